@@ -1,0 +1,1 @@
+"""Cameras and handcrafted geometric cues (numpy only)."""

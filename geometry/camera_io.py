@@ -1,0 +1,203 @@
+"""Named cameras read from and written to a JSON file.
+
+File format (version 1)::
+
+    {
+      "version": 1,
+      "cameras": {
+        "top": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
+                "R": [[...], [...], [...]],      # world -> camera rotation (Eq. 4)
+                "c": [x, y, z],                  # camera centre, world units (metres)
+                "width": 1920, "height": 1080},  # image size, pixels
+        "ego": {...}
+      }
+    }
+
+The convention is that of :class:`~xvmatch.geometry.camera.Camera` and Eq. 4 of the
+geometric-priors paper, ``lambda [u, v, 1]^T = K R (X - c)``. Camera names are free strings;
+the pipeline uses ``"top"`` (static overview camera) and ``"ego"`` (egocentric camera).
+Unknown keys are rejected so that a typo (``"k"`` for ``"K"``) cannot go unnoticed.
+
+Every error is a :class:`CameraFileError` whose message starts with the file and the field,
+e.g. ``cams.json: cameras.ego.K: expected 3x3 numbers``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from xvmatch.geometry.camera import Camera
+
+__all__ = ["FORMAT_VERSION", "CameraFileError", "load_cameras", "save_cameras"]
+
+FORMAT_VERSION = 1
+_CAMERA_FIELDS = ("K", "R", "c", "width", "height")
+_TOP_FIELDS = ("version", "cameras")
+
+
+class CameraFileError(ValueError):
+    """A camera file is unreadable or a field in it is invalid; the message names both."""
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _matrix(value: Any, rows: int, cols: int, where: str) -> np.ndarray:
+    shape = f"{rows}x{cols}" if cols else f"{rows}"
+    ok = isinstance(value, list) and len(value) == rows
+    if ok and cols:
+        ok = all(isinstance(r, list) and len(r) == cols and all(map(_is_number, r)) for r in value)
+    elif ok:
+        ok = all(map(_is_number, value))
+    if not ok:
+        raise CameraFileError(f"{where}: expected {shape} numbers (finite), got {value!r:.80}")
+    return np.asarray(value, dtype=float)
+
+
+def _size(value: Any, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value) or (
+        value <= 0
+    ):
+        raise CameraFileError(f"{where}: expected a positive integer (pixels), got {value!r}")
+    return int(value)
+
+
+def _camera(record: Any, where: str) -> Camera:
+    if not isinstance(record, dict):
+        raise CameraFileError(f"{where}: expected an object with {', '.join(_CAMERA_FIELDS)}")
+    unknown = sorted(set(record) - set(_CAMERA_FIELDS))
+    if unknown:
+        raise CameraFileError(
+            f"{where}: unknown field(s) {', '.join(unknown)} (expected {', '.join(_CAMERA_FIELDS)})"
+        )
+    missing = [k for k in _CAMERA_FIELDS if k not in record]
+    if missing:
+        raise CameraFileError(f"{where}: missing field(s) {', '.join(missing)}")
+    K = _matrix(record["K"], 3, 3, f"{where}.K")
+    if abs(np.linalg.det(K)) < 1e-12:
+        raise CameraFileError(f"{where}.K: singular intrinsic matrix (det = 0); check fx, fy")
+    R = _matrix(record["R"], 3, 3, f"{where}.R")
+    err = float(np.abs(R @ R.T - np.eye(3)).max())
+    if err > 1e-6 or np.linalg.det(R) < 0:
+        raise CameraFileError(
+            f"{where}.R: not a proper rotation (max |R R^T - I| = {err:.2g}, "
+            f"det = {np.linalg.det(R):.6g}); store R with full precision, world -> camera"
+        )
+    c = _matrix(record["c"], 3, 0, f"{where}.c")
+    width = _size(record["width"], f"{where}.width")
+    height = _size(record["height"], f"{where}.height")
+    return Camera(K=K, R=R, c=c, width=width, height=height)
+
+
+def load_cameras(
+    path: str | os.PathLike[str], *, required: Iterable[str] = ()
+) -> dict[str, Camera]:
+    """Read named cameras from a version-1 camera file (format in the module docstring).
+
+    Args:
+        path: the JSON file.
+        required: camera names that must be present, e.g. ``("top", "ego")``.
+
+    Returns:
+        ``{name: Camera}`` in file order.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        CameraFileError: invalid JSON, wrong version, or an invalid field; the message is
+            ``"<file>: <field path>: <problem>"``.
+    """
+    name = os.fspath(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CameraFileError(f"{name}: not UTF-8 text ({exc.reason})") from exc
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CameraFileError(
+            f"{name}: invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from exc
+    try:
+        if not isinstance(data, dict):
+            raise CameraFileError('expected a JSON object {"version": 1, "cameras": {...}}')
+        unknown = sorted(set(data) - set(_TOP_FIELDS))
+        if unknown:
+            raise CameraFileError(
+                f"unknown top-level field(s) {', '.join(unknown)} (expected version, cameras)"
+            )
+        if "version" not in data:
+            raise CameraFileError(f"version: missing; add \"version\": {FORMAT_VERSION}")
+        if isinstance(data["version"], bool) or data["version"] != FORMAT_VERSION:
+            raise CameraFileError(
+                f"version: unsupported {data['version']!r}, this reader knows {FORMAT_VERSION}"
+            )
+        cams = data.get("cameras")
+        if not isinstance(cams, dict) or not cams:
+            raise CameraFileError("cameras: expected a non-empty object {name: camera}")
+        cameras = {str(key): _camera(rec, f"cameras.{key}") for key, rec in cams.items()}
+        missing = [k for k in required if k not in cameras]
+        if missing:
+            raise CameraFileError(
+                f"cameras: missing required camera(s) {', '.join(missing)}; "
+                f"the file has {', '.join(cameras)}"
+            )
+    except CameraFileError as exc:
+        raise CameraFileError(f"{name}: {exc}") from None
+    return cameras
+
+
+def save_cameras(path: str | os.PathLike[str], cameras: Mapping[str, Camera]) -> None:
+    """Write named cameras to a version-1 camera file, atomically.
+
+    The JSON is written to a temporary file in the destination directory, flushed to disk and
+    moved over ``path`` with ``os.replace``, so readers see either the old or the new file,
+    never a partial one. Floats are written with full precision, so a round trip is exact.
+
+    Args:
+        path: destination file; its directory must exist.
+        cameras: ``{name: Camera}``, at least one, names non-empty strings.
+
+    Raises:
+        CameraFileError: no cameras, a bad name, or a value that is not a Camera.
+        FileNotFoundError: the destination directory does not exist.
+    """
+    name = os.fspath(path)
+    if not isinstance(cameras, Mapping) or not cameras:
+        raise CameraFileError(f"{name}: cameras: expected a non-empty mapping {{name: Camera}}")
+    records = {}
+    for key, cam in cameras.items():
+        if not isinstance(key, str) or not key:
+            raise CameraFileError(f"{name}: cameras: names must be non-empty strings, got {key!r}")
+        if not isinstance(cam, Camera):
+            raise CameraFileError(f"{name}: cameras.{key}: expected a Camera, got {type(cam)}")
+        for field in ("K", "R", "c"):
+            if not np.isfinite(getattr(cam, field)).all():
+                raise CameraFileError(f"{name}: cameras.{key}.{field}: contains NaN or inf")
+        records[key] = cam.to_dict()
+    text = json.dumps({"version": FORMAT_VERSION, "cameras": records}, indent=2, allow_nan=False)
+
+    directory = os.path.dirname(os.path.abspath(name))
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(f"{name}: directory {directory} does not exist")
+    mode = os.stat(name).st_mode & 0o777 if os.path.exists(name) else 0o644
+    fd, tmp = tempfile.mkstemp(prefix=".", suffix=".tmp", dir=directory)
+    try:
+        os.chmod(tmp, mode)  # mkstemp creates 0600; keep the usual permissions of a data file
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, name)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

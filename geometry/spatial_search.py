@@ -1,0 +1,307 @@
+"""Search over the camera location O and orientation theta (CVMHAT paper, Section 3.2.4).
+
+Frame level: every (O, theta) hypothesis is scored with Phi (Eq. 12) and the best one gives the
+association. Over a video: the reduced search limits theta to a damped window S_t around the
+previous orientation and follows O with the top view's own track ids. The same machinery
+estimates a temporal offset between two unsynchronised videos by sliding clips (Fig. 5).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.geometry.spatial_matching import (
+    SpatialParams,
+    cost_lower_bound,
+    match_vector_sets,
+)
+from xvmatch.geometry.spatial_vectors import (
+    TopHypotheses,
+    box_centres,
+    horizontal_vectors,
+    top_geometry,
+    top_hypotheses,
+)
+
+__all__ = [
+    "SEARCH_MODES",
+    "FrameAssociation",
+    "OffsetEstimate",
+    "associate_frame",
+    "associate_sequence",
+    "estimate_offset",
+    "search_window",
+]
+
+SEARCH_MODES = ("exhaustive", "reduced", "follow")
+
+
+@dataclass(frozen=True)
+class FrameAssociation:
+    """Best hypothesis of one frame.
+
+    Attributes:
+        pairs: ``(P, 2)`` indices (top box, horizontal box) of the associated people, sorted.
+        camera: index of the top box taken as the camera location O; -1 if none was scored.
+        theta: view direction of the horizontal camera in the top image (radians, CCW on screen).
+        cost: Phi of Eq. 12 for the best hypothesis (+inf when nothing could be matched).
+        scale: the factor mu of the best hypothesis.
+    """
+
+    pairs: np.ndarray
+    camera: int
+    theta: float
+    cost: float
+    scale: float
+
+
+_EMPTY = FrameAssociation(np.zeros((0, 2), dtype=np.intp), -1, 0.0, math.inf, 1.0)
+
+
+def search_window(
+    center: float, step_index: int, params: SpatialParams
+) -> np.ndarray:
+    """Orientations of the reduced search on the ``step_index``-th frame (1-based).
+
+    S_t = 2 pi (r^(t-1) + u) / (1 + u) (Sec. 3.2.4), sampled every dtheta around ``center``;
+    the first frame covers the whole circle.
+    """
+    step = math.radians(params.dtheta_deg)
+    full = max(1, round(2.0 * math.pi / step))
+    r, u = params.damping_r, params.damping_u
+    span = 2.0 * math.pi * (r ** (step_index - 1) + u) / (1.0 + u)
+    n = min(full, max(1, math.ceil(span / step - 1e-9)))
+    return center + step * (np.arange(n) - n // 2)
+
+
+def full_circle(params: SpatialParams) -> np.ndarray:
+    """Orientations of the exhaustive search: [0, 2 pi) every dtheta."""
+    step = math.radians(params.dtheta_deg)
+    return step * np.arange(max(1, round(2.0 * math.pi / step)))
+
+
+def associate_frame(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    candidates: Iterable[int] | None = None,
+    thetas: np.ndarray | None = None,
+) -> FrameAssociation:
+    """Associate the people of one top/horizontal frame pair (Sec. 3.2).
+
+    Args:
+        top_boxes: ``(M, 4)`` top-view boxes x, y, w, h (pixels).
+        hor_boxes: ``(Q, 4)`` horizontal-view boxes.
+        hor_width: width W of the horizontal image (pixels), Eq. 9.
+        params: association parameters; paper defaults when None.
+        candidates: indices of top boxes that may be the camera location O; every box when None
+            (the exhaustive search), a single index when O is given.
+        thetas: orientations to try (radians), the same for every candidate; the full circle
+            every dtheta when None.
+
+    Returns:
+        The best :class:`FrameAssociation` (lowest Phi; the first one on ties, candidates in the
+        given order and orientations in the given order).
+    """
+    params = params or SpatialParams()
+    top_boxes = np.asarray(top_boxes, dtype=float).reshape(-1, 4)
+    hor_boxes = np.asarray(hor_boxes, dtype=float).reshape(-1, 4)
+    cand = (
+        np.arange(top_boxes.shape[0])
+        if candidates is None
+        else np.asarray(list(candidates), dtype=np.intp)
+    )
+    if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
+        return _EMPTY
+    if thetas is None:
+        thetas = full_circle(params)
+    thetas = np.asarray(thetas, dtype=float).reshape(-1)
+    geometry = top_geometry(box_centres(top_boxes), cand, math.radians(params.tau_deg))
+    hypotheses = top_hypotheses(geometry, thetas, math.radians(params.fov_deg))
+    hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
+    best, cost, pairs_mask, scale, top_index = _best_hypothesis(hypotheses, hor, params)
+    if best < 0:
+        return _EMPTY
+    rows, cols = np.nonzero(pairs_mask)
+    pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    n_theta = thetas.shape[0]
+    return FrameAssociation(
+        pairs=pairs,
+        camera=int(cand[best // n_theta]),
+        theta=float(np.mod(thetas[best % n_theta], 2.0 * math.pi)),
+        cost=cost,
+        scale=scale,
+    )
+
+
+def _best_hypothesis(
+    hypotheses: TopHypotheses, hor: np.ndarray, params: SpatialParams, first_chunk: int = 256
+) -> tuple[int, float, np.ndarray, float, np.ndarray]:
+    """Exact argmin of Phi over all hypotheses by best-first branch and bound.
+
+    Hypotheses are scored in order of their lower bound (:func:`cost_lower_bound`), in chunks of
+    doubling size, until the next bound exceeds the best cost found: the result is the same as
+    scoring every hypothesis (lowest Phi, then lowest hypothesis index on ties), at a few percent
+    of the work.
+
+    Returns:
+        (index, cost, pairs mask (K, Q) of that hypothesis, scale, top person of each of its K
+        entries); index -1 if none is finite.
+    """
+    bound = cost_lower_bound(hypotheses.x, hypotheses.count, hor[:, 0], params)
+    order = np.argsort(bound, kind="stable")
+    n_finite = int(np.isfinite(bound).sum())
+    best, best_cost, best_pairs, best_scale, best_index = -1, math.inf, None, 1.0, None
+    start, chunk = 0, first_chunk
+    while start < n_finite and bound[order[start]] <= best_cost:
+        idx = order[start : start + chunk]
+        idx = np.sort(idx[bound[idx] <= best_cost])
+        start += chunk
+        chunk *= 2
+        vectors = hypotheses.take(idx)
+        result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
+        k = int(np.argmin(result.cost))
+        cost = float(result.cost[k])
+        if cost < best_cost or (cost == best_cost and best >= 0 and idx[k] < best):
+            best, best_cost = int(idx[k]), cost
+            best_pairs, best_scale = result.pairs[k], float(result.scale[k])
+            best_index = vectors.index[k]
+    if best < 0 or not math.isfinite(best_cost):
+        return -1, math.inf, np.zeros((0, 0), dtype=bool), 1.0, np.zeros(0, dtype=np.intp)
+    return best, best_cost, best_pairs, best_scale, best_index
+
+
+class _FrameLike:
+    """Structural type of a frame record: ``ids (N,)`` and ``boxes (N, 4)``."""
+
+    ids: np.ndarray
+    boxes: np.ndarray
+
+
+def _ids_to_index(ids: np.ndarray, wanted: int) -> list[int]:
+    return [int(k) for k in np.flatnonzero(np.asarray(ids) == wanted)]
+
+
+def associate_sequence(
+    top: Mapping[int, _FrameLike],
+    hor: Mapping[int, _FrameLike],
+    hor_width: float,
+    params: SpatialParams | None = None,
+    search: str = "exhaustive",
+    camera_id: int | None = None,
+    frames: Iterable[int] | None = None,
+    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+) -> dict[int, list[tuple[int, int]]]:
+    """Associate every frame of a sequence pair; returns ``{frame: [(top_id, hor_id), ...]}``.
+
+    Ids are only used to report pairs, to locate O when ``camera_id`` is given, and (in the
+    ``follow`` mode) to follow O with the top view's own track ids; they are never compared
+    across views.
+
+    Args:
+        top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (e.g. ``FrameBoxes``).
+        hor_width: width of the horizontal image (pixels).
+        params: association parameters.
+        search: ``exhaustive`` (every O, every theta, each frame on its own), ``reduced``
+            (every O, theta within the damped window S_t around the previous orientation) or
+            ``follow`` (reduced theta, and O followed by its top-view track id once found).
+        camera_id: top-view id of the camera wearer (O given); frames where it is absent fall
+            back to searching every O.
+        frames: frames to process (default: the union of both views' frames, ascending).
+        progress: optional wrapper around the frame iterator (e.g. a progress bar).
+    """
+    if search not in SEARCH_MODES:
+        raise ValueError(f"search must be one of {', '.join(SEARCH_MODES)}; got {search!r}")
+    params = params or SpatialParams()
+    order = sorted(set(top) | set(hor)) if frames is None else sorted(set(frames))
+    circle = full_circle(params)
+    followed: int | None = None
+    last_theta = 0.0
+    step_index = 0
+    out: dict[int, list[tuple[int, int]]] = {}
+    for frame in progress(order) if progress else order:
+        t_rec, h_rec = top.get(frame), hor.get(frame)
+        if t_rec is None or h_rec is None or len(t_rec.ids) == 0 or len(h_rec.ids) == 0:
+            out[frame] = []
+            continue
+        candidates: list[int] | None = None
+        if camera_id is not None:
+            candidates = _ids_to_index(t_rec.ids, camera_id) or None
+        elif search == "follow" and followed is not None:
+            candidates = _ids_to_index(t_rec.ids, followed) or None
+        if search == "exhaustive":
+            thetas = circle
+        else:
+            step_index += 1
+            thetas = search_window(last_theta, step_index, params)
+        result = associate_frame(t_rec.boxes, h_rec.boxes, hor_width, params, candidates, thetas)
+        if result.camera >= 0:
+            last_theta = result.theta
+            followed = int(t_rec.ids[result.camera])
+        out[frame] = [
+            (int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs
+        ]
+    return out
+
+
+@dataclass(frozen=True)
+class OffsetEstimate:
+    """Result of the sliding-clip synchronisation (Fig. 5).
+
+    Attributes:
+        offset: frames to add to a horizontal frame number to get the matching top frame.
+        offsets: ``(N,)`` offsets tried.
+        costs: ``(N,)`` mean best Phi of each offset's clip (+inf where nothing matched).
+    """
+
+    offset: int
+    offsets: np.ndarray
+    costs: np.ndarray
+
+
+def estimate_offset(
+    top: Mapping[int, _FrameLike],
+    hor: Mapping[int, _FrameLike],
+    hor_width: float,
+    params: SpatialParams | None = None,
+    clip_start: int | None = None,
+    clip_length: int = 10,
+    max_offset: int = 15,
+    camera_id: int | None = None,
+) -> OffsetEstimate:
+    """Estimate the temporal offset between the two videos by sliding clips (Sec. 3.2.4, Fig. 5).
+
+    A clip of ``clip_length`` horizontal frames starting at ``clip_start`` is compared with top
+    clips shifted by every offset in [-max_offset, max_offset] (step 1: 2 * max_offset + 1 clips;
+    the paper uses 10 frames and 30 clips); each offset scores the mean over the clip's frames of
+    the best Phi, and the lowest mean wins.
+    """
+    params = params or SpatialParams()
+    hor_frames = sorted(hor)
+    if not hor_frames:
+        raise ValueError("the horizontal sequence has no frames")
+    if clip_start is None:
+        clip_start = hor_frames[0] + max_offset
+    clip = [f for f in range(clip_start, clip_start + clip_length) if f in hor]
+    offsets = np.arange(-max_offset, max_offset + 1)
+    costs = np.full(offsets.shape, np.inf)
+    for k, off in enumerate(offsets):
+        values = []
+        for f in clip:
+            t_rec = top.get(f + int(off))
+            if t_rec is None or len(t_rec.ids) == 0:
+                continue
+            cand = _ids_to_index(t_rec.ids, camera_id) or None if camera_id is not None else None
+            res = associate_frame(t_rec.boxes, hor[f].boxes, hor_width, params, cand)
+            values.append(res.cost)
+        finite = [v for v in values if math.isfinite(v)]
+        if finite and len(finite) == len(values):
+            costs[k] = float(np.mean(finite))
+    best = int(np.argmin(costs)) if np.isfinite(costs).any() else int(np.argmin(np.abs(offsets)))
+    return OffsetEstimate(offset=int(offsets[best]), offsets=offsets, costs=costs)

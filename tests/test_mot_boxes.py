@@ -1,0 +1,262 @@
+"""Tests of the MOT box / prediction file reader and writer (xvmatch.datasets.mot_boxes)."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from xvmatch.datasets.mot_boxes import (
+    PREDICTION_HEADER,
+    BoxFileError,
+    FrameBoxes,
+    atomic_write_text,
+    read_mot_boxes,
+    read_predictions,
+    write_mot_boxes,
+    write_predictions,
+)
+
+GOOD_LINE = "1,1,10,20,30,40,-1,-1,-1,-1"
+
+
+def _write(tmp_path: Path, text: str, name: str = "boxes.txt") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _expect_error(path: Path, line: int | None, match: str, reader=read_mot_boxes) -> None:
+    """The reader raises a one-line BoxFileError "<path>:<line>: ..." that mentions ``match``."""
+    with pytest.raises(BoxFileError, match=match) as info:
+        reader(path)
+    message = str(info.value)
+    where = f"{path}:{line}: " if line is not None else f"{path}: "
+    assert message.startswith(where), message
+    assert "\n" not in message
+    assert info.value.line == line
+    assert info.value.path == str(path)
+
+
+# --------------------------------------------------------------------------------------------
+# Reading box files
+
+
+def test_read_groups_by_frame_sorted_and_keeps_file_order(tmp_path):
+    path = _write(
+        tmp_path,
+        "2,7,1.5,2,3,4,-1,-1,-1,-1\n"
+        "1,3,10,20,30,40\n"  # only the 6 required fields
+        "\n"  # blank lines are skipped
+        "2,5,-4,0,1,1,-1,-1,-1,-1\n"
+        "1.0,4.0,0,0,2,2,-1,-1,-1,-1\n",  # integer-valued floats are integers
+    )
+    frames = read_mot_boxes(path)
+    assert list(frames) == [1, 2]
+    assert frames[2].frame == 2
+    np.testing.assert_array_equal(frames[2].ids, [7, 5])
+    np.testing.assert_array_equal(frames[1].ids, [3, 4])
+    np.testing.assert_array_equal(frames[2].boxes, [[1.5, 2, 3, 4], [-4, 0, 1, 1]])
+    assert frames[1].ids.dtype == np.int64
+    assert frames[1].boxes.dtype == np.float64
+    assert frames[1].boxes.shape == (2, 4)
+
+
+def test_read_empty_file_gives_no_frames(tmp_path):
+    assert read_mot_boxes(_write(tmp_path, "\n\n")) == {}
+
+
+def test_missing_file(tmp_path):
+    _expect_error(tmp_path / "nope.txt", None, "no such file")
+
+
+@pytest.mark.parametrize(
+    ("bad_line", "match"),
+    [
+        ("1,1,abc,20,30,40", "x is not a number: 'abc'"),
+        ("1,1,,20,30,40", "x is not a number"),
+        ("1,1,10,20,30", "at least 6 comma-separated fields"),
+        ("1", "at least 6"),
+        ("5.5,1,10,20,30,40", "frame must be an integer"),
+        ("0,1,10,20,30,40", "frame must be >= 1"),
+        ("-3,1,10,20,30,40", "frame must be >= 1"),
+        ("1,2.5,10,20,30,40", "id must be an integer"),
+        ("1,2,10,20,0,40", "w must be > 0"),
+        ("1,2,10,20,30,-1", "h must be > 0"),
+        ("1,2,nan,20,30,40", "x must be finite"),
+        ("1,2,10,inf,30,40", "y must be finite"),
+        ("1,2,10,20,30,1_0", "h is not a number"),
+        ("1,1,11,21,31,41", "duplicate id 1 in frame 1 \\(first on line 1\\)"),
+    ],
+)
+def test_malformed_box_line_names_file_and_line(tmp_path, bad_line, match):
+    # Line 1 is good, line 2 blank, line 3 good: the bad line is line 4.
+    text = f"{GOOD_LINE}\n\n2,1,10,20,30,40\n{bad_line}\n3,1,10,20,30,40\n"
+    _expect_error(_write(tmp_path, text), 4, match)
+
+
+def test_not_utf8_is_a_whole_file_error(tmp_path):
+    path = tmp_path / "boxes.txt"
+    path.write_bytes(b"1,1,10,20,30,40\n\xff\xfe\n")
+    _expect_error(path, None, "not UTF-8")
+
+
+def test_duplicates_first_keeps_first_box_and_warns(tmp_path):
+    path = _write(tmp_path, f"{GOOD_LINE}\n1,2,0,0,1,1\n1,1,99,99,9,9\n")
+    with pytest.warns(UserWarning, match=f"{path}:3: duplicate id 1 in frame 1") as record:
+        frames = read_mot_boxes(path, duplicates="first")
+    assert len(record) == 1
+    np.testing.assert_array_equal(frames[1].ids, [1, 2])
+    np.testing.assert_array_equal(frames[1].boxes[0], [10, 20, 30, 40])
+    with pytest.raises(ValueError, match="duplicates must be"):
+        read_mot_boxes(path, duplicates="last")
+
+
+def test_read_is_fast_on_a_1200_frame_file(tmp_path):
+    rng = np.random.default_rng(0)
+    lines = [
+        f"{t},{i},{x:.0f},{y:.0f},{w:.0f},{h:.0f},-1,-1,-1,-1"
+        for i in range(11)
+        for t in range(1, 1201)
+        for x, y, w, h in [rng.uniform(1, 2000, size=4)]
+    ]
+    path = _write(tmp_path, "\n".join(lines) + "\n")
+    best = float("inf")
+    for _ in range(3):
+        start = time.perf_counter()
+        frames = read_mot_boxes(path)
+        best = min(best, time.perf_counter() - start)
+    assert len(frames) == 1200
+    assert best < 0.05, f"reading 13,200 lines took {best * 1e3:.1f} ms"
+
+
+# --------------------------------------------------------------------------------------------
+# Writing box files
+
+
+def test_box_round_trip_is_exact(tmp_path):
+    rng = np.random.default_rng(1)
+    min_size = np.array([0, 0, 60, 60])
+    frames = {
+        t: FrameBoxes(t, rng.permutation(9)[:n], rng.uniform(-50, 2700, (n, 4)) + min_size)
+        for t, n in [(3, 4), (1, 2), (10, 5)]
+    }
+    frames[1] = FrameBoxes(1, [0, 8], [[1986, 144, 96, 85], [0.1, 1e-3, 1e6, 2.5]])
+    path = tmp_path / "out.txt"
+    write_mot_boxes(path, frames)
+    back = read_mot_boxes(path)
+    assert list(back) == [1, 3, 10]
+    for t, rec in frames.items():
+        np.testing.assert_array_equal(back[t].ids, rec.ids)
+        np.testing.assert_array_equal(back[t].boxes, rec.boxes)
+    assert path.read_text().splitlines()[0] == "1,0,1986,144,96,85,-1,-1,-1,-1"
+
+
+def test_write_rejects_bad_records(tmp_path):
+    path = tmp_path / "out.txt"
+    with pytest.raises(ValueError, match="frame key 2"):
+        write_mot_boxes(path, {2: FrameBoxes(1, [1], [[0, 0, 1, 1]])})
+    with pytest.raises(ValueError, match="w/h <= 0"):
+        write_mot_boxes(path, {1: FrameBoxes(1, [1], [[0, 0, 0, 1]])})
+    with pytest.raises(ValueError, match="repeats an id"):
+        write_mot_boxes(path, {1: FrameBoxes(1, [1, 1], [[0, 0, 1, 1], [0, 0, 1, 1]])})
+    assert not path.exists()
+
+
+def test_frame_boxes_checks_shapes():
+    with pytest.raises(ValueError, match=r"boxes \(N, 4\)"):
+        FrameBoxes(1, [1, 2], [[0, 0, 1, 1]])
+    with pytest.raises(ValueError, match="ids must be integers"):
+        FrameBoxes(1, [1.5], [[0, 0, 1, 1]])
+    assert FrameBoxes(1, np.array([2.0]), [[0, 0, 1, 1]]).ids.dtype == np.int64
+    empty = FrameBoxes(1, [], [])
+    assert len(empty) == 0 and empty.boxes.shape == (0, 4)
+
+
+# --------------------------------------------------------------------------------------------
+# Prediction files
+
+
+def test_predictions_round_trip(tmp_path):
+    pairs = {12: [(3, 3), (1, 4)], 2: [(0, 1)], 5: []}
+    path = tmp_path / "pred.csv"
+    write_predictions(path, pairs)
+    text = path.read_text()
+    assert text.splitlines() == [PREDICTION_HEADER, "2,0,1", "12,3,3", "12,1,4"]
+    assert read_predictions(path) == {2: [(0, 1)], 12: [(3, 3), (1, 4)]}
+
+
+def test_predictions_header_only_is_empty(tmp_path):
+    path = _write(tmp_path, PREDICTION_HEADER + "\n", "pred.csv")
+    assert read_predictions(path) == {}
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "match"),
+    [
+        ("", 1, "missing header"),
+        ("frame,hor_id,top_id\n1,1,1\n", 1, "wrong header"),
+        ("1,2,3\n", 1, "wrong header"),
+        (f"{PREDICTION_HEADER}\n1,1,1\n1,1,2\n", 3, "duplicate top_id 1 in frame 1"),
+        (f"{PREDICTION_HEADER}\n1,1,1\n\n1,2,1\n", 4, "duplicate hor_id 1 in frame 1"),
+        (f"{PREDICTION_HEADER}\n1,1,1\n2,1.5,1\n", 3, "top_id must be an integer"),
+        (f"{PREDICTION_HEADER}\n1,1,1,0.9\n", 2, "exactly 3 comma-separated fields"),
+        (f"{PREDICTION_HEADER}\n1,1\n", 2, "exactly 3"),
+        (f"{PREDICTION_HEADER}\n0,1,1\n", 2, "frame must be >= 1"),
+        (f"{PREDICTION_HEADER}\n1,a,1\n", 2, "top_id is not a number"),
+    ],
+)
+def test_malformed_predictions_name_file_and_line(tmp_path, text, line, match):
+    path = _write(tmp_path, text, "pred.csv")
+    _expect_error(path, line, match, reader=read_predictions)
+
+
+def test_predictions_repeated_ids_in_other_frames_are_fine(tmp_path):
+    path = _write(tmp_path, f"{PREDICTION_HEADER}\n1,1,2\n2,1,2\n1.0,2,1\n", "pred.csv")
+    assert read_predictions(path) == {1: [(1, 2), (2, 1)], 2: [(1, 2)]}
+
+
+def test_write_predictions_rejects_non_one_to_one(tmp_path):
+    path = tmp_path / "pred.csv"
+    with pytest.raises(ValueError, match="at most once"):
+        write_predictions(path, {1: [(1, 2), (1, 3)]})
+    assert not path.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Atomic writes
+
+
+def test_atomic_write_leaves_no_temp_file(tmp_path):
+    path = tmp_path / "a.txt"
+    atomic_write_text(path, "one\n")
+    atomic_write_text(path, "two\n")
+    write_mot_boxes(tmp_path / "b.txt", {1: FrameBoxes(1, [1], [[0, 0, 1, 1]])})
+    write_predictions(tmp_path / "c.csv", {1: [(1, 1)]})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt", "c.csv"]
+    assert path.read_text() == "two\n"
+
+
+def test_atomic_write_failure_keeps_old_file_and_cleans_up(tmp_path, monkeypatch):
+    path = tmp_path / "a.txt"
+    path.write_text("old\n")
+
+    def broken_replace(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", broken_replace)
+    with pytest.raises(OSError, match="disk full"):
+        atomic_write_text(path, "new\n")
+    assert path.read_text() == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_atomic_write_keeps_permissions(tmp_path):
+    path = tmp_path / "a.txt"
+    path.write_text("old\n")
+    path.chmod(0o640)
+    atomic_write_text(path, "new\n")
+    assert path.stat().st_mode & 0o777 == 0o640

@@ -1,0 +1,3 @@
+from xvmatch.cli import main
+
+raise SystemExit(main())
