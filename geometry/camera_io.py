@@ -48,7 +48,13 @@ class CameraFileError(ValueError):
 
 
 def _is_number(x: Any) -> bool:
-    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+    """A finite JSON number (bools are ints in Python but not numbers here)."""
+    if isinstance(x, bool) or not isinstance(x, int | float):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:  # an integer too large for a float
+        return False
 
 
 def _matrix(value: Any, rows: int, cols: int, where: str) -> np.ndarray:
@@ -64,9 +70,7 @@ def _matrix(value: Any, rows: int, cols: int, where: str) -> np.ndarray:
 
 
 def _size(value: Any, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value) or (
-        value <= 0
-    ):
+    if not _is_number(value) or value <= 0 or value != int(value):
         raise CameraFileError(f"{where}: expected a positive integer (pixels), got {value!r}")
     return int(value)
 
@@ -135,7 +139,7 @@ def load_cameras(
                 f"unknown top-level field(s) {', '.join(unknown)} (expected version, cameras)"
             )
         if "version" not in data:
-            raise CameraFileError(f"version: missing; add \"version\": {FORMAT_VERSION}")
+            raise CameraFileError(f'version: missing; add "version": {FORMAT_VERSION}')
         if isinstance(data["version"], bool) or data["version"] != FORMAT_VERSION:
             raise CameraFileError(
                 f"version: unsupported {data['version']!r}, this reader knows {FORMAT_VERSION}"

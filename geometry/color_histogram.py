@@ -32,6 +32,7 @@ N_BINS: int = HSV_BINS[0] * HSV_BINS[1] * HSV_BINS[2]
 """Length of one histogram (32)."""
 
 _HSV_RANGES: tuple[int, int, int] = (180, 256, 256)  # OpenCV 8-bit: H in [0, 180), S, V in [0, 256)
+_CHUNK_PIXELS = 1 << 22  # pixels gathered per bincount (~200 MB of temporaries at most)
 
 
 class BoxHistograms(NamedTuple):
@@ -104,13 +105,37 @@ def hsv_bin_indices(image_bgr: np.ndarray) -> np.ndarray:
 
     Returns:
         (H, W) int64 bin indices in [0, 32).
+
+    Raises:
+        ValueError: image not (H, W, 3) uint8.
     """
     image = _check_image(image_bgr)
-    hsv = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_BGR2HSV).astype(np.int64)
-    bins = np.array(HSV_BINS, dtype=np.int64)
-    ranges = np.array(_HSV_RANGES, dtype=np.int64)
-    per_channel = np.minimum(hsv * bins // ranges, bins - 1)  # min() guards any H outside [0,180)
-    return (per_channel[..., 0] * bins[1] + per_channel[..., 1]) * bins[2] + per_channel[..., 2]
+    hsv = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_BGR2HSV)
+    n_h, n_s, n_v = HSV_BINS
+    r_h, r_s, r_v = _HSV_RANGES
+    # uint16 arithmetic: 255 * 8 fits; min() guards any H outside [0, 180).
+    h = np.minimum(hsv[..., 0].astype(np.uint16) * n_h // r_h, n_h - 1)
+    s = hsv[..., 1].astype(np.uint16) * n_s // r_s
+    v = hsv[..., 2].astype(np.uint16) * n_v // r_v
+    return ((h * n_s + s) * n_v + v).astype(np.int64)
+
+
+def _count_bins(
+    bins_img: np.ndarray, x0: np.ndarray, y0: np.ndarray, crop_w: np.ndarray, area: np.ndarray
+) -> np.ndarray:
+    """Bin counts (n, 32) of n crops, gathered into one ``np.bincount`` without a Python loop.
+
+    Pixel p of crop b lies at row ``y0 + p // w``, column ``x0 + p % w``; empty crops add none.
+    """
+    n = x0.shape[0]
+    total = int(area.sum())
+    box_of_pixel = np.repeat(np.arange(n), area)
+    local = np.arange(total) - np.repeat(np.cumsum(area) - area, area)
+    w_of_pixel = np.repeat(np.maximum(crop_w, 1), area)
+    rows = np.repeat(y0, area) + local // w_of_pixel
+    cols = np.repeat(x0, area) + local % w_of_pixel
+    flat = box_of_pixel * N_BINS + bins_img[rows, cols]
+    return np.bincount(flat, minlength=n * N_BINS).reshape(n, N_BINS).astype(float)
 
 
 def box_histograms(image_bgr: np.ndarray, boxes_xywh: np.ndarray) -> BoxHistograms:
@@ -119,7 +144,8 @@ def box_histograms(image_bgr: np.ndarray, boxes_xywh: np.ndarray) -> BoxHistogra
     A box covers the pixel columns ``floor(x) .. ceil(x + w) - 1`` and rows
     ``floor(y) .. ceil(y + h) - 1``, clipped to the image, so every partly covered pixel counts;
     a box with ``w == 0`` or ``h == 0`` covers no pixel.
-    All boxes are counted in one ``np.bincount`` over the gathered pixels.
+    The pixels of all boxes are gathered and counted by one ``np.bincount`` (in chunks of
+    about 4 M pixels, to bound memory on large frames).
 
     Args:
         image_bgr: (H, W, 3) uint8 BGR image (OpenCV order).
@@ -134,9 +160,9 @@ def box_histograms(image_bgr: np.ndarray, boxes_xywh: np.ndarray) -> BoxHistogra
     Raises:
         ValueError: wrong image shape or dtype, boxes not (N, 4), non-finite or negative sizes.
     """
-    bins_img = hsv_bin_indices(image_bgr)
+    image = _check_image(image_bgr)
     boxes = _check_boxes(boxes_xywh)
-    height, width = bins_img.shape
+    height, width = image.shape[:2]
     n = boxes.shape[0]
 
     x0 = np.clip(np.floor(boxes[:, 0]), 0, width).astype(np.int64)
@@ -149,18 +175,24 @@ def box_histograms(image_bgr: np.ndarray, boxes_xywh: np.ndarray) -> BoxHistogra
     crop_h = np.maximum(y1 - y0, 0)
     area = crop_w * crop_h
     valid = area > 0
+    if not valid.any():
+        return BoxHistograms(histograms=np.zeros((n, N_BINS)), valid=valid)
 
-    # Gather the pixels of all crops at once: pixel p of box b lies at row y0 + p // w,
-    # column x0 + p % w. Empty boxes contribute no pixel.
-    total = int(area.sum())
-    box_of_pixel = np.repeat(np.arange(n), area)
-    first = np.cumsum(area) - area
-    local = np.arange(total) - np.repeat(first, area)
-    w_of_pixel = np.repeat(np.maximum(crop_w, 1), area)
-    rows = np.repeat(y0, area) + local // w_of_pixel
-    cols = np.repeat(x0, area) + local % w_of_pixel
-    flat = box_of_pixel * N_BINS + bins_img[rows, cols]
-    counts = np.bincount(flat, minlength=n * N_BINS).reshape(n, N_BINS).astype(float)
+    # Convert only the region covering every crop, and index it from its corner.
+    left, top = int(x0[valid].min()), int(y0[valid].min())
+    right, bottom = int(x1[valid].max()), int(y1[valid].max())
+    bins_img = hsv_bin_indices(image[top:bottom, left:right])
+    x0, y0 = x0 - left, y0 - top
+
+    counts = np.zeros((n, N_BINS))
+    ends = np.cumsum(area)
+    start = 0
+    while start < n:  # boxes in chunks of <= _CHUNK_PIXELS pixels bound the memory used
+        done = ends[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(ends, done + _CHUNK_PIXELS, side="right")))
+        sl = slice(start, stop)
+        counts[sl] = _count_bins(bins_img, x0[sl], y0[sl], crop_w[sl], area[sl])
+        start = stop
 
     norms = np.linalg.norm(counts, axis=1, keepdims=True)
     hist = np.divide(counts, norms, out=np.zeros_like(counts), where=norms > 0)

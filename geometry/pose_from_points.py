@@ -300,19 +300,16 @@ def estimate_relative_pose(
     if E is None or E.ndim != 2 or E.shape[1] != 3 or E.shape[0] % 3 or E.shape[0] == 0:
         raise PoseEstimationError("no essential matrix found; check the correspondences")
 
-    best: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
     ransac_mask = mask.reshape(-1).astype(np.uint8) if mask is not None else np.ones(n, np.uint8)
+    count, R, t, pose_mask = -1, eye, np.zeros(3), ransac_mask
     for k in range(E.shape[0] // 3):  # the 5-point solver may return several candidates
         candidate = np.ascontiguousarray(E[3 * k : 3 * k + 3])
         try:
-            count, R, t, pose_mask = cv2.recoverPose(
-                candidate, xa, xb, eye, mask=ransac_mask.copy().reshape(-1, 1)
-            )
+            found = cv2.recoverPose(candidate, xa, xb, eye, mask=ransac_mask.copy().reshape(-1, 1))
         except cv2.error as exc:
             raise PoseEstimationError(f"cv2.recoverPose failed: {exc}") from exc
-        if best is None or count > best[0]:
-            best = (int(count), R, t, pose_mask)
-    count, R, t, pose_mask = best  # type: ignore[misc]  # E has at least one candidate
+        if int(found[0]) > count:
+            count, R, t, pose_mask = int(found[0]), found[1], found[2], found[3]
     if count < MIN_ESSENTIAL_POINTS:
         raise PoseEstimationError(
             f"only {count} correspondences lie in front of both cameras under the best pose; "

@@ -41,7 +41,7 @@ DEFAULT_BETA: float = 1e3
 _PARALLEL_TOL = 1e-9  # |n_i x n_j| below this (sine of the angle) counts as parallel
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Rays:
     """Projection rays ``r = c + s n`` of N image points of one camera (Eq. 5).
 

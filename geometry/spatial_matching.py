@@ -86,42 +86,48 @@ def monotonic_path(cost: np.ndarray, rows: np.ndarray) -> np.ndarray:
         ``(B, K, Q)`` boolean mask of the path cells.
     """
     n_batch, n_rows, n_cols = cost.shape
-    path = np.zeros(cost.shape, dtype=bool)
     if n_batch == 0 or n_rows == 0 or n_cols == 0:
-        return path
-    acc = np.empty_like(cost)
-    acc[:, 0, :] = np.cumsum(cost[:, 0, :], axis=1)
+        return np.zeros(cost.shape, dtype=bool)
+    # Accumulated cost, padded with a row and a column of +inf so that every cell has its three
+    # predecessors in range: acc[:, i + 1, j + 1] is the best cost from (0, 0) to (i, j).
+    width = n_cols + 1
+    acc = np.full((n_batch, n_rows + 1, width), np.inf)
+    acc[:, 1, 1:] = np.cumsum(cost[:, 0, :], axis=1)
     for i in range(1, n_rows):
-        prev = acc[:, i - 1, :]
-        reach = prev.copy()
-        np.minimum(prev[:, 1:], prev[:, :-1], out=reach[:, 1:])
+        prev = acc[:, i, :]
+        reach = np.minimum(prev[:, 1:], prev[:, :-1])
         row = cost[:, i, :]
         csum = np.cumsum(row, axis=1)
         # acc[i, j] = min_{k <= j} (reach[k] + sum_{l=k..j} row[l]): a min-plus prefix scan.
-        acc[:, i, :] = csum + np.minimum.accumulate(reach - csum + row, axis=1)
+        acc[:, i + 1, 1:] = csum + np.minimum.accumulate(reach - csum + row, axis=1)
 
-    b = np.arange(n_batch)
-    i = np.asarray(rows, dtype=np.intp) - 1
-    j = np.full(n_batch, n_cols - 1, dtype=np.intp)
-    alive = i >= 0
-    path[b[alive], i[alive], j[alive]] = True
-    inf = np.inf
+    # Backtrack on flat indices of the padded grid, from (rows[b], Q) to (1, 1).
+    flat = acc.reshape(n_batch, -1)
+    offset = np.arange(n_batch) * flat.shape[1]
+    flat = flat.reshape(-1)
+    start = width + 1
+    pos = np.asarray(rows, dtype=np.intp) * width + n_cols
+    alive = np.asarray(rows) > 0
+    pos = np.where(alive, pos, start) + offset
+    goal = start + offset
+    visited = [pos]
     for _ in range(n_rows + n_cols - 2):
-        moving = alive & ((i > 0) | (j > 0))
+        moving = pos != goal
         if not moving.any():
             break
-        im1, jm1 = np.maximum(i - 1, 0), np.maximum(j - 1, 0)
-        diag = np.where((i > 0) & (j > 0), acc[b, im1, jm1], inf)
-        up = np.where(i > 0, acc[b, im1, j], inf)
-        left = np.where(j > 0, acc[b, i, jm1], inf)
-        take_diag = (diag <= up) & (diag <= left)
-        take_up = ~take_diag & (up <= left)
-        step_i = moving & (take_diag | take_up)
-        step_j = moving & ~take_up
-        i = i - step_i
-        j = j - step_j
-        path[b[moving], i[moving], j[moving]] = True
-    return path
+        diag = flat[pos - width - 1]
+        up = flat[pos - width]
+        left = flat[pos - 1]
+        step = np.where(
+            (diag <= up) & (diag <= left), width + 1, np.where(up <= left, width, 1)
+        )
+        pos = pos - step * moving
+        visited.append(pos)
+    padded = np.zeros(n_batch * (n_rows + 1) * width, dtype=bool)
+    padded[np.concatenate(visited)] = True
+    padded = padded.reshape(n_batch, n_rows + 1, width)[:, 1:, 1:]
+    padded[~alive] = False
+    return padded
 
 
 def one_to_one(path: np.ndarray, cost: np.ndarray) -> np.ndarray:
@@ -225,20 +231,26 @@ def match_vector_sets(
 
 
 def cost_lower_bound(
-    top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, params: SpatialParams
+    top_x: np.ndarray,
+    count: np.ndarray,
+    hor_x: np.ndarray,
+    params: SpatialParams,
+    tight: bool = True,
 ) -> np.ndarray:
-    """Cheap lower bound of Phi (Eq. 12) per hypothesis, for exact branch-and-bound pruning.
+    """Lower bound of Phi (Eq. 12) per hypothesis, for exact branch-and-bound pruning.
 
     A kept pair (i, j) costs at least lambda * |x_top_i - x_hor_j| >= lambda * e_i, with e_i the
     distance from x_top_i to its nearest x_hor; so kappa kept pairs cost at least lambda * s_kappa,
     the sum of the kappa smallest e_i, and, as kappa <= m = min(|K|, Q),
-    Phi >= min over kappa in 1..m of rho^(L / kappa) / kappa * lambda * s_kappa.
+    Phi >= min over kappa in 1..m of rho^(L / kappa) / kappa * lambda * s_kappa (``tight``).
+    The looser ``tight=False`` bound, rho^(L / m) * lambda * min_i e_i, needs no sorting.
 
     Args:
         top_x: ``(B, M)`` top x values in any order; +inf marks absent entries.
         count: ``(B,)`` number of finite entries per row.
         hor_x: ``(Q,)`` horizontal x values, ascending.
         params: the association parameters.
+        tight: the sorted partial-sum bound (default) or the cheaper loose one.
 
     Returns:
         ``(B,)`` bound; +inf where the hypothesis has no top vector or Q = 0.
@@ -253,15 +265,21 @@ def cost_lower_bound(
     above = hor_x[np.minimum(pos, n_cols - 1)]
     with np.errstate(invalid="ignore"):
         gap = np.minimum(np.abs(top_x - below), np.abs(top_x - above))
-    gap[~np.isfinite(top_x)] = np.inf
+    absent = ~np.isfinite(top_x)
+    gap[absent] = np.inf
+    longest = np.maximum(count, n_cols)
+    shortest = np.minimum(count, n_cols)
+    if not tight:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            bound = params.rho ** (longest / shortest) * params.lam * gap.min(axis=1)
+        return np.where(count > 0, bound, np.inf)
     gap.sort(axis=1)
     gap[~np.isfinite(gap)] = 0.0
     partial = np.cumsum(gap, axis=1)
-    # coef[L, kappa - 1] = rho^(L / kappa) / kappa, for kappa <= min(count, Q), else +inf.
-    longest = np.maximum(count, n_cols)
+    # coef[L, kappa - 1] = rho^(L / kappa) / kappa, used for kappa <= min(count, Q) only.
     kappa = np.arange(1, n_people + 1)
     with np.errstate(over="ignore"):
         coef = params.rho ** (np.arange(longest.max() + 1)[:, None] / kappa) / kappa
-    usable = kappa[None, :] <= np.minimum(count, n_cols)[:, None]
+    usable = kappa[None, :] <= shortest[:, None]
     bound = np.where(usable, coef[longest] * partial, np.inf).min(axis=1) * params.lam
     return np.where(count > 0, bound, np.inf)

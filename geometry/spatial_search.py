@@ -154,16 +154,12 @@ def _best_hypothesis(
         (index, cost, pairs mask (K, Q) of that hypothesis, scale, top person of each of its K
         entries); index -1 if none is finite.
     """
-    bound = cost_lower_bound(hypotheses.x, hypotheses.count, hor[:, 0], params)
-    order = np.argsort(bound, kind="stable")
-    n_finite = int(np.isfinite(bound).sum())
+    hor_x = hor[:, 0]
+    loose = cost_lower_bound(hypotheses.x, hypotheses.count, hor_x, params, tight=False)
     best, best_cost, best_pairs, best_scale, best_index = -1, math.inf, None, 1.0, None
-    start, chunk = 0, first_chunk
-    while start < n_finite and bound[order[start]] <= best_cost:
-        idx = order[start : start + chunk]
-        idx = np.sort(idx[bound[idx] <= best_cost])
-        start += chunk
-        chunk *= 2
+
+    def score(idx: np.ndarray) -> None:
+        nonlocal best, best_cost, best_pairs, best_scale, best_index
         vectors = hypotheses.take(idx)
         result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
         k = int(np.argmin(result.cost))
@@ -172,6 +168,29 @@ def _best_hypothesis(
             best, best_cost = int(idx[k]), cost
             best_pairs, best_scale = result.pairs[k], float(result.scale[k])
             best_index = vectors.index[k]
+
+    # Seed the incumbent with the most promising hypotheses under the loose bound, then bound
+    # the survivors tightly and score them best-first in chunks of doubling size.
+    seed = np.argsort(loose, kind="stable")[:first_chunk]
+    seed = np.sort(seed[np.isfinite(loose[seed])])
+    if seed.size == 0:
+        return -1, math.inf, np.zeros((0, 0), dtype=bool), 1.0, np.zeros(0, dtype=np.intp)
+    score(seed)
+    done = np.zeros(loose.shape[0], dtype=bool)
+    done[seed] = True
+    rest = np.flatnonzero(~done & (loose <= best_cost))
+    tight = cost_lower_bound(
+        hypotheses.x[rest], hypotheses.count[rest], hor_x, params, tight=True
+    )
+    order = np.argsort(tight, kind="stable")
+    rest, tight = rest[order], tight[order]
+    start, chunk = 0, first_chunk
+    while start < rest.shape[0] and tight[start] <= best_cost:
+        sel = slice(start, start + chunk)
+        idx = np.sort(rest[sel][tight[sel] <= best_cost])
+        start += chunk
+        chunk *= 2
+        score(idx)
     if best < 0 or not math.isfinite(best_cost):
         return -1, math.inf, np.zeros((0, 0), dtype=bool), 1.0, np.zeros(0, dtype=np.intp)
     return best, best_cost, best_pairs, best_scale, best_index

@@ -119,6 +119,7 @@ _DELETE = object()
         ("cameras.top.width", -5, r"cameras\.top\.width: expected a positive integer"),
         ("cameras.top.height", 10.5, r"cameras\.top\.height: expected a positive integer"),
         ("cameras.top.height", True, r"cameras\.top\.height: expected a positive integer"),
+        ("cameras.top.height", math.inf, r"cameras\.top\.height: expected a positive integer"),
         ("cameras.top.K", _DELETE, r"cameras\.top: missing field\(s\) K"),
         ("cameras.top.k", [[1]], r"cameras\.top: unknown field\(s\) k"),
         ("cameras.top", [1, 2], r"cameras\.top: expected an object"),
