@@ -192,6 +192,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         clip_length=args.clip_length,
         max_offset=args.max_offset,
         camera_id=args.camera_id,
+        n_clips=args.clips,
     )
     if args.json:
         print(
@@ -363,7 +364,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     box_inputs(p)
     p.add_argument("--camera-id", type=int, default=None, help="top-view id of the wearer")
-    p.add_argument("--clip-start", type=int, default=None, help="first horizontal frame of clip")
+    p.add_argument(
+        "--clip-start",
+        type=int,
+        default=None,
+        help="first horizontal frame of a single clip (the paper's setting); default: "
+        "--clips clips spread over the video",
+    )
+    p.add_argument("--clips", type=int, default=5, help="clips to average (default 5)")
     p.add_argument("--clip-length", type=int, default=10, help="clip length (default 10)")
     p.add_argument("--max-offset", type=int, default=15, help="largest |offset| (default 15)")
     p.add_argument(
