@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 from functools import cache
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -35,7 +36,8 @@ def _all_paths(n_rows: int, n_cols: int) -> tuple[tuple[tuple[int, int], ...], .
     out = []
     for di, dj in ((1, 0), (0, 1), (1, 1)):
         if n_rows - di >= 1 and n_cols - dj >= 1:
-            out.extend(p + ((n_rows - 1, n_cols - 1),) for p in _all_paths(n_rows - di, n_cols - dj))
+            end = (n_rows - 1, n_cols - 1)
+            out.extend((*p, end) for p in _all_paths(n_rows - di, n_cols - dj))
     return tuple(out)
 
 
@@ -83,7 +85,7 @@ def test_monotonic_path_is_a_minimal_dtw_path(batch):
         assert cells[-1] == (count - 1, n_cols - 1)
         assert all(i < count for i, _ in cells)
         # Monotonic, steps of at most 1 in each direction (no repeated cell, no jump).
-        steps = {(i1 - i0, j1 - j0) for (i0, j0), (i1, j1) in zip(cells, cells[1:], strict=False)}
+        steps = {(i1 - i0, j1 - j0) for (i0, j0), (i1, j1) in pairwise(cells)}
         assert steps <= {(1, 0), (0, 1), (1, 1)}
         # Minimal cost, as brute force over every monotonic path.
         got = sum(cost[b, i, j] for i, j in cells)
@@ -231,9 +233,11 @@ def test_one_extra_top_person_is_left_unmatched():
 
 def test_no_vectors_cost_infinite():
     hor = np.array([[0.0, 0.01]])
-    res = match_vector_sets(np.full((2, 3), np.inf), np.zeros((2, 3)), np.array([0, 0]), hor, PARAMS)
+    no_top = np.array([0, 0])
+    res = match_vector_sets(np.full((2, 3), np.inf), np.zeros((2, 3)), no_top, hor, PARAMS)
     assert np.isinf(res.cost).all() and not res.pairs.any()
-    res = match_vector_sets(np.zeros((1, 2)), np.ones((1, 2)), np.array([2]), np.zeros((0, 2)), PARAMS)
+    no_hor = np.zeros((0, 2))
+    res = match_vector_sets(np.zeros((1, 2)), np.ones((1, 2)), np.array([2]), no_hor, PARAMS)
     assert np.isinf(res.cost).all()
     res = match_vector_sets(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int), hor, PARAMS)
     assert res.cost.shape == (0,)
@@ -271,7 +275,8 @@ def test_match_is_independent_per_batch_row(batch):
     res = match_vector_sets(top_x, top_y, count, hor, PARAMS)
     for b in range(top_x.shape[0]):
         n = int(count[b])
-        one = match_vector_sets(top_x[b : b + 1, :n], top_y[b : b + 1, :n], count[b : b + 1], hor, PARAMS)
+        row = slice(b, b + 1)
+        one = match_vector_sets(top_x[row, :n], top_y[row, :n], count[row], hor, PARAMS)
         assert math.isclose(res.cost[b], one.cost[0], rel_tol=1e-12) or (
             np.isinf(res.cost[b]) and np.isinf(one.cost[0])
         )
@@ -286,8 +291,9 @@ def test_match_is_independent_per_batch_row(batch):
             d = PARAMS.lam * np.abs(top_x[b, i] - hor[j, 0]) + np.abs(
                 res.scale[b] * top_y[b, i] - hor[j, 1]
             )
-            phi = PARAMS.rho ** (max(n, len(hor)) / kappa) / kappa * d.sum()
-            assert math.isclose(res.cost[b], phi, rel_tol=1e-9, abs_tol=1e-12)
+            coef = PARAMS.rho ** (max(n, len(hor)) / kappa) / kappa
+            # D is recomputed with scale * y instead of y / mean ratio: rounding, times coef.
+            assert math.isclose(res.cost[b], coef * d.sum(), rel_tol=1e-9, abs_tol=coef * 1e-12)
 
 
 # --------------------------------------------------------------------------------------------
@@ -295,20 +301,37 @@ def test_match_is_independent_per_batch_row(batch):
 
 
 @settings(max_examples=300, deadline=None)
-@given(batch=_top_batches(), data=st.data(), rho=st.floats(1.01, 30.0), lam=st.floats(1e-4, 10.0))
-def test_cost_lower_bound_never_exceeds_phi(batch, data, rho, lam):
+@given(
+    batch=_top_batches(),
+    data=st.data(),
+    rho=st.floats(1.01, 30.0),
+    lam=st.floats(1e-4, 10.0),
+    tight=st.booleans(),
+)
+def test_cost_lower_bound_never_exceeds_phi(batch, data, rho, lam, tight):
     top_x, top_y, count, hor = batch
     params = SpatialParams(rho=rho, lam=lam)
     true = match_vector_sets(top_x, top_y, count, hor, params).cost
     # The bound takes x in any order (the unsorted hypotheses): shuffle each row.
     shuffled = np.array([data.draw(st.permutations(list(row))) for row in top_x], dtype=float)
-    bound = cost_lower_bound(shuffled, count, hor[:, 0], params)
+    bound = cost_lower_bound(shuffled, count, hor[:, 0], params, tight=tight)
     assert bound.shape == true.shape
     assert (bound >= 0).all()
     finite = np.isfinite(true)
     assert (bound[finite] <= true[finite] * (1 + 1e-12)).all(), (bound, true)
     # No vector in the field of view: nothing to match, bound +inf.
     assert np.isinf(bound[count == 0]).all()
+
+
+@settings(max_examples=100, deadline=None)
+@given(batch=_top_batches())
+def test_tight_bound_is_at_least_the_loose_one(batch):
+    # Both are valid; the sorted partial-sum bound is never weaker (it is worth its sorting).
+    top_x, _, count, hor = batch
+    tight = cost_lower_bound(top_x, count, hor[:, 0], PARAMS, tight=True)
+    loose = cost_lower_bound(top_x, count, hor[:, 0], PARAMS, tight=False)
+    finite = np.isfinite(loose)
+    assert (tight[finite] >= loose[finite] * (1 - 1e-12)).all()
 
 
 def test_cost_lower_bound_is_tight_when_the_x_match_is_exact_and_y_agrees():
@@ -322,12 +345,15 @@ def test_cost_lower_bound_is_tight_when_the_x_match_is_exact_and_y_agrees():
     assert math.isclose(bound, phi, rel_tol=1e-9)
 
 
-def test_cost_lower_bound_empty_cases():
+@pytest.mark.parametrize("tight", [True, False])
+def test_cost_lower_bound_empty_cases(tight):
     hor_x = np.array([-0.5, 0.5])
-    bound = cost_lower_bound(np.full((3, 4), np.inf), np.zeros(3, int), hor_x, PARAMS)
-    assert np.isinf(bound).all()
-    assert np.isinf(cost_lower_bound(np.zeros((2, 1)), np.ones(2, int), np.zeros(0), PARAMS)).all()
-    assert cost_lower_bound(np.zeros((0, 3)), np.zeros(0, int), hor_x, PARAMS).shape == (0,)
+    absent = np.full((3, 4), np.inf)
+    assert np.isinf(cost_lower_bound(absent, np.zeros(3, int), hor_x, PARAMS, tight=tight)).all()
+    no_hor = cost_lower_bound(np.zeros((2, 1)), np.ones(2, int), np.zeros(0), PARAMS, tight=tight)
+    assert np.isinf(no_hor).all()
+    empty = cost_lower_bound(np.zeros((0, 3)), np.zeros(0, int), hor_x, PARAMS, tight=tight)
+    assert empty.shape == (0,)
 
 
 # --------------------------------------------------------------------------------------------

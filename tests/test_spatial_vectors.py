@@ -109,7 +109,7 @@ def test_horizontal_vectors_properties(boxes, data):
 # --------------------------------------------------------------------------------------------
 # Top view (Eqs. 5-8): a hand-made layout around O = (500, 500), theta = 0 (looking towards +u)
 
-O = (500.0, 500.0)
+O = (500.0, 500.0)  # noqa: E741 (the paper's name for the camera location)
 
 
 def test_person_straight_ahead():
@@ -189,7 +189,7 @@ def test_occlusion_hides_the_farther_person():
     near, far = _at(O, 1.0, 100.0), _at(O, 0.0, 200.0)  # 1 deg apart < tau = 2 deg
     geo = top_geometry(np.array([O, far, near]), [0], TAU2)
     np.testing.assert_array_equal(geo.visible, [[False, False, True]])
-    x, _, idx = _vectors([O, far, near], camera=0, theta=0.0)
+    _, _, idx = _vectors([O, far, near], camera=0, theta=0.0)
     np.testing.assert_array_equal(idx, [2])
 
 
@@ -218,7 +218,9 @@ def test_occlusion_is_per_candidate():
     # Seen from A, B hides C; seen from D (perpendicular), all three are apart.
     a, b, c, d = (0.0, 0.0), (100.0, 0.0), (200.0, 0.0), (150.0, 300.0)
     geo = top_geometry(np.array([a, b, c, d]), [0, 3], TAU2)
-    np.testing.assert_array_equal(geo.visible, [[False, True, False, True], [True, True, True, False]])
+    np.testing.assert_array_equal(
+        geo.visible, [[False, True, False, True], [True, True, True, False]]
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -354,9 +356,7 @@ def test_take_equals_top_vectors_rows(layout, data):
     hyp = top_hypotheses(geo, thetas, fov)
     full = top_vectors(geo, thetas, fov)
     n_rows = hyp.x.shape[0]
-    rows = np.asarray(
-        data.draw(st.lists(st.integers(0, n_rows - 1), min_size=1, max_size=n_rows))
-    )
+    rows = np.asarray(data.draw(st.lists(st.integers(0, n_rows - 1), min_size=1, max_size=n_rows)))
     part = hyp.take(rows)
     width = part.x.shape[1]
     assert width == int(full.count[rows].max())
