@@ -10,15 +10,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from xvmatch.geometry.array_checks import as_points
+
 __all__ = ["Camera", "intrinsics_from_fov", "look_rotation"]
-
-
-def _as_points(points: np.ndarray, dim: int, name: str) -> np.ndarray:
-    """Validate a ``(..., dim)`` float array once, at the public boundary."""
-    arr = np.asarray(points, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != dim:
-        raise ValueError(f"{name} must have shape (..., {dim}), got {arr.shape}")
-    return arr
 
 
 def intrinsics_from_fov(width: int, height: int, hfov_deg: float) -> np.ndarray:
@@ -100,7 +94,7 @@ class Camera:
 
     def to_camera(self, points: np.ndarray) -> np.ndarray:
         """World points ``(..., 3)`` to camera coordinates ``R (X - c)``, shape ``(..., 3)``."""
-        pts = _as_points(points, 3, "points")
+        pts = as_points(points, 3, "points")
         return (pts - self.c) @ self.R.T
 
     def depth(self, points: np.ndarray) -> np.ndarray:
@@ -124,14 +118,14 @@ class Camera:
 
     def ray_directions(self, pixels: np.ndarray) -> np.ndarray:
         """Unit world directions ``(..., 3)`` of the rays through pixels ``(..., 2)`` (Eq. 5)."""
-        uv = _as_points(pixels, 2, "pixels")
+        uv = as_points(pixels, 2, "pixels")
         hom = np.concatenate([uv, np.ones((*uv.shape[:-1], 1))], axis=-1)
         d = (hom @ self._K_inv.T) @ self.R  # R^T K^-1 [u v 1]^T, row-vector form
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def back_project(self, pixels: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """World points at the given depth (camera z) behind pixels ``(..., 2)``."""
-        uv = _as_points(pixels, 2, "pixels")
+        uv = as_points(pixels, 2, "pixels")
         hom = np.concatenate([uv, np.ones((*uv.shape[:-1], 1))], axis=-1)
         cam = (hom @ self._K_inv.T) * np.asarray(depth, dtype=float)[..., None]
         return cam @ self.R + self.c

@@ -15,6 +15,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from xvmatch.geometry.array_checks import as_boxes
+
 __all__ = [
     "HSV_BINS",
     "N_BINS",
@@ -58,19 +60,6 @@ def _check_image(image_bgr: np.ndarray) -> np.ndarray:
             "convert with np.clip(img, 0, 255).astype(np.uint8)"
         )
     return image
-
-
-def _check_boxes(boxes_xywh: np.ndarray) -> np.ndarray:
-    boxes = np.asarray(boxes_xywh, dtype=float)
-    if boxes.ndim == 1 and boxes.size == 0:
-        boxes = boxes.reshape(0, 4)
-    if boxes.ndim != 2 or boxes.shape[1] != 4:
-        raise ValueError(f"boxes_xywh must have shape (N, 4) as (x, y, w, h), got {boxes.shape}")
-    if not np.isfinite(boxes).all():
-        raise ValueError("boxes_xywh contains NaN or inf; drop or fix those detections first")
-    if (boxes[:, 2:] < 0).any():
-        raise ValueError("boxes_xywh has a negative width or height; boxes are (x, y, w, h)")
-    return boxes
 
 
 def _check_histograms(hist: np.ndarray, name: str) -> np.ndarray:
@@ -161,7 +150,7 @@ def box_histograms(image_bgr: np.ndarray, boxes_xywh: np.ndarray) -> BoxHistogra
         ValueError: wrong image shape or dtype, boxes not (N, 4), non-finite or negative sizes.
     """
     image = _check_image(image_bgr)
-    boxes = _check_boxes(boxes_xywh)
+    boxes = as_boxes(boxes_xywh)
     height, width = image.shape[:2]
     n = boxes.shape[0]
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.geometry.array_checks import as_boxes, as_points
 from xvmatch.geometry.camera import Camera
 
 __all__ = [
@@ -59,17 +60,6 @@ class Rays:
         return int(self.directions.shape[0])
 
 
-def _check_boxes(boxes_xywh: np.ndarray) -> np.ndarray:
-    boxes = np.asarray(boxes_xywh, dtype=float)
-    if boxes.ndim == 1 and boxes.size == 0:
-        boxes = boxes.reshape(0, 4)
-    if boxes.ndim != 2 or boxes.shape[1] != 4:
-        raise ValueError(f"boxes_xywh must have shape (N, 4) as (x, y, w, h), got {boxes.shape}")
-    if not np.isfinite(boxes).all():
-        raise ValueError("boxes_xywh contains NaN or inf; drop or fix those detections first")
-    return boxes
-
-
 def box_top_centres(boxes_xywh: np.ndarray) -> np.ndarray:
     """Top-centre (head) point ``(x + w/2, y)`` of each box, the point the paper projects.
 
@@ -79,7 +69,7 @@ def box_top_centres(boxes_xywh: np.ndarray) -> np.ndarray:
     Returns:
         (N, 2) pixels.
     """
-    boxes = _check_boxes(boxes_xywh)
+    boxes = as_boxes(boxes_xywh)
     return np.stack([boxes[:, 0] + 0.5 * boxes[:, 2], boxes[:, 1]], axis=1)
 
 
@@ -95,13 +85,7 @@ def pixel_rays(camera: Camera, pixels: np.ndarray) -> Rays:
     """
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a xvmatch.geometry.camera.Camera, got {type(camera)}")
-    uv = np.asarray(pixels, dtype=float)
-    if uv.ndim == 1 and uv.size == 0:
-        uv = uv.reshape(0, 2)
-    if uv.ndim != 2 or uv.shape[1] != 2:
-        raise ValueError(f"pixels must have shape (N, 2), got {uv.shape}")
-    if not np.isfinite(uv).all():
-        raise ValueError("pixels contains NaN or inf")
+    uv = as_points(pixels, 2, "pixels", finite=True).reshape(-1, 2)
     return Rays(camera=camera, pixels=uv, directions=camera.ray_directions(uv).reshape(-1, 3))
 
 

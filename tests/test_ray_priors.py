@@ -187,7 +187,7 @@ def test_bad_inputs() -> None:
         box_rays(cam, np.array([[0.0, np.nan, 1.0, 1.0]]))
     with pytest.raises(ValueError, match=r"\(N, 4\)"):
         box_rays(cam, np.ones((2, 3)))
-    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+    with pytest.raises(ValueError, match=r"\(\.\.\., 2\)"):
         pixel_rays(cam, np.ones(3))
     with pytest.raises(TypeError, match="Camera"):
         pixel_rays("top", np.ones((1, 2)))  # type: ignore[arg-type]
@@ -209,8 +209,8 @@ _coord = st.floats(-20, 20, allow_nan=False)
     yaw=st.tuples(_angle, _angle),
     pitch=st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)),
     centres=st.tuples(st.tuples(_coord, _coord, _coord), st.tuples(_coord, _coord, _coord)),
-    boxes_a=arrays(float, st.tuples(st.integers(0, 5), st.just(4)), elements=st.floats(-1e4, 1e4)),
-    boxes_b=arrays(float, st.tuples(st.integers(0, 5), st.just(4)), elements=st.floats(-1e4, 1e4)),
+    boxes_a=arrays(float, st.tuples(st.integers(0, 5), st.just(4)), elements=st.floats(0, 1e4)),
+    boxes_b=arrays(float, st.tuples(st.integers(0, 5), st.just(4)), elements=st.floats(0, 1e4)),
 )
 def test_never_nan(
     yaw: tuple[float, float],
