@@ -28,18 +28,17 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from xvmatch.datasets.mot_boxes import read_mot_boxes  # noqa: E402
+from xvmatch.datasets.cvmhat import (  # noqa: E402
+    IMAGE_SIZE,
+    default_cvmhat_dir,
+    read_sequence,
+    sequence_names,
+)
 from xvmatch.geometry.spatial_search import associate_sequence  # noqa: E402
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cvmhat"
-WIDTH = 2688
-
-
-def _sequences(data: Path) -> list[str]:
-    return sorted(p.name[: -len("_top.txt")] for p in data.glob("*_top.txt"))
+WIDTH = IMAGE_SIZE[0]
 
 
 def _children_cpu() -> float:
@@ -49,27 +48,17 @@ def _children_cpu() -> float:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("XVMATCH_CVMHAT", DEFAULT_DATA))
-    )
+    parser.add_argument("--data", type=Path, default=default_cvmhat_dir(), help="CVMHAT boxes")
     parser.add_argument("--sequences", type=int, default=0, help="use only the first N (0 = all)")
     parser.add_argument("--no-cli", action="store_true", help="skip the whole-CLI timing")
     args = parser.parse_args()
     if not (args.data / "README.md").exists():
         print(f"CVMHAT data not found at {args.data}; nothing to measure (skipped).")
         return 0
-    names = _sequences(args.data)
+    names = sequence_names(args.data)
     if args.sequences:
         names = names[: args.sequences]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        pairs = {
-            n: (
-                read_mot_boxes(args.data / f"{n}_top.txt", duplicates="first"),
-                read_mot_boxes(args.data / f"{n}_hor.txt", duplicates="first"),
-            )
-            for n in names
-        }
+    pairs = {n: read_sequence(args.data, n) for n in names}
     n_frames = sum(len(set(t) | set(h)) for t, h in pairs.values())
 
     rows = []

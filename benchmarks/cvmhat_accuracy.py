@@ -16,20 +16,18 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import os
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
 
+from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes
+from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_search import associate_sequence
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cvmhat"
-SIZE = (2688, 1512)
+SIZE = IMAGE_SIZE
 MODES = {"A": None, "B": 0}
 
 
@@ -73,24 +71,15 @@ def reference_table(path: Path) -> dict[tuple[str, str], tuple[float, float]]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    default_data = Path(os.environ.get("XVMATCH_CVMHAT", DEFAULT_DATA))
-    parser.add_argument("--data", type=Path, default=default_data, help="CVMHAT box folder")
+    parser.add_argument("--data", type=Path, default=default_cvmhat_dir(), help="CVMHAT boxes")
     parser.add_argument("--noise-seeds", type=int, default=3, help="noise draws to average")
     args = parser.parse_args()
     if not (args.data / "REFERENCE.md").exists():
         print(f"CVMHAT data not found at {args.data}; nothing to measure (skipped).")
         return 0
-    names = sorted(p.name[: -len("_top.txt")] for p in args.data.glob("*_top.txt"))
+    names = sequence_names(args.data)
     ref = reference_table(args.data / "REFERENCE.md")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        data = {
-            n: (
-                read_mot_boxes(args.data / f"{n}_top.txt", duplicates="first"),
-                read_mot_boxes(args.data / f"{n}_hor.txt", duplicates="first"),
-            )
-            for n in names
-        }
+    data = {n: read_sequence(args.data, n) for n in names}
     noise = DetectorNoise()
     for mode, camera_id in MODES.items():
         print(f"== mode {mode} ({'O given' if camera_id is not None else 'O searched'})")
