@@ -64,8 +64,8 @@ class TopGeometry:
         phi: ``(C, M)`` angle of person m seen from candidate c (radians, CCW on screen).
         dist: ``(C, M)`` distance |OP| in top-image pixels.
         visible: ``(C, M)`` person m can be seen from candidate c: it is not O itself and no
-            nearer person lies within the occlusion tolerance tau of its direction (Sec. 3.2.2,
-            "Occlusion Scenario").
+            strictly nearer person lies within the occlusion tolerance tau of its direction
+            (Sec. 3.2.2, "Occlusion Scenario").
     """
 
     phi: np.ndarray
@@ -93,12 +93,10 @@ def top_geometry(
     # Pairwise angular gaps per candidate: (C, M, M); person m is hidden by a nearer person n.
     gap = np.abs(phi[:, :, None] - phi[:, None, :])
     gap = np.minimum(gap, TWO_PI - gap)
-    m_idx = np.arange(centres.shape[0])
-    nearer = (dist[:, None, :] < dist[:, :, None]) | (
-        (dist[:, None, :] == dist[:, :, None]) & (m_idx[None, None, :] > m_idx[None, :, None])
-    )
+    # Only a strictly nearer person hides: two people at exactly the same distance both stay,
+    # so the result never depends on the order of the boxes.
+    nearer = dist[:, None, :] < dist[:, :, None]
     hides = (gap < tau) & nearer & present[:, None, :] & present[:, :, None]
-    hides[:, m_idx, m_idx] = False
     visible = present & ~hides.any(axis=2)
     return TopGeometry(phi=phi, dist=dist, visible=visible)
 

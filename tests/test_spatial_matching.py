@@ -248,7 +248,7 @@ def _top_batches(draw, max_rows: int = 6):
     """(top_x (B, K) ascending with +inf padding, top_y, count, hor (Q, 2) ascending)."""
     n_batch = draw(st.integers(1, 4))
     width = draw(st.integers(1, max_rows))
-    xs = st.floats(-0.999, 0.999)
+    xs = st.floats(-0.999, 0.999, allow_subnormal=False)
     rows_x, rows_y, counts = [], [], []
     for _ in range(n_batch):
         n = draw(st.integers(0, width))
@@ -318,7 +318,8 @@ def test_cost_lower_bound_never_exceeds_phi(batch, data, rho, lam, tight):
     assert bound.shape == true.shape
     assert (bound >= 0).all()
     finite = np.isfinite(true)
-    assert (bound[finite] <= true[finite] * (1 + 1e-12)).all(), (bound, true)
+    # (1e-300: products of tiny gaps underflow differently in Phi and in the bound.)
+    assert (bound[finite] <= true[finite] * (1 + 1e-12) + 1e-300).all(), (bound, true)
     # No vector in the field of view: nothing to match, bound +inf.
     assert np.isinf(bound[count == 0]).all()
 
