@@ -34,6 +34,8 @@ __all__ = [
     "associate_frame",
     "associate_sequence",
     "estimate_offset",
+    "hypothesis_vectors",
+    "rank_hypotheses",
     "search_window",
 ]
 
@@ -84,6 +86,73 @@ def full_circle(params: SpatialParams) -> np.ndarray:
     return step * np.arange(max(1, round(2.0 * math.pi / step)))
 
 
+def _prepare(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    candidates: Iterable[int] | None,
+    thetas: np.ndarray | None,
+    params: SpatialParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    top_boxes = np.asarray(top_boxes, dtype=float).reshape(-1, 4)
+    hor_boxes = np.asarray(hor_boxes, dtype=float).reshape(-1, 4)
+    cand = (
+        np.arange(top_boxes.shape[0])
+        if candidates is None
+        else np.asarray(list(candidates), dtype=np.intp)
+    )
+    thetas = full_circle(params) if thetas is None else np.asarray(thetas, dtype=float).ravel()
+    return top_boxes, hor_boxes, cand, thetas
+
+
+def rank_hypotheses(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    candidates: Iterable[int] | None = None,
+    thetas: np.ndarray | None = None,
+    k: int = 1,
+) -> list[FrameAssociation]:
+    """The ``k`` lowest-Phi (O, theta) hypotheses of one frame pair, best first (Sec. 3.2.4).
+
+    Exact (the same branch and bound as :func:`associate_frame`, pruning against the k-th best
+    cost); ties keep the lower hypothesis index (candidates, then orientations, in the given
+    order). Fewer than ``k`` are returned when fewer have a finite cost.
+
+    Args:
+        top_boxes, hor_boxes, hor_width, params, candidates, thetas: as in
+            :func:`associate_frame`.
+        k: number of hypotheses to return (>= 1).
+    """
+    if k < 1:
+        raise ValueError(f"k must be >= 1, got {k}")
+    params = params or SpatialParams()
+    top_boxes, hor_boxes, cand, thetas = _prepare(
+        top_boxes, hor_boxes, candidates, thetas, params
+    )
+    if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
+        return []
+    geometry = top_geometry(box_centres(top_boxes), cand, math.radians(params.tau_deg))
+    hypotheses = top_hypotheses(geometry, thetas, math.radians(params.fov_deg))
+    hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
+    n_theta = thetas.shape[0]
+    out = []
+    for index, cost, pairs_mask, scale, top_index in _ranked(hypotheses, hor, params, k):
+        rows, cols = np.nonzero(pairs_mask)
+        pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
+        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+        out.append(
+            FrameAssociation(
+                pairs=pairs,
+                camera=int(cand[index // n_theta]),
+                theta=float(np.mod(thetas[index % n_theta], 2.0 * math.pi)),
+                cost=cost,
+                scale=scale,
+            )
+        )
+    return out
+
+
 def associate_frame(
     top_boxes: np.ndarray,
     hor_boxes: np.ndarray,
@@ -106,94 +175,99 @@ def associate_frame(
 
     Returns:
         The best :class:`FrameAssociation` (lowest Phi; the first one on ties, candidates in the
-        given order and orientations in the given order).
+        given order and orientations in the given order); an empty one (camera -1, cost +inf)
+        when nothing can be matched.
+    """
+    ranked = rank_hypotheses(top_boxes, hor_boxes, hor_width, params, candidates, thetas, k=1)
+    return ranked[0] if ranked else _EMPTY
+
+
+def hypothesis_vectors(
+    top_boxes: np.ndarray,
+    camera: int,
+    theta: float,
+    params: SpatialParams | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Top-view vectors of every person under one hypothesis (O = ``camera``, ``theta``).
+
+    Returns:
+        ``(x, y, in_view, visible)``, each ``(M,)`` in the order of ``top_boxes``: x_top (Eq. 7,
+        +inf outside the field of view), the depth y_top = |OP| cos(delta) (pixels; also given
+        outside the view), whether the person is in the field of view and not occluded, and
+        whether it is not occluded (tau) and not O itself.
     """
     params = params or SpatialParams()
     top_boxes = np.asarray(top_boxes, dtype=float).reshape(-1, 4)
-    hor_boxes = np.asarray(hor_boxes, dtype=float).reshape(-1, 4)
-    cand = (
-        np.arange(top_boxes.shape[0])
-        if candidates is None
-        else np.asarray(list(candidates), dtype=np.intp)
-    )
-    if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
-        return _EMPTY
-    if thetas is None:
-        thetas = full_circle(params)
-    thetas = np.asarray(thetas, dtype=float).reshape(-1)
-    geometry = top_geometry(box_centres(top_boxes), cand, math.radians(params.tau_deg))
-    hypotheses = top_hypotheses(geometry, thetas, math.radians(params.fov_deg))
-    hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
-    best, cost, pairs_mask, scale, top_index = _best_hypothesis(hypotheses, hor, params)
-    if best < 0:
-        return _EMPTY
-    rows, cols = np.nonzero(pairs_mask)
-    pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
-    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
-    n_theta = thetas.shape[0]
-    return FrameAssociation(
-        pairs=pairs,
-        camera=int(cand[best // n_theta]),
-        theta=float(np.mod(thetas[best % n_theta], 2.0 * math.pi)),
-        cost=cost,
-        scale=scale,
-    )
+    geometry = top_geometry(box_centres(top_boxes), [camera], math.radians(params.tau_deg))
+    hyp = top_hypotheses(geometry, np.array([theta]), math.radians(params.fov_deg))
+    x = hyp.x[0]
+    y = geometry.dist[0] * np.cos(hyp.delta[0])
+    return x, y, np.isfinite(x), geometry.visible[0]
 
 
-def _best_hypothesis(
-    hypotheses: TopHypotheses, hor: np.ndarray, params: SpatialParams, first_chunk: int = 256
-) -> tuple[int, float, np.ndarray, float, np.ndarray]:
-    """Exact argmin of Phi over all hypotheses by best-first branch and bound.
+def _ranked(
+    hypotheses: TopHypotheses,
+    hor: np.ndarray,
+    params: SpatialParams,
+    k: int,
+    first_chunk: int = 256,
+) -> list[tuple[int, float, np.ndarray, float, np.ndarray]]:
+    """The k lowest-Phi hypotheses by best-first branch and bound, exactly.
 
     Hypotheses are scored in order of their lower bound (:func:`cost_lower_bound`), in chunks of
-    doubling size, until the next bound exceeds the best cost found: the result is the same as
-    scoring every hypothesis (lowest Phi, then lowest hypothesis index on ties), at a few percent
-    of the work.
+    doubling size, until the next bound exceeds the k-th best cost found: the result is the same
+    as scoring every hypothesis (lowest Phi, then lowest hypothesis index on ties), at a few
+    percent of the work.
 
     Returns:
-        (index, cost, pairs mask (K, Q) of that hypothesis, scale, top person of each of its K
-        entries); index -1 if none is finite.
+        Up to k tuples (hypothesis index, cost, pairs mask (K, Q), scale, top person of each of
+        the K entries), best first; only finite costs.
     """
     hor_x = hor[:, 0]
     loose = cost_lower_bound(hypotheses.x, hypotheses.count, hor_x, params, tight=False)
-    best, best_cost, best_pairs, best_scale, best_index = -1, math.inf, None, 1.0, None
+    pool: list[tuple[float, int, np.ndarray, float, np.ndarray]] = []
+
+    def threshold() -> float:
+        return pool[-1][0] if len(pool) >= k else math.inf
 
     def score(idx: np.ndarray) -> None:
-        nonlocal best, best_cost, best_pairs, best_scale, best_index
         vectors = hypotheses.take(idx)
         result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
-        k = int(np.argmin(result.cost))
-        cost = float(result.cost[k])
-        if cost < best_cost or (cost == best_cost and best >= 0 and idx[k] < best):
-            best, best_cost = int(idx[k]), cost
-            best_pairs, best_scale = result.pairs[k], float(result.scale[k])
-            best_index = vectors.index[k]
+        limit = threshold()
+        for r in np.flatnonzero(np.isfinite(result.cost) & (result.cost <= limit)):
+            pool.append(
+                (
+                    float(result.cost[r]),
+                    int(idx[r]),
+                    result.pairs[r],
+                    float(result.scale[r]),
+                    vectors.index[r],
+                )
+            )
+        pool.sort(key=lambda item: (item[0], item[1]))
+        del pool[k:]
 
-    # Seed the incumbent with the most promising hypotheses under the loose bound, then bound
-    # the survivors tightly and score them best-first in chunks of doubling size.
+    # Seed the pool with the most promising hypotheses under the loose bound, then bound the
+    # survivors tightly and score them best-first in chunks of doubling size.
     seed = np.argsort(loose, kind="stable")[:first_chunk]
     seed = np.sort(seed[np.isfinite(loose[seed])])
     if seed.size == 0:
-        return -1, math.inf, np.zeros((0, 0), dtype=bool), 1.0, np.zeros(0, dtype=np.intp)
+        return []
     score(seed)
     done = np.zeros(loose.shape[0], dtype=bool)
     done[seed] = True
-    rest = np.flatnonzero(~done & (loose <= best_cost))
-    tight = cost_lower_bound(
-        hypotheses.x[rest], hypotheses.count[rest], hor_x, params, tight=True
-    )
+    rest = np.flatnonzero(~done & (loose <= threshold()))
+    tight = cost_lower_bound(hypotheses.x[rest], hypotheses.count[rest], hor_x, params)
     order = np.argsort(tight, kind="stable")
     rest, tight = rest[order], tight[order]
     start, chunk = 0, first_chunk
-    while start < rest.shape[0] and tight[start] <= best_cost:
+    while start < rest.shape[0] and tight[start] <= threshold():
         sel = slice(start, start + chunk)
-        idx = np.sort(rest[sel][tight[sel] <= best_cost])
+        idx = np.sort(rest[sel][tight[sel] <= threshold()])
         start += chunk
         chunk *= 2
         score(idx)
-    if best < 0 or not math.isfinite(best_cost):
-        return -1, math.inf, np.zeros((0, 0), dtype=bool), 1.0, np.zeros(0, dtype=np.intp)
-    return best, best_cost, best_pairs, best_scale, best_index
+    return [(i, c, p, s, t) for c, i, p, s, t in pool]
 
 
 class _FrameLike:

@@ -18,6 +18,8 @@ from xvmatch.geometry.spatial_search import (
     associate_sequence,
     estimate_offset,
     full_circle,
+    hypothesis_vectors,
+    rank_hypotheses,
     search_window,
 )
 from xvmatch.geometry.spatial_vectors import (
@@ -154,6 +156,40 @@ def test_branch_and_bound_equals_brute_force(scene, noisy_views, source, frame, 
     assert _angle_diff_deg(result.theta, theta) < 1e-9
     assert math.isclose(result.cost, cost, rel_tol=1e-12)
     assert sorted(map(tuple, result.pairs.tolist())) == pairs
+
+
+@pytest.mark.parametrize(("source", "frame"), [("exact", 5), ("noisy", 3), ("exact", 33)])
+def test_rank_hypotheses_equals_brute_force_top_k(scene, noisy_views, source, frame):
+    views = (scene.top, scene.hor) if source == "exact" else noisy_views
+    top, hor = views[0][frame].boxes, views[1][frame].boxes
+    thetas = full_circle(PARAMS)
+    geo = top_geometry(box_centres(top), np.arange(len(top)), math.radians(PARAMS.tau_deg))
+    vec = top_vectors(geo, thetas, math.radians(PARAMS.fov_deg))
+    res = match_vector_sets(vec.x, vec.y, vec.count, horizontal_vectors(hor, WIDTH)[0], PARAMS)
+    order = np.lexsort((np.arange(res.cost.size), res.cost))[:10]
+    ranked = rank_hypotheses(top, hor, WIDTH, PARAMS, k=10)
+    assert len(ranked) == 10
+    for b, item in zip(order, ranked, strict=True):
+        assert math.isclose(item.cost, res.cost[b], rel_tol=1e-12)
+        assert item.camera == b // len(thetas)
+        assert _angle_diff_deg(item.theta, thetas[b % len(thetas)]) < 1e-9
+    best = associate_frame(top, hor, WIDTH, PARAMS)
+    assert ranked[0].camera == best.camera and ranked[0].cost == best.cost
+    with pytest.raises(ValueError, match="k must be"):
+        rank_hypotheses(top, hor, WIDTH, PARAMS, k=0)
+
+
+def test_hypothesis_vectors_agree_with_the_batched_vectors(scene):
+    top = scene.top[10].boxes
+    result = associate_frame(top, scene.hor[10].boxes, WIDTH, PARAMS)
+    x, y, in_view, visible = hypothesis_vectors(top, result.camera, result.theta, PARAMS)
+    geo = top_geometry(box_centres(top), [result.camera], math.radians(PARAMS.tau_deg))
+    vec = top_vectors(geo, np.array([result.theta]), math.radians(PARAMS.fov_deg))
+    n = int(vec.count[0])
+    np.testing.assert_allclose(x[vec.index[0, :n]], vec.x[0, :n], rtol=1e-12)
+    np.testing.assert_allclose(y[vec.index[0, :n]], vec.y[0, :n], rtol=1e-12)
+    assert in_view.sum() == n and not visible[result.camera]
+    assert np.all(visible[in_view]) and np.all(np.isinf(x[~in_view]))
 
 
 # --------------------------------------------------------------------------------------------
