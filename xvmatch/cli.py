@@ -1,4 +1,4 @@
-"""Command-line interface: ``xvmatch associate | evaluate | noise | offset | demo``.
+"""Command-line interface: ``xvmatch associate | evaluate | noise | offset | demo | synth | show``.
 
 Each command imports only what it needs, so ``xvmatch associate`` starts fast and never imports
 torch. Bad input ends with one line ``xvmatch: error: ...`` naming the file and line, exit code 2.
@@ -386,6 +386,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=150, help="frames to simulate (default 150)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.set_defaults(func=_cmd_demo)
+
+    from xvmatch.cli_synth import add_show_parser, add_synth_parser
+
+    add_synth_parser(sub)
+    add_show_parser(sub)
     return parser
 
 

@@ -1,0 +1,753 @@
+"""The rendered dataset on disk: writing it (in parallel, reproducibly) and reading it back.
+
+Layout of a dataset folder ``ROOT``::
+
+    ROOT/dataset.json                       manifest: schema, generator settings, scene list
+    ROOT/annotations/SCENE.json             one per scene: people, cameras and labels per frame
+    ROOT/images/top/SCENE_FRAME.jpg         top/overview view (FRAME is 1-based, 6 digits)
+    ROOT/images/ego/SCENE_FRAME.jpg         egocentric view
+
+Both JSON files carry ``"schema"`` and ``"version"`` (:data:`SCHEMA_VERSION`); a reader refuses a
+version it does not know. The scene file holds, per frame and view, the image path (relative to
+``ROOT``), the camera (``K``, ``R``, ``c``, ``width``, ``height`` in the convention of
+:class:`~xvmatch.geometry.camera.Camera`) and one record per visible person (the fields of
+:class:`~xvmatch.datasets.image_render.ViewLabels`). ``docs/synthetic_data.md`` documents every
+field.
+
+Scene ``i`` of a dataset with seed ``S`` is drawn from ``numpy.random.default_rng([S, i])``
+alone, so the files are byte-identical for any number of workers. Every file is written
+atomically (temporary file, then rename), the manifest last: a dataset with a manifest is
+complete.
+
+Reading goes through :class:`SyntheticDataset` (pairs, per-scene box tracks for the box-level
+methods and the detector noise) and :func:`person_crops` (the crops the appearance branch trains
+on), so training and evaluation see the same data the same way. Malformed files raise
+:class:`SchemaError`, whose one-line message names the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
+from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_text
+from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
+from xvmatch.geometry.camera import Camera
+
+__all__ = [
+    "MANIFEST",
+    "SCHEMA_NAME",
+    "SCHEMA_VERSION",
+    "VIEWS",
+    "PairRecord",
+    "SceneRecord",
+    "SchemaError",
+    "SyntheticDataset",
+    "ViewRecord",
+    "draw_pair",
+    "generate_dataset",
+    "person_crops",
+    "read_scene",
+    "scene_name",
+    "write_scene",
+]
+
+SCHEMA_NAME = "xvmatch.synthetic"
+"""``"schema"`` of a scene annotation file; the manifest's is ``SCHEMA_NAME + ".dataset"``."""
+SCHEMA_VERSION = 1
+"""Version of both JSON files; bumped on any incompatible change."""
+MANIFEST = "dataset.json"
+VIEWS: tuple[str, ...] = ("top", "ego")
+"""View names: the top/overview view and the egocentric view."""
+
+
+class SchemaError(ValueError):
+    """A dataset file that does not follow the schema; the message is ``"FILE: FIELD: problem"``."""
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+
+def scene_name(index: int) -> str:
+    """Name of scene ``index``: ``s00000``, ``s00001``, ..."""
+    return f"s{int(index):05d}"
+
+
+def _image_path(view: str, scene: str, frame: int) -> str:
+    return f"images/{view}/{scene}_{frame:06d}.jpg"
+
+
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename (no partial files)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def _round(values: np.ndarray, digits: int) -> list:
+    return np.round(np.asarray(values, dtype=float), digits).tolist()
+
+
+def _labels_to_json(labels: ViewLabels) -> list[dict]:
+    boxes, full = _round(labels.boxes, 2), _round(labels.full_boxes, 2)
+    ground, head = _round(labels.ground, 4), _round(labels.head, 4)
+    visible = _round(labels.visible, 4)
+    return [
+        {
+            "id": int(labels.ids[k]),
+            "box": boxes[k],
+            "full_box": full[k],
+            "visible": visible[k],
+            "truncated": bool(labels.truncated[k]),
+            "visible_pixels": int(labels.visible_pixels[k]),
+            "ground": ground[k],
+            "head": head[k],
+        }
+        for k in range(len(labels))
+    ]
+
+
+def _config_dict(config: SynthConfig) -> dict:
+    return json.loads(json.dumps(asdict(config)))
+
+
+def write_scene(
+    root: str | os.PathLike,
+    config: SynthConfig,
+    index: int,
+    n_frames: int,
+    seed: int,
+    difficulty: Difficulty | None = None,
+) -> dict:
+    """Render scene ``index`` of a dataset and write its images and annotation file.
+
+    Args:
+        root: dataset folder; ``images/top``, ``images/ego`` and ``annotations`` are created.
+        config: scenario configuration.
+        index: scene index; the scene is drawn from ``default_rng([seed, index])``.
+        n_frames: frames of the scene.
+        seed: dataset seed.
+        difficulty: rendering difficulty (``None``: medium).
+
+    Returns:
+        The scene's manifest entry: name, annotation path, frames and people.
+    """
+    import cv2
+
+    root = Path(root)
+    name = scene_name(index)
+    for sub in ("images/top", "images/ego", "annotations"):
+        (root / sub).mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng([int(seed), int(index)])
+    scene = make_scene(config, n_frames, rng)
+    renderer = SceneRenderer(scene, rng, difficulty)
+    people = scene.people
+    frames = []
+    for frame in range(1, scene.n_frames + 1):
+        pair = renderer.render(frame)
+        record: dict = {"frame": frame}
+        for view in VIEWS:
+            rendered = getattr(pair, view)
+            rel = _image_path(view, name, frame)
+            ok, buf = cv2.imencode(".jpg", rendered.image,
+                                   [cv2.IMWRITE_JPEG_QUALITY, rendered.jpeg_quality])
+            if not ok:  # pragma: no cover - OpenCV always encodes a valid uint8 image
+                raise OSError(f"could not encode {rel}")
+            _atomic_write_bytes(root / rel, buf.tobytes())
+            record[view] = {
+                "image": rel,
+                "camera": rendered.camera.to_dict(),
+                "people": _labels_to_json(rendered.labels),
+            }
+        frames.append(record)
+    appearance = renderer.appearances.to_dicts(people.ids)
+    doc = {
+        "schema": SCHEMA_NAME,
+        "version": SCHEMA_VERSION,
+        "scene": name,
+        "scenario": config.scenario,
+        "seed": [int(seed), int(index)],
+        "fps": float(config.fps),
+        "n_frames": scene.n_frames,
+        "area": round(float(scene.area), 4),
+        "camera_wearer": int(people.ids[people.wearer]),
+        "people": [
+            {
+                "id": int(people.ids[i]),
+                "height": round(float(people.heights[i]), 4),
+                "width": round(float(people.widths[i]), 4),
+                "appearance": appearance[i],
+            }
+            for i in range(people.n_people)
+        ],
+        "buildings": [b.to_dict() for b in scene.buildings],
+        "photometric": {v: renderer.photometric[v].to_dict() for v in VIEWS},
+        "frames": frames,
+    }
+    annotation = f"annotations/{name}.json"
+    atomic_write_text(root / annotation, json.dumps(doc, separators=(",", ":")) + "\n")
+    return {"name": name, "annotation": annotation, "n_frames": scene.n_frames,
+            "n_people": people.n_people}
+
+
+def _worker_init() -> None:
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def _write_scene_task(args: tuple) -> dict:
+    return write_scene(*args)
+
+
+def generate_dataset(
+    root: str | os.PathLike,
+    config: SynthConfig,
+    *,
+    n_scenes: int,
+    n_frames: int,
+    seed: int,
+    workers: int = 1,
+    difficulty: Difficulty | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> Path:
+    """Render a whole dataset into ``root`` and write its manifest last.
+
+    Args:
+        root: output folder: created if missing; if it exists it must be empty or hold a
+            previous dataset (``dataset.json``), whose files are overwritten.
+        config: scenario configuration.
+        n_scenes: number of scenes (>= 1).
+        n_frames: frames per scene (>= 1).
+        seed: dataset seed; scene i uses ``default_rng([seed, i])``.
+        workers: processes rendering scenes in parallel (1: in this process). The output does
+            not depend on it.
+        difficulty: rendering difficulty (``None``: medium).
+        progress: called with the number of pairs written each time a scene is done.
+
+    Returns:
+        The manifest path.
+    """
+    if int(n_scenes) < 1 or int(n_frames) < 1:
+        raise ValueError(f"need at least 1 scene and 1 frame, got {n_scenes} scenes, "
+                         f"{n_frames} frames")
+    if int(workers) < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    difficulty = Difficulty() if difficulty is None else difficulty
+    root = Path(root)
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"{os.fspath(root)}: exists and is not a directory")
+    if root.is_dir() and any(root.iterdir()) and not (root / MANIFEST).is_file():
+        raise ValueError(f"{os.fspath(root)}: not empty and not a synthetic dataset "
+                         f"(no {MANIFEST}); choose an empty or new folder")
+    root.mkdir(parents=True, exist_ok=True)
+    tasks = [(root, config, i, int(n_frames), int(seed), difficulty) for i in range(n_scenes)]
+    entries: list[dict] = []
+    if workers == 1:
+        for task in tasks:
+            entries.append(_write_scene_task(task))
+            if progress is not None:
+                progress(entries[-1]["n_frames"])
+    else:
+        # "spawn": a forked child would inherit OpenCV's thread pool in whatever state the
+        # parent left it, which can deadlock; fresh interpreters are safe and cost ~1 s.
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=int(workers), mp_context=context,
+                                 initializer=_worker_init) as pool:
+            futures = [pool.submit(_write_scene_task, task) for task in tasks]
+            for future in as_completed(futures):
+                entries.append(future.result())
+                if progress is not None:
+                    progress(entries[-1]["n_frames"])
+    entries.sort(key=lambda e: e["name"])
+    manifest = {
+        "schema": SCHEMA_NAME + ".dataset",
+        "version": SCHEMA_VERSION,
+        "scenario": config.scenario,
+        "seed": int(seed),
+        "n_scenes": int(n_scenes),
+        "frames_per_scene": int(n_frames),
+        "config": _config_dict(config),
+        "difficulty": json.loads(json.dumps(difficulty.to_dict())),
+        "scenes": entries,
+    }
+    path = root / MANIFEST
+    atomic_write_text(path, json.dumps(manifest, indent=1) + "\n")
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Reading and validation
+
+
+class _Doc:
+    """A JSON value together with its file and field path, for one-line schema errors."""
+
+    def __init__(self, value, file: str, path: str = "") -> None:
+        self.value, self.file, self.path = value, file, path
+
+    def error(self, what: str) -> SchemaError:
+        where = f"{self.file}: {self.path}" if self.path else self.file
+        return SchemaError(f"{where}: {what}")
+
+    def __getitem__(self, key: str | int) -> _Doc:
+        sub = f"{self.path}.{key}" if isinstance(key, str) else f"{self.path}[{key}]"
+        sub = sub.lstrip(".")
+        if isinstance(key, str):
+            if not isinstance(self.value, dict):
+                raise self.error(f"expected an object, got {type(self.value).__name__}")
+            if key not in self.value:
+                raise SchemaError(f"{self.file}: {sub}: missing field")
+        return _Doc(self.value[key], self.file, sub)
+
+    def items(self) -> list[_Doc]:
+        if not isinstance(self.value, list):
+            raise self.error(f"expected a list, got {type(self.value).__name__}")
+        return [self[k] for k in range(len(self.value))]
+
+    def str(self) -> str:
+        if not isinstance(self.value, str):
+            raise self.error(f"expected a string, got {self.value!r}")
+        return self.value
+
+    def int(self, low: int | None = None) -> int:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(f"expected an integer, got {v!r}")
+        if low is not None and v < low:
+            raise self.error(f"expected an integer >= {low}, got {v}")
+        return v
+
+    def bool(self) -> bool:
+        if not isinstance(self.value, bool):
+            raise self.error(f"expected true or false, got {self.value!r}")
+        return self.value
+
+    def numbers(self, shape: tuple[int, ...]) -> np.ndarray:
+        try:
+            arr = np.array(self.value, dtype=float)
+        except (TypeError, ValueError):
+            raise self.error(f"expected numbers of shape {shape}, got {self.value!r}") from None
+        if arr.shape != shape or any(isinstance(v, bool) for v in np.ravel(self.value)):
+            raise self.error(f"expected numbers of shape {shape}, got shape {arr.shape}")
+        if not np.isfinite(arr).all():
+            raise self.error("expected finite numbers")
+        return arr
+
+    def number(self, low: float = -np.inf, high: float = np.inf) -> float:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, int | float) or not low <= v <= high:
+            raise self.error(f"expected a number in [{low}, {high}], got {v!r}")
+        return float(v)
+
+
+def _load_json(path: Path) -> object:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SchemaError(f"{os.fspath(path)}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SchemaError(f"{os.fspath(path)}: cannot read: {exc}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SchemaError(
+            f"{os.fspath(path)}: line {exc.lineno} column {exc.colno}: not valid JSON ({exc.msg})"
+        ) from None
+
+
+def _check_header(doc: _Doc, schema: str) -> None:
+    if doc["schema"].str() != schema:
+        raise doc["schema"].error(f"expected {schema!r}, got {doc.value['schema']!r}")
+    version = doc["version"].int()
+    if version != SCHEMA_VERSION:
+        raise doc["version"].error(
+            f"unsupported version {version}; this xvmatch reads version {SCHEMA_VERSION}"
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class ViewRecord:
+    """One view of one labelled pair.
+
+    Attributes:
+        view: ``"top"`` or ``"ego"``.
+        image_path: absolute path of the JPEG file.
+        camera: the calibrated camera.
+        labels: the people visible in the view.
+    """
+
+    view: str
+    image_path: Path
+    camera: Camera
+    labels: ViewLabels
+
+    def load_image(self) -> np.ndarray:
+        """The image as ``(H, W, 3)`` uint8 BGR; ``OSError`` if it cannot be read."""
+        import cv2
+
+        image = cv2.imread(os.fspath(self.image_path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise OSError(f"{os.fspath(self.image_path)}: cannot read image")
+        return image
+
+
+@dataclass(frozen=True, eq=False)
+class PairRecord:
+    """A labelled image pair: both views of one frame of one scene.
+
+    Attributes:
+        scene: scene name.
+        frame: 1-based frame number.
+        scenario: ``"drone"`` or ``"overview"``.
+        camera_wearer: id of the person carrying the egocentric camera (in the top view only).
+        top: the top/overview view.
+        ego: the egocentric view.
+    """
+
+    scene: str
+    frame: int
+    scenario: str
+    camera_wearer: int
+    top: ViewRecord
+    ego: ViewRecord
+
+
+@dataclass(frozen=True, eq=False)
+class SceneRecord:
+    """A scene annotation file, parsed and validated.
+
+    Attributes:
+        name: scene name.
+        path: the annotation file.
+        scenario: ``"drone"`` or ``"overview"``.
+        fps: frame rate of the walks.
+        camera_wearer: id of the egocentric camera's carrier.
+        people: per-person records (``id``, ``height``, ``width``, ``appearance``).
+        pairs: the frames, ``pairs[f - 1]`` for frame f.
+    """
+
+    name: str
+    path: Path
+    scenario: str
+    fps: float
+    camera_wearer: int
+    people: list[dict]
+    pairs: list[PairRecord]
+
+    def boxes(self, view: str, *, full: bool = False) -> dict[int, FrameBoxes]:
+        """The view's boxes as ``{frame: FrameBoxes}`` (visible boxes, or full ones)."""
+        if view not in VIEWS:
+            raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
+        out = {}
+        for pair in self.pairs:
+            labels = getattr(pair, view).labels
+            out[pair.frame] = FrameBoxes(
+                pair.frame, labels.ids, labels.full_boxes if full else labels.boxes
+            )
+        return out
+
+    def visibility(self, view: str) -> dict[int, np.ndarray]:
+        """Visible fractions aligned with :meth:`boxes`: ``{frame: (N,) array}``."""
+        if view not in VIEWS:
+            raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
+        return {pair.frame: getattr(pair, view).labels.visible for pair in self.pairs}
+
+
+def _parse_labels(doc: _Doc) -> ViewLabels:
+    rows = doc.items()
+    n = len(rows)
+    ids = np.empty(n, np.int64)
+    boxes, full = np.empty((n, 4)), np.empty((n, 4))
+    visible, truncated = np.empty(n), np.empty(n, bool)
+    pixels = np.empty(n, np.int64)
+    ground, head = np.empty((n, 3)), np.empty((n, 3))
+    for k, row in enumerate(rows):
+        ids[k] = row["id"].int(0)
+        boxes[k] = row["box"].numbers((4,))
+        full[k] = row["full_box"].numbers((4,))
+        if (boxes[k, 2:] <= 0).any():
+            raise row["box"].error(f"width and height must be > 0, got {boxes[k].tolist()}")
+        visible[k] = row["visible"].number(0.0, 1.0)
+        truncated[k] = row["truncated"].bool()
+        pixels[k] = row["visible_pixels"].int(1)
+        ground[k] = row["ground"].numbers((3,))
+        head[k] = row["head"].numbers((3,))
+    if np.unique(ids).size != n:
+        raise doc.error(f"repeated person id in {sorted(ids.tolist())}")
+    return ViewLabels(ids, boxes, full, visible, truncated, pixels, ground, head)
+
+
+def _parse_camera(doc: _Doc) -> Camera:
+    d = doc.value
+    if not isinstance(d, dict):
+        raise doc.error("expected a camera object with K, R, c, width, height")
+    K, R, c = doc["K"].numbers((3, 3)), doc["R"].numbers((3, 3)), doc["c"].numbers((3,))
+    width, height = doc["width"].int(1), doc["height"].int(1)
+    try:
+        return Camera(K=K, R=R, c=c, width=width, height=height)
+    except ValueError as exc:
+        raise doc.error(str(exc)) from None
+
+
+def read_scene(path: str | os.PathLike, root: str | os.PathLike | None = None) -> SceneRecord:
+    """Read and validate one scene annotation file.
+
+    Args:
+        path: ``ROOT/annotations/SCENE.json``.
+        root: the dataset folder image paths are relative to (default: the file's grandparent).
+
+    Returns:
+        The :class:`SceneRecord`.
+
+    Raises:
+        SchemaError: the file is missing, not JSON, or does not follow the schema; the message
+            names the file and the field, e.g. ``s00001.json: frames[3].ego.people[0].box:
+            expected numbers of shape (4,), got shape (3,)``.
+    """
+    path = Path(path)
+    root = path.resolve().parent.parent if root is None else Path(root)
+    doc = _Doc(_load_json(path), os.fspath(path))
+    _check_header(doc, SCHEMA_NAME)
+    name = doc["scene"].str()
+    scenario = doc["scenario"].str()
+    wearer = doc["camera_wearer"].int(0)
+    fps = doc["fps"].number(1e-9)
+    people = [p.value for p in doc["people"].items()]
+    for p in doc["people"].items():
+        p["id"].int(0)
+        p["height"].number(0.1, 3.0)
+    frames = doc["frames"].items()
+    if len(frames) != doc["n_frames"].int(1):
+        raise doc["frames"].error(
+            f"holds {len(frames)} frames but n_frames is {doc.value['n_frames']}"
+        )
+    pairs = []
+    for k, fr in enumerate(frames):
+        frame = fr["frame"].int(1)
+        if frame != k + 1:
+            raise fr["frame"].error(f"expected frame {k + 1} (frames are 1..F in order)")
+        views = {}
+        for view in VIEWS:
+            v = fr[view]
+            views[view] = ViewRecord(
+                view=view,
+                image_path=root / v["image"].str(),
+                camera=_parse_camera(v["camera"]),
+                labels=_parse_labels(v["people"]),
+            )
+        pairs.append(PairRecord(scene=name, frame=frame, scenario=scenario,
+                                camera_wearer=wearer, top=views["top"], ego=views["ego"]))
+    return SceneRecord(name=name, path=path, scenario=scenario, fps=fps, camera_wearer=wearer,
+                       people=people, pairs=pairs)
+
+
+class SyntheticDataset:
+    """A rendered dataset folder: its manifest, scenes and labelled pairs.
+
+    Scenes are parsed lazily and cached one at a time, so iterating over a large dataset holds
+    one scene's labels in memory.
+
+    Args:
+        root: the dataset folder (holding ``dataset.json``).
+
+    Raises:
+        SchemaError: missing or malformed manifest.
+    """
+
+    def __init__(self, root: str | os.PathLike) -> None:
+        self.root = Path(root)
+        path = self.root / MANIFEST
+        doc = _Doc(_load_json(path), os.fspath(path))
+        _check_header(doc, SCHEMA_NAME + ".dataset")
+        self.scenario = doc["scenario"].str()
+        self.seed = doc["seed"].int()
+        self.manifest = doc.value
+        self._entries = []
+        for entry in doc["scenes"].items():
+            self._entries.append(
+                (entry["name"].str(), entry["annotation"].str(), entry["n_frames"].int(1))
+            )
+        self._cache: tuple[str, SceneRecord] | None = None
+
+    @property
+    def scene_names(self) -> list[str]:
+        """Names of the scenes, in order."""
+        return [e[0] for e in self._entries]
+
+    def __len__(self) -> int:
+        """Number of labelled pairs."""
+        return sum(e[2] for e in self._entries)
+
+    def scene(self, name: str) -> SceneRecord:
+        """The parsed scene ``name``."""
+        if self._cache is not None and self._cache[0] == name:
+            return self._cache[1]
+        for entry_name, annotation, _ in self._entries:
+            if entry_name == name:
+                record = read_scene(self.root / annotation, self.root)
+                self._cache = (name, record)
+                return record
+        raise KeyError(f"{os.fspath(self.root)}: no scene {name!r}")
+
+    def scenes(self) -> Iterator[SceneRecord]:
+        """Every scene, in order."""
+        for name in self.scene_names:
+            yield self.scene(name)
+
+    def pairs(self) -> Iterator[PairRecord]:
+        """Every labelled pair, scene by scene, frame by frame."""
+        for record in self.scenes():
+            yield from record.pairs
+
+    def __iter__(self) -> Iterator[PairRecord]:
+        return self.pairs()
+
+
+def person_crops(
+    image: np.ndarray,
+    labels: ViewLabels,
+    *,
+    size: tuple[int, int] = (64, 128),
+    min_visible: float = 0.0,
+    min_pixels: int = 1,
+    context: float = 0.1,
+    full: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Crops of the labelled people, resized to one size: the appearance branch's input.
+
+    The crop is the (visible, or ``full``) box enlarged by ``context`` of its size on every
+    side; parts outside the image are filled by replicating the border.
+
+    Args:
+        image: ``(H, W, 3)`` uint8 image of the view.
+        labels: the view's labels.
+        size: (width, height) of the crops.
+        min_visible: leave out people whose visible fraction is below this.
+        min_pixels: leave out people with fewer visible pixels.
+        context: relative margin around the box.
+        full: crop the full (unoccluded) box instead of the visible one.
+
+    Returns:
+        (ids, crops): ``(M,)`` ids and ``(M, size[1], size[0], 3)`` uint8 crops.
+    """
+    import cv2
+
+    width, height = int(size[0]), int(size[1])
+    if width < 1 or height < 1:
+        raise ValueError(f"size must be (width, height) >= 1, got {size}")
+    keep = (labels.visible >= min_visible) & (labels.visible_pixels >= min_pixels)
+    boxes = (labels.full_boxes if full else labels.boxes)[keep]
+    crops = np.empty((boxes.shape[0], height, width, 3), np.uint8)
+    img_h, img_w = image.shape[:2]
+    for k, (x, y, w, h) in enumerate(boxes):
+        x0, y0 = int(np.floor(x - context * w)), int(np.floor(y - context * h))
+        x1, y1 = int(np.ceil(x + w + context * w)), int(np.ceil(y + h + context * h))
+        x1, y1 = max(x1, x0 + 1), max(y1, y0 + 1)
+        patch = image[max(y0, 0) : min(y1, img_h), max(x0, 0) : min(x1, img_w)]
+        if patch.size == 0:
+            patch = np.zeros((1, 1, 3), np.uint8)
+        pad = (max(-y0, 0), max(y1 - img_h, 0), max(-x0, 0), max(x1 - img_w, 0))
+        if any(pad):
+            patch = cv2.copyMakeBorder(patch, *pad, cv2.BORDER_REPLICATE)
+        shrink = patch.shape[1] > width and patch.shape[0] > height
+        crops[k] = cv2.resize(patch, (width, height),
+                              interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    return labels.ids[keep], crops
+
+
+# --------------------------------------------------------------------------------------------
+# Pictures
+
+
+def _id_colour(pid: int) -> tuple[int, int, int]:
+    """A distinct, stable BGR colour per id (golden-angle hues)."""
+    import cv2
+
+    hue = int((pid * 137.508) % 180)
+    bgr = cv2.cvtColor(np.array([[[hue, 220, 255]]], np.uint8), cv2.COLOR_HSV2BGR)[0, 0]
+    return int(bgr[0]), int(bgr[1]), int(bgr[2])
+
+
+def draw_pair(
+    pair: PairRecord,
+    images: Sequence[np.ndarray] | None = None,
+    *,
+    full_boxes: bool = False,
+    title: bool = True,
+) -> np.ndarray:
+    """Both views side by side, each person's box and id in a colour shared across views.
+
+    The camera wearer's top-view box is labelled ``O`` (the camera location). Views of unequal
+    heights are scaled to the top view's height.
+
+    Args:
+        pair: the labelled pair.
+        images: the (top, ego) images; read from disk when ``None``.
+        full_boxes: also draw the full (unoccluded) boxes, thin.
+        title: add a caption strip with scene, frame and scenario.
+
+    Returns:
+        ``(H, W_top + W_ego, 3)`` uint8 BGR picture (plus the caption strip).
+    """
+    import cv2
+
+    if images is None:
+        images = (pair.top.load_image(), pair.ego.load_image())
+    panels = []
+    target_h = images[0].shape[0]
+    for view_rec, image in zip((pair.top, pair.ego), images, strict=True):
+        img = image.copy()
+        lab = view_rec.labels
+        scale = max(img.shape[0] / 360.0, 0.6)
+        for k in range(len(lab)):
+            pid = int(lab.ids[k])
+            colour = _id_colour(pid)
+            if full_boxes:
+                x, y, w, h = lab.full_boxes[k]
+                cv2.rectangle(img, (round(x * 16), round(y * 16)),
+                              (round((x + w) * 16), round((y + h) * 16)), colour, 1,
+                              cv2.LINE_AA, 4)
+            x, y, w, h = lab.boxes[k]
+            cv2.rectangle(img, (int(x), int(y)), (int(x + w) - 1, int(y + h) - 1), colour,
+                          1 if w < 20 else 2)
+            text = f"O:{pid}" if view_rec.view == "top" and pid == pair.camera_wearer else str(pid)
+            org = (int(x), max(int(y) - 3, 10))
+            cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.4 * scale, (0, 0, 0), 3,
+                        cv2.LINE_AA)
+            cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.4 * scale, colour, 1,
+                        cv2.LINE_AA)
+        if img.shape[0] != target_h:
+            img = cv2.resize(img, (round(img.shape[1] * target_h / img.shape[0]), target_h),
+                             interpolation=cv2.INTER_AREA)
+        panels.append(img)
+    picture = np.concatenate([panels[0], np.full((target_h, 4, 3), 255, np.uint8), panels[1]],
+                             axis=1)
+    if title:
+        strip = np.full((22, picture.shape[1], 3), 32, np.uint8)
+        top_name = "top (drone)" if pair.scenario == "drone" else "overview (building)"
+        caption = (f"{pair.scene} frame {pair.frame}: {top_name} | egocentric; "
+                   f"same colour = same person, O = camera wearer")
+        cv2.putText(strip, caption, (6, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (235, 235, 235), 1,
+                    cv2.LINE_AA)
+        picture = np.concatenate([strip, picture], axis=0)
+    return picture
