@@ -32,6 +32,7 @@ __all__ = [
     "PREDICTION_HEADER",
     "BoxFileError",
     "FrameBoxes",
+    "atomic_write_bytes",
     "atomic_write_text",
     "read_mot_boxes",
     "read_predictions",
@@ -411,17 +412,19 @@ def _default_mode() -> int:
     return 0o666 & ~umask
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` (UTF-8, ``\\n`` line ends) to ``path`` atomically.
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, fsync: bool = True) -> None:
+    """Write ``data`` to ``path`` atomically: the one helper every writer of the project uses.
 
-    The text goes to a temporary file in the same directory, is flushed to disk, then renamed over
-    ``path`` with ``os.replace``: readers see either the old file or the complete new one, never a
-    partial write. The temporary file is removed if anything fails. An existing file keeps its
-    permissions; a new one gets the usual ``0o666 & ~umask``.
+    The bytes go to a temporary file in the same directory, are flushed to disk (``fsync``; bulk
+    image writers may skip it for speed), then renamed over ``path`` with ``os.replace``: readers
+    see either the old file or the complete new one, never a partial write. The temporary file is
+    removed if anything fails. An existing file keeps its permissions; a new one gets the usual
+    ``0o666 & ~umask``.
 
     Args:
         path: destination file; its directory must exist.
-        text: the full content.
+        data: the full content.
+        fsync: flush the data to disk before the rename.
     """
     target = Path(path)
     try:
@@ -430,10 +433,11 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
         mode = _default_mode()
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            if fsync:
+                handle.flush()
+                os.fsync(handle.fileno())
         os.chmod(tmp, mode)
         os.replace(tmp, target)
     except BaseException:
@@ -442,6 +446,11 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
         except FileNotFoundError:
             pass
         raise
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` as UTF-8 to ``path`` atomically, flushed to disk (see atomic_write_bytes)."""
+    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def _fmt(value: float) -> str:

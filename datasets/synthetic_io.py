@@ -30,7 +30,6 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
-import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
@@ -39,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
-from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_text
+from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, atomic_write_text
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
 from xvmatch.geometry.camera import Camera
 
@@ -85,22 +84,6 @@ def scene_name(index: int) -> str:
 
 def _image_path(view: str, scene: str, frame: int) -> str:
     return f"images/{view}/{scene}_{frame:06d}.jpg"
-
-
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename (no partial files)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def _round(values: np.ndarray, digits: int) -> list:
@@ -172,7 +155,7 @@ def write_scene(
                                    [cv2.IMWRITE_JPEG_QUALITY, rendered.jpeg_quality])
             if not ok:  # pragma: no cover - OpenCV always encodes a valid uint8 image
                 raise OSError(f"could not encode {rel}")
-            _atomic_write_bytes(root / rel, buf.tobytes())
+            atomic_write_bytes(root / rel, buf.tobytes(), fsync=False)
             record[view] = {
                 "image": rel,
                 "camera": rendered.camera.to_dict(),
