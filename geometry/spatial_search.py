@@ -9,6 +9,7 @@ estimates a temporal offset between two unsynchronised videos by sliding clips (
 from __future__ import annotations
 
 import math
+from collections import Counter, deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ from xvmatch.geometry.spatial_vectors import (
 
 __all__ = [
     "SEARCH_MODES",
+    "FollowPolicy",
     "FrameAssociation",
     "OffsetEstimate",
     "associate_frame",
@@ -270,6 +272,32 @@ def _ranked(
     return [(i, c, p, s, t) for c, i, p, s, t in pool]
 
 
+@dataclass(frozen=True)
+class FollowPolicy:
+    """How the ``follow`` search finds the camera location O without a given camera id.
+
+    One frame's exhaustive search can pick the wrong person as O, and following it would keep
+    the mistake, so O is chosen by a vote: the first ``init_frames`` frames and then every
+    ``check_every``-th frame run the exhaustive search, and the top-view track id that won most of
+    the last ``votes`` checks is followed (the damped theta window restarts when it changes).
+
+    Attributes:
+        init_frames: exhaustive checks at the start of the sequence.
+        check_every: later, one exhaustive check every this many frames.
+        votes: how many recent checks vote.
+    """
+
+    init_frames: int = 10
+    check_every: int = 30
+    votes: int = 10
+
+    def __post_init__(self) -> None:
+        if self.init_frames < 1 or self.check_every < 1 or self.votes < 1:
+            raise ValueError(
+                f"FollowPolicy needs init_frames, check_every and votes >= 1, got {self}"
+            )
+
+
 class _FrameLike:
     """Structural type of a frame record: ``ids (N,)`` and ``boxes (N, 4)``."""
 
@@ -290,6 +318,7 @@ def associate_sequence(
     camera_id: int | None = None,
     frames: Iterable[int] | None = None,
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+    follow: FollowPolicy = FollowPolicy(),
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame of a sequence pair; returns ``{frame: [(top_id, hor_id), ...]}``.
 
@@ -303,43 +332,64 @@ def associate_sequence(
         params: association parameters.
         search: ``exhaustive`` (every O, every theta, each frame on its own), ``reduced``
             (every O, theta within the damped window S_t around the previous orientation) or
-            ``follow`` (reduced theta, and O followed by its top-view track id once found).
+            ``follow`` (reduced theta, and O followed by its top-view track id: the id that won
+            most of the recent exhaustive checks, see :class:`FollowPolicy`).
         camera_id: top-view id of the camera wearer (O given); frames where it is absent fall
             back to searching every O.
         frames: frames to process (default: the union of both views' frames, ascending).
         progress: optional wrapper around the frame iterator (e.g. a progress bar).
+        follow: how the ``follow`` mode finds O when ``camera_id`` is not given.
     """
     if search not in SEARCH_MODES:
         raise ValueError(f"search must be one of {', '.join(SEARCH_MODES)}; got {search!r}")
     params = params or SpatialParams()
     order = sorted(set(top) | set(hor)) if frames is None else sorted(set(frames))
     circle = full_circle(params)
+    voting = search == "follow" and camera_id is None
+    votes: deque[int] = deque(maxlen=follow.votes)
     followed: int | None = None
     last_theta = 0.0
     step_index = 0
+    checks = 0
     out: dict[int, list[tuple[int, int]]] = {}
     for frame in progress(order) if progress else order:
         t_rec, h_rec = top.get(frame), hor.get(frame)
         if t_rec is None or h_rec is None or len(t_rec.ids) == 0 or len(h_rec.ids) == 0:
             out[frame] = []
             continue
-        candidates: list[int] | None = None
-        if camera_id is not None:
-            candidates = _ids_to_index(t_rec.ids, camera_id) or None
-        elif search == "follow" and followed is not None:
-            candidates = _ids_to_index(t_rec.ids, followed) or None
-        if search == "exhaustive":
-            thetas = circle
+        step_index += 1
+        if voting and (checks < follow.init_frames or step_index % follow.check_every == 0):
+            # Exhaustive check: vote for the winning O; follow the most voted top-view id.
+            checks += 1
+            result = associate_frame(t_rec.boxes, h_rec.boxes, hor_width, params)
+            if result.camera >= 0:
+                votes.append(int(t_rec.ids[result.camera]))
+                leader = Counter(votes).most_common(1)[0][0]
+                if leader != followed:
+                    followed, step_index = leader, 1
+                if int(t_rec.ids[result.camera]) != followed:
+                    own = _ids_to_index(t_rec.ids, followed)
+                    if own:
+                        result = associate_frame(
+                            t_rec.boxes, h_rec.boxes, hor_width, params, own, circle
+                        )
         else:
-            step_index += 1
-            thetas = search_window(last_theta, step_index, params)
-        result = associate_frame(t_rec.boxes, h_rec.boxes, hor_width, params, candidates, thetas)
+            candidates: list[int] | None = None
+            if camera_id is not None:
+                candidates = _ids_to_index(t_rec.ids, camera_id) or None
+            elif search == "follow" and followed is not None:
+                candidates = _ids_to_index(t_rec.ids, followed) or None
+            thetas = (
+                circle if search == "exhaustive" else search_window(last_theta, step_index, params)
+            )
+            result = associate_frame(
+                t_rec.boxes, h_rec.boxes, hor_width, params, candidates, thetas
+            )
         if result.camera >= 0:
             last_theta = result.theta
-            followed = int(t_rec.ids[result.camera])
-        out[frame] = [
-            (int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs
-        ]
+            if not voting:
+                followed = int(t_rec.ids[result.camera])
+        out[frame] = [(int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs]
     return out
 
 
