@@ -1,7 +1,8 @@
-"""Command-line interface: ``xvmatch associate | evaluate | noise | offset | demo | synth | show``.
+"""Command-line interface: ``xvmatch associate | evaluate | noise | offset | demo | ...``.
 
-Each command imports only what it needs, so ``xvmatch associate`` starts fast and never imports
-torch. Bad input ends with one line ``xvmatch: error: ...`` naming the file and line, exit code 2.
+``synth`` and ``show`` come from ``cli_synth``, ``baseline`` from ``cli_baseline``. Each command
+imports only what it needs, so ``xvmatch associate`` starts fast and never imports torch. Bad
+input ends with one line ``xvmatch: error: ...`` naming the file and line, exit code 2.
 """
 
 from __future__ import annotations
@@ -391,6 +392,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_synth_parser(sub)
     add_show_parser(sub)
+
+    from xvmatch.cli_baseline import add_baseline_parser
+
+    add_baseline_parser(sub)
     return parser
 
 
