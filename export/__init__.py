@@ -1,1 +1,1 @@
-"""Reserved for later issues (see the roadmap in the README)."""
+"""ONNX export of the learned matcher (roadmap: next issue)."""

@@ -1,1 +1,1 @@
-"""Reserved for later issues (see the roadmap in the README)."""
+"""Inference without training code: assignment with a non-association cost, learned association."""

@@ -1,1 +1,1 @@
-"""Reserved for later issues (see the roadmap in the README)."""
+"""Torch modules of the learned matcher: appearance, geometry encoder, fusion, losses."""

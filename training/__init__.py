@@ -1,1 +1,1 @@
-"""Reserved for later issues (see the roadmap in the README)."""
+"""Lightning training of the learned matcher: modules, data modules, command entry points."""

@@ -1,6 +1,7 @@
 """Command-line interface: ``xvmatch associate | evaluate | noise | offset | demo | ...``.
 
-``synth`` and ``show`` come from ``cli_synth``, ``baseline`` from ``cli_baseline``. Each command
+``synth``/``show``, ``baseline``, ``fit-geometry`` and ``train`` come from ``cli_synth``,
+``cli_baseline``, ``cli_learn`` and ``cli_train``. Each command
 imports only what it needs, so ``xvmatch associate`` starts fast and never imports torch. Bad
 input ends with one line ``xvmatch: error: ...`` naming the file and line, exit code 2.
 """
@@ -125,16 +126,22 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     if args.mode == "frame" and search != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")
     frames = sorted(set(top) | set(hor))
-    pairs = associate_sequence(
-        top,
-        hor,
-        hor_width=args.image_size[0],
-        params=params,
-        search=search,
-        camera_id=args.camera_id,
-        frames=frames,
-        progress=_progress(len(frames), "associate", not args.quiet),
-    )
+    progress = _progress(len(frames), "associate", not args.quiet)
+    if args.model is not None:
+        from xvmatch.cli_learn import associate_with_model
+
+        pairs = associate_with_model(args, top, hor, frames, progress)
+    else:
+        pairs = associate_sequence(
+            top,
+            hor,
+            hor_width=args.image_size[0],
+            params=params,
+            search=search,
+            camera_id=args.camera_id,
+            frames=frames,
+            progress=progress,
+        )
     write_predictions(args.out, pairs)
     n_pairs = sum(len(p) for p in pairs.values())
     if not args.quiet:
@@ -326,6 +333,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     _add_spatial_options(p)
+    from xvmatch.cli_learn import add_model_arguments
+
+    add_model_arguments(p)
     p.set_defaults(func=_cmd_associate)
 
     p = command("evaluate", "Score predicted pairs: CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9 accuracy.")
@@ -394,8 +404,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_show_parser(sub)
 
     from xvmatch.cli_baseline import add_baseline_parser
+    from xvmatch.cli_learn import add_fit_geometry_parser
+    from xvmatch.cli_train import add_train_parser
 
     add_baseline_parser(sub)
+    add_fit_geometry_parser(sub)
+    add_train_parser(sub)
     return parser
 
 

@@ -1,0 +1,641 @@
+"""The Siamese appearance branch: person crops of either view to unit-length descriptors.
+
+Section 3.3.2 of the CVMHAT paper (Han et al., TPAMI 2021): a two-branch Siamese network with
+one set of weights, each branch a ResNet-50 trunk on a 256x128 crop, global pooling, then two
+fully connected layers of 1,024 and 128 units, the first followed by batch normalisation, ReLU
+and dropout; trained with the pair-based contrastive loss (Hadsell et al., 2006) on the
+Euclidean distance of the two branches' outputs.
+
+Here the 128-d output is scaled to unit length, so the distance of a pair,
+``d = |a - b| / 2`` (:func:`appearance_distance`), lies in [0, 1] and can be fused with the
+other normalised costs (:mod:`xvmatch.models.fusion_heads`) without a further squashing.
+
+Reads top-down like ``torchvision.models.resnet``: trunks (:class:`ResNetTrunk`,
+:class:`CompactTrunk`), the typed model (:class:`AppearanceNet`), the weights record
+(:class:`AppearanceWeights`: a local file that carries its preprocessing, so inference cannot
+mismatch it), then thin builders (:func:`appearance_resnet50`, :func:`appearance_resnet18`,
+:func:`appearance_small`). Nothing is ever downloaded: ``weights=None`` by default, and an
+ImageNet-initialised trunk comes only from a local torchvision weights file passed as
+``backbone_weights``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+import torchvision
+from torch import Tensor, nn
+from torchvision.models.resnet import BasicBlock
+
+__all__ = [
+    "ARCHS",
+    "IMAGENET_MEAN",
+    "IMAGENET_STD",
+    "WEIGHTS_FORMAT",
+    "AppearanceNet",
+    "AppearanceWeights",
+    "CompactTrunk",
+    "CropTransform",
+    "Preprocessing",
+    "ResNetTrunk",
+    "appearance_distance",
+    "appearance_from_weights",
+    "appearance_resnet18",
+    "appearance_resnet50",
+    "appearance_small",
+    "load_backbone_weights",
+    "save_appearance_weights",
+]
+
+IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
+"""RGB mean of torchvision's ImageNet weights, on the [0, 1] scale."""
+IMAGENET_STD: tuple[float, float, float] = (0.229, 0.224, 0.225)
+"""RGB standard deviation of torchvision's ImageNet weights, on the [0, 1] scale."""
+
+WEIGHTS_FORMAT = "xvmatch.appearance"
+"""``format`` field of an appearance weights file (:func:`save_appearance_weights`)."""
+_WEIGHTS_VERSION = 1
+
+ARCHS: tuple[str, ...] = ("resnet50", "resnet18", "small")
+"""Architectures with a builder: :func:`appearance_resnet50`, :func:`appearance_resnet18`,
+:func:`appearance_small`."""
+
+
+# --------------------------------------------------------------------------------------------
+# Preprocessing
+
+
+@dataclass(frozen=True)
+class Preprocessing:
+    """How crops must be prepared for a network: size and normalisation.
+
+    Attributes:
+        input_size: ``(height, width)`` of the crops in pixels (the paper: 256x128).
+        mean: RGB mean subtracted, on the [0, 1] scale.
+        std: RGB standard deviation divided by, on the [0, 1] scale.
+    """
+
+    input_size: tuple[int, int] = (256, 128)
+    mean: tuple[float, float, float] = IMAGENET_MEAN
+    std: tuple[float, float, float] = IMAGENET_STD
+
+    def __post_init__(self) -> None:
+        size = tuple(int(v) for v in self.input_size)
+        if len(size) != 2 or min(size) < 16:
+            raise ValueError(
+                f"input_size must be (height, width) of at least 16x16 pixels, got "
+                f"{self.input_size}"
+            )
+        object.__setattr__(self, "input_size", size)
+        for name in ("mean", "std"):
+            values = tuple(float(v) for v in getattr(self, name))
+            if len(values) != 3:
+                raise ValueError(f"{name} must have 3 (RGB) values, got {getattr(self, name)}")
+            object.__setattr__(self, name, values)
+        if min(self.std) <= 0:
+            raise ValueError(f"std must be > 0, got {self.std}")
+
+    @property
+    def crop_size(self) -> tuple[int, int]:
+        """``(width, height)``, the order of OpenCV and of ``person_crops(size=...)``."""
+        return self.input_size[1], self.input_size[0]
+
+
+class CropTransform(nn.Module):
+    """Crops as OpenCV gives them to the network's input.
+
+    ``(B, H, W, 3)`` BGR crops, uint8 or float on the [0, 255] scale, become ``(B, 3, H, W)``
+    RGB floats normalised with the record's mean and standard deviation. Crops must already
+    have the input size (``person_crops(size=preprocessing.crop_size)``).
+
+    Args:
+        preprocessing: the input size and normalisation.
+    """
+
+    def __init__(self, preprocessing: Preprocessing) -> None:
+        super().__init__()
+        self.preprocessing = preprocessing
+        mean = torch.tensor(preprocessing.mean).view(1, 3, 1, 1) * 255.0
+        std = torch.tensor(preprocessing.std).view(1, 3, 1, 1) * 255.0
+        self.register_buffer("mean", mean, persistent=False)
+        self.register_buffer("std", std, persistent=False)
+
+    def forward(self, crops: Tensor) -> Tensor:
+        """Normalise ``crops (B, H, W, 3)`` BGR [0, 255] into ``(B, 3, H, W)`` RGB."""
+        h, w = self.preprocessing.input_size
+        if crops.ndim != 4 or tuple(crops.shape[1:]) != (h, w, 3):
+            raise ValueError(
+                f"crops must be (B, {h}, {w}, 3) BGR images of the network's input size, "
+                f"got shape {tuple(crops.shape)}; crop with size=({w}, {h})"
+            )
+        # Contiguous NCHW: a channels-last view here crashes torch 2.14's CPU convolution
+        # backward with more than one thread.
+        x = crops.flip(-1).permute(0, 3, 1, 2).to(self.mean.dtype).contiguous()
+        return (x - self.mean) / self.std
+
+
+# --------------------------------------------------------------------------------------------
+# Trunks
+
+
+_RESNETS: dict[int, Callable[..., torchvision.models.ResNet]] = {
+    18: torchvision.models.resnet18,
+    34: torchvision.models.resnet34,
+    50: torchvision.models.resnet50,
+    101: torchvision.models.resnet101,
+}
+
+
+class ResNetTrunk(nn.Module):
+    """The convolutional part of a torchvision ResNet (everything before pooling).
+
+    Parameter names equal torchvision's, so a torchvision state dict (less ``fc.*``) loads into
+    it unchanged.
+
+    Args:
+        depth: 18, 34, 50 or 101.
+        weights_path: optional local torchvision weights file of the same depth (e.g. a saved
+            ``torchvision.models.resnet50(weights="IMAGENET1K_V2").state_dict()``); None: random
+            initialisation. Never downloaded.
+    """
+
+    def __init__(self, depth: int = 50, weights_path: str | None = None) -> None:
+        super().__init__()
+        if depth not in _RESNETS:
+            raise ValueError(f"depth must be one of {sorted(_RESNETS)}, got {depth}")
+        resnet = _RESNETS[depth](weights=None)
+        self.depth = int(depth)
+        self.conv1, self.bn1, self.relu, self.maxpool = (
+            resnet.conv1, resnet.bn1, resnet.relu, resnet.maxpool
+        )
+        self.layer1, self.layer2, self.layer3, self.layer4 = (
+            resnet.layer1, resnet.layer2, resnet.layer3, resnet.layer4
+        )
+        self.out_channels = int(resnet.fc.in_features)
+        if weights_path is not None:
+            load_backbone_weights(self, weights_path)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``(B, 3, H, W)`` to ``(B, C, H / 32, W / 32)`` feature maps."""
+        x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
+        return self.layer4(self.layer3(self.layer2(self.layer1(x))))
+
+
+class CompactTrunk(nn.Module):
+    """A small residual trunk for CPU training: a stride-4 stem, one basic block per stage.
+
+    About 1.2 M parameters at the default widths and roughly 1.5x the crops per second of a
+    ResNet-18 at 128x64 on a CPU. No pretrained weights exist for it.
+
+    Args:
+        widths: channels of the four stages (strides 1, 2, 2, 2 after the stem).
+        blocks: basic blocks per stage.
+    """
+
+    def __init__(self, widths: Sequence[int] = (32, 64, 128, 256), blocks: int = 1) -> None:
+        super().__init__()
+        widths = [int(w) for w in widths]
+        if len(widths) != 4 or min(widths) < 1 or int(blocks) < 1:
+            raise ValueError(
+                f"widths must be 4 positive channel counts and blocks >= 1, got {widths}, "
+                f"{blocks}"
+            )
+        self.stem = nn.Sequential(
+            nn.Conv2d(3, widths[0], 5, stride=2, padding=2, bias=False),
+            nn.BatchNorm2d(widths[0]),
+            nn.ReLU(inplace=True),
+            nn.MaxPool2d(3, stride=2, padding=1),
+        )
+        stages, cin = [], widths[0]
+        for k, cout in enumerate(widths):
+            stride = 1 if k == 0 else 2
+            down = None
+            if stride != 1 or cin != cout:
+                down = nn.Sequential(nn.Conv2d(cin, cout, 1, stride=stride, bias=False),
+                                     nn.BatchNorm2d(cout))
+            stage = [BasicBlock(cin, cout, stride, down)]
+            stage += [BasicBlock(cout, cout) for _ in range(int(blocks) - 1)]
+            stages.append(nn.Sequential(*stage))
+            cin = cout
+        self.stages = nn.Sequential(*stages)
+        self.out_channels = widths[-1]
+        for m in self.modules():
+            if isinstance(m, nn.Conv2d):
+                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``(B, 3, H, W)`` to ``(B, C, H / 32, W / 32)`` feature maps."""
+        return self.stages(self.stem(x))
+
+
+def _torchvision_state(path: Path) -> dict[str, Tensor]:
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{os.fspath(path)}: no such torchvision weights file; save one on a machine with "
+            "network access, e.g. torch.save(torchvision.models.resnet50(weights="
+            "'IMAGENET1K_V2').state_dict(), 'resnet50.pth'), and pass its path"
+        )
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # pickle, zip or weights-only errors all mean "not a state dict"
+        raise ValueError(f"{os.fspath(path)}: not a torch weights file ({exc})") from None
+    if isinstance(state, Mapping) and "state_dict" in state and isinstance(
+        state["state_dict"], Mapping
+    ):
+        state = state["state_dict"]
+    if not isinstance(state, Mapping) or not all(isinstance(v, Tensor) for v in state.values()):
+        raise ValueError(f"{os.fspath(path)}: expected a state dict {{name: tensor}}")
+    return {k: v for k, v in state.items() if not k.startswith("fc.")}
+
+
+def load_backbone_weights(trunk: ResNetTrunk, path: str | os.PathLike) -> None:
+    """Load a local torchvision ResNet weights file into a trunk, all-or-nothing.
+
+    The file is a state dict of ``torchvision.models.resnetNN`` (the classifier ``fc.*`` is
+    ignored), or a dict holding one under ``"state_dict"``.
+
+    Args:
+        trunk: the trunk to fill.
+        path: the local file.
+
+    Raises:
+        FileNotFoundError: no file at ``path`` (the message says how to make one).
+        ValueError: not a state dict, or one of another architecture (missing, unexpected or
+            differently shaped parameters; the message names a few).
+    """
+    path = Path(path)
+    state = _torchvision_state(path)
+    own = trunk.state_dict()
+    missing = sorted(set(own) - set(state))
+    unexpected = sorted(set(state) - set(own))
+    shapes = [k for k in sorted(set(own) & set(state)) if own[k].shape != state[k].shape]
+    if missing or unexpected or shapes:
+        parts = []
+        for what, keys in (("missing", missing), ("unexpected", unexpected),
+                           ("shape mismatch", shapes)):
+            if keys:
+                more = f" (+{len(keys) - 3} more)" if len(keys) > 3 else ""
+                parts.append(f"{what}: {', '.join(keys[:3])}{more}")
+        raise ValueError(
+            f"{os.fspath(path)}: not torchvision resnet{trunk.depth} weights ({'; '.join(parts)})"
+        )
+    trunk.load_state_dict(state)
+
+
+# --------------------------------------------------------------------------------------------
+# The model
+
+
+class AppearanceNet(nn.Module):
+    """One branch of the Siamese network (both views share it): crop to unit descriptor.
+
+    ``trunk -> global average pooling -> FC(hidden) -> BatchNorm -> ReLU -> Dropout ->
+    FC(embedding) -> L2 normalisation`` (Section 3.3.2 of the CVMHAT paper, the normalisation
+    added so that descriptor distances lie in [0, 1]).
+
+    Args:
+        trunk: convolutional trunk with an ``out_channels`` attribute, e.g.
+            :class:`ResNetTrunk` or :class:`CompactTrunk`.
+        input_size: ``(height, width)`` of the crops (the paper: 256x128).
+        embedding_dim: descriptor size (the paper: 128).
+        hidden_dim: first FC layer (the paper: 1,024).
+        dropout: dropout probability after the first FC layer.
+        arch: name of the architecture, recorded in weights files.
+        mean: RGB normalisation mean on the [0, 1] scale.
+        std: RGB normalisation standard deviation on the [0, 1] scale.
+    """
+
+    def __init__(
+        self,
+        trunk: nn.Module,
+        input_size: tuple[int, int] = (256, 128),
+        embedding_dim: int = 128,
+        hidden_dim: int = 1024,
+        dropout: float = 0.5,
+        arch: str = "custom",
+        mean: tuple[float, float, float] = IMAGENET_MEAN,
+        std: tuple[float, float, float] = IMAGENET_STD,
+    ) -> None:
+        super().__init__()
+        channels = getattr(trunk, "out_channels", None)
+        if not isinstance(channels, int) or channels < 1:
+            raise ValueError("trunk must have an int out_channels attribute (its feature "
+                             f"channels), got {channels!r}")
+        if int(embedding_dim) < 1 or int(hidden_dim) < 1:
+            raise ValueError(f"embedding_dim and hidden_dim must be >= 1, got {embedding_dim}, "
+                             f"{hidden_dim}")
+        if not 0 <= float(dropout) < 1:
+            raise ValueError(f"dropout must be in [0, 1), got {dropout}")
+        self.preprocessing = Preprocessing(tuple(input_size), tuple(mean), tuple(std))
+        self.arch = str(arch)
+        self.embedding_dim = int(embedding_dim)
+        self.hidden_dim = int(hidden_dim)
+        self.transform = CropTransform(self.preprocessing)
+        self.trunk = trunk
+        self.pool = nn.AdaptiveAvgPool2d(1)
+        self.head = nn.Sequential(
+            nn.Linear(channels, self.hidden_dim),
+            nn.BatchNorm1d(self.hidden_dim),
+            nn.ReLU(inplace=True),
+            nn.Dropout(float(dropout)),
+            nn.Linear(self.hidden_dim, self.embedding_dim),
+        )
+
+    def forward(self, images: Tensor) -> Tensor:
+        """Descriptors of normalised images.
+
+        Args:
+            images: ``(B, 3, H, W)`` RGB, normalised by :attr:`transform`.
+
+        Returns:
+            ``(B, embedding_dim)`` unit-length descriptors.
+        """
+        x = self.pool(self.trunk(images)).flatten(1)
+        return nn.functional.normalize(self.head(x), dim=1, eps=1e-8)
+
+    def embed_crops(self, crops: Tensor) -> Tensor:
+        """Descriptors of ``(B, H, W, 3)`` BGR crops on the [0, 255] scale (see
+        :class:`CropTransform`)."""
+        return self(self.transform(crops))
+
+
+def appearance_distance(top: Tensor, ego: Tensor) -> Tensor:
+    """Pairwise appearance cost ``|a - b| / 2`` of unit descriptors, in [0, 1].
+
+    Args:
+        top: ``(..., M, D)`` descriptors of the top view.
+        ego: ``(..., N, D)`` descriptors of the egocentric view.
+
+    Returns:
+        ``(..., M, N)``; 0 for identical descriptors (up to float32 round-off, about 1e-3, of
+        the cosine form, which keeps gradients finite), 1 for opposite ones. Empty sides give
+        empty matrices.
+    """
+    cosine = top @ ego.transpose(-1, -2)
+    return (0.5 * (2.0 - 2.0 * cosine).clamp(min=1e-12).sqrt()).clamp(0.0, 1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Weights records
+
+
+@dataclass(frozen=True)
+class AppearanceWeights:
+    """A trained :class:`AppearanceNet` saved locally, with what is needed to use it.
+
+    The counterpart of torchvision's ``Weights`` enums for files of our own: the record carries
+    the architecture, the preprocessing and metadata (training data, recipe), so a builder
+    given it builds the matching network and the crops are prepared the same way as in training.
+
+    Attributes:
+        path: the file.
+        arch: one of :data:`ARCHS`.
+        preprocessing: input size and normalisation.
+        embedding_dim: descriptor size.
+        hidden_dim: first FC layer.
+        trunk: keyword arguments of the trunk (e.g. ``{"depth": 50}``, ``{"widths": [...]}``).
+        meta: free-form metadata (JSON types).
+    """
+
+    path: Path
+    arch: str
+    preprocessing: Preprocessing
+    embedding_dim: int
+    hidden_dim: int
+    trunk: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike) -> AppearanceWeights:
+        """Read the record of a weights file written by :func:`save_appearance_weights`.
+
+        Raises:
+            FileNotFoundError: no file.
+            ValueError: not an appearance weights file, or an unsupported version.
+        """
+        path = Path(path)
+        blob = _load_weights_blob(path)
+        p = blob["preprocessing"]
+        return cls(
+            path=path,
+            arch=str(blob["arch"]),
+            preprocessing=Preprocessing(tuple(p["input_size"]), tuple(p["mean"]),
+                                        tuple(p["std"])),
+            embedding_dim=int(blob["embedding_dim"]),
+            hidden_dim=int(blob["hidden_dim"]),
+            trunk=dict(blob.get("trunk", {})),
+            meta=dict(blob.get("meta", {})),
+        )
+
+    def state_dict(self) -> dict[str, Tensor]:
+        """The network's parameters and buffers."""
+        return dict(_load_weights_blob(self.path)["state_dict"])
+
+    def transforms(self) -> CropTransform:
+        """The crop preprocessing these weights were trained with."""
+        return CropTransform(self.preprocessing)
+
+
+def _load_weights_blob(path: Path) -> dict:
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{os.fspath(path)}: no such appearance weights file; train one with "
+            "xvmatch train --config configs/appearance_cpu.yaml"
+        )
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise ValueError(f"{os.fspath(path)}: not a torch file ({exc})") from None
+    if not isinstance(blob, Mapping) or blob.get("format") != WEIGHTS_FORMAT:
+        raise ValueError(
+            f"{os.fspath(path)}: not an xvmatch appearance weights file (format "
+            f"{WEIGHTS_FORMAT!r}); a torchvision trunk file goes to backbone_weights instead"
+        )
+    if blob.get("version") != _WEIGHTS_VERSION:
+        raise ValueError(f"{os.fspath(path)}: unsupported version {blob.get('version')}; this "
+                         f"xvmatch reads version {_WEIGHTS_VERSION}")
+    return dict(blob)
+
+
+def _trunk_config(net: AppearanceNet) -> dict:
+    trunk = net.trunk
+    if isinstance(trunk, ResNetTrunk):
+        return {"depth": trunk.depth}
+    if isinstance(trunk, CompactTrunk):
+        widths = [stage[0].conv1.out_channels for stage in trunk.stages]
+        return {"widths": widths, "blocks": len(trunk.stages[0])}
+    return {}
+
+
+def save_appearance_weights(
+    net: AppearanceNet, path: str | os.PathLike, meta: Mapping[str, Any] | None = None
+) -> AppearanceWeights:
+    """Write a network and its record (architecture, preprocessing, metadata) to one file.
+
+    Args:
+        net: the trained network (its ``arch`` must be one of :data:`ARCHS` to be rebuilt by
+            :func:`appearance_from_weights`).
+        path: output file (``.pt``), written atomically.
+        meta: JSON-typed metadata, e.g. the training data and recipe.
+
+    Returns:
+        The record of the written file.
+    """
+    path = Path(path)
+    blob = {
+        "format": WEIGHTS_FORMAT,
+        "version": _WEIGHTS_VERSION,
+        "arch": net.arch,
+        "preprocessing": {k: list(v) for k, v in asdict(net.preprocessing).items()},
+        "embedding_dim": net.embedding_dim,
+        "hidden_dim": net.hidden_dim,
+        "trunk": _trunk_config(net),
+        "meta": dict(meta or {}),
+        "state_dict": {k: v.detach().cpu().clone() for k, v in net.state_dict().items()},
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(blob, tmp)
+    os.replace(tmp, path)
+    return AppearanceWeights.from_file(path)
+
+
+def _as_record(weights: AppearanceWeights | str | os.PathLike) -> AppearanceWeights:
+    if isinstance(weights, AppearanceWeights):
+        return weights
+    return AppearanceWeights.from_file(weights)
+
+
+# --------------------------------------------------------------------------------------------
+# Builders
+
+
+def _build(
+    arch: str,
+    trunk: nn.Module,
+    weights: AppearanceWeights | str | os.PathLike | None,
+    input_size: tuple[int, int],
+    embedding_dim: int,
+    hidden_dim: int,
+    dropout: float,
+) -> AppearanceNet:
+    record = None if weights is None else _as_record(weights)
+    if record is not None:
+        if record.arch != arch:
+            raise ValueError(
+                f"{os.fspath(record.path)} holds an appearance_{record.arch} network, not "
+                f"appearance_{arch}; build it with appearance_from_weights"
+            )
+        input_size = record.preprocessing.input_size
+        embedding_dim, hidden_dim = record.embedding_dim, record.hidden_dim
+    p = Preprocessing(input_size) if record is None else record.preprocessing
+    net = AppearanceNet(trunk, p.input_size, embedding_dim, hidden_dim, dropout, arch=arch,
+                        mean=p.mean, std=p.std)
+    if record is not None:
+        try:
+            net.load_state_dict(record.state_dict())
+        except RuntimeError as exc:
+            first = str(exc).strip().splitlines()
+            raise ValueError(f"{os.fspath(record.path)}: weights do not fit the "
+                             f"appearance_{arch} network: {' '.join(first[:3])}") from None
+    return net
+
+
+def appearance_resnet50(
+    *,
+    weights: AppearanceWeights | str | os.PathLike | None = None,
+    backbone_weights: str | os.PathLike | None = None,
+    input_size: tuple[int, int] = (256, 128),
+    embedding_dim: int = 128,
+    hidden_dim: int = 1024,
+    dropout: float = 0.5,
+) -> AppearanceNet:
+    """The paper's branch: ResNet-50 trunk, 256x128 crops, FC 1024 + BN + ReLU + dropout, FC 128.
+
+    Args:
+        weights: a trained appearance weights file or record (:class:`AppearanceWeights`);
+            it sets the input size and layer sizes. None: untrained.
+        backbone_weights: local torchvision ``resnet50`` weights file for the trunk (ImageNet
+            initialisation); ignored when ``weights`` is given. None: random trunk.
+        input_size: ``(height, width)`` of the crops.
+        embedding_dim: descriptor size.
+        hidden_dim: first FC layer.
+        dropout: dropout after the first FC layer.
+
+    Raises:
+        FileNotFoundError: a weights file that does not exist.
+        ValueError: a weights file of another architecture or with mismatched parameters.
+    """
+    trunk = ResNetTrunk(50, None if weights is not None or backbone_weights is None
+                        else os.fspath(backbone_weights))
+    return _build("resnet50", trunk, weights, input_size, embedding_dim, hidden_dim, dropout)
+
+
+def appearance_resnet18(
+    *,
+    weights: AppearanceWeights | str | os.PathLike | None = None,
+    backbone_weights: str | os.PathLike | None = None,
+    input_size: tuple[int, int] = (128, 64),
+    embedding_dim: int = 128,
+    hidden_dim: int = 1024,
+    dropout: float = 0.5,
+) -> AppearanceNet:
+    """A lighter branch: ResNet-18 trunk on 128x64 crops, same head (arguments as
+    :func:`appearance_resnet50`; ``backbone_weights`` is a torchvision ``resnet18`` file)."""
+    trunk = ResNetTrunk(18, None if weights is not None or backbone_weights is None
+                        else os.fspath(backbone_weights))
+    return _build("resnet18", trunk, weights, input_size, embedding_dim, hidden_dim, dropout)
+
+
+def appearance_small(
+    *,
+    weights: AppearanceWeights | str | os.PathLike | None = None,
+    input_size: tuple[int, int] = (128, 64),
+    widths: Sequence[int] = (32, 64, 128, 256),
+    embedding_dim: int = 128,
+    hidden_dim: int = 256,
+    dropout: float = 0.2,
+) -> AppearanceNet:
+    """The CPU branch: :class:`CompactTrunk` on 128x64 crops, FC 256 + BN + ReLU + dropout,
+    FC 128, for fast tests and CPU experiments.
+
+    Args:
+        weights: a trained appearance weights file or record; it sets every size.
+        input_size: ``(height, width)`` of the crops.
+        widths: channels of the trunk's four stages.
+        embedding_dim: descriptor size.
+        hidden_dim: first FC layer.
+        dropout: dropout after the first FC layer.
+    """
+    if weights is not None:
+        record = _as_record(weights)
+        widths = record.trunk.get("widths", widths)
+        return _build("small", CompactTrunk(widths, record.trunk.get("blocks", 1)), record,
+                      input_size, embedding_dim, hidden_dim, dropout)
+    return _build("small", CompactTrunk(widths), None, input_size, embedding_dim, hidden_dim,
+                  dropout)
+
+
+def appearance_from_weights(weights: AppearanceWeights | str | os.PathLike) -> AppearanceNet:
+    """Build the network a weights file holds, whatever its architecture, in eval mode.
+
+    Raises:
+        FileNotFoundError: no file.
+        ValueError: not an appearance weights file, or an architecture without a builder.
+    """
+    record = _as_record(weights)
+    if record.arch == "small":
+        net = appearance_small(weights=record)
+    elif record.arch == "resnet50":
+        net = appearance_resnet50(weights=record)
+    elif record.arch == "resnet18":
+        net = appearance_resnet18(weights=record)
+    else:
+        raise ValueError(f"{os.fspath(record.path)}: architecture {record.arch!r} has no "
+                         f"builder; one of {', '.join(ARCHS)} expected")
+    return net.eval()

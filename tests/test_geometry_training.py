@@ -1,0 +1,180 @@
+"""Training the geometry model: loss goes down, fit/checkpoint/resume round trip, DataModules."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import lightning as L
+import numpy as np
+import pytest
+import torch
+
+from xvmatch.datasets.box_scene import write_box_scene
+from xvmatch.datasets.geometry_features import FeatureConfig
+from xvmatch.inference.learned_association import load_geometry_model
+from xvmatch.models.geometry_encoder import GeometryEncoder
+from xvmatch.training.box_datamodule import (
+    CvmhatBoxDataModule,
+    SimBoxDataModule,
+    random_scene_config,
+    site_of,
+)
+from xvmatch.training.fit_geometry import fit_geometry
+from xvmatch.training.geometry_module import GeometryMatchingModule
+
+FEATURES = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
+TINY = {"width": 16, "layers": 1, "heads": 2, "sinkhorn_iterations": 10}
+INPUTS = ("top", "hor", "hyp", "pair", "top_mask", "hor_mask", "hyp_mask")
+
+pytestmark = pytest.mark.filterwarnings("ignore::UserWarning", "ignore::DeprecationWarning")
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """One intra-op thread: tiny tensors gain nothing from more, and on a busy 2-core machine
+    more threads spin against each other (a 1 s training run took over a minute)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+def _sim(cache, **kwargs) -> SimBoxDataModule:
+    options = {"n_scenes": 4, "frames_per_scene": 16, "frame_step": 2, "val_scenes": 1,
+               "feature_config": FEATURES, "batch_size": 8, "cache_dir": str(cache), "seed": 1}
+    options.update(kwargs)
+    return SimBoxDataModule(**options)
+
+
+def _mean_loss(module: GeometryMatchingModule, batches) -> float:
+    module.eval()
+    with torch.no_grad():
+        values = [
+            module.loss(module(b), b["match"], b["camera_correct"], b["top_mask"],
+                        b["hor_mask"], b["hyp_mask"])["total"].item()
+            for b in batches
+        ]
+    module.train()
+    return float(np.mean(values))
+
+
+def test_a_few_training_steps_reduce_the_loss(sim_dir):
+    dm = _sim(sim_dir)
+    dm.setup("fit")
+    assert len(dm.train_parts) == 3 and len(dm.val_parts) == 1
+    batches = list(dm.train_dataloader())
+    L.seed_everything(0, verbose=False)
+    module = GeometryMatchingModule(GeometryEncoder(**TINY), learning_rate=5e-3)
+    before = _mean_loss(module, batches)
+    trainer = L.Trainer(max_epochs=12, accelerator="cpu", logger=False, enable_checkpointing=False,
+                        enable_progress_bar=False, enable_model_summary=False,
+                        num_sanity_val_steps=0, limit_val_batches=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        trainer.fit(module, train_dataloaders=dm.train_dataloader())
+    after = _mean_loss(module, batches)
+    assert after < 0.7 * before, (before, after)
+
+
+def test_fit_checkpoint_resume_round_trip(sim_dir, tmp_path):
+    out = tmp_path / "geo.pt"
+    run = tmp_path / "run"
+    result = fit_geometry(_sim(sim_dir), out, feature_config=FEATURES, model_config=TINY,
+                          epochs=1, seed=0, run_dir=run, progress=False, meta={"note": "test"})
+    assert result.model_path == out and out.is_file()
+    assert result.epochs == 1 and result.best_score is not None
+    assert result.wall_time_s > 0 and result.peak_memory_mb > 0
+    assert (run / "checkpoints" / "last.ckpt").is_file()
+    assert list((run / "csv").rglob("metrics.csv"))
+    assert list((run / "tensorboard").rglob("*tfevents*"))
+    config = json.loads((run / "config.json").read_text())
+    assert config["model_config"]["width"] == 16 and config["seed"] == 0
+
+    # The model file round-trips: same weights, same costs.
+    loaded = load_geometry_model(out)
+    assert loaded.meta["note"] == "test" and loaded.feature_config == FEATURES
+    best = torch.load(next((run / "checkpoints").glob("best-*.ckpt")), weights_only=True)
+    weights = {k.removeprefix("model."): v for k, v in best["state_dict"].items()
+               if k.startswith("model.")}
+    for name, value in loaded.matcher.geometry.state_dict().items():
+        assert torch.equal(value, weights[name]), name
+    dm = _sim(sim_dir)
+    dm.setup("fit")
+    batch = next(iter(dm.val_dataloader()))
+    reference = GeometryEncoder(**TINY)
+    reference.load_state_dict(weights)
+    reference.eval()
+    with torch.no_grad():
+        expected = reference(*(batch[k] for k in INPUTS)).cost
+        got = loaded.matcher(*(batch[k] for k in INPUTS)).cost
+    assert torch.equal(expected, got)
+
+    # Resume continues from the last checkpoint up to the new epoch budget.
+    again = fit_geometry(_sim(sim_dir), out, feature_config=FEATURES, model_config=TINY,
+                         epochs=2, seed=0, run_dir=run, resume=True, progress=False)
+    assert again.epochs == 2
+
+
+def test_fit_rejects_bad_arguments(sim_dir, tmp_path):
+    with pytest.raises(ValueError, match="epochs must be >= 1"):
+        fit_geometry(_sim(sim_dir), tmp_path / "m.pt", feature_config=FEATURES, epochs=0)
+    with pytest.raises(ValueError, match="does not exist"):
+        fit_geometry(_sim(sim_dir), tmp_path / "nope" / "m.pt", feature_config=FEATURES)
+
+
+def test_sim_datamodule_is_deterministic(sim_dir):
+    a, b = _sim(sim_dir, n_scenes=2, val_scenes=0), _sim(sim_dir, n_scenes=2, val_scenes=0)
+    for k in range(2):
+        ta, _, ca = a.scene(k)
+        tb, _, cb = b.scene(k)
+        assert ca == cb
+        assert all(np.array_equal(ta[f].boxes, tb[f].boxes) for f in ta)
+    rng = np.random.default_rng(3)
+    configs = [random_scene_config(rng) for _ in range(20)]  # all valid SceneConfigs
+    assert len({c.top_altitude for c in configs}) == 20
+
+
+def test_cvmhat_datamodule_on_box_files(tmp_path, sim_dir):
+    """Leave-one-site-out splits on a tiny CVMHAT-layout folder written from simulated scenes."""
+    sim = _sim(sim_dir, n_scenes=3, frames_per_scene=8, noise_probability=0.0)
+    from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+
+    for k, name in enumerate(["V0-S_alpha_0-G_1", "V0-S_alpha_1-G_1", "V1-S_beta-G_2"]):
+        scene = simulate_box_scene(SceneConfig(n_people=(5, 7)), n_frames=8, seed=k)
+        write_box_scene(scene, tmp_path, name)
+    del sim
+    assert site_of("V1-S_beta-G_2") == "beta"
+    dm = CvmhatBoxDataModule(data_dir=str(tmp_path), test_site="beta", val_fraction=0.25,
+                             noise_seeds=[1000], feature_config=FEATURES,
+                             cache_dir=str(sim_dir), batch_size=4)
+    dm.setup("fit")
+    n_train = sum(len(p) for p in dm.train_parts)
+    n_val = sum(len(p) for p in dm.val_parts)
+    n_test = sum(len(p) for p in dm.test_parts)
+    assert n_val > 0 and n_test > 0
+    assert n_train >= 2 * n_val  # clean + noisy copy of the first 75% of frames
+    assert {p.name.split("/")[0] for p in dm.test_parts} == {"V1-S_beta-G_2"}
+    batch = next(iter(dm.train_dataloader()))
+    assert batch["match"].dtype == torch.bool and batch["match"].any()
+    with pytest.raises(ValueError, match="not among the sites"):
+        CvmhatBoxDataModule(data_dir=str(tmp_path), test_site="gamma").setup()
+    with pytest.raises(ValueError, match="nothing to train on"):
+        CvmhatBoxDataModule(data_dir=str(tmp_path), clean=False)
+
+
+def test_training_is_deterministic_given_the_seed(sim_dir, tmp_path):
+    """Same seed, same data: bit-identical weights (what make_default_geometry.py relies on)."""
+    weights = []
+    for k in range(2):
+        out = tmp_path / f"m{k}.pt"
+        fit_geometry(_sim(sim_dir), out, feature_config=FEATURES, model_config=TINY, epochs=1,
+                     seed=3, run_dir=tmp_path / f"run{k}", progress=False)
+        weights.append(torch.load(out, weights_only=True)["state_dict"])
+    assert weights[0].keys() == weights[1].keys()
+    assert all(torch.equal(weights[0][k], weights[1][k]) for k in weights[0])
