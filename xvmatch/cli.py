@@ -13,6 +13,8 @@ import json
 import sys
 from collections.abc import Iterable, Sequence
 
+from xvmatch.cli_types import image_size
+
 __all__ = ["main"]
 
 EXAMPLES = {
@@ -26,18 +28,6 @@ EXAMPLES = {
 
 class UsageError(Exception):
     """A user mistake reported as one line, without a traceback."""
-
-
-def _image_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected WIDTHxHEIGHT, e.g. 2688x1512; got {text!r}"
-        ) from None
-    if w <= 0 or h <= 0:
-        raise argparse.ArgumentTypeError(f"image size must be positive, got {text!r}")
-    return w, h
 
 
 def _progress(total: int, desc: str, enabled: bool):
@@ -326,7 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--image-size",
-        type=_image_size,
+        type=image_size(),
         default=(2688, 1512),
         metavar="WxH",
         help="horizontal image size in pixels (default 2688x1512, CVMHAT)",
@@ -360,7 +350,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--keep-id", type=int, action="append", default=[], help="never drop this id (repeatable)"
     )
     p.add_argument(
-        "--image-size", type=_image_size, default=(2688, 1512), metavar="WxH",
+        "--image-size", type=image_size(), default=(2688, 1512), metavar="WxH",
         help="image size (default 2688x1512)",
     )
     p.add_argument(
@@ -386,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--clip-length", type=int, default=10, help="clip length (default 10)")
     p.add_argument("--max-offset", type=int, default=15, help="largest |offset| (default 15)")
     p.add_argument(
-        "--image-size", type=_image_size, default=(2688, 1512), metavar="WxH",
+        "--image-size", type=image_size(), default=(2688, 1512), metavar="WxH",
         help="horizontal image size (default 2688x1512)",
     )
     p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")

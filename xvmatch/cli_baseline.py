@@ -13,22 +13,14 @@ import json
 import sys
 import time
 
+from xvmatch.cli_types import positive_int
+
 __all__ = ["EXAMPLE", "add_baseline_parser"]
 
 EXAMPLE = (
     "xvmatch synth --out data/ov_test --scenario overview --scenes 20 --frames 5 --seed 1000\n"
     "  xvmatch baseline --data data/ov_test --figures figures/"
 )
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def _gamma(text: str) -> float:
@@ -68,7 +60,7 @@ def add_baseline_parser(subparsers) -> argparse.ArgumentParser:
                    help="also write the true/false cost distributions before and after "
                    "normalisation (Figs. 2-3) as PNG files into DIR")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
-    p.add_argument("--workers", type=_positive, default=1, metavar="K",
+    p.add_argument("--workers", type=positive_int, default=1, metavar="K",
                    help="processes computing the costs (default 1); the result does not "
                    "depend on it")
     g = p.add_argument_group(

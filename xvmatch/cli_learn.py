@@ -14,6 +14,8 @@ import argparse
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
+from xvmatch.cli_types import non_negative_int, positive_int
+
 __all__ = [
     "EXAMPLES",
     "add_fit_geometry_parser",
@@ -25,26 +27,6 @@ EXAMPLES = {
     "fit-geometry": "xvmatch fit-geometry --cvmhat ../shared/data/cvmhat --out geometry.pt "
     "--sites canteen 55 --epochs 8 --seed 0",
 }
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-def _non_negative(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return value
 
 
 def _gamma(text: str) -> float:
@@ -76,11 +58,11 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write")
     p.add_argument("--sites", nargs="+", default=None, metavar="SITE",
                    help="train on these sites only (the S_<site> part of the names; default all)")
-    p.add_argument("--epochs", type=_positive, default=8, help="most epochs (default 8)")
+    p.add_argument("--epochs", type=positive_int, default=8, help="most epochs (default 8)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--noise", type=_non_negative, default=2, metavar="COPIES",
+    p.add_argument("--noise", type=non_negative_int, default=2, metavar="COPIES",
                    help="detector-noise copies of the training frames (default 2; 0: clean only)")
-    p.add_argument("--sim-scenes", type=_non_negative, default=300, metavar="N",
+    p.add_argument("--sim-scenes", type=non_negative_int, default=300, metavar="N",
                    help="box-simulator scenes added to the training set as a regulariser "
                    "(default 300; 0: real data only)")
     p.add_argument("--cache", default=None, metavar="DIR",
@@ -88,9 +70,9 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--run-dir", default=None, metavar="DIR",
                    help="checkpoints and CSV/TensorBoard logs (default MODEL.run)")
     p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
-    p.add_argument("--workers", type=_positive, default=1,
+    p.add_argument("--workers", type=positive_int, default=1,
                    help="processes for feature extraction (default 1)")
-    p.add_argument("--threads", type=_positive, default=None,
+    p.add_argument("--threads", type=positive_int, default=None,
                    help="torch threads for training (default: torch's choice; 1 is often "
                    "fastest on a busy machine)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.cli_types import image_size, positive_int
+
 __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
 
 EXAMPLES = {
@@ -30,28 +32,6 @@ def _people_range(text: str) -> tuple[int, int]:
     if not 1 <= low <= high:
         raise argparse.ArgumentTypeError(f"need 1 <= MIN <= MAX, got {text!r}")
     return low, high
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected WIDTHxHEIGHT, e.g. 640x360; got {text!r}"
-        ) from None
-    if w < 8 or h < 8:
-        raise argparse.ArgumentTypeError(f"image size must be at least 8x8, got {text!r}")
-    return w, h
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def _parser(subparsers, name: str, help_text: str) -> argparse.ArgumentParser:
@@ -77,19 +57,19 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scenario", choices=("drone", "overview"), default="drone",
                    help="drone: nadir camera 20-60 m up + head-worn camera (CVMHAT); overview: "
                    "building camera 8-25 m up + hand-held camera (default drone)")
-    p.add_argument("--scenes", type=_positive, default=10, help="number of scenes (default 10)")
-    p.add_argument("--frames", type=_positive, default=10,
+    p.add_argument("--scenes", type=positive_int, default=10, help="number of scenes (default 10)")
+    p.add_argument("--frames", type=positive_int, default=10,
                    help="frames per scene; people walk with turns and stops (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0); the output is "
                    "identical for any --workers")
     p.add_argument("--people", type=_people_range, default=(3, 14), metavar="MIN:MAX",
                    help="people per scene, camera wearer included (default 3:14)")
-    p.add_argument("--size", type=_size, default=(640, 360), metavar="WxH",
+    p.add_argument("--size", type=image_size(8), default=(640, 360), metavar="WxH",
                    help="image size of both views (default 640x360)")
     p.add_argument("--difficulty", choices=("easy", "medium", "hard"), default="medium",
                    help="look-alike clothing and photometric degradation (default medium)")
     p.add_argument("--fps", type=float, default=10.0, help="frame rate of the walks (default 10)")
-    p.add_argument("--workers", type=_positive, default=1,
+    p.add_argument("--workers", type=positive_int, default=1,
                    help="rendering processes (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=_cmd_synth)
@@ -135,7 +115,7 @@ def add_show_parser(subparsers) -> argparse.ArgumentParser:
                    "a scene file (annotations/SCENE.json), or a dataset folder")
     p.add_argument("--scene", default=None, help="scene name when PAIR is a dataset folder "
                    "(default: the first scene)")
-    p.add_argument("--frame", type=_positive, default=None,
+    p.add_argument("--frame", type=positive_int, default=None,
                    help="frame number when PAIR is a scene file or folder (default 1)")
     p.add_argument("--out", default="pair.png", help="picture to write (default pair.png)")
     p.add_argument("--full-boxes", action="store_true",
