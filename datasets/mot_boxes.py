@@ -36,6 +36,7 @@ __all__ = [
     "atomic_write_text",
     "read_mot_boxes",
     "read_predictions",
+    "shift_frames",
     "write_mot_boxes",
     "write_predictions",
 ]
@@ -112,6 +113,19 @@ class FrameBoxes:
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
+
+
+def shift_frames(frames: Mapping[int, FrameBoxes], offset: int) -> dict[int, FrameBoxes]:
+    """A view re-timed by ``offset`` frames: the result's frame ``f`` holds input frame
+    ``f + offset`` (the convention of ``xvmatch offset``: top frame = horizontal frame + offset),
+    so a shifted top view lines up with the horizontal one. Frames that would fall below 1 are
+    dropped."""
+    offset = int(offset)
+    return {
+        f - offset: FrameBoxes(f - offset, r.ids, r.boxes)
+        for f, r in sorted(frames.items())
+        if f - offset >= 1
+    }
 
 
 # --------------------------------------------------------------------------------------------

@@ -18,6 +18,7 @@ from xvmatch.datasets.mot_boxes import (
     FrameBoxes,
     read_mot_boxes,
     read_predictions,
+    shift_frames,
     write_mot_boxes,
     write_predictions,
 )
@@ -367,6 +368,58 @@ def test_offset_recovers_a_shift_end_to_end(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["offset"] == -4
     assert data["offsets"] == list(range(-6, 7))
+
+
+def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
+    # The idealised walk of test_offset_recovers_a_shift_end_to_end: horizontal frame g shows
+    # top frame g - 4, so the offset is -4 and pairs are written under the horizontal frames.
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    scene = simulate_box_scene(config, n_frames=60, seed=3)
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    write_mot_boxes(top, scene.top)
+    shifted_hor = {f + 4: FrameBoxes(f + 4, r.ids, r.boxes) for f, r in scene.hor.items()}
+    write_mot_boxes(hor, shifted_hor)
+    base = ["associate", "--top", str(top), "--hor", str(hor), "--camera-id", "0"]
+    scores = {}
+    for tag, extra in [("none", []), ("given", ["--offset", "-4"]),
+                       ("auto", ["--offset", "auto", "--max-offset", "6"])]:
+        out = tmp_path / f"{tag}.csv"
+        assert main([*base, "--out", str(out), "--quiet", *extra]) == 0
+        pred = read_predictions(out)
+        truth_top = shift_frames(scene.top, -4)  # the top view on the horizontal timeline
+        scores[tag] = summarize(count_sequence(pred, truth_top, shifted_hor)).cvidf1
+        if tag == "given":
+            expected = associate_sequence(truth_top, shifted_hor, WIDTH, camera_id=0)
+            assert pred == {f: p for f, p in expected.items() if p}
+        if tag == "auto":
+            assert pred == read_predictions(tmp_path / "given.csv")
+    assert scores["given"] > scores["none"] + 10, scores
+    capsys.readouterr()
+    argv = ["evaluate", "--pred", str(tmp_path / "given.csv"), "--top", str(top), "--hor",
+            str(hor), "--offset", "-4", "--json"]
+    assert main(argv) == 0
+    assert json.loads(capsys.readouterr().out)["cvidf1"] == pytest.approx(scores["given"])
+    out = tmp_path / "loud.csv"
+    assert main([*base, "--out", str(out), "--offset", "auto", "--max-offset", "6"]) == 0
+    assert "estimated offset -4 frames" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra", [["--mirror"], ["--gamma", "0.4"]])
+def test_model_options_need_a_model(files, tmp_path, capsys, extra):
+    top, hor = files
+    out = tmp_path / "pred.csv"
+    argv = ["associate", "--top", str(top), "--hor", str(hor), "--out", str(out), "--quiet"]
+    assert main([*argv, *extra]) == 2
+    assert "add --model" in _error_line(capsys)
+    assert not out.exists()
+
+
+def test_associate_rejects_a_bad_offset(files, tmp_path, capsys):
+    top, hor = files
+    argv = ["associate", "--top", str(top), "--hor", str(hor), "--out", str(tmp_path / "p.csv")]
+    with pytest.raises(SystemExit):
+        main([*argv, "--offset", "soon"])
+    assert "expected an integer number of frames or 'auto'" in capsys.readouterr().err
 
 
 def test_offset_bad_clip_settings_are_one_line(files, capsys):

@@ -150,6 +150,10 @@ def test_associate_with_model_cli_helper(model_file, scene):
     direct = associate_sequence_learned(scene.top, scene.hor, WIDTH,
                                         load_geometry_model(model_file))
     assert pred == direct
+    mirrored = cli_learn.associate_with_model(argparse.Namespace(**{**vars(args), "mirror": True}),
+                                              scene.top, scene.hor, frames, None)
+    assert mirrored == associate_sequence_learned(scene.top, scene.hor, WIDTH,
+                                                  load_geometry_model(model_file), mirror=True)
     with pytest.raises(ValueError, match="--mode frame"):
         cli_learn.associate_with_model(argparse.Namespace(**{**vars(args), "mode": "video"}),
                                        scene.top, scene.hor, frames, None)

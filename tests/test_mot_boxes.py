@@ -15,6 +15,7 @@ from xvmatch.datasets.mot_boxes import (
     atomic_write_text,
     read_mot_boxes,
     read_predictions,
+    shift_frames,
     write_mot_boxes,
     write_predictions,
 )
@@ -257,3 +258,14 @@ def test_atomic_write_keeps_permissions(tmp_path):
     path.chmod(0o640)
     atomic_write_text(path, "new\n")
     assert path.stat().st_mode & 0o777 == 0o640
+
+
+def test_shift_frames_retimes_a_view():
+    frames = {f: FrameBoxes(f, np.array([f]), np.array([[f, 0.0, 1.0, 2.0]])) for f in (1, 2, 5)}
+    ahead = shift_frames(frames, 1)  # frame f of the result shows input frame f + 1
+    assert sorted(ahead) == [1, 4]  # input frame 1 would land on frame 0: dropped
+    assert ahead[1].frame == 1 and ahead[1].ids.tolist() == [2]
+    assert ahead[4].boxes[0, 0] == 5.0
+    behind = shift_frames(frames, -3)
+    assert sorted(behind) == [4, 5, 8] and behind[8].ids.tolist() == [5]
+    assert shift_frames(frames, 0).keys() == frames.keys()

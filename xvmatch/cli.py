@@ -13,9 +13,12 @@ import json
 import sys
 from collections.abc import Iterable, Sequence
 
-from xvmatch.cli_types import image_size
+from xvmatch.cli_types import image_size, int_at_least, offset_value
 
 __all__ = ["main"]
+
+AUTO_MAX_OFFSET = 60
+"""Largest |offset| (frames) that ``associate --offset auto`` considers (2 s at 30 fps)."""
 
 EXAMPLES = {
     "associate": "xvmatch associate --top seq_top.txt --hor seq_hor.txt --out pred.csv",
@@ -115,6 +118,23 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     search = args.search or ("exhaustive" if args.mode == "frame" else "follow")
     if args.mode == "frame" and search != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")
+    if args.model is None and (args.mirror or args.gamma is not None):
+        raise UsageError("--mirror and --gamma apply to a learned model: add --model")
+    if args.offset == "auto":
+        from xvmatch.geometry.spatial_search import estimate_offset
+
+        est = estimate_offset(top, hor, hor_width=args.image_size[0], params=params,
+                              max_offset=args.max_offset, camera_id=args.camera_id)
+        offset = est.offset
+        if not args.quiet:
+            print(f"estimated offset {offset:+d} frames (top frame = horizontal frame "
+                  f"{offset:+d})", file=sys.stderr)
+    else:
+        offset = args.offset
+    if offset:
+        from xvmatch.datasets.mot_boxes import shift_frames
+
+        top = shift_frames(top, offset)
     frames = sorted(set(top) | set(hor))
     progress = _progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
@@ -151,6 +171,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     top = _read_boxes(args.top, args.duplicates)
     hor = _read_boxes(args.hor, args.duplicates)
     pred = read_predictions(args.pred)
+    if args.offset:
+        from xvmatch.datasets.mot_boxes import shift_frames
+
+        top = shift_frames(top, args.offset)
     try:
         counts = count_sequence(pred, top, hor)
     except ValueError as exc:
@@ -321,6 +345,22 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="WxH",
         help="horizontal image size in pixels (default 2688x1512, CVMHAT)",
     )
+    p.add_argument(
+        "--offset",
+        type=offset_value,
+        default=0,
+        metavar="N|auto",
+        help="the videos are out of sync: top frame = horizontal frame + N (what "
+        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about 20 s "
+        "per sequence with the default --max-offset). Pairs are written under the horizontal "
+        "frame numbers (default 0: frame-locked videos)",
+    )
+    p.add_argument(
+        "--max-offset",
+        type=int_at_least(0),
+        default=AUTO_MAX_OFFSET,
+        help=f"largest |offset| tried by --offset auto (default {AUTO_MAX_OFFSET} frames)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     _add_spatial_options(p)
     from xvmatch.cli_learn import add_model_arguments
@@ -333,6 +373,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pred", required=True, help="prediction CSV (frame,top_id,hor_id)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
+    p.add_argument("--offset", type=int, default=0, metavar="N",
+                   help="score predictions made with 'associate --offset N': the top view is "
+                   "re-timed the same way (top frame = horizontal frame + N) before scoring")
     p.set_defaults(func=_cmd_evaluate)
 
     p = command(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["image_size", "int_at_least", "non_negative_int", "positive_int"]
+__all__ = ["image_size", "int_at_least", "non_negative_int", "offset_value", "positive_int"]
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:
@@ -45,3 +45,15 @@ def image_size(min_side: int = 1) -> Callable[[str], tuple[int, int]]:
         return w, h
 
     return convert
+
+
+def offset_value(text: str) -> int | str:
+    """An argparse type for a frame offset: an integer (may be negative) or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer number of frames or 'auto', got {text!r}"
+        ) from None
