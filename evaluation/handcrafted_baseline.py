@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.datasets.synthetic_io import MANIFEST, SceneRecord, SyntheticDataset
+from xvmatch.datasets.synthetic_io import MANIFEST, PairRecord, SceneRecord, SyntheticDataset
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
 from xvmatch.evaluation.cost_distributions import CostSamples
 from xvmatch.evaluation.cross_view_metrics import (
@@ -96,6 +96,7 @@ __all__ = [
     "BaselineConfig",
     "BaselineResult",
     "DetectionStats",
+    "FrameSample",
     "Method",
     "PairCosts",
     "PairTrial",
@@ -107,8 +108,10 @@ __all__ = [
     "format_baseline_table",
     "fused_cost",
     "match_to_ground_truth",
+    "noise_seed_of",
     "open_dataset",
     "pair_costs",
+    "scene_samples",
     "scene_trials",
     "score_trial",
     "tune_gammas",
@@ -607,10 +610,88 @@ class _SceneTrials:
     detection: DetectionStats
 
 
-def _noise_seed(noise_seed: int, scene_index: int) -> int:
+def noise_seed_of(noise_seed: int, scene_index: int) -> int:
     """Seed of the detector noise of one scene, independent across scenes."""
     state = np.random.SeedSequence([int(noise_seed), int(scene_index)]).generate_state(1)
     return int(state[0])
+
+
+@dataclass(frozen=True, eq=False)
+class FrameSample:
+    """The boxes of one frame pair in one setting, as every synthetic evaluation sees them.
+
+    Attributes:
+        pair: the frame pair (images and cameras).
+        setting: ``"gt"`` or ``"det"``.
+        images, cameras: per view (``"top"``, ``"ego"``).
+        gt_ids: per view, the ground-truth ids of the frame.
+        boxes: per view, the boxes in a seeded random order (ground truth or detections).
+        stands_for: per view, the ground-truth id each box stands for
+            (:data:`FALSE_POSITIVE` for a false detection); evaluation only.
+        n_gt, n_det, n_true: per view, ground-truth boxes, detections and true detections
+            (zeros in the ``"gt"`` setting).
+    """
+
+    pair: PairRecord
+    setting: str
+    images: dict[str, np.ndarray]
+    cameras: dict[str, Camera]
+    gt_ids: dict[str, np.ndarray]
+    boxes: dict[str, np.ndarray]
+    stands_for: dict[str, np.ndarray]
+    n_gt: dict[str, int]
+    n_det: dict[str, int]
+    n_true: dict[str, int]
+
+
+def scene_samples(
+    scene: SceneRecord,
+    scene_index: int,
+    config: BaselineConfig,
+    settings: Sequence[str] = SETTINGS,
+) -> Iterator[FrameSample]:
+    """Every frame pair of a scene in each requested setting (:data:`SETTINGS` order), boxes
+    shuffled per view with a seed of (``config.scramble_seed``, scene, frame, setting) and
+    detections drawn with :func:`noise_seed_of` (``config.noise_seed``, ``scene_index``)."""
+    unknown = [s for s in settings if s not in SETTINGS]
+    if unknown:
+        raise ValueError(f"settings must be among {', '.join(SETTINGS)}, got {unknown}")
+    views = ("top", "ego")
+    gt_boxes = {v: scene.boxes(v) for v in views}
+    det_boxes = {}
+    if "det" in settings:
+        seed = noise_seed_of(config.noise_seed, scene_index)
+        for v in views:
+            camera = getattr(scene.pairs[0], v).camera
+            det_boxes[v] = apply_visibility_noise(
+                gt_boxes[v], scene.visibility(v), camera.image_size, config.noise, seed, v
+            )
+    for pair in scene.pairs:
+        images = {v: getattr(pair, v).load_image() for v in views}
+        cameras = {v: getattr(pair, v).camera for v in views}
+        gt_ids = {v: gt_boxes[v][pair.frame].ids for v in views}
+        for s_index, setting in enumerate(SETTINGS):
+            if setting not in settings:
+                continue
+            rng = np.random.default_rng(
+                [int(config.scramble_seed), int(scene_index), pair.frame, s_index]
+            )
+            boxes, stands_for = {}, {}
+            counts = {k: {v: 0 for v in views} for k in ("n_gt", "n_det", "n_true")}
+            for v in views:
+                gt = gt_boxes[v][pair.frame]
+                if setting == "gt":
+                    b, ids = gt.boxes, gt.ids
+                else:
+                    b = det_boxes[v][pair.frame].boxes
+                    ids = match_to_ground_truth(b, gt.boxes, gt.ids, config.iou_threshold)
+                    counts["n_gt"][v] = len(gt)
+                    counts["n_det"][v] = len(b)
+                    counts["n_true"][v] = int((ids != FALSE_POSITIVE).sum())
+                order = rng.permutation(len(ids))
+                boxes[v], stands_for[v] = b[order], ids[order]
+            yield FrameSample(pair, setting, images, cameras, gt_ids, boxes, stands_for,
+                              **counts)
 
 
 def scene_trials(
@@ -632,54 +713,24 @@ def scene_trials(
         the raw true/false costs of the ground-truth boxes (Figs. 2-3; empty unless ``"gt"`` is
         among the settings), and the detector statistics (zeros unless ``"det"`` is).
     """
-    unknown = [s for s in settings if s not in SETTINGS]
-    if unknown:
-        raise ValueError(f"settings must be among {', '.join(SETTINGS)}, got {unknown}")
     views = ("top", "ego")
-    gt_boxes = {v: scene.boxes(v) for v in views}
-    det_boxes = {}
-    if "det" in settings:
-        seed = _noise_seed(config.noise_seed, scene_index)
-        for v in views:
-            camera = getattr(scene.pairs[0], v).camera
-            det_boxes[v] = apply_visibility_noise(
-                gt_boxes[v], scene.visibility(v), camera.image_size, config.noise, seed, v
-            )
     stats = {k: {v: 0 for v in views} for k in ("n_gt", "n_det", "n_true")}
     trials: list[PairTrial] = []
     samples: list[CostSamples] = []
-    for pair in scene.pairs:
-        images = {v: getattr(pair, v).load_image() for v in views}
-        cameras = {v: getattr(pair, v).camera for v in views}
-        gt_ids = {v: gt_boxes[v][pair.frame].ids for v in views}
-        for s_index, setting in enumerate(SETTINGS):
-            if setting not in settings:
-                continue
-            rng = np.random.default_rng(
-                [int(config.scramble_seed), int(scene_index), pair.frame, s_index]
-            )
-            boxes, stands_for = {}, {}
+    for fs in scene_samples(scene, scene_index, config, settings):
+        for key, per_view in stats.items():
             for v in views:
-                gt = gt_boxes[v][pair.frame]
-                if setting == "gt":
-                    b, ids = gt.boxes, gt.ids
-                else:
-                    b = det_boxes[v][pair.frame].boxes
-                    ids = match_to_ground_truth(b, gt.boxes, gt.ids, config.iou_threshold)
-                    stats["n_gt"][v] += len(gt)
-                    stats["n_det"][v] += len(b)
-                    stats["n_true"][v] += int((ids != FALSE_POSITIVE).sum())
-                order = rng.permutation(len(ids))
-                boxes[v], stands_for[v] = b[order], ids[order]
-            costs = pair_costs(cameras["top"], cameras["ego"], images["top"], images["ego"],
-                               boxes["top"], boxes["ego"], margin=config.margin,
-                               beta=config.beta)
-            if setting == "gt":
-                same = stands_for["top"][:, None] == stands_for["ego"][None, :]
-                samples.append(CostSamples.from_matrices(costs.geo, costs.hist, same,
-                                                         costs.hist_valid))
-            trials.append(PairTrial(pair.scene, pair.frame, setting, costs, gt_ids["top"],
-                                    gt_ids["ego"], stands_for["top"], stands_for["ego"]))
+                per_view[v] += getattr(fs, key)[v]
+        costs = pair_costs(fs.cameras["top"], fs.cameras["ego"], fs.images["top"],
+                           fs.images["ego"], fs.boxes["top"], fs.boxes["ego"],
+                           margin=config.margin, beta=config.beta)
+        if fs.setting == "gt":
+            same = fs.stands_for["top"][:, None] == fs.stands_for["ego"][None, :]
+            samples.append(CostSamples.from_matrices(costs.geo, costs.hist, same,
+                                                     costs.hist_valid))
+        trials.append(PairTrial(fs.pair.scene, fs.pair.frame, fs.setting, costs,
+                                fs.gt_ids["top"], fs.gt_ids["ego"], fs.stands_for["top"],
+                                fs.stands_for["ego"]))
     return trials, CostSamples.concatenate(samples), DetectionStats(**stats)
 
 

@@ -40,7 +40,6 @@ import torch
 from torch import nn
 
 from xvmatch.datasets.synthetic_io import SceneRecord
-from xvmatch.datasets.visibility_noise import apply_visibility_noise
 from xvmatch.evaluation.cross_view_metrics import CrossViewScores, FrameCounts, summarize
 from xvmatch.evaluation.handcrafted_baseline import (
     FALSE_POSITIVE,
@@ -52,9 +51,9 @@ from xvmatch.evaluation.handcrafted_baseline import (
     PairTrial,
     count_pair,
     fused_cost,
-    match_to_ground_truth,
     open_dataset,
     pair_costs,
+    scene_samples,
 )
 from xvmatch.geometry.cost_fusion import add_cheirality
 from xvmatch.inference.assignment import assign
@@ -72,7 +71,6 @@ __all__ = [
     "default_rules",
     "evaluate_learned_matcher",
     "format_learned_table",
-    "noise_seed_of",
     "rule_cost",
     "scene_box_trials",
     "score_rule",
@@ -197,12 +195,6 @@ class BoxTrial:
                          self.gt_ego_ids, self.det_top_ids, self.det_ego_ids)
 
 
-def noise_seed_of(noise_seed: int, scene_index: int) -> int:
-    """Seed of the detector noise of one scene, as the baseline draws it."""
-    state = np.random.SeedSequence([int(noise_seed), int(scene_index)]).generate_state(1)
-    return int(state[0])
-
-
 def scene_box_trials(
     scene: SceneRecord,
     scene_index: int,
@@ -224,49 +216,17 @@ def scene_box_trials(
     Returns:
         Trials frame by frame, settings in :data:`SETTINGS` order.
     """
-    unknown = [s for s in settings if s not in SETTINGS]
-    if unknown:
-        raise ValueError(f"settings must be among {', '.join(SETTINGS)}, got {unknown}")
-    views = ("top", "ego")
-    gt_boxes = {v: scene.boxes(v) for v in views}
-    det_boxes = {}
-    if "det" in settings:
-        seed = noise_seed_of(config.noise_seed, scene_index)
-        for v in views:
-            camera = getattr(scene.pairs[0], v).camera
-            det_boxes[v] = apply_visibility_noise(
-                gt_boxes[v], scene.visibility(v), camera.image_size, config.noise, seed, v
-            )
     trials: list[BoxTrial] = []
-    for pair in scene.pairs:
-        images = {v: getattr(pair, v).load_image() for v in views}
-        cameras = {v: getattr(pair, v).camera for v in views}
-        gt_ids = {v: gt_boxes[v][pair.frame].ids for v in views}
-        for s_index, setting in enumerate(SETTINGS):
-            if setting not in settings:
-                continue
-            rng = np.random.default_rng(
-                [int(config.scramble_seed), int(scene_index), pair.frame, s_index]
-            )
-            boxes, stands_for = {}, {}
-            for v in views:
-                gt = gt_boxes[v][pair.frame]
-                if setting == "gt":
-                    b, ids = gt.boxes, gt.ids
-                else:
-                    b = det_boxes[v][pair.frame].boxes
-                    ids = match_to_ground_truth(b, gt.boxes, gt.ids, config.iou_threshold)
-                order = rng.permutation(len(ids))
-                boxes[v], stands_for[v] = b[order], ids[order]
-            costs = pair_costs(cameras["top"], cameras["ego"], images["top"], images["ego"],
-                               boxes["top"], boxes["ego"], margin=config.margin,
-                               beta=config.beta)
-            app = None
-            if coster is not None:
-                app = coster(images["top"], boxes["top"], images["ego"], boxes["ego"])
-            trials.append(BoxTrial(pair.scene, pair.frame, setting, boxes["top"], boxes["ego"],
-                                   costs, app, gt_ids["top"], gt_ids["ego"], stands_for["top"],
-                                   stands_for["ego"]))
+    for fs in scene_samples(scene, scene_index, config, settings):
+        costs = pair_costs(fs.cameras["top"], fs.cameras["ego"], fs.images["top"],
+                           fs.images["ego"], fs.boxes["top"], fs.boxes["ego"],
+                           margin=config.margin, beta=config.beta)
+        app = None
+        if coster is not None:
+            app = coster(fs.images["top"], fs.boxes["top"], fs.images["ego"], fs.boxes["ego"])
+        trials.append(BoxTrial(fs.pair.scene, fs.pair.frame, fs.setting, fs.boxes["top"],
+                               fs.boxes["ego"], costs, app, fs.gt_ids["top"], fs.gt_ids["ego"],
+                               fs.stands_for["top"], fs.stands_for["ego"]))
     return trials
 
 
