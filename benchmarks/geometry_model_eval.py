@@ -93,7 +93,7 @@ def evaluate(job: tuple) -> tuple[str, str, int | None, list]:
     if method == "handcrafted":
         pred = associate_sequence(s_top, s_hor, IMAGE_SIZE[0])
     else:
-        model = load_geometry_model(model_path)
+        model = [load_geometry_model(p) for p in model_path.split("+")]
         pred = associate_sequence_learned(
             s_top, s_hor, IMAGE_SIZE[0], model, hor_height=IMAGE_SIZE[1], mirror=mirror
         )
@@ -120,6 +120,9 @@ def main() -> int:
     parser.add_argument("--sync", action="store_true",
                         help="every method first re-times the top view by the offset that "
                         "'associate --offset auto' estimates from the boxes")
+    parser.add_argument("--ensemble", action="store_true",
+                        help="the learned column averages the fold model's costs with the "
+                        "sim-only default's (associate --model FOLD --model default)")
     parser.add_argument("--mirror", action="store_true",
                         help="learned models with left-right mirror test-time augmentation")
     parser.add_argument(
@@ -181,7 +184,8 @@ def main() -> int:
             for s in seeds:
                 o = offsets.get((name, s), 0)
                 jobs.append(("handcrafted", None, args.data, name, s, False, o))
-                jobs.append(("learned", str(folds[site]), args.data, name, s, args.mirror, o))
+                learned = str(folds[site]) + (f"+{args.default_model}" if args.ensemble else "")
+                jobs.append(("learned", learned, args.data, name, s, args.mirror, o))
                 jobs.append(("default", args.default_model, args.data, name, s, args.mirror, o))
     jobs.sort(key=lambda j: j[0] == "handcrafted")  # slow learned jobs first
     with ProcessPoolExecutor(max_workers=args.workers) as pool:

@@ -26,7 +26,7 @@ import io
 import json
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -237,7 +237,7 @@ def associate_sequence_learned(
     top: Mapping[int, _FrameLike],
     hor: Mapping[int, _FrameLike],
     hor_width: float,
-    model: LearnedGeometryModel,
+    model: LearnedGeometryModel | Sequence[LearnedGeometryModel],
     camera_id: int | None = None,
     gamma: float | None = None,
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
@@ -254,10 +254,11 @@ def associate_sequence_learned(
     Args:
         top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (e.g. ``FrameBoxes``).
         hor_width: width of the horizontal image (pixels).
-        model: from :func:`load_geometry_model`.
+        model: from :func:`load_geometry_model`, or several: an ensemble whose cost matrices
+            are averaged (features are computed once per distinct feature configuration).
         camera_id: top-view id of the camera wearer (O given); frames where it is absent
             search O.
-        gamma: non-association cost (default: the model's own).
+        gamma: non-association cost (default: the (first) model's own).
         progress: optional wrapper around the frame iterator (e.g. a progress bar).
         hor_height: height of the horizontal image (default ``hor_width * 9 / 16``).
         frames: frames to process (default the union of both views' frames).
@@ -268,18 +269,33 @@ def associate_sequence_learned(
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
+    models = [model] if isinstance(model, LearnedGeometryModel) else list(model)
+    if not models:
+        raise ValueError("no model given")
+    configs: list[FeatureConfig] = []
+    for m in models:
+        if m.feature_config not in configs:
+            configs.append(m.feature_config)
+    gamma = models[0].gamma if gamma is None else float(gamma)
     height = float(hor_height) if hor_height is not None else float(hor_width) * 9.0 / 16.0
     size = (float(hor_width), height)
     order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})
     out: dict[int, list[tuple[int, int]]] = {}
-    pending: list[tuple[int, list[FrameFeatures]]] = []
+    pending: list[tuple[int, list[list[FrameFeatures]]]] = []
 
     def flush() -> None:
-        views = [f for _, group in pending for f in group]
-        costs = iter(model.costs(views, batch_size))
-        for frame, group in pending:
-            cost = np.mean([_input_order(f, next(costs)) for f in group], axis=0)
-            pairs = model.associate(cost, gamma)
+        per_model = []
+        for m in models:
+            c = configs.index(m.feature_config)
+            views = [f for _, groups in pending for f in groups[c]]
+            per_model.append(iter(m.costs(views, batch_size)))
+        for frame, groups in pending:
+            cost = np.mean([
+                _input_order(f, next(costs))
+                for m, costs in zip(models, per_model, strict=True)
+                for f in groups[configs.index(m.feature_config)]
+            ], axis=0)
+            pairs = assign(cost, gamma)
             t_ids, h_ids = top[frame].ids, hor[frame].ids
             out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]
         pending.clear()
@@ -293,13 +309,15 @@ def associate_sequence_learned(
         if camera_id is not None:
             hits = np.flatnonzero(np.asarray(t_rec.ids) == camera_id)
             cam = int(hits[0]) if hits.size else None
-        group = [frame_features(t_rec.boxes, h_rec.boxes, size, model.feature_config, cam)]
-        if mirror:
-            top_width = float(np.max(t_rec.boxes[:, 0] + t_rec.boxes[:, 2]))
-            group.append(frame_features(_mirrored(t_rec.boxes, top_width),
-                                        _mirrored(h_rec.boxes, size[0]), size,
-                                        model.feature_config, cam))
-        pending.append((frame, group))
+        groups = []
+        for config in configs:
+            group = [frame_features(t_rec.boxes, h_rec.boxes, size, config, cam)]
+            if mirror:
+                top_width = float(np.max(t_rec.boxes[:, 0] + t_rec.boxes[:, 2]))
+                group.append(frame_features(_mirrored(t_rec.boxes, top_width),
+                                            _mirrored(h_rec.boxes, size[0]), size, config, cam))
+            groups.append(group)
+        pending.append((frame, groups))
         if len(pending) >= batch_size:
             flush()
     if pending:

@@ -215,3 +215,42 @@ def test_mirror_augmentation_is_symmetric(model_file, scene):
                                    mirror=True)
     assert {f: sorted(p) for f, p in a.items()} == {f: sorted(p) for f, p in b.items()}
     assert sum(len(p) for p in a.values()) > 0
+
+
+def test_ensemble_averages_the_models_costs(model_file, tmp_path, scene):
+    """Several models: the mean of their cost matrices, each with its own feature config."""
+    from xvmatch.datasets.geometry_features import frame_features
+    from xvmatch.inference.assignment import assign
+    from xvmatch.inference.learned_association import _input_order
+
+    tiny = load_geometry_model(model_file)
+    torch.manual_seed(1)
+    other_features = FeatureConfig(n_hypotheses=2, dtheta_deg=6.0)
+    other_path = tmp_path / "other.pt"
+    save_geometry_model(other_path, GeometryEncoder(**TINY), other_features, gamma=0.3)
+    other = load_geometry_model(other_path)
+    assert associate_sequence_learned(scene.top, scene.hor, WIDTH, [tiny, tiny]) == (
+        associate_sequence_learned(scene.top, scene.hor, WIDTH, tiny))
+    pred = associate_sequence_learned(scene.top, scene.hor, WIDTH, [tiny, other], gamma=1.0)
+    size = (WIDTH, WIDTH * 9 / 16)
+    n_pairs = 0
+    for frame, pairs in pred.items():
+        t, h = scene.top[frame], scene.hor[frame]
+        if not len(t) or not len(h):
+            continue
+        costs = []
+        for m in (tiny, other):
+            f = frame_features(t.boxes, h.boxes, size, m.feature_config)
+            costs.append(_input_order(f, m.costs([f])[0]))
+        expected = assign((costs[0] + costs[1]) / 2, 1.0)
+        assert pairs == [(int(t.ids[a]), int(h.ids[b])) for a, b in expected]
+        n_pairs += len(pairs)
+    assert n_pairs > 0
+    args = argparse.Namespace(model=[str(model_file), str(other_path)], image_size=(2688, 1512),
+                              camera_id=None, mode="frame", gamma=1.0)
+    assert cli_learn.associate_with_model(args, scene.top, scene.hor, sorted(scene.top),
+                                          None) == pred
+    assert associate_sequence_learned(scene.top, scene.hor, WIDTH, [tiny, other]) == (
+        associate_sequence_learned(scene.top, scene.hor, WIDTH, [tiny, other], gamma=0.6))
+    with pytest.raises(ValueError, match="no model"):
+        associate_sequence_learned(scene.top, scene.hor, WIDTH, [])

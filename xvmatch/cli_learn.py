@@ -117,9 +117,10 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``--model MODEL|default`` and ``--gamma`` to a parser (e.g. ``associate``)."""
     parser.add_argument(
-        "--model", default=None, metavar="MODEL",
+        "--model", action="append", default=None, metavar="MODEL",
         help="learned geometry model file, or 'default' for the shipped simulator-trained one; "
-        "replaces the handcrafted cost (frame mode only)",
+        "replaces the handcrafted cost (frame mode only). Repeat it to average the costs of "
+        "several models (an ensemble, e.g. --model site.pt --model default)",
     )
     parser.add_argument(
         "--gamma", type=_gamma, default=None,
@@ -153,7 +154,8 @@ def associate_with_model(
 
     if getattr(args, "mode", "frame") != "frame":
         raise ValueError("--model solves each frame on its own: use --mode frame")
-    model = load_geometry_model(args.model)
+    names = [args.model] if isinstance(args.model, str) else list(args.model)
+    model = [load_geometry_model(name) for name in names]
     width, height = args.image_size
     return associate_sequence_learned(
         top,
