@@ -17,7 +17,9 @@ Prints one table (per held-out site and pooled over the three), one row per sequ
 labelled diagnostic without the out-of-sync pair ``V0-S_canteen_1-G_3``, and the training wall
 time and peak memory per fold. ``--mirror``: the learned models with left-right mirror test-time
 augmentation (``associate --mirror``); ``--sync``: every method first re-times the top view by the
-offset ``associate --offset auto`` estimates (offsets saved in ``--work``/offsets.json). CPU only.
+offset ``associate --offset auto`` estimates (offsets saved in ``--work``/offsets.json);
+``--ensemble``: the learned column averages each fold model with the default;
+``--tune-gamma``: each fold's gamma chosen on its training sites' validation frames. CPU only.
 README figures:
 ``python benchmarks/geometry_model_eval.py --work runs/geometry_eval --mirror --noise-seeds 3``
 (about 40 minutes on the 2-core development machine; ``--reuse`` keeps trained folds).
@@ -40,6 +42,7 @@ from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes, shift_frames
 from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_search import associate_sequence, estimate_offset
+from xvmatch.inference.assignment import assign
 from xvmatch.inference.learned_association import associate_sequence_learned, load_geometry_model
 from xvmatch.training.box_datamodule import site_of
 from xvmatch.training.fit_geometry import fit_geometry_cvmhat, peak_memory_mb
@@ -82,7 +85,7 @@ def evaluate(job: tuple) -> tuple[str, str, int | None, list]:
     """Counts of one (method, sequence, noise seed), ids scrambled per view; with a non-zero
     offset the top view is re-timed before association and scoring (same id, same person:
     the truth of the re-timed frames)."""
-    method, model_path, data, name, noise_seed, mirror, offset = job
+    method, model_path, data, name, noise_seed, mirror, offset, gamma = job
     torch.set_num_threads(1)
     top, hor = _inputs(data, name, noise_seed)
     rng = np.random.default_rng([0 if noise_seed is None else noise_seed + 1, 7])
@@ -95,10 +98,38 @@ def evaluate(job: tuple) -> tuple[str, str, int | None, list]:
     else:
         model = [load_geometry_model(p) for p in model_path.split("+")]
         pred = associate_sequence_learned(
-            s_top, s_hor, IMAGE_SIZE[0], model, hor_height=IMAGE_SIZE[1], mirror=mirror
+            s_top, s_hor, IMAGE_SIZE[0], model, hor_height=IMAGE_SIZE[1], mirror=mirror,
+            gamma=gamma,
         )
     pred = {f: [(inv_top[a], inv_hor[b]) for a, b in p] for f, p in pred.items()}
     return method, name, noise_seed, count_sequence(pred, shift_frames(top, offset), hor)
+
+
+GAMMAS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
+"""Non-association costs tried by ``--tune-gamma``."""
+
+
+def validation_gammas(job: tuple) -> tuple[str, str, int | None, dict[float, list]]:
+    """Counts per gamma of a fold's learned model(s) on the validation frames of one training
+    sequence (its last 15%, as fit-geometry holds them out), ids scrambled per view."""
+    site, model_path, data, name, noise_seed, mirror = job
+    torch.set_num_threads(1)
+    top, hor = _inputs(data, name, noise_seed)
+    both = sorted(set(top) & set(hor))
+    frames = both[min(len(both) - 1, round(len(both) * 0.85)):]
+    rng = np.random.default_rng([0 if noise_seed is None else noise_seed + 1, 11])
+    s_top, inv_top = scramble(top, rng)
+    s_hor, inv_hor = scramble(hor, rng)
+    model = [load_geometry_model(p) for p in model_path.split("+")]
+    costs: dict[int, np.ndarray] = {}
+    associate_sequence_learned(s_top, s_hor, IMAGE_SIZE[0], model, hor_height=IMAGE_SIZE[1],
+                               mirror=mirror, frames=frames, costs_out=costs)
+    out = {}
+    for gamma in GAMMAS:
+        pred = {f: [(inv_top[int(s_top[f].ids[a])], inv_hor[int(s_hor[f].ids[b])])
+                    for a, b in assign(c, gamma)] for f, c in costs.items()}
+        out[gamma] = count_sequence(pred, top, hor, frames=frames)
+    return site, name, noise_seed, out
 
 
 def main() -> int:
@@ -123,6 +154,9 @@ def main() -> int:
     parser.add_argument("--ensemble", action="store_true",
                         help="the learned column averages the fold model's costs with the "
                         "sim-only default's (associate --model FOLD --model default)")
+    parser.add_argument("--tune-gamma", action="store_true",
+                        help="choose each fold's gamma on its training sites' validation frames "
+                        "(last 15%%, clean and noise seed 999, as fit-geometry holds them out)")
     parser.add_argument("--mirror", action="store_true",
                         help="learned models with left-right mirror test-time augmentation")
     parser.add_argument(
@@ -178,15 +212,37 @@ def main() -> int:
         saved.write_text(json.dumps([[n, s, o] for (n, s), o in offsets.items()]) + "\n")
         print("estimated offsets (top frame = horizontal frame + offset): " + ", ".join(
             f"{n} {'/'.join(f'{offsets[n, s]:+d}' for s in seeds)}" for n in tested))
+    learned = {
+        site: str(folds[site]) + (f"+{args.default_model}" if args.ensemble else "")
+        for site in args.sites
+    }
+    gammas: dict[str, float | None] = {site: None for site in args.sites}
+    if args.tune_gamma:
+        val_jobs = [(site, learned[site], args.data, n, s, args.mirror)
+                    for site in args.sites for t in SITES if t != site for n in by_site[t]
+                    for s in (None, 999)]
+        with ProcessPoolExecutor(max_workers=args.workers) as pool:
+            val = list(pool.map(validation_gammas, val_jobs))
+        for site in args.sites:
+            curve = {}
+            for gamma in GAMMAS:
+                f1 = [summarize([c for st, _, s, per in val if st == site and s == seed
+                                 for c in per[gamma]]).cvidf1 for seed in (None, 999)]
+                curve[gamma] = float(np.mean(f1))
+            gammas[site] = max(GAMMAS, key=lambda g: (curve[g], -abs(g - 0.5)))
+            print(f"fold {site}: validation CVIDF1 (mean of clean and noisy) by gamma: "
+                  + ", ".join(f"{g}: {v:.2f}" for g, v in curve.items())
+                  + f" -> gamma {gammas[site]}", flush=True)
     jobs = []
     for site in args.sites:
         for name in by_site[site]:
             for s in seeds:
                 o = offsets.get((name, s), 0)
-                jobs.append(("handcrafted", None, args.data, name, s, False, o))
-                learned = str(folds[site]) + (f"+{args.default_model}" if args.ensemble else "")
-                jobs.append(("learned", learned, args.data, name, s, args.mirror, o))
-                jobs.append(("default", args.default_model, args.data, name, s, args.mirror, o))
+                jobs.append(("handcrafted", None, args.data, name, s, False, o, None))
+                jobs.append(("learned", learned[site], args.data, name, s, args.mirror, o,
+                             gammas[site]))
+                jobs.append(("default", args.default_model, args.data, name, s, args.mirror, o,
+                             None))
     jobs.sort(key=lambda j: j[0] == "handcrafted")  # slow learned jobs first
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         results = list(pool.map(evaluate, jobs))

@@ -245,6 +245,7 @@ def associate_sequence_learned(
     frames: Iterable[int] | None = None,
     batch_size: int = 64,
     mirror: bool = False,
+    costs_out: dict[int, np.ndarray] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame on its own with the learned model; ``{frame: [(top_id, hor_id)]}``.
 
@@ -266,6 +267,9 @@ def associate_sequence_learned(
         mirror: test-time augmentation: also run the model on both views mirrored left-right
             (the same scene seen in a mirror, which the geometry maps one to one) and average
             the two cost matrices; twice the time.
+        costs_out: if given, filled with ``{frame: (M, N) cost matrix}`` (rows and columns in
+            the input order of the frame's boxes) of every frame with boxes in both views, e.g.
+            to choose gamma on validation frames without running the model again.
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
@@ -295,6 +299,8 @@ def associate_sequence_learned(
                 for m, costs in zip(models, per_model, strict=True)
                 for f in groups[configs.index(m.feature_config)]
             ], axis=0)
+            if costs_out is not None:
+                costs_out[frame] = cost
             pairs = assign(cost, gamma)
             t_ids, h_ids = top[frame].ids, hor[frame].ids
             out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]

@@ -254,3 +254,19 @@ def test_ensemble_averages_the_models_costs(model_file, tmp_path, scene):
         associate_sequence_learned(scene.top, scene.hor, WIDTH, [tiny, other], gamma=0.6))
     with pytest.raises(ValueError, match="no model"):
         associate_sequence_learned(scene.top, scene.hor, WIDTH, [])
+
+
+def test_costs_out_holds_the_matrices_behind_the_pairs(model_file, scene):
+    from xvmatch.inference.assignment import assign
+
+    model = load_geometry_model(model_file)
+    costs: dict = {}
+    pred = associate_sequence_learned(scene.top, scene.hor, WIDTH, model, gamma=1.0,
+                                      costs_out=costs)
+    with_boxes = [f for f in pred if len(scene.top[f]) and len(scene.hor[f])]
+    assert sorted(costs) == with_boxes
+    for f in with_boxes:
+        assert costs[f].shape == (len(scene.top[f]), len(scene.hor[f]))
+        t, h = scene.top[f].ids, scene.hor[f].ids
+        assert pred[f] == [(int(t[a]), int(h[b])) for a, b in assign(costs[f], 1.0)]
+    assert sum(len(p) for p in pred.values()) > 0
