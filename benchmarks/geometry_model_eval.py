@@ -9,8 +9,9 @@ from the training-noise seeds 1000+ and the validation-noise seed 999):
 * learned (LOSO): for each site, a model trained exactly as ``xvmatch fit-geometry`` does
   (:func:`~xvmatch.training.fit_geometry.fit_geometry_cvmhat`) on the other two sites (clean +
   2 noisy copies, the last 15% of each sequence for early stopping, plus ``--sim-scenes``
-  simulated scenes) and tested on the held-out site; the models are written under ``--work``
-  (never commit them: they are trained on the CVMHAT files);
+  simulated scenes) and tested on the held-out site; with ``--train-seeds``, one model per seed
+  and their ensemble (mean of cost matrices, ``associate --model A --model B ...``); the models
+  are written under ``--work`` (never commit them: they are trained on the CVMHAT files);
 * default (sim-to-real): the shipped simulator-only model on all 10 pairs.
 
 Prints one table (per held-out site and pooled over the three), one row per sequence, a clearly
@@ -18,11 +19,13 @@ labelled diagnostic without the out-of-sync pair ``V0-S_canteen_1-G_3``, and the
 time and peak memory per fold. ``--mirror``: the learned models with left-right mirror test-time
 augmentation (``associate --mirror``); ``--sync``: every method first re-times the top view by the
 offset ``associate --offset auto`` estimates (offsets saved in ``--work``/offsets.json);
-``--ensemble``: the learned column averages each fold model with the default;
+``--ensemble``: the learned column averages the fold's model(s) with the default;
 ``--tune-gamma``: each fold's gamma chosen on its training sites' validation frames. CPU only.
 README figures:
-``python benchmarks/geometry_model_eval.py --work runs/geometry_eval --mirror --noise-seeds 3``
-(about 40 minutes on the 2-core development machine; ``--reuse`` keeps trained folds).
+``python benchmarks/geometry_model_eval.py --work runs/geometry_eval --mirror --noise-seeds 3
+--train-seeds 0 1 2 --ensemble`` (about 1 h 40 min of training and 30 min of association on the
+2-core development machine; ``--reuse`` keeps trained folds, ``--no-default`` skips the
+default column).
 """
 
 from __future__ import annotations
@@ -48,6 +51,11 @@ from xvmatch.training.box_datamodule import site_of
 from xvmatch.training.fit_geometry import fit_geometry_cvmhat, peak_memory_mb
 
 SITES = ("canteen", "55", "square")
+
+
+def fold_path(work: Path, site: str, seed: int) -> Path:
+    """Where the model of one fold and training seed lives (seed 0: ``fold_SITE.pt``)."""
+    return work / (f"fold_{site}.pt" if seed == 0 else f"fold_{site}_seed{seed}.pt")
 
 
 def scramble(frames: dict[int, FrameBoxes], rng: np.random.Generator):
@@ -138,14 +146,19 @@ def main() -> int:
     parser.add_argument("--work", type=Path, default=Path("runs/geometry_eval"),
                         help="fold models and logs (not to be committed)")
     parser.add_argument("--noise-seeds", type=int, default=1, help="evaluation noise draws")
-    parser.add_argument("--epochs", type=int, default=8, help="most epochs per fold")
+    parser.add_argument("--epochs", type=int, default=12, help="most epochs per fold")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
+    parser.add_argument("--train-seeds", type=int, nargs="+", default=None, metavar="SEED",
+                        help="train one model per fold and seed; the learned column is their "
+                        "ensemble (mean of costs; default: --seed alone)")
     parser.add_argument("--workers", type=int, default=2, help="processes")
     parser.add_argument("--sim-scenes", type=int, default=300,
                         help="simulated scenes added to each fold's training set")
     parser.add_argument("--cache", default=None, help="feature cache folder")
     parser.add_argument("--threads", type=int, default=1, help="torch threads for training")
     parser.add_argument("--default-model", default="default", help="sim-to-real model")
+    parser.add_argument("--no-default", action="store_true",
+                        help="skip the sim-only default column (quicker experiments)")
     parser.add_argument("--reuse", action="store_true", help="reuse fold models in --work")
     parser.add_argument("--sites", nargs="+", default=list(SITES), help="folds to train/test")
     parser.add_argument("--sync", action="store_true",
@@ -179,23 +192,26 @@ def main() -> int:
     names = sequence_names(args.data)
     by_site = {s: [n for n in names if site_of(n) == s] for s in SITES}
 
-    # 1. Leave-one-site-out training.
-    folds, fold_stats = {}, {}
+    # 1. Leave-one-site-out training (one model per fold and training seed).
+    train_seeds = args.train_seeds if args.train_seeds else [args.seed]
+    folds: dict[str, list[Path]] = {}
+    fold_stats = {}
     for site in args.sites:
-        path = args.work / f"fold_{site}.pt"
-        folds[site] = path
-        if args.reuse and path.exists():
-            continue
-        result = fit_geometry_cvmhat(
-            args.data, path, sites=[s for s in SITES if s != site], epochs=args.epochs,
-            seed=args.seed, noise_copies=2, sim_scenes=args.sim_scenes, cache_dir=args.cache,
-            workers=args.workers, run_dir=args.work / f"fold_{site}.run", progress=False,
-            threads=args.threads,
-        )
-        fold_stats[site] = result
-        print(f"fold {site}: {result.epochs} epochs, val CVIDF1 {result.best_score:.1f}, "
-              f"{result.wall_time_s:.0f} s, peak memory {result.peak_memory_mb:.0f} MiB",
-              flush=True)
+        for seed in train_seeds:
+            path = fold_path(args.work, site, seed)
+            folds.setdefault(site, []).append(path)
+            if args.reuse and path.exists():
+                continue
+            result = fit_geometry_cvmhat(
+                args.data, path, sites=[s for s in SITES if s != site], epochs=args.epochs,
+                seed=seed, noise_copies=2, sim_scenes=args.sim_scenes, cache_dir=args.cache,
+                workers=args.workers, run_dir=path.with_suffix(".run"), progress=False,
+                threads=args.threads,
+            )
+            fold_stats[site, seed] = result
+            print(f"fold {site} seed {seed}: {result.epochs} epochs, val CVIDF1 "
+                  f"{result.best_score:.1f}, {result.wall_time_s:.0f} s, peak memory "
+                  f"{result.peak_memory_mb:.0f} MiB", flush=True)
 
     # 2. Association, ids scrambled per view.
     seeds = [None, *range(args.noise_seeds)]
@@ -213,7 +229,7 @@ def main() -> int:
         print("estimated offsets (top frame = horizontal frame + offset): " + ", ".join(
             f"{n} {'/'.join(f'{offsets[n, s]:+d}' for s in seeds)}" for n in tested))
     learned = {
-        site: str(folds[site]) + (f"+{args.default_model}" if args.ensemble else "")
+        site: "+".join(map(str, folds[site])) + (f"+{args.default_model}" if args.ensemble else "")
         for site in args.sites
     }
     gammas: dict[str, float | None] = {site: None for site in args.sites}
@@ -241,8 +257,9 @@ def main() -> int:
                 jobs.append(("handcrafted", None, args.data, name, s, False, o, None))
                 jobs.append(("learned", learned[site], args.data, name, s, args.mirror, o,
                              gammas[site]))
-                jobs.append(("default", args.default_model, args.data, name, s, args.mirror, o,
-                             None))
+                if not args.no_default:
+                    jobs.append(("default", args.default_model, args.data, name, s, args.mirror,
+                                 o, None))
     jobs.sort(key=lambda j: j[0] == "handcrafted")  # slow learned jobs first
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         results = list(pool.map(evaluate, jobs))
@@ -261,6 +278,8 @@ def main() -> int:
         groups: dict = {}
         for s, c in counts.get((method, setting, key), []):
             groups.setdefault(s, []).extend(c)
+        if not groups:  # not measured (--no-default, --noise-seeds 0)
+            return float("nan"), float("nan")
         sums = [summarize(c) for c in groups.values()]
         return np.mean([x.cvidf1 for x in sums]), np.mean([x.cvma for x in sums])
 
@@ -297,8 +316,8 @@ def main() -> int:
                 f"{m} {f:.1f} / {a:.1f}" for m, (f, a) in zip(
                     ("handcrafted", "learned", "default"), cells, strict=True))
                   + f"; learned error {(100 - learned) / max(100 - hand, 1e-9):.2f}x")
-    for site, r in fold_stats.items():
-        print(f"training fold {site}: {r.wall_time_s:.0f} s wall, {r.epochs} epochs, "
+    for (site, seed), r in fold_stats.items():
+        print(f"training fold {site} seed {seed}: {r.wall_time_s:.0f} s wall, {r.epochs} epochs, "
               f"peak memory {r.peak_memory_mb:.0f} MiB")
     print(f"noisy = mean over {args.noise_seeds} noise seed(s); total run time "
           f"{time.perf_counter() - start:.0f} s; peak memory of this process "

@@ -212,7 +212,7 @@ def fit_geometry_cvmhat(
     out: str | os.PathLike,
     *,
     sites: Sequence[str] | None = None,
-    epochs: int = 8,
+    epochs: int = 12,
     seed: int = 0,
     noise_copies: int = 2,
     sim_scenes: int = 300,

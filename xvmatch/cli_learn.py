@@ -25,7 +25,7 @@ __all__ = [
 
 EXAMPLES = {
     "fit-geometry": "xvmatch fit-geometry --cvmhat ../shared/data/cvmhat --out geometry.pt "
-    "--sites canteen 55 --epochs 8 --seed 0",
+    "--sites canteen 55 --epochs 12 --seed 0",
 }
 
 
@@ -58,7 +58,7 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write")
     p.add_argument("--sites", nargs="+", default=None, metavar="SITE",
                    help="train on these sites only (the S_<site> part of the names; default all)")
-    p.add_argument("--epochs", type=positive_int, default=8, help="most epochs (default 8)")
+    p.add_argument("--epochs", type=positive_int, default=12, help="most epochs (default 12)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--noise", type=non_negative_int, default=2, metavar="COPIES",
                    help="detector-noise copies of the training frames (default 2; 0: clean only)")
