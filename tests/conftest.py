@@ -6,6 +6,13 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests draw the same examples on every run (same code, same result: CI cannot turn red
+# by chance); HYPOTHESIS_PROFILE=explore searches with fresh random examples instead.
+settings.register_profile("deterministic", derandomize=True, database=None)
+settings.register_profile("explore")
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 CVMHAT_ENV = "XVMATCH_CVMHAT"
 """Environment variable that overrides where the CVMHAT boxes are looked for."""
