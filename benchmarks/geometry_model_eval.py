@@ -283,6 +283,14 @@ def main() -> int:
         sums = [summarize(c) for c in groups.values()]
         return np.mean([x.cvidf1 for x in sums]), np.mean([x.cvma for x in sums])
 
+    def pair(f: float, a: float) -> str:
+        """'CVIDF1 / CVMA', or '-' for a column not measured."""
+        return "-" if np.isnan(f) else f"{f:6.1f} /{a:5.1f}"
+
+    def one(f: float) -> str:
+        """CVIDF1, or '-' for a column not measured."""
+        return "-" if np.isnan(f) else f"{f:.1f}"
+
     print()
     print("CVIDF1 / CVMA (percent), frame mode, O searched, ids scrambled per view")
     print(f"{'held-out site':14s} {'setting':7s} {'handcrafted':>13s} {'learned LOSO':>13s} "
@@ -291,8 +299,7 @@ def main() -> int:
         for setting in ("clean", "noisy"):
             cells = [score(m, setting, key) for m in ("handcrafted", "learned", "default")]
             print(f"{key:14s} {setting:7s} " + " ".join(
-                f"{f:6.1f} /{a:5.1f}".rjust(w) for (f, a), w in zip(cells, (13, 13, 17),
-                                                                     strict=True)))
+                pair(f, a).rjust(w) for (f, a), w in zip(cells, (13, 13, 17), strict=True)))
     for setting in ("clean", "noisy"):
         hand, _ = score("handcrafted", setting, "overall")
         learned, _ = score("learned", setting, "overall")
@@ -303,7 +310,7 @@ def main() -> int:
     print()
     print("per sequence, CVIDF1 clean | noisy: handcrafted, learned LOSO, sim-only default")
     for name in [n for n in names if site_of(n) in args.sites]:
-        cells = [f"{score(m, st, name)[0]:5.1f}" for st in ("clean", "noisy")
+        cells = [one(score(m, st, name)[0]).rjust(5) for st in ("clean", "noisy")
                  for m in ("handcrafted", "learned", "default")]
         print(f"{name:22s} {' '.join(cells[:3])} | {' '.join(cells[3:])}")
     if diagnostic:
@@ -313,7 +320,7 @@ def main() -> int:
             cells = [score(m, setting, diagnostic) for m in ("handcrafted", "learned", "default")]
             hand, learned = cells[0][0], cells[1][0]
             print(f"  {setting}: " + ", ".join(
-                f"{m} {f:.1f} / {a:.1f}" for m, (f, a) in zip(
+                f"{m} {pair(f, a).strip()}" for m, (f, a) in zip(
                     ("handcrafted", "learned", "default"), cells, strict=True))
                   + f"; learned error {(100 - learned) / max(100 - hand, 1e-9):.2f}x")
     for (site, seed), r in fold_stats.items():
