@@ -18,7 +18,7 @@ Prints one table (per held-out site and pooled over the three), one row per sequ
 labelled diagnostic without the out-of-sync pair ``V0-S_canteen_1-G_3``, and the training wall
 time and peak memory per fold. ``--mirror``: the learned models with left-right mirror test-time
 augmentation (``associate --mirror``); ``--sync``: every method first re-times the top view by the
-offset ``associate --offset auto`` estimates (offsets saved in ``--work``/offsets.json);
+offset ``associate --offset auto`` applies (offsets saved in ``--work``/offsets_v2.json);
 ``--ensemble``: the learned column averages the fold's model(s) with the default;
 ``--tune-gamma``: each fold's gamma chosen on its training sites' validation frames. CPU only.
 README figures:
@@ -80,13 +80,14 @@ def _inputs(data: Path, name: str, noise_seed: int | None):
     return top, hor
 
 
-def sync_offset(job: tuple) -> tuple[str, int | None, int]:
+def sync_offset(job: tuple) -> tuple[str, int | None, int, int]:
     """Offset of one (sequence, noise seed) estimated from its (noisy) boxes, O searched, as
-    ``xvmatch associate --offset auto`` does."""
+    ``xvmatch associate --offset auto`` does: the offset applied (0 when the clips disagree) and
+    the curve's minimum."""
     data, name, noise_seed = job
     top, hor = _inputs(data, name, noise_seed)
     est = estimate_offset(top, hor, IMAGE_SIZE[0], max_offset=AUTO_MAX_OFFSET)
-    return name, noise_seed, est.offset
+    return name, noise_seed, est.applied, est.offset
 
 
 def evaluate(job: tuple) -> tuple[str, str, int | None, list]:
@@ -217,17 +218,27 @@ def main() -> int:
     seeds = [None, *range(args.noise_seeds)]
     tested = [n for site in args.sites for n in by_site[site]]
     offsets: dict[tuple[str, int | None], int] = {}
-    saved = args.work / "offsets.json"
+    minima: dict[tuple[str, int | None], int] = {}
+    saved = args.work / "offsets_v2.json"  # v2: applied offset and minimum (clip agreement)
     if args.sync and args.reuse and saved.exists():
-        offsets = {(n, s): o for n, s, o in json.loads(saved.read_text())}
+        for n, s, o, m in json.loads(saved.read_text()):
+            offsets[n, s], minima[n, s] = o, m
     if args.sync and any((n, s) not in offsets for n in tested for s in seeds):
         with ProcessPoolExecutor(max_workers=args.workers) as pool:
-            for name, s, offset in pool.map(
+            for name, s, offset, minimum in pool.map(
                     sync_offset, [(args.data, n, s) for n in tested for s in seeds]):
-                offsets[name, s] = offset
-        saved.write_text(json.dumps([[n, s, o] for (n, s), o in offsets.items()]) + "\n")
-        print("estimated offsets (top frame = horizontal frame + offset): " + ", ".join(
-            f"{n} {'/'.join(f'{offsets[n, s]:+d}' for s in seeds)}" for n in tested))
+                offsets[name, s], minima[name, s] = offset, minimum
+        saved.write_text(
+            json.dumps([[n, s, o, minima[n, s]] for (n, s), o in offsets.items()]) + "\n"
+        )
+    if args.sync:
+        def shown(key) -> str:
+            o, m = offsets[key], minima[key]
+            return f"{o:+d}" if o == m else f"0 ({m:+d} rejected)"
+
+        print("estimated offsets, clean/noise seeds (top frame = horizontal frame + offset; "
+              "rejected: the clips disagree): " + ", ".join(
+                  f"{n} {' / '.join(shown((n, s)) for s in seeds)}" for n in tested))
     learned = {
         site: "+".join(map(str, folds[site])) + (f"+{args.default_model}" if args.ensemble else "")
         for site in args.sites

@@ -401,11 +401,29 @@ class OffsetEstimate:
         offset: frames to add to a horizontal frame number to get the matching top frame.
         offsets: ``(N,)`` offsets tried.
         costs: ``(N,)`` mean best Phi of each offset's clip (+inf where nothing matched).
+        clip_costs: ``(K, N)`` each clip's own curve (normalised by its median when K > 1;
+            rows of +inf for clips that never matched).
+        support: fraction of the clips that matched whose own minimum lies within
+            ``tolerance`` frames of ``offset`` (1 for a single clip).
+        chance: probability that at least that many clips agree by chance, had their minima
+            fallen anywhere in the range (binomial tail; 1 for a single clip).
+        reliable: a majority of the clips agree (``support >= min_support``) and
+            ``chance <= alpha``; a single clip cannot be checked and counts as reliable.
     """
 
     offset: int
     offsets: np.ndarray
     costs: np.ndarray
+    clip_costs: np.ndarray
+    support: float = 1.0
+    chance: float = 1.0
+    reliable: bool = True
+
+    @property
+    def applied(self) -> int:
+        """The offset to re-time the videos by: ``offset`` when reliable, else 0 (keep the
+        files' timing rather than shift by a minimum the clips do not agree on)."""
+        return self.offset if self.reliable else 0
 
 
 def _clip_cost(
@@ -439,6 +457,9 @@ def estimate_offset(
     max_offset: int = 15,
     camera_id: int | None = None,
     n_clips: int = 5,
+    tolerance: int = 5,
+    min_support: float = 0.5,
+    alpha: float = 0.05,
 ) -> OffsetEstimate:
     """Estimate the temporal offset between the two videos by sliding clips (Sec. 3.2.4, Fig. 5).
 
@@ -449,12 +470,26 @@ def estimate_offset(
     used, each curve divided by its own median, and the mean curve's minimum wins (``clip_start``
     given: that one clip only, as in the paper).
 
+    With detector noise a curve can have its minimum far from the truth, so the estimate also
+    says how many clips agree: ``support`` is the fraction of clips whose own minimum lies within
+    ``tolerance`` frames of the winner. Clips without a common offset have their minima scattered
+    over the range, each near the winner with probability p = (2 tolerance + 1) / N; the estimate
+    is ``reliable`` when a majority agree (``min_support``) and that many would agree by chance
+    with probability at most ``alpha`` (:attr:`OffsetEstimate.applied` is 0 otherwise). The
+    default tolerance of 5 frames is the spread of single-clip minima on clean, synchronised
+    CVMHAT pairs (10-frame clips at 30 fps).
+
     Returns:
         :class:`OffsetEstimate`; ``costs`` is the mean normalised curve (raw for one clip).
     """
     params = params or SpatialParams()
-    if clip_length < 1 or max_offset < 0 or n_clips < 1:
-        raise ValueError("need clip_length >= 1, max_offset >= 0 and n_clips >= 1")
+    if clip_length < 1 or max_offset < 0 or n_clips < 1 or tolerance < 0:
+        raise ValueError(
+            "need clip_length >= 1, max_offset >= 0, n_clips >= 1 and tolerance >= 0"
+        )
+    if not (0.0 <= min_support <= 1.0 and 0.0 < alpha <= 1.0):
+        raise ValueError(f"need 0 <= min_support <= 1 and 0 < alpha <= 1, got {min_support} "
+                         f"and {alpha}")
     hor_frames = sorted(hor)
     if not hor_frames:
         raise ValueError("the horizontal sequence has no frames")
@@ -464,15 +499,39 @@ def estimate_offset(
         first, last = hor_frames[0] + max_offset, hor_frames[-1] - max_offset - clip_length + 1
         starts = sorted({int(s) for s in np.linspace(first, max(first, last), n_clips).round()})
     offsets = np.arange(-max_offset, max_offset + 1)
-    curves = []
-    for start in starts:
+    clip_costs = np.full((len(starts), offsets.size), np.inf)
+    for k, start in enumerate(starts):
         clip = [f for f in range(start, start + clip_length) if f in hor]
         curve = np.array(
             [_clip_cost(top, hor, clip, int(o), hor_width, params, camera_id) for o in offsets]
         )
         finite = curve[np.isfinite(curve)]
         if finite.size:
-            curves.append(curve if len(starts) == 1 else curve / np.median(finite))
-    costs = np.mean(curves, axis=0) if curves else np.full(offsets.shape, np.inf)
+            clip_costs[k] = curve if len(starts) == 1 else curve / np.median(finite)
+    used = np.isfinite(clip_costs).any(axis=1)
+    costs = clip_costs[used].mean(axis=0) if used.any() else np.full(offsets.shape, np.inf)
     best = int(np.argmin(costs)) if np.isfinite(costs).any() else int(np.argmin(np.abs(offsets)))
-    return OffsetEstimate(offset=int(offsets[best]), offsets=offsets, costs=costs)
+    clip_best = offsets[np.argmin(clip_costs[used], axis=1)]
+    n_used = int(used.sum())
+    agree = int(np.sum(np.abs(clip_best - offsets[best]) <= tolerance))
+    support = agree / n_used if n_used else 0.0
+    if len(starts) == 1:
+        chance, reliable = 1.0, n_used == 1
+    else:
+        p_near = min(1.0, (2 * tolerance + 1) / offsets.size)
+        # Binomial tail P(X >= agree), X ~ B(n_used, p_near) (math.comb: scipy.stats costs
+        # the CLI half a second of import time).
+        chance = sum(
+            math.comb(n_used, j) * p_near**j * (1 - p_near) ** (n_used - j)
+            for j in range(agree, n_used + 1)
+        )
+        reliable = n_used > 0 and support >= min_support and chance <= alpha
+    return OffsetEstimate(
+        offset=int(offsets[best]),
+        offsets=offsets,
+        costs=costs,
+        clip_costs=clip_costs,
+        support=support,
+        chance=chance,
+        reliable=bool(reliable),
+    )

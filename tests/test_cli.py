@@ -338,6 +338,7 @@ def test_offset_json(files, capsys):
     assert data["offsets"] == [-2, -1, 0, 1, 2]
     assert len(data["costs"]) == 5 and all(c is None or c > 0 for c in data["costs"])
     assert data["offset"] in data["offsets"]
+    assert data["support"] == 1.0 and data["reliable"]  # one clip: nothing to compare
     assert main(argv[:-1]) == 0
     assert capsys.readouterr().out.startswith(f"offset {data['offset']:+d} frames")
 
@@ -382,7 +383,7 @@ def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     base = ["associate", "--top", str(top), "--hor", str(hor), "--camera-id", "0"]
     scores = {}
     for tag, extra in [("none", []), ("given", ["--offset", "-4"]),
-                       ("auto", ["--offset", "auto", "--max-offset", "6"])]:
+                       ("auto", ["--offset", "auto", "--max-offset", "12"])]:
         out = tmp_path / f"{tag}.csv"
         assert main([*base, "--out", str(out), "--quiet", *extra]) == 0
         pred = read_predictions(out)
@@ -400,8 +401,23 @@ def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     assert main(argv) == 0
     assert json.loads(capsys.readouterr().out)["cvidf1"] == pytest.approx(scores["given"])
     out = tmp_path / "loud.csv"
-    assert main([*base, "--out", str(out), "--offset", "auto", "--max-offset", "6"]) == 0
+    assert main([*base, "--out", str(out), "--offset", "auto", "--max-offset", "12"]) == 0
     assert "estimated offset -4 frames" in capsys.readouterr().err
+
+
+def test_associate_keeps_the_timing_when_the_offset_is_unreliable(tmp_path, capsys):
+    # Top and horizontal views of two different scenes: the clips' minima disagree.
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    write_mot_boxes(top, simulate_box_scene(config, n_frames=80, seed=3).top)
+    write_mot_boxes(hor, simulate_box_scene(config, n_frames=80, seed=4).hor)
+    base = ["associate", "--top", str(top), "--hor", str(hor)]
+    auto, plain = tmp_path / "auto.csv", tmp_path / "plain.csv"
+    auto_args = ["--out", str(auto), "--quiet", "--offset", "auto", "--max-offset", "15"]
+    assert main([*base, *auto_args]) == 0
+    assert "warning: no reliable offset" in capsys.readouterr().err  # even with --quiet
+    assert main([*base, "--out", str(plain), "--quiet"]) == 0
+    assert read_predictions(auto) == read_predictions(plain)
 
 
 @pytest.mark.parametrize("extra", [["--mirror"], ["--gamma", "0.4"]])

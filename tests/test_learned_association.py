@@ -193,11 +193,16 @@ def test_fit_geometry_command_end_to_end(tmp_path):
     args = parser.parse_args(
         ["fit-geometry", "--cvmhat", str(data), "--out", str(out), "--epochs", "1",
          "--noise", "0", "--sim-scenes", "2", "--sites", "alpha", "--cache",
-         str(tmp_path / "c"), "--quiet"]
+         str(tmp_path / "c"), "--quiet", "--width", "16", "--layers", "1"]
     )
     assert args.func(args) == 0
     model = load_geometry_model(out)
     assert model.meta["sites"] == ["alpha"]
+    stored = torch.load(out, map_location="cpu", weights_only=True)["model_config"]
+    assert stored["width"] == 16 and stored["layers"] == 1
+    with pytest.raises(ValueError, match="--width must be a multiple of 4"):
+        args.func(parser.parse_args(["fit-geometry", "--cvmhat", str(data), "--out",
+                                     str(tmp_path / "w.pt"), "--width", "10"]))
 
 
 def test_mirror_augmentation_is_symmetric(model_file, scene):

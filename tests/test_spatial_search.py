@@ -452,6 +452,38 @@ def test_estimate_offset_sign_convention_on_exact_views(scene, shift):
     assert est.costs[np.argmin(est.costs)] < 1e-9 < np.sort(est.costs)[1]
 
 
+def test_offset_clips_that_agree_are_reliable(offset_scene):
+    # O searched, five clips, +-15 frames: every clip's own minimum is near the shift.
+    hor = _shift(offset_scene.hor, 5)
+    est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5)
+    assert est.clip_costs.shape == (5, 31)
+    clip_best = est.offsets[np.argmin(est.clip_costs, axis=1)]
+    assert est.support == np.mean(np.abs(clip_best - est.offset) <= 5) == 1.0
+    assert est.chance == pytest.approx((11 / 31) ** 5)  # all 5 within +-5 frames by chance
+    assert est.reliable and est.applied == est.offset == -5
+    # Over +-8 frames, +-5 covers most of the range: agreement proves nothing.
+    narrow = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=8, n_clips=5)
+    assert narrow.offset == -5 and narrow.support == 1.0
+    assert not narrow.reliable and narrow.applied == 0
+
+
+def test_offset_of_unrelated_videos_is_not_applied(offset_scene):
+    """Top and horizontal views of two different scenes: the curve still has a minimum, but the
+    clips do not agree on it beyond chance, so nothing is shifted."""
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    for seed in (4, 5):
+        other = simulate_box_scene(config, n_frames=80, seed=seed)
+        est = estimate_offset(offset_scene.top, other.hor, WIDTH, max_offset=15, n_clips=5)
+        assert not est.reliable and est.applied == 0
+
+
+def test_estimate_offset_rejects_bad_settings(scene):
+    with pytest.raises(ValueError, match="min_support"):
+        estimate_offset(scene.top, scene.hor, WIDTH, min_support=1.5)
+    with pytest.raises(ValueError, match="tolerance"):
+        estimate_offset(scene.top, scene.hor, WIDTH, tolerance=-1)
+
+
 def test_estimate_offset_without_horizontal_frames(scene):
     with pytest.raises(ValueError, match="horizontal sequence has no frames"):
         estimate_offset(scene.top, {}, WIDTH)

@@ -125,10 +125,13 @@ def _cmd_associate(args: argparse.Namespace) -> int:
 
         est = estimate_offset(top, hor, hor_width=args.image_size[0], params=params,
                               max_offset=args.max_offset, camera_id=args.camera_id)
-        offset = est.offset
-        if not args.quiet:
+        offset = est.applied
+        if not est.reliable:
+            print(f"warning: no reliable offset ({_offset_summary(est)}); keeping the files' "
+                  "timing (offset 0); pass --offset N if you know it", file=sys.stderr)
+        elif not args.quiet:
             print(f"estimated offset {offset:+d} frames (top frame = horizontal frame "
-                  f"{offset:+d})", file=sys.stderr)
+                  f"{offset:+d}; {_offset_summary(est)})", file=sys.stderr)
     else:
         offset = args.offset
     if offset:
@@ -200,6 +203,14 @@ def _cmd_noise(args: argparse.Namespace) -> int:
     return 0
 
 
+def _offset_summary(est) -> str:
+    """How many clips agree with an :class:`OffsetEstimate`, in words."""
+    import numpy as np
+
+    n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
+    return f"best {est.offset:+d}, {round(est.support * n)} of {n} clips agree"
+
+
 def _cmd_offset(args: argparse.Namespace) -> int:
     from xvmatch.geometry.spatial_search import estimate_offset
 
@@ -221,13 +232,19 @@ def _cmd_offset(args: argparse.Namespace) -> int:
             json.dumps(
                 {
                     "offset": est.offset,
+                    "support": est.support,
+                    "reliable": est.reliable,
                     "offsets": est.offsets.tolist(),
                     "costs": [c if c != float("inf") else None for c in est.costs.tolist()],
                 }
             )
         )
     else:
-        print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d})")
+        print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
+              f"{_offset_summary(est)})")
+        if not est.reliable:
+            print("warning: the clips disagree: the estimate is unreliable (detector noise, "
+                  "too few people, or an offset beyond --max-offset)", file=sys.stderr)
     return 0
 
 

@@ -65,6 +65,10 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--sim-scenes", type=non_negative_int, default=300, metavar="N",
                    help="box-simulator scenes added to the training set as a regulariser "
                    "(default 300; 0: real data only)")
+    p.add_argument("--width", type=positive_int, default=64,
+                   help="encoder embedding size (default 64; a multiple of 4, the heads)")
+    p.add_argument("--layers", type=non_negative_int, default=2,
+                   help="encoder rounds of self/cross attention (default 2)")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="feature cache folder (default $XVMATCH_CACHE or ~/.cache/xvmatch)")
     p.add_argument("--run-dir", default=None, metavar="DIR",
@@ -86,6 +90,8 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
     folder = Path(args.cvmhat)
     if not folder.is_dir():
         raise ValueError(f"{args.cvmhat}: no such folder")
+    if args.width % 4:
+        raise ValueError(f"--width must be a multiple of 4 (the attention heads), got {args.width}")
     from xvmatch.training.fit_geometry import fit_geometry_cvmhat
 
     result = fit_geometry_cvmhat(
@@ -102,6 +108,7 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
         resume=args.resume,
         progress=not args.quiet,
         threads=args.threads,
+        model_config={"width": args.width, "layers": args.layers},
     )
     if not args.quiet:
         score = "n/a" if result.best_score is None else f"{result.best_score:.1f}"
