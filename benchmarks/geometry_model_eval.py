@@ -18,7 +18,7 @@ Prints one table (per held-out site and pooled over the three), one row per sequ
 labelled diagnostic without the out-of-sync pair ``V0-S_canteen_1-G_3``, and the training wall
 time and peak memory per fold. ``--mirror``: the learned models with left-right mirror test-time
 augmentation (``associate --mirror``); ``--sync``: every method first re-times the top view by the
-offset ``associate --offset auto`` applies (offsets saved in ``--work``/offsets_v2.json);
+offset ``associate --offset auto`` applies (offsets saved in ``--work``/offsets_v3.json);
 ``--ensemble``: the learned column averages the fold's model(s) with the default;
 ``--tune-gamma``: each fold's gamma chosen on its training sites' validation frames. CPU only.
 README figures:
@@ -80,14 +80,14 @@ def _inputs(data: Path, name: str, noise_seed: int | None):
     return top, hor
 
 
-def sync_offset(job: tuple) -> tuple[str, int | None, int, int]:
+def sync_offset(job: tuple) -> tuple[str, int | None, int, int, str]:
     """Offset of one (sequence, noise seed) estimated from its (noisy) boxes, O searched, as
-    ``xvmatch associate --offset auto`` does: the offset applied (0 when the clips disagree) and
-    the curve's minimum."""
+    ``xvmatch associate --offset auto`` does: the offset applied (0 unless the clips back it),
+    the curve's minimum and the verdict (:attr:`OffsetEstimate.status`)."""
     data, name, noise_seed = job
     top, hor = _inputs(data, name, noise_seed)
     est = estimate_offset(top, hor, IMAGE_SIZE[0], max_offset=AUTO_MAX_OFFSET)
-    return name, noise_seed, est.applied, est.offset
+    return name, noise_seed, est.applied, est.offset, est.status
 
 
 def evaluate(job: tuple) -> tuple[str, str, int | None, list]:
@@ -218,26 +218,29 @@ def main() -> int:
     seeds = [None, *range(args.noise_seeds)]
     tested = [n for site in args.sites for n in by_site[site]]
     offsets: dict[tuple[str, int | None], int] = {}
-    minima: dict[tuple[str, int | None], int] = {}
-    saved = args.work / "offsets_v2.json"  # v2: applied offset and minimum (clip agreement)
+    minima: dict[tuple[str, int | None], tuple[int, str]] = {}
+    # v3: applied offset, minimum and verdict (9 clips; evidence and agreement checks).
+    saved = args.work / "offsets_v3.json"
     if args.sync and args.reuse and saved.exists():
-        for n, s, o, m in json.loads(saved.read_text()):
-            offsets[n, s], minima[n, s] = o, m
+        for n, s, o, m, status in json.loads(saved.read_text()):
+            offsets[n, s], minima[n, s] = o, (m, status)
     if args.sync and any((n, s) not in offsets for n in tested for s in seeds):
         with ProcessPoolExecutor(max_workers=args.workers) as pool:
-            for name, s, offset, minimum in pool.map(
+            for name, s, offset, minimum, status in pool.map(
                     sync_offset, [(args.data, n, s) for n in tested for s in seeds]):
-                offsets[name, s], minima[name, s] = offset, minimum
+                offsets[name, s], minima[name, s] = offset, (minimum, status)
         saved.write_text(
-            json.dumps([[n, s, o, minima[n, s]] for (n, s), o in offsets.items()]) + "\n"
+            json.dumps([[n, s, o, *minima[n, s]] for (n, s), o in offsets.items()]) + "\n"
         )
     if args.sync:
         def shown(key) -> str:
-            o, m = offsets[key], minima[key]
-            return f"{o:+d}" if o == m else f"0 ({m:+d} rejected)"
+            o, (m, status) = offsets[key], minima[key]
+            if o == m:
+                return f"{o:+d}" if o else "0"
+            return f"0 ({m:+d} {status.replace('_', ' ')})"
 
         print("estimated offsets, clean/noise seeds (top frame = horizontal frame + offset; "
-              "rejected: the clips disagree): " + ", ".join(
+              "minima not applied in brackets): " + ", ".join(
                   f"{n} {' / '.join(shown((n, s)) for s in seeds)}" for n in tested))
     learned = {
         site: "+".join(map(str, folds[site])) + (f"+{args.default_model}" if args.ensemble else "")

@@ -338,7 +338,8 @@ def test_offset_json(files, capsys):
     assert data["offsets"] == [-2, -1, 0, 1, 2]
     assert len(data["costs"]) == 5 and all(c is None or c > 0 for c in data["costs"])
     assert data["offset"] in data["offsets"]
-    assert data["support"] == 1.0 and data["reliable"]  # one clip: nothing to compare
+    # One clip: nothing to compare it with, applied as in the paper.
+    assert data["status"] == "applied" and data["applied"] == data["offset"]
     assert main(argv[:-1]) == 0
     assert capsys.readouterr().out.startswith(f"offset {data['offset']:+d} frames")
 
@@ -369,25 +370,31 @@ def test_offset_recovers_a_shift_end_to_end(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["offset"] == -4
     assert data["offsets"] == list(range(-6, 7))
+    # 4 frames is within the estimate's precision: reported, not applied by --offset auto.
+    assert data["status"] == "within_tolerance" and data["applied"] == 0
+    assert data["evidence"] > 0 and 0 < data["support"] <= 1
+    assert main(argv[:-1]) == 0
+    assert "note: -4 is within the estimate's precision" in capsys.readouterr().err
 
 
 def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
-    # The idealised walk of test_offset_recovers_a_shift_end_to_end: horizontal frame g shows
-    # top frame g - 4, so the offset is -4 and pairs are written under the horizontal frames.
+    # The idealised walk of test_offset_recovers_a_shift_end_to_end, horizontal frames
+    # renumbered by 8 (beyond the 5-frame tolerance of --offset auto): horizontal frame g shows
+    # top frame g - 8, so the offset is -8 and pairs are written under the horizontal frames.
     config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
     scene = simulate_box_scene(config, n_frames=60, seed=3)
     top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
     write_mot_boxes(top, scene.top)
-    shifted_hor = {f + 4: FrameBoxes(f + 4, r.ids, r.boxes) for f, r in scene.hor.items()}
+    shifted_hor = {f + 8: FrameBoxes(f + 8, r.ids, r.boxes) for f, r in scene.hor.items()}
     write_mot_boxes(hor, shifted_hor)
     base = ["associate", "--top", str(top), "--hor", str(hor), "--camera-id", "0"]
     scores = {}
-    for tag, extra in [("none", []), ("given", ["--offset", "-4"]),
-                       ("auto", ["--offset", "auto", "--max-offset", "12"])]:
+    for tag, extra in [("none", []), ("given", ["--offset", "-8"]),
+                       ("auto", ["--offset", "auto", "--max-offset", "10"])]:
         out = tmp_path / f"{tag}.csv"
         assert main([*base, "--out", str(out), "--quiet", *extra]) == 0
         pred = read_predictions(out)
-        truth_top = shift_frames(scene.top, -4)  # the top view on the horizontal timeline
+        truth_top = shift_frames(scene.top, -8)  # the top view on the horizontal timeline
         scores[tag] = summarize(count_sequence(pred, truth_top, shifted_hor)).cvidf1
         if tag == "given":
             expected = associate_sequence(truth_top, shifted_hor, WIDTH, camera_id=0)
@@ -397,12 +404,12 @@ def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     assert scores["given"] > scores["none"] + 10, scores
     capsys.readouterr()
     argv = ["evaluate", "--pred", str(tmp_path / "given.csv"), "--top", str(top), "--hor",
-            str(hor), "--offset", "-4", "--json"]
+            str(hor), "--offset", "-8", "--json"]
     assert main(argv) == 0
     assert json.loads(capsys.readouterr().out)["cvidf1"] == pytest.approx(scores["given"])
     out = tmp_path / "loud.csv"
-    assert main([*base, "--out", str(out), "--offset", "auto", "--max-offset", "12"]) == 0
-    assert "estimated offset -4 frames" in capsys.readouterr().err
+    assert main([*base, "--out", str(out), "--offset", "auto", "--max-offset", "10"]) == 0
+    assert "estimated offset -8 frames" in capsys.readouterr().err
 
 
 def test_associate_keeps_the_timing_when_the_offset_is_unreliable(tmp_path, capsys):
@@ -415,7 +422,7 @@ def test_associate_keeps_the_timing_when_the_offset_is_unreliable(tmp_path, caps
     auto, plain = tmp_path / "auto.csv", tmp_path / "plain.csv"
     auto_args = ["--out", str(auto), "--quiet", "--offset", "auto", "--max-offset", "15"]
     assert main([*base, *auto_args]) == 0
-    assert "warning: no reliable offset" in capsys.readouterr().err  # even with --quiet
+    assert "not applied" in capsys.readouterr().err  # a warning, even with --quiet
     assert main([*base, "--out", str(plain), "--quiet"]) == 0
     assert read_predictions(auto) == read_predictions(plain)
 

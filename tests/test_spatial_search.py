@@ -7,6 +7,8 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
@@ -20,6 +22,7 @@ from xvmatch.geometry.spatial_search import (
     estimate_offset,
     full_circle,
     hypothesis_vectors,
+    judge_offset,
     rank_hypotheses,
     search_window,
 )
@@ -452,34 +455,115 @@ def test_estimate_offset_sign_convention_on_exact_views(scene, shift):
     assert est.costs[np.argmin(est.costs)] < 1e-9 < np.sort(est.costs)[1]
 
 
-def test_offset_clips_that_agree_are_reliable(offset_scene):
-    # O searched, five clips, +-15 frames: every clip's own minimum is near the shift.
-    hor = _shift(offset_scene.hor, 5)
+def test_offset_the_clips_back_is_applied(offset_scene):
+    # O searched, five clips, +-15 frames: every clip's own minimum is at the shift.
+    hor = _shift(offset_scene.hor, 8)
     est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5)
     assert est.clip_costs.shape == (5, 31)
     clip_best = est.offsets[np.argmin(est.clip_costs, axis=1)]
     assert est.support == np.mean(np.abs(clip_best - est.offset) <= 5) == 1.0
     assert est.chance == pytest.approx((11 / 31) ** 5)  # all 5 within +-5 frames by chance
-    assert est.reliable and est.applied == est.offset == -5
-    # Over +-8 frames, +-5 covers most of the range: agreement proves nothing.
-    narrow = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=8, n_clips=5)
-    assert narrow.offset == -5 and narrow.support == 1.0
-    assert not narrow.reliable and narrow.applied == 0
+    assert est.evidence > 2.0
+    assert est.status == "applied" and est.applied == est.offset == -8
+
+
+def test_offset_within_tolerance_keeps_the_files_timing(offset_scene):
+    hor = _shift(offset_scene.hor, 4)
+    est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5)
+    assert est.offset == -4 and est.status == "within_tolerance" and est.applied == 0
+    finer = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5, tolerance=2)
+    assert finer.status == "applied" and finer.applied == -4
 
 
 def test_offset_of_unrelated_videos_is_not_applied(offset_scene):
     """Top and horizontal views of two different scenes: the curve still has a minimum, but the
-    clips do not agree on it beyond chance, so nothing is shifted."""
+    clips do not back it, so nothing is shifted."""
     config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
     for seed in (4, 5):
         other = simulate_box_scene(config, n_frames=80, seed=seed)
         est = estimate_offset(offset_scene.top, other.hor, WIDTH, max_offset=15, n_clips=5)
-        assert not est.reliable and est.applied == 0
+        assert est.status == "unsupported" and est.applied == 0
+
+
+OFFSETS = np.arange(-30, 31)
+
+
+def _dips(centres: list[int], depth=0.5, width: float = 2.0) -> np.ndarray:
+    """One curve per centre: 1 everywhere, a Gaussian dip of ``depth`` (scalar or per clip) at
+    the centre."""
+    c = np.asarray(centres, dtype=float)[:, None]
+    d = np.broadcast_to(np.asarray(depth, dtype=float), (len(centres),))[:, None]
+    return 1.0 - d * np.exp(-0.5 * ((OFFSETS[None, :] - c) / width) ** 2)
+
+
+def test_judge_offset_applies_a_shift_all_clips_share():
+    curves = _dips([20] * 8 + [19]) + 0.01 * np.arange(9)[:, None]
+    est = judge_offset(curves, OFFSETS)
+    assert (est.offset, est.applied, est.status, est.support) == (20, 20, "applied", 1.0)
+    assert est.evidence > 10 and est.chance < 1e-6
+
+
+def test_judge_offset_keeps_0_against_one_deep_noise_dip():
+    """Synchronised views (every clip dips at 0) where one clip's noise dip at -25 is so deep
+    that the mean curve's minimum moves there: the other clips prefer 0, so it is refused."""
+    curves = _dips([0] * 9, depth=0.1)
+    curves[:2] -= np.array([[0.95], [0.5]]) * np.exp(-0.5 * ((OFFSETS + 25) / 2.0) ** 2)
+    est = judge_offset(curves, OFFSETS)
+    assert est.offset == -25 and est.status == "unsupported" and est.applied == 0
+    assert est.evidence < 1.0
+
+
+def test_judge_offset_refuses_a_minimum_no_clip_agrees_on():
+    """Views with no common offset: every clip dips somewhere else, and all are a little lower at
+    the winner than at 0 (so the paired t alone would pass); the agreement check refuses it."""
+    curves = _dips([-28, -21, -14, 12, 19, 26, 8, -8, 29])
+    curves[:, OFFSETS == 26] -= 0.05 + 0.01 * np.arange(9)[:, None]
+    est = judge_offset(curves, OFFSETS)
+    assert est.offset == 26 and est.evidence > 2.0
+    assert est.chance > 0.05 and est.status == "unsupported" and est.applied == 0
+
+
+def test_judge_offset_one_clip_is_applied_unchecked():
+    est = judge_offset(_dips([3]), OFFSETS)
+    assert (est.offset, est.applied, est.status) == (3, 3, "applied")
+
+
+def test_judge_offset_ignores_clips_that_never_matched():
+    curves = np.vstack([_dips([20] * 6) + 0.01 * np.arange(6)[:, None], np.full((2, 61), np.inf)])
+    est = judge_offset(curves, OFFSETS)
+    assert est.applied == 20 and est.support == 1.0
+
+
+def test_judge_offset_rejects_bad_input():
+    with pytest.raises(ValueError, match="including 0"):
+        judge_offset(np.ones((3, 5)), np.arange(1, 6))
+    with pytest.raises(ValueError, match=r"\(K, N\)"):
+        judge_offset(np.ones((3, 4)), np.arange(-2, 3))
+    with pytest.raises(ValueError, match="alpha"):
+        judge_offset(np.ones((3, 5)), np.arange(-2, 3), alpha=0.0)
+
+
+@given(
+    centres=st.lists(st.integers(-30, 30), min_size=2, max_size=9),
+    shifts=st.lists(st.floats(-5, 5), min_size=9, max_size=9),
+    scale=st.floats(0.1, 10),
+)
+def test_judge_offset_ignores_each_clips_level_and_the_units(centres, shifts, scale):
+    """Adding a constant to one clip's curve, or scaling all curves, changes no decision."""
+    # Depths differ per clip so that the mean curve has no exact tie for its minimum.
+    curves = _dips(centres, depth=0.5 + 0.0371 * np.arange(len(centres)))
+    base = judge_offset(curves, OFFSETS)
+    moved = judge_offset(scale * (curves + np.asarray(shifts[: len(centres)])[:, None]), OFFSETS)
+    assert (moved.offset, moved.status, moved.applied) == (base.offset, base.status, base.applied)
+    assert moved.support == base.support and moved.chance == base.chance
+    assert moved.evidence == pytest.approx(base.evidence, rel=1e-6, abs=1e-9)
+    assert base.applied in (0, base.offset)
+    assert (base.status == "within_tolerance") == (abs(base.offset) <= 5)
 
 
 def test_estimate_offset_rejects_bad_settings(scene):
-    with pytest.raises(ValueError, match="min_support"):
-        estimate_offset(scene.top, scene.hor, WIDTH, min_support=1.5)
+    with pytest.raises(ValueError, match="min_evidence"):
+        estimate_offset(scene.top, scene.hor, WIDTH, min_evidence=-1.0)
     with pytest.raises(ValueError, match="tolerance"):
         estimate_offset(scene.top, scene.hor, WIDTH, tolerance=-1)
 

@@ -121,17 +121,20 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     if args.model is None and (args.mirror or args.gamma is not None):
         raise UsageError("--mirror and --gamma apply to a learned model: add --model")
     if args.offset == "auto":
-        from xvmatch.geometry.spatial_search import estimate_offset
+        from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
         est = estimate_offset(top, hor, hor_width=args.image_size[0], params=params,
                               max_offset=args.max_offset, camera_id=args.camera_id)
         offset = est.applied
-        if not est.reliable:
-            print(f"warning: no reliable offset ({_offset_summary(est)}); keeping the files' "
-                  "timing (offset 0); pass --offset N if you know it", file=sys.stderr)
+        if est.status == "unsupported":
+            print(f"warning: offset {est.offset:+d} not applied ({_offset_summary(est)}): the "
+                  "clips do not prefer it to 0; keeping the files' timing; pass --offset N if "
+                  "you know it", file=sys.stderr)
         elif not args.quiet:
-            print(f"estimated offset {offset:+d} frames (top frame = horizontal frame "
-                  f"{offset:+d}; {_offset_summary(est)})", file=sys.stderr)
+            kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
+                    if est.offset and not offset else "")
+            print(f"estimated offset {est.offset:+d} frames (top frame = horizontal frame "
+                  f"{est.offset:+d}; {_offset_summary(est)}){kept}", file=sys.stderr)
     else:
         offset = args.offset
     if offset:
@@ -204,15 +207,20 @@ def _cmd_noise(args: argparse.Namespace) -> int:
 
 
 def _offset_summary(est) -> str:
-    """How many clips agree with an :class:`OffsetEstimate`, in words."""
+    """How strongly the clips back an :class:`OffsetEstimate`, in words."""
     import numpy as np
 
     n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
-    return f"best {est.offset:+d}, {round(est.support * n)} of {n} clips agree"
+    text = f"{round(est.support * n)} of {n} clips agree"
+    return text + (f", evidence t = {est.evidence:.1f}" if est.offset and n > 1 else "")
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:
-    from xvmatch.geometry.spatial_search import estimate_offset
+    from xvmatch.geometry.spatial_search import (
+        MIN_OFFSET_EVIDENCE,
+        OFFSET_TOLERANCE,
+        estimate_offset,
+    )
 
     top = _read_boxes(args.top, args.duplicates)
     hor = _read_boxes(args.hor, args.duplicates)
@@ -232,8 +240,10 @@ def _cmd_offset(args: argparse.Namespace) -> int:
             json.dumps(
                 {
                     "offset": est.offset,
+                    "applied": est.applied,
+                    "status": est.status,
                     "support": est.support,
-                    "reliable": est.reliable,
+                    "evidence": est.evidence if est.evidence != float("inf") else None,
                     "offsets": est.offsets.tolist(),
                     "costs": [c if c != float("inf") else None for c in est.costs.tolist()],
                 }
@@ -242,9 +252,15 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     else:
         print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
               f"{_offset_summary(est)})")
-        if not est.reliable:
-            print("warning: the clips disagree: the estimate is unreliable (detector noise, "
-                  "too few people, or an offset beyond --max-offset)", file=sys.stderr)
+        if est.status == "unsupported":
+            print(f"warning: the clips do not prefer {est.offset:+d} to 0 (evidence t below "
+                  f"{MIN_OFFSET_EVIDENCE}): the estimate is unreliable (detector noise, too few "
+                  "people, or an offset beyond --max-offset); associate --offset auto keeps "
+                  "the files' timing", file=sys.stderr)
+        elif est.status == "within_tolerance" and est.offset:
+            print(f"note: {est.offset:+d} is within the estimate's precision ({OFFSET_TOLERANCE} "
+                  "frames) of 0: associate --offset auto keeps the files' timing; pass "
+                  f"--offset {est.offset} to apply it", file=sys.stderr)
     return 0
 
 
@@ -368,9 +384,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N|auto",
         help="the videos are out of sync: top frame = horizontal frame + N (what "
-        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about 20 s "
-        "per sequence with the default --max-offset). Pairs are written under the horizontal "
-        "frame numbers (default 0: frame-locked videos)",
+        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about a "
+        "minute per sequence with the default --max-offset) and shifts only when the clips "
+        "back the estimate and it is more than 5 frames from 0. Pairs are written under the "
+        "horizontal frame numbers (default 0: frame-locked videos)",
     )
     p.add_argument(
         "--max-offset",
@@ -432,7 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="first horizontal frame of a single clip (the paper's setting); default: "
         "--clips clips spread over the video",
     )
-    p.add_argument("--clips", type=int, default=5, help="clips to average (default 5)")
+    p.add_argument("--clips", type=int, default=9, help="clips to average (default 9)")
     p.add_argument("--clip-length", type=int, default=10, help="clip length (default 10)")
     p.add_argument("--max-offset", type=int, default=15, help="largest |offset| (default 15)")
     p.add_argument(
