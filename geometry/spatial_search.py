@@ -471,6 +471,24 @@ def _clip_cost(
     return float(np.mean(finite)) if finite and 2 * len(finite) >= len(clip) else math.inf
 
 
+def clip_starts(
+    hor_span: tuple[int, int],
+    top_span: tuple[int, int],
+    clip_length: int,
+    max_offset: int,
+    n_clips: int,
+) -> list[int]:
+    """First horizontal frames of ``n_clips`` clips spread evenly over the part of the video
+    where every offset in [-max_offset, max_offset] finds top frames for the whole clip, so
+    that all clips score every offset (videos of different lengths or start frames included).
+    Where no clip fits that way, the horizontal span less ``max_offset`` at each end is used."""
+    first = max(hor_span[0], top_span[0] + max_offset)
+    last = min(hor_span[1], top_span[1] - max_offset) - clip_length + 1
+    if last < first:
+        first, last = hor_span[0] + max_offset, hor_span[1] - max_offset - clip_length + 1
+    return sorted({int(s) for s in np.linspace(first, max(first, last), n_clips).round()})
+
+
 def _check_thresholds(tolerance: int, min_evidence: float, alpha: float) -> None:
     if tolerance < 0 or not min_evidence >= 0.0 or not 0.0 < alpha <= 1.0:
         raise ValueError(f"need tolerance >= 0, min_evidence >= 0 and 0 < alpha <= 1, got "
@@ -548,8 +566,9 @@ def estimate_offset(
     offset in [-max_offset, max_offset] (step 1: 2 * max_offset + 1 clips; the paper uses 10
     frames and 30 clips); each offset scores the mean over the clip's frames of the best Phi.
     One clip's cost curve is shallow, so by default ``n_clips`` clips spread over the video are
-    used, each curve divided by its own median, and the mean curve's minimum wins (``clip_start``
-    given: that one clip only, as in the paper).
+    used (where every offset finds top frames: :func:`clip_starts`), each curve divided by its
+    own median, and the mean curve's minimum wins (``clip_start`` given: that one clip only, as
+    in the paper).
 
     The videos are taken to be in sync unless the clips show otherwise: the estimate is applied
     only when it is more than ``tolerance`` frames from 0 (the precision of the estimate: the
@@ -571,14 +590,12 @@ def estimate_offset(
     if clip_length < 1 or max_offset < 0 or n_clips < 1:
         raise ValueError("need clip_length >= 1, max_offset >= 0 and n_clips >= 1")
     _check_thresholds(tolerance, min_evidence, alpha)
-    hor_frames = sorted(hor)
-    if not hor_frames:
+    if not hor:
         raise ValueError("the horizontal sequence has no frames")
-    if clip_start is not None:
-        starts = [clip_start]
-    else:
-        first, last = hor_frames[0] + max_offset, hor_frames[-1] - max_offset - clip_length + 1
-        starts = sorted({int(s) for s in np.linspace(first, max(first, last), n_clips).round()})
+    if not top:
+        raise ValueError("the top sequence has no frames")
+    starts = [clip_start] if clip_start is not None else clip_starts(
+        (min(hor), max(hor)), (min(top), max(top)), clip_length, max_offset, n_clips)
     offsets = np.arange(-max_offset, max_offset + 1)
     clip_costs = np.full((len(starts), offsets.size), np.inf)
     for k, start in enumerate(starts):

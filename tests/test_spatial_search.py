@@ -19,6 +19,7 @@ from xvmatch.geometry.spatial_search import (
     FollowPolicy,
     associate_frame,
     associate_sequence,
+    clip_starts,
     estimate_offset,
     full_circle,
     hypothesis_vectors,
@@ -559,6 +560,37 @@ def test_judge_offset_ignores_each_clips_level_and_the_units(centres, shifts, sc
     assert moved.evidence == pytest.approx(base.evidence, rel=1e-6, abs=1e-9)
     assert base.applied in (0, base.offset)
     assert (base.status == "within_tolerance") == (abs(base.offset) <= 5)
+
+
+def test_clip_starts_on_equal_spans_leave_max_offset_at_each_end():
+    starts = clip_starts((1, 600), (1, 600), 10, 60, 9)
+    assert starts[0] == 61 and starts[-1] == 600 - 60 - 10 + 1 and len(starts) == 9
+
+
+@given(
+    h0=st.integers(1, 200), h_len=st.integers(1, 800), t0=st.integers(1, 200),
+    t_len=st.integers(1, 800), length=st.integers(1, 20), max_offset=st.integers(0, 60),
+    n=st.integers(1, 12),
+)
+def test_clip_starts_let_every_clip_score_every_offset(h0, h_len, t0, t_len, length, max_offset, n):
+    hor_span, top_span = (h0, h0 + h_len - 1), (t0, t0 + t_len - 1)
+    starts = clip_starts(hor_span, top_span, length, max_offset, n)
+    assert 1 <= len(starts) <= n and starts == sorted(set(starts))
+    fits = (max(h0, t0 + max_offset)
+            <= min(hor_span[1], top_span[1] - max_offset) - length + 1)
+    if fits:  # whole clip in the horizontal video, and its top frames exist at every offset
+        for s in starts:
+            assert hor_span[0] <= s and s + length - 1 <= hor_span[1]
+            assert top_span[0] <= s - max_offset and s + length - 1 + max_offset <= top_span[1]
+
+
+def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene):
+    """The top video starts 12 frames after the horizontal one and ends 10 frames before it:
+    the clips are placed where every offset has top frames, so no curve has a gap."""
+    top = {f: r for f, r in offset_scene.top.items() if 13 <= f <= 70}
+    est = estimate_offset(top, offset_scene.hor, WIDTH, max_offset=8, n_clips=3)
+    assert np.isfinite(est.clip_costs).all()
+    assert est.offset == 0
 
 
 def test_estimate_offset_rejects_bad_settings(scene):
