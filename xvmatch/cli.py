@@ -24,7 +24,7 @@ EXAMPLES = {
     "associate": "xvmatch associate --top seq_top.txt --hor seq_hor.txt --out pred.csv",
     "evaluate": "xvmatch evaluate --pred pred.csv --top seq_top.txt --hor seq_hor.txt",
     "noise": "xvmatch noise --boxes seq_top.txt --view top --seed 1 --out noisy_top.txt",
-    "offset": "xvmatch offset --top seq_top.txt --hor seq_hor.txt --max-offset 15",
+    "offset": "xvmatch offset --top seq_top.txt --hor seq_hor.txt",
     "demo": "xvmatch demo --frames 150 --seed 0",
 }
 
@@ -451,7 +451,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--clips", type=int, default=9, help="clips to average (default 9)")
     p.add_argument("--clip-length", type=int, default=10, help="clip length (default 10)")
-    p.add_argument("--max-offset", type=int, default=15, help="largest |offset| (default 15)")
+    p.add_argument(
+        "--max-offset", type=int_at_least(0), default=AUTO_MAX_OFFSET,
+        help=f"largest |offset| (default {AUTO_MAX_OFFSET}, as associate --offset auto)",
+    )
     p.add_argument(
         "--image-size", type=image_size(), default=(2688, 1512), metavar="WxH",
         help="horizontal image size (default 2688x1512)",
