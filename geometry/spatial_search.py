@@ -35,8 +35,11 @@ __all__ = [
     "OffsetEstimate",
     "associate_frame",
     "associate_sequence",
+    "clip_cost_curves",
+    "clip_starts",
     "estimate_offset",
     "hypothesis_vectors",
+    "judge_offset",
     "rank_hypotheses",
     "search_window",
 ]
@@ -471,6 +474,84 @@ def _clip_cost(
     return float(np.mean(finite)) if finite and 2 * len(finite) >= len(clip) else math.inf
 
 
+def _clip_curve(
+    top: Mapping[int, _FrameLike],
+    hor: Mapping[int, _FrameLike],
+    clip: list[int],
+    offsets: list[int],
+    hor_width: float,
+    params: SpatialParams,
+    camera_id: int | None,
+) -> list[float]:
+    """:func:`_clip_cost` of one clip at each of ``offsets`` (one task of the process pool)."""
+    return [_clip_cost(top, hor, clip, o, hor_width, params, camera_id) for o in offsets]
+
+
+def _curve_tasks(
+    top: Mapping[int, _FrameLike],
+    hor: Mapping[int, _FrameLike],
+    clips: list[list[int]],
+    offsets: np.ndarray,
+    pieces: int,
+) -> list[tuple[int, list[int], tuple]]:
+    """Split the (clip, offset) grid into tasks of contiguous offsets, each carrying only the
+    frames it reads, so that a task pickles in kilobytes whatever the video's length."""
+    tasks = []
+    for k, clip in enumerate(clips):
+        for chunk in np.array_split(offsets, min(pieces, offsets.size)):
+            lo, hi = int(chunk[0]), int(chunk[-1])
+            wanted = {f + o for f in clip for o in range(lo, hi + 1)}
+            sub_top = {g: top[g] for g in sorted(wanted) if g in top}
+            sub_hor = {f: hor[f] for f in clip}
+            tasks.append((k, [int(o) for o in chunk], (sub_top, sub_hor, clip)))
+    return tasks
+
+
+def clip_cost_curves(
+    top: Mapping[int, _FrameLike],
+    hor: Mapping[int, _FrameLike],
+    clips: list[list[int]],
+    offsets: np.ndarray,
+    hor_width: float,
+    params: SpatialParams,
+    camera_id: int | None = None,
+    workers: int = 1,
+) -> np.ndarray:
+    """``(K, N)`` raw cost curves: the mean best Phi of each clip (horizontal frame numbers)
+    at each offset (Eq. 12 averaged over the clip, Fig. 5); +inf where most frames found no
+    top frame or no match. ``workers`` processes share the (clip, offset) grid; the curves
+    are the same for any number of workers."""
+    if int(workers) < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    offsets = np.asarray(offsets, dtype=int).ravel()
+    curves = np.full((len(clips), offsets.size), np.inf)
+    if not clips or offsets.size == 0:
+        return curves
+    if workers == 1:
+        for k, clip in enumerate(clips):
+            curves[k] = _clip_curve(top, hor, clip, offsets.tolist(), hor_width, params,
+                                    camera_id)
+        return curves
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # About four tasks per worker, so that uneven tasks (crowded frames) still balance.
+    pieces = max(1, -(-4 * int(workers) // len(clips)))
+    tasks = _curve_tasks(top, hor, clips, offsets, pieces)
+    index = {int(o): i for i, o in enumerate(offsets)}
+    # "spawn" as elsewhere in the package: a forked child may inherit a parent's thread pools.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(int(workers), len(tasks)),
+                             mp_context=context) as pool:
+        futures = [
+            pool.submit(_clip_curve, sub_top, sub_hor, clip, chunk, hor_width, params, camera_id)
+            for _, chunk, (sub_top, sub_hor, clip) in tasks
+        ]
+        for (k, chunk, _), future in zip(tasks, futures, strict=True):
+            curves[k, [index[o] for o in chunk]] = future.result()
+    return curves
+
+
 def clip_starts(
     hor_span: tuple[int, int],
     top_span: tuple[int, int],
@@ -559,6 +640,7 @@ def estimate_offset(
     tolerance: int = OFFSET_TOLERANCE,
     min_evidence: float = MIN_OFFSET_EVIDENCE,
     alpha: float = OFFSET_ALPHA,
+    workers: int = 1,
 ) -> OffsetEstimate:
     """Estimate the temporal offset between the two videos by sliding clips (Sec. 3.2.4, Fig. 5).
 
@@ -581,6 +663,8 @@ def estimate_offset(
       rejects the lowest of many noise dips when the views share no offset at all).
     The defaults were set on simulated scenes with detector noise
     (``benchmarks/offset_calibration.py``): no synchronised scene shifted, most true shifts found.
+    ``workers`` processes compute the curves (:func:`clip_cost_curves`); the estimate is the
+    same for any number.
 
     Returns:
         :class:`OffsetEstimate` (see :func:`judge_offset`); ``costs`` is the mean normalised
@@ -597,12 +681,10 @@ def estimate_offset(
     starts = [clip_start] if clip_start is not None else clip_starts(
         (min(hor), max(hor)), (min(top), max(top)), clip_length, max_offset, n_clips)
     offsets = np.arange(-max_offset, max_offset + 1)
-    clip_costs = np.full((len(starts), offsets.size), np.inf)
-    for k, start in enumerate(starts):
-        clip = [f for f in range(start, start + clip_length) if f in hor]
-        curve = np.array(
-            [_clip_cost(top, hor, clip, int(o), hor_width, params, camera_id) for o in offsets]
-        )
+    clips = [[f for f in range(start, start + clip_length) if f in hor] for start in starts]
+    curves = clip_cost_curves(top, hor, clips, offsets, hor_width, params, camera_id, workers)
+    clip_costs = np.full(curves.shape, np.inf)
+    for k, curve in enumerate(curves):
         finite = curve[np.isfinite(curve)]
         if finite.size:
             clip_costs[k] = curve if len(starts) == 1 else curve / np.median(finite)

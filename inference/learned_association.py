@@ -26,7 +26,7 @@ import io
 import json
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -246,6 +246,7 @@ def associate_sequence_learned(
     batch_size: int = 64,
     mirror: bool = False,
     costs_out: dict[int, np.ndarray] | None = None,
+    workers: int = 1,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame on its own with the learned model; ``{frame: [(top_id, hor_id)]}``.
 
@@ -270,9 +271,13 @@ def associate_sequence_learned(
         costs_out: if given, filled with ``{frame: (M, N) cost matrix}`` (rows and columns in
             the input order of the frame's boxes) of every frame with boxes in both views, e.g.
             to choose gamma on validation frames without running the model again.
+        workers: processes computing the features (1: in this process); the result is the same
+            for any number.
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
+    if int(workers) < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
     models = [model] if isinstance(model, LearnedGeometryModel) else list(model)
     if not models:
         raise ValueError("no model given")
@@ -306,26 +311,90 @@ def associate_sequence_learned(
             out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]
         pending.clear()
 
-    for frame in progress(order) if progress else order:
+    def both(frame: int) -> bool:
         t_rec, h_rec = top.get(frame), hor.get(frame)
-        if t_rec is None or h_rec is None or len(t_rec.ids) == 0 or len(h_rec.ids) == 0:
-            out[frame] = []
-            continue
-        cam = None
-        if camera_id is not None:
-            hits = np.flatnonzero(np.asarray(t_rec.ids) == camera_id)
-            cam = int(hits[0]) if hits.size else None
-        groups = []
-        for config in configs:
-            group = [frame_features(t_rec.boxes, h_rec.boxes, size, config, cam)]
-            if mirror:
-                top_width = float(np.max(t_rec.boxes[:, 0] + t_rec.boxes[:, 2]))
-                group.append(frame_features(_mirrored(t_rec.boxes, top_width),
-                                            _mirrored(h_rec.boxes, size[0]), size, config, cam))
-            groups.append(group)
-        pending.append((frame, groups))
-        if len(pending) >= batch_size:
+        return bool(t_rec is not None and h_rec is not None and len(t_rec.ids) and len(h_rec.ids))
+
+    inputs = []
+    for frame in order:
+        if both(frame):
+            cam = None
+            if camera_id is not None:
+                hits = np.flatnonzero(np.asarray(top[frame].ids) == camera_id)
+                cam = int(hits[0]) if hits.size else None
+            inputs.append((top[frame].boxes, hor[frame].boxes, cam))
+    stream = _feature_stream(inputs, size, configs, mirror, workers)
+    try:
+        for frame in progress(order) if progress else order:
+            if not both(frame):
+                out[frame] = []
+                continue
+            pending.append((frame, next(stream)))
+            if len(pending) >= batch_size:
+                flush()
+        if pending:
             flush()
-    if pending:
-        flush()
+    finally:
+        stream.close()  # shuts the worker pool down, also on an error or an interrupt
     return {f: out[f] for f in order}
+
+
+def _frame_groups(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    size: tuple[float, float],
+    configs: Sequence[FeatureConfig],
+    camera: int | None,
+    mirror: bool,
+) -> list[list[FrameFeatures]]:
+    """Features of one frame pair for each feature configuration: ``[plain]``, or
+    ``[plain, mirrored]`` with ``mirror``."""
+    groups = []
+    for config in configs:
+        group = [frame_features(top_boxes, hor_boxes, size, config, camera)]
+        if mirror:
+            top_width = float(np.max(top_boxes[:, 0] + top_boxes[:, 2]))
+            group.append(frame_features(_mirrored(top_boxes, top_width),
+                                        _mirrored(hor_boxes, size[0]), size, config, camera))
+        groups.append(group)
+    return groups
+
+
+def _groups_of_chunk(
+    inputs: Sequence[tuple[np.ndarray, np.ndarray, int | None]],
+    size: tuple[float, float],
+    configs: Sequence[FeatureConfig],
+    mirror: bool,
+) -> list[list[list[FrameFeatures]]]:
+    return [_frame_groups(tb, hb, size, configs, cam, mirror) for tb, hb, cam in inputs]
+
+
+def _feature_stream(
+    inputs: Sequence[tuple[np.ndarray, np.ndarray, int | None]],
+    size: tuple[float, float],
+    configs: Sequence[FeatureConfig],
+    mirror: bool,
+    workers: int,
+    chunk: int = 32,
+) -> Iterator[list[list[FrameFeatures]]]:
+    """:func:`_frame_groups` of each ``(top boxes, hor boxes, camera row)`` in order, computed
+    by ``workers`` processes (the k-best hypothesis search dominates the learned path)."""
+    if workers == 1 or len(inputs) <= chunk:
+        for tb, hb, cam in inputs:
+            yield _frame_groups(tb, hb, size, configs, cam, mirror)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
+    # "spawn": the parent has torch (and its thread pools) loaded; a forked child may hang.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(int(workers), len(chunks)),
+                             mp_context=context) as pool:
+        futures = [pool.submit(_groups_of_chunk, c, size, configs, mirror) for c in chunks]
+        try:
+            for future in futures:
+                yield from future.result()
+        finally:
+            for future in futures:
+                future.cancel()

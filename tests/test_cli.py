@@ -390,7 +390,7 @@ def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     base = ["associate", "--top", str(top), "--hor", str(hor), "--camera-id", "0"]
     scores = {}
     for tag, extra in [("none", []), ("given", ["--offset", "-8"]),
-                       ("auto", ["--offset", "auto", "--max-offset", "10"])]:
+                       ("auto", ["--offset", "auto", "--max-offset", "10", "--workers", "2"])]:
         out = tmp_path / f"{tag}.csv"
         assert main([*base, "--out", str(out), "--quiet", *extra]) == 0
         pred = read_predictions(out)

@@ -275,3 +275,26 @@ def test_costs_out_holds_the_matrices_behind_the_pairs(model_file, scene):
         t, h = scene.top[f].ids, scene.hor[f].ids
         assert pred[f] == [(int(t[a]), int(h[b])) for a, b in assign(costs[f], 1.0)]
     assert sum(len(p) for p in pred.values()) > 0
+
+
+def test_workers_give_the_same_pairs_and_costs(model_file):
+    # 70 frames with gaps and an empty frame: more than one 32-frame chunk goes to the two
+    # spawned processes, and the pairs and cost matrices must come back in frame order.
+    model = load_geometry_model(model_file)
+    sc = simulate_box_scene(SceneConfig(n_people=(5, 7)), n_frames=70, seed=5)
+    top = {f: r for f, r in sc.top.items() if f % 9}
+    hor = dict(sc.hor)
+    hor[20] = FrameBoxes(20, np.zeros(0, np.int64), np.zeros((0, 4)))
+    runs = []
+    for workers in (1, 2):
+        costs: dict = {}
+        pred = associate_sequence_learned(top, hor, WIDTH, model, camera_id=0, gamma=1.0,
+                                          mirror=True, costs_out=costs, workers=workers)
+        runs.append((pred, costs))
+    (one, one_costs), (two, two_costs) = runs
+    assert one == two and sum(len(p) for p in one.values()) > 0
+    assert sorted(one_costs) == sorted(two_costs)
+    for f, c in one_costs.items():
+        np.testing.assert_array_equal(c, two_costs[f])
+    with pytest.raises(ValueError, match="workers"):
+        associate_sequence_learned(top, hor, WIDTH, model, workers=0)

@@ -17,6 +17,7 @@ from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_matching import SpatialParams, match_vector_sets
 from xvmatch.geometry.spatial_search import (
     FollowPolicy,
+    _curve_tasks,
     associate_frame,
     associate_sequence,
     clip_starts,
@@ -593,11 +594,35 @@ def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene)
     assert est.offset == 0
 
 
+def test_offset_curves_are_the_same_for_any_number_of_workers(offset_scene):
+    # Two spawned processes share the (clip, offset) grid; the estimate must not change.
+    hor = _shift(offset_scene.hor, 8)
+    one = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=3, camera_id=0)
+    two = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=3, camera_id=0,
+                          workers=2)
+    assert one.applied == -8
+    np.testing.assert_array_equal(one.clip_costs, two.clip_costs)
+    assert (one.offset, one.applied, one.status) == (two.offset, two.applied, two.status)
+
+
+def test_curve_tasks_carry_only_the_frames_they_read(offset_scene):
+    clips = [[20, 21, 22], [50, 51, 52]]
+    tasks = _curve_tasks(offset_scene.top, offset_scene.hor, clips, np.arange(-4, 5), pieces=3)
+    # Every (clip, offset) cell exactly once, in contiguous runs of offsets.
+    cells = sorted((k, o) for k, chunk, _ in tasks for o in chunk)
+    assert cells == [(k, o) for k in range(2) for o in range(-4, 5)]
+    for k, chunk, (sub_top, sub_hor, clip) in tasks:
+        assert clip == clips[k] and sorted(sub_hor) == clip
+        assert sorted(sub_top) == sorted({f + o for f in clip for o in chunk})
+
+
 def test_estimate_offset_rejects_bad_settings(scene):
     with pytest.raises(ValueError, match="min_evidence"):
         estimate_offset(scene.top, scene.hor, WIDTH, min_evidence=-1.0)
     with pytest.raises(ValueError, match="tolerance"):
         estimate_offset(scene.top, scene.hor, WIDTH, tolerance=-1)
+    with pytest.raises(ValueError, match="workers"):
+        estimate_offset(scene.top, scene.hor, WIDTH, workers=0)
 
 
 def test_estimate_offset_without_horizontal_frames(scene):

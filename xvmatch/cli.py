@@ -13,7 +13,7 @@ import json
 import sys
 from collections.abc import Iterable, Sequence
 
-from xvmatch.cli_types import image_size, int_at_least, offset_value
+from xvmatch.cli_types import image_size, int_at_least, offset_value, positive_int
 
 __all__ = ["main"]
 
@@ -124,7 +124,8 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
         est = estimate_offset(top, hor, hor_width=args.image_size[0], params=params,
-                              max_offset=args.max_offset, camera_id=args.camera_id)
+                              max_offset=args.max_offset, camera_id=args.camera_id,
+                              workers=args.workers)
         offset = est.applied
         if est.status == "unsupported":
             print(f"warning: offset {est.offset:+d} not applied ({_offset_summary(est)}): the "
@@ -234,6 +235,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         max_offset=args.max_offset,
         camera_id=args.camera_id,
         n_clips=args.clips,
+        workers=args.workers,
     )
     if args.json:
         print(
@@ -385,7 +387,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N|auto",
         help="the videos are out of sync: top frame = horizontal frame + N (what "
         "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about a "
-        "minute per sequence with the default --max-offset) and shifts only when the clips "
+        "minute per sequence on one core with the default --max-offset; see --workers) and "
+        "shifts only when the clips "
         "back the estimate and it is more than 5 frames from 0. Pairs are written under the "
         "horizontal frame numbers (default 0: frame-locked videos)",
     )
@@ -395,6 +398,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=AUTO_MAX_OFFSET,
         help=f"largest |offset| tried by --offset auto (default {AUTO_MAX_OFFSET} frames)",
     )
+    p.add_argument("--workers", type=positive_int, default=1, metavar="K",
+                   help="processes for --offset auto's estimate and for --model's features "
+                   "(default 1; the same output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     _add_spatial_options(p)
     from xvmatch.cli_learn import add_model_arguments
@@ -460,6 +466,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="horizontal image size (default 2688x1512)",
     )
     p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="K",
+                   help="processes sharing the clips (default 1; the estimate is the same "
+                   "for any K)")
     _add_spatial_options(p)
     p.set_defaults(func=_cmd_offset)
 

@@ -151,8 +151,8 @@ def associate_with_model(
     """Associate with ``args.model`` (a model file or ``default``); ``{frame: [(top, hor)]}``.
 
     Reads ``args.model``, ``args.image_size`` (W, H), ``args.camera_id``, and when present
-    ``args.mode`` (must be ``frame``) and ``args.gamma``. The model uses the search parameters
-    it was trained with, not ``--rho`` / ``--lam`` / ...
+    ``args.mode`` (must be ``frame``), ``args.gamma``, ``args.mirror`` and ``args.workers``.
+    The model uses the search parameters it was trained with, not ``--rho`` / ``--lam`` / ...
     """
     from xvmatch.inference.learned_association import (
         associate_sequence_learned,
@@ -175,4 +175,5 @@ def associate_with_model(
         hor_height=height,
         frames=frames,
         mirror=bool(getattr(args, "mirror", False)),
+        workers=getattr(args, "workers", 1),
     )
