@@ -39,12 +39,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from xvmatch.cli import AUTO_MAX_OFFSET
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes, shift_frames
 from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
-from xvmatch.geometry.spatial_search import associate_sequence, estimate_offset
+from xvmatch.geometry.spatial_search import (
+    AUTO_MAX_OFFSET,
+    associate_sequence,
+    estimate_offset,
+)
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.learned_association import associate_sequence_learned, load_geometry_model
 from xvmatch.training.box_datamodule import site_of

@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.cli import AUTO_MAX_OFFSET
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import shift_frames
 from xvmatch.geometry.spatial_search import (
+    AUTO_MAX_OFFSET,
     MIN_OFFSET_EVIDENCE,
     OFFSET_ALPHA,
     OFFSET_TOLERANCE,

@@ -29,6 +29,7 @@ from xvmatch.geometry.spatial_vectors import (
 )
 
 __all__ = [
+    "AUTO_MAX_OFFSET",
     "SEARCH_MODES",
     "FollowPolicy",
     "FrameAssociation",
@@ -401,6 +402,9 @@ def associate_sequence(
 OFFSET_TOLERANCE = 5
 MIN_OFFSET_EVIDENCE = 2.0
 OFFSET_ALPHA = 0.05
+AUTO_MAX_OFFSET = 60
+"""Largest |offset| (frames) that ``associate --offset auto`` and ``fit-geometry`` consider (2 s
+at 30 fps; ``estimate_offset`` itself defaults to the paper's 15)."""
 
 
 @dataclass(frozen=True)
@@ -418,8 +422,8 @@ class OffsetEstimate:
             ``"applied"``, else 0 (keep the files' timing).
         status: ``"applied"``; ``"within_tolerance"`` (``|offset| <= tolerance``: as close to the
             files' timing as the estimate can tell); or ``"unsupported"`` (``evidence`` or
-            ``chance`` short of the thresholds). One clip cannot be checked and is always
-            applied, as in the paper.
+            ``chance`` short of the thresholds, or no clip could be scored). One clip asked for
+            cannot be checked and is applied, as in the paper.
         support: fraction of the clips that matched whose own minimum lies within
             ``tolerance`` frames of ``offset`` (1 for a single clip).
         chance: probability that at least that many clips agree by chance, had their minima
@@ -562,12 +566,16 @@ def clip_starts(
     """First horizontal frames of ``n_clips`` clips spread evenly over the part of the video
     where every offset in [-max_offset, max_offset] finds top frames for the whole clip, so
     that all clips score every offset (videos of different lengths or start frames included).
-    Where no clip fits that way, the horizontal span less ``max_offset`` at each end is used."""
+    Where no clip fits that way, the horizontal span less ``max_offset`` at each end is used,
+    and where even that is too short, one clip in the middle of the horizontal video."""
     first = max(hor_span[0], top_span[0] + max_offset)
     last = min(hor_span[1], top_span[1] - max_offset) - clip_length + 1
     if last < first:
         first, last = hor_span[0] + max_offset, hor_span[1] - max_offset - clip_length + 1
-    return sorted({int(s) for s in np.linspace(first, max(first, last), n_clips).round()})
+    if last < first:
+        middle = max(hor_span[0], (hor_span[0] + hor_span[1] - clip_length + 1) // 2)
+        return [int(middle)]
+    return sorted({int(s) for s in np.linspace(first, last, n_clips).round()})
 
 
 def _check_thresholds(tolerance: int, min_evidence: float, alpha: float) -> None:
@@ -582,10 +590,12 @@ def judge_offset(
     tolerance: int = OFFSET_TOLERANCE,
     min_evidence: float = MIN_OFFSET_EVIDENCE,
     alpha: float = OFFSET_ALPHA,
+    single_clip: bool = True,
 ) -> OffsetEstimate:
     """The offset that ``(K, N)`` clip cost curves over ``offsets`` point to, and whether to
     apply it (see :func:`estimate_offset`). Rows that are all +inf (clips that never matched)
-    are ignored; with K = 1 the curve's minimum is applied unchecked, as in the paper."""
+    are ignored. With K = 1 and ``single_clip`` the curve's minimum is applied unchecked, as in
+    the paper; without, one clip cannot back it (``unsupported`` beyond the tolerance)."""
     clip_costs = np.asarray(clip_costs, dtype=float)
     offsets = np.asarray(offsets)
     if clip_costs.ndim != 2 or clip_costs.shape[1] != offsets.size or 0 not in offsets:
@@ -599,7 +609,7 @@ def judge_offset(
     best = int(np.argmin(costs)) if np.isfinite(costs).any() else zero
     offset = int(offsets[best])
     common = dict(offset=offset, offsets=offsets, costs=costs, clip_costs=clip_costs)
-    if clip_costs.shape[0] == 1:
+    if clip_costs.shape[0] == 1 and single_clip:
         return OffsetEstimate(**common, applied=offset, status="applied")
     clip_best = offsets[np.argmin(clip_costs[used], axis=1)]
     agree = int(np.sum(np.abs(clip_best - offset) <= tolerance))
@@ -611,7 +621,7 @@ def judge_offset(
         for j in range(agree, n_used + 1)
     )
     evidence = _paired_evidence(clip_costs[used], best, zero)
-    if abs(offset) <= tolerance:
+    if n_used and abs(offset) <= tolerance:
         status = "within_tolerance"
     elif n_used and evidence >= min_evidence and chance <= alpha:
         status = "applied"
@@ -668,7 +678,7 @@ def estimate_offset(
 
     Returns:
         :class:`OffsetEstimate` (see :func:`judge_offset`); ``costs`` is the mean normalised
-        curve (raw for one clip).
+        curve (raw when one clip is asked for).
     """
     params = params or SpatialParams()
     if clip_length < 1 or max_offset < 0 or n_clips < 1:
@@ -680,6 +690,10 @@ def estimate_offset(
         raise ValueError("the top sequence has no frames")
     starts = [clip_start] if clip_start is not None else clip_starts(
         (min(hor), max(hor)), (min(top), max(top)), clip_length, max_offset, n_clips)
+    # One clip asked for (clip_start, or n_clips = 1) is the paper's unchecked estimate. When
+    # several are asked for but only one fits (a video shorter than about 2 * max_offset plus a
+    # clip), nothing can back its minimum: it is judged, not applied unchecked.
+    single = clip_start is not None or n_clips == 1
     offsets = np.arange(-max_offset, max_offset + 1)
     clips = [[f for f in range(start, start + clip_length) if f in hor] for start in starts]
     curves = clip_cost_curves(top, hor, clips, offsets, hor_width, params, camera_id, workers)
@@ -687,5 +701,5 @@ def estimate_offset(
     for k, curve in enumerate(curves):
         finite = curve[np.isfinite(curve)]
         if finite.size:
-            clip_costs[k] = curve if len(starts) == 1 else curve / np.median(finite)
-    return judge_offset(clip_costs, offsets, tolerance, min_evidence, alpha)
+            clip_costs[k] = curve if single else curve / np.median(finite)
+    return judge_offset(clip_costs, offsets, tolerance, min_evidence, alpha, single_clip=single)

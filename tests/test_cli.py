@@ -445,6 +445,24 @@ def test_associate_rejects_a_bad_offset(files, tmp_path, capsys):
     assert "expected an integer number of frames or 'auto'" in capsys.readouterr().err
 
 
+def test_offset_on_videos_too_short_for_the_range_says_so(tmp_path, capsys):
+    # The idealised walk, 35 frames, horizontal frames renumbered by 8: with the default +-60
+    # one clip fits, its minimum is -8, and one clip cannot back it.
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    scene = simulate_box_scene(config, n_frames=35, seed=3)
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    write_mot_boxes(top, scene.top)
+    write_mot_boxes(hor, {f + 8: FrameBoxes(f + 8, r.ids, r.boxes) for f, r in scene.hor.items()})
+    argv = ["offset", "--top", str(top), "--hor", str(hor), "--camera-id", "0"]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("offset -8 frames") and "1 of 1 clips agree" in out
+    assert "only 1 clip fits videos this short for --max-offset 60" in err
+    assert main([*argv, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["status"] == "unsupported" and data["applied"] == 0
+
+
 def test_offset_bad_clip_settings_are_one_line(files, capsys):
     top, hor = files
     argv = ["offset", "--top", str(top), "--hor", str(hor), "--clip-length", "0"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 
 import lightning as L
 import numpy as np
@@ -166,6 +167,46 @@ def test_cvmhat_datamodule_on_box_files(tmp_path, sim_dir):
         CvmhatBoxDataModule(data_dir=str(tmp_path), test_site="gamma").setup()
     with pytest.raises(ValueError, match="nothing to train on"):
         CvmhatBoxDataModule(data_dir=str(tmp_path), clean=False)
+
+
+def test_cvmhat_datamodule_re_times_an_out_of_sync_training_pair(tmp_path):
+    """One training pair is the other with its horizontal frames renumbered by 8: synchronised,
+    its frames carry the very features and labels of the original; the test site is untouched."""
+    from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+    from xvmatch.datasets.mot_boxes import FrameBoxes
+
+    config = SceneConfig(n_people=(5, 6), fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    scene = simulate_box_scene(config, n_frames=60, seed=3)
+    write_box_scene(scene, tmp_path, "V0-S_alpha_0-G_1")
+    shifted = replace(scene, hor={f + 8: FrameBoxes(f + 8, r.ids, r.boxes)
+                                  for f, r in scene.hor.items()})
+    write_box_scene(shifted, tmp_path, "V0-S_alpha_1-G_1")
+    write_box_scene(shifted, tmp_path, "V1-S_beta-G_1")
+    options = dict(data_dir=str(tmp_path), test_site="beta", val_fraction=0.0,
+                   feature_config=FEATURES, cache_dir=str(tmp_path / "cache"), sync_max_offset=10)
+    dm = CvmhatBoxDataModule(**options)
+    dm.setup("fit")
+    assert {n: o.applied for n, o in dm.offsets.items()} == {
+        "V0-S_alpha_0-G_1": 0, "V0-S_alpha_1-G_1": -8}
+    orig, moved = dm.train_parts
+    f0, f1 = orig.features.frames, moved.features.frames
+    common = np.intersect1d(f0, f1 - 8)
+    assert common.size > 40
+    for f in common[:: 7]:
+        a = orig.features.frame(int(np.flatnonzero(f0 == f)[0]))
+        b = moved.features.frame(int(np.flatnonzero(f1 == f + 8)[0]))
+        for field in ("top", "hor", "hyp", "pair"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    # The same labels: with the files' timing the moved pair's labels are the wrong ones.
+    labels = {int(f): m for f, m in zip(f0, orig.matches, strict=True)}
+    assert all(np.array_equal(m, labels[int(f) - 8])
+               for f, m in zip(f1, moved.matches, strict=True) if int(f) - 8 in labels)
+    (test,) = dm.test_parts
+    assert test.features.frames.min() == min(shifted.hor)  # files' timing: no re-timing
+    plain = CvmhatBoxDataModule(**options, synchronise=False)
+    plain.setup("fit")
+    assert plain.offsets == {}
+    assert not np.array_equal(plain.train_parts[1].features.frames, f1)
 
 
 def test_training_is_deterministic_given_the_seed(sim_dir, tmp_path):

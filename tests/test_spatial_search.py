@@ -583,6 +583,9 @@ def test_clip_starts_let_every_clip_score_every_offset(h0, h_len, t0, t_len, len
         for s in starts:
             assert hor_span[0] <= s and s + length - 1 <= hor_span[1]
             assert top_span[0] <= s - max_offset and s + length - 1 + max_offset <= top_span[1]
+    if h_len >= length:  # never a clip outside a horizontal video that can hold one
+        for s in starts:
+            assert hor_span[0] <= s and s + length - 1 <= hor_span[1]
 
 
 def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene):
@@ -592,6 +595,19 @@ def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene)
     est = estimate_offset(top, offset_scene.hor, WIDTH, max_offset=8, n_clips=3)
     assert np.isfinite(est.clip_costs).all()
     assert est.offset == 0
+
+
+def test_a_short_video_gets_one_clip_judged_not_applied_unchecked(offset_scene):
+    # 35 frames cannot hold 9 clips that every offset in +-15 reaches: one clip is left, and
+    # one clip cannot back its minimum, so the files' timing is kept ...
+    top = {f: r for f, r in offset_scene.top.items() if f <= 35}
+    hor = _shift({f: r for f, r in offset_scene.hor.items() if f <= 35}, 8)
+    est = estimate_offset(top, hor, WIDTH, max_offset=15, camera_id=0)
+    assert est.clip_costs.shape[0] == 1 and est.offset == -8
+    assert est.status == "unsupported" and est.applied == 0
+    # ... unless one clip is what was asked for (the paper's unchecked estimate).
+    one = estimate_offset(top, hor, WIDTH, max_offset=15, camera_id=0, n_clips=1)
+    assert one.status == "applied" and one.applied == -8
 
 
 def test_offset_curves_are_the_same_for_any_number_of_workers(offset_scene):

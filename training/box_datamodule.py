@@ -8,7 +8,10 @@ sees boxes only, in a canonical order, so scrambling ids or shuffling boxes chan
 * :class:`CvmhatBoxDataModule`: the CVMHAT dev sequences; the sites not held out are split in
   time (the last ``val_fraction`` of each sequence validates, for early stopping), the held-out
   site is the test set. Optional detector-noise copies of the training sequences (seeded with
-  ``noise_seeds``, which should differ from the evaluation seeds) augment the clean ones.
+  ``noise_seeds``, which should differ from the evaluation seeds) augment the clean ones. Each
+  training sequence is first synchronised as ``associate --offset auto`` would (the same id in
+  both views is only the same person at the same moment if the videos are in sync; one CVMHAT
+  dev pair is 37 frames off).
 * :class:`SimBoxDataModule`: scenes of the box simulator with randomised configurations (domain
   randomisation: crowd size, heights, area, camera altitude and fields of view, pitch, roll, gaze,
   visibility threshold) and random detector-noise levels; whole scenes are held out to validate.
@@ -20,10 +23,11 @@ Every random choice is seeded by ``seed``.
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import lightning as L
@@ -38,22 +42,27 @@ from xvmatch.datasets.geometry_features import (
     FeatureConfig,
     FeatureSet,
     FrameFeatures,
+    cache_key,
     cached_sequence_features,
     camera_labels,
     collate_frames,
+    default_cache_dir,
     match_labels,
 )
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_text, shift_frames
+from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET, estimate_offset
 
 __all__ = [
     "CvmhatBoxDataModule",
     "LabelledFrames",
     "MixedBoxDataModule",
     "SimBoxDataModule",
+    "TrainingOffset",
     "collate_labelled",
     "labelled_sequence",
     "random_scene_config",
     "site_of",
+    "training_offset",
 ]
 
 
@@ -128,6 +137,54 @@ def labelled_sequence(
         matches.append(match_labels(ff, top[f].ids, hor[f].ids))
         cameras.append(camera_labels(ff, top[f].ids, wearer_id))
     return LabelledFrames(feats, np.arange(len(feats)), matches, cameras, name)
+
+
+@dataclass(frozen=True)
+class TrainingOffset:
+    """The offset estimate of one training pair, as ``associate --offset auto`` reports it.
+
+    Attributes:
+        applied: frames the top view is re-timed by (0: the files' timing is kept).
+        offset: the minimum of the clips' mean cost curve.
+        status: ``applied``, ``within_tolerance`` or ``unsupported``
+            (:class:`~xvmatch.geometry.spatial_search.OffsetEstimate`).
+        support: fraction of the clips whose own minimum agrees.
+        evidence: paired t statistic of the clips' preference for ``offset`` over 0.
+    """
+
+    applied: int
+    offset: int
+    status: str
+    support: float
+    evidence: float
+
+
+def training_offset(
+    top: Mapping[int, FrameBoxes],
+    hor: Mapping[int, FrameBoxes],
+    hor_width: float,
+    cache_dir: str | Path | None = None,
+    workers: int = 1,
+    max_offset: int = AUTO_MAX_OFFSET,
+) -> TrainingOffset:
+    """The ``associate --offset auto`` estimate (O searched, up to ``max_offset`` frames) of a
+    training pair, cached under ``offsets/`` in the feature cache: a minute of search per CVMHAT
+    pair, done once. Boxes only; ids play no part."""
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    frames = sorted(set(top) | set(hor))
+    key = cache_key(top, hor, (hor_width, 0.0), FeatureConfig(), None, frames)
+    path = folder / "offsets" / f"auto{int(max_offset)}_{key}.json"
+    if path.exists():
+        try:
+            return TrainingOffset(**json.loads(path.read_text()))
+        except (OSError, ValueError, TypeError):
+            pass  # unreadable or stale: estimate again and overwrite
+    est = estimate_offset(top, hor, hor_width, max_offset=max_offset, workers=workers)
+    found = TrainingOffset(applied=est.applied, offset=est.offset, status=est.status,
+                           support=float(est.support), evidence=float(est.evidence))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(asdict(found)))
+    return found
 
 
 class _FrameDataset(Dataset):
@@ -220,6 +277,11 @@ class CvmhatBoxDataModule(_BoxDataModule):
         cache_dir: feature cache folder (default ``~/.cache/xvmatch``).
         workers: processes for feature extraction.
         seed: seed of the shuffling.
+        synchronise: re-time each training sequence's top view by the offset
+            :func:`training_offset` applies (0 for synchronised pairs), so that the labels (same
+            id, same person) hold for the frame pairs the model sees; ``offsets`` records them.
+            The test site keeps the files' timing.
+        sync_max_offset: largest |offset| searched (default that of ``--offset auto``).
     """
 
     def __init__(
@@ -237,6 +299,8 @@ class CvmhatBoxDataModule(_BoxDataModule):
         cache_dir: str | None = None,
         workers: int = 1,
         seed: int = 0,
+        synchronise: bool = True,
+        sync_max_offset: int = AUTO_MAX_OFFSET,
     ) -> None:
         super().__init__(batch_size, seed)
         if not 0.0 <= val_fraction < 1.0:
@@ -254,6 +318,9 @@ class CvmhatBoxDataModule(_BoxDataModule):
         self.feature_config = feature_config or FeatureConfig()
         self.cache_dir = cache_dir
         self.workers = workers
+        self.synchronise = synchronise
+        self.sync_max_offset = sync_max_offset
+        self.offsets: dict[str, TrainingOffset] = {}
         if not clean and not self.noise_seeds:
             raise ValueError("nothing to train on: clean=False and no noise_seeds")
 
@@ -285,6 +352,20 @@ class CvmhatBoxDataModule(_BoxDataModule):
             raise ValueError(f"test_site {self.test_site!r} is also a training site")
         return train, ([self.test_site] if self.test_site else [])
 
+    def training_offsets(self) -> dict[str, TrainingOffset]:
+        """``{name: offset estimate}`` of the training sequences (empty unless
+        ``synchronise``); estimated once, then read from the cache."""
+        if self.synchronise:
+            by_site = self.sequences()
+            for site in self._sites()[0]:
+                for name in by_site[site]:
+                    if name not in self.offsets:
+                        top, hor = read_sequence(self.data_dir, name)
+                        self.offsets[name] = training_offset(
+                            top, hor, IMAGE_SIZE[0], self.cache_dir, self.workers,
+                            self.sync_max_offset)
+        return dict(self.offsets)
+
     def _variant(self, name, top, hor, seed: int | None, frames) -> LabelledFrames:
         if seed is not None:
             noise = DetectorNoise()
@@ -302,9 +383,12 @@ class CvmhatBoxDataModule(_BoxDataModule):
             return
         train_sites, test_sites = self._sites()
         by_site = self.sequences()
+        offsets = self.training_offsets()
         for site in train_sites:
             for name in by_site[site]:
                 top, hor = read_sequence(self.data_dir, name)
+                if offsets.get(name) is not None and offsets[name].applied:
+                    top = shift_frames(top, offsets[name].applied)
                 frames = sorted(set(top) & set(hor))[:: self.frame_step]
                 cut = None  # first validation frame: the last val_fraction of the sequence
                 if self.val_fraction > 0 and frames:

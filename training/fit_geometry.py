@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import os
 import resource
+import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -224,8 +225,14 @@ def fit_geometry_cvmhat(
     model_config: Mapping[str, Any] | None = None,
     feature_config: FeatureConfig | None = None,
     threads: int | None = None,
+    synchronise: bool = True,
 ) -> FitResult:
     """Train on CVMHAT-format box pairs (``NAME_top.txt`` / ``NAME_hor.txt``) of ``sites``.
+
+    With ``synchronise`` each pair's top view is first re-timed by the offset
+    ``associate --offset auto`` applies (estimated from the boxes, cached; 0 for pairs in sync),
+    so that the labels hold for the frame pairs the model sees; the model file's meta records
+    the re-timed pairs.
 
     The last 15% of every sequence validates (early stopping, best checkpoint);
     ``noise_copies`` detector-noise copies (seeds 1000, 1001, ...) of the training frames and one
@@ -244,7 +251,15 @@ def fit_geometry_cvmhat(
         cache_dir=os.fspath(cache_dir) if cache_dir is not None else None,
         workers=workers,
         seed=seed,
+        synchronise=synchronise,
     )
+    retimed = {name: o.applied for name, o in real.training_offsets().items() if o.applied}
+    if progress:
+        for name, o in real.offsets.items():
+            if o.status != "within_tolerance" or o.applied:
+                kept = "re-timed" if o.applied else "the files' timing kept"
+                print(f"{name}: offset {o.offset:+d} frames ({o.status}; {kept})",
+                      file=sys.stderr)
     dm = real
     if sim_scenes > 0:
         sim = SimBoxDataModule(
@@ -272,5 +287,7 @@ def fit_geometry_cvmhat(
             "sites": sorted(real._sites()[0]),
             "noise_copies": noise_copies,
             "sim_scenes": sim_scenes,
+            "synchronised": synchronise,
+            "retimed": retimed,
         },
     )

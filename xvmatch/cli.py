@@ -14,11 +14,9 @@ import sys
 from collections.abc import Iterable, Sequence
 
 from xvmatch.cli_types import image_size, int_at_least, offset_value, positive_int
+from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET
 
 __all__ = ["main"]
-
-AUTO_MAX_OFFSET = 60
-"""Largest |offset| (frames) that ``associate --offset auto`` considers (2 s at 30 fps)."""
 
 EXAMPLES = {
     "associate": "xvmatch associate --top seq_top.txt --hor seq_hor.txt --out pred.csv",
@@ -128,9 +126,9 @@ def _cmd_associate(args: argparse.Namespace) -> int:
                               workers=args.workers)
         offset = est.applied
         if est.status == "unsupported":
-            print(f"warning: offset {est.offset:+d} not applied ({_offset_summary(est)}): the "
-                  "clips do not prefer it to 0; keeping the files' timing; pass --offset N if "
-                  "you know it", file=sys.stderr)
+            print(f"warning: offset {est.offset:+d} not applied ({_offset_summary(est)}): "
+                  f"{_unsupported_reason(est, args.max_offset)}; keeping the files' timing; "
+                  "pass --offset N if you know it", file=sys.stderr)
         elif not args.quiet:
             kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
                     if est.offset and not offset else "")
@@ -216,12 +214,25 @@ def _offset_summary(est) -> str:
     return text + (f", evidence t = {est.evidence:.1f}" if est.offset and n > 1 else "")
 
 
+def _unsupported_reason(est, max_offset: int) -> str:
+    """Why an :class:`OffsetEstimate` was not applied, in words."""
+    import numpy as np
+
+    from xvmatch.geometry.spatial_search import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
+
+    n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
+    if n < 2:
+        return (f"only {n} clip fits videos this short for --max-offset {max_offset} and one "
+                "clip cannot back an offset; try a smaller --max-offset")
+    if est.evidence < MIN_OFFSET_EVIDENCE:
+        return (f"the clips do not prefer {est.offset:+d} to 0 (evidence t = "
+                f"{est.evidence:.1f} < {MIN_OFFSET_EVIDENCE})")
+    return (f"too few clips agree on {est.offset:+d} ({round(est.support * n)} of {n}: chance "
+            f"{est.chance:.2f} > {OFFSET_ALPHA})")
+
+
 def _cmd_offset(args: argparse.Namespace) -> int:
-    from xvmatch.geometry.spatial_search import (
-        MIN_OFFSET_EVIDENCE,
-        OFFSET_TOLERANCE,
-        estimate_offset,
-    )
+    from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
     top = _read_boxes(args.top, args.duplicates)
     hor = _read_boxes(args.hor, args.duplicates)
@@ -255,10 +266,10 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
               f"{_offset_summary(est)})")
         if est.status == "unsupported":
-            print(f"warning: the clips do not prefer {est.offset:+d} to 0 (evidence t below "
-                  f"{MIN_OFFSET_EVIDENCE}): the estimate is unreliable (detector noise, too few "
-                  "people, or an offset beyond --max-offset); associate --offset auto keeps "
-                  "the files' timing", file=sys.stderr)
+            print(f"warning: {_unsupported_reason(est, args.max_offset)}: the estimate is "
+                  "unreliable (detector noise, too few people, or an offset beyond "
+                  "--max-offset); associate --offset auto keeps the files' timing",
+                  file=sys.stderr)
         elif est.status == "within_tolerance" and est.offset:
             print(f"note: {est.offset:+d} is within the estimate's precision ({OFFSET_TOLERANCE} "
                   "frames) of 0: associate --offset auto keeps the files' timing; pass "

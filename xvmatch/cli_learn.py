@@ -65,6 +65,10 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--sim-scenes", type=non_negative_int, default=300, metavar="N",
                    help="box-simulator scenes added to the training set as a regulariser "
                    "(default 300; 0: real data only)")
+    p.add_argument("--no-sync", action="store_true",
+                   help="keep every pair's files' timing (default: re-time a pair's top view "
+                   "when 'associate --offset auto' would, so that same id means same moment; "
+                   "estimated once per pair and cached)")
     p.add_argument("--width", type=positive_int, default=64,
                    help="encoder embedding size (default 64; a multiple of 4, the heads)")
     p.add_argument("--layers", type=non_negative_int, default=2,
@@ -109,6 +113,7 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         threads=args.threads,
         model_config={"width": args.width, "layers": args.layers},
+        synchronise=not args.no_sync,
     )
     if not args.quiet:
         score = "n/a" if result.best_score is None else f"{result.best_score:.1f}"
