@@ -49,7 +49,7 @@ from xvmatch.geometry.spatial_search import (
     estimate_offset,
 )
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.learned_association import associate_sequence_learned, load_geometry_model
+from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
 from xvmatch.training.box_datamodule import site_of
 from xvmatch.training.fit_geometry import fit_geometry_cvmhat, peak_memory_mb
 
@@ -59,6 +59,23 @@ SITES = ("canteen", "55", "square")
 def fold_path(work: Path, site: str, seed: int) -> Path:
     """Where the model of one fold and training seed lives (seed 0: ``fold_SITE.pt``)."""
     return work / (f"fold_{site}.pt" if seed == 0 else f"fold_{site}_seed{seed}.pt")
+
+
+def load_models(model_path: str) -> list:
+    """The ONNX matchers of ``A+B+...``: bundle folders, ``default``, or fold matcher files
+    (exported once to ``FILE.bundle/`` beside them)."""
+    out = []
+    for p in model_path.split("+"):
+        path = Path(p)
+        if path.is_file():
+            bundle = path.with_suffix(".bundle")
+            if not (bundle / "manifest.json").is_file():
+                from xvmatch.export.onnx_export import export_bundle
+
+                export_bundle(path, bundle)
+            p = bundle
+        out.append(load_matcher_bundle(p))
+    return out
 
 
 def scramble(frames: dict[int, FrameBoxes], rng: np.random.Generator):
@@ -108,7 +125,7 @@ def evaluate(job: tuple) -> tuple[str, str, int | None, list]:
     if method == "handcrafted":
         pred = associate_sequence(s_top, s_hor, IMAGE_SIZE[0])
     else:
-        model = [load_geometry_model(p) for p in model_path.split("+")]
+        model = load_models(model_path)
         pred = associate_sequence_learned(
             s_top, s_hor, IMAGE_SIZE[0], model, hor_height=IMAGE_SIZE[1], mirror=mirror,
             gamma=gamma,
@@ -132,7 +149,7 @@ def validation_gammas(job: tuple) -> tuple[str, str, int | None, dict[float, lis
     rng = np.random.default_rng([0 if noise_seed is None else noise_seed + 1, 11])
     s_top, inv_top = scramble(top, rng)
     s_hor, inv_hor = scramble(hor, rng)
-    model = [load_geometry_model(p) for p in model_path.split("+")]
+    model = load_models(model_path)
     costs: dict[int, np.ndarray] = {}
     associate_sequence_learned(s_top, s_hor, IMAGE_SIZE[0], model, hor_height=IMAGE_SIZE[1],
                                mirror=mirror, frames=frames, costs_out=costs)
@@ -163,6 +180,8 @@ def main() -> int:
     parser.add_argument("--default-model", default="default", help="sim-to-real model")
     parser.add_argument("--no-default", action="store_true",
                         help="skip the sim-only default column (quicker experiments)")
+    parser.add_argument("--default-only", action="store_true",
+                        help="only the handcrafted and default columns: no fold training")
     parser.add_argument("--reuse", action="store_true", help="reuse fold models in --work")
     parser.add_argument("--sites", nargs="+", default=list(SITES), help="folds to train/test")
     parser.add_argument("--sync", action="store_true",
@@ -200,7 +219,7 @@ def main() -> int:
     train_seeds = args.train_seeds if args.train_seeds else [args.seed]
     folds: dict[str, list[Path]] = {}
     fold_stats = {}
-    for site in args.sites:
+    for site in [] if args.default_only else args.sites:
         for seed in train_seeds:
             path = fold_path(args.work, site, seed)
             folds.setdefault(site, []).append(path)
@@ -247,8 +266,10 @@ def main() -> int:
                   f"{n} {' / '.join(shown((n, s)) for s in seeds)}" for n in tested))
     learned = {
         site: "+".join(map(str, folds[site])) + (f"+{args.default_model}" if args.ensemble else "")
-        for site in args.sites
+        for site in args.sites if site in folds
     }
+    for path in {*learned.values(), args.default_model}:
+        load_models(path)  # export fold matcher files to bundles once, before the workers
     gammas: dict[str, float | None] = {site: None for site in args.sites}
     if args.tune_gamma:
         val_jobs = [(site, learned[site], args.data, n, s, args.mirror)
@@ -272,8 +293,9 @@ def main() -> int:
             for s in seeds:
                 o = offsets.get((name, s), 0)
                 jobs.append(("handcrafted", None, args.data, name, s, False, o, None))
-                jobs.append(("learned", learned[site], args.data, name, s, args.mirror, o,
-                             gammas[site]))
+                if site in learned:
+                    jobs.append(("learned", learned[site], args.data, name, s, args.mirror, o,
+                                 gammas[site]))
                 if not args.no_default:
                     jobs.append(("default", args.default_model, args.data, name, s, args.mirror,
                                  o, None))

@@ -124,14 +124,14 @@ def best_checkpoint(version: Path) -> Path:
 
 def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
     """Render, train, evaluate one scenario; returns the JSON-ready record."""
+    from xvmatch.datasets.pair_trials import dataset_trials
     from xvmatch.evaluation.learned_matcher_eval import (
-        AppearanceCoster,
-        dataset_box_trials,
         default_rules,
         evaluate_learned_matcher,
         format_learned_table,
     )
     from xvmatch.models.appearance_net import appearance_from_weights
+    from xvmatch.training.appearance_costs import AppearanceCoster
     from xvmatch.training.fusion_module import FusionModule
 
     paths = {role: render(args.work, scenario, role, args.workers) for role in ROLES}
@@ -164,8 +164,8 @@ def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
 
     coster = AppearanceCoster(appearance_from_weights(weights))
     start = time.perf_counter()
-    val = dataset_box_trials(paths["val"], coster=coster)
-    test = dataset_box_trials(paths["test"], coster=coster)
+    val = dataset_trials(paths["val"], coster=coster)
+    test = dataset_trials(paths["test"], coster=coster)
     result = evaluate_learned_matcher(test, val, default_rules(heads),
                                       test_data=str(paths["test"]), val_data=str(paths["val"]),
                                       scenario=scenario)

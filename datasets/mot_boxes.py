@@ -18,6 +18,7 @@ All writes go through :func:`atomic_write_text` (temporary file in the same dire
 from __future__ import annotations
 
 import functools
+import math
 import os
 import re
 import tempfile
@@ -36,6 +37,7 @@ __all__ = [
     "atomic_write_text",
     "read_mot_boxes",
     "read_predictions",
+    "scale_frames",
     "shift_frames",
     "write_mot_boxes",
     "write_predictions",
@@ -126,6 +128,14 @@ def shift_frames(frames: Mapping[int, FrameBoxes], offset: int) -> dict[int, Fra
         for f, r in sorted(frames.items())
         if f - offset >= 1
     }
+
+
+def scale_frames(frames: Mapping[int, FrameBoxes], factor: float) -> dict[int, FrameBoxes]:
+    """A view's boxes at another resolution: every coordinate multiplied by ``factor`` (the same
+    video exported ``factor`` times as wide)."""
+    if not (math.isfinite(factor) and factor > 0):
+        raise ValueError(f"scale factor must be a finite number > 0, got {factor}")
+    return {f: FrameBoxes(f, r.ids, r.boxes * float(factor)) for f, r in frames.items()}
 
 
 # --------------------------------------------------------------------------------------------
@@ -445,7 +455,14 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, fsync: bool = True)
         mode = target.stat().st_mode & 0o7777
     except FileNotFoundError:
         mode = _default_mode()
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as exc:
+        raise OSError(f"{os.fspath(target)}: cannot write ({exc.strerror or exc})") from None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as exc:
+        why = ("its folder does not exist" if not target.parent.is_dir()
+               else exc.strerror or str(exc))
+        raise OSError(f"{os.fspath(target)}: cannot write ({why})") from None
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.datasets.crops import box_crops
 from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
 from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, atomic_write_text
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
@@ -48,6 +49,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "VIEWS",
     "PairRecord",
+    "SceneInputs",
     "SceneRecord",
     "SchemaError",
     "SyntheticDataset",
@@ -58,6 +60,7 @@ __all__ = [
     "read_scene",
     "scene_name",
     "write_scene",
+    "write_scene_inputs",
 ]
 
 SCHEMA_NAME = "xvmatch.synthetic"
@@ -618,8 +621,7 @@ def person_crops(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Crops of the labelled people, resized to one size: the appearance branch's input.
 
-    The crop is the (visible, or ``full``) box enlarged by ``context`` of its size on every
-    side; parts outside the image are filled by replicating the border.
+    The crop is the (visible, or ``full``) box cut by :func:`~xvmatch.datasets.crops.box_crops`.
 
     Args:
         image: ``(H, W, 3)`` uint8 image of the view.
@@ -633,29 +635,56 @@ def person_crops(
     Returns:
         (ids, crops): ``(M,)`` ids and ``(M, size[1], size[0], 3)`` uint8 crops.
     """
-    import cv2
-
-    width, height = int(size[0]), int(size[1])
-    if width < 1 or height < 1:
-        raise ValueError(f"size must be (width, height) >= 1, got {size}")
     keep = (labels.visible >= min_visible) & (labels.visible_pixels >= min_pixels)
     boxes = (labels.full_boxes if full else labels.boxes)[keep]
-    crops = np.empty((boxes.shape[0], height, width, 3), np.uint8)
-    img_h, img_w = image.shape[:2]
-    for k, (x, y, w, h) in enumerate(boxes):
-        x0, y0 = int(np.floor(x - context * w)), int(np.floor(y - context * h))
-        x1, y1 = int(np.ceil(x + w + context * w)), int(np.ceil(y + h + context * h))
-        x1, y1 = max(x1, x0 + 1), max(y1, y0 + 1)
-        patch = image[max(y0, 0) : min(y1, img_h), max(x0, 0) : min(x1, img_w)]
-        if patch.size == 0:
-            patch = np.zeros((1, 1, 3), np.uint8)
-        pad = (max(-y0, 0), max(y1 - img_h, 0), max(-x0, 0), max(x1 - img_w, 0))
-        if any(pad):
-            patch = cv2.copyMakeBorder(patch, *pad, cv2.BORDER_REPLICATE)
-        shrink = patch.shape[1] > width and patch.shape[0] > height
-        crops[k] = cv2.resize(patch, (width, height),
-                              interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
-    return labels.ids[keep], crops
+    return labels.ids[keep], box_crops(image, boxes, size, context)
+
+
+@dataclass(frozen=True)
+class SceneInputs:
+    """A synthetic scene laid out as a user's data: what ``xvmatch associate`` reads.
+
+    Attributes:
+        top: MOT box file of the top view (ground-truth ids, for ``xvmatch evaluate``).
+        hor: MOT box file of the egocentric view.
+        cameras: folder of per-frame camera files (``000001.json``: cameras ``top``, ``ego``).
+        top_images: glob pattern of the scene's top images (``--top-images``).
+        hor_images: glob pattern of the scene's egocentric images (``--hor-images``).
+    """
+
+    top: Path
+    hor: Path
+    cameras: Path
+    top_images: str
+    hor_images: str
+
+
+def write_scene_inputs(scene: SceneRecord, out: str | os.PathLike) -> SceneInputs:
+    """Write a scene's boxes and cameras as a user would have them (MOT files, camera files);
+    the images stay where they are, named by a glob pattern. Files are written atomically.
+
+    Args:
+        scene: a scene of a dataset written by :func:`generate_dataset`.
+        out: folder to write ``top.txt``, ``hor.txt`` and ``cameras/`` into.
+    """
+    from xvmatch.datasets.mot_boxes import write_mot_boxes
+    from xvmatch.geometry.camera_io import save_cameras
+
+    out = Path(out)
+    (out / "cameras").mkdir(parents=True, exist_ok=True)
+    write_mot_boxes(out / "top.txt", scene.boxes("top"))
+    write_mot_boxes(out / "hor.txt", scene.boxes("ego"))
+    for pair in scene.pairs:
+        save_cameras(out / "cameras" / f"{pair.frame:06d}.json",
+                     {"top": pair.top.camera, "ego": pair.ego.camera})
+    first = scene.pairs[0]
+    return SceneInputs(
+        top=out / "top.txt",
+        hor=out / "hor.txt",
+        cameras=out / "cameras",
+        top_images=os.fspath(first.top.image_path.parent / f"{scene.name}_*.jpg"),
+        hor_images=os.fspath(first.ego.image_path.parent / f"{scene.name}_*.jpg"),
+    )
 
 
 # --------------------------------------------------------------------------------------------

@@ -32,8 +32,9 @@ CVIDP is 0 (nothing was predicted, so nothing was right); with no frame where ``
 non-empty, CVIDR and CVMA are 0 (there was nothing to find, the scores are undefined and reported
 as 0); CVIDF1 is 0 when P + R = 0, ACC9 is 0 with no frame where ``U_t > 0``.
 
-Counts are accumulated per frame (:func:`count_frame`, :func:`count_sequence`) and the ratios are
-derived once (:func:`summarize`), so sequences can be pooled, optionally with per-frame weights.
+Counts are accumulated per frame (:func:`count_frame`, :func:`count_sequence`; with detections
+that may stand for no person, :func:`count_pair`) and the ratios are derived once
+(:func:`summarize`), so sequences can be pooled, optionally with per-frame weights.
 """
 
 from __future__ import annotations
@@ -43,12 +44,14 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from xvmatch.datasets.detector_noise import FALSE_POSITIVE
 from xvmatch.datasets.mot_boxes import FrameBoxes
 
 __all__ = [
     "CrossViewScores",
     "FrameCounts",
     "count_frame",
+    "count_pair",
     "count_sequence",
     "format_table",
     "scores_to_dict",
@@ -342,3 +345,89 @@ def scores_to_dict(scores: CrossViewScores) -> dict[str, float | int]:
         name: (int(value) if kinds[name] in ("int", int) else float(value))
         for name, value in asdict(scores).items()
     }
+
+
+def _true_ids(ids: np.ndarray, gt: set[int], name: str, frame: int) -> np.ndarray:
+    arr = np.asarray(ids).reshape(-1).astype(np.int64)
+    real = arr[arr != FALSE_POSITIVE]
+    if np.unique(real).size != real.size:
+        raise ValueError(f"frame {frame}: {name} stand for one ground-truth id twice: "
+                         f"{sorted(real.tolist())}")
+    unknown = sorted(set(real.tolist()) - gt)
+    if unknown:
+        raise ValueError(f"frame {frame}: {name} name ids absent from the view's ground truth: "
+                         f"{unknown}")
+    return arr
+
+
+def count_pair(
+    gt_top_ids: np.ndarray,
+    gt_ego_ids: np.ndarray,
+    det_top_ids: np.ndarray,
+    det_ego_ids: np.ndarray,
+    pairs: np.ndarray,
+    *,
+    frame: int = 0,
+) -> FrameCounts:
+    """Count one image pair against the ground truth, detections allowed (Eq. 9, Accuracy*).
+
+    ``U`` (the unique persons of Eq. 9) are the ground-truth ids of either view and ``G`` those
+    of both. A predicted pair is a true positive when both of its boxes stand for the same
+    ground-truth id; a wrong pair is a mismatch when its egocentric box stands for an id of
+    ``G``, otherwise a false positive. A miss is an id of ``G`` whose egocentric box is
+    undetected or in no pair. A true negative is an id seen in one view only (in the ground
+    truth) whose box there was detected and left unmatched. With the ground-truth boxes as
+    detections this equals :func:`xvmatch.evaluation.cross_view_metrics.count_frame`.
+
+    Args:
+        gt_top_ids: (G1,) ground-truth ids of the top view.
+        gt_ego_ids: (G2,) ground-truth ids of the egocentric view.
+        det_top_ids: (M,) id each associated top box stands for (``FALSE_POSITIVE``, -1, for a
+            false positive), in the order of the association's rows.
+        det_ego_ids: (N,) the same for the egocentric boxes (columns).
+        pairs: (K, 2) ``(row, column)`` pairs of the association.
+        frame: frame number, recorded and used in error messages.
+
+    Returns:
+        The :class:`~xvmatch.evaluation.cross_view_metrics.FrameCounts`.
+
+    Raises:
+        ValueError: repeated ground-truth ids, a detection standing for an id twice or for an id
+            the view does not have, or pairs out of range or not one-to-one.
+    """
+    gt_top = [int(v) for v in np.asarray(gt_top_ids).reshape(-1)]
+    gt_ego = [int(v) for v in np.asarray(gt_ego_ids).reshape(-1)]
+    top_set, ego_set = set(gt_top), set(gt_ego)
+    if len(top_set) != len(gt_top) or len(ego_set) != len(gt_ego):
+        raise ValueError(f"frame {frame}: a ground-truth id is listed twice in a view")
+    det_top = _true_ids(det_top_ids, top_set, "det_top_ids", frame)
+    det_ego = _true_ids(det_ego_ids, ego_set, "det_ego_ids", frame)
+    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if p.size and ((p < 0).any() or (p[:, 0] >= det_top.size).any()
+                   or (p[:, 1] >= det_ego.size).any()):
+        raise ValueError(f"frame {frame}: pairs out of range for {det_top.size} x {det_ego.size}")
+    if np.unique(p[:, 0]).size != len(p) or np.unique(p[:, 1]).size != len(p):
+        raise ValueError(f"frame {frame}: pairs must be one-to-one, got {p.tolist()}")
+    shared = top_set & ego_set
+    a, b = det_top[p[:, 0]], det_ego[p[:, 1]]
+    correct = (a == b) & (a != FALSE_POSITIVE)
+    tp = int(correct.sum())
+    mismatch = int(sum(1 for ok, h in zip(correct, b, strict=True) if not ok and int(h) in shared))
+    paired_ego = {int(h) for h in b if h != FALSE_POSITIVE}
+    paired_top = {int(t) for t in a if t != FALSE_POSITIVE}
+    detected_top = {int(t) for t in det_top if t != FALSE_POSITIVE}
+    detected_ego = {int(h) for h in det_ego if h != FALSE_POSITIVE}
+    tn = len(((top_set - ego_set) & detected_top) - paired_top) + len(
+        ((ego_set - top_set) & detected_ego) - paired_ego
+    )
+    return FrameCounts(
+        frame=int(frame),
+        n_pred=len(p),
+        n_gt=len(shared),
+        tp=tp,
+        fp=len(p) - tp - mismatch,
+        mismatch=mismatch,
+        miss=len(shared - paired_ego),
+        n_union=len(top_set | ego_set),
+        tn=tn,
+    )

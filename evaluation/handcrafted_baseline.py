@@ -47,97 +47,60 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
-from xvmatch.datasets.synthetic_io import MANIFEST, PairRecord, SceneRecord, SyntheticDataset
-from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
+from xvmatch.datasets.pair_trials import (
+    SETTINGS,
+    PairTrial,
+    TrialConfig,
+    open_dataset,
+    scene_trials,
+)
+from xvmatch.datasets.synthetic_io import SceneRecord, SyntheticDataset
 from xvmatch.evaluation.cost_distributions import CostSamples
 from xvmatch.evaluation.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
+    count_pair,
     scores_to_dict,
     summarize,
 )
-from xvmatch.geometry.array_checks import as_boxes
-from xvmatch.geometry.camera import Camera
-from xvmatch.geometry.color_histogram import box_histograms, chi2_brd_distance
-from xvmatch.geometry.cost_fusion import (
-    ProductFusion,
-    SumFusion,
-    add_cheirality,
-    normalise_distance,
-)
-from xvmatch.geometry.ray_priors import (
-    DEFAULT_BETA,
-    METRIC_MARGIN,
-    box_rays,
-    cheirality_cost,
-    ray_distances,
-)
-from xvmatch.inference.assignment import assign
+from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
+from xvmatch.geometry.handcrafted_costs import PairCosts
+from xvmatch.inference.assignment import GAMMA_GRID, assign
 
 __all__ = [
-    "FALSE_POSITIVE",
     "GAMMA_GEO",
-    "GAMMA_GRID",
     "GAMMA_HIST",
     "GAMMA_PRODUCT",
     "GAMMA_SUM",
     "RULES",
     "RULE_NAMES",
-    "SETTINGS",
-    "SETTING_NAMES",
     "BaselineConfig",
     "BaselineResult",
     "DetectionStats",
-    "FrameSample",
     "Method",
-    "PairCosts",
-    "PairTrial",
     "TuningResult",
     "associate",
-    "box_iou",
-    "count_pair",
     "evaluate_baseline",
     "format_baseline_table",
     "fused_cost",
-    "match_to_ground_truth",
-    "noise_seed_of",
-    "open_dataset",
-    "pair_costs",
-    "scene_samples",
-    "scene_trials",
     "score_trial",
     "tune_gammas",
 ]
 
 RULES: tuple[str, ...] = ("geo", "hist", "sum", "product")
 """The cost rules of Tables I-II: geometry only, histogram only, weighted sum, product (Eq. 8)."""
-
 RULE_NAMES: dict[str, str] = {
     "geo": "Geometry only",
     "hist": "Histogram only",
     "sum": "Sum combination",
     "product": "Product combination",
 }
-
-SETTINGS: tuple[str, ...] = ("gt", "det")
-"""``"gt"``: ground-truth boxes (Table I); ``"det"``: detector-noise boxes (Table II)."""
-
-SETTING_NAMES: dict[str, str] = {
-    "gt": "Table I: ground-truth boxes",
-    "det": "Table II: detections",
-}
-
-FALSE_POSITIVE: int = -1
-"""Id given to a detection that overlaps no ground-truth box enough (IoU < threshold)."""
-
 GAMMA_SUM: float = 0.25
 """Non-association cost of the sum rule, Section IV-A."""
 GAMMA_PRODUCT: float = 0.1
@@ -146,13 +109,6 @@ GAMMA_GEO: float = 0.15
 """Non-association cost of "geometry only": tuned on validation seed 2000 (module docstring)."""
 GAMMA_HIST: float = 0.95
 """Non-association cost of "histogram only": tuned on validation seed 2000 (module docstring)."""
-GAMMA_GRID: tuple[float, ...] = tuple(round(0.05 * k, 2) for k in range(1, 21))
-"""Candidate gammas of :func:`tune_gammas`: 0.05, 0.10, ..., 1.0 (normalised costs are < 1, so
-gamma = 1 accepts every pair the Hungarian solution wants)."""
-
-
-# --------------------------------------------------------------------------------------------
-# Methods and configuration
 
 
 @dataclass(frozen=True)
@@ -187,8 +143,10 @@ class Method:
 
 
 @dataclass(frozen=True)
-class BaselineConfig:
-    """Everything that defines a baseline run besides the data.
+class BaselineConfig(TrialConfig):
+    """Everything that defines a baseline run besides the data: the trials'
+    :class:`~xvmatch.datasets.pair_trials.TrialConfig` (cheirality margin and beta, IoU, noise,
+    seeds) plus the gammas and the sum rule's weights.
 
     Attributes:
         gamma_geo: gamma of "geometry only".
@@ -196,12 +154,6 @@ class BaselineConfig:
         gamma_sum: gamma of the sum rule (paper: 0.25).
         gamma_product: gamma of the product rule (paper: 0.1).
         weights: ``(w_geo, w_app)`` of the sum rule (paper: 0.5 each).
-        margin: depth margin of Eq. 7 in metres (0.5 with a metric scale, 0 without).
-        beta: cost added to pairs that violate Eq. 7 (``>> 1``).
-        iou_threshold: IoU for a detection to count as a ground-truth box (paper: 0.3).
-        noise: the detector-noise model of the ``"det"`` setting.
-        noise_seed: seed of the detector noise; scene i uses ``SeedSequence([seed, i])``.
-        scramble_seed: seed of the per-frame, per-view shuffling of the boxes.
     """
 
     gamma_geo: float = GAMMA_GEO
@@ -209,26 +161,15 @@ class BaselineConfig:
     gamma_sum: float = GAMMA_SUM
     gamma_product: float = GAMMA_PRODUCT
     weights: tuple[float, float] = (0.5, 0.5)
-    margin: float = METRIC_MARGIN
-    beta: float = DEFAULT_BETA
-    iou_threshold: float = 0.3
-    noise: VisibilityNoise = field(default_factory=VisibilityNoise)
-    noise_seed: int = 0
-    scramble_seed: int = 0
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         for rule in RULES:
             g = self.gamma(rule)
             if not np.isfinite(g) or g <= 0:
                 raise ValueError(f"gamma_{rule} must be a finite cost > 0, got {g}")
         if len(self.weights) != 2:
             raise ValueError(f"weights must be (w_geo, w_app), got {self.weights}")
-        if not 0 < self.iou_threshold <= 1:
-            raise ValueError(f"iou_threshold must be in (0, 1], got {self.iou_threshold}")
-        if not np.isfinite(self.margin) or self.margin < 0:
-            raise ValueError(f"margin must be a finite depth >= 0, got {self.margin}")
-        if not np.isfinite(self.beta) or self.beta <= 1:
-            raise ValueError(f"beta must be a finite cost > 1, got {self.beta}")
         SumFusion({"geo": self.weights[0], "hist": self.weights[1]})  # validates the weights
 
     def gamma(self, rule: str) -> float:
@@ -242,103 +183,6 @@ class BaselineConfig:
         return tuple(
             Method(rule, cheir, self.gamma(rule)) for rule in RULES for cheir in (False, True)
         )
-
-
-# --------------------------------------------------------------------------------------------
-# Costs and association of one image pair
-
-
-@dataclass(frozen=True, eq=False)
-class PairCosts:
-    """Raw cues between the M top-view boxes (rows) and N egocentric boxes (columns).
-
-    Attributes:
-        geo: (M, N) ray distances of Eq. 6 between the top-centre rays, world units (metres).
-        hist: (M, N) chi-square BRD distances of Eq. 3 between the HSV histograms.
-        hist_valid: (M, N) bool, False where either crop is empty (box outside its image).
-        cheirality: (M, N) cost of Eq. 7: 0 where the constraint holds, ``beta`` elsewhere.
-    """
-
-    geo: np.ndarray
-    hist: np.ndarray
-    hist_valid: np.ndarray
-    cheirality: np.ndarray
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(M, N)."""
-        return self.geo.shape  # type: ignore[return-value]
-
-    def normalised(self) -> dict[str, np.ndarray]:
-        """``{"geo": tanh(d_geo), "hist": tanh(d_hist)}`` (Section III-C), each (M, N) in [0, 1].
-
-        Pairs without appearance evidence (``hist_valid`` False) get ``d'_hist = 1``.
-        """
-        return {
-            "geo": normalise_distance(self.geo),
-            "hist": np.where(self.hist_valid, normalise_distance(self.hist), 1.0),
-        }
-
-
-def _check_image(image: np.ndarray, camera: Camera, name: str) -> None:
-    shape = np.shape(image)
-    if len(shape) != 3 or shape[2] != 3:
-        raise ValueError(f"{name} must be an (H, W, 3) BGR image, got shape {shape}")
-    if (shape[1], shape[0]) != camera.image_size:
-        raise ValueError(
-            f"{name} is {shape[1]}x{shape[0]} but its camera is "
-            f"{camera.width}x{camera.height}; pass the image the camera was calibrated for"
-        )
-
-
-def pair_costs(
-    top_camera: Camera,
-    ego_camera: Camera,
-    top_image: np.ndarray,
-    ego_image: np.ndarray,
-    top_boxes: np.ndarray,
-    ego_boxes: np.ndarray,
-    *,
-    margin: float = METRIC_MARGIN,
-    beta: float = DEFAULT_BETA,
-) -> PairCosts:
-    """Compute the raw cues of one image pair (Eqs. 3, 6 and 7).
-
-    Args:
-        top_camera: calibrated top/overview camera.
-        ego_camera: calibrated egocentric camera.
-        top_image: (H, W, 3) uint8 BGR top image, of ``top_camera``'s size.
-        ego_image: (H', W', 3) uint8 BGR egocentric image, of ``ego_camera``'s size.
-        top_boxes: (M, 4) ``(x, y, w, h)`` boxes in the top image (may run past its border).
-        ego_boxes: (N, 4) boxes in the egocentric image.
-        margin: depth margin of Eq. 7.
-        beta: cost of violating Eq. 7.
-
-    Returns:
-        The :class:`PairCosts`; every matrix is finite (never NaN), also for empty crops,
-        coincident camera centres or parallel rays.
-
-    Raises:
-        TypeError: a camera that is not a :class:`~xvmatch.geometry.camera.Camera`.
-        ValueError: malformed boxes or images, an image that does not match its camera.
-    """
-    for cam, name in ((top_camera, "top_camera"), (ego_camera, "ego_camera")):
-        if not isinstance(cam, Camera):
-            raise TypeError(f"{name} must be a xvmatch.geometry.camera.Camera, got {type(cam)}")
-    top_boxes = as_boxes(top_boxes, "top_boxes")
-    ego_boxes = as_boxes(ego_boxes, "ego_boxes")
-    _check_image(top_image, top_camera, "top_image")
-    _check_image(ego_image, ego_camera, "ego_image")
-    top_hist = box_histograms(top_image, top_boxes)
-    ego_hist = box_histograms(ego_image, ego_boxes)
-    rays_top = box_rays(top_camera, top_boxes)
-    rays_ego = box_rays(ego_camera, ego_boxes)
-    return PairCosts(
-        geo=ray_distances(rays_top, rays_ego),
-        hist=chi2_brd_distance(top_hist.histograms, ego_hist.histograms),
-        hist_valid=top_hist.valid[:, None] & ego_hist.valid[None, :],
-        cheirality=cheirality_cost(rays_top, rays_ego, margin=margin, beta=beta),
-    )
 
 
 def fused_cost(
@@ -377,190 +221,6 @@ def associate(
         (K, 2) int64 ``(top index, ego index)`` pairs, sorted by top index.
     """
     return assign(fused_cost(costs, method, weights), method.gamma)
-
-
-# --------------------------------------------------------------------------------------------
-# Ground-truth matching and counting
-
-
-def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
-    """Pairwise intersection over union of ``(x, y, w, h)`` boxes.
-
-    Args:
-        boxes_a: (M, 4) boxes.
-        boxes_b: (N, 4) boxes.
-
-    Returns:
-        (M, N) IoU in [0, 1]; 0 where the union is empty (two zero-area boxes).
-    """
-    a = as_boxes(boxes_a, "boxes_a")
-    b = as_boxes(boxes_b, "boxes_b")
-    ax1, ay1 = a[:, 0] + a[:, 2], a[:, 1] + a[:, 3]
-    bx1, by1 = b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
-    iw = np.minimum(ax1[:, None], bx1[None, :]) - np.maximum(a[:, None, 0], b[None, :, 0])
-    ih = np.minimum(ay1[:, None], by1[None, :]) - np.maximum(a[:, None, 1], b[None, :, 1])
-    inter = np.clip(iw, 0, None) * np.clip(ih, 0, None)
-    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None, :] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
-
-
-def match_to_ground_truth(
-    det_boxes: np.ndarray,
-    gt_boxes: np.ndarray,
-    gt_ids: np.ndarray,
-    iou_threshold: float = 0.3,
-) -> np.ndarray:
-    """The ground-truth id each detection stands for (Section IV-B: IoU >= 0.3).
-
-    Detections and ground-truth boxes of one view are matched one to one, maximising the total
-    IoU over the pairs with ``IoU >= iou_threshold`` (Hungarian algorithm); a detection left
-    without a partner, e.g. a second detection on an already matched person, is a false
-    positive.
-
-    Args:
-        det_boxes: (D, 4) detections.
-        gt_boxes: (G, 4) ground-truth boxes.
-        gt_ids: (G,) their ids (distinct, >= 0).
-        iou_threshold: smallest IoU of a match, in (0, 1].
-
-    Returns:
-        (D,) int64 ids; :data:`FALSE_POSITIVE` (-1) for false positives.
-
-    Raises:
-        ValueError: bad boxes, ids not matching the boxes, repeated or negative ids, or a
-            threshold outside (0, 1].
-    """
-    if not 0 < iou_threshold <= 1:
-        raise ValueError(f"iou_threshold must be in (0, 1], got {iou_threshold}")
-    ids = np.asarray(gt_ids).reshape(-1).astype(np.int64)
-    iou = box_iou(det_boxes, gt_boxes)
-    if ids.shape[0] != iou.shape[1]:
-        raise ValueError(f"gt_ids has {ids.shape[0]} ids for {iou.shape[1]} gt_boxes")
-    if ids.size and (np.unique(ids).size != ids.size or ids.min() < 0):
-        raise ValueError(f"gt_ids must be distinct and >= 0, got {sorted(ids.tolist())}")
-    out = np.full(iou.shape[0], FALSE_POSITIVE, np.int64)
-    if iou.size == 0:
-        return out
-    eligible = iou >= iou_threshold
-    rows, cols = linear_sum_assignment(np.where(eligible, iou, 0.0), maximize=True)
-    keep = eligible[rows, cols]
-    out[rows[keep]] = ids[cols[keep]]
-    return out
-
-
-def _true_ids(ids: np.ndarray, gt: set[int], name: str, frame: int) -> np.ndarray:
-    arr = np.asarray(ids).reshape(-1).astype(np.int64)
-    real = arr[arr != FALSE_POSITIVE]
-    if np.unique(real).size != real.size:
-        raise ValueError(f"frame {frame}: {name} stand for one ground-truth id twice: "
-                         f"{sorted(real.tolist())}")
-    unknown = sorted(set(real.tolist()) - gt)
-    if unknown:
-        raise ValueError(f"frame {frame}: {name} name ids absent from the view's ground truth: "
-                         f"{unknown}")
-    return arr
-
-
-def count_pair(
-    gt_top_ids: np.ndarray,
-    gt_ego_ids: np.ndarray,
-    det_top_ids: np.ndarray,
-    det_ego_ids: np.ndarray,
-    pairs: np.ndarray,
-    *,
-    frame: int = 0,
-) -> FrameCounts:
-    """Count one image pair against the ground truth, detections allowed (Eq. 9, Accuracy*).
-
-    ``U`` (the unique persons of Eq. 9) are the ground-truth ids of either view and ``G`` those
-    of both. A predicted pair is a true positive when both of its boxes stand for the same
-    ground-truth id; a wrong pair is a mismatch when its egocentric box stands for an id of
-    ``G``, otherwise a false positive. A miss is an id of ``G`` whose egocentric box is
-    undetected or in no pair. A true negative is an id seen in one view only (in the ground
-    truth) whose box there was detected and left unmatched. With the ground-truth boxes as
-    detections this equals :func:`xvmatch.evaluation.cross_view_metrics.count_frame`.
-
-    Args:
-        gt_top_ids: (G1,) ground-truth ids of the top view.
-        gt_ego_ids: (G2,) ground-truth ids of the egocentric view.
-        det_top_ids: (M,) id each associated top box stands for (:data:`FALSE_POSITIVE` for a
-            false positive), in the order of the association's rows.
-        det_ego_ids: (N,) the same for the egocentric boxes (columns).
-        pairs: (K, 2) ``(row, column)`` pairs of the association.
-        frame: frame number, recorded and used in error messages.
-
-    Returns:
-        The :class:`~xvmatch.evaluation.cross_view_metrics.FrameCounts`.
-
-    Raises:
-        ValueError: repeated ground-truth ids, a detection standing for an id twice or for an id
-            the view does not have, or pairs out of range or not one-to-one.
-    """
-    gt_top = [int(v) for v in np.asarray(gt_top_ids).reshape(-1)]
-    gt_ego = [int(v) for v in np.asarray(gt_ego_ids).reshape(-1)]
-    top_set, ego_set = set(gt_top), set(gt_ego)
-    if len(top_set) != len(gt_top) or len(ego_set) != len(gt_ego):
-        raise ValueError(f"frame {frame}: a ground-truth id is listed twice in a view")
-    det_top = _true_ids(det_top_ids, top_set, "det_top_ids", frame)
-    det_ego = _true_ids(det_ego_ids, ego_set, "det_ego_ids", frame)
-    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    if p.size and ((p < 0).any() or (p[:, 0] >= det_top.size).any()
-                   or (p[:, 1] >= det_ego.size).any()):
-        raise ValueError(f"frame {frame}: pairs out of range for {det_top.size} x {det_ego.size}")
-    if np.unique(p[:, 0]).size != len(p) or np.unique(p[:, 1]).size != len(p):
-        raise ValueError(f"frame {frame}: pairs must be one-to-one, got {p.tolist()}")
-    shared = top_set & ego_set
-    a, b = det_top[p[:, 0]], det_ego[p[:, 1]]
-    correct = (a == b) & (a != FALSE_POSITIVE)
-    tp = int(correct.sum())
-    mismatch = int(sum(1 for ok, h in zip(correct, b, strict=True) if not ok and int(h) in shared))
-    paired_ego = {int(h) for h in b if h != FALSE_POSITIVE}
-    paired_top = {int(t) for t in a if t != FALSE_POSITIVE}
-    detected_top = {int(t) for t in det_top if t != FALSE_POSITIVE}
-    detected_ego = {int(h) for h in det_ego if h != FALSE_POSITIVE}
-    tn = len(((top_set - ego_set) & detected_top) - paired_top) + len(
-        ((ego_set - top_set) & detected_ego) - paired_ego
-    )
-    return FrameCounts(
-        frame=int(frame),
-        n_pred=len(p),
-        n_gt=len(shared),
-        tp=tp,
-        fp=len(p) - tp - mismatch,
-        mismatch=mismatch,
-        miss=len(shared - paired_ego),
-        n_union=len(top_set | ego_set),
-        tn=tn,
-    )
-
-
-# --------------------------------------------------------------------------------------------
-# Trials: one image pair in one setting, ready to associate and score
-
-
-@dataclass(frozen=True, eq=False)
-class PairTrial:
-    """One image pair in one setting, its boxes shuffled, ready to associate and score.
-
-    Attributes:
-        scene: scene name.
-        frame: 1-based frame number.
-        setting: ``"gt"`` or ``"det"``.
-        costs: the raw cues between the shuffled boxes.
-        gt_top_ids: ground-truth ids of the top view.
-        gt_ego_ids: ground-truth ids of the egocentric view.
-        det_top_ids: (M,) id each shuffled top box stands for (-1: false positive).
-        det_ego_ids: (N,) id each shuffled egocentric box stands for.
-    """
-
-    scene: str
-    frame: int
-    setting: str
-    costs: PairCosts
-    gt_top_ids: np.ndarray
-    gt_ego_ids: np.ndarray
-    det_top_ids: np.ndarray
-    det_ego_ids: np.ndarray
 
 
 def score_trial(
@@ -610,97 +270,14 @@ class _SceneTrials:
     detection: DetectionStats
 
 
-def noise_seed_of(noise_seed: int, scene_index: int) -> int:
-    """Seed of the detector noise of one scene, independent across scenes."""
-    state = np.random.SeedSequence([int(noise_seed), int(scene_index)]).generate_state(1)
-    return int(state[0])
-
-
-@dataclass(frozen=True, eq=False)
-class FrameSample:
-    """The boxes of one frame pair in one setting, as every synthetic evaluation sees them.
-
-    Attributes:
-        pair: the frame pair (images and cameras).
-        setting: ``"gt"`` or ``"det"``.
-        images, cameras: per view (``"top"``, ``"ego"``).
-        gt_ids: per view, the ground-truth ids of the frame.
-        boxes: per view, the boxes in a seeded random order (ground truth or detections).
-        stands_for: per view, the ground-truth id each box stands for
-            (:data:`FALSE_POSITIVE` for a false detection); evaluation only.
-        n_gt, n_det, n_true: per view, ground-truth boxes, detections and true detections
-            (zeros in the ``"gt"`` setting).
-    """
-
-    pair: PairRecord
-    setting: str
-    images: dict[str, np.ndarray]
-    cameras: dict[str, Camera]
-    gt_ids: dict[str, np.ndarray]
-    boxes: dict[str, np.ndarray]
-    stands_for: dict[str, np.ndarray]
-    n_gt: dict[str, int]
-    n_det: dict[str, int]
-    n_true: dict[str, int]
-
-
-def scene_samples(
+def _scene_results(
     scene: SceneRecord,
     scene_index: int,
     config: BaselineConfig,
     settings: Sequence[str] = SETTINGS,
-) -> Iterator[FrameSample]:
-    """Every frame pair of a scene in each requested setting (:data:`SETTINGS` order), boxes
-    shuffled per view with a seed of (``config.scramble_seed``, scene, frame, setting) and
-    detections drawn with :func:`noise_seed_of` (``config.noise_seed``, ``scene_index``)."""
-    unknown = [s for s in settings if s not in SETTINGS]
-    if unknown:
-        raise ValueError(f"settings must be among {', '.join(SETTINGS)}, got {unknown}")
-    views = ("top", "ego")
-    gt_boxes = {v: scene.boxes(v) for v in views}
-    det_boxes = {}
-    if "det" in settings:
-        seed = noise_seed_of(config.noise_seed, scene_index)
-        for v in views:
-            camera = getattr(scene.pairs[0], v).camera
-            det_boxes[v] = apply_visibility_noise(
-                gt_boxes[v], scene.visibility(v), camera.image_size, config.noise, seed, v
-            )
-    for pair in scene.pairs:
-        images = {v: getattr(pair, v).load_image() for v in views}
-        cameras = {v: getattr(pair, v).camera for v in views}
-        gt_ids = {v: gt_boxes[v][pair.frame].ids for v in views}
-        for s_index, setting in enumerate(SETTINGS):
-            if setting not in settings:
-                continue
-            rng = np.random.default_rng(
-                [int(config.scramble_seed), int(scene_index), pair.frame, s_index]
-            )
-            boxes, stands_for = {}, {}
-            counts = {k: {v: 0 for v in views} for k in ("n_gt", "n_det", "n_true")}
-            for v in views:
-                gt = gt_boxes[v][pair.frame]
-                if setting == "gt":
-                    b, ids = gt.boxes, gt.ids
-                else:
-                    b = det_boxes[v][pair.frame].boxes
-                    ids = match_to_ground_truth(b, gt.boxes, gt.ids, config.iou_threshold)
-                    counts["n_gt"][v] = len(gt)
-                    counts["n_det"][v] = len(b)
-                    counts["n_true"][v] = int((ids != FALSE_POSITIVE).sum())
-                order = rng.permutation(len(ids))
-                boxes[v], stands_for[v] = b[order], ids[order]
-            yield FrameSample(pair, setting, images, cameras, gt_ids, boxes, stands_for,
-                              **counts)
-
-
-def scene_trials(
-    scene: SceneRecord,
-    scene_index: int,
-    config: BaselineConfig,
-    settings: Sequence[str] = SETTINGS,
-) -> tuple[list[PairTrial], CostSamples, DetectionStats]:
-    """Build the trials of every frame of a scene, in the requested settings.
+) -> _SceneTrials:
+    """The trials of every frame of a scene (:func:`~xvmatch.datasets.pair_trials.
+    scene_trials`) with the baseline's extras.
 
     Args:
         scene: the parsed scene.
@@ -709,58 +286,35 @@ def scene_trials(
         settings: subset of :data:`SETTINGS`.
 
     Returns:
-        (trials, samples, detection): the trials (frame by frame, settings in the given order),
-        the raw true/false costs of the ground-truth boxes (Figs. 2-3; empty unless ``"gt"`` is
-        among the settings), and the detector statistics (zeros unless ``"det"`` is).
+        The trials (frame by frame, settings in the given order), the raw true/false costs of
+        the ground-truth boxes (Figs. 2-3; empty unless ``"gt"`` is among the settings), and
+        the detector statistics (zeros unless ``"det"`` is).
     """
     views = ("top", "ego")
     stats = {k: {v: 0 for v in views} for k in ("n_gt", "n_det", "n_true")}
-    trials: list[PairTrial] = []
     samples: list[CostSamples] = []
-    for fs in scene_samples(scene, scene_index, config, settings):
+    trials = scene_trials(scene, scene_index, config, settings)
+    for t in trials:
         for key, per_view in stats.items():
             for v in views:
-                per_view[v] += getattr(fs, key)[v]
-        costs = pair_costs(fs.cameras["top"], fs.cameras["ego"], fs.images["top"],
-                           fs.images["ego"], fs.boxes["top"], fs.boxes["ego"],
-                           margin=config.margin, beta=config.beta)
-        if fs.setting == "gt":
-            same = fs.stands_for["top"][:, None] == fs.stands_for["ego"][None, :]
-            samples.append(CostSamples.from_matrices(costs.geo, costs.hist, same,
-                                                     costs.hist_valid))
-        trials.append(PairTrial(fs.pair.scene, fs.pair.frame, fs.setting, costs,
-                                fs.gt_ids["top"], fs.gt_ids["ego"], fs.stands_for["top"],
-                                fs.stands_for["ego"]))
-    return trials, CostSamples.concatenate(samples), DetectionStats(**stats)
+                per_view[v] += getattr(t, key)[v]
+        if t.setting == "gt":
+            same = t.det_top_ids[:, None] == t.det_ego_ids[None, :]
+            samples.append(CostSamples.from_matrices(t.costs.geo, t.costs.hist, same,
+                                                     t.costs.hist_valid))
+    return _SceneTrials(trials, CostSamples.concatenate(samples), DetectionStats(**stats))
 
 
 def _scene_task(root: str, name: str, index: int, config: BaselineConfig,
                 settings: tuple[str, ...]) -> _SceneTrials:
     scene = SyntheticDataset(root).scene(name)
-    trials, samples, detection = scene_trials(scene, index, config, settings)
-    return _SceneTrials(trials, samples, detection)
+    return _scene_results(scene, index, config, settings)
 
 
 def _worker_init() -> None:
     import cv2
 
     cv2.setNumThreads(1)
-
-
-def open_dataset(data: str | os.PathLike) -> SyntheticDataset:
-    """Open a synthetic dataset folder, with an actionable error when it is not one.
-
-    Raises:
-        ValueError: no ``dataset.json`` in ``data``.
-        SchemaError: a malformed manifest.
-    """
-    root = Path(data)
-    if not (root / MANIFEST).is_file():
-        raise ValueError(
-            f"{os.fspath(root)}: no {MANIFEST}; generate a dataset first, e.g. "
-            "xvmatch synth --out DIR --scenario overview --scenes 20 --frames 5 --seed 1000"
-        )
-    return SyntheticDataset(root)
 
 
 def _all_trials(
@@ -795,10 +349,6 @@ def _all_trials(
                 if progress is not None:
                     progress(len({t.frame for t in results[i].trials}))
     return dataset, [r for r in results if r is not None]
-
-
-# --------------------------------------------------------------------------------------------
-# Evaluation, tuning and the table
 
 
 @dataclass(frozen=True, eq=False)

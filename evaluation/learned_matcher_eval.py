@@ -5,13 +5,13 @@ Every image pair of a test dataset is associated by the handcrafted rules of
 boxes: the ground-truth boxes (``"gt"``, Table I setting) and the detector-noise boxes
 (``"det"``, Table II setting), shuffled per frame and view with the baseline's seeds ("ids
 scrambled"), and scored with the same functions (:func:`~xvmatch.evaluation.
-handcrafted_baseline.count_pair`, Eq. 9 accuracy averaged over pairs). :func:`scene_box_trials`
-rebuilds the baseline's trials with the boxes kept (a test checks the parity).
+cross_view_metrics.count_pair`, Eq. 9 accuracy averaged over pairs): the trials of
+:mod:`xvmatch.datasets.pair_trials`.
 
-Cues, each an ``(M, N)`` cost in [0, 1] (:meth:`BoxTrial.cues`):
+Cues, each an ``(M, N)`` cost in [0, 1] (:meth:`~xvmatch.datasets.pair_trials.PairTrial.cues`):
 
 * ``"app"``: the learned appearance cost ``|a - b| / 2`` of the Siamese descriptors of the two
-  crops (:class:`AppearanceCoster`, :mod:`xvmatch.models.appearance_net`);
+  crops (from the coster the trials were built with);
 * ``"geo"``: ``tanh`` of the ray distance of Eq. 6 (the baseline's geometry);
 * ``"cheir"``: 1 where the cheirality test of Eq. 7 fails, else 0;
 * ``"hist"``: the baseline's normalised histogram distance (for completeness).
@@ -31,235 +31,36 @@ with their published gammas (the baseline's table).
 
 from __future__ import annotations
 
-import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 from torch import nn
 
-from xvmatch.datasets.synthetic_io import SceneRecord
-from xvmatch.evaluation.cross_view_metrics import CrossViewScores, FrameCounts, summarize
-from xvmatch.evaluation.handcrafted_baseline import (
-    FALSE_POSITIVE,
-    GAMMA_GRID,
-    SETTINGS,
-    BaselineConfig,
-    Method,
-    PairCosts,
-    PairTrial,
+from xvmatch.datasets.pair_trials import CUES, SETTINGS, PairTrial
+from xvmatch.evaluation.cross_view_metrics import (
+    CrossViewScores,
+    FrameCounts,
     count_pair,
-    fused_cost,
-    open_dataset,
-    pair_costs,
-    scene_samples,
+    summarize,
 )
+from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
 from xvmatch.geometry.cost_fusion import add_cheirality
-from xvmatch.inference.assignment import assign
-from xvmatch.models.appearance_net import AppearanceNet, appearance_distance
+from xvmatch.inference.assignment import GAMMA_GRID, assign
 from xvmatch.models.fusion_heads import ProductFusionHead, SumFusionHead
 
 __all__ = [
-    "CUES",
-    "AppearanceCoster",
-    "BoxTrial",
     "CueRule",
     "LearnedResult",
     "ResultRow",
-    "dataset_box_trials",
     "default_rules",
     "evaluate_learned_matcher",
     "format_learned_table",
     "rule_cost",
-    "scene_box_trials",
     "score_rule",
     "tune_gamma",
 ]
-
-CUES: tuple[str, ...] = ("app", "geo", "cheir", "hist")
-"""Names of the normalised cues a fusion head can take (see the module docstring)."""
-
-
-# --------------------------------------------------------------------------------------------
-# Learned appearance costs
-
-
-class AppearanceCoster:
-    """Learned appearance costs between the boxes of two images.
-
-    Crops every box as in training (:func:`~xvmatch.training.image_datamodule.box_crops`, the
-    network's input size from its weights record), embeds them with the network in eval mode
-    and returns ``|a - b| / 2``.
-
-    Args:
-        net: the trained network.
-        device: where to run it.
-        batch_size: crops per forward pass.
-        context: relative margin around each box (as in training).
-    """
-
-    def __init__(self, net: AppearanceNet, *, device: str | torch.device = "cpu",
-                 batch_size: int = 256, context: float = 0.1) -> None:
-        self.net = net.eval().to(device)
-        self.device = torch.device(device)
-        self.batch_size = int(batch_size)
-        self.context = float(context)
-
-    @torch.no_grad()
-    def embed(self, image: np.ndarray, boxes: np.ndarray) -> torch.Tensor:
-        """``(K, D)`` descriptors of the ``(K, 4)`` boxes of ``image`` (BGR uint8)."""
-        from xvmatch.training.image_datamodule import box_crops
-
-        crops = box_crops(image, boxes, self.net.preprocessing.crop_size, self.context)
-        if crops.shape[0] == 0:
-            return torch.zeros(0, self.net.embedding_dim, device=self.device)
-        out = []
-        for k in range(0, crops.shape[0], self.batch_size):
-            chunk = torch.from_numpy(crops[k : k + self.batch_size]).to(self.device)
-            out.append(self.net.embed_crops(chunk))
-        return torch.cat(out)
-
-    def __call__(self, top_image: np.ndarray, top_boxes: np.ndarray, ego_image: np.ndarray,
-                 ego_boxes: np.ndarray) -> np.ndarray:
-        """``(M, N)`` appearance costs in [0, 1] between top and egocentric boxes."""
-        top = self.embed(top_image, top_boxes)
-        ego = self.embed(ego_image, ego_boxes)
-        return appearance_distance(top, ego).double().cpu().numpy()
-
-
-# --------------------------------------------------------------------------------------------
-# Trials with boxes
-
-
-@dataclass(frozen=True, eq=False)
-class BoxTrial:
-    """One image pair in one setting, boxes shuffled: the baseline's trial, boxes kept.
-
-    Attributes:
-        scene: scene name.
-        frame: 1-based frame number.
-        setting: ``"gt"`` or ``"det"``.
-        top_boxes: ``(M, 4)`` shuffled top-view boxes.
-        ego_boxes: ``(N, 4)`` shuffled egocentric boxes.
-        costs: the handcrafted cues between them.
-        app: ``(M, N)`` learned appearance costs, or None when no network was given.
-        gt_top_ids: ground-truth ids of the top view.
-        gt_ego_ids: ground-truth ids of the egocentric view.
-        det_top_ids: ``(M,)`` id each top box stands for (-1: false positive).
-        det_ego_ids: ``(N,)`` id each egocentric box stands for.
-    """
-
-    scene: str
-    frame: int
-    setting: str
-    top_boxes: np.ndarray
-    ego_boxes: np.ndarray
-    costs: PairCosts
-    app: np.ndarray | None
-    gt_top_ids: np.ndarray
-    gt_ego_ids: np.ndarray
-    det_top_ids: np.ndarray
-    det_ego_ids: np.ndarray
-
-    def cues(self) -> dict[str, np.ndarray]:
-        """The normalised cues ``{"geo", "hist", "cheir"[, "app"]}``, each ``(M, N)`` in [0, 1]."""
-        norm = self.costs.normalised()
-        out = {"geo": norm["geo"], "hist": norm["hist"],
-               "cheir": (self.costs.cheirality > 0).astype(np.float64)}
-        if self.app is not None:
-            out["app"] = np.asarray(self.app, dtype=np.float64)
-        return out
-
-    def match(self) -> np.ndarray:
-        """``(M, N)`` bool: both boxes stand for the same ground-truth person."""
-        top, ego = self.det_top_ids[:, None], self.det_ego_ids[None, :]
-        return (top == ego) & (top != FALSE_POSITIVE)
-
-    def solo(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(M,)`` and ``(N,)`` bool: the box stands for a person seen in its view only (a
-        correct true negative of Eq. 9 when left unmatched)."""
-        top = set(self.gt_top_ids.tolist())
-        ego = set(self.gt_ego_ids.tolist())
-        return (np.array([int(i) in top - ego for i in self.det_top_ids], bool).reshape(-1),
-                np.array([int(i) in ego - top for i in self.det_ego_ids], bool).reshape(-1))
-
-    @property
-    def n_union(self) -> int:
-        """Unique persons of Eq. 9: ground-truth ids of either view."""
-        return len(set(self.gt_top_ids.tolist()) | set(self.gt_ego_ids.tolist()))
-
-    def as_pair_trial(self) -> PairTrial:
-        """The baseline's :class:`PairTrial` of the same boxes."""
-        return PairTrial(self.scene, self.frame, self.setting, self.costs, self.gt_top_ids,
-                         self.gt_ego_ids, self.det_top_ids, self.det_ego_ids)
-
-
-def scene_box_trials(
-    scene: SceneRecord,
-    scene_index: int,
-    config: BaselineConfig,
-    settings: Sequence[str] = SETTINGS,
-    coster: Callable[..., np.ndarray] | None = None,
-) -> list[BoxTrial]:
-    """The trials of every frame of a scene, as
-    :func:`~xvmatch.evaluation.handcrafted_baseline.scene_trials` builds them, boxes kept.
-
-    Args:
-        scene: the parsed scene.
-        scene_index: its index in the dataset (seeds the detector noise and the shuffling).
-        config: cameras' margin and beta, detector noise and seeds.
-        settings: subset of :data:`SETTINGS`.
-        coster: optional ``coster(top_image, top_boxes, ego_image, ego_boxes) -> (M, N)``
-            learned appearance costs (an :class:`AppearanceCoster`).
-
-    Returns:
-        Trials frame by frame, settings in :data:`SETTINGS` order.
-    """
-    trials: list[BoxTrial] = []
-    for fs in scene_samples(scene, scene_index, config, settings):
-        costs = pair_costs(fs.cameras["top"], fs.cameras["ego"], fs.images["top"],
-                           fs.images["ego"], fs.boxes["top"], fs.boxes["ego"],
-                           margin=config.margin, beta=config.beta)
-        app = None
-        if coster is not None:
-            app = coster(fs.images["top"], fs.boxes["top"], fs.images["ego"], fs.boxes["ego"])
-        trials.append(BoxTrial(fs.pair.scene, fs.pair.frame, fs.setting, fs.boxes["top"],
-                               fs.boxes["ego"], costs, app, fs.gt_ids["top"], fs.gt_ids["ego"],
-                               fs.stands_for["top"], fs.stands_for["ego"]))
-    return trials
-
-
-def dataset_box_trials(
-    data: str | os.PathLike,
-    config: BaselineConfig | None = None,
-    settings: Sequence[str] = SETTINGS,
-    coster: Callable[..., np.ndarray] | None = None,
-    progress: Callable[[int], None] | None = None,
-) -> list[BoxTrial]:
-    """:func:`scene_box_trials` of every scene of a dataset folder, in scene order.
-
-    Args:
-        data: dataset folder written by ``xvmatch synth``.
-        config: seeds and noise (default :class:`BaselineConfig`).
-        settings: subset of :data:`SETTINGS`.
-        coster: optional learned appearance costs.
-        progress: called with the number of pairs of each finished scene.
-    """
-    config = BaselineConfig() if config is None else config
-    dataset = open_dataset(data)
-    out: list[BoxTrial] = []
-    for index, name in enumerate(dataset.scene_names):
-        scene = dataset.scene(name)
-        out += scene_box_trials(scene, index, config, settings, coster)
-        if progress is not None:
-            progress(len(scene.pairs))
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# Rules, gammas and scores
-
 
 @dataclass(frozen=True, eq=False)
 class CueRule:
@@ -268,7 +69,7 @@ class CueRule:
     Attributes:
         key: short unique name, e.g. ``"learned(app,geo,cheir)"``.
         name: table name.
-        head: fusion head over :meth:`BoxTrial.cues` (:mod:`xvmatch.models.fusion_heads`), or
+        head: fusion head over :meth:`PairTrial.cues` (:mod:`xvmatch.models.fusion_heads`), or
             None to use the single cue ``cue``.
         cue: the cue used when ``head`` is None.
         cheirality: add the cheirality cost (0 or beta) after the head (Eq. 7 as a veto).
@@ -289,7 +90,7 @@ class CueRule:
 
 
 @torch.no_grad()
-def rule_cost(trial: BoxTrial, rule: CueRule | Method) -> np.ndarray:
+def rule_cost(trial: PairTrial, rule: CueRule | Method) -> np.ndarray:
     """``(M, N)`` association cost of a trial under a learned rule or a handcrafted method."""
     if isinstance(rule, Method):
         return fused_cost(trial.costs, rule)
@@ -312,7 +113,7 @@ def rule_cost(trial: BoxTrial, rule: CueRule | Method) -> np.ndarray:
     return add_cheirality(cost, trial.costs.cheirality) if rule.cheirality else cost
 
 
-def score_rule(trial: BoxTrial, rule: CueRule | Method, gamma: float,
+def score_rule(trial: PairTrial, rule: CueRule | Method, gamma: float,
                cost: np.ndarray | None = None) -> FrameCounts:
     """Associate a trial's boxes (Eqs. 1-2, non-association cost ``gamma``) and count it."""
     c = rule_cost(trial, rule) if cost is None else cost
@@ -321,7 +122,7 @@ def score_rule(trial: BoxTrial, rule: CueRule | Method, gamma: float,
                       pairs, frame=trial.frame)
 
 
-def tune_gamma(trials: Sequence[BoxTrial], rule: CueRule | Method,
+def tune_gamma(trials: Sequence[PairTrial], rule: CueRule | Method,
                grid: Sequence[float] = GAMMA_GRID) -> tuple[float, dict[float, float]]:
     """The gamma of ``grid`` with the best mean Eq. 9 accuracy over ``trials`` (middle of ties,
     as :func:`~xvmatch.evaluation.handcrafted_baseline.tune_gammas`).
@@ -420,7 +221,7 @@ class LearnedResult:
         return max(rows, key=lambda r: r.accuracy(setting))
 
 
-def _scores(trials: Sequence[BoxTrial], rule: CueRule | Method, gamma: float
+def _scores(trials: Sequence[PairTrial], rule: CueRule | Method, gamma: float
             ) -> dict[str, CrossViewScores]:
     out = {}
     for s in SETTINGS:
@@ -431,8 +232,8 @@ def _scores(trials: Sequence[BoxTrial], rule: CueRule | Method, gamma: float
 
 
 def evaluate_learned_matcher(
-    test_trials: Sequence[BoxTrial],
-    val_trials: Sequence[BoxTrial],
+    test_trials: Sequence[PairTrial],
+    val_trials: Sequence[PairTrial],
     rules: Sequence[CueRule],
     *,
     config: BaselineConfig | None = None,

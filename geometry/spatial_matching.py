@@ -31,7 +31,10 @@ class SpatialParams:
 
     Attributes:
         rho: penalty base of Eq. 12 (rho > 1): fewer matched pairs cost rho^(L / kappa).
-        lam: balance factor lambda of Eq. 11 between the x and y dissimilarities.
+        lam: balance factor lambda of Eq. 11 between the x and y dissimilarities; y_hor is in
+            units of a 2688-pixel-wide image whatever the resolution
+            (:func:`~xvmatch.geometry.spatial_vectors.horizontal_vectors`), so the paper's 0.003
+            holds for any image size.
         tau_deg: occlusion tolerance tau (degrees), Sec. 3.2.2.
         dtheta_deg: orientation step of the search (degrees), Sec. 3.2.4.
         fov_deg: field-of-view angle alpha of the horizontal camera (degrees), Eq. 6.
@@ -88,46 +91,44 @@ def monotonic_path(cost: np.ndarray, rows: np.ndarray) -> np.ndarray:
     n_batch, n_rows, n_cols = cost.shape
     if n_batch == 0 or n_rows == 0 or n_cols == 0:
         return np.zeros(cost.shape, dtype=bool)
-    # Accumulated cost, padded with a row and a column of +inf so that every cell has its three
-    # predecessors in range: acc[:, i + 1, j + 1] is the best cost from (0, 0) to (i, j).
+    # The batch is the last (contiguous) axis, so each step below is one vector operation over
+    # all hypotheses. acc[i + 1, j + 1] = cost[i, j] + min(acc[i, j], acc[i, j + 1],
+    # acc[i + 1, j]), the DTW recurrence, on a grid padded with a row and a column of +inf
+    # (acc[0, 0] = 0 starts the path at (0, 0)).
     width = n_cols + 1
-    acc = np.full((n_batch, n_rows + 1, width), np.inf)
-    acc[:, 1, 1:] = np.cumsum(cost[:, 0, :], axis=1)
-    for i in range(1, n_rows):
-        prev = acc[:, i, :]
-        reach = np.minimum(prev[:, 1:], prev[:, :-1])
-        row = cost[:, i, :]
-        csum = np.cumsum(row, axis=1)
-        # acc[i, j] = min_{k <= j} (reach[k] + sum_{l=k..j} row[l]): a min-plus prefix scan.
-        acc[:, i + 1, 1:] = csum + np.minimum.accumulate(reach - csum + row, axis=1)
-
-    # Backtrack on flat indices of the padded grid, from (rows[b], Q) to (1, 1).
-    flat = acc.reshape(n_batch, -1)
-    offset = np.arange(n_batch) * flat.shape[1]
-    flat = flat.reshape(-1)
-    start = width + 1
-    pos = np.asarray(rows, dtype=np.intp) * width + n_cols
+    costs = np.ascontiguousarray(cost.transpose(1, 2, 0))  # (K, Q, B)
+    acc = np.full((n_rows + 1, width, n_batch), np.inf)
+    acc[0, 0] = 0.0
+    for i in range(n_rows):
+        reach = np.minimum(acc[i, :-1], acc[i, 1:])  # diagonal and vertical predecessors
+        row, out = costs[i], acc[i + 1]
+        for j in range(n_cols):
+            out[j + 1] = row[j] + np.minimum(reach[j], out[j])
+    # Backtracking step of every cell (in flat indices of the padded grid): diagonal on ties,
+    # then vertical, then horizontal; none at the start cell (1, 1).
+    stride = n_batch
+    up_step, diag_step = width * stride, (width + 1) * stride
+    diag, up, left = acc[:-1, :-1], acc[:-1, 1:], acc[1:, :-1]
+    steps = np.zeros((n_rows + 1, width, n_batch), dtype=np.intp)
+    steps[1:, 1:] = np.where((diag <= up) & (diag <= left), diag_step,
+                             np.where(up <= left, up_step, stride))
+    steps[1, 1] = 0
+    steps = steps.reshape(-1)
+    # Walk back from (rows[b], Q) to (1, 1) (at most K + Q - 2 steps).
     alive = np.asarray(rows) > 0
-    pos = np.where(alive, pos, start) + offset
-    goal = start + offset
+    start = (width + 1) * stride
+    pos = np.where(alive, (np.asarray(rows, dtype=np.intp) * width + n_cols) * stride, start)
+    pos = pos + np.arange(n_batch)
     visited = [pos]
     for _ in range(n_rows + n_cols - 2):
-        moving = pos != goal
-        if not moving.any():
-            break
-        diag = flat[pos - width - 1]
-        up = flat[pos - width]
-        left = flat[pos - 1]
-        step = np.where(
-            (diag <= up) & (diag <= left), width + 1, np.where(up <= left, width, 1)
-        )
-        pos = pos - step * moving
+        pos = pos - steps[pos]
         visited.append(pos)
-    padded = np.zeros(n_batch * (n_rows + 1) * width, dtype=bool)
+    padded = np.zeros((n_rows + 1) * width * n_batch, dtype=bool)
     padded[np.concatenate(visited)] = True
-    padded = padded.reshape(n_batch, n_rows + 1, width)[:, 1:, 1:]
-    padded[~alive] = False
-    return padded
+    path = padded.reshape(n_rows + 1, width, n_batch)[1:, 1:].transpose(2, 0, 1)
+    path = np.ascontiguousarray(path)
+    path[~alive] = False
+    return path
 
 
 def one_to_one(path: np.ndarray, cost: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
+    "REFERENCE_SIZE",
     "TopGeometry",
     "TopHypotheses",
     "TopVectors",
@@ -29,6 +30,11 @@ __all__ = [
 
 TWO_PI = 2.0 * np.pi
 
+REFERENCE_SIZE: tuple[int, int] = (2688, 1512)
+"""Width and height (pixels) of the CVMHAT videos, the resolution the paper's parameters were set
+at. Horizontal box heights are expressed in pixels of an image this wide (Eq. 9 below), so the
+lambda of Eq. 11 keeps its published meaning at any resolution."""
+
 
 def box_centres(boxes: np.ndarray) -> np.ndarray:
     """Centres ``(N, 2)`` of ``(N, 4)`` x, y, w, h boxes."""
@@ -39,19 +45,25 @@ def box_centres(boxes: np.ndarray) -> np.ndarray:
 def horizontal_vectors(boxes: np.ndarray, image_width: float) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal-view vectors of Eqs. 9-10, sorted by x ascending.
 
+    Resolution-free: the paper's y_hor = 1 / h is taken with h in pixels of an image
+    ``REFERENCE_SIZE[0]`` (2688) pixels wide, ``y_hor = 1 / (h 2688 / W)``, so the same scene at
+    another resolution gives the same vectors, and at 2688 pixels they are the paper's exactly.
+    The width is the right unit: with the horizontal field of view alpha fixed (Eq. 6), the
+    focal length is proportional to W, and 1 / h to depth over focal length.
+
     Args:
         boxes: ``(Q, 4)`` x, y, w, h boxes in the horizontal image.
         image_width: W, the width of the horizontal image in pixels.
 
     Returns:
-        (vectors, order): ``(Q, 2)`` rows ``(x_hor, y_hor) = ((u - W/2) / (W/2), 1 / h)`` sorted by
-        x (ties broken by y, so the result does not depend on input order), and the indices of
-        the input boxes in that order.
+        (vectors, order): ``(Q, 2)`` rows ``(x_hor, y_hor) = ((u - W/2) / (W/2),
+        W / (2688 h))`` sorted by x (ties broken by y, so the result does not depend on input
+        order), and the indices of the input boxes in that order.
     """
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
     half = 0.5 * float(image_width)
     x = (boxes[:, 0] + 0.5 * boxes[:, 2] - half) / half
-    y = 1.0 / boxes[:, 3]
+    y = (float(image_width) / REFERENCE_SIZE[0]) / boxes[:, 3]
     order = np.lexsort((y, x))
     return np.stack([x[order], y[order]], axis=1), order
 

@@ -18,7 +18,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-__all__ = ["assign", "assignment_matrix", "augmented_cost_matrix"]
+__all__ = ["GAMMA_GRID", "assign", "assignment_matrix", "augmented_cost_matrix"]
+
+GAMMA_GRID: tuple[float, ...] = tuple(round(0.05 * k, 2) for k in range(1, 21))
+"""Candidate non-association costs for choosing gamma on validation data: 0.05, 0.10, ..., 1.0
+(normalised costs are < 1, so gamma = 1 accepts every pair the Hungarian solution wants)."""
 
 
 def _check_cost(cost: np.ndarray) -> np.ndarray:

@@ -1,229 +1,141 @@
-"""Association with the learned box-only geometry model, and its model file format.
+"""Association with a deployed matcher bundle on the CPU, without torch.
 
-The model replaces the handcrafted cost of the CVMHAT search: per frame, the features of
-:mod:`xvmatch.datasets.geometry_features` (which run the search itself for the best hypotheses)
-go through the :class:`~xvmatch.models.geometry_encoder.GeometryEncoder` inside a box-only
-:class:`~xvmatch.models.cross_view_matcher.CrossViewMatcher`, and its cost matrix in [0, 1] through
-the Hungarian assignment with a non-association cost gamma (Eqs. 1-2 of the geometric-priors
-paper, :func:`xvmatch.inference.assignment.assign`).
+Per frame pair, in numpy (:mod:`xvmatch.geometry.matcher_inputs`): the geometry features of the
+spatial-distribution search (on boxes mapped to the ideal setting when the cameras are known),
+and the pair cues the frame has: the appearance cost of the two views' crops (embedded by
+``appearance.onnx``, all crops of a frame in one batch) and, with cameras, the ray distance and
+cheirality cues. Frames go through ``matcher.onnx`` in padded batches; each cost matrix in
+[0, 1] goes through the Hungarian assignment with the non-association cost gamma (Eqs. 1-2 of
+the geometric-priors paper, :func:`xvmatch.inference.assignment.assign`).
 
-This module imports no torch at import time (the ``xvmatch associate`` command without
-``--model`` never loads it); torch is imported when a model is loaded.
-
-Model file (``torch.save`` of plain containers, read with ``weights_only=True``)::
-
-    {"format": "xvmatch-geometry-model", "format_version": 1,
-     "feature_version": FEATURE_VERSION, "feature_config": {...}, "model_config": {...},
-     "gamma": float, "meta": {...JSON-able...}, "state_dict": {name: tensor}}
-
-Written atomically (temporary file, then rename). Loading checks every key and version and says
-what is wrong in one line.
+The input settings of one bundle: boxes only (CVMHAT), images and boxes, images, boxes and
+cameras (and boxes and cameras). Ids are only used to report pairs, to find O when the user
+names the wearer's top-view id, and never reach the matcher.
 """
 
 from __future__ import annotations
 
-import io
-import json
-import math
 import os
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.datasets.geometry_features import (
-    FEATURE_VERSION,
-    FeatureConfig,
-    FrameFeatures,
-    collate_frames,
-    frame_features,
+from xvmatch.datasets.crops import box_crops
+from xvmatch.geometry.matcher_inputs import (
+    FrameCameras,
+    MatcherInputs,
+    appearance_cost,
+    camera_cues,
+    canonical_cues,
+    collate_inputs,
+    frame_cues,
+    matcher_features,
+    rectified_boxes,
 )
-from xvmatch.datasets.mot_boxes import atomic_write_bytes
+from xvmatch.geometry.spatial_features import FeatureConfig, FrameFeatures
 from xvmatch.inference.assignment import assign
+from xvmatch.inference.bundle import Bundle, load_bundle
 
 __all__ = [
-    "DEFAULT_MODEL_PATH",
-    "MODEL_FORMAT",
-    "MODEL_FORMAT_VERSION",
-    "LearnedGeometryModel",
+    "FrameCameraSource",
+    "FrameImages",
+    "LearnedMatcher",
     "associate_sequence_learned",
-    "load_geometry_model",
-    "save_geometry_model",
+    "load_matcher_bundle",
 ]
-
-MODEL_FORMAT = "xvmatch-geometry-model"
-MODEL_FORMAT_VERSION = 1
-DEFAULT_MODEL_PATH = Path(__file__).resolve().parents[1] / "models" / "default_geometry.pt"
-"""The shipped default (trained on the box simulator only, by
-``training/make_default_geometry.py``)."""
-
-_KEYS = (
-    "format",
-    "format_version",
-    "feature_version",
-    "feature_config",
-    "model_config",
-    "gamma",
-    "meta",
-    "state_dict",
-)
-
-
-def save_geometry_model(
-    path: str | os.PathLike,
-    model,
-    feature_config: FeatureConfig,
-    gamma: float = 0.5,
-    meta: Mapping[str, Any] | None = None,
-) -> Path:
-    """Write a geometry model file atomically.
-
-    Args:
-        path: destination (its folder must exist).
-        model: a :class:`~xvmatch.models.geometry_encoder.GeometryEncoder`.
-        feature_config: the feature configuration it was trained with.
-        gamma: the non-association cost to use with it.
-        meta: JSON-able notes (training data, seed, scores); never the training data itself.
-
-    Returns:
-        The path written.
-    """
-    import torch
-
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise ValueError(f"cannot write {os.fspath(path)!r}: folder {os.fspath(path.parent)!r} "
-                         "does not exist")
-    meta = dict(meta or {})
-    json.dumps(meta)  # must be JSON-able
-    if not 0.0 < float(gamma) <= 1.0:
-        raise ValueError(f"gamma must be in (0, 1], got {gamma}")
-    record = {
-        "format": MODEL_FORMAT,
-        "format_version": MODEL_FORMAT_VERSION,
-        "feature_version": FEATURE_VERSION,
-        "feature_config": feature_config.to_dict(),
-        "model_config": dict(model.config),
-        "gamma": float(gamma),
-        "meta": meta,
-        "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
-    }
-    buffer = io.BytesIO()
-    torch.save(record, buffer)
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
 
 
 @dataclass
-class LearnedGeometryModel:
-    """A loaded geometry model, ready to associate frames (CPU, eval mode, no gradients).
+class LearnedMatcher:
+    """A bundle ready to score frames (see the module docstring).
 
     Attributes:
-        matcher: the box-only :class:`~xvmatch.models.cross_view_matcher.CrossViewMatcher`.
-        feature_config: the feature configuration the model expects.
-        gamma: non-association cost stored with the model.
-        meta: the notes stored with the model.
-        path: where it was loaded from.
+        bundle: the loaded bundle.
     """
 
-    matcher: Any
-    feature_config: FeatureConfig
-    gamma: float = 0.5
-    meta: dict = field(default_factory=dict)
-    path: str = ""
+    bundle: Bundle
 
-    def costs(self, feats: list[FrameFeatures], batch_size: int = 64) -> list[np.ndarray]:
-        """``(M, N)`` cost matrices in [0, 1] of each frame, rows and columns in canonical
-        order (see :class:`FrameFeatures`)."""
-        import torch
+    @property
+    def feature_config(self) -> FeatureConfig:
+        """The geometry features the matcher expects."""
+        return self.bundle.manifest.feature_config
 
+    @property
+    def gamma(self) -> float:
+        """The bundle's non-association cost."""
+        return self.bundle.manifest.gamma
+
+    @property
+    def cues(self) -> tuple[str, ...]:
+        """The pair cues the matcher takes."""
+        return self.bundle.manifest.cues
+
+    def descriptors(self, image: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """``(K, D)`` appearance descriptors of the boxes of one image (one batch)."""
+        spec = self.bundle.manifest.appearance
+        if spec is None:
+            raise ValueError(f"{self.bundle.name}: this bundle has no appearance network")
+        return self.bundle.embed(box_crops(image, boxes, spec.crop_size, spec.context))
+
+    def inputs(
+        self,
+        features: FrameFeatures,
+        shape: tuple[int, int],
+        app: np.ndarray | None = None,
+        ray_distance: np.ndarray | None = None,
+        cheirality: np.ndarray | None = None,
+    ) -> MatcherInputs:
+        """One frame's matcher inputs from its features and raw (input-order) cues; cues the
+        matcher does not take are left out."""
+        cues, mask = frame_cues(
+            shape, self.cues,
+            app=app if "app" in self.cues else None,
+            ray_distance=ray_distance if "ray" in self.cues else None,
+            cheirality=cheirality if "cheir" in self.cues else None,
+        )
+        return MatcherInputs(features, canonical_cues(cues, features), mask)
+
+    def costs(self, frames: Sequence[MatcherInputs], batch_size: int = 64) -> list[np.ndarray]:
+        """``(M, N)`` float64 cost matrices in [0, 1] of each frame, canonical order."""
         out: list[np.ndarray] = []
-        with torch.inference_mode():
-            for start in range(0, len(feats), batch_size):
-                chunk = feats[start : start + batch_size]
-                batch = {k: torch.from_numpy(v) for k, v in collate_frames(chunk).items()}
-                result = self.matcher(
-                    batch["top"], batch["hor"], batch["hyp"], batch["pair"],
-                    batch["top_mask"], batch["hor_mask"], batch["hyp_mask"],
-                )
-                cost = result.cost.numpy().astype(np.float64)
-                for k, f in enumerate(chunk):
-                    _, m, n = f.shape
-                    out.append(cost[k, :m, :n])
+        for start in range(0, len(frames), batch_size):
+            chunk = list(frames[start : start + batch_size])
+            cost = self.bundle.costs(collate_inputs(chunk)).astype(np.float64)
+            if not np.isfinite(cost).all():
+                raise ValueError(f"{self.bundle.name}: the matcher gave non-finite costs; its "
+                                 "weights are corrupt (NaN or infinite): export it again")
+            for k, f in enumerate(chunk):
+                m, n = f.features.top.shape[0], f.features.hor.shape[0]
+                out.append(cost[k, :m, :n])
         return out
 
-    def associate(self, cost: np.ndarray, gamma: float | None = None) -> np.ndarray:
-        """``(K, 2)`` matched (top row, hor row) of an input-order cost matrix (Eq. 2)."""
-        return assign(cost, self.gamma if gamma is None else float(gamma))
 
-
-def _input_order(feats: FrameFeatures, cost: np.ndarray) -> np.ndarray:
-    """A canonical-order cost matrix put back in the input order of the frame's boxes."""
-    out = np.empty_like(cost)
-    out[np.ix_(feats.top_order, feats.hor_order)] = cost
-    return out
-
-
-def _mirrored(boxes: np.ndarray, width: float) -> np.ndarray:
-    """Boxes of the image mirrored left-right about x = width / 2."""
-    out = np.array(boxes, dtype=float).reshape(-1, 4)
-    out[:, 0] = width - out[:, 0] - out[:, 2]
-    return out
-
-
-def _fail(where: str, what: str) -> ValueError:
-    return ValueError(f"{where}: {what}")
-
-
-def load_geometry_model(path_or_default: str | os.PathLike = "default") -> LearnedGeometryModel:
-    """Load a geometry model file, or the shipped default with ``"default"``.
+def load_matcher_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,
+                        precision: str | None = None) -> LearnedMatcher:
+    """Open a bundle folder (or ``"default"``) as a :class:`LearnedMatcher` (``threads`` and
+    ``precision`` as :func:`~xvmatch.inference.bundle.load_bundle`).
 
     Raises:
-        ValueError: missing or unreadable file, another format, a version this code cannot
-            read, or weights that do not fit the stored configuration (one line, naming the file).
+        BundleError: an unusable bundle (one line naming the file).
     """
-    import torch
+    return LearnedMatcher(load_bundle(path_or_default, threads, precision))
 
-    from xvmatch.models.cross_view_matcher import CrossViewMatcher
-    from xvmatch.models.geometry_encoder import GeometryEncoder
 
-    path = DEFAULT_MODEL_PATH if str(path_or_default) == "default" else Path(path_or_default)
-    where = os.fspath(path)
-    if not path.is_file():
-        hint = " (run training/make_default_geometry.py to rebuild it)" if (
-            path == DEFAULT_MODEL_PATH) else ""
-        raise _fail(where, f"no such model file{hint}")
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise _fail(where, f"not a geometry model file ({type(exc).__name__}: "
-                    f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
-    if not isinstance(record, dict) or record.get("format") != MODEL_FORMAT:
-        raise _fail(where, f"not a geometry model file (expected format {MODEL_FORMAT!r})")
-    missing = [k for k in _KEYS if k not in record]
-    if missing:
-        raise _fail(where, f"model file lacks {', '.join(missing)}")
-    if record["format_version"] != MODEL_FORMAT_VERSION:
-        raise _fail(where, f"model format version {record['format_version']}, this xvmatch "
-                    f"reads {MODEL_FORMAT_VERSION}")
-    if record["feature_version"] != FEATURE_VERSION:
-        raise _fail(where, f"model trained on feature version {record['feature_version']}, "
-                    f"this xvmatch computes {FEATURE_VERSION}; retrain it (xvmatch fit-geometry)")
-    try:
-        feature_config = FeatureConfig.from_dict(record["feature_config"])
-        model = GeometryEncoder(**record["model_config"])
-        model.load_state_dict(record["state_dict"])
-    except (TypeError, ValueError, RuntimeError) as exc:
-        raise _fail(where, f"model does not fit its configuration: "
-                    f"{str(exc).splitlines()[0]}") from None
-    gamma = float(record["gamma"])
-    if not 0.0 < gamma <= 1.0 or not math.isfinite(gamma):
-        raise _fail(where, f"gamma must be in (0, 1], got {gamma}")
-    model.eval()
-    matcher = CrossViewMatcher(model).eval()
-    return LearnedGeometryModel(matcher, feature_config, gamma, dict(record["meta"]), where)
+class FrameImages:
+    """Structural type of an image source (:class:`xvmatch.datasets.frame_sources.
+    FrameSource`): ``get(frame) -> (H, W, 3) uint8 BGR``."""
+
+    def get(self, frame: int) -> np.ndarray:  # pragma: no cover - a protocol
+        raise NotImplementedError
+
+
+class FrameCameraSource:
+    """Structural type of a camera source (:class:`xvmatch.datasets.camera_frames.
+    CameraFrames`): ``get(frame) -> FrameCameras``."""
+
+    def get(self, frame: int) -> FrameCameras:  # pragma: no cover - a protocol
+        raise NotImplementedError
 
 
 class _FrameLike:
@@ -233,11 +145,88 @@ class _FrameLike:
     boxes: np.ndarray
 
 
+def _input_order(feats: FrameFeatures, cost: np.ndarray) -> np.ndarray:
+    """A canonical-order cost matrix put back in the input order of the frame's boxes."""
+    out = np.empty_like(cost)
+    out[np.ix_(feats.top_order, feats.hor_order)] = cost
+    return out
+
+
+def _mirrored(boxes: np.ndarray, axis: float) -> np.ndarray:
+    """Boxes of the image mirrored left-right about ``x = axis / 2``."""
+    out = np.array(boxes, dtype=float).reshape(-1, 4)
+    out[:, 0] = axis - out[:, 0] - out[:, 2]
+    return out
+
+
+def _frame_features(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    size: tuple[float, float],
+    configs: Sequence[FeatureConfig],
+    camera: int | None,
+    cameras: FrameCameras | None,
+    mirror: bool,
+) -> list[list[FrameFeatures]]:
+    """Features of one frame pair per configuration: ``[plain]``, or ``[plain, mirrored]``.
+
+    The mirrored copy is the same scene seen in a mirror: the horizontal boxes reflected about
+    the image centre, the top boxes about any vertical line (the features do not depend on
+    where); with cameras, the boxes are first mapped to the ideal setting and then reflected.
+    """
+    if cameras is not None:
+        top_boxes, hor_boxes, camera = rectified_boxes(top_boxes, hor_boxes, cameras, camera)
+    groups = []
+    for config in configs:
+        group = [matcher_features(top_boxes, hor_boxes, size, config, camera)]
+        if mirror:
+            group.append(matcher_features(_mirrored(top_boxes, 0.0),
+                                          _mirrored(hor_boxes, size[0]), size, config, camera))
+        groups.append(group)
+    return groups
+
+
+def _features_of_chunk(inputs, size, configs, mirror) -> list[list[list[FrameFeatures]]]:
+    return [_frame_features(tb, hb, size, configs, cam, cams, mirror)
+            for tb, hb, cam, cams in inputs]
+
+
+def _feature_stream(
+    inputs: Sequence[tuple[np.ndarray, np.ndarray, int | None, FrameCameras | None]],
+    size: tuple[float, float],
+    configs: Sequence[FeatureConfig],
+    mirror: bool,
+    workers: int,
+    chunk: int = 32,
+) -> Iterator[list[list[FrameFeatures]]]:
+    """:func:`_frame_features` of each ``(top boxes, hor boxes, camera row, cameras)`` in
+    order, computed by ``workers`` processes (the spatial-distribution search dominates)."""
+    if workers == 1 or len(inputs) <= chunk:
+        for tb, hb, cam, cams in inputs:
+            yield _frame_features(tb, hb, size, configs, cam, cams, mirror)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
+    # "spawn": a forked child may inherit onnxruntime's or OpenCV's thread pools and hang.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(int(workers), len(chunks)),
+                             mp_context=context) as pool:
+        futures = [pool.submit(_features_of_chunk, c, size, configs, mirror) for c in chunks]
+        try:
+            for future in futures:
+                yield from future.result()
+        finally:
+            for future in futures:
+                future.cancel()
+
+
 def associate_sequence_learned(
     top: Mapping[int, _FrameLike],
     hor: Mapping[int, _FrameLike],
     hor_width: float,
-    model: LearnedGeometryModel | Sequence[LearnedGeometryModel],
+    model: LearnedMatcher | Sequence[LearnedMatcher],
     camera_id: int | None = None,
     gamma: float | None = None,
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
@@ -247,40 +236,46 @@ def associate_sequence_learned(
     mirror: bool = False,
     costs_out: dict[int, np.ndarray] | None = None,
     workers: int = 1,
+    top_images: FrameImages | None = None,
+    hor_images: FrameImages | None = None,
+    cameras: FrameCameraSource | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
-    """Associate every frame on its own with the learned model; ``{frame: [(top_id, hor_id)]}``.
-
-    Ids are only used to report pairs and to find O when ``camera_id`` is given; they never
-    enter the model, which sees the boxes only, in a canonical order.
+    """Associate every frame on its own with the learned matcher; ``{frame: [(top_id, hor_id)]}``.
 
     Args:
         top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (e.g. ``FrameBoxes``).
         hor_width: width of the horizontal image (pixels).
-        model: from :func:`load_geometry_model`, or several: an ensemble whose cost matrices
-            are averaged (features are computed once per distinct feature configuration).
+        model: a :class:`LearnedMatcher`, or several: an ensemble whose cost matrices are
+            averaged (features computed once per distinct feature configuration).
         camera_id: top-view id of the camera wearer (O given); frames where it is absent
             search O.
         gamma: non-association cost (default: the (first) model's own).
         progress: optional wrapper around the frame iterator (e.g. a progress bar).
         hor_height: height of the horizontal image (default ``hor_width * 9 / 16``).
         frames: frames to process (default the union of both views' frames).
-        batch_size: frames per model call.
-        mirror: test-time augmentation: also run the model on both views mirrored left-right
-            (the same scene seen in a mirror, which the geometry maps one to one) and average
-            the two cost matrices; twice the time.
+        batch_size: frames per matcher call.
+        mirror: test-time augmentation: also score the scene mirrored left-right and average
+            the two cost matrices (the cues do not change in a mirror); twice the search.
         costs_out: if given, filled with ``{frame: (M, N) cost matrix}`` (rows and columns in
-            the input order of the frame's boxes) of every frame with boxes in both views, e.g.
-            to choose gamma on validation frames without running the model again.
-        workers: processes computing the features (1: in this process); the result is the same
-            for any number.
+            the input order of the frame's boxes) of every frame with boxes in both views.
+        workers: processes computing the geometry features (1: in this process); the result
+            is the same for any number.
+        top_images, hor_images: image sources of both views (``get(frame)``), for the
+            appearance cue; both or neither.
+        cameras: the calibrated cameras of each frame (``get(frame)``), for the camera cues and
+            the rectified geometry.
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
     if int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    models = [model] if isinstance(model, LearnedGeometryModel) else list(model)
+    if (top_images is None) != (hor_images is None):
+        raise ValueError("give the images of both views or of neither")
+    models = [model] if isinstance(model, LearnedMatcher) else list(model)
     if not models:
         raise ValueError("no model given")
+    if top_images is not None and any(m.bundle.manifest.appearance is None for m in models):
+        raise ValueError("images were given but a bundle has no appearance network")
     configs: list[FeatureConfig] = []
     for m in models:
         if m.feature_config not in configs:
@@ -289,16 +284,39 @@ def associate_sequence_learned(
     height = float(hor_height) if hor_height is not None else float(hor_width) * 9.0 / 16.0
     size = (float(hor_width), height)
     order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})
+    manifest = models[0].bundle.manifest
     out: dict[int, list[tuple[int, int]]] = {}
-    pending: list[tuple[int, list[list[FrameFeatures]]]] = []
+    pending: list[tuple[int, list[list[FrameFeatures]], dict]] = []
+
+    def raw_cues(frame: int) -> dict:
+        """The frame's cues in input order: appearance cost, ray distance, cheirality."""
+        t_boxes, h_boxes = top[frame].boxes, hor[frame].boxes
+        cues: dict = {}
+        if top_images is not None:
+            per_model = []
+            for m in models:
+                a = m.descriptors(top_images.get(frame), t_boxes)
+                b = m.descriptors(hor_images.get(frame), h_boxes)
+                per_model.append(appearance_cost(a, b))
+            cues["app"] = per_model
+        if cameras is not None:
+            ray, cheir = camera_cues(cameras.get(frame), t_boxes, h_boxes, manifest.margin,
+                                     manifest.beta)
+            cues["ray_distance"], cues["cheirality"] = ray, cheir
+        return cues
 
     def flush() -> None:
         per_model = []
-        for m in models:
+        for k, m in enumerate(models):
             c = configs.index(m.feature_config)
-            views = [f for _, groups in pending for f in groups[c]]
-            per_model.append(iter(m.costs(views, batch_size)))
-        for frame, groups in pending:
+            items = []
+            for frame, groups, cues in pending:
+                shape = (len(top[frame].ids), len(hor[frame].ids))
+                for feats in groups[c]:
+                    items.append(m.inputs(feats, shape, cues["app"][k] if "app" in cues else None,
+                                          cues.get("ray_distance"), cues.get("cheirality")))
+            per_model.append(iter(m.costs(items, batch_size)))
+        for frame, groups, _ in pending:
             cost = np.mean([
                 _input_order(f, next(costs))
                 for m, costs in zip(models, per_model, strict=True)
@@ -322,14 +340,15 @@ def associate_sequence_learned(
             if camera_id is not None:
                 hits = np.flatnonzero(np.asarray(top[frame].ids) == camera_id)
                 cam = int(hits[0]) if hits.size else None
-            inputs.append((top[frame].boxes, hor[frame].boxes, cam))
+            inputs.append((top[frame].boxes, hor[frame].boxes, cam,
+                           cameras.get(frame) if cameras is not None else None))
     stream = _feature_stream(inputs, size, configs, mirror, workers)
     try:
         for frame in progress(order) if progress else order:
             if not both(frame):
                 out[frame] = []
                 continue
-            pending.append((frame, next(stream)))
+            pending.append((frame, next(stream), raw_cues(frame)))
             if len(pending) >= batch_size:
                 flush()
         if pending:
@@ -337,64 +356,3 @@ def associate_sequence_learned(
     finally:
         stream.close()  # shuts the worker pool down, also on an error or an interrupt
     return {f: out[f] for f in order}
-
-
-def _frame_groups(
-    top_boxes: np.ndarray,
-    hor_boxes: np.ndarray,
-    size: tuple[float, float],
-    configs: Sequence[FeatureConfig],
-    camera: int | None,
-    mirror: bool,
-) -> list[list[FrameFeatures]]:
-    """Features of one frame pair for each feature configuration: ``[plain]``, or
-    ``[plain, mirrored]`` with ``mirror``."""
-    groups = []
-    for config in configs:
-        group = [frame_features(top_boxes, hor_boxes, size, config, camera)]
-        if mirror:
-            top_width = float(np.max(top_boxes[:, 0] + top_boxes[:, 2]))
-            group.append(frame_features(_mirrored(top_boxes, top_width),
-                                        _mirrored(hor_boxes, size[0]), size, config, camera))
-        groups.append(group)
-    return groups
-
-
-def _groups_of_chunk(
-    inputs: Sequence[tuple[np.ndarray, np.ndarray, int | None]],
-    size: tuple[float, float],
-    configs: Sequence[FeatureConfig],
-    mirror: bool,
-) -> list[list[list[FrameFeatures]]]:
-    return [_frame_groups(tb, hb, size, configs, cam, mirror) for tb, hb, cam in inputs]
-
-
-def _feature_stream(
-    inputs: Sequence[tuple[np.ndarray, np.ndarray, int | None]],
-    size: tuple[float, float],
-    configs: Sequence[FeatureConfig],
-    mirror: bool,
-    workers: int,
-    chunk: int = 32,
-) -> Iterator[list[list[FrameFeatures]]]:
-    """:func:`_frame_groups` of each ``(top boxes, hor boxes, camera row)`` in order, computed
-    by ``workers`` processes (the k-best hypothesis search dominates the learned path)."""
-    if workers == 1 or len(inputs) <= chunk:
-        for tb, hb, cam in inputs:
-            yield _frame_groups(tb, hb, size, configs, cam, mirror)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
-    # "spawn": the parent has torch (and its thread pools) loaded; a forked child may hang.
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(int(workers), len(chunks)),
-                             mp_context=context) as pool:
-        futures = [pool.submit(_groups_of_chunk, c, size, configs, mirror) for c in chunks]
-        try:
-            for future in futures:
-                yield from future.result()
-        finally:
-            for future in futures:
-                future.cancel()

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,7 @@ __all__ = [
     "CropTransform",
     "Preprocessing",
     "ResNetTrunk",
+    "appearance_blob",
     "appearance_distance",
     "appearance_from_weights",
     "appearance_resnet18",
@@ -400,6 +401,8 @@ class AppearanceWeights:
         hidden_dim: first FC layer.
         trunk: keyword arguments of the trunk (e.g. ``{"depth": 50}``, ``{"widths": [...]}``).
         meta: free-form metadata (JSON types).
+        blob: the whole record with its weights when it was read from memory (a matcher
+            model file embeds one); None: :meth:`state_dict` reads ``path``.
     """
 
     path: Path
@@ -409,6 +412,7 @@ class AppearanceWeights:
     hidden_dim: int
     trunk: dict = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
+    blob: dict | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_file(cls, path: str | os.PathLike) -> AppearanceWeights:
@@ -419,22 +423,38 @@ class AppearanceWeights:
             ValueError: not an appearance weights file, or an unsupported version.
         """
         path = Path(path)
-        blob = _load_weights_blob(path)
-        p = blob["preprocessing"]
-        return cls(
-            path=path,
-            arch=str(blob["arch"]),
-            preprocessing=Preprocessing(tuple(p["input_size"]), tuple(p["mean"]),
-                                        tuple(p["std"])),
-            embedding_dim=int(blob["embedding_dim"]),
-            hidden_dim=int(blob["hidden_dim"]),
-            trunk=dict(blob.get("trunk", {})),
-            meta=dict(blob.get("meta", {})),
-        )
+        return replace(cls.from_blob(_load_weights_blob(path), path), blob=None)
+
+    @classmethod
+    def from_blob(cls, blob: Mapping[str, Any], path: str | os.PathLike) -> AppearanceWeights:
+        """The record of an :func:`appearance_blob` (read from ``path``, named in errors).
+
+        Raises:
+            ValueError: a field missing or of the wrong type (the message names it).
+        """
+        where = os.fspath(path)
+        try:
+            p = blob["preprocessing"]
+            record = cls(
+                path=Path(path),
+                arch=str(blob["arch"]),
+                preprocessing=Preprocessing(tuple(p["input_size"]), tuple(p["mean"]),
+                                            tuple(p["std"])),
+                embedding_dim=int(blob["embedding_dim"]),
+                hidden_dim=int(blob["hidden_dim"]),
+                trunk=dict(blob.get("trunk", {})),
+                meta=dict(blob.get("meta", {})),
+                blob=dict(blob),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{where}: malformed appearance record ({type(exc).__name__}: "
+                             f"{exc})") from None
+        return record
 
     def state_dict(self) -> dict[str, Tensor]:
         """The network's parameters and buffers."""
-        return dict(_load_weights_blob(self.path)["state_dict"])
+        blob = self.blob if self.blob is not None else _load_weights_blob(self.path)
+        return dict(blob["state_dict"])
 
     def transforms(self) -> CropTransform:
         """The crop preprocessing these weights were trained with."""
@@ -472,6 +492,23 @@ def _trunk_config(net: AppearanceNet) -> dict:
     return {}
 
 
+def appearance_blob(net: AppearanceNet, meta: Mapping[str, Any] | None = None) -> dict:
+    """The record of a network as plain containers (architecture, preprocessing, sizes,
+    metadata and weights): what :func:`save_appearance_weights` writes, and what a matcher
+    model file embeds."""
+    return {
+        "format": WEIGHTS_FORMAT,
+        "version": _WEIGHTS_VERSION,
+        "arch": net.arch,
+        "preprocessing": {k: list(v) for k, v in asdict(net.preprocessing).items()},
+        "embedding_dim": net.embedding_dim,
+        "hidden_dim": net.hidden_dim,
+        "trunk": _trunk_config(net),
+        "meta": dict(meta or {}),
+        "state_dict": {k: v.detach().cpu().clone() for k, v in net.state_dict().items()},
+    }
+
+
 def save_appearance_weights(
     net: AppearanceNet, path: str | os.PathLike, meta: Mapping[str, Any] | None = None
 ) -> AppearanceWeights:
@@ -487,17 +524,7 @@ def save_appearance_weights(
         The record of the written file.
     """
     path = Path(path)
-    blob = {
-        "format": WEIGHTS_FORMAT,
-        "version": _WEIGHTS_VERSION,
-        "arch": net.arch,
-        "preprocessing": {k: list(v) for k, v in asdict(net.preprocessing).items()},
-        "embedding_dim": net.embedding_dim,
-        "hidden_dim": net.hidden_dim,
-        "trunk": _trunk_config(net),
-        "meta": dict(meta or {}),
-        "state_dict": {k: v.detach().cpu().clone() for k, v in net.state_dict().items()},
-    }
+    blob = appearance_blob(net, meta)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     torch.save(blob, tmp)

@@ -1,48 +1,89 @@
-"""The cross-view matcher: geometry model, optional other cues, one fusion head.
+"""The one cross-view matcher: box geometry, optional appearance and camera cues, one dustbin.
 
-``CrossViewMatcher`` composes the box-only :class:`~xvmatch.models.geometry_encoder.
-GeometryEncoder` with any other normalised costs (e.g. an appearance cost from a Siamese
-branch), fused by a head of :mod:`xvmatch.models.fusion_heads` under the name ``"geo"`` for the
-geometry cost. With boxes only (no other cost) the fused cost is the geometry cost itself.
+``CrossViewMatcher`` wraps the box-only :class:`~xvmatch.models.geometry_encoder.
+GeometryEncoder` (the spatial-distribution features of the CVMHAT search, attention across the
+two sets) and fuses into it the pair cues that a frame may or may not have, each a normalised
+``(M, N)`` cost in [0, 1]:
+
+* ``"app"``: the Siamese appearance cost ``|a - b| / 2`` of the two crops' descriptors
+  (Sec. 3.3.2 of the CVMHAT paper; :mod:`xvmatch.models.appearance_net`), with images;
+* ``"ray"``: ``tanh`` of the distance between the two boxes' projection rays (Eqs. 4-6 of the
+  geometric-priors paper), with calibrated cameras;
+* ``"cheir"``: 1 where the cheirality test fails (Eq. 7), with calibrated cameras.
+
+A cue enters twice, both times as ``(logit(c) * available, available)`` so that a missing cue is
+an input of its own rather than a fake value: early, embedded and added to every pair's
+embedding before the attention rounds (so attention reasons over appearance and rays too), and
+late, in the fusion head that adds a learned per-pair term to the geometry score. The fused
+scores, a learnable dustbin score (the non-association cost) and log-space Sinkhorn give matching
+probabilities P and the cost ``1 - P``; Hungarian assignment with gamma runs outside the graph.
+
+One trained model covers the three input settings of the deployed matcher: boxes only (every cue
+unavailable), images without cameras (``app``), images with cameras (``app``, ``ray``,
+``cheir``). Availability is a ``(B, K)`` mask, never a Python branch, so the module exports to
+ONNX with dynamic numbers of frames, people and hypotheses.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import NamedTuple
+from collections.abc import Sequence
 
+import torch
 from torch import Tensor, nn
 
 from xvmatch.models.geometry_encoder import GeometryEncoder, GeometryOutput
 
-__all__ = ["CrossViewMatcher", "MatcherOutput"]
+__all__ = ["CUES", "CrossViewMatcher"]
 
+CUES: tuple[str, ...] = ("app", "ray", "cheir")
+"""The pair cues a matcher can take besides the box geometry, in input order."""
 
-class MatcherOutput(NamedTuple):
-    """Output of :class:`CrossViewMatcher`.
-
-    Attributes:
-        cost: ``(B, M, N)`` fused cost in [0, 1] (the geometry cost when box-only).
-        geometry: the :class:`GeometryOutput` of the geometry model.
-    """
-
-    cost: Tensor
-    geometry: GeometryOutput
+_EPS = 1e-4
 
 
 class CrossViewMatcher(nn.Module):
-    """Geometry model plus optional extra cues, fused into one normalised cost matrix.
+    """Geometry encoder plus optional pair cues, fused early and late, with one dustbin.
 
     Args:
-        geometry: the box-only geometry model.
-        fusion: fusion head over ``{"geo": ..., **other costs}``; needed only when other costs
-            are passed to :meth:`forward`.
+        geometry: the box-only geometry encoder (its dustbin and Sinkhorn are the matcher's).
+        cues: names of the pair cues this matcher takes, a subset of :data:`CUES` in that
+            order; empty for a box-only matcher.
+        hidden: hidden units of the late fusion head.
     """
 
-    def __init__(self, geometry: GeometryEncoder, fusion: nn.Module | None = None) -> None:
+    def __init__(
+        self, geometry: GeometryEncoder, cues: Sequence[str] = CUES, hidden: int = 32
+    ) -> None:
         super().__init__()
+        cues = tuple(cues)
+        if isinstance(cues, str) or any(c not in CUES for c in cues) or list(cues) != [
+            c for c in CUES if c in cues
+        ]:
+            raise ValueError(f"cues must be a subset of {CUES} in that order, got {cues}")
+        if int(hidden) < 1:
+            raise ValueError(f"hidden must be >= 1, got {hidden}")
         self.geometry = geometry
-        self.fusion = fusion
+        self.cues = cues
+        self.config = {"cues": list(cues), "hidden": int(hidden)}
+        k = len(cues)
+        if k:
+            width = int(geometry.config["width"])
+            self.cue_embed = nn.Sequential(
+                nn.Linear(2 * k, width), nn.ReLU(), nn.Linear(width, width)
+            )
+            self.fusion = nn.Sequential(
+                nn.Linear(2 * k + 1, int(hidden)), nn.ReLU(), nn.Linear(int(hidden), 1)
+            )
+            self.fusion_linear = nn.Linear(2 * k, 1)
+            # Start as the geometry model alone: cues add nothing until trained.
+            for layer in (self.cue_embed[2], self.fusion[2], self.fusion_linear):
+                nn.init.zeros_(layer.weight)
+                nn.init.zeros_(layer.bias)
+
+    @property
+    def n_cues(self) -> int:
+        """K, the number of pair cues."""
+        return len(self.cues)
 
     def forward(
         self,
@@ -53,24 +94,41 @@ class CrossViewMatcher(nn.Module):
         top_mask: Tensor,
         hor_mask: Tensor,
         hyp_mask: Tensor,
-        other_costs: Mapping[str, Tensor] | None = None,
-    ) -> MatcherOutput:
-        """Cost matrix of a padded batch (inputs as :meth:`GeometryEncoder.forward`).
+        cues: Tensor | None = None,
+        cue_mask: Tensor | None = None,
+    ) -> GeometryOutput:
+        """Match a batch of frames.
 
         Args:
-            other_costs: optional ``{name: (B, M, N) cost in [0, 1]}`` of other cues (e.g.
-                ``"app"``), fused with the geometry cost ``"geo"``; None or empty: box-only.
+            top, hor, hyp, pair, top_mask, hor_mask, hyp_mask: the geometry features, as in
+                :meth:`GeometryEncoder.forward`.
+            cues: ``(B, M, N, K)`` pair cues in [0, 1], in the order of :attr:`cues` (ignored
+                where unavailable); None for a box-only call.
+            cue_mask: ``(B, K)`` bool, which cues each frame has; None: none.
+
+        Returns:
+            :class:`~xvmatch.models.geometry_encoder.GeometryOutput` of the fused matcher.
         """
-        geo = self.geometry(top, hor, hyp, pair, top_mask, hor_mask, hyp_mask)
-        if not other_costs:
-            return MatcherOutput(cost=geo.cost, geometry=geo)
-        if self.fusion is None:
-            raise ValueError(
-                f"other costs ({', '.join(other_costs)}) were given but the matcher has no "
-                "fusion head; build it with fusion=SumFusionHead(...) or another head"
-            )
-        if "geo" in other_costs:
-            raise ValueError("'geo' is the geometry model's own cost; rename the other cost")
-        fused = self.fusion({"geo": geo.cost, **other_costs})
-        pair_mask = (top_mask[:, :, None] & hor_mask[:, None, :]).to(fused.dtype)
-        return MatcherOutput(cost=fused * pair_mask + (1.0 - pair_mask), geometry=geo)
+        enc = self.geometry
+        extra = None
+        x = None
+        if self.n_cues and cues is not None and cue_mask is not None:
+            avail = cue_mask.to(top.dtype)[:, None, None, :].expand_as(cues)
+            logit = torch.logit(cues.clamp(_EPS, 1.0 - _EPS)) * avail
+            x = torch.cat([logit, avail], dim=-1)  # (B, M, N, 2K)
+            extra = self.cue_embed(x)
+        a, b, pair_emb, frame_logits = enc.encode(
+            top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, pair_extra=extra
+        )
+        scores, pa, pb = enc.pair_scores(a, b, pair_emb)
+        if x is not None:
+            late = self.fusion(torch.cat([x, scores[..., None]], dim=-1)).squeeze(-1)
+            scores = scores + late + self.fusion_linear(x).squeeze(-1)
+        cost, log_assignment = enc.match(scores, top_mask, hor_mask)
+        return GeometryOutput(
+            cost=cost,
+            log_assignment=log_assignment,
+            hypothesis_logits=frame_logits,
+            top_descriptors=nn.functional.normalize(pa, dim=-1),
+            hor_descriptors=nn.functional.normalize(pb, dim=-1),
+        )

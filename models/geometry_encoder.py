@@ -1,7 +1,7 @@
 """The box-only learned geometry model: attention across the two sets, dustbin, log-Sinkhorn.
 
-Input: the features of :mod:`xvmatch.datasets.geometry_features` for a batch of frames, padded
-with masks (:func:`~xvmatch.datasets.geometry_features.collate_frames`): per hypothesis h of the
+Input: the features of :mod:`xvmatch.geometry.spatial_features` for a batch of frames, padded
+with masks (:func:`~xvmatch.geometry.spatial_features.collate_frames`): per hypothesis h of the
 CVMHAT search (Section 3.2 of the CVMHAT paper) and pair (i, j) a feature vector, per hypothesis
 a few scalars, per person its box geometry.
 
@@ -30,7 +30,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
-from xvmatch.datasets.geometry_features import (
+from xvmatch.geometry.spatial_features import (
     HOR_FEATURES,
     HYP_FEATURES,
     PAIR_FEATURES,
@@ -295,6 +295,102 @@ class GeometryEncoder(nn.Module):
         self.dustbin = nn.Parameter(torch.tensor(float(initial_dustbin)))
         self.sinkhorn = LogSinkhorn(sinkhorn_iterations)
 
+    def encode(
+        self,
+        top: Tensor,
+        hor: Tensor,
+        hyp: Tensor,
+        pair: Tensor,
+        top_mask: Tensor,
+        hor_mask: Tensor,
+        hyp_mask: Tensor,
+        pair_extra: Tensor | None = None,
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """Steps 1-3: people and pair embeddings after the attention rounds.
+
+        Args:
+            top, hor, hyp, pair, top_mask, hor_mask, hyp_mask: as in :meth:`forward`.
+            pair_extra: optional ``(B, M, N, D)`` added to every pair's embedding before the
+                people embeddings and the attention rounds (other cues of the pair, e.g. the
+                appearance cost, embedded by :class:`~xvmatch.models.cross_view_matcher.
+                CrossViewMatcher`).
+
+        Returns:
+            ``(top (B, M, D), hor (B, N, D), pair (B, M, N, D), hypothesis logits (B, H))``.
+        """
+        pair_mask = top_mask[:, :, None] & hor_mask[:, None, :]  # (B, M, N)
+        hyp_pair_mask = hyp_mask[:, :, None, None] & pair_mask[:, None]  # (B, H, M, N)
+        b, h, m, n, _ = pair.shape
+
+        # 1. Per-hypothesis pair embeddings.
+        e = self.pair_in(pair) + self.hyp_in(hyp)[:, :, None, None, :]
+        e = e * hyp_pair_mask[..., None].to(e.dtype)
+
+        # 2. Hypothesis weights: frame-level + pair-level scores, softmax over H. Explicit sizes
+        #    (not flatten / -1) keep the exported graph valid when a dimension is 0.
+        flat = e.reshape(b, h, m * n, e.shape[-1])
+        flat_mask = hyp_pair_mask.reshape(b, h, m * n)
+        pooled = torch.cat(
+            [
+                _masked_mean(flat, flat_mask, dim=2),
+                _masked_max(flat, flat_mask, dim=2),
+                self.hyp_in(hyp),
+            ],
+            dim=-1,
+        )
+        frame_logits = self.hyp_score(pooled).squeeze(-1).masked_fill(~hyp_mask, _NEG)
+        local = self.pair_hyp_score(e).squeeze(-1)  # (B, H, M, N)
+        logits = (frame_logits[:, :, None, None] + local).masked_fill(~hyp_pair_mask, _NEG)
+        weights = torch.softmax(logits, dim=1) * hyp_pair_mask.to(e.dtype)
+        mixed = (weights.unsqueeze(-1) * e).sum(dim=1)
+        pair_emb = self.pair_mix(
+            torch.cat([mixed, _masked_max(e, hyp_pair_mask, dim=1)], dim=-1)
+        )
+        if pair_extra is not None:
+            pair_emb = pair_emb + pair_extra
+        pair_emb = pair_emb * pair_mask[..., None].to(e.dtype)
+
+        # 3. People embeddings and attention across the two sets.
+        a = self.top_in(
+            torch.cat(
+                [
+                    top,
+                    _masked_mean(pair_emb, pair_mask, dim=2),
+                    _masked_max(pair_emb, pair_mask, dim=2),
+                ],
+                dim=-1,
+            )
+        ) * top_mask[..., None].to(e.dtype)
+        t_mask = pair_mask.transpose(1, 2)
+        b_emb = self.hor_in(
+            torch.cat(
+                [
+                    hor,
+                    _masked_mean(pair_emb.transpose(1, 2), t_mask, dim=2),
+                    _masked_max(pair_emb.transpose(1, 2), t_mask, dim=2),
+                ],
+                dim=-1,
+            )
+        ) * hor_mask[..., None].to(e.dtype)
+        for layer in self.layers:
+            a, b_emb, pair_emb = layer(a, b_emb, pair_emb, top_mask, hor_mask, pair_mask)
+        return a, b_emb, pair_emb, frame_logits
+
+    def pair_scores(self, top: Tensor, hor: Tensor, pair: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Step 4a: ``(scores (B, M, N), top descriptors, hor descriptors)`` from the encoded
+        people and pairs (an MLP of the pair embedding plus a scaled dot product)."""
+        pa, pb = self.top_desc(top), self.hor_desc(hor)
+        scores = self.score(pair).squeeze(-1) + (pa @ pb.transpose(1, 2)) * self.dot_scale
+        return scores, pa, pb
+
+    def match(self, scores: Tensor, top_mask: Tensor, hor_mask: Tensor) -> tuple[Tensor, Tensor]:
+        """Step 4b: the dustbin and log-Sinkhorn; ``(cost 1 - P (B, M, N), log assignment
+        (B, M + 1, N + 1))``, cost 1 on padding."""
+        pair_mask = top_mask[:, :, None] & hor_mask[:, None, :]
+        log_assignment = self.sinkhorn(scores, self.dustbin, top_mask, hor_mask)
+        prob = log_assignment[:, :-1, :-1].exp() * pair_mask.to(scores.dtype)
+        return (1.0 - prob).clamp(0.0, 1.0), log_assignment
+
     def forward(
         self,
         top: Tensor,
@@ -317,63 +413,11 @@ class GeometryEncoder(nn.Module):
         Returns:
             :class:`GeometryOutput`.
         """
-        pair_mask = top_mask[:, :, None] & hor_mask[:, None, :]  # (B, M, N)
-        hyp_pair_mask = hyp_mask[:, :, None, None] & pair_mask[:, None]  # (B, H, M, N)
-
-        # 1. Per-hypothesis pair embeddings.
-        e = self.pair_in(pair) + self.hyp_in(hyp)[:, :, None, None, :]
-        e = e * hyp_pair_mask[..., None].to(e.dtype)
-
-        # 2. Hypothesis weights: frame-level + pair-level scores, softmax over H.
-        flat, flat_mask = e.flatten(2, 3), hyp_pair_mask.flatten(2, 3)
-        pooled = torch.cat(
-            [
-                _masked_mean(flat, flat_mask, dim=2),
-                _masked_max(flat, flat_mask, dim=2),
-                self.hyp_in(hyp),
-            ],
-            dim=-1,
+        a, b, pair_emb, frame_logits = self.encode(
+            top, hor, hyp, pair, top_mask, hor_mask, hyp_mask
         )
-        frame_logits = self.hyp_score(pooled).squeeze(-1).masked_fill(~hyp_mask, _NEG)
-        local = self.pair_hyp_score(e).squeeze(-1)  # (B, H, M, N)
-        logits = (frame_logits[:, :, None, None] + local).masked_fill(~hyp_pair_mask, _NEG)
-        weights = torch.softmax(logits, dim=1) * hyp_pair_mask.to(e.dtype)
-        mixed = (weights.unsqueeze(-1) * e).sum(dim=1)
-        pair_emb = self.pair_mix(
-            torch.cat([mixed, _masked_max(e, hyp_pair_mask, dim=1)], dim=-1)
-        ) * pair_mask[..., None].to(e.dtype)
-
-        # 3. People embeddings and attention across the two sets.
-        a = self.top_in(
-            torch.cat(
-                [
-                    top,
-                    _masked_mean(pair_emb, pair_mask, dim=2),
-                    _masked_max(pair_emb, pair_mask, dim=2),
-                ],
-                dim=-1,
-            )
-        ) * top_mask[..., None].to(e.dtype)
-        t_mask = pair_mask.transpose(1, 2)
-        b = self.hor_in(
-            torch.cat(
-                [
-                    hor,
-                    _masked_mean(pair_emb.transpose(1, 2), t_mask, dim=2),
-                    _masked_max(pair_emb.transpose(1, 2), t_mask, dim=2),
-                ],
-                dim=-1,
-            )
-        ) * hor_mask[..., None].to(e.dtype)
-        for layer in self.layers:
-            a, b, pair_emb = layer(a, b, pair_emb, top_mask, hor_mask, pair_mask)
-
-        # 4. Scores, dustbin, Sinkhorn.
-        pa, pb = self.top_desc(a), self.hor_desc(b)
-        scores = self.score(pair_emb).squeeze(-1) + (pa @ pb.transpose(1, 2)) * self.dot_scale
-        log_assignment = self.sinkhorn(scores, self.dustbin, top_mask, hor_mask)
-        prob = log_assignment[:, :-1, :-1].exp() * pair_mask.to(scores.dtype)
-        cost = (1.0 - prob).clamp(0.0, 1.0)
+        scores, pa, pb = self.pair_scores(a, b, pair_emb)
+        cost, log_assignment = self.match(scores, top_mask, hor_mask)
         return GeometryOutput(
             cost=cost,
             log_assignment=log_assignment,

@@ -30,3 +30,58 @@ def cvmhat_dir() -> Path:
     if not path.is_dir():
         pytest.skip(f"CVMHAT data not found at {path} (set {CVMHAT_ENV} to its folder)")
     return path
+
+
+TINY_GEOMETRY = {"width": 16, "layers": 1, "heads": 2, "sinkhorn_iterations": 10}
+"""A geometry encoder small enough to train and export in a second."""
+TINY_APPEARANCE = {"input_size": (32, 16), "widths": (4, 8, 8, 16), "hidden_dim": 16,
+                   "embedding_dim": 8}
+"""An appearance network small enough to train and export in a second."""
+
+
+@pytest.fixture(scope="session")
+def tiny_synth(tmp_path_factory) -> dict[str, Path]:
+    """Tiny synthetic datasets of both scenarios (2 scenes x 2 frames, 320x180, 3-6 people)."""
+    from xvmatch.datasets.synthetic_io import generate_dataset
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+
+    root = tmp_path_factory.mktemp("tiny_synth")
+    out = {}
+    for k, scenario in enumerate(("drone", "overview")):
+        config = SynthConfig(scenario=scenario, top_size=(320, 180), ego_size=(320, 180),
+                             n_people=(3, 6))
+        generate_dataset(root / scenario, config, n_scenes=2, n_frames=2, seed=70 + k)
+        out[scenario] = root / scenario
+    return out
+
+
+@pytest.fixture(scope="session")
+def tiny_models(tmp_path_factory, tiny_synth) -> dict[str, Path]:
+    """Untrained tiny matchers as files and bundles: ``boxes`` (box-only, gamma 0.6, the
+    layout of ``fit-geometry`` files) and ``full`` (appearance and camera cues, cue weights
+    drawn so the cues matter), each ``.pt`` with its exported bundle folder beside it."""
+    import torch
+
+    from xvmatch.export.onnx_export import export_bundle
+    from xvmatch.geometry.spatial_features import FeatureConfig
+    from xvmatch.models.appearance_net import appearance_small
+    from xvmatch.models.cross_view_matcher import CrossViewMatcher
+    from xvmatch.models.geometry_encoder import GeometryEncoder
+    from xvmatch.training.matcher_file import save_matcher
+
+    root = tmp_path_factory.mktemp("tiny_models")
+    features = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
+    torch.manual_seed(0)
+    box_only = CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), cues=())
+    full = CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY))
+    for layer in (full.cue_embed[2], full.fusion[2], full.fusion_linear):
+        torch.nn.init.normal_(layer.weight, std=0.5)
+    net = appearance_small(**TINY_APPEARANCE).eval()
+    out = {}
+    for name, matcher, app, gamma in (("boxes", box_only, None, 0.6), ("full", full, net, 0.5)):
+        path = root / f"{name}.pt"
+        save_matcher(path, matcher.eval(), features, gamma, {"k": 1}, appearance=app)
+        export_bundle(path, root / name, parity_data=tiny_synth["overview"])
+        out[name] = path
+        out[f"{name}_bundle"] = root / name
+    return out

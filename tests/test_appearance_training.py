@@ -12,6 +12,7 @@ import torch
 from torch import nn
 
 from xvmatch.cli_train import add_train_parser
+from xvmatch.datasets.crops import box_crops
 from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset, person_crops
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.models.appearance_net import (
@@ -24,7 +25,6 @@ from xvmatch.training.image_datamodule import (
     CropPair,
     ImagePairDataModule,
     augment_crops,
-    box_crops,
     collate_crop_pairs,
     load_crop_pairs,
     split_scenes,

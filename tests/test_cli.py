@@ -470,22 +470,22 @@ def test_offset_bad_clip_settings_are_one_line(files, capsys):
     assert "clip_length >= 1" in _error_line(capsys)
 
 
-def test_demo_prints_the_metrics_table(capsys):
-    assert main(["demo", "--frames", "40", "--seed", "1"]) == 0
+def test_demo_prints_the_table_and_writes_the_picture(tmp_path, capsys, tiny_models):
+    out = tmp_path / "demo"
+    argv = ["demo", "--out", str(out), "--scenes", "1", "--frames", "2",
+            "--model", str(tiny_models["full_bundle"])]
+    assert main(argv) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].startswith("simulated scene:") and "40 frames" in lines[0]
-    assert lines[1].split() == ["name", "frames", "CVIDP", "CVIDR", "CVIDF1", "CVMA", "ACC9"]
-    rows = lines[2:]
-    assert [r.split("  ")[0] for r in rows] == [
-        "frame, O searched",
-        "frame, O given",
-        "video, theta reduced + O followed",
-        "frame, O searched, detector noise",
-    ]
+    assert lines[0].startswith("Eq. 9 accuracy (%) on 2 rendered pairs per scenario")
+    rows = [line for line in lines if line.startswith(("handcrafted:", "learned (ONNX):"))]
+    assert len(rows) == 8 + 3
     for row in rows:
-        cells = row.split()
-        assert cells[-6] == "40"
-        assert all(0.0 <= float(c) <= 100.0 for c in cells[-5:-2])  # CVIDP, CVIDR, CVIDF1
+        values = [float(c.rstrip("*")) for c in row.split()[-4:]]
+        assert all(0.0 <= v <= 100.0 for v in values)
+    assert (out / "match.png").is_file()
+    assert (out / "scene" / "top.txt").is_file() and (out / "scene" / "cameras").is_dir()
+    assert any(f"xvmatch associate --model {tiny_models['full_bundle']}" in line
+               for line in lines)
 
 
 # --------------------------------------------------------------------------------------------
@@ -508,6 +508,28 @@ def test_top_level_help_lists_every_command(capsys):
     assert info.value.code == 0
     out = capsys.readouterr().out
     assert all(c in out for c in COMMANDS)
+
+
+def test_help_lists_the_commands_in_the_order_a_user_needs_them(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    order = ["demo", "associate", "evaluate", "offset", "synth", "show", "baseline",
+             "fit-geometry", "train", "export", "noise"]
+    positions = [out.index(f"\n    {c}") for c in order]
+    assert positions == sorted(positions)
+
+
+def test_version_prints_the_file_formats(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("xvmatch ")
+    for what in ("geometry features: version 2", "matcher bundle: format 1",
+                 "matcher file (.pt): format 1", "camera file: version 1",
+                 "synthetic dataset: schema 1"):
+        assert what in out
 
 
 def test_unknown_command_is_a_usage_error(capsys):

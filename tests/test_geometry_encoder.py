@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.geometry_features import FeatureConfig, collate_frames, frame_features
 from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion
+from xvmatch.geometry.spatial_features import FeatureConfig, collate_frames, frame_features
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.models.fusion_heads import LearnedFusionHead, ProductFusionHead, SumFusionHead
 from xvmatch.models.geometry_encoder import GeometryEncoder, LogSinkhorn
@@ -143,22 +143,32 @@ def test_fusion_heads_match_the_numpy_rules():
         SumFusionHead({"geo": -1.0})
 
 
-def test_matcher_box_only_and_fused(model, frames):
-    matcher = CrossViewMatcher(model)
+def test_matcher_starts_as_the_geometry_model_and_masks_missing_cues(model, frames):
+    matcher = CrossViewMatcher(model).eval()
     batch = {k: torch.from_numpy(v) for k, v in collate_frames(frames).items()}
     args = [batch[k] for k in INPUTS]
+    b, m, n = batch["top"].shape[0], batch["top"].shape[1], batch["hor"].shape[1]
+    cues = torch.rand(b, m, n, 3, generator=torch.Generator().manual_seed(1))
     with torch.no_grad():
+        geo = model(*args)
         box_only = matcher(*args)
-        assert torch.equal(box_only.cost, box_only.geometry.cost)
-        app = torch.full_like(box_only.cost, 0.5)
-        with pytest.raises(ValueError, match="no fusion head"):
-            matcher(*args, other_costs={"app": app})
-        fused = CrossViewMatcher(model, SumFusionHead({"geo": 1.0, "app": 1.0}))(
-            *args, other_costs={"app": app}
-        )
-    mask = batch["top_mask"][:, :, None] & batch["hor_mask"][:, None, :]
-    expected = torch.where(mask, 0.5 * (box_only.cost + 0.5), torch.ones_like(app))
-    assert torch.allclose(fused.cost, expected, atol=1e-6)
+        untrained = matcher(*args, cues, torch.ones(b, 3, dtype=torch.bool))
+        # Cue modules start at zero: an untrained matcher is the geometry model.
+        assert torch.allclose(box_only.cost, geo.cost) and torch.allclose(untrained.cost,
+                                                                           geo.cost)
+        for layer in (matcher.cue_embed[2], matcher.fusion[2], matcher.fusion_linear):
+            torch.nn.init.normal_(layer.weight, std=0.5)
+        fused = matcher(*args, cues, torch.ones(b, 3, dtype=torch.bool))
+        assert not torch.allclose(fused.cost, geo.cost)
+        # An unavailable cue is ignored whatever its values.
+        none = torch.zeros(b, 3, dtype=torch.bool)
+        a = matcher(*args, cues, none).cost
+        c = matcher(*args, torch.rand_like(cues), none).cost
+        assert torch.allclose(a, c)
+        assert torch.isfinite(fused.cost).all()
+    with pytest.raises(ValueError, match="subset of"):
+        CrossViewMatcher(model, cues=("ray", "app"))
+    assert CrossViewMatcher(model, cues=()).n_cues == 0
 
 
 def test_exports_to_onnx_with_dynamic_sizes(model, frames, tmp_path):

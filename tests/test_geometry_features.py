@@ -6,20 +6,18 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.geometry_features import (
+from xvmatch.datasets.feature_cache import FeatureSet, cached_sequence_features, sequence_features
+from xvmatch.geometry.spatial_features import (
     FEATURE_VERSION,
     HOR_FEATURES,
     HYP_FEATURES,
     PAIR_FEATURES,
     TOP_FEATURES,
     FeatureConfig,
-    FeatureSet,
-    cached_sequence_features,
     camera_labels,
     collate_frames,
     frame_features,
     match_labels,
-    sequence_features,
 )
 
 SIZE = (2688, 1512)
@@ -139,7 +137,7 @@ def test_feature_set_round_trip_and_cache(scene, tmp_path, monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("the cache should have been used")
 
-    monkeypatch.setattr("xvmatch.datasets.geometry_features.sequence_features", fail)
+    monkeypatch.setattr("xvmatch.datasets.feature_cache.sequence_features", fail)
     again = cached_sequence_features(scene.top, scene.hor, SIZE, CONFIG, frames=[1, 3],
                                      cache_dir=tmp_path)
     assert np.array_equal(first.arrays["pair"], again.arrays["pair"])

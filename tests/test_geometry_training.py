@@ -12,8 +12,7 @@ import pytest
 import torch
 
 from xvmatch.datasets.box_scene import write_box_scene
-from xvmatch.datasets.geometry_features import FeatureConfig
-from xvmatch.inference.learned_association import load_geometry_model
+from xvmatch.geometry.spatial_features import FeatureConfig
 from xvmatch.models.geometry_encoder import GeometryEncoder
 from xvmatch.training.box_datamodule import (
     CvmhatBoxDataModule,
@@ -23,6 +22,7 @@ from xvmatch.training.box_datamodule import (
 )
 from xvmatch.training.fit_geometry import fit_geometry
 from xvmatch.training.geometry_module import GeometryMatchingModule
+from xvmatch.training.matcher_file import load_matcher
 
 FEATURES = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
 TINY = {"width": 16, "layers": 1, "heads": 2, "sinkhorn_iterations": 10}
@@ -98,18 +98,18 @@ def test_fit_checkpoint_resume_round_trip(sim_dir, tmp_path):
     assert config["model_config"]["width"] == 16 and config["seed"] == 0
 
     # The model file round-trips: same weights, same costs.
-    loaded = load_geometry_model(out)
+    loaded = load_matcher(out)
     assert loaded.meta["note"] == "test" and loaded.feature_config == FEATURES
     best = torch.load(next((run / "checkpoints").glob("best-*.ckpt")), weights_only=True)
     weights = {k.removeprefix("model."): v for k, v in best["state_dict"].items()
                if k.startswith("model.")}
-    for name, value in loaded.matcher.geometry.state_dict().items():
+    for name, value in loaded.matcher.state_dict().items():
         assert torch.equal(value, weights[name]), name
     dm = _sim(sim_dir)
     dm.setup("fit")
     batch = next(iter(dm.val_dataloader()))
     reference = GeometryEncoder(**TINY)
-    reference.load_state_dict(weights)
+    reference.load_state_dict({k.removeprefix("geometry."): v for k, v in weights.items()})
     reference.eval()
     with torch.no_grad():
         expected = reference(*(batch[k] for k in INPUTS)).cost
@@ -210,7 +210,7 @@ def test_cvmhat_datamodule_re_times_an_out_of_sync_training_pair(tmp_path):
 
 
 def test_training_is_deterministic_given_the_seed(sim_dir, tmp_path):
-    """Same seed, same data: bit-identical weights (what make_default_geometry.py relies on)."""
+    """Same seed, same data: bit-identical weights (what make_default_bundle.py relies on)."""
     weights = []
     for k in range(2):
         out = tmp_path / f"m{k}.pt"

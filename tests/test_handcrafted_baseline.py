@@ -16,33 +16,33 @@ from hypothesis import strategies as st
 
 from xvmatch.cli_baseline import add_baseline_parser
 from xvmatch.datasets.detector_noise import DetectorNoise
+from xvmatch.datasets.pair_trials import (
+    FALSE_POSITIVE,
+    SETTINGS,
+    box_iou,
+    match_to_ground_truth,
+    scene_trials,
+)
 from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.visibility_noise import VisibilityNoise
 from xvmatch.evaluation.cost_distributions import FIGURE_FILES
-from xvmatch.evaluation.cross_view_metrics import count_frame, summarize
+from xvmatch.evaluation.cross_view_metrics import count_frame, count_pair, summarize
 from xvmatch.evaluation.handcrafted_baseline import (
-    FALSE_POSITIVE,
     GAMMA_GEO,
-    GAMMA_GRID,
     RULE_NAMES,
     RULES,
-    SETTINGS,
     BaselineConfig,
     Method,
-    PairCosts,
-    box_iou,
-    count_pair,
     evaluate_baseline,
     format_baseline_table,
     fused_cost,
-    match_to_ground_truth,
-    pair_costs,
-    scene_trials,
     score_trial,
     tune_gammas,
 )
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+from xvmatch.geometry.handcrafted_costs import PairCosts, pair_costs
+from xvmatch.inference.assignment import GAMMA_GRID
 
 SMALL = (320, 180)
 CONFIG = SynthConfig(scenario="overview", top_size=SMALL, ego_size=SMALL, n_people=(5, 9))
@@ -96,7 +96,7 @@ def test_table_has_every_method_and_setting(result) -> None:
 def test_geometry_with_exact_cameras_is_well_above_chance(dataset: Path, result) -> None:
     trials = []
     for index, scene in enumerate(SyntheticDataset(dataset).scenes()):
-        trials += scene_trials(scene, index, BaselineConfig(), settings=("gt",))[0]
+        trials += scene_trials(scene, index, BaselineConfig(), settings=("gt",))
     rng = np.random.default_rng(0)
     chance = 0.0
     for gamma in (GAMMA_GEO, 0.5, 1.0):  # the best association by costs carrying no information
@@ -129,8 +129,8 @@ def test_scrambling_ids_leaves_results_unchanged(dataset: Path, result) -> None:
     assert _same_scores(result, other)
     # ... and the scrambling is real: the boxes reach the association in another order.
     scene = SyntheticDataset(dataset).scene("s00001")
-    a, _, _ = scene_trials(scene, 1, BaselineConfig(scramble_seed=0), settings=("gt",))
-    b, _, _ = scene_trials(scene, 1, BaselineConfig(scramble_seed=123), settings=("gt",))
+    a = scene_trials(scene, 1, BaselineConfig(scramble_seed=0), settings=("gt",))
+    b = scene_trials(scene, 1, BaselineConfig(scramble_seed=123), settings=("gt",))
     assert any(not np.array_equal(x.det_top_ids, y.det_top_ids) for x, y in zip(a, b, strict=True))
     for x, y in zip(a, b, strict=True):
         assert sorted(x.det_top_ids.tolist()) == sorted(y.det_top_ids.tolist())

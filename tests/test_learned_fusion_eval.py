@@ -9,19 +9,17 @@ import numpy as np
 import pytest
 import torch
 
+from xvmatch.datasets.pair_trials import dataset_trials, scene_trials
 from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.handcrafted_baseline import (
     BaselineConfig,
     Method,
-    scene_trials,
     score_trial,
 )
 from xvmatch.evaluation.learned_matcher_eval import (
-    AppearanceCoster,
     CueRule,
-    dataset_box_trials,
     default_rules,
     evaluate_learned_matcher,
     format_learned_table,
@@ -32,6 +30,7 @@ from xvmatch.evaluation.learned_matcher_eval import (
 from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion
 from xvmatch.models.appearance_net import appearance_small, save_appearance_weights
 from xvmatch.models.fusion_heads import LearnedFusionHead
+from xvmatch.training.appearance_costs import AppearanceCoster
 from xvmatch.training.fusion_datamodule import CuePairDataModule, collate_trials
 from xvmatch.training.fusion_module import FusionModule, batch_acc9
 
@@ -58,7 +57,7 @@ def coster() -> AppearanceCoster:
 
 @pytest.fixture(scope="module")
 def trials(tiny_data: Path, coster: AppearanceCoster):
-    return dataset_box_trials(tiny_data, BaselineConfig(), coster=coster)
+    return dataset_trials(tiny_data, BaselineConfig(), coster=coster)
 
 
 def test_trials_equal_the_baselines(tiny_data: Path, trials) -> None:
@@ -66,7 +65,7 @@ def test_trials_equal_the_baselines(tiny_data: Path, trials) -> None:
     config = BaselineConfig()
     reference = []
     for index, name in enumerate(data.scene_names):
-        reference += scene_trials(data.scene(name), index, config)[0]
+        reference += scene_trials(data.scene(name), index, config)
     assert len(reference) == len(trials) == 12
     method = Method("product", True, 0.1)
     for ours, theirs in zip(trials, reference, strict=True):

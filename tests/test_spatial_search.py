@@ -20,6 +20,7 @@ from xvmatch.geometry.spatial_search import (
     _curve_tasks,
     associate_frame,
     associate_sequence,
+    best_per_candidate,
     clip_starts,
     estimate_offset,
     full_circle,
@@ -183,6 +184,33 @@ def test_rank_hypotheses_equals_brute_force_top_k(scene, noisy_views, source, fr
     assert ranked[0].camera == best.camera and ranked[0].cost == best.cost
     with pytest.raises(ValueError, match="k must be"):
         rank_hypotheses(top, hor, WIDTH, PARAMS, k=0)
+
+
+@pytest.mark.parametrize(
+    ("source", "frame", "params"),
+    [("exact", 5, PARAMS), ("noisy", 3, PARAMS), ("noisy", 11, PARAMS),
+     ("exact", 20, SpatialParams(rho=2.0, lam=0.05, dtheta_deg=2.0))],
+)
+def test_best_per_candidate_equals_one_search_per_candidate(scene, noisy_views, source, frame,
+                                                            params):
+    views = (scene.top, scene.hor) if source == "exact" else noisy_views
+    top, hor = views[0][frame].boxes, views[1][frame].boxes
+    each = [r for c in range(len(top))
+            for r in rank_hypotheses(top, hor, WIDTH, params, candidates=[c], k=1)]
+    batched = best_per_candidate(top, hor, WIDTH, params)
+    assert [b.camera for b in batched] == [e.camera for e in each]
+    for b, e in zip(batched, each, strict=True):
+        assert _angle_diff_deg(b.theta, e.theta) < 1e-9
+        assert math.isclose(b.cost, e.cost, rel_tol=1e-12)
+        np.testing.assert_array_equal(b.pairs, e.pairs)
+    # Only the `keep` lowest are wanted: they are exact, the others are left out.
+    for keep in (1, 3):
+        wanted = sorted(each, key=lambda r: (r.cost, r.camera))[:keep]
+        got = best_per_candidate(top, hor, WIDTH, params, keep=keep)
+        assert sorted(r.camera for r in got) == sorted(r.camera for r in wanted)
+        for g in got:
+            e = next(r for r in each if r.camera == g.camera)
+            assert math.isclose(g.cost, e.cost, rel_tol=1e-12)
 
 
 def test_hypothesis_vectors_agree_with_the_batched_vectors(scene):

@@ -15,6 +15,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from xvmatch.geometry.spatial_vectors import (
+    REFERENCE_SIZE,
     box_centres,
     horizontal_vectors,
     top_geometry,
@@ -51,23 +52,33 @@ def test_box_centres():
 
 
 def test_horizontal_vectors_hand_computed():
-    # W = 2000: x = (u - 1000) / 1000 with u the box centre, y = 1 / h.
+    # W = 2688 (the reference width): x = (u - 1344) / 1344 with u the box centre, y = 1 / h.
     boxes = np.array(
         [
-            [1400.0, 100.0, 200.0, 400.0],  # u = 1500 -> x = 0.5,   h = 400 -> y = 0.0025
-            [0.0, 0.0, 100.0, 50.0],  # u = 50   -> x = -0.95, h = 50  -> y = 0.02
-            [900.0, 10.0, 200.0, 100.0],  # u = 1000 -> x = 0,     h = 100 -> y = 0.01
+            [1816.0, 100.0, 200.0, 400.0],  # u = 1916 -> x = 572 / 1344, h = 400 -> y = 0.0025
+            [0.0, 0.0, 100.0, 50.0],  # u = 50   -> x = -1294 / 1344, h = 50  -> y = 0.02
+            [1244.0, 10.0, 200.0, 100.0],  # u = 1344 -> x = 0,     h = 100 -> y = 0.01
         ]
     )
-    vectors, order = horizontal_vectors(boxes, 2000.0)
+    vectors, order = horizontal_vectors(boxes, 2688.0)
     np.testing.assert_array_equal(order, [1, 2, 0])
-    np.testing.assert_allclose(vectors, [[-0.95, 0.02], [0.0, 0.01], [0.5, 0.0025]], rtol=1e-15)
+    np.testing.assert_allclose(
+        vectors, [[-1294 / 1344, 0.02], [0.0, 0.01], [572 / 1344, 0.0025]], rtol=1e-15
+    )
+
+
+def test_horizontal_y_is_in_reference_pixels():
+    # W = 1344, half the reference width: a box 100 px tall is 200 reference px tall.
+    boxes = np.array([[600.0, 0.0, 50.0, 100.0]])
+    vectors, _ = horizontal_vectors(boxes, 1344.0)
+    np.testing.assert_allclose(vectors[0], [(625 - 672) / 672, 1 / 200], rtol=1e-15)
+    assert REFERENCE_SIZE == (2688, 1512)
 
 
 def test_horizontal_vectors_ties_broken_by_depth():
     # Same centre u, different heights: sorted by y = 1/h, so the taller (nearer) box first.
     boxes = np.array([[100.0, 0.0, 50.0, 100.0], [100.0, 0.0, 50.0, 400.0]])
-    vectors, order = horizontal_vectors(boxes, 1000.0)
+    vectors, order = horizontal_vectors(boxes, 2688.0)
     np.testing.assert_array_equal(order, [1, 0])
     np.testing.assert_allclose(vectors[:, 1], [1 / 400, 1 / 100])
 
@@ -95,7 +106,7 @@ def test_horizontal_vectors_properties(boxes, data):
     np.testing.assert_array_equal(np.sort(order), np.arange(len(boxes)))
     u = boxes[order, 0] + boxes[order, 2] / 2
     np.testing.assert_allclose(vectors[:, 0], (u - width / 2) / (width / 2), rtol=1e-12)
-    np.testing.assert_allclose(vectors[:, 1], 1.0 / boxes[order, 3], rtol=1e-12)
+    np.testing.assert_allclose(vectors[:, 1], (width / 2688) / boxes[order, 3], rtol=1e-12)
     # Eq. 10: ascending in x (ties by y).
     keys = list(zip(vectors[:, 0], vectors[:, 1], strict=True))
     assert keys == sorted(keys)

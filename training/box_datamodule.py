@@ -1,6 +1,6 @@
 """DataModules of the box-only geometry model: CVMHAT box files by site, and the box simulator.
 
-Both turn frame pairs into the features of :mod:`xvmatch.datasets.geometry_features` (cached on
+Both turn frame pairs into the features of :mod:`xvmatch.geometry.spatial_features` (cached on
 disk) plus labels. Ids are read once, to build the labels (the same id in both views is a match;
 the top-view id ``wearer_id`` is the camera location O), and never reach the features: the model
 sees boxes only, in a canonical order, so scrambling ids or shuffling boxes changes nothing.
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import re
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
@@ -38,28 +39,37 @@ from torch.utils.data import DataLoader, Dataset
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.geometry_features import (
-    FeatureConfig,
+from xvmatch.datasets.feature_cache import (
     FeatureSet,
-    FrameFeatures,
     cache_key,
     cached_sequence_features,
+    default_cache_dir,
+)
+from xvmatch.datasets.mot_boxes import (
+    FrameBoxes,
+    atomic_write_text,
+    scale_frames,
+    shift_frames,
+)
+from xvmatch.geometry.spatial_features import (
+    FeatureConfig,
+    FrameFeatures,
     camera_labels,
     collate_frames,
-    default_cache_dir,
     match_labels,
 )
-from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_text, shift_frames
 from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET, estimate_offset
 
 __all__ = [
     "CvmhatBoxDataModule",
+    "FrameDataModule",
     "LabelledFrames",
     "MixedBoxDataModule",
     "SimBoxDataModule",
     "TrainingOffset",
     "collate_labelled",
     "labelled_sequence",
+    "random_image_size",
     "random_scene_config",
     "site_of",
     "training_offset",
@@ -202,23 +212,34 @@ class _FrameDataset(Dataset):
         return self.parts[p].item(int(k - self.bounds[p]))
 
 
-def collate_labelled(
-    items: Sequence[tuple[FrameFeatures, np.ndarray, np.ndarray]],
-) -> dict[str, torch.Tensor]:
+def collate_labelled(items: Sequence[tuple]) -> dict[str, torch.Tensor]:
     """Pad frames and labels into one batch of tensors (``match (B, M, N)``,
-    ``camera_correct (B, H)``, and the inputs of :func:`collate_frames`)."""
+    ``camera_correct (B, H)``, and the inputs of :func:`collate_frames`). Items are
+    ``(features, match, camera labels)``, or with pair cues ``(..., cues (M, N, K), cue mask
+    (K,))``, which adds ``cues (B, M, N, K)`` and ``cue_mask (B, K)``."""
     feats = [it[0] for it in items]
     batch = collate_frames(feats)
     b, m, n = batch["pair"].shape[0], batch["top"].shape[1], batch["hor"].shape[1]
     h = batch["hyp"].shape[1]
     match = np.zeros((b, m, n), bool)
     cams = np.zeros((b, h), bool)
-    for k, (f, mt, cm) in enumerate(items):
+    with_cues = len(items[0]) == 5 if items else False
+    if with_cues:
+        k_cues = items[0][4].shape[0]
+        cues = np.zeros((b, m, n, k_cues), np.float32)
+        cue_mask = np.zeros((b, k_cues), bool)
+    for k, item in enumerate(items):
+        f, mt, cm = item[:3]
         _, mm, nn_ = f.shape
         match[k, :mm, :nn_] = mt
         cams[k, : cm.shape[0]] = cm
+        if with_cues:
+            cues[k, :mm, :nn_] = item[3]
+            cue_mask[k] = item[4]
     batch["match"] = match
     batch["camera_correct"] = cams
+    if with_cues:
+        batch["cues"], batch["cue_mask"] = cues, cue_mask
     return {k: torch.from_numpy(v) for k, v in batch.items()}
 
 
@@ -234,8 +255,10 @@ def _loader(parts: Sequence[LabelledFrames], batch_size: int, shuffle: bool, see
     )
 
 
-class _BoxDataModule(L.LightningDataModule):
-    """Shared loaders; subclasses fill ``self.train_parts``, ``val_parts``, ``test_parts``."""
+class FrameDataModule(L.LightningDataModule):
+    """Shared loaders of labelled frames; subclasses fill ``self.train_parts``, ``val_parts``
+    and ``test_parts`` with parts that have ``len`` and ``item(k)`` (e.g.
+    :class:`LabelledFrames`)."""
 
     def __init__(self, batch_size: int, seed: int) -> None:
         super().__init__()
@@ -257,7 +280,7 @@ class _BoxDataModule(L.LightningDataModule):
         return _loader(self.test_parts, self.batch_size, False, self.seed)
 
 
-class CvmhatBoxDataModule(_BoxDataModule):
+class CvmhatBoxDataModule(FrameDataModule):
     """CVMHAT dev sequences, leave-one-site-out.
 
     Args:
@@ -282,6 +305,8 @@ class CvmhatBoxDataModule(_BoxDataModule):
             id, same person) hold for the frame pairs the model sees; ``offsets`` records them.
             The test site keeps the files' timing.
         sync_max_offset: largest |offset| searched (default that of ``--offset auto``).
+        rescale: give each detector-noise copy its own resolution per view (boxes scaled by a
+            seeded factor in [1/2, 2]; augmentation over resolutions).
     """
 
     def __init__(
@@ -301,6 +326,7 @@ class CvmhatBoxDataModule(_BoxDataModule):
         seed: int = 0,
         synchronise: bool = True,
         sync_max_offset: int = AUTO_MAX_OFFSET,
+        rescale: bool = True,
     ) -> None:
         super().__init__(batch_size, seed)
         if not 0.0 <= val_fraction < 1.0:
@@ -320,6 +346,7 @@ class CvmhatBoxDataModule(_BoxDataModule):
         self.workers = workers
         self.synchronise = synchronise
         self.sync_max_offset = sync_max_offset
+        self.rescale = rescale
         self.offsets: dict[str, TrainingOffset] = {}
         if not clean and not self.noise_seeds:
             raise ValueError("nothing to train on: clean=False and no noise_seeds")
@@ -367,13 +394,21 @@ class CvmhatBoxDataModule(_BoxDataModule):
         return dict(self.offsets)
 
     def _variant(self, name, top, hor, seed: int | None, frames) -> LabelledFrames:
+        size = IMAGE_SIZE
         if seed is not None:
             noise = DetectorNoise()
             top = apply_detector_noise(top, IMAGE_SIZE, noise, seed=seed, view="top")
             hor = apply_detector_noise(hor, IMAGE_SIZE, noise, seed=seed, view="hor")
+            if self.rescale:
+                # The same videos at other resolutions (each view its own, log-uniform in
+                # [1/2, 2]): the features are resolution-free, and the training data say so.
+                rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
+                f_top, f_hor = np.exp(rng.uniform(np.log(0.5), np.log(2.0), size=2))
+                top, hor = scale_frames(top, f_top), scale_frames(hor, f_hor)
+                size = (IMAGE_SIZE[0] * f_hor, IMAGE_SIZE[1] * f_hor)
         tag = "clean" if seed is None else f"noise{seed}"
         return labelled_sequence(
-            top, hor, IMAGE_SIZE, self.feature_config, self.cache_dir, self.workers,
+            top, hor, size, self.feature_config, self.cache_dir, self.workers,
             name=f"{name}/{tag}", frames=frames,
         )
 
@@ -419,7 +454,8 @@ def random_scene_config(rng: np.random.Generator, base: SceneConfig | None = Non
 
     Crowd size, body heights, walking area, drone altitude and field of view, the head-worn
     camera's field of view, pitch, roll and wobble, the wearer's gaze behaviour and the
-    visibility threshold are drawn around the CVMHAT-like defaults.
+    visibility threshold are drawn around the CVMHAT-like defaults; so are both views' image
+    sizes (:func:`random_image_size`), which the features must not depend on.
     """
     base = base or SceneConfig()
     low = int(rng.integers(3, 9))
@@ -442,7 +478,22 @@ def random_scene_config(rng: np.random.Generator, base: SceneConfig | None = Non
         head_turn_std_deg=float(rng.uniform(10.0, 35.0)),
         min_visible_fraction=float(rng.uniform(0.2, 0.5)),
     )
-    return config
+    return replace(config, top_size=random_image_size(rng), hor_size=random_image_size(rng))
+
+
+ASPECTS: tuple[float, ...] = (16 / 9, 4 / 3, 3 / 2, 1.0)
+"""Width over height of the image sizes drawn by :func:`random_image_size` (video, GoPro and
+phone sensors, square crops)."""
+
+
+def random_image_size(
+    rng: np.random.Generator, widths: tuple[float, float] = (640.0, 5376.0)
+) -> tuple[int, int]:
+    """A random image size: width log-uniform in ``widths`` (a quarter of the CVMHAT width to
+    twice it), height from one of :data:`ASPECTS` (augmentation over resolutions)."""
+    width = float(np.exp(rng.uniform(np.log(widths[0]), np.log(widths[1]))))
+    aspect = ASPECTS[int(rng.integers(len(ASPECTS)))]
+    return round(width), max(1, round(width / aspect))
 
 
 def random_noise(rng: np.random.Generator) -> DetectorNoise:
@@ -454,7 +505,7 @@ def random_noise(rng: np.random.Generator) -> DetectorNoise:
     )
 
 
-class SimBoxDataModule(_BoxDataModule):
+class SimBoxDataModule(FrameDataModule):
     """Scenes of the box simulator with randomised configurations (no real data).
 
     Args:
@@ -561,7 +612,7 @@ def _sim_part(job: tuple[SimBoxDataModule, int]) -> LabelledFrames:
     return module.part(k)
 
 
-class MixedBoxDataModule(_BoxDataModule):
+class MixedBoxDataModule(FrameDataModule):
     """Real box pairs plus simulated scenes: the union of both training sets.
 
     The simulator's diversity (domain randomisation) regularises a model trained on a few real
@@ -578,7 +629,7 @@ class MixedBoxDataModule(_BoxDataModule):
 
     def __init__(
         self,
-        real: _BoxDataModule,
+        real: FrameDataModule,
         sim: SimBoxDataModule,
         sim_validation: bool = False,
         batch_size: int = 32,

@@ -1,12 +1,13 @@
-"""Train a box-only geometry model end to end and write its model file (``xvmatch fit-geometry``).
+"""Train the learned matcher end to end and write its matcher file (``xvmatch fit-geometry`` for
+the box-only matcher on box files; the default bundle's recipe for the matcher with cues).
 
-:func:`fit_geometry` runs Lightning with everything a reproducible run needs: a global seed
+:func:`fit_matcher` runs Lightning with everything a reproducible run needs: a global seed
 (``lightning.seed_everything``, deterministic algorithms), checkpoints of the best validation
 CVIDF1 and of the last epoch (``ModelCheckpoint``), resuming from the last checkpoint, early
 stopping on the validation CVIDF1, CSV and TensorBoard logs, a progress bar, and the resolved
 configuration saved as ``config.json`` in the run folder. It reports the wall time and the peak
-memory (``resource.getrusage``) of the run. :func:`fit_geometry_cvmhat` builds the CVMHAT
-DataModule for the command line.
+memory (``resource.getrusage``) of the run. :func:`fit_geometry` trains a box-only matcher;
+:func:`fit_geometry_cvmhat` builds the CVMHAT DataModule for the command line.
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint, TQDMProgressBar
 from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-from xvmatch.datasets.geometry_features import FeatureConfig
-from xvmatch.inference.learned_association import save_geometry_model
+from xvmatch.geometry.spatial_features import FeatureConfig
+from xvmatch.models.appearance_net import AppearanceNet
+from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.models.geometry_encoder import GeometryEncoder
 from xvmatch.models.losses import GeometryMatchingLoss
 from xvmatch.training.box_datamodule import (
@@ -36,8 +38,9 @@ from xvmatch.training.box_datamodule import (
     SimBoxDataModule,
 )
 from xvmatch.training.geometry_module import GeometryMatchingModule
+from xvmatch.training.matcher_file import save_matcher
 
-__all__ = ["FitResult", "fit_geometry", "fit_geometry_cvmhat", "peak_memory_mb"]
+__all__ = ["FitResult", "fit_geometry", "fit_geometry_cvmhat", "fit_matcher", "peak_memory_mb"]
 
 
 def peak_memory_mb() -> float:
@@ -72,6 +75,23 @@ def fit_geometry(
     *,
     feature_config: FeatureConfig,
     model_config: Mapping[str, Any] | None = None,
+    **kwargs: Any,
+) -> FitResult:
+    """Train a box-only matcher (a :class:`GeometryEncoder` of ``model_config``, no cues) on
+    ``datamodule`` and write its matcher file ``out``; other arguments as :func:`fit_matcher`."""
+    L.seed_everything(int(kwargs.get("seed", 0)), workers=True, verbose=False)  # the weights
+    matcher = CrossViewMatcher(GeometryEncoder(**dict(model_config or {})), cues=())
+    return fit_matcher(datamodule, out, matcher=matcher, feature_config=feature_config,
+                       **kwargs)
+
+
+def fit_matcher(
+    datamodule: L.LightningDataModule,
+    out: str | os.PathLike,
+    *,
+    matcher: CrossViewMatcher,
+    feature_config: FeatureConfig,
+    appearance: AppearanceNet | None = None,
     loss_config: Mapping[str, Any] | None = None,
     epochs: int = 8,
     seed: int = 0,
@@ -85,14 +105,15 @@ def fit_geometry(
     meta: Mapping[str, Any] | None = None,
     threads: int | None = None,
 ) -> FitResult:
-    """Train a :class:`GeometryEncoder` on ``datamodule`` and write the model file ``out``.
+    """Train a :class:`CrossViewMatcher` on ``datamodule`` and write the matcher file ``out``.
 
     Args:
         datamodule: a DataModule yielding ``collate_labelled`` batches (its ``val_parts`` may
             be empty: then the last epoch is kept and nothing stops early).
-        out: model file to write (atomically).
+        out: matcher file to write (atomically).
+        matcher: the matcher to train (e.g. initialised from a box-only one).
         feature_config: the feature configuration the DataModule uses (stored in the file).
-        model_config: keyword arguments of :class:`GeometryEncoder`.
+        appearance: the frozen appearance network behind the ``app`` cue (stored in the file).
         loss_config: keyword arguments of :class:`GeometryMatchingLoss`.
         epochs: most epochs.
         seed: global seed (weights, shuffling).
@@ -127,9 +148,9 @@ def fit_geometry(
     datamodule.setup("fit")
     has_val = bool(getattr(datamodule, "val_parts", [True]))
 
-    model = GeometryEncoder(**dict(model_config or {}))
+    matcher.train()  # a matcher loaded from a file comes in eval mode; Lightning keeps modes
     module = GeometryMatchingModule(
-        model,
+        matcher,
         GeometryMatchingLoss(**dict(loss_config or {})),
         learning_rate=learning_rate,
         weight_decay=weight_decay,
@@ -143,7 +164,8 @@ def fit_geometry(
         "weight_decay": weight_decay,
         "gamma": gamma,
         "patience": patience,
-        "model_config": model.config,
+        "model_config": matcher.geometry.config,
+        "matcher_config": matcher.config,
         "loss_config": dict(loss_config or {}),
         "feature_config": feature_config.to_dict(),
         "datamodule": {
@@ -195,9 +217,10 @@ def fit_geometry(
         "seed": seed,
         "epochs_run": int(trainer.current_epoch),
         "best_val_f1": best_score,
-        "model_config": model.config,
+        "model_config": matcher.geometry.config,
+        "matcher_config": matcher.config,
     }
-    save_geometry_model(out, module.model, feature_config, gamma, notes)
+    save_matcher(out, module.model, feature_config, gamma, notes, appearance=appearance)
     return FitResult(
         model_path=out,
         best_score=best_score,

@@ -2,7 +2,7 @@
 
 Each item is one image pair in one setting (ground-truth boxes, or detector-noise boxes matched
 to the ground truth at IoU 0.3), its boxes shuffled per view, built exactly as the evaluation
-builds its trials (:func:`xvmatch.evaluation.learned_matcher_eval.scene_box_trials`): the
+builds its trials (:func:`xvmatch.datasets.pair_trials.scene_trials`): the
 normalised cues ``{"app", "geo", "cheir", "hist"}`` as ``(M, N)`` matrices, the ground-truth
 match matrix, and what the Eq. 9 accuracy needs (which boxes stand for a person seen in one
 view only, the number of unique persons). The appearance cue comes from a trained appearance
@@ -25,14 +25,9 @@ import torch
 from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 
-from xvmatch.evaluation.handcrafted_baseline import SETTINGS, BaselineConfig
-from xvmatch.evaluation.learned_matcher_eval import (
-    CUES,
-    AppearanceCoster,
-    BoxTrial,
-    dataset_box_trials,
-)
+from xvmatch.datasets.pair_trials import CUES, SETTINGS, PairTrial, TrialConfig, dataset_trials
 from xvmatch.models.appearance_net import appearance_from_weights
+from xvmatch.training.appearance_costs import AppearanceCoster
 
 __all__ = ["CueBatch", "CuePairDataModule", "TrialDataset", "collate_trials"]
 
@@ -60,19 +55,19 @@ class CueBatch(NamedTuple):
 
 
 class TrialDataset(Dataset):
-    """A list of :class:`BoxTrial` as a map-style dataset."""
+    """A list of :class:`PairTrial` as a map-style dataset."""
 
-    def __init__(self, trials: Sequence[BoxTrial]) -> None:
+    def __init__(self, trials: Sequence[PairTrial]) -> None:
         self.trials = list(trials)
 
     def __len__(self) -> int:
         return len(self.trials)
 
-    def __getitem__(self, k: int) -> BoxTrial:
+    def __getitem__(self, k: int) -> PairTrial:
         return self.trials[k]
 
 
-def collate_trials(trials: Sequence[BoxTrial], names: Sequence[str] = CUES) -> CueBatch:
+def collate_trials(trials: Sequence[PairTrial], names: Sequence[str] = CUES) -> CueBatch:
     """Pad trials to the batch's largest M and N (at least 1 each; empty sides allowed).
 
     Args:
@@ -113,7 +108,7 @@ class _Collate:
     def __init__(self, names: Sequence[str]) -> None:
         self.names = tuple(names)
 
-    def __call__(self, trials: Sequence[BoxTrial]) -> CueBatch:
+    def __call__(self, trials: Sequence[PairTrial]) -> CueBatch:
         return collate_trials(trials, self.names)
 
 
@@ -177,7 +172,7 @@ class CuePairDataModule(L.LightningDataModule):
         if int(batch_size) < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.batch_size = int(batch_size)
-        self.splits: dict[str, list[BoxTrial]] = {}
+        self.splits: dict[str, list[PairTrial]] = {}
 
     def _coster(self) -> AppearanceCoster | None:
         weights = self.hparams.appearance_weights
@@ -190,18 +185,18 @@ class CuePairDataModule(L.LightningDataModule):
         if "train" in self.splits:
             return
         coster = self._coster()
-        train: list[BoxTrial] = []
+        train: list[PairTrial] = []
         for folder in self.train_folders:
             if "gt" in self.settings:
-                config = BaselineConfig(scramble_seed=self.hparams.scramble_seed)
-                train += dataset_box_trials(folder, config, ("gt",), coster)
+                config = TrialConfig(scramble_seed=self.hparams.scramble_seed)
+                train += dataset_trials(folder, config, ("gt",), coster)
             if "det" in self.settings:
                 for s in self.noise_seeds:
-                    config = BaselineConfig(noise_seed=s, scramble_seed=self.hparams.scramble_seed)
-                    train += dataset_box_trials(folder, config, ("det",), coster)
-        val: list[BoxTrial] = []
+                    config = TrialConfig(noise_seed=s, scramble_seed=self.hparams.scramble_seed)
+                    train += dataset_trials(folder, config, ("det",), coster)
+        val: list[PairTrial] = []
         for folder in self.val_folders:
-            val += dataset_box_trials(folder, BaselineConfig(), SETTINGS, coster)
+            val += dataset_trials(folder, TrialConfig(), SETTINGS, coster)
         self.splits = {"train": train, "val": val}
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:

@@ -27,8 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from xvmatch.evaluation.handcrafted_baseline import GAMMA_GRID
-from xvmatch.inference.assignment import assign
+from xvmatch.inference.assignment import GAMMA_GRID, assign
 from xvmatch.models.geometry_encoder import LogSinkhorn
 from xvmatch.models.losses import AssignmentNLLLoss, ContrastiveLoss
 from xvmatch.training.appearance_module import hparams_ignore
@@ -42,7 +41,7 @@ def batch_acc9(cost: np.ndarray, batch: CueBatch, gammas: Sequence[float]) -> np
 
     ``(TP + TN) / U`` with TP the predicted pairs that are true, TN the boxes of persons seen
     in one view only that are left unmatched, U the unique persons (as
-    :func:`~xvmatch.evaluation.handcrafted_baseline.count_pair`).
+    :func:`~xvmatch.evaluation.cross_view_metrics.count_pair`).
 
     Args:
         cost: ``(B, M, N)`` fused costs.

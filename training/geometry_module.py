@@ -1,6 +1,7 @@
-"""LightningModule of the box-only geometry model: steps, logging and the optimiser, nothing else.
+"""LightningModule of the learned matcher: steps, logging and the optimiser, nothing else.
 
-It wraps a plain :class:`~xvmatch.models.geometry_encoder.GeometryEncoder` and a
+It wraps a plain :class:`~xvmatch.models.cross_view_matcher.CrossViewMatcher` (or a bare
+:class:`~xvmatch.models.geometry_encoder.GeometryEncoder`) and a
 :class:`~xvmatch.models.losses.GeometryMatchingLoss`, both passed in. Validation also measures
 the association itself: each frame's cost matrix goes through the Hungarian assignment with the
 non-association cost ``gamma`` (Eq. 2 of the geometric-priors paper) and the cross-view ID F1
@@ -15,11 +16,10 @@ import math
 import lightning as L
 import numpy as np
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from xvmatch.evaluation.cross_view_metrics import count_frame, summarize
 from xvmatch.inference.assignment import assign
-from xvmatch.models.geometry_encoder import GeometryEncoder
 from xvmatch.models.losses import GeometryMatchingLoss
 
 __all__ = ["GeometryMatchingModule", "frame_counts"]
@@ -44,10 +44,11 @@ def frame_counts(cost: np.ndarray, match: np.ndarray, gamma: float):
 
 
 class GeometryMatchingModule(L.LightningModule):
-    """Trains a :class:`GeometryEncoder` on padded frame batches with labels.
+    """Trains a matcher on padded frame batches with labels (``collate_labelled``); batches
+    with ``cues`` and ``cue_mask`` pass them on.
 
     Args:
-        model: the geometry model to train.
+        model: the matcher (or bare geometry encoder) to train.
         loss: the training loss (default :class:`GeometryMatchingLoss` with its defaults).
         learning_rate: peak learning rate (AdamW; warm-up then cosine decay).
         weight_decay: AdamW weight decay.
@@ -56,7 +57,7 @@ class GeometryMatchingModule(L.LightningModule):
 
     def __init__(
         self,
-        model: GeometryEncoder,
+        model: nn.Module,
         loss: GeometryMatchingLoss | None = None,
         learning_rate: float = 2e-3,
         weight_decay: float = 1e-4,
@@ -75,7 +76,10 @@ class GeometryMatchingModule(L.LightningModule):
 
     def forward(self, batch: dict[str, Tensor]):
         """The model's :class:`GeometryOutput` for a batch from ``collate_labelled``."""
-        return self.model(*(batch[k] for k in _INPUTS))
+        inputs = [batch[k] for k in _INPUTS]
+        if "cues" in batch:
+            return self.model(*inputs, batch["cues"], batch["cue_mask"])
+        return self.model(*inputs)
 
     def _step(self, batch: dict[str, Tensor], stage: str) -> tuple[Tensor, object]:
         output = self(batch)

@@ -43,7 +43,6 @@ from torch import Tensor
 from torch.nn import functional as F
 from torch.utils.data import DataLoader, Dataset
 
-from xvmatch.datasets.image_render import ViewLabels
 from xvmatch.datasets.synthetic_io import MANIFEST, PairRecord, SyntheticDataset, person_crops
 from xvmatch.geometry.ray_priors import box_rays, ray_distances
 
@@ -53,36 +52,11 @@ __all__ = [
     "CropPairDataset",
     "ImagePairDataModule",
     "augment_crops",
-    "box_crops",
     "collate_crop_pairs",
     "load_crop_pairs",
     "pair_crops",
     "split_scenes",
 ]
-
-
-def box_crops(
-    image: np.ndarray, boxes: np.ndarray, size: tuple[int, int], context: float = 0.1
-) -> np.ndarray:
-    """Crops of arbitrary ``(x, y, w, h)`` boxes (detections), cut as :func:`person_crops` cuts
-    labelled people, so training and evaluation crops are alike.
-
-    Args:
-        image: ``(H, W, 3)`` uint8 image.
-        boxes: ``(K, 4)`` boxes; they may run past the image (the border is replicated).
-        size: ``(width, height)`` of the crops.
-        context: relative margin around each box.
-
-    Returns:
-        ``(K, size[1], size[0], 3)`` uint8 crops.
-    """
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
-    k = b.shape[0]
-    labels = ViewLabels(
-        ids=np.arange(k), boxes=b, full_boxes=b, visible=np.ones(k), truncated=np.zeros(k, bool),
-        visible_pixels=np.ones(k, np.int64), ground=np.zeros((k, 3)), head=np.zeros((k, 3)),
-    )
-    return person_crops(image, labels, size=size, context=context)[1]
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,7 +3,9 @@
 ``synth``/``show``, ``baseline``, ``fit-geometry`` and ``train`` come from ``cli_synth``,
 ``cli_baseline``, ``cli_learn`` and ``cli_train``. Each command
 imports only what it needs, so ``xvmatch associate`` starts fast and never imports torch. Bad
-input ends with one line ``xvmatch: error: ...`` naming the file and line, exit code 2.
+input ends with one line ``xvmatch: error: ...`` naming the file and line, exit code 2. Every
+size or count option has a range, given in its help and checked while the arguments are parsed
+(:mod:`xvmatch.cli_types`), before any work starts.
 """
 
 from __future__ import annotations
@@ -13,7 +15,18 @@ import json
 import sys
 from collections.abc import Iterable, Sequence
 
-from xvmatch.cli_types import image_size, int_at_least, offset_value, positive_int
+from xvmatch.cli_demo import EXAMPLES as DEMO_EXAMPLES
+from xvmatch.cli_types import (
+    box_id,
+    check_output_path,
+    float_in,
+    frame_offset,
+    image_size,
+    int_in,
+    offset_value,
+    seed_value,
+    worker_count,
+)
 from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET
 
 __all__ = ["main"]
@@ -23,7 +36,7 @@ EXAMPLES = {
     "evaluate": "xvmatch evaluate --pred pred.csv --top seq_top.txt --hor seq_hor.txt",
     "noise": "xvmatch noise --boxes seq_top.txt --view top --seed 1 --out noisy_top.txt",
     "offset": "xvmatch offset --top seq_top.txt --hor seq_hor.txt",
-    "demo": "xvmatch demo --frames 150 --seed 0",
+    **DEMO_EXAMPLES,
 }
 
 
@@ -50,21 +63,67 @@ def _progress(total: int, desc: str, enabled: bool):
     return wrap
 
 
+MAX_OFFSET_LIMIT = 10_000
+"""Largest ``--max-offset``: each clip is compared at 2 * max_offset + 1 offsets."""
+
+MAX_OFFSET_TYPE = int_in(0, MAX_OFFSET_LIMIT, "each clip is compared at 2 * max_offset + 1 "
+                         "offsets")
+"""``--max-offset``: 0..10000 frames (and at most the videos' length: :func:`_max_offset`)."""
+
+HOR_IMAGE_SIZE = image_size(8, 65536, "pixels of a camera image")
+"""``--image-size`` of the horizontal view: 8..65536 pixels a side."""
+
+
 def _add_spatial_options(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("spatial-distribution parameters (paper defaults)")
-    g.add_argument("--rho", type=float, default=15.0, help="penalty base of Eq. 12 (default 15)")
+    # rho > 1 is checked with the other parameters by SpatialParams (one line, exit 2, before
+    # any work): the parser bounds only its size.
     g.add_argument(
-        "--lam", type=float, default=0.003, help="x/y balance lambda of Eq. 11 (default 0.003)"
+        "--rho", default=15.0,
+        type=float_in(None, 1e6, "Eq. 12's penalty base, in (1, 1e6]; the paper uses 15"),
+        help="penalty base of Eq. 12, in (1, 1e6] (default 15)",
     )
     g.add_argument(
-        "--tau", type=float, default=2.0, help="occlusion tolerance, degrees (default 2)"
+        "--lam", default=0.003,
+        type=float_in(0, 1e6, "Eq. 11's x/y balance is positive; the paper uses 0.003",
+                      low_open=True),
+        help="x/y balance lambda of Eq. 11, in (0, 1e6] (default 0.003)",
     )
     g.add_argument(
-        "--dtheta", type=float, default=1.0, help="orientation step, degrees (default 1)"
+        "--tau", default=2.0,
+        type=float_in(0, 90, "an angle between two people seen from the camera, degrees"),
+        help="occlusion tolerance, degrees in [0, 90] (default 2)",
     )
     g.add_argument(
-        "--fov", type=float, default=90.0, help="horizontal camera field of view, degrees (90)"
+        "--dtheta", default=1.0,
+        type=float_in(0.01, 360, "the search tries 360 / dtheta orientations"),
+        help="orientation step, degrees in [0.01, 360]: the search tries 360 / dtheta "
+        "orientations (default 1)",
     )
+    g.add_argument(
+        "--fov", default=90.0,
+        type=float_in(0, 180, "a pinhole camera's horizontal field of view, degrees",
+                      low_open=True, high_open=True),
+        help="horizontal camera field of view, degrees in (0, 180) (default 90)",
+    )
+
+
+def _max_offset(args: argparse.Namespace, top, hor) -> int:
+    """``--max-offset``, the default when not given; a given one must not exceed the number of
+    frames the two box files span (no larger offset aligns any frame of the two)."""
+    if args.max_offset is None:
+        return AUTO_MAX_OFFSET
+    frames = [*top, *hor]
+    if frames:
+        first, last = min(frames), max(frames)
+        span = last - first + 1
+        if args.max_offset > span:
+            raise UsageError(
+                f"--max-offset {args.max_offset} is more than the videos' length: the box files "
+                f"span {span} frames ({first}..{last}) and no larger offset aligns any frame; "
+                f"use at most {span}"
+            )
+    return args.max_offset
 
 
 def _spatial_params(args: argparse.Namespace):
@@ -116,18 +175,30 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     search = args.search or ("exhaustive" if args.mode == "frame" else "follow")
     if args.mode == "frame" and search != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")
-    if args.model is None and (args.mirror or args.gamma is not None):
-        raise UsageError("--mirror and --gamma apply to a learned model: add --model")
+    if args.model is None:
+        from xvmatch.cli_learn import LEARNED_ONLY
+
+        given = [f"--{k.replace('_', '-')}" for k in LEARNED_ONLY
+                 if getattr(args, k) not in (None, False)]
+        if given:
+            raise UsageError(f"{', '.join(given)} apply to a learned matcher: add --model "
+                             "default (or a bundle)")
+    from xvmatch.cli_learn import horizontal_size
+
+    hor_width = horizontal_size(args, hor)[0][0]
+    for path in (args.out, args.costs):
+        check_output_path(path)
     if args.offset == "auto":
         from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
-        est = estimate_offset(top, hor, hor_width=args.image_size[0], params=params,
-                              max_offset=args.max_offset, camera_id=args.camera_id,
+        max_offset = _max_offset(args, top, hor)
+        est = estimate_offset(top, hor, hor_width=hor_width, params=params,
+                              max_offset=max_offset, camera_id=args.camera_id,
                               workers=args.workers)
         offset = est.applied
         if est.status == "unsupported":
             print(f"warning: offset {est.offset:+d} not applied ({_offset_summary(est)}): "
-                  f"{_unsupported_reason(est, args.max_offset)}; keeping the files' timing; "
+                  f"{_unsupported_reason(est, max_offset)}; keeping the files' timing; "
                   "pass --offset N if you know it", file=sys.stderr)
         elif not args.quiet:
             kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
@@ -145,12 +216,12 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     if args.model is not None:
         from xvmatch.cli_learn import associate_with_model
 
-        pairs = associate_with_model(args, top, hor, frames, progress)
+        pairs = associate_with_model(args, top, hor, frames, progress, top_offset=offset)
     else:
         pairs = associate_sequence(
             top,
             hor,
-            hor_width=args.image_size[0],
+            hor_width=hor_width,
             params=params,
             search=search,
             camera_id=args.camera_id,
@@ -234,16 +305,18 @@ def _unsupported_reason(est, max_offset: int) -> str:
 def _cmd_offset(args: argparse.Namespace) -> int:
     from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
+    params = _spatial_params(args)
     top = _read_boxes(args.top, args.duplicates)
     hor = _read_boxes(args.hor, args.duplicates)
+    max_offset = _max_offset(args, top, hor)
     est = estimate_offset(
         top,
         hor,
         hor_width=args.image_size[0],
-        params=_spatial_params(args),
+        params=params,
         clip_start=args.clip_start,
         clip_length=args.clip_length,
-        max_offset=args.max_offset,
+        max_offset=max_offset,
         camera_id=args.camera_id,
         n_clips=args.clips,
         workers=args.workers,
@@ -266,7 +339,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
               f"{_offset_summary(est)})")
         if est.status == "unsupported":
-            print(f"warning: {_unsupported_reason(est, args.max_offset)}: the estimate is "
+            print(f"warning: {_unsupported_reason(est, max_offset)}: the estimate is "
                   "unreliable (detector noise, too few people, or an offset beyond "
                   "--max-offset); associate --offset auto keeps the files' timing",
                   file=sys.stderr)
@@ -277,62 +350,43 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-    from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-    from xvmatch.evaluation.cross_view_metrics import count_sequence, format_table, summarize
-    from xvmatch.geometry.spatial_matching import SpatialParams
-    from xvmatch.geometry.spatial_search import associate_sequence
+def version_text() -> str:
+    """``xvmatch --version``: the package and every on-disk format it reads and writes."""
+    from xvmatch import __version__
+    from xvmatch.datasets.synthetic_io import SCHEMA_VERSION
+    from xvmatch.geometry.camera_io import FORMAT_VERSION as CAMERA_VERSION
+    from xvmatch.geometry.spatial_features import FEATURE_VERSION
+    from xvmatch.inference.bundle import BUNDLE_FORMAT_VERSION, OPSET
 
-    config = SceneConfig()
-    scene = simulate_box_scene(config, n_frames=args.frames, seed=args.seed)
-    width = config.hor_size[0]
-    print(
-        f"simulated scene: {scene.people.n_people} people, {args.frames} frames, seed {args.seed} "
-        f"(top {config.top_size[0]}x{config.top_size[1]}, "
-        f"horizontal {config.hor_size[0]}x{config.hor_size[1]})"
-    )
-    noisy_top = apply_detector_noise(
-        scene.top, config.top_size, DetectorNoise(), seed=args.seed, view="top", keep_ids=(0,)
-    )
-    noisy_hor = apply_detector_noise(
-        scene.hor, config.hor_size, DetectorNoise(), seed=args.seed, view="hor"
-    )
-    runs = [
-        ("frame, O searched", scene.top, scene.hor, "exhaustive", None),
-        ("frame, O given", scene.top, scene.hor, "exhaustive", 0),
-        ("video, theta reduced + O followed", scene.top, scene.hor, "follow", None),
-        ("frame, O searched, detector noise", noisy_top, noisy_hor, "exhaustive", None),
-    ]
-    rows = []
-    params = SpatialParams()
-    for name, top, hor, search, cam in runs:
-        frames = sorted(set(top) | set(hor))
-        pred = associate_sequence(
-            top,
-            hor,
-            width,
-            params,
-            search=search,
-            camera_id=cam,
-            frames=frames,
-            progress=_progress(len(frames), name, True),
-        )
-        rows.append((name, summarize(count_sequence(pred, top, hor))))
-    print(format_table(rows))
-    return 0
+    try:  # the training file format needs torch (the learn extra)
+        from xvmatch.training.matcher_file import MATCHER_FORMAT_VERSION as MATCHER
+    except ImportError:
+        MATCHER = "(needs the learn extra)"
+    return (f"xvmatch {__version__}\n"
+            f"  geometry features: version {FEATURE_VERSION}\n"
+            f"  matcher bundle: format {BUNDLE_FORMAT_VERSION} (ONNX opset {OPSET})\n"
+            f"  matcher file (.pt): format {MATCHER}\n"
+            f"  camera file: version {CAMERA_VERSION}\n"
+            f"  synthetic dataset: schema {SCHEMA_VERSION}")
+
+
+class _VersionAction(argparse.Action):
+    """``--version``, computed only when asked (it may import torch)."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        print(version_text())
+        parser.exit()
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command (also used to render the README's examples)."""
-    from xvmatch import __version__
-
     parser = argparse.ArgumentParser(
         prog="xvmatch",
         description="Associate the same people across a top/overview view and a horizontal "
         "(egocentric) view.",
     )
-    parser.add_argument("--version", action="version", version=f"xvmatch {__version__}")
+    parser.add_argument("--version", action=_VersionAction, nargs=0,
+                        help="print the version of xvmatch and of its file formats")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, help_text: str) -> argparse.ArgumentParser:
@@ -356,19 +410,30 @@ def build_parser() -> argparse.ArgumentParser:
             "(default; the real CVMHAT files have a few) or stop with an error",
         )
 
+    # In the order a user needs them: try it, match, score, synchronise, data, the baseline,
+    # training, deployment, utilities.
+    from xvmatch.cli_baseline import add_baseline_parser
+    from xvmatch.cli_demo import add_demo_parser
+    from xvmatch.cli_learn import add_export_parser, add_fit_geometry_parser
+    from xvmatch.cli_synth import add_show_parser, add_synth_parser
+    from xvmatch.cli_train import add_train_parser
+
+    add_demo_parser(sub)
+
     p = command(
         "associate",
-        "Associate people across the two views from boxes alone (CVMHAT spatial "
-        "distribution, Sec. 3.2) and write frame,top_id,hor_id pairs.",
+        "Associate people across the two views and write frame,top_id,hor_id pairs: from "
+        "boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned "
+        "matcher (--model) from boxes, images and cameras.",
     )
     box_inputs(p)
     p.add_argument("--out", required=True, help="prediction CSV to write (atomically)")
     p.add_argument(
         "--camera-id",
-        type=int,
+        type=box_id,
         default=None,
-        help="top-view id of the horizontal camera's wearer (the 'O given' setting); "
-        "without it O is searched among all top-view people",
+        help="top-view id of the horizontal camera's wearer (the 'O given' setting; any id a "
+        "box file holds, |id| <= 2**53); without it O is searched among all top-view people",
     )
     p.add_argument(
         "--mode",
@@ -386,10 +451,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--image-size",
-        type=image_size(),
-        default=(2688, 1512),
+        type=HOR_IMAGE_SIZE,
+        default=None,
         metavar="WxH",
-        help="horizontal image size in pixels (default 2688x1512, CVMHAT)",
+        help="horizontal image size in pixels, 8..65536 a side (default: the images' size "
+        "with --hor-images, else 2688x1512, CVMHAT)",
     )
     p.add_argument(
         "--offset",
@@ -401,17 +467,18 @@ def build_parser() -> argparse.ArgumentParser:
         "minute per sequence on one core with the default --max-offset; see --workers) and "
         "shifts only when the clips "
         "back the estimate and it is more than 5 frames from 0. Pairs are written under the "
-        "horizontal frame numbers (default 0: frame-locked videos)",
+        "horizontal frame numbers; |N| <= 100000 (default 0: frame-locked videos)",
     )
     p.add_argument(
         "--max-offset",
-        type=int_at_least(0),
-        default=AUTO_MAX_OFFSET,
-        help=f"largest |offset| tried by --offset auto (default {AUTO_MAX_OFFSET} frames)",
+        type=MAX_OFFSET_TYPE,
+        default=None,
+        help=f"largest |offset| tried by --offset auto, 0..{MAX_OFFSET_LIMIT} frames and at "
+        f"most the frames the box files span (default {AUTO_MAX_OFFSET})",
     )
-    p.add_argument("--workers", type=positive_int, default=1, metavar="K",
-                   help="processes for --offset auto's estimate and for --model's features "
-                   "(default 1; the same output for any K)")
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes for --offset auto's estimate and for --model's features, "
+                   "1..64 (default 1; the same output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     _add_spatial_options(p)
     from xvmatch.cli_learn import add_model_arguments
@@ -424,10 +491,57 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pred", required=True, help="prediction CSV (frame,top_id,hor_id)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
-    p.add_argument("--offset", type=int, default=0, metavar="N",
+    p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
                    help="score predictions made with 'associate --offset N': the top view is "
-                   "re-timed the same way (top frame = horizontal frame + N) before scoring")
+                   "re-timed the same way (top frame = horizontal frame + N) before scoring; "
+                   "|N| <= 100000")
     p.set_defaults(func=_cmd_evaluate)
+
+    p = command(
+        "offset",
+        "Estimate the temporal offset between the two videos by sliding clips (Fig. 5).",
+    )
+    box_inputs(p)
+    p.add_argument("--camera-id", type=box_id, default=None,
+                   help="top-view id of the wearer (|id| <= 2**53)")
+    p.add_argument(
+        "--clip-start",
+        type=int_in(1, 2**53, "a frame number: frames are 1-based, exact to 2**53"),
+        default=None,
+        help="first horizontal frame of a single clip (the paper's setting), 1..2**53; "
+        "default: --clips clips spread over the video",
+    )
+    p.add_argument("--clips", default=9,
+                   type=int_in(1, 100, "each clip is one more search over every offset"),
+                   help="clips to average, 1..100 (default 9)")
+    # clip_length >= 1 is checked by estimate_offset with the other clip settings (one line,
+    # exit 2, before any search): the parser bounds only its size.
+    p.add_argument("--clip-length", default=10,
+                   type=int_in(None, 1000, "frames per clip, in [1, 1000]: each is searched at "
+                               "every offset"),
+                   help="clip length in frames, 1..1000 (default 10)")
+    p.add_argument(
+        "--max-offset", type=MAX_OFFSET_TYPE, default=None,
+        help=f"largest |offset|, 0..{MAX_OFFSET_LIMIT} frames and at most the frames the box "
+        f"files span (default {AUTO_MAX_OFFSET}, as associate --offset auto)",
+    )
+    p.add_argument(
+        "--image-size", type=HOR_IMAGE_SIZE, default=(2688, 1512), metavar="WxH",
+        help="horizontal image size, 8..65536 a side (default 2688x1512)",
+    )
+    p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes sharing the clips, 1..64 (default 1; the estimate is the "
+                   "same for any K)")
+    _add_spatial_options(p)
+    p.set_defaults(func=_cmd_offset)
+
+    add_synth_parser(sub)
+    add_show_parser(sub)
+    add_baseline_parser(sub)
+    add_fit_geometry_parser(sub)
+    add_train_parser(sub)
+    add_export_parser(sub)
 
     p = command(
         "noise",
@@ -436,16 +550,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--boxes", required=True, help="input box file (MOT format)")
     p.add_argument("--out", required=True, help="output box file (written atomically)")
     p.add_argument("--view", choices=("top", "hor"), required=True, help="which view it is")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--jitter", type=float, default=0.05, help="box jitter fraction (0.05)")
-    p.add_argument("--miss", type=float, default=0.10, help="miss probability (0.10)")
-    p.add_argument("--false", type=float, default=0.3, help="false boxes per frame (0.3)")
+    p.add_argument("--seed", type=seed_value, default=0,
+                   help="random seed, 0..2**32-1 (default 0)")
+    p.add_argument("--jitter", default=0.05,
+                   type=float_in(0, 1, "a fraction of the box size: 1 moves a box by its size"),
+                   help="box jitter fraction, in [0, 1] (default 0.05)")
+    p.add_argument("--miss", default=0.10, type=float_in(0, 1, "a probability"),
+                   help="miss probability, in [0, 1] (default 0.10)")
+    p.add_argument("--false", default=0.3,
+                   type=float_in(0, 500, "false boxes per frame, each held in memory; 500 is "
+                                 "far beyond any detector"),
+                   help="false boxes per frame (Poisson mean), in [0, 500] (default 0.3)")
     p.add_argument(
-        "--keep-id", type=int, action="append", default=[], help="never drop this id (repeatable)"
+        "--keep-id", type=box_id, action="append", default=[],
+        help="never drop this id (repeatable; |id| <= 2**53)",
     )
     p.add_argument(
-        "--image-size", type=image_size(), default=(2688, 1512), metavar="WxH",
-        help="image size (default 2688x1512)",
+        "--image-size", type=image_size(8, 65536, "pixels of a camera image"),
+        default=(2688, 1512), metavar="WxH",
+        help="image size, 8..65536 a side (default 2688x1512)",
     )
     p.add_argument(
         "--duplicates", choices=("first", "error"), default="first",
@@ -453,53 +576,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_noise)
 
-    p = command(
-        "offset",
-        "Estimate the temporal offset between the two videos by sliding clips (Fig. 5).",
-    )
-    box_inputs(p)
-    p.add_argument("--camera-id", type=int, default=None, help="top-view id of the wearer")
-    p.add_argument(
-        "--clip-start",
-        type=int,
-        default=None,
-        help="first horizontal frame of a single clip (the paper's setting); default: "
-        "--clips clips spread over the video",
-    )
-    p.add_argument("--clips", type=int, default=9, help="clips to average (default 9)")
-    p.add_argument("--clip-length", type=int, default=10, help="clip length (default 10)")
-    p.add_argument(
-        "--max-offset", type=int_at_least(0), default=AUTO_MAX_OFFSET,
-        help=f"largest |offset| (default {AUTO_MAX_OFFSET}, as associate --offset auto)",
-    )
-    p.add_argument(
-        "--image-size", type=image_size(), default=(2688, 1512), metavar="WxH",
-        help="horizontal image size (default 2688x1512)",
-    )
-    p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")
-    p.add_argument("--workers", type=positive_int, default=1, metavar="K",
-                   help="processes sharing the clips (default 1; the estimate is the same "
-                   "for any K)")
-    _add_spatial_options(p)
-    p.set_defaults(func=_cmd_offset)
-
-    p = command("demo", "Simulate a scene, associate it in several modes and print the metrics.")
-    p.add_argument("--frames", type=int, default=150, help="frames to simulate (default 150)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.set_defaults(func=_cmd_demo)
-
-    from xvmatch.cli_synth import add_show_parser, add_synth_parser
-
-    add_synth_parser(sub)
-    add_show_parser(sub)
-
-    from xvmatch.cli_baseline import add_baseline_parser
-    from xvmatch.cli_learn import add_fit_geometry_parser
-    from xvmatch.cli_train import add_train_parser
-
-    add_baseline_parser(sub)
-    add_fit_geometry_parser(sub)
-    add_train_parser(sub)
     return parser
 
 

@@ -13,7 +13,7 @@ import json
 import sys
 import time
 
-from xvmatch.cli_types import positive_int
+from xvmatch.cli_types import seed_value, worker_count
 
 __all__ = ["EXAMPLE", "add_baseline_parser"]
 
@@ -51,30 +51,33 @@ def add_baseline_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--data", required=True, metavar="DIR",
                    help="dataset folder written by xvmatch synth (the paper's setting: "
                    "--scenario overview)")
-    p.add_argument("--noise-seed", type=int, default=0, metavar="S",
-                   help="seed of the detector noise of the Table II setting (default 0)")
-    p.add_argument("--scramble-seed", type=int, default=0, metavar="S",
-                   help="seed of the per-view shuffling of the boxes (default 0); the table "
-                   "does not depend on it")
+    p.add_argument("--noise-seed", type=seed_value, default=0, metavar="S",
+                   help="seed of the detector noise of the Table II setting, 0..2**32-1 "
+                   "(default 0)")
+    p.add_argument("--scramble-seed", type=seed_value, default=0, metavar="S",
+                   help="seed of the per-view shuffling of the boxes, 0..2**32-1 (default 0); "
+                   "the table does not depend on it")
     p.add_argument("--figures", default=None, metavar="DIR",
                    help="also write the true/false cost distributions before and after "
                    "normalisation (Figs. 2-3) as PNG files into DIR")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
-    p.add_argument("--workers", type=positive_int, default=1, metavar="K",
-                   help="processes computing the costs (default 1); the result does not "
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes computing the costs, 1..64 (default 1); the result does not "
                    "depend on it")
     g = p.add_argument_group(
         "non-association costs gamma (Eq. 2); the table's gamma column shows those used"
     )
     g.add_argument("--gamma-geo", type=_gamma, default=None, metavar="G",
-                   help="geometry only (default: tuned on the validation seed 2000, see "
-                   "xvmatch.evaluation.handcrafted_baseline.GAMMA_GEO)")
+                   help="geometry only, a finite cost > 0 (default: tuned on the validation seed "
+                   "2000, see xvmatch.evaluation.handcrafted_baseline.GAMMA_GEO)")
     g.add_argument("--gamma-hist", type=_gamma, default=None, metavar="G",
-                   help="histogram only (default: tuned on the validation seed 2000, GAMMA_HIST)")
+                   help="histogram only, a finite cost > 0 (default: tuned on the validation seed "
+                   "2000, GAMMA_HIST)")
     g.add_argument("--gamma-sum", type=_gamma, default=None, metavar="G",
-                   help="sum combination, w = 0.5 (default: the paper's 0.25)")
+                   help="sum combination, w = 0.5, a finite cost > 0 (default: the paper's 0.25)")
     g.add_argument("--gamma-product", type=_gamma, default=None, metavar="G",
-                   help="product combination of Eq. 8 (default: the paper's 0.1)")
+                   help="product combination of Eq. 8, a finite cost > 0 (default: the paper's "
+                   "0.1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=_cmd_baseline)
     return p
@@ -83,12 +86,12 @@ def add_baseline_parser(subparsers) -> argparse.ArgumentParser:
 def _cmd_baseline(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from xvmatch.datasets.pair_trials import open_dataset
     from xvmatch.evaluation.cost_distributions import save_cost_figures
     from xvmatch.evaluation.handcrafted_baseline import (
         BaselineConfig,
         evaluate_baseline,
         format_baseline_table,
-        open_dataset,
     )
 
     gammas = {f"gamma_{rule}": getattr(args, f"gamma_{rule}")

@@ -14,29 +14,25 @@ import argparse
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
-from xvmatch.cli_types import non_negative_int, positive_int
+from xvmatch.cli_types import float_in, int_in, seed_value, thread_count, worker_count
 
 __all__ = [
     "EXAMPLES",
+    "add_export_parser",
     "add_fit_geometry_parser",
     "add_model_arguments",
     "associate_with_model",
 ]
 
 EXAMPLES = {
+    "export": "xvmatch export --model geometry.pt --out geometry_bundle/",
     "fit-geometry": "xvmatch fit-geometry --cvmhat ../shared/data/cvmhat --out geometry.pt "
     "--sites canteen 55 --epochs 12 --seed 0",
 }
 
 
-def _gamma(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1], got {text!r}") from None
-    if not 0.0 < value <= 1.0:
-        raise argparse.ArgumentTypeError(f"gamma must be in (0, 1], got {text!r}")
-    return value
+_gamma = float_in(0, 1, "the matcher's costs lie in [0, 1]", low_open=True)
+"""``--gamma``: a non-association cost in (0, 1]."""
 
 
 def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
@@ -58,31 +54,43 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write")
     p.add_argument("--sites", nargs="+", default=None, metavar="SITE",
                    help="train on these sites only (the S_<site> part of the names; default all)")
-    p.add_argument("--epochs", type=positive_int, default=12, help="most epochs (default 12)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--noise", type=non_negative_int, default=2, metavar="COPIES",
-                   help="detector-noise copies of the training frames (default 2; 0: clean only)")
-    p.add_argument("--sim-scenes", type=non_negative_int, default=300, metavar="N",
-                   help="box-simulator scenes added to the training set as a regulariser "
-                   "(default 300; 0: real data only)")
+    p.add_argument("--epochs", default=12,
+                   type=int_in(1, 1000, "a bound on the run's time: the default converges in "
+                               "12"),
+                   help="most epochs, 1..1000 (default 12)")
+    p.add_argument("--seed", type=seed_value, default=0,
+                   help="random seed, 0..2**32-1 (default 0)")
+    p.add_argument("--noise", default=2, metavar="COPIES",
+                   type=int_in(0, 100, "copies of the training frames, all held in memory"),
+                   help="detector-noise copies of the training frames, 0..100 (default 2; 0: "
+                   "clean only)")
+    p.add_argument("--sim-scenes", default=300, metavar="N",
+                   type=int_in(0, 100_000, "simulated scenes, all held in memory"),
+                   help="box-simulator scenes added to the training set as a regulariser, "
+                   "0..100000 (default 300; 0: real data only)")
     p.add_argument("--no-sync", action="store_true",
                    help="keep every pair's files' timing (default: re-time a pair's top view "
                    "when 'associate --offset auto' would, so that same id means same moment; "
                    "estimated once per pair and cached)")
-    p.add_argument("--width", type=positive_int, default=64,
-                   help="encoder embedding size (default 64; a multiple of 4, the heads)")
-    p.add_argument("--layers", type=non_negative_int, default=2,
-                   help="encoder rounds of self/cross attention (default 2)")
+    # The multiple of 4 is checked by the command (one line, exit 2, before any work).
+    p.add_argument("--width", default=64,
+                   type=int_in(4, 1024, "the encoder's embedding size, a multiple of 4 (the "
+                               "heads); the default is 64"),
+                   help="encoder embedding size, 4..1024 and a multiple of 4, the heads "
+                   "(default 64)")
+    p.add_argument("--layers", default=2,
+                   type=int_in(0, 16, "encoder rounds; the default is 2"),
+                   help="encoder rounds of self/cross attention, 0..16 (default 2)")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="feature cache folder (default $XVMATCH_CACHE or ~/.cache/xvmatch)")
     p.add_argument("--run-dir", default=None, metavar="DIR",
                    help="checkpoints and CSV/TensorBoard logs (default MODEL.run)")
     p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
-    p.add_argument("--workers", type=positive_int, default=1,
-                   help="processes for feature extraction (default 1)")
-    p.add_argument("--threads", type=positive_int, default=None,
-                   help="torch threads for training (default: torch's choice; 1 is often "
-                   "fastest on a busy machine)")
+    p.add_argument("--workers", type=worker_count, default=1,
+                   help="processes for feature extraction, 1..64 (default 1)")
+    p.add_argument("--threads", type=thread_count, default=None,
+                   help="torch threads for training, 1..64 (default: torch's choice; 1 is "
+                   "often fastest on a busy machine)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_fit_geometry)
     return p
@@ -126,24 +134,222 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_export_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch export`` on ``subparsers`` and return its parser."""
+    help_text = (
+        "Export a trained matcher file to a deployable bundle folder: the appearance network "
+        "and the matcher as ONNX, and manifest.json (preprocessing, gamma, sha256, the parity "
+        "figures). Fails, writing nothing, unless onnxruntime reproduces the torch costs within "
+        "1e-4 and the same assignments on held-out synthetic frames."
+    )
+    p = subparsers.add_parser(
+        "export",
+        help=help_text,
+        description=help_text,
+        epilog=f"example:\n  {EXAMPLES['export']}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--model", required=True, metavar="MODEL",
+                   help="matcher file (.pt from fit-geometry or the matcher training), or "
+                   "'default' (models/default_matcher.pt)")
+    p.add_argument("--out", required=True, metavar="BUNDLE", help="bundle folder to write")
+    p.add_argument("--parity-data", default=None, metavar="DIR",
+                   help="synthetic dataset (xvmatch synth) for the parity check (default: "
+                   "render a small held-out one)")
+    p.add_argument("--int8", action="store_true",
+                   help="also write a static INT8 (QDQ) appearance network, which the runtime "
+                   "then uses (needs --calibration)")
+    p.add_argument("--calibration", default=None, metavar="DATA",
+                   help="with --int8: synthetic dataset (xvmatch synth, 2+ scenes): even "
+                   "scenes calibrate, odd scenes measure the accuracy kept")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=_cmd_export)
+    return p
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    try:
+        from xvmatch.export.onnx_export import export_bundle
+    except ImportError as exc:
+        raise ValueError(f"xvmatch export needs the learn extra (torch, onnx): {exc}") from None
+
+    def say(line: str) -> None:
+        if not args.quiet:
+            print(line, file=sys.stderr)
+
+    if args.int8 != (args.calibration is not None):
+        raise ValueError("--int8 and --calibration DATA go together")
+    manifest = export_bundle(args.model, args.out, parity_data=args.parity_data,
+                             int8_calibration=args.calibration, progress=say)
+    if not args.quiet:
+        for setting, p in manifest["parity"].items():
+            if isinstance(p, dict) and "frames" in p:
+                say(f"parity {setting}: {p['frames']} frames, max |cost diff| "
+                    f"{p['max_abs_cost_diff']:.1e}, identical assignments "
+                    f"{p['assignments_identical']}/{p['frames']}")
+        int8 = (manifest.get("appearance") or {}).get("int8")
+        if int8:
+            acc = int8["accuracy"]
+            say(f"INT8 appearance ({int8['calibration']['method']} calibration): Eq. 9 accuracy "
+                f"with images {acc['int8']['images']['acc9']:.1f} against FP32 "
+                f"{acc['fp32']['images']['acc9']:.1f} on held-out scenes")
+        say(f"wrote {args.out} (cues: {', '.join(manifest['cues']) or 'none, box-only'})")
+    return 0
+
+
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--model MODEL|default`` and ``--gamma`` to a parser (e.g. ``associate``)."""
-    parser.add_argument(
-        "--model", action="append", default=None, metavar="MODEL",
-        help="learned geometry model file, or 'default' for the shipped simulator-trained one; "
-        "replaces the handcrafted cost (frame mode only). Repeat it to average the costs of "
-        "several models (an ensemble, e.g. --model site.pt --model default)",
+    """Add the learned matcher's options to a parser (``associate``): ``--model``, ``--gamma``,
+    ``--mirror``, the image and camera inputs, ``--costs``, ``--draw`` and ``--threads``."""
+    g = parser.add_argument_group("learned matcher (--model)")
+    g.add_argument(
+        "--model", action="append", default=None, metavar="BUNDLE",
+        help="a matcher bundle folder (xvmatch export), 'default' for the shipped one, or a "
+        "torch matcher file (.pt, exported once into the cache; needs the learn extra); "
+        "replaces the handcrafted search (frame mode). Repeat it to average the costs of "
+        "several models (an ensemble)",
     )
-    parser.add_argument(
+    g.add_argument(
         "--gamma", type=_gamma, default=None,
-        help="with --model: non-association cost in (0, 1] (default: the model's own, 0.5)",
+        help="non-association cost in (0, 1] (default: the model's own)",
     )
-    parser.add_argument(
+    g.add_argument(
         "--mirror", action="store_true",
-        help="with --model: also run the model on both views mirrored left-right and average "
-        "the costs (test-time augmentation: twice the time, a few tenths to about one point "
-        "of CVIDF1 better on CVMHAT)",
+        help="also score the scene mirrored left-right and average the costs (test-time "
+        "augmentation: twice the search; a few tenths of CVIDF1 on CVMHAT)",
     )
+    g.add_argument(
+        "--top-images", default=None, metavar="PATH",
+        help="images of the top view: one image, a folder of frames whose names end in the "
+        "frame number (0212.jpg, frame_000212.png), a quoted glob pattern, or a video file",
+    )
+    g.add_argument("--hor-images", default=None, metavar="PATH",
+                   help="images of the horizontal view (as --top-images)")
+    g.add_argument(
+        "--cameras", default=None, metavar="CAMERAS",
+        help="calibrated cameras 'top' and 'ego': a camera file (both fixed) or a folder of "
+        "per-frame camera files named by frame number",
+    )
+    g.add_argument("--costs", default=None, metavar="JSON",
+                   help="also write each frame's ids and cost matrix (written atomically)")
+    g.add_argument("--draw", default=None, metavar="DIR",
+                   help="write a side-by-side picture of each frame's matches (needs images)")
+    g.add_argument("--draw-every", default=1, metavar="K",
+                   type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
+                   help="with --draw: every K-th frame only, 1..100000 (default 1)")
+    g.add_argument("--threads", type=thread_count, default=1, metavar="K",
+                   help="onnxruntime threads, 1..64 (default 1)")
+    g.add_argument("--precision", choices=("fp32", "int8"), default=None,
+                   help="appearance network to run: int8 (needs a bundle exported with --int8) "
+                   "or fp32 (default: int8 when the bundle has it)")
+
+
+LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs", "draw",
+                "precision")
+"""Options of ``associate`` that need ``--model``."""
+
+
+def _torch_file_bundle(path: str, threads: int, precision: str | None):
+    """The bundle of a torch matcher file, exported once into the cache."""
+    import hashlib
+    from pathlib import Path
+
+    from xvmatch.datasets.feature_cache import default_cache_dir
+    from xvmatch.inference.learned_association import load_matcher_bundle
+
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()[:20]
+    folder = default_cache_dir() / "bundles" / digest
+    if not (folder / "manifest.json").is_file():
+        try:
+            from xvmatch.export.onnx_export import export_bundle
+        except ImportError:
+            raise ValueError(f"{path}: a torch matcher file; export it with 'xvmatch export' on "
+                             "a machine with the learn extra, and pass the bundle folder"
+                             ) from None
+        print(f"exporting {path} to {folder} (once)", file=sys.stderr)
+        export_bundle(path, folder)
+    return load_matcher_bundle(folder, threads, precision)
+
+
+def open_models(names: Iterable[str], threads: int = 1, precision: str | None = None) -> list:
+    """:class:`~xvmatch.inference.learned_association.LearnedMatcher` of each ``--model``."""
+    import os
+
+    from xvmatch.inference.learned_association import load_matcher_bundle
+
+    models = []
+    for name in names:
+        if name != "default" and os.path.isfile(name):
+            models.append(_torch_file_bundle(name, threads, precision))
+        else:
+            models.append(load_matcher_bundle(name, threads, precision))
+    return models
+
+
+class _Shifted:
+    """An image source re-timed like the boxes: frame ``f`` is the source's ``f + shift``."""
+
+    def __init__(self, source, shift: int) -> None:
+        self.source, self.shift = source, int(shift)
+
+    def get(self, frame: int):
+        return self.source.get(int(frame) + self.shift)
+
+    def close(self) -> None:
+        self.source.close()
+
+
+def _check_boxes_inside(frames: Mapping, size: tuple[int, int], where: str) -> None:
+    """Every box must overlap its image, else the images and boxes do not belong together."""
+    import numpy as np
+
+    width, height = size
+    for frame, rec in sorted(frames.items()):
+        b = np.asarray(rec.boxes)
+        outside = (b[:, 0] >= width) | (b[:, 1] >= height) | (b[:, 0] + b[:, 2] <= 0) | (
+            b[:, 1] + b[:, 3] <= 0)
+        if outside.any():
+            k = int(np.flatnonzero(outside)[0])
+            x, y, w, h = (float(v) for v in b[k])
+            raise ValueError(f"{where}: frame {frame}: box of id {int(rec.ids[k])} "
+                             f"({x:g}, {y:g}, {w:g}, {h:g}) lies outside the {width}x{height} "
+                             "image; are these the boxes of these images?")
+
+
+def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) -> None:
+    """Every camera's image size must be its view's image size (``sizes``: view -> (size,
+    where that size comes from))."""
+    for where, cams in cameras.all():
+        for view, cam in (("top", cams.top), ("hor", cams.hor)):
+            if view not in sizes:
+                continue
+            want, source = sizes[view]
+            if tuple(cam.image_size) != tuple(want):
+                name = "ego" if view == "hor" else "top"
+                label = "horizontal" if view == "hor" else "top"
+                raise ValueError(f"{where}: camera {name!r} is {cam.width}x{cam.height} but the "
+                                 f"{label} image size is {want[0]}x{want[1]} (from {source})")
+
+
+def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, int], str]:
+    """The horizontal image size and where it comes from: ``--image-size``, else the
+    ``--hor-images``, else the ``--cameras`` file's ego camera, else CVMHAT's 2688x1512."""
+    if getattr(args, "image_size", None) is not None:
+        return tuple(args.image_size), "--image-size"
+    if getattr(args, "model", None) is not None and getattr(args, "hor_images", None):
+        from xvmatch.datasets.frame_sources import open_frames
+
+        with open_frames(args.hor_images, box_frames=sorted(hor)) as source:
+            return tuple(source.size), "the images"
+    if getattr(args, "model", None) is not None and getattr(args, "cameras", None):
+        from xvmatch.datasets.camera_frames import open_cameras
+
+        sizes = {tuple(c.hor.image_size) for _, c in open_cameras(args.cameras).all()}
+        if len(sizes) != 1:
+            raise ValueError(f"{args.cameras}: the ego cameras have several image sizes "
+                             f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))}); pass "
+                             "--image-size")
+        return sizes.pop(), "the camera files"
+    return (2688, 1512), "the CVMHAT default; pass --image-size"
 
 
 def associate_with_model(
@@ -152,33 +358,150 @@ def associate_with_model(
     hor: Mapping,
     frames: Iterable[int],
     progress: Callable[[Iterable[int]], Iterable[int]] | None,
+    top_offset: int = 0,
 ) -> dict[int, list[tuple[int, int]]]:
-    """Associate with ``args.model`` (a model file or ``default``); ``{frame: [(top, hor)]}``.
+    """Associate with ``args.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
+    hor)]}``. Also writes ``--costs`` and ``--draw`` when asked. ``top`` is already re-timed by
+    ``top_offset`` (``--offset``); the top images are re-timed the same way.
 
-    Reads ``args.model``, ``args.image_size`` (W, H), ``args.camera_id``, and when present
-    ``args.mode`` (must be ``frame``), ``args.gamma``, ``args.mirror`` and ``args.workers``.
-    The model uses the search parameters it was trained with, not ``--rho`` / ``--lam`` / ...
+    Reads ``args.model``, ``args.image_size`` (W, H, or None: from the images, else CVMHAT's),
+    ``args.camera_id``, and when present ``args.mode`` (must be ``frame``), ``args.gamma``,
+    ``args.mirror``, ``args.workers``, ``args.threads``, ``args.top_images``,
+    ``args.hor_images``, ``args.cameras``, ``args.costs``, ``args.draw``, ``args.draw_every``.
+    Every input is checked before any work starts; outputs are written only at the end.
     """
-    from xvmatch.inference.learned_association import (
-        associate_sequence_learned,
-        load_geometry_model,
-    )
+    from xvmatch.inference.learned_association import associate_sequence_learned
 
     if getattr(args, "mode", "frame") != "frame":
         raise ValueError("--model solves each frame on its own: use --mode frame")
+    top_path, hor_path = getattr(args, "top_images", None), getattr(args, "hor_images", None)
+    if (top_path is None) != (hor_path is None):
+        raise ValueError("give --top-images and --hor-images together")
+    draw = getattr(args, "draw", None)
+    if draw is not None and top_path is None:
+        raise ValueError("--draw needs the images: add --top-images and --hor-images")
     names = [args.model] if isinstance(args.model, str) else list(args.model)
-    model = [load_geometry_model(name) for name in names]
-    width, height = args.image_size
-    return associate_sequence_learned(
-        top,
-        hor,
-        hor_width=width,
-        model=model,
-        camera_id=getattr(args, "camera_id", None),
-        gamma=getattr(args, "gamma", None),
-        progress=progress,
-        hor_height=height,
-        frames=frames,
-        mirror=bool(getattr(args, "mirror", False)),
-        workers=getattr(args, "workers", 1),
+    models = open_models(names, getattr(args, "threads", 1), getattr(args, "precision", None))
+    frames = list(frames)
+    both = [f for f in frames if f in top and f in hor and len(top[f]) and len(hor[f])]
+    sources = {}
+    sizes: dict[str, tuple[int, int]] = {}
+    if top_path is not None:
+        from xvmatch.datasets.frame_sources import check_frames, open_frames
+
+        for m, name in zip(models, names, strict=True):
+            if m.bundle.manifest.appearance is None:
+                raise ValueError(f"{name}: a box-only matcher cannot use images; drop "
+                                 "--top-images/--hor-images or use a bundle with an "
+                                 "appearance network (e.g. default)")
+        for view, path, boxes, shift in (("top", top_path, top, top_offset),
+                                         ("hor", hor_path, hor, 0)):
+            source = open_frames(path, box_frames=sorted(f + shift for f in boxes))
+            check_frames(source, [f + shift for f in both])
+            sources[view] = _Shifted(source, shift) if shift else source
+            sizes[view] = tuple(source.size)
+        given = getattr(args, "image_size", None)
+        if given is not None and tuple(given) != sizes["hor"]:
+            raise ValueError(f"--image-size {given[0]}x{given[1]} disagrees with the horizontal "
+                             f"images ({sizes['hor'][0]}x{sizes['hor'][1]}, {hor_path})")
+        _check_boxes_inside(top, sizes["top"], args.top)
+        _check_boxes_inside(hor, sizes["hor"], args.hor)
+    (width, height), said = horizontal_size(args, hor)
+    cameras = None
+    if getattr(args, "cameras", None) is not None:
+        from xvmatch.datasets.camera_frames import open_cameras
+
+        for m, name in zip(models, names, strict=True):
+            if not m.bundle.manifest.uses_cameras:
+                raise ValueError(f"{name}: this matcher takes no camera cues; drop --cameras or "
+                                 "use a bundle trained with cameras (e.g. default)")
+        cameras = open_cameras(args.cameras, both)
+        wanted = {"hor": ((width, height), "the images" if sizes else said)}
+        if "top" in sizes:
+            wanted["top"] = (sizes["top"], "the images")
+        _check_camera_sizes(cameras, wanted)
+    want_costs = getattr(args, "costs", None) is not None or draw is not None
+    costs: dict | None = {} if want_costs else None
+    try:
+        pairs = associate_sequence_learned(
+            top,
+            hor,
+            hor_width=width,
+            model=models,
+            camera_id=getattr(args, "camera_id", None),
+            gamma=getattr(args, "gamma", None),
+            progress=progress,
+            hor_height=height,
+            frames=frames,
+            mirror=bool(getattr(args, "mirror", False)),
+            workers=getattr(args, "workers", 1),
+            top_images=sources.get("top"),
+            hor_images=sources.get("hor"),
+            cameras=cameras,
+            costs_out=costs,
+        )
+        if draw is not None:
+            _draw(draw, getattr(args, "draw_every", 1), top, hor, pairs, costs, sources)
+    finally:
+        for source in sources.values():
+            source.close()
+    if getattr(args, "costs", None) is not None:
+        _write_costs(args.costs, top, hor, costs, getattr(args, "gamma", None) or
+                     models[0].gamma)
+    return pairs
+
+
+def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float) -> None:
+    import json
+
+    from xvmatch.datasets.mot_boxes import atomic_write_text
+
+    record = {
+        "version": 1,
+        "gamma": gamma,
+        "frames": {
+            str(f): {"top_ids": [int(i) for i in top[f].ids],
+                     "hor_ids": [int(i) for i in hor[f].ids],
+                     "cost": [[round(float(v), 6) for v in row] for row in c]}
+            for f, c in sorted(costs.items())
+        },
+    }
+    atomic_write_text(path, json.dumps(record) + "\n")
+
+
+def _draw(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Mapping,
+          costs: dict, sources: dict) -> None:
+    """Pictures of the drawn frames, written into a temporary folder and moved into ``folder``
+    only once all are made."""
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+
+    from xvmatch.inference.match_drawing import (
+        draw_matches,
+        frames_to_draw,
+        picture_path,
+        write_match_picture,
     )
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".draw-", dir=out))
+    try:
+        written = []
+        for f in frames_to_draw(sorted(costs), every):
+            t_ids, h_ids = list(top[f].ids), list(hor[f].ids)
+            rows = np.array([(t_ids.index(a), h_ids.index(b)) for a, b in pairs[f]],
+                            dtype=np.int64).reshape(-1, 2)
+            picture = draw_matches(sources["top"].get(f), sources["hor"].get(f), top[f].boxes,
+                                   hor[f].boxes, rows, top[f].ids, hor[f].ids, costs[f],
+                                   title=f"frame {f}: {len(rows)} matches")
+            path = picture_path(tmp, f)
+            write_match_picture(path, picture)
+            written.append(path)
+        for path in written:
+            path.replace(out / path.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

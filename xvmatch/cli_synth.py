@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.cli_types import image_size, positive_int
+from xvmatch.cli_types import float_in, image_size, int_in, seed_value, worker_count
 
 __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
 
@@ -24,14 +24,25 @@ EXAMPLES = {
 }
 
 
+MAX_PEOPLE = 60
+"""Most people per scene: what the renderer places in a scene's area (``SynthConfig``)."""
+
+
 def _people_range(text: str) -> tuple[int, int]:
     try:
         low, high = (int(v) for v in text.split(":"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected MIN:MAX, e.g. 3:14; got {text!r}") from None
-    if not 1 <= low <= high:
-        raise argparse.ArgumentTypeError(f"need 1 <= MIN <= MAX, got {text!r}")
+    if not 1 <= low <= high <= MAX_PEOPLE:
+        raise argparse.ArgumentTypeError(
+            f"need 1 <= MIN <= MAX <= {MAX_PEOPLE} (the renderer places at most {MAX_PEOPLE} "
+            f"people in a scene), got {text!r}"
+        )
     return low, high
+
+
+MAX_FRAMES = 10_000
+"""Most frames per scene (``synth --frames``, ``show --frame``)."""
 
 
 def _parser(subparsers, name: str, help_text: str) -> argparse.ArgumentParser:
@@ -57,20 +68,31 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scenario", choices=("drone", "overview"), default="drone",
                    help="drone: nadir camera 20-60 m up + head-worn camera (CVMHAT); overview: "
                    "building camera 8-25 m up + hand-held camera (default drone)")
-    p.add_argument("--scenes", type=positive_int, default=10, help="number of scenes (default 10)")
-    p.add_argument("--frames", type=positive_int, default=10,
-                   help="frames per scene; people walk with turns and stops (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0); the output is "
-                   "identical for any --workers")
+    p.add_argument("--scenes", default=10,
+                   type=int_in(1, 100_000, "a bound on the run's time and disk: 100000 scenes "
+                               "is ten times the largest training set"),
+                   help="number of scenes, 1..100000 (default 10)")
+    p.add_argument("--frames", default=10,
+                   type=int_in(1, MAX_FRAMES, "frames per scene: a scene's walk is held in "
+                               "memory"),
+                   help=f"frames per scene, 1..{MAX_FRAMES}; people walk with turns and stops "
+                   "(default 10)")
+    p.add_argument("--seed", type=seed_value, default=0, help="random seed, 0..2**32-1 "
+                   "(default 0); the output is identical for any --workers")
     p.add_argument("--people", type=_people_range, default=(3, 14), metavar="MIN:MAX",
-                   help="people per scene, camera wearer included (default 3:14)")
-    p.add_argument("--size", type=image_size(8), default=(640, 360), metavar="WxH",
-                   help="image size of both views (default 640x360)")
+                   help=f"people per scene, camera wearer included, 1 <= MIN <= MAX <= "
+                   f"{MAX_PEOPLE} (default 3:14)")
+    p.add_argument("--size", default=(640, 360), metavar="WxH",
+                   type=image_size(8, 8192, "each image is held in memory: 8192x8192 is 200 "
+                                   "MB; the renderer needs 8"),
+                   help="image size of both views, 8..8192 a side (default 640x360)")
     p.add_argument("--difficulty", choices=("easy", "medium", "hard"), default="medium",
                    help="look-alike clothing and photometric degradation (default medium)")
-    p.add_argument("--fps", type=float, default=10.0, help="frame rate of the walks (default 10)")
-    p.add_argument("--workers", type=positive_int, default=1,
-                   help="rendering processes (default 1)")
+    p.add_argument("--fps", default=10.0,
+                   type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
+                   help="frame rate of the walks, in [0.1, 1000] (default 10)")
+    p.add_argument("--workers", type=worker_count, default=1,
+                   help="rendering processes, 1..64 (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=_cmd_synth)
     return p
@@ -115,8 +137,11 @@ def add_show_parser(subparsers) -> argparse.ArgumentParser:
                    "a scene file (annotations/SCENE.json), or a dataset folder")
     p.add_argument("--scene", default=None, help="scene name when PAIR is a dataset folder "
                    "(default: the first scene)")
-    p.add_argument("--frame", type=positive_int, default=None,
-                   help="frame number when PAIR is a scene file or folder (default 1)")
+    p.add_argument("--frame", default=None,
+                   type=int_in(1, MAX_FRAMES, f"a scene has at most {MAX_FRAMES} frames "
+                               "(synth --frames)"),
+                   help=f"frame number when PAIR is a scene file or folder, 1..{MAX_FRAMES} "
+                   "(default 1)")
     p.add_argument("--out", default="pair.png", help="picture to write (default pair.png)")
     p.add_argument("--full-boxes", action="store_true",
                    help="also draw the full (unoccluded) boxes, thin")

@@ -1,4 +1,5 @@
-"""Box-only input features of the learned geometry model (numpy only, no torch).
+"""Box-only input features of the learned geometry model, built from the spatial-distribution
+search (numpy only: no torch, no I/O).
 
 For one frame pair (top-view boxes, horizontal-view boxes) the features describe, without any
 id and independently of the order of the boxes:
@@ -18,30 +19,36 @@ Boxes are first put in a canonical order (sorted by their coordinates), so featu
 model outputs computed from them, do not depend on the input order; ``top_order`` and
 ``hor_order`` map canonical rows back to input rows. Everything is float32.
 
-Extraction costs about 10 ms per frame (one exact search per candidate O), so whole datasets are
-cached on disk (:func:`cached_sequence_features`), keyed by a hash of the boxes, the
-configuration and :data:`FEATURE_VERSION`.
+Every feature is resolution-free (:data:`FEATURE_VERSION` 2): a view's boxes and image size
+scaled by any factor give the same features (the horizontal y of Eq. 9 in reference pixels,
+:func:`~xvmatch.geometry.spatial_vectors.horizontal_vectors`; top-view lengths over the frame's
+median box size; horizontal positions over the image size).
+
+Extraction runs one exact search per candidate O; whole sequences are computed in parallel and
+cached on disk by :mod:`xvmatch.datasets.feature_cache`.
 """
 
 from __future__ import annotations
 
-import hashlib
-import io
-import json
 import math
-import os
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
-from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import atomic_write_bytes
 from xvmatch.geometry.array_checks import as_boxes
 from xvmatch.geometry.spatial_matching import SpatialParams
-from xvmatch.geometry.spatial_search import FrameAssociation, hypothesis_vectors, rank_hypotheses
-from xvmatch.geometry.spatial_vectors import box_centres, horizontal_vectors, top_geometry
+from xvmatch.geometry.spatial_search import (
+    FrameAssociation,
+    best_per_candidate,
+    rank_hypotheses,
+)
+from xvmatch.geometry.spatial_vectors import (
+    REFERENCE_SIZE,
+    box_centres,
+    horizontal_vectors,
+    top_geometry,
+)
 
 __all__ = [
     "FEATURE_VERSION",
@@ -50,20 +57,17 @@ __all__ = [
     "PAIR_FEATURES",
     "TOP_FEATURES",
     "FeatureConfig",
-    "FeatureSet",
     "FrameFeatures",
-    "cache_key",
-    "cached_sequence_features",
     "camera_labels",
     "collate_frames",
-    "default_cache_dir",
     "frame_features",
     "match_labels",
-    "sequence_features",
 ]
 
-FEATURE_VERSION = 1
-"""Bumped whenever a feature's definition changes; stored in caches and model files."""
+FEATURE_VERSION = 2
+"""Bumped whenever a feature's definition changes; stored in caches and model files. Version 2:
+resolution-free (y_hor in units of a 2688-pixel-wide image, the border test and the scale mu
+relative to the image size); version 1 depended on the horizontal image's pixel count."""
 
 TOP_FEATURES = ("log_w", "log_h", "log_nn_dist", "log_n_top", "log_n_hor")
 """Per top-view person: box size and nearest-neighbour distance over the frame's top box scale
@@ -95,7 +99,9 @@ HYP_FEATURES = (
     "camera_given",
 )
 """Per hypothesis: log Phi (Eq. 12), log Phi minus the best one's, rank / n_hypotheses, matched
-pairs over N, people in view over N, log(mu s_top H_img) (a size-free scale), O given."""
+pairs over N, people in view over N, log(mu s_top 1512) (mu relates the top view's depths to the
+horizontal y of Eq. 9, which is resolution-free, so mu s_top is too; the constant is the reference
+height of :data:`~xvmatch.geometry.spatial_vectors.REFERENCE_SIZE`), O given."""
 
 PAIR_FEATURES = (
     "bearing_diff",
@@ -119,6 +125,9 @@ its column (over the visible i); log(|O P_i| / s_top)."""
 
 _CLIP = 3.0
 _EPS = 1e-6
+_BORDER = 2.0
+"""A box within this many reference pixels (2 of 2688 across, 2 of 1512 down) of the image border
+touches it; scaled with the image, so the test is the same at any resolution."""
 
 
 @dataclass(frozen=True)
@@ -143,6 +152,19 @@ class FeatureConfig:
     fov_deg: float = 90.0
 
     def __post_init__(self) -> None:
+        for name in ("n_hypotheses", "modes_per_camera"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise ValueError(f"FeatureConfig.{name} must be an integer, got {value!r}")
+        for name in ("mode_separation_deg", "rho", "lam", "tau_deg", "dtheta_deg", "fov_deg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float | np.floating) or \
+                    not math.isfinite(value):
+                raise ValueError(f"FeatureConfig.{name} must be a finite number, got {value!r}")
+        if self.n_hypotheses > 64 or self.modes_per_camera > 64:
+            raise ValueError("FeatureConfig.n_hypotheses and modes_per_camera must be <= 64 "
+                             f"(the hypotheses kept per frame), got {self.n_hypotheses} and "
+                             f"{self.modes_per_camera}")
         if self.n_hypotheses < 1 or self.modes_per_camera < 1:
             raise ValueError(
                 "FeatureConfig.n_hypotheses and modes_per_camera must be >= 1, got "
@@ -239,9 +261,13 @@ def _hypotheses(
     depth = 1 if modes == 1 else max(4 * modes, 2 * math.ceil(
         math.degrees(separation) / config.dtheta_deg) * modes)
     found: list[FrameAssociation] = []
-    for c in candidates:
-        ranked = rank_hypotheses(top, hor, hor_width, params, candidates=[c], k=depth)
-        found += _modes(ranked, modes, separation)
+    if depth == 1:  # one orientation per candidate: one batched search for all of them
+        found = best_per_candidate(top, hor, hor_width, params, candidates=candidates,
+                                   keep=config.n_hypotheses)
+    else:
+        for c in candidates:
+            ranked = rank_hypotheses(top, hor, hor_width, params, candidates=[c], k=depth)
+            found += _modes(ranked, modes, separation)
     found.sort(key=lambda h: (h.cost, h.camera, h.theta))
     return found[: config.n_hypotheses]
 
@@ -315,9 +341,11 @@ def frame_features(
     x_hor[sorted_rows], y_hor[sorted_rows] = vectors[:, 0], vectors[:, 1]
     log_h = np.log(hor[:, 3] / height)
     bottom = (hor[:, 1] + hor[:, 3]) / height
+    margin_x = _BORDER * width / REFERENCE_SIZE[0]
+    margin_y = _BORDER * height / REFERENCE_SIZE[1]
     border = (
-        (hor[:, 0] <= 2.0) | (hor[:, 0] + hor[:, 2] >= width - 2.0)
-        | (hor[:, 1] + hor[:, 3] >= height - 2.0)
+        (hor[:, 0] <= margin_x) | (hor[:, 0] + hor[:, 2] >= width - margin_x)
+        | (hor[:, 1] + hor[:, 3] >= height - margin_y)
     )
     hor_f = np.column_stack(
         [
@@ -336,68 +364,65 @@ def frame_features(
 
     hyps = _hypotheses(top, hor, width, config, cam) if m and n else []
     n_hyp = len(hyps)
-    params = config.spatial_params()
     half_fov = 0.5 * math.radians(config.fov_deg)
     hyp_f = np.zeros((n_hyp, len(HYP_FEATURES)))
     pair_f = np.zeros((n_hyp, m, n, len(PAIR_FEATURES)))
     hyp_camera = np.array([h.camera for h in hyps], dtype=np.int64)
     if n_hyp:
+        # Every hypothesis at once: (H, M) per top person, (H, M, N) per pair.
         bearing_hor = np.arctan(x_hor * math.tan(half_fov))  # (N,) right of the axis, radians
         log_y_hor = np.log(y_hor)
-        best = math.log(max(hyps[0].cost, 1e-12))
+        thetas = np.array([h.theta for h in hyps])
+        scales = np.array([h.scale for h in hyps])
         geometry = top_geometry(centres, hyp_camera, math.radians(config.tau_deg))
+        dist, visible = geometry.dist, geometry.visible
+        delta = _wrap(geometry.phi - thetas[:, None])  # signed angle from the optical axis
+        in_view = (np.abs(delta) < half_fov) & visible  # inside the field of view (Eqs. 5-7)
+        y_top = dist * np.cos(delta)  # Eq. 5 depth
+        bearing_top = -delta  # Eq. 7: x_top = -tan(delta) / tan(alpha / 2)
+        diff = _wrap(bearing_top[:, :, None] - bearing_hor[None, None, :]) / half_fov
+        diff = np.clip(diff, -_CLIP, _CLIP)
+        depth = np.maximum(y_top, 0.05 * dist) * scales[:, None]
+        ratio = np.log(np.maximum(depth, 1e-12))[:, :, None] - log_y_hor[None, None, :]
+        ratio = np.clip(ratio, -_CLIP, _CLIP)
+        matched = np.zeros((n_hyp, m, n))
         for h, hyp in enumerate(hyps):
-            _, y_top, in_view, visible = hypothesis_vectors(top, hyp.camera, hyp.theta, params)
-            delta = _wrap(geometry.phi[h] - hyp.theta)
-            dist = geometry.dist[h]
-            bearing_top = -delta  # Eq. 7: x_top = -tan(delta) / tan(alpha / 2)
-            diff = _wrap(bearing_top[:, None] - bearing_hor[None, :]) / half_fov
-            diff = np.clip(diff, -_CLIP, _CLIP)
-            depth = np.maximum(y_top, 0.05 * dist) * hyp.scale
-            ratio = np.log(np.maximum(depth, 1e-12))[:, None] - log_y_hor[None, :]
-            ratio = np.clip(ratio, -_CLIP, _CLIP)
-            matched = np.zeros((m, n))
             if hyp.pairs.size:
-                matched[hyp.pairs[:, 0], hyp.pairs[:, 1]] = 1.0
-            absdiff = np.abs(diff)
-            row_gap = absdiff - absdiff.min(axis=1, keepdims=True)
-            col_ref = np.where(visible[:, None], absdiff, np.inf).min(axis=0, keepdims=True)
-            col_gap = np.clip(absdiff - np.where(np.isfinite(col_ref), col_ref, 0.0), 0, _CLIP)
-            is_cam = np.arange(m) == hyp.camera
-            per_top = np.stack(
-                [
-                    in_view.astype(float),
-                    visible.astype(float),
-                    is_cam.astype(float),
-                    np.abs(bearing_top) / math.pi,
-                ],
-                axis=1,
-            )
-            log_dist = np.clip(np.log(np.maximum(dist, _EPS) / s_top), -_CLIP, 2 * _CLIP)
-            pair_f[h] = np.concatenate(
-                [
-                    diff[..., None],
-                    absdiff[..., None],
-                    ratio[..., None],
-                    np.abs(ratio)[..., None],
-                    matched[..., None],
-                    np.broadcast_to(per_top[:, None, :], (m, n, 4)),
-                    row_gap[..., None],
-                    col_gap[..., None],
-                    np.broadcast_to(log_dist[:, None, None], (m, n, 1)),
-                ],
-                axis=2,
-            )
-            log_cost = math.log(max(hyp.cost, 1e-12))
-            hyp_f[h] = [
-                np.clip(log_cost / 5.0, -_CLIP, _CLIP),
-                min(log_cost - best, 10.0) / 5.0,
-                h / config.n_hypotheses,
-                hyp.pairs.shape[0] / n,
-                in_view.sum() / n,
-                np.clip(math.log(max(hyp.scale * s_top * height, 1e-12)), -10, 10) / 5.0,
-                float(camera is not None),
-            ]
+                matched[h, hyp.pairs[:, 0], hyp.pairs[:, 1]] = 1.0
+        absdiff = np.abs(diff)
+        row_gap = absdiff - absdiff.min(axis=2, keepdims=True)
+        col_ref = np.where(visible[:, :, None], absdiff, np.inf).min(axis=1, keepdims=True)
+        col_gap = np.clip(absdiff - np.where(np.isfinite(col_ref), col_ref, 0.0), 0, _CLIP)
+        is_cam = np.arange(m)[None, :] == hyp_camera[:, None]
+        per_top = np.stack([in_view, visible, is_cam, np.abs(bearing_top) / math.pi],
+                           axis=2).astype(float)
+        log_dist = np.clip(np.log(np.maximum(dist, _EPS) / s_top), -_CLIP, 2 * _CLIP)
+        pair_f = np.concatenate(
+            [
+                diff[..., None],
+                absdiff[..., None],
+                ratio[..., None],
+                np.abs(ratio)[..., None],
+                matched[..., None],
+                np.broadcast_to(per_top[:, :, None, :], (n_hyp, m, n, 4)),
+                row_gap[..., None],
+                col_gap[..., None],
+                np.broadcast_to(log_dist[:, :, None, None], (n_hyp, m, n, 1)),
+            ],
+            axis=3,
+        )
+        costs = np.array([max(h.cost, 1e-12) for h in hyps])
+        log_cost = np.log(costs)
+        hyp_f = np.column_stack([
+            np.clip(log_cost / 5.0, -_CLIP, _CLIP),
+            np.minimum(log_cost - log_cost[0], 10.0) / 5.0,
+            np.arange(n_hyp) / config.n_hypotheses,
+            np.array([h.pairs.shape[0] for h in hyps]) / n,
+            in_view.sum(axis=1) / n,
+            np.clip(np.log(np.maximum(scales * s_top * REFERENCE_SIZE[1], 1e-12)), -10, 10)
+            / 5.0,
+            np.full(n_hyp, float(camera is not None)),
+        ])
     return FrameFeatures(
         top=top_f.astype(np.float32),
         hor=hor_f.astype(np.float32),
@@ -425,229 +450,6 @@ def camera_labels(features: FrameFeatures, top_ids: np.ndarray, wearer_id: int =
     """``(H,)`` bool: the hypothesis' O is the wearer (top-view id ``wearer_id``; labels only)."""
     t = np.asarray(top_ids)[features.top_order]
     return t[features.hyp_camera] == wearer_id if features.hyp_camera.size else np.zeros(0, bool)
-
-
-# ------------------------------------------------------------------------------------------
-# Whole sequences: flat storage, parallel extraction, disk cache
-
-
-_ARRAYS = ("top", "hor", "hyp", "pair", "top_order", "hor_order", "hyp_camera")
-
-
-@dataclass(frozen=True, eq=False)
-class FeatureSet:
-    """Features of many frames, stored flat (one concatenated array per field) with offsets.
-
-    Attributes:
-        frames: ``(F,)`` frame numbers.
-        shapes: ``(F, 3)`` (H, M, N) of each frame.
-        arrays: ``{field: concatenated array}`` for the fields of :class:`FrameFeatures`.
-    """
-
-    frames: np.ndarray
-    shapes: np.ndarray
-    arrays: dict[str, np.ndarray]
-
-    def __len__(self) -> int:
-        return int(self.frames.shape[0])
-
-    def _offsets(self) -> dict[str, np.ndarray]:
-        h, m, n = self.shapes.T.astype(np.int64)
-        sizes = {
-            "top": m, "hor": n, "hyp": h, "pair": h * m * n,
-            "top_order": m, "hor_order": n, "hyp_camera": h,
-        }
-        return {k: np.concatenate([[0], np.cumsum(v)]) for k, v in sizes.items()}
-
-    def frame(self, index: int) -> FrameFeatures:
-        """Features of the ``index``-th stored frame."""
-        offsets = self.__dict__.get("_cached_offsets")
-        if offsets is None:
-            offsets = self._offsets()
-            object.__setattr__(self, "_cached_offsets", offsets)
-        h, m, n = (int(v) for v in self.shapes[index])
-        parts = {}
-        for k in _ARRAYS:
-            a, b = offsets[k][index], offsets[k][index + 1]
-            parts[k] = self.arrays[k][a:b]
-        parts["pair"] = parts["pair"].reshape(h, m, n, len(PAIR_FEATURES))
-        return FrameFeatures(**parts)
-
-    @classmethod
-    def from_frames(cls, frames: Sequence[int], feats: Sequence[FrameFeatures]) -> FeatureSet:
-        """Pack per-frame features (in the given order)."""
-        shapes = np.array([f.shape for f in feats], dtype=np.int64).reshape(-1, 3)
-        dims = {
-            "top": (0, len(TOP_FEATURES)), "hor": (0, len(HOR_FEATURES)),
-            "hyp": (0, len(HYP_FEATURES)), "pair": (0, len(PAIR_FEATURES)),
-        }
-        arrays = {}
-        for k in _ARRAYS:
-            if k == "pair":
-                parts = [f.pair.reshape(-1, len(PAIR_FEATURES)) for f in feats]
-            else:
-                parts = [getattr(f, k) for f in feats]
-            empty = np.zeros(dims[k], np.float32) if k in dims else np.zeros(0, np.int64)
-            arrays[k] = np.concatenate(parts) if parts else empty
-        return cls(np.asarray(frames, dtype=np.int64), shapes, arrays)
-
-    def save(self, path: str | os.PathLike) -> None:
-        """Write an ``.npz`` atomically (temporary file in the same folder, then rename)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        buffer = io.BytesIO()
-        np.savez(buffer, frames=self.frames, shapes=self.shapes,
-                 feature_version=np.array(FEATURE_VERSION), **self.arrays)
-        atomic_write_bytes(path, buffer.getvalue(), fsync=False)
-
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> FeatureSet:
-        """Read a file written by :meth:`save`; a different feature version is an error."""
-        with np.load(path) as data:
-            version = int(data["feature_version"])
-            if version != FEATURE_VERSION:
-                raise ValueError(
-                    f"{os.fspath(path)}: feature version {version}, this code computes "
-                    f"{FEATURE_VERSION}; delete the cache file to recompute"
-                )
-            return cls(data["frames"], data["shapes"], {k: data[k] for k in _ARRAYS})
-
-
-class _BoxesLike:
-    """Structural type of a frame record: ``ids (N,)`` and ``boxes (N, 4)``."""
-
-    ids: np.ndarray
-    boxes: np.ndarray
-
-
-_EMPTY_BOXES = np.zeros((0, 4))
-
-
-def _frame_inputs(
-    top: Mapping[int, _BoxesLike],
-    hor: Mapping[int, _BoxesLike],
-    frames: Sequence[int],
-    camera_id: int | None,
-) -> list[tuple[np.ndarray, np.ndarray, int | None]]:
-    out = []
-    for f in frames:
-        t, h = top.get(f), hor.get(f)
-        tb = t.boxes if t is not None else _EMPTY_BOXES
-        hb = h.boxes if h is not None else _EMPTY_BOXES
-        cam = None
-        if camera_id is not None and t is not None:
-            hits = np.flatnonzero(np.asarray(t.ids) == camera_id)
-            cam = int(hits[0]) if hits.size else None
-        out.append((tb, hb, cam))
-    return out
-
-
-def _extract_chunk(args) -> list[FrameFeatures]:
-    inputs, hor_size, config_dict = args
-    config = FeatureConfig.from_dict(config_dict)
-    return [frame_features(tb, hb, hor_size, config, cam) for tb, hb, cam in inputs]
-
-
-def sequence_features(
-    top: Mapping[int, _BoxesLike],
-    hor: Mapping[int, _BoxesLike],
-    hor_size: tuple[float, float],
-    config: FeatureConfig | None = None,
-    camera_id: int | None = None,
-    frames: Iterable[int] | None = None,
-    workers: int = 1,
-    progress: Callable[[Iterable], Iterable] | None = None,
-) -> FeatureSet:
-    """Features of every frame of a sequence pair (ids are used only to find ``camera_id``).
-
-    Args:
-        top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (e.g. ``FrameBoxes``).
-        hor_size: (width, height) of the horizontal image.
-        config: hypothesis generation.
-        camera_id: top-view id of the camera wearer (O given); frames where it is absent
-            search O.
-        frames: frames to extract (default the union of both views' frames, ascending).
-        workers: processes to use (1: in this process).
-        progress: optional wrapper around the iterator of chunks (each ~64 frames).
-    """
-    config = config or FeatureConfig()
-    order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})
-    inputs = _frame_inputs(top, hor, order, camera_id)
-    size = 64
-    chunks = [(inputs[i : i + size], tuple(hor_size), config.to_dict())
-              for i in range(0, len(inputs), size)]
-    if workers > 1 and len(chunks) > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            results = pool.map(_extract_chunk, chunks)
-            results = list(progress(results) if progress else results)
-    else:
-        it = progress(chunks) if progress else chunks
-        results = [_extract_chunk(c) for c in it]
-    feats = [f for chunk in results for f in chunk]
-    return FeatureSet.from_frames(order, feats)
-
-
-def default_cache_dir() -> Path:
-    """``$XVMATCH_CACHE`` if set, else ``~/.cache/xvmatch``."""
-    env = os.environ.get("XVMATCH_CACHE")
-    return Path(env) if env else Path.home() / ".cache" / "xvmatch"
-
-
-def cache_key(
-    top: Mapping[int, _BoxesLike],
-    hor: Mapping[int, _BoxesLike],
-    hor_size: tuple[float, float],
-    config: FeatureConfig,
-    camera_id: int | None,
-    frames: Sequence[int],
-) -> str:
-    """SHA-256 over the boxes of the frames, the image size, the configuration and the feature
-    version (ids enter only through the camera row when ``camera_id`` is given)."""
-    digest = hashlib.sha256()
-    header = {
-        "feature_version": FEATURE_VERSION,
-        "config": config.to_dict(),
-        "hor_size": [float(v) for v in hor_size],
-        "camera_id": camera_id,
-    }
-    digest.update(json.dumps(header, sort_keys=True).encode())
-    for tb, hb, cam in _frame_inputs(top, hor, frames, camera_id):
-        digest.update(np.ascontiguousarray(tb, dtype=np.float64).tobytes())
-        digest.update(b"|")
-        digest.update(np.ascontiguousarray(hb, dtype=np.float64).tobytes())
-        digest.update(f"|{cam}#".encode())
-    digest.update(np.asarray(frames, dtype=np.int64).tobytes())
-    return digest.hexdigest()[:32]
-
-
-def cached_sequence_features(
-    top: Mapping[int, _BoxesLike],
-    hor: Mapping[int, _BoxesLike],
-    hor_size: tuple[float, float],
-    config: FeatureConfig | None = None,
-    camera_id: int | None = None,
-    frames: Iterable[int] | None = None,
-    cache_dir: str | os.PathLike | None = None,
-    workers: int = 1,
-    progress: Callable[[Iterable], Iterable] | None = None,
-) -> FeatureSet:
-    """:func:`sequence_features`, read from / written to ``cache_dir`` (default
-    :func:`default_cache_dir`) under ``geometry_features/<cache_key>.npz``."""
-    config = config or FeatureConfig()
-    order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})
-    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    key = cache_key(top, hor, hor_size, config, camera_id, order)
-    path = folder / "geometry_features" / f"{key}.npz"
-    if path.exists():
-        try:
-            return FeatureSet.load(path)
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable or stale: recompute and overwrite
-    feats = sequence_features(
-        top, hor, hor_size, config, camera_id, order, workers=workers, progress=progress
-    )
-    feats.save(path)
-    return feats
 
 
 def collate_frames(

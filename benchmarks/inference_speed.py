@@ -1,0 +1,155 @@
+"""CPU speed of the appearance branch: torch eager FP32, ONNX FP32 and ONNX INT8, in one run.
+
+For the paper's ResNet-50 branch (256x128 crops) and the compact trunk of the shipped default
+(128x64), with 1 and 2 threads, on the same crops: crops per second (batches of 64) and
+milliseconds per image pair with 10 + 10 people (one batch of 20 crops, what the runtime sends
+per frame). The INT8 networks are static QDQ ones (:mod:`xvmatch.export.int8`, MinMax
+calibration on rendered crops); speed does not depend on the weights, so untrained networks are
+timed. Also: the ResNet-50's FP32 GFLOP/s (its multiply-adds counted from the ONNX graph's
+convolutions and matrix products) beside the machine's single-precision matrix-product peak
+measured in the same run (numpy sgemm, 2048x2048, one and two threads, ``threadpoolctl`` when
+installed, else the environment's thread count).
+
+Usage:
+    python benchmarks/inference_speed.py [--repeats 5] [--archs resnet50 small]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+
+def _timed(fn, repeats: int) -> float:
+    """Best wall time of ``repeats`` calls (after one warm-up)."""
+    fn()
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def sgemm_gflops(threads: int, n: int = 2048, repeats: int = 3) -> float:
+    """Measured float32 matrix-product speed of numpy's BLAS with ``threads`` threads."""
+    a = np.random.default_rng(0).standard_normal((n, n)).astype(np.float32)
+    b = np.random.default_rng(1).standard_normal((n, n)).astype(np.float32)
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # the environment's thread count (OMP_NUM_THREADS) then
+        threadpool_limits = None
+    if threadpool_limits is not None:
+        with threadpool_limits(limits=threads):
+            t = _timed(lambda: a @ b, repeats)
+    else:
+        t = _timed(lambda: a @ b, repeats)
+    return 2.0 * n**3 / t / 1e9
+
+
+def graph_gflop(path: Path, batch: int) -> float:
+    """Multiply-add FLOPs (x2) of the Conv, Gemm and MatMul nodes of an ONNX graph for one
+    batch, from shape inference."""
+    import onnx
+    from onnx import shape_inference
+
+    model = shape_inference.infer_shapes(onnx.load(os.fspath(path)))
+    shapes = {}
+    for v in list(model.graph.value_info) + list(model.graph.input) + list(model.graph.output):
+        dims = [d.dim_value if d.dim_value > 0 else batch for d in v.type.tensor_type.shape.dim]
+        shapes[v.name] = dims
+    weights = {w.name: list(w.dims) for w in model.graph.initializer}
+    total = 0.0
+    for node in model.graph.node:
+        if node.op_type == "Conv":
+            w = weights.get(node.input[1])
+            out = shapes.get(node.output[0])
+            if w and out:
+                total += 2.0 * np.prod(out) * np.prod(w[1:])
+        elif node.op_type in ("Gemm", "MatMul"):
+            w = weights.get(node.input[1])
+            out = shapes.get(node.output[0])
+            if w and out:
+                total += 2.0 * np.prod(out) * w[0 if node.op_type == "MatMul" else 1]
+    return total / 1e9
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--archs", nargs="+", default=["resnet50", "small"])
+    args = parser.parse_args()
+
+    import onnxruntime as ort
+    import torch
+
+    from xvmatch.datasets.synthetic_io import generate_dataset
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+    from xvmatch.export.int8 import calibration_crops, quantize_appearance
+    from xvmatch.export.onnx_export import AppearanceGraph, _onnx_export
+    from xvmatch.models.appearance_net import appearance_resnet50, appearance_small
+
+    builders = {"resnet50": appearance_resnet50, "small": appearance_small}
+    peak = {t: sgemm_gflops(t) for t in (1, 2)}
+    print(f"numpy sgemm peak: {peak[1]:.1f} GFLOP/s on 1 thread, {peak[2]:.1f} on 2")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        data = tmp / "data"
+        generate_dataset(data, SynthConfig(scenario="overview", n_people=(8, 12)), n_scenes=4,
+                         n_frames=2, seed=31)
+        for arch in args.archs:
+            torch.manual_seed(0)
+            net = builders[arch]().eval()
+            h, w = net.preprocessing.input_size
+            crops = calibration_crops(data, (w, h), 0.1, max_crops=128)
+            batch = np.resize(crops, (64, h, w, 3))
+            pair = np.resize(crops, (20, h, w, 3))
+            fp32 = tmp / f"{arch}.onnx"
+            _onnx_export(AppearanceGraph(net).eval(),
+                         (torch.from_numpy(batch[:2]),), fp32, ["crops"], ["descriptors"],
+                         {"crops": {0: "n"}, "descriptors": {0: "n"}})
+            int8 = tmp / f"{arch}_int8.onnx"
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                quantize_appearance(fp32, int8, crops, "minmax")
+            gflop = graph_gflop(fp32, 64)
+            print(f"\n{arch}: {h}x{w} crops, {gflop / 64:.2f} GFLOP per crop")
+            print(f"{'runtime':18s} {'threads':>7s} {'crops/s':>9s} {'ms/pair':>8s} "
+                  f"{'vs torch':>8s} {'vs onnx':>8s}")
+            for threads in (1, 2):
+                rows = {}
+                torch.set_num_threads(threads)
+                with torch.inference_mode():
+                    tb, tp = torch.from_numpy(batch), torch.from_numpy(pair)
+                    rows["torch eager fp32"] = (
+                        _timed(lambda n=net, x=tb: n.embed_crops(x), args.repeats),
+                        _timed(lambda n=net, x=tp: n.embed_crops(x), args.repeats))
+                for label, path in (("onnx fp32", fp32), ("onnx int8", int8)):
+                    options = ort.SessionOptions()
+                    options.intra_op_num_threads = threads
+                    options.inter_op_num_threads = 1
+                    s = ort.InferenceSession(os.fspath(path), options,
+                                             providers=["CPUExecutionProvider"])
+                    rows[label] = (
+                        _timed(lambda s=s, x=batch: s.run(None, {"crops": x}), args.repeats),
+                        _timed(lambda s=s, x=pair: s.run(None, {"crops": x}), args.repeats))
+                for label, (tb_s, tp_s) in rows.items():
+                    print(f"{label:18s} {threads:7d} {64 / tb_s:9.1f} {1000 * tp_s:8.1f} "
+                          f"{rows['torch eager fp32'][0] / tb_s:7.2f}x "
+                          f"{rows['onnx fp32'][0] / tb_s:7.2f}x")
+                if arch == "resnet50":
+                    achieved = gflop / rows["onnx fp32"][0]
+                    print(f"  ResNet-50 ONNX FP32: {achieved:.1f} GFLOP/s = "
+                          f"{100 * achieved / peak[threads]:.0f}% of the sgemm peak "
+                          f"({peak[threads]:.1f})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

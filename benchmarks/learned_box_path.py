@@ -1,0 +1,140 @@
+"""The learned box-only path on real CVMHAT boxes: ONNX runtime against the torch path, and
+against the handcrafted search, as whole command-line runs on one core, in one run.
+
+Three runs over the same sequences (default ``V1-S_55-G_1``, 1,200 frames), each a fresh
+process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
+
+* ``handcrafted``: ``xvmatch associate`` (the exhaustive search of Sec. 3.2.4);
+* ``onnx``: ``xvmatch associate --model BUNDLE`` (the deployed runtime, no torch);
+* ``torch``: the path this release replaces, rebuilt here: the features with one exact search
+  per candidate camera location (``rank_hypotheses(..., k=1)`` per candidate, as feature
+  version 1 did) and the torch matcher (``training.matcher_file``) with the same weights,
+  batched 64 frames, Hungarian with the same gamma, the same CSV written.
+
+Prints frames per second (CPU time of the child processes, and wall time), the ratios, and the
+CVIDF1 of each on those frames (ids as in the files: the learned paths never see them).
+
+Usage:
+    python benchmarks/learned_box_path.py [--sequences V1-S_55-G_1 ...] [--model default]
+        [--torch-model default]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence  # noqa: E402
+from xvmatch.datasets.mot_boxes import read_predictions  # noqa: E402
+from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize  # noqa: E402
+
+
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
+    """The replaced pipeline (see the module docstring), run as a command of its own."""
+    import numpy as np
+    import torch
+
+    import xvmatch.geometry.spatial_features as features
+    from xvmatch.datasets.mot_boxes import read_mot_boxes, write_predictions
+    from xvmatch.geometry.spatial_features import collate_frames, frame_features
+    from xvmatch.geometry.spatial_search import rank_hypotheses
+    from xvmatch.inference.assignment import assign
+    from xvmatch.training.matcher_file import load_matcher
+
+    def per_candidate(top, hor, width, params, candidates, keep=None):
+        return [r for c in candidates
+                for r in rank_hypotheses(top, hor, width, params, candidates=[c], k=1)]
+
+    features.best_per_candidate = per_candidate  # feature version 1's search
+    torch.set_num_threads(1)
+    loaded = load_matcher(model)
+    top = read_mot_boxes(top_file, duplicates="first")
+    hor = read_mot_boxes(hor_file, duplicates="first")
+    frames = [f for f in sorted(set(top) | set(hor))
+              if f in top and f in hor and len(top[f]) and len(hor[f])]
+    pairs: dict[int, list] = {f: [] for f in sorted(set(top) | set(hor))}
+    for start in range(0, len(frames), 64):
+        chunk = frames[start : start + 64]
+        feats = [frame_features(top[f].boxes, hor[f].boxes, IMAGE_SIZE, loaded.feature_config)
+                 for f in chunk]
+        batch = {k: torch.from_numpy(v) for k, v in collate_frames(feats).items()}
+        with torch.inference_mode():
+            cost = loaded.matcher(batch["top"], batch["hor"], batch["hyp"], batch["pair"],
+                                  batch["top_mask"], batch["hor_mask"],
+                                  batch["hyp_mask"]).cost.numpy().astype(np.float64)
+        for k, (f, ff) in enumerate(zip(chunk, feats, strict=True)):
+            m, n = ff.shape[1:]
+            full = np.empty((m, n))
+            full[np.ix_(ff.top_order, ff.hor_order)] = cost[k, :m, :n]
+            pairs[f] = [(int(top[f].ids[a]), int(hor[f].ids[b]))
+                        for a, b in assign(full, loaded.gamma)]
+    write_predictions(out, pairs)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=default_cvmhat_dir(), help="CVMHAT boxes")
+    parser.add_argument("--sequences", nargs="+", default=["V1-S_55-G_1"])
+    parser.add_argument("--model", default="default", help="bundle of the ONNX path")
+    parser.add_argument("--torch-model", default="default",
+                        help="matcher file of the torch path (the bundle's source)")
+    parser.add_argument("--torch-path", nargs=3, metavar=("TOP", "HOR", "OUT"),
+                        help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.torch_path:
+        torch_path(*args.torch_path, args.torch_model)
+        return 0
+    if not (args.data / "README.md").exists():
+        print(f"CVMHAT data not found at {args.data}; nothing to measure (skipped).")
+        return 0
+    exe = [sys.executable, "-m", "xvmatch", "associate", "--quiet"]
+    runs = {
+        "handcrafted": lambda t, h, o: [*exe, "--top", t, "--hor", h, "--out", o],
+        "onnx": lambda t, h, o: [*exe, "--top", t, "--hor", h, "--out", o, "--model",
+                                 args.model, "--threads", "1"],
+        "torch": lambda t, h, o: [sys.executable, __file__, "--torch-model", args.torch_model,
+                                  "--torch-path", t, h, o],
+    }
+    seqs = {n: read_sequence(args.data, n) for n in args.sequences}
+    n_frames = sum(len(set(t) | set(h)) for t, h in seqs.values())
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, cmd in runs.items():
+            cpu0, wall0 = _children_cpu(), time.perf_counter()
+            counts = []
+            for n, (top, hor) in seqs.items():
+                out = f"{tmp}/{label}_{n}.csv"
+                subprocess.run(cmd(str(args.data / f"{n}_top.txt"),
+                                   str(args.data / f"{n}_hor.txt"), out), check=True)
+                counts += count_sequence(read_predictions(out), top, hor)
+            rows[label] = (_children_cpu() - cpu0, time.perf_counter() - wall0,
+                           summarize(counts).cvidf1)
+    print(f"{', '.join(args.sequences)}: {n_frames} frames, whole command per sequence, one "
+          "thread")
+    print(f"{'path':12s} {'fps (cpu)':>10s} {'fps (wall)':>11s} {'CVIDF1':>7s}")
+    for label, (cpu, wall, f1) in rows.items():
+        print(f"{label:12s} {n_frames / cpu:10.1f} {n_frames / wall:11.1f} {f1:7.2f}")
+    cpu = {k: v[0] for k, v in rows.items()}
+    print(f"onnx / torch speed: {cpu['torch'] / cpu['onnx']:.2f}x (target >= 3); onnx / "
+          f"handcrafted: {cpu['handcrafted'] / cpu['onnx']:.2f} of its speed; CVIDF1 onnx - "
+          f"torch: {rows['onnx'][2] - rows['torch'][2]:+.2f} (target within 0.2)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,96 @@
+"""The deployed matcher (ONNX bundle, no torch) on synthetic trials, in each input setting.
+
+The trials are those every synthetic evaluation uses (:mod:`xvmatch.datasets.pair_trials`:
+ground-truth or detector-noise boxes, shuffled per view, ids scrambled), so the learned rows
+score exactly the frames the handcrafted baseline scores. Per trial and setting
+(:data:`~xvmatch.geometry.matcher_inputs.INPUT_SETTINGS`): the matcher's cost matrix from the
+boxes, the ONNX appearance cost (with images) and the camera cues and rectified geometry (with
+cameras); the Hungarian assignment with gamma; the Eq. 9 accuracy and the cross-view ID scores
+of :func:`~xvmatch.evaluation.cross_view_metrics.count_pair`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from xvmatch.datasets.pair_trials import PairTrial
+from xvmatch.evaluation.cross_view_metrics import CrossViewScores, count_pair, summarize
+from xvmatch.geometry.matcher_inputs import (
+    INPUT_SETTINGS,
+    FrameCameras,
+    appearance_cost,
+    matcher_inputs,
+)
+from xvmatch.inference.assignment import assign
+from xvmatch.inference.learned_association import LearnedMatcher
+
+__all__ = ["OnnxAppearanceCoster", "matcher_costs", "score_matcher"]
+
+
+class OnnxAppearanceCoster:
+    """Appearance costs of a bundle's ONNX network between the boxes of two images, with the
+    call signature of the trials' coster (:func:`xvmatch.datasets.pair_trials.scene_trials`).
+
+    Args:
+        matcher: a bundle with an appearance network.
+    """
+
+    def __init__(self, matcher: LearnedMatcher) -> None:
+        if matcher.bundle.manifest.appearance is None:
+            raise ValueError(f"{matcher.bundle.name}: this bundle has no appearance network")
+        self.matcher = matcher
+
+    def __call__(self, top_image: np.ndarray, top_boxes: np.ndarray, ego_image: np.ndarray,
+                 ego_boxes: np.ndarray) -> np.ndarray:
+        """``(M, N)`` appearance costs in [0, 1]."""
+        return appearance_cost(self.matcher.descriptors(top_image, top_boxes),
+                               self.matcher.descriptors(ego_image, ego_boxes))
+
+
+def matcher_costs(matcher: LearnedMatcher, trials: Sequence[PairTrial], setting: str,
+                  batch_size: int = 64) -> list[np.ndarray]:
+    """``(M, N)`` cost matrices (input order) of each trial in one input setting.
+
+    Raises:
+        ValueError: an unknown setting, or one whose cues the matcher or the trials lack
+            (``app`` needs trials built with an :class:`OnnxAppearanceCoster`).
+    """
+    if setting not in INPUT_SETTINGS:
+        raise ValueError(f"setting must be one of {', '.join(INPUT_SETTINGS)}, got {setting!r}")
+    cues, rectified = INPUT_SETTINGS[setting]
+    missing = [c for c in cues if c not in matcher.cues]
+    if missing:
+        raise ValueError(f"{matcher.bundle.name} takes no {', '.join(missing)} cue: it cannot "
+                         f"run the {setting!r} setting")
+    manifest = matcher.bundle.manifest
+    inputs = []
+    for t in trials:
+        if "app" in cues and t.app is None:
+            raise ValueError(f"{t.scene}/{t.frame}: no appearance costs; build the trials with "
+                             "an OnnxAppearanceCoster")
+        cams = FrameCameras(t.cameras["top"], t.cameras["ego"]) if rectified else None
+        inputs.append(matcher_inputs(
+            t.top_boxes, t.ego_boxes, t.cameras["ego"].image_size, matcher.feature_config,
+            matcher.cues, cameras=cams, app=t.app if "app" in cues else None,
+            margin=manifest.margin, beta=manifest.beta))
+    out = []
+    for f, c in zip(inputs, matcher.costs(inputs, batch_size), strict=True):
+        full = np.empty_like(c)
+        full[np.ix_(f.features.top_order, f.features.hor_order)] = c
+        out.append(full)
+    return out
+
+
+def score_matcher(matcher: LearnedMatcher, trials: Sequence[PairTrial], setting: str,
+                  gamma: float | None = None,
+                  costs: Sequence[np.ndarray] | None = None) -> CrossViewScores:
+    """Eq. 9 accuracy and cross-view ID scores of the matcher on ``trials`` in ``setting``
+    (gamma: the bundle's unless given; ``costs``: precomputed :func:`matcher_costs`)."""
+    gamma = matcher.gamma if gamma is None else float(gamma)
+    costs = matcher_costs(matcher, trials, setting) if costs is None else costs
+    counts = [count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids, t.det_ego_ids,
+                         assign(c, gamma), frame=t.frame)
+              for t, c in zip(trials, costs, strict=True)]
+    return summarize(counts)

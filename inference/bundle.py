@@ -1,0 +1,365 @@
+"""A deployable matcher bundle: its manifest, checked field by field, and its ONNX sessions.
+
+A bundle is a folder written by ``xvmatch export`` (:mod:`xvmatch.export.onnx_export`)::
+
+    manifest.json      format, versions, feature configuration, gamma, cues, preprocessing,
+                       sha256 of every file, the parity figures measured at export
+    matcher.onnx       padded geometry features and pair cues -> cost 1 - P
+    appearance.onnx    uint8 BGR crops -> unit descriptors (absent for a box-only matcher)
+
+Loading checks the format and its version, every field's type and range, and each file's
+sha256 before onnxruntime opens it, and reports any problem in one line naming the file.
+Torch-free: numpy and onnxruntime only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from xvmatch.geometry.matcher_inputs import CUE_NAMES
+from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
+
+__all__ = [
+    "APPEARANCE_INPUT",
+    "BUNDLE_FORMAT",
+    "BUNDLE_FORMAT_VERSION",
+    "DEFAULT_BUNDLE",
+    "MANIFEST",
+    "MATCHER_INPUTS",
+    "MATCHER_OUTPUT",
+    "OPSET",
+    "PRECISIONS",
+    "AppearanceSpec",
+    "Bundle",
+    "BundleError",
+    "Manifest",
+    "load_bundle",
+    "read_manifest",
+]
+
+MANIFEST = "manifest.json"
+BUNDLE_FORMAT = "xvmatch-bundle"
+BUNDLE_FORMAT_VERSION = 1
+OPSET = 17
+"""ONNX opset of the exported graphs."""
+MATCHER_INPUTS: tuple[str, ...] = (
+    "top", "hor", "hyp", "pair", "top_mask", "hor_mask", "hyp_mask", "cues", "cue_mask",
+)
+"""Input names of ``matcher.onnx``, in order (a graph may omit the cue inputs it ignores)."""
+MATCHER_OUTPUT = "cost"
+APPEARANCE_INPUT = "crops"
+DEFAULT_BUNDLE = Path(__file__).resolve().parent / "default_bundle"
+"""The shipped default (``training/make_default_bundle.py`` rebuilds it)."""
+
+
+class BundleError(ValueError):
+    """A bundle that cannot be used; the message names the file and what is wrong."""
+
+
+@dataclass(frozen=True)
+class AppearanceSpec:
+    """How to feed ``appearance.onnx`` (from the manifest).
+
+    Attributes:
+        file: the ONNX file name in the bundle.
+        sha256: its checksum.
+        crop_size: ``(width, height)`` of the crops.
+        context: relative margin cut around each box.
+        embedding_dim: descriptor size.
+        precision: precision of ``file``, ``"fp32"``.
+        int8_file, int8_sha256: the static INT8 network beside it (``xvmatch export --int8``),
+            or None.
+        int8: what the manifest records of it (calibration, accuracy at export).
+    """
+
+    file: str
+    sha256: str
+    crop_size: tuple[int, int]
+    context: float
+    embedding_dim: int
+    precision: str = "fp32"
+    int8_file: str | None = None
+    int8_sha256: str | None = None
+    int8: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A bundle's manifest, validated.
+
+    Attributes:
+        folder: the bundle folder.
+        feature_config: the geometry feature configuration the matcher expects.
+        gamma: non-association cost of the Hungarian assignment.
+        cues: the pair cues the matcher takes (a subset of ``CUE_NAMES``, in order).
+        margin, beta: depth margin and cost of the cheirality cue (Eq. 7).
+        matcher_file, matcher_sha256: ``matcher.onnx`` and its checksum.
+        appearance: the appearance graph, or None for a box-only matcher.
+        parity: the figures measured at export.
+        meta: the training notes of the source model.
+        raw: the whole JSON document.
+    """
+
+    folder: Path
+    feature_config: FeatureConfig
+    gamma: float
+    cues: tuple[str, ...]
+    margin: float
+    beta: float
+    matcher_file: str
+    matcher_sha256: str
+    appearance: AppearanceSpec | None
+    parity: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+    raw: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def uses_images(self) -> bool:
+        """The matcher takes the appearance cue (and the bundle has its network)."""
+        return self.appearance is not None
+
+    @property
+    def uses_cameras(self) -> bool:
+        """The matcher takes the camera cues (ray distance, cheirality)."""
+        return "ray" in self.cues or "cheir" in self.cues
+
+
+def _fail(where: Path | str, what: str) -> BundleError:
+    return BundleError(f"{os.fspath(where)}: {what}")
+
+
+def _get(doc: dict, key: str, kinds: type | tuple[type, ...], where: Path, prefix: str = ""):
+    """``doc[key]`` checked to be one of ``kinds`` (bools are not numbers)."""
+    name = f"{prefix}{key}"
+    if not isinstance(doc, dict) or key not in doc:
+        raise _fail(where, f"manifest lacks the field {name!r}")
+    kinds = kinds if isinstance(kinds, tuple) else (kinds,)
+    value = doc[key]
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        wanted = " or ".join("null" if k is type(None) else k.__name__ for k in kinds)
+        raise _fail(where, f"manifest field {name!r} must be {wanted}, got "
+                    f"{type(value).__name__} {value!r:.60}")
+    return value
+
+
+def _number(doc: dict, key: str, where: Path, low: float, high: float, prefix: str = ""
+            ) -> float:
+    value = float(_get(doc, key, (int, float), where, prefix))
+    if not (math.isfinite(value) and low <= value <= high):
+        raise _fail(where, f"manifest field {prefix}{key!r} must be in [{low:g}, {high:g}], "
+                    f"got {value!r}")
+    return value
+
+
+def _file_name(doc: dict, where: Path, prefix: str) -> tuple[str, str]:
+    name = _get(doc, "file", str, where, prefix)
+    if Path(name).name != name or not name.endswith(".onnx"):
+        raise _fail(where, f"manifest field {prefix}file must be an .onnx file name inside the "
+                    f"bundle, got {name!r}")
+    sha = _get(doc, "sha256", str, where, prefix)
+    if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
+        raise _fail(where, f"manifest field {prefix}sha256 must be 64 hex digits, got {sha!r:.70}")
+    return name, sha
+
+
+def read_manifest(folder: str | os.PathLike) -> Manifest:
+    """Read and validate ``folder/manifest.json`` (every field's presence, type and range).
+
+    Raises:
+        BundleError: no folder or manifest, malformed JSON, another format or version, a field
+            missing or out of range (the message names the field).
+    """
+    folder = Path(folder)
+    path = folder / MANIFEST
+    if not folder.is_dir():
+        raise _fail(folder, "no such bundle folder (xvmatch export writes one)")
+    if not path.is_file():
+        raise _fail(path, "no manifest: not a bundle folder (xvmatch export writes one)")
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _fail(path, f"not a readable JSON manifest ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != BUNDLE_FORMAT:
+        raise _fail(path, f"not an xvmatch bundle manifest (format {BUNDLE_FORMAT!r} expected)")
+    version = _get(doc, "format_version", int, path)
+    if version != BUNDLE_FORMAT_VERSION:
+        raise _fail(path, f"bundle format version {version}, this xvmatch reads "
+                    f"{BUNDLE_FORMAT_VERSION}; export the model again with this xvmatch")
+    features = _get(doc, "feature_version", int, path)
+    if features != FEATURE_VERSION:
+        raise _fail(path, f"bundle built for feature version {features}, this xvmatch computes "
+                    f"{FEATURE_VERSION}; retrain and export the model again")
+    try:
+        config = FeatureConfig.from_dict(_get(doc, "feature_config", dict, path))
+    except (TypeError, ValueError) as exc:
+        raise _fail(path, f"manifest field 'feature_config': {exc}") from None
+    gamma = _number(doc, "gamma", path, 1e-9, 1.0)
+    cues = _get(doc, "cues", list, path)
+    if not all(isinstance(c, str) for c in cues) or list(cues) != [c for c in CUE_NAMES
+                                                                  if c in cues]:
+        raise _fail(path, f"manifest field 'cues' must list a subset of {list(CUE_NAMES)} in "
+                    f"that order, got {cues!r}")
+    camera = _get(doc, "camera_cues", dict, path)
+    margin = _number(camera, "margin", path, 0.0, 100.0, "camera_cues.")
+    beta = _number(camera, "beta", path, 1.0, 1e12, "camera_cues.")
+    matcher = _get(doc, "matcher", dict, path)
+    matcher_file, matcher_sha = _file_name(matcher, path, "matcher.")
+    app = _get(doc, "appearance", (dict, type(None)), path)
+    spec = None
+    if app is not None:
+        name, sha = _file_name(app, path, "appearance.")
+        size = _get(app, "crop_size", list, path, "appearance.")
+        if len(size) != 2 or not all(isinstance(v, int) and not isinstance(v, bool)
+                                     and 8 <= v <= 1024 for v in size):
+            raise _fail(path, "manifest field 'appearance.crop_size' must be [width, height] "
+                        f"in 8-1024 pixels, got {size!r}")
+        dim = _get(app, "embedding_dim", int, path, "appearance.")
+        if not 1 <= dim <= 65536:
+            raise _fail(path, f"manifest field 'appearance.embedding_dim' must be in 1-65536, "
+                        f"got {dim}")
+        if _get(app, "colour_order", str, path, "appearance.") != "BGR":
+            raise _fail(path, "manifest field 'appearance.colour_order' must be 'BGR'")
+        precision = _get(app, "precision", str, path, "appearance.")
+        if precision != "fp32":
+            raise _fail(path, f"manifest field 'appearance.precision' must be fp32, got "
+                        f"{precision!r}")
+        int8 = app.get("int8")
+        int8_file = int8_sha = None
+        if int8 is not None:
+            if not isinstance(int8, dict):
+                raise _fail(path, "manifest field 'appearance.int8' must be an object or absent")
+            int8_file, int8_sha = _file_name(int8, path, "appearance.int8.")
+        spec = AppearanceSpec(name, sha, (size[0], size[1]),
+                              _number(app, "context", path, 0.0, 1.0, "appearance."), dim,
+                              precision, int8_file, int8_sha, dict(int8 or {}))
+    if ("app" in cues) != (spec is not None):
+        raise _fail(path, "the appearance graph must be present exactly when 'app' is among "
+                    f"the cues (cues {cues})")
+    parity = _get(doc, "parity", dict, path)
+    meta = _get(doc, "meta", dict, path)
+    return Manifest(folder, config, gamma, tuple(cues), margin, beta, matcher_file, matcher_sha,
+                    spec, parity, meta, doc)
+
+
+def _checked_file(folder: Path, name: str, sha: str) -> Path:
+    path = folder / name
+    if not path.is_file():
+        raise _fail(path, "missing from the bundle")
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    if digest != sha:
+        raise _fail(path, f"sha256 {digest[:12]}... does not match the manifest's "
+                    f"{sha[:12]}...; the file was changed or corrupted: export the bundle again")
+    return path
+
+
+def _open_session(path: Path, threads: int):
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = int(threads)
+    options.inter_op_num_threads = 1
+    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    options.log_severity_level = 3
+    try:
+        return ort.InferenceSession(os.fspath(path), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime raises its own exception types
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise _fail(path, f"onnxruntime cannot load it ({first[:200]})") from None
+
+
+@dataclass
+class Bundle:
+    """A loaded bundle: its manifest and onnxruntime sessions (CPU).
+
+    Attributes:
+        manifest: the validated manifest.
+        matcher: the session of ``matcher.onnx``.
+        appearance: the session of the appearance network, or None.
+        threads: onnxruntime intra-op threads of each session.
+        precision: the appearance network in use, ``"fp32"`` or ``"int8"`` (None without one).
+    """
+
+    manifest: Manifest
+    matcher: Any
+    appearance: Any = None
+    threads: int = 1
+    precision: str | None = None
+
+    @property
+    def name(self) -> str:
+        """The bundle folder, for messages."""
+        return os.fspath(self.manifest.folder)
+
+    def embed(self, crops: np.ndarray) -> np.ndarray:
+        """``(K, D)`` float32 unit descriptors of ``(K, H, W, 3)`` uint8 BGR crops, in one
+        batch (``K`` may be 0)."""
+        spec = self.manifest.appearance
+        if self.appearance is None or spec is None:
+            raise BundleError(f"{self.name}: this bundle has no appearance network")
+        if crops.shape[0] == 0:
+            return np.zeros((0, spec.embedding_dim), np.float32)
+        return self.appearance.run(None, {APPEARANCE_INPUT: crops})[0]
+
+    def costs(self, batch: dict[str, np.ndarray]) -> np.ndarray:
+        """``(B, M, N)`` costs of a padded batch
+        (:func:`~xvmatch.geometry.matcher_inputs.collate_inputs`)."""
+        wanted = {i.name for i in self.matcher.get_inputs()}
+        return self.matcher.run([MATCHER_OUTPUT],
+                                {k: batch[k] for k in MATCHER_INPUTS if k in wanted})[0]
+
+
+PRECISIONS: tuple[str, ...] = ("fp32", "int8")
+"""Precisions of the appearance network a bundle can run."""
+
+
+def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,
+                precision: str | None = None) -> Bundle:
+    """Open a bundle folder, or the shipped default with ``"default"``.
+
+    Args:
+        path_or_default: the bundle folder or ``"default"``.
+        threads: onnxruntime intra-op threads per session (>= 1).
+        precision: the appearance network to run: ``"int8"`` (needs one), ``"fp32"``, or None:
+            the INT8 one when the bundle has it, else FP32.
+
+    Raises:
+        BundleError: anything wrong with the manifest or a file (one line naming the file).
+    """
+    if int(threads) < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+    if precision is not None and precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISIONS)}, got {precision!r}")
+    folder = DEFAULT_BUNDLE if str(path_or_default) == "default" else Path(path_or_default)
+    manifest = read_manifest(folder)
+    matcher_path = _checked_file(folder, manifest.matcher_file, manifest.matcher_sha256)
+    matcher = _open_session(matcher_path, threads)
+    names = [i.name for i in matcher.get_inputs()]
+    missing = [n for n in MATCHER_INPUTS[:7] if n not in names]
+    if missing or [i.name for i in matcher.get_outputs()][:1] != [MATCHER_OUTPUT]:
+        raise _fail(matcher_path, f"not a matcher graph (inputs {names}, expected "
+                    f"{list(MATCHER_INPUTS)})")
+    appearance = None
+    used = None
+    if manifest.appearance is not None:
+        spec = manifest.appearance
+        used = "int8" if spec.int8_file is not None and precision != "fp32" else "fp32"
+        if precision == "int8" and spec.int8_file is None:
+            raise _fail(folder, "this bundle has no INT8 appearance network (export it with "
+                        "xvmatch export --int8 --calibration DATA)")
+        if used == "int8":
+            app_path = _checked_file(folder, spec.int8_file, spec.int8_sha256)
+        else:
+            app_path = _checked_file(folder, spec.file, spec.sha256)
+        appearance = _open_session(app_path, threads)
+        inputs = appearance.get_inputs()
+        if [i.name for i in inputs] != [APPEARANCE_INPUT]:
+            raise _fail(app_path, f"not an appearance graph (inputs {[i.name for i in inputs]})")
+    return Bundle(manifest, matcher, appearance, int(threads), used)

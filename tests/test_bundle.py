@@ -1,0 +1,238 @@
+"""Loading a deployable matcher bundle: every way a manifest or a file can be wrong is one
+``BundleError`` naming the file, and the shipped default loads with its parity figures."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from xvmatch.inference.bundle import (
+    BUNDLE_FORMAT_VERSION,
+    DEFAULT_BUNDLE,
+    MANIFEST,
+    BundleError,
+    load_bundle,
+    read_manifest,
+)
+
+
+@pytest.fixture
+def bundle(tmp_path, tiny_models) -> Path:
+    """A private copy of the full tiny bundle (appearance and camera cues), to break."""
+    return Path(shutil.copytree(tiny_models["full_bundle"], tmp_path / "bundle"))
+
+
+def _edit(folder: Path, change: Callable[[dict], object]) -> Path:
+    """Apply ``change`` to the manifest document and write it back; the manifest's path."""
+    path = folder / MANIFEST
+    doc = json.loads(path.read_text())
+    change(doc)
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _names(path: Path, what: str) -> str:
+    """A ``match`` pattern: the message starts with the file, then says ``what``."""
+    return rf"^{re.escape(str(path))}: .*{what}"
+
+
+def test_a_valid_copy_loads(bundle):
+    loaded = load_bundle(bundle, threads=2)
+    manifest = loaded.manifest
+    assert manifest.folder == bundle and manifest.gamma == 0.5
+    assert manifest.cues == ("app", "ray", "cheir")
+    assert manifest.uses_images and manifest.uses_cameras
+    assert manifest.appearance.crop_size == (16, 32) and manifest.appearance.embedding_dim == 8
+    assert loaded.threads == 2 and loaded.appearance is not None
+    assert loaded.embed(np.zeros((0, 32, 16, 3), np.uint8)).shape == (0, 8)
+    assert read_manifest(bundle).raw == manifest.raw
+
+
+def test_missing_folder(tmp_path):
+    folder = tmp_path / "nowhere"
+    with pytest.raises(BundleError, match=_names(folder, "no such bundle folder")):
+        load_bundle(folder)
+
+
+def test_folder_without_manifest(tmp_path):
+    (tmp_path / "matcher.onnx").write_bytes(b"x")
+    with pytest.raises(BundleError, match=_names(tmp_path / MANIFEST, "no manifest")):
+        read_manifest(tmp_path)
+
+
+def test_invalid_json(bundle):
+    path = bundle / MANIFEST
+    path.write_text('{"format": "xvmatch-bundle", ')
+    with pytest.raises(BundleError, match=_names(path, "not a readable JSON manifest")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize("doc", [["a", "list"], {"format": "something-else"}, {}])
+def test_other_format(bundle, doc):
+    path = bundle / MANIFEST
+    path.write_text(json.dumps(doc))
+    with pytest.raises(BundleError, match=_names(path, "not an xvmatch bundle manifest")):
+        load_bundle(bundle)
+
+
+def test_other_format_version(bundle):
+    path = _edit(bundle, lambda d: d.update(format_version=BUNDLE_FORMAT_VERSION + 1))
+    with pytest.raises(BundleError, match=_names(path, "bundle format version 2, this xvmatch "
+                                                       "reads 1; export the model again")):
+        load_bundle(bundle)
+
+
+def test_other_feature_version(bundle):
+    path = _edit(bundle, lambda d: d.update(feature_version=1))
+    with pytest.raises(BundleError, match=_names(path, "feature version 1.*retrain")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize(
+    ("where", "key", "name"),
+    [
+        ((), "gamma", "gamma"),
+        ((), "cues", "cues"),
+        ((), "feature_version", "feature_version"),
+        ((), "parity", "parity"),
+        (("camera_cues",), "margin", "camera_cues.margin"),
+        (("matcher",), "sha256", "matcher.sha256"),
+        (("appearance",), "crop_size", "appearance.crop_size"),
+        (("appearance",), "colour_order", "appearance.colour_order"),
+    ],
+)
+def test_a_field_missing(bundle, where, key, name):
+    def drop(doc):
+        for k in where:
+            doc = doc[k]
+        del doc[key]
+
+    path = _edit(bundle, drop)
+    with pytest.raises(BundleError, match=_names(path, f"lacks the field '{re.escape(name)}'")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize(
+    ("change", "what"),
+    [
+        (lambda d: d.update(gamma="0.5"), r"field 'gamma' must be int or float, got str"),
+        (lambda d: d.update(gamma=True), r"field 'gamma' must be int or float, got bool"),
+        (lambda d: d.update(cues="app,ray,cheir"), r"field 'cues' must be list, got str"),
+        (lambda d: d.update(cues=["ray", "app", "cheir"]), r"'cues' must list a subset"),
+        (lambda d: d.update(cues=["app", "depth"]), r"'cues' must list a subset"),
+        (lambda d: d.update(cues=[1, 2]), r"'cues' must list a subset"),
+        (lambda d: d.update(cues=["ray", "cheir"]), r"appearance graph must be present"),
+        (lambda d: d.update(feature_config={"n_hypotheses": 0}), r"'feature_config'"),
+        (lambda d: d.update(feature_config={"colour": 1}), r"'feature_config'.*colour"),
+        (lambda d: d.update(matcher="matcher.onnx"), r"field 'matcher' must be dict"),
+        (lambda d: d["matcher"].update(file="../matcher.onnx"), r"matcher.file must be an "
+         r"\.onnx file name inside the bundle"),
+        (lambda d: d["matcher"].update(sha256="abc"), r"matcher.sha256 must be 64 hex digits"),
+        (lambda d: d["appearance"].update(crop_size=[16]), r"'appearance.crop_size' must be"),
+        (lambda d: d["appearance"].update(crop_size=[16, 4]), r"'appearance.crop_size' must be"),
+        (lambda d: d["appearance"].update(crop_size=[16.0, 32.0]),
+         r"'appearance.crop_size' must be"),
+        (lambda d: d["appearance"].update(crop_size="16x32"),
+         r"field 'appearance.crop_size' must be list, got str"),
+        (lambda d: d["appearance"].update(colour_order="RGB"), r"colour_order' must be 'BGR'"),
+        (lambda d: d["appearance"].update(precision="fp16"), r"precision' must be fp32"),
+        (lambda d: d["appearance"].update(embedding_dim=0), r"embedding_dim' must be in"),
+        (lambda d: d.update(appearance=None), r"appearance graph must be present"),
+        (lambda d: d.update(meta=[]), r"field 'meta' must be dict, got list"),
+    ],
+)
+def test_a_field_of_the_wrong_type_or_value(bundle, change, what):
+    path = _edit(bundle, change)
+    with pytest.raises(BundleError, match=_names(path, what)):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize("value", [3.0, True])
+def test_feature_config_counts_must_be_integers(bundle, value):
+    path = _edit(bundle, lambda d: d["feature_config"].update(n_hypotheses=value))
+    with pytest.raises(BundleError, match=_names(path, "feature_config")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize("gamma", [0.0, -0.1, 1.5, float("nan"), float("inf")])
+def test_gamma_out_of_range(bundle, gamma):
+    path = _edit(bundle, lambda d: d.update(gamma=gamma))
+    with pytest.raises(BundleError, match=_names(path, r"field 'gamma' must be in \[1e-09, 1\]")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize("name", ["matcher.onnx", "appearance.onnx"])
+def test_a_file_whose_sha256_does_not_match(bundle, name):
+    path = bundle / name
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    path.write_bytes(bytes(data))
+    with pytest.raises(BundleError, match=_names(path, "sha256 .* does not match the manifest")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize("name", ["matcher.onnx", "appearance.onnx"])
+def test_a_missing_onnx_file(bundle, name):
+    (bundle / name).unlink()
+    with pytest.raises(BundleError, match=_names(bundle / name, "missing from the bundle")):
+        load_bundle(bundle)
+
+
+@pytest.mark.parametrize(("name", "key"), [("matcher.onnx", "matcher"),
+                                           ("appearance.onnx", "appearance")])
+def test_a_corrupt_onnx_file_with_a_matching_sha256(bundle, name, key):
+    garbage = b"not an onnx model" * 64
+    (bundle / name).write_bytes(garbage)
+    _edit(bundle, lambda d: d[key].update(sha256=hashlib.sha256(garbage).hexdigest()))
+    with pytest.raises(BundleError, match=_names(bundle / name, "onnxruntime cannot load it")):
+        load_bundle(bundle)
+
+
+def test_swapped_graphs_are_refused(bundle):
+    """Each file is checked to be the graph it is named as (the inputs it takes)."""
+    def swap(doc):
+        doc["matcher"], doc["appearance"]["file"] = (
+            {**doc["matcher"], "file": "appearance.onnx",
+             "sha256": doc["appearance"]["sha256"]}, "appearance.onnx")
+
+    _edit(bundle, swap)
+    with pytest.raises(BundleError, match=_names(bundle / "appearance.onnx",
+                                                 "not a matcher graph")):
+        load_bundle(bundle)
+
+
+def test_threads_must_be_positive(bundle):
+    with pytest.raises(ValueError, match="threads must be >= 1"):
+        load_bundle(bundle, threads=0)
+
+
+def test_the_default_bundle():
+    if not (DEFAULT_BUNDLE / MANIFEST).is_file():
+        pytest.skip(f"no default bundle at {DEFAULT_BUNDLE} (training/make_default_bundle.py "
+                    "builds it)")
+    loaded = load_bundle("default")
+    manifest = loaded.manifest
+    assert manifest.folder == DEFAULT_BUNDLE
+    parity = manifest.parity
+    tolerance = float(parity["tolerance"])
+    assert 0 < tolerance <= 1e-4
+    settings = {k: v for k, v in parity.items() if isinstance(v, dict)}
+    assert "boxes" in settings and "edge cases" in settings
+    if manifest.uses_images:
+        assert "images" in settings and "appearance" in settings
+    if manifest.uses_cameras:
+        assert "cameras" in settings
+    for name, figures in settings.items():
+        if "frames" in figures:
+            assert figures["frames"] > 0, name
+            assert figures["max_abs_cost_diff"] <= tolerance, name
+            assert figures["assignments_identical"] == figures["frames"], name
+        else:
+            assert figures["max_abs_descriptor_diff"] <= tolerance, name

@@ -1,0 +1,97 @@
+"""The package reads as a pipeline: imports run one way, and the deployed runtime needs no torch.
+
+geometry -> datasets -> models -> training | inference -> evaluation -> CLI (the ``xvmatch``
+root); ``export`` sits beside training. Every import statement of every module is read from the
+source (lazy imports inside functions included), so a rule cannot be broken by importing late.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SUBPACKAGES = ("geometry", "datasets", "models", "training", "export", "inference",
+               "evaluation", "xvmatch")
+
+ALLOWED: dict[str, set[str]] = {
+    "geometry": {"geometry"},
+    "datasets": {"geometry", "datasets"},
+    "models": {"geometry", "models"},
+    # Training validates with the Hungarian assignment of inference/ (a numpy module).
+    "training": {"geometry", "datasets", "models", "training", "inference"},
+    "inference": {"geometry", "datasets", "inference"},
+    "export": {"geometry", "datasets", "models", "training", "inference", "export"},
+    "evaluation": {"geometry", "datasets", "models", "inference", "evaluation"},
+    "xvmatch": set(SUBPACKAGES),
+}
+"""Which subpackages each subpackage may import (beside the exceptions below)."""
+
+ALLOWED_MODULES: dict[str, set[str]] = {
+    "training": {"evaluation.cross_view_metrics"},
+    "export": {"evaluation.cross_view_metrics"},
+}
+"""Single modules a subpackage may import outside its allowed subpackages: training scores its
+validation, and export the accuracy kept by INT8, with the cross-view metrics and nothing else
+of evaluation/."""
+
+TORCH_FREE = ("geometry", "datasets", "inference")
+"""Subpackages that never import torch, lightning or onnx (the base install runs them)."""
+HEAVY = {"torch", "torchvision", "lightning", "onnx"}
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """``(line, dotted name)`` of every import in a file (``from x import y`` gives ``x.y``
+    for package-level names, so ``from xvmatch.evaluation import cross_view_metrics`` counts)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.lineno, node.module))
+            out += [(node.lineno, f"{node.module}.{alias.name}") for alias in node.names]
+    return out
+
+
+def _modules(package: str) -> list[Path]:
+    return sorted((ROOT / package).glob("*.py"))
+
+
+@pytest.mark.parametrize("package", SUBPACKAGES)
+def test_imports_run_one_way(package: str) -> None:
+    bad = []
+    for path in _modules(package):
+        for line, name in _imports(path):
+            parts = name.split(".")
+            if parts[0] != "xvmatch" or len(parts) < 2:
+                continue
+            target = "xvmatch" if parts[1] not in SUBPACKAGES else parts[1]
+            module = ".".join(parts[1:3])
+            if target in ALLOWED[package] or module in ALLOWED_MODULES.get(package, set()):
+                continue
+            # `from xvmatch.evaluation import x` lists both the package and x: judge by x.
+            if len(parts) == 2 and any(
+                other.startswith(name + ".") for _, other in _imports(path)
+            ):
+                continue
+            bad.append(f"{path.relative_to(ROOT)}:{line}: imports {name}")
+    assert not bad, "imports against the pipeline:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("package", TORCH_FREE)
+def test_torch_free_subpackages_import_no_torch(package: str) -> None:
+    bad = [
+        f"{path.relative_to(ROOT)}:{line}: imports {name}"
+        for path in _modules(package)
+        for line, name in _imports(path)
+        if name.split(".")[0] in HEAVY
+    ]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_rules_cover_every_subpackage() -> None:
+    on_disk = {p.parent.name for p in ROOT.glob("*/__init__.py")} - {"tests", "benchmarks"}
+    assert on_disk <= set(SUBPACKAGES)
