@@ -268,7 +268,15 @@ def _best_per_group(
     def score(idx: np.ndarray) -> None:
         vectors = hypotheses.take(idx)
         result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
-        for r in np.flatnonzero(np.isfinite(result.cost)):
+        rows = np.flatnonzero(np.isfinite(result.cost))
+        if rows.size == 0:
+            return
+        # The batch's best row of each group (lowest cost, then lowest index), then a merge
+        # with the groups' bests so far: a loop over groups, not over rows.
+        groups, costs = group[idx[rows]], result.cost[rows]
+        order = np.lexsort((idx[rows], costs, groups))
+        _, first = np.unique(groups[order], return_index=True)
+        for r in rows[order[first]]:
             i, c = int(idx[r]), float(result.cost[r])
             g = group[i]
             held = best[g]
