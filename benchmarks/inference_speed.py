@@ -7,8 +7,8 @@ per frame). The INT8 networks are static QDQ ones (:mod:`xvmatch.export.int8`, M
 calibration on rendered crops); speed does not depend on the weights, so untrained networks are
 timed. Also: the ResNet-50's FP32 GFLOP/s (its multiply-adds counted from the ONNX graph's
 convolutions and matrix products) beside the machine's single-precision matrix-product peak
-measured in the same run (numpy sgemm, 2048x2048, one and two threads, ``threadpoolctl`` when
-installed, else the environment's thread count).
+measured in the same run (numpy sgemm, 2048x2048, in a process with one, then two BLAS
+threads).
 
 Usage:
     python benchmarks/inference_speed.py [--repeats 5] [--archs resnet50 small]
@@ -37,20 +37,25 @@ def _timed(fn, repeats: int) -> float:
     return best
 
 
-def sgemm_gflops(threads: int, n: int = 2048, repeats: int = 3) -> float:
-    """Measured float32 matrix-product speed of numpy's BLAS with ``threads`` threads."""
-    a = np.random.default_rng(0).standard_normal((n, n)).astype(np.float32)
-    b = np.random.default_rng(1).standard_normal((n, n)).astype(np.float32)
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # the environment's thread count (OMP_NUM_THREADS) then
-        threadpool_limits = None
-    if threadpool_limits is not None:
-        with threadpool_limits(limits=threads):
-            t = _timed(lambda: a @ b, repeats)
-    else:
-        t = _timed(lambda: a @ b, repeats)
-    return 2.0 * n**3 / t / 1e9
+def sgemm_gflops(threads: int, n: int = 2048, repeats: int = 5) -> float:
+    """Measured float32 matrix-product speed of numpy's BLAS with ``threads`` threads, in a
+    fresh process (BLAS reads its thread count when it loads)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import time, numpy as np\n"
+        f"a = np.random.default_rng(0).standard_normal(({n}, {n})).astype(np.float32)\n"
+        "b = a.T.copy(); a @ b\n"
+        f"best = min((lambda t: (a @ b, time.perf_counter() - t)[1])(time.perf_counter()) "
+        f"for _ in range({repeats}))\n"
+        f"print(2.0 * {n}**3 / best / 1e9)\n"
+    )
+    env = {**os.environ, **{v: str(threads) for v in
+                            ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, check=True)
+    return float(out.stdout.strip())
 
 
 def graph_gflop(path: Path, batch: int) -> float:

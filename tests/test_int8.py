@@ -46,9 +46,26 @@ def test_export_records_the_int8_network_and_its_accuracy(int8_bundle):
     assert json.loads((out / "manifest.json").read_text())["appearance"]["int8"] == int8
 
 
-def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models):
+def test_int8_is_the_default_only_on_cpus_with_int8_dot_products(int8_bundle, monkeypatch):
+    from xvmatch.inference import bundle
+
+    assert bundle.fast_int8_cpu("processor : 0\nflags : fpu sse avx2 fma avx512_vnni\n")
+    assert bundle.fast_int8_cpu("Features : fp asimd asimddp\n")
+    assert not bundle.fast_int8_cpu("processor : 0\nflags : fpu sse avx2 fma\n")
+    out, _ = int8_bundle
+    monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: False)
+    assert load_bundle(out).precision == "fp32"
+    monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
+    assert load_bundle(out).precision == "int8"
+
+
+def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, monkeypatch):
+    from xvmatch.inference import bundle
+
+    monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
     out, _ = int8_bundle
     assert load_bundle(out).precision == "int8"
+    assert load_bundle(out, precision="int8").precision == "int8"
     assert load_bundle(out, precision="fp32").precision == "fp32"
     assert load_bundle(tiny_models["full_bundle"]).precision == "fp32"
     with pytest.raises(BundleError, match="no INT8 appearance network"):

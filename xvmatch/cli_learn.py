@@ -240,7 +240,8 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                    help="onnxruntime threads, 1..64 (default 1)")
     g.add_argument("--precision", choices=("fp32", "int8"), default=None,
                    help="appearance network to run: int8 (needs a bundle exported with --int8) "
-                   "or fp32 (default: int8 when the bundle has it)")
+                   "or fp32 (default: int8 when the bundle has it and the CPU has 8-bit "
+                   "dot-product instructions, VNNI; else fp32)")
 
 
 LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs", "draw",
