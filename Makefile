@@ -12,7 +12,7 @@ $(PY):
 	$(PY) -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e ".[dev,learn]"
+	$(PY) -m pip install --quiet -e ".[dev,learn,plots]"
 	touch $(STAMP)
 
 demo: $(STAMP)

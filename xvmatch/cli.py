@@ -412,6 +412,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     # In the order a user needs them: try it, match, score, synchronise, data, the baseline,
     # training, deployment, utilities.
+    from xvmatch.cli_ablate import add_ablate_parser
     from xvmatch.cli_baseline import add_baseline_parser
     from xvmatch.cli_demo import add_demo_parser
     from xvmatch.cli_learn import add_export_parser, add_fit_geometry_parser
@@ -539,6 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_synth_parser(sub)
     add_show_parser(sub)
     add_baseline_parser(sub)
+    add_ablate_parser(sub)
     add_fit_geometry_parser(sub)
     add_train_parser(sub)
     add_export_parser(sub)
