@@ -57,11 +57,11 @@ from xvmatch.inference.bundle import (
     MATCHER_OUTPUT,
     OPSET,
 )
-from xvmatch.models.appearance_net import AppearanceNet
+from xvmatch.models.appearance_net import AppearanceNet, appearance_source
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.training.matcher_file import LoadedMatcher, load_matcher
 
-__all__ = ["PARITY_TOLERANCE", "ExportError", "export_bundle", "parity_frames"]
+__all__ = ["PARITY_TOLERANCE", "ExportError", "backbone_record", "export_bundle", "parity_frames"]
 
 PARITY_TOLERANCE: float = 1e-4
 """Largest |cost_torch - cost_onnx| accepted at export."""
@@ -319,6 +319,17 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def backbone_record(net: AppearanceNet) -> dict[str, str]:
+    """The manifest's ``appearance.backbone``: the architecture and where its trunk's initial
+    weights came from (for an ImageNet initialisation: the registry package, its version and
+    licence, which the derived weights inherit)."""
+    source = appearance_source(net)
+    if source is None:
+        return {"arch": net.arch, "init": "random"}
+    return {"arch": net.arch, "init": "imagenet",
+            **{k: str(source.get(k, "unknown")) for k in ("package", "version", "licence")}}
+
+
 def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
     """Export the graphs into ``folder``; the manifest's file records."""
     matcher = loaded.matcher.eval()
@@ -364,7 +375,8 @@ def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
             "xvmatch.output": "unit descriptors (B, D); cost of a pair |a - b| / 2",
         })
         records["appearance"] = {"file": path.name, "arch": net.arch,
-                                 "embedding_dim": net.embedding_dim, "precision": "fp32", **prep}
+                                 "embedding_dim": net.embedding_dim, "precision": "fp32", **prep,
+                                 "backbone": backbone_record(net)}
     return records
 
 

