@@ -283,7 +283,8 @@ def format_report(rows: Sequence[dict], context: ReportContext) -> str:
         "misses growing with occlusion, 0.3 false boxes per frame and view; detections take "
         "the id of the ground-truth box with IoU >= 0.3), and the sweep "
         f"`{context.sweep}`: {SWEEP_AXES[context.sweep]}"
-        + {"noise": "; on detections, x1 is the detector-noise column.",
+        + {"noise": "; x0 (no jitter, misses or false boxes) is the GT column, x1 the "
+                    "detector-noise column.",
            "calibration": "; both cameras, a random rotation axis and direction per scene "
                           "and camera, on GT boxes; 0 is the GT column.",
            "crowd": "; scenes rendered for each point with the folder's settings (into "

@@ -108,8 +108,8 @@ def _number(value: float) -> str:
 
 def grid_settings(sweep: str) -> tuple[Setting, ...]:
     """The columns for ``sweep``: ground-truth boxes, detector noise, then the sweep's points
-    that are not one of those two (noise x1 is the detector-noise column, calibration error 0
-    the ground-truth column; they carry the sweep value).
+    that are not one of those two (noise x0 and calibration error 0 are the ground-truth column,
+    noise x1 the detector-noise column; they carry the sweep value).
 
     Raises:
         ValueError: an unknown sweep.
@@ -120,10 +120,13 @@ def grid_settings(sweep: str) -> tuple[Setting, ...]:
     det = Setting("det", "detector noise", "det")
     points: list[Setting] = []
     if sweep == "noise":
+        # Noise x0 gives the ground-truth boxes exactly (a test pins it): the GT column is
+        # that point, not a second copy of it.
+        gt = replace(gt, label="GT boxes (noise x0)", sweep_value=0.0)
         det = replace(det, label="detector noise (x1)", sweep_value=1.0)
         points = [Setting(f"noise{_number(k)}", f"noise x{_number(k)}", "det", noise=float(k),
                           sweep_value=float(k))
-                  for k in SWEEPS["noise"] if k != 1.0]
+                  for k in SWEEPS["noise"] if k not in (0.0, 1.0)]
     elif sweep == "calibration":
         gt = replace(gt, label="GT boxes (calib. 0)", sweep_value=0.0)
         points = [Setting(f"calib{_number(deg)}", f"calib. {_number(deg)} deg / {_number(m)} m",
