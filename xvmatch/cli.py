@@ -236,6 +236,10 @@ def _cmd_associate(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.tracks is not None:
+        from xvmatch.cli_track import evaluate_tracks_command
+
+        return evaluate_tracks_command(args, _read_boxes)
     from xvmatch.datasets.mot_boxes import read_predictions
     from xvmatch.evaluation.cross_view_metrics import (
         count_sequence,
@@ -417,6 +421,7 @@ def build_parser() -> argparse.ArgumentParser:
     from xvmatch.cli_demo import add_demo_parser
     from xvmatch.cli_learn import add_export_parser, add_fit_geometry_parser
     from xvmatch.cli_synth import add_show_parser, add_synth_parser
+    from xvmatch.cli_track import add_track_parser
     from xvmatch.cli_train import add_train_parser
 
     add_demo_parser(sub)
@@ -487,9 +492,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_model_arguments(p)
     p.set_defaults(func=_cmd_associate)
 
-    p = command("evaluate", "Score predicted pairs: CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9 accuracy.")
+    p = command("evaluate", "Score predicted pairs: CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9 accuracy; "
+                "or tracks (--tracks): CVIDF1 and CVMA across views, IDF1, MOTA, MOTP and HOTA "
+                "per view.")
     box_inputs(p)
-    p.add_argument("--pred", required=True, help="prediction CSV (frame,top_id,hor_id)")
+    scored = p.add_mutually_exclusive_group(required=True)
+    scored.add_argument("--pred", help="prediction CSV (frame,top_id,hor_id)")
+    scored.add_argument("--tracks", metavar="DIR",
+                        help="tracks of xvmatch track (DIR/top.txt, DIR/hor.txt); per-view "
+                        "metrics need TrackEval (pip install trackeval)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
     p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
@@ -497,6 +508,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "re-timed the same way (top frame = horizontal frame + N) before scoring; "
                    "|N| <= 100000")
     p.set_defaults(func=_cmd_evaluate)
+    add_track_parser(sub)
 
     p = command(
         "offset",

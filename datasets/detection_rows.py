@@ -1,0 +1,96 @@
+"""Box files read as detections: every row kept, its text kept, its id column only carried along.
+
+``xvmatch track`` takes MOT-style box files whose id column means nothing (detector output often
+has ``-1`` on every row) and writes the same rows back with the id replaced by a track id. So the
+rows are read with the validation of :func:`xvmatch.datasets.mot_boxes.read_mot_boxes` (same
+messages, ``<path>:<line>: ...``) but repeated ids are allowed, and each record's ``ids`` are the
+row numbers (0-based, over the non-blank lines) rather than the file's ids.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.datasets.mot_boxes import (
+    _BOX_COLUMNS,
+    FrameBoxes,
+    _parse_table,
+    _read_text,
+    atomic_write_text,
+)
+
+__all__ = ["DetectionRows", "read_detection_rows", "write_track_rows"]
+
+
+@dataclass(frozen=True, eq=False)
+class DetectionRows:
+    """The rows of one box file, read as detections.
+
+    Attributes:
+        path: the file read.
+        lines: (R,) the non-blank lines, file order, without their line ends.
+        file_ids: (R,) int64 the id column of each row (only used to locate the camera wearer).
+        frames: ``{frame: FrameBoxes}`` whose ``ids`` are row numbers into ``lines``, ascending
+            frames, file order within a frame.
+    """
+
+    path: str
+    lines: tuple[str, ...]
+    file_ids: np.ndarray
+    frames: dict[int, FrameBoxes]
+
+    def rows_with_id(self, file_id: int) -> np.ndarray:
+        """Row numbers whose id column equals ``file_id`` (e.g. the wearer's ``--camera-id``)."""
+        return np.flatnonzero(self.file_ids == int(file_id))
+
+
+def read_detection_rows(path: str | os.PathLike) -> DetectionRows:
+    """Read a ``frame,id,x,y,w,h[,...]`` file keeping every row; ids may repeat.
+
+    Raises:
+        BoxFileError: as :func:`xvmatch.datasets.mot_boxes.read_mot_boxes` (missing file, bad
+            field, ``w``/``h`` <= 0, ...), naming file and line.
+    """
+    lines = [ln for ln in _read_text(path).splitlines() if ln.strip()]
+    data = _parse_table(path, lines, 1, _BOX_COLUMNS, False)
+    if data.shape[0] == 0:
+        return DetectionRows(os.fspath(path), (), np.zeros(0, np.int64), {})
+    frames = data[:, 0].astype(np.int64)
+    order = np.argsort(frames, kind="stable")
+    sorted_frames = frames[order]
+    starts = np.flatnonzero(np.r_[True, sorted_frames[1:] != sorted_frames[:-1]])
+    ends = np.r_[starts[1:], sorted_frames.size]
+    records = {
+        int(sorted_frames[s]): FrameBoxes(
+            int(sorted_frames[s]), order[s:e].astype(np.int64), data[order[s:e], 2:6]
+        )
+        for s, e in zip(starts.tolist(), ends.tolist(), strict=True)
+    }
+    return DetectionRows(os.fspath(path), tuple(lines), data[:, 1].astype(np.int64), records)
+
+
+def write_track_rows(
+    path: str | os.PathLike, rows: DetectionRows, track_of_row: Mapping[int, int]
+) -> int:
+    """Write the rows that have a track, file order, text unchanged but the id field; atomic.
+
+    Args:
+        path: destination file.
+        rows: the detections the tracks were computed from.
+        track_of_row: ``{row: track id}``; rows absent here (dropped by the tracker) are absent
+            from the output.
+
+    Returns:
+        The number of rows written.
+    """
+    out = []
+    for row in sorted(track_of_row):
+        fields = rows.lines[row].split(",")
+        fields[1] = str(int(track_of_row[row]))
+        out.append(",".join(fields) + "\n")
+    atomic_write_text(path, "".join(out))
+    return len(out)

@@ -1,0 +1,141 @@
+"""Edge weights of the four-cluster tracking graph (CVMHAT paper, Sec. 3.3-3.5, Eqs. 13-18).
+
+- Cross-view (clusters 3 -> 0 and 1 -> 2): the spatial term of Eq. 13, the fraction of the
+  longer tracklet's frames on which the frame-level association (Sec. 3.2) paired the two boxes.
+- Over time (clusters 0 -> 1 and 2 -> 3): the constant-velocity motion term of Eqs. 15-16.
+- Eqs. 17 and 18 mix each with an appearance term; without images that term does not exist and
+  the weight is the other term alone (the mix renormalised over the terms present), so that the
+  edge weights keep the [0, 1] range the dummy weight ``c0`` is set against.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.inference.tracklets import Tracklet
+
+__all__ = [
+    "TrackWeights",
+    "combine_cross_view",
+    "combine_over_time",
+    "motion_similarity",
+    "spatial_similarity",
+]
+
+
+@dataclass(frozen=True)
+class TrackWeights:
+    """Weights of Eqs. 1, 15, 17 and 18 (paper defaults, Sec. 4.1).
+
+    Attributes:
+        c0: weight of an edge to a dummy node (Eq. 1); a real edge pays off when its weight is
+            above ``2 c0`` (it takes one dummy edge off each of its two clusters).
+        w1: share of the spatial term in a cross-view weight (Eq. 17).
+        w2: share of the appearance term in an over-time weight (Eq. 18).
+        sigma: scale of the constant-velocity deviation, per pixel (Eq. 15).
+    """
+
+    c0: float = 0.2
+    w1: float = 0.3
+    w2: float = 0.6
+    sigma: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("c0", "w1", "w2"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {value}")
+        if not self.sigma > 0 or not np.isfinite(self.sigma):
+            raise ValueError(f"sigma must be a positive number, got {self.sigma}")
+
+
+def _row_index(tracklets: Sequence[Tracklet]) -> dict[int, int]:
+    return {int(r): k for k, t in enumerate(tracklets) for r in t.rows.tolist()}
+
+
+def spatial_similarity(
+    top: Sequence[Tracklet],
+    hor: Sequence[Tracklet],
+    frame_pairs: Mapping[int, Sequence[tuple[int, int]]],
+) -> np.ndarray:
+    """(len(top), len(hor)) spatial similarity of Eq. 13 from the frame-level association.
+
+    ``frame_pairs[f]`` lists the ``(top row, horizontal row)`` pairs the frame association
+    (Sec. 3.2) made on frame ``f``; the similarity of two tracklets is the number of their
+    common frames where their boxes were paired, over the length of the longer tracklet.
+    """
+    out = np.zeros((len(top), len(hor)))
+    if not top or not hor:
+        return out
+    t_of, h_of = _row_index(top), _row_index(hor)
+    frames = set().union(*(t.frames.tolist() for t in top))
+    hits = [(t_of[a], h_of[b]) for f in frames for a, b in frame_pairs.get(f, ())
+            if a in t_of and b in h_of]
+    if hits:
+        idx = np.array(hits)
+        np.add.at(out, (idx[:, 0], idx[:, 1]), 1.0)
+    lengths_t = np.array([len(t) for t in top], dtype=float)
+    lengths_h = np.array([len(h) for h in hor], dtype=float)
+    return out / np.maximum(lengths_t[:, None], lengths_h[None, :])
+
+
+def _centres(t: Tracklet) -> np.ndarray:
+    return t.boxes[:, :2] + 0.5 * t.boxes[:, 2:]
+
+
+def _velocity(t: Tracklet) -> np.ndarray:
+    """Least-squares constant velocity (pixels per frame) of a tracklet's box centres."""
+    if len(t) < 2:
+        return np.zeros(2)
+    f = t.frames.astype(float)
+    f = f - f.mean()
+    c = _centres(t)
+    return (f[:, None] * (c - c.mean(axis=0))).sum(axis=0) / (f @ f)
+
+
+def motion_similarity(
+    earlier: Sequence[Tracklet], later: Sequence[Tracklet], sigma: float = 0.05
+) -> np.ndarray:
+    """(len(earlier), len(later)) motion consistency of Eqs. 15-16, ``exp(-sigma (d_f + d_b))``.
+
+    ``d_f`` is the distance (pixels) between the later tracklet's first centre and the earlier
+    one's last centre carried forward at its constant velocity; ``d_b`` the same backwards.
+    A pair where the later tracklet does not start after the earlier one ends gets 0.
+    """
+    if not earlier or not later:
+        return np.zeros((len(earlier), len(later)))
+    last = np.array([_centres(t)[-1] for t in earlier])
+    first = np.array([_centres(t)[0] for t in later])
+    v_e = np.array([_velocity(t) for t in earlier])
+    v_l = np.array([_velocity(t) for t in later])
+    end = np.array([t.frames[-1] for t in earlier], dtype=float)
+    start = np.array([t.frames[0] for t in later], dtype=float)
+    gap = start[None, :] - end[:, None]
+    forward = last[:, None, :] + v_e[:, None, :] * gap[..., None]
+    backward = first[None, :, :] - v_l[None, :, :] * gap[..., None]
+    d_f = np.linalg.norm(forward - first[None, :, :], axis=-1)
+    d_b = np.linalg.norm(backward - last[:, None, :], axis=-1)
+    return np.where(gap > 0, np.exp(-sigma * (d_f + d_b)), 0.0)
+
+
+def combine_cross_view(
+    spatial: np.ndarray, appearance: np.ndarray | None, weights: TrackWeights
+) -> np.ndarray:
+    """Cross-view edge weight of Eq. 17, ``w1 spatial + (1 - w1) appearance``; spatial alone
+    without an appearance term."""
+    if appearance is None:
+        return np.asarray(spatial, dtype=float)
+    return weights.w1 * spatial + (1.0 - weights.w1) * appearance
+
+
+def combine_over_time(
+    motion: np.ndarray, appearance: np.ndarray | None, weights: TrackWeights
+) -> np.ndarray:
+    """Over-time edge weight of Eq. 18, ``w2 appearance + (1 - w2) motion``; motion alone
+    without an appearance term."""
+    if appearance is None:
+        return np.asarray(motion, dtype=float)
+    return weights.w2 * appearance + (1.0 - weights.w2) * motion

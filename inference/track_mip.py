@@ -1,0 +1,234 @@
+"""The four-cluster mixed-integer program of the CVMHAT paper (Sec. 3.1, Eqs. 1-4), with HiGHS.
+
+Clusters, in the paper's clockwise order: 0 = top view, clip t; 1 = top view, clip t+1;
+2 = horizontal view, clip t+1; 3 = horizontal view, clip t. Edge set ``i`` joins cluster ``i``
+to cluster ``(i + 1) % 4`` and is an ``(N_i, N_{i+1})`` binary matrix: sets 0 and 2 link a view
+over time, sets 1 and 3 link the two views within a clip.
+
+- Eq. 1: maximise ``sum c e + c0 sum_i d_i``, ``d_i`` the edges at cluster ``i``'s dummy node.
+- Eq. 2: at most one edge leaves and one enters each real node of each edge set.
+- Eq. 3: three consecutive edges of a loop force the fourth (the paths close into 4-cycles).
+- Eq. 4: every cluster has ``2K`` edge ends (in and out, dummy ones included), ``K`` the largest
+  cluster size, so an edge is worth taking when its weight is above ``2 c0``.
+
+The loop constraints are ``4 N0 N1 N2 N3`` in number; they are added lazily (solve, add the
+loops the solution breaks, solve again), which is exact and keeps each program small. Each
+window has a time limit; past it, or if HiGHS fails, :func:`greedy_solution` (a Hungarian
+assignment per edge set on the same weights, then the broken loops cut at their weakest edge)
+answers instead and the solution says so.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, linear_sum_assignment, milp
+from scipy.sparse import coo_matrix
+
+__all__ = [
+    "ClusterSolution",
+    "check_weights",
+    "greedy_solution",
+    "loop_violations",
+    "objective",
+    "solve_four_clusters",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class ClusterSolution:
+    """Edges chosen between the four clusters of one window.
+
+    Attributes:
+        edges: four binary ``(N_i, N_{i+1})`` int8 matrices, edge sets 0..3.
+        dummies: (4,) the ``d_i`` of Eqs. 1 and 4.
+        status: ``optimal`` (HiGHS proved it), ``fallback`` (time limit or solver failure:
+            greedy answer) or ``greedy`` (asked for).
+        rounds: how many programs were solved (one per batch of lazily added loops).
+    """
+
+    edges: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    dummies: np.ndarray
+    status: str
+    rounds: int
+
+
+def check_weights(weights: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """The four weight matrices as float arrays, their shapes chained ``(N_i, N_{i+1})``."""
+    if len(weights) != 4:
+        raise ValueError(f"need 4 weight matrices (edge sets 0..3), got {len(weights)}")
+    mats = tuple(np.asarray(w, dtype=float).reshape(np.shape(w)) for w in weights)
+    for i, w in enumerate(mats):
+        nxt = mats[(i + 1) % 4]
+        if w.ndim != 2 or w.shape[1] != nxt.shape[0] or not np.isfinite(w).all():
+            raise ValueError(
+                f"weight matrix {i} must be finite with shape (N_{i}, N_{(i + 1) % 4}) chained "
+                f"to the next one; got shapes {[m.shape for m in mats]}"
+            )
+    return mats
+
+
+def _sizes(mats: Sequence[np.ndarray]) -> list[int]:
+    return [m.shape[0] for m in mats]
+
+
+def _dummies(edges: Sequence[np.ndarray], sizes: Sequence[int]) -> np.ndarray:
+    """``d_i = 2K - (edges into cluster i) - (edges out of cluster i)`` (Eq. 4)."""
+    k = max(sizes) if sizes else 0
+    return np.array(
+        [2 * k - int(edges[(i - 1) % 4].sum()) - int(edges[i].sum()) for i in range(4)]
+    )
+
+
+def objective(weights: Sequence[np.ndarray], edges: Sequence[np.ndarray], c0: float) -> float:
+    """Value of Eq. 1 for the given edges (dummy counts from Eq. 4)."""
+    mats = check_weights(weights)
+    d = _dummies(edges, _sizes(mats))
+    return float(sum((w * e).sum() for w, e in zip(mats, edges, strict=True)) + c0 * d.sum())
+
+
+def loop_violations(edges: Sequence[np.ndarray]) -> list[tuple[int, int, int, int, int]]:
+    """Loops that break Eq. 3: ``(i, a, b, c, d)`` with edges a->b, b->c, c->d from cluster
+    ``i`` on and no edge d->a closing the loop."""
+    succ = []
+    for e in edges:
+        s = np.full(e.shape[0], -1)
+        rows, cols = np.nonzero(e)
+        s[rows] = cols
+        succ.append(s)
+    out = []
+    for i in range(4):
+        for a in np.flatnonzero(succ[i] >= 0).tolist():
+            b = int(succ[i][a])
+            c = int(succ[(i + 1) % 4][b])
+            if c < 0:
+                continue
+            d = int(succ[(i + 2) % 4][c])
+            if d >= 0 and not edges[(i + 3) % 4][d, a]:
+                out.append((i, a, b, c, d))
+    return out
+
+
+def greedy_solution(weights: Sequence[np.ndarray], c0: float = 0.2) -> ClusterSolution:
+    """Hungarian assignment per edge set on the weights (pairs above ``2 c0``), then every
+    broken loop of Eq. 3 cut at the weakest of its three edges; the MIP's fallback."""
+    mats = check_weights(weights)
+    edges = []
+    for w in mats:
+        e = np.zeros(w.shape, dtype=np.int8)
+        if w.size:
+            r, c = linear_sum_assignment(-w)
+            keep = w[r, c] > 2 * c0
+            e[r[keep], c[keep]] = 1
+        edges.append(e)
+    while True:
+        broken = loop_violations(edges)
+        if not broken:
+            break
+        i, a, b, c, d = broken[0]
+        path = [(i, a, b), ((i + 1) % 4, b, c), ((i + 2) % 4, c, d)]
+        k, r, s = min(path, key=lambda p: mats[p[0]][p[1], p[2]])
+        edges[k][r, s] = 0
+    return ClusterSolution(tuple(edges), _dummies(edges, _sizes(mats)), "greedy", 0)
+
+
+def _offsets(mats: Sequence[np.ndarray]) -> list[int]:
+    out, at = [], 0
+    for w in mats:
+        out.append(at)
+        at += w.size
+    return [*out, at]
+
+
+def solve_four_clusters(
+    weights: Sequence[np.ndarray],
+    c0: float = 0.2,
+    time_limit: float = 2.0,
+    max_rounds: int = 50,
+) -> ClusterSolution:
+    """Solve Eqs. 1-4 for one window with ``scipy.optimize.milp`` (HiGHS).
+
+    Args:
+        weights: the four edge-weight matrices ``c^i``, shapes ``(N_i, N_{(i+1)%4})``.
+        c0: dummy-node weight of Eq. 1.
+        time_limit: seconds for the whole window (every round); past it the greedy fallback.
+        max_rounds: most programs solved while adding broken loops; past it the fallback.
+
+    Returns:
+        The :class:`ClusterSolution`; ``status`` says whether HiGHS proved it optimal.
+    """
+    mats = check_weights(weights)
+    sizes = _sizes(mats)
+    if min(m.size for m in mats) == 0 and sum(m.size for m in mats) == 0:
+        empty = tuple(np.zeros(m.shape, dtype=np.int8) for m in mats)
+        return ClusterSolution(empty, _dummies(empty, sizes), "optimal", 0)
+    off = _offsets(mats)
+    n_e = off[-1]
+    n_var = n_e + 4
+    k = max(sizes)
+
+    def var(i: int, a: int, b: int) -> int:
+        return off[i] + a * mats[i].shape[1] + b
+
+    rows: list[int] = []
+    cols: list[int] = []
+    vals: list[float] = []
+    lo: list[float] = []
+    hi: list[float] = []
+
+    def add(entries: list[tuple[int, float]], low: float, high: float) -> None:
+        r = len(lo)
+        for c, v in entries:
+            rows.append(r)
+            cols.append(c)
+            vals.append(v)
+        lo.append(low)
+        hi.append(high)
+
+    for i, w in enumerate(mats):  # Eq. 2
+        n_a, n_b = w.shape
+        for a in range(n_a):
+            add([(var(i, a, b), 1.0) for b in range(n_b)], -np.inf, 1.0)
+        for b in range(n_b):
+            add([(var(i, a, b), 1.0) for a in range(n_a)], -np.inf, 1.0)
+    for i in range(4):  # Eq. 4, K fixed to the largest cluster
+        inc = (i - 1) % 4
+        entries = [(c, 1.0) for c in range(off[inc], off[inc + 1])]
+        entries += [(c, 1.0) for c in range(off[i], off[i + 1])]
+        entries.append((n_e + i, 1.0))
+        add(entries, 2.0 * k, 2.0 * k)
+    cost = -np.concatenate([*(w.ravel() for w in mats), np.full(4, c0)])
+    integrality = np.ones(n_var)
+    bounds = Bounds(np.zeros(n_var), np.r_[np.ones(n_e), np.full(4, 2.0 * k)])
+    start = time.perf_counter()
+    seen: set[tuple[int, int, int, int, int]] = set()
+    for rounds in range(1, max_rounds + 1):
+        left = time_limit - (time.perf_counter() - start)
+        if left <= 0:
+            break
+        a_mat = coo_matrix((vals, (rows, cols)), shape=(len(lo), n_var)).tocsr()
+        res = milp(
+            cost,
+            integrality=integrality,
+            bounds=bounds,
+            constraints=LinearConstraint(a_mat, lo, hi),
+            options={"time_limit": left, "disp": False},
+        )
+        if res.status != 0 or res.x is None:
+            break
+        x = np.round(res.x).astype(np.int64)
+        edges = tuple(
+            x[off[i]:off[i + 1]].reshape(w.shape).astype(np.int8) for i, w in enumerate(mats)
+        )
+        broken = [v for v in loop_violations(edges) if v not in seen]
+        if not broken:
+            return ClusterSolution(edges, x[n_e:].copy(), "optimal", rounds)
+        for i, a, b, c, d in broken:  # Eq. 3 for this loop
+            seen.add((i, a, b, c, d))
+            add([(var(i, a, b), 1.0), (var((i + 1) % 4, b, c), 1.0),
+                 (var((i + 2) % 4, c, d), 1.0), (var((i + 3) % 4, d, a), -1.0)], -np.inf, 2.0)
+    fallback = greedy_solution(mats, c0)
+    return ClusterSolution(fallback.edges, fallback.dummies, "fallback", rounds)

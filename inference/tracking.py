@@ -1,0 +1,210 @@
+"""Complementary-view tracking from boxes: the whole CVMHAT pipeline (paper, Algorithm 1).
+
+1. Frame-level cross-view association of every frame (Sec. 3.2, the exhaustive search of
+   :func:`xvmatch.geometry.spatial_search.associate_frame`; O given when the wearer is known).
+2. Single-view tracklets in clips of ``clip_length`` frames (:mod:`.tracklets`).
+3. For each pair of adjacent clips, the edge weights (:mod:`.track_costs`) and the four-cluster
+   MIP (:mod:`.track_mip`), or the spectral-clustering baseline (:mod:`.track_spectral`).
+4. Stitching into long cross-view trajectories (:mod:`.track_stitching`).
+
+Input records are ``{frame: FrameBoxes}`` whose ``ids`` are detection row numbers (unique over
+the view), so that the result can name each input row; no id is ever compared across views.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.spatial_matching import SpatialParams
+from xvmatch.geometry.spatial_search import associate_frame
+from xvmatch.inference.track_costs import (
+    TrackWeights,
+    combine_cross_view,
+    combine_over_time,
+    motion_similarity,
+    spatial_similarity,
+)
+from xvmatch.inference.track_mip import ClusterSolution, solve_four_clusters
+from xvmatch.inference.track_spectral import spectral_solution
+from xvmatch.inference.track_stitching import stitch_windows
+from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets
+
+__all__ = ["SOLVERS", "TrackConfig", "TrackResult", "associate_frames", "track_pair"]
+
+SOLVERS = ("mip", "spectral")
+
+Progress = Callable[[Iterable, int, str], Iterable]
+"""``progress(iterable, total, description)``: wraps an iterable, e.g. in a progress bar."""
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    """Settings of :func:`track_pair` (paper defaults, Sec. 4.1).
+
+    Attributes:
+        clip_length: frames per clip (10).
+        min_iou: IoU a box needs with the previous frame's box to extend its tracklet (0.5).
+        weights: the edge-weight parameters (``c0``, ``w1``, ``w2``, ``sigma``).
+        solver: ``mip`` (Eqs. 1-4 with HiGHS) or ``spectral`` (the Sec. 4.1 baseline).
+        time_limit: seconds per window for the MIP before the greedy fallback.
+        seed: seed of the spectral baseline's k-means.
+    """
+
+    clip_length: int = 10
+    min_iou: float = 0.5
+    weights: TrackWeights = field(default_factory=TrackWeights)
+    solver: str = "mip"
+    time_limit: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.clip_length < 1:
+            raise ValueError(f"clip_length must be >= 1, got {self.clip_length}")
+        if not 0.0 < self.min_iou <= 1.0:
+            raise ValueError(f"min_iou must be in (0, 1], got {self.min_iou}")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        if not self.time_limit > 0:
+            raise ValueError(f"time_limit must be > 0 seconds, got {self.time_limit}")
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """Tracks of both views.
+
+    Attributes:
+        top_rows: ``{top row: track id}``; rows absent were dropped.
+        hor_rows: ``{horizontal row: track id}``; the same id in both views is one person.
+        frame_pairs: ``{frame: [(top row, horizontal row), ...]}`` of the frame association.
+        n_windows: windows solved.
+        n_fallback: windows where the MIP hit its time limit or failed (greedy answer used).
+    """
+
+    top_rows: dict[int, int]
+    hor_rows: dict[int, int]
+    frame_pairs: dict[int, list[tuple[int, int]]]
+    n_windows: int
+    n_fallback: int
+
+
+def _associate_chunk(
+    args: tuple[list[tuple[int, FrameBoxes, FrameBoxes, np.ndarray | None]], float, SpatialParams],
+) -> list[tuple[int, list[tuple[int, int]]]]:
+    """Associate a chunk of frames (one task of the process pool); pairs as detection rows."""
+    items, hor_width, params = args
+    out = []
+    for frame, t, h, cand in items:
+        res = associate_frame(t.boxes, h.boxes, hor_width, params, cand)
+        out.append((frame, [(int(t.ids[a]), int(h.ids[b])) for a, b in res.pairs]))
+    return out
+
+
+def associate_frames(
+    top: Mapping[int, FrameBoxes],
+    hor: Mapping[int, FrameBoxes],
+    hor_width: float,
+    params: SpatialParams | None = None,
+    camera_rows: Iterable[int] | None = None,
+    workers: int = 1,
+    progress: Progress | None = None,
+) -> dict[int, list[tuple[int, int]]]:
+    """Frame-level association (Sec. 3.2) of every frame both views have, as row pairs.
+
+    ``camera_rows`` are the top rows of the camera wearer (O given on frames that have one,
+    searched elsewhere). The result does not depend on ``workers``.
+    """
+    params = params or SpatialParams()
+    cams = set(int(r) for r in camera_rows) if camera_rows is not None else set()
+    items = []
+    for f in sorted(set(top) & set(hor)):
+        t, h = top[f], hor[f]
+        if len(t) == 0 or len(h) == 0:
+            continue
+        cand = np.flatnonzero(np.isin(t.ids, list(cams))) if cams else np.zeros(0, np.intp)
+        items.append((f, t, h, cand if cand.size else None))
+    chunk = 25
+    chunks = [(items[k:k + chunk], hor_width, params) for k in range(0, len(items), chunk)]
+    out: dict[int, list[tuple[int, int]]] = {}
+    if workers > 1 and len(chunks) > 1:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            results = pool.map(_associate_chunk, chunks)
+            done = progress(results, len(chunks), "associate") if progress else results
+            for res in done:
+                out.update(res)
+    else:
+        done = progress(chunks, len(chunks), "associate") if progress else chunks
+        for c in done:
+            out.update(_associate_chunk(c))
+    return out
+
+
+def _window_weights(
+    top_t: list[Tracklet], top_u: list[Tracklet], hor_u: list[Tracklet], hor_t: list[Tracklet],
+    frame_pairs: Mapping[int, list[tuple[int, int]]], weights: TrackWeights,
+) -> list[np.ndarray]:
+    """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t)."""
+    c0 = combine_over_time(motion_similarity(top_t, top_u, weights.sigma), None, weights)
+    c1 = combine_cross_view(spatial_similarity(top_u, hor_u, frame_pairs), None, weights)
+    c2 = combine_over_time(motion_similarity(hor_t, hor_u, weights.sigma), None, weights).T
+    c3 = combine_cross_view(spatial_similarity(top_t, hor_t, frame_pairs), None, weights).T
+    return [c0, c1, c2, c3]
+
+
+def track_pair(
+    top: Mapping[int, FrameBoxes],
+    hor: Mapping[int, FrameBoxes],
+    hor_width: float,
+    params: SpatialParams | None = None,
+    config: TrackConfig | None = None,
+    camera_rows: Iterable[int] | None = None,
+    workers: int = 1,
+    progress: Progress | None = None,
+    frame_pairs: Mapping[int, list[tuple[int, int]]] | None = None,
+) -> TrackResult:
+    """Track the people of a top/horizontal sequence pair with one id across views (Alg. 1).
+
+    Args:
+        top, hor: ``{frame: FrameBoxes}``, ``ids`` = detection rows, unique within a view.
+        hor_width: width of the horizontal image (pixels).
+        params: spatial-distribution parameters of the frame association.
+        config: tracking settings.
+        camera_rows: top rows of the camera wearer, when known.
+        workers: processes for the frame association.
+        progress: optional progress wrapper.
+        frame_pairs: a frame association computed earlier (skips step 1).
+    """
+    config = config or TrackConfig()
+    if frame_pairs is None:
+        frame_pairs = associate_frames(top, hor, hor_width, params, camera_rows, workers,
+                                       progress)
+    clips = split_clips(sorted(set(top) | set(hor)), config.clip_length)
+    top_tr = view_tracklets(top, clips, config.min_iou)
+    hor_tr = view_tracklets(hor, clips, config.min_iou)
+    if len(clips) == 1:
+        top_tr.append([])
+        hor_tr.append([])
+    n_windows = max(1, len(clips) - 1)
+    solutions: list[ClusterSolution] = []
+    steps = range(n_windows)
+    for t in progress(steps, n_windows, "track") if progress else steps:
+        w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
+                            config.weights)
+        if config.solver == "mip":
+            solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
+        else:
+            solutions.append(spectral_solution(w, config.weights.c0, config.seed + t))
+    if len(clips) == 1:
+        top_tr, hor_tr = top_tr[:1], hor_tr[:1]
+    stitched = stitch_windows(top_tr, hor_tr, [s.edges for s in solutions])
+    return TrackResult(
+        top_rows=stitched.top_rows,
+        hor_rows=stitched.hor_rows,
+        frame_pairs=dict(frame_pairs),
+        n_windows=n_windows,
+        n_fallback=sum(s.status == "fallback" for s in solutions),
+    )

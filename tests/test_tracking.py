@@ -1,0 +1,282 @@
+"""Complementary-view tracking: tracklets, edge weights, the four-cluster MIP, stitching."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.inference.track_costs import (
+    TrackWeights,
+    combine_cross_view,
+    combine_over_time,
+    motion_similarity,
+    spatial_similarity,
+)
+from xvmatch.inference.track_mip import (
+    greedy_solution,
+    loop_violations,
+    objective,
+    solve_four_clusters,
+)
+from xvmatch.inference.track_spectral import spectral_groups, spectral_solution
+from xvmatch.inference.track_stitching import stitch_windows
+from xvmatch.inference.tracking import TrackConfig, track_pair
+from xvmatch.inference.tracklets import Tracklet, box_iou, clip_tracklets, split_clips
+
+
+def _tracklet(clip: int, frames, rows, centres, size=(10.0, 10.0)) -> Tracklet:
+    c = np.asarray(centres, dtype=float).reshape(-1, 2)
+    boxes = np.c_[c - 0.5 * np.asarray(size), np.tile(size, (len(c), 1))]
+    return Tracklet(clip, np.asarray(frames), np.asarray(rows), boxes)
+
+
+# --- tracklets -------------------------------------------------------------------------------
+
+
+def test_box_iou_reference_values():
+    a = np.array([[0, 0, 10, 10]])
+    b = np.array([[0, 0, 10, 10], [5, 0, 10, 10], [20, 20, 5, 5]])
+    # Half overlap: intersection 50, union 150 -> 1/3.
+    assert box_iou(a, b) == pytest.approx(np.array([[1.0, 1 / 3, 0.0]]))
+
+
+def test_split_clips_covers_the_span():
+    clips = split_clips([3, 25, 7], 10)
+    assert [c.tolist() for c in clips] == [list(range(3, 13)), list(range(13, 23)), [23, 24, 25]]
+    with pytest.raises(ValueError, match="clip length"):
+        split_clips([1], 0)
+
+
+def test_clip_tracklets_links_by_iou_and_breaks_on_gaps():
+    def rec(f, ids, xs):
+        return FrameBoxes(f, np.array(ids), np.array([[x, 0, 10, 10] for x in xs], float))
+
+    # Two people moving 1 px per frame, listed in a different order on frame 2; frame 4 missing.
+    frames = {1: rec(1, [0, 1], [0, 100]), 2: rec(2, [2, 3], [101, 1]), 3: rec(3, [4, 5], [2, 102]),
+              5: rec(5, [6], [4])}
+    tracklets = clip_tracklets(frames, np.arange(1, 6), clip=0)
+    rows = sorted(t.rows.tolist() for t in tracklets)
+    assert rows == [[0, 3, 4], [1, 2, 5], [6]]
+
+
+# --- edge weights ----------------------------------------------------------------------------
+
+
+def test_spatial_similarity_is_eq13_fraction():
+    top = [_tracklet(0, [1, 2, 3, 4], [0, 1, 2, 3], [[0, 0]] * 4)]
+    hor = [_tracklet(0, [2, 3], [10, 11], [[0, 0]] * 2),
+           _tracklet(0, [1, 2], [12, 13], [[0, 0]] * 2)]
+    pairs = {1: [(0, 12)], 2: [(1, 10)], 3: [(2, 11)], 4: []}
+    # Paired on 2 of the longer tracklet's 4 frames, and on 1 of 4.
+    assert spatial_similarity(top, hor, pairs) == pytest.approx(np.array([[2 / 4, 1 / 4]]))
+
+
+def test_motion_similarity_constant_velocity():
+    earlier = [_tracklet(0, [1, 2, 3], [0, 1, 2], [[0, 0], [1, 0], [2, 0]])]
+    on_line = _tracklet(1, [4, 5], [3, 4], [[3, 0], [4, 0]])
+    off_line = _tracklet(1, [4, 5], [5, 6], [[3, 4], [4, 4]])
+    sim = motion_similarity(earlier, [on_line, off_line], sigma=0.05)
+    # Forward and backward deviations: 0 on the line; 4 + 4 pixels off it.
+    assert sim == pytest.approx(np.array([[1.0, np.exp(-0.05 * 8)]]))
+    overlapping = _tracklet(1, [3], [7], [[2, 0]])
+    assert motion_similarity(earlier, [overlapping])[0, 0] == 0.0
+
+
+def test_combinations_eq17_eq18():
+    w = TrackWeights()
+    assert combine_cross_view(np.array([1.0]), np.array([0.0]), w) == pytest.approx([0.3])
+    assert combine_over_time(np.array([1.0]), np.array([0.0]), w) == pytest.approx([0.4])
+    assert combine_cross_view(np.array([0.7]), None, w) == pytest.approx([0.7])
+    with pytest.raises(ValueError, match="c0"):
+        TrackWeights(c0=2.0)
+
+
+# --- the four-cluster MIP --------------------------------------------------------------------
+
+
+def _check_constraints(edges, sizes):
+    for i, e in enumerate(edges):
+        assert e.shape == (sizes[i], sizes[(i + 1) % 4])
+        assert set(np.unique(e).tolist()) <= {0, 1}
+        assert (e.sum(axis=0) <= 1).all() and (e.sum(axis=1) <= 1).all()  # Eq. 2
+    assert loop_violations(edges) == []  # Eq. 3
+
+
+def _brute_force(weights, c0):
+    """Best Eq. 1 value over every assignment (tiny problems only)."""
+    shapes = [w.shape for w in weights]
+    cells = [(i, a, b) for i, s in enumerate(shapes) for a in range(s[0]) for b in range(s[1])]
+    best = -np.inf
+    for bits in itertools.product((0, 1), repeat=len(cells)):
+        edges = [np.zeros(s, dtype=np.int8) for s in shapes]
+        for on, (i, a, b) in zip(bits, cells, strict=True):
+            edges[i][a, b] = on
+        if any((e.sum(0) > 1).any() or (e.sum(1) > 1).any() for e in edges):
+            continue
+        if loop_violations(edges):
+            continue
+        best = max(best, objective(weights, edges, c0))
+    return best
+
+
+def test_mip_two_people_forms_two_loops():
+    eye = np.eye(2)
+    weights = [eye * 0.9, eye[::-1] * 0.8, eye[::-1] * 0.9, eye * 0.8]
+    sol = solve_four_clusters(weights)
+    assert sol.status == "optimal"
+    for e, w in zip(sol.edges, weights, strict=True):
+        assert np.array_equal(e, (w > 0).astype(np.int8))
+    assert sol.dummies.tolist() == [0, 0, 0, 0]  # K = 2, every cluster has 4 real edge ends
+
+
+def test_mip_loop_forces_a_weak_closing_edge():
+    # Three strong edges and a weak fourth: the loop (Eq. 3) is worth more than any open path.
+    w = [np.array([[0.9]]), np.array([[0.9]]), np.array([[0.9]]), np.array([[0.1]])]
+    sol = solve_four_clusters(w)
+    assert [int(e[0, 0]) for e in sol.edges] == [1, 1, 1, 1]
+    assert objective(w, sol.edges, 0.2) == pytest.approx(2.8)
+    assert _brute_force(w, 0.2) == pytest.approx(2.8)
+
+
+def test_mip_rejects_bad_shapes():
+    with pytest.raises(ValueError, match="chained"):
+        solve_four_clusters([np.zeros((2, 2)), np.zeros((3, 2)), np.zeros((2, 2)),
+                             np.zeros((2, 2))])
+
+
+@st.composite
+def _problems(draw, max_size=3):
+    sizes = [draw(st.integers(0, max_size)) for _ in range(4)]
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    return [rng.random((sizes[i], sizes[(i + 1) % 4])) ** 2 for i in range(4)]
+
+
+@settings(max_examples=40, deadline=None)
+@given(_problems())
+def test_mip_solutions_satisfy_the_constraints(weights):
+    sizes = [w.shape[0] for w in weights]
+    sol = solve_four_clusters(weights)
+    _check_constraints(sol.edges, sizes)
+    assert sol.status == "optimal"
+    k = max(sizes)
+    for i in range(4):  # Eq. 4
+        ends = sol.edges[(i - 1) % 4].sum() + sol.edges[i].sum() + sol.dummies[i]
+        assert ends == 2 * k and sol.dummies[i] >= 0
+    greedy = greedy_solution(weights)
+    _check_constraints(greedy.edges, sizes)
+    assert objective(weights, sol.edges, 0.2) >= objective(weights, greedy.edges, 0.2) - 1e-9
+
+
+@settings(max_examples=15, deadline=None)
+@given(_problems(max_size=2))
+def test_mip_is_optimal_on_tiny_problems(weights):
+    if sum(w.size for w in weights) > 12:
+        return
+    sol = solve_four_clusters(weights)
+    assert objective(weights, sol.edges, 0.2) == pytest.approx(_brute_force(weights, 0.2))
+
+
+def test_time_limit_falls_back_to_greedy():
+    rng = np.random.default_rng(0)
+    n = [12, 12, 7, 7]
+    weights = [rng.random((n[i], n[(i + 1) % 4])) ** 4 for i in range(4)]
+    sol = solve_four_clusters(weights, max_rounds=1)
+    if sol.status == "fallback":  # one round did not settle every loop
+        _check_constraints(sol.edges, n)
+    assert sol.status in ("optimal", "fallback")
+
+
+# --- spectral baseline -----------------------------------------------------------------------
+
+
+def test_spectral_groups_separates_blocks():
+    w = np.kron(np.eye(3), np.ones((2, 2))) - np.eye(6)
+    groups = spectral_groups(w, 3, seed=0)
+    assert len(set(groups.tolist())) == 3
+    assert all(groups[2 * k] == groups[2 * k + 1] for k in range(3))
+
+
+def test_spectral_solution_two_people():
+    eye = np.eye(2)
+    weights = [eye * 0.9, eye[::-1] * 0.8, eye[::-1] * 0.9, eye * 0.8]
+    sol = spectral_solution(weights, seed=1)
+    for e, w in zip(sol.edges, weights, strict=True):
+        assert np.array_equal(e, (w > 0).astype(np.int8))
+
+
+# --- stitching -------------------------------------------------------------------------------
+
+
+def test_stitching_follows_algorithm_1():
+    top = [[_tracklet(0, [1], [0], [[0, 0]]), _tracklet(0, [1], [1], [[50, 0]])],
+           [_tracklet(1, [2], [2], [[0, 0]]), _tracklet(1, [2], [3], [[50, 0]])]]
+    hor = [[_tracklet(0, [1], [0], [[0, 0]])], [_tracklet(1, [2], [1], [[0, 0]])]]
+    e0 = np.eye(2, dtype=np.int8)  # top over time
+    e1 = np.array([[0], [1]], dtype=np.int8)  # clip 1: hor joins the second top tracklet
+    e2 = np.array([[1]], dtype=np.int8)  # hor over time
+    e3 = np.array([[1, 0]], dtype=np.int8)  # clip 0: hor joins the first top tracklet
+    out = stitch_windows(top, hor, [(e0, e1, e2, e3)])
+    assert out.top_clip_ids[0].tolist() == out.top_clip_ids[1].tolist() == [1, 2]
+    assert out.hor_clip_ids[0].tolist() == [1]
+    assert out.hor_clip_ids[1].tolist() == [2]  # the cross-view edge wins over the over-time one
+    # Without the clip-1 cross-view edge, the horizontal tracklet keeps id 1, unless the top
+    # tracklet holding id 1 is in clip 1 (then pairing them would contradict the window).
+    out = stitch_windows(top, hor, [(e0, np.zeros((2, 1), np.int8), e2, e3)])
+    assert out.hor_clip_ids[1].tolist() == [3]
+    out = stitch_windows(top, hor, [(np.zeros((2, 2), np.int8), np.zeros((2, 1), np.int8), e2,
+                                     e3)])
+    assert out.hor_clip_ids[1].tolist() == [1]
+    assert out.top_rows == {0: 1, 1: 2, 2: 3, 3: 4}
+
+
+# --- the pipeline ----------------------------------------------------------------------------
+
+
+def _scrambled(frames, seed):
+    """Records whose ids are row numbers, in a shuffled order per frame (ids are detections)."""
+    rng = np.random.default_rng(seed)
+    out, truth, row = {}, {}, 0
+    for f in sorted(frames):
+        rec = frames[f]
+        order = rng.permutation(len(rec))
+        ids = np.arange(row, row + len(rec))
+        truth.update(zip(ids.tolist(), rec.ids[order].tolist(), strict=True))
+        out[f] = FrameBoxes(f, ids, rec.boxes[order])
+        row += len(rec)
+    return out, truth
+
+
+@pytest.mark.parametrize("solver", ["mip", "spectral"])
+def test_track_pair_on_a_synthetic_scene(solver):
+    # A calm head (the default turns it up to ~140 px a frame, beyond IoU linking).
+    scene = simulate_box_scene(SceneConfig(head_turn_std_deg=2.0), n_frames=40, seed=5)
+    top, top_truth = _scrambled(scene.top, 1)
+    hor, hor_truth = _scrambled(scene.hor, 2)
+    res = track_pair(top, hor, float(scene.config.hor_size[0]), config=TrackConfig(solver=solver))
+    assert set(res.top_rows) == set(top_truth) and set(res.hor_rows) == set(hor_truth)
+    for frames, rows in ((top, res.top_rows), (hor, res.hor_rows)):
+        for rec in frames.values():  # one box per track id and frame in each view
+            ids = [rows[r] for r in rec.ids.tolist()]
+            assert len(set(ids)) == len(ids)
+    # Top-view tracks are pure: each track id stands for one person.
+    owners: dict[int, set[int]] = {}
+    for r, k in res.top_rows.items():
+        owners.setdefault(k, set()).add(top_truth[r])
+    assert all(len(v) == 1 for v in owners.values())
+    # Cross-view pairs (same track id in one frame) are mostly right.
+    good = bad = 0
+    for f in set(top) & set(hor):
+        by_id = {res.top_rows[r]: top_truth[r] for r in top[f].ids.tolist()}
+        for r in hor[f].ids.tolist():
+            person = by_id.get(res.hor_rows[r])
+            if person is not None:
+                good += person == hor_truth[r]
+                bad += person != hor_truth[r]
+    assert good > 4 * bad and good > 0, (good, bad)

@@ -1,0 +1,136 @@
+"""``xvmatch track`` and ``xvmatch evaluate --tracks`` end to end, on a small synthetic scene."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from xvmatch.cli import main
+from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+from xvmatch.datasets.mot_boxes import read_mot_boxes, write_mot_boxes
+
+
+@pytest.fixture(scope="module")
+def scene_files(tmp_path_factory) -> dict[str, Path]:
+    """Ground-truth files and detection files (ids all -1, rows shuffled) of one scene."""
+    folder = tmp_path_factory.mktemp("track")
+    scene = simulate_box_scene(SceneConfig(head_turn_std_deg=2.0), n_frames=30, seed=5)
+    out = {}
+    for view, frames in (("top", scene.top), ("hor", scene.hor)):
+        gt = folder / f"gt_{view}.txt"
+        write_mot_boxes(gt, frames)
+        lines = gt.read_text().splitlines()
+        rng = np.random.default_rng(7)
+        det = [",".join([ln.split(",")[0], "-1", *ln.split(",")[2:]])
+               for ln in (lines[k] for k in rng.permutation(len(lines)))]
+        (folder / f"det_{view}.txt").write_text("\n".join(det) + "\n")
+        out[f"gt_{view}"], out[f"det_{view}"] = gt, folder / f"det_{view}.txt"
+    out["folder"] = folder
+    return out
+
+
+def _track(files, out: Path, *extra: str) -> int:
+    return main(["track", "--top", str(files["det_top"]), "--hor", str(files["det_hor"]),
+                 "--out", str(out), "--quiet", *extra])
+
+
+def test_track_writes_the_input_rows_with_track_ids(scene_files, tmp_path):
+    out = tmp_path / "tracks"
+    assert _track(scene_files, out) == 0
+    for view in ("top", "hor"):
+        det = scene_files[f"det_{view}"].read_text().splitlines()
+        written = (out / f"{view}.txt").read_text().splitlines()
+        assert len(written) == len(det)  # ground-truth boxes: no row is dropped
+        strip = [ln.split(",", 2)[::2] for ln in written]
+        assert strip == [ln.split(",", 2)[::2] for ln in det]  # same text but the id
+        frames = read_mot_boxes(out / f"{view}.txt")  # one box per track id and frame
+        assert all(len(r) for r in frames.values())
+
+
+def test_evaluate_tracks_scores_them(scene_files, tmp_path, capsys):
+    out = tmp_path / "tracks"
+    assert _track(scene_files, out) == 0
+    capsys.readouterr()
+    argv = ["evaluate", "--tracks", str(out), "--top", str(scene_files["gt_top"]), "--hor",
+            str(scene_files["gt_hor"]), "--json"]
+    assert main(argv) == 0
+    scores = json.loads(capsys.readouterr().out)
+    assert scores["top"]["idf1"] > 90 and scores["top"]["mota"] > 99
+    assert scores["top"]["motp"] == pytest.approx(100.0)  # the boxes are the ground truth's
+    assert scores["cross_view"]["cvidp"] > 80
+    assert main(argv[:-1]) == 0
+    assert "CVIDF1" in capsys.readouterr().out
+
+
+def test_evaluate_the_ground_truth_as_tracks_is_perfect(scene_files, tmp_path, capsys):
+    folder = tmp_path / "perfect"
+    folder.mkdir()
+    (folder / "top.txt").write_text(scene_files["gt_top"].read_text())
+    (folder / "hor.txt").write_text(scene_files["gt_hor"].read_text())
+    assert main(["evaluate", "--tracks", str(folder), "--top", str(scene_files["gt_top"]),
+                 "--hor", str(scene_files["gt_hor"]), "--json"]) == 0
+    scores = json.loads(capsys.readouterr().out)
+    for key in ("cvidp", "cvidr", "cvidf1", "cvma"):
+        assert scores["cross_view"][key] == pytest.approx(100.0)
+    for view in ("top", "hor"):
+        for key in ("idf1", "mota", "motp", "hota"):
+            assert scores[view][key] == pytest.approx(100.0)
+
+
+def test_spectral_and_camera_id(scene_files, tmp_path):
+    det_top = scene_files["det_top"]
+    # Give the wearer (ground-truth id 0) its id back in the detection file.
+    gt = {ln.split(",", 2)[2]: ln.split(",")[1]
+          for ln in scene_files["gt_top"].read_text().splitlines()}
+    lines = [ln.replace(",-1,", ",0,", 1) if gt[ln.split(",", 2)[2]] == "0" else ln
+             for ln in det_top.read_text().splitlines()]
+    with_wearer = tmp_path / "top_wearer.txt"
+    with_wearer.write_text("\n".join(lines) + "\n")
+    files = {**scene_files, "det_top": with_wearer}
+    assert _track(files, tmp_path / "a", "--camera-id", "0") == 0
+    assert _track(scene_files, tmp_path / "b", "--solver", "spectral", "--seed", "3") == 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--camera-id", "12345"], "no box has the --camera-id 12345"),
+        (["--top", "/nonexistent/top.txt"], "no such file"),
+    ],
+)
+def test_track_errors_are_one_line(scene_files, tmp_path, capsys, extra, message):
+    assert _track(scene_files, tmp_path / "x", *extra) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("xvmatch: error:") and message in err[0]
+
+
+def test_track_out_must_be_a_folder(scene_files, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert _track(scene_files, blocker) == 2
+    assert "not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"),
+    [("--clip-length", "0"), ("--clip-length", "1001"), ("--min-iou", "0"), ("--c0", "1.5"),
+     ("--sigma", "0"), ("--time-limit", "0"), ("--time-limit", "nan"), ("--workers", "65"),
+     ("--seed", "-1"), ("--image-size", "4x4")],
+)
+def test_track_numeric_options_are_bounded(scene_files, tmp_path, capsys, flag, value):
+    with pytest.raises(SystemExit) as exc:
+        _track(scene_files, tmp_path / "x", flag, value)
+    assert exc.value.code == 2
+    assert f"argument {flag}" in capsys.readouterr().err
+
+
+def test_evaluate_needs_pred_or_tracks(scene_files, tmp_path, capsys):
+    base = ["evaluate", "--top", str(scene_files["gt_top"]), "--hor", str(scene_files["gt_hor"])]
+    with pytest.raises(SystemExit):
+        main(base)
+    assert "one of the arguments --pred --tracks is required" in capsys.readouterr().err
+    assert main([*base, "--tracks", str(tmp_path / "missing")]) == 2
+    assert "not a folder" in capsys.readouterr().err

@@ -1,0 +1,167 @@
+"""The ``xvmatch track`` command and ``xvmatch evaluate --tracks``: complementary-view tracking.
+
+``track`` reads two box files as detections (their id column is ignored, except to find the
+camera wearer with ``--camera-id``), tracks the people of both views with one id per person
+across the views (:func:`xvmatch.inference.tracking.track_pair`, CVMHAT Algorithm 1), and writes
+``OUT/top.txt`` and ``OUT/hor.txt``: the input rows, text unchanged but the id field, which holds
+the track id; rows the tracker dropped are absent. Bad input raises ``ValueError`` with a one-line
+message, printed by the main entry point as ``xvmatch: error: ...`` with exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Iterable
+from pathlib import Path
+
+from xvmatch.cli_types import box_id, float_in, image_size, int_in, seed_value, worker_count
+
+__all__ = ["EXAMPLE", "add_track_parser", "evaluate_tracks_command"]
+
+EXAMPLE = (
+    "xvmatch track --top seq_top.txt --hor seq_hor.txt --out tracks/\n"
+    "  xvmatch evaluate --tracks tracks/ --top gt_top.txt --hor gt_hor.txt"
+)
+
+CLIP_LENGTH_TYPE = int_in(1, 1000, "frames per clip; each window's program grows with it")
+MIN_IOU_TYPE = float_in(0, 1, "an intersection over union", low_open=True)
+C0_TYPE = float_in(0, 1, "edge weights are in [0, 1]; an edge pays off above 2 c0")
+SIGMA_TYPE = float_in(0, 1000, "per pixel of motion deviation", low_open=True)
+TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per window before the greedy fallback")
+HOR_SIZE_TYPE = image_size(8, 65536, "pixels of a camera image")
+
+
+def _progress(enabled: bool):
+    """``progress(iterable, total, description)`` as a tqdm bar on stderr, or nothing."""
+
+    def wrap(items: Iterable, total: int, desc: str) -> Iterable:
+        from tqdm import tqdm
+
+        return tqdm(items, total=total, desc=desc, unit="step", leave=False, file=sys.stderr,
+                    disable=None if enabled else True)
+
+    return wrap
+
+
+def add_track_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch track`` on ``subparsers`` and return its parser."""
+    from xvmatch.cli import _add_spatial_options
+
+    help_text = (
+        "Track the people of a top-view and a horizontal-view box file with one id per person "
+        "across both views (CVMHAT: tracklets in 10-frame clips, a four-cluster mixed-integer "
+        "program per pair of clips, stitching). The input ids are ignored; writes OUT/top.txt "
+        "and OUT/hor.txt, the input rows with the id replaced by the track id."
+    )
+    p = subparsers.add_parser(
+        "track", help=help_text, description=help_text, epilog=f"example:\n  {EXAMPLE}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--top", required=True, help="top-view detections (MOT format, ids ignored)")
+    p.add_argument("--hor", required=True,
+                   help="horizontal-view detections (MOT format, ids ignored)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (created); top.txt and hor.txt are written atomically")
+    p.add_argument("--solver", choices=("mip", "spectral"), default="mip",
+                   help="mip: Eqs. 1-4 with HiGHS (default); spectral: the spectral-clustering "
+                   "baseline on the same weights")
+    p.add_argument("--camera-id", type=box_id, default=None,
+                   help="id (in the top file's id column) of the horizontal camera's wearer: O "
+                   "given (|id| <= 2**53); without it O is searched among all top-view boxes")
+    p.add_argument("--clip-length", type=CLIP_LENGTH_TYPE, default=10,
+                   help="frames per clip, 1..1000 (default 10)")
+    p.add_argument("--min-iou", type=MIN_IOU_TYPE, default=0.5,
+                   help="IoU that links a box to the previous frame's, in (0, 1] (default 0.5)")
+    p.add_argument("--c0", type=C0_TYPE, default=0.2,
+                   help="dummy-node weight of Eq. 1, in [0, 1] (default 0.2)")
+    p.add_argument("--sigma", type=SIGMA_TYPE, default=0.05,
+                   help="motion deviation scale of Eq. 15 per pixel, in (0, 1000] (default 0.05)")
+    p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=2.0,
+                   help="seconds per window for the MIP, in [0.01, 600] (default 2); past it a "
+                   "greedy answer is used and counted in a warning")
+    p.add_argument("--seed", type=seed_value, default=0,
+                   help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
+    p.add_argument("--image-size", type=HOR_SIZE_TYPE, default=(2688, 1512), metavar="WxH",
+                   help="horizontal image size, 8..65536 a side (default 2688x1512, CVMHAT)")
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes for the frame association, 1..64 (default 1; the same "
+                   "output for any K)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    _add_spatial_options(p)
+    p.set_defaults(func=_cmd_track)
+    return p
+
+
+def _cmd_track(args: argparse.Namespace) -> int:
+    from xvmatch.cli import _spatial_params
+    from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
+    from xvmatch.inference.track_costs import TrackWeights
+    from xvmatch.inference.tracking import TrackConfig, track_pair
+
+    start = time.perf_counter()
+    params = _spatial_params(args)
+    config = TrackConfig(
+        clip_length=args.clip_length,
+        min_iou=args.min_iou,
+        weights=TrackWeights(c0=args.c0, sigma=args.sigma),
+        solver=args.solver,
+        time_limit=args.time_limit,
+        seed=args.seed,
+    )
+    top = read_detection_rows(args.top)
+    hor = read_detection_rows(args.hor)
+    camera_rows = None
+    if args.camera_id is not None:
+        camera_rows = top.rows_with_id(args.camera_id)
+        if camera_rows.size == 0:
+            raise ValueError(f"{args.top}: no box has the --camera-id {args.camera_id}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {args.out}: exists and is not a folder")
+    result = track_pair(top.frames, hor.frames, float(args.image_size[0]), params, config,
+                        camera_rows, args.workers, _progress(not args.quiet))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OSError(f"--out {args.out}: cannot create the folder ({exc.strerror})") from None
+    n_top = write_track_rows(out / "top.txt", top, result.top_rows)
+    n_hor = write_track_rows(out / "hor.txt", hor, result.hor_rows)
+    if result.n_fallback:
+        print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows hit the MIP "
+              f"time limit ({args.time_limit:g} s) or failed and used the greedy fallback; "
+              "raise --time-limit", file=sys.stderr)
+    if not args.quiet:
+        ids = set(result.top_rows.values()) | set(result.hor_rows.values())
+        print(f"wrote {n_top} top and {n_hor} horizontal boxes, {len(ids)} tracks, to {out}/ "
+              f"({time.perf_counter() - start:.1f} s)", file=sys.stderr)
+    return 0
+
+
+def evaluate_tracks_command(args: argparse.Namespace, read_boxes) -> int:
+    """``xvmatch evaluate --tracks DIR``: print the tracking scores of DIR/top.txt, DIR/hor.txt."""
+    from xvmatch.datasets.mot_boxes import read_mot_boxes
+    from xvmatch.evaluation.track_metrics import (
+        evaluate_tracks,
+        format_track_table,
+        track_scores_to_dict,
+    )
+
+    if args.offset:
+        raise ValueError("--offset applies to --pred; track and score re-timed files instead")
+    folder = Path(args.tracks)
+    if not folder.is_dir():
+        raise ValueError(f"--tracks {args.tracks}: not a folder (expected the --out of "
+                         "xvmatch track, with top.txt and hor.txt)")
+    tracks_top = read_mot_boxes(folder / "top.txt")
+    tracks_hor = read_mot_boxes(folder / "hor.txt")
+    gt_top = read_boxes(args.top, args.duplicates)
+    gt_hor = read_boxes(args.hor, args.duplicates)
+    scores = evaluate_tracks(tracks_top, tracks_hor, gt_top, gt_hor)
+    if args.json:
+        print(json.dumps(track_scores_to_dict(scores), indent=2))
+    else:
+        print(format_track_table([(args.name or args.tracks, scores)]))
+    return 0
