@@ -37,7 +37,10 @@ __all__ = [
     "evaluate_tracks",
     "format_track_table",
     "gt_identity",
+    "pool_view_scores",
     "track_pair_counts",
+    "track_scores_to_dict",
+    "view_track_results",
     "view_track_scores",
 ]
 
@@ -150,15 +153,30 @@ def _trackeval():
     return CLEAR, HOTA, Identity
 
 
-def view_track_scores(
+def view_track_results(
     gt: Mapping[int, FrameBoxes], pred: Mapping[int, FrameBoxes]
-) -> ViewTrackScores:
-    """IDF1, MOTA, MOTP and HOTA of one view's tracks, computed by TrackEval."""
+) -> dict[str, dict]:
+    """TrackEval's raw per-sequence results of one view (``CLEAR``, ``HOTA``, ``Identity``),
+    to pool sequences with :func:`pool_view_scores`; ``ids`` holds the id counts."""
     clear_cls, hota_cls, identity_cls = _trackeval()
     data = _trackeval_data(gt, pred)
-    clear = clear_cls({"PRINT_CONFIG": False}).eval_sequence(data)
-    hota = hota_cls({"PRINT_CONFIG": False}).eval_sequence(data)
-    ident = identity_cls({"PRINT_CONFIG": False}).eval_sequence(data)
+    return {
+        "CLEAR": clear_cls({"PRINT_CONFIG": False}).eval_sequence(data),
+        "HOTA": hota_cls({"PRINT_CONFIG": False}).eval_sequence(data),
+        "Identity": identity_cls({"PRINT_CONFIG": False}).eval_sequence(data),
+        "ids": {"gt": data["num_gt_ids"], "tracks": data["num_tracker_ids"]},
+    }
+
+
+def pool_view_scores(results: Sequence[dict[str, dict]]) -> ViewTrackScores:
+    """One view's scores over several sequences (TrackEval's ``combine_sequences``: counts
+    summed, ratios derived once); a single sequence gives its own scores."""
+    clear_cls, hota_cls, identity_cls = _trackeval()
+    pooled = {}
+    for name, cls in (("CLEAR", clear_cls), ("HOTA", hota_cls), ("Identity", identity_cls)):
+        per_seq = {str(k): r[name] for k, r in enumerate(results)}
+        pooled[name] = cls({"PRINT_CONFIG": False}).combine_sequences(per_seq)
+    clear, hota, ident = pooled["CLEAR"], pooled["HOTA"], pooled["Identity"]
     return ViewTrackScores(
         idf1=100.0 * float(ident["IDF1"]),
         idp=100.0 * float(ident["IDP"]),
@@ -169,9 +187,16 @@ def view_track_scores(
         deta=100.0 * float(np.mean(hota["DetA"])),
         assa=100.0 * float(np.mean(hota["AssA"])),
         idsw=int(clear["IDSW"]),
-        gt_ids=data["num_gt_ids"],
-        track_ids=data["num_tracker_ids"],
+        gt_ids=int(sum(r["ids"]["gt"] for r in results)),
+        track_ids=int(sum(r["ids"]["tracks"] for r in results)),
     )
+
+
+def view_track_scores(
+    gt: Mapping[int, FrameBoxes], pred: Mapping[int, FrameBoxes]
+) -> ViewTrackScores:
+    """IDF1, MOTA, MOTP and HOTA of one view's tracks, computed by TrackEval."""
+    return pool_view_scores([view_track_results(gt, pred)])
 
 
 def evaluate_tracks(

@@ -10,6 +10,7 @@ gives edges in the same form as the MIP's, for the same stitching.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -38,7 +39,9 @@ def spectral_groups(affinity: np.ndarray, n_groups: int, seed: int = 0) -> np.nd
     u = vectors[:, -k:]
     norms = np.linalg.norm(u, axis=1, keepdims=True)
     u = u / np.where(norms > 0, norms, 1.0)
-    _, labels = kmeans2(u, k, minit="++", seed=np.random.default_rng(seed))
+    with warnings.catch_warnings():  # an empty cluster is a valid answer here, not a problem
+        warnings.simplefilter("ignore", UserWarning)
+        _, labels = kmeans2(u, k, minit="++", seed=np.random.default_rng(seed))
     return labels.astype(np.int64)
 
 
