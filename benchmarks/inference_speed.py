@@ -1,17 +1,19 @@
 """CPU speed of the appearance branch: torch eager FP32, ONNX FP32 and ONNX INT8, in one run.
 
-For the paper's ResNet-50 branch (256x128 crops) and the compact trunk of the shipped default
-(128x64), with 1 and 2 threads, on the same crops: crops per second (batches of 64) and
-milliseconds per image pair with 10 + 10 people (one batch of 20 crops, what the runtime sends
-per frame). The INT8 networks are static QDQ ones (:mod:`xvmatch.export.int8`, MinMax
-calibration on rendered crops); speed does not depend on the weights, so untrained networks are
-timed. Also: the ResNet-50's FP32 GFLOP/s (its multiply-adds counted from the ONNX graph's
-convolutions and matrix products) beside the machine's single-precision matrix-product peak
-measured in the same run (numpy sgemm, 2048x2048, in a process with one, then two BLAS
-threads).
+For the paper's ResNet-50 branch (256x128 crops), the compact trunk of the shipped default
+(128x64) and the ImageNet-initialisable MobileNetV2 and EfficientNet-Lite0 trunks (128x64,
+:mod:`xvmatch.models.pretrained_backbones`), with 1 and 2 threads, on the same crops: crops per
+second (batches of 64) and milliseconds per image pair with 10 + 10 people (one batch of 20
+crops, what the runtime sends per frame). The INT8 networks are static QDQ ones
+(:mod:`xvmatch.export.int8`, MinMax calibration on rendered crops); speed does not depend on the
+weights, so untrained networks are timed. Also: the ResNet-50's FP32 GFLOP/s (its multiply-adds
+counted from the ONNX graph's convolutions and matrix products) beside the machine's
+single-precision matrix-product peak measured in the same run (numpy sgemm, 2048x2048, in a
+process with one, then two BLAS threads).
 
 Usage:
-    python benchmarks/inference_speed.py [--repeats 5] [--archs resnet50 small]
+    python benchmarks/inference_speed.py [--repeats 5]
+        [--archs resnet50 small mobilenetv2 efficientnet_lite0]
 """
 
 from __future__ import annotations
@@ -88,7 +90,8 @@ def graph_gflop(path: Path, batch: int) -> float:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--archs", nargs="+", default=["resnet50", "small"])
+    parser.add_argument("--archs", nargs="+",
+                        default=["resnet50", "small", "mobilenetv2", "efficientnet_lite0"])
     args = parser.parse_args()
 
     import onnxruntime as ort
@@ -98,9 +101,16 @@ def main() -> int:
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.export.int8 import calibration_crops, quantize_appearance
     from xvmatch.export.onnx_export import AppearanceGraph, _onnx_export
-    from xvmatch.models.appearance_net import appearance_resnet50, appearance_small
+    from xvmatch.models.appearance_net import (
+        appearance_efficientnet_lite0,
+        appearance_mobilenetv2,
+        appearance_resnet50,
+        appearance_small,
+    )
 
-    builders = {"resnet50": appearance_resnet50, "small": appearance_small}
+    builders = {"resnet50": appearance_resnet50, "small": appearance_small,
+                "mobilenetv2": appearance_mobilenetv2,
+                "efficientnet_lite0": appearance_efficientnet_lite0}
     peak = {t: sgemm_gflops(t) for t in (1, 2)}
     print(f"numpy sgemm peak: {peak[1]:.1f} GFLOP/s on 1 thread, {peak[2]:.1f} on 2")
     with tempfile.TemporaryDirectory() as tmp:
