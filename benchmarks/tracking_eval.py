@@ -36,8 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
+from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.track_metrics import (
     pool_view_scores,
     track_pair_counts,
@@ -71,6 +72,18 @@ def as_tracks(det: dict[int, FrameBoxes], track_of_row: dict[int, int]) -> dict[
             ids = np.array([track_of_row[int(rec.ids[k])] for k in keep])
             out[f] = FrameBoxes(f, ids, rec.boxes[keep])
     return out
+
+
+def frame_tracks(det_top, det_hor, pairs):
+    """The frame association as per-frame pseudo-tracks (a pair shares an id), so that it is
+    scored by the same box matching as the tracks (needed with detector noise)."""
+    out_top, out_hor = {}, {}
+    for det, out, side in ((det_top, out_top, 0), (det_hor, out_hor, 1)):
+        for f, rec in det.items():
+            paired = {p[side]: k + 1 for k, p in enumerate(pairs.get(f, ()))}
+            ids = [paired.get(int(r), 1_000_000 + int(r)) for r in rec.ids]
+            out[f] = FrameBoxes(f, np.array(ids, dtype=np.int64), rec.boxes)
+    return out_top, out_hor
 
 
 def frame_pairs_cached(name, top, hor, camera_rows, cache: Path | None, tag: str):
@@ -125,7 +138,12 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the row shuffling")
     parser.add_argument("--frames", type=int, default=None, help="first N frames only")
     parser.add_argument("--sequences", nargs="*", default=None, help="subset of names")
+    parser.add_argument("--noise", type=int, default=None, metavar="SEED",
+                        help="apply the default detector noise (5%% jitter, 10%% misses, 0.3 "
+                        "false boxes per frame and view) with this seed")
     parser.add_argument("--c0", type=float, default=0.2, help="dummy weight of Eq. 1")
+    parser.add_argument("--sigma", type=float, default=0.05, help="Eq. 15 scale per pixel")
+    parser.add_argument("--max-gap", type=int, default=3, help="frames a tracklet may miss")
     parser.add_argument("--min-iou", type=float, default=0.5, help="tracklet IoU link")
     parser.add_argument("--time-sequence", default="V1-S_55-G_1")
     parser.add_argument("--no-timing", action="store_true")
@@ -140,14 +158,18 @@ def main() -> int:
     names = args.sequences or sequence_names(folder)
 
     def config(solver: str) -> TrackConfig:
-        return TrackConfig(min_iou=args.min_iou, weights=TrackWeights(c0=args.c0), solver=solver)
+        return TrackConfig(min_iou=args.min_iou, max_gap=args.max_gap,
+                           weights=TrackWeights(c0=args.c0, sigma=args.sigma), solver=solver)
 
     tag = ("B" if args.camera_given else "A") + f"s{args.seed}" + (
-        f"f{args.frames}" if args.frames else "")
+        f"f{args.frames}" if args.frames else "") + (
+        f"n{args.noise}" if args.noise is not None else "")
     head = (f"{'sequence':<20} {'frames':>5} {'CVIDF1':>6} {'CVMA':>6} | top IDF1 MOTA HOTA IDSW"
             f" | hor IDF1 MOTA HOTA IDSW")
-    print(f"O {'given' if args.camera_given else 'searched'}; ground-truth boxes, ids replaced "
-          f"by shuffled row numbers per view; c0 {args.c0:g}, min IoU {args.min_iou:g}")
+    boxes = "ground-truth" if args.noise is None else f"noisy (seed {args.noise})"
+    print(f"O {'given' if args.camera_given else 'searched'}; {boxes} boxes, ids replaced "
+          f"by shuffled row numbers per view; c0 {args.c0:g}, sigma {args.sigma:g}, min IoU "
+          f"{args.min_iou:g}")
     print(head)
     pooled = {k: [] for k in ("frame", *SOLVERS)}
     views = {s: {"top": [], "hor": []} for s in SOLVERS}
@@ -156,16 +178,21 @@ def main() -> int:
         if args.frames:
             top = {f: r for f, r in top.items() if f <= args.frames}
             hor = {f: r for f, r in hor.items() if f <= args.frames}
-        det_top, truth_top = as_detections(top, args.seed * 2 + 1)
-        det_hor, truth_hor = as_detections(hor, args.seed * 2 + 2)
+        in_top, in_hor = top, hor
+        if args.noise is not None:
+            noise = DetectorNoise()
+            in_top = apply_detector_noise(top, IMAGE_SIZE, noise, args.noise, "top",
+                                          keep_ids=(0,) if args.camera_given else ())
+            in_hor = apply_detector_noise(hor, IMAGE_SIZE, noise, args.noise, "hor")
+        det_top, truth_top = as_detections(in_top, args.seed * 2 + 1)
+        det_hor, _ = as_detections(in_hor, args.seed * 2 + 2)
         camera_rows = ([r for r, i in truth_top.items() if i == 0] if args.camera_given
                        else None)
         start = time.perf_counter()
         fp = frame_pairs_cached(name, det_top, det_hor, camera_rows, cache, tag)
         t_assoc = time.perf_counter() - start
         frames = sorted(set(top) | set(hor))
-        pred = {f: [(truth_top[a], truth_hor[b]) for a, b in p] for f, p in fp.items()}
-        counts = count_sequence(pred, top, hor, frames)
+        counts = track_pair_counts(*frame_tracks(det_top, det_hor, fp), top, hor, frames)
         pooled["frame"] += counts
         print(fmt_row(f"{name} frame", len(frames), summarize(counts),
                       extra=f"assoc {t_assoc:.0f}s"))

@@ -49,6 +49,7 @@ class TrackConfig:
     Attributes:
         clip_length: frames per clip (10).
         min_iou: IoU a box needs with the previous frame's box to extend its tracklet (0.5).
+        max_gap: frames a tracklet may miss inside a clip and still be extended (3).
         weights: the edge-weight parameters (``c0``, ``w1``, ``w2``, ``sigma``).
         solver: ``mip`` (Eqs. 1-4 with HiGHS) or ``spectral`` (the Sec. 4.1 baseline).
         time_limit: seconds per window for the MIP before the greedy fallback.
@@ -57,6 +58,7 @@ class TrackConfig:
 
     clip_length: int = 10
     min_iou: float = 0.5
+    max_gap: int = 3
     weights: TrackWeights = field(default_factory=TrackWeights)
     solver: str = "mip"
     time_limit: float = 2.0
@@ -67,6 +69,8 @@ class TrackConfig:
             raise ValueError(f"clip_length must be >= 1, got {self.clip_length}")
         if not 0.0 < self.min_iou <= 1.0:
             raise ValueError(f"min_iou must be in (0, 1], got {self.min_iou}")
+        if self.max_gap < 0:
+            raise ValueError(f"max_gap must be >= 0 frames, got {self.max_gap}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         if not self.time_limit > 0:
@@ -183,8 +187,8 @@ def track_pair(
         frame_pairs = associate_frames(top, hor, hor_width, params, camera_rows, workers,
                                        progress)
     clips = split_clips(sorted(set(top) | set(hor)), config.clip_length)
-    top_tr = view_tracklets(top, clips, config.min_iou)
-    hor_tr = view_tracklets(hor, clips, config.min_iou)
+    top_tr = view_tracklets(top, clips, config.min_iou, config.max_gap)
+    hor_tr = view_tracklets(hor, clips, config.min_iou, config.max_gap)
     if len(clips) == 1:
         top_tr.append([])
         hor_tr.append([])

@@ -2,7 +2,9 @@
 
 The video is cut into clips of a fixed length (10 frames in the paper); inside a clip, boxes of
 adjacent frames are linked one-to-one by IoU (Hungarian assignment, a link needs IoU >= 0.5, the
-paper's threshold) and each chain of links is a tracklet. Boxes are ``x, y, w, h`` in pixels.
+paper's threshold; a box may also continue a tracklet last seen a few frames earlier, so that a
+missed detection does not cut it) and each chain of links is a tracklet. Boxes are
+``x, y, w, h`` in pixels.
 """
 
 from __future__ import annotations
@@ -69,25 +71,31 @@ def split_clips(frames: Sequence[int], length: int) -> list[np.ndarray]:
 
 
 def clip_tracklets(
-    frames: Mapping[int, FrameBoxes], clip_frames: np.ndarray, clip: int, min_iou: float = 0.5
+    frames: Mapping[int, FrameBoxes],
+    clip_frames: np.ndarray,
+    clip: int,
+    min_iou: float = 0.5,
+    max_gap: int = 3,
 ) -> list[Tracklet]:
-    """Link the boxes of one clip into tracklets by IoU between adjacent frames (Sec. 4.1).
+    """Link the boxes of one clip into tracklets by IoU (Sec. 4.1), over short gaps.
 
-    A missing frame ends every chain. Tracklets are ordered by first frame, then file order.
+    Each frame's boxes are assigned (Hungarian, IoU >= ``min_iou``) to the tracklets whose last
+    box is at most ``max_gap`` frames before (a detector's misses would otherwise cut a person
+    into several tracklets of one clip, and only one of them could continue over time); a
+    tracklet last seen one frame earlier wins a tie. Ordered by first frame, then file order.
     """
     chains: list[list[tuple[int, int, np.ndarray]]] = []
-    open_chains: list[int] = []  # chain index of each box of the previous frame
-    prev_boxes = np.zeros((0, 4))
-    prev_frame = None
     for f in clip_frames.tolist():
         rec = frames.get(f)
         if rec is None or len(rec) == 0:
-            open_chains, prev_boxes, prev_frame = [], np.zeros((0, 4)), None
             continue
+        open_chains = [k for k, c in enumerate(chains) if f - 1 - max_gap <= c[-1][0] < f]
         current = [-1] * len(rec)
-        if prev_frame is not None and len(prev_boxes):
-            iou = box_iou(prev_boxes, rec.boxes)
-            r, c = linear_sum_assignment(-iou)
+        if open_chains:
+            last = np.array([chains[k][-1][2] for k in open_chains])
+            gaps = np.array([f - chains[k][-1][0] - 1 for k in open_chains], dtype=float)
+            iou = box_iou(last, rec.boxes)
+            r, c = linear_sum_assignment(-(iou - 1e-3 * gaps[:, None]))
             for i, j in zip(r.tolist(), c.tolist(), strict=True):
                 if iou[i, j] >= min_iou:
                     current[j] = open_chains[i]
@@ -96,7 +104,6 @@ def clip_tracklets(
                 current[j] = len(chains)
                 chains.append([])
             chains[current[j]].append((f, int(rec.ids[j]), rec.boxes[j]))
-        open_chains, prev_boxes, prev_frame = current, rec.boxes, f
     return [
         Tracklet(
             clip=clip,
@@ -109,7 +116,10 @@ def clip_tracklets(
 
 
 def view_tracklets(
-    frames: Mapping[int, FrameBoxes], clips: Sequence[np.ndarray], min_iou: float = 0.5
+    frames: Mapping[int, FrameBoxes],
+    clips: Sequence[np.ndarray],
+    min_iou: float = 0.5,
+    max_gap: int = 3,
 ) -> list[list[Tracklet]]:
     """The tracklets of every clip of one view (one list per clip)."""
-    return [clip_tracklets(frames, c, k, min_iou) for k, c in enumerate(clips)]
+    return [clip_tracklets(frames, c, k, min_iou, max_gap) for k, c in enumerate(clips)]

@@ -53,16 +53,19 @@ def test_split_clips_covers_the_span():
         split_clips([1], 0)
 
 
-def test_clip_tracklets_links_by_iou_and_breaks_on_gaps():
+def test_clip_tracklets_links_by_iou_over_short_gaps():
     def rec(f, ids, xs):
         return FrameBoxes(f, np.array(ids), np.array([[x, 0, 10, 10] for x in xs], float))
 
     # Two people moving 1 px per frame, listed in a different order on frame 2; frame 4 missing.
     frames = {1: rec(1, [0, 1], [0, 100]), 2: rec(2, [2, 3], [101, 1]), 3: rec(3, [4, 5], [2, 102]),
               5: rec(5, [6], [4])}
-    tracklets = clip_tracklets(frames, np.arange(1, 6), clip=0)
+    tracklets = clip_tracklets(frames, np.arange(1, 6), clip=0, max_gap=0)
     rows = sorted(t.rows.tolist() for t in tracklets)
     assert rows == [[0, 3, 4], [1, 2, 5], [6]]
+    # A one-frame miss is bridged when the gap is allowed (IoU of x=2 and x=4 boxes: 8/12).
+    tracklets = clip_tracklets(frames, np.arange(1, 6), clip=0, max_gap=1)
+    assert sorted(t.rows.tolist() for t in tracklets) == [[0, 3, 4, 6], [1, 2, 5]]
 
 
 # --- edge weights ----------------------------------------------------------------------------

@@ -116,7 +116,8 @@ def test_track_out_must_be_a_folder(scene_files, tmp_path, capsys):
 
 @pytest.mark.parametrize(
     ("flag", "value"),
-    [("--clip-length", "0"), ("--clip-length", "1001"), ("--min-iou", "0"), ("--c0", "1.5"),
+    [("--clip-length", "0"), ("--clip-length", "1001"), ("--max-gap", "-1"),
+     ("--min-iou", "0"), ("--c0", "1.5"),
      ("--sigma", "0"), ("--time-limit", "0"), ("--time-limit", "nan"), ("--workers", "65"),
      ("--seed", "-1"), ("--image-size", "4x4")],
 )

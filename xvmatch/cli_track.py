@@ -27,6 +27,7 @@ EXAMPLE = (
 )
 
 CLIP_LENGTH_TYPE = int_in(1, 1000, "frames per clip; each window's program grows with it")
+MAX_GAP_TYPE = int_in(0, 1000, "frames; a clip is at most 1000 frames")
 MIN_IOU_TYPE = float_in(0, 1, "an intersection over union", low_open=True)
 C0_TYPE = float_in(0, 1, "edge weights are in [0, 1]; an edge pays off above 2 c0")
 SIGMA_TYPE = float_in(0, 1000, "per pixel of motion deviation", low_open=True)
@@ -75,6 +76,9 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="frames per clip, 1..1000 (default 10)")
     p.add_argument("--min-iou", type=MIN_IOU_TYPE, default=0.5,
                    help="IoU that links a box to the previous frame's, in (0, 1] (default 0.5)")
+    p.add_argument("--max-gap", type=MAX_GAP_TYPE, default=3,
+                   help="frames a tracklet may miss inside a clip and still continue, 0..1000 "
+                   "(default 3)")
     p.add_argument("--c0", type=C0_TYPE, default=0.2,
                    help="dummy-node weight of Eq. 1, in [0, 1] (default 0.2)")
     p.add_argument("--sigma", type=SIGMA_TYPE, default=0.05,
@@ -106,6 +110,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     config = TrackConfig(
         clip_length=args.clip_length,
         min_iou=args.min_iou,
+        max_gap=args.max_gap,
         weights=TrackWeights(c0=args.c0, sigma=args.sigma),
         solver=args.solver,
         time_limit=args.time_limit,
