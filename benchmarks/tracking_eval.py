@@ -36,16 +36,18 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
-from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
+from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.track_metrics import (
     pool_view_scores,
     track_pair_counts,
+    tracklet_scores,
     view_track_results,
 )
 from xvmatch.inference.track_costs import TrackWeights
 from xvmatch.inference.tracking import TrackConfig, associate_frames, track_pair
+from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets
 
 SOLVERS = ("mip", "spectral")
 
@@ -173,6 +175,8 @@ def main() -> int:
     print(head)
     pooled = {k: [] for k in ("frame", *SOLVERS)}
     views = {s: {"top": [], "hor": []} for s in SOLVERS}
+    made = {"top": [], "hor": []}
+    people: dict[str, dict] = {"top": {}, "hor": {}}
     for name in names:
         top, hor = read_sequence(folder, name)
         if args.frames:
@@ -185,7 +189,15 @@ def main() -> int:
                                           keep_ids=(0,) if args.camera_given else ())
             in_hor = apply_detector_noise(hor, IMAGE_SIZE, noise, args.noise, "hor")
         det_top, truth_top = as_detections(in_top, args.seed * 2 + 1)
-        det_hor, _ = as_detections(in_hor, args.seed * 2 + 2)
+        det_hor, truth_hor = as_detections(in_hor, args.seed * 2 + 2)
+        clips = split_clips(sorted(set(det_top) | set(det_hor)), 10)
+        for view, det, truth in (("top", det_top, truth_top), ("hor", det_hor, truth_hor)):
+            base = len(people[view])  # rows of every sequence kept apart
+            for clip in view_tracklets(det, clips, args.min_iou, args.max_gap):
+                made[view].append([Tracklet(t.clip, t.frames, t.rows + base, t.boxes)
+                                   for t in clip])
+            people[view].update({r + base: (f"{name}:{i}" if i < FALSE_ID_BASE["top"] else None)
+                                 for r, i in truth.items()})
         camera_rows = ([r for r, i in truth_top.items() if i == 0] if args.camera_given
                        else None)
         start = time.perf_counter()
@@ -223,6 +235,11 @@ def main() -> int:
         hor_s = pool_view_scores(views[solver]["hor"])
         overall[solver] = (cv, top_s, hor_s)
         print(fmt_row(f"OVERALL {solver}", total, cv, top_s, hor_s))
+    for view in ("top", "hor"):
+        ts = tracklet_scores(made[view], people[view])
+        print(f"tracklets ({view}, Table 10): P {ts.precision:.2f} R {ts.recall:.2f} "
+              f"F1 {ts.f1:.2f} ({ts.n_right} right of {ts.n_tracklets} made, "
+              f"{ts.n_person_clips} person-clips)")
     mip_cv, mip_top, _ = overall["mip"]
     print(f"targets: tracking CVIDF1 - frame = {mip_cv.cvidf1 - frame_cv.cvidf1:+.1f} (>= +5); "
           f"top IDF1 {mip_top.idf1:.1f} (>= 90); MIP - spectral CVIDF1 = "

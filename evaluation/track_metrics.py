@@ -29,10 +29,11 @@ from xvmatch.evaluation.cross_view_metrics import (
     count_pair,
     summarize,
 )
-from xvmatch.inference.tracklets import box_iou
+from xvmatch.inference.tracklets import Tracklet, box_iou
 
 __all__ = [
     "TrackScores",
+    "TrackletScores",
     "ViewTrackScores",
     "evaluate_tracks",
     "format_track_table",
@@ -40,6 +41,7 @@ __all__ = [
     "pool_view_scores",
     "track_pair_counts",
     "track_scores_to_dict",
+    "tracklet_scores",
     "view_track_results",
     "view_track_scores",
 ]
@@ -118,6 +120,51 @@ def track_pair_counts(
         out.append(count_pair(gt_t.ids, gt_h.ids, det_t, det_h, np.array(pairs).reshape(-1, 2),
                               frame=f))
     return out
+
+
+@dataclass(frozen=True)
+class TrackletScores:
+    """Tracklet extraction scores (CVMHAT paper, Table 10), in percent, with their counts.
+
+    A tracklet is right when it holds exactly the boxes of one person in its clip (it joins
+    them all, and nothing else); precision is over the tracklets made, recall over the
+    person-clips of the ground truth.
+    """
+
+    precision: float
+    recall: float
+    f1: float
+    n_tracklets: int
+    n_person_clips: int
+    n_right: int
+
+
+def tracklet_scores(
+    clips: Sequence[Sequence[Tracklet]], person_of_row: Mapping[int, int | None]
+) -> TrackletScores:
+    """Table 10 precision, recall and F1 of one view's tracklets.
+
+    Args:
+        clips: per clip, the tracklets (their ``rows`` are detection rows).
+        person_of_row: the person each row is, ``None`` for a false detection.
+    """
+    truth: dict[tuple[int, int], set[int]] = {}
+    for k, clip in enumerate(clips):
+        for t in clip:
+            for r in t.rows.tolist():
+                person = person_of_row.get(int(r))
+                if person is not None:
+                    truth.setdefault((k, person), set()).add(int(r))
+    made = [(k, t) for k, clip in enumerate(clips) for t in clip]
+    right = 0
+    for k, t in made:
+        people = {person_of_row.get(int(r)) for r in t.rows.tolist()}
+        if len(people) == 1 and None not in people:
+            right += truth[(k, people.pop())] == set(t.rows.tolist())
+    p = right / len(made) if made else 0.0
+    r = right / len(truth) if truth else 0.0
+    f1 = 2 * p * r / (p + r) if p + r > 0 else 0.0
+    return TrackletScores(100 * p, 100 * r, 100 * f1, len(made), len(truth), right)
 
 
 def _trackeval_data(gt: Mapping[int, FrameBoxes], pred: Mapping[int, FrameBoxes]) -> dict:

@@ -283,3 +283,20 @@ def test_track_pair_on_a_synthetic_scene(solver):
                 good += person == hor_truth[r]
                 bad += person != hor_truth[r]
     assert good > 4 * bad and good > 0, (good, bad)
+
+
+def test_tracklet_scores_table10_toy():
+    from xvmatch.evaluation.track_metrics import tracklet_scores
+
+    def t(clip, rows):
+        return Tracklet(clip, np.arange(len(rows)), np.array(rows), np.zeros((len(rows), 4)))
+
+    person = {0: 1, 1: 1, 2: 1, 3: 2, 4: 2, 5: None, 6: 1}
+    # Clip 0: person 1 whole (right), person 2 cut in two (both wrong), a false box (wrong).
+    # Clip 1: person 1 whole (right). 2 right of 5 made; 2 right of 3 person-clips.
+    scores = tracklet_scores([[t(0, [0, 1, 2]), t(0, [3]), t(0, [4]), t(0, [5])],
+                              [t(1, [6])]], person)
+    assert (scores.n_right, scores.n_tracklets, scores.n_person_clips) == (2, 5, 3)
+    assert scores.precision == pytest.approx(100 * 2 / 5)
+    assert scores.recall == pytest.approx(100 * 2 / 3)
+    assert scores.f1 == pytest.approx(100 * 2 * (2 / 5) * (2 / 3) / (2 / 5 + 2 / 3))
