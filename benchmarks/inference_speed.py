@@ -64,9 +64,23 @@ def graph_gflop(path: Path, batch: int) -> float:
     """Multiply-add FLOPs (x2) of the Conv, Gemm and MatMul nodes of an ONNX graph for one
     batch, from shape inference."""
     import onnx
+    import onnxruntime as ort
     from onnx import shape_inference
 
-    model = shape_inference.infer_shapes(onnx.load(os.fspath(path)))
+    # onnxruntime's basic optimisations first: they fold the traced padding arithmetic of
+    # EfficientNet's "same" padding into the convolutions, so every shape can be inferred.
+    with tempfile.TemporaryDirectory() as tmp:
+        options = ort.SessionOptions()
+        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_BASIC
+        options.optimized_model_filepath = os.fspath(Path(tmp) / "basic.onnx")
+        options.intra_op_num_threads = 1
+        ort.InferenceSession(os.fspath(path), options, providers=["CPUExecutionProvider"])
+        model = onnx.load(options.optimized_model_filepath)
+    for v in model.graph.input:  # the batch axis made concrete
+        for d in v.type.tensor_type.shape.dim:
+            if d.dim_value <= 0:
+                d.dim_value = batch
+    model = shape_inference.infer_shapes(model, data_prop=True)
     shapes = {}
     for v in list(model.graph.value_info) + list(model.graph.input) + list(model.graph.output):
         dims = [d.dim_value if d.dim_value > 0 else batch for d in v.type.tensor_type.shape.dim]

@@ -72,6 +72,7 @@ def raw_imagenet(arch: str) -> AppearanceNet:
                "efficientnet_lite0": appearance_efficientnet_lite0}[arch]
     net = builder(init="imagenet")
     net.head = nn.Identity()
+    net.embedding_dim = net.trunk.out_channels
     return net.eval()
 
 
