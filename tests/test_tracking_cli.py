@@ -135,3 +135,10 @@ def test_evaluate_needs_pred_or_tracks(scene_files, tmp_path, capsys):
     assert "one of the arguments --pred --tracks is required" in capsys.readouterr().err
     assert main([*base, "--tracks", str(tmp_path / "missing")]) == 2
     assert "not a folder" in capsys.readouterr().err
+
+
+def test_track_output_does_not_depend_on_workers(scene_files, tmp_path):
+    assert _track(scene_files, tmp_path / "one") == 0
+    assert _track(scene_files, tmp_path / "two", "--workers", "2") == 0
+    for view in ("top.txt", "hor.txt"):
+        assert (tmp_path / "one" / view).read_bytes() == (tmp_path / "two" / view).read_bytes()
