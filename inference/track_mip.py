@@ -162,7 +162,7 @@ def solve_four_clusters(
     """
     mats = check_weights(weights)
     sizes = _sizes(mats)
-    if min(m.size for m in mats) == 0 and sum(m.size for m in mats) == 0:
+    if all(m.size == 0 for m in mats):
         empty = tuple(np.zeros(m.shape, dtype=np.int8) for m in mats)
         return ClusterSolution(empty, _dummies(empty, sizes), "optimal", 0)
     off = _offsets(mats)
