@@ -8,13 +8,15 @@ with IoU 1); an unmatched track box stands for no person.
 - Across views (CVMHAT paper, Eqs. 19-20): the predicted pairs of a frame are the boxes of the two
   views with the same track id, scored by
   :func:`xvmatch.evaluation.cross_view_metrics.count_pair` exactly as the frame-level metrics.
-- Per view: the maintained TrackEval package (``pip install trackeval``; its HOTA, CLEAR and
-  Identity metrics, fed through its ``eval_sequence`` interface with IoU similarities); these
-  metrics are not re-implemented here.
+- Per view: the maintained TrackEval package (``pip install --no-deps trackeval``; its HOTA,
+  CLEAR and Identity metrics, fed through its ``eval_sequence`` interface with IoU
+  similarities); these metrics are not re-implemented here.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 
@@ -192,10 +194,14 @@ def _trackeval_data(gt: Mapping[int, FrameBoxes], pred: Mapping[int, FrameBoxes]
 
 def _trackeval():
     try:
-        from trackeval.metrics import CLEAR, HOTA, Identity
+        # TrackEval prints a line for each optional dataset reader it cannot import (pycocotools
+        # and the like, which its metrics do not use): keep that out of the user's output.
+        with contextlib.redirect_stdout(io.StringIO()):
+            from trackeval.metrics import CLEAR, HOTA, Identity
     except ImportError:
         raise ValueError(
-            "per-view tracking metrics need the TrackEval package: pip install trackeval"
+            "per-view tracking metrics need the TrackEval package: "
+            "pip install --no-deps 'trackeval>=1.3' (its metrics need only numpy and scipy)"
         ) from None
     return CLEAR, HOTA, Identity
 

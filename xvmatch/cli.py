@@ -500,7 +500,7 @@ def build_parser() -> argparse.ArgumentParser:
     scored.add_argument("--pred", help="prediction CSV (frame,top_id,hor_id)")
     scored.add_argument("--tracks", metavar="DIR",
                         help="tracks of xvmatch track (DIR/top.txt, DIR/hor.txt); per-view "
-                        "metrics need TrackEval (pip install trackeval)")
+                        "metrics need TrackEval (pip install --no-deps trackeval)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
     p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
