@@ -420,6 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
     from xvmatch.cli_baseline import add_baseline_parser
     from xvmatch.cli_demo import add_demo_parser
     from xvmatch.cli_learn import add_export_parser, add_fit_geometry_parser
+    from xvmatch.cli_multi_ego import add_multi_ego_parser
     from xvmatch.cli_synth import add_show_parser, add_synth_parser
     from xvmatch.cli_track import add_track_parser
     from xvmatch.cli_train import add_train_parser
@@ -509,6 +510,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "|N| <= 100000")
     p.set_defaults(func=_cmd_evaluate)
     add_track_parser(sub)
+    add_multi_ego_parser(sub)
 
     p = command(
         "offset",

@@ -1,0 +1,331 @@
+"""Joint association of V >= 2 views of one instant with cycle consistency, with HiGHS.
+
+Views are numbered ``0..V-1`` (in ``xvmatch associate-multi``: 0 the top view, 1..K the
+egocentric ones); view ``a`` has ``n_a`` boxes. For every pair of views ``a < b`` an
+``(n_a, n_b)`` cost matrix ``c^{ab}`` and a non-association cost ``gamma_ab`` are given (as in
+Eqs. 1-2 of the geometric-priors paper, a pair is worth matching alone when ``c < gamma``).
+
+The joint 0/1 program over all view pairs:
+
+- minimise ``sum_{a<b} sum_ij (c^{ab}_ij - gamma_ab) x^{ab}_ij`` (Eq. 1 with the dummy cost of
+  Eq. 2 folded in: leaving a box unmatched costs nothing, matching it costs ``c - gamma``);
+- each box matched at most once in each other view (Eq. 1's row and column constraints);
+- cycle consistency (transitivity) for every triple of views ``a, b, c`` and boxes ``i, j, k``:
+  ``x^{ab}_ij + x^{bc}_jk - 1 <= x^{ac}_ik`` and its two rotations: a person matched ego1-top
+  and top-ego2 is the same person in ego1-ego2.
+
+Together these make the matched boxes cliques with at most one box per view: one person each.
+Without the triangle inequalities the program is the pairwise Hungarian assignment of each view
+pair (:func:`pairwise_hungarian`, the baseline), so any change comes from consistency alone.
+The triangle inequalities (``3 n_a n_b n_c`` per triple of views) are added lazily: solve, add
+those of every triple the solution breaks, solve again, until none is broken; that is exact.
+Past a time limit, or if HiGHS fails, :func:`consistent_hungarian` answers (pairwise Hungarian
+made consistent by merging its pairs greedily, best first) and the solution says so.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from xvmatch.inference.assignment import assign
+
+__all__ = [
+    "STATUSES",
+    "MultiViewSolution",
+    "check_problem",
+    "consistent_hungarian",
+    "cycle_violations",
+    "global_ids",
+    "objective",
+    "pairwise_hungarian",
+    "solve_multi_view",
+    "view_pairs",
+]
+
+STATUSES = ("optimal", "fallback", "greedy", "pairwise")
+"""``optimal``: HiGHS proved it; ``fallback``: time limit or solver failure, the greedy answer;
+``greedy``: :func:`consistent_hungarian` asked for; ``pairwise``: the pairwise baseline (may be
+inconsistent)."""
+
+Pairs = dict[tuple[int, int], np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class MultiViewSolution:
+    """The matches of every view pair and one person id per box.
+
+    Attributes:
+        pairs: ``{(a, b): (K, 2) int64 (row in view a, row in view b)}`` for every ``a < b``,
+            sorted by the first column.
+        person: per view, ``(n_a,)`` int64 person id of each box (connected components of all
+            matches, numbered 0.. in order of first appearance, view 0 first); boxes with the
+            same id are one person (for an inconsistent baseline a component may hold two boxes
+            of one view).
+        status: one of :data:`STATUSES`.
+        rounds: programs solved (one per batch of added triangle inequalities).
+    """
+
+    pairs: Pairs
+    person: tuple[np.ndarray, ...]
+    status: str
+    rounds: int
+
+    @property
+    def consistent(self) -> bool:
+        """No broken triangle: every component is a clique with at most one box per view."""
+        return not cycle_violations(self.pairs, [p.size for p in self.person])
+
+
+def view_pairs(n_views: int) -> list[tuple[int, int]]:
+    """Every view pair ``(a, b)``, ``a < b``, in lexicographic order."""
+    return list(itertools.combinations(range(int(n_views)), 2))
+
+
+def check_problem(
+    sizes: Sequence[int],
+    costs: Mapping[tuple[int, int], np.ndarray],
+    gamma: float | Mapping[tuple[int, int], float],
+) -> tuple[list[int], dict[tuple[int, int], np.ndarray], dict[tuple[int, int], float]]:
+    """The sizes, the cost matrices as float arrays and one gamma per view pair, checked.
+
+    Raises:
+        ValueError: fewer than 2 views, a negative size, a missing view pair, a cost matrix of
+            the wrong shape, NaN or -inf in a cost, or a non-finite gamma.
+    """
+    n = [int(s) for s in sizes]
+    if len(n) < 2 or min(n) < 0:
+        raise ValueError(f"sizes must give >= 2 views with >= 0 boxes each, got {list(sizes)}")
+    mats, gammas = {}, {}
+    for a, b in view_pairs(len(n)):
+        if (a, b) not in costs:
+            raise ValueError(f"no cost matrix for views ({a}, {b}); give one per pair a < b")
+        c = np.asarray(costs[(a, b)], dtype=float)
+        if c.size == 0:
+            c = c.reshape(n[a], n[b]) if n[a] * n[b] == 0 else c
+        if c.shape != (n[a], n[b]):
+            raise ValueError(f"cost matrix ({a}, {b}) has shape {c.shape}, expected "
+                             f"{(n[a], n[b])} (boxes of views {a} and {b})")
+        if np.isnan(c).any() or np.isneginf(c).any():
+            raise ValueError(f"cost matrix ({a}, {b}) holds NaN or -inf; use +inf to forbid a "
+                             "pair")
+        g = float(gamma[(a, b)] if isinstance(gamma, Mapping) else gamma)
+        if not np.isfinite(g):
+            raise ValueError(f"gamma of views ({a}, {b}) must be finite, got {g}")
+        mats[(a, b)], gammas[(a, b)] = c, g
+    return n, mats, gammas
+
+
+def _matrix(pairs: np.ndarray, m: int, n: int) -> np.ndarray:
+    x = np.zeros((m, n), dtype=bool)
+    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    x[p[:, 0], p[:, 1]] = True
+    return x
+
+
+def _pairs(x: np.ndarray) -> np.ndarray:
+    rows, cols = np.nonzero(x)
+    return np.stack([rows, cols], axis=1).astype(np.int64).reshape(-1, 2)
+
+
+def cycle_violations(pairs: Mapping[tuple[int, int], np.ndarray],
+                     sizes: Sequence[int]) -> list[tuple[int, int, int, int, int, int]]:
+    """Broken triangles ``(a, b, c, i, j, k)``, ``a < b < c``: of the three matches
+    ``(a i, b j)``, ``(b j, c k)``, ``(a i, c k)`` exactly two are made."""
+    n = [int(s) for s in sizes]
+    x = {ab: _matrix(pairs.get(ab, np.zeros((0, 2))), n[ab[0]], n[ab[1]])
+         for ab in view_pairs(len(n))}
+    out = []
+    for a, b, c in itertools.combinations(range(len(n)), 3):
+        ab, bc, ac = x[(a, b)].astype(np.int8), x[(b, c)].astype(np.int8), x[(a, c)]
+        total = ab[:, :, None] + bc[None, :, :] + ac[:, None, :].astype(np.int8)
+        for i, j, k in zip(*np.nonzero(total == 2), strict=True):
+            out.append((a, b, c, int(i), int(j), int(k)))
+    return out
+
+
+def global_ids(pairs: Mapping[tuple[int, int], np.ndarray],
+               sizes: Sequence[int]) -> tuple[np.ndarray, ...]:
+    """Person id of every box: connected components of the matches, numbered in order of first
+    appearance (view 0's boxes first, then view 1's, ...)."""
+    n = [int(s) for s in sizes]
+    start = np.r_[0, np.cumsum(n)]
+    rows, cols = [], []
+    for (a, b), p in pairs.items():
+        p = np.asarray(p, dtype=np.int64).reshape(-1, 2)
+        rows.append(start[a] + p[:, 0])
+        cols.append(start[b] + p[:, 1])
+    total = int(start[-1])
+    r = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    c = np.concatenate(cols) if cols else np.zeros(0, np.int64)
+    graph = coo_matrix((np.ones(r.size), (r, c)), shape=(total, total))
+    _, labels = connected_components(graph, directed=False)
+    _, first = np.unique(labels, return_index=True)
+    rank = np.empty(first.size, np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    ids = rank[labels] if total else np.zeros(0, np.int64)
+    return tuple(ids[start[v]:start[v + 1]].astype(np.int64) for v in range(len(n)))
+
+
+def objective(costs: Mapping[tuple[int, int], np.ndarray],
+              gamma: float | Mapping[tuple[int, int], float],
+              pairs: Mapping[tuple[int, int], np.ndarray]) -> float:
+    """``sum (c - gamma)`` over the matched pairs: the value the joint program minimises."""
+    total = 0.0
+    for ab, p in pairs.items():
+        p = np.asarray(p, dtype=np.int64).reshape(-1, 2)
+        g = float(gamma[ab] if isinstance(gamma, Mapping) else gamma)
+        total += float((np.asarray(costs[ab], dtype=float)[p[:, 0], p[:, 1]] - g).sum())
+    return total
+
+
+def _solution(pairs: Pairs, sizes: Sequence[int], status: str, rounds: int) -> MultiViewSolution:
+    ordered = {ab: p[np.argsort(p[:, 0], kind="stable")] for ab, p in sorted(pairs.items())}
+    return MultiViewSolution(ordered, global_ids(ordered, sizes), status, rounds)
+
+
+def pairwise_hungarian(
+    sizes: Sequence[int],
+    costs: Mapping[tuple[int, int], np.ndarray],
+    gamma: float | Mapping[tuple[int, int], float],
+) -> MultiViewSolution:
+    """The baseline: each view pair on its own with the Hungarian algorithm and its gamma
+    (:func:`xvmatch.inference.assignment.assign`); the result may break cycles."""
+    n, mats, gammas = check_problem(sizes, costs, gamma)
+    pairs = {ab: assign(mats[ab], gammas[ab]) for ab in mats}
+    return _solution(pairs, n, "pairwise", 0)
+
+
+def consistent_hungarian(
+    sizes: Sequence[int],
+    costs: Mapping[tuple[int, int], np.ndarray],
+    gamma: float | Mapping[tuple[int, int], float],
+) -> MultiViewSolution:
+    """Pairwise Hungarian made consistent: its pairs, best gain ``gamma - c`` first, merge two
+    people when they share no view and no pair between them is forbidden (+inf); then every
+    two boxes of one person are matched. Consistent by construction; the MIP's fallback."""
+    n, mats, gammas = check_problem(sizes, costs, gamma)
+    candidates = []
+    for ab, c in mats.items():
+        for i, j in assign(c, gammas[ab]).tolist():
+            candidates.append((gammas[ab] - c[i, j], ab, i, j))
+    candidates.sort(key=lambda e: (-e[0], e[1], e[2], e[3]))
+    members: dict[tuple[int, int], list[tuple[int, int]]] = {
+        (v, i): [(v, i)] for v in range(len(n)) for i in range(n[v])}
+
+    def forbidden(p: list[tuple[int, int]], q: list[tuple[int, int]]) -> bool:
+        for (v, i), (w, j) in itertools.product(p, q):
+            a, b, r, s = (v, w, i, j) if v < w else (w, v, j, i)
+            if not np.isfinite(mats[(a, b)][r, s]):
+                return True
+        return False
+
+    for _, (a, b), i, j in candidates:
+        p, q = members[(a, i)], members[(b, j)]
+        if p is q or {v for v, _ in p} & {w for w, _ in q} or forbidden(p, q):
+            continue
+        p.extend(q)
+        for box in q:
+            members[box] = p
+    chosen: dict[tuple[int, int], list[tuple[int, int]]] = {ab: [] for ab in mats}
+    seen = set()
+    for group in members.values():
+        if id(group) in seen:
+            continue
+        seen.add(id(group))
+        for (v, i), (w, j) in itertools.combinations(sorted(group), 2):
+            chosen[(v, w)].append((i, j))
+    pairs = {ab: np.array(p, dtype=np.int64).reshape(-1, 2) for ab, p in chosen.items()}
+    return _solution(pairs, n, "greedy", 0)
+
+
+def solve_multi_view(
+    sizes: Sequence[int],
+    costs: Mapping[tuple[int, int], np.ndarray],
+    gamma: float | Mapping[tuple[int, int], float],
+    time_limit: float = 2.0,
+    max_rounds: int = 50,
+) -> MultiViewSolution:
+    """Solve the joint program of the module docstring with ``scipy.optimize.milp`` (HiGHS).
+
+    Args:
+        sizes: boxes per view, ``(n_0, ..., n_{V-1})``, V >= 2.
+        costs: ``{(a, b): (n_a, n_b) costs}`` for every ``a < b``; ``+inf`` forbids a pair.
+        gamma: the non-association cost, one for all pairs or ``{(a, b): gamma_ab}``.
+        time_limit: seconds for all rounds together; past it the greedy fallback answers.
+        max_rounds: most programs solved while adding broken triangles; past it the fallback.
+
+    Returns:
+        The :class:`MultiViewSolution`; ``status`` ``optimal`` or ``fallback``.
+
+    Raises:
+        ValueError: as :func:`check_problem`; ``time_limit`` or ``max_rounds`` not positive.
+    """
+    if not time_limit > 0 or int(max_rounds) < 1:
+        raise ValueError(f"time_limit and max_rounds must be > 0, got {time_limit}, {max_rounds}")
+    n, mats, gammas = check_problem(sizes, costs, gamma)
+    keys = list(mats)
+    offset = dict(zip(keys, np.cumsum([0, *(mats[k].size for k in keys)])[:-1].tolist(),
+                      strict=True))
+    n_var = int(sum(m.size for m in mats.values()))
+    if n_var == 0:
+        return _solution({ab: np.zeros((0, 2), np.int64) for ab in keys}, n, "optimal", 0)
+
+    def var(ab: tuple[int, int], i: int, j: int) -> int:
+        return offset[ab] + i * mats[ab].shape[1] + j
+
+    rows: list[int] = []
+    cols: list[int] = []
+    vals: list[float] = []
+    n_rows = 0
+    for ab in keys:  # at most one match per box and other view
+        m, k = mats[ab].shape
+        grid = offset[ab] + np.arange(m * k).reshape(m, k)
+        for line in (*grid, *grid.T):
+            rows.extend([n_rows] * line.size)
+            cols.extend(line.tolist())
+            vals.extend([1.0] * line.size)
+            n_rows += 1
+    weight = np.concatenate([np.where(np.isfinite(mats[ab]), mats[ab] - gammas[ab], 0.0).ravel()
+                             for ab in keys])
+    upper = np.concatenate([np.isfinite(mats[ab]).ravel().astype(float) for ab in keys])
+    bounds = Bounds(np.zeros(n_var), upper)
+    integrality = np.ones(n_var)
+    start = time.perf_counter()
+    added: set[tuple[int, int, int, int, int, int]] = set()
+    rounds = 0
+    for rounds in range(1, int(max_rounds) + 1):
+        left = time_limit - (time.perf_counter() - start)
+        if left <= 0:
+            break
+        constraints = LinearConstraint(
+            coo_matrix((vals, (rows, cols)), shape=(n_rows, n_var)).tocsr(),
+            np.full(n_rows, -np.inf), np.ones(n_rows))
+        res = milp(weight, integrality=integrality, bounds=bounds, constraints=constraints,
+                   options={"time_limit": left, "disp": False})
+        if res.status != 0 or res.x is None:
+            break
+        x = np.round(res.x).astype(bool)
+        pairs = {ab: _pairs(x[offset[ab]:offset[ab] + mats[ab].size].reshape(mats[ab].shape))
+                 for ab in keys}
+        broken = [t for t in cycle_violations(pairs, n) if t not in added]
+        if not broken:
+            return _solution(pairs, n, "optimal", rounds)
+        for a, b, c, i, j, k in broken:  # all three inequalities of the triangle
+            added.add((a, b, c, i, j, k))
+            e_ab, e_bc, e_ac = var((a, b), i, j), var((b, c), j, k), var((a, c), i, k)
+            for plus, minus in (((e_ab, e_bc), e_ac), ((e_ab, e_ac), e_bc),
+                                ((e_ac, e_bc), e_ab)):
+                rows.extend([n_rows] * 3)
+                cols.extend([*plus, minus])
+                vals.extend([1.0, 1.0, -1.0])
+                n_rows += 1
+    fallback = consistent_hungarian(n, mats, gammas)
+    return MultiViewSolution(fallback.pairs, fallback.person, "fallback", rounds)

@@ -1,0 +1,259 @@
+"""Cost matrices of every view pair of one top view and K egocentric views, frame by frame.
+
+View 0 is the top view, views 1..K the egocentric (horizontal) ones. Every cost is minus the
+evidence, in nats, that the two boxes are one person, with non-association cost 0, so that the
+joint program of :mod:`xvmatch.inference.multi_view_assignment` adds evidence of different
+origins in one unit (a log-odds), and pairwise Hungarian on the same matrices takes the pairs
+each matcher takes alone.
+
+- Top-ego pairs come from an existing per-pair matcher: the learned matcher of a bundle
+  (:func:`~xvmatch.inference.learned_association.associate_sequence_learned`: boxes, and
+  images and cameras when given), its cost ``1 - P`` turned into minus the log-odds relative to
+  its gamma (:func:`log_odds_cost`); or the handcrafted spatial-distribution search (CVMHAT
+  Sec. 3.2), whose best hypotheses vote for pairs (:func:`spatial_vote_cost`), calibrated into
+  log-odds by a logistic fit (:data:`SPATIAL_VOTE`).
+- Ego-ego pairs are two horizontal views: people are seen from the side in both, at similar
+  scales, so appearance is the natural cue, while the box layouts of two views facing different
+  ways share nothing the spatial features could use. The cue is the appearance distance of the
+  bundle's network (:func:`~xvmatch.geometry.matcher_inputs.appearance_cost`) as a
+  log-likelihood ratio (:data:`EGO_APPEARANCE`). Without images the ego-ego costs are 0: no
+  evidence either way, and the joint program links two egocentric views through the top view.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.geometry.matcher_inputs import appearance_cost
+from xvmatch.geometry.spatial_matching import SpatialParams
+from xvmatch.geometry.spatial_search import best_per_candidate, rank_hypotheses
+from xvmatch.inference.learned_association import (
+    FrameCameraSource,
+    FrameImages,
+    LearnedMatcher,
+    associate_sequence_learned,
+)
+from xvmatch.inference.multi_view_assignment import view_pairs
+
+__all__ = [
+    "EGO_APPEARANCE",
+    "LOGIT_CLIP",
+    "SPATIAL_VOTE",
+    "FrameProblem",
+    "LogisticCalibration",
+    "log_odds_cost",
+    "multi_view_costs",
+    "spatial_vote_cost",
+]
+
+LOGIT_CLIP = 0.01
+"""Probabilities are clipped to [0.01, 0.99] before their log-odds are taken (a matcher's
+certainty is capped at about 4.6 nats, so no single pair overrules every other)."""
+
+
+def log_odds_cost(cost: np.ndarray, gamma: float = 0.5) -> np.ndarray:
+    """``logit(c) - logit(gamma)`` of costs ``c = 1 - P`` in [0, 1]: minus the log-odds of a
+    match (relative to the matcher's own threshold), in the units the joint program adds up;
+    with non-association cost 0 a pair is matched alone when ``c < gamma``, as the matcher's
+    own pairwise decision."""
+    c = np.clip(np.asarray(cost, dtype=float), LOGIT_CLIP, 1.0 - LOGIT_CLIP)
+    g = float(np.clip(gamma, LOGIT_CLIP, 1.0 - LOGIT_CLIP))
+    return (np.log(c) - np.log1p(-c)) - (np.log(g) - np.log1p(-g))
+
+
+@dataclass(frozen=True)
+class LogisticCalibration:
+    """Evidence ``slope (threshold - d)`` (nats) that two boxes are one person, from a cost or
+    distance ``d`` that grows as they differ; the joint program takes minus it as the cost.
+
+    Attributes:
+        threshold: the ``d`` with no evidence either way.
+        slope: how fast the evidence falls with ``d`` (> 0).
+    """
+
+    threshold: float
+    slope: float
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.threshold) and np.isfinite(self.slope) and self.slope > 0):
+            raise ValueError(f"LogisticCalibration needs a finite threshold and a slope > 0, "
+                             f"got {self.threshold}, {self.slope}")
+
+    def cost(self, distance: np.ndarray) -> np.ndarray:
+        """Minus the evidence of each ``d``: the joint program's cost (gamma 0)."""
+        return self.slope * (np.asarray(distance, dtype=float) - self.threshold)
+
+
+EGO_APPEARANCE = LogisticCalibration(threshold=0.240, slope=18.8)
+"""Ego-ego pairs: the log-likelihood ratio of the shipped appearance network's distance, i.e.
+the log-odds of a logistic fit less the log prior odds of the fit's pairs (the prior of an
+ego-ego match is already counted by the top-ego matches it closes a triangle with). Fitted on
+30 rendered 1 top + 3 ego scenes (ground-truth boxes, seeds disjoint from the evaluation's) by
+``python benchmarks/multi_ego_eval.py --calibrate`` (docs/multi_egocentric.md)."""
+
+SPATIAL_VOTE = LogisticCalibration(threshold=0.598, slope=9.8)
+"""Top-ego pairs of the handcrafted search: the log-odds of a logistic fit of
+:func:`spatial_vote_cost` (O searched), on the same scenes by the same command."""
+
+
+@dataclass(frozen=True, eq=False)
+class FrameProblem:
+    """The joint program of one frame.
+
+    Attributes:
+        sizes: boxes per view, top first.
+        costs: ``{(a, b): (n_a, n_b) costs}`` for every ``a < b``.
+        gamma: ``{(a, b): non-association cost}``.
+    """
+
+    sizes: tuple[int, ...]
+    costs: dict[tuple[int, int], np.ndarray]
+    gamma: dict[tuple[int, int], float]
+
+
+def spatial_vote_cost(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    camera: int | None = None,
+    keep: int = 5,
+    temperature: float = 0.01,
+) -> np.ndarray:
+    """``(M, N)`` cost of the spatial-distribution search (Sec. 3.2): one minus the weighted
+    share of its best hypotheses that pair the two boxes.
+
+    The hypotheses are the best orientation of each of the ``keep`` best camera locations O
+    (or, with O given, the ``keep`` best orientations), weighted by
+    ``exp(-(Phi - Phi_min) / temperature)`` (Phi of Eq. 12).
+    """
+    m, n = len(top_boxes), len(hor_boxes)
+    out = np.ones((m, n))
+    if camera is None:
+        found = best_per_candidate(top_boxes, hor_boxes, hor_width, params, keep=keep)
+    else:
+        found = rank_hypotheses(top_boxes, hor_boxes, hor_width, params, [camera], k=keep)
+    if not found:
+        return out
+    phi = np.array([h.cost for h in found])
+    weight = np.exp(-(phi - phi.min()) / temperature)
+    weight /= weight.sum()
+    for h, w in zip(found, weight, strict=True):
+        p = np.asarray(h.pairs, dtype=np.int64).reshape(-1, 2)
+        out[p[:, 0], p[:, 1]] -= w
+    return np.clip(out, 0.0, 1.0)
+
+
+def multi_view_costs(
+    views: Sequence[Mapping[int, object]],
+    hor_sizes: Sequence[tuple[float, float]],
+    frames: Iterable[int],
+    matcher: LearnedMatcher | None = None,
+    appearance: LearnedMatcher | None = None,
+    images: Sequence[FrameImages] | None = None,
+    cameras: Sequence[FrameCameraSource | None] | None = None,
+    camera_rows: Sequence[Mapping[int, int] | None] | None = None,
+    params: SpatialParams | None = None,
+    calibration: LogisticCalibration = EGO_APPEARANCE,
+    vote_calibration: LogisticCalibration = SPATIAL_VOTE,
+    workers: int = 1,
+    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+) -> dict[int, FrameProblem]:
+    """The :class:`FrameProblem` of every frame.
+
+    Args:
+        views: per view, top first, ``{frame: record}`` with ``ids`` and ``boxes``.
+        hor_sizes: (width, height) of each egocentric view's images.
+        frames: the frames to build.
+        matcher: the learned top-ego matcher; None runs the spatial search.
+        appearance: the bundle whose appearance network scores ego-ego pairs (needs
+            ``images``); None leaves them uninformative (cost 0).
+        images: per view (top first) an image source, or None.
+        cameras: per egocentric view, its ``top``/``ego`` camera source or None (learned only).
+        camera_rows: per egocentric view, ``{frame: top-view row of its wearer}`` or None.
+        params: the spatial search's parameters (handcrafted top-ego costs).
+        calibration: the ego-ego appearance calibration.
+        vote_calibration: the calibration of the handcrafted top-ego vote costs.
+        workers: processes for the learned matcher's geometry features.
+        progress: wraps the frame iterator of each top-ego pass.
+    """
+    frames = sorted({int(f) for f in frames})
+    n_views = len(views)
+    if n_views < 2 or len(hor_sizes) != n_views - 1:
+        raise ValueError(f"need a top view, >= 1 egocentric view and one size per egocentric "
+                         f"view, got {n_views} views and {len(hor_sizes)} sizes")
+    if images is not None and len(images) != n_views:
+        raise ValueError(f"give images for all {n_views} views or none")
+    if appearance is not None and images is None:
+        raise ValueError("ego-ego appearance costs need the images of every view")
+
+    def boxes(v: int, f: int) -> np.ndarray:
+        rec = views[v].get(f)
+        return np.zeros((0, 4)) if rec is None else np.asarray(rec.boxes, float).reshape(-1, 4)
+
+    sizes = {f: tuple(len(boxes(v, f)) for v in range(n_views)) for f in frames}
+    top_ego: dict[int, dict[int, np.ndarray]] = {f: {} for f in frames}
+    for k in range(1, n_views):
+        rows = (camera_rows[k - 1] if camera_rows is not None else None) or {}
+        width, height = hor_sizes[k - 1]
+        if matcher is None:
+            for f in progress(frames) if progress else frames:
+                t, h = boxes(0, f), boxes(k, f)
+                top_ego[f][k] = (spatial_vote_cost(t, h, width, params, rows.get(f))
+                                 if len(t) and len(h) else np.ones((len(t), len(h))))
+            continue
+        found: dict[int, np.ndarray] = {}
+        top_rows = {f: _with_rows(views[0][f], rows.get(f)) for f in frames if f in views[0]}
+        associate_sequence_learned(
+            top_rows, {f: views[k][f] for f in frames if f in views[k]}, width, matcher,
+            camera_id=-1 if rows else None, hor_height=height, frames=frames,
+            workers=workers, progress=progress, costs_out=found,
+            top_images=images[0] if images is not None else None,
+            hor_images=images[k] if images is not None else None,
+            cameras=cameras[k - 1] if cameras is not None else None,
+        )
+        for f in frames:
+            top_ego[f][k] = found.get(f, np.ones(sizes[f][:1] + sizes[f][k:k + 1]))
+    out = {}
+    for f in frames:
+        desc = {}
+        if appearance is not None:
+            for v in range(1, n_views):
+                b = boxes(v, f)
+                desc[v] = appearance.descriptors(images[v].get(f), b) if len(b) else None
+        costs, gammas = {}, {}
+        for a, b in view_pairs(n_views):
+            gammas[(a, b)] = 0.0
+            if a == 0 and matcher is None:
+                costs[(a, b)] = vote_calibration.cost(top_ego[f][b])
+            elif a == 0:
+                costs[(a, b)] = log_odds_cost(top_ego[f][b], matcher.gamma)
+            elif appearance is not None and desc[a] is not None and desc[b] is not None:
+                costs[(a, b)] = calibration.cost(appearance_cost(desc[a], desc[b]))
+            else:
+                costs[(a, b)] = np.zeros((sizes[f][a], sizes[f][b]))
+        out[f] = FrameProblem(sizes[f], costs, gammas)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Tagged:
+    """A top-view record whose ids are -1 at the wearer's row and the row number elsewhere,
+    so that ``camera_id=-1`` names the wearer to the learned matcher."""
+
+    ids: np.ndarray
+    boxes: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.ids.shape[0])
+
+
+def _with_rows(record, wearer_row: int | None):
+    n = len(record.boxes)
+    ids = np.arange(n, dtype=np.int64)
+    if wearer_row is not None:
+        ids[int(wearer_row)] = -1
+    return _Tagged(ids, np.asarray(record.boxes, float).reshape(-1, 4))

@@ -1,0 +1,229 @@
+"""The ``xvmatch associate-multi`` command: one top view and several egocentric views at once.
+
+Reads a top-view box file and 1..3 horizontal (egocentric) box files as detections (their id
+columns are ignored, except to find each wearer with ``--camera-id``), builds the cost matrices
+of every view pair frame by frame (:func:`xvmatch.inference.multi_view_costs.multi_view_costs`:
+the learned matcher or the handcrafted search for top-ego, the appearance network for ego-ego),
+solves the joint cycle-consistent program of every frame
+(:func:`xvmatch.inference.multi_view_assignment.solve_multi_view`), and writes ``OUT/top.txt``,
+``OUT/hor1.txt``, ...: the input rows, text unchanged but the id field, which holds a person id;
+the same id in two views of a frame is the same person (ids are unique over the whole output and
+do not carry over frames: ``xvmatch track`` follows people over time). Bad input raises
+``ValueError`` with one line, printed by the main entry point as ``xvmatch: error: ...``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from xvmatch.cli_types import box_id, float_in, image_size, thread_count, worker_count
+
+__all__ = ["EXAMPLE", "add_multi_ego_parser"]
+
+EXAMPLE = ("xvmatch associate-multi --model default --top top.txt --hor hor1.txt hor2.txt "
+           "hor3.txt --out people/")
+
+MAX_HOR = 3
+"""Most horizontal views (issue 17: one top view and two or three horizontal ones)."""
+
+TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per frame before the greedy fallback")
+SIZE_TYPE = image_size(8, 65536, "pixels of a camera image")
+
+
+def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch associate-multi`` on ``subparsers`` and return its parser."""
+    from xvmatch.cli import _add_spatial_options
+
+    help_text = (
+        "Associate the people of one top view and 1-3 horizontal (egocentric) views at once: "
+        "a joint assignment over every view pair with cycle consistency (a person matched "
+        "hor1-top and top-hor2 is the same in hor1-hor2), solved with HiGHS. The input ids "
+        "are ignored; writes OUT/top.txt, OUT/hor1.txt, ...: the input rows with the id "
+        "replaced by a person id shared across the views of a frame."
+    )
+    p = subparsers.add_parser(
+        "associate-multi", help=help_text, description=help_text,
+        epilog=f"example:\n  {EXAMPLE}", formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--top", required=True, help="top-view boxes (MOT format, ids ignored)")
+    p.add_argument("--hor", required=True, nargs="+", metavar="H",
+                   help="1 to 3 horizontal-view box files (MOT format, ids ignored)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (created); top.txt, hor1.txt, ... written atomically")
+    p.add_argument("--model", default=None, metavar="BUNDLE",
+                   help="learned top-ego matcher: a bundle folder or 'default'; without it the "
+                   "handcrafted spatial-distribution search (boxes only)")
+    p.add_argument("--top-images", default=None, metavar="PATH",
+                   help="images of the top view (as associate; needs --model)")
+    p.add_argument("--hor-images", default=None, nargs="+", metavar="PATH",
+                   help="images of each horizontal view, in the order of --hor (needs "
+                   "--model; its appearance network also scores the hor-hor pairs)")
+    p.add_argument("--cameras", default=None, nargs="+", metavar="CAMERAS",
+                   help="per horizontal view, a camera file or folder with cameras 'top' and "
+                   "'ego' (as associate; needs --model)")
+    p.add_argument("--camera-id", default=None, nargs="+", type=box_id, metavar="ID",
+                   help="per horizontal view, the top-file id of its wearer (O given; "
+                   "|id| <= 2**53); without it O is searched")
+    p.add_argument("--image-size", type=SIZE_TYPE, default=None, metavar="WxH",
+                   help="horizontal image size, 8..65536 a side (default: the images' or the "
+                   "cameras' size, else 2688x1512, CVMHAT)")
+    p.add_argument("--solver", choices=("mip", "greedy"), default="mip",
+                   help="mip: the joint program with HiGHS (default); greedy: pairwise "
+                   "Hungarian made consistent (the MIP's fallback)")
+    p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=5.0, metavar="S",
+                   help="seconds per frame for the MIP, in [0.01, 600] (default 5); past it "
+                   "the greedy answer is used and counted in a warning")
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes for the learned matcher's features, 1..64 (default 1)")
+    p.add_argument("--threads", type=thread_count, default=1, metavar="K",
+                   help="onnxruntime threads, 1..64 (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    _add_spatial_options(p)
+    p.set_defaults(func=_cmd_associate_multi)
+    return p
+
+
+def _per_view(values: list | None, n_hor: int, option: str) -> None:
+    if values is not None and len(values) != n_hor:
+        raise ValueError(f"{option}: give one per --hor file ({n_hor}), got {len(values)}")
+
+
+def _wearer_rows(top, camera_id: int) -> dict[int, int]:
+    """``{frame: row within the frame's record}`` of the top box with ``camera_id``."""
+    rows = set(top.rows_with_id(camera_id).tolist())
+    if not rows:
+        raise ValueError(f"{top.path}: no box has the --camera-id {camera_id}")
+    out = {}
+    for frame, rec in top.frames.items():
+        hits = [k for k, r in enumerate(rec.ids.tolist()) if r in rows]
+        if hits:
+            out[frame] = hits[0]
+    return out
+
+
+def _check_inside(frames, size, where: str) -> None:
+    """Every box must overlap its image, else the images and boxes do not belong together."""
+    width, height = size
+    for frame, rec in sorted(frames.items()):
+        for (x, y, w, h) in rec.boxes.tolist():
+            if x >= width or y >= height or x + w <= 0 or y + h <= 0:
+                raise ValueError(f"{where}: frame {frame}: box ({x:g}, {y:g}, {w:g}, {h:g}) lies "
+                                 f"outside the {width}x{height} image; are these the boxes of "
+                                 "these images?")
+
+
+def _cmd_associate_multi(args: argparse.Namespace) -> int:
+    from xvmatch.cli import _progress, _spatial_params
+    from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
+    from xvmatch.inference.multi_view_assignment import consistent_hungarian, solve_multi_view
+    from xvmatch.inference.multi_view_costs import multi_view_costs
+
+    start = time.perf_counter()
+    n_hor = len(args.hor)
+    if not 1 <= n_hor <= MAX_HOR:
+        raise ValueError(f"--hor: give 1 to {MAX_HOR} horizontal box files, got {n_hor}")
+    for option in ("hor_images", "cameras", "camera_id"):
+        _per_view(getattr(args, option), n_hor, "--" + option.replace("_", "-"))
+    if (args.top_images is None) != (args.hor_images is None):
+        raise ValueError("give --top-images and --hor-images together")
+    if args.model is None and (args.top_images or args.cameras):
+        raise ValueError("--top-images, --hor-images and --cameras feed a learned matcher: add "
+                         "--model default (or a bundle)")
+    params = _spatial_params(args)
+    paths = [args.top, *args.hor]
+    if len(set(map(str, map(Path, paths)))) != len(paths):
+        raise ValueError("--top and --hor name the same file twice")
+    rows = [read_detection_rows(p) for p in paths]
+    views = [r.frames for r in rows]
+    frames = sorted(set().union(*views))
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {args.out}: exists and is not a folder")
+    camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
+                   if args.camera_id is not None else None)
+    matcher = images = cameras = None
+    sizes = [tuple(args.image_size)] * n_hor if args.image_size is not None else [None] * n_hor
+    sources = []
+    try:
+        if args.model is not None:
+            from xvmatch.cli_learn import open_models
+
+            matcher = open_models([args.model], args.threads)[0]
+        if args.top_images is not None:
+            from xvmatch.datasets.frame_sources import check_frames, open_frames
+
+            if matcher.bundle.manifest.appearance is None:
+                raise ValueError(f"{args.model}: a box-only matcher cannot use images; drop "
+                                 "the images or use a bundle with an appearance network")
+            for v, path in enumerate([args.top_images, *args.hor_images]):
+                source = open_frames(path, box_frames=sorted(views[v]))
+                sources.append(source)
+                check_frames(source, [f for f in sorted(views[v]) if len(views[v][f])])
+                _check_inside(views[v], source.size, paths[v])
+                if v and sizes[v - 1] is not None and tuple(sizes[v - 1]) != tuple(source.size):
+                    raise ValueError(f"--image-size disagrees with the images of {path}")
+                if v:
+                    sizes[v - 1] = tuple(source.size)
+            images = sources
+        if args.cameras is not None:
+            from xvmatch.datasets.camera_frames import open_cameras
+
+            if not matcher.bundle.manifest.uses_cameras:
+                raise ValueError(f"{args.model}: this matcher takes no camera cues; drop "
+                                 "--cameras")
+            cameras = []
+            for k, path in enumerate(args.cameras):
+                cams = open_cameras(path, sorted(views[k + 1]))
+                for where, pair in cams.all():
+                    size = tuple(pair.hor.image_size)
+                    if sizes[k] is None:
+                        sizes[k] = size
+                    elif tuple(sizes[k]) != size:
+                        raise ValueError(f"{where}: camera 'ego' is {size[0]}x{size[1]} but "
+                                         f"{paths[k + 1]}'s images are "
+                                         f"{sizes[k][0]}x{sizes[k][1]}")
+                cameras.append(cams)
+        sizes = [s if s is not None else (2688, 1512) for s in sizes]
+        problems = multi_view_costs(
+            views, sizes, frames, matcher=matcher,
+            appearance=matcher if images is not None else None, images=images,
+            cameras=cameras, camera_rows=camera_rows, params=params, workers=args.workers,
+            progress=_progress(len(frames), "costs", not args.quiet),
+        )
+    finally:
+        for source in sources:
+            source.close()
+    person: list[dict[int, int]] = [{} for _ in paths]
+    next_id, n_fallback = 1, 0
+    for f in frames:
+        problem = problems[f]
+        if args.solver == "mip":
+            sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma, args.time_limit)
+            n_fallback += sol.status == "fallback"
+        else:
+            sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
+        for v, ids in enumerate(sol.person):
+            rec = views[v].get(f)
+            for row, pid in zip(rec.ids.tolist() if rec is not None else [], ids.tolist(),
+                                strict=True):
+                person[v][row] = next_id + pid
+        next_id += int(max((int(ids.max()) + 1 for ids in sol.person if ids.size), default=0))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OSError(f"--out {args.out}: cannot create the folder ({exc.strerror})") from None
+    names = ["top", *(f"hor{k}" for k in range(1, n_hor + 1))]
+    written = [write_track_rows(out / f"{name}.txt", r, p)
+               for name, r, p in zip(names, rows, person, strict=True)]
+    if n_fallback:
+        print(f"xvmatch: warning: {n_fallback} of {len(frames)} frames hit the MIP time limit "
+              f"({args.time_limit:g} s) or failed and used the greedy fallback; raise "
+              "--time-limit", file=sys.stderr)
+    if not args.quiet:
+        print(f"wrote {sum(written)} boxes of {len(paths)} views, {next_id - 1} people over "
+              f"{len(frames)} frames, to {out}/ ({time.perf_counter() - start:.1f} s)",
+              file=sys.stderr)
+    return 0
