@@ -9,9 +9,11 @@ import pytest
 from hypothesis import settings
 
 # Property tests draw the same examples on every run (same code, same result: CI cannot turn red
-# by chance); HYPOTHESIS_PROFILE=explore searches with fresh random examples instead.
-settings.register_profile("deterministic", derandomize=True, database=None)
-settings.register_profile("explore")
+# by chance); HYPOTHESIS_PROFILE=explore searches with fresh random examples instead. No
+# deadline: timings are benchmarks' business, and the first call of a compiled kernel (numba,
+# geometry/search_kernels.py) on a fresh clone includes its compilation.
+settings.register_profile("deterministic", derandomize=True, database=None, deadline=None)
+settings.register_profile("explore", deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 CVMHAT_ENV = "XVMATCH_CVMHAT"
