@@ -2,9 +2,12 @@
 
 1. Frame-level cross-view association of every frame (Sec. 3.2, the exhaustive search of
    :func:`xvmatch.geometry.spatial_search.associate_frame`; O given when the wearer is known).
-2. Single-view tracklets in clips of ``clip_length`` frames (:mod:`.tracklets`).
-3. For each pair of adjacent clips, the edge weights (:mod:`.track_costs`) and the four-cluster
-   MIP (:mod:`.track_mip`), or the spectral-clustering baseline (:mod:`.track_spectral`).
+2. Single-view tracklets in clips of ``clip_length`` frames (:mod:`.tracklets`); with images,
+   the horizontal view's link by IoU and colour, and each tracklet gets its appearance
+   (:mod:`.track_appearance`: colour histograms, and the network descriptor with a bundle).
+3. For each pair of adjacent clips, the edge weights (:mod:`.track_costs`; with images, Eqs. 17
+   and 18 mix in the appearance terms) and the four-cluster MIP (:mod:`.track_mip`), or the
+   spectral-clustering baseline (:mod:`.track_spectral`).
 4. Stitching into long cross-view trajectories (:mod:`.track_stitching`).
 
 Input records are ``{frame: FrameBoxes}`` whose ``ids`` are detection row numbers (unique over
@@ -22,6 +25,15 @@ import numpy as np
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.geometry.spatial_matching import SpatialParams
 from xvmatch.geometry.spatial_search import associate_frame
+from xvmatch.inference.learned_association import FrameImages
+from xvmatch.inference.track_appearance import (
+    Embedder,
+    TrackletAppearance,
+    clip_appearance,
+    colour_similarity,
+    descriptor_similarity,
+    frame_histograms,
+)
 from xvmatch.inference.track_costs import (
     TrackWeights,
     combine_cross_view,
@@ -32,11 +44,21 @@ from xvmatch.inference.track_costs import (
 from xvmatch.inference.track_mip import ClusterSolution, solve_four_clusters
 from xvmatch.inference.track_spectral import spectral_solution
 from xvmatch.inference.track_stitching import stitch_windows
-from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets
+from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips, view_tracklets
 
-__all__ = ["SOLVERS", "TrackConfig", "TrackResult", "associate_frames", "track_pair"]
+__all__ = [
+    "SOLVERS",
+    "TIME_APPEARANCE",
+    "TrackConfig",
+    "TrackImages",
+    "TrackResult",
+    "associate_frames",
+    "track_pair",
+]
 
 SOLVERS = ("mip", "spectral")
+TIME_APPEARANCE = ("colour", "network")
+"""Over-time appearance terms (Eq. 18): the paper's colour histograms (Eq. 14) or the network."""
 
 Progress = Callable[[Iterable, int, str], Iterable]
 """``progress(iterable, total, description)``: wraps an iterable, e.g. in a progress bar."""
@@ -54,6 +76,11 @@ class TrackConfig:
         solver: ``mip`` (Eqs. 1-4 with HiGHS) or ``spectral`` (the Sec. 4.1 baseline).
         time_limit: seconds per window for the MIP before the greedy fallback.
         seed: seed of the spectral baseline's k-means.
+        min_colour: with images, the colour-histogram similarity a horizontal box needs with
+            the previous box to extend its tracklet (0.3, Sec. 4.1).
+        time_appearance: with images, the over-time appearance term of Eq. 18: ``colour``
+            (Eq. 14, histogram intersection of median colour histograms) or ``network`` (the
+            appearance network's descriptors; needs one, else colour is used).
     """
 
     clip_length: int = 10
@@ -63,6 +90,8 @@ class TrackConfig:
     solver: str = "mip"
     time_limit: float = 2.0
     seed: int = 0
+    min_colour: float = 0.3
+    time_appearance: str = "colour"
 
     def __post_init__(self) -> None:
         if self.clip_length < 1:
@@ -75,6 +104,27 @@ class TrackConfig:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         if not self.time_limit > 0:
             raise ValueError(f"time_limit must be > 0 seconds, got {self.time_limit}")
+        if not 0.0 <= self.min_colour <= 1.0:
+            raise ValueError(f"min_colour must be in [0, 1], got {self.min_colour}")
+        if self.time_appearance not in TIME_APPEARANCE:
+            raise ValueError(f"time_appearance must be one of {', '.join(TIME_APPEARANCE)}, "
+                             f"got {self.time_appearance!r}")
+
+
+@dataclass(frozen=True)
+class TrackImages:
+    """The images of both views, and the appearance network if any.
+
+    Attributes:
+        top, hor: image sources, ``get(frame)`` per frame that has boxes.
+        embed: ``embed(image, boxes) -> (K, D)`` unit descriptors (the deployed appearance
+            network, cut as the runtime cuts crops), or None: colour terms only, and the
+            cross-view weight stays the spatial term alone.
+    """
+
+    top: FrameImages
+    hor: FrameImages
+    embed: Embedder | None = None
 
 
 @dataclass(frozen=True)
@@ -150,13 +200,53 @@ def associate_frames(
 def _window_weights(
     top_t: list[Tracklet], top_u: list[Tracklet], hor_u: list[Tracklet], hor_t: list[Tracklet],
     frame_pairs: Mapping[int, list[tuple[int, int]]], weights: TrackWeights,
+    app: tuple[TrackletAppearance, ...] | None = None, time_appearance: str = "colour",
 ) -> list[np.ndarray]:
-    """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t)."""
-    c0 = combine_over_time(motion_similarity(top_t, top_u, weights.sigma), None, weights)
-    c1 = combine_cross_view(spatial_similarity(top_u, hor_u, frame_pairs), None, weights)
-    c2 = combine_over_time(motion_similarity(hor_t, hor_u, weights.sigma), None, weights).T
-    c3 = combine_cross_view(spatial_similarity(top_t, hor_t, frame_pairs), None, weights).T
+    """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t);
+    ``app``: the appearance of the same four tracklet lists, or None (boxes only)."""
+    a_time = a_cross = (None, None)
+    if app is not None:
+        a_tt, a_tu, a_hu, a_ht = app
+        network = a_tt.descriptors is not None
+        over = (descriptor_similarity if network and time_appearance == "network"
+                else colour_similarity)
+        a_time = (over(a_tt, a_tu), over(a_ht, a_hu))
+        if network:
+            a_cross = (descriptor_similarity(a_tu, a_hu), descriptor_similarity(a_tt, a_ht))
+    c0 = combine_over_time(motion_similarity(top_t, top_u, weights.sigma), a_time[0], weights)
+    c1 = combine_cross_view(spatial_similarity(top_u, hor_u, frame_pairs), a_cross[0], weights)
+    c2 = combine_over_time(motion_similarity(hor_t, hor_u, weights.sigma), a_time[1],
+                           weights).T
+    c3 = combine_cross_view(spatial_similarity(top_t, hor_t, frame_pairs), a_cross[1],
+                            weights).T
     return [c0, c1, c2, c3]
+
+
+def _tracklets_with_images(
+    top: Mapping[int, FrameBoxes],
+    hor: Mapping[int, FrameBoxes],
+    clips: list[np.ndarray],
+    config: TrackConfig,
+    images: TrackImages,
+    progress: Progress | None,
+) -> tuple[list[list[Tracklet]], list[list[Tracklet]], list[tuple[TrackletAppearance, ...]]]:
+    """Tracklets and their appearance, clip by clip (each clip's images read once, then
+    dropped): top by IoU, horizontal by IoU and colour (Sec. 4.1)."""
+    top_tr, hor_tr, app = [], [], []
+    steps = list(enumerate(clips))
+    for k, c in progress(steps, len(steps), "images") if progress else steps:
+        out = []
+        for frames, source, colour in ((top, images.top, False), (hor, images.hor, True)):
+            imgs = {f: source.get(f) for f in c.tolist() if f in frames and len(frames[f])}
+            hist = frame_histograms(frames, imgs)
+            tracklets = clip_tracklets(frames, c, k, config.min_iou, config.max_gap,
+                                       hist if colour else None, config.min_colour)
+            out.append((tracklets, clip_appearance(tracklets, frames, hist, imgs,
+                                                   images.embed)))
+        top_tr.append(out[0][0])
+        hor_tr.append(out[1][0])
+        app.append((out[0][1], out[1][1]))
+    return top_tr, hor_tr, app
 
 
 def track_pair(
@@ -169,6 +259,7 @@ def track_pair(
     workers: int = 1,
     progress: Progress | None = None,
     frame_pairs: Mapping[int, list[tuple[int, int]]] | None = None,
+    images: TrackImages | None = None,
 ) -> TrackResult:
     """Track the people of a top/horizontal sequence pair with one id across views (Alg. 1).
 
@@ -181,23 +272,33 @@ def track_pair(
         workers: processes for the frame association.
         progress: optional progress wrapper.
         frame_pairs: a frame association computed earlier (skips step 1).
+        images: the images of both views (and the appearance network): the appearance terms
+            of Sec. 3.3.2, 3.4.1 and 4.1; without them the weights come from the boxes alone.
     """
     config = config or TrackConfig()
     if frame_pairs is None:
         frame_pairs = associate_frames(top, hor, hor_width, params, camera_rows, workers,
                                        progress)
     clips = split_clips(sorted(set(top) | set(hor)), config.clip_length)
-    top_tr = view_tracklets(top, clips, config.min_iou, config.max_gap)
-    hor_tr = view_tracklets(hor, clips, config.min_iou, config.max_gap)
+    app: list[tuple[TrackletAppearance, ...]] | None = None
+    if images is None:
+        top_tr = view_tracklets(top, clips, config.min_iou, config.max_gap)
+        hor_tr = view_tracklets(hor, clips, config.min_iou, config.max_gap)
+    else:
+        top_tr, hor_tr, app = _tracklets_with_images(top, hor, clips, config, images, progress)
     if len(clips) == 1:
         top_tr.append([])
         hor_tr.append([])
+        if app is not None:
+            app.append(tuple(clip_appearance([], {}, {}, {}, images.embed) for _ in range(2)))
     n_windows = max(1, len(clips) - 1)
     solutions: list[ClusterSolution] = []
     steps = range(n_windows)
     for t in progress(steps, n_windows, "track") if progress else steps:
+        window_app = None if app is None else (app[t][0], app[t + 1][0], app[t + 1][1],
+                                               app[t][1])
         w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
-                            config.weights)
+                            config.weights, window_app, config.time_appearance)
         if config.solver == "mip":
             solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
         else:

@@ -3,8 +3,10 @@
 The video is cut into clips of a fixed length (10 frames in the paper); inside a clip, boxes of
 adjacent frames are linked one-to-one by IoU (Hungarian assignment, a link needs IoU >= 0.5, the
 paper's threshold; a box may also continue a tracklet last seen a few frames earlier, so that a
-missed detection does not cut it) and each chain of links is a tracklet. Boxes are
-``x, y, w, h`` in pixels.
+missed detection does not cut it) and each chain of links is a tracklet. With colour histograms
+of the boxes (the horizontal view, when images are given), a link also needs a histogram
+similarity of at least 0.3 (Sec. 4.1), and the assignment maximises IoU plus colour similarity.
+Boxes are ``x, y, w, h`` in pixels.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.color_histogram import histogram_intersection
 
 __all__ = ["Tracklet", "box_iou", "clip_tracklets", "split_clips", "view_tracklets"]
 
@@ -76,6 +79,8 @@ def clip_tracklets(
     clip: int,
     min_iou: float = 0.5,
     max_gap: int = 3,
+    histograms: Mapping[int, np.ndarray] | None = None,
+    min_colour: float = 0.3,
 ) -> list[Tracklet]:
     """Link the boxes of one clip into tracklets by IoU (Sec. 4.1), over short gaps.
 
@@ -83,8 +88,13 @@ def clip_tracklets(
     box is at most ``max_gap`` frames before (a detector's misses would otherwise cut a person
     into several tracklets of one clip, and only one of them could continue over time); a
     tracklet last seen one frame earlier wins a tie. Ordered by first frame, then file order.
+
+    With ``histograms`` (``{frame: (N, B)}`` colour histograms of each frame's boxes, record
+    order), a link also needs the histogram intersection of the two boxes to be at least
+    ``min_colour``, and the assignment maximises IoU plus that similarity (Sec. 4.1).
     """
     chains: list[list[tuple[int, int, np.ndarray]]] = []
+    colour: list[np.ndarray] = []  # per chain, the histogram of its last box
     for f in clip_frames.tolist():
         rec = frames.get(f)
         if rec is None or len(rec) == 0:
@@ -95,15 +105,26 @@ def clip_tracklets(
             last = np.array([chains[k][-1][2] for k in open_chains])
             gaps = np.array([f - chains[k][-1][0] - 1 for k in open_chains], dtype=float)
             iou = box_iou(last, rec.boxes)
-            r, c = linear_sum_assignment(-(iou - 1e-3 * gaps[:, None]))
+            if histograms is None:
+                r, c = linear_sum_assignment(-(iou - 1e-3 * gaps[:, None]))
+                ok = iou >= min_iou
+            else:
+                sim = histogram_intersection(np.array([colour[k] for k in open_chains]),
+                                             histograms[f])
+                ok = (iou >= min_iou) & (sim >= min_colour)
+                r, c = linear_sum_assignment(-np.where(ok, iou + sim - 1e-3 * gaps[:, None],
+                                                       -1.0))
             for i, j in zip(r.tolist(), c.tolist(), strict=True):
-                if iou[i, j] >= min_iou:
+                if ok[i, j]:
                     current[j] = open_chains[i]
         for j in range(len(rec)):
             if current[j] < 0:
                 current[j] = len(chains)
                 chains.append([])
+                colour.append(np.zeros(0))
             chains[current[j]].append((f, int(rec.ids[j]), rec.boxes[j]))
+            if histograms is not None:
+                colour[current[j]] = histograms[f][j]
     return [
         Tracklet(
             clip=clip,
@@ -121,5 +142,5 @@ def view_tracklets(
     min_iou: float = 0.5,
     max_gap: int = 3,
 ) -> list[list[Tracklet]]:
-    """The tracklets of every clip of one view (one list per clip)."""
+    """The tracklets of every clip of one view (one list per clip), by IoU alone."""
     return [clip_tracklets(frames, c, k, min_iou, max_gap) for k, c in enumerate(clips)]

@@ -84,11 +84,37 @@ def test_motion_similarity_constant_velocity():
     earlier = [_tracklet(0, [1, 2, 3], [0, 1, 2], [[0, 0], [1, 0], [2, 0]])]
     on_line = _tracklet(1, [4, 5], [3, 4], [[3, 0], [4, 0]])
     off_line = _tracklet(1, [4, 5], [5, 6], [[3, 4], [4, 4]])
-    sim = motion_similarity(earlier, [on_line, off_line], sigma=0.05)
-    # Forward and backward deviations: 0 on the line; 4 + 4 pixels off it.
-    assert sim == pytest.approx(np.array([[1.0, np.exp(-0.05 * 8)]]))
+    sim = motion_similarity(earlier, [on_line, off_line], sigma=0.5)
+    # Forward and backward deviations: 0 on the line; 4 + 4 pixels off it, in units of the
+    # 10-pixel box height: 0.4 + 0.4.
+    assert sim == pytest.approx(np.array([[1.0, np.exp(-0.5 * 0.8)]]))
     overlapping = _tracklet(1, [3], [7], [[2, 0]])
     assert motion_similarity(earlier, [overlapping])[0, 0] == 0.0
+    # Each deviation is measured in units of the box it is measured at: the forward one at
+    # the later tracklet's (20 px), the backward one at the earlier tracklet's (10 px).
+    big = _tracklet(1, [4, 5], [8, 9], [[3, 4], [4, 4]], size=(20.0, 20.0))
+    assert motion_similarity(earlier, [big], sigma=0.5)[0, 0] == pytest.approx(
+        np.exp(-0.5 * (4 / 20 + 4 / 10)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(0.25, 4.0), st.integers(0, 2**16))
+def test_motion_similarity_is_resolution_free(scale, seed):
+    rng = np.random.default_rng(seed)
+
+    def random_tracklet(clip, start):
+        c = rng.uniform(0, 500, 2) + np.cumsum(rng.normal(0, 3, (5, 2)), axis=0)
+        return _tracklet(clip, np.arange(start, start + 5), np.arange(5), c,
+                         size=tuple(rng.uniform(10, 200, 2)))
+
+    def scaled(t):
+        return Tracklet(t.clip, t.frames, t.rows, t.boxes * scale)
+
+    earlier = [random_tracklet(0, 1) for _ in range(3)]
+    later = [random_tracklet(1, 7) for _ in range(4)]
+    np.testing.assert_allclose(
+        motion_similarity([scaled(t) for t in earlier], [scaled(t) for t in later]),
+        motion_similarity(earlier, later), rtol=1e-9, atol=1e-12)
 
 
 def test_combinations_eq17_eq18():
@@ -268,11 +294,13 @@ def test_track_pair_on_a_synthetic_scene(solver):
         for rec in frames.values():  # one box per track id and frame in each view
             ids = [rows[r] for r in rec.ids.tolist()]
             assert len(set(ids)) == len(ids)
-    # Top-view tracks are pure: each track id stands for one person.
+    # Top-view tracks are pure: each track id stands for one person (the MIP; the spectral
+    # baseline, without the loop constraints, may merge two people's ids).
     owners: dict[int, set[int]] = {}
     for r, k in res.top_rows.items():
         owners.setdefault(k, set()).add(top_truth[r])
-    assert all(len(v) == 1 for v in owners.values())
+    pure = sum(len(v) == 1 for v in owners.values())
+    assert pure == len(owners) if solver == "mip" else pure >= 0.8 * len(owners)
     # Cross-view pairs (same track id in one frame) are mostly right.
     good = bad = 0
     for f in set(top) & set(hor):

@@ -119,7 +119,8 @@ def test_track_out_must_be_a_folder(scene_files, tmp_path, capsys):
     [("--clip-length", "0"), ("--clip-length", "1001"), ("--max-gap", "-1"),
      ("--min-iou", "0"), ("--c0", "1.5"),
      ("--sigma", "0"), ("--time-limit", "0"), ("--time-limit", "nan"), ("--workers", "65"),
-     ("--seed", "-1"), ("--image-size", "4x4")],
+     ("--seed", "-1"), ("--image-size", "4x4"), ("--w1", "1.5"), ("--w2", "-0.1"),
+     ("--min-colour", "2")],
 )
 def test_track_numeric_options_are_bounded(scene_files, tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit) as exc:
@@ -142,3 +143,76 @@ def test_track_output_does_not_depend_on_workers(scene_files, tmp_path):
     assert _track(scene_files, tmp_path / "two", "--workers", "2") == 0
     for view in ("top.txt", "hor.txt"):
         assert (tmp_path / "one" / view).read_bytes() == (tmp_path / "two" / view).read_bytes()
+
+
+@pytest.fixture(scope="module")
+def video_files(tmp_path_factory) -> dict[str, Path]:
+    """A tiny rendered clip: ground-truth files, detection files (ids -1) and image folders."""
+    from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+
+    folder = tmp_path_factory.mktemp("track_video")
+    out = write_tracking_video(render_tracking_video(2, n_frames=20), folder)
+    files = {"folder": folder, "top_images": out["top_images"], "hor_images": out["hor_images"]}
+    for view in ("top", "hor"):
+        lines = out[view].read_text().splitlines()
+        det = [",".join([ln.split(",")[0], "-1", *ln.split(",")[2:]]) for ln in lines]
+        (folder / f"det_{view}.txt").write_text("\n".join(det) + "\n")
+        files[f"gt_{view}"], files[f"det_{view}"] = out[view], folder / f"det_{view}.txt"
+    return files
+
+
+def _track_video(files, out: Path, *extra: str) -> int:
+    return _track(files, out, "--top-images", str(files["top_images"]),
+                  "--hor-images", str(files["hor_images"]), *extra)
+
+
+def test_track_with_images_end_to_end(video_files, tmp_path, capsys):
+    out = tmp_path / "tracks"
+    assert _track_video(video_files, out, "--model", "default") == 0
+    for view in ("top", "hor"):
+        det = video_files[f"det_{view}"].read_text().splitlines()
+        written = (out / f"{view}.txt").read_text().splitlines()
+        assert [ln.split(",", 2)[::2] for ln in written] == [ln.split(",", 2)[::2] for ln in det]
+    capsys.readouterr()
+    assert main(["evaluate", "--tracks", str(out), "--top", str(video_files["gt_top"]),
+                 "--hor", str(video_files["gt_hor"]), "--json"]) == 0
+    scores = json.loads(capsys.readouterr().out)
+    assert scores["cross_view"]["cvidf1"] > 80 and scores["top"]["idf1"] > 80
+    # Colour terms only (no network), and the network over time too: both run.
+    assert _track_video(video_files, tmp_path / "colour") == 0
+    assert _track_video(video_files, tmp_path / "net", "--model", "default",
+                        "--time-appearance", "network", "--w1", "0.5", "--w2", "0.5",
+                        "--min-colour", "0.2") == 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--top-images", "IMAGES"], "give --top-images and --hor-images together"),
+        (["--model", "default"], "needs the images"),
+        (["--top-images", "IMAGES", "--hor-images", "IMAGES", "--image-size", "320x180"],
+         "disagrees with the horizontal images"),
+        (["--top-images", "IMAGES", "--hor-images", "/nonexistent/hor"], "no such file"),
+        (["--time-appearance", "network"], "needs --model"),
+    ],
+)
+def test_track_image_errors_are_one_line(video_files, tmp_path, capsys, extra, message):
+    extra = [str(video_files["top_images"]) if e == "IMAGES" else e for e in extra]
+    argv = ["track", "--top", str(video_files["det_top"]), "--hor", str(video_files["det_hor"]),
+            "--out", str(tmp_path / "x"), "--quiet", *extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("xvmatch: error:") and message in err[0], err
+
+
+def test_track_help_states_the_library_defaults(capsys):
+    from xvmatch.inference.track_costs import TrackWeights
+    from xvmatch.inference.tracking import TrackConfig
+
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    options = " ".join(capsys.readouterr().out.split()).split("options:", 1)[1]
+    w, c = TrackWeights(), TrackConfig()
+    for flag, value in (("--c0", w.c0), ("--sigma", w.sigma), ("--w1", w.w1), ("--w2", w.w2),
+                        ("--min-colour", c.min_colour)):
+        assert f"(default {value:g}" in options.split(f" {flag} ", 1)[1].split(" --", 1)[0], flag

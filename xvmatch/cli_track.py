@@ -4,8 +4,12 @@
 camera wearer with ``--camera-id``), tracks the people of both views with one id per person
 across the views (:func:`xvmatch.inference.tracking.track_pair`, CVMHAT Algorithm 1), and writes
 ``OUT/top.txt`` and ``OUT/hor.txt``: the input rows, text unchanged but the id field, which holds
-the track id; rows the tracker dropped are absent. Bad input raises ``ValueError`` with a one-line
-message, printed by the main entry point as ``xvmatch: error: ...`` with exit code 2.
+the track id; rows the tracker dropped are absent. With the images of both views
+(``--top-images``, ``--hor-images``: the forms ``xvmatch associate`` reads) the horizontal
+tracklets link by IoU and colour and the over-time weights mix in colour similarity; ``--model``
+adds the appearance network's cross-view term (CVMHAT Sec. 3.3.2, 3.4.1, 4.1). Bad input raises
+``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
+...`` with exit code 2.
 """
 
 from __future__ import annotations
@@ -30,7 +34,8 @@ CLIP_LENGTH_TYPE = int_in(1, 1000, "frames per clip; each window's program grows
 MAX_GAP_TYPE = int_in(0, 1000, "frames; a clip is at most 1000 frames")
 MIN_IOU_TYPE = float_in(0, 1, "an intersection over union", low_open=True)
 C0_TYPE = float_in(0, 1, "edge weights are in [0, 1]; an edge pays off above 2 c0")
-SIGMA_TYPE = float_in(0, 1000, "per pixel of motion deviation", low_open=True)
+SIGMA_TYPE = float_in(0, 1000, "per box height of motion deviation", low_open=True)
+SHARE_TYPE = float_in(0, 1, "a share of a linear combination")
 TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per window before the greedy fallback")
 HOR_SIZE_TYPE = image_size(8, 65536, "pixels of a camera image")
 
@@ -45,6 +50,48 @@ def _progress(enabled: bool):
                     disable=None if enabled else True)
 
     return wrap
+
+
+def _open_images(args: argparse.Namespace, top, hor):
+    """The image sources of both views, their horizontal size and the embedder (or None),
+    after every check (images given together, the frames the boxes list, boxes inside the
+    images, ``--image-size`` agreeing, a bundle with an appearance network)."""
+    from xvmatch.cli_learn import _check_boxes_inside, open_models
+    from xvmatch.datasets.frame_sources import check_frames, open_frames
+    from xvmatch.inference.tracking import TrackImages
+
+    if (args.top_images is None) != (args.hor_images is None):
+        raise ValueError("give --top-images and --hor-images together")
+    if args.top_images is None:
+        if args.model is not None:
+            raise ValueError("--model gives the appearance network, which needs the images: "
+                             "add --top-images and --hor-images")
+        return None, [], None
+    embed = None
+    if args.model is not None:
+        model = open_models([args.model])[0]
+        if model.bundle.manifest.appearance is None:
+            raise ValueError(f"{args.model}: a box-only matcher has no appearance network; "
+                             "use a bundle with one (e.g. default)")
+        embed = model.descriptors
+    sources = []
+    try:
+        for path, frames in ((args.top_images, top), (args.hor_images, hor)):
+            source = open_frames(path, box_frames=sorted(frames))
+            sources.append(source)
+            check_frames(source, [f for f in sorted(frames) if len(frames[f])])
+        size = tuple(sources[1].size)
+        if args.image_size is not None and tuple(args.image_size) != size:
+            raise ValueError(f"--image-size {args.image_size[0]}x{args.image_size[1]} "
+                             f"disagrees with the horizontal images ({size[0]}x{size[1]}, "
+                             f"{args.hor_images})")
+        _check_boxes_inside(top, tuple(sources[0].size), args.top)
+        _check_boxes_inside(hor, size, args.hor)
+    except BaseException:
+        for source in sources:
+            source.close()
+        raise
+    return TrackImages(sources[0], sources[1], embed), sources, size
 
 
 def add_track_parser(subparsers) -> argparse.ArgumentParser:
@@ -79,21 +126,46 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--max-gap", type=MAX_GAP_TYPE, default=3,
                    help="frames a tracklet may miss inside a clip and still continue, 0..1000 "
                    "(default 3)")
-    p.add_argument("--c0", type=C0_TYPE, default=0.2,
-                   help="dummy-node weight of Eq. 1, in [0, 1] (default 0.2)")
-    p.add_argument("--sigma", type=SIGMA_TYPE, default=0.05,
-                   help="motion deviation scale of Eq. 15 per pixel, in (0, 1000] (default 0.05)")
+    p.add_argument("--c0", type=C0_TYPE, default=None,
+                   help="dummy-node weight of Eq. 1, in [0, 1] (default 0.1; the paper's 0.2)")
+    p.add_argument("--sigma", type=SIGMA_TYPE, default=None,
+                   help="motion deviation scale of Eq. 15 per box height (resolution-free), in "
+                   "(0, 1000] (default 1)")
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=2.0,
                    help="seconds per window for the MIP, in [0.01, 600] (default 2); past it a "
                    "greedy answer is used and counted in a warning")
     p.add_argument("--seed", type=seed_value, default=0,
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
-    p.add_argument("--image-size", type=HOR_SIZE_TYPE, default=(2688, 1512), metavar="WxH",
-                   help="horizontal image size, 8..65536 a side (default 2688x1512, CVMHAT)")
+    p.add_argument("--image-size", type=HOR_SIZE_TYPE, default=None, metavar="WxH",
+                   help="horizontal image size, 8..65536 a side (default: the images' size "
+                   "with --hor-images, else 2688x1512, CVMHAT)")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for the frame association, 1..64 (default 1; the same "
                    "output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    g = p.add_argument_group("appearance (with the images of both views)")
+    g.add_argument("--top-images", default=None, metavar="PATH",
+                   help="images of the top view: one image, a folder of frames whose names end "
+                   "in the frame number (0212.jpg, frame_000212.png), a quoted glob pattern, or "
+                   "a video file")
+    g.add_argument("--hor-images", default=None, metavar="PATH",
+                   help="images of the horizontal view (as --top-images)")
+    g.add_argument("--model", default=None, metavar="BUNDLE",
+                   help="a matcher bundle with an appearance network (xvmatch export), or "
+                   "'default' for the shipped one: the cross-view appearance term of Eq. 17 "
+                   "(needs the images); the frame association stays the spatial search")
+    g.add_argument("--w1", type=SHARE_TYPE, default=None,
+                   help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
+                   "(default 0.3)")
+    g.add_argument("--w2", type=SHARE_TYPE, default=None,
+                   help="share of the appearance term in an over-time weight (Eq. 18), in "
+                   "[0, 1] (default 0.6)")
+    g.add_argument("--min-colour", type=SHARE_TYPE, default=0.3,
+                   help="colour-histogram similarity a horizontal box needs to extend a "
+                   "tracklet, in [0, 1] (default 0.3)")
+    g.add_argument("--time-appearance", choices=("colour", "network"), default="colour",
+                   help="over-time appearance term of Eq. 18: colour histograms (Eq. 14, "
+                   "default) or the --model's network")
     _add_spatial_options(p)
     p.set_defaults(func=_cmd_track)
     return p
@@ -111,10 +183,13 @@ def _cmd_track(args: argparse.Namespace) -> int:
         clip_length=args.clip_length,
         min_iou=args.min_iou,
         max_gap=args.max_gap,
-        weights=TrackWeights(c0=args.c0, sigma=args.sigma),
+        weights=TrackWeights(**{k: getattr(args, k) for k in ("c0", "w1", "w2", "sigma")
+                                if getattr(args, k) is not None}),
         solver=args.solver,
         time_limit=args.time_limit,
         seed=args.seed,
+        min_colour=args.min_colour,
+        time_appearance=args.time_appearance,
     )
     top = read_detection_rows(args.top)
     hor = read_detection_rows(args.hor)
@@ -126,8 +201,16 @@ def _cmd_track(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {args.out}: exists and is not a folder")
-    result = track_pair(top.frames, hor.frames, float(args.image_size[0]), params, config,
-                        camera_rows, args.workers, _progress(not args.quiet))
+    if args.time_appearance == "network" and args.model is None:
+        raise ValueError("--time-appearance network needs --model (and the images)")
+    images, sources, size = _open_images(args, top.frames, hor.frames)
+    width = (size or args.image_size or (2688, 1512))[0]
+    try:
+        result = track_pair(top.frames, hor.frames, float(width), params, config,
+                            camera_rows, args.workers, _progress(not args.quiet), images=images)
+    finally:
+        for source in sources:
+            source.close()
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

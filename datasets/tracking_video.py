@@ -1,0 +1,132 @@
+"""Short rendered videos for complementary-view tracking: one continuous walk, both views.
+
+:func:`render_tracking_video` draws a drone scene (:func:`xvmatch.datasets.synthetic_scenes.
+make_scene`: people walking with turns and stops, frame after frame, the egocentric camera worn
+by person 0) and renders every frame of it (:class:`xvmatch.datasets.image_render.SceneRenderer`),
+so the boxes and images of consecutive frames show the same people a fraction of a second apart:
+what ``xvmatch track`` reads. ``xvmatch synth --frames N`` renders the same walks but stores them
+as training pairs; this keeps the video in memory and can write it as box files and image
+folders (:func:`write_tracking_video`). The walk model turns the worn camera's gaze by several
+degrees a frame (it is drawn for single frames; on a 640-pixel image, people's boxes then barely
+overlap from one frame to the next); a head-worn video turns far more smoothly, so here the
+head's yaw, pitch and roll are smoothed over time (a Gaussian of ``head_smoothing`` seconds)
+and the egocentric cameras rebuilt from them. Ids are the ground truth (the same person has the
+same id in both views); they are for evaluation only.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from xvmatch.datasets.image_render import SceneRenderer
+from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, write_mot_boxes
+from xvmatch.datasets.synthetic_scenes import SynthConfig, SyntheticScene, make_scene
+from xvmatch.geometry.camera import Camera, look_rotation
+
+__all__ = ["TrackingVideo", "render_tracking_video", "write_tracking_video"]
+
+
+@dataclass(frozen=True, eq=False)
+class TrackingVideo:
+    """A rendered video pair with its ground-truth boxes.
+
+    Attributes:
+        top, hor: ``{frame: FrameBoxes}`` (1-based frames, ground-truth ids) of each view.
+        top_images, hor_images: ``{frame: (H, W, 3) uint8 BGR}`` images.
+        hor_size: ``(width, height)`` of the egocentric image.
+        fps: frames per second of the walk.
+    """
+
+    top: dict[int, FrameBoxes]
+    hor: dict[int, FrameBoxes]
+    top_images: dict[int, np.ndarray]
+    hor_images: dict[int, np.ndarray]
+    hor_size: tuple[int, int]
+    fps: float
+
+
+def _smooth_head(scene: SyntheticScene, seconds: float) -> SyntheticScene:
+    """The scene with the wearer's head pose smoothed over ``seconds`` and the egocentric
+    cameras rebuilt from it (same centres and intrinsics)."""
+    if seconds <= 0:
+        return scene
+    sigma = seconds * scene.config.fps
+    people = scene.people
+    yaw, pitch, roll = (gaussian_filter1d(a, sigma, mode="nearest") for a in (
+        np.unwrap(people.head_yaw), people.head_pitch, people.head_roll))
+    cameras = [Camera(K=c.K, R=look_rotation(y, p, r), c=c.c, width=c.width, height=c.height)
+               for c, y, p, r in zip(scene.ego_cameras, yaw.tolist(), pitch.tolist(),
+                                     roll.tolist(), strict=True)]
+    people = replace(people, head_yaw=yaw, head_pitch=pitch, head_roll=roll)
+    return replace(scene, people=people, ego_cameras=cameras)
+
+
+def render_tracking_video(
+    seed: int,
+    n_frames: int = 60,
+    config: SynthConfig | None = None,
+    min_visible: float = 0.3,
+    min_pixels: int = 100,
+    head_smoothing: float = 1.0,
+    progress: Callable[[int], None] | None = None,
+) -> TrackingVideo:
+    """Render ``n_frames`` consecutive frames of one drone scene drawn from ``seed``.
+
+    Args:
+        seed: the scene's seed (scene, outfits, world and per-frame noise all come from it).
+        n_frames: frames of the video (>= 1).
+        config: the scene configuration (default: the drone scenario at 25 fps, 6 to 12 people).
+        min_visible: an egocentric person needs this visible fraction to get a box (as a
+            detector misses a mostly hidden person).
+        min_pixels: and this many visible pixels.
+        head_smoothing: seconds (standard deviation) of the head-pose smoothing; 0 keeps the
+            walk model's per-frame gaze.
+        progress: called with each rendered frame number.
+
+    Returns:
+        The :class:`TrackingVideo`.
+    """
+    if int(n_frames) < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    config = config or SynthConfig(scenario="drone", n_people=(6, 12), fps=25.0)
+    rng = np.random.default_rng([int(seed), 17])
+    scene = _smooth_head(make_scene(config, int(n_frames), rng), head_smoothing)
+    renderer = SceneRenderer(scene, rng)
+    top, hor, top_images, hor_images = {}, {}, {}, {}
+    for f in range(1, int(n_frames) + 1):
+        pair = renderer.render(f)
+        t, e = pair.top.labels, pair.ego.labels
+        top[f] = FrameBoxes(f, t.ids, t.boxes)
+        keep = (e.visible >= min_visible) & (e.visible_pixels >= min_pixels)
+        hor[f] = FrameBoxes(f, e.ids[keep], e.boxes[keep])
+        top_images[f], hor_images[f] = pair.top.image, pair.ego.image
+        if progress is not None:
+            progress(f)
+    return TrackingVideo(top, hor, top_images, hor_images, tuple(config.ego_size), config.fps)
+
+
+def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dict[str, Path]:
+    """Write ``top.txt``, ``hor.txt`` (MOT boxes, ground-truth ids) and the image folders
+    ``top/`` and ``hor/`` (``000001.png`` ...) into ``folder``; returns their paths by name
+    (``top``, ``hor``, ``top_images``, ``hor_images``)."""
+    import cv2
+
+    folder = Path(folder)
+    out = {"top": folder / "top.txt", "hor": folder / "hor.txt",
+           "top_images": folder / "top", "hor_images": folder / "hor"}
+    write_mot_boxes(out["top"], video.top)
+    write_mot_boxes(out["hor"], video.hor)
+    for view, images in (("top_images", video.top_images), ("hor_images", video.hor_images)):
+        out[view].mkdir(parents=True, exist_ok=True)
+        for f, image in images.items():
+            ok, data = cv2.imencode(".png", image)
+            if not ok:
+                raise ValueError(f"{out[view]}: cannot encode frame {f} as PNG")
+            atomic_write_bytes(out[view] / f"{f:06d}.png", data.tobytes(), fsync=False)
+    return out
