@@ -77,22 +77,27 @@ def _pairwise_sum(values: np.ndarray) -> float:
 
 @njit(cache=True)
 def _path_one_to_one(cost: np.ndarray, rows: int, cols: int, acc: np.ndarray,
-                     keep: np.ndarray) -> None:
-    """DTW path from (0, 0) to (rows - 1, cols - 1), then the one-to-one clean-up, into ``keep``.
+                     best_col: np.ndarray, winner: np.ndarray) -> None:
+    """DTW path from (0, 0) to (rows - 1, cols - 1), then the one-to-one clean-up.
 
     Ties as ``monotonic_path`` (diagonal, then down, then right) and ``one_to_one`` (the first
-    least dissimilar cell of a row, then of a column).
+    least dissimilar path cell of a row, then the first least dissimilar of those rows per
+    column). Leaves in ``winner[j]`` the row kept with column j, or -1; ``best_col`` is scratch.
     """
-    acc[: rows + 1, : cols + 1] = np.inf
     acc[0, 0] = 0.0
+    for j in range(1, cols + 1):
+        acc[0, j] = np.inf
+    for i in range(1, rows + 1):
+        acc[i, 0] = np.inf
     for i in range(rows):
         for j in range(cols):
             a, b, c = acc[i, j], acc[i, j + 1], acc[i + 1, j]
             m = a if a < b else b
             acc[i + 1, j + 1] = cost[i, j] + (m if m < c else c)
-    keep[:, :] = False
+    # Walk back; a row's path cells come right to left, so "<=" keeps its first least one.
+    best_col[:rows] = -1
     i, j = rows, cols
-    keep[i - 1, j - 1] = True
+    best_col[i - 1] = j - 1
     while i > 1 or j > 1:
         diag, up, left = acc[i - 1, j - 1], acc[i - 1, j], acc[i, j - 1]
         if diag <= up and diag <= left:
@@ -102,21 +107,14 @@ def _path_one_to_one(cost: np.ndarray, rows: int, cols: int, acc: np.ndarray,
             i -= 1
         else:
             j -= 1
-        keep[i - 1, j - 1] = True
-    for i in range(rows):
-        best = -1
-        for j in range(cols):
-            if keep[i, j] and (best < 0 or cost[i, j] < cost[i, best]):
-                best = j
-        for j in range(cols):
-            keep[i, j] = j == best
-    for j in range(cols):
-        best = -1
-        for i in range(rows):
-            if keep[i, j] and (best < 0 or cost[i, j] < cost[best, j]):
-                best = i
-        for i in range(rows):
-            keep[i, j] = i == best
+        r, c = i - 1, j - 1
+        if best_col[r] < 0 or cost[r, c] <= cost[r, best_col[r]]:
+            best_col[r] = c
+    winner[:cols] = -1
+    for r in range(rows):
+        c = best_col[r]
+        if winner[c] < 0 or cost[r, c] < cost[winner[c], c]:
+            winner[c] = r
 
 
 @njit(cache=True)
@@ -130,11 +128,12 @@ def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: 
     dx = np.zeros((n_rows, n_cols))
     dis = np.zeros((n_rows, n_cols))
     acc = np.empty((n_rows + 1, n_cols + 1))
-    keep = np.zeros((n_rows, n_cols), dtype=np.bool_)
+    best_col = np.empty(n_rows, dtype=np.int64)
+    winner = np.empty(n_cols, dtype=np.int64)
     terms = np.zeros(n_rows * n_cols)
     for b in range(n_batch):
         rows = count[b]
-        dx[:, :] = 0.0
+        pairs_out[b] = False
         for i in range(rows):
             for j in range(n_cols):
                 dx[i, j] = abs(top_x[b, i] - hor_x[j])
@@ -142,40 +141,38 @@ def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: 
         # closer in x than the scale threshold).
         ok, mean_ratio = False, 1.0
         if rows > 0:
-            _path_one_to_one(dx, rows, n_cols, acc, keep)
+            _path_one_to_one(dx, rows, n_cols, acc, best_col, winner)
             terms[:] = 0.0
             n_x = 0
-            for i in range(rows):
-                for j in range(n_cols):
-                    if keep[i, j] and dx[i, j] < scale_threshold:
-                        terms[i * n_cols + j] = top_y[b, i] / hor_y[j]
-                        n_x += 1
+            for j in range(n_cols):
+                i = winner[j]
+                if i >= 0 and dx[i, j] < scale_threshold:
+                    terms[i * n_cols + j] = top_y[b, i] / hor_y[j]
+                    n_x += 1
             if n_x > 0:
                 ratio = _pairwise_sum(terms) / n_x
                 if np.isfinite(ratio) and ratio > 0:
                     ok, mean_ratio = True, ratio
         # Eq. 11 with mu = 1 / mean ratio, then the matching and Phi (Eq. 12).
-        dis[:, :] = 0.0
-        for i in range(rows):
-            for j in range(n_cols):
-                dis[i, j] = lam * dx[i, j] + abs(top_y[b, i] / mean_ratio - hor_y[j])
-        pairs_out[b] = False
-        terms[:] = 0.0
-        kappa = 0
+        cost = np.inf
         if rows > 0:
-            _path_one_to_one(dis, rows, n_cols, acc, keep)
             for i in range(rows):
                 for j in range(n_cols):
-                    if keep[i, j]:
-                        pairs_out[b, i, j] = True
-                        terms[i * n_cols + j] = dis[i, j]
-                        kappa += 1
-        cost = np.inf
-        if ok and kappa > 0:
-            longest = max(rows, n_cols)
-            cost = rho ** (longest / kappa) * _pairwise_sum(terms) / kappa
-            if np.isnan(cost):
-                cost = np.inf
+                    dis[i, j] = lam * dx[i, j] + abs(top_y[b, i] / mean_ratio - hor_y[j])
+            _path_one_to_one(dis, rows, n_cols, acc, best_col, winner)
+            terms[:] = 0.0
+            kappa = 0
+            for j in range(n_cols):
+                i = winner[j]
+                if i >= 0:
+                    pairs_out[b, i, j] = True
+                    terms[i * n_cols + j] = dis[i, j]
+                    kappa += 1
+            if ok and kappa > 0:
+                longest = max(rows, n_cols)
+                cost = rho ** (longest / kappa) * _pairwise_sum(terms) / kappa
+                if np.isnan(cost):
+                    cost = np.inf
         cost_out[b] = cost
         scale_out[b] = 1.0 / mean_ratio
 
