@@ -113,6 +113,21 @@ def fmt_row(name, frames, cv, top=None, hor=None, extra=""):
     return f"{name:<20} {frames:5d} {cv.cvidf1:6.1f} {cv.cvma:6.1f}{views} {extra}"
 
 
+def score_tracks(label: str, res, det, truth, frames, pooled: list, views: dict,
+                 extra: str) -> None:
+    """Score one tracking result (``det``, ``truth``: the (top, hor) detections and ground
+    truth), add its counts and per-view results to the pools and print its row."""
+    (det_top, det_hor), (top, hor) = det, truth
+    tr_top, tr_hor = as_tracks(det_top, res.top_rows), as_tracks(det_hor, res.hor_rows)
+    counts = track_pair_counts(tr_top, tr_hor, top, hor, frames)
+    pooled.extend(counts)
+    r_top, r_hor = view_track_results(top, tr_top), view_track_results(hor, tr_hor)
+    views["top"].append(r_top)
+    views["hor"].append(r_hor)
+    print(fmt_row(label, len(frames), summarize(counts), pool_view_scores([r_top]),
+                  pool_view_scores([r_hor]), extra))
+
+
 def time_command(folder: Path, name: str, top, hor, solver: str) -> tuple[float, float]:
     """Wall and CPU seconds of ``xvmatch track`` on detection files (ids -1), one core."""
     tmp = Path(tempfile.mkdtemp(prefix="track_time_"))
@@ -137,10 +152,10 @@ def time_command(folder: Path, name: str, top, hor, solver: str) -> tuple[float,
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-SYNTHETIC_ARMS = ("boxes", "colour", "network", "network-time")
+SYNTHETIC_ARMS = ("boxes", "colour", "network-cv", "network")
 """The --synthetic rows: boxes only; images, colour terms only (no network); images and the
-default bundle's appearance network (cross-view Eq. 17, colour over time); the same with the
-network over time too."""
+appearance network across views (Eq. 17) with colour over time (Eq. 14, the paper's); the
+network across views and over time (the default with --model)."""
 
 
 def synthetic_main(args: argparse.Namespace) -> int:
@@ -182,21 +197,13 @@ def synthetic_main(args: argparse.Namespace) -> int:
                 images = TrackImages(video.top_images, video.hor_images,
                                      None if arm == "colour" else model.descriptors)
             config = TrackConfig(min_iou=args.min_iou, max_gap=args.max_gap, weights=weights,
-                                 time_appearance="network" if arm == "network-time"
-                                 else "colour")
+                                 time_appearance="colour" if arm == "network-cv"
+                                 else "network")
             start = time.perf_counter()
             res = track_pair(det_top, det_hor, width, config=config, frame_pairs=fp,
                              images=images)
-            t_track = time.perf_counter() - start
-            tr_top, tr_hor = as_tracks(det_top, res.top_rows), as_tracks(det_hor, res.hor_rows)
-            counts = track_pair_counts(tr_top, tr_hor, top, hor, frames)
-            pooled[arm] += counts
-            r_top, r_hor = view_track_results(top, tr_top), view_track_results(hor, tr_hor)
-            views[arm]["top"].append(r_top)
-            views[arm]["hor"].append(r_hor)
-            print(fmt_row(f"{name} {arm}", len(frames), summarize(counts),
-                          pool_view_scores([r_top]), pool_view_scores([r_hor]),
-                          f"track {t_track:.1f}s"))
+            score_tracks(f"{name} {arm}", res, (det_top, det_hor), (top, hor), frames,
+                         pooled[arm], views[arm], f"track {time.perf_counter() - start:.1f}s")
         sys.stdout.flush()
     print("-" * len(head))
     total = len(pooled["frame"])
@@ -309,15 +316,9 @@ def main() -> int:
                              config=config(solver), camera_rows=camera_rows,
                              frame_pairs=fp)
             t_track = time.perf_counter() - start
-            tr_top, tr_hor = as_tracks(det_top, res.top_rows), as_tracks(det_hor, res.hor_rows)
-            counts = track_pair_counts(tr_top, tr_hor, top, hor, frames)
-            pooled[solver] += counts
-            r_top, r_hor = view_track_results(top, tr_top), view_track_results(hor, tr_hor)
-            views[solver]["top"].append(r_top)
-            views[solver]["hor"].append(r_hor)
-            print(fmt_row(f"{name} {solver}", len(frames), summarize(counts),
-                          pool_view_scores([r_top]), pool_view_scores([r_hor]),
-                          f"track {t_track:.1f}s fallback {res.n_fallback}/{res.n_windows}"))
+            score_tracks(f"{name} {solver}", res, (det_top, det_hor), (top, hor), frames,
+                         pooled[solver], views[solver],
+                         f"track {t_track:.1f}s fallback {res.n_fallback}/{res.n_windows}")
         sys.stdout.flush()
     print("-" * len(head))
     total = len(pooled["frame"])

@@ -78,9 +78,10 @@ class TrackConfig:
         seed: seed of the spectral baseline's k-means.
         min_colour: with images, the colour-histogram similarity a horizontal box needs with
             the previous box to extend its tracklet (0.3, Sec. 4.1).
-        time_appearance: with images, the over-time appearance term of Eq. 18: ``colour``
-            (Eq. 14, histogram intersection of median colour histograms) or ``network`` (the
-            appearance network's descriptors; needs one, else colour is used).
+        time_appearance: with images, the over-time appearance term of Eq. 18: ``network``
+            (the appearance network's descriptors, when there is one; else colour) or
+            ``colour`` (the paper's Eq. 14, histogram intersection of median colour
+            histograms). The network is ahead on rendered videos (docs/tracking.md).
     """
 
     clip_length: int = 10
@@ -91,7 +92,7 @@ class TrackConfig:
     time_limit: float = 2.0
     seed: int = 0
     min_colour: float = 0.3
-    time_appearance: str = "colour"
+    time_appearance: str = "network"
 
     def __post_init__(self) -> None:
         if self.clip_length < 1:
@@ -200,7 +201,7 @@ def associate_frames(
 def _window_weights(
     top_t: list[Tracklet], top_u: list[Tracklet], hor_u: list[Tracklet], hor_t: list[Tracklet],
     frame_pairs: Mapping[int, list[tuple[int, int]]], weights: TrackWeights,
-    app: tuple[TrackletAppearance, ...] | None = None, time_appearance: str = "colour",
+    app: tuple[TrackletAppearance, ...] | None = None, time_appearance: str = "network",
 ) -> list[np.ndarray]:
     """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t);
     ``app``: the appearance of the same four tracklet lists, or None (boxes only)."""

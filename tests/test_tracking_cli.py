@@ -178,10 +178,10 @@ def test_track_with_images_end_to_end(video_files, tmp_path, capsys):
                  "--hor", str(video_files["gt_hor"]), "--json"]) == 0
     scores = json.loads(capsys.readouterr().out)
     assert scores["cross_view"]["cvidf1"] > 80 and scores["top"]["idf1"] > 80
-    # Colour terms only (no network), and the network over time too: both run.
+    # Colour terms only (no network), and colour over time with the network: both run.
     assert _track_video(video_files, tmp_path / "colour") == 0
     assert _track_video(video_files, tmp_path / "net", "--model", "default",
-                        "--time-appearance", "network", "--w1", "0.5", "--w2", "0.5",
+                        "--time-appearance", "colour", "--w1", "0.5", "--w2", "0.5",
                         "--min-colour", "0.2") == 0
 
 
@@ -193,7 +193,6 @@ def test_track_with_images_end_to_end(video_files, tmp_path, capsys):
         (["--top-images", "IMAGES", "--hor-images", "IMAGES", "--image-size", "320x180"],
          "disagrees with the horizontal images"),
         (["--top-images", "IMAGES", "--hor-images", "/nonexistent/hor"], "no such file"),
-        (["--time-appearance", "network"], "needs --model"),
     ],
 )
 def test_track_image_errors_are_one_line(video_files, tmp_path, capsys, extra, message):

@@ -59,7 +59,7 @@ def test_without_images_the_weights_are_the_box_terms(box_scene, box_tracks):
     for g, e in zip(got, want, strict=True):
         np.testing.assert_array_equal(g, e)
     # The image settings change nothing without images.
-    other = TrackConfig(min_colour=0.9, time_appearance="network",
+    other = TrackConfig(min_colour=0.9, time_appearance="colour",
                         weights=TrackWeights(w1=0.9, w2=0.1))
     res = track_pair(top, hor, float(box_scene.config.hor_size[0]), config=other,
                      frame_pairs=fp)

@@ -7,7 +7,8 @@ across the views (:func:`xvmatch.inference.tracking.track_pair`, CVMHAT Algorith
 the track id; rows the tracker dropped are absent. With the images of both views
 (``--top-images``, ``--hor-images``: the forms ``xvmatch associate`` reads) the horizontal
 tracklets link by IoU and colour and the over-time weights mix in colour similarity; ``--model``
-adds the appearance network's cross-view term (CVMHAT Sec. 3.3.2, 3.4.1, 4.1). Bad input raises
+adds the appearance network's cross-view term and takes over the over-time one (CVMHAT Sec.
+3.3.2, 3.4.1, 4.1). Bad input raises
 ``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
 ...`` with exit code 2.
 """
@@ -163,9 +164,9 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--min-colour", type=SHARE_TYPE, default=0.3,
                    help="colour-histogram similarity a horizontal box needs to extend a "
                    "tracklet, in [0, 1] (default 0.3)")
-    g.add_argument("--time-appearance", choices=("colour", "network"), default="colour",
-                   help="over-time appearance term of Eq. 18: colour histograms (Eq. 14, "
-                   "default) or the --model's network")
+    g.add_argument("--time-appearance", choices=("network", "colour"), default="network",
+                   help="over-time appearance term of Eq. 18: the --model's network (default; "
+                   "colour without --model) or colour histograms (Eq. 14, the paper's)")
     _add_spatial_options(p)
     p.set_defaults(func=_cmd_track)
     return p
@@ -201,8 +202,6 @@ def _cmd_track(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {args.out}: exists and is not a folder")
-    if args.time_appearance == "network" and args.model is None:
-        raise ValueError("--time-appearance network needs --model (and the images)")
     images, sources, size = _open_images(args, top.frames, hor.frames)
     width = (size or args.image_size or (2688, 1512))[0]
     try:
