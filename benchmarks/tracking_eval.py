@@ -203,7 +203,8 @@ def synthetic_main(args: argparse.Namespace) -> int:
             res = track_pair(det_top, det_hor, width, config=config, frame_pairs=fp,
                              images=images)
             score_tracks(f"{name} {arm}", res, (det_top, det_hor), (top, hor), frames,
-                         pooled[arm], views[arm], f"track {time.perf_counter() - start:.1f}s")
+                         pooled[arm], views[arm], f"track {time.perf_counter() - start:.1f}s "
+                         f"fallback {res.n_fallback}/{res.n_windows}")
         sys.stdout.flush()
     print("-" * len(head))
     total = len(pooled["frame"])

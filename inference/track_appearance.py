@@ -66,7 +66,7 @@ def frame_histograms(
 def clip_appearance(
     tracklets: Sequence[Tracklet],
     frames: Mapping[int, FrameBoxes],
-    histograms: Mapping[int, np.ndarray],
+    histograms: Mapping[int, np.ndarray] | None,
     images: Mapping[int, np.ndarray],
     embed: Embedder | None = None,
 ) -> TrackletAppearance:
@@ -75,18 +75,21 @@ def clip_appearance(
     Args:
         tracklets: the clip's tracklets (``rows`` are the records' ``ids``).
         frames: ``{frame: FrameBoxes}`` of the view.
-        histograms: ``{frame: (N, 32)}`` from :func:`frame_histograms`, for the clip's frames.
-        images: ``{frame: image}`` of the clip's frames.
+        histograms: ``{frame: (N, 32)}`` from :func:`frame_histograms`, for the clip's frames;
+            None: no colour descriptor (``histograms`` of the result is ``(T, 0)``).
+        images: ``{frame: image}`` of the clip's frames (with ``embed``, at least the frames
+            of the tracklets' middle boxes).
         embed: the appearance network, or None for colour only.
     """
-    hist = np.zeros((len(tracklets), _bins(histograms)))
+    hist = np.zeros((len(tracklets), 0 if histograms is None else _bins(histograms)))
     middle: dict[int, list[tuple[int, int]]] = {}
     for k, t in enumerate(tracklets):
-        per_box = []
-        for f, r in zip(t.frames.tolist(), t.rows.tolist(), strict=True):
-            j = int(np.flatnonzero(frames[f].ids == r)[0])
-            per_box.append(histograms[f][j])
-        hist[k] = np.median(np.array(per_box), axis=0)
+        if histograms is not None:
+            per_box = []
+            for f, r in zip(t.frames.tolist(), t.rows.tolist(), strict=True):
+                j = int(np.flatnonzero(frames[f].ids == r)[0])
+                per_box.append(histograms[f][j])
+            hist[k] = np.median(np.array(per_box), axis=0)
         f = int(t.frames[len(t) // 2])
         middle.setdefault(f, []).append((k, int(t.rows[len(t) // 2])))
     if embed is None:
@@ -112,6 +115,9 @@ def _bins(histograms: Mapping[int, np.ndarray]) -> int:
 def colour_similarity(a: TrackletAppearance, b: TrackletAppearance) -> np.ndarray:
     """(T_a, T_b) over-time appearance similarity of Eq. 14: histogram intersection of the
     tracklets' median colour histograms, in [0, 1]."""
+    if 0 in (a.histograms.shape[1], b.histograms.shape[1]) and a.histograms.shape[0] and \
+            b.histograms.shape[0]:
+        raise ValueError("colour_similarity needs histograms: these tracklets have none")
     if a.histograms.shape[0] == 0 or b.histograms.shape[0] == 0:
         return np.zeros((a.histograms.shape[0], b.histograms.shape[0]))
     return histogram_intersection(a.histograms, b.histograms)

@@ -232,16 +232,26 @@ def _tracklets_with_images(
     progress: Progress | None,
 ) -> tuple[list[list[Tracklet]], list[list[Tracklet]], list[tuple[TrackletAppearance, ...]]]:
     """Tracklets and their appearance, clip by clip (each clip's images read once, then
-    dropped): top by IoU, horizontal by IoU and colour (Sec. 4.1)."""
+    dropped): top by IoU, horizontal by IoU and colour (Sec. 4.1). When no colour term is used
+    in the top view (a network gives the over-time term), only the top frames that hold a
+    tracklet's middle box are read, and no top-view histogram is computed."""
+    top_colour = images.embed is None or config.time_appearance == "colour"
     top_tr, hor_tr, app = [], [], []
     steps = list(enumerate(clips))
     for k, c in progress(steps, len(steps), "images") if progress else steps:
         out = []
-        for frames, source, colour in ((top, images.top, False), (hor, images.hor, True)):
-            imgs = {f: source.get(f) for f in c.tolist() if f in frames and len(frames[f])}
-            hist = frame_histograms(frames, imgs)
-            tracklets = clip_tracklets(frames, c, k, config.min_iou, config.max_gap,
-                                       hist if colour else None, config.min_colour)
+        for frames, source, is_hor in ((top, images.top, False), (hor, images.hor, True)):
+            boxed = [f for f in c.tolist() if f in frames and len(frames[f])]
+            if is_hor or top_colour:
+                imgs = {f: source.get(f) for f in boxed}
+                hist = frame_histograms(frames, imgs)
+                tracklets = clip_tracklets(frames, c, k, config.min_iou, config.max_gap,
+                                           hist if is_hor else None, config.min_colour)
+            else:
+                hist = None
+                tracklets = clip_tracklets(frames, c, k, config.min_iou, config.max_gap)
+                middle = sorted({int(t.frames[len(t) // 2]) for t in tracklets})
+                imgs = {f: source.get(f) for f in middle}
             out.append((tracklets, clip_appearance(tracklets, frames, hist, imgs,
                                                    images.embed)))
         top_tr.append(out[0][0])

@@ -152,3 +152,36 @@ def test_track_pair_with_images_on_a_rendered_clip(network):
                 good += person == hor_truth[r]
                 bad += person != hor_truth[r]
     assert good > 3 * bad and good > 0, (good, bad)
+
+
+def test_top_images_are_read_only_where_needed():
+    # With the network over time the top view needs no histogram and only its tracklets'
+    # middle frames: the same tracklets and descriptors as when every frame is read.
+    from xvmatch.inference.tracking import _tracklets_with_images
+
+    video = render_tracking_video(4, n_frames=12)
+    top, _ = _as_rows(video.top)
+    hor, _ = _as_rows(video.hor)
+    embed = load_matcher_bundle("default").descriptors
+    clips = split_clips(sorted(top), 6)
+
+    class Counted(dict):
+        def get(self, frame):
+            self.read = getattr(self, "read", 0) + 1
+            return self[frame]
+
+    results = {}
+    for mode in ("colour", "network"):
+        source = Counted(video.top_images)
+        images = TrackImages(source, video.hor_images, embed)
+        results[mode] = (*_tracklets_with_images(top, hor, clips, TrackConfig(
+            time_appearance=mode), images, None), source.read)
+    (t_c, h_c, a_c, read_c), (t_n, h_n, a_n, read_n) = results["colour"], results["network"]
+    assert read_c == 12 and read_n < read_c
+    for k in range(len(clips)):
+        assert [t.rows.tolist() for t in t_c[k]] == [t.rows.tolist() for t in t_n[k]]
+        assert [t.rows.tolist() for t in h_c[k]] == [t.rows.tolist() for t in h_n[k]]
+        np.testing.assert_array_equal(a_c[k][0].descriptors, a_n[k][0].descriptors)
+        assert a_n[k][0].histograms.shape[1] == 0
+        with pytest.raises(ValueError, match="needs histograms"):
+            colour_similarity(a_n[k][0], a_n[k][0])
