@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.geometry import kernel_choice
+
 __all__ = [
     "MatchResult",
     "SpatialParams",
@@ -201,14 +203,14 @@ def match_vector_sets(
             pairs=np.zeros((n_batch, n_rows, n_cols), dtype=bool),
             scale=np.ones(n_batch),
         )
-    # The compiled kernel: the steps below, hypothesis by hypothesis, bit-identical to
-    # one_to_one(monotonic_path(...)) on the batch (tests/test_spatial_matching.py).
-    from xvmatch.geometry.search_kernels import match_batch
-
+    kernels = kernel_choice.kernels()
+    if kernels is None:
+        return kernel_choice.timed_numpy(
+            lambda: _match_numpy(top_x, top_y, count, hor, params), n_batch)
     cost = np.empty(n_batch)
     pairs = np.empty((n_batch, n_rows, n_cols), dtype=bool)
     scale = np.empty(n_batch)
-    match_batch(
+    kernels.match_batch(
         np.ascontiguousarray(top_x, dtype=np.float64),
         np.ascontiguousarray(top_y, dtype=np.float64),
         np.ascontiguousarray(count, dtype=np.int64),
@@ -217,6 +219,40 @@ def match_vector_sets(
         float(params.rho), float(params.lam), float(params.scale_threshold), cost, pairs, scale,
     )
     return MatchResult(cost=cost, pairs=pairs, scale=scale)
+
+
+def _match_numpy(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor: np.ndarray,
+                 params: SpatialParams) -> MatchResult:
+    """:func:`match_vector_sets` batched in numpy (the definition the kernel reproduces)."""
+    n_rows, n_cols = top_x.shape[1], hor.shape[0]
+    valid = np.arange(n_rows)[None, :] < count[:, None]
+    hx, hy = hor[:, 0], hor[:, 1]
+    tx = np.where(valid, top_x, 0.0)
+    dx = np.abs(tx[:, :, None] - hx[None, None, :])
+
+    # Scale mu from a first matching on x alone (RANSAC-like reliable subset).
+    pairs_x = one_to_one(monotonic_path(dx, count), dx)
+    if np.isfinite(params.scale_threshold):
+        pairs_x &= dx < params.scale_threshold
+    n_x = pairs_x.sum(axis=(1, 2))
+    ratio = top_y[:, :, None] / hy[None, None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean_ratio = np.where(pairs_x, ratio, 0.0).sum(axis=(1, 2)) / n_x
+    ok = (n_x > 0) & np.isfinite(mean_ratio) & (mean_ratio > 0)
+    mean_ratio = np.where(ok, mean_ratio, 1.0)
+
+    # Eq. 11 with mu = 1 / mean ratio, then the DP matching and its clean-up.
+    dy = np.abs(top_y[:, :, None] / mean_ratio[:, None, None] - hy[None, None, :])
+    dis = np.where(valid[:, :, None], params.lam * dx + dy, 0.0)
+    pairs = one_to_one(monotonic_path(dis, count), dis)
+    kappa = pairs.sum(axis=(1, 2))
+    total = np.where(pairs, dis, 0.0).sum(axis=(1, 2))
+    longest = np.maximum(count, n_cols)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        cost = params.rho ** (longest / kappa) * total / kappa
+    cost = np.where(ok & (kappa > 0) & (count > 0), cost, np.inf)
+    cost = np.where(np.isnan(cost), np.inf, cost)
+    return MatchResult(cost=cost, pairs=pairs, scale=1.0 / mean_ratio)
 
 
 def cost_lower_bound(
@@ -249,11 +285,43 @@ def cost_lower_bound(
     count = np.asarray(count)
     if n_batch == 0 or n_people == 0 or n_cols == 0:
         return np.full(n_batch, np.inf)
-    from xvmatch.geometry.search_kernels import lower_bounds
-
+    kernels = kernel_choice.kernels()
+    if kernels is None:
+        return kernel_choice.timed_numpy(
+            lambda: _lower_bound_numpy(top_x, count, hor_x, params, tight), n_batch)
     bound = np.empty(n_batch)
-    lower_bounds(np.ascontiguousarray(top_x, dtype=np.float64),
-                 np.ascontiguousarray(count, dtype=np.int64),
-                 np.ascontiguousarray(hor_x, dtype=np.float64),
-                 float(params.rho), float(params.lam), bool(tight), bound)
+    kernels.lower_bounds(np.ascontiguousarray(top_x, dtype=np.float64),
+                         np.ascontiguousarray(count, dtype=np.int64),
+                         np.ascontiguousarray(hor_x, dtype=np.float64),
+                         float(params.rho), float(params.lam), bool(tight), bound)
     return bound
+
+
+def _lower_bound_numpy(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray,
+                       params: SpatialParams, tight: bool) -> np.ndarray:
+    """:func:`cost_lower_bound` in numpy."""
+    n_people = top_x.shape[1]
+    n_cols = hor_x.shape[0]
+    pos = np.searchsorted(hor_x, top_x)
+    below = hor_x[np.maximum(pos - 1, 0)]
+    above = hor_x[np.minimum(pos, n_cols - 1)]
+    with np.errstate(invalid="ignore"):
+        gap = np.minimum(np.abs(top_x - below), np.abs(top_x - above))
+    absent = ~np.isfinite(top_x)
+    gap[absent] = np.inf
+    longest = np.maximum(count, n_cols)
+    shortest = np.minimum(count, n_cols)
+    if not tight:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            bound = params.rho ** (longest / shortest) * params.lam * gap.min(axis=1)
+        return np.where(count > 0, bound, np.inf)
+    gap.sort(axis=1)
+    gap[~np.isfinite(gap)] = 0.0
+    partial = np.cumsum(gap, axis=1)
+    # coef[L, kappa - 1] = rho^(L / kappa) / kappa, used for kappa <= min(count, Q) only.
+    kappa = np.arange(1, n_people + 1)
+    with np.errstate(over="ignore"):
+        coef = params.rho ** (np.arange(longest.max() + 1)[:, None] / kappa) / kappa
+    usable = kappa[None, :] <= shortest[:, None]
+    bound = np.where(usable, coef[longest] * partial, np.inf).min(axis=1) * params.lam
+    return np.where(count > 0, bound, np.inf)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.geometry import kernel_choice
+
 __all__ = [
     "REFERENCE_SIZE",
     "TopGeometry",
@@ -154,15 +156,31 @@ class TopHypotheses:
 
     def take(self, rows: np.ndarray) -> TopVectors:
         """Sorted, trimmed vectors (Eq. 8) of the hypotheses ``rows``."""
-        from xvmatch.geometry.search_kernels import sorted_vectors
-
+        kernels = kernel_choice.kernels()
+        if kernels is None:
+            return kernel_choice.timed_numpy(lambda: self._take_numpy(rows), len(rows))
         rows = np.ascontiguousarray(rows, dtype=np.int64).reshape(-1)
         count = self.count[rows]
         width = int(count.max()) if count.size else 0
         x = np.empty((rows.shape[0], width))
         y = np.empty((rows.shape[0], width))
         index = np.empty((rows.shape[0], width), dtype=np.intp)
-        sorted_vectors(self.x, self.delta, self.dist, self.n_theta, rows, x, y, index)
+        kernels.sorted_vectors(self.x, self.delta, self.dist, self.n_theta, rows, x, y, index)
+        return TopVectors(x=x, y=y, index=index, count=count)
+
+    def _take_numpy(self, rows: np.ndarray) -> TopVectors:
+        """:meth:`take` in numpy."""
+        rows = np.asarray(rows, dtype=np.intp)
+        count = self.count[rows]
+        width = int(count.max()) if count.size else 0
+        x_rows = self.x[rows]
+        order = np.argsort(x_rows, axis=1, kind="stable")[:, :width]
+        x = np.take_along_axis(x_rows, order, axis=1)
+        valid = np.arange(width)[None, :] < count[:, None]
+        delta = np.take_along_axis(self.delta[rows], order, axis=1)
+        dist = np.take_along_axis(self.dist[rows // self.n_theta], order, axis=1)
+        y = np.where(valid, dist * np.cos(delta), 0.0)
+        index = np.where(valid, order, -1)
         return TopVectors(x=x, y=y, index=index, count=count)
 
 
@@ -181,8 +199,10 @@ def top_hypotheses(
         thetas: ``(T,)`` view directions (radians), tried for every candidate.
         fov: the horizontal camera's field-of-view angle alpha (radians), in (0, pi).
     """
-    from xvmatch.geometry.search_kernels import hypothesis_table
-
+    kernels = kernel_choice.kernels()
+    if kernels is None:
+        return kernel_choice.timed_numpy(lambda: _top_hypotheses_numpy(geometry, thetas, fov),
+                                         geometry.phi.shape[0] * np.size(thetas))
     phi = np.ascontiguousarray(geometry.phi, dtype=np.float64)
     visible = np.ascontiguousarray(geometry.visible, dtype=bool)
     thetas = np.ascontiguousarray(thetas, dtype=np.float64).reshape(-1)
@@ -191,10 +211,24 @@ def top_hypotheses(
     delta = np.empty((n_rows, phi.shape[1]))
     count = np.empty(n_rows, dtype=np.intp)
     half = 0.5 * fov
-    hypothesis_table(phi, visible, thetas, half, -1.0 / np.tan(half), x, delta, count)
+    kernels.hypothesis_table(phi, visible, thetas, half, -1.0 / np.tan(half), x, delta, count)
+    return TopHypotheses(x=x, count=count, delta=delta, dist=geometry.dist,
+                         n_theta=thetas.shape[0])
+
+
+def _top_hypotheses_numpy(geometry: TopGeometry, thetas: np.ndarray, fov: float) -> TopHypotheses:
+    """:func:`top_hypotheses` in numpy."""
+    phi, visible = geometry.phi, geometry.visible
+    n_people = phi.shape[1]
+    thetas = np.asarray(thetas, dtype=float).reshape(-1)
+    delta = np.mod(phi[:, None, :] - thetas[None, :, None] + np.pi, TWO_PI) - np.pi
+    delta = delta.reshape(-1, n_people)
+    half = 0.5 * fov
+    inside = (np.abs(delta) < half) & np.repeat(visible, thetas.shape[0], axis=0)
+    x = np.where(inside, np.tan(delta) * (-1.0 / np.tan(half)), np.inf)
     return TopHypotheses(
         x=x,
-        count=count,
+        count=inside.sum(axis=1),
         delta=delta,
         dist=geometry.dist,
         n_theta=thetas.shape[0],

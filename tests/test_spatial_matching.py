@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from xvmatch.geometry import kernel_choice
 from xvmatch.geometry.spatial_matching import (
     SpatialParams,
     cost_lower_bound,
@@ -296,29 +297,13 @@ def test_match_is_independent_per_batch_row(batch):
             assert math.isclose(res.cost[b], coef * d.sum(), rel_tol=1e-9, abs_tol=coef * 1e-12)
 
 
-def _reference_match(top_x, top_y, count, hor, params):
-    """Eqs. 11-12 in batched numpy, from the reference monotonic_path and one_to_one."""
-    valid = np.arange(top_x.shape[1])[None, :] < count[:, None]
-    hx, hy = hor[:, 0], hor[:, 1]
-    dx = np.abs(np.where(valid, top_x, 0.0)[:, :, None] - hx[None, None, :])
-    pairs_x = one_to_one(monotonic_path(dx, count), dx)
-    if np.isfinite(params.scale_threshold):
-        pairs_x &= dx < params.scale_threshold
-    n_x = pairs_x.sum(axis=(1, 2))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean_ratio = np.where(pairs_x, top_y[:, :, None] / hy[None, None, :], 0.0).sum(
-            axis=(1, 2)) / n_x
-    ok = (n_x > 0) & np.isfinite(mean_ratio) & (mean_ratio > 0)
-    mean_ratio = np.where(ok, mean_ratio, 1.0)
-    dy = np.abs(top_y[:, :, None] / mean_ratio[:, None, None] - hy[None, None, :])
-    dis = np.where(valid[:, :, None], params.lam * dx + dy, 0.0)
-    pairs = one_to_one(monotonic_path(dis, count), dis)
-    kappa = pairs.sum(axis=(1, 2))
-    total = np.where(pairs, dis, 0.0).sum(axis=(1, 2))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        cost = params.rho ** (np.maximum(count, len(hor)) / kappa) * total / kappa
-    cost = np.where(ok & (kappa > 0) & (count > 0), cost, np.inf)
-    return np.where(np.isnan(cost), np.inf, cost), pairs, 1.0 / mean_ratio
+def _both(run):
+    """``run()`` with the compiled kernels and with the numpy forms."""
+    with kernel_choice.forced("compiled"):
+        compiled = run()
+    with kernel_choice.forced("numpy"):
+        reference = run()
+    return compiled, reference
 
 
 @settings(max_examples=200, deadline=None)
@@ -333,11 +318,14 @@ def test_compiled_match_is_bit_identical_to_the_numpy_definition(batch, threshol
         top_x = np.where(np.isfinite(top_x), np.round(top_x, 1), top_x)
         hor = np.column_stack([np.round(hor[:, 0], 1), hor[:, 1]])
     params = SpatialParams(scale_threshold=threshold)
-    res = match_vector_sets(top_x, top_y, count, hor, params)
-    cost, pairs, scale = _reference_match(top_x, top_y, count, hor, params)
-    np.testing.assert_array_equal(res.cost, cost)
-    np.testing.assert_array_equal(res.pairs, pairs)
-    np.testing.assert_array_equal(res.scale, scale)
+    res, ref = _both(lambda: match_vector_sets(top_x, top_y, count, hor, params))
+    np.testing.assert_array_equal(res.cost, ref.cost)
+    np.testing.assert_array_equal(res.pairs, ref.pairs)
+    np.testing.assert_array_equal(res.scale, ref.scale)
+    for tight in (True, False):
+        bound, ref_bound = _both(
+            lambda t=tight: cost_lower_bound(top_x, count, hor[:, 0], params, t))
+        np.testing.assert_array_equal(bound, ref_bound)
 
 
 def test_compiled_match_is_bit_identical_on_large_sets():
@@ -350,12 +338,11 @@ def test_compiled_match_is_bit_identical_on_large_sets():
     valid = np.arange(n_rows)[None, :] < count[:, None]
     top_x, top_y = np.where(valid, top_x, np.inf), np.where(valid, top_y, 0.0)
     hor = np.column_stack([np.sort(rng.uniform(-1, 1, n_cols)), rng.uniform(1e-3, 0.05, n_cols)])
-    res = match_vector_sets(top_x, top_y, count, hor, PARAMS)
-    cost, pairs, scale = _reference_match(top_x, top_y, count, hor, PARAMS)
-    np.testing.assert_array_equal(res.cost, cost)
-    np.testing.assert_array_equal(res.pairs, pairs)
-    np.testing.assert_array_equal(res.scale, scale)
-    assert np.isfinite(cost).sum() > 40
+    res, ref = _both(lambda: match_vector_sets(top_x, top_y, count, hor, PARAMS))
+    np.testing.assert_array_equal(res.cost, ref.cost)
+    np.testing.assert_array_equal(res.pairs, ref.pairs)
+    np.testing.assert_array_equal(res.scale, ref.scale)
+    assert np.isfinite(ref.cost).sum() > 40
 
 
 # --------------------------------------------------------------------------------------------
