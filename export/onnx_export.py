@@ -26,6 +26,7 @@ agrees within :data:`PARITY_TOLERANCE` and every frame's Hungarian assignment is
 from __future__ import annotations
 
 import hashlib
+import importlib.metadata
 import json
 import os
 import shutil
@@ -61,7 +62,8 @@ from xvmatch.models.appearance_net import AppearanceNet, appearance_source
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.training.matcher_file import LoadedMatcher, load_matcher
 
-__all__ = ["PARITY_TOLERANCE", "ExportError", "backbone_record", "export_bundle", "parity_frames"]
+__all__ = ["NOTICE", "PARITY_TOLERANCE", "ExportError", "backbone_record", "export_bundle",
+           "licence_texts", "notice_text", "parity_frames"]
 
 PARITY_TOLERANCE: float = 1e-4
 """Largest |cost_torch - cost_onnx| accepted at export."""
@@ -330,6 +332,53 @@ def backbone_record(net: AppearanceNet) -> dict[str, str]:
             **{k: str(source.get(k, "unknown")) for k in ("package", "version", "licence")}}
 
 
+NOTICE = "NOTICE.txt"
+"""The licence notice a bundle carries when its appearance trunk started from third-party
+weights (the derived weights inherit the checkpoint's licence)."""
+
+
+def licence_texts(package: str) -> list[tuple[str, str]]:
+    """``(file name, text)`` of the licence files an installed distribution ships (LICENSE,
+    COPYING, NOTICE in its metadata or package); empty when it is absent or ships none."""
+    try:
+        files = importlib.metadata.distribution(package).files or []
+    except importlib.metadata.PackageNotFoundError:
+        return []
+    out = []
+    for f in files:
+        if f.name.upper().startswith(("LICENSE", "LICENCE", "COPYING", "NOTICE")):
+            path = Path(os.fspath(f.locate()))
+            if path.is_file():
+                out.append((f.name, path.read_text(errors="replace").strip()))
+    return out
+
+
+def notice_text(net: AppearanceNet) -> str | None:
+    """The text of a bundle's :data:`NOTICE`, or None for a trunk trained from scratch: which
+    package's weights the appearance network was fine-tuned from, its licence, and the licence
+    text found in the installed distribution."""
+    source = appearance_source(net)
+    if source is None:
+        return None
+    package = str(source.get("package", "unknown"))
+    lines = [
+        "The appearance network of this bundle (appearance.onnx, and appearance_int8.onnx when "
+        "present) was",
+        f"fine-tuned (modified) from the ImageNet weights of the {net.arch} trunk shipped in the "
+        f"Python package",
+        f"{package} {source.get('version', 'unknown')} (file {source.get('weights', 'unknown')}),"
+        f" licence {source.get('licence', 'unknown')}.",
+        "Those weights' licence applies to the derived weights; its text, as the package ships "
+        "it, follows.",
+    ]
+    texts = licence_texts(package)
+    if not texts:
+        lines.append(f"(no licence file found in the installed {package}; see its project page)")
+    for name, text in texts:
+        lines += ["", f"--- {package}: {name} ---", text]
+    return "\n".join(lines) + "\n"
+
+
 def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
     """Export the graphs into ``folder``; the manifest's file records."""
     matcher = loaded.matcher.eval()
@@ -374,6 +423,9 @@ def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
             "xvmatch.preprocessing": json.dumps(prep),
             "xvmatch.output": "unit descriptors (B, D); cost of a pair |a - b| / 2",
         })
+        notice = notice_text(net)
+        if notice is not None:
+            (folder / NOTICE).write_text(notice)
         records["appearance"] = {"file": path.name, "arch": net.arch,
                                  "embedding_dim": net.embedding_dim, "precision": "fp32", **prep,
                                  "backbone": backbone_record(net)}

@@ -266,3 +266,8 @@ def test_the_default_bundle():
             assert figures["assignments_identical"] == figures["frames"], name
         else:
             assert figures["max_abs_descriptor_diff"] <= tolerance, name
+    backbone = manifest.appearance.backbone if manifest.appearance else None
+    if backbone and backbone.get("init") == "imagenet":  # derived weights carry their licence
+        notice = (DEFAULT_BUNDLE / "NOTICE.txt").read_text()
+        assert f"{backbone['package']} {backbone['version']}" in notice
+        assert f"licence {backbone['licence']}" in notice

