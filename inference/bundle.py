@@ -32,6 +32,7 @@ __all__ = [
     "BUNDLE_FORMAT",
     "BUNDLE_FORMAT_VERSION",
     "DEFAULT_BUNDLE",
+    "INT8_MAX_LOSS",
     "MANIFEST",
     "MATCHER_INPUTS",
     "MATCHER_OUTPUT",
@@ -42,6 +43,8 @@ __all__ = [
     "BundleError",
     "Manifest",
     "fast_int8_cpu",
+    "int8_accuracy_loss",
+    "int8_is_safe",
     "load_bundle",
     "read_manifest",
 ]
@@ -359,6 +362,28 @@ def fast_int8_cpu(cpuinfo: str | None = None) -> bool:
     return any(f in flags for f in _INT8_DOT_FLAGS)
 
 
+INT8_MAX_LOSS = 1.0
+"""Most Eq. 9 points the INT8 appearance network may lose against FP32 (matcher with images, the
+held-out scenes measured at export) for the runtime to pick it on its own."""
+
+
+def int8_accuracy_loss(int8: dict) -> float | None:
+    """FP32 minus INT8 Eq. 9 accuracy with images, as the manifest's ``appearance.int8`` records
+    it at export; None when it records no such figures."""
+    try:
+        acc = int8["accuracy"]
+        return float(acc["fp32"]["images"]["acc9"]) - float(acc["int8"]["images"]["acc9"])
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def int8_is_safe(int8: dict) -> bool:
+    """Whether the INT8 network kept the FP32 accuracy at export (within :data:`INT8_MAX_LOSS`;
+    unknown counts as not kept)."""
+    loss = int8_accuracy_loss(int8)
+    return loss is not None and loss <= INT8_MAX_LOSS
+
+
 def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,
                 precision: str | None = None) -> Bundle:
     """Open a bundle folder, or the shipped default with ``"default"``.
@@ -367,9 +392,10 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
         path_or_default: the bundle folder or ``"default"``.
         threads: onnxruntime intra-op threads per session (>= 1).
         precision: the appearance network to run: ``"int8"`` (needs one), ``"fp32"``, or None:
-            the INT8 one when the bundle has it and the CPU has 8-bit dot-product instructions
+            the INT8 one when the bundle has it, the CPU has 8-bit dot-product instructions
             (:func:`fast_int8_cpu`; measured on an AVX2-only CPU, INT8 was 0.76x the speed of
-            FP32 for the compact network), else FP32.
+            FP32 for the compact network) and it kept the FP32 accuracy at export
+            (:func:`int8_is_safe`: the MobileNetV2 branch lost 6.9 Eq. 9 points), else FP32.
 
     Raises:
         BundleError: anything wrong with the manifest or a file (one line naming the file).
@@ -391,7 +417,7 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
     used = None
     if manifest.appearance is not None:
         spec = manifest.appearance
-        auto = precision is None and fast_int8_cpu()
+        auto = precision is None and int8_is_safe(spec.int8) and fast_int8_cpu()
         used = "int8" if spec.int8_file is not None and (precision == "int8" or auto) else "fp32"
         if precision == "int8" and spec.int8_file is None:
             raise _fail(folder, "this bundle has no INT8 appearance network (export it with "

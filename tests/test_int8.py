@@ -46,24 +46,57 @@ def test_export_records_the_int8_network_and_its_accuracy(int8_bundle):
     assert json.loads((out / "manifest.json").read_text())["appearance"]["int8"] == int8
 
 
-def test_int8_is_the_default_only_on_cpus_with_int8_dot_products(int8_bundle, monkeypatch):
+def _with_int8_loss(out, tmp_path, loss: float | None):
+    """A copy of the bundle whose manifest records an INT8 accuracy ``loss`` points below FP32
+    (None: no accuracy record)."""
+    import shutil
+
+    copy = tmp_path / f"loss_{loss}"
+    shutil.copytree(out, copy)
+    manifest = json.loads((copy / "manifest.json").read_text())
+    accuracy = manifest["appearance"]["int8"]["accuracy"]
+    if loss is None:
+        del manifest["appearance"]["int8"]["accuracy"]
+    else:
+        accuracy["int8"]["images"]["acc9"] = accuracy["fp32"]["images"]["acc9"] - loss
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    return copy
+
+
+def test_int8_is_the_default_only_on_cpus_with_int8_dot_products(int8_bundle, tmp_path,
+                                                                  monkeypatch):
     from xvmatch.inference import bundle
 
     assert bundle.fast_int8_cpu("processor : 0\nflags : fpu sse avx2 fma avx512_vnni\n")
     assert bundle.fast_int8_cpu("Features : fp asimd asimddp\n")
     assert not bundle.fast_int8_cpu("processor : 0\nflags : fpu sse avx2 fma\n")
-    out, _ = int8_bundle
+    out = _with_int8_loss(int8_bundle[0], tmp_path, 0.0)
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: False)
     assert load_bundle(out).precision == "fp32"
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
     assert load_bundle(out).precision == "int8"
 
 
-def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, monkeypatch):
+@pytest.mark.parametrize(("loss", "chosen"), [(0.0, "int8"), (-2.0, "int8"), (0.9, "int8"),
+                                             (1.5, "fp32"), (6.9, "fp32"), (None, "fp32")])
+def test_int8_is_chosen_alone_only_if_it_kept_the_accuracy(int8_bundle, tmp_path, monkeypatch,
+                                                          loss, chosen):
+    """A fast CPU is not enough: an INT8 network that lost Eq. 9 points at export (the
+    MobileNetV2 branch lost 6.9) or has no record runs only when asked for."""
     from xvmatch.inference import bundle
 
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
-    out, _ = int8_bundle
+    out = _with_int8_loss(int8_bundle[0], tmp_path, loss)
+    assert load_bundle(out).precision == chosen
+    assert load_bundle(out, precision="int8").precision == "int8"
+
+
+def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, tmp_path,
+                                                    monkeypatch):
+    from xvmatch.inference import bundle
+
+    monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
+    out = _with_int8_loss(int8_bundle[0], tmp_path, 0.0)
     assert load_bundle(out).precision == "int8"
     assert load_bundle(out, precision="int8").precision == "int8"
     assert load_bundle(out, precision="fp32").precision == "fp32"
