@@ -1,5 +1,6 @@
-"""Appearance alone on synthetic held-out frames: the shipped compact trunk against other
-trained appearance networks (e.g. the ImageNet-initialised MobileNetV2), on the same frames.
+"""Appearance alone on synthetic held-out frames: the shipped bundle's appearance network against
+other trained appearance networks (compact trunk, ImageNet-initialised MobileNetV2 or
+EfficientNet-Lite0), on the same frames.
 
 The frames and trials are those of ``benchmarks/deployed_matcher_eval.py`` (test: seed 1000,
 20 scenes x 5 frames; validation: seed 2000; ``overview`` 640x360 and ``drone`` 1280x720;
@@ -9,15 +10,16 @@ the rows associate by that cost alone (and with the cheirality veto of Eq. 7), w
 non-association cost gamma tuned on the validation frames (best mean Eq. 9 accuracy over
 ``GAMMA_GRID``, middle of ties), and report Eq. 9 accuracy and CVIDF1 on the test frames.
 
-The compact trunk is the shipped bundle's ONNX network (``inference/default_bundle``); other
-networks are appearance weights files (``xvmatch train`` writes ``appearance_weights.pt``), run
-in torch on one thread. ``--raw-imagenet ARCH`` adds the untrained ImageNet trunk itself (its
-pooled 1,280-d features, unit length, no head): what the initialisation knows before training.
+Bundles (the shipped one, ``inference/default_bundle``, unless ``--no-default``; others with
+``--bundles NAME=FOLDER``) run their ONNX FP32 network; other networks are appearance weights
+files (``xvmatch train`` writes ``appearance_weights.pt``), run in torch on one thread.
+``--raw-imagenet ARCH`` adds the untrained ImageNet trunk itself (its pooled 1,280-d features,
+unit length, no head): what the initialisation knows before training.
 
 Usage:
     python benchmarks/pretrained_backbones_eval.py --weights mobilenetv2=runs/.../w.pt
-        [--raw-imagenet mobilenetv2] [--work runs/deployed_eval] [--scenarios overview drone]
-        [--json FILE]
+        [--bundles compact=runs/bundle_compact] [--no-default] [--raw-imagenet mobilenetv2]
+        [--work runs/deployed_eval] [--scenarios overview drone] [--json FILE]
 """
 
 from __future__ import annotations
@@ -100,13 +102,14 @@ def main() -> int:
     """Score every network on every scenario; print a table, write ``--json``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--weights", nargs="*", default=[], metavar="NAME=FILE",
-                        help="appearance weights files to compare with the shipped compact "
-                        "trunk")
+                        help="appearance weights files to compare with the shipped bundle's")
+    parser.add_argument("--bundles", nargs="*", default=[], metavar="NAME=FOLDER",
+                        help="bundles whose ONNX appearance networks to compare too")
     parser.add_argument("--raw-imagenet", nargs="*", default=[],
                         choices=["mobilenetv2", "efficientnet_lite0"],
                         help="also score these untrained ImageNet trunks (pooled features)")
-    parser.add_argument("--no-compact", action="store_true",
-                        help="leave out the shipped compact trunk")
+    parser.add_argument("--no-default", action="store_true",
+                        help="leave out the shipped bundle's network")
     parser.add_argument("--work", type=Path, default=Path("runs/deployed_eval"))
     parser.add_argument("--scenarios", nargs="+", default=["overview", "drone"],
                         choices=sorted(SIZES))
@@ -115,9 +118,17 @@ def main() -> int:
     args = parser.parse_args()
     torch.set_num_threads(1)
     costers = {}
-    if not args.no_compact:
-        costers["compact (shipped bundle, ONNX FP32)"] = OnnxAppearanceCoster(
-            load_matcher_bundle("default", precision="fp32"))
+    bundles = [] if args.no_default else [("shipped bundle", "default")]
+    for item in args.bundles:
+        name, _, path = item.partition("=")
+        if not path:
+            parser.error(f"--bundles takes NAME=FOLDER, got {item!r}")
+        bundles.append((name, path))
+    for name, path in bundles:
+        matcher = load_matcher_bundle(path, precision="fp32")
+        arch = matcher.bundle.manifest.appearance.arch if matcher.bundle.manifest.appearance \
+            else "none"
+        costers[f"{name} ({arch}, ONNX FP32)"] = OnnxAppearanceCoster(matcher)
     for arch in args.raw_imagenet:
         costers[f"{arch} ImageNet features, untrained"] = AppearanceCoster(raw_imagenet(arch))
     for item in args.weights:
