@@ -39,8 +39,9 @@ EXAMPLE = (
     "  xvmatch train --config configs/fusion_overview.yaml\n"
     "  xvmatch train --config configs/appearance_resnet50.yaml --trainer.devices 4 "
     "--trainer.strategy ddp\n"
-    "  xvmatch train --config configs/appearance_cpu.yaml --backbone mobilenetv2 --init imagenet "
-    "--model.init_args.lr 0.0005"
+    "  xvmatch train --config configs/appearance_mobilenetv2.yaml   "
+    "# the shipped default's branch, from ImageNet weights\n"
+    "  xvmatch train --config configs/appearance_efficientnet_lite0.yaml"
 )
 
 
