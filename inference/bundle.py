@@ -395,7 +395,7 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
             the INT8 one when the bundle has it, the CPU has 8-bit dot-product instructions
             (:func:`fast_int8_cpu`; measured on an AVX2-only CPU, INT8 was 0.76x the speed of
             FP32 for the compact network) and it kept the FP32 accuracy at export
-            (:func:`int8_is_safe`: the MobileNetV2 branch lost 6.9 Eq. 9 points), else FP32.
+            (:func:`int8_is_safe`: the shipped MobileNetV2 branch lost 9.1 Eq. 9 points), else FP32.
 
     Raises:
         BundleError: anything wrong with the manifest or a file (one line naming the file).

@@ -17,7 +17,8 @@ README = ROOT / "README.md"
 DOC_FILES = [README, *sorted((ROOT / "docs").glob("*.md"))]
 PACKAGES = ("geometry", "datasets", "models", "training", "export", "inference", "evaluation",
             "xvmatch")
-README_MAX_LINES = 260
+README_MAX_LINES = 275
+"""The user's manual stays short: 260 until the backbone comparison (issue 21) had to be in it."""
 PENDING = {ROOT / "docs" / "match_example.png"}
 """Files the documentation names before they exist (the README's picture of a matched pair is
 made from a run of the shipped matcher and added later)."""

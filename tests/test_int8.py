@@ -78,11 +78,11 @@ def test_int8_is_the_default_only_on_cpus_with_int8_dot_products(int8_bundle, tm
 
 
 @pytest.mark.parametrize(("loss", "chosen"), [(0.0, "int8"), (-2.0, "int8"), (0.9, "int8"),
-                                             (1.5, "fp32"), (6.9, "fp32"), (None, "fp32")])
+                                             (1.5, "fp32"), (9.1, "fp32"), (None, "fp32")])
 def test_int8_is_chosen_alone_only_if_it_kept_the_accuracy(int8_bundle, tmp_path, monkeypatch,
                                                           loss, chosen):
     """A fast CPU is not enough: an INT8 network that lost Eq. 9 points at export (the
-    MobileNetV2 branch lost 6.9) or has no record runs only when asked for."""
+    shipped MobileNetV2 branch lost 9.1) or has no record runs only when asked for."""
     from xvmatch.inference import bundle
 
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
