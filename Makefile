@@ -41,7 +41,7 @@ install-check:
 	$(BASE_VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(BASE_VENV)/bin/python -m pip install --quiet .
 	$(BASE_VENV)/bin/python -c "import importlib.util, sys; sys.exit(importlib.util.find_spec('torch') is not None)"
-	$(BASE_VENV)/bin/python -c "import sys; from xvmatch.inference.bundle import DEFAULT_BUNDLE as d; sys.exit(not (d / 'NOTICE.txt').is_file())"
+	cd /tmp && $(BASE_VENV)/bin/python -c "import sys; from xvmatch.inference.bundle import DEFAULT_BUNDLE as d; sys.exit(not (d / 'NOTICE.txt').is_file())"
 	cd /tmp && $(BASE_VENV)/bin/xvmatch demo --out /tmp/xvmatch-install-check --scenes 1 --frames 2
 	cd /tmp && $(BASE_VENV)/bin/xvmatch associate --model default \
 		--top /tmp/xvmatch-install-check/scene/top.txt --hor /tmp/xvmatch-install-check/scene/hor.txt \
