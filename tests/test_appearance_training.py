@@ -326,3 +326,71 @@ def test_xvmatch_train_rejects_a_missing_config(tmp_path: Path) -> None:
     args = parser.parse_args(["train", "--config", str(tmp_path / "none.yaml")])
     with pytest.raises(ValueError, match="no such configuration file"):
         args.func(args)
+
+
+# ---------------------------------------------------------------------------------------------
+# Untrusted checkpoints (issue 28, item 2a)
+
+
+class _Marker:
+    """A pickled object that, once unpickled, creates a file: stands for code execution."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (str(self.path), "w"))
+
+
+def _fit_with_best_checkpoint(data: Path, root: Path, max_steps: int, ckpt_path=None):
+    from lightning.pytorch.callbacks import ModelCheckpoint
+
+    from xvmatch.training.appearance_module import SaveAppearanceWeights
+
+    dm = ImagePairDataModule(str(data), val_fraction=0.25, input_height=SIZE[0],
+                             input_width=SIZE[1], batch_size=2, workers=1)
+    save = SaveAppearanceWeights(path=str(root / "weights.pt"))
+    trainer = L.Trainer(max_steps=max_steps, limit_val_batches=1, default_root_dir=root,
+                        callbacks=[ModelCheckpoint(dirpath=root / "checkpoints",
+                                                   monitor="val/loss", save_last=True), save],
+                        **QUIET)
+    trainer.fit(_module(), dm, ckpt_path=ckpt_path)
+    return save
+
+
+def _crafted_resume(root: Path, best: Path) -> Path:
+    """The run's last checkpoint with its stored best-model path replaced by ``best``."""
+    blob = torch.load(root / "checkpoints" / "last.ckpt", weights_only=True)
+    for key, state in blob["callbacks"].items():
+        if key.startswith("ModelCheckpoint"):
+            state["best_model_path"] = str(best)
+    crafted = root / "crafted.ckpt"
+    torch.save(blob, crafted)
+    return crafted
+
+
+def test_best_checkpoint_outside_the_run_folder_is_refused(tiny_data: Path,
+                                                            tmp_path: Path) -> None:
+    root = tmp_path / "run"
+    assert _fit_with_best_checkpoint(tiny_data, root, max_steps=1).written is not None
+    marker = tmp_path / "marker"
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    torch.save({"state_dict": _Marker(marker)}, elsewhere / "evil.ckpt")
+    crafted = _crafted_resume(root, elsewhere / "evil.ckpt")
+    with pytest.raises(ValueError, match=r"refusing best checkpoint .*evil\.ckpt: outside"):
+        _fit_with_best_checkpoint(tiny_data, root, max_steps=2, ckpt_path=crafted)
+    assert not marker.exists()
+
+
+def test_best_checkpoint_with_pickled_code_is_refused(tiny_data: Path, tmp_path: Path) -> None:
+    root = tmp_path / "run"
+    _fit_with_best_checkpoint(tiny_data, root, max_steps=1)
+    marker = tmp_path / "marker"
+    evil = root / "checkpoints" / "evil.ckpt"  # inside the run folder: read weights-only
+    torch.save({"state_dict": _Marker(marker)}, evil)
+    crafted = _crafted_resume(root, evil)
+    with pytest.raises(ValueError, match=r"evil\.ckpt: not a readable checkpoint") as info:
+        _fit_with_best_checkpoint(tiny_data, root, max_steps=2, ckpt_path=crafted)
+    assert "\n" not in str(info.value)
+    assert not marker.exists()

@@ -122,6 +122,37 @@ def test_fit_checkpoint_resume_round_trip(sim_dir, tmp_path):
     assert again.epochs == 2
 
 
+def test_a_corrupt_resume_checkpoint_is_one_line_naming_it(sim_dir, tmp_path):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    last = run / "checkpoints" / "last.ckpt"
+    last.write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(ValueError, match=r"last\.ckpt: not a readable checkpoint") as info:
+        fit_geometry(_sim(sim_dir), tmp_path / "m.pt", feature_config=FEATURES,
+                     model_config=TINY, epochs=1, run_dir=run, resume=True, progress=False)
+    assert "\n" not in str(info.value)
+    assert not (tmp_path / "m.pt").exists()
+
+
+def test_a_resumed_best_path_outside_the_run_is_refused(sim_dir, tmp_path):
+    run = tmp_path / "run"
+    fit_geometry(_sim(sim_dir), tmp_path / "m.pt", feature_config=FEATURES, model_config=TINY,
+                 epochs=1, seed=0, run_dir=run, progress=False)
+    last = run / "checkpoints" / "last.ckpt"
+    blob = torch.load(last, weights_only=True)
+    outside = tmp_path / "outside.ckpt"
+    outside.write_bytes(last.read_bytes())
+    for key, state in blob["callbacks"].items():
+        if key.startswith("ModelCheckpoint"):
+            state["best_model_path"] = str(outside)
+            state["best_model_score"] = torch.tensor(1e9)  # no later epoch replaces it
+    torch.save(blob, last)
+    with pytest.raises(ValueError, match=r"refusing best checkpoint .*outside\.ckpt"):
+        fit_geometry(_sim(sim_dir), tmp_path / "m2.pt", feature_config=FEATURES,
+                     model_config=TINY, epochs=2, seed=0, run_dir=run, resume=True,
+                     progress=False)
+
+
 def test_fit_rejects_bad_arguments(sim_dir, tmp_path):
     with pytest.raises(ValueError, match="epochs must be >= 1"):
         fit_geometry(_sim(sim_dir), tmp_path / "m.pt", feature_config=FEATURES, epochs=0)

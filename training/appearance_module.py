@@ -32,6 +32,7 @@ from torch import Tensor, nn
 
 from xvmatch.models.appearance_net import appearance_distance, save_appearance_weights
 from xvmatch.models.losses import ContrastiveLoss
+from xvmatch.training.checkpoint_files import best_checkpoint_path, load_checkpoint_state
 from xvmatch.training.image_datamodule import CropBatch
 
 __all__ = [
@@ -256,14 +257,18 @@ class SaveAppearanceWeights(L.Callback):
         self.written: Path | None = None
 
     def on_fit_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
-        """Load the best checkpoint (if any) into the module and write its network."""
+        """Load the best checkpoint (if any) into the module and write its network.
+
+        The best checkpoint is read with ``weights_only=True`` and only from the checkpoint
+        callback's own folder: a resumed checkpoint could store any path there.
+        """
         best, score = "", None
         ckpt = trainer.checkpoint_callback
-        if ckpt is not None and getattr(ckpt, "best_model_path", ""):
-            best = ckpt.best_model_path
+        best_path = best_checkpoint_path(ckpt)  # refuses a path outside the run's own folder
+        if best_path is not None:
+            best = os.fspath(best_path)
             score = ckpt.best_model_score
-            state = torch.load(best, map_location="cpu", weights_only=False)["state_dict"]
-            pl_module.load_state_dict(state)
+            pl_module.load_state_dict(load_checkpoint_state(best_path))
         if not trainer.is_global_zero:
             return
         out = Path(self.path) if self.path else Path(trainer.log_dir or ".") / self.filename

@@ -37,6 +37,11 @@ from xvmatch.training.box_datamodule import (
     MixedBoxDataModule,
     SimBoxDataModule,
 )
+from xvmatch.training.checkpoint_files import (
+    best_checkpoint_path,
+    check_checkpoint_file,
+    load_checkpoint_state,
+)
 from xvmatch.training.geometry_module import GeometryMatchingModule
 from xvmatch.training.matcher_file import save_matcher
 
@@ -204,13 +209,15 @@ def fit_matcher(
         limit_val_batches=1.0 if has_val else 0,
     )
     last = run / "checkpoints" / "last.ckpt"
-    trainer.fit(module, datamodule=datamodule, ckpt_path=last if resume and last.exists() else None)
+    resume_from = last if resume and last.exists() else None
+    if resume_from is not None:
+        check_checkpoint_file(resume_from)  # a corrupt file: one line naming it, not a traceback
+    trainer.fit(module, datamodule=datamodule, ckpt_path=resume_from)
 
-    best_path = checkpoint.best_model_path
+    best_path = best_checkpoint_path(checkpoint)  # only from the run's own checkpoint folder
     best_score = None
-    if has_val and best_path:
-        state = torch.load(best_path, map_location="cpu", weights_only=True)["state_dict"]
-        module.load_state_dict(state)
+    if has_val and best_path is not None:
+        module.load_state_dict(load_checkpoint_state(best_path))
         best_score = float(checkpoint.best_model_score)
     notes = {
         **dict(meta or {}),
