@@ -20,6 +20,8 @@ from xvmatch.datasets.mot_boxes import (
     FrameBoxes,
     _parse_table,
     _read_text,
+    _require_rows,
+    _split_lines,
     atomic_write_text,
 )
 
@@ -52,13 +54,14 @@ def read_detection_rows(path: str | os.PathLike) -> DetectionRows:
     """Read a ``frame,id,x,y,w,h[,...]`` file keeping every row; ids may repeat.
 
     Raises:
-        BoxFileError: as :func:`xvmatch.datasets.mot_boxes.read_mot_boxes` (missing file, bad
-            field, ``w``/``h`` <= 0, ...), naming file and line.
+        BoxFileError: as :func:`xvmatch.datasets.mot_boxes.read_mot_boxes` (missing file, no
+            boxes, bad field, ``w``/``h`` <= 0, ...), naming file and line; line numbers count
+            blank lines too, as an editor does.
     """
-    lines = [ln for ln in _read_text(path).splitlines() if ln.strip()]
-    data = _parse_table(path, lines, 1, _BOX_COLUMNS, False)
-    if data.shape[0] == 0:
-        return DetectionRows(os.fspath(path), (), np.zeros(0, np.int64), {})
+    all_lines = _split_lines(path, _read_text(path))
+    data = _parse_table(path, all_lines, 1, _BOX_COLUMNS, False)
+    _require_rows(path, data)
+    lines = [ln for ln in all_lines if ln.strip()]
     frames = data[:, 0].astype(np.int64)
     order = np.argsort(frames, kind="stable")
     sorted_frames = frames[order]

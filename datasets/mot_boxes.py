@@ -9,7 +9,9 @@ header, one matched pair per line.
 Parsing is vectorised (one ``np.loadtxt`` call plus array checks) because the CLI reads several
 files of ~10k lines per sequence; only when that fast path rejects a file does a line-by-line scan
 run, to name the exact bad line. Every problem is a :class:`BoxFileError` whose message is one line,
-``"<path>:<line>: <what is wrong>"``, so editors and terminals can jump to it.
+``"<path>:<line>: <what is wrong>"``, so editors and terminals can jump to it: lines are counted at
+``\\n`` only (``\\r\\n`` too), and a file holding another line-break character (form feed,
+U+2028, ...) is refused at that line. A box file without any box is refused as well.
 
 All writes go through :func:`atomic_write_text` (temporary file in the same directory, then
 ``os.replace``), so a crash never leaves a half-written file that a later run would trust.
@@ -54,6 +56,12 @@ _MAX_EXACT_INT = 2**53
 _NUMBER = re.compile(
     r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)", re.IGNORECASE
 )
+
+
+# Characters that ``str.splitlines`` breaks lines at besides "\n" (and a "\r" not followed by
+# "\n"): lines are counted at "\n" only, as editors and ``grep -n`` count them, and one of these
+# inside a line is refused with its line number rather than read as a line break or as content.
+_OTHER_BREAKS = re.compile("[\v\f\x1c\x1d\x1e\x85\u2028\u2029]|\r(?!\n)")
 
 
 class BoxFileError(ValueError):
@@ -162,9 +170,10 @@ _PRED_COLUMNS = (_Column("frame", "frame"), _Column("top_id", "id"), _Column("ho
 
 
 def _read_text(path: str | os.PathLike) -> str:
-    """The whole file as text, with whole-file problems turned into :class:`BoxFileError`."""
+    """The whole file as text, line ends untranslated (:func:`_split_lines` splits them), with
+    whole-file problems turned into :class:`BoxFileError`."""
     try:
-        with open(path, encoding="utf-8-sig") as handle:
+        with open(path, encoding="utf-8-sig", newline="") as handle:
             return handle.read()
     except FileNotFoundError:
         raise _error(path, None, "no such file") from None
@@ -174,6 +183,28 @@ def _read_text(path: str | os.PathLike) -> str:
         raise _error(path, None, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except OSError as exc:
         raise _error(path, None, f"cannot read: {exc.strerror or exc}") from None
+
+
+def _split_lines(path: str | os.PathLike, text: str) -> list[str]:
+    """The lines of ``text`` split at "\n" only (a "\r\n" end loses its "\r"), so that item
+    ``i`` is line ``i + 1`` of the file; any other line-break character is a
+    :class:`BoxFileError` naming its line."""
+    odd = _OTHER_BREAKS.search(text)
+    if odd is not None:
+        line = text.count("\n", 0, odd.start()) + 1
+        raise _error(path, line, f"line-break character U+{ord(odd.group()):04X} inside the "
+                                 "line; lines must end in \\n or \\r\\n")
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()
+    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+
+
+def _require_rows(path: str | os.PathLike, data: np.ndarray) -> None:
+    """Refuse a box file without a single box (empty, or blank lines only): every command that
+    reads one needs boxes, and an empty result would pass for a real one."""
+    if data.shape[0] == 0:
+        raise _error(path, None, "no boxes (the file is empty or holds only blank lines)")
 
 
 def _is_int(values: np.ndarray) -> np.ndarray:
@@ -346,10 +377,13 @@ def _check_repeats(
     return np.delete(data, rows, axis=0)
 
 
-def read_mot_boxes(path: str | os.PathLike, *, duplicates: str = "error") -> dict[int, FrameBoxes]:
+def read_mot_boxes(
+    path: str | os.PathLike, *, duplicates: str = "error", allow_empty: bool = False
+) -> dict[int, FrameBoxes]:
     """Read a MOTChallenge-style box file, ``frame,id,x,y,w,h[,...]`` per line.
 
-    Blank lines are skipped; fields after the sixth are ignored. Integer-valued floats such as
+    Lines end in ``\\n`` or ``\\r\\n`` and are numbered as editors number them; blank lines
+    are skipped; fields after the sixth are ignored. Integer-valued floats such as
     ``5.0`` are accepted for ``frame`` and ``id`` (some MOT tools write them), ``5.5`` is not.
 
     Args:
@@ -360,22 +394,27 @@ def read_mot_boxes(path: str | os.PathLike, *, duplicates: str = "error") -> dic
             ``"first"``: three files have one stray second box for an id (e.g.
             ``V1-S_55-G_1_top.txt`` frame 1 id 11), and in each case the first box is the one
             that continues the track in the neighbouring frames.
+        allow_empty: accept a file without boxes (an empty result) instead of raising; only for
+            files that may legitimately hold nothing, such as a tracker's output.
 
     Returns:
         ``{frame: FrameBoxes}`` with keys in ascending order; within a frame, boxes keep the file
         order. Frames without boxes are absent.
 
     Raises:
-        BoxFileError: missing or unreadable file, fewer than 6 fields, a non-numeric, NaN or
-            infinite field, a frame that is not an integer >= 1, a non-integer id, ``w`` or
-            ``h`` <= 0, or (unless ``duplicates="first"``) the same ``(frame, id)`` twice. The
-            message names file and line.
+        BoxFileError: missing or unreadable file, no boxes at all (unless ``allow_empty``), a
+            line-break character other than ``\\n`` / ``\\r\\n``, fewer than 6 fields, a
+            non-numeric, NaN or infinite field, a frame that is not an integer >= 1, a
+            non-integer id, ``w`` or ``h`` <= 0, or (unless ``duplicates="first"``) the same
+            ``(frame, id)`` twice. The message names file and line.
         ValueError: ``duplicates`` is neither ``"error"`` nor ``"first"``.
     """
     if duplicates not in ("error", "first"):
         raise ValueError(f"duplicates must be 'error' or 'first', got {duplicates!r}")
-    lines = _read_text(path).splitlines()
+    lines = _split_lines(path, _read_text(path))
     data = _parse_table(path, lines, 1, _BOX_COLUMNS, False)
+    if not allow_empty:
+        _require_rows(path, data)
     data = _check_repeats(path, lines, 1, data, 1, "id", drop=duplicates == "first")
     if data.shape[0] == 0:
         return {}
@@ -403,11 +442,12 @@ def read_predictions(path: str | os.PathLike) -> dict[int, list[tuple[int, int]]
         Frames without a predicted pair are absent (an empty prediction, not an error).
 
     Raises:
-        BoxFileError: missing file, wrong header, not exactly 3 fields, a non-integer value,
+        BoxFileError: missing file, wrong header, a line-break character other than ``\\n`` /
+            ``\\r\\n``, not exactly 3 fields, a non-integer value,
             a frame < 1, or a ``top_id`` or ``hor_id`` used twice in one frame (the association
             is one-to-one). The message names file and line.
     """
-    lines = _read_text(path).splitlines()
+    lines = _split_lines(path, _read_text(path))
     if not lines or not lines[0].strip():
         raise _error(path, 1, f"missing header, expected {PREDICTION_HEADER!r}")
     header = ",".join(f.strip() for f in lines[0].split(","))

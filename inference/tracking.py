@@ -285,8 +285,17 @@ def track_pair(
         frame_pairs: a frame association computed earlier (skips step 1).
         images: the images of both views (and the appearance network): the appearance terms
             of Sec. 3.3.2, 3.4.1 and 4.1; without them the weights come from the boxes alone.
+
+    Only the frames present are visited (:func:`split_clips`), so a gap of any length between
+    frames costs nothing.
+
+    Raises:
+        ValueError: a view without any box.
     """
     config = config or TrackConfig()
+    for name, view in (("top", top), ("horizontal", hor)):
+        if not any(len(rec) for rec in view.values()):
+            raise ValueError(f"the {name} view has no boxes: nothing to track")
     if frame_pairs is None:
         frame_pairs = associate_frames(top, hor, hor_width, params, camera_rows, workers,
                                        progress)

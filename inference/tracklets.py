@@ -60,17 +60,33 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def split_clips(frames: Sequence[int], length: int) -> list[np.ndarray]:
-    """Cut the frame span ``min..max`` of ``frames`` into consecutive clips of ``length`` frames.
+    """Cut the frames present into consecutive clips of ``length`` frame numbers, from the first.
 
     Both views must be cut the same way (Sec. 3.1 splits the two videos synchronously), so
-    pass the union of their frames. Returns one ``(<= length,)`` array of frame numbers per clip.
+    pass the union of their frames. Clip ``k`` spans frame numbers ``first + k * length`` to
+    ``first + (k + 1) * length - 1`` but holds only the frames present (frames without boxes
+    add nothing to a tracklet); a run of clips without any frame becomes one empty clip, which
+    breaks the tracks there as the whole run would. So the work grows with the frames present,
+    not with the span: frames 1 and 10**9 give three clips, not 10**8.
+
+    Returns:
+        One ``(K,)`` int64 array of ascending frame numbers per clip (``K`` may be 0).
     """
     if length < 1:
         raise ValueError(f"clip length must be >= 1, got {length}")
-    if len(frames) == 0:
+    present = np.unique(np.asarray(frames, dtype=np.int64))
+    if present.size == 0:
         return []
-    first, last = int(min(frames)), int(max(frames))
-    return [np.arange(s, min(s + length, last + 1)) for s in range(first, last + 1, length)]
+    index = (present - present[0]) // length
+    starts = np.flatnonzero(np.r_[True, index[1:] != index[:-1]])
+    ends = np.r_[starts[1:], present.size]
+    after_gap = np.r_[False, np.diff(index[starts]) > 1]
+    clips: list[np.ndarray] = []
+    for s, e, gap in zip(starts.tolist(), ends.tolist(), after_gap.tolist(), strict=True):
+        if gap:
+            clips.append(np.zeros(0, dtype=np.int64))
+        clips.append(present[s:e])
+    return clips
 
 
 def clip_tracklets(

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from xvmatch.datasets.detection_rows import read_detection_rows
 from xvmatch.datasets.mot_boxes import (
     PREDICTION_HEADER,
     BoxFileError,
@@ -65,8 +66,49 @@ def test_read_groups_by_frame_sorted_and_keeps_file_order(tmp_path):
     assert frames[1].boxes.shape == (2, 4)
 
 
-def test_read_empty_file_gives_no_frames(tmp_path):
-    assert read_mot_boxes(_write(tmp_path, "\n\n")) == {}
+@pytest.mark.parametrize("text", ["", "\n\n", "  \n\t\n"])
+def test_a_file_without_boxes_is_refused(tmp_path, text):
+    path = _write(tmp_path, text)
+    _expect_error(path, None, "no boxes")
+    _expect_error(path, None, "no boxes", reader=read_detection_rows)
+    assert read_mot_boxes(path, allow_empty=True) == {}
+
+
+# Every character str.splitlines breaks at besides "\n": each would shift the line numbers.
+OTHER_BREAKS = ["\v", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029", "\r"]
+
+
+@pytest.mark.parametrize("char", OTHER_BREAKS, ids=[f"U+{ord(c):04X}" for c in OTHER_BREAKS])
+@pytest.mark.parametrize("reader", [read_mot_boxes, read_detection_rows])
+def test_another_line_break_character_is_refused_at_its_line(tmp_path, char, reader):
+    # Line 3 holds the character between two fields, line 4 a bad value: the error is at 3.
+    text = f"{GOOD_LINE}\n\n1,2,10,20,{char}30,40\n1,3,abc,0,1,1\n"
+    _expect_error(_write(tmp_path, text), 3, f"U\\+{ord(char):04X}", reader=reader)
+
+
+@pytest.mark.parametrize("char", OTHER_BREAKS, ids=[f"U+{ord(c):04X}" for c in OTHER_BREAKS])
+def test_another_line_break_character_in_predictions_is_refused(tmp_path, char):
+    path = _write(tmp_path, f"{PREDICTION_HEADER}\n1,2,3\n1,{char}4,5\n")
+    _expect_error(path, 3, f"U\\+{ord(char):04X}", reader=read_predictions)
+
+
+@pytest.mark.parametrize("reader", [read_mot_boxes, read_detection_rows])
+def test_line_numbers_count_blank_lines_and_crlf_ends(tmp_path, reader):
+    path = tmp_path / "boxes.txt"
+    path.write_bytes(f"{GOOD_LINE}\r\n\r\n\n1,2,0,0,1,1\r\n1,3,0,0,1,0\r\n".encode())
+    _expect_error(path, 5, "box size h must be > 0", reader=reader)
+    path.write_bytes(f"{GOOD_LINE}\r\n\r\n1,2,0,0,1,1\r\n".encode())
+    frames = reader(path) if reader is read_mot_boxes else reader(path).frames
+    np.testing.assert_array_equal(frames[1].boxes[1], [0, 0, 1, 1])
+
+
+def test_detection_rows_name_the_real_line_of_a_repeated_bad_row(tmp_path):
+    # Blank lines before the bad row used to be skipped before counting (reported as line 2).
+    path = _write(tmp_path, f"\n\n{GOOD_LINE}\n\n1,1,0,0,-1,5\n")
+    _expect_error(path, 5, "box size w must be > 0", reader=read_detection_rows)
+    rows = read_detection_rows(_write(tmp_path, f"\n{GOOD_LINE}\n\n1,-1,0,0,2,2\n", "ok.txt"))
+    assert rows.lines == (GOOD_LINE, "1,-1,0,0,2,2")
+    np.testing.assert_array_equal(rows.frames[1].ids, [0, 1])
 
 
 def test_missing_file(tmp_path):

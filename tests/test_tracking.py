@@ -46,11 +46,44 @@ def test_box_iou_reference_values():
     assert box_iou(a, b) == pytest.approx(np.array([[1.0, 1 / 3, 0.0]]))
 
 
-def test_split_clips_covers_the_span():
-    clips = split_clips([3, 25, 7], 10)
-    assert [c.tolist() for c in clips] == [list(range(3, 13)), list(range(13, 23)), [23, 24, 25]]
+def test_split_clips_holds_the_frames_present_and_one_clip_per_gap():
+    clips = split_clips([3, 25, 7, 7], 10)
+    # Clips start every 10 frames from frame 3: 3..12, 13..22 (empty), 23..32.
+    assert [c.tolist() for c in clips] == [[3, 7], [], [25]]
+    clips = split_clips([1, 2, 11, 12, 50, 10**9], 10)
+    assert [c.tolist() for c in clips] == [[1, 2], [11, 12], [], [50], [], [10**9]]
+    assert split_clips([], 10) == []
     with pytest.raises(ValueError, match="clip length"):
         split_clips([1], 0)
+
+
+def test_track_over_a_gap_of_a_billion_frames_visits_only_the_frames_present():
+    # One person, seen at frames 1-3 and 10**9 + 1-3 in both views: stepping through the
+    # frames between (as the tracker once did) would take minutes and run out of memory.
+    scene = simulate_box_scene(SceneConfig(n_people=(3, 3)), n_frames=3, seed=0)
+    late = 10**9  # frames 10**9 + 1 to 10**9 + 3, all in one clip
+    top = {**scene.top, **{f + late: FrameBoxes(f + late, r.ids + 100, r.boxes)
+                           for f, r in scene.top.items()}}
+    hor = {**scene.hor, **{f + late: FrameBoxes(f + late, r.ids + 100, r.boxes)
+                           for f, r in scene.hor.items()}}
+    rows = {}
+    for name, view in (("top", top), ("hor", hor)):  # ids become unique row numbers
+        n = 0
+        rows[name] = {}
+        for f, r in sorted(view.items()):
+            rows[name][f] = FrameBoxes(f, np.arange(n, n + len(r)), r.boxes)
+            n += len(r)
+    result = track_pair(rows["top"], rows["hor"], 1920.0)
+    assert result.n_windows == 2  # clips: frames 1-3, one empty clip, the late frames
+    assert len(result.top_rows) == sum(len(r) for r in top.values())
+    assert {f for f in result.frame_pairs} == set(top)
+
+
+def test_track_without_boxes_is_one_line():
+    scene = simulate_box_scene(SceneConfig(n_people=(2, 2)), n_frames=2, seed=0)
+    for top, hor, name in ((scene.top, {}, "horizontal"), ({}, scene.hor, "top")):
+        with pytest.raises(ValueError, match=f"the {name} view has no boxes"):
+            track_pair(top, hor, 1920.0)
 
 
 def test_clip_tracklets_links_by_iou_over_short_gaps():
