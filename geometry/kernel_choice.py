@@ -1,38 +1,30 @@
-"""Whether the (O, theta) search runs its numpy forms or its compiled numba kernels.
+"""Whether a step of the (O, theta) search runs its numpy form or its compiled numba kernel.
 
-Both give bit-identical results (tested), so the choice only moves time. The kernels are 3-8x
-faster per call, but a process pays about a second to import numba and load their machine code
-once, which a short command never earns back. ``auto`` therefore rents before it buys: the
-numpy forms run until they have spent as long as that start-up on batches of at least
-``LARGE_BATCH`` hypotheses, then the kernels take over (the ski-rental rule: never more than
-about twice the better choice made in hindsight). Small batches are not counted: where the
-kernels gain little (the few orientations per frame of the video mode, which runs hundreds of
-frames per second in numpy), numpy stays. ``XVMATCH_KERNELS=auto|compiled|numpy`` or
-:func:`set_mode` forces one side (tests run both).
+The two give bit-identical results on every CPU (the kernels do only IEEE arithmetic and
+comparisons in the numpy forms' order; every transcendental function is numpy's, in both;
+``tests/test_spatial_matching.py`` and ``tests/test_spatial_vectors.py`` pin it), so the choice
+only moves time. It is a rule on the work alone, never on elapsed time, so that every process and
+every worker makes the same choice for the same call: ``auto`` runs a call of at least
+``LARGE_BATCH`` hypotheses in the kernels (3-8x faster per call; the exhaustive search's calls
+hold thousands) and smaller calls in numpy (the video mode's few dozen orientations per frame,
+where importing numba, about a second per process, would never pay).
+``XVMATCH_KERNELS=auto|compiled|numpy`` or :func:`set_mode` forces one side (tests run both).
 """
 
 from __future__ import annotations
 
 import os
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from types import ModuleType
-from typing import TypeVar
 
-__all__ = ["LARGE_BATCH", "MODES", "STARTUP_SECONDS", "forced", "kernels", "mode", "set_mode",
-           "timed_numpy"]
+__all__ = ["LARGE_BATCH", "MODES", "forced", "kernels", "mode", "set_mode"]
 
 MODES = ("auto", "compiled", "numpy")
-STARTUP_SECONDS = 1.0
-"""Numpy time after which ``auto`` switches: about what importing numba and loading the cached
-kernels costs a fresh process on the 2-core development machine."""
 LARGE_BATCH = 256
-"""Hypotheses in a call from which its numpy time counts towards the switch (the exhaustive
-search's calls hold thousands; the video mode's followed camera a few dozen)."""
+"""Hypotheses in a call from which ``auto`` runs the compiled kernel."""
 
-_T = TypeVar("_T")
-_state = {"mode": "", "numpy_seconds": 0.0}
+_state = {"mode": ""}
 
 
 def set_mode(value: str) -> None:
@@ -60,24 +52,11 @@ def forced(value: str) -> Iterator[None]:
         set_mode(previous)
 
 
-def kernels() -> ModuleType | None:
-    """The compiled kernels module when they should run now, else None (use numpy)."""
+def kernels(batch: int) -> ModuleType | None:
+    """The compiled kernels module for a call over ``batch`` hypotheses, or None (use numpy)."""
     current = mode()
-    if current == "numpy" or (current == "auto"
-                              and float(_state["numpy_seconds"]) < STARTUP_SECONDS):
+    if current == "numpy" or (current == "auto" and batch < LARGE_BATCH):
         return None
     from xvmatch.geometry import search_kernels
 
     return search_kernels
-
-
-def timed_numpy(run: Callable[[], _T], batch: int) -> _T:
-    """``run()`` (a numpy form over ``batch`` hypotheses), its time counted towards the switch
-    of ``auto`` when the batch is large."""
-    if batch < LARGE_BATCH:
-        return run()
-    start = time.perf_counter()
-    try:
-        return run()
-    finally:
-        _state["numpy_seconds"] = float(_state["numpy_seconds"]) + time.perf_counter() - start

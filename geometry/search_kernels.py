@@ -5,8 +5,11 @@ The search scores hundreds of hypotheses per frame out of thousands, each two sm
 the batched numpy forms spent most of their time in per-cell array calls and in arrays of the
 whole (candidate, theta, person) grid. These kernels follow the numpy definitions step by step
 (:func:`~xvmatch.geometry.spatial_matching.monotonic_path` with its tie order,
-:func:`~xvmatch.geometry.spatial_matching.one_to_one`, sums in NumPy's pairwise order, the same
-libm calls), so costs, pairs and scales are bit-identical to them (tested). Imported on first
+:func:`~xvmatch.geometry.spatial_matching.one_to_one`, sums in NumPy's pairwise order), so costs,
+pairs and scales are bit-identical to them on every CPU (tested). They do only IEEE arithmetic
+and comparisons, never a transcendental function: tan, cos and rho^(L / kappa) come from numpy
+in both forms (numpy's SIMD tan and pow differ from libm's in the last bit on AVX-512 CPUs), and
+numba does not contract multiply-adds without ``fastmath``. Imported on first
 use only: ``import numba`` and loading the cached machine code take about a second.
 """
 
@@ -15,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "sorted_vectors"]
+__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "sorted_order"]
 
 _BLOCK = 128  # NumPy's pairwise-summation block (PW_BLOCKSIZE)
 
@@ -119,10 +122,11 @@ def _path_one_to_one(cost: np.ndarray, rows: int, cols: int, acc: np.ndarray,
 
 @njit(cache=True)
 def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: np.ndarray,
-                hor_y: np.ndarray, rho: float, lam: float, scale_threshold: float,
+                hor_y: np.ndarray, coef: np.ndarray, lam: float, scale_threshold: float,
                 cost_out: np.ndarray, pairs_out: np.ndarray, scale_out: np.ndarray) -> None:
     """Eqs. 11-12 for every hypothesis b: Phi into ``cost_out[b]``, the kept pairs into
-    ``pairs_out[b]`` and mu into ``scale_out[b]`` (see ``match_vector_sets``)."""
+    ``pairs_out[b]`` and mu into ``scale_out[b]`` (see ``match_vector_sets``); ``coef[L, k]``
+    is rho^(L / k) (``penalty_table``)."""
     n_batch, n_rows = top_x.shape
     n_cols = hor_x.shape[0]
     dx = np.zeros((n_rows, n_cols))
@@ -170,7 +174,7 @@ def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: 
                     kappa += 1
             if ok and kappa > 0:
                 longest = max(rows, n_cols)
-                cost = rho ** (longest / kappa) * _pairwise_sum(terms) / kappa
+                cost = coef[longest, kappa] * _pairwise_sum(terms) / kappa
                 if np.isnan(cost):
                     cost = np.inf
         cost_out[b] = cost
@@ -178,9 +182,10 @@ def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: 
 
 
 @njit(cache=True)
-def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, rho: float,
+def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, coef: np.ndarray,
                  lam: float, tight: bool, out: np.ndarray) -> None:
-    """``cost_lower_bound`` of every hypothesis into ``out`` (its docstring has the bound)."""
+    """``cost_lower_bound`` of every hypothesis into ``out`` (its docstring has the bound;
+    ``coef[L, k]`` is rho^(L / k))."""
     n_batch, n_people = top_x.shape
     n_cols = hor_x.shape[0]
     gaps = np.empty(n_people)
@@ -211,7 +216,7 @@ def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, rho: f
             smallest = np.inf
             for k in range(n):
                 smallest = min(smallest, gaps[k])
-            out[b] = rho ** (longest / shortest) * lam * smallest
+            out[b] = coef[longest, shortest] * lam * smallest
             continue
         for k in range(1, n):  # insertion sort: a handful of people
             value, i = gaps[k], k - 1
@@ -222,16 +227,15 @@ def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, rho: f
         best, partial = np.inf, 0.0
         for kappa in range(1, min(shortest, n_people) + 1):
             partial += gaps[kappa - 1] if kappa <= n else 0.0
-            best = min(best, rho ** (longest / kappa) / kappa * partial)
+            best = min(best, coef[longest, kappa] / kappa * partial)
         out[b] = best * lam
 
 
 @njit(cache=True)
 def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, half: float,
-                     x_factor: float, x: np.ndarray, delta: np.ndarray,
-                     count: np.ndarray) -> None:
-    """x_top (Eq. 7; +inf outside the view), delta and |K| of every (candidate, theta) row
-    b = c T + t, as ``top_hypotheses`` defines them (``x_factor`` = -1 / tan(half))."""
+                     delta: np.ndarray, inside: np.ndarray, count: np.ndarray) -> None:
+    """delta, whether in the view and |K| of every (candidate, theta) row b = c T + t, as
+    ``top_hypotheses`` defines them (x_top, Eq. 7, is numpy's tan of delta, in both forms)."""
     n_cand, n_people = phi.shape
     n_theta = thetas.shape[0]
     for c in range(n_cand):
@@ -241,21 +245,17 @@ def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, h
             for m in range(n_people):
                 d = np.mod(phi[c, m] - thetas[t] + np.pi, 2.0 * np.pi) - np.pi
                 delta[b, m] = d
-                if abs(d) < half and visible[c, m]:
-                    x[b, m] = np.tan(d) * x_factor
-                    n += 1
-                else:
-                    x[b, m] = np.inf
+                inside[b, m] = abs(d) < half and visible[c, m]
+                n += inside[b, m]
             count[b] = n
 
 
 @njit(cache=True)
-def sorted_vectors(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n_theta: int,
-                   rows: np.ndarray, x: np.ndarray, y: np.ndarray, index: np.ndarray) -> None:
-    """Eq. 8's sorted vectors of the hypotheses ``rows`` (``TopHypotheses.take``): x ascending
-    (a stable sort, +inf last), y = |OP| cos(delta), the person index; padding 0 and -1."""
+def sorted_order(x_all: np.ndarray, rows: np.ndarray, order_out: np.ndarray) -> None:
+    """Eq. 8's order of the hypotheses ``rows``: the first ``order_out.shape[1]`` person
+    indices of each row by x ascending, a stable sort (+inf last), as numpy's stable argsort."""
     n_people = x_all.shape[1]
-    width = x.shape[1]
+    width = order_out.shape[1]
     order = np.empty(n_people, dtype=np.int64)
     for r in range(rows.shape[0]):
         b = rows[r]
@@ -265,13 +265,5 @@ def sorted_vectors(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n
                 order[i + 1] = order[i]
                 i -= 1
             order[i + 1] = m
-        c = b // n_theta
         for k in range(width):
-            m = order[k]
-            x[r, k] = x_all[b, m]
-            if np.isfinite(x_all[b, m]):
-                y[r, k] = dist[c, m] * np.cos(delta_all[b, m])
-                index[r, k] = m
-            else:
-                y[r, k] = 0.0
-                index[r, k] = -1
+            order_out[r, k] = order[k]

@@ -24,6 +24,7 @@ __all__ = [
     "match_vector_sets",
     "monotonic_path",
     "one_to_one",
+    "penalty_table",
 ]
 
 
@@ -159,6 +160,16 @@ def one_to_one(path: np.ndarray, cost: np.ndarray) -> np.ndarray:
     return keep
 
 
+def penalty_table(rho: float, size: int) -> np.ndarray:
+    """``(size + 1, size + 1)`` table of rho^(L / kappa), Eq. 12's penalty, at [L, kappa] for
+    L, kappa <= size (column 0, kappa = 0, is never used as a penalty): one numpy power for
+    the numpy forms and the compiled kernels alike, since libm's pow and numpy's SIMD pow differ
+    in the last bit on some CPUs (AVX-512)."""
+    n = np.arange(size + 1, dtype=float)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        return float(rho) ** (n[:, None] / n[None, :])
+
+
 @dataclass(frozen=True)
 class MatchResult:
     """Matching of the horizontal set against a batch of top sets.
@@ -203,10 +214,10 @@ def match_vector_sets(
             pairs=np.zeros((n_batch, n_rows, n_cols), dtype=bool),
             scale=np.ones(n_batch),
         )
-    kernels = kernel_choice.kernels()
+    coef = penalty_table(params.rho, max(n_rows, n_cols))
+    kernels = kernel_choice.kernels(n_batch)
     if kernels is None:
-        return kernel_choice.timed_numpy(
-            lambda: _match_numpy(top_x, top_y, count, hor, params), n_batch)
+        return _match_numpy(top_x, top_y, count, hor, params, coef)
     cost = np.empty(n_batch)
     pairs = np.empty((n_batch, n_rows, n_cols), dtype=bool)
     scale = np.empty(n_batch)
@@ -216,13 +227,13 @@ def match_vector_sets(
         np.ascontiguousarray(count, dtype=np.int64),
         np.ascontiguousarray(hor[:, 0], dtype=np.float64),
         np.ascontiguousarray(hor[:, 1], dtype=np.float64),
-        float(params.rho), float(params.lam), float(params.scale_threshold), cost, pairs, scale,
+        coef, float(params.lam), float(params.scale_threshold), cost, pairs, scale,
     )
     return MatchResult(cost=cost, pairs=pairs, scale=scale)
 
 
 def _match_numpy(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor: np.ndarray,
-                 params: SpatialParams) -> MatchResult:
+                 params: SpatialParams, coef: np.ndarray) -> MatchResult:
     """:func:`match_vector_sets` batched in numpy (the definition the kernel reproduces)."""
     n_rows, n_cols = top_x.shape[1], hor.shape[0]
     valid = np.arange(n_rows)[None, :] < count[:, None]
@@ -249,7 +260,7 @@ def _match_numpy(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor: n
     total = np.where(pairs, dis, 0.0).sum(axis=(1, 2))
     longest = np.maximum(count, n_cols)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        cost = params.rho ** (longest / kappa) * total / kappa
+        cost = coef[longest, kappa] * total / kappa
     cost = np.where(ok & (kappa > 0) & (count > 0), cost, np.inf)
     cost = np.where(np.isnan(cost), np.inf, cost)
     return MatchResult(cost=cost, pairs=pairs, scale=1.0 / mean_ratio)
@@ -285,20 +296,20 @@ def cost_lower_bound(
     count = np.asarray(count)
     if n_batch == 0 or n_people == 0 or n_cols == 0:
         return np.full(n_batch, np.inf)
-    kernels = kernel_choice.kernels()
+    coef = penalty_table(params.rho, max(n_people, n_cols))
+    kernels = kernel_choice.kernels(n_batch)
     if kernels is None:
-        return kernel_choice.timed_numpy(
-            lambda: _lower_bound_numpy(top_x, count, hor_x, params, tight), n_batch)
+        return _lower_bound_numpy(top_x, count, hor_x, params, tight, coef)
     bound = np.empty(n_batch)
     kernels.lower_bounds(np.ascontiguousarray(top_x, dtype=np.float64),
                          np.ascontiguousarray(count, dtype=np.int64),
                          np.ascontiguousarray(hor_x, dtype=np.float64),
-                         float(params.rho), float(params.lam), bool(tight), bound)
+                         coef, float(params.lam), bool(tight), bound)
     return bound
 
 
 def _lower_bound_numpy(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray,
-                       params: SpatialParams, tight: bool) -> np.ndarray:
+                       params: SpatialParams, tight: bool, coef: np.ndarray) -> np.ndarray:
     """:func:`cost_lower_bound` in numpy."""
     n_people = top_x.shape[1]
     n_cols = hor_x.shape[0]
@@ -313,15 +324,15 @@ def _lower_bound_numpy(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray,
     shortest = np.minimum(count, n_cols)
     if not tight:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            bound = params.rho ** (longest / shortest) * params.lam * gap.min(axis=1)
+            bound = coef[longest, shortest] * params.lam * gap.min(axis=1)
         return np.where(count > 0, bound, np.inf)
     gap.sort(axis=1)
     gap[~np.isfinite(gap)] = 0.0
     partial = np.cumsum(gap, axis=1)
-    # coef[L, kappa - 1] = rho^(L / kappa) / kappa, used for kappa <= min(count, Q) only.
+    # per[L, kappa - 1] = rho^(L / kappa) / kappa, used for kappa <= min(count, Q) only.
     kappa = np.arange(1, n_people + 1)
-    with np.errstate(over="ignore"):
-        coef = params.rho ** (np.arange(longest.max() + 1)[:, None] / kappa) / kappa
+    with np.errstate(over="ignore", invalid="ignore"):
+        per = coef[: longest.max() + 1, 1 : n_people + 1] / kappa
     usable = kappa[None, :] <= shortest[:, None]
-    bound = np.where(usable, coef[longest] * partial, np.inf).min(axis=1) * params.lam
+    bound = np.where(usable, per[longest] * partial, np.inf).min(axis=1) * params.lam
     return np.where(count > 0, bound, np.inf)

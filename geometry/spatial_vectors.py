@@ -156,26 +156,16 @@ class TopHypotheses:
 
     def take(self, rows: np.ndarray) -> TopVectors:
         """Sorted, trimmed vectors (Eq. 8) of the hypotheses ``rows``."""
-        kernels = kernel_choice.kernels()
+        rows = np.asarray(rows, dtype=np.intp).reshape(-1)
+        count = self.count[rows]
+        width = int(count.max()) if count.size else 0
+        kernels = kernel_choice.kernels(rows.shape[0])
         if kernels is None:
-            return kernel_choice.timed_numpy(lambda: self._take_numpy(rows), len(rows))
-        rows = np.ascontiguousarray(rows, dtype=np.int64).reshape(-1)
-        count = self.count[rows]
-        width = int(count.max()) if count.size else 0
-        x = np.empty((rows.shape[0], width))
-        y = np.empty((rows.shape[0], width))
-        index = np.empty((rows.shape[0], width), dtype=np.intp)
-        kernels.sorted_vectors(self.x, self.delta, self.dist, self.n_theta, rows, x, y, index)
-        return TopVectors(x=x, y=y, index=index, count=count)
-
-    def _take_numpy(self, rows: np.ndarray) -> TopVectors:
-        """:meth:`take` in numpy."""
-        rows = np.asarray(rows, dtype=np.intp)
-        count = self.count[rows]
-        width = int(count.max()) if count.size else 0
-        x_rows = self.x[rows]
-        order = np.argsort(x_rows, axis=1, kind="stable")[:, :width]
-        x = np.take_along_axis(x_rows, order, axis=1)
+            order = np.argsort(self.x[rows], axis=1, kind="stable")[:, :width]
+        else:
+            order = np.empty((rows.shape[0], width), dtype=np.intp)
+            kernels.sorted_order(self.x, rows.astype(np.int64), order)
+        x = np.take_along_axis(self.x[rows], order, axis=1)
         valid = np.arange(width)[None, :] < count[:, None]
         delta = np.take_along_axis(self.delta[rows], order, axis=1)
         dist = np.take_along_axis(self.dist[rows // self.n_theta], order, axis=1)
@@ -199,40 +189,27 @@ def top_hypotheses(
         thetas: ``(T,)`` view directions (radians), tried for every candidate.
         fov: the horizontal camera's field-of-view angle alpha (radians), in (0, pi).
     """
-    kernels = kernel_choice.kernels()
-    if kernels is None:
-        return kernel_choice.timed_numpy(lambda: _top_hypotheses_numpy(geometry, thetas, fov),
-                                         geometry.phi.shape[0] * np.size(thetas))
     phi = np.ascontiguousarray(geometry.phi, dtype=np.float64)
-    visible = np.ascontiguousarray(geometry.visible, dtype=bool)
     thetas = np.ascontiguousarray(thetas, dtype=np.float64).reshape(-1)
-    n_rows = phi.shape[0] * thetas.shape[0]
-    x = np.empty((n_rows, phi.shape[1]))
-    delta = np.empty((n_rows, phi.shape[1]))
-    count = np.empty(n_rows, dtype=np.intp)
+    n_cand, n_people = phi.shape
     half = 0.5 * fov
-    kernels.hypothesis_table(phi, visible, thetas, half, -1.0 / np.tan(half), x, delta, count)
+    kernels = kernel_choice.kernels(n_cand * thetas.shape[0])
+    if kernels is None:
+        delta = np.mod(phi[:, None, :] - thetas[None, :, None] + np.pi, TWO_PI) - np.pi
+        delta = delta.reshape(-1, n_people)
+        inside = (np.abs(delta) < half) & np.repeat(geometry.visible, thetas.shape[0], axis=0)
+        count = inside.sum(axis=1)
+    else:
+        n_rows = n_cand * thetas.shape[0]
+        delta = np.empty((n_rows, n_people))
+        inside = np.empty((n_rows, n_people), dtype=bool)
+        count = np.empty(n_rows, dtype=np.intp)
+        kernels.hypothesis_table(phi, np.ascontiguousarray(geometry.visible, dtype=bool),
+                                 thetas, half, delta, inside, count)
+    # numpy's tan in both forms: its SIMD tan is not libm's to the last bit on every CPU.
+    x = np.where(inside, np.tan(delta) * (-1.0 / np.tan(half)), np.inf)
     return TopHypotheses(x=x, count=count, delta=delta, dist=geometry.dist,
                          n_theta=thetas.shape[0])
-
-
-def _top_hypotheses_numpy(geometry: TopGeometry, thetas: np.ndarray, fov: float) -> TopHypotheses:
-    """:func:`top_hypotheses` in numpy."""
-    phi, visible = geometry.phi, geometry.visible
-    n_people = phi.shape[1]
-    thetas = np.asarray(thetas, dtype=float).reshape(-1)
-    delta = np.mod(phi[:, None, :] - thetas[None, :, None] + np.pi, TWO_PI) - np.pi
-    delta = delta.reshape(-1, n_people)
-    half = 0.5 * fov
-    inside = (np.abs(delta) < half) & np.repeat(visible, thetas.shape[0], axis=0)
-    x = np.where(inside, np.tan(delta) * (-1.0 / np.tan(half)), np.inf)
-    return TopHypotheses(
-        x=x,
-        count=inside.sum(axis=1),
-        delta=delta,
-        dist=geometry.dist,
-        n_theta=thetas.shape[0],
-    )
 
 
 def top_vectors(

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -27,19 +26,16 @@ def test_forced_modes_give_the_same_association():
     assert found["numpy"].theta == found["compiled"].theta
 
 
-def test_auto_rents_numpy_until_it_has_cost_the_start_up(monkeypatch):
-    monkeypatch.setitem(kernel_choice._state, "numpy_seconds", 0.0)
+def test_auto_is_a_rule_on_the_batch_size_alone():
+    # The same call takes the same side in every process and worker, however long the process
+    # has run (no timing): small batches in numpy, large ones in the kernels.
     with kernel_choice.forced("auto"):
-        assert kernel_choice.kernels() is None
-        kernel_choice.timed_numpy(lambda: None, kernel_choice.LARGE_BATCH)
-        assert kernel_choice.kernels() is None  # far less than a second of numpy so far
-        kernel_choice.timed_numpy(lambda: time.sleep(0.05), 1)  # small batches do not count
-        assert kernel_choice._state["numpy_seconds"] < 0.05
-        monkeypatch.setitem(kernel_choice._state, "numpy_seconds",
-                            kernel_choice.STARTUP_SECONDS)
-        assert kernel_choice.kernels() is not None
+        assert kernel_choice.kernels(kernel_choice.LARGE_BATCH - 1) is None
+        assert kernel_choice.kernels(kernel_choice.LARGE_BATCH) is not None
     with kernel_choice.forced("numpy"):
-        assert kernel_choice.kernels() is None
+        assert kernel_choice.kernels(10**6) is None
+    with kernel_choice.forced("compiled"):
+        assert kernel_choice.kernels(1) is not None
 
 
 def test_bad_mode_is_a_clear_error():
@@ -49,7 +45,7 @@ def test_bad_mode_is_a_clear_error():
 
 def test_environment_variable_sets_the_mode():
     code = ("from xvmatch.geometry import kernel_choice; print(kernel_choice.mode()); "
-            "print(kernel_choice.kernels() is None)")
+            "print(kernel_choice.kernels(1) is None)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={"XVMATCH_KERNELS": "compiled", "PATH": ""}).stdout.split()
     assert out == ["compiled", "False"]
