@@ -62,8 +62,8 @@ from xvmatch.models.appearance_net import AppearanceNet, appearance_source
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.training.matcher_file import LoadedMatcher, load_matcher
 
-__all__ = ["NOTICE", "PARITY_TOLERANCE", "ExportError", "backbone_record", "export_bundle",
-           "licence_texts", "notice_text", "parity_frames"]
+__all__ = ["NOTICE", "PARITY_TOLERANCE", "ExportError", "backbone_record", "check_replaceable",
+           "export_bundle", "licence_texts", "notice_text", "parity_frames"]
 
 PARITY_TOLERANCE: float = 1e-4
 """Largest |cost_torch - cost_onnx| accepted at export."""
@@ -529,6 +529,53 @@ def _add_int8(folder: Path, manifest: dict, loaded: LoadedMatcher, data: Path,
     }
 
 
+def _bundle_files(folder: Path) -> set[str] | None:
+    """The names of the files an export wrote into ``folder``, from its manifest; None when
+    ``folder`` holds no xvmatch bundle manifest."""
+    try:
+        doc = json.loads((folder / MANIFEST).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    if not isinstance(doc, dict) or doc.get("format") != BUNDLE_FORMAT:
+        return None
+    names = {MANIFEST, NOTICE}
+    for key in ("matcher", "appearance"):
+        record = doc.get(key)
+        if isinstance(record, dict):
+            names.add(str(record.get("file")))
+            if isinstance(record.get("int8"), dict):
+                names.add(str(record["int8"].get("file")))
+    return names
+
+
+def check_replaceable(out: str | os.PathLike) -> None:
+    """``out`` may be written by an export: absent, an empty folder, or a bundle an export
+    wrote, holding only the files its manifest lists (replacing it deletes nothing else).
+
+    Raises:
+        ExportError: a file, or a folder that is not such a bundle (a user's folder that
+            happens to hold a ``manifest.json`` included).
+    """
+    out = Path(out)
+    if not out.exists() and not out.is_symlink():
+        return
+    if out.is_symlink() or not out.is_dir():
+        raise ExportError(f"{os.fspath(out)}: exists and is not a bundle folder; choose a new "
+                          "folder")
+    present = {p.name for p in out.iterdir()}
+    if not present:
+        return
+    known = _bundle_files(out)
+    if known is None:
+        raise ExportError(f"{os.fspath(out)}: exists and is not a bundle folder (no xvmatch "
+                          f"bundle {MANIFEST}); choose a new folder")
+    foreign = sorted(present - known)
+    if foreign:
+        raise ExportError(f"{os.fspath(out)}: exists and is not a bundle folder: it also holds "
+                          f"{', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''}, "
+                          "which xvmatch export did not write; choose a new folder")
+
+
 def export_bundle(
     model: str | os.PathLike | LoadedMatcher,
     out: str | os.PathLike,
@@ -543,7 +590,8 @@ def export_bundle(
     Args:
         model: a matcher file (``xvmatch fit-geometry`` or the matcher training), ``"default"``,
             or a loaded one.
-        out: the bundle folder to write (created; an existing bundle there is replaced).
+        out: the bundle folder to write (created; a bundle an export wrote there is
+            replaced, anything else refused: :func:`check_replaceable`).
         parity_data: synthetic dataset folder for the parity check (default: render a small
             held-out one).
         int8_calibration: synthetic dataset folder: also write a static INT8 appearance
@@ -556,14 +604,11 @@ def export_bundle(
 
     Raises:
         ExportError: parity not reached (the figures are in the message), or ``out`` is a
-            non-empty folder that is not a bundle.
+            file or a non-empty folder that is not a bundle holding only its own files.
         MatcherFileError: an unusable matcher file.
     """
     out = Path(out)
-    if out.exists() and (not out.is_dir() or (any(out.iterdir())
-                                               and not (out / MANIFEST).is_file())):
-        raise ExportError(f"{os.fspath(out)}: exists and is not a bundle folder; choose a new "
-                          "folder")
+    check_replaceable(out)
     loaded = model if isinstance(model, LoadedMatcher) else load_matcher(model)
     source = Path(loaded.path) if loaded.path else None
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -626,6 +671,7 @@ def export_bundle(
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)  # as mkdir would make it (mkdtemp's is 0700)
         if out.exists():
+            check_replaceable(out)  # again: the folder may have changed during the export
             shutil.rmtree(out)
         os.replace(tmp, out)
         return manifest

@@ -18,7 +18,6 @@ from collections.abc import Iterable, Sequence
 from xvmatch.cli_demo import EXAMPLES as DEMO_EXAMPLES
 from xvmatch.cli_types import (
     box_id,
-    check_output_path,
     float_in,
     frame_offset,
     image_size,
@@ -28,6 +27,7 @@ from xvmatch.cli_types import (
     worker_count,
 )
 from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET
+from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["main"]
 
@@ -134,6 +134,15 @@ def _spatial_params(args: argparse.Namespace):
     )
 
 
+def _check_camera_id(camera_id: int | None, top, path: str) -> None:
+    """``--camera-id`` must name a person of the top view in at least one frame."""
+    if camera_id is None:
+        return
+    if not any(camera_id in rec.ids for rec in top.values()):
+        raise UsageError(f"--camera-id {camera_id}: no box of {path} has this id (the id of "
+                         "the horizontal camera's wearer in the top-view file)")
+
+
 def _read_boxes(path: str, duplicates: str):
     import warnings
 
@@ -183,11 +192,23 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         if given:
             raise UsageError(f"{', '.join(given)} apply to a learned matcher: add --model "
                              "default (or a bundle)")
+    _check_camera_id(args.camera_id, top, args.top)
+    models = [m for m in args.model or () if m != "default"]
+    check_outputs(
+        [Output("--out", args.out), Output("--costs", args.costs),
+         Output("--draw", args.draw, folder=True)],
+        [Input("--top", args.top), Input("--hor", args.hor),
+         Input("--top-images", args.top_images), Input("--hor-images", args.hor_images),
+         Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
+    )
+    if args.draw is not None:
+        from xvmatch.cli_learn import DRAW_COMMAND
+        from xvmatch.output_paths import check_own_folder
+
+        check_own_folder(args.draw, DRAW_COMMAND, "--draw")
     from xvmatch.cli_learn import horizontal_size
 
     hor_width = horizontal_size(args, hor)[0][0]
-    for path in (args.out, args.costs):
-        check_output_path(path)
     if args.offset == "auto":
         from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
@@ -255,6 +276,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from xvmatch.datasets.mot_boxes import shift_frames
 
         top = shift_frames(top, args.offset)
+    _check_common_frames(top, hor, args)
     try:
         counts = count_sequence(pred, top, hor)
     except ValueError as exc:
@@ -267,10 +289,27 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_common_frames(top, hor, args: argparse.Namespace) -> None:
+    """Scores need a frame with boxes in both views: without one every score is empty."""
+    common = {f for f, rec in top.items() if len(rec)} & {f for f, rec in hor.items() if len(rec)}
+    if common:
+        return
+
+    def span(frames) -> str:
+        used = [f for f, rec in frames.items() if len(rec)]
+        return f"{min(used)}..{max(used)}" if used else "none"
+
+    shifted = f" after --offset {args.offset}" if args.offset else ""
+    raise UsageError(f"nothing to score: {args.top} and {args.hor} share no frame with boxes in "
+                     f"both views{shifted} (top frames {span(top)}, horizontal frames "
+                     f"{span(hor)}); check the files and --offset")
+
+
 def _cmd_noise(args: argparse.Namespace) -> int:
     from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
     from xvmatch.datasets.mot_boxes import write_mot_boxes
 
+    check_outputs([Output("--out", args.out)], [Input("--boxes", args.boxes)])
     frames = _read_boxes(args.boxes, args.duplicates)
     noise = DetectorNoise(jitter=args.jitter, miss_rate=args.miss, false_per_frame=args.false)
     noisy = apply_detector_noise(
@@ -313,6 +352,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     top = _read_boxes(args.top, args.duplicates)
     hor = _read_boxes(args.hor, args.duplicates)
     max_offset = _max_offset(args, top, hor)
+    _check_camera_id(args.camera_id, top, args.top)
     est = estimate_offset(
         top,
         hor,
@@ -604,6 +644,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ValueError, OSError) as exc:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"xvmatch: error: {message}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"xvmatch: error: out of memory running {args.command}: the input or the options "
+              "need more memory than this machine has (try smaller inputs or fewer --workers)",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("xvmatch: interrupted", file=sys.stderr)

@@ -14,6 +14,7 @@ import shlex
 import sys
 
 from xvmatch.cli_types import int_in, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_ablate_parser"]
 
@@ -94,6 +95,9 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
     from xvmatch import __version__
     from xvmatch.evaluation.ablation import AblationOptions, run_ablation
 
+    check_outputs([Output("--out", args.out, folder=True)],
+                  [*(Input("--data", d) for d in args.data), Input("--cvmhat", args.cvmhat),
+                   Input("--model", None if args.model == "default" else args.model)])
     options = AblationOptions(data=tuple(args.data), out=args.out, model=args.model,
                               seeds=args.seeds, sweep=args.sweep, cvmhat=args.cvmhat,
                               cvmhat_step=args.cvmhat_step, workers=args.workers)

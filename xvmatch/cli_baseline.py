@@ -14,6 +14,7 @@ import sys
 import time
 
 from xvmatch.cli_types import seed_value, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_baseline_parser"]
 
@@ -87,7 +88,7 @@ def _cmd_baseline(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from xvmatch.datasets.pair_trials import open_dataset
-    from xvmatch.evaluation.cost_distributions import save_cost_figures
+    from xvmatch.evaluation.cost_distributions import FIGURE_FILES, save_cost_figures
     from xvmatch.evaluation.handcrafted_baseline import (
         BaselineConfig,
         evaluate_baseline,
@@ -100,6 +101,8 @@ def _cmd_baseline(args: argparse.Namespace) -> int:
         **{k: v for k, v in gammas.items() if v is not None},
         noise_seed=args.noise_seed, scramble_seed=args.scramble_seed,
     )
+    check_outputs([Output("--figures", args.figures, folder=True,
+                          files=tuple(FIGURE_FILES.values()))], [Input("--data", args.data)])
     dataset = open_dataset(args.data)
     start = time.perf_counter()
     with tqdm(total=len(dataset), desc="baseline", unit="pair", file=sys.stderr, leave=False,

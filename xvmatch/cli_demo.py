@@ -15,10 +15,15 @@ import time
 from pathlib import Path
 
 from xvmatch.cli_types import int_in, seed_value, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder, claim_folder
 
 __all__ = ["EXAMPLES", "add_demo_parser"]
 
 EXAMPLES = {"demo": "xvmatch demo --out xvmatch-demo --scenes 3 --frames 2"}
+
+DEMO_COMMAND = "xvmatch demo"
+"""The owner named in the marker of a demo's folder: the demo writes only into a new or empty
+folder or one an earlier demo made (:func:`xvmatch.output_paths.claim_folder`)."""
 
 _DEMO_COUNT = int_in(1, 100, "a demonstration holds every pair in memory; for more, xvmatch "
                      "synth + baseline")
@@ -38,7 +43,8 @@ def add_demo_parser(subparsers) -> argparse.ArgumentParser:
         epilog=f"example:\n  {EXAMPLES['demo']}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--out", default="xvmatch-demo", help="output folder (default xvmatch-demo)")
+    p.add_argument("--out", default="xvmatch-demo",
+                   help="output folder: new, empty, or an earlier demo's (default xvmatch-demo)")
     p.add_argument("--scenes", type=_DEMO_COUNT, default=3,
                    help="scenes per scenario, 1..100 (default 3)")
     p.add_argument("--frames", type=_DEMO_COUNT, default=2,
@@ -75,7 +81,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     out = Path(args.out)
+    check_outputs([Output("--out", out, folder=True, files=("match.png",))],
+                  [Input("--model", None if args.model == "default" else args.model)])
+    check_own_folder(out, DEMO_COMMAND)
     matcher = load_matcher_bundle(args.model)
+    claim_folder(out, DEMO_COMMAND)
     coster = OnnxAppearanceCoster(matcher)
     config = BaselineConfig()
     rows: dict[str, dict[tuple[str, str], float]] = {}

@@ -15,6 +15,7 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 
 from xvmatch.cli_types import float_in, int_in, seed_value, thread_count, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = [
     "EXAMPLES",
@@ -104,6 +105,12 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.cvmhat}: no such folder")
     if args.width % 4:
         raise ValueError(f"--width must be a multiple of 4 (the attention heads), got {args.width}")
+    run_dir = args.run_dir if args.run_dir is not None else f"{args.out}.run"
+    check_outputs(
+        [Output("--out", args.out), Output("--run-dir", run_dir, folder=True),
+         Output("--cache", args.cache, folder=True)],
+        [Input("--cvmhat", args.cvmhat)],
+    )
     from xvmatch.training.fit_geometry import fit_geometry_cvmhat
 
     result = fit_geometry_cvmhat(
@@ -179,6 +186,11 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     if args.int8 != (args.calibration is not None):
         raise ValueError("--int8 and --calibration DATA go together")
+    check_outputs(
+        [Output("--out", args.out, folder=True)],
+        [Input("--model", None if args.model == "default" else args.model),
+         Input("--parity-data", args.parity_data), Input("--calibration", args.calibration)],
+    )
     manifest = export_bundle(args.model, args.out, parity_data=args.parity_data,
                              int8_calibration=args.calibration, progress=say)
     if not args.quiet:
@@ -243,6 +255,10 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                    "or fp32 (default: int8 when the bundle has it and the CPU has 8-bit "
                    "dot-product instructions, VNNI; else fp32)")
 
+
+DRAW_COMMAND = "xvmatch associate --draw"
+"""The owner of a ``--draw`` folder: pictures are written only into a new or empty folder or one
+an earlier ``--draw`` made (:func:`xvmatch.output_paths.claim_folder`)."""
 
 LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs", "draw",
                 "precision")
@@ -381,6 +397,8 @@ def associate_with_model(
     draw = getattr(args, "draw", None)
     if draw is not None and top_path is None:
         raise ValueError("--draw needs the images: add --top-images and --hor-images")
+    if draw is not None:
+        check_own_folder(draw, DRAW_COMMAND, "--draw")
     names = [args.model] if isinstance(args.model, str) else list(args.model)
     models = open_models(names, getattr(args, "threads", 1), getattr(args, "precision", None))
     frames = list(frames)
@@ -486,9 +504,9 @@ def _draw(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Mapping,
         picture_path,
         write_match_picture,
     )
+    from xvmatch.output_paths import claim_folder
 
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
+    out = claim_folder(folder, DRAW_COMMAND, "--draw")
     tmp = Path(tempfile.mkdtemp(prefix=".draw-", dir=out))
     try:
         written = []

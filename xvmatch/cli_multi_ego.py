@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from xvmatch.cli_types import box_id, float_in, image_size, thread_count, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_multi_ego_parser"]
 
@@ -136,12 +137,19 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     paths = [args.top, *args.hor]
     if len(set(map(str, map(Path, paths)))) != len(paths):
         raise ValueError("--top and --hor name the same file twice")
+    out = Path(args.out)
+    check_outputs(
+        [Output("--out", out, folder=True,
+                files=("top.txt", *(f"hor{k}.txt" for k in range(1, n_hor + 1))))],
+        [Input("--top", args.top), *(Input("--hor", h) for h in args.hor),
+         Input("--top-images", args.top_images),
+         *(Input("--hor-images", h) for h in args.hor_images or ()),
+         *(Input("--cameras", c) for c in args.cameras or ()),
+         Input("--model", None if args.model == "default" else args.model)],
+    )
     rows = [read_detection_rows(p) for p in paths]
     views = [r.frames for r in rows]
     frames = sorted(set().union(*views))
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {args.out}: exists and is not a folder")
     camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
                    if args.camera_id is not None else None)
     matcher = images = cameras = None

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from xvmatch.cli_types import float_in, image_size, int_in, seed_value, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
 
@@ -105,6 +106,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from xvmatch.datasets.synthetic_io import generate_dataset
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
+    check_outputs([Output("--out", args.out, folder=True)])
     config = SynthConfig(scenario=args.scenario, n_people=args.people, top_size=args.size,
                          ego_size=args.size, fps=args.fps)
     total = args.scenes * args.frames
@@ -183,24 +185,29 @@ def _resolve_pair(spec: str, scene: str | None, frame: int | None):
 def _cmd_show(args: argparse.Namespace) -> int:
     import cv2
 
+    from xvmatch.datasets.mot_boxes import atomic_write_bytes
     from xvmatch.datasets.synthetic_io import draw_pair, read_scene
 
     annotation, root, frame = _resolve_pair(args.pair, args.scene, args.frame)
     record = read_scene(annotation, root)
     if not 1 <= frame <= len(record.pairs):
         raise ValueError(f"{annotation}: frame {frame} out of range 1..{len(record.pairs)}")
-    picture = draw_pair(record.pairs[frame - 1], full_boxes=args.full_boxes)
-    if args.bits < 8:
-        drop = 8 - args.bits
-        picture = ((picture >> drop) << drop) + ((1 << drop) >> 1)
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise ValueError(f"--out {args.out}: use a .png or .jpg file name")
+    pair = record.pairs[frame - 1]
+    check_outputs([Output("--out", out)],
+                  [Input("PAIR", args.pair), Input("PAIR", annotation),
+                   Input("PAIR", pair.top.image_path), Input("PAIR", pair.ego.image_path)])
+    picture = draw_pair(pair, full_boxes=args.full_boxes)
+    if args.bits < 8:
+        drop = 8 - args.bits
+        picture = ((picture >> drop) << drop) + ((1 << drop) >> 1)
     ok, buf = cv2.imencode(out.suffix.lower(), picture, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:  # pragma: no cover
         raise OSError(f"could not encode {out}")
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_bytes(buf.tobytes())
-    tmp.replace(out)
+    # A temporary file of an unpredictable name, made exclusively beside the output, then
+    # renamed over it; removed on any failure.
+    atomic_write_bytes(out, buf.tobytes(), fsync=False)
     print(f"wrote {out} ({picture.shape[1]}x{picture.shape[0]})", file=sys.stderr)
     return 0

@@ -23,6 +23,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from xvmatch.cli_types import box_id, float_in, image_size, int_in, seed_value, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_track_parser", "evaluate_tracks_command"]
 
@@ -200,8 +201,12 @@ def _cmd_track(args: argparse.Namespace) -> int:
         if camera_rows.size == 0:
             raise ValueError(f"{args.top}: no box has the --camera-id {args.camera_id}")
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {args.out}: exists and is not a folder")
+    check_outputs(
+        [Output("--out", out, folder=True, files=("top.txt", "hor.txt"))],
+        [Input("--top", args.top), Input("--hor", args.hor),
+         Input("--top-images", args.top_images), Input("--hor-images", args.hor_images),
+         Input("--model", None if args.model == "default" else args.model)],
+    )
     images, sources, size = _open_images(args, top.frames, hor.frames)
     width = (size or args.image_size or (2688, 1512))[0]
     try:

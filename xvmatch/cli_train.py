@@ -130,6 +130,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     except ImportError as exc:  # --init imagenet without its package: one line, no traceback
         raise ValueError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
     except SystemExit as exc:  # jsonargparse reports bad configurations by exiting
+        if isinstance(exc.__context__, KeyboardInterrupt):
+            # Lightning turns Ctrl-C into sys.exit(1) after its graceful shutdown: an
+            # interruption, not a rejected configuration (exit 130 from the main entry point)
+            raise KeyboardInterrupt from None
         code = exc.code if isinstance(exc.code, int) else 2
         if code:
             print(f"xvmatch: error: training configuration {args.config} rejected (see above)",

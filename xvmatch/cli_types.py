@@ -22,7 +22,6 @@ __all__ = [
     "MAX_FRAME_OFFSET",
     "MAX_WORKERS",
     "box_id",
-    "check_output_path",
     "float_in",
     "frame_offset",
     "image_size",
@@ -190,19 +189,3 @@ def offset_value(text: str) -> int | str:
             f"expected an integer number of frames or 'auto', got {text!r}"
         ) from None
     return frame_offset(text)
-
-
-def check_output_path(path: str | None) -> None:
-    """Fail before any work when an output file cannot be written: its folder must exist and
-    be writable, and the path must not be a folder (None: no output asked for)."""
-    if path is None:
-        return
-    import os
-
-    folder = os.path.dirname(os.path.abspath(path))
-    if os.path.isdir(path):
-        raise ValueError(f"{path}: is a folder; give a file name")
-    if not os.path.isdir(folder):
-        raise ValueError(f"{path}: cannot write: the folder {folder} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise ValueError(f"{path}: cannot write: the folder {folder} is not writable")
