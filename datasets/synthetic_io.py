@@ -15,9 +15,9 @@ version it does not know. The scene file holds, per frame and view, the image pa
 field.
 
 Scene ``i`` of a dataset with seed ``S`` is drawn from ``numpy.random.default_rng([S, i])``
-alone, so the files are byte-identical for any number of workers. Every file is written
-atomically (temporary file, then rename), the manifest last: a dataset with a manifest is
-complete.
+alone, so the files are byte-identical for any number of workers. The whole folder is written
+atomically (a temporary folder beside it, moved into place at the end), the manifest last: a
+dataset with a manifest is complete, and only a folder this module wrote is ever replaced.
 
 Reading goes through :class:`SyntheticDataset` (pairs, per-scene box tracks for the box-level
 methods and the detector noise) and :func:`person_crops` (the crops the appearance branch trains
@@ -27,9 +27,12 @@ on), so training and evaluation see the same data the same way. Malformed files 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import multiprocessing
 import os
+import shutil
+import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
@@ -44,6 +47,7 @@ from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
 from xvmatch.geometry.camera import Camera
 
 __all__ = [
+    "GENERATOR",
     "MANIFEST",
     "SCHEMA_NAME",
     "SCHEMA_VERSION",
@@ -68,6 +72,9 @@ SCHEMA_NAME = "xvmatch.synthetic"
 SCHEMA_VERSION = 1
 """Version of both JSON files; bumped on any incompatible change."""
 MANIFEST = "dataset.json"
+GENERATOR = "xvmatch synth"
+"""``"generator"`` of a manifest: marks a folder this module wrote (and may replace)."""
+_OWN_ENTRIES = frozenset({MANIFEST, "annotations", "images"})
 VIEWS: tuple[str, ...] = ("top", "ego")
 """View names: the top/overview view and the egocentric view."""
 
@@ -205,6 +212,53 @@ def _write_scene_task(args: tuple) -> dict:
     return write_scene(*args)
 
 
+def _is_own_dataset(root: Path) -> bool:
+    """Whether ``root`` holds only a dataset this module wrote (its manifest and folders)."""
+    try:
+        manifest = json.loads((root / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return False
+    if not isinstance(manifest, dict) or manifest.get("schema") != SCHEMA_NAME + ".dataset":
+        return False
+    if manifest.get("generator", GENERATOR) != GENERATOR:  # absent: written before the mark
+        return False
+    return all(p.name in _OWN_ENTRIES for p in root.iterdir())
+
+
+def _check_output_folder(root: Path) -> None:
+    """Refuse a target that is a file, or a non-empty folder that is not our own dataset."""
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"{os.fspath(root)}: exists and is not a directory")
+    if not root.is_dir() or not any(root.iterdir()):
+        return
+    if not (root / MANIFEST).is_file():
+        raise ValueError(f"{os.fspath(root)}: not empty and not a synthetic dataset "
+                         f"(no {MANIFEST}); choose an empty or new folder")
+    if not _is_own_dataset(root):
+        raise ValueError(f"{os.fspath(root)}: not a dataset written by {GENERATOR} (foreign "
+                         f"{MANIFEST} or other files beside it); choose an empty or new folder")
+
+
+def _move_into_place(tmp: Path, root: Path) -> None:
+    """Replace ``root`` (absent, empty, or our own dataset) by the finished folder ``tmp``."""
+    _check_output_folder(root)  # again: the folder may have changed while rendering
+    old = None
+    if root.is_dir():
+        if any(root.iterdir()):
+            old = root.with_name(f"{tmp.name}.old")
+            root.rename(old)
+        else:
+            root.rmdir()
+    try:
+        tmp.rename(root)
+    except BaseException:
+        if old is not None and not root.exists():
+            old.rename(root)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 def generate_dataset(
     root: str | os.PathLike,
     config: SynthConfig,
@@ -216,11 +270,17 @@ def generate_dataset(
     difficulty: Difficulty | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> Path:
-    """Render a whole dataset into ``root`` and write its manifest last.
+    """Render a whole dataset into ``root``, atomically as a folder.
+
+    The scenes and the manifest are written into a temporary folder beside ``root``, which is
+    moved into place at the end: an interrupted run leaves ``root`` as it was, and a re-run
+    replaces the whole previous dataset (no stale scenes stay beside the new manifest).
 
     Args:
         root: output folder: created if missing; if it exists it must be empty or hold a
-            previous dataset (``dataset.json``), whose files are overwritten.
+            previous dataset written by this function (nothing but its manifest, naming
+            :data:`GENERATOR` and the format, and its ``annotations``/``images`` folders),
+            which is replaced.
         config: scenario configuration.
         n_scenes: number of scenes (>= 1).
         n_frames: frames per scene (>= 1).
@@ -240,13 +300,31 @@ def generate_dataset(
         raise ValueError(f"workers must be >= 1, got {workers}")
     difficulty = Difficulty() if difficulty is None else difficulty
     root = Path(root)
-    if root.exists() and not root.is_dir():
-        raise ValueError(f"{os.fspath(root)}: exists and is not a directory")
-    if root.is_dir() and any(root.iterdir()) and not (root / MANIFEST).is_file():
-        raise ValueError(f"{os.fspath(root)}: not empty and not a synthetic dataset "
-                         f"(no {MANIFEST}); choose an empty or new folder")
-    root.mkdir(parents=True, exist_ok=True)
-    tasks = [(root, config, i, int(n_frames), int(seed), difficulty) for i in range(n_scenes)]
+    _check_output_folder(root)
+    root.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.synth-", dir=root.parent))
+    try:
+        _render_into(tmp, config, int(n_scenes), int(n_frames), int(seed), int(workers),
+                     difficulty, progress)
+        _move_into_place(tmp, root)
+    except BaseException:  # interrupted or failed: leave no half-written folder behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return root / MANIFEST
+
+
+def _render_into(
+    root: Path,
+    config: SynthConfig,
+    n_scenes: int,
+    n_frames: int,
+    seed: int,
+    workers: int,
+    difficulty: Difficulty,
+    progress: Callable[[int], None] | None,
+) -> None:
+    """Render every scene into ``root`` and write the manifest last."""
+    tasks = [(root, config, i, n_frames, seed, difficulty) for i in range(n_scenes)]
     entries: list[dict] = []
     if workers == 1:
         for task in tasks:
@@ -257,7 +335,7 @@ def generate_dataset(
         # "spawn": a forked child would inherit OpenCV's thread pool in whatever state the
         # parent left it, which can deadlock; fresh interpreters are safe and cost ~1 s.
         context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=int(workers), mp_context=context,
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                  initializer=_worker_init) as pool:
             futures = [pool.submit(_write_scene_task, task) for task in tasks]
             for future in as_completed(futures):
@@ -268,17 +346,16 @@ def generate_dataset(
     manifest = {
         "schema": SCHEMA_NAME + ".dataset",
         "version": SCHEMA_VERSION,
+        "generator": GENERATOR,
         "scenario": config.scenario,
-        "seed": int(seed),
-        "n_scenes": int(n_scenes),
-        "frames_per_scene": int(n_frames),
+        "seed": seed,
+        "n_scenes": n_scenes,
+        "frames_per_scene": n_frames,
         "config": _config_dict(config),
         "difficulty": json.loads(json.dumps(difficulty.to_dict())),
         "scenes": entries,
     }
-    path = root / MANIFEST
-    atomic_write_text(path, json.dumps(manifest, indent=1) + "\n")
-    return path
+    atomic_write_text(root / MANIFEST, json.dumps(manifest, indent=1) + "\n")
 
 
 # --------------------------------------------------------------------------------------------
@@ -583,6 +660,30 @@ class SyntheticDataset:
     def __len__(self) -> int:
         """Number of labelled pairs."""
         return sum(e[2] for e in self._entries)
+
+    def content_sha256(self) -> str:
+        """SHA-256 of the dataset's content: the manifest, every scene's annotation file and
+        every image under ``images/``, each with its path relative to the folder.
+
+        It keys results computed from the data (the ablation's cells): a folder re-rendered at
+        the same path gets another key, and a copied or moved folder keeps its key.
+
+        Raises:
+            OSError: a file cannot be read.
+        """
+        files = [MANIFEST, *(annotation for _, annotation, _ in self._entries)]
+        images = self.root / "images"
+        if images.is_dir():
+            files += sorted(p.relative_to(self.root).as_posix() for p in images.rglob("*")
+                            if p.is_file())
+        digest = hashlib.sha256()
+        for rel in files:
+            path = self.root / rel
+            digest.update(f"{rel}\0{path.stat().st_size}\0".encode())
+            with open(path, "rb") as handle:
+                while chunk := handle.read(1 << 20):
+                    digest.update(chunk)
+        return digest.hexdigest()
 
     def scene(self, name: str) -> SceneRecord:
         """The parsed scene ``name``."""

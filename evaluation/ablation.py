@@ -14,6 +14,8 @@ pictures (:mod:`~xvmatch.evaluation.ablation_report`, :mod:`~xvmatch.evaluation.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import multiprocessing
 import os
 import re
@@ -58,6 +60,11 @@ from xvmatch.evaluation.ablation_report import (
 )
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, SWEEPS, Setting, grid_settings
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
+
+REPORT_COMMAND = "xvmatch ablate"
+REPORT_MARKER = ".xvmatch-output.json"
+"""The file ``ablate`` leaves in a report folder it made, ``{"written_by": "xvmatch ablate"}``
+(the marker of :mod:`xvmatch.output_paths`); it replaces only such a folder."""
 
 __all__ = [
     "MAX_SEEDS",
@@ -201,6 +208,7 @@ def plan_ablation(options: AblationOptions, matcher: LearnedMatcher) -> Ablation
         frames = [int(e["n_frames"]) for e in dataset.manifest["scenes"]]
         scenarios.append({
             "label": label, "data": os.fspath(folder), "scenario": dataset.scenario,
+            "sha256": dataset.content_sha256(),
             "scenes": len(names),
             "test_pairs": int(sum(f for f, v in zip(frames, is_val, strict=True) if not v)),
             "val_pairs": int(sum(f for f, v in zip(frames, is_val, strict=True) if v)),
@@ -221,18 +229,20 @@ def plan_ablation(options: AblationOptions, matcher: LearnedMatcher) -> Ablation
             n_frames += len(sorted(set(top) | set(hor))[:: int(options.cvmhat_step)])
         cvmhat = {"folder": os.fspath(Path(options.cvmhat).resolve()),
                   "step": int(options.cvmhat_step), "sequences": len(names),
-                  "frames": n_frames}
+                  "frames": n_frames, "sha256": _cvmhat_sha256(options.cvmhat, names)}
     manifest = matcher.bundle.manifest
     model = options.model if options.model == "default" else os.fspath(
         Path(options.model).resolve())
+    # The cells are keyed on the data's content, not its path: a folder re-rendered at the
+    # same path gives other cells, a copied or moved one the same.
     record = {
-        "data": [s["data"] for s in scenarios],
+        "data": [f"{s['label']} sha256:{s['sha256']}" for s in scenarios],
         "model": model,
         "matcher_sha256": manifest.matcher_sha256,
         "appearance_sha256": manifest.appearance.sha256 if manifest.appearance else None,
         "sweep": options.sweep,
         "seeds": int(options.seeds),
-        "cvmhat": cvmhat["folder"] if cvmhat else None,
+        "cvmhat": f"sha256:{cvmhat['sha256']}" if cvmhat else None,
         "cvmhat_step": cvmhat["step"] if cvmhat else None,
     }
     settings = grid_settings(options.sweep)
@@ -252,13 +262,47 @@ def plan_ablation(options: AblationOptions, matcher: LearnedMatcher) -> Ablation
     return AblationPlan(options, record, scenarios, settings, cells, bundle, cvmhat)
 
 
+def _cvmhat_sha256(folder: str | os.PathLike, names: Sequence[str]) -> str:
+    """SHA-256 of the CVMHAT box files the ablation reads (name and bytes of each)."""
+    digest = hashlib.sha256()
+    for name in names:
+        for view in ("top", "hor"):
+            path = Path(folder) / f"{name}_{view}.txt"
+            data = path.read_bytes()
+            digest.update(f"{path.name}\0{len(data)}\0".encode())
+            digest.update(data)
+    return digest.hexdigest()
+
+
+def _is_own_report(out: Path) -> bool:
+    """Whether ``out`` holds the marker of ``xvmatch ablate`` (or, from before the marker, at
+    least one stored cell and nothing but cells in ``cells/``)."""
+    try:
+        record = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        record = None
+    if isinstance(record, dict):
+        return record.get("written_by") == REPORT_COMMAND
+    try:
+        return bool(load_cells(out))
+    except ValueError:
+        return False
+
+
 def _check_out(out: Path) -> None:
+    """Refuse a report folder ``ablate`` did not make: it replaces ``report.md`` and more."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a folder; give a report folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / "cells").is_dir() and not (
-            out / "report.md").is_file():
-        raise ValueError(f"{out}: not empty and not an ablation report; choose an empty or new "
-                         "folder")
+    if out.is_dir() and any(out.iterdir()) and not _is_own_report(out):
+        raise ValueError(f"{out}: not empty and not an ablation report made by "
+                         f"{REPORT_COMMAND} (no {REPORT_MARKER}); choose an empty or new folder")
+
+
+def _claim_out(out: Path) -> None:
+    """Create the report folder and mark it as ``ablate``'s own."""
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / REPORT_MARKER).is_file():
+        atomic_write_text(out / REPORT_MARKER, json.dumps({"written_by": REPORT_COMMAND}) + "\n")
 
 
 _MATCHERS: dict[str, LearnedMatcher] = {}
@@ -376,7 +420,9 @@ def _example_figures(plan: AblationPlan, records: dict[str, dict], rows: list[di
             position = [name for name, _ in cells].index(d.cell)
             setting, other = plan.settings[position], best[position]
             rec = cells[position][1]
-            sample = frame_sample(rec["data"], setting, 0, d.scene, d.frame)
+            spec = next(c for c in plan.cells if isinstance(c, CellSpec) and c.name == d.cell)
+            data = os.fspath(spec.render_dir) if setting.renders else spec.data  # not rec's
+            sample = frame_sample(data, setting, 0, d.scene, d.frame)
             where = f"{sc['label']}, {setting.label}, {d.scene} frame {d.frame}"
             titles = [f"{where}: learned fusion (images + cameras), Eq. 9 {d.acc_a:.2f}",
                       f"{where}: {row_by_key(other).label}, Eq. 9 {d.acc_b:.2f}"]
@@ -428,7 +474,7 @@ def run_ablation(options: AblationOptions, command: str,
     names = {c.name for c in plan.cells}
     records = {k: v for k, v in stored.items() if k in names}
     todo = [c for c in plan.cells if c.name not in records]
-    out.mkdir(parents=True, exist_ok=True)
+    _claim_out(out)
     done = len(plan.cells) - len(todo)
     if progress is not None:
         progress(done, len(plan.cells))

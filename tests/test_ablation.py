@@ -185,6 +185,57 @@ def test_foreign_output_folder(tiny_synth, tiny_models, tmp_path, capsys) -> Non
     assert code == 2 and "not an ablation report" in err
 
 
+def test_a_foreign_report_md_is_not_replaced(tiny_synth, tiny_models, tmp_path, capsys) -> None:
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "report.md").write_text("my own report\n")
+    code, err = _ablate(capsys, "--data", str(tiny_synth["drone"]), "--model",
+                        str(tiny_models["full_bundle"]), "--out", str(tmp_path / "r"))
+    assert code == 2 and err.count("\n") == 1 and "not an ablation report" in err
+    assert (tmp_path / "r" / "report.md").read_text() == "my own report\n"
+    assert [p.name for p in (tmp_path / "r").iterdir()] == ["report.md"]
+
+
+def test_the_report_folder_is_marked_as_ablate_s_own(report: Path) -> None:
+    marker = json.loads((report / ".xvmatch-output.json").read_text())
+    assert marker == {"written_by": "xvmatch ablate"}
+
+
+def test_cells_are_keyed_on_the_data_content_not_its_path(tiny_synth, tiny_models,
+                                                          tmp_path) -> None:
+    import shutil
+
+    from xvmatch.datasets.synthetic_io import generate_dataset
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+    from xvmatch.evaluation.ablation import AblationOptions, plan_ablation
+    from xvmatch.evaluation.ablation_cells import check_cells
+    from xvmatch.inference.learned_association import load_matcher_bundle
+
+    matcher = load_matcher_bundle(str(tiny_models["full_bundle"]), threads=1)
+    data = tmp_path / "a" / "drone"
+    shutil.copytree(tiny_synth["drone"], data)
+
+    def record(folder: Path) -> dict:
+        options = AblationOptions(data=(str(folder),), model=str(tiny_models["full_bundle"]),
+                                  out=str(tmp_path / "r"))
+        return plan_ablation(options, matcher).record
+
+    first = record(data)
+    moved = tmp_path / "b" / "drone"
+    shutil.copytree(data, moved)
+    assert record(moved) == first  # same content elsewhere: the same cells
+    cells = {"drone__gt__seed0": {"options": first}}
+    check_cells(tmp_path / "r", cells, record(moved))
+    # Re-rendered at the same path: other cells, and the stored ones are refused.
+    source = SyntheticDataset(data).manifest
+    config = SynthConfig(scenario="drone", top_size=tuple(source["config"]["top_size"]),
+                         ego_size=tuple(source["config"]["ego_size"]))
+    generate_dataset(data, config, n_scenes=2, n_frames=1, seed=99)
+    again = record(data)
+    assert again["data"] != first["data"]
+    with pytest.raises(ValueError, match=r"holds cells of other options \(data "):
+        check_cells(tmp_path / "r", cells, again)
+
+
 @pytest.mark.parametrize("option", [("--sweep", "weather"), ("--seeds", "0"), ("--seeds", "21"),
                                     ("--workers", "0"), ("--cvmhat-step", "0")])
 def test_bad_options_exit_2_before_any_work(tiny_synth, tmp_path, capsys, option) -> None:

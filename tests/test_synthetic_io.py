@@ -146,6 +146,54 @@ def test_refuses_foreign_folder(tmp_path: Path) -> None:
         generate_dataset(tmp_path, CONFIG, n_scenes=1, n_frames=1, seed=0)
 
 
+def test_refuses_foreign_manifest_and_extra_files(tmp_path: Path) -> None:
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / MANIFEST).write_text('{"name": "someone else\'s dataset"}\n')
+    with pytest.raises(ValueError, match=r"foreign.*not a dataset written by xvmatch synth"):
+        generate_dataset(foreign, CONFIG, n_scenes=1, n_frames=1, seed=0)
+    assert (foreign / MANIFEST).read_text() == '{"name": "someone else\'s dataset"}\n'
+    ours = tmp_path / "ours"
+    generate_dataset(ours, CONFIG, n_scenes=1, n_frames=1, seed=0)
+    (ours / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match="not a dataset written by xvmatch synth"):
+        generate_dataset(ours, CONFIG, n_scenes=1, n_frames=1, seed=1)
+    assert (ours / "notes.txt").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["foreign", "ours"]
+
+
+def test_rerun_replaces_the_whole_dataset(tmp_path: Path) -> None:
+    root = tmp_path / "data"
+    generate_dataset(root, CONFIG, n_scenes=3, n_frames=1, seed=0)
+    manifest = json.loads((root / MANIFEST).read_text())
+    assert manifest["generator"] == "xvmatch synth"
+    generate_dataset(root, CONFIG, n_scenes=1, n_frames=1, seed=1)
+    assert sorted(p.name for p in (root / "annotations").iterdir()) == ["s00000.json"]
+    assert sorted(p.name for p in (root / "images" / "top").iterdir()) == [
+        "s00000_000001.jpg"]
+    assert len(SyntheticDataset(root)) == 1
+    assert [p.name for p in tmp_path.iterdir()] == ["data"]  # no temporary folder left
+
+
+def test_interrupted_run_leaves_the_target_as_it_was(tmp_path: Path) -> None:
+    def interrupt(_: int) -> None:
+        raise KeyboardInterrupt
+
+    new = tmp_path / "new"
+    with pytest.raises(KeyboardInterrupt):
+        generate_dataset(new, CONFIG, n_scenes=2, n_frames=1, seed=0, progress=interrupt)
+    assert list(tmp_path.iterdir()) == []  # neither the target nor a temporary folder
+    old = tmp_path / "old"
+    generate_dataset(old, CONFIG, n_scenes=2, n_frames=1, seed=0)
+    before = _digest(old)
+    with pytest.raises(KeyboardInterrupt):
+        generate_dataset(old, CONFIG, n_scenes=3, n_frames=1, seed=5, progress=interrupt)
+    assert _digest(old) == before
+    assert [p.name for p in tmp_path.iterdir()] == ["old"]
+    generate_dataset(old, CONFIG, n_scenes=1, n_frames=1, seed=5)  # and the next run works
+    assert len(SyntheticDataset(old)) == 1
+
+
 def _cli(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="xvmatch")
     sub = parser.add_subparsers(dest="command", required=True)
