@@ -329,12 +329,16 @@ def write_match_picture(path: str | os.PathLike, picture: np.ndarray) -> None:
         picture: (H, W, 3) uint8 BGR picture.
 
     Raises:
-        ValueError: a path not ending in ``.png``, a picture that is not non-empty (H, W, 3)
-            uint8, or a picture OpenCV cannot encode.
+        ValueError: a path not ending in ``.png``, a path that exists and is not a regular file
+            (a folder, a FIFO, a device: renaming over it would replace it), a picture that is
+            not non-empty (H, W, 3) uint8, or a picture OpenCV cannot encode.
     """
     target = Path(path)
     if target.suffix.lower() != ".png":
         raise ValueError(f"path must end in .png (the pictures are PNG), got {str(target)!r}")
+    if target.exists() and not target.is_file():
+        raise ValueError(f"{os.fspath(target)}: exists and is not a regular file; refusing to "
+                         "write a picture over it")
     image = _check_image(picture, "picture")
     ok, encoded = cv2.imencode(".png", np.ascontiguousarray(image))
     if not ok:

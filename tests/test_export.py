@@ -178,6 +178,48 @@ def test_exporting_into_something_else_is_refused(tmp_path, tiny_models, kind):
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
 
 
+@pytest.mark.parametrize("case", ["foreign manifest", "extra file", "symlink"])
+def test_exporting_over_a_folder_it_did_not_write_is_refused(tmp_path, tiny_models, case):
+    # issue 28: a user's folder holding a manifest.json, or a bundle with a file the export did
+    # not write, must not be emptied; only a bundle of exactly its own files is replaced.
+    out = tmp_path / "project"
+    if case == "foreign manifest":
+        out.mkdir()
+        (out / "manifest.json").write_text('{"name": "my project"}\n')
+        (out / "notes.txt").write_text("mine\n")
+    elif case == "extra file":
+        shutil.copytree(tiny_models["boxes_bundle"], out)
+        (out / "notes.txt").write_text("mine\n")
+    else:
+        (tmp_path / "real").mkdir()
+        out.symlink_to(tmp_path / "real")
+    before = sorted((p.relative_to(tmp_path), p.is_file() and p.read_bytes())
+                    for p in tmp_path.rglob("*"))
+    with pytest.raises(ExportError, match=r"project: exists and is not a bundle folder"):
+        export_bundle(tiny_models["boxes"], out)
+    assert sorted((p.relative_to(tmp_path), p.is_file() and p.read_bytes())
+                  for p in tmp_path.rglob("*")) == before
+
+
+def test_export_command_refuses_bad_outputs_at_once(tmp_path, tiny_models, capsys):
+    os.mkfifo(tmp_path / "pipe")
+    model = tmp_path / "m.pt"
+    shutil.copy(tiny_models["boxes"], model)
+    for out, words in ((tmp_path / "pipe", "exists and is not a folder"),
+                       (tmp_path, "holds the input --model"),
+                       (tmp_path / "sub", None)):
+        if words is None:  # a user's folder with a manifest.json of its own
+            out.mkdir()
+            (out / "manifest.json").write_text("{}\n")
+            words = "exists and is not a bundle folder"
+        rc = main(["export", "--model", str(model), "--out", str(out)])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and words in err, err
+    assert stat.S_ISFIFO((tmp_path / "pipe").lstat().st_mode)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["m.pt", "manifest.json", "pipe",
+                                                           "sub"]
+
+
 def test_the_bundle_folder_follows_the_umask(exported, tmp_path):
     probe = tmp_path / "probe"
     probe.mkdir()

@@ -172,6 +172,20 @@ def test_write_match_picture_rejects_bad_input(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_write_match_picture_never_replaces_a_fifo_or_a_folder(tmp_path: Path) -> None:
+    import os
+    import stat
+
+    os.mkfifo(tmp_path / "pipe.png")
+    (tmp_path / "dir.png").mkdir()
+    for name in ("pipe.png", "dir.png"):
+        with pytest.raises(ValueError, match=f"{name}: exists and is not a regular file"):
+            write_match_picture(tmp_path / name, _image(4, 4))
+    assert stat.S_ISFIFO((tmp_path / "pipe.png").lstat().st_mode)
+    assert (tmp_path / "dir.png").is_dir()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.png", "pipe.png"]
+
+
 def test_picture_path() -> None:
     assert picture_path(Path("out"), 12) == Path("out/frame_000012.png")
     assert picture_path("out", 0).name == "frame_000000.png"

@@ -89,10 +89,11 @@ def _kind(mode: int) -> str:
 
 
 def _stat(path: str, option: str) -> os.stat_result | None:
-    """``os.stat`` through symlinks; None when nothing (or a dangling link) is there."""
+    """``os.stat`` through symlinks; None when nothing (or a dangling link) is there, or a
+    parent is not a folder."""
     try:
         return os.stat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):  # the folder check names the cause
         return None
     except OSError as exc:
         raise OutputPathError(f"{option} {path}: cannot write ({exc.strerror or exc})") from None
@@ -197,6 +198,7 @@ def _check_folder(out: Output, inputs: list[_Seen]) -> None:
         if seen.folder and _inside(real, seen.real):
             raise OutputPathError(f"{what}: is or lies in the input folder {seen.option} "
                                   f"{seen.given}; choose another folder")
+    for seen in inputs:
         if _inside(seen.real, real):
             raise OutputPathError(f"{what}: holds the input {seen.option} {seen.given}; choose "
                                   "another folder")
