@@ -658,7 +658,7 @@ def clip_cost_curves(
     """``(K, N)`` raw cost curves: the mean best Phi of each clip (horizontal frame numbers)
     at each offset (Eq. 12 averaged over the clip, Fig. 5); +inf where most frames found no
     top frame or no match. ``workers`` processes share the (clip, offset) grid; the curves
-    are the same for any number of workers."""
+    are the same for any number of workers, and Ctrl-C stops the workers at once."""
     if int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     offsets = np.asarray(offsets, dtype=int).ravel()
@@ -670,17 +670,14 @@ def clip_cost_curves(
             curves[k] = _clip_curve(top, hor, clip, offsets.tolist(), hor_width, params,
                                     camera_id)
         return curves
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from xvmatch.worker_pool import worker_pool
 
     # About four tasks per worker, so that uneven tasks (crowded frames) still balance.
     pieces = max(1, -(-4 * int(workers) // len(clips)))
     tasks = _curve_tasks(top, hor, clips, offsets, pieces)
     index = {int(o): i for i, o in enumerate(offsets)}
-    # "spawn" as elsewhere in the package: a forked child may inherit a parent's thread pools.
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(int(workers), len(tasks)),
-                             mp_context=context) as pool:
+    # Spawned workers that ignore Ctrl-C; an interrupt stops them at once (worker_pool).
+    with worker_pool(min(int(workers), len(tasks))) as pool:
         futures = [
             pool.submit(_clip_curve, sub_top, sub_hor, clip, chunk, hor_width, params, camera_id)
             for _, chunk, (sub_top, sub_hor, clip) in tasks

@@ -205,21 +205,16 @@ def _feature_stream(
         for tb, hb, cam, cams in inputs:
             yield _frame_features(tb, hb, size, configs, cam, cams, mirror)
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from xvmatch.worker_pool import worker_pool
 
     chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
-    # "spawn": a forked child may inherit onnxruntime's or OpenCV's thread pools and hang.
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(int(workers), len(chunks)),
-                             mp_context=context) as pool:
+    # Spawned workers ("spawn": a forked child may inherit onnxruntime's or OpenCV's thread
+    # pools and hang) that ignore Ctrl-C; closing the stream early (an error or an interrupt
+    # in the caller raises GeneratorExit here) cancels the rest and stops them at once.
+    with worker_pool(min(int(workers), len(chunks))) as pool:
         futures = [pool.submit(_features_of_chunk, c, size, configs, mirror) for c in chunks]
-        try:
-            for future in futures:
-                yield from future.result()
-        finally:
-            for future in futures:
-                future.cancel()
+        for future in futures:
+            yield from future.result()
 
 
 def associate_sequence_learned(

@@ -17,7 +17,6 @@ the view), so that the result can name each input row; no id is ever compared ac
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,6 +44,7 @@ from xvmatch.inference.track_mip import ClusterSolution, solve_four_clusters
 from xvmatch.inference.track_spectral import spectral_solution
 from xvmatch.inference.track_stitching import stitch_windows
 from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips, view_tracklets
+from xvmatch.worker_pool import worker_pool
 
 __all__ = [
     "SOLVERS",
@@ -186,7 +186,9 @@ def associate_frames(
     chunks = [(items[k:k + chunk], hor_width, params) for k in range(0, len(items), chunk)]
     out: dict[int, list[tuple[int, int]]] = {}
     if workers > 1 and len(chunks) > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        # Forked (the platform default, as before) workers that ignore Ctrl-C; an interrupt
+        # stops them at once instead of waiting for the queued chunks (worker_pool).
+        with worker_pool(workers, start_method=None) as pool:
             results = pool.map(_associate_chunk, chunks)
             done = progress(results, len(chunks), "associate") if progress else results
             for res in done:

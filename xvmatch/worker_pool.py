@@ -1,0 +1,66 @@
+"""Process pools that stop at once on Ctrl-C: the one way the package starts worker processes.
+
+``with ProcessPoolExecutor(...)`` waits on exit for every task already queued, so a Ctrl-C
+during a long search took tens of seconds, and a second Ctrl-C inside that wait could deadlock
+the interpreter's exit. :func:`worker_pool` gives the same executor, but its workers ignore
+SIGINT (the terminal sends it to the whole process group; only the parent should act on it)
+and, when the ``with`` block is left by any exception (``KeyboardInterrupt`` included), the
+pending tasks are cancelled and the workers terminated before the exception goes on.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+
+__all__ = ["stop_pool", "worker_pool"]
+
+
+def _ignore_sigint() -> None:
+    """Worker initializer: leave Ctrl-C to the parent, which stops the workers itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel ``pool``'s pending tasks and terminate its workers now, without waiting for the
+    tasks they are running (their results are dropped)."""
+    # The executor has no public handle on its processes; _processes is the only one.
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    # Terminate first: a second Ctrl-C arriving during what follows then finds no worker left
+    # that the interpreter's exit would wait for.
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.join(timeout=1.0)
+        if process.is_alive():
+            process.kill()
+            process.join(timeout=1.0)
+
+
+@contextmanager
+def worker_pool(workers: int, start_method: str | None = "spawn") -> Iterator[ProcessPoolExecutor]:
+    """A ``ProcessPoolExecutor`` of ``workers`` processes that ignore SIGINT, stopped at once
+    (:func:`stop_pool`) when the block raises, and shut down normally when it completes.
+
+    Args:
+        workers: number of worker processes (>= 1).
+        start_method: ``"spawn"`` (default: a forked child may inherit the parent's thread
+            pools, e.g. onnxruntime's or OpenCV's, and hang), ``"fork"``, or None for the
+            platform's default.
+    """
+    if int(workers) < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    context = multiprocessing.get_context(start_method)
+    pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=context,
+                               initializer=_ignore_sigint)
+    try:
+        yield pool
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
