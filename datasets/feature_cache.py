@@ -13,6 +13,9 @@ import hashlib
 import io
 import json
 import os
+import warnings
+import zipfile
+import zlib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -36,6 +39,7 @@ from xvmatch.geometry.spatial_features import (
 __all__ = [
     "FeatureSet",
     "FrameJob",
+    "StaleFeaturesError",
     "cache_key",
     "cached_frame_features",
     "cached_sequence_features",
@@ -115,15 +119,43 @@ class FeatureSet:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> FeatureSet:
-        """Read a file written by :meth:`save`; a different feature version is an error."""
-        with np.load(path) as data:
-            version = int(data["feature_version"])
-            if version != FEATURE_VERSION:
-                raise ValueError(
-                    f"{os.fspath(path)}: feature version {version}, this code computes "
-                    f"{FEATURE_VERSION}; delete the cache file to recompute"
-                )
-            return cls(data["frames"], data["shapes"], {k: data[k] for k in _ARRAYS})
+        """Read a file written by :meth:`save`.
+
+        Raises:
+            ValueError: a different feature version, or a truncated or corrupt file (one line
+                naming it).
+            OSError: the file cannot be opened.
+        """
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                version = int(data["feature_version"])
+                if version != FEATURE_VERSION:
+                    raise StaleFeaturesError(
+                        f"{os.fspath(path)}: feature version {version}, this code computes "
+                        f"{FEATURE_VERSION}; delete the cache file to recompute"
+                    )
+                return cls(data["frames"], data["shapes"], {k: data[k] for k in _ARRAYS})
+        except (KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            raise ValueError(f"{os.fspath(path)}: not a readable feature cache file "
+                             f"({type(exc).__name__}: {first})") from None
+
+
+def _load_cached(path: Path) -> FeatureSet | None:
+    """A cache file's features, or None (with a warning naming it) when it cannot be read."""
+    if not path.exists():
+        return None
+    try:
+        return FeatureSet.load(path)
+    except StaleFeaturesError:  # written by an earlier xvmatch: expected after an upgrade
+        return None
+    except (OSError, ValueError) as exc:
+        warnings.warn(f"{exc}; rebuilding it", stacklevel=3)
+        return None
+
+
+class StaleFeaturesError(ValueError):
+    """A feature file of another feature version (recomputed, never mixed)."""
 
 
 class _BoxesLike:
@@ -251,11 +283,9 @@ def cached_sequence_features(
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     key = cache_key(top, hor, hor_size, config, camera_id, order)
     path = folder / "geometry_features" / f"{key}.npz"
-    if path.exists():
-        try:
-            return FeatureSet.load(path)
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable or stale: recompute and overwrite
+    stored = _load_cached(path)  # unreadable or stale: recomputed and overwritten
+    if stored is not None:
+        return stored
     feats = sequence_features(
         top, hor, hor_size, config, camera_id, order, workers=workers, progress=progress
     )
@@ -319,13 +349,9 @@ def cached_frame_features(
     configuration and the feature version). The result is the same for any ``workers``."""
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     path = folder / "frame_features" / f"{_jobs_key(jobs, config)}.npz"
-    if path.exists():
-        try:
-            stored = FeatureSet.load(path)
-            if len(stored) == len(jobs):
-                return [stored.frame(k) for k in range(len(stored))]
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable or stale: recompute and overwrite
+    stored = _load_cached(path)  # unreadable or stale: recomputed and overwritten
+    if stored is not None and len(stored) == len(jobs):
+        return [stored.frame(k) for k in range(len(stored))]
     tasks = [(list(jobs[i : i + chunk]), config.to_dict()) for i in range(0, len(jobs), chunk)]
     if workers > 1 and len(tasks) > 1:
         import multiprocessing

@@ -11,8 +11,11 @@ The deployed matcher takes the images of each view as ``--top-images PATH`` /
   reports the frame the images lack);
 * one image file, which serves a single frame (see :func:`open_frames` for which one);
 * a video file read with OpenCV, video frame index 0 being frame 1 (MOT frame numbers are
-  1-based). Frames are expected in ascending order and read sequentially; asking for an earlier
-  frame re-opens the video and reads up to it again (correct, but slow).
+  1-based). A file is taken for a video only when its first bytes are a known container's
+  signature (:func:`video_container`: MP4/MOV, AVI, Matroska/WebM, MPEG-TS/PS, FLV, ...):
+  FFmpeg would otherwise "decode" a text file as a picture of its characters. Frames are
+  expected in ascending order and read sequentially; asking for an earlier frame re-opens the
+  video and reads up to it again (correct, but slow).
 
 Every problem with the user's input is a :class:`FrameSourceError` whose message is one line
 naming the path (and the frame when there is one), so the command can stop with it as is.
@@ -34,12 +37,15 @@ from types import TracebackType
 import cv2
 import numpy as np
 
+from xvmatch.datasets.image_size import ImageTooLargeError, check_image_size
+
 __all__ = [
     "FrameImage",
     "FrameSource",
     "FrameSourceError",
     "check_frames",
     "open_frames",
+    "video_container",
 ]
 
 IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
@@ -221,7 +227,9 @@ def _decode(path: str, frame: int | None = None) -> np.ndarray:
     """Decode one image file to ``(H, W, 3)`` uint8 BGR (grey and alpha images are converted).
 
     Reads the bytes with numpy rather than ``cv2.imread`` so that unreadable files and
-    undecodable ones get different messages, and non-ASCII paths work on every platform.
+    undecodable ones get different messages, and non-ASCII paths work on every platform; an
+    image whose header declares too many pixels is refused before decoding
+    (:func:`~xvmatch.datasets.image_size.check_image_size`).
     """
     try:
         data = np.fromfile(path, dtype=np.uint8)
@@ -229,7 +237,16 @@ def _decode(path: str, frame: int | None = None) -> np.ndarray:
         raise FrameSourceError(
             f"{path}: cannot read: {exc.strerror or exc}", path=path, frame=frame
         ) from None
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    try:
+        check_image_size(data, path)  # a decompression bomb: refused before decoding
+    except ImageTooLargeError as exc:
+        raise FrameSourceError(str(exc), path=path, frame=frame) from None
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    except cv2.error as exc:  # e.g. OpenCV's own pixel limit, for formats read by none above
+        lines = [line for line in str(exc).splitlines() if line.strip()]
+        raise FrameSourceError(f"{path}: not a decodable image ({lines[-1] if lines else exc})",
+                               path=path, frame=frame) from None
     if image is None:
         which = f" (frame {frame})" if frame is not None else ""
         raise FrameSourceError(f"{path}: not a decodable image{which}", path=path, frame=frame)
@@ -246,6 +263,67 @@ def _check_size(image: np.ndarray, size: tuple[int, int], where: str, frame: int
             frame=frame,
         )
     return image
+
+
+_QUICKTIME_ATOMS = (b"ftyp", b"moov", b"mdat", b"wide", b"free", b"skip", b"pnot")
+_TS_PACKET, _M2TS_PACKET = 188, 192
+
+
+def video_container(head: bytes) -> str | None:
+    """The video container a file's first bytes announce, or None for none known.
+
+    FFmpeg (behind ``cv2.VideoCapture``) probes any file and decodes some that are no video at
+    all (a text file as "tty" art), so a file is read as a video only when its first bytes are
+    a known container's signature. ``head``: at least the first 400 bytes when the file has
+    them (an MPEG transport stream is recognised by three packets' sync bytes).
+    """
+    if len(head) >= 8 and head[4:8] in _QUICKTIME_ATOMS:
+        return "MP4/MOV"
+    if head[:4] == b"RIFF" and head[8:12] in (b"AVI ", b"AVIX"):
+        return "AVI"
+    if head[:4] == b"\x1a\x45\xdf\xa3":
+        return "Matroska/WebM"
+    if head[:4] == b"\x00\x00\x01\xba":
+        return "MPEG-PS"
+    if head[:4] == b"\x00\x00\x01\xb3":
+        return "MPEG video"
+    if head[:4] == b"\x00\x00\x00\x01" or head[:3] == b"\x00\x00\x01":
+        return "H.264/H.265 stream"
+    for step, first in ((_TS_PACKET, 0), (_M2TS_PACKET, 4)):
+        syncs = [first + k * step for k in range(3)]
+        if len(head) > syncs[-1] and all(head[i] == 0x47 for i in syncs):
+            return "MPEG-TS"
+    if head[:3] == b"FLV":
+        return "FLV"
+    if head[:8] == b"\x30\x26\xb2\x75\x8e\x66\xcf\x11":
+        return "ASF/WMV"
+    if head[:4] == b"OggS":
+        return "Ogg"
+    if head[:9] == b"YUV4MPEG2":
+        return "Y4M"
+    if head[:6] in (b"GIF87a", b"GIF89a"):
+        return "GIF"
+    if head[:2] == b"\xff\xd8":
+        return "Motion JPEG"
+    return None
+
+
+def _sniff_video(path: str) -> str:
+    """The container of a file to be read as a video; a one-line error when it has none."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(_M2TS_PACKET * 3)
+    except OSError as exc:
+        raise FrameSourceError(f"{path}: cannot read: {exc.strerror or exc}", path=path) from None
+    container = video_container(head)
+    if container is None:
+        raise FrameSourceError(
+            f"{path}: neither an image nor a video OpenCV can read (no image extension "
+            f"({' '.join(IMAGE_EXTENSIONS)}) and no known video container: MP4/MOV, AVI, "
+            "Matroska/WebM, MPEG-TS/PS, FLV, ASF/WMV, Ogg, Y4M, GIF, Motion JPEG)",
+            path=path,
+        )
+    return container
 
 
 # --------------------------------------------------------------------------------------------
@@ -344,6 +422,7 @@ class _VideoSource(FrameSource):
 
     def __init__(self, path: str):
         self.path = path
+        self.container = _sniff_video(path)
         self._capture: cv2.VideoCapture | None = None
         self._next = 1  # frame number the next read() of the capture returns
         self._last: tuple[int, np.ndarray] | None = None
@@ -355,7 +434,8 @@ class _VideoSource(FrameSource):
         except FrameSourceError:
             self.close()
             raise FrameSourceError(
-                f"{path}: neither an image nor a video OpenCV can read (no frame decodes)",
+                f"{path}: neither an image nor a video OpenCV can read ({self.container} "
+                "container, but no frame decodes: damaged, or a codec this OpenCV build lacks)",
                 path=path,
             ) from None
         self._last = (1, first)
@@ -371,7 +451,9 @@ class _VideoSource(FrameSource):
         if not self._capture.isOpened():
             self._capture.release()
             raise FrameSourceError(
-                f"{self.path}: neither an image nor a video OpenCV can read", path=self.path
+                f"{self.path}: neither an image nor a video OpenCV can read ("
+                f"{self.container} container, but OpenCV cannot open it: damaged, or a "
+                "container this OpenCV build lacks)", path=self.path
             )
 
     def _grab_frame(self, frame: int) -> np.ndarray:
@@ -442,7 +524,8 @@ def open_frames(
     """Open the images of one view, choosing the kind of source by what ``path`` is.
 
     A folder is read as frames named by number, a file with an image extension as one image,
-    and any other file as a video (see the module docstring). A glob pattern (quoted on the
+    and any other file as a video when its first bytes are a known video container's
+    (:func:`video_container`; see the module docstring). A glob pattern (quoted on the
     command line, e.g. ``'data/images/top/s00003_*.jpg'``) is read like a folder holding just
     the files it matches.
 

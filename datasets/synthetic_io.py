@@ -42,9 +42,11 @@ import numpy as np
 
 from xvmatch.datasets.crops import box_crops
 from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
+from xvmatch.datasets.image_size import check_image_size
 from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, atomic_write_text
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
 from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.json_text import parse_json
 
 __all__ = [
     "GENERATOR",
@@ -430,12 +432,7 @@ def _load_json(path: Path) -> object:
         raise SchemaError(f"{os.fspath(path)}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SchemaError(f"{os.fspath(path)}: cannot read: {exc}") from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SchemaError(
-            f"{os.fspath(path)}: line {exc.lineno} column {exc.colno}: not valid JSON ({exc.msg})"
-        ) from None
+    return parse_json(text, os.fspath(path), SchemaError)  # syntax, nesting depth: one line
 
 
 def _check_header(doc: _Doc, schema: str) -> None:
@@ -465,12 +462,26 @@ class ViewRecord:
     labels: ViewLabels
 
     def load_image(self) -> np.ndarray:
-        """The image as ``(H, W, 3)`` uint8 BGR; ``OSError`` if it cannot be read."""
+        """The image as ``(H, W, 3)`` uint8 BGR.
+
+        Raises:
+            OSError: the file cannot be read or decoded.
+            ImageTooLargeError: its header declares too many pixels (checked before decoding).
+        """
         import cv2
 
-        image = cv2.imread(os.fspath(self.image_path), cv2.IMREAD_COLOR)
+        where = os.fspath(self.image_path)
+        try:
+            data = np.fromfile(where, dtype=np.uint8)
+        except OSError as exc:
+            raise OSError(f"{where}: cannot read image ({exc.strerror or exc})") from None
+        check_image_size(data, where)
+        try:
+            image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        except cv2.error:
+            image = None
         if image is None:
-            raise OSError(f"{os.fspath(self.image_path)}: cannot read image")
+            raise OSError(f"{where}: cannot read image")
         return image
 
 

@@ -44,6 +44,7 @@ from xvmatch.evaluation.ablation_settings import (
 )
 from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
+from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import FrameCameras, camera_cues
 from xvmatch.inference.learned_association import LearnedMatcher
 
@@ -281,9 +282,12 @@ def load_cells(report: str | os.PathLike) -> dict[str, dict]:
     for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
         try:
             record = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError) as exc:
             raise ValueError(f"{path}: not a readable cell file ({exc}); delete it to "
                              "recompute that cell") from None
+        except (ValueError, RecursionError) as exc:  # syntax, nesting too deep
+            raise ValueError(f"{path}: not a readable cell file ({json_problem(exc)}); delete "
+                             "it to recompute that cell") from None
         if (not isinstance(record, dict) or record.get("format") != CELL_FORMAT
                 or record.get("version") != CELL_VERSION):
             raise ValueError(f"{path}: not a cell of this xvmatch (format {CELL_FORMAT} "

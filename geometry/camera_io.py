@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.json_text import parse_json
 
 __all__ = ["FORMAT_VERSION", "CameraFileError", "load_cameras", "save_cameras"]
 
@@ -124,12 +125,7 @@ def load_cameras(
         text = Path(path).read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise CameraFileError(f"{name}: not UTF-8 text ({exc.reason})") from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CameraFileError(
-            f"{name}: invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
-        ) from exc
+    data = parse_json(text, name, CameraFileError)  # syntax, nesting depth: one line
     try:
         if not isinstance(data, dict):
             raise CameraFileError('expected a JSON object {"version": 1, "cameras": {...}}')

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import CUE_NAMES
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
 
@@ -195,9 +196,13 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     if not path.is_file():
         raise _fail(path, "no manifest: not a bundle folder (xvmatch export writes one)")
     try:
-        doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise _fail(path, f"not a readable JSON manifest ({exc})") from None
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError) as exc:  # syntax, nesting too deep, huge numbers
+        raise _fail(path, f"not a readable JSON manifest ({json_problem(exc)})") from None
     if not isinstance(doc, dict) or doc.get("format") != BUNDLE_FORMAT:
         raise _fail(path, f"not an xvmatch bundle manifest (format {BUNDLE_FORMAT!r} expected)")
     version = _get(doc, "format_version", int, path)

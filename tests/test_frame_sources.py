@@ -20,6 +20,7 @@ from xvmatch.datasets.frame_sources import (
     FrameSourceError,
     check_frames,
     open_frames,
+    video_container,
 )
 
 W, H = 40, 30  # (width, height) of the test images
@@ -63,7 +64,8 @@ def _close(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
 
 def test_public_names():
     assert set(frame_sources.__all__) == {
-        "FrameImage", "FrameSource", "FrameSourceError", "check_frames", "open_frames"
+        "FrameImage", "FrameSource", "FrameSourceError", "check_frames", "open_frames",
+        "video_container",
     }
     assert issubclass(FrameSourceError, ValueError)
 
@@ -333,6 +335,43 @@ def test_file_opencv_cannot_read(tmp_path, content):
         FrameSourceError,
         match="^" + re.escape(f"{path}: neither an image nor a video OpenCV can read"),
     ):
+        open_frames(path)
+
+
+def test_a_text_file_is_not_taken_for_a_video(tmp_path):
+    # FFmpeg "decodes" text (as tty art): without the container check this opened as a video.
+    path = tmp_path / "notes.txt"
+    path.write_text("frame,id,x,y,w,h\n" * 200)
+    with pytest.raises(FrameSourceError, match=(
+            "^" + re.escape(f"{path}: neither an image nor a video OpenCV can read (no image "
+                            "extension") + r".*no known video container: MP4/MOV, AVI")) as info:
+        open_frames(path)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(("head", "container"), [
+    (b"\x00\x00\x00\x20ftypisom" + bytes(20), "MP4/MOV"),
+    (b"RIFF\x00\x10\x00\x00AVI LIST", "AVI"),
+    (b"\x1a\x45\xdf\xa3\x9f\x42\x86\x81", "Matroska/WebM"),
+    (b"\x00\x00\x01\xba\x44\x00", "MPEG-PS"),
+    ((b"\x47" + bytes(187)) * 3, "MPEG-TS"),
+    ((bytes(4) + b"\x47" + bytes(187)) * 3, "MPEG-TS"),
+    (b"FLV\x01\x05\x00\x00\x00\x09", "FLV"),
+    (b"OggS\x00\x02", "Ogg"),
+    (b"hello, world\n", None),
+    (b"Good morning\n", None),
+    (b"\x47 is a capital G, and this line is plain text" * 10, None),
+    (b"", None),
+])
+def test_video_containers_by_signature(head, container):
+    assert video_container(head) == container
+
+
+def test_a_damaged_video_says_which_container_it_is(tmp_path):
+    path = tmp_path / "broken.avi"
+    path.write_bytes(b"RIFF\x00\x10\x00\x00AVI LIST" + b"\x00garbage" * 50)
+    with pytest.raises(FrameSourceError, match=re.escape(f"{path}: neither an image nor a video "
+                                                         "OpenCV can read (AVI container, ")):
         open_frames(path)
 
 

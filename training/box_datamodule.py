@@ -187,7 +187,7 @@ def training_offset(
     if path.exists():
         try:
             return TrainingOffset(**json.loads(path.read_text()))
-        except (OSError, ValueError, TypeError):
+        except (OSError, ValueError, TypeError, RecursionError):
             pass  # unreadable or stale: estimate again and overwrite
     est = estimate_offset(top, hor, hor_width, max_offset=max_offset, workers=workers)
     found = TrainingOffset(applied=est.applied, offset=est.offset, status=est.status,
