@@ -30,6 +30,7 @@ from xvmatch.geometry.spatial_vectors import (
 
 __all__ = [
     "AUTO_MAX_OFFSET",
+    "MIN_AGREEING_CLIPS",
     "SEARCH_MODES",
     "FollowPolicy",
     "FrameAssociation",
@@ -536,6 +537,9 @@ def associate_sequence(
 OFFSET_TOLERANCE = 5
 MIN_OFFSET_EVIDENCE = 2.0
 OFFSET_ALPHA = 0.05
+MIN_AGREEING_CLIPS = 2
+"""Fewest clips whose own minima must agree (within the tolerance) before an offset is applied:
+one clip's minimum cannot be told from a noise dip, so a single clip is reported, never applied."""
 AUTO_MAX_OFFSET = 60
 """Largest |offset| (frames) that ``associate --offset auto`` and ``fit-geometry`` consider (2 s
 at 30 fps; ``estimate_offset`` itself defaults to the paper's 15)."""
@@ -555,9 +559,10 @@ class OffsetEstimate:
         applied: the offset to re-time the videos by: ``offset`` when ``status`` is
             ``"applied"``, else 0 (keep the files' timing).
         status: ``"applied"``; ``"within_tolerance"`` (``|offset| <= tolerance``: as close to the
-            files' timing as the estimate can tell); or ``"unsupported"`` (``evidence`` or
-            ``chance`` short of the thresholds, or no clip could be scored). One clip asked for
-            cannot be checked and is applied, as in the paper.
+            files' timing as the estimate can tell); or ``"unsupported"`` (fewer than
+            ``min_agree`` clips agree, ``evidence`` or ``chance`` short of the thresholds, or no
+            clip could be scored). So one clip, even when it is all that was asked for, never
+            gets an offset applied: it is reported for the user to pass on.
         support: fraction of the clips that matched whose own minimum lies within
             ``tolerance`` frames of ``offset`` (1 for a single clip).
         chance: probability that at least that many clips agree by chance, had their minima
@@ -709,10 +714,11 @@ def clip_starts(
     return sorted({int(s) for s in np.linspace(first, last, n_clips).round()})
 
 
-def _check_thresholds(tolerance: int, min_evidence: float, alpha: float) -> None:
-    if tolerance < 0 or not min_evidence >= 0.0 or not 0.0 < alpha <= 1.0:
-        raise ValueError(f"need tolerance >= 0, min_evidence >= 0 and 0 < alpha <= 1, got "
-                         f"{tolerance}, {min_evidence} and {alpha}")
+def _check_thresholds(tolerance: int, min_evidence: float, alpha: float, min_agree: int) -> None:
+    if tolerance < 0 or not min_evidence >= 0.0 or not 0.0 < alpha <= 1.0 or min_agree < 1:
+        raise ValueError(f"need tolerance >= 0, min_evidence >= 0, 0 < alpha <= 1 and "
+                         f"min_agree >= 1, got {tolerance}, {min_evidence}, {alpha} and "
+                         f"{min_agree}")
 
 
 def judge_offset(
@@ -721,18 +727,20 @@ def judge_offset(
     tolerance: int = OFFSET_TOLERANCE,
     min_evidence: float = MIN_OFFSET_EVIDENCE,
     alpha: float = OFFSET_ALPHA,
-    single_clip: bool = True,
+    min_agree: int = MIN_AGREEING_CLIPS,
 ) -> OffsetEstimate:
     """The offset that ``(K, N)`` clip cost curves over ``offsets`` point to, and whether to
     apply it (see :func:`estimate_offset`). Rows that are all +inf (clips that never matched)
-    are ignored. With K = 1 and ``single_clip`` the curve's minimum is applied unchecked, as in
-    the paper; without, one clip cannot back it (``unsupported`` beyond the tolerance)."""
+    are ignored. An offset beyond the tolerance is applied only when at least ``min_agree``
+    clips (default :data:`MIN_AGREEING_CLIPS`, 2) have their own minimum within ``tolerance``
+    of it, besides the ``evidence`` and ``chance`` tests: with one clip (the paper's single
+    clip included) it is ``unsupported``, i.e. reported and not applied."""
     clip_costs = np.asarray(clip_costs, dtype=float)
     offsets = np.asarray(offsets)
     if clip_costs.ndim != 2 or clip_costs.shape[1] != offsets.size or 0 not in offsets:
         raise ValueError(f"need (K, N) curves over N offsets including 0, got "
                          f"{clip_costs.shape} over {offsets.size}")
-    _check_thresholds(tolerance, min_evidence, alpha)
+    _check_thresholds(tolerance, min_evidence, alpha, min_agree)
     used = np.isfinite(clip_costs).any(axis=1)
     n_used = int(used.sum())
     costs = clip_costs[used].mean(axis=0) if n_used else np.full(offsets.shape, np.inf)
@@ -740,8 +748,6 @@ def judge_offset(
     best = int(np.argmin(costs)) if np.isfinite(costs).any() else zero
     offset = int(offsets[best])
     common = dict(offset=offset, offsets=offsets, costs=costs, clip_costs=clip_costs)
-    if clip_costs.shape[0] == 1 and single_clip:
-        return OffsetEstimate(**common, applied=offset, status="applied")
     clip_best = offsets[np.argmin(clip_costs[used], axis=1)]
     agree = int(np.sum(np.abs(clip_best - offset) <= tolerance))
     p_near = min(1.0, (2 * tolerance + 1) / offsets.size)
@@ -754,7 +760,7 @@ def judge_offset(
     evidence = _paired_evidence(clip_costs[used], best, zero)
     if n_used and abs(offset) <= tolerance:
         status = "within_tolerance"
-    elif n_used and evidence >= min_evidence and chance <= alpha:
+    elif agree >= min_agree and evidence >= min_evidence and chance <= alpha:
         status = "applied"
     else:
         status = "unsupported"
@@ -782,6 +788,7 @@ def estimate_offset(
     min_evidence: float = MIN_OFFSET_EVIDENCE,
     alpha: float = OFFSET_ALPHA,
     workers: int = 1,
+    min_agree: int = MIN_AGREEING_CLIPS,
 ) -> OffsetEstimate:
     """Estimate the temporal offset between the two videos by sliding clips (Sec. 3.2.4, Fig. 5).
 
@@ -791,7 +798,7 @@ def estimate_offset(
     One clip's cost curve is shallow, so by default ``n_clips`` clips spread over the video are
     used (where every offset finds top frames: :func:`clip_starts`), each curve divided by its
     own median, and the mean curve's minimum wins (``clip_start`` given: that one clip only, as
-    in the paper).
+    in the paper, its minimum reported but never applied).
 
     The videos are taken to be in sync unless the clips show otherwise: the estimate is applied
     only when it is more than ``tolerance`` frames from 0 (the precision of the estimate: the
@@ -799,9 +806,10 @@ def estimate_offset(
     shifted scenes with detector noise) and the clips back it twice over:
     - they prefer it to 0: the paired t statistic of cost(0) - cost(offset) over the clips is at
       least ``min_evidence`` (this rejects a noise minimum when the truth is 0);
-    - they agree on it: as many clips have their own minimum within ``tolerance`` frames of it
-      with probability at most ``alpha`` had the minima fallen anywhere in the range (this
-      rejects the lowest of many noise dips when the views share no offset at all).
+    - they agree on it: at least ``min_agree`` clips (:data:`MIN_AGREEING_CLIPS`) have their
+      own minimum within ``tolerance`` frames of it, and as many would agree with probability
+      at most ``alpha`` had the minima fallen anywhere in the range (this rejects the lowest of
+      many noise dips when the views share no offset at all).
     The defaults were set on simulated scenes with detector noise
     (``benchmarks/offset_calibration.py``): no synchronised scene shifted, most true shifts found.
     ``workers`` processes compute the curves (:func:`clip_cost_curves`); the estimate is the
@@ -814,16 +822,15 @@ def estimate_offset(
     params = params or SpatialParams()
     if clip_length < 1 or max_offset < 0 or n_clips < 1:
         raise ValueError("need clip_length >= 1, max_offset >= 0 and n_clips >= 1")
-    _check_thresholds(tolerance, min_evidence, alpha)
+    _check_thresholds(tolerance, min_evidence, alpha, min_agree)
     if not hor:
         raise ValueError("the horizontal sequence has no frames")
     if not top:
         raise ValueError("the top sequence has no frames")
     starts = [clip_start] if clip_start is not None else clip_starts(
         (min(hor), max(hor)), (min(top), max(top)), clip_length, max_offset, n_clips)
-    # One clip asked for (clip_start, or n_clips = 1) is the paper's unchecked estimate. When
-    # several are asked for but only one fits (a video shorter than about 2 * max_offset plus a
-    # clip), nothing can back its minimum: it is judged, not applied unchecked.
+    # One clip asked for (clip_start, or n_clips = 1): the paper's estimate, its raw curve kept;
+    # like a lone clip that fits a short video, it is reported but cannot be applied.
     single = clip_start is not None or n_clips == 1
     offsets = np.arange(-max_offset, max_offset + 1)
     clips = [[f for f in range(start, start + clip_length) if f in hor] for start in starts]
@@ -833,4 +840,4 @@ def estimate_offset(
         finite = curve[np.isfinite(curve)]
         if finite.size:
             clip_costs[k] = curve if single else curve / np.median(finite)
-    return judge_offset(clip_costs, offsets, tolerance, min_evidence, alpha, single_clip=single)
+    return judge_offset(clip_costs, offsets, tolerance, min_evidence, alpha, min_agree)

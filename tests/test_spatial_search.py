@@ -16,6 +16,7 @@ from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_matching import SpatialParams, match_vector_sets
 from xvmatch.geometry.spatial_search import (
+    MIN_AGREEING_CLIPS,
     FollowPolicy,
     _curve_tasks,
     associate_frame,
@@ -553,9 +554,26 @@ def test_judge_offset_refuses_a_minimum_no_clip_agrees_on():
     assert est.chance > 0.05 and est.status == "unsupported" and est.applied == 0
 
 
-def test_judge_offset_one_clip_is_applied_unchecked():
-    est = judge_offset(_dips([3]), OFFSETS)
-    assert (est.offset, est.applied, est.status) == (3, 3, "applied")
+def test_judge_offset_one_clip_is_reported_never_applied():
+    # A lone clip's minimum cannot be told from a noise dip, whatever the other thresholds.
+    for kwargs in ({}, {"min_evidence": 0.0, "alpha": 1.0}):
+        est = judge_offset(_dips([20]), OFFSETS, **kwargs)
+        assert (est.offset, est.applied, est.status, est.support) == (20, 0, "unsupported", 1.0)
+    # Inside the tolerance it is still "as close to the files' timing as it can tell".
+    assert judge_offset(_dips([3]), OFFSETS).status == "within_tolerance"
+
+
+def test_judge_offset_needs_min_agree_clips_that_agree():
+    curves = _dips([20, 20]) + np.array([[0.0], [0.03]])
+    permissive = {"min_evidence": 0.0, "alpha": 1.0}
+    assert MIN_AGREEING_CLIPS == 2
+    est = judge_offset(curves, OFFSETS, **permissive)
+    assert (est.applied, est.status) == (20, "applied")
+    est = judge_offset(curves, OFFSETS, min_agree=3, **permissive)
+    assert (est.offset, est.applied, est.status) == (20, 0, "unsupported")
+    # Two clips, one of which dips elsewhere: one agrees with the mean's minimum, not enough.
+    est = judge_offset(_dips([20, -20], depth=[0.9, 0.1]), OFFSETS, **permissive)
+    assert est.offset == 20 and est.support == 0.5 and est.status == "unsupported"
 
 
 def test_judge_offset_ignores_clips_that_never_matched():
@@ -571,6 +589,8 @@ def test_judge_offset_rejects_bad_input():
         judge_offset(np.ones((3, 4)), np.arange(-2, 3))
     with pytest.raises(ValueError, match="alpha"):
         judge_offset(np.ones((3, 5)), np.arange(-2, 3), alpha=0.0)
+    with pytest.raises(ValueError, match="min_agree >= 1"):
+        judge_offset(np.ones((3, 5)), np.arange(-2, 3), min_agree=0)
 
 
 @given(
@@ -625,7 +645,7 @@ def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene)
     assert est.offset == 0
 
 
-def test_a_short_video_gets_one_clip_judged_not_applied_unchecked(offset_scene):
+def test_a_short_video_gets_one_clip_judged_not_applied(offset_scene):
     # 35 frames cannot hold 9 clips that every offset in +-15 reaches: one clip is left, and
     # one clip cannot back its minimum, so the files' timing is kept ...
     top = {f: r for f, r in offset_scene.top.items() if f <= 35}
@@ -633,9 +653,11 @@ def test_a_short_video_gets_one_clip_judged_not_applied_unchecked(offset_scene):
     est = estimate_offset(top, hor, WIDTH, max_offset=15, camera_id=0)
     assert est.clip_costs.shape[0] == 1 and est.offset == -8
     assert est.status == "unsupported" and est.applied == 0
-    # ... unless one clip is what was asked for (the paper's unchecked estimate).
+    # ... and so when one clip is all that was asked for (the paper's estimate): reported,
+    # never applied.
     one = estimate_offset(top, hor, WIDTH, max_offset=15, camera_id=0, n_clips=1)
-    assert one.status == "applied" and one.applied == -8
+    assert one.offset == -8 and one.support == 1.0
+    assert one.status == "unsupported" and one.applied == 0
 
 
 def test_offset_curves_are_the_same_for_any_number_of_workers(offset_scene):
