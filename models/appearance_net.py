@@ -251,6 +251,12 @@ class CompactTrunk(nn.Module):
         return self.stages(self.stem(x))
 
 
+def _first_line(exc: BaseException) -> str:
+    """An exception in one line (torch's weights-only errors span many)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+
+
 def _torchvision_state(path: Path) -> dict[str, Tensor]:
     if not path.is_file():
         raise FileNotFoundError(
@@ -261,7 +267,8 @@ def _torchvision_state(path: Path) -> dict[str, Tensor]:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # pickle, zip or weights-only errors all mean "not a state dict"
-        raise ValueError(f"{os.fspath(path)}: not a torch weights file ({exc})") from None
+        raise ValueError(f"{os.fspath(path)}: not a torch weights file ({_first_line(exc)})"
+                         ) from None
     if isinstance(state, Mapping) and "state_dict" in state and isinstance(
         state["state_dict"], Mapping
     ):
@@ -487,7 +494,7 @@ def _load_weights_blob(path: Path) -> dict:
     try:
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise ValueError(f"{os.fspath(path)}: not a torch file ({exc})") from None
+        raise ValueError(f"{os.fspath(path)}: not a torch file ({_first_line(exc)})") from None
     if not isinstance(blob, Mapping) or blob.get("format") != WEIGHTS_FORMAT:
         raise ValueError(
             f"{os.fspath(path)}: not an xvmatch appearance weights file (format "

@@ -302,7 +302,9 @@ def _read_state(path: Path) -> dict[str, Tensor]:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # pickle, zip or weights-only errors all mean "not a state dict"
-        raise ValueError(f"{os.fspath(path)}: not a torch weights file ({exc})") from None
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        first = f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+        raise ValueError(f"{os.fspath(path)}: not a torch weights file ({first})") from None
     if not isinstance(state, Mapping) or not all(isinstance(v, Tensor) for v in state.values()):
         raise ValueError(f"{os.fspath(path)}: expected a state dict {{name: tensor}}")
     return dict(state)

@@ -201,3 +201,49 @@ def test_bad_images_through_the_command_line(tmp_path: Path, capsys, kind: str) 
     assert code == 2 and err.count("\n") == 1, err
     assert str(bad) in err and what in err and "Traceback" not in err
     assert not (tmp_path / "pred.csv").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Weights files holding pickled code
+
+
+class _Marker:
+    """Unpickled, creates a file: stands for code a crafted weights file would run."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (str(self.path), "w"))
+
+
+@pytest.mark.parametrize("reader", ["matcher", "appearance", "backbone", "pretrained",
+                                    "checkpoint"])
+def test_weights_files_with_pickled_code_are_refused(tmp_path: Path, reader: str) -> None:
+    torch = pytest.importorskip("torch")
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.pt"
+    torch.save({"format": "x", "weight": torch.zeros(2), "payload": _Marker(marker)}, evil)
+    with pytest.raises(ValueError) as info:
+        if reader == "matcher":
+            from xvmatch.training.matcher_file import load_matcher
+
+            load_matcher(evil)
+        elif reader == "appearance":
+            from xvmatch.models.appearance_net import AppearanceWeights
+
+            AppearanceWeights.from_file(evil)
+        elif reader == "backbone":
+            from xvmatch.models.appearance_net import ResNetTrunk, load_backbone_weights
+
+            load_backbone_weights(ResNetTrunk(18), evil)
+        elif reader == "pretrained":
+            from xvmatch.models.pretrained_backbones import MobileNetV2Trunk, load_pretrained_trunk
+
+            load_pretrained_trunk(MobileNetV2Trunk(), "mobilenetv2", evil)
+        else:
+            from xvmatch.training.checkpoint_files import load_checkpoint_state
+
+            load_checkpoint_state(evil)
+    assert "\n" not in str(info.value) and str(evil) in str(info.value)
+    assert not marker.exists()
