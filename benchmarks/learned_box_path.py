@@ -5,7 +5,7 @@ Four runs over the same sequences (default ``V1-S_55-G_1``, 1,200 frames), each 
 process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
 
 * ``handcrafted``: ``xvmatch associate`` (the exhaustive search of Sec. 3.2.4), as shipped
-  (``XVMATCH_KERNELS=auto``: numpy, then the compiled kernels once they pay);
+  (``XVMATCH_KERNELS=auto``: calls of 256 hypotheses or more in the compiled kernels);
 * ``hand-numpy``: the same command with ``XVMATCH_KERNELS=numpy``: the search as it ran before
   the compiled kernels, the speed the issue's reference figure (265 frames/s) was measured on;
 * ``onnx``: ``xvmatch associate --model BUNDLE`` (the deployed runtime, no torch);

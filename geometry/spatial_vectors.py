@@ -38,6 +38,11 @@ at. Horizontal box heights are expressed in pixels of an image this wide (Eq. 9 
 lambda of Eq. 11 keeps its published meaning at any resolution."""
 
 
+OCCLUSION_BLOCK = 1 << 22
+"""(candidate, person, person) triples per block of the occlusion test (about 32 MiB a float
+array)."""
+
+
 def box_centres(boxes: np.ndarray) -> np.ndarray:
     """Centres ``(N, 2)`` of ``(N, 4)`` x, y, w, h boxes."""
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
@@ -104,14 +109,20 @@ def top_geometry(
     dist = np.hypot(d[..., 0], d[..., 1])
     phi = np.mod(np.arctan2(-d[..., 1], d[..., 0]), TWO_PI)
     present = dist > 0.0
-    # Pairwise angular gaps per candidate: (C, M, M); person m is hidden by a nearer person n.
-    gap = np.abs(phi[:, :, None] - phi[:, None, :])
-    gap = np.minimum(gap, TWO_PI - gap)
-    # Only a strictly nearer person hides: two people at exactly the same distance both stay,
-    # so the result never depends on the order of the boxes.
-    nearer = dist[:, None, :] < dist[:, :, None]
-    hides = (gap < tau) & nearer & present[:, None, :] & present[:, :, None]
-    visible = present & ~hides.any(axis=2)
+    # Pairwise angular gaps per candidate, (C, M, M): person m is hidden by a nearer person n.
+    # In blocks of candidates, so that a crowd (1,000 people: 10^9 pairs) stays within memory.
+    visible = np.empty_like(present)
+    n_people = centres.shape[0]
+    step = max(1, OCCLUSION_BLOCK // max(1, n_people * n_people))
+    for lo in range(0, candidates.shape[0], step):
+        part = slice(lo, lo + step)
+        gap = np.abs(phi[part, :, None] - phi[part, None, :])
+        gap = np.minimum(gap, TWO_PI - gap)
+        # Only a strictly nearer person hides: two people at exactly the same distance both
+        # stay, so the result never depends on the order of the boxes.
+        nearer = dist[part, None, :] < dist[part, :, None]
+        hides = (gap < tau) & nearer & present[part, None, :] & present[part, :, None]
+        visible[part] = present[part] & ~hides.any(axis=2)
     return TopGeometry(phi=phi, dist=dist, visible=visible)
 
 
