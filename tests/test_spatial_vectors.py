@@ -412,3 +412,18 @@ def test_equidistant_people_within_tau_both_stay_whatever_the_box_order():
     b = a[[0, 2, 1]]
     np.testing.assert_array_equal(top_geometry(a, [0]).visible, [[False, True, True]])
     np.testing.assert_array_equal(top_geometry(b, [0]).visible, [[False, True, True]])
+
+
+def test_occlusion_in_blocks_of_candidates_is_the_same(monkeypatch):
+    # A crowd is tested in blocks of candidates to bound memory; any block size gives the same
+    # visibility, angles and distances.
+    from xvmatch.geometry import spatial_vectors
+
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(0.0, 300.0, size=(40, 2))
+    whole = top_geometry(centres, np.arange(40))
+    monkeypatch.setattr(spatial_vectors, "OCCLUSION_BLOCK", 3 * 40 * 40)  # 3 per block
+    parts = top_geometry(centres, np.arange(40))
+    assert not whole.visible.all()  # some people are hidden: the test can fail
+    for name in ("phi", "dist", "visible"):
+        np.testing.assert_array_equal(getattr(parts, name), getattr(whole, name))
