@@ -247,3 +247,21 @@ def test_weights_files_with_pickled_code_are_refused(tmp_path: Path, reader: str
             load_checkpoint_state(evil)
     assert "\n" not in str(info.value) and str(evil) in str(info.value)
     assert not marker.exists()
+
+
+def test_a_corrupt_fit_geometry_resume_checkpoint_through_the_command_line(tmp_path: Path,
+                                                                         capsys) -> None:
+    pytest.importorskip("lightning")
+    cvmhat = tmp_path / "cvmhat"
+    cvmhat.mkdir()
+    for view in ("top", "hor"):
+        (cvmhat / f"S_a_1_{view}.txt").write_text("1,1,10,10,20,40\n")
+    last = tmp_path / "m.pt.run" / "checkpoints" / "last.ckpt"
+    last.parent.mkdir(parents=True)
+    last.write_bytes(b"PK\x03\x04 cut short")
+    code, err = _cli(capsys, "fit-geometry", "--cvmhat", str(cvmhat), "--out",
+                     str(tmp_path / "m.pt"), "--resume", "--quiet", "--sim-scenes", "0",
+                     "--cache", str(tmp_path / "cache"))
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"{last}: not a readable checkpoint" in err and "Traceback" not in err
+    assert not (tmp_path / "m.pt").exists()

@@ -144,6 +144,10 @@ def fit_matcher(
         raise ValueError(f"cannot write {os.fspath(out)!r}: folder {os.fspath(out.parent)!r} "
                          "does not exist")
     run = Path(run_dir) if run_dir is not None else out.with_name(out.name + ".run")
+    last = run / "checkpoints" / "last.ckpt"
+    resume_from = last if resume and last.exists() else None
+    if resume_from is not None:  # before any work: a corrupt file is one line naming it
+        check_checkpoint_file(resume_from)
     run.mkdir(parents=True, exist_ok=True)
     if threads is not None:
         if threads < 1:
@@ -208,10 +212,6 @@ def fit_matcher(
         num_sanity_val_steps=0,
         limit_val_batches=1.0 if has_val else 0,
     )
-    last = run / "checkpoints" / "last.ckpt"
-    resume_from = last if resume and last.exists() else None
-    if resume_from is not None:
-        check_checkpoint_file(resume_from)  # a corrupt file: one line naming it, not a traceback
     trainer.fit(module, datamodule=datamodule, ckpt_path=resume_from)
 
     best_path = best_checkpoint_path(checkpoint)  # only from the run's own checkpoint folder
