@@ -1,9 +1,11 @@
-# Quick start on a fresh machine: `make demo` and `make test`.
+# Quick start on a fresh machine: `make demo` (the base install, no torch) and `make test`
+# (everything, for development).
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-BASE_VENV ?= /tmp/xvmatch-base-venv
+DEMO_VENV ?= .venv-base
+DEMO_STAMP := $(DEMO_VENV)/.installed
 
 .PHONY: demo test lint bench install-check clean
 
@@ -20,8 +22,15 @@ $(STAMP): pyproject.toml | $(PY)
 		"efficientnet-lite-pytorch>=0.1"
 	touch $(STAMP)
 
-demo: $(STAMP)
-	$(VENV)/bin/xvmatch demo --out xvmatch-demo
+# The demo needs only the base install (about 0.7 GB, no torch); `make test` builds the full one.
+$(DEMO_STAMP): pyproject.toml
+	$(PYTHON) -m venv $(DEMO_VENV)
+	$(DEMO_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(DEMO_VENV)/bin/python -m pip install --quiet -e .
+	touch $(DEMO_STAMP)
+
+demo: $(DEMO_STAMP)
+	$(DEMO_VENV)/bin/xvmatch demo --out xvmatch-demo
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
@@ -33,23 +42,26 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/association_speed.py
 
-# The base install (no extras, no torch) runs the shipped matcher on images: a fresh venv,
-# `pip install .`, then the demo and one `xvmatch associate` on rendered images.
+# The base install (no extras, no torch) runs the shipped matcher on images: a fresh venv in a
+# fresh temporary folder (removed afterwards), `pip install .`, then the demo, one
+# `xvmatch associate` on rendered images and `xvmatch evaluate`. PYTHON=python3.13 checks
+# another interpreter.
 install-check:
-	rm -rf $(BASE_VENV) /tmp/xvmatch-install-check
-	$(PYTHON) -m venv $(BASE_VENV)
-	$(BASE_VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(BASE_VENV)/bin/python -m pip install --quiet .
-	$(BASE_VENV)/bin/python -c "import importlib.util, sys; sys.exit(importlib.util.find_spec('torch') is not None)"
-	cd /tmp && $(BASE_VENV)/bin/python -c "import sys; from xvmatch.inference.bundle import DEFAULT_BUNDLE as d; sys.exit(not (d / 'NOTICE.txt').is_file())"
-	cd /tmp && $(BASE_VENV)/bin/xvmatch demo --out /tmp/xvmatch-install-check --scenes 1 --frames 2
-	cd /tmp && $(BASE_VENV)/bin/xvmatch associate --model default \
-		--top /tmp/xvmatch-install-check/scene/top.txt --hor /tmp/xvmatch-install-check/scene/hor.txt \
-		--top-images '/tmp/xvmatch-install-check/data/overview/images/top/s00000_*.jpg' \
-		--hor-images '/tmp/xvmatch-install-check/data/overview/images/ego/s00000_*.jpg' \
-		--cameras /tmp/xvmatch-install-check/scene/cameras --out /tmp/xvmatch-install-check/pred.csv
-	cd /tmp && $(BASE_VENV)/bin/xvmatch evaluate --pred /tmp/xvmatch-install-check/pred.csv \
-		--top /tmp/xvmatch-install-check/scene/top.txt --hor /tmp/xvmatch-install-check/scene/hor.txt
+	@set -e; tmp=$$(mktemp -d); trap 'rm -rf "$$tmp"' EXIT; \
+	venv=$$tmp/venv; out=$$tmp/demo; \
+	$(PYTHON) -m venv $$venv; \
+	$$venv/bin/python -m pip install --quiet --upgrade pip; \
+	$$venv/bin/python -m pip install --quiet .; \
+	cd $$tmp; \
+	$$venv/bin/python -c "import importlib.util, sys; sys.exit(importlib.util.find_spec('torch') is not None)"; \
+	$$venv/bin/python -c "import sys; from xvmatch.inference.bundle import DEFAULT_BUNDLE as d; sys.exit(not (d / 'NOTICE.txt').is_file())"; \
+	$$venv/bin/xvmatch demo --out $$out --scenes 1 --frames 2; \
+	$$venv/bin/xvmatch associate --model default --top $$out/scene/top.txt --hor $$out/scene/hor.txt \
+		--top-images "$$out/data/overview/images/top/s00000_*.jpg" \
+		--hor-images "$$out/data/overview/images/ego/s00000_*.jpg" \
+		--cameras $$out/scene/cameras --out $$tmp/pred.csv; \
+	$$venv/bin/xvmatch evaluate --pred $$tmp/pred.csv --top $$out/scene/top.txt --hor $$out/scene/hor.txt; \
+	echo "install-check passed with $$($$venv/bin/python --version)"
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(DEMO_VENV) build *.egg-info .pytest_cache .ruff_cache
