@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    "MAX_PIXELS",
     "PREDICTION_HEADER",
     "BoxFileError",
     "FrameBoxes",
@@ -50,6 +51,14 @@ PREDICTION_HEADER = "frame,top_id,hor_id"
 
 # Largest integer a float64 holds exactly: frames and ids beyond it cannot round-trip.
 _MAX_EXACT_INT = 2**53
+
+MAX_PIXELS = 1_000_000.0
+"""Largest |x|, |y|, w or h a box file may hold, in pixels: no camera's image is a million pixels
+across, so a value beyond is a data error (an exponent or unit slip). Refused at its line
+because it is silent downstream: from every candidate camera location such a box lies at the same
+bearing and a depth that dwarfs everyone else's, so in each hypothesis that sees it, it alone
+sets the depth scale of Eq. 11 and every other depth ratio saturates; one box at x = 1e22 took a
+frame's learned association from 11 pairs to 0."""
 
 # What np.loadtxt accepts as a float, spelled out so the line-by-line scan agrees with the fast
 # path (Python's float() would also take "1_000" or non-ASCII digits, which loadtxt rejects).
@@ -155,7 +164,8 @@ class _Column:
     """One leading column of a table: its name and what values it admits."""
 
     name: str
-    kind: str  # "frame" (integer >= 1), "id" (integer), "coord" (finite), "size" (finite > 0)
+    kind: str  # "frame" (integer >= 1), "id" (integer), "coord" (|v| <= MAX_PIXELS),
+    # "size" (0 < v <= MAX_PIXELS)
 
 
 _BOX_COLUMNS = (
@@ -226,6 +236,8 @@ def _columns_ok(data: np.ndarray, columns: Sequence[_Column]) -> bool:
             return False
         if col.kind == "size" and not (values > 0).all():
             return False
+        if col.kind in ("coord", "size") and not (np.abs(values) <= MAX_PIXELS).all():
+            return False
     return True
 
 
@@ -268,6 +280,9 @@ def _check_value(text: str, col: _Column) -> str | float:
             return f"frame must be >= 1 (frames are 1-based), got {text!r}"
     if col.kind == "size" and value <= 0:
         return f"box size {col.name} must be > 0, got {text!r}"
+    if col.kind in ("coord", "size") and abs(value) > MAX_PIXELS:
+        return (f"{col.name} = {text} is far outside any image (|{col.name}| must be at most "
+                f"{MAX_PIXELS:.0f} pixels)")
     return value
 
 
@@ -405,8 +420,9 @@ def read_mot_boxes(
         BoxFileError: missing or unreadable file, no boxes at all (unless ``allow_empty``), a
             line-break character other than ``\\n`` / ``\\r\\n``, fewer than 6 fields, a
             non-numeric, NaN or infinite field, a frame that is not an integer >= 1, a
-            non-integer id, ``w`` or ``h`` <= 0, or (unless ``duplicates="first"``) the same
-            ``(frame, id)`` twice. The message names file and line.
+            non-integer id, ``w`` or ``h`` <= 0, a coordinate or size beyond
+            :data:`MAX_PIXELS`, or (unless ``duplicates="first"``) the same ``(frame, id)``
+            twice. The message names file and line.
         ValueError: ``duplicates`` is neither ``"error"`` nor ``"first"``.
     """
     if duplicates not in ("error", "first"):

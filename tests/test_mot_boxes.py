@@ -10,6 +10,7 @@ import pytest
 
 from xvmatch.datasets.detection_rows import read_detection_rows
 from xvmatch.datasets.mot_boxes import (
+    MAX_PIXELS,
     PREDICTION_HEADER,
     BoxFileError,
     FrameBoxes,
@@ -131,6 +132,9 @@ def test_missing_file(tmp_path):
         ("1,2,nan,20,30,40", "x must be finite"),
         ("1,2,10,inf,30,40", "y must be finite"),
         ("1,2,10,20,30,1_0", "h is not a number"),
+        ("1,2,1e22,20,30,40", "x = 1e22 is far outside any image"),
+        ("1,2,10,-1000001,30,40", "|y| must be at most 1000000 pixels"),
+        ("1,2,10,20,2e6,40", "w = 2e6 is far outside any image"),
         ("1,1,11,21,31,41", "duplicate id 1 in frame 1 \\(first on line 1\\)"),
     ],
 )
@@ -138,6 +142,11 @@ def test_malformed_box_line_names_file_and_line(tmp_path, bad_line, match):
     # Line 1 is good, line 2 blank, line 3 good: the bad line is line 4.
     text = f"{GOOD_LINE}\n\n2,1,10,20,30,40\n{bad_line}\n3,1,10,20,30,40\n"
     _expect_error(_write(tmp_path, text), 4, match)
+
+
+def test_coordinates_up_to_max_pixels_are_read(tmp_path):
+    path = _write(tmp_path, f"1,1,{-MAX_PIXELS:g},{MAX_PIXELS:g},{MAX_PIXELS:g},0.5\n")
+    np.testing.assert_array_equal(read_mot_boxes(path)[1].boxes, [[-1e6, 1e6, 1e6, 0.5]])
 
 
 def test_not_utf8_is_a_whole_file_error(tmp_path):
