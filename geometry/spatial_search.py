@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +112,25 @@ def _prepare(
     return top_boxes, hor_boxes, cand, thetas
 
 
+HYPOTHESIS_BLOCK = 1 << 23
+"""(hypothesis, person) entries per block of candidate camera locations: a crowd is searched in
+blocks of candidates, so that 1,000 people in a frame stay within about 1 GiB (an ordinary
+frame, tens of people, is one block)."""
+
+
+def _candidate_blocks(
+    top_boxes: np.ndarray, cand: np.ndarray, thetas: np.ndarray, params: SpatialParams
+) -> Iterator[tuple[int, TopHypotheses]]:
+    """The hypotheses of consecutive blocks of candidates, with the index of each block's first
+    hypothesis among all (candidate-major: b = c T + t)."""
+    centres = box_centres(top_boxes)
+    step = max(1, HYPOTHESIS_BLOCK // max(1, thetas.shape[0] * centres.shape[0]))
+    for lo in range(0, cand.shape[0], step):
+        geometry = top_geometry(centres, cand[lo:lo + step], math.radians(params.tau_deg))
+        yield lo * thetas.shape[0], top_hypotheses(geometry, thetas,
+                                                   math.radians(params.fov_deg))
+
+
 def rank_hypotheses(
     top_boxes: np.ndarray,
     hor_boxes: np.ndarray,
@@ -140,12 +159,14 @@ def rank_hypotheses(
     )
     if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
         return []
-    geometry = top_geometry(box_centres(top_boxes), cand, math.radians(params.tau_deg))
-    hypotheses = top_hypotheses(geometry, thetas, math.radians(params.fov_deg))
     hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
     n_theta = thetas.shape[0]
+    found = []
+    for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
+        found += [(start + i, *rest) for i, *rest in _ranked(hypotheses, hor, params, k)]
+    found = sorted(found, key=lambda item: (item[1], item[0]))[:k]
     out = []
-    for index, cost, pairs_mask, scale, top_index in _ranked(hypotheses, hor, params, k):
+    for index, cost, pairs_mask, scale, top_index in found:
         rows, cols = np.nonzero(pairs_mask)
         pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
         pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
@@ -222,12 +243,15 @@ def best_per_candidate(
     )
     if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
         return []
-    geometry = top_geometry(box_centres(top_boxes), cand, math.radians(params.tau_deg))
-    hypotheses = top_hypotheses(geometry, thetas, math.radians(params.fov_deg))
     hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
     n_theta = thetas.shape[0]
+    found = []
+    for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
+        found += [(start + i, *rest) for i, *rest in _best_per_group(hypotheses, hor, params,
+                                                                      keep)]
+    if keep is not None:  # each block's keep best are exact, so the keep best of all are too
+        found = sorted(sorted(found, key=lambda b: (b[1], b[0]))[:keep], key=lambda b: b[0])
     out = []
-    found = _best_per_group(hypotheses, hor, params, keep)
     for index, cost, pairs_mask, scale, top_index in found:
         rows, cols = np.nonzero(pairs_mask)
         pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)

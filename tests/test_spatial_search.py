@@ -708,3 +708,26 @@ def test_follow_votes_for_o_instead_of_trusting_the_first_frame():
     assert scores["vote"] > scores["first frame"] + 10
     with pytest.raises(ValueError, match="FollowPolicy"):
         FollowPolicy(check_every=0)
+
+
+def test_search_in_blocks_of_candidates_is_the_same(monkeypatch):
+    # A crowd is searched in blocks of candidates to bound memory; any block size gives the
+    # same ranking, per-candidate bests and keep-best (exact branch and bound in each block).
+    from xvmatch.geometry import spatial_search
+
+    rng = np.random.default_rng(5)
+    top = np.column_stack([rng.uniform(0, 800, (14, 2)), np.full((14, 2), 20.0)])
+    hor = np.column_stack([rng.uniform(0, 2400, 5), np.full(5, 400.0), np.full(5, 60.0),
+                           rng.uniform(150, 400, 5)])
+
+    def run():
+        ranked = spatial_search.rank_hypotheses(top, hor, WIDTH, k=4)
+        per = spatial_search.best_per_candidate(top, hor, WIDTH)
+        kept = spatial_search.best_per_candidate(top, hor, WIDTH, keep=3)
+        return [[(a.camera, a.theta, a.cost, a.pairs.tolist()) for a in found]
+                for found in (ranked, per, kept)]
+
+    whole = run()
+    monkeypatch.setattr(spatial_search, "HYPOTHESIS_BLOCK", 3 * 360 * 14)  # 3 per block
+    assert run() == whole
+    assert len(whole[0]) == 4 and len(whole[2]) == 3
