@@ -176,7 +176,7 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     try:
-        from xvmatch.export.onnx_export import export_bundle
+        from xvmatch.export.onnx_export import ExportError, check_replaceable, export_bundle
     except ImportError as exc:
         raise ValueError(f"xvmatch export needs the learn extra (torch, onnx): {exc}") from None
 
@@ -191,6 +191,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
         [Input("--model", None if args.model == "default" else args.model),
          Input("--parity-data", args.parity_data), Input("--calibration", args.calibration)],
     )
+    try:
+        check_replaceable(args.out)  # only a bundle of an earlier export is replaced
+    except ExportError as exc:
+        raise ValueError(f"--out {exc}") from None
     manifest = export_bundle(args.model, args.out, parity_data=args.parity_data,
                              int8_calibration=args.calibration, progress=say)
     if not args.quiet:
