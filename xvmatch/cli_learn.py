@@ -248,7 +248,8 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--costs", default=None, metavar="JSON",
                    help="also write each frame's ids and cost matrix (written atomically)")
     g.add_argument("--draw", default=None, metavar="DIR",
-                   help="write a side-by-side picture of each frame's matches (needs images)")
+                   help="write a side-by-side picture of each frame's matches (needs images) "
+                   "into DIR: a new or empty folder, or one an earlier --draw wrote")
     g.add_argument("--draw-every", default=1, metavar="K",
                    type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
                    help="with --draw: every K-th frame only, 1..100000 (default 1)")
