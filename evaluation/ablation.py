@@ -292,9 +292,9 @@ def _is_own_report(out: Path) -> bool:
 def _check_out(out: Path) -> None:
     """Refuse a report folder ``ablate`` did not make: it replaces ``report.md`` and more."""
     if out.exists() and not out.is_dir():
-        raise ValueError(f"{out}: exists and is not a folder; give a report folder")
+        raise ValueError(f"--out {out}: exists and is not a folder; give a report folder")
     if out.is_dir() and any(out.iterdir()) and not _is_own_report(out):
-        raise ValueError(f"{out}: not empty and not an ablation report made by "
+        raise ValueError(f"--out {out}: not empty and not an ablation report made by "
                          f"{REPORT_COMMAND} (no {REPORT_MARKER}); choose an empty or new folder")
 
 
@@ -466,9 +466,9 @@ def run_ablation(options: AblationOptions, command: str,
     require_matplotlib()
     if not 1 <= int(options.workers):
         raise ValueError(f"workers must be >= 1, got {options.workers}")
-    plan = plan_ablation(options, _matcher(options.model))
     out = Path(options.out)
-    _check_out(out)
+    _check_out(out)  # before the matcher loads and the data are hashed
+    plan = plan_ablation(options, _matcher(options.model))
     stored = load_cells(out)
     check_cells(out, stored, plan.record)
     names = {c.name for c in plan.cells}

@@ -195,6 +195,15 @@ def test_a_foreign_report_md_is_not_replaced(tiny_synth, tiny_models, tmp_path, 
     assert [p.name for p in (tmp_path / "r").iterdir()] == ["report.md"]
 
 
+def test_the_report_folder_is_checked_before_the_data_is_read(tmp_path, capsys) -> None:
+    # A refused --out is said first, before the matcher loads or any dataset is opened.
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "report.md").write_text("my own report\n")
+    code, err = _ablate(capsys, "--data", str(tmp_path / "no_data"), "--model", "default",
+                        "--out", str(tmp_path / "r"))
+    assert code == 2 and err.count("\n") == 1 and "--out" in err and "not an ablation" in err
+
+
 def test_the_report_folder_is_marked_as_ablate_s_own(report: Path) -> None:
     marker = json.loads((report / ".xvmatch-output.json").read_text())
     assert marker == {"written_by": "xvmatch ablate"}
