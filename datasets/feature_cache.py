@@ -17,7 +17,6 @@ import warnings
 import zipfile
 import zlib
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from xvmatch.geometry.spatial_features import (
     FrameFeatures,
     frame_features,
 )
+from xvmatch.geometry.worker_pool import worker_pool
 
 __all__ = [
     "FeatureSet",
@@ -222,7 +222,7 @@ def sequence_features(
     chunks = [(inputs[i : i + size], tuple(hor_size), config.to_dict())
               for i in range(0, len(inputs), size)]
     if workers > 1 and len(chunks) > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with worker_pool(workers, None) as pool:
             results = pool.map(_extract_chunk, chunks)
             results = list(progress(results) if progress else results)
     else:
@@ -354,10 +354,7 @@ def cached_frame_features(
         return [stored.frame(k) for k in range(len(stored))]
     tasks = [(list(jobs[i : i + chunk]), config.to_dict()) for i in range(0, len(jobs), chunk)]
     if workers > 1 and len(tasks) > 1:
-        import multiprocessing
-
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        with worker_pool(workers, "spawn") as pool:
             results = pool.map(_job_features, tasks)
             results = list(progress(results) if progress else results)
     else:

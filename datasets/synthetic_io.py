@@ -29,12 +29,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -47,6 +46,7 @@ from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, atomic_wr
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.json_text import parse_json
+from xvmatch.geometry.worker_pool import worker_pool
 
 __all__ = [
     "GENERATOR",
@@ -336,9 +336,7 @@ def _render_into(
     else:
         # "spawn": a forked child would inherit OpenCV's thread pool in whatever state the
         # parent left it, which can deadlock; fresh interpreters are safe and cost ~1 s.
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                                 initializer=_worker_init) as pool:
+        with worker_pool(workers, "spawn", _worker_init) as pool:
             futures = [pool.submit(_write_scene_task, task) for task in tasks]
             for future in as_completed(futures):
                 entries.append(future.result())

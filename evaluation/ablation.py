@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import os
 import re
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -59,6 +58,7 @@ from xvmatch.evaluation.ablation_report import (
     write_results,
 )
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, SWEEPS, Setting, grid_settings
+from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
 
 REPORT_COMMAND = "xvmatch ablate"
@@ -335,15 +335,10 @@ def _run_cells(todo: Sequence[CellSpec | CvmhatSpec], workers: int
             yield _compute(spec)
         return
     # "spawn": a forked child may inherit onnxruntime's or OpenCV's thread pools and hang.
-    context = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)), mp_context=context,
-                               initializer=_worker_init)
-    try:
+    with worker_pool(min(int(workers), len(todo)), "spawn", _worker_init) as pool:
         futures = [pool.submit(_compute, spec) for spec in todo]
         for future in as_completed(futures):
             yield future.result()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _name(scenario: dict) -> str:

@@ -45,10 +45,9 @@ and ids are looked up again only to score.
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -71,6 +70,7 @@ from xvmatch.evaluation.cross_view_metrics import (
 )
 from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
 from xvmatch.geometry.handcrafted_costs import PairCosts
+from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.assignment import GAMMA_GRID, assign
 
 __all__ = [
@@ -339,9 +339,7 @@ def _all_trials(
                 progress(len({t.frame for t in results[i].trials}))
     else:
         # "spawn" as in generate_dataset: forked children may inherit OpenCV's thread pool.
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=int(workers), mp_context=context,
-                                 initializer=_worker_init) as pool:
+        with worker_pool(int(workers), "spawn", _worker_init) as pool:
             futures = {pool.submit(_scene_task, *task): i for i, task in enumerate(tasks)}
             for future in as_completed(futures):
                 i = futures[future]

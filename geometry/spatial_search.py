@@ -699,7 +699,7 @@ def clip_cost_curves(
             curves[k] = _clip_curve(top, hor, clip, offsets.tolist(), hor_width, params,
                                     camera_id)
         return curves
-    from xvmatch.worker_pool import worker_pool
+    from xvmatch.geometry.worker_pool import worker_pool
 
     # About four tasks per worker, so that uneven tasks (crowded frames) still balance.
     pieces = max(1, -(-4 * int(workers) // len(clips)))

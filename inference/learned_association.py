@@ -205,7 +205,7 @@ def _feature_stream(
         for tb, hb, cam, cams in inputs:
             yield _frame_features(tb, hb, size, configs, cam, cams, mirror)
         return
-    from xvmatch.worker_pool import worker_pool
+    from xvmatch.geometry.worker_pool import worker_pool
 
     chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
     # Spawned workers ("spawn": a forked child may inherit onnxruntime's or OpenCV's thread

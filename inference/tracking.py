@@ -24,6 +24,7 @@ import numpy as np
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.geometry.spatial_matching import SpatialParams
 from xvmatch.geometry.spatial_search import associate_frame
+from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.learned_association import FrameImages
 from xvmatch.inference.track_appearance import (
     Embedder,
@@ -44,7 +45,6 @@ from xvmatch.inference.track_mip import ClusterSolution, solve_four_clusters
 from xvmatch.inference.track_spectral import spectral_solution
 from xvmatch.inference.track_stitching import stitch_windows
 from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips, view_tracklets
-from xvmatch.worker_pool import worker_pool
 
 __all__ = [
     "SOLVERS",

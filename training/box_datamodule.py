@@ -27,7 +27,6 @@ import json
 import re
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -59,6 +58,7 @@ from xvmatch.geometry.spatial_features import (
     match_labels,
 )
 from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET, estimate_offset
+from xvmatch.geometry.worker_pool import worker_pool
 
 __all__ = [
     "CvmhatBoxDataModule",
@@ -588,7 +588,7 @@ class SimBoxDataModule(FrameDataModule):
             return
         jobs = [(self, k) for k in range(self.n_scenes)]
         if self.workers > 1 and self.n_scenes > 1:
-            with ProcessPoolExecutor(max_workers=self.workers) as pool:
+            with worker_pool(self.workers, None) as pool:
                 parts = list(pool.map(_sim_part, jobs, chunksize=4))
         else:
             parts = [_sim_part(job) for job in jobs]

@@ -12,16 +12,19 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
 __all__ = ["stop_pool", "worker_pool"]
 
 
-def _ignore_sigint() -> None:
-    """Worker initializer: leave Ctrl-C to the parent, which stops the workers itself."""
+def _start_worker(initializer: Callable[[], object] | None) -> None:
+    """Worker initializer: leave Ctrl-C to the parent, which stops the workers itself, then run
+    the caller's own ``initializer`` (e.g. one thread per worker)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if initializer is not None:
+        initializer()
 
 
 def stop_pool(pool: ProcessPoolExecutor) -> None:
@@ -43,7 +46,9 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
 
 
 @contextmanager
-def worker_pool(workers: int, start_method: str | None = "spawn") -> Iterator[ProcessPoolExecutor]:
+def worker_pool(workers: int, start_method: str | None = "spawn",
+                initializer: Callable[[], object] | None = None,
+                ) -> Iterator[ProcessPoolExecutor]:
     """A ``ProcessPoolExecutor`` of ``workers`` processes that ignore SIGINT, stopped at once
     (:func:`stop_pool`) when the block raises, and shut down normally when it completes.
 
@@ -52,12 +57,13 @@ def worker_pool(workers: int, start_method: str | None = "spawn") -> Iterator[Pr
         start_method: ``"spawn"`` (default: a forked child may inherit the parent's thread
             pools, e.g. onnxruntime's or OpenCV's, and hang), ``"fork"``, or None for the
             platform's default.
+        initializer: run in each worker after it starts (a module-level function).
     """
     if int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     context = multiprocessing.get_context(start_method)
     pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=context,
-                               initializer=_ignore_sigint)
+                               initializer=_start_worker, initargs=(initializer,))
     try:
         yield pool
     except BaseException:
