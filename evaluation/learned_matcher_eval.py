@@ -33,10 +33,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
-from torch import nn
 
 from xvmatch.datasets.pair_trials import CUES, SETTINGS, PairTrial
 from xvmatch.evaluation.cross_view_metrics import (
@@ -48,7 +47,9 @@ from xvmatch.evaluation.cross_view_metrics import (
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
 from xvmatch.geometry.cost_fusion import add_cheirality
 from xvmatch.inference.assignment import GAMMA_GRID, assign
-from xvmatch.models.fusion_heads import ProductFusionHead, SumFusionHead
+
+if TYPE_CHECKING:  # torch is imported only by the functions that run a fusion head
+    from torch import nn
 
 __all__ = [
     "CueRule",
@@ -89,7 +90,6 @@ class CueRule:
                              f"{self.cue!r}")
 
 
-@torch.no_grad()
 def rule_cost(trial: PairTrial, rule: CueRule | Method) -> np.ndarray:
     """``(M, N)`` association cost of a trial under a learned rule or a handcrafted method."""
     if isinstance(rule, Method):
@@ -101,15 +101,18 @@ def rule_cost(trial: PairTrial, rule: CueRule | Method) -> np.ndarray:
                              "appearance coster when building the trials")
         cost = cues[rule.cue]
     else:
+        import torch
+
         head = rule.head.eval()
         param = next(head.parameters(), None)
         buffer = next(head.buffers(), None)
         ref = param if param is not None else buffer
         dtype = ref.dtype if ref is not None else torch.float32
         device = ref.device if ref is not None else torch.device("cpu")
-        tensors = {k: torch.as_tensor(v, dtype=dtype, device=device)[None]
-                   for k, v in cues.items()}
-        cost = rule.head(tensors)[0].double().cpu().numpy()
+        with torch.no_grad():
+            tensors = {k: torch.as_tensor(v, dtype=dtype, device=device)[None]
+                       for k, v in cues.items()}
+            cost = rule.head(tensors)[0].double().cpu().numpy()
     return add_cheirality(cost, trial.costs.cheirality) if rule.cheirality else cost
 
 
@@ -149,6 +152,8 @@ def default_rules(heads: Mapping[str, nn.Module] | None = None) -> list[CueRule]
         heads: ``{name: head}`` of trained fusion heads, e.g. ``{"geometry only": head_geo,
             "fused": head_all}``; each becomes the row ``"learned head: NAME"``.
     """
+    from xvmatch.models.fusion_heads import ProductFusionHead, SumFusionHead
+
     rules = [
         CueRule("app", "Learned appearance only", cue="app"),
         CueRule("app+cheirality", "Learned appearance only", cue="app", cheirality=True),

@@ -92,6 +92,37 @@ def test_torch_free_subpackages_import_no_torch(package: str) -> None:
     assert not bad, "\n".join(bad)
 
 
+LAZY_TORCH = ("evaluation",)
+"""Subpackages that may use torch, but only inside the functions that need it: importing them
+(the CLI's evaluate, ablate and baseline do) must not load torch."""
+
+
+def _module_level_imports(path: Path) -> list[tuple[int, str]]:
+    """``(line, dotted name)`` of the imports run when the module is imported (not those inside
+    functions or under ``if TYPE_CHECKING:``)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    out = []
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.lineno, node.module))
+    return out
+
+
+@pytest.mark.parametrize("package", LAZY_TORCH)
+def test_lazy_torch_subpackages_import_torch_only_inside_functions(package: str) -> None:
+    heavy_packages = {"models", "training", "export"}  # their modules import torch
+    bad = [
+        f"{path.relative_to(ROOT)}:{line}: imports {name} when the module is imported"
+        for path in _modules(package)
+        for line, name in _module_level_imports(path)
+        if name.split(".")[0] in HEAVY
+        or (name.startswith("xvmatch.") and name.split(".")[1] in heavy_packages)
+    ]
+    assert not bad, "\n".join(bad)
+
+
 def test_the_rules_cover_every_subpackage() -> None:
     on_disk = {p.parent.name for p in ROOT.glob("*/__init__.py")} - {"tests", "benchmarks"}
     assert on_disk <= set(SUBPACKAGES)
