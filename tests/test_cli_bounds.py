@@ -283,6 +283,7 @@ OPTIONS = [
     *(Option("baseline", f"--gamma-{r}", "float", 0, None, "a finite cost > 0",
              open_low=True)
       for r in ("geo", "hist", "sum", "product")),
+    Option("fit-geometry", "--image-size", "size", 8, 65536, "8..65536 a side"),
     Option("fit-geometry", "--epochs", "int", 1, 1000, "1..1000"),
     Option("fit-geometry", "--seed", "int", *SEED, "0..2**32-1"),
     Option("fit-geometry", "--noise", "int", 0, 100, "0..100"),

@@ -54,7 +54,7 @@ def _images(scene: SceneInputs) -> list[str]:
 SETTINGS = {
     "images": lambda s: _images(s),
     "images+cameras": lambda s: [*_images(s), "--cameras", str(s.cameras)],
-    "boxes": lambda s: [],
+    "boxes": lambda s: ["--image-size", "320x180"],  # boxes only: the camera's size is given
 }
 
 

@@ -227,7 +227,8 @@ def test_fit_geometry_command_end_to_end(tmp_path):
     args = parser.parse_args(
         ["fit-geometry", "--cvmhat", str(data), "--out", str(out), "--epochs", "1",
          "--noise", "0", "--sim-scenes", "2", "--sites", "alpha", "--cache",
-         str(tmp_path / "c"), "--quiet", "--width", "16", "--layers", "1"]
+         str(tmp_path / "c"), "--quiet", "--width", "16", "--layers", "1",
+         "--image-size", "2688x1512"]  # the simulator's size: its few boxes reach x 1066 only
     )
     assert args.func(args) == 0
     model = load_matcher(out)

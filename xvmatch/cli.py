@@ -75,6 +75,13 @@ MAX_OFFSET_TYPE = int_in(0, MAX_OFFSET_LIMIT, "each clip is compared at 2 * max_
 HOR_IMAGE_SIZE = image_size(8, 65536, "pixels of a camera image")
 """``--image-size`` of the horizontal view: 8..65536 pixels a side."""
 
+IMAGE_SIZE_HELP = (
+    "the horizontal camera's image size in pixels, 8..65536 a side; needed with boxes only "
+    "(default: the images' or the cameras' size; else 2688x1512, CVMHAT's, only when the boxes "
+    "reach beyond 60%% of its width, with a note; a box more than 10%% past the image's border "
+    "is an error)")
+"""The help of every ``--image-size`` of the horizontal view (:mod:`xvmatch.cli_image_size`)."""
+
 
 def _add_spatial_options(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("spatial-distribution parameters (paper defaults)")
@@ -210,11 +217,16 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         check_own_folder(args.draw, DRAW_COMMAND, "--draw")
     from xvmatch.cli_learn import horizontal_size
 
-    hor_width = horizontal_size(args, hor)[0][0]
+    max_offset = _max_offset(args, top, hor) if args.offset == "auto" else None
+    hor_size = horizontal_size(args, hor)
+    hor_width = hor_size[0][0]
+    if args.model is None:
+        from xvmatch.cli_image_size import note_if_assumed
+
+        note_if_assumed(hor_size, hor, args.hor, args.quiet)
     if args.offset == "auto":
         from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
 
-        max_offset = _max_offset(args, top, hor)
         est = estimate_offset(top, hor, hor_width=hor_width, params=params,
                               max_offset=max_offset, camera_id=args.camera_id,
                               workers=args.workers)
@@ -239,7 +251,8 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     if args.model is not None:
         from xvmatch.cli_learn import associate_with_model
 
-        pairs = associate_with_model(args, top, hor, frames, progress, top_offset=offset)
+        pairs = associate_with_model(args, top, hor, frames, progress, top_offset=offset,
+                                     hor_size=hor_size)
     else:
         pairs = associate_sequence(
             top,
@@ -355,10 +368,19 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     hor = _read_boxes(args.hor, args.duplicates)
     max_offset = _max_offset(args, top, hor)
     _check_camera_id(args.camera_id, top, args.top)
+    if args.clip_length < 1:  # before the size note: a refused run prints one line
+        raise UsageError(f"--clip-length {args.clip_length}: need clip_length >= 1 (frames per "
+                         "clip)")
+    from xvmatch.cli_image_size import note_if_assumed, resolve_size
+
+    given = [] if args.image_size is None else [(args.image_size, "--image-size")]
+    resolved = resolve_size(hor, args.hor, given)
+    hor_width = resolved[0][0]
+    note_if_assumed(resolved, hor, args.hor)
     est = estimate_offset(
         top,
         hor,
-        hor_width=args.image_size[0],
+        hor_width=hor_width,
         params=params,
         clip_start=args.clip_start,
         clip_length=args.clip_length,
@@ -503,8 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=HOR_IMAGE_SIZE,
         default=None,
         metavar="WxH",
-        help="horizontal image size in pixels, 8..65536 a side (default: the images' size "
-        "with --hor-images, else 2688x1512, CVMHAT)",
+        help=IMAGE_SIZE_HELP + "; with --hor-images or --cameras it must agree with them",
     )
     p.add_argument(
         "--offset",
@@ -583,8 +604,8 @@ def build_parser() -> argparse.ArgumentParser:
         f"files span (default {AUTO_MAX_OFFSET}, as associate --offset auto)",
     )
     p.add_argument(
-        "--image-size", type=HOR_IMAGE_SIZE, default=(2688, 1512), metavar="WxH",
-        help="horizontal image size, 8..65536 a side (default 2688x1512)",
+        "--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
+        help=IMAGE_SIZE_HELP,
     )
     p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",

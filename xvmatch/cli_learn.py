@@ -14,7 +14,14 @@ import argparse
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
-from xvmatch.cli_types import float_in, int_in, seed_value, thread_count, worker_count
+from xvmatch.cli_types import (
+    float_in,
+    image_size,
+    int_in,
+    seed_value,
+    thread_count,
+    worker_count,
+)
 from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = [
@@ -55,6 +62,11 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write")
     p.add_argument("--sites", nargs="+", default=None, metavar="SITE",
                    help="train on these sites only (the S_<site> part of the names; default all)")
+    p.add_argument("--image-size", type=image_size(8, 65536, "pixels of a camera image"),
+                   default=None, metavar="WxH",
+                   help="the horizontal camera's image size, 16:9, 8..65536 a side; boxes of "
+                   "another size than 2688x1512 are scaled to it for training (default: "
+                   "2688x1512 when the boxes reach beyond 60%% of its width, else an error)")
     p.add_argument("--epochs", default=12,
                    type=int_in(1, 1000, "a bound on the run's time: the default converges in "
                                "12"),
@@ -111,9 +123,26 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
          Output("--cache", args.cache, folder=True)],
         [Input("--cvmhat", args.cvmhat)],
     )
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="xvmatch-fit-") as scratch:
+        data = _training_folder(folder, args.sites, args.image_size, scratch, args.quiet)
+        result = _fit(args, data)
+    if not args.quiet:
+        score = "n/a" if result.best_score is None else f"{result.best_score:.1f}"
+        print(
+            f"wrote {result.model_path} (validation CVIDF1 {score}, {result.epochs} epochs, "
+            f"{result.wall_time_s:.0f} s, peak memory {result.peak_memory_mb:.0f} MiB; "
+            f"logs in {result.run_dir})",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def _fit(args: argparse.Namespace, folder):
     from xvmatch.training.fit_geometry import fit_geometry_cvmhat
 
-    result = fit_geometry_cvmhat(
+    return fit_geometry_cvmhat(
         folder,
         args.out,
         sites=args.sites,
@@ -130,15 +159,63 @@ def _cmd_fit_geometry(args: argparse.Namespace) -> int:
         model_config={"width": args.width, "layers": args.layers},
         synchronise=not args.no_sync,
     )
-    if not args.quiet:
-        score = "n/a" if result.best_score is None else f"{result.best_score:.1f}"
-        print(
-            f"wrote {result.model_path} (validation CVIDF1 {score}, {result.epochs} epochs, "
-            f"{result.wall_time_s:.0f} s, peak memory {result.peak_memory_mb:.0f} MiB; "
-            f"logs in {result.run_dir})",
-            file=sys.stderr,
-        )
-    return 0
+
+
+def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
+    """The folder fit-geometry trains from. It trains at CVMHAT's 2688x1512, so the horizontal
+    boxes of the pairs it reads (``sites``) must be of that size (:mod:`xvmatch.cli_image_size`):
+    with ``size`` (``--image-size``) each box must lie in it, and boxes of another size are
+    scaled to 2688 pixels wide into ``scratch`` (the features are resolution-free); without it
+    the boxes must be consistent with 2688x1512. Else one error line."""
+    import re
+    import shutil
+    import warnings
+    from pathlib import Path
+
+    from xvmatch.cli_image_size import (
+        CVMHAT_SIZE,
+        MIN_EXTENT,
+        box_extent,
+        check_boxes_in_image,
+        consistent_with,
+    )
+    from xvmatch.datasets.cvmhat import sequence_names
+    from xvmatch.datasets.mot_boxes import read_mot_boxes, scale_frames, write_mot_boxes
+
+    if size is not None and abs(size[1] * CVMHAT_SIZE[0] / size[0] - CVMHAT_SIZE[1]) > 0.02 * \
+            CVMHAT_SIZE[1]:
+        raise ValueError(f"--image-size {size[0]}x{size[1]}: fit-geometry trains at CVMHAT's "
+                         "16:9 (2688x1512); crop or pad the boxes to a 16:9 image first")
+    source = "--image-size" if size is not None else "CVMHAT's size, fit-geometry's"
+    want = tuple(size) if size is not None else CVMHAT_SIZE
+    names, right, widest = [], 0.0, {}
+    for name in sequence_names(folder):
+        site = re.search(r"S_([A-Za-z0-9]+)", name)
+        if sites and (site is None or site.group(1) not in sites):
+            continue
+        path = Path(folder) / f"{name}_hor.txt"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            hor = read_mot_boxes(path, duplicates="first")
+        check_boxes_in_image(hor, want, path, source)
+        names.append((name, hor))
+        if box_extent(hor)[0] > right:
+            right, widest = box_extent(hor)[0], hor
+    if size is None and widest and not consistent_with(widest):
+        raise ValueError(f"--cvmhat {folder}: the horizontal image size is unknown: pass "
+                         f"--image-size WxH (fit-geometry trains at CVMHAT's 2688x1512 and "
+                         f"these boxes reach only x {right:g}, not beyond {MIN_EXTENT:.0%} of "
+                         "2688)")
+    if size is None and widest and not quiet:
+        print(f"xvmatch: note: assuming the horizontal images of {folder} are 2688x1512 (CVMHAT; "
+              f"the boxes reach x {right:g}); pass --image-size WxH if not", file=sys.stderr)
+    if want == CVMHAT_SIZE:
+        return Path(folder)
+    out = Path(scratch)
+    for name, hor in names:
+        shutil.copyfile(Path(folder) / f"{name}_top.txt", out / f"{name}_top.txt")
+        write_mot_boxes(out / f"{name}_hor.txt", scale_frames(hor, CVMHAT_SIZE[0] / want[0]))
+    return out
 
 
 def add_export_parser(subparsers) -> argparse.ArgumentParser:
@@ -320,21 +397,13 @@ class _Shifted:
         self.source.close()
 
 
-def _check_boxes_inside(frames: Mapping, size: tuple[int, int], where: str) -> None:
-    """Every box must overlap its image, else the images and boxes do not belong together."""
-    import numpy as np
+def _check_boxes_inside(frames: Mapping, size: tuple[int, int], where: str,
+                        source: str = "the images") -> None:
+    """Every box must lie in its image (:func:`xvmatch.cli_image_size.check_boxes_in_image`:
+    at most 10% past a border), else the images and boxes do not belong together."""
+    from xvmatch.cli_image_size import check_boxes_in_image
 
-    width, height = size
-    for frame, rec in sorted(frames.items()):
-        b = np.asarray(rec.boxes)
-        outside = (b[:, 0] >= width) | (b[:, 1] >= height) | (b[:, 0] + b[:, 2] <= 0) | (
-            b[:, 1] + b[:, 3] <= 0)
-        if outside.any():
-            k = int(np.flatnonzero(outside)[0])
-            x, y, w, h = (float(v) for v in b[k])
-            raise ValueError(f"{where}: frame {frame}: box of id {int(rec.ids[k])} "
-                             f"({x:g}, {y:g}, {w:g}, {h:g}) lies outside the {width}x{height} "
-                             "image; are these the boxes of these images?")
+    check_boxes_in_image(frames, size, where, source)
 
 
 def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) -> None:
@@ -353,16 +422,24 @@ def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) 
 
 
 def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, int], str]:
-    """The horizontal image size and where it comes from: ``--image-size``, else the
-    ``--hor-images``, else the ``--cameras`` file's ego camera, else CVMHAT's 2688x1512."""
+    """The horizontal image size and where it comes from (:mod:`xvmatch.cli_image_size`):
+    ``--image-size``, the ``--hor-images`` and the ``--cameras`` file's ego camera must agree
+    when given; with none, CVMHAT's 2688x1512 when the boxes are consistent with it (a note on
+    stderr), else an error asking for ``--image-size``. Every horizontal box must lie in it."""
+    from xvmatch.cli_image_size import resolve_size
+
+    if (getattr(args, "top_images", None) is None) != (getattr(args, "hor_images", None) is None):
+        raise ValueError("give --top-images and --hor-images together")
+    given = []
     if getattr(args, "image_size", None) is not None:
-        return tuple(args.image_size), "--image-size"
+        given.append((tuple(args.image_size), "--image-size"))
     if getattr(args, "model", None) is not None and getattr(args, "hor_images", None):
         from xvmatch.datasets.frame_sources import open_frames
 
         with open_frames(args.hor_images, box_frames=sorted(hor)) as source:
-            return tuple(source.size), "the images"
-    if getattr(args, "model", None) is not None and getattr(args, "cameras", None):
+            given.append((tuple(source.size), f"the horizontal images {args.hor_images}"))
+    elif getattr(args, "model", None) is not None and getattr(args, "cameras", None):
+        # with images, each camera file is checked against them (:func:`_check_camera_sizes`)
         from xvmatch.datasets.camera_frames import open_cameras
 
         sizes = {tuple(c.hor.image_size) for _, c in open_cameras(args.cameras).all()}
@@ -370,8 +447,8 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
             raise ValueError(f"{args.cameras}: the ego cameras have several image sizes "
                              f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))}); pass "
                              "--image-size")
-        return sizes.pop(), "the camera files"
-    return (2688, 1512), "the CVMHAT default; pass --image-size"
+        given.append((sizes.pop(), f"the camera files {args.cameras}"))
+    return resolve_size(hor, getattr(args, "hor", "the horizontal boxes"), given)
 
 
 def associate_with_model(
@@ -381,10 +458,12 @@ def associate_with_model(
     frames: Iterable[int],
     progress: Callable[[Iterable[int]], Iterable[int]] | None,
     top_offset: int = 0,
+    hor_size: tuple[tuple[int, int], str] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate with ``args.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
     hor)]}``. Also writes ``--costs`` and ``--draw`` when asked. ``top`` is already re-timed by
-    ``top_offset`` (``--offset``); the top images are re-timed the same way.
+    ``top_offset`` (``--offset``); the top images are re-timed the same way. ``hor_size``:
+    :func:`horizontal_size` when the caller has it already (else it is worked out here).
 
     Reads ``args.model``, ``args.image_size`` (W, H, or None: from the images, else CVMHAT's),
     ``args.camera_id``, and when present ``args.mode`` (must be ``frame``), ``args.gamma``,
@@ -424,13 +503,8 @@ def associate_with_model(
             check_frames(source, [f + shift for f in both])
             sources[view] = _Shifted(source, shift) if shift else source
             sizes[view] = tuple(source.size)
-        given = getattr(args, "image_size", None)
-        if given is not None and tuple(given) != sizes["hor"]:
-            raise ValueError(f"--image-size {given[0]}x{given[1]} disagrees with the horizontal "
-                             f"images ({sizes['hor'][0]}x{sizes['hor'][1]}, {hor_path})")
         _check_boxes_inside(top, sizes["top"], args.top)
-        _check_boxes_inside(hor, sizes["hor"], args.hor)
-    (width, height), said = horizontal_size(args, hor)
+    (width, height), said = hor_size or horizontal_size(args, hor)
     cameras = None
     if getattr(args, "cameras", None) is not None:
         from xvmatch.datasets.camera_frames import open_cameras
@@ -444,6 +518,10 @@ def associate_with_model(
         if "top" in sizes:
             wanted["top"] = (sizes["top"], "the images")
         _check_camera_sizes(cameras, wanted)
+    from xvmatch.cli_image_size import note_if_assumed
+
+    note_if_assumed(((width, height), said), hor, getattr(args, "hor", "the horizontal boxes"),
+                    bool(getattr(args, "quiet", False)))
     want_costs = getattr(args, "costs", None) is not None or draw is not None
     costs: dict | None = {} if want_costs else None
     try:

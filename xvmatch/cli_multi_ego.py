@@ -68,9 +68,11 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--camera-id", default=None, nargs="+", type=box_id, metavar="ID",
                    help="per horizontal view, the top-file id of its wearer (O given; "
                    "|id| <= 2**53); without it O is searched")
+    from xvmatch.cli import IMAGE_SIZE_HELP
+
     p.add_argument("--image-size", type=SIZE_TYPE, default=None, metavar="WxH",
-                   help="horizontal image size, 8..65536 a side (default: the images' or the "
-                   "cameras' size, else 2688x1512, CVMHAT)")
+                   help=IMAGE_SIZE_HELP + " (every horizontal view); with images or cameras it "
+                   "must agree with them")
     p.add_argument("--solver", choices=("mip", "greedy"), default="mip",
                    help="mip: the joint program with HiGHS (default); greedy: pairwise "
                    "Hungarian made consistent (the MIP's fallback)")
@@ -105,19 +107,9 @@ def _wearer_rows(top, camera_id: int) -> dict[int, int]:
     return out
 
 
-def _check_inside(frames, size, where: str) -> None:
-    """Every box must overlap its image, else the images and boxes do not belong together."""
-    width, height = size
-    for frame, rec in sorted(frames.items()):
-        for (x, y, w, h) in rec.boxes.tolist():
-            if x >= width or y >= height or x + w <= 0 or y + h <= 0:
-                raise ValueError(f"{where}: frame {frame}: box ({x:g}, {y:g}, {w:g}, {h:g}) lies "
-                                 f"outside the {width}x{height} image; are these the boxes of "
-                                 "these images?")
-
-
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
     from xvmatch.cli import _progress, _spatial_params
+    from xvmatch.cli_image_size import check_boxes_in_image, note_if_assumed, resolve_size
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.multi_view_assignment import consistent_hungarian, solve_multi_view
     from xvmatch.inference.multi_view_costs import multi_view_costs
@@ -153,7 +145,9 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
                    if args.camera_id is not None else None)
     matcher = images = cameras = None
-    sizes = [tuple(args.image_size)] * n_hor if args.image_size is not None else [None] * n_hor
+    given: list[list] = [[] for _ in range(n_hor)]  # per horizontal view: [(size, source)]
+    if args.image_size is not None:
+        given = [[(tuple(args.image_size), "--image-size")] for _ in range(n_hor)]
     sources = []
     try:
         if args.model is not None:
@@ -170,11 +164,11 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                 source = open_frames(path, box_frames=sorted(views[v]))
                 sources.append(source)
                 check_frames(source, [f for f in sorted(views[v]) if len(views[v][f])])
-                _check_inside(views[v], source.size, paths[v])
-                if v and sizes[v - 1] is not None and tuple(sizes[v - 1]) != tuple(source.size):
-                    raise ValueError(f"--image-size disagrees with the images of {path}")
                 if v:
-                    sizes[v - 1] = tuple(source.size)
+                    given[v - 1].append((tuple(source.size), f"the horizontal images {path}"))
+                else:
+                    check_boxes_in_image(views[0], tuple(source.size), paths[0],
+                                         f"the images {path}", ids=False)
             images = sources
         if args.cameras is not None:
             from xvmatch.datasets.camera_frames import open_cameras
@@ -187,14 +181,19 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                 cams = open_cameras(path, sorted(views[k + 1]))
                 for where, pair in cams.all():
                     size = tuple(pair.hor.image_size)
-                    if sizes[k] is None:
-                        sizes[k] = size
-                    elif tuple(sizes[k]) != size:
+                    if given[k] and tuple(given[k][0][0]) != size:
+                        want = given[k][0][0]
                         raise ValueError(f"{where}: camera 'ego' is {size[0]}x{size[1]} but "
-                                         f"{paths[k + 1]}'s images are "
-                                         f"{sizes[k][0]}x{sizes[k][1]}")
+                                         f"{paths[k + 1]}'s images are {want[0]}x{want[1]} "
+                                         f"(from {given[k][0][1]})")
+                    if not given[k]:
+                        given[k].append((size, f"the camera files {path}"))
                 cameras.append(cams)
-        sizes = [s if s is not None else (2688, 1512) for s in sizes]
+        resolved = [resolve_size(views[k + 1], paths[k + 1], given[k], ids=False)
+                    for k in range(n_hor)]
+        for k, r in enumerate(resolved):
+            note_if_assumed(r, views[k + 1], paths[k + 1], args.quiet)
+        sizes = [r[0] for r in resolved]
         problems = multi_view_costs(
             views, sizes, frames, matcher=matcher,
             appearance=matcher if images is not None else None, images=images,

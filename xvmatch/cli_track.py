@@ -58,7 +58,8 @@ def _open_images(args: argparse.Namespace, top, hor):
     """The image sources of both views, their horizontal size and the embedder (or None),
     after every check (images given together, the frames the boxes list, boxes inside the
     images, ``--image-size`` agreeing, a bundle with an appearance network)."""
-    from xvmatch.cli_learn import _check_boxes_inside, open_models
+    from xvmatch.cli_image_size import check_boxes_in_image
+    from xvmatch.cli_learn import open_models
     from xvmatch.datasets.frame_sources import check_frames, open_frames
     from xvmatch.inference.tracking import TrackImages
 
@@ -83,12 +84,8 @@ def _open_images(args: argparse.Namespace, top, hor):
             sources.append(source)
             check_frames(source, [f for f in sorted(frames) if len(frames[f])])
         size = tuple(sources[1].size)
-        if args.image_size is not None and tuple(args.image_size) != size:
-            raise ValueError(f"--image-size {args.image_size[0]}x{args.image_size[1]} "
-                             f"disagrees with the horizontal images ({size[0]}x{size[1]}, "
-                             f"{args.hor_images})")
-        _check_boxes_inside(top, tuple(sources[0].size), args.top)
-        _check_boxes_inside(hor, size, args.hor)
+        check_boxes_in_image(top, tuple(sources[0].size), args.top,
+                             f"the images {args.top_images}", ids=False)
     except BaseException:
         for source in sources:
             source.close()
@@ -138,9 +135,10 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "greedy answer is used and counted in a warning")
     p.add_argument("--seed", type=seed_value, default=0,
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
+    from xvmatch.cli import IMAGE_SIZE_HELP
+
     p.add_argument("--image-size", type=HOR_SIZE_TYPE, default=None, metavar="WxH",
-                   help="horizontal image size, 8..65536 a side (default: the images' size "
-                   "with --hor-images, else 2688x1512, CVMHAT)")
+                   help=IMAGE_SIZE_HELP + "; with --hor-images it must agree with them")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for the frame association, 1..64 (default 1; the same "
                    "output for any K)")
@@ -208,8 +206,15 @@ def _cmd_track(args: argparse.Namespace) -> int:
          Input("--model", None if args.model == "default" else args.model)],
     )
     images, sources, size = _open_images(args, top.frames, hor.frames)
-    width = (size or args.image_size or (2688, 1512))[0]
     try:
+        from xvmatch.cli_image_size import note_if_assumed, resolve_size
+
+        given = [] if args.image_size is None else [(args.image_size, "--image-size")]
+        if size is not None:
+            given.append((size, f"the horizontal images {args.hor_images}"))
+        resolved = resolve_size(hor.frames, args.hor, given, ids=False)
+        width = resolved[0][0]
+        note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
         result = track_pair(top.frames, hor.frames, float(width), params, config,
                             camera_rows, args.workers, _progress(not args.quiet), images=images)
     finally:

@@ -1,0 +1,190 @@
+"""The horizontal image size of box-only runs (issue 29, item 1; :mod:`xvmatch.cli_image_size`).
+
+The same scene's horizontal boxes at CVMHAT's 2688x1512, at 1399x787 (the user's camera) and at
+half size: without ``--image-size`` the CVMHAT-sized boxes run with a note and the others are
+refused in one line naming ``--image-size``; with the right ``--image-size`` every run pairs the
+same people as the original (the features are resolution-free). Boxes too far outside the image
+are an error naming the line. Run through ``xvmatch.cli.main`` end to end.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from xvmatch.cli import main
+from xvmatch.cli_image_size import CVMHAT_SIZE, MIN_EXTENT, consistent_with
+from xvmatch.datasets.box_scene import simulate_box_scene
+from xvmatch.datasets.mot_boxes import (
+    FrameBoxes,
+    read_mot_boxes,
+    read_predictions,
+    scale_frames,
+    write_mot_boxes,
+)
+
+SIZES = {"1399x787": 1399 / 2688, "1344x756": 0.5}
+"""The user's camera of the issue, and half the CVMHAT size: ``--image-size`` -> scale."""
+
+
+@pytest.fixture(scope="module")
+def boxes(tmp_path_factory):
+    """A simulated 2688x1512 scene (boxes reaching past 60% of the width) and its horizontal
+    boxes scaled to each of :data:`SIZES`; ``{name: (top, hor)}`` paths, ``cvmhat`` the
+    original."""
+    folder = tmp_path_factory.mktemp("sizes")
+    scene = simulate_box_scene(n_frames=12, seed=1)
+    assert consistent_with(scene.hor)
+    top = folder / "top.txt"
+    write_mot_boxes(top, scene.top)
+    out = {"cvmhat": (top, folder / "hor.txt")}
+    write_mot_boxes(out["cvmhat"][1], scene.hor)
+    for size, factor in SIZES.items():
+        out[size] = (top, folder / f"hor_{size}.txt")
+        write_mot_boxes(out[size][1], scale_frames(scene.hor, factor))
+    return out
+
+
+def _run(capsys, *argv: str) -> tuple[int, str]:
+    capsys.readouterr()
+    code = main(list(argv))
+    return code, capsys.readouterr().err
+
+
+@pytest.mark.parametrize("model", [[], ["--model", "default"]], ids=["handcrafted", "learned"])
+@pytest.mark.parametrize("size", list(SIZES))
+def test_boxes_only_needs_the_size_and_then_pairs_as_at_full_size(boxes, tmp_path, capsys,
+                                                                  size, model):
+    top, hor = boxes["cvmhat"]
+    code, err = _run(capsys, "associate", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "full.csv"), *model)
+    assert code == 0, err
+    notes = [line for line in err.splitlines() if line.startswith("xvmatch: note:")]
+    assert len(notes) == 1 and "2688x1512" in notes[0] and "--image-size" in notes[0], err
+    full = read_predictions(tmp_path / "full.csv")
+    assert sum(len(p) for p in full.values()) >= 20
+
+    top, hor = boxes[size]
+    code, err = _run(capsys, "associate", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "refused.csv"), *model)
+    assert code == 2 and err.count("\n") == 1 and err.startswith("xvmatch: error: "), err
+    assert "--image-size" in err and str(hor) in err
+    assert not (tmp_path / "refused.csv").exists()
+
+    code, err = _run(capsys, "associate", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "scaled.csv"), "--image-size", size, "--quiet", *model)
+    assert code == 0 and err == "", err
+    assert read_predictions(tmp_path / "scaled.csv") == full
+
+
+@pytest.mark.parametrize("command", ["track", "offset", "associate-multi"])
+def test_every_box_command_refuses_an_unknown_size(boxes, tmp_path, capsys, command):
+    top, hor = boxes["1399x787"]
+    out = [] if command == "offset" else ["--out", str(tmp_path / "out")]
+    code, err = _run(capsys, command, "--top", str(top), "--hor", str(hor), *out)
+    assert code == 2 and err.count("\n") == 1 and "--image-size" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_track_with_the_size_gives_the_tracks_of_the_full_size(boxes, tmp_path, capsys):
+    top, hor = boxes["cvmhat"]
+    code, err = _run(capsys, "track", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "full"), "--quiet")
+    assert code == 0, err
+    top, hor = boxes["1399x787"]
+    code, err = _run(capsys, "track", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "scaled"), "--quiet", "--image-size", "1399x787")
+    assert code == 0, err
+    assert (tmp_path / "scaled" / "top.txt").read_text() == \
+        (tmp_path / "full" / "top.txt").read_text()
+    full_ids = [ln.split(",")[1] for ln in (tmp_path / "full" / "hor.txt").read_text().split()]
+    scaled_ids = [ln.split(",")[1] for ln in
+                  (tmp_path / "scaled" / "hor.txt").read_text().split()]
+    assert scaled_ids == full_ids
+
+
+def test_offset_and_multi_take_the_size(boxes, tmp_path, capsys):
+    top, hor = boxes["1344x756"]
+    code, err = _run(capsys, "offset", "--top", str(top), "--hor", str(hor), "--image-size",
+                     "1344x756", "--max-offset", "2", "--clips", "2", "--clip-length", "3")
+    assert code == 0, err
+    code, err = _run(capsys, "associate-multi", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "multi"), "--image-size", "1344x756", "--quiet")
+    assert code == 0, err
+
+
+def test_fit_geometry_refuses_an_unknown_size(boxes, tmp_path, capsys):
+    pytest.importorskip("torch")
+    data = tmp_path / "data"
+    data.mkdir()
+    top, hor = boxes["1399x787"]
+    (data / "V0-S_a-G_1_top.txt").write_text(top.read_text())
+    (data / "V0-S_a-G_1_hor.txt").write_text(hor.read_text())
+    code, err = _run(capsys, "fit-geometry", "--cvmhat", str(data), "--out",
+                     str(tmp_path / "m.pt"), "--quiet")
+    assert code == 2 and err.count("\n") == 1 and "--image-size" in err, err
+    assert not (tmp_path / "m.pt").exists()
+    code, err = _run(capsys, "fit-geometry", "--cvmhat", str(data), "--out",
+                     str(tmp_path / "m.pt"), "--quiet", "--image-size", "1400x600")
+    assert code == 2 and "16:9" in err, err
+    code, err = _run(capsys, "fit-geometry", "--cvmhat", str(data), "--out",
+                     str(tmp_path / "m.pt"), "--quiet", "--image-size", "1399x787", "--epochs",
+                     "1", "--noise", "0", "--sim-scenes", "0", "--width", "16", "--layers", "1",
+                     "--cache", str(tmp_path / "cache"), "--no-sync")
+    assert code == 0, err  # trained on the boxes scaled to 2688 wide
+    assert (tmp_path / "m.pt").is_file()
+
+
+def test_the_rule_separates_a_small_camera_from_cvmhat():
+    """A 1399-wide camera's boxes reach at most 1399 plus the margin: below 60% of 2688."""
+    assert 1399 * 1.1 < MIN_EXTENT * CVMHAT_SIZE[0]
+    edge = {1: FrameBoxes(1, [1, 2], [[0, 0, 50, 100], [1340, 600, 59, 187]])}
+    assert not consistent_with(edge)
+    wide = {1: FrameBoxes(1, [1], [[2600, 1400, 80, 110]])}
+    assert consistent_with(wide)
+
+
+@pytest.mark.parametrize(("box", "ok"), [
+    ("1380,700,60,100", True),     # 41 px past the right border of 1399: within 10%
+    ("1500,300,60,100", False),    # past the border by 161 px > 139.9
+    ("-100,300,60,100", False),    # entirely left of the image
+    ("-130,300,200,100", True),    # 130 px past the left border, but inside by 70 px
+])
+def test_a_box_outside_the_stated_image_is_an_error_naming_the_line(tmp_path, capsys, box, ok):
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    top.write_text("1,1,10,10,20,40\n1,2,60,10,20,40\n")
+    hor.write_text(f"1,1,100,200,50,120\n1,2,{box}\n")
+    code, err = _run(capsys, "associate", "--top", str(top), "--hor", str(hor), "--out",
+                     str(tmp_path / "p.csv"), "--image-size", "1399x787", "--quiet")
+    if ok:
+        assert code == 0, err
+        return
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"{hor}:2: frame 1: box of id 2" in err and "outside the 1399x787 image" in err
+
+
+@pytest.mark.cvmhat
+def test_a_cvmhat_pair_at_two_resolutions(cvmhat_dir, tmp_path, capsys):
+    """A real CVMHAT dev pair (its first 40 frames), the horizontal boxes scaled to 1399x787
+    and to half size: refused without --image-size, the original's pairs with it."""
+    name = "V0-S_canteen_0-G_1"
+    top = {f: r for f, r in read_mot_boxes(cvmhat_dir / f"{name}_top.txt",
+                                           duplicates="first").items() if f <= 40}
+    hor = {f: r for f, r in read_mot_boxes(cvmhat_dir / f"{name}_hor.txt",
+                                           duplicates="first").items() if f <= 40}
+    write_mot_boxes(tmp_path / "top.txt", top)
+    write_mot_boxes(tmp_path / "hor.txt", hor)
+    code, err = _run(capsys, "associate", "--top", str(tmp_path / "top.txt"), "--hor",
+                     str(tmp_path / "hor.txt"), "--out", str(tmp_path / "full.csv"), "--quiet")
+    assert code == 0, err
+    full = read_predictions(tmp_path / "full.csv")
+    for size, factor in SIZES.items():
+        path = tmp_path / f"hor_{size}.txt"
+        write_mot_boxes(path, scale_frames(hor, factor))
+        argv = ["associate", "--top", str(tmp_path / "top.txt"), "--hor", str(path), "--out",
+                str(tmp_path / f"{size}.csv"), "--quiet"]
+        code, err = _run(capsys, *argv)
+        assert code == 2 and "--image-size" in err, err
+        code, err = _run(capsys, *argv, "--image-size", size)
+        assert code == 0, err
+        assert read_predictions(tmp_path / f"{size}.csv") == full
+    assert sum(len(p) for p in full.values()) > 0
