@@ -49,3 +49,14 @@ def test_environment_variable_sets_the_mode():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={"XVMATCH_KERNELS": "compiled", "PATH": ""}).stdout.split()
     assert out == ["compiled", "False"]
+
+
+def test_a_planned_long_run_takes_the_kernels_for_small_calls_too():
+    with kernel_choice.forced("auto"):
+        with kernel_choice.planned(kernel_choice.LONG_RUN - 1):
+            assert kernel_choice.kernels(1) is None
+        with kernel_choice.planned(kernel_choice.LONG_RUN):
+            assert kernel_choice.kernels(1) is not None
+        assert kernel_choice.kernels(1) is None  # the plan ends with its block
+    with kernel_choice.forced("numpy"), kernel_choice.planned(10**6):
+        assert kernel_choice.kernels(10**6) is None
