@@ -10,6 +10,7 @@ and a scene laid out as a user's data with the command that matches it. Torch-fr
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -137,9 +138,28 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     inputs = write_scene_inputs(scene.scene(scene.scene_names[0]), out / "scene")
     print(f"\nwrote {picture_path} ({time.perf_counter() - start:.0f} s). Match a scene as a "
           "user would (boxes from any detector, images, optional cameras):")
-    print(f"  xvmatch associate --model {args.model} --top {inputs.top} --hor {inputs.hor} "
-          f"--top-images '{inputs.top_images}' --hor-images '{inputs.hor_images}' "
-          f"--cameras {inputs.cameras} --out {out / 'pred.csv'} --draw {out / 'pictures'}")
-    print(f"  xvmatch evaluate --pred {out / 'pred.csv'} --top {inputs.top} --hor {inputs.hor}",
-          file=sys.stdout)
+    q, xvmatch = shlex.quote, xvmatch_command()
+    print(f"  {xvmatch} associate --model {q(str(args.model))} --top {q(str(inputs.top))} "
+          f"--hor {q(str(inputs.hor))} --top-images {q(str(inputs.top_images))} --hor-images "
+          f"{q(str(inputs.hor_images))} --cameras {q(str(inputs.cameras))} --out "
+          f"{q(str(out / 'pred.csv'))} --draw {q(str(out / 'pictures'))}")
+    print(f"  {xvmatch} evaluate --pred {q(str(out / 'pred.csv'))} --top {q(str(inputs.top))} "
+          f"--hor {q(str(inputs.hor))}", file=sys.stdout)
     return 0
+
+
+def xvmatch_command() -> str:
+    """How to run this xvmatch from a shell, as printed commands start (issue 29, item 3):
+    ``xvmatch`` when that name on ``PATH`` is the running entry point; else the full path of
+    the entry point beside the running interpreter (a virtual environment not activated);
+    else ``PYTHON -m xvmatch`` with the running interpreter's path. Quoted for a POSIX shell."""
+    import os
+    import shutil
+
+    here = os.path.join(os.path.dirname(sys.executable), "xvmatch")
+    if os.path.isfile(here) and os.access(here, os.X_OK):
+        found = shutil.which("xvmatch")
+        if found and os.path.realpath(found) == os.path.realpath(here):
+            return "xvmatch"
+        return shlex.quote(here)
+    return f"{shlex.quote(sys.executable)} -m xvmatch"
