@@ -237,12 +237,38 @@ def _cmd_track(args: argparse.Namespace) -> int:
     return 0
 
 
+TRACKEVAL_MISSING = ("xvmatch: note: per-view IDF1, MOTA, MOTP and HOTA need the TrackEval "
+                     "package: pip install --no-deps trackeval")
+"""The line ``evaluate --tracks`` prints on stderr when TrackEval is not installed."""
+
+
+def _trackeval_installed() -> bool:
+    """Whether TrackEval's metrics import (its optional dataset readers' messages hidden)."""
+    import contextlib
+    import io
+
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            import trackeval.metrics  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def evaluate_tracks_command(args: argparse.Namespace, read_boxes) -> int:
-    """``xvmatch evaluate --tracks DIR``: print the tracking scores of DIR/top.txt, DIR/hor.txt."""
+    """``xvmatch evaluate --tracks DIR``: print the tracking scores of DIR/top.txt, DIR/hor.txt.
+
+    Without TrackEval the cross-view scores are printed alone (JSON: ``top`` and ``hor`` are
+    null), then one line on stderr naming the package the per-view metrics need; exit 0, as the
+    cross-view scores asked for are given (issue 29, item 4)."""
+    from dataclasses import asdict
+
     from xvmatch.datasets.mot_boxes import read_mot_boxes
+    from xvmatch.evaluation.cross_view_metrics import format_table, summarize
     from xvmatch.evaluation.track_metrics import (
         evaluate_tracks,
         format_track_table,
+        track_pair_counts,
         track_scores_to_dict,
     )
 
@@ -256,9 +282,18 @@ def evaluate_tracks_command(args: argparse.Namespace, read_boxes) -> int:
     tracks_hor = read_mot_boxes(folder / "hor.txt")
     gt_top = read_boxes(args.top, args.duplicates)
     gt_hor = read_boxes(args.hor, args.duplicates)
+    name = args.name or args.tracks
+    if not _trackeval_installed():
+        cross = summarize(track_pair_counts(tracks_top, tracks_hor, gt_top, gt_hor))
+        if args.json:
+            print(json.dumps({"cross_view": asdict(cross), "top": None, "hor": None}, indent=2))
+        else:
+            print(format_table([(name, cross)]))
+        print(TRACKEVAL_MISSING, file=sys.stderr)
+        return 0
     scores = evaluate_tracks(tracks_top, tracks_hor, gt_top, gt_hor)
     if args.json:
         print(json.dumps(track_scores_to_dict(scores), indent=2))
     else:
-        print(format_track_table([(args.name or args.tracks, scores)]))
+        print(format_track_table([(name, scores)]))
     return 0
