@@ -132,6 +132,20 @@ def _candidate_blocks(
                                                    math.radians(params.fov_deg))
 
 
+def _association(found: tuple[int, float, np.ndarray, float, np.ndarray], cand: np.ndarray,
+                 thetas: np.ndarray, hor_order: np.ndarray) -> FrameAssociation:
+    """The :class:`FrameAssociation` of one scored hypothesis (index b = c T + t, cost, pairs
+    mask over the sorted vectors, scale, top person of each entry), in input box order."""
+    index, cost, pairs_mask, scale, top_index = found
+    rows, cols = np.nonzero(pairs_mask)
+    pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    n_theta = thetas.shape[0]
+    return FrameAssociation(pairs=pairs, camera=int(cand[index // n_theta]),
+                            theta=float(np.mod(thetas[index % n_theta], 2.0 * math.pi)),
+                            cost=cost, scale=scale)
+
+
 def rank_hypotheses(
     top_boxes: np.ndarray,
     hor_boxes: np.ndarray,
@@ -161,26 +175,11 @@ def rank_hypotheses(
     if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
         return []
     hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
-    n_theta = thetas.shape[0]
     found = []
     for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
         found += [(start + i, *rest) for i, *rest in _ranked(hypotheses, hor, params, k)]
     found = sorted(found, key=lambda item: (item[1], item[0]))[:k]
-    out = []
-    for index, cost, pairs_mask, scale, top_index in found:
-        rows, cols = np.nonzero(pairs_mask)
-        pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
-        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
-        out.append(
-            FrameAssociation(
-                pairs=pairs,
-                camera=int(cand[index // n_theta]),
-                theta=float(np.mod(thetas[index % n_theta], 2.0 * math.pi)),
-                cost=cost,
-                scale=scale,
-            )
-        )
-    return out
+    return [_association(f, cand, thetas, hor_order) for f in found]
 
 
 def associate_frame(
@@ -245,28 +244,13 @@ def best_per_candidate(
     if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
         return []
     hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
-    n_theta = thetas.shape[0]
     found = []
     for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
         found += [(start + i, *rest) for i, *rest in _best_per_group(hypotheses, hor, params,
                                                                       keep)]
     if keep is not None:  # each block's keep best are exact, so the keep best of all are too
         found = sorted(sorted(found, key=lambda b: (b[1], b[0]))[:keep], key=lambda b: b[0])
-    out = []
-    for index, cost, pairs_mask, scale, top_index in found:
-        rows, cols = np.nonzero(pairs_mask)
-        pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
-        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
-        out.append(
-            FrameAssociation(
-                pairs=pairs,
-                camera=int(cand[index // n_theta]),
-                theta=float(np.mod(thetas[index % n_theta], 2.0 * math.pi)),
-                cost=cost,
-                scale=scale,
-            )
-        )
-    return out
+    return [_association(f, cand, thetas, hor_order) for f in found]
 
 
 def _best_per_group(
