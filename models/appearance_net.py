@@ -40,6 +40,7 @@ from xvmatch.models.pretrained_backbones import (
     MobileNetV2Trunk,
     load_pretrained_trunk,
     pretrained_source_record,
+    state_mismatch,
 )
 
 __all__ = [
@@ -295,20 +296,10 @@ def load_backbone_weights(trunk: ResNetTrunk, path: str | os.PathLike) -> None:
     """
     path = Path(path)
     state = _torchvision_state(path)
-    own = trunk.state_dict()
-    missing = sorted(set(own) - set(state))
-    unexpected = sorted(set(state) - set(own))
-    shapes = [k for k in sorted(set(own) & set(state)) if own[k].shape != state[k].shape]
-    if missing or unexpected or shapes:
-        parts = []
-        for what, keys in (("missing", missing), ("unexpected", unexpected),
-                           ("shape mismatch", shapes)):
-            if keys:
-                more = f" (+{len(keys) - 3} more)" if len(keys) > 3 else ""
-                parts.append(f"{what}: {', '.join(keys[:3])}{more}")
-        raise ValueError(
-            f"{os.fspath(path)}: not torchvision resnet{trunk.depth} weights ({'; '.join(parts)})"
-        )
+    problem = state_mismatch(trunk, state)
+    if problem:
+        raise ValueError(f"{os.fspath(path)}: not torchvision resnet{trunk.depth} weights "
+                         f"({problem})")
     trunk.load_state_dict(state)
 
 

@@ -46,6 +46,7 @@ __all__ = [
     "mobilenetv2_state_from_deep_sort",
     "pretrained_source_record",
     "pretrained_weights_path",
+    "state_mismatch",
 ]
 
 
@@ -310,20 +311,27 @@ def _read_state(path: Path) -> dict[str, Tensor]:
     return dict(state)
 
 
-def _load_exact(trunk: nn.Module, state: Mapping[str, Tensor], where: str) -> None:
-    """Load all-or-nothing: every key matched and every shape equal, else a ValueError."""
-    own = trunk.state_dict()
+def state_mismatch(module: nn.Module, state: Mapping[str, Tensor]) -> str | None:
+    """Why ``state`` cannot load into ``module`` all-or-nothing (missing, unexpected or
+    differently shaped parameters, a few of each named), or None when every key and shape fits."""
+    own = module.state_dict()
     missing = sorted(set(own) - set(state))
     unexpected = sorted(set(state) - set(own))
     shapes = [k for k in sorted(set(own) & set(state)) if own[k].shape != state[k].shape]
-    if missing or unexpected or shapes:
-        parts = []
-        for what, keys in (("missing", missing), ("unexpected", unexpected),
-                           ("shape mismatch", shapes)):
-            if keys:
-                more = f" (+{len(keys) - 3} more)" if len(keys) > 3 else ""
-                parts.append(f"{what}: {', '.join(keys[:3])}{more}")
-        raise ValueError(f"{where}: weights do not fit the trunk ({'; '.join(parts)})")
+    parts = []
+    for what, keys in (("missing", missing), ("unexpected", unexpected),
+                       ("shape mismatch", shapes)):
+        if keys:
+            more = f" (+{len(keys) - 3} more)" if len(keys) > 3 else ""
+            parts.append(f"{what}: {', '.join(keys[:3])}{more}")
+    return "; ".join(parts) or None
+
+
+def _load_exact(trunk: nn.Module, state: Mapping[str, Tensor], where: str) -> None:
+    """Load all-or-nothing: every key matched and every shape equal, else a ValueError."""
+    problem = state_mismatch(trunk, state)
+    if problem:
+        raise ValueError(f"{where}: weights do not fit the trunk ({problem})")
     trunk.load_state_dict(state)
 
 
