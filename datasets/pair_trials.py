@@ -30,7 +30,7 @@ from scipy.optimize import linear_sum_assignment
 from xvmatch.datasets.detector_noise import FALSE_POSITIVE
 from xvmatch.datasets.synthetic_io import MANIFEST, PairRecord, SceneRecord, SyntheticDataset
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
-from xvmatch.geometry.array_checks import as_boxes
+from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.geometry.ray_priors import DEFAULT_BETA, METRIC_MARGIN
@@ -43,7 +43,6 @@ __all__ = [
     "FrameSample",
     "PairTrial",
     "TrialConfig",
-    "box_iou",
     "dataset_trials",
     "match_to_ground_truth",
     "noise_seed_of",
@@ -94,27 +93,6 @@ class TrialConfig:
             raise ValueError(f"margin must be a finite depth >= 0, got {self.margin}")
         if not np.isfinite(self.beta) or self.beta <= 1:
             raise ValueError(f"beta must be a finite cost > 1, got {self.beta}")
-
-
-def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
-    """Pairwise intersection over union of ``(x, y, w, h)`` boxes.
-
-    Args:
-        boxes_a: (M, 4) boxes.
-        boxes_b: (N, 4) boxes.
-
-    Returns:
-        (M, N) IoU in [0, 1]; 0 where the union is empty (two zero-area boxes).
-    """
-    a = as_boxes(boxes_a, "boxes_a")
-    b = as_boxes(boxes_b, "boxes_b")
-    ax1, ay1 = a[:, 0] + a[:, 2], a[:, 1] + a[:, 3]
-    bx1, by1 = b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
-    iw = np.minimum(ax1[:, None], bx1[None, :]) - np.maximum(a[:, None, 0], b[None, :, 0])
-    ih = np.minimum(ay1[:, None], by1[None, :]) - np.maximum(a[:, None, 1], b[None, :, 1])
-    inter = np.clip(iw, 0, None) * np.clip(ih, 0, None)
-    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None, :] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
 
 
 def match_to_ground_truth(

@@ -31,7 +31,8 @@ from xvmatch.evaluation.cross_view_metrics import (
     count_pair,
     summarize,
 )
-from xvmatch.inference.tracklets import Tracklet, box_iou
+from xvmatch.geometry.box_overlap import box_iou
+from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [
     "TrackScores",

@@ -18,9 +18,10 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.color_histogram import histogram_intersection
 
-__all__ = ["Tracklet", "box_iou", "clip_tracklets", "split_clips", "view_tracklets"]
+__all__ = ["Tracklet", "clip_tracklets", "split_clips", "view_tracklets"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,22 +42,6 @@ class Tracklet:
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])
-
-
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, M) intersection over union of ``x, y, w, h`` boxes ``a (N, 4)`` and ``b (M, 4)``."""
-    a = np.asarray(a, dtype=float).reshape(-1, 4)
-    b = np.asarray(b, dtype=float).reshape(-1, 4)
-    ix = np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2]) - np.maximum(
-        a[:, None, 0], b[None, :, 0]
-    )
-    iy = np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3]) - np.maximum(
-        a[:, None, 1], b[None, :, 1]
-    )
-    inter = np.clip(ix, 0, None) * np.clip(iy, 0, None)
-    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None, :] - inter
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(union > 0, inter / union, 0.0)
 
 
 def split_clips(frames: Sequence[int], length: int) -> list[np.ndarray]:

@@ -19,7 +19,6 @@ from xvmatch.datasets.detector_noise import DetectorNoise
 from xvmatch.datasets.pair_trials import (
     FALSE_POSITIVE,
     SETTINGS,
-    box_iou,
     match_to_ground_truth,
     scene_trials,
 )
@@ -40,6 +39,7 @@ from xvmatch.evaluation.handcrafted_baseline import (
     score_trial,
     tune_gammas,
 )
+from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.inference.assignment import GAMMA_GRID

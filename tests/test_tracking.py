@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.inference.track_costs import (
     TrackWeights,
     combine_cross_view,
@@ -27,7 +28,7 @@ from xvmatch.inference.track_mip import (
 from xvmatch.inference.track_spectral import spectral_groups, spectral_solution
 from xvmatch.inference.track_stitching import stitch_windows
 from xvmatch.inference.tracking import TrackConfig, track_pair
-from xvmatch.inference.tracklets import Tracklet, box_iou, clip_tracklets, split_clips
+from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips
 
 
 def _tracklet(clip: int, frames, rows, centres, size=(10.0, 10.0)) -> Tracklet:
