@@ -26,6 +26,7 @@ import numpy as np
 
 from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import CUE_NAMES
+from xvmatch.geometry.record_fields import typed_field
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
 
 __all__ = [
@@ -150,16 +151,8 @@ def _fail(where: Path | str, what: str) -> BundleError:
 
 def _get(doc: dict, key: str, kinds: type | tuple[type, ...], where: Path, prefix: str = ""):
     """``doc[key]`` checked to be one of ``kinds`` (bools are not numbers)."""
-    name = f"{prefix}{key}"
-    if not isinstance(doc, dict) or key not in doc:
-        raise _fail(where, f"manifest lacks the field {name!r}")
-    kinds = kinds if isinstance(kinds, tuple) else (kinds,)
-    value = doc[key]
-    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-        wanted = " or ".join("null" if k is type(None) else k.__name__ for k in kinds)
-        raise _fail(where, f"manifest field {name!r} must be {wanted}, got "
-                    f"{type(value).__name__} {value!r:.60}")
-    return value
+    return typed_field(doc, key, kinds, os.fspath(where), error=BundleError,
+                       document="manifest", prefix=prefix)
 
 
 def _number(doc: dict, key: str, where: Path, low: float, high: float, prefix: str = ""

@@ -29,6 +29,7 @@ from typing import Any
 import torch
 
 from xvmatch.datasets.mot_boxes import atomic_write_bytes
+from xvmatch.geometry.record_fields import typed_field
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
 from xvmatch.models.appearance_net import (
     AppearanceNet,
@@ -145,14 +146,8 @@ def _fail(where: str, what: str) -> MatcherFileError:
 
 def _field(record: Mapping, key: str, kinds: type | tuple[type, ...], where: str):
     """``record[key]``, checked to be one of ``kinds`` (a bool is not a number here)."""
-    if key not in record:
-        raise _fail(where, f"matcher file lacks the field {key!r}")
-    kinds = kinds if isinstance(kinds, tuple) else (kinds,)
-    value = record[key]
-    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-        names = " or ".join(k.__name__ for k in kinds)
-        raise _fail(where, f"field {key!r} must be a {names}, got {type(value).__name__}")
-    return value
+    return typed_field(record, key, kinds, where, error=MatcherFileError,
+                       document="matcher file")
 
 
 def _finite_weights(state: Mapping, where: str, what: str) -> None:
