@@ -255,7 +255,7 @@ def test_a_corrupt_fit_geometry_resume_checkpoint_through_the_command_line(tmp_p
     cvmhat = tmp_path / "cvmhat"
     cvmhat.mkdir()
     for view in ("top", "hor"):
-        (cvmhat / f"S_a_1_{view}.txt").write_text("1,1,10,10,20,40\n")
+        (cvmhat / f"S_a_1_{view}.txt").write_text("1,1,2000,10,20,40\n")
     last = tmp_path / "m.pt.run" / "checkpoints" / "last.ckpt"
     last.parent.mkdir(parents=True)
     last.write_bytes(b"PK\x03\x04 cut short")
