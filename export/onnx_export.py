@@ -20,26 +20,34 @@ needs no extra package, and the parity gate checks its output. Parity at export:
 modules and the ONNX graphs (run by onnxruntime) are compared on held-out synthetic frames in
 each input setting (boxes only, with images, with images and cameras) plus edge cases (one
 person, an empty view in a padded batch); the export fails, writing nothing, unless every cost
-agrees within :data:`PARITY_TOLERANCE` and every frame's Hungarian assignment is identical.
+agrees within :data:`~xvmatch.export.parity.PARITY_TOLERANCE` and every frame's Hungarian
+assignment is identical (:mod:`xvmatch.export.parity`). The licence notice of a pretrained trunk
+comes from :mod:`xvmatch.export.licence_notice`, the optional INT8 network from
+:mod:`xvmatch.export.int8`.
 """
 
 from __future__ import annotations
 
 import hashlib
-import importlib.metadata
 import json
 import os
 import shutil
 import tempfile
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import Tensor, nn
 
-from xvmatch.geometry.matcher_inputs import MatcherInputs, collate_inputs
+from xvmatch.export.int8 import add_int8
+from xvmatch.export.licence_notice import NOTICE, backbone_record, notice_text
+from xvmatch.export.parity import (
+    PARITY_TOLERANCE,
+    appearance_parity,
+    compare_matcher,
+    parity_frames,
+)
 from xvmatch.geometry.ray_priors import DEFAULT_BETA, METRIC_MARGIN
 from xvmatch.geometry.spatial_features import (
     FEATURE_VERSION,
@@ -48,7 +56,6 @@ from xvmatch.geometry.spatial_features import (
     PAIR_FEATURES,
     TOP_FEATURES,
 )
-from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import (
     APPEARANCE_INPUT,
     BUNDLE_FORMAT,
@@ -57,17 +64,13 @@ from xvmatch.inference.bundle import (
     MATCHER_INPUTS,
     MATCHER_OUTPUT,
     OPSET,
+    open_session,
 )
-from xvmatch.models.appearance_net import AppearanceNet, appearance_source
+from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.training.matcher_file import LoadedMatcher, load_matcher
 
-__all__ = ["NOTICE", "PARITY_TOLERANCE", "ExportError", "backbone_record", "check_replaceable",
-           "export_bundle", "licence_texts", "notice_text", "parity_frames"]
-
-PARITY_TOLERANCE: float = 1e-4
-"""Largest |cost_torch - cost_onnx| accepted at export."""
-
+__all__ = ["ExportError", "check_replaceable", "export_bundle"]
 
 class ExportError(ValueError):
     """The export cannot produce a faithful bundle; the message gives the figures."""
@@ -161,154 +164,6 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _session(path: Path):
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1
-    return ort.InferenceSession(os.fspath(path), options, providers=["CPUExecutionProvider"])
-
-
-def _matcher_costs_torch(matcher: CrossViewMatcher, batch: dict[str, np.ndarray]) -> np.ndarray:
-    with torch.inference_mode():
-        out = matcher(*(torch.from_numpy(batch[k]) for k in MATCHER_INPUTS))
-    return out.cost.numpy()
-
-
-def _matcher_costs_onnx(session, batch: dict[str, np.ndarray]) -> np.ndarray:
-    wanted = {i.name for i in session.get_inputs()}
-    return session.run([MATCHER_OUTPUT], {k: batch[k] for k in MATCHER_INPUTS if k in wanted})[0]
-
-
-def _compare_matcher(matcher: CrossViewMatcher, session, frames: Sequence[MatcherInputs],
-                     gamma: float, batch_size: int = 16) -> dict:
-    """Parity figures of one input setting."""
-    worst, same, n_pairs = 0.0, 0, 0
-    for start in range(0, len(frames), batch_size):
-        chunk = list(frames[start : start + batch_size])
-        batch = collate_inputs(chunk)
-        ref = _matcher_costs_torch(matcher, batch)
-        got = _matcher_costs_onnx(session, batch)
-        if got.shape != ref.shape or not np.isfinite(got).all():
-            return {"frames": len(frames), "max_abs_cost_diff": float("inf"),
-                    "assignments_identical": 0, "error": f"shape {got.shape} / non-finite"}
-        for k, f in enumerate(chunk):
-            m, n = f.features.top.shape[0], f.features.hor.shape[0]
-            a, b = ref[k, :m, :n].astype(np.float64), got[k, :m, :n].astype(np.float64)
-            if a.size:
-                worst = max(worst, float(np.abs(a - b).max()))
-            same += int(np.array_equal(assign(a, gamma), assign(b, gamma)))
-            n_pairs += int(assign(a, gamma).shape[0])
-    return {"frames": len(frames), "max_abs_cost_diff": worst, "assignments_identical": same,
-            "pairs": n_pairs}
-
-
-def parity_frames(
-    loaded: LoadedMatcher,
-    data: str | os.PathLike | None = None,
-    *,
-    seed: int = 424242,
-    progress: Callable[[str], None] | None = None,
-) -> tuple[dict[str, list[MatcherInputs]], np.ndarray]:
-    """Held-out synthetic frames in each input setting, and the crops they were cut from.
-
-    Args:
-        loaded: the matcher (its feature configuration, cues and appearance network).
-        data: synthetic dataset folder(s) to draw from (``xvmatch synth``); None renders a small
-            one of each scenario (seed ``seed``, never a training seed) in a temporary folder.
-        seed: seed of the rendered scenes.
-        progress: called with a line of text at each stage.
-
-    Returns:
-        ``({setting: frames}, crops (C, H, W, 3) uint8)``; settings ``boxes`` always,
-        ``images`` and ``cameras`` when the matcher takes those cues.
-    """
-    from xvmatch.datasets.crops import box_crops
-    from xvmatch.datasets.pair_trials import TrialConfig, dataset_trials
-    from xvmatch.datasets.synthetic_io import generate_dataset
-    from xvmatch.datasets.synthetic_scenes import SynthConfig
-    from xvmatch.geometry.matcher_inputs import FrameCameras, appearance_cost, matcher_inputs
-
-    names = tuple(loaded.matcher.cues)
-    tmp = None
-    folders: list[Path]
-    if data is None:
-        tmp = Path(tempfile.mkdtemp(prefix="xvmatch-parity-"))
-        folders = []
-        for k, scenario in enumerate(("drone", "overview")):
-            folder = tmp / scenario
-            config = SynthConfig(scenario=scenario, n_people=(2, 12))
-            generate_dataset(folder, config, n_scenes=2, n_frames=2, seed=seed + k)
-            folders.append(folder)
-    else:
-        folders = [Path(data)]
-    try:
-        if progress:
-            progress(f"parity frames from {', '.join(map(str, folders))}")
-        net = loaded.appearance
-        crops_all: list[np.ndarray] = []
-
-        def coster(top_image, top_boxes, hor_image, hor_boxes):
-            size = net.preprocessing.crop_size
-            a = box_crops(top_image, top_boxes, size, loaded.crop_context)
-            b = box_crops(hor_image, hor_boxes, size, loaded.crop_context)
-            crops_all.extend([a, b])
-            with torch.inference_mode():
-                da = net.embed_crops(torch.from_numpy(a)).numpy() if len(a) else np.zeros(
-                    (0, net.embedding_dim), np.float32)
-                db = net.embed_crops(torch.from_numpy(b)).numpy() if len(b) else np.zeros(
-                    (0, net.embedding_dim), np.float32)
-            return appearance_cost(da, db)
-
-        trials = []
-        for folder in folders:
-            trials += dataset_trials(folder, TrialConfig(),
-                                     coster=coster if net is not None else None)
-        settings: dict[str, list[MatcherInputs]] = {"boxes": []}
-        if "app" in names:
-            settings["images"] = []
-        if "ray" in names or "cheir" in names:
-            settings["cameras"] = []
-        config = loaded.feature_config
-        for t in trials:
-            size = t.cameras["ego"].image_size
-            cams = FrameCameras(t.cameras["top"], t.cameras["ego"])
-            plain = matcher_inputs(t.top_boxes, t.ego_boxes, size, config, names)
-            settings["boxes"].append(plain)
-            if "images" in settings:
-                settings["images"].append(matcher_inputs(t.top_boxes, t.ego_boxes, size, config,
-                                                         names, app=t.app))
-            if "cameras" in settings:
-                settings["cameras"].append(matcher_inputs(t.top_boxes, t.ego_boxes, size, config,
-                                                          names, cameras=cams, app=t.app))
-        # Edge cases: one person per view, and an empty view padded in a batch.
-        t = max(trials, key=lambda t: len(t.top_boxes) * len(t.ego_boxes))
-        size = t.cameras["ego"].image_size
-        edge = [
-            matcher_inputs(t.top_boxes[:1], t.ego_boxes[:1], size, config, names),
-            matcher_inputs(t.top_boxes, t.ego_boxes[:0], size, config, names),
-            matcher_inputs(t.top_boxes[:0], t.ego_boxes, size, config, names),
-            matcher_inputs(t.top_boxes, t.ego_boxes, size, config, names),
-        ]
-        settings["edge cases"] = edge
-        crops = np.concatenate(crops_all) if crops_all else np.zeros((0, 1, 1, 3), np.uint8)
-        return settings, crops
-    finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
-
-
-def _appearance_parity(net: AppearanceNet, session, crops: np.ndarray) -> dict:
-    if crops.shape[0] == 0:
-        return {"crops": 0, "max_abs_descriptor_diff": 0.0}
-    with torch.inference_mode():
-        ref = net.embed_crops(torch.from_numpy(crops)).numpy()
-    got = np.concatenate([session.run(None, {APPEARANCE_INPUT: crops[k : k + 64]})[0]
-                          for k in range(0, crops.shape[0], 64)])
-    return {"crops": int(crops.shape[0]),
-            "max_abs_descriptor_diff": float(np.abs(ref - got).max())}
-
-
 def _versions() -> dict[str, str]:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -319,64 +174,6 @@ def _versions() -> dict[str, str]:
         except PackageNotFoundError:
             out[name] = "unknown"
     return out
-
-
-def backbone_record(net: AppearanceNet) -> dict[str, str]:
-    """The manifest's ``appearance.backbone``: the architecture and where its trunk's initial
-    weights came from (for an ImageNet initialisation: the registry package, its version and
-    licence, which the derived weights inherit)."""
-    source = appearance_source(net)
-    if source is None:
-        return {"arch": net.arch, "init": "random"}
-    return {"arch": net.arch, "init": "imagenet",
-            **{k: str(source.get(k, "unknown")) for k in ("package", "version", "licence")}}
-
-
-NOTICE = "NOTICE.txt"
-"""The licence notice a bundle carries when its appearance trunk started from third-party
-weights (the derived weights inherit the checkpoint's licence)."""
-
-
-def licence_texts(package: str) -> list[tuple[str, str]]:
-    """``(file name, text)`` of the licence files an installed distribution ships (LICENSE,
-    COPYING, NOTICE in its metadata or package); empty when it is absent or ships none."""
-    try:
-        files = importlib.metadata.distribution(package).files or []
-    except importlib.metadata.PackageNotFoundError:
-        return []
-    out = []
-    for f in files:
-        if f.name.upper().startswith(("LICENSE", "LICENCE", "COPYING", "NOTICE")):
-            path = Path(os.fspath(f.locate()))
-            if path.is_file():
-                out.append((f.name, path.read_text(errors="replace").strip()))
-    return out
-
-
-def notice_text(net: AppearanceNet) -> str | None:
-    """The text of a bundle's :data:`NOTICE`, or None for a trunk trained from scratch: which
-    package's weights the appearance network was fine-tuned from, its licence, and the licence
-    text found in the installed distribution."""
-    source = appearance_source(net)
-    if source is None:
-        return None
-    package = str(source.get("package", "unknown"))
-    lines = [
-        "The appearance network of this bundle (appearance.onnx, and appearance_int8.onnx when "
-        "present) was",
-        f"fine-tuned (modified) from the ImageNet weights of the {net.arch} trunk shipped in the "
-        f"Python package",
-        f"{package} {source.get('version', 'unknown')} (file {source.get('weights', 'unknown')}),"
-        f" licence {source.get('licence', 'unknown')}.",
-        "Those weights' licence applies to the derived weights; its text, as the package ships "
-        "it, follows.",
-    ]
-    texts = licence_texts(package)
-    if not texts:
-        lines.append(f"(no licence file found in the installed {package}; see its project page)")
-    for name, text in texts:
-        lines += ["", f"--- {package}: {name} ---", text]
-    return "\n".join(lines) + "\n"
 
 
 def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
@@ -430,103 +227,6 @@ def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
                                  "embedding_dim": net.embedding_dim, "precision": "fp32", **prep,
                                  "backbone": backbone_record(net)}
     return records
-
-
-def _int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str],
-                   files: dict[str, str]) -> dict[str, dict]:
-    """Eq. 9 accuracy and CVIDF1 (percent) of the matcher with images (and with images and
-    cameras, when it takes camera cues) on ``scenes`` of ``data``, ground-truth boxes and
-    detector noise pooled, for each appearance file of ``files`` ({label: file name})."""
-    from xvmatch.datasets.pair_trials import TrialConfig, scene_trials
-    from xvmatch.datasets.synthetic_io import SyntheticDataset
-    from xvmatch.evaluation.cross_view_metrics import count_pair, summarize
-    from xvmatch.geometry.matcher_inputs import (
-        INPUT_SETTINGS,
-        FrameCameras,
-        appearance_cost,
-        matcher_inputs,
-    )
-    from xvmatch.inference.bundle import Bundle, read_manifest
-    from xvmatch.inference.learned_association import LearnedMatcher
-
-    spec = read_manifest(folder)
-    matcher_session = _session(folder / manifest["matcher"]["file"])
-    dataset = SyntheticDataset(data)
-    index = {name: k for k, name in enumerate(dataset.scene_names)}
-    settings = ["images"] + (["images+cameras"] if "ray" in spec.cues else [])
-    out: dict[str, dict] = {}
-    for label, file in files.items():
-        matcher = LearnedMatcher(Bundle(spec, matcher_session, _session(folder / file)))
-
-        def coster(ti, tb, ei, eb, m=matcher):
-            return appearance_cost(m.descriptors(ti, tb), m.descriptors(ei, eb))
-
-        trials = [t for name in scenes
-                  for t in scene_trials(dataset.scene(name), index[name], TrialConfig(),
-                                        coster=coster)]
-        record = {}
-        for setting in settings:
-            _, rectified = INPUT_SETTINGS[setting]
-            inputs = [matcher_inputs(
-                t.top_boxes, t.ego_boxes, t.cameras["ego"].image_size, spec.feature_config,
-                spec.cues, app=t.app,
-                cameras=FrameCameras(t.cameras["top"], t.cameras["ego"]) if rectified else None)
-                for t in trials]
-            counts = []
-            for t, f, c in zip(trials, inputs, matcher.costs(inputs), strict=True):
-                full = np.empty_like(c)
-                full[np.ix_(f.features.top_order, f.features.hor_order)] = c
-                counts.append(count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids,
-                                         t.det_ego_ids, assign(full, spec.gamma),
-                                         frame=t.frame))
-            s = summarize(counts)
-            record[setting] = {"acc9": round(s.acc9, 3), "cvidf1": round(s.cvidf1, 3),
-                               "trials": len(trials)}
-        out[label] = record
-    return out
-
-
-def _add_int8(folder: Path, manifest: dict, loaded: LoadedMatcher, data: Path,
-              progress: Callable[[str], None] | None) -> None:
-    """Quantise the appearance graph (each calibration method), keep the best by measured
-    accuracy as ``appearance_int8.onnx`` and record everything in ``manifest``."""
-    from xvmatch.datasets.synthetic_io import SyntheticDataset
-    from xvmatch.export.int8 import CALIBRATION_METHODS, calibration_crops, quantize_appearance
-
-    names = SyntheticDataset(data).scene_names
-    calibrate, measure = names[0::2], names[1::2]
-    if not measure:
-        raise ExportError(f"{os.fspath(data)}: INT8 calibration needs at least two scenes "
-                          "(even ones calibrate, odd ones measure the accuracy)")
-    app = manifest["appearance"]
-    crops = calibration_crops(data, tuple(app["crop_size"]), loaded.crop_context, calibrate)
-    files = {"fp32": app["file"]}
-    for method in CALIBRATION_METHODS:
-        files[method] = f"appearance_int8_{method}.onnx"
-        quantize_appearance(folder / app["file"], folder / files[method], crops, method,
-                            APPEARANCE_INPUT, progress)
-    if progress:
-        progress(f"measuring FP32 and INT8 accuracy on {len(measure)} held-out scenes")
-    accuracy = _int8_accuracy(folder, manifest, data, measure, files)
-    best = max(CALIBRATION_METHODS,
-               key=lambda m: (accuracy[m]["images"]["acc9"], -CALIBRATION_METHODS.index(m)))
-    final = folder / "appearance_int8.onnx"
-    os.replace(folder / files[best], final)
-    for method in CALIBRATION_METHODS:
-        (folder / files[method]).unlink(missing_ok=True)
-    app["int8"] = {
-        "file": final.name,
-        "sha256": _sha256(final),
-        "format": "QDQ, per-channel INT8 weights, UINT8 activations (onnxruntime "
-                  "quantize_static after quant_pre_process)",
-        "calibration": {"method": best, "methods_tried": list(CALIBRATION_METHODS),
-                        "crops": int(crops.shape[0]), "data": os.fspath(data),
-                        "scenes": list(calibrate)},
-        "accuracy": {"measured_on": {"data": os.fspath(data), "scenes": list(measure),
-                                     "settings": "ground-truth boxes and detector noise"},
-                     "fp32": accuracy["fp32"], "int8": accuracy[best],
-                     "by_method": {m: accuracy[m] for m in CALIBRATION_METHODS}},
-    }
 
 
 def _bundle_files(folder: Path) -> set[str] | None:
@@ -621,12 +321,12 @@ def export_bundle(
         if progress:
             progress("checking parity (torch against onnxruntime)")
         parity: dict = {}
-        session = _session(tmp / records["matcher"]["file"])
+        session = open_session(tmp / records["matcher"]["file"], 1)
         for setting, items in frames.items():
-            parity[setting] = _compare_matcher(loaded.matcher, session, items, loaded.gamma)
+            parity[setting] = compare_matcher(loaded.matcher, session, items, loaded.gamma)
         if loaded.appearance is not None:
-            app_session = _session(tmp / records["appearance"]["file"])
-            parity["appearance"] = _appearance_parity(loaded.appearance, app_session, crops)
+            app_session = open_session(tmp / records["appearance"]["file"], 1)
+            parity["appearance"] = appearance_parity(loaded.appearance, app_session, crops)
         failed = [
             f"{s}: max |cost diff| {p['max_abs_cost_diff']:.2e}, identical assignments "
             f"{p['assignments_identical']}/{p['frames']}"
@@ -665,7 +365,10 @@ def export_bundle(
             if loaded.appearance is None:
                 raise ExportError("--int8 quantises the appearance network, and this matcher "
                                   "has none")
-            _add_int8(tmp, manifest, loaded, Path(int8_calibration), progress)
+            try:
+                add_int8(tmp, manifest, loaded, Path(int8_calibration), progress)
+            except ValueError as exc:  # unusable calibration data: this export's error
+                raise ExportError(str(exc)) from None
             (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
         umask = os.umask(0o022)
         os.umask(umask)

@@ -48,6 +48,7 @@ __all__ = [
     "int8_accuracy_loss",
     "int8_is_safe",
     "load_bundle",
+    "open_session",
     "read_manifest",
 ]
 
@@ -279,7 +280,9 @@ def _checked_file(folder: Path, name: str, sha: str) -> Path:
     return path
 
 
-def _open_session(path: Path, threads: int):
+def open_session(path: Path, threads: int):
+    """An onnxruntime CPU session of ``path`` with ``threads`` intra-op threads, sequential;
+    a file onnxruntime cannot load is a one-line :class:`BundleError`."""
     import onnxruntime as ort
 
     options = ort.SessionOptions()
@@ -405,7 +408,7 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
     folder = DEFAULT_BUNDLE if str(path_or_default) == "default" else Path(path_or_default)
     manifest = read_manifest(folder)
     matcher_path = _checked_file(folder, manifest.matcher_file, manifest.matcher_sha256)
-    matcher = _open_session(matcher_path, threads)
+    matcher = open_session(matcher_path, threads)
     names = [i.name for i in matcher.get_inputs()]
     missing = [n for n in MATCHER_INPUTS[:7] if n not in names]
     if missing or [i.name for i in matcher.get_outputs()][:1] != [MATCHER_OUTPUT]:
@@ -424,7 +427,7 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
             app_path = _checked_file(folder, spec.int8_file, spec.int8_sha256)
         else:
             app_path = _checked_file(folder, spec.file, spec.sha256)
-        appearance = _open_session(app_path, threads)
+        appearance = open_session(app_path, threads)
         inputs = appearance.get_inputs()
         if [i.name for i in inputs] != [APPEARANCE_INPUT]:
             raise _fail(app_path, f"not an appearance graph (inputs {[i.name for i in inputs]})")
