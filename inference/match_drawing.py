@@ -3,13 +3,15 @@
 :func:`draw_matches` puts the top/overview image (left) and the horizontal/egocentric image
 (right) side by side at a common height, with a small gap between them. Each matched pair gets its
 own colour (golden-ratio hues, :func:`pair_colour`): both boxes are outlined in it (thickness 2)
-and a line joins the two box centres across the gap, optionally labelled with the pair's cost.
-Unmatched boxes are outlined in grey (:data:`UNMATCHED_COLOUR`, thickness 1) over a desaturated,
-dimmed interior. Ids, when given, are printed by each box.
+and a line joins the two box centres across the gap, optionally labelled ``cost 0.04`` with the
+pair's cost. Unmatched boxes are outlined in grey (:data:`UNMATCHED_COLOUR`, thickness 1) over a
+desaturated, dimmed interior. Ids, when given, are printed by each box, placed so that labels do
+not cover one another where there is room.
 
-:func:`write_match_picture` stores a picture as PNG through the project's one atomic writer
+:func:`write_match_picture` stores a picture as JPEG (quality 90: a few hundred kB for a real
+frame) or PNG (maximum compression) through the project's one atomic writer
 (:func:`~xvmatch.datasets.mot_boxes.atomic_write_bytes`); :func:`picture_path` names the file of a
-frame and :func:`frames_to_draw` picks every k-th frame of a sequence.
+frame (``frame_000212.jpg``) and :func:`frames_to_draw` picks every k-th frame of a sequence.
 
 This module uses numpy and OpenCV only (no torch), both in the base install.
 """
@@ -28,6 +30,7 @@ from xvmatch.geometry.array_checks import as_boxes
 
 __all__ = [
     "GAP_COLOUR",
+    "JPEG_QUALITY",
     "UNMATCHED_COLOUR",
     "draw_matches",
     "frames_to_draw",
@@ -115,7 +118,7 @@ def _id_text(value: object) -> str:
 
 
 def _cost_text(value: float) -> str:
-    return f"{value:.2f}" if np.isfinite(value) else str(value)
+    return f"cost {value:.2f}" if np.isfinite(value) else f"cost {value}"
 
 
 def _scaled_boxes(
@@ -168,15 +171,50 @@ def _put_text(
     cv2.putText(canvas, text, org, font, scale, colour, 1, cv2.LINE_AA)
 
 
-def _label_origin(
-    text: str, rect: np.ndarray, x_range: tuple[int, int], top: int, scale: float
-) -> tuple[int, int]:
-    """Where a box's label goes: above its top-left corner, or just inside when no room above."""
+def _text_rect(text: str, org: tuple[int, int], scale: float) -> tuple[int, int, int, int]:
+    """The ``(x0, y0, x1, y1)`` pixels a label drawn at ``org`` (its baseline start) covers."""
+    (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    return org[0] - 1, org[1] - th - 1, org[0] + tw + 1, org[1] + base + 1
+
+
+def _overlap(a: tuple[int, int, int, int], placed: list[tuple[int, int, int, int]]) -> int:
+    """Pixels of rectangle ``a`` covered by the rectangles ``placed`` (summed)."""
+    total = 0
+    for b in placed:
+        w = min(a[2], b[2]) - max(a[0], b[0])
+        h = min(a[3], b[3]) - max(a[1], b[1])
+        total += max(w, 0) * max(h, 0)
+    return total
+
+
+def _place_label(text: str, candidates: list[tuple[int, int]], x_range: tuple[int, int],
+                 y_range: tuple[int, int], scale: float,
+                 placed: list[tuple[int, int, int, int]]) -> tuple[int, int]:
+    """The first of ``candidates`` (baseline origins, in order of preference), kept inside
+    ``x_range`` and ``y_range``, whose label covers none of the labels ``placed``; else the one
+    covering the fewest pixels of them. The chosen label's rectangle is added to ``placed``."""
+    (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
+    best = None
+    for x, y in candidates:
+        x = min(max(x, x_range[0]), max(x_range[1] - tw, x_range[0]))
+        y = min(max(y, y_range[0] + th + 1), max(y_range[1] - base - 1, y_range[0] + th + 1))
+        rect = _text_rect(text, (x, y), scale)
+        cover = _overlap(rect, placed)
+        if best is None or cover < best[0]:
+            best = (cover, (x, y), rect)
+        if cover == 0:
+            break
+    placed.append(best[2])
+    return best[1]
+
+
+def _label_candidates(text: str, rect: np.ndarray, scale: float) -> list[tuple[int, int]]:
+    """Where a box's label may go, best first: above its top-left corner, just inside it,
+    below it, beside it on the right."""
     (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
-    x0, y0 = int(rect[0]), int(rect[1])
-    x = min(max(x0, x_range[0]), max(x_range[1] - tw, x_range[0]))
-    y = y0 - 4 if y0 - 4 - th >= top else y0 + th + 4
-    return x, y
+    x0, y0, x1, y1 = (int(v) for v in rect)
+    return [(x0, y0 - 4), (x0 + 2, y0 + th + 4), (x0, y1 + th + 4), (x1 + 4, y0 + th + 2),
+            (x0 - tw - 4, y0 + th + 2), (x0, (y0 + y1) // 2)]
 
 
 def draw_matches(
@@ -208,9 +246,12 @@ def draw_matches(
         hor_boxes: (N, 4) float ``(x, y, w, h)`` boxes in ``hor_image`` pixels; N may be 0.
         pairs: (K, 2) int ``(top index, hor index)`` rows, one-to-at-most-one (as returned by
             :func:`~xvmatch.inference.assignment.assign`); K may be 0.
-        top_ids: M ids printed by the top boxes (e.g. track ids); ``None`` prints none.
+        top_ids: M ids printed by the top boxes (e.g. track ids); ``None`` prints none. Labels
+            are placed so as not to cover one another where the boxes leave room (matched
+            boxes' labels first).
         hor_ids: N ids printed by the hor boxes; ``None`` prints none.
-        costs: (M, N) association costs; each matched pair's cost is printed by its line.
+        costs: (M, N) association costs; each matched pair's cost is printed by its line as
+            ``cost 0.04``; ``None`` prints none.
         title: one line drawn in a dark header strip above the images; ``None`` for no strip.
         max_height: the largest height (px, >= 1) of the scaled images.
 
@@ -287,17 +328,22 @@ def draw_matches(
         cv2.line(canvas, points[0], points[1], colours[k], 2, cv2.LINE_AA)
         ends.append(points)
 
+    placed: list[tuple[int, int, int, int]] = []  # label rectangles drawn so far
+    y_range = (header, canvas.shape[0])
     for side, labels in enumerate((top_labels, hor_labels)):
         if labels is None:
             continue
         ox, oy = offsets[side]
         pair_of = {int(idx): k for k, idx in enumerate(p[:, side])}
-        for index, value in enumerate(labels):
-            text = _id_text(value)
+        # matched boxes' labels first: they get the best places
+        order = sorted(range(len(labels)), key=lambda i: (pair_of.get(i) is None, i))
+        for index in order:
+            text = _id_text(labels[index])
             k = pair_of.get(index)
             colour = _UNMATCHED_TEXT if k is None else colours[k]
             rect = rects[side][index] + np.array([ox, oy, ox, oy])
-            org = _label_origin(text, rect, x_ranges[side], header, scale)
+            org = _place_label(text, _label_candidates(text, rect, scale), x_ranges[side],
+                               y_range, scale, placed)
             _put_text(canvas, text, org, colour, scale)
 
     if cost is not None:
@@ -305,7 +351,10 @@ def draw_matches(
             text = _cost_text(float(cost[i, j]))
             tw = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0]
             (ax, ay), (bx, by) = ends[k]
-            org = ((ax + bx) // 2 - tw // 2, (ay + by) // 2 - 5)
+            mx, my = (ax + bx) // 2 - tw // 2, (ay + by) // 2
+            org = _place_label(text, [(mx, my - 5), (mx, my + 18), (mx, my - 24),
+                                      (mx, my + 36)], (0, canvas.shape[1]), y_range, scale,
+                               placed)
             _put_text(canvas, text, org, colours[k], scale)
 
     if title is not None:
@@ -316,50 +365,64 @@ def draw_matches(
     return canvas
 
 
-def write_match_picture(path: str | os.PathLike, picture: np.ndarray) -> None:
-    """Store a picture of :func:`draw_matches` as a PNG file, atomically.
+JPEG_QUALITY = 90
+"""Quality of the JPEG pictures (OpenCV's 0..100 scale)."""
 
-    The folder is created if missing. The PNG bytes go through
+
+def write_match_picture(path: str | os.PathLike, picture: np.ndarray) -> None:
+    """Store a picture of :func:`draw_matches` as a JPEG (``.jpg``/``.jpeg``, quality
+    :data:`JPEG_QUALITY`) or PNG (``.png``, maximum compression) file, atomically.
+
+    The folder is created if missing. The bytes go through
     :func:`~xvmatch.datasets.mot_boxes.atomic_write_bytes` (temporary file, then rename, without
     ``fsync`` as for other bulk image writes): a reader sees the old file or the new one, never a
     partial one, and an existing file is replaced.
 
     Args:
-        path: destination file, ending in ``.png`` (see :func:`picture_path`).
+        path: destination file, ending in ``.jpg``, ``.jpeg`` or ``.png`` (see
+            :func:`picture_path`).
         picture: (H, W, 3) uint8 BGR picture.
 
     Raises:
-        ValueError: a path not ending in ``.png``, a path that exists and is not a regular file
+        ValueError: a path with another ending, a path that exists and is not a regular file
             (a folder, a FIFO, a device: renaming over it would replace it), a picture that is
             not non-empty (H, W, 3) uint8, or a picture OpenCV cannot encode.
     """
     target = Path(path)
-    if target.suffix.lower() != ".png":
-        raise ValueError(f"path must end in .png (the pictures are PNG), got {str(target)!r}")
+    suffix = target.suffix.lower()
+    if suffix not in (".jpg", ".jpeg", ".png"):
+        raise ValueError(f"path must end in .jpg, .jpeg or .png (the pictures are JPEG or PNG), "
+                         f"got {str(target)!r}")
     if target.exists() and not target.is_file():
         raise ValueError(f"{os.fspath(target)}: exists and is not a regular file; refusing to "
                          "write a picture over it")
     image = _check_image(picture, "picture")
-    ok, encoded = cv2.imencode(".png", np.ascontiguousarray(image))
+    params = ([cv2.IMWRITE_PNG_COMPRESSION, 9] if suffix == ".png"
+              else [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    ok, encoded = cv2.imencode(suffix, np.ascontiguousarray(image), params)
     if not ok:
-        raise ValueError(f"OpenCV could not PNG-encode a picture of shape {image.shape}")
+        raise ValueError(f"OpenCV could not encode a picture of shape {image.shape} as {suffix}")
     target.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(target, encoded.tobytes(), fsync=False)
 
 
-def picture_path(folder: str | os.PathLike, frame: int) -> Path:
-    """The file of a frame's picture: ``folder / f"frame_{frame:06d}.png"``.
+def picture_path(folder: str | os.PathLike, frame: int, suffix: str = ".jpg") -> Path:
+    """The file of a frame's picture: ``folder / f"frame_{frame:06d}.jpg"`` (``suffix``
+    ``.png`` for a PNG).
 
     Args:
         folder: the ``--draw`` output folder.
         frame: the frame number (>= 0; MOT frames are 1-based).
+        suffix: the file type, ``.jpg`` (default) or ``.png``.
 
     Raises:
-        ValueError: a negative frame.
+        ValueError: a negative frame or another suffix.
     """
     if int(frame) != frame or frame < 0:
         raise ValueError(f"frame must be an integer >= 0, got {frame!r}")
-    return Path(folder) / f"frame_{int(frame):06d}.png"
+    if suffix not in (".jpg", ".png"):
+        raise ValueError(f"suffix must be '.jpg' or '.png', got {suffix!r}")
+    return Path(folder) / f"frame_{int(frame):06d}{suffix}"
 
 
 def frames_to_draw(frames: Sequence[int], every: int) -> list[int]:

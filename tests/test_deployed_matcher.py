@@ -131,8 +131,10 @@ def test_costs_solved_with_the_gamma_given_give_the_csv(tmp_path, scene, tiny_mo
 
 
 def test_draw_writes_one_picture_per_frame(tmp_path, scene, tiny_models, capsys):
-    for every, expected in ((1, ["frame_000001.png", "frame_000002.png"]),
-                            (2, ["frame_000001.png"])):
+    from xvmatch.output_paths import MARKER
+
+    for every, expected in ((1, [MARKER, "frame_000001.jpg", "frame_000002.jpg"]),
+                            (2, [MARKER, "frame_000001.jpg"])):
         draw = tmp_path / f"draw{every}"
         rc, err = _associate(capsys, scene, tmp_path / f"p{every}.csv", *_images(scene),
                              "--draw", str(draw), "--draw-every", str(every),
@@ -221,11 +223,6 @@ def _box_outside(tmp, scene, models):
             [str(hor), "frame 2", "id 9", "outside the 320x180 image"])
 
 
-def _draw_without_images(tmp, scene, models):
-    return (["--draw", str(tmp / "out" / "draw")], models["full_bundle"], {},
-            ["--draw needs the images"])
-
-
 def _top_without_hor(tmp, scene, models):
     return (["--top-images", scene.top_images], models["full_bundle"], {},
             ["--top-images and --hor-images together"])
@@ -265,7 +262,7 @@ def _other_format_version(tmp, scene, models):
 
 BAD = {f.__name__.lstrip("_"): Case(f) for f in (
     _missing_image, _undecodable_image, _image_size, _camera_size, _missing_camera_file,
-    _box_outside, _draw_without_images, _top_without_hor, _cameras_with_box_only,
+    _box_outside, _top_without_hor, _cameras_with_box_only,
     _images_with_box_only, _images_without_model, _tampered_bundle, _other_format_version,
 )}
 
@@ -344,4 +341,4 @@ def test_the_deployed_runtime_never_imports_torch(tmp_path, scene, tiny_models):
                           text=True, timeout=120, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "pred.csv").is_file() and (tmp_path / "c.json").is_file()
-    assert len(list((tmp_path / "draw").glob("*.png"))) == 2
+    assert len(list((tmp_path / "draw").glob("*.jpg"))) == 2

@@ -100,6 +100,20 @@ def test_boxes_past_the_image_are_clipped() -> None:
     assert tuple(picture[40, 0]) == pair_colour(0)  # the clipped left edge
 
 
+def test_labels_of_boxes_on_top_of_one_another_do_not_overlap() -> None:
+    """Issue 29, item 6: two boxes at almost the same place: their ids go to different places
+    (the second one's preferred place is taken, it moves to the next free one)."""
+    from xvmatch.inference import match_drawing
+
+    placed: list = []
+    rects = [np.array([40, 60, 60, 100]), np.array([42, 62, 62, 102])]
+    origins = [match_drawing._place_label(
+        text, match_drawing._label_candidates(text, rect, 0.5), (0, 300), (0, 200), 0.5, placed)
+        for text, rect in zip(["17", "23"], rects, strict=True)]
+    assert origins[0] != origins[1]
+    assert match_drawing._overlap(placed[1], [placed[0]]) == 0
+
+
 def test_ids_and_costs_are_printed() -> None:
     top, hor = _image(120, 160, value=0), _image(120, 160, value=0)
     kwargs = dict(top_boxes=[[40, 60, 20, 40]], hor_boxes=[[40, 60, 20, 40]], pairs=[[0, 0]])
@@ -155,7 +169,7 @@ def test_bad_input_is_rejected(kwargs: dict, match: str) -> None:
 def test_write_match_picture_round_trips_atomically(tmp_path: Path) -> None:
     picture = draw_matches(_image(30, 40), _image(30, 40), [[5, 5, 10, 10]], [[5, 5, 10, 10]],
                            [[0, 0]])
-    path = picture_path(tmp_path / "draw" / "nested", 7)
+    path = picture_path(tmp_path / "draw" / "nested", 7, suffix=".png")
     write_match_picture(path, picture)
     np.testing.assert_array_equal(cv2.imread(str(path), cv2.IMREAD_COLOR), picture)
     second = np.zeros_like(picture)
@@ -164,9 +178,37 @@ def test_write_match_picture_round_trips_atomically(tmp_path: Path) -> None:
     assert sorted(p.name for p in path.parent.iterdir()) == ["frame_000007.png"]
 
 
+def _real_looking_frame(height: int, width: int) -> np.ndarray:
+    """A camera-like image: smooth shading, texture and sensor noise (seeded)."""
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    base = 120 + 60 * np.sin(x / 97.0) * np.cos(y / 61.0)
+    image = base[..., None] + rng.normal(0, 6, (height, width, 3))
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
+def test_pictures_are_jpeg_of_a_few_hundred_kilobytes(tmp_path: Path) -> None:
+    """Issue 29, item 6: a real-size frame pair's picture was a 3 MB PNG; it is a JPEG of
+    quality 90 now, a fraction of the lossless size, and decodes to nearly the same picture."""
+    top, hor = _real_looking_frame(1512, 2688), _real_looking_frame(787, 1399)
+    picture = draw_matches(top, hor, [[100, 100, 60, 60], [900, 500, 60, 60]],
+                           [[200, 200, 80, 300], [900, 250, 90, 320]], [[0, 0], [1, 1]],
+                           top_ids=[1, 2], hor_ids=[11, 12], title="frame 1")
+    jpeg = picture_path(tmp_path, 1)
+    assert jpeg.name == "frame_000001.jpg"
+    write_match_picture(jpeg, picture)
+    png = picture_path(tmp_path, 1, suffix=".png")
+    write_match_picture(png, picture)
+    assert jpeg.stat().st_size < 700_000
+    assert jpeg.stat().st_size < png.stat().st_size / 2
+    back = cv2.imread(str(jpeg), cv2.IMREAD_COLOR)
+    assert back.shape == picture.shape
+    assert np.abs(back.astype(int) - picture).mean() < 6
+
+
 def test_write_match_picture_rejects_bad_input(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match=r"path must end in \.png"):
-        write_match_picture(tmp_path / "frame.jpg", _image(4, 4))
+    with pytest.raises(ValueError, match=r"path must end in \.jpg, \.jpeg or \.png"):
+        write_match_picture(tmp_path / "frame.gif", _image(4, 4))
     with pytest.raises(ValueError, match="picture must be uint8"):
         write_match_picture(tmp_path / "frame.png", np.zeros((4, 4, 3), np.float64))
     assert list(tmp_path.iterdir()) == []
@@ -187,10 +229,12 @@ def test_write_match_picture_never_replaces_a_fifo_or_a_folder(tmp_path: Path) -
 
 
 def test_picture_path() -> None:
-    assert picture_path(Path("out"), 12) == Path("out/frame_000012.png")
-    assert picture_path("out", 0).name == "frame_000000.png"
+    assert picture_path(Path("out"), 12) == Path("out/frame_000012.jpg")
+    assert picture_path("out", 0, suffix=".png").name == "frame_000000.png"
     with pytest.raises(ValueError, match="frame must be an integer >= 0"):
         picture_path("out", -1)
+    with pytest.raises(ValueError, match="suffix"):
+        picture_path("out", 1, suffix=".gif")
 
 
 def test_frames_to_draw() -> None:

@@ -264,6 +264,12 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             frames=frames,
             progress=progress,
         )
+        if args.draw is not None:
+            from xvmatch.cli_learn import draw_pictures
+
+            both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
+            draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
+                          not args.no_labels)
     write_predictions(args.out, pairs)
     n_pairs = sum(len(p) for p in pairs.values())
     if not args.quiet:
@@ -551,9 +557,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "1..64 (default 1; the same output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     _add_spatial_options(p)
-    from xvmatch.cli_learn import add_model_arguments
+    from xvmatch.cli_learn import add_draw_arguments, add_model_arguments
 
     add_model_arguments(p)
+    add_draw_arguments(p)
     p.set_defaults(func=_cmd_associate)
 
     p = command("evaluate", "Score predicted pairs: CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9 accuracy; "

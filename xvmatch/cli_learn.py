@@ -26,10 +26,12 @@ from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = [
     "EXAMPLES",
+    "add_draw_arguments",
     "add_export_parser",
     "add_fit_geometry_parser",
     "add_model_arguments",
     "associate_with_model",
+    "draw_pictures",
 ]
 
 EXAMPLES = {
@@ -292,7 +294,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the learned matcher's options to a parser (``associate``): ``--model``, ``--gamma``,
-    ``--mirror``, the image and camera inputs, ``--costs``, ``--draw`` and ``--threads``."""
+    ``--mirror``, the image and camera inputs, ``--costs``, ``--threads`` and ``--precision``."""
     g = parser.add_argument_group("learned matcher (--model)")
     g.add_argument(
         "--model", action="append", default=None, metavar="BUNDLE",
@@ -324,12 +326,6 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--costs", default=None, metavar="JSON",
                    help="also write each frame's ids and cost matrix (written atomically)")
-    g.add_argument("--draw", default=None, metavar="DIR",
-                   help="write a side-by-side picture of each frame's matches (needs images) "
-                   "into DIR: a new or empty folder, or one an earlier --draw wrote")
-    g.add_argument("--draw-every", default=1, metavar="K",
-                   type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
-                   help="with --draw: every K-th frame only, 1..100000 (default 1)")
     g.add_argument("--threads", type=thread_count, default=1, metavar="K",
                    help="onnxruntime threads, 1..64 (default 1)")
     g.add_argument("--precision", choices=("fp32", "int8"), default=None,
@@ -338,11 +334,26 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                    "dot-product instructions, VNNI; else fp32)")
 
 
+def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--draw``, ``--draw-every`` and ``--no-labels`` (both methods of ``associate``)."""
+    g = parser.add_argument_group("pictures (both methods)")
+    g.add_argument("--draw", default=None, metavar="DIR",
+                   help="write a side-by-side picture of each frame's matches, "
+                   "DIR/frame_000212.jpg (JPEG), into DIR: a new or empty folder, or one an "
+                   "earlier --draw wrote. Without images the boxes are drawn on a blank canvas "
+                   "of the horizontal image size and the top view as a plan")
+    g.add_argument("--draw-every", default=1, metavar="K",
+                   type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
+                   help="with --draw: every K-th frame only, 1..100000 (default 1)")
+    g.add_argument("--no-labels", action="store_true",
+                   help="with --draw: print no ids by the boxes (colours alone show the pairs)")
+
+
 DRAW_COMMAND = "xvmatch associate --draw"
 """The owner of a ``--draw`` folder: pictures are written only into a new or empty folder or one
 an earlier ``--draw`` made (:func:`xvmatch.output_paths.claim_folder`)."""
 
-LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs", "draw",
+LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs",
                 "precision")
 """Options of ``associate`` that need ``--model``."""
 
@@ -479,8 +490,6 @@ def associate_with_model(
     if (top_path is None) != (hor_path is None):
         raise ValueError("give --top-images and --hor-images together")
     draw = getattr(args, "draw", None)
-    if draw is not None and top_path is None:
-        raise ValueError("--draw needs the images: add --top-images and --hor-images")
     if draw is not None:
         check_own_folder(draw, DRAW_COMMAND, "--draw")
     names = [args.model] if isinstance(args.model, str) else list(args.model)
@@ -543,7 +552,9 @@ def associate_with_model(
             costs_out=costs,
         )
         if draw is not None:
-            _draw(draw, getattr(args, "draw_every", 1), top, hor, pairs, costs, sources)
+            draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, pairs, sorted(costs),
+                          sources or None, (width, height),
+                          not getattr(args, "no_labels", False))
     finally:
         for source in sources.values():
             source.close()
@@ -571,16 +582,31 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
     atomic_write_text(path, json.dumps(record) + "\n")
 
 
-def _draw(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Mapping,
-          costs: dict, sources: dict) -> None:
-    """Pictures of the drawn frames, written into a temporary folder and moved into ``folder``
-    only once all are made."""
+def draw_pictures(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Mapping,
+                  frames: list[int], sources: dict | None, hor_size: tuple[int, int],
+                  labels: bool = True) -> None:
+    """``--draw``: the pictures of every ``every``-th of ``frames``, written into a temporary
+    folder and moved into ``folder`` only once all are made.
+
+    Args:
+        folder: the ``--draw`` folder.
+        every: ``--draw-every``.
+        top, hor: ``{frame: FrameBoxes}`` of each view (the top one re-timed as the pairs).
+        pairs: ``{frame: [(top id, hor id)]}``.
+        frames: the frames that may be drawn (those with boxes in both views).
+        sources: ``{"top": source, "hor": source}`` of the images; None: boxes only, drawn on a
+            blank canvas of ``hor_size`` and the top view as a plan
+            (:mod:`xvmatch.inference.box_canvas`).
+        hor_size: the horizontal image size.
+        labels: print each box's id (``--no-labels``: none).
+    """
     import shutil
     import tempfile
     from pathlib import Path
 
     import numpy as np
 
+    from xvmatch.inference.box_canvas import blank_view, top_plan
     from xvmatch.inference.match_drawing import (
         draw_matches,
         frames_to_draw,
@@ -591,15 +617,27 @@ def _draw(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Mapping,
 
     out = claim_folder(folder, DRAW_COMMAND, "--draw")
     tmp = Path(tempfile.mkdtemp(prefix=".draw-", dir=out))
+    plan = hor_canvas = None
+    if sources is None:
+        plan, hor_canvas = top_plan(top), blank_view(hor_size)
+    legend = "same colour: same person; grey: unmatched"
+    if sources is None:
+        legend += "; boxes only: top view as a plan, horizontal view blank"
     try:
         written = []
-        for f in frames_to_draw(sorted(costs), every):
+        for f in frames_to_draw(frames, every):
             t_ids, h_ids = list(top[f].ids), list(hor[f].ids)
-            rows = np.array([(t_ids.index(a), h_ids.index(b)) for a, b in pairs[f]],
+            rows = np.array([(t_ids.index(a), h_ids.index(b)) for a, b in pairs.get(f, [])],
                             dtype=np.int64).reshape(-1, 2)
-            picture = draw_matches(sources["top"].get(f), sources["hor"].get(f), top[f].boxes,
-                                   hor[f].boxes, rows, top[f].ids, hor[f].ids, costs[f],
-                                   title=f"frame {f}: {len(rows)} matches")
+            if sources is None:
+                images = (plan.image, hor_canvas)
+                boxes = (plan.place(top[f].boxes), hor[f].boxes)
+            else:
+                images = (sources["top"].get(f), sources["hor"].get(f))
+                boxes = (top[f].boxes, hor[f].boxes)
+            picture = draw_matches(*images, *boxes, rows, top[f].ids if labels else None,
+                                   hor[f].ids if labels else None,
+                                   title=f"frame {f}: {len(rows)} matches ({legend})")
             path = picture_path(tmp, f)
             write_match_picture(path, picture)
             written.append(path)
