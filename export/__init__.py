@@ -1,4 +1,5 @@
-"""Export of the learned matcher to a deployable bundle (``xvmatch export``): ONNX graphs of the
-matcher and the appearance network with a manifest, checked by a parity gate
-(:mod:`~xvmatch.export.onnx_export`), and the optional static INT8 appearance network
-(:mod:`~xvmatch.export.int8`)."""
+"""Export of the learned matcher to a deployable bundle (``xvmatch export``): the ONNX graphs of
+the matcher and the appearance network with their manifest (:mod:`~xvmatch.export.onnx_export`),
+the parity gate against the torch modules (:mod:`~xvmatch.export.parity`), the backbone record
+and licence notice (:mod:`~xvmatch.export.licence_notice`), and the optional static INT8
+appearance network (:mod:`~xvmatch.export.int8`)."""
