@@ -162,6 +162,8 @@ def parity_frames(
 
 
 def appearance_parity(net: AppearanceNet, session, crops: np.ndarray) -> dict:
+    """The largest descriptor difference between the torch network and its ONNX graph on
+    ``crops``."""
     if crops.shape[0] == 0:
         return {"crops": 0, "max_abs_descriptor_diff": 0.0}
     with torch.inference_mode():
