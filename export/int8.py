@@ -5,8 +5,8 @@ Static QDQ: onnxruntime's pre-processing (shape inference and graph optimisation
 ``quantize_static`` with per-channel INT8 weights and UINT8 activations (the x86 layout) whose
 ranges come from calibration crops. Calibration and measurement use disjoint scenes of one
 synthetic dataset (``xvmatch synth``): even scenes calibrate, odd scenes measure. Several
-calibration methods are tried; the one whose INT8 network keeps the best geometric-priors Eq. 9 accuracy of the
-matcher with images on the measurement frames is kept (ties: the first in
+calibration methods are tried; the one whose INT8 network keeps the best geometric-priors Eq. 9
+accuracy of the matcher with images on the measurement frames is kept (ties: the first in
 :data:`CALIBRATION_METHODS`), and every method's figures are recorded.
 """
 
@@ -142,9 +142,9 @@ def quantize_appearance(
 
 def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str],
                    files: dict[str, str]) -> dict[str, dict]:
-    """Geometric-priors Eq. 9 accuracy and CVIDF1 (percent) of the matcher with images (and with images and
-    cameras, when it takes camera cues) on ``scenes`` of ``data``, ground-truth boxes and
-    detector noise pooled, for each appearance file of ``files`` ({label: file name})."""
+    """Geometric-priors Eq. 9 accuracy and CVIDF1 (percent) of the matcher with images (and with
+    images and cameras, when it takes camera cues) on ``scenes`` of ``data``, ground-truth boxes
+    and detector noise pooled, for each appearance file of ``files`` ({label: file name})."""
     from xvmatch.datasets.pair_trials import TrialConfig, scene_trials
     from xvmatch.datasets.synthetic_io import SyntheticDataset
     from xvmatch.evaluation.cross_view_metrics import count_pair, summarize
