@@ -188,3 +188,20 @@ def test_a_cvmhat_pair_at_two_resolutions(cvmhat_dir, tmp_path, capsys):
         assert code == 0, err
         assert read_predictions(tmp_path / f"{size}.csv") == full
     assert sum(len(p) for p in full.values()) > 0
+
+
+def test_noise_places_false_boxes_in_the_horizontal_image(boxes, tmp_path, capsys):
+    """``noise --view hor`` takes the size by the same rule: its false boxes land inside the
+    user's 1399x787 image, so that associate accepts the noisy file."""
+    top, hor = boxes["1399x787"]
+    out = tmp_path / "noisy.txt"
+    code, err = _run(capsys, "noise", "--boxes", str(hor), "--view", "hor", "--out", str(out))
+    assert code == 2 and "--image-size" in err and not out.exists(), err
+    code, err = _run(capsys, "noise", "--boxes", str(hor), "--view", "hor", "--out", str(out),
+                     "--image-size", "1399x787", "--false", "3")
+    assert code == 0, err
+    noisy = read_mot_boxes(out)
+    assert any(i >= 2_000_000 for rec in noisy.values() for i in rec.ids)  # false boxes
+    code, err = _run(capsys, "associate", "--top", str(top), "--hor", str(out), "--out",
+                     str(tmp_path / "p.csv"), "--image-size", "1399x787", "--quiet")
+    assert code == 0, err

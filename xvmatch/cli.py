@@ -332,9 +332,19 @@ def _cmd_noise(args: argparse.Namespace) -> int:
 
     check_outputs([Output("--out", args.out)], [Input("--boxes", args.boxes)])
     frames = _read_boxes(args.boxes, args.duplicates)
+    size = args.image_size
+    if args.view == "hor":  # false boxes land in this image: the associate rule's size
+        from xvmatch.cli_image_size import note_if_assumed, resolve_size
+
+        resolved = resolve_size(frames, args.boxes, [] if size is None else
+                                [(size, "--image-size")])
+        note_if_assumed(resolved, frames, args.boxes)
+        size = resolved[0]
+    elif size is None:
+        size = (2688, 1512)
     noise = DetectorNoise(jitter=args.jitter, miss_rate=args.miss, false_per_frame=args.false)
     noisy = apply_detector_noise(
-        frames, args.image_size, noise, seed=args.seed, view=args.view, keep_ids=args.keep_id
+        frames, size, noise, seed=args.seed, view=args.view, keep_ids=args.keep_id
     )
     write_mot_boxes(args.out, noisy)
     return 0
@@ -571,7 +581,8 @@ def build_parser() -> argparse.ArgumentParser:
     scored.add_argument("--pred", help="prediction CSV (frame,top_id,hor_id)")
     scored.add_argument("--tracks", metavar="DIR",
                         help="tracks of xvmatch track (DIR/top.txt, DIR/hor.txt); per-view "
-                        "metrics need TrackEval (pip install --no-deps trackeval)")
+                        "metrics need TrackEval (pip install --no-deps trackeval; without it "
+                        "the cross-view scores alone, with a note)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
     p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
@@ -653,8 +664,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--image-size", type=image_size(8, 65536, "pixels of a camera image"),
-        default=(2688, 1512), metavar="WxH",
-        help="image size, 8..65536 a side (default 2688x1512)",
+        default=None, metavar="WxH",
+        help="image size, 8..65536 a side, where false boxes are placed (default: --view top "
+        "2688x1512; --view hor as associate: 2688x1512 only when the boxes reach beyond 60%% "
+        "of its width, else an error asking for it)",
     )
     p.add_argument(
         "--duplicates", choices=("first", "error"), default="first",
