@@ -75,3 +75,26 @@ def test_the_plan_frames_every_top_box_and_keeps_their_shape():
     assert blank_view((40, 30)).shape == (30, 40, 3)
     with pytest.raises(ValueError, match="size"):
         blank_view((0, 30))
+
+
+def test_show_draws_a_frame_of_box_files(boxes, tmp_path, capsys):
+    """``show --top --hor``: the ground-truth pairs (same id in both views) or a prediction
+    CSV's, on the same canvases as --draw; a frame without boxes in both views is refused."""
+    top, hor = boxes
+    code, err = _associate(capsys, boxes, tmp_path)
+    assert code == 0, err
+    capsys.readouterr()
+    for extra, name in (([], "gt.png"), (["--pred", str(tmp_path / "p.csv")], "pred.jpg")):
+        assert main(["show", "--top", str(top), "--hor", str(hor), "--frame", "2",
+                     "--image-size", "2688x1512", "--out", str(tmp_path / name), *extra]) == 0
+        picture = cv2.imread(str(tmp_path / name), cv2.IMREAD_COLOR)
+        body = picture[40:].reshape(-1, 3).astype(int)
+        near = np.abs(body - np.array(pair_colour(0))).max(axis=1) <= 40
+        assert near.sum() > 50  # at least one pair drawn in the first pair colour
+    capsys.readouterr()
+    assert main(["show", "--top", str(top), "--hor", str(hor), "--frame", "99", "--image-size",
+                 "2688x1512", "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--frame 99" in err and not (tmp_path / "x.png").exists()
+    assert main(["show", "--out", str(tmp_path / "x.png")]) == 2
+    assert "PAIR" in capsys.readouterr().err

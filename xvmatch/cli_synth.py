@@ -132,18 +132,31 @@ def add_show_parser(subparsers) -> argparse.ArgumentParser:
         subparsers,
         "show",
         "Draw a labelled pair side by side with each person's box and id (one colour per "
-        "person across the views; O marks the camera wearer) into a PNG.",
+        "person across the views; O marks the camera wearer) into a PNG; or a frame of your "
+        "own box files (--top, --hor), matched by a prediction CSV or by their ids.",
     )
-    p.add_argument("pair", metavar="PAIR",
+    p.add_argument("pair", metavar="PAIR", nargs="?", default=None,
                    help="an image of the pair (images/top/SCENE_FRAME.jpg or images/ego/...), "
                    "a scene file (annotations/SCENE.json), or a dataset folder")
+    g = p.add_argument_group("box files instead of PAIR (drawn on blank canvases: the "
+                             "horizontal view at its image size, the top view as a plan)")
+    g.add_argument("--top", default=None, metavar="FILE", help="top-view boxes (MOT format)")
+    g.add_argument("--hor", default=None, metavar="FILE",
+                   help="horizontal-view boxes (MOT format)")
+    g.add_argument("--pred", default=None, metavar="CSV",
+                   help="pairs to draw, frame,top_id,hor_id (xvmatch associate --out); default: "
+                   "the same id in both views (ground truth)")
+    from xvmatch.cli import IMAGE_SIZE_HELP
+
+    g.add_argument("--image-size", type=image_size(8, 65536, "pixels of a camera image"),
+                   default=None, metavar="WxH", help=IMAGE_SIZE_HELP)
+    g.add_argument("--no-labels", action="store_true", help="print no ids by the boxes")
     p.add_argument("--scene", default=None, help="scene name when PAIR is a dataset folder "
                    "(default: the first scene)")
     p.add_argument("--frame", default=None,
-                   type=int_in(1, MAX_FRAMES, f"a scene has at most {MAX_FRAMES} frames "
-                               "(synth --frames)"),
-                   help=f"frame number when PAIR is a scene file or folder, 1..{MAX_FRAMES} "
-                   "(default 1)")
+                   type=int_in(1, 2**53, "a frame number: frames are 1-based, exact to 2**53"),
+                   help="frame number when PAIR is a scene file or folder (default 1), or of "
+                   "the box files (default: the first with boxes in both views), 1..2**53")
     p.add_argument("--out", default="pair.png", help="picture to write (default pair.png)")
     p.add_argument("--full-boxes", action="store_true",
                    help="also draw the full (unoccluded) boxes, thin")
@@ -182,8 +195,65 @@ def _resolve_pair(spec: str, scene: str | None, frame: int | None):
     return root / "annotations" / f"{name}.json", root, frame or int(number)
 
 
+def _show_boxes(args: argparse.Namespace) -> int:
+    """``show --top T --hor H``: one frame of box files, pairs from ``--pred`` or equal ids."""
+    import numpy as np
+
+    from xvmatch.cli import _read_boxes
+    from xvmatch.cli_image_size import note_if_assumed, resolve_size
+    from xvmatch.datasets.mot_boxes import read_predictions
+    from xvmatch.inference.box_canvas import blank_view, top_plan
+    from xvmatch.inference.match_drawing import draw_matches, write_match_picture
+
+    if args.pair is not None or args.top is None or args.hor is None:
+        raise ValueError("give either PAIR (a synthetic pair) or --top and --hor (box files)")
+    if args.full_boxes:
+        raise ValueError("--full-boxes applies to a synthetic PAIR (box files hold one box)")
+    out = Path(args.out)
+    check_outputs([Output("--out", out)], [Input("--top", args.top), Input("--hor", args.hor),
+                                           Input("--pred", args.pred)])
+    top, hor = _read_boxes(args.top, "first"), _read_boxes(args.hor, "first")
+    both = [f for f in sorted(set(top) & set(hor)) if len(top[f]) and len(hor[f])]
+    frame = args.frame if args.frame is not None else (both[0] if both else None)
+    if frame not in both:
+        raise ValueError(f"--frame {frame}: {args.top} and {args.hor} have no boxes in both "
+                         f"views there (frames with both: {both[0]}..{both[-1]})" if both else
+                         f"{args.top} and {args.hor} share no frame with boxes in both views")
+    resolved = resolve_size(hor, args.hor, [] if args.image_size is None else
+                            [(args.image_size, "--image-size")])
+    t_ids, h_ids = top[frame].ids.tolist(), hor[frame].ids.tolist()
+    if args.pred is not None:
+        pairs = read_predictions(args.pred).get(frame, [])
+        for a, b in pairs:
+            if a not in t_ids or b not in h_ids:
+                raise ValueError(f"{args.pred}: frame {frame}: pair ({a}, {b}) names a box "
+                                 "that is not in the box files")
+        what = f"{len(pairs)} pairs of {args.pred}"
+    else:
+        pairs = [(i, i) for i in t_ids if i in h_ids]
+        what = f"{len(pairs)} people with the same id in both views"
+    rows = [(t_ids.index(a), h_ids.index(b)) for a, b in pairs]
+    plan = top_plan(top)
+    picture = draw_matches(
+        plan.image, blank_view(resolved[0]), plan.place(top[frame].boxes), hor[frame].boxes,
+        np.array(rows, dtype=np.int64).reshape(-1, 2),
+        None if args.no_labels else t_ids, None if args.no_labels else h_ids,
+        title=f"frame {frame}: {what} (same colour: same person; grey: unmatched; top view as "
+        "a plan)")
+    note_if_assumed(resolved, hor, args.hor)
+    write_match_picture(out, picture)
+    print(f"wrote {out} ({picture.shape[1]}x{picture.shape[0]})", file=sys.stderr)
+    return 0
+
+
 def _cmd_show(args: argparse.Namespace) -> int:
     import cv2
+
+    if args.top is not None or args.hor is not None or args.pair is None:
+        return _show_boxes(args)
+    for option in ("pred", "image_size"):
+        if getattr(args, option) is not None:
+            raise ValueError(f"--{option.replace('_', '-')} applies to box files (--top, --hor)")
 
     from xvmatch.datasets.mot_boxes import atomic_write_bytes
     from xvmatch.datasets.synthetic_io import draw_pair, read_scene
