@@ -295,7 +295,7 @@ def _run(inputs, out, *extra):
 
     top, *hor = inputs.boxes
     return main(["associate-multi", "--top", str(top), "--hor", *map(str, hor), "--out",
-                 str(out), "--quiet", *extra])
+                 str(out), "--quiet", "--image-size", "320x180", *extra])
 
 
 @pytest.mark.parametrize("learned", [True, False], ids=["model", "handcrafted"])
@@ -374,5 +374,5 @@ def test_cli_takes_one_to_three_horizontal_views(scene, tmp_path, capsys):
                  str(tmp_path / "out")])
     assert code == 2 and "the same file twice" in capsys.readouterr().err
     assert main(["associate-multi", "--top", top, "--hor", hor1, "--out", str(tmp_path / "one"),
-                 "--quiet"]) == 0
+                 "--quiet", "--image-size", "320x180"]) == 0
     assert sorted(p.name for p in (tmp_path / "one").iterdir()) == ["hor1.txt", "top.txt"]
