@@ -341,8 +341,29 @@ def test_offset_json(files, capsys):
     # One clip: nothing to compare it with, so it is reported but never applied (issue 28,
     # item 6: an offset needs MIN_AGREEING_CLIPS clips that agree).
     assert data["status"] in ("unsupported", "within_tolerance") and data["applied"] == 0
+
     assert main(argv[:-1]) == 0
     assert capsys.readouterr().out.startswith(f"offset {data['offset']:+d} frames")
+
+
+def test_offset_from_one_asked_clip_says_why_it_is_not_applied(tmp_path, capsys):
+    # A single clip the user asked for cannot be checked: it is reported, never applied, and
+    # the warning says why (not that the videos are too short). The idealised walk of
+    # test_offset_recovers_a_shift_end_to_end, renumbered by 8 frames (beyond the tolerance).
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    scene = simulate_box_scene(config, n_frames=60, seed=3)
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    write_mot_boxes(top, scene.top)
+    write_mot_boxes(hor, {f + 8: FrameBoxes(f + 8, r.ids, r.boxes) for f, r in scene.hor.items()})
+    argv = ["offset", "--top", str(top), "--hor", str(hor), "--camera-id", "0",
+            "--max-offset", "10", "--clips", "1", "--image-size", "2688x1512"]
+    assert main([*argv, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["offset"] == -8 and data["status"] == "unsupported" and data["applied"] == 0
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "one clip (--clips 1 or --clip-start) cannot back an offset" in err
+    assert "videos this short" not in err
 
 
 def test_offset_recovers_a_shift_end_to_end(tmp_path, capsys):

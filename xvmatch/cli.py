@@ -359,13 +359,17 @@ def _offset_summary(est) -> str:
     return text + (f", evidence t = {est.evidence:.1f}" if est.offset and n > 1 else "")
 
 
-def _unsupported_reason(est, max_offset: int) -> str:
-    """Why an :class:`OffsetEstimate` was not applied, in words."""
+def _unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> str:
+    """Why an :class:`OffsetEstimate` was not applied, in words (``one_clip_asked``: the user
+    asked for a single clip with --clips 1 or --clip-start)."""
     import numpy as np
 
     from xvmatch.geometry.spatial_search import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
 
     n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
+    if n < 2 and one_clip_asked:
+        return ("one clip (--clips 1 or --clip-start) cannot back an offset: at least 2 clips "
+                "must agree; use --clips 3 or more, or pass --offset N if you trust it")
     if n < 2:
         return (f"only {n} clip fits videos this short for --max-offset {max_offset} and one "
                 "clip cannot back an offset; try a smaller --max-offset")
@@ -423,7 +427,8 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
               f"{_offset_summary(est)})")
         if est.status == "unsupported":
-            print(f"warning: {_unsupported_reason(est, max_offset)}: the estimate is "
+            one_clip = args.clip_start is not None or args.clips == 1
+            print(f"warning: {_unsupported_reason(est, max_offset, one_clip)}: the estimate is "
                   "unreliable (detector noise, too few people, or an offset beyond "
                   "--max-offset); associate --offset auto keeps the files' timing",
                   file=sys.stderr)
