@@ -65,6 +65,20 @@ def test_evaluate_tracks_scores_them(scene_files, tmp_path, capsys):
     assert "CVIDF1" in capsys.readouterr().out
 
 
+def test_evaluate_tracks_with_an_empty_view_scores_it_as_missed(scene_files, tmp_path, capsys):
+    # A tracker that kept no horizontal track wrote an empty hor.txt: a poor result to score,
+    # not a bad input file.
+    folder = tmp_path / "no_hor"
+    folder.mkdir()
+    (folder / "top.txt").write_text(scene_files["gt_top"].read_text())
+    (folder / "hor.txt").write_text("")
+    assert main(["evaluate", "--tracks", str(folder), "--top", str(scene_files["gt_top"]),
+                 "--hor", str(scene_files["gt_hor"]), "--json"]) == 0
+    scores = json.loads(capsys.readouterr().out)
+    assert scores["cross_view"]["cvidr"] == pytest.approx(0.0)
+    assert scores["top"]["idf1"] == pytest.approx(100.0)
+
+
 def test_evaluate_the_ground_truth_as_tracks_is_perfect(scene_files, tmp_path, capsys):
     folder = tmp_path / "perfect"
     folder.mkdir()

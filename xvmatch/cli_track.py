@@ -278,8 +278,8 @@ def evaluate_tracks_command(args: argparse.Namespace, read_boxes) -> int:
     if not folder.is_dir():
         raise ValueError(f"--tracks {args.tracks}: not a folder (expected the --out of "
                          "xvmatch track, with top.txt and hor.txt)")
-    tracks_top = read_mot_boxes(folder / "top.txt")
-    tracks_hor = read_mot_boxes(folder / "hor.txt")
+    tracks_top = read_mot_boxes(folder / "top.txt", allow_empty=True)
+    tracks_hor = read_mot_boxes(folder / "hor.txt", allow_empty=True)
     gt_top = read_boxes(args.top, args.duplicates)
     gt_hor = read_boxes(args.hor, args.duplicates)
     name = args.name or args.tracks
