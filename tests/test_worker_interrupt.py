@@ -114,6 +114,22 @@ def test_a_second_ctrl_c_does_not_hang(long_scene, tmp_path):
     assert "Traceback" not in err
 
 
+def _running(pid: int) -> bool:
+    """The process ``pid`` exists and is not a zombie (asked of the OS: ``Process.is_alive`` can
+    stay True when the executor's own thread reaped the child first)."""
+    stat = Path(f"/proc/{pid}/stat")
+    if stat.parent.parent.is_dir() and Path("/proc/self").exists():
+        try:
+            return stat.read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 def test_worker_pool_stops_its_workers_when_the_block_raises():
     start = time.monotonic()
     with pytest.raises(KeyboardInterrupt), worker_pool(2) as pool:
@@ -122,4 +138,4 @@ def test_worker_pool_stops_its_workers_when_the_block_raises():
         processes = list(pool._processes.values())
         raise KeyboardInterrupt
     assert time.monotonic() - start < HANG  # not waiting for the sleeping tasks
-    assert len(processes) == 2 and not any(p.is_alive() for p in processes)
+    assert len(processes) == 2 and not any(_running(p.pid) for p in processes)
