@@ -22,8 +22,8 @@ from xvmatch.datasets.mot_boxes import (
     _read_text,
     _require_rows,
     _split_lines,
-    atomic_write_text,
 )
+from xvmatch.geometry.atomic_files import atomic_write_text
 
 __all__ = ["DetectionRows", "read_detection_rows", "write_track_rows"]
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import atomic_write_bytes
+from xvmatch.geometry.atomic_files import atomic_write_bytes
 from xvmatch.geometry.matcher_inputs import FrameCameras, matcher_features
 from xvmatch.geometry.spatial_features import (
     FEATURE_VERSION,

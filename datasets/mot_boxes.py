@@ -13,31 +13,29 @@ run, to name the exact bad line. Every problem is a :class:`BoxFileError` whose 
 ``\\n`` only (``\\r\\n`` too), and a file holding another line-break character (form feed,
 U+2028, ...) is refused at that line. A box file without any box is refused as well.
 
-All writes go through :func:`atomic_write_text` (temporary file in the same directory, then
-``os.replace``), so a crash never leaves a half-written file that a later run would trust.
+All writes go through :func:`~xvmatch.geometry.atomic_files.atomic_write_text` (temporary file
+in the same directory, then ``os.replace``), so a crash never leaves a half-written file that a
+later run would trust.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 import re
-import tempfile
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
+
+from xvmatch.geometry.atomic_files import atomic_write_text
 
 __all__ = [
     "MAX_PIXELS",
     "PREDICTION_HEADER",
     "BoxFileError",
     "FrameBoxes",
-    "atomic_write_bytes",
-    "atomic_write_text",
     "read_mot_boxes",
     "read_predictions",
     "scale_frames",
@@ -482,62 +480,6 @@ def read_predictions(path: str | os.PathLike) -> dict[int, list[tuple[int, int]]
 
 # --------------------------------------------------------------------------------------------
 # Writing
-
-
-@functools.cache
-def _default_mode() -> int:
-    """Permissions a plain ``open(..., "w")`` would give a new file (0o666 minus the umask)."""
-    umask = os.umask(0o022)
-    os.umask(umask)
-    return 0o666 & ~umask
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, fsync: bool = True) -> None:
-    """Write ``data`` to ``path`` atomically: the one helper every writer of the project uses.
-
-    The bytes go to a temporary file in the same directory, are flushed to disk (``fsync``; bulk
-    image writers may skip it for speed), then renamed over ``path`` with ``os.replace``: readers
-    see either the old file or the complete new one, never a partial write. The temporary file is
-    removed if anything fails. An existing file keeps its permissions; a new one gets the usual
-    ``0o666 & ~umask``.
-
-    Args:
-        path: destination file; its directory must exist.
-        data: the full content.
-        fsync: flush the data to disk before the rename.
-    """
-    target = Path(path)
-    try:
-        mode = target.stat().st_mode & 0o7777
-    except FileNotFoundError:
-        mode = _default_mode()
-    except OSError as exc:
-        raise OSError(f"{os.fspath(target)}: cannot write ({exc.strerror or exc})") from None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    except OSError as exc:
-        why = ("its folder does not exist" if not target.parent.is_dir()
-               else exc.strerror or str(exc))
-        raise OSError(f"{os.fspath(target)}: cannot write ({why})") from None
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            if fsync:
-                handle.flush()
-                os.fsync(handle.fileno())
-        os.chmod(tmp, mode)
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` as UTF-8 to ``path`` atomically, flushed to disk (see atomic_write_bytes)."""
-    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def _fmt(value: float) -> str:

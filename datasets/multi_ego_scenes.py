@@ -230,7 +230,8 @@ def write_multi_ego_inputs(frames: Sequence[MultiEgoFrame], out: str | os.PathLi
     """
     import cv2
 
-    from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, write_mot_boxes
+    from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
+    from xvmatch.geometry.atomic_files import atomic_write_bytes
     from xvmatch.geometry.camera_io import save_cameras
 
     if not frames:

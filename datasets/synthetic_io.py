@@ -42,8 +42,9 @@ import numpy as np
 from xvmatch.datasets.crops import box_crops
 from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
 from xvmatch.datasets.image_size import check_image_size
-from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, atomic_write_text
+from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
+from xvmatch.geometry.atomic_files import atomic_write_bytes, atomic_write_text
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.json_text import parse_json
 from xvmatch.geometry.worker_pool import worker_pool

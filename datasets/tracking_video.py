@@ -25,8 +25,9 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from xvmatch.datasets.image_render import SceneRenderer
-from xvmatch.datasets.mot_boxes import FrameBoxes, atomic_write_bytes, write_mot_boxes
+from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig, SyntheticScene, make_scene
+from xvmatch.geometry.atomic_files import atomic_write_bytes
 from xvmatch.geometry.camera import Camera, look_rotation
 
 __all__ = ["TrackingVideo", "render_tracking_video", "write_tracking_video"]

@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import atomic_write_text
 from xvmatch.datasets.pair_trials import open_dataset
 from xvmatch.evaluation.ablation_cells import (
     DISTRIBUTION_ROWS,
@@ -58,6 +57,7 @@ from xvmatch.evaluation.ablation_report import (
     write_results,
 )
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, SWEEPS, Setting, grid_settings
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
 

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import atomic_write_text
 from xvmatch.datasets.pair_trials import (
     FrameSample,
     PairTrial,
@@ -44,6 +43,7 @@ from xvmatch.evaluation.ablation_settings import (
 )
 from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import FrameCameras, camera_cues
 from xvmatch.inference.learned_association import LearnedMatcher

@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import atomic_write_bytes
 from xvmatch.evaluation.cost_distributions import (
     CostHistogram,
     draw_cost_histograms,
     encode_png,
 )
+from xvmatch.geometry.atomic_files import atomic_write_bytes
 
 __all__ = [
     "Disagreement",

@@ -18,11 +18,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from xvmatch.datasets.mot_boxes import atomic_write_text
 from xvmatch.evaluation.ablation_cvmhat import CVMHAT_ROWS, CVMHAT_SETTINGS
 from xvmatch.evaluation.ablation_methods import FAMILIES, LEARNED_FUSION, ROWS, row_by_key
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, Setting
 from xvmatch.evaluation.confidence import MeanInterval, mean_interval
+from xvmatch.geometry.atomic_files import atomic_write_text
 
 __all__ = [
     "CSV_COLUMNS",

@@ -10,8 +10,8 @@ not cover one another where there is room.
 
 :func:`write_match_picture` stores a picture as JPEG (quality 90: a few hundred kB for a real
 frame) or PNG (maximum compression) through the project's one atomic writer
-(:func:`~xvmatch.datasets.mot_boxes.atomic_write_bytes`); :func:`picture_path` names the file of a
-frame (``frame_000212.jpg``) and :func:`frames_to_draw` picks every k-th frame of a sequence.
+(:func:`~xvmatch.geometry.atomic_files.atomic_write_bytes`); :func:`picture_path` names the file
+of a frame (``frame_000212.jpg``) and :func:`frames_to_draw` picks every k-th frame of a sequence.
 
 This module uses numpy and OpenCV only (no torch), both in the base install.
 """
@@ -25,8 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import atomic_write_bytes
 from xvmatch.geometry.array_checks import as_boxes
+from xvmatch.geometry.atomic_files import atomic_write_bytes
 
 __all__ = [
     "GAP_COLOUR",
@@ -374,7 +374,7 @@ def write_match_picture(path: str | os.PathLike, picture: np.ndarray) -> None:
     :data:`JPEG_QUALITY`) or PNG (``.png``, maximum compression) file, atomically.
 
     The folder is created if missing. The bytes go through
-    :func:`~xvmatch.datasets.mot_boxes.atomic_write_bytes` (temporary file, then rename, without
+    :func:`~xvmatch.geometry.atomic_files.atomic_write_bytes` (temporary file, then rename, without
     ``fsync`` as for other bulk image writes): a reader sees the old file or the new one, never a
     partial one, and an existing file is replaced.
 

@@ -14,13 +14,13 @@ from xvmatch.datasets.mot_boxes import (
     PREDICTION_HEADER,
     BoxFileError,
     FrameBoxes,
-    atomic_write_text,
     read_mot_boxes,
     read_predictions,
     shift_frames,
     write_mot_boxes,
     write_predictions,
 )
+from xvmatch.geometry.atomic_files import atomic_write_text
 
 GOOD_LINE = "1,1,10,20,30,40,-1,-1,-1,-1"
 

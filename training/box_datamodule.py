@@ -44,12 +44,8 @@ from xvmatch.datasets.feature_cache import (
     cached_sequence_features,
     default_cache_dir,
 )
-from xvmatch.datasets.mot_boxes import (
-    FrameBoxes,
-    atomic_write_text,
-    scale_frames,
-    shift_frames,
-)
+from xvmatch.datasets.mot_boxes import FrameBoxes, scale_frames, shift_frames
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.spatial_features import (
     FeatureConfig,
     FrameFeatures,

@@ -28,7 +28,7 @@ from typing import Any
 
 import torch
 
-from xvmatch.datasets.mot_boxes import atomic_write_bytes
+from xvmatch.geometry.atomic_files import atomic_write_bytes
 from xvmatch.geometry.record_fields import typed_field
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
 from xvmatch.models.appearance_net import (

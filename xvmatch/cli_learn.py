@@ -567,7 +567,7 @@ def associate_with_model(
 def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float) -> None:
     import json
 
-    from xvmatch.datasets.mot_boxes import atomic_write_text
+    from xvmatch.geometry.atomic_files import atomic_write_text
 
     record = {
         "version": 1,

@@ -255,8 +255,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         if getattr(args, option) is not None:
             raise ValueError(f"--{option.replace('_', '-')} applies to box files (--top, --hor)")
 
-    from xvmatch.datasets.mot_boxes import atomic_write_bytes
     from xvmatch.datasets.synthetic_io import draw_pair, read_scene
+    from xvmatch.geometry.atomic_files import atomic_write_bytes
 
     annotation, root, frame = _resolve_pair(args.pair, args.scene, args.frame)
     record = read_scene(annotation, root)

@@ -267,7 +267,7 @@ def check_own_folder(folder: str | os.PathLike, command: str, option: str = "--o
 def claim_folder(folder: str | os.PathLike, command: str, option: str = "--out") -> Path:
     """Make ``folder`` the command's own (after :func:`check_own_folder`): create it if missing
     and leave the marker naming ``command``; a folder already marked is kept as it is."""
-    from xvmatch.datasets.mot_boxes import atomic_write_text
+    from xvmatch.geometry.atomic_files import atomic_write_text
 
     check_own_folder(folder, command, option)
     out = Path(folder)
