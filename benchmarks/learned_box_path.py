@@ -11,7 +11,7 @@ process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
 * ``onnx``: ``xvmatch associate --model BUNDLE`` (the deployed runtime, no torch);
 * ``torch``: the path this release replaces, rebuilt here: the features with one exact search
   per candidate camera location (``rank_hypotheses(..., k=1)`` per candidate, as feature
-  version 1 did) and the torch matcher (``training.matcher_file``) with the same weights,
+  version 1 did) and the torch matcher (``models.matcher_file``) with the same weights,
   batched 64 frames, Hungarian with the same gamma, the same CSV written.
 
 Prints frames per second (CPU time of the child processes, and wall time), the ratios, and the
@@ -57,7 +57,7 @@ def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
     from xvmatch.geometry.spatial_features import collate_frames, frame_features
     from xvmatch.geometry.spatial_search import rank_hypotheses
     from xvmatch.inference.assignment import assign
-    from xvmatch.training.matcher_file import load_matcher
+    from xvmatch.models.matcher_file import load_matcher
 
     def per_candidate(top, hor, width, params, candidates, keep=None):
         return [r for c in candidates

@@ -22,7 +22,7 @@ import numpy as np
 
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import APPEARANCE_INPUT, open_session
-from xvmatch.training.matcher_file import LoadedMatcher
+from xvmatch.models.matcher_file import LoadedMatcher
 
 __all__ = ["CALIBRATION_METHODS", "add_int8", "calibration_crops", "int8_accuracy",
            "quantize_appearance"]

@@ -68,7 +68,7 @@ from xvmatch.inference.bundle import (
 )
 from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
-from xvmatch.training.matcher_file import LoadedMatcher, load_matcher
+from xvmatch.models.matcher_file import LoadedMatcher, load_matcher
 
 __all__ = ["ExportError", "check_replaceable", "export_bundle"]
 

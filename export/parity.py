@@ -24,7 +24,7 @@ from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import APPEARANCE_INPUT, MATCHER_INPUTS, MATCHER_OUTPUT
 from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
-from xvmatch.training.matcher_file import LoadedMatcher
+from xvmatch.models.matcher_file import LoadedMatcher
 
 __all__ = ["PARITY_TOLERANCE", "appearance_parity", "compare_matcher", "parity_frames"]
 

@@ -69,7 +69,7 @@ def tiny_models(tmp_path_factory, tiny_synth) -> dict[str, Path]:
     from xvmatch.models.appearance_net import appearance_small
     from xvmatch.models.cross_view_matcher import CrossViewMatcher
     from xvmatch.models.geometry_encoder import GeometryEncoder
-    from xvmatch.training.matcher_file import save_matcher
+    from xvmatch.models.matcher_file import save_matcher
 
     root = tmp_path_factory.mktemp("tiny_models")
     features = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)

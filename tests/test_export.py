@@ -26,7 +26,7 @@ from xvmatch.geometry.spatial_features import (
     TOP_FEATURES,
 )
 from xvmatch.inference.bundle import load_bundle, read_manifest
-from xvmatch.training.matcher_file import load_matcher
+from xvmatch.models.matcher_file import load_matcher
 
 onnx = pytest.importorskip("onnx")
 

@@ -14,6 +14,7 @@ import torch
 from xvmatch.datasets.box_scene import write_box_scene
 from xvmatch.geometry.spatial_features import FeatureConfig
 from xvmatch.models.geometry_encoder import GeometryEncoder
+from xvmatch.models.matcher_file import load_matcher
 from xvmatch.training.box_datamodule import (
     CvmhatBoxDataModule,
     SimBoxDataModule,
@@ -22,7 +23,6 @@ from xvmatch.training.box_datamodule import (
 )
 from xvmatch.training.fit_geometry import fit_geometry
 from xvmatch.training.geometry_module import GeometryMatchingModule
-from xvmatch.training.matcher_file import load_matcher
 
 FEATURES = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
 TINY = {"width": 16, "layers": 1, "heads": 2, "sinkhorn_iterations": 10}

@@ -17,7 +17,7 @@ from xvmatch.inference.learned_association import (
     associate_sequence_learned,
     load_matcher_bundle,
 )
-from xvmatch.training.matcher_file import load_matcher
+from xvmatch.models.matcher_file import load_matcher
 
 WIDTH = 2688
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from xvmatch.training.matcher_file import MatcherFileError, load_matcher, save_matcher
+from xvmatch.models.matcher_file import MatcherFileError, load_matcher, save_matcher
 
 
 def test_round_trip_keeps_every_part(tiny_models):

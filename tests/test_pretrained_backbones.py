@@ -199,7 +199,7 @@ def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synt
     from xvmatch.inference.bundle import read_manifest
     from xvmatch.models.cross_view_matcher import CrossViewMatcher
     from xvmatch.models.geometry_encoder import GeometryEncoder
-    from xvmatch.training.matcher_file import save_matcher
+    from xvmatch.models.matcher_file import save_matcher
 
     torch.manual_seed(0)
     matcher = CrossViewMatcher(GeometryEncoder(width=16, layers=1, heads=2,

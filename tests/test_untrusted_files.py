@@ -226,7 +226,7 @@ def test_weights_files_with_pickled_code_are_refused(tmp_path: Path, reader: str
     torch.save({"format": "x", "weight": torch.zeros(2), "payload": _Marker(marker)}, evil)
     with pytest.raises(ValueError) as info:
         if reader == "matcher":
-            from xvmatch.training.matcher_file import load_matcher
+            from xvmatch.models.matcher_file import load_matcher
 
             load_matcher(evil)
         elif reader == "appearance":

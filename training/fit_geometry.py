@@ -32,6 +32,7 @@ from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.models.geometry_encoder import GeometryEncoder
 from xvmatch.models.losses import GeometryMatchingLoss
+from xvmatch.models.matcher_file import save_matcher
 from xvmatch.training.box_datamodule import (
     CvmhatBoxDataModule,
     MixedBoxDataModule,
@@ -43,7 +44,6 @@ from xvmatch.training.checkpoint_files import (
     load_checkpoint_state,
 )
 from xvmatch.training.geometry_module import GeometryMatchingModule
-from xvmatch.training.matcher_file import save_matcher
 
 __all__ = ["FitResult", "fit_geometry", "fit_geometry_cvmhat", "fit_matcher", "peak_memory_mb"]
 

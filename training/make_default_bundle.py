@@ -162,9 +162,9 @@ def matcher(args: argparse.Namespace, work: Path, data: dict[str, Path], init: P
 
     from xvmatch.models.appearance_net import appearance_from_weights
     from xvmatch.models.cross_view_matcher import CUES, CrossViewMatcher
+    from xvmatch.models.matcher_file import load_matcher
     from xvmatch.training.fit_geometry import fit_matcher
     from xvmatch.training.matcher_datamodule import SyntheticMatcherDataModule
-    from xvmatch.training.matcher_file import load_matcher
 
     base = load_matcher(init)
     seed = args.matcher_seed

@@ -448,7 +448,7 @@ def version_text() -> str:
     from xvmatch.inference.bundle import BUNDLE_FORMAT_VERSION, OPSET
 
     try:  # the training file format needs torch (the learn extra)
-        from xvmatch.training.matcher_file import MATCHER_FORMAT_VERSION as MATCHER
+        from xvmatch.models.matcher_file import MATCHER_FORMAT_VERSION as MATCHER
     except ImportError:
         MATCHER = "(needs the learn extra)"
     return (f"xvmatch {__version__}\n"

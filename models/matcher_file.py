@@ -52,7 +52,7 @@ __all__ = [
 
 MATCHER_FORMAT = "xvmatch-matcher"
 MATCHER_FORMAT_VERSION = 1
-DEFAULT_MATCHER_PATH = Path(__file__).resolve().parents[1] / "models" / "default_matcher.pt"
+DEFAULT_MATCHER_PATH = Path(__file__).resolve().parent / "default_matcher.pt"
 """The torch file the shipped default bundle is exported from (``training/
 make_default_bundle.py`` writes both)."""
 
