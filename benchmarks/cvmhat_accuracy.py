@@ -24,8 +24,8 @@ import numpy as np
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_search import associate_sequence
+from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 
 SIZE = IMAGE_SIZE
 MODES = {"A": None, "B": 0}

@@ -40,11 +40,11 @@ import numpy as np
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
-from xvmatch.evaluation.cross_view_metrics import count_pair, summarize
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
 from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS
 from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.cross_view_metrics import count_pair, summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}

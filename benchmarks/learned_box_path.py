@@ -39,7 +39,7 @@ from pathlib import Path  # noqa: E402
 
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence  # noqa: E402
 from xvmatch.datasets.mot_boxes import read_predictions  # noqa: E402
-from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize  # noqa: E402
+from xvmatch.inference.cross_view_metrics import count_sequence, summarize  # noqa: E402
 
 
 def _children_cpu() -> float:

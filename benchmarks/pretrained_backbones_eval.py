@@ -35,9 +35,9 @@ from torch import nn
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
-from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.evaluation.learned_matcher_eval import CueRule, score_rule, tune_gamma
+from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.models.appearance_net import (
     AppearanceNet,

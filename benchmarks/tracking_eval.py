@@ -45,13 +45,13 @@ import numpy as np
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.track_metrics import (
     pool_view_scores,
     track_pair_counts,
     tracklet_scores,
     view_track_results,
 )
+from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.track_costs import TrackWeights
 from xvmatch.inference.tracking import TrackConfig, associate_frames, track_pair
 from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets

@@ -10,7 +10,7 @@ A trial is one image pair (``xvmatch synth``) in one setting, ready to associate
 
 Per frame and view, the boxes are shuffled with a seeded permutation before any cost is
 computed ("ids scrambled"): a method sees boxes, images and cameras only, never an id; ids are
-looked up again only to score (:func:`xvmatch.evaluation.cross_view_metrics.count_pair`) and to
+looked up again only to score (:func:`xvmatch.inference.cross_view_metrics.count_pair`) and to
 build training labels. Each trial carries the handcrafted cues between its boxes
 (:func:`~xvmatch.geometry.handcrafted_costs.pair_costs`) and, when a coster is given, learned
 appearance costs. The handcrafted baseline, the learned-matcher evaluation and the fusion and

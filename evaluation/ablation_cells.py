@@ -41,11 +41,11 @@ from xvmatch.evaluation.ablation_settings import (
     perturb_camera,
     scaled_noise,
 )
-from xvmatch.evaluation.cross_view_metrics import summarize
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import FrameCameras, camera_cues
+from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import LearnedMatcher
 
 __all__ = [

@@ -29,10 +29,10 @@ from xvmatch.datasets.detector_noise import (
     apply_detector_noise,
 )
 from xvmatch.evaluation.ablation_cells import CELL_FORMAT, CELL_VERSION
-from xvmatch.evaluation.cross_view_metrics import count_pair, summarize
 from xvmatch.geometry.matcher_inputs import matcher_inputs
 from xvmatch.geometry.spatial_search import associate_frame
 from xvmatch.inference.assignment import assign
+from xvmatch.inference.cross_view_metrics import count_pair, summarize
 from xvmatch.inference.learned_association import LearnedMatcher
 
 __all__ = [

@@ -3,7 +3,7 @@ the CVMHAT search and the learned matcher, scored on the same trials.
 
 Rows (:data:`ROWS`), each an association of the shuffled boxes of a
 :class:`~xvmatch.datasets.pair_trials.PairTrial` scored with Eq. 9 and the cross-view ID scores
-(:func:`~xvmatch.evaluation.cross_view_metrics.count_pair`):
+(:func:`~xvmatch.inference.cross_view_metrics.count_pair`):
 
 * single cues: the learned appearance cost alone, the colour histogram alone (Eq. 3), the ray
   distance alone (Eq. 6), the ray distance with the cheirality veto (Eq. 7), and the CVMHAT
@@ -29,12 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from xvmatch.datasets.pair_trials import PairTrial
-from xvmatch.evaluation.cross_view_metrics import FrameCounts, count_pair, summarize
 from xvmatch.evaluation.deployed_matcher_eval import matcher_costs
 from xvmatch.evaluation.handcrafted_baseline import GAMMA_PRODUCT, GAMMA_SUM, Method, fused_cost
 from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
 from xvmatch.geometry.spatial_search import associate_frame
 from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.cross_view_metrics import FrameCounts, count_pair, summarize
 from xvmatch.inference.learned_association import LearnedMatcher
 
 __all__ = [
@@ -145,7 +145,7 @@ class RowResult:
 
     Attributes:
         gamma: the non-association cost used (None for the search).
-        counts: per test trial, its :class:`~xvmatch.evaluation.cross_view_metrics.FrameCounts`.
+        counts: per test trial, its :class:`~xvmatch.inference.cross_view_metrics.FrameCounts`.
         pairs: per test trial, the ``(K, 2)`` (top row, ego column) pairs.
         costs: per test trial, the ``(M, N)`` cost matrix, or None for the search.
     """

@@ -6,7 +6,7 @@ score exactly the frames the handcrafted baseline scores. Per trial and setting
 (:data:`~xvmatch.geometry.matcher_inputs.INPUT_SETTINGS`): the matcher's cost matrix from the
 boxes, the ONNX appearance cost (with images) and the camera cues and rectified geometry (with
 cameras); the Hungarian assignment with gamma; the Eq. 9 accuracy and the cross-view ID scores
-of :func:`~xvmatch.evaluation.cross_view_metrics.count_pair`.
+of :func:`~xvmatch.inference.cross_view_metrics.count_pair`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from xvmatch.datasets.pair_trials import PairTrial
-from xvmatch.evaluation.cross_view_metrics import CrossViewScores, count_pair, summarize
 from xvmatch.geometry.matcher_inputs import (
     INPUT_SETTINGS,
     FrameCameras,
@@ -24,6 +23,7 @@ from xvmatch.geometry.matcher_inputs import (
     matcher_inputs,
 )
 from xvmatch.inference.assignment import assign
+from xvmatch.inference.cross_view_metrics import CrossViewScores, count_pair, summarize
 from xvmatch.inference.learned_association import LearnedMatcher
 
 __all__ = ["OnnxAppearanceCoster", "matcher_costs", "score_matcher"]

@@ -61,17 +61,17 @@ from xvmatch.datasets.pair_trials import (
 )
 from xvmatch.datasets.synthetic_io import SceneRecord, SyntheticDataset
 from xvmatch.evaluation.cost_distributions import CostSamples
-from xvmatch.evaluation.cross_view_metrics import (
+from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
+from xvmatch.geometry.handcrafted_costs import PairCosts
+from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,
     scores_to_dict,
     summarize,
 )
-from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
-from xvmatch.geometry.handcrafted_costs import PairCosts
-from xvmatch.geometry.worker_pool import worker_pool
-from xvmatch.inference.assignment import GAMMA_GRID, assign
 
 __all__ = [
     "GAMMA_GEO",

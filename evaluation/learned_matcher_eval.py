@@ -38,15 +38,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from xvmatch.datasets.pair_trials import CUES, SETTINGS, PairTrial
-from xvmatch.evaluation.cross_view_metrics import (
+from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
+from xvmatch.geometry.cost_fusion import add_cheirality
+from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,
     summarize,
 )
-from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
-from xvmatch.geometry.cost_fusion import add_cheirality
-from xvmatch.inference.assignment import GAMMA_GRID, assign
 
 if TYPE_CHECKING:  # torch is imported only by the functions that run a fusion head
     from torch import nn

@@ -1,7 +1,7 @@
 """Scores of a joint association of several views: every view pair, and cycle consistency.
 
 Each view pair ``(a, b)`` of a frame is scored as a top/egocentric pair is
-(:func:`~xvmatch.evaluation.cross_view_metrics.count_pair`: Eq. 9 accuracy of the
+(:func:`~xvmatch.inference.cross_view_metrics.count_pair`: Eq. 9 accuracy of the
 geometric-priors paper and the CVMHAT CVIDF1 / CVMA, view ``a`` in the role of the top view);
 the per-pair counts pool over frames (:func:`summarize_views`) and the figures of a method are
 the mean over the view pairs.
@@ -19,7 +19,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from xvmatch.evaluation.cross_view_metrics import (
+from xvmatch.inference.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,

@@ -7,7 +7,7 @@ with IoU 1); an unmatched track box stands for no person.
 
 - Across views (CVMHAT paper, Eqs. 19-20): the predicted pairs of a frame are the boxes of the two
   views with the same track id, scored by
-  :func:`xvmatch.evaluation.cross_view_metrics.count_pair` exactly as the frame-level metrics.
+  :func:`xvmatch.inference.cross_view_metrics.count_pair` exactly as the frame-level metrics.
 - Per view: the maintained TrackEval package (``pip install --no-deps trackeval``; its HOTA,
   CLEAR and Identity metrics, fed through its ``eval_sequence`` interface with IoU
   similarities); these metrics are not re-implemented here.
@@ -25,13 +25,13 @@ from scipy.optimize import linear_sum_assignment
 
 from xvmatch.datasets.detector_noise import FALSE_POSITIVE
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.cross_view_metrics import (
+from xvmatch.geometry.box_overlap import box_iou
+from xvmatch.inference.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,
     summarize,
 )
-from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [

@@ -147,7 +147,6 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
     and detector noise pooled, for each appearance file of ``files`` ({label: file name})."""
     from xvmatch.datasets.pair_trials import TrialConfig, scene_trials
     from xvmatch.datasets.synthetic_io import SyntheticDataset
-    from xvmatch.evaluation.cross_view_metrics import count_pair, summarize
     from xvmatch.geometry.matcher_inputs import (
         INPUT_SETTINGS,
         FrameCameras,
@@ -155,6 +154,7 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
         matcher_inputs,
     )
     from xvmatch.inference.bundle import Bundle, read_manifest
+    from xvmatch.inference.cross_view_metrics import count_pair, summarize
     from xvmatch.inference.learned_association import LearnedMatcher
 
     spec = read_manifest(folder)

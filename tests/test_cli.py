@@ -22,8 +22,8 @@ from xvmatch.datasets.mot_boxes import (
     write_mot_boxes,
     write_predictions,
 )
-from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_search import associate_sequence
+from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 
 WIDTH = 2688
 COMMANDS = ("associate", "evaluate", "noise", "offset", "demo")

@@ -26,7 +26,6 @@ from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.visibility_noise import VisibilityNoise
 from xvmatch.evaluation.cost_distributions import FIGURE_FILES
-from xvmatch.evaluation.cross_view_metrics import count_frame, count_pair, summarize
 from xvmatch.evaluation.handcrafted_baseline import (
     GAMMA_GEO,
     RULE_NAMES,
@@ -43,6 +42,7 @@ from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.inference.assignment import GAMMA_GRID
+from xvmatch.inference.cross_view_metrics import count_frame, count_pair, summarize
 
 SMALL = (320, 180)
 CONFIG = SynthConfig(scenario="overview", top_size=SMALL, ego_size=SMALL, n_people=(5, 9))

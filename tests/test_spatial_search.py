@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.geometry.spatial_matching import SpatialParams, match_vector_sets
 from xvmatch.geometry.spatial_search import (
     MIN_AGREEING_CLIPS,
@@ -36,6 +35,7 @@ from xvmatch.geometry.spatial_vectors import (
     top_geometry,
     top_vectors,
 )
+from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 
 PARAMS = SpatialParams()
 WIDTH = SceneConfig().hor_size[0]

@@ -7,8 +7,8 @@ import pytest
 
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.cross_view_metrics import count_sequence, summarize
 from xvmatch.evaluation.track_metrics import track_pair_counts, view_track_scores
+from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.tracking import associate_frames, track_pair
 
 NAME = "V1-S_55-G_1"

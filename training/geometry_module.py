@@ -18,8 +18,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from xvmatch.evaluation.cross_view_metrics import count_frame, summarize
 from xvmatch.inference.assignment import assign
+from xvmatch.inference.cross_view_metrics import count_frame, summarize
 from xvmatch.models.losses import GeometryMatchingLoss
 
 __all__ = ["GeometryMatchingModule", "frame_counts"]
@@ -31,7 +31,7 @@ def frame_counts(cost: np.ndarray, match: np.ndarray, gamma: float):
     """Association counts of one frame from its cost matrix and ground-truth pairs.
 
     Rows and columns stand for people; a matched column takes its row's label, an unmatched one
-    a label of its own, so :func:`~xvmatch.evaluation.cross_view_metrics.count_frame` scores it
+    a label of its own, so :func:`~xvmatch.inference.cross_view_metrics.count_frame` scores it
     like the real ids would.
     """
     m, n = cost.shape

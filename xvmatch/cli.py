@@ -283,7 +283,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
         return evaluate_tracks_command(args, _read_boxes)
     from xvmatch.datasets.mot_boxes import read_predictions
-    from xvmatch.evaluation.cross_view_metrics import (
+    from xvmatch.inference.cross_view_metrics import (
         count_sequence,
         format_table,
         scores_to_dict,

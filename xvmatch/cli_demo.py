@@ -69,7 +69,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         write_scene_inputs,
     )
     from xvmatch.datasets.synthetic_scenes import SynthConfig
-    from xvmatch.evaluation.cross_view_metrics import summarize
     from xvmatch.evaluation.deployed_matcher_eval import (
         OnnxAppearanceCoster,
         matcher_costs,
@@ -77,6 +76,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     )
     from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, score_trial
     from xvmatch.inference.assignment import assign
+    from xvmatch.inference.cross_view_metrics import summarize
     from xvmatch.inference.learned_association import load_matcher_bundle
     from xvmatch.inference.match_drawing import draw_matches, write_match_picture
 

@@ -264,13 +264,13 @@ def evaluate_tracks_command(args: argparse.Namespace, read_boxes) -> int:
     from dataclasses import asdict
 
     from xvmatch.datasets.mot_boxes import read_mot_boxes
-    from xvmatch.evaluation.cross_view_metrics import format_table, summarize
     from xvmatch.evaluation.track_metrics import (
         evaluate_tracks,
         format_track_table,
         track_pair_counts,
         track_scores_to_dict,
     )
+    from xvmatch.inference.cross_view_metrics import format_table, summarize
 
     if args.offset:
         raise ValueError("--offset applies to --pred; track and score re-timed files instead")

@@ -377,7 +377,7 @@ def count_pair(
     ``G``, otherwise a false positive. A miss is an id of ``G`` whose egocentric box is
     undetected or in no pair. A true negative is an id seen in one view only (in the ground
     truth) whose box there was detected and left unmatched. With the ground-truth boxes as
-    detections this equals :func:`xvmatch.evaluation.cross_view_metrics.count_frame`.
+    detections this equals :func:`xvmatch.inference.cross_view_metrics.count_frame`.
 
     Args:
         gt_top_ids: (G1,) ground-truth ids of the top view.
@@ -389,7 +389,7 @@ def count_pair(
         frame: frame number, recorded and used in error messages.
 
     Returns:
-        The :class:`~xvmatch.evaluation.cross_view_metrics.FrameCounts`.
+        The :class:`~xvmatch.inference.cross_view_metrics.FrameCounts`.
 
     Raises:
         ValueError: repeated ground-truth ids, a detection standing for an id twice or for an id
