@@ -23,7 +23,7 @@ ALLOWED: dict[str, set[str]] = {
     # Training validates with the Hungarian assignment of inference/ (a numpy module).
     "training": {"geometry", "datasets", "models", "training", "inference"},
     "inference": {"geometry", "datasets", "inference"},
-    "export": {"geometry", "datasets", "models", "training", "inference", "export"},
+    "export": {"geometry", "datasets", "models", "inference", "export"},
     "evaluation": {"geometry", "datasets", "models", "inference", "evaluation"},
     "xvmatch": set(SUBPACKAGES),
 }
