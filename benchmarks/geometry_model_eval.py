@@ -42,11 +42,8 @@ import torch
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes, shift_frames
-from xvmatch.geometry.spatial_search import (
-    AUTO_MAX_OFFSET,
-    associate_sequence,
-    estimate_offset,
-)
+from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
+from xvmatch.geometry.spatial_search import associate_sequence
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle

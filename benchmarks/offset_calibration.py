@@ -9,7 +9,7 @@ Each pair's 9 clip curves over +-60 frames (what ``associate --offset auto`` com
 in ``--work`` so that other thresholds can be judged at once (``--reuse``).
 
 Prints one row per pair (truth, minimum, evidence, agreement, verdict) and the summary the
-defaults of :func:`~xvmatch.geometry.spatial_search.estimate_offset` were chosen from: no
+defaults of :func:`~xvmatch.geometry.offset_estimation.estimate_offset` were chosen from: no
 synchronised or unrelated pair shifted, and how many true shifts are found. CPU only.
 README figures: ``python benchmarks/offset_calibration.py --work runs/offset_cal --clean-scenes 12
 --unrelated 6`` (58 pairs, about 40-60 s each per worker on the 2-core development machine; add
@@ -28,7 +28,7 @@ import numpy as np
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import shift_frames
-from xvmatch.geometry.spatial_search import (
+from xvmatch.geometry.offset_estimation import (
     AUTO_MAX_OFFSET,
     MIN_OFFSET_EVIDENCE,
     OFFSET_ALPHA,

@@ -17,7 +17,8 @@ import pytest
 
 from xvmatch.datasets.mot_boxes import read_mot_boxes
 from xvmatch.geometry import kernel_choice
-from xvmatch.geometry.spatial_search import associate_sequence, estimate_offset, rank_hypotheses
+from xvmatch.geometry.offset_estimation import estimate_offset
+from xvmatch.geometry.spatial_search import associate_sequence, rank_hypotheses
 
 pytestmark = pytest.mark.cvmhat
 

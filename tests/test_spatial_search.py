@@ -13,19 +13,21 @@ from hypothesis import strategies as st
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.offset_estimation import (
+    MIN_AGREEING_CLIPS,
+    _curve_tasks,
+    clip_starts,
+    estimate_offset,
+    judge_offset,
+)
 from xvmatch.geometry.spatial_matching import SpatialParams, match_vector_sets
 from xvmatch.geometry.spatial_search import (
-    MIN_AGREEING_CLIPS,
     FollowPolicy,
-    _curve_tasks,
     associate_frame,
     associate_sequence,
     best_per_candidate,
-    clip_starts,
-    estimate_offset,
     full_circle,
     hypothesis_vectors,
-    judge_offset,
     rank_hypotheses,
     search_window,
 )

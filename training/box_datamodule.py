@@ -46,6 +46,7 @@ from xvmatch.datasets.feature_cache import (
 )
 from xvmatch.datasets.mot_boxes import FrameBoxes, scale_frames, shift_frames
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
 from xvmatch.geometry.spatial_features import (
     FeatureConfig,
     FrameFeatures,
@@ -53,7 +54,6 @@ from xvmatch.geometry.spatial_features import (
     collate_frames,
     match_labels,
 )
-from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET, estimate_offset
 from xvmatch.geometry.worker_pool import worker_pool
 
 __all__ = [

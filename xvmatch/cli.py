@@ -28,7 +28,7 @@ from xvmatch.cli_types import (
     seed_value,
     worker_count,
 )
-from xvmatch.geometry.spatial_search import AUTO_MAX_OFFSET
+from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
 from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["main"]
@@ -225,7 +225,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
 
         note_if_assumed(hor_size, hor, args.hor, args.quiet)
     if args.offset == "auto":
-        from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
+        from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
 
         est = estimate_offset(top, hor, hor_width=hor_width, params=params,
                               max_offset=max_offset, camera_id=args.camera_id,
@@ -364,7 +364,7 @@ def _unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> s
     asked for a single clip with --clips 1 or --clip-start)."""
     import numpy as np
 
-    from xvmatch.geometry.spatial_search import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
+    from xvmatch.geometry.offset_estimation import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
 
     n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
     if n < 2 and one_clip_asked:
@@ -381,7 +381,7 @@ def _unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> s
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:
-    from xvmatch.geometry.spatial_search import OFFSET_TOLERANCE, estimate_offset
+    from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
 
     params = _spatial_params(args)
     top = _read_boxes(args.top, args.duplicates)
