@@ -34,6 +34,7 @@ from xvmatch.geometry.matcher_inputs import (
     rectified_boxes,
 )
 from xvmatch.geometry.spatial_features import FeatureConfig, FrameFeatures
+from xvmatch.geometry.spatial_search import FrameLike
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import Bundle, load_bundle
 
@@ -138,13 +139,6 @@ class FrameCameraSource:
         raise NotImplementedError
 
 
-class _FrameLike:
-    """Structural type of a frame record: ``ids (N,)`` and ``boxes (N, 4)``."""
-
-    ids: np.ndarray
-    boxes: np.ndarray
-
-
 def _input_order(feats: FrameFeatures, cost: np.ndarray) -> np.ndarray:
     """A canonical-order cost matrix put back in the input order of the frame's boxes."""
     out = np.empty_like(cost)
@@ -218,8 +212,8 @@ def _feature_stream(
 
 
 def associate_sequence_learned(
-    top: Mapping[int, _FrameLike],
-    hor: Mapping[int, _FrameLike],
+    top: Mapping[int, FrameLike],
+    hor: Mapping[int, FrameLike],
     hor_width: float,
     model: LearnedMatcher | Sequence[LearnedMatcher],
     camera_id: int | None = None,
