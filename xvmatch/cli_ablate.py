@@ -13,6 +13,7 @@ import argparse
 import shlex
 import sys
 
+from xvmatch.cli_options import add_command_parser, progress_bar
 from xvmatch.cli_types import int_in, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs
 
@@ -43,13 +44,9 @@ def add_ablate_parser(subparsers) -> argparse.ArgumentParser:
         "report.md, results.csv, results.json and PNG plots into the report folder; finished "
         "cells are kept there and reused when the command runs again."
     )
-    p = subparsers.add_parser(
-        "ablate",
-        help=help_text,
-        description=help_text.replace("%%", "%"),  # the help is %-formatted, this is not
-        epilog=f"example:\n  {EXAMPLE}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    # the help is %-formatted, the description is not
+    p = add_command_parser(subparsers, "ablate", help_text, EXAMPLE,
+                           description=help_text.replace("%%", "%"))
     p.add_argument("--data", required=True, nargs="+", metavar="DIR",
                    help="dataset folders written by xvmatch synth, one table each (every 5th "
                    "scene is the validation split, the rest the test split)")
@@ -90,8 +87,6 @@ def _command_line(args: argparse.Namespace) -> str:
 
 
 def _cmd_ablate(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from xvmatch import __version__
     from xvmatch.evaluation.ablation import AblationOptions, run_ablation
 
@@ -106,8 +101,8 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
     def progress(done: int, total: int) -> None:
         nonlocal bar
         if bar is None:
-            bar = tqdm(total=total, initial=done, desc="ablate", unit="cell", file=sys.stderr,
-                       disable=True if args.quiet else None)
+            bar = progress_bar(total, "ablate", "cell", not args.quiet, leave=True,
+                               initial=done)
         else:
             bar.update(done - bar.n)
 

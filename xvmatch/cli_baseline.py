@@ -13,6 +13,7 @@ import json
 import sys
 import time
 
+from xvmatch.cli_options import add_command_parser, progress_bar
 from xvmatch.cli_types import seed_value, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs
 
@@ -42,13 +43,7 @@ def add_baseline_parser(subparsers) -> argparse.ArgumentParser:
         "without cheirality, on ground-truth boxes (Table I) and with detector noise matched to "
         "ground truth at IoU 0.3 (Table II)."
     )
-    p = subparsers.add_parser(
-        "baseline",
-        help=help_text,
-        description=help_text,
-        epilog=f"example:\n  {EXAMPLE}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command_parser(subparsers, "baseline", help_text, EXAMPLE)
     p.add_argument("--data", required=True, metavar="DIR",
                    help="dataset folder written by xvmatch synth (the paper's setting: "
                    "--scenario overview)")
@@ -85,8 +80,6 @@ def add_baseline_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_baseline(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from xvmatch.datasets.pair_trials import open_dataset
     from xvmatch.evaluation.cost_distributions import FIGURE_FILES, save_cost_figures
     from xvmatch.evaluation.handcrafted_baseline import (
@@ -105,8 +98,7 @@ def _cmd_baseline(args: argparse.Namespace) -> int:
                           files=tuple(FIGURE_FILES.values()))], [Input("--data", args.data)])
     dataset = open_dataset(args.data)
     start = time.perf_counter()
-    with tqdm(total=len(dataset), desc="baseline", unit="pair", file=sys.stderr, leave=False,
-              disable=True if args.quiet else None) as bar:
+    with progress_bar(len(dataset), "baseline", "pair", not args.quiet) as bar:
         result = evaluate_baseline(args.data, config, workers=args.workers,
                                    progress=bar.update)
     elapsed = time.perf_counter() - start

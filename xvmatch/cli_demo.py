@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.cli_options import add_command_parser
 from xvmatch.cli_types import int_in, seed_value, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder, claim_folder
 
@@ -39,11 +40,7 @@ def add_demo_parser(subparsers) -> argparse.ArgumentParser:
     help_text = ("Render a few drone and overview image pairs, match them with the shipped "
                  "ONNX matcher (boxes, images, images + cameras) and the handcrafted baseline, "
                  "print the accuracies and write a match picture.")
-    p = subparsers.add_parser(
-        "demo", help=help_text, description=help_text,
-        epilog=f"example:\n  {EXAMPLES['demo']}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command_parser(subparsers, "demo", help_text, EXAMPLES["demo"])
     p.add_argument("--out", default="xvmatch-demo",
                    help="output folder: new, empty, or an earlier demo's (default xvmatch-demo)")
     p.add_argument("--scenes", type=_DEMO_COUNT, default=3,

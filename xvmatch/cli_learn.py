@@ -14,9 +14,14 @@ import argparse
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    add_command_parser,
+    add_image_options,
+    check_images_together,
+)
 from xvmatch.cli_types import (
     float_in,
-    image_size,
     int_in,
     seed_value,
     thread_count,
@@ -52,20 +57,13 @@ def add_fit_geometry_parser(subparsers) -> argparse.ArgumentParser:
         "(CVMHAT layout: NAME_top.txt + NAME_hor.txt, same id = same person) and write a model "
         "file for 'xvmatch associate --model'."
     )
-    p = subparsers.add_parser(
-        "fit-geometry",
-        help=help_text,
-        description=help_text,
-        epilog=f"example:\n  {EXAMPLES['fit-geometry']}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command_parser(subparsers, "fit-geometry", help_text, EXAMPLES["fit-geometry"])
     p.add_argument("--cvmhat", required=True, metavar="DIR",
                    help="folder of NAME_top.txt / NAME_hor.txt pairs")
     p.add_argument("--out", required=True, metavar="MODEL", help="model file to write")
     p.add_argument("--sites", nargs="+", default=None, metavar="SITE",
                    help="train on these sites only (the S_<site> part of the names; default all)")
-    p.add_argument("--image-size", type=image_size(8, 65536, "pixels of a camera image"),
-                   default=None, metavar="WxH",
+    p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help="the horizontal camera's image size, 16:9, 8..65536 a side; boxes of "
                    "another size than 2688x1512 are scaled to it for training (default: "
                    "2688x1512 when the boxes reach beyond 60%% of its width, else an error)")
@@ -228,13 +226,7 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
         "figures). Fails, writing nothing, unless onnxruntime reproduces the torch costs within "
         "1e-4 and the same assignments on held-out synthetic frames."
     )
-    p = subparsers.add_parser(
-        "export",
-        help=help_text,
-        description=help_text,
-        epilog=f"example:\n  {EXAMPLES['export']}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command_parser(subparsers, "export", help_text, EXAMPLES["export"])
     p.add_argument("--model", required=True, metavar="MODEL",
                    help="matcher file (.pt from fit-geometry or the matcher training), or "
                    "'default' (models/default_matcher.pt)")
@@ -312,13 +304,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
         help="also score the scene mirrored left-right and average the costs (test-time "
         "augmentation: twice the search; a few tenths of CVIDF1 on CVMHAT)",
     )
-    g.add_argument(
-        "--top-images", default=None, metavar="PATH",
-        help="images of the top view: one image, a folder of frames whose names end in the "
-        "frame number (0212.jpg, frame_000212.png), a quoted glob pattern, or a video file",
-    )
-    g.add_argument("--hor-images", default=None, metavar="PATH",
-                   help="images of the horizontal view (as --top-images)")
+    add_image_options(g)
     g.add_argument(
         "--cameras", default=None, metavar="CAMERAS",
         help="calibrated cameras 'top' and 'ego': a camera file (both fixed) or a folder of "
@@ -439,8 +425,7 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
     stderr), else an error asking for ``--image-size``. Every horizontal box must lie in it."""
     from xvmatch.cli_image_size import resolve_size
 
-    if (getattr(args, "top_images", None) is None) != (getattr(args, "hor_images", None) is None):
-        raise ValueError("give --top-images and --hor-images together")
+    check_images_together(args)
     given = []
     if getattr(args, "image_size", None) is not None:
         given.append((tuple(args.image_size), "--image-size"))
@@ -487,8 +472,7 @@ def associate_with_model(
     if getattr(args, "mode", "frame") != "frame":
         raise ValueError("--model solves each frame on its own: use --mode frame")
     top_path, hor_path = getattr(args, "top_images", None), getattr(args, "hor_images", None)
-    if (top_path is None) != (hor_path is None):
-        raise ValueError("give --top-images and --hor-images together")
+    check_images_together(args)
     draw = getattr(args, "draw", None)
     if draw is not None:
         check_own_folder(draw, DRAW_COMMAND, "--draw")

@@ -19,7 +19,18 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.cli_types import box_id, float_in, image_size, thread_count, worker_count
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    IMAGE_SIZE_HELP,
+    add_command_parser,
+    add_image_options,
+    add_spatial_options,
+    check_images_together,
+    frame_progress,
+    image_inputs,
+    spatial_params,
+)
+from xvmatch.cli_types import box_id, float_in, thread_count, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_multi_ego_parser"]
@@ -31,13 +42,10 @@ MAX_HOR = 3
 """Most horizontal views (issue 17: one top view and two or three horizontal ones)."""
 
 TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per frame before the greedy fallback")
-SIZE_TYPE = image_size(8, 65536, "pixels of a camera image")
 
 
 def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     """Register ``xvmatch associate-multi`` on ``subparsers`` and return its parser."""
-    from xvmatch.cli import _add_spatial_options
-
     help_text = (
         "Associate the people of one top view and 1-3 horizontal (egocentric) views at once: "
         "a joint assignment over every view pair with cycle consistency (a person matched "
@@ -45,10 +53,7 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
         "are ignored; writes OUT/top.txt, OUT/hor1.txt, ...: the input rows with the id "
         "replaced by a person id shared across the views of a frame."
     )
-    p = subparsers.add_parser(
-        "associate-multi", help=help_text, description=help_text,
-        epilog=f"example:\n  {EXAMPLE}", formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command_parser(subparsers, "associate-multi", help_text, EXAMPLE)
     p.add_argument("--top", required=True, help="top-view boxes (MOT format, ids ignored)")
     p.add_argument("--hor", required=True, nargs="+", metavar="H",
                    help="1 to 3 horizontal-view box files (MOT format, ids ignored)")
@@ -57,20 +62,17 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--model", default=None, metavar="BUNDLE",
                    help="learned top-ego matcher: a bundle folder or 'default'; without it the "
                    "handcrafted spatial-distribution search (boxes only)")
-    p.add_argument("--top-images", default=None, metavar="PATH",
-                   help="images of the top view (as associate; needs --model)")
-    p.add_argument("--hor-images", default=None, nargs="+", metavar="PATH",
-                   help="images of each horizontal view, in the order of --hor (needs "
-                   "--model; its appearance network also scores the hor-hor pairs)")
+    add_image_options(p, top_help="images of the top view (as associate; needs --model)",
+                      hor_help="images of each horizontal view, in the order of --hor (needs "
+                      "--model; its appearance network also scores the hor-hor pairs)",
+                      several_hor=True)
     p.add_argument("--cameras", default=None, nargs="+", metavar="CAMERAS",
                    help="per horizontal view, a camera file or folder with cameras 'top' and "
                    "'ego' (as associate; needs --model)")
     p.add_argument("--camera-id", default=None, nargs="+", type=box_id, metavar="ID",
                    help="per horizontal view, the top-file id of its wearer (O given; "
                    "|id| <= 2**53); without it O is searched")
-    from xvmatch.cli import IMAGE_SIZE_HELP
-
-    p.add_argument("--image-size", type=SIZE_TYPE, default=None, metavar="WxH",
+    p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help=IMAGE_SIZE_HELP + " (every horizontal view); with images or cameras it "
                    "must agree with them")
     p.add_argument("--solver", choices=("mip", "greedy"), default="mip",
@@ -84,7 +86,7 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--threads", type=thread_count, default=1, metavar="K",
                    help="onnxruntime threads, 1..64 (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    _add_spatial_options(p)
+    add_spatial_options(p)
     p.set_defaults(func=_cmd_associate_multi)
     return p
 
@@ -108,7 +110,6 @@ def _wearer_rows(top, camera_id: int) -> dict[int, int]:
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
-    from xvmatch.cli import _progress, _spatial_params
     from xvmatch.cli_image_size import check_boxes_in_image, note_if_assumed, resolve_size
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.multi_view_assignment import consistent_hungarian, solve_multi_view
@@ -120,12 +121,11 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         raise ValueError(f"--hor: give 1 to {MAX_HOR} horizontal box files, got {n_hor}")
     for option in ("hor_images", "cameras", "camera_id"):
         _per_view(getattr(args, option), n_hor, "--" + option.replace("_", "-"))
-    if (args.top_images is None) != (args.hor_images is None):
-        raise ValueError("give --top-images and --hor-images together")
+    check_images_together(args)
     if args.model is None and (args.top_images or args.cameras):
         raise ValueError("--top-images, --hor-images and --cameras feed a learned matcher: add "
                          "--model default (or a bundle)")
-    params = _spatial_params(args)
+    params = spatial_params(args)
     paths = [args.top, *args.hor]
     if len(set(map(str, map(Path, paths)))) != len(paths):
         raise ValueError("--top and --hor name the same file twice")
@@ -134,8 +134,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         [Output("--out", out, folder=True,
                 files=("top.txt", *(f"hor{k}.txt" for k in range(1, n_hor + 1))))],
         [Input("--top", args.top), *(Input("--hor", h) for h in args.hor),
-         Input("--top-images", args.top_images),
-         *(Input("--hor-images", h) for h in args.hor_images or ()),
+         *image_inputs(args),
          *(Input("--cameras", c) for c in args.cameras or ()),
          Input("--model", None if args.model == "default" else args.model)],
     )
@@ -198,7 +197,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             views, sizes, frames, matcher=matcher,
             appearance=matcher if images is not None else None, images=images,
             cameras=cameras, camera_rows=camera_rows, params=params, workers=args.workers,
-            progress=_progress(len(frames), "costs", not args.quiet),
+            progress=frame_progress(len(frames), "costs", not args.quiet),
         )
     finally:
         for source in sources:

@@ -13,6 +13,13 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    IMAGE_SIZE_HELP,
+    add_command_parser,
+    progress_bar,
+    read_boxes,
+)
 from xvmatch.cli_types import float_in, image_size, int_in, seed_value, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs
 
@@ -47,13 +54,7 @@ MAX_FRAMES = 10_000
 
 
 def _parser(subparsers, name: str, help_text: str) -> argparse.ArgumentParser:
-    return subparsers.add_parser(
-        name,
-        help=help_text,
-        description=help_text,
-        epilog=f"example:\n  {EXAMPLES[name]}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    return add_command_parser(subparsers, name, help_text, EXAMPLES[name])
 
 
 def add_synth_parser(subparsers) -> argparse.ArgumentParser:
@@ -100,8 +101,6 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from xvmatch.datasets.image_render import Difficulty
     from xvmatch.datasets.synthetic_io import generate_dataset
     from xvmatch.datasets.synthetic_scenes import SynthConfig
@@ -111,8 +110,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                          ego_size=args.size, fps=args.fps)
     total = args.scenes * args.frames
     start = time.perf_counter()
-    with tqdm(total=total, desc="synth", unit="pair", file=sys.stderr, leave=False,
-              disable=True if args.quiet else None) as bar:
+    with progress_bar(total, "synth", "pair", not args.quiet) as bar:
         manifest = generate_dataset(
             args.out, config, n_scenes=args.scenes, n_frames=args.frames, seed=args.seed,
             workers=args.workers, difficulty=Difficulty.preset(args.difficulty),
@@ -146,9 +144,7 @@ def add_show_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--pred", default=None, metavar="CSV",
                    help="pairs to draw, frame,top_id,hor_id (xvmatch associate --out); default: "
                    "the same id in both views (ground truth)")
-    from xvmatch.cli import IMAGE_SIZE_HELP
-
-    g.add_argument("--image-size", type=image_size(8, 65536, "pixels of a camera image"),
+    g.add_argument("--image-size", type=HOR_IMAGE_SIZE,
                    default=None, metavar="WxH", help=IMAGE_SIZE_HELP)
     g.add_argument("--no-labels", action="store_true", help="print no ids by the boxes")
     p.add_argument("--scene", default=None, help="scene name when PAIR is a dataset folder "
@@ -199,7 +195,6 @@ def _show_boxes(args: argparse.Namespace) -> int:
     """``show --top T --hor H``: one frame of box files, pairs from ``--pred`` or equal ids."""
     import numpy as np
 
-    from xvmatch.cli import _read_boxes
     from xvmatch.cli_image_size import note_if_assumed, resolve_size
     from xvmatch.datasets.mot_boxes import read_predictions
     from xvmatch.inference.box_canvas import blank_view, top_plan
@@ -212,7 +207,7 @@ def _show_boxes(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_outputs([Output("--out", out)], [Input("--top", args.top), Input("--hor", args.hor),
                                            Input("--pred", args.pred)])
-    top, hor = _read_boxes(args.top, "first"), _read_boxes(args.hor, "first")
+    top, hor = read_boxes(args.top, "first"), read_boxes(args.hor, "first")
     both = [f for f in sorted(set(top) & set(hor)) if len(top[f]) and len(hor[f])]
     frame = args.frame if args.frame is not None else (both[0] if both else None)
     if frame not in both:

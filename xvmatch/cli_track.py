@@ -22,7 +22,19 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from xvmatch.cli_types import box_id, float_in, image_size, int_in, seed_value, worker_count
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    IMAGE_SIZE_HELP,
+    add_command_parser,
+    add_image_options,
+    add_spatial_options,
+    check_images_together,
+    image_inputs,
+    progress_bar,
+    read_boxes,
+    spatial_params,
+)
+from xvmatch.cli_types import box_id, float_in, int_in, seed_value, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_track_parser", "evaluate_tracks_command"]
@@ -39,17 +51,13 @@ C0_TYPE = float_in(0, 1, "edge weights are in [0, 1]; an edge pays off above 2 c
 SIGMA_TYPE = float_in(0, 1000, "per box height of motion deviation", low_open=True)
 SHARE_TYPE = float_in(0, 1, "a share of a linear combination")
 TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per window before the greedy fallback")
-HOR_SIZE_TYPE = image_size(8, 65536, "pixels of a camera image")
 
 
-def _progress(enabled: bool):
-    """``progress(iterable, total, description)`` as a tqdm bar on stderr, or nothing."""
+def _step_progress(enabled: bool):
+    """``progress(iterable, total, description)``: a :func:`progress_bar` of steps."""
 
     def wrap(items: Iterable, total: int, desc: str) -> Iterable:
-        from tqdm import tqdm
-
-        return tqdm(items, total=total, desc=desc, unit="step", leave=False, file=sys.stderr,
-                    disable=None if enabled else True)
+        return progress_bar(total, desc, "step", enabled, items)
 
     return wrap
 
@@ -63,8 +71,7 @@ def _open_images(args: argparse.Namespace, top, hor):
     from xvmatch.datasets.frame_sources import check_frames, open_frames
     from xvmatch.inference.tracking import TrackImages
 
-    if (args.top_images is None) != (args.hor_images is None):
-        raise ValueError("give --top-images and --hor-images together")
+    check_images_together(args)
     if args.top_images is None:
         if args.model is not None:
             raise ValueError("--model gives the appearance network, which needs the images: "
@@ -95,18 +102,13 @@ def _open_images(args: argparse.Namespace, top, hor):
 
 def add_track_parser(subparsers) -> argparse.ArgumentParser:
     """Register ``xvmatch track`` on ``subparsers`` and return its parser."""
-    from xvmatch.cli import _add_spatial_options
-
     help_text = (
         "Track the people of a top-view and a horizontal-view box file with one id per person "
         "across both views (CVMHAT: tracklets in 10-frame clips, a four-cluster mixed-integer "
         "program per pair of clips, stitching). The input ids are ignored; writes OUT/top.txt "
         "and OUT/hor.txt, the input rows with the id replaced by the track id."
     )
-    p = subparsers.add_parser(
-        "track", help=help_text, description=help_text, epilog=f"example:\n  {EXAMPLE}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = add_command_parser(subparsers, "track", help_text, EXAMPLE)
     p.add_argument("--top", required=True, help="top-view detections (MOT format, ids ignored)")
     p.add_argument("--hor", required=True,
                    help="horizontal-view detections (MOT format, ids ignored)")
@@ -135,21 +137,14 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "greedy answer is used and counted in a warning")
     p.add_argument("--seed", type=seed_value, default=0,
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
-    from xvmatch.cli import IMAGE_SIZE_HELP
-
-    p.add_argument("--image-size", type=HOR_SIZE_TYPE, default=None, metavar="WxH",
+    p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help=IMAGE_SIZE_HELP + "; with --hor-images it must agree with them")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for the frame association, 1..64 (default 1; the same "
                    "output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     g = p.add_argument_group("appearance (with the images of both views)")
-    g.add_argument("--top-images", default=None, metavar="PATH",
-                   help="images of the top view: one image, a folder of frames whose names end "
-                   "in the frame number (0212.jpg, frame_000212.png), a quoted glob pattern, or "
-                   "a video file")
-    g.add_argument("--hor-images", default=None, metavar="PATH",
-                   help="images of the horizontal view (as --top-images)")
+    add_image_options(g)
     g.add_argument("--model", default=None, metavar="BUNDLE",
                    help="a matcher bundle with an appearance network (xvmatch export), or "
                    "'default' for the shipped one: the cross-view appearance term of Eq. 17 "
@@ -166,19 +161,18 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--time-appearance", choices=("network", "colour"), default="network",
                    help="over-time appearance term of Eq. 18: the --model's network (default; "
                    "colour without --model) or colour histograms (Eq. 14, the paper's)")
-    _add_spatial_options(p)
+    add_spatial_options(p)
     p.set_defaults(func=_cmd_track)
     return p
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from xvmatch.cli import _spatial_params
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.track_costs import TrackWeights
     from xvmatch.inference.tracking import TrackConfig, track_pair
 
     start = time.perf_counter()
-    params = _spatial_params(args)
+    params = spatial_params(args)
     config = TrackConfig(
         clip_length=args.clip_length,
         min_iou=args.min_iou,
@@ -202,7 +196,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     check_outputs(
         [Output("--out", out, folder=True, files=("top.txt", "hor.txt"))],
         [Input("--top", args.top), Input("--hor", args.hor),
-         Input("--top-images", args.top_images), Input("--hor-images", args.hor_images),
+         *image_inputs(args),
          Input("--model", None if args.model == "default" else args.model)],
     )
     images, sources, size = _open_images(args, top.frames, hor.frames)
@@ -216,7 +210,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
         width = resolved[0][0]
         note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
         result = track_pair(top.frames, hor.frames, float(width), params, config,
-                            camera_rows, args.workers, _progress(not args.quiet), images=images)
+                            camera_rows, args.workers, _step_progress(not args.quiet),
+                            images=images)
     finally:
         for source in sources:
             source.close()
@@ -255,7 +250,7 @@ def _trackeval_installed() -> bool:
     return True
 
 
-def evaluate_tracks_command(args: argparse.Namespace, read_boxes) -> int:
+def evaluate_tracks_command(args: argparse.Namespace) -> int:
     """``xvmatch evaluate --tracks DIR``: print the tracking scores of DIR/top.txt, DIR/hor.txt.
 
     Without TrackEval the cross-view scores are printed alone (JSON: ``top`` and ``hor`` are

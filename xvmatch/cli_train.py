@@ -14,6 +14,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from xvmatch.cli_options import add_command_parser
+
 __all__ = ["BACKBONES", "EXAMPLE", "PRETRAINED_BACKBONES", "add_train_parser", "backbone_args"]
 
 BACKBONES: dict[str, str] = {
@@ -92,14 +94,11 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
         "configuration (LightningCLI): checkpoints, resume, early stopping, CSV and "
         "TensorBoard logs, the resolved configuration saved with each run."
     )
-    p = subparsers.add_parser(
-        "train",
-        help=help_text,
+    p = add_command_parser(
+        subparsers, "train", help_text, EXAMPLE,
         description=help_text + " Any further LightningCLI argument may follow, e.g. "
         "--trainer.max_epochs 2 or --ckpt_path last.ckpt (resume); see `python -m "
         "xvmatch.training.train_cli fit --help` for all of them.",
-        epilog=f"example:\n  {EXAMPLE}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--config", required=True, metavar="FILE",
                    help="YAML configuration, e.g. configs/appearance_cpu.yaml")

@@ -1,0 +1,65 @@
+"""The command line's modules: the root ``xvmatch/cli.py`` imports the command modules, never
+the reverse, and each shared option is defined once, in ``xvmatch/cli_options.py`` (issue 30,
+item 2). Every import statement is read from the source, lazy imports inside functions included.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CLI_MODULES = sorted((ROOT / "xvmatch").glob("cli_*.py"))
+SHARED_OPTIONS = ("--top-images", "--hor-images", "--rho", "--lam", "--tau", "--dtheta", "--fov")
+"""Options several commands take, each added by one function of ``cli_options``."""
+
+
+def _imported(path: Path) -> list[tuple[int, str]]:
+    """``(line, dotted name)`` of every import of a file; ``from x import y`` gives ``x`` and
+    ``x.y``."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.lineno, node.module))
+            out += [(node.lineno, f"{node.module}.{alias.name}") for alias in node.names]
+    return out
+
+
+def _string_constants(path: Path) -> list[str]:
+    return [node.value for node in ast.walk(ast.parse(path.read_text(), filename=str(path)))
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+
+
+def test_there_are_command_modules() -> None:
+    assert {p.name for p in CLI_MODULES} >= {"cli_options.py", "cli_associate.py"}
+
+
+@pytest.mark.parametrize("path", CLI_MODULES, ids=lambda p: p.name)
+def test_no_command_module_imports_the_root(path: Path) -> None:
+    bad = [f"{path.name}:{line}: imports {name}" for line, name in _imported(path)
+           if name == "xvmatch.cli" or name.startswith("xvmatch.cli.")]
+    assert not bad, "only xvmatch/cli.py imports the command modules:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("option", SHARED_OPTIONS)
+def test_shared_option_is_defined_in_one_module(option: str) -> None:
+    modules = sorted({p.name for p in [ROOT / "xvmatch" / "cli.py", *CLI_MODULES]
+                      if option in _string_constants(p)})
+    assert modules == ["cli_options.py"], f"{option} appears as a literal in {modules}"
+    calls = [node for node in ast.walk(ast.parse((ROOT / "xvmatch" / "cli_options.py")
+                                                 .read_text()))
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+             and node.func.attr == "add_argument" and node.args
+             and isinstance(node.args[0], ast.Constant) and node.args[0].value == option]
+    assert len(calls) == 1, f"{option} is added {len(calls)} times"
+
+
+def test_one_progress_bar() -> None:
+    """Every command's progress bar comes from ``cli_options.progress_bar``."""
+    users = sorted(p.name for p in [ROOT / "xvmatch" / "cli.py", *CLI_MODULES]
+                   if any(name.split(".")[0] == "tqdm" for _, name in _imported(p)))
+    assert users == ["cli_options.py"]

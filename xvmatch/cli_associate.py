@@ -1,0 +1,222 @@
+"""The ``xvmatch associate`` command: pairs of the two views, frame by frame.
+
+From boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned matcher
+(``--model``, :mod:`xvmatch.cli_learn`) from boxes, images and cameras; ``--offset auto``
+re-times the views first (:mod:`xvmatch.cli_offset`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from xvmatch.cli_learn import add_draw_arguments, add_model_arguments
+from xvmatch.cli_offset import (
+    MAX_OFFSET_LIMIT,
+    MAX_OFFSET_TYPE,
+    max_offset_of,
+    offset_summary,
+    unsupported_reason,
+)
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    IMAGE_SIZE_HELP,
+    UsageError,
+    add_box_inputs,
+    add_command_parser,
+    add_spatial_options,
+    check_camera_id,
+    frame_progress,
+    image_inputs,
+    read_boxes,
+    spatial_params,
+)
+from xvmatch.cli_types import box_id, offset_value, worker_count
+from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
+from xvmatch.output_paths import Input, Output, check_outputs
+
+__all__ = ["EXAMPLE", "add_associate_parser"]
+
+EXAMPLE = "xvmatch associate --top seq_top.txt --hor seq_hor.txt --out pred.csv"
+
+
+def add_associate_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch associate`` on ``subparsers`` and return its parser."""
+    p = add_command_parser(
+        subparsers,
+        "associate",
+        "Associate people across the two views and write frame,top_id,hor_id pairs: from "
+        "boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned "
+        "matcher (--model) from boxes, images and cameras.",
+        EXAMPLE,
+    )
+    add_box_inputs(p)
+    p.add_argument("--out", required=True, help="prediction CSV to write (atomically)")
+    p.add_argument(
+        "--camera-id",
+        type=box_id,
+        default=None,
+        help="top-view id of the horizontal camera's wearer (the 'O given' setting; any id a "
+        "box file holds, |id| <= 2**53); without it O is searched among all top-view people",
+    )
+    p.add_argument(
+        "--mode",
+        choices=("frame", "video"),
+        default="frame",
+        help="frame: each frame solved on its own (exhaustive search); video: uses previous "
+        "frames (damped orientation window, O followed by its top-view track id)",
+    )
+    p.add_argument(
+        "--search",
+        choices=("exhaustive", "reduced", "follow"),
+        default=None,
+        help="video-mode search: reduced = orientation window only, follow = window + O "
+        "followed (default in video mode)",
+    )
+    p.add_argument(
+        "--image-size",
+        type=HOR_IMAGE_SIZE,
+        default=None,
+        metavar="WxH",
+        help=IMAGE_SIZE_HELP + "; with --hor-images or --cameras it must agree with them",
+    )
+    p.add_argument(
+        "--offset",
+        type=offset_value,
+        default=0,
+        metavar="N|auto",
+        help="the videos are out of sync: top frame = horizontal frame + N (what "
+        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about a "
+        "minute per sequence on one core with the default --max-offset; see --workers) and "
+        "shifts only when the clips "
+        "back the estimate and it is more than 5 frames from 0. Pairs are written under the "
+        "horizontal frame numbers; |N| <= 100000 (default 0: frame-locked videos)",
+    )
+    p.add_argument(
+        "--max-offset",
+        type=MAX_OFFSET_TYPE,
+        default=None,
+        help=f"largest |offset| tried by --offset auto, 0..{MAX_OFFSET_LIMIT} frames and at "
+        f"most the frames the box files span (default {AUTO_MAX_OFFSET})",
+    )
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes for --offset auto's estimate and for --model's features, "
+                   "1..64 (default 1; the same output for any K)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    add_spatial_options(p)
+    add_model_arguments(p)
+    add_draw_arguments(p)
+    p.set_defaults(func=_cmd_associate)
+    return p
+
+
+def _keep_heap_memory() -> None:
+    """Stop glibc returning large numpy temporaries to the OS after every frame.
+
+    The search allocates and frees a few hundred-kilobyte arrays per frame; with glibc's default
+    mmap threshold each one is a fresh mapping, and the page faults cost about 20% of the run.
+    Process-wide, so only the CLI does it; a no-op where ``mallopt`` does not exist.
+    """
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 256 << 20)  # M_MMAP_THRESHOLD
+        libc.mallopt(-1, 512 << 20)  # M_TRIM_THRESHOLD
+    except (OSError, AttributeError):
+        pass
+
+
+def _cmd_associate(args: argparse.Namespace) -> int:
+    from xvmatch.datasets.mot_boxes import write_predictions
+    from xvmatch.geometry.spatial_search import associate_sequence
+
+    _keep_heap_memory()
+    params = spatial_params(args)
+    top = read_boxes(args.top, args.duplicates)
+    hor = read_boxes(args.hor, args.duplicates)
+    search = args.search or ("exhaustive" if args.mode == "frame" else "follow")
+    if args.mode == "frame" and search != "exhaustive":
+        raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")
+    if args.model is None:
+        from xvmatch.cli_learn import LEARNED_ONLY
+
+        given = [f"--{k.replace('_', '-')}" for k in LEARNED_ONLY
+                 if getattr(args, k) not in (None, False)]
+        if given:
+            raise UsageError(f"{', '.join(given)} apply to a learned matcher: add --model "
+                             "default (or a bundle)")
+    check_camera_id(args.camera_id, top, args.top)
+    models = [m for m in args.model or () if m != "default"]
+    check_outputs(
+        [Output("--out", args.out), Output("--costs", args.costs),
+         Output("--draw", args.draw, folder=True)],
+        [Input("--top", args.top), Input("--hor", args.hor),
+         *image_inputs(args),
+         Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
+    )
+    if args.draw is not None:
+        from xvmatch.cli_learn import DRAW_COMMAND
+        from xvmatch.output_paths import check_own_folder
+
+        check_own_folder(args.draw, DRAW_COMMAND, "--draw")
+    from xvmatch.cli_learn import horizontal_size
+
+    max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
+    hor_size = horizontal_size(args, hor)
+    hor_width = hor_size[0][0]
+    if args.model is None:
+        from xvmatch.cli_image_size import note_if_assumed
+
+        note_if_assumed(hor_size, hor, args.hor, args.quiet)
+    if args.offset == "auto":
+        from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
+
+        est = estimate_offset(top, hor, hor_width=hor_width, params=params,
+                              max_offset=max_offset, camera_id=args.camera_id,
+                              workers=args.workers)
+        offset = est.applied
+        if est.status == "unsupported":
+            print(f"warning: offset {est.offset:+d} not applied ({offset_summary(est)}): "
+                  f"{unsupported_reason(est, max_offset)}; keeping the files' timing; "
+                  "pass --offset N if you know it", file=sys.stderr)
+        elif not args.quiet:
+            kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
+                    if est.offset and not offset else "")
+            print(f"estimated offset {est.offset:+d} frames (top frame = horizontal frame "
+                  f"{est.offset:+d}; {offset_summary(est)}){kept}", file=sys.stderr)
+    else:
+        offset = args.offset
+    if offset:
+        from xvmatch.datasets.mot_boxes import shift_frames
+
+        top = shift_frames(top, offset)
+    frames = sorted(set(top) | set(hor))
+    progress = frame_progress(len(frames), "associate", not args.quiet)
+    if args.model is not None:
+        from xvmatch.cli_learn import associate_with_model
+
+        pairs = associate_with_model(args, top, hor, frames, progress, top_offset=offset,
+                                     hor_size=hor_size)
+    else:
+        pairs = associate_sequence(
+            top,
+            hor,
+            hor_width=hor_width,
+            params=params,
+            search=search,
+            camera_id=args.camera_id,
+            frames=frames,
+            progress=progress,
+        )
+        if args.draw is not None:
+            from xvmatch.cli_learn import draw_pictures
+
+            both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
+            draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
+                          not args.no_labels)
+    write_predictions(args.out, pairs)
+    n_pairs = sum(len(p) for p in pairs.values())
+    if not args.quiet:
+        print(f"wrote {n_pairs} pairs over {len(frames)} frames to {args.out}", file=sys.stderr)
+    return 0

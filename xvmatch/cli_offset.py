@@ -1,0 +1,190 @@
+"""The ``xvmatch offset`` command: the temporal offset between the two videos (Fig. 5).
+
+Also what ``xvmatch associate --offset auto`` shares with it: the ``--max-offset`` bound
+(:func:`max_offset_of`) and the estimate's summary and refusal in words.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    IMAGE_SIZE_HELP,
+    UsageError,
+    add_box_inputs,
+    add_command_parser,
+    add_spatial_options,
+    check_camera_id,
+    read_boxes,
+    spatial_params,
+)
+from xvmatch.cli_types import box_id, int_in, worker_count
+from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
+
+__all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_parser",
+           "max_offset_of", "offset_summary", "unsupported_reason"]
+
+EXAMPLE = "xvmatch offset --top seq_top.txt --hor seq_hor.txt"
+
+MAX_OFFSET_LIMIT = 10_000
+"""Largest ``--max-offset``: each clip is compared at 2 * max_offset + 1 offsets."""
+
+MAX_OFFSET_TYPE = int_in(0, MAX_OFFSET_LIMIT, "each clip is compared at 2 * max_offset + 1 "
+                         "offsets")
+"""``--max-offset``: 0..10000 frames (and at most the videos' length: :func:`max_offset_of`)."""
+
+
+def max_offset_of(args: argparse.Namespace, top, hor) -> int:
+    """``--max-offset``, the default when not given; a given one must not exceed the number of
+    frames the two box files span (no larger offset aligns any frame of the two)."""
+    if args.max_offset is None:
+        return AUTO_MAX_OFFSET
+    frames = [*top, *hor]
+    if frames:
+        first, last = min(frames), max(frames)
+        span = last - first + 1
+        if args.max_offset > span:
+            raise UsageError(
+                f"--max-offset {args.max_offset} is more than the videos' length: the box files "
+                f"span {span} frames ({first}..{last}) and no larger offset aligns any frame; "
+                f"use at most {span}"
+            )
+    return args.max_offset
+
+
+
+def offset_summary(est) -> str:
+    """How strongly the clips back an :class:`OffsetEstimate`, in words."""
+    import numpy as np
+
+    n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
+    text = f"{round(est.support * n)} of {n} clips agree"
+    return text + (f", evidence t = {est.evidence:.1f}" if est.offset and n > 1 else "")
+
+
+def unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> str:
+    """Why an :class:`OffsetEstimate` was not applied, in words (``one_clip_asked``: the user
+    asked for a single clip with --clips 1 or --clip-start)."""
+    import numpy as np
+
+    from xvmatch.geometry.offset_estimation import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
+
+    n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
+    if n < 2 and one_clip_asked:
+        return ("one clip (--clips 1 or --clip-start) cannot back an offset: at least 2 clips "
+                "must agree; use --clips 3 or more, or pass --offset N if you trust it")
+    if n < 2:
+        return (f"only {n} clip fits videos this short for --max-offset {max_offset} and one "
+                "clip cannot back an offset; try a smaller --max-offset")
+    if est.evidence < MIN_OFFSET_EVIDENCE:
+        return (f"the clips do not prefer {est.offset:+d} to 0 (evidence t = "
+                f"{est.evidence:.1f} < {MIN_OFFSET_EVIDENCE})")
+    return (f"too few clips agree on {est.offset:+d} ({round(est.support * n)} of {n}: chance "
+            f"{est.chance:.2f} > {OFFSET_ALPHA})")
+
+
+def _cmd_offset(args: argparse.Namespace) -> int:
+    from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
+
+    params = spatial_params(args)
+    top = read_boxes(args.top, args.duplicates)
+    hor = read_boxes(args.hor, args.duplicates)
+    max_offset = max_offset_of(args, top, hor)
+    check_camera_id(args.camera_id, top, args.top)
+    if args.clip_length < 1:  # before the size note: a refused run prints one line
+        raise UsageError(f"--clip-length {args.clip_length}: need clip_length >= 1 (frames per "
+                         "clip)")
+    from xvmatch.cli_image_size import note_if_assumed, resolve_size
+
+    given = [] if args.image_size is None else [(args.image_size, "--image-size")]
+    resolved = resolve_size(hor, args.hor, given)
+    hor_width = resolved[0][0]
+    note_if_assumed(resolved, hor, args.hor)
+    est = estimate_offset(
+        top,
+        hor,
+        hor_width=hor_width,
+        params=params,
+        clip_start=args.clip_start,
+        clip_length=args.clip_length,
+        max_offset=max_offset,
+        camera_id=args.camera_id,
+        n_clips=args.clips,
+        workers=args.workers,
+    )
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "offset": est.offset,
+                    "applied": est.applied,
+                    "status": est.status,
+                    "support": est.support,
+                    "evidence": est.evidence if est.evidence != float("inf") else None,
+                    "offsets": est.offsets.tolist(),
+                    "costs": [c if c != float("inf") else None for c in est.costs.tolist()],
+                }
+            )
+        )
+    else:
+        print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
+              f"{offset_summary(est)})")
+        if est.status == "unsupported":
+            one_clip = args.clip_start is not None or args.clips == 1
+            print(f"warning: {unsupported_reason(est, max_offset, one_clip)}: the estimate is "
+                  "unreliable (detector noise, too few people, or an offset beyond "
+                  "--max-offset); associate --offset auto keeps the files' timing",
+                  file=sys.stderr)
+        elif est.status == "within_tolerance" and est.offset:
+            print(f"note: {est.offset:+d} is within the estimate's precision ({OFFSET_TOLERANCE} "
+                  "frames) of 0: associate --offset auto keeps the files' timing; pass "
+                  f"--offset {est.offset} to apply it", file=sys.stderr)
+    return 0
+
+
+def add_offset_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch offset`` on ``subparsers`` and return its parser."""
+    p = add_command_parser(
+        subparsers,
+        "offset",
+        "Estimate the temporal offset between the two videos by sliding clips (Fig. 5).",
+        EXAMPLE,
+    )
+    add_box_inputs(p)
+    p.add_argument("--camera-id", type=box_id, default=None,
+                   help="top-view id of the wearer (|id| <= 2**53)")
+    p.add_argument(
+        "--clip-start",
+        type=int_in(1, 2**53, "a frame number: frames are 1-based, exact to 2**53"),
+        default=None,
+        help="first horizontal frame of a single clip (the paper's setting), 1..2**53; "
+        "default: --clips clips spread over the video",
+    )
+    p.add_argument("--clips", default=9,
+                   type=int_in(1, 100, "each clip is one more search over every offset"),
+                   help="clips to average, 1..100 (default 9)")
+    # clip_length >= 1 is checked by estimate_offset with the other clip settings (one line,
+    # exit 2, before any search): the parser bounds only its size.
+    p.add_argument("--clip-length", default=10,
+                   type=int_in(None, 1000, "frames per clip, in [1, 1000]: each is searched at "
+                               "every offset"),
+                   help="clip length in frames, 1..1000 (default 10)")
+    p.add_argument(
+        "--max-offset", type=MAX_OFFSET_TYPE, default=None,
+        help=f"largest |offset|, 0..{MAX_OFFSET_LIMIT} frames and at most the frames the box "
+        f"files span (default {AUTO_MAX_OFFSET}, as associate --offset auto)",
+    )
+    p.add_argument(
+        "--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
+        help=IMAGE_SIZE_HELP,
+    )
+    p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes sharing the clips, 1..64 (default 1; the estimate is the "
+                   "same for any K)")
+    add_spatial_options(p)
+    p.set_defaults(func=_cmd_offset)
+    return p

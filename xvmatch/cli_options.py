@@ -1,0 +1,201 @@
+"""Options and helpers shared by the ``xvmatch`` commands (every ``cli_*`` module uses them).
+
+Each option is defined here once: the box inputs (``--top``, ``--hor``, ``--duplicates``), the
+spatial-distribution parameters (``--rho --lam --tau --dtheta --fov``, read back by
+:func:`spatial_params`), the image inputs (``--top-images``, ``--hor-images``, checked together
+by :func:`check_images_together`), and the horizontal ``--image-size``'s type and help. With them
+come the sub-command parser (:func:`add_command_parser`), the progress bar
+(:func:`progress_bar`), the box reader that prints the reader's warnings
+(:func:`read_boxes`) and :class:`UsageError`. Output paths are checked by
+:mod:`xvmatch.output_paths`; :func:`image_inputs` lists the images as its inputs.
+
+Nothing here imports :mod:`xvmatch.cli` (the root imports the command modules, never the
+reverse), and nothing heavy is imported until a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Iterable, Mapping
+
+from xvmatch.cli_types import float_in, image_size
+from xvmatch.output_paths import Input
+
+__all__ = [
+    "HOR_IMAGE_SIZE",
+    "IMAGE_SIZE_HELP",
+    "UsageError",
+    "add_box_inputs",
+    "add_command_parser",
+    "add_image_options",
+    "add_spatial_options",
+    "check_camera_id",
+    "check_images_together",
+    "frame_progress",
+    "image_inputs",
+    "progress_bar",
+    "read_boxes",
+    "spatial_params",
+]
+
+
+class UsageError(Exception):
+    """A user mistake reported as one line, without a traceback."""
+
+
+def add_command_parser(subparsers, name: str, help_text: str, example: str,
+                       description: str | None = None) -> argparse.ArgumentParser:
+    """Register the sub-command ``name`` on ``subparsers``: ``help_text`` in the command list
+    and as its description (unless ``description`` is given), ``example`` as its epilog."""
+    return subparsers.add_parser(
+        name,
+        help=help_text,
+        description=help_text if description is None else description,
+        epilog=f"example:\n  {example}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
+def add_box_inputs(parser: argparse.ArgumentParser) -> None:
+    """``--top``, ``--hor`` (MOT box files) and ``--duplicates`` (associate, evaluate,
+    offset)."""
+    parser.add_argument("--top", required=True, help="top-view boxes (MOT format)")
+    parser.add_argument("--hor", required=True, help="horizontal-view boxes (MOT format)")
+    parser.add_argument(
+        "--duplicates",
+        choices=("first", "error"),
+        default="first",
+        help="a repeated (frame, id) in a box file: keep the first box with a warning "
+        "(default; the real CVMHAT files have a few) or stop with an error",
+    )
+
+
+def read_boxes(path: str, duplicates: str):
+    """``{frame: FrameBoxes}`` of a MOT box file; the reader's warnings are printed on stderr
+    as ``xvmatch: warning: ...`` lines."""
+    import warnings
+
+    from xvmatch.datasets.mot_boxes import read_mot_boxes
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        frames = read_mot_boxes(path, duplicates=duplicates)
+    for w in caught:
+        print(f"xvmatch: warning: {w.message}", file=sys.stderr)
+    return frames
+
+
+def check_camera_id(camera_id: int | None, top: Mapping, path: str) -> None:
+    """``--camera-id`` must name a person of the top view in at least one frame."""
+    if camera_id is None:
+        return
+    if not any(camera_id in rec.ids for rec in top.values()):
+        raise UsageError(f"--camera-id {camera_id}: no box of {path} has this id (the id of "
+                         "the horizontal camera's wearer in the top-view file)")
+
+
+def add_spatial_options(parser: argparse.ArgumentParser) -> None:
+    """The spatial-distribution parameters of the CVMHAT search (Eqs. 11-12), in a group:
+    ``--rho --lam --tau --dtheta --fov`` (:func:`spatial_params` reads them back)."""
+    g = parser.add_argument_group("spatial-distribution parameters (paper defaults)")
+    # rho > 1 is checked with the other parameters by SpatialParams (one line, exit 2, before
+    # any work): the parser bounds only its size.
+    g.add_argument(
+        "--rho", default=15.0,
+        type=float_in(None, 1e6, "Eq. 12's penalty base, in (1, 1e6]; the paper uses 15"),
+        help="penalty base of Eq. 12, in (1, 1e6] (default 15)",
+    )
+    g.add_argument(
+        "--lam", default=0.003,
+        type=float_in(0, 1e6, "Eq. 11's x/y balance is positive; the paper uses 0.003",
+                      low_open=True),
+        help="x/y balance lambda of Eq. 11, in (0, 1e6] (default 0.003)",
+    )
+    g.add_argument(
+        "--tau", default=2.0,
+        type=float_in(0, 90, "an angle between two people seen from the camera, degrees"),
+        help="occlusion tolerance, degrees in [0, 90] (default 2)",
+    )
+    g.add_argument(
+        "--dtheta", default=1.0,
+        type=float_in(0.01, 360, "the search tries 360 / dtheta orientations"),
+        help="orientation step, degrees in [0.01, 360]: the search tries 360 / dtheta "
+        "orientations (default 1)",
+    )
+    g.add_argument(
+        "--fov", default=90.0,
+        type=float_in(0, 180, "a pinhole camera's horizontal field of view, degrees",
+                      low_open=True, high_open=True),
+        help="horizontal camera field of view, degrees in (0, 180) (default 90)",
+    )
+
+
+def spatial_params(args: argparse.Namespace):
+    """The :class:`~xvmatch.geometry.spatial_matching.SpatialParams` of the options of
+    :func:`add_spatial_options` (checked there: one line, exit 2, before any work)."""
+    from xvmatch.geometry.spatial_matching import SpatialParams
+
+    return SpatialParams(
+        rho=args.rho, lam=args.lam, tau_deg=args.tau, dtheta_deg=args.dtheta, fov_deg=args.fov
+    )
+
+
+HOR_IMAGE_SIZE = image_size(8, 65536, "pixels of a camera image")
+"""``--image-size`` of a camera image: 8..65536 pixels a side."""
+
+IMAGE_SIZE_HELP = (
+    "the horizontal camera's image size in pixels, 8..65536 a side; needed with boxes only "
+    "(default: the images' or the cameras' size; else 2688x1512, CVMHAT's, only when the boxes "
+    "reach beyond 60%% of its width, with a note; a box more than 10%% past the image's border "
+    "is an error)")
+"""The help of every ``--image-size`` of the horizontal view (:mod:`xvmatch.cli_image_size`)."""
+
+TOP_IMAGES_HELP = (
+    "images of the top view: one image, a folder of frames whose names end in the frame number "
+    "(0212.jpg, frame_000212.png), a quoted glob pattern, or a video file")
+HOR_IMAGES_HELP = "images of the horizontal view (as --top-images)"
+
+
+def add_image_options(group, top_help: str = TOP_IMAGES_HELP, hor_help: str = HOR_IMAGES_HELP,
+                      several_hor: bool = False) -> None:
+    """``--top-images`` and ``--hor-images`` (given together: :func:`check_images_together`)
+    on a parser or an argument group; ``several_hor``: one ``--hor-images`` per horizontal
+    view (``associate-multi``)."""
+    group.add_argument("--top-images", default=None, metavar="PATH", help=top_help)
+    group.add_argument("--hor-images", default=None, nargs="+" if several_hor else None,
+                       metavar="PATH", help=hor_help)
+
+
+def check_images_together(args: argparse.Namespace) -> None:
+    """``--top-images`` and ``--hor-images`` come together or not at all."""
+    if (getattr(args, "top_images", None) is None) != (getattr(args, "hor_images", None) is None):
+        raise ValueError("give --top-images and --hor-images together")
+
+
+def image_inputs(args: argparse.Namespace) -> list[Input]:
+    """The images of :func:`add_image_options` as inputs of the output-path check
+    (:func:`xvmatch.output_paths.check_outputs`)."""
+    hor = args.hor_images
+    return [Input("--top-images", args.top_images),
+            *(Input("--hor-images", h) for h in (hor if isinstance(hor, list) else [hor]))]
+
+
+def progress_bar(total: int, desc: str, unit: str, enabled: bool, items: Iterable | None = None,
+                 leave: bool = False, initial: int = 0):
+    """A tqdm progress bar on stderr over ``items`` (or updated by hand): shown only on a
+    terminal, never when not ``enabled`` (``--quiet``)."""
+    from tqdm import tqdm
+
+    return tqdm(items, total=total, desc=desc, unit=unit, initial=initial, leave=leave,
+                file=sys.stderr, disable=None if enabled else True)
+
+
+def frame_progress(total: int, desc: str, enabled: bool
+                   ) -> Callable[[Iterable[int]], Iterable[int]]:
+    """``progress(frames)``: wraps a frame iterator in a :func:`progress_bar`."""
+
+    def wrap(frames: Iterable[int]) -> Iterable[int]:
+        return progress_bar(total, desc, "frame", enabled, frames)
+
+    return wrap
