@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from xvmatch import cli_learn
+from xvmatch import cli_fit_geometry, cli_model
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene, write_box_scene
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.inference.assignment import assign
@@ -175,30 +175,30 @@ def _args(**kw) -> argparse.Namespace:
 def test_associate_with_model_cli_helper(model, tiny_models, scene, tmp_path, monkeypatch):
     frames = sorted(scene.top)
     args = _args(model=[str(tiny_models["boxes_bundle"])])
-    pred = cli_learn.associate_with_model(args, scene.top, scene.hor, frames, None)
+    pred = cli_model.associate_with_model(args, scene.top, scene.hor, frames, None)
     assert pred == associate_sequence_learned(scene.top, scene.hor, WIDTH, model)
-    mirrored = cli_learn.associate_with_model(_args(model=args.model, mirror=True), scene.top,
+    mirrored = cli_model.associate_with_model(_args(model=args.model, mirror=True), scene.top,
                                               scene.hor, frames, None)
     assert mirrored == associate_sequence_learned(scene.top, scene.hor, WIDTH, model,
                                                   mirror=True)
     # A torch matcher file is exported once into the cache and gives the same pairs.
     monkeypatch.setenv("XVMATCH_CACHE", str(tmp_path / "cache"))
-    from_file = cli_learn.associate_with_model(_args(model=[str(tiny_models["boxes"])]),
+    from_file = cli_model.associate_with_model(_args(model=[str(tiny_models["boxes"])]),
                                                scene.top, scene.hor, frames, None)
     assert from_file == pred
     assert len(list((tmp_path / "cache" / "bundles").iterdir())) == 1
     with pytest.raises(ValueError, match="--mode frame"):
-        cli_learn.associate_with_model(_args(model=args.model, mode="video"), scene.top,
+        cli_model.associate_with_model(_args(model=args.model, mode="video"), scene.top,
                                        scene.hor, frames, None)
     with pytest.raises(ValueError, match="no such bundle folder"):
-        cli_learn.associate_with_model(_args(model=["nope"]), scene.top, scene.hor, frames,
+        cli_model.associate_with_model(_args(model=["nope"]), scene.top, scene.hor, frames,
                                        None)
 
 
 def test_fit_geometry_parser(tmp_path):
     parser = argparse.ArgumentParser(prog="xvmatch")
     sub = parser.add_subparsers(dest="command")
-    cli_learn.add_fit_geometry_parser(sub)
+    cli_fit_geometry.add_fit_geometry_parser(sub)
     args = parser.parse_args(["fit-geometry", "--cvmhat", "d", "--out", "m.pt", "--sites", "a",
                               "b", "--epochs", "3", "--noise", "0"])
     assert args.sites == ["a", "b"] and args.epochs == 3 and args.noise == 0
@@ -209,7 +209,7 @@ def test_fit_geometry_parser(tmp_path):
         args.func(parser.parse_args(["fit-geometry", "--cvmhat", str(tmp_path / "x"),
                                      "--out", "m.pt"]))
     sub2 = argparse.ArgumentParser()
-    cli_learn.add_model_arguments(sub2)
+    cli_model.add_model_arguments(sub2)
     assert sub2.parse_args(["--model", "default", "--gamma", "0.4"]).gamma == 0.4
 
 
@@ -223,7 +223,7 @@ def test_fit_geometry_command_end_to_end(tmp_path):
         write_box_scene(scene, data, name)
     out = tmp_path / "geo.pt"
     parser = argparse.ArgumentParser(prog="xvmatch")
-    cli_learn.add_fit_geometry_parser(parser.add_subparsers())
+    cli_fit_geometry.add_fit_geometry_parser(parser.add_subparsers())
     args = parser.parse_args(
         ["fit-geometry", "--cvmhat", str(data), "--out", str(out), "--epochs", "1",
          "--noise", "0", "--sim-scenes", "2", "--sites", "alpha", "--cache",

@@ -65,7 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
     from xvmatch.cli_ablate import add_ablate_parser
     from xvmatch.cli_baseline import add_baseline_parser
     from xvmatch.cli_demo import add_demo_parser
-    from xvmatch.cli_learn import add_export_parser, add_fit_geometry_parser
+    from xvmatch.cli_export import add_export_parser
+    from xvmatch.cli_fit_geometry import add_fit_geometry_parser
     from xvmatch.cli_multi_ego import add_multi_ego_parser
     from xvmatch.cli_synth import add_show_parser, add_synth_parser
     from xvmatch.cli_track import add_track_parser

@@ -1,7 +1,7 @@
 """The ``xvmatch associate`` command: pairs of the two views, frame by frame.
 
 From boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned matcher
-(``--model``, :mod:`xvmatch.cli_learn`) from boxes, images and cameras; ``--offset auto``
+(``--model``, :mod:`xvmatch.cli_model`) from boxes, images and cameras; ``--offset auto``
 re-times the views first (:mod:`xvmatch.cli_offset`).
 """
 
@@ -10,7 +10,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from xvmatch.cli_learn import add_draw_arguments, add_model_arguments
+from xvmatch.cli_model import (
+    DRAW_COMMAND,
+    LEARNED_ONLY,
+    add_draw_arguments,
+    add_model_arguments,
+    associate_with_model,
+    draw_pictures,
+    horizontal_size,
+)
 from xvmatch.cli_offset import (
     MAX_OFFSET_LIMIT,
     MAX_OFFSET_TYPE,
@@ -33,7 +41,7 @@ from xvmatch.cli_options import (
 )
 from xvmatch.cli_types import box_id, offset_value, worker_count
 from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
-from xvmatch.output_paths import Input, Output, check_outputs
+from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["EXAMPLE", "add_associate_parser"]
 
@@ -139,8 +147,6 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     if args.mode == "frame" and search != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")
     if args.model is None:
-        from xvmatch.cli_learn import LEARNED_ONLY
-
         given = [f"--{k.replace('_', '-')}" for k in LEARNED_ONLY
                  if getattr(args, k) not in (None, False)]
         if given:
@@ -151,17 +157,11 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     check_outputs(
         [Output("--out", args.out), Output("--costs", args.costs),
          Output("--draw", args.draw, folder=True)],
-        [Input("--top", args.top), Input("--hor", args.hor),
-         *image_inputs(args),
+        [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
          Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
     )
     if args.draw is not None:
-        from xvmatch.cli_learn import DRAW_COMMAND
-        from xvmatch.output_paths import check_own_folder
-
         check_own_folder(args.draw, DRAW_COMMAND, "--draw")
-    from xvmatch.cli_learn import horizontal_size
-
     max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
     hor_size = horizontal_size(args, hor)
     hor_width = hor_size[0][0]
@@ -194,8 +194,6 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     frames = sorted(set(top) | set(hor))
     progress = frame_progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
-        from xvmatch.cli_learn import associate_with_model
-
         pairs = associate_with_model(args, top, hor, frames, progress, top_offset=offset,
                                      hor_size=hor_size)
     else:
@@ -210,8 +208,6 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             progress=progress,
         )
         if args.draw is not None:
-            from xvmatch.cli_learn import draw_pictures
-
             both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
             draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
                           not args.no_labels)

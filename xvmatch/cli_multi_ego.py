@@ -150,7 +150,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     sources = []
     try:
         if args.model is not None:
-            from xvmatch.cli_learn import open_models
+            from xvmatch.cli_model import open_models
 
             matcher = open_models([args.model], args.threads)[0]
         if args.top_images is not None:

@@ -67,7 +67,7 @@ def _open_images(args: argparse.Namespace, top, hor):
     after every check (images given together, the frames the boxes list, boxes inside the
     images, ``--image-size`` agreeing, a bundle with an appearance network)."""
     from xvmatch.cli_image_size import check_boxes_in_image
-    from xvmatch.cli_learn import open_models
+    from xvmatch.cli_model import open_models
     from xvmatch.datasets.frame_sources import check_frames, open_frames
     from xvmatch.inference.tracking import TrackImages
 
