@@ -44,6 +44,7 @@ __all__ = [
     "LearnedMatcher",
     "associate_sequence_learned",
     "load_matcher_bundle",
+    "non_association_cost",
 ]
 
 
@@ -121,6 +122,15 @@ def load_matcher_bundle(path_or_default: str | os.PathLike = "default", threads:
         BundleError: an unusable bundle (one line naming the file).
     """
     return LearnedMatcher(load_bundle(path_or_default, threads, precision))
+
+
+def non_association_cost(models: Sequence[LearnedMatcher], gamma: float | None = None) -> float:
+    """The non-association cost of a run: ``gamma`` when given, else the (first) model's own.
+
+    The one home of this rule: :func:`associate_sequence_learned` and the pipeline
+    (:mod:`xvmatch.inference.learned_pipeline`, which writes it into ``--costs``) both use it.
+    """
+    return models[0].gamma if gamma is None else float(gamma)
 
 
 class FrameImages:
@@ -269,7 +279,7 @@ def associate_sequence_learned(
     for m in models:
         if m.feature_config not in configs:
             configs.append(m.feature_config)
-    gamma = models[0].gamma if gamma is None else float(gamma)
+    gamma = non_association_cost(models, gamma)
     height = float(hor_height) if hor_height is not None else float(hor_width) * 9.0 / 16.0
     size = (float(hor_width), height)
     order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})

@@ -2,10 +2,12 @@
 
 ``add_model_arguments`` adds ``--model``, ``--gamma``, the images, the cameras and the other
 learned-matcher options to ``associate``'s parser, ``add_draw_arguments`` its ``--draw``
-pictures; ``associate_with_model`` runs the association with the models, ``open_models`` opens
-them (also for ``track`` and ``associate-multi``), ``horizontal_size`` works out the horizontal
-image size. Imports are lazy: only these code paths load onnxruntime (torch only to export a
-.pt file once). Bad input raises ``ValueError`` with a one-line message, which the main entry
+pictures; ``associate_with_model`` runs the association with the models
+(:func:`xvmatch.inference.learned_pipeline.run_learned_association`'s steps, with the options
+:func:`learned_run_options` builds from the arguments), ``open_models`` opens them (also for
+``track`` and ``associate-multi``), ``horizontal_size`` works out the horizontal image size.
+Imports are lazy: only these code paths load onnxruntime (torch only to export a .pt file
+once). Bad input raises ``ValueError`` with a one-line message, which the main entry
 point prints as ``xvmatch: error: ...``.
 """
 
@@ -27,6 +29,7 @@ __all__ = [
     "associate_with_model",
     "draw_pictures",
     "horizontal_size",
+    "learned_run_options",
     "open_models",
 ]
 
@@ -131,43 +134,6 @@ def open_models(names: Iterable[str], threads: int = 1, precision: str | None = 
     return models
 
 
-class _Shifted:
-    """An image source re-timed like the boxes: frame ``f`` is the source's ``f + shift``."""
-
-    def __init__(self, source, shift: int) -> None:
-        self.source, self.shift = source, int(shift)
-
-    def get(self, frame: int):
-        return self.source.get(int(frame) + self.shift)
-
-    def close(self) -> None:
-        self.source.close()
-
-
-def _check_boxes_inside(frames: Mapping, size: tuple[int, int], where: str,
-                        source: str = "the images") -> None:
-    """Every box must lie in its image (:func:`xvmatch.cli_image_size.check_boxes_in_image`:
-    at most 10% past a border), else the images and boxes do not belong together."""
-    from xvmatch.cli_image_size import check_boxes_in_image
-
-    check_boxes_in_image(frames, size, where, source)
-
-
-def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) -> None:
-    """Every camera's image size must be its view's image size (``sizes``: view -> (size,
-    where that size comes from))."""
-    for where, cams in cameras.all():
-        for view, cam in (("top", cams.top), ("hor", cams.hor)):
-            if view not in sizes:
-                continue
-            want, source = sizes[view]
-            if tuple(cam.image_size) != tuple(want):
-                name = "ego" if view == "hor" else "top"
-                label = "horizontal" if view == "hor" else "top"
-                raise ValueError(f"{where}: camera {name!r} is {cam.width}x{cam.height} but the "
-                                 f"{label} image size is {want[0]}x{want[1]} (from {source})")
-
-
 def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, int], str]:
     """The horizontal image size and where it comes from (:mod:`xvmatch.cli_image_size`):
     ``--image-size``, the ``--hor-images`` and the ``--cameras`` file's ego camera must agree
@@ -185,7 +151,7 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
         with open_frames(args.hor_images, box_frames=sorted(hor)) as source:
             given.append((tuple(source.size), f"the horizontal images {args.hor_images}"))
     elif getattr(args, "model", None) is not None and getattr(args, "cameras", None):
-        # with images, each camera file is checked against them (:func:`_check_camera_sizes`)
+        # with images, each camera file is checked against them (inference/learned_pipeline.py)
         from xvmatch.datasets.camera_frames import open_cameras
 
         sizes = {tuple(c.hor.image_size) for _, c in open_cameras(args.cameras).all()}
@@ -195,6 +161,40 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
                              "--image-size")
         given.append((sizes.pop(), f"the camera files {args.cameras}"))
     return resolve_size(hor, getattr(args, "hor", "the horizontal boxes"), given)
+
+
+def learned_run_options(
+    args: argparse.Namespace,
+    models: list,
+    names: list[str],
+    hor_size: tuple[tuple[int, int], str],
+    top_offset: int = 0,
+):
+    """The :class:`~xvmatch.inference.learned_pipeline.LearnedRunOptions` of ``associate``'s
+    arguments, for ``models`` already opened (:func:`open_models`) from ``names`` and the
+    horizontal size :func:`horizontal_size` resolved; options a namespace lacks take their
+    defaults. Costs are kept when ``--costs`` or ``--draw`` asks for them (the pictures are
+    of the frames that have costs)."""
+    from xvmatch.inference.learned_pipeline import LearnedRunOptions
+
+    (width, height), said = hor_size
+    return LearnedRunOptions(
+        models=tuple(models),
+        hor_size=(width, height),
+        hor_size_source=said,
+        names=tuple(names),
+        top_images=getattr(args, "top_images", None),
+        hor_images=getattr(args, "hor_images", None),
+        cameras=getattr(args, "cameras", None),
+        top_boxes=getattr(args, "top", "the top-view boxes"),
+        camera_id=getattr(args, "camera_id", None),
+        gamma=getattr(args, "gamma", None),
+        mirror=bool(getattr(args, "mirror", False)),
+        workers=getattr(args, "workers", 1),
+        top_offset=top_offset,
+        keep_costs=(getattr(args, "costs", None) is not None
+                    or getattr(args, "draw", None) is not None),
+    )
 
 
 def associate_with_model(
@@ -207,95 +207,42 @@ def associate_with_model(
     hor_size: tuple[tuple[int, int], str] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate with ``args.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
-    hor)]}``. Also writes ``--costs`` and ``--draw`` when asked. ``top`` is already re-timed by
-    ``top_offset`` (``--offset``); the top images are re-timed the same way. ``hor_size``:
-    :func:`horizontal_size` when the caller has it already (else it is worked out here).
+    hor)]}``. The command line's side of :mod:`xvmatch.inference.learned_pipeline`: checks
+    the options, opens the models, builds the run's options (:func:`learned_run_options`),
+    prints the note of an assumed image size, runs it, and writes ``--costs`` and ``--draw``.
+    ``top`` is already re-timed by ``top_offset`` (``--offset``); the top images are re-timed
+    the same way. ``hor_size``: :func:`horizontal_size` when the caller has it already (else it
+    is worked out here).
 
-    Reads ``args.model``, ``args.image_size`` (W, H, or None: from the images, else CVMHAT's),
-    ``args.camera_id``, and when present ``args.mode`` (must be ``frame``), ``args.gamma``,
-    ``args.mirror``, ``args.workers``, ``args.threads``, ``args.top_images``,
-    ``args.hor_images``, ``args.cameras``, ``args.costs``, ``args.draw``, ``args.draw_every``.
-    Every input is checked before any work starts; outputs are written only at the end.
+    Reads ``args.model`` and, when present, ``args.mode`` (must be ``frame``), ``args.threads``,
+    ``args.precision``, ``args.draw``, ``args.draw_every``, ``args.no_labels``, ``args.costs``,
+    ``args.quiet``, ``args.hor`` and what :func:`learned_run_options` reads. Every input is
+    checked before any work starts; outputs are written only at the end.
     """
-    from xvmatch.inference.learned_association import associate_sequence_learned
+    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.inference.learned_pipeline import open_learned_inputs
 
     if getattr(args, "mode", "frame") != "frame":
         raise ValueError("--model solves each frame on its own: use --mode frame")
-    top_path, hor_path = getattr(args, "top_images", None), getattr(args, "hor_images", None)
     check_images_together(args)
     draw = getattr(args, "draw", None)
     if draw is not None:
         check_own_folder(draw, DRAW_COMMAND, "--draw")
     names = [args.model] if isinstance(args.model, str) else list(args.model)
     models = open_models(names, getattr(args, "threads", 1), getattr(args, "precision", None))
-    frames = list(frames)
-    both = [f for f in frames if f in top and f in hor and len(top[f]) and len(hor[f])]
-    sources = {}
-    sizes: dict[str, tuple[int, int]] = {}
-    if top_path is not None:
-        from xvmatch.datasets.frame_sources import check_frames, open_frames
-
-        for m, name in zip(models, names, strict=True):
-            if m.bundle.manifest.appearance is None:
-                raise ValueError(f"{name}: a box-only matcher cannot use images; drop "
-                                 "--top-images/--hor-images or use a bundle with an "
-                                 "appearance network (e.g. default)")
-        for view, path, boxes, shift in (("top", top_path, top, top_offset),
-                                         ("hor", hor_path, hor, 0)):
-            source = open_frames(path, box_frames=sorted(f + shift for f in boxes))
-            check_frames(source, [f + shift for f in both])
-            sources[view] = _Shifted(source, shift) if shift else source
-            sizes[view] = tuple(source.size)
-        _check_boxes_inside(top, sizes["top"], args.top)
-    (width, height), said = hor_size or horizontal_size(args, hor)
-    cameras = None
-    if getattr(args, "cameras", None) is not None:
-        from xvmatch.datasets.camera_frames import open_cameras
-
-        for m, name in zip(models, names, strict=True):
-            if not m.bundle.manifest.uses_cameras:
-                raise ValueError(f"{name}: this matcher takes no camera cues; drop --cameras or "
-                                 "use a bundle trained with cameras (e.g. default)")
-        cameras = open_cameras(args.cameras, both)
-        wanted = {"hor": ((width, height), "the images" if sizes else said)}
-        if "top" in sizes:
-            wanted["top"] = (sizes["top"], "the images")
-        _check_camera_sizes(cameras, wanted)
-    from xvmatch.cli_image_size import note_if_assumed
-
-    note_if_assumed(((width, height), said), hor, getattr(args, "hor", "the horizontal boxes"),
-                    bool(getattr(args, "quiet", False)))
-    want_costs = getattr(args, "costs", None) is not None or draw is not None
-    costs: dict | None = {} if want_costs else None
-    try:
-        pairs = associate_sequence_learned(
-            top,
-            hor,
-            hor_width=width,
-            model=models,
-            camera_id=getattr(args, "camera_id", None),
-            gamma=getattr(args, "gamma", None),
-            progress=progress,
-            hor_height=height,
-            frames=frames,
-            mirror=bool(getattr(args, "mirror", False)),
-            workers=getattr(args, "workers", 1),
-            top_images=sources.get("top"),
-            hor_images=sources.get("hor"),
-            cameras=cameras,
-            costs_out=costs,
-        )
+    hor_size = hor_size or horizontal_size(args, hor)
+    options = learned_run_options(args, models, names, hor_size, top_offset)
+    hor_path = getattr(args, "hor", "the horizontal boxes")
+    with open_learned_inputs(top, hor, frames, options) as inputs:
+        note_if_assumed(hor_size, hor, hor_path, bool(getattr(args, "quiet", False)))
+        run = inputs.associate(progress)
         if draw is not None:
-            draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, pairs, sorted(costs),
-                          sources or None, (width, height),
+            draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, run.pairs,
+                          sorted(run.costs), inputs.images or None, run.hor_size,
                           not getattr(args, "no_labels", False))
-    finally:
-        for source in sources.values():
-            source.close()
     if getattr(args, "costs", None) is not None:
-        _write_costs(args.costs, top, hor, costs, getattr(args, "gamma", None) or
-                     models[0].gamma)
-    return pairs
+        _write_costs(args.costs, top, hor, run.costs, run.gamma)
+    return run.pairs
 
 
 def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float) -> None:

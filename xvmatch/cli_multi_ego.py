@@ -154,15 +154,15 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
 
             matcher = open_models([args.model], args.threads)[0]
         if args.top_images is not None:
-            from xvmatch.datasets.frame_sources import check_frames, open_frames
+            from xvmatch.inference.learned_pipeline import open_view_images
 
             if matcher.bundle.manifest.appearance is None:
                 raise ValueError(f"{args.model}: a box-only matcher cannot use images; drop "
                                  "the images or use a bundle with an appearance network")
             for v, path in enumerate([args.top_images, *args.hor_images]):
-                source = open_frames(path, box_frames=sorted(views[v]))
+                source = open_view_images(path, views[v],
+                                          [f for f in sorted(views[v]) if len(views[v][f])])
                 sources.append(source)
-                check_frames(source, [f for f in sorted(views[v]) if len(views[v][f])])
                 if v:
                     given[v - 1].append((tuple(source.size), f"the horizontal images {path}"))
                 else:

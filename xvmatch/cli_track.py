@@ -68,7 +68,7 @@ def _open_images(args: argparse.Namespace, top, hor):
     images, ``--image-size`` agreeing, a bundle with an appearance network)."""
     from xvmatch.cli_image_size import check_boxes_in_image
     from xvmatch.cli_model import open_models
-    from xvmatch.datasets.frame_sources import check_frames, open_frames
+    from xvmatch.inference.learned_pipeline import open_view_images
     from xvmatch.inference.tracking import TrackImages
 
     check_images_together(args)
@@ -87,9 +87,8 @@ def _open_images(args: argparse.Namespace, top, hor):
     sources = []
     try:
         for path, frames in ((args.top_images, top), (args.hor_images, hor)):
-            source = open_frames(path, box_frames=sorted(frames))
-            sources.append(source)
-            check_frames(source, [f for f in sorted(frames) if len(frames[f])])
+            sources.append(open_view_images(path, frames,
+                                            [f for f in sorted(frames) if len(frames[f])]))
         size = tuple(sources[1].size)
         check_boxes_in_image(top, tuple(sources[0].size), args.top,
                              f"the images {args.top_images}", ids=False)
