@@ -640,4 +640,6 @@ def test_ctrl_c_during_train_is_an_interruption_not_a_rejected_configuration(
     err = capsys.readouterr().err
     assert rc == 130, err
     assert err.strip().splitlines()[-1] == "xvmatch: interrupted"
-    assert "rejected" not in err
+    # Not reported as a bad configuration (a logging handler left by another test may print a
+    # stack naming this test, so look for the command's own error line, not the word).
+    assert "xvmatch: error" not in err

@@ -142,7 +142,7 @@ def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
     import warnings
     from pathlib import Path
 
-    from xvmatch.cli_image_size import (
+    from xvmatch.datasets.box_image_size import (
         CVMHAT_SIZE,
         MIN_EXTENT,
         box_extent,

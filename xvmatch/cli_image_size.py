@@ -1,7 +1,7 @@
 """The command line's side of the horizontal image size rule: the rule itself (which size the
 horizontal boxes belong to, and whether they fit it) lives in
-:mod:`xvmatch.datasets.box_image_size`, re-exported here; this module adds the one-line note a
-command prints when it assumed the CVMHAT size.
+:mod:`xvmatch.datasets.box_image_size`; this module adds the one-line note a command prints when
+it assumed the CVMHAT size.
 """
 
 from __future__ import annotations
@@ -10,35 +10,17 @@ import os
 import sys
 from collections.abc import Mapping
 
-from xvmatch.datasets.box_image_size import (
-    ASSUMED,
-    CVMHAT_SIZE,
-    MARGIN,
-    MIN_EXTENT,
-    box_extent,
-    check_boxes_in_image,
-    consistent_with,
-    resolve_size,
-)
+from xvmatch.datasets.box_image_size import ASSUMED, box_extent
 
-__all__ = [
-    "ASSUMED",
-    "CVMHAT_SIZE",
-    "MARGIN",
-    "MIN_EXTENT",
-    "box_extent",
-    "check_boxes_in_image",
-    "consistent_with",
-    "note_if_assumed",
-    "resolve_size",
-]
+__all__ = ["note_if_assumed"]
 
 
 def note_if_assumed(resolved: tuple[tuple[int, int], str], hor: Mapping,
                     hor_path: str | os.PathLike, quiet: bool = False,
                     option: str = "--image-size") -> None:
-    """Print the one-line note on stderr when :func:`resolve_size` assumed the CVMHAT size
-    (not with ``quiet``). Commands call it once every check has passed, as the work starts, so
+    """Print the one-line note on stderr when
+    :func:`~xvmatch.datasets.box_image_size.resolve_size` assumed the CVMHAT size (not with
+    ``quiet``). Commands call it once every check has passed, as the work starts, so
     that a refused run prints its error line alone."""
     if quiet or resolved[1] != ASSUMED:
         return

@@ -139,7 +139,7 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
     ``--image-size``, the ``--hor-images`` and the ``--cameras`` file's ego camera must agree
     when given; with none, CVMHAT's 2688x1512 when the boxes are consistent with it (a note on
     stderr), else an error asking for ``--image-size``. Every horizontal box must lie in it."""
-    from xvmatch.cli_image_size import resolve_size
+    from xvmatch.datasets.box_image_size import resolve_size
 
     check_images_together(args)
     given = []

@@ -110,7 +110,8 @@ def _wearer_rows(top, camera_id: int) -> dict[int, int]:
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
-    from xvmatch.cli_image_size import check_boxes_in_image, note_if_assumed, resolve_size
+    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.datasets.box_image_size import check_boxes_in_image, resolve_size
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.multi_view_assignment import consistent_hungarian, solve_multi_view
     from xvmatch.inference.multi_view_costs import multi_view_costs

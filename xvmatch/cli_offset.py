@@ -97,7 +97,8 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     if args.clip_length < 1:  # before the size note: a refused run prints one line
         raise UsageError(f"--clip-length {args.clip_length}: need clip_length >= 1 (frames per "
                          "clip)")
-    from xvmatch.cli_image_size import note_if_assumed, resolve_size
+    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.datasets.box_image_size import resolve_size
 
     given = [] if args.image_size is None else [(args.image_size, "--image-size")]
     resolved = resolve_size(hor, args.hor, given)

@@ -195,7 +195,8 @@ def _show_boxes(args: argparse.Namespace) -> int:
     """``show --top T --hor H``: one frame of box files, pairs from ``--pred`` or equal ids."""
     import numpy as np
 
-    from xvmatch.cli_image_size import note_if_assumed, resolve_size
+    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.datasets.box_image_size import resolve_size
     from xvmatch.datasets.mot_boxes import read_predictions
     from xvmatch.inference.box_canvas import blank_view, top_plan
     from xvmatch.inference.match_drawing import draw_matches, write_match_picture

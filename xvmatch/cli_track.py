@@ -66,8 +66,8 @@ def _open_images(args: argparse.Namespace, top, hor):
     """The image sources of both views, their horizontal size and the embedder (or None),
     after every check (images given together, the frames the boxes list, boxes inside the
     images, ``--image-size`` agreeing, a bundle with an appearance network)."""
-    from xvmatch.cli_image_size import check_boxes_in_image
     from xvmatch.cli_model import open_models
+    from xvmatch.datasets.box_image_size import check_boxes_in_image
     from xvmatch.inference.learned_pipeline import open_view_images
     from xvmatch.inference.tracking import TrackImages
 
@@ -200,7 +200,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
     )
     images, sources, size = _open_images(args, top.frames, hor.frames)
     try:
-        from xvmatch.cli_image_size import note_if_assumed, resolve_size
+        from xvmatch.cli_image_size import note_if_assumed
+        from xvmatch.datasets.box_image_size import resolve_size
 
         given = [] if args.image_size is None else [(args.image_size, "--image-size")]
         if size is not None:
