@@ -15,7 +15,6 @@ pictures (:mod:`~xvmatch.evaluation.ablation_report`, :mod:`~xvmatch.evaluation.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import re
 import time
@@ -58,13 +57,13 @@ from xvmatch.evaluation.ablation_report import (
 )
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, SWEEPS, Setting, grid_settings
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.geometry.folder_marker import MARKER, is_own_folder, mark_own_folder
 from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
 
 REPORT_COMMAND = "xvmatch ablate"
-REPORT_MARKER = ".xvmatch-output.json"
-"""The file ``ablate`` leaves in a report folder it made, ``{"written_by": "xvmatch ablate"}``
-(the marker of :mod:`xvmatch.output_paths`); it replaces only such a folder."""
+"""The command named in the marker (:mod:`xvmatch.geometry.folder_marker`) that ``ablate``
+leaves in a report folder it made; it replaces only such a folder."""
 
 __all__ = [
     "MAX_SEEDS",
@@ -277,12 +276,8 @@ def _cvmhat_sha256(folder: str | os.PathLike, names: Sequence[str]) -> str:
 def _is_own_report(out: Path) -> bool:
     """Whether ``out`` holds the marker of ``xvmatch ablate`` (or, from before the marker, at
     least one stored cell and nothing but cells in ``cells/``)."""
-    try:
-        record = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
-        record = None
-    if isinstance(record, dict):
-        return record.get("written_by") == REPORT_COMMAND
+    if (out / MARKER).exists():
+        return is_own_folder(out, REPORT_COMMAND)
     try:
         return bool(load_cells(out))
     except ValueError:
@@ -295,14 +290,12 @@ def _check_out(out: Path) -> None:
         raise ValueError(f"--out {out}: exists and is not a folder; give a report folder")
     if out.is_dir() and any(out.iterdir()) and not _is_own_report(out):
         raise ValueError(f"--out {out}: not empty and not an ablation report made by "
-                         f"{REPORT_COMMAND} (no {REPORT_MARKER}); choose an empty or new folder")
+                         f"{REPORT_COMMAND} (no {MARKER}); choose an empty or new folder")
 
 
 def _claim_out(out: Path) -> None:
     """Create the report folder and mark it as ``ablate``'s own."""
-    out.mkdir(parents=True, exist_ok=True)
-    if not (out / REPORT_MARKER).is_file():
-        atomic_write_text(out / REPORT_MARKER, json.dumps({"written_by": REPORT_COMMAND}) + "\n")
+    mark_own_folder(out, REPORT_COMMAND)
 
 
 _MATCHERS: dict[str, LearnedMatcher] = {}

@@ -131,7 +131,7 @@ def test_costs_solved_with_the_gamma_given_give_the_csv(tmp_path, scene, tiny_mo
 
 
 def test_draw_writes_one_picture_per_frame(tmp_path, scene, tiny_models, capsys):
-    from xvmatch.output_paths import MARKER
+    from xvmatch.geometry.folder_marker import MARKER
 
     for every, expected in ((1, [MARKER, "frame_000001.jpg", "frame_000002.jpg"]),
                             (2, [MARKER, "frame_000001.jpg"])):

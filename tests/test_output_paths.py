@@ -17,15 +17,14 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
 from xvmatch.datasets.mot_boxes import read_mot_boxes, write_predictions
+from xvmatch.geometry.folder_marker import MARKER, is_own_folder
 from xvmatch.output_paths import (
-    MARKER,
     Input,
     Output,
     OutputPathError,
     check_outputs,
     check_own_folder,
     claim_folder,
-    is_own_folder,
 )
 
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0

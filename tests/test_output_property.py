@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-from xvmatch.output_paths import MARKER
+from xvmatch.geometry.folder_marker import MARKER
 
 KINDS = ("absent", "file", "fifo", "folder", "foreign", "input", "other")
 """What an output path is made to be: nothing, a regular file, a FIFO, an empty folder, a

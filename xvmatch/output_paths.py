@@ -17,32 +17,29 @@ and the path (:class:`OutputPathError`, a ``ValueError``: exit code 2) when
 
 :func:`check_own_folder` / :func:`claim_folder` let a command write into only a folder it made
 itself (or a new or empty one): it leaves a marker file naming the command
-(:data:`MARKER`), and refuses any other non-empty folder.
+(:mod:`xvmatch.geometry.folder_marker`), and refuses any other non-empty folder.
 """
 
 from __future__ import annotations
 
 import glob
-import json
 import os
 import stat
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from xvmatch.geometry.folder_marker import is_own_folder, mark_own_folder
+
 __all__ = [
-    "MARKER",
     "Input",
     "Output",
     "OutputPathError",
     "check_outputs",
     "check_own_folder",
     "claim_folder",
-    "is_own_folder",
 ]
 
-MARKER = ".xvmatch-output.json"
-"""The file a command leaves in a folder it made: ``{"written_by": "xvmatch demo"}``."""
 
 
 class OutputPathError(ValueError):
@@ -238,16 +235,6 @@ def check_outputs(outputs: Sequence[Output], inputs: Sequence[Input] = ()) -> No
             targets[real] = f"{option} {given}"
 
 
-def is_own_folder(folder: str | os.PathLike, command: str) -> bool:
-    """Whether ``folder`` holds the marker of ``command`` (``"xvmatch demo"``)."""
-    marker = Path(folder) / MARKER
-    try:
-        record = json.loads(marker.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return False
-    return isinstance(record, dict) and record.get("written_by") == command
-
-
 def check_own_folder(folder: str | os.PathLike, command: str, option: str = "--out") -> None:
     """Refuse a folder ``command`` may not write into: one that exists and is not a folder, or
     a non-empty folder without ``command``'s marker (a user's folder, or another command's).
@@ -267,11 +254,5 @@ def check_own_folder(folder: str | os.PathLike, command: str, option: str = "--o
 def claim_folder(folder: str | os.PathLike, command: str, option: str = "--out") -> Path:
     """Make ``folder`` the command's own (after :func:`check_own_folder`): create it if missing
     and leave the marker naming ``command``; a folder already marked is kept as it is."""
-    from xvmatch.geometry.atomic_files import atomic_write_text
-
     check_own_folder(folder, command, option)
-    out = Path(folder)
-    if not is_own_folder(out, command):
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / MARKER, json.dumps({"written_by": command}) + "\n")
-    return out
+    return mark_own_folder(folder, command)
