@@ -234,7 +234,7 @@ def _bundle_files(folder: Path) -> set[str] | None:
     ``folder`` holds no xvmatch bundle manifest."""
     try:
         doc = json.loads((folder / MANIFEST).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):  # as json_text sees it
         return None
     if not isinstance(doc, dict) or doc.get("format") != BUNDLE_FORMAT:
         return None

@@ -178,7 +178,7 @@ def test_exporting_into_something_else_is_refused(tmp_path, tiny_models, kind):
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
 
 
-@pytest.mark.parametrize("case", ["foreign manifest", "extra file", "symlink"])
+@pytest.mark.parametrize("case", ["foreign manifest", "deep manifest", "extra file", "symlink"])
 def test_exporting_over_a_folder_it_did_not_write_is_refused(tmp_path, tiny_models, case):
     # issue 28: a user's folder holding a manifest.json, or a bundle with a file the export did
     # not write, must not be emptied; only a bundle of exactly its own files is replaced.
@@ -187,6 +187,9 @@ def test_exporting_over_a_folder_it_did_not_write_is_refused(tmp_path, tiny_mode
         out.mkdir()
         (out / "manifest.json").write_text('{"name": "my project"}\n')
         (out / "notes.txt").write_text("mine\n")
+    elif case == "deep manifest":  # nested past the JSON reader's recursion limit
+        out.mkdir()
+        (out / "manifest.json").write_text("[" * 100_000)
     elif case == "extra file":
         shutil.copytree(tiny_models["boxes_bundle"], out)
         (out / "notes.txt").write_text("mine\n")
