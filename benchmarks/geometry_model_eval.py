@@ -39,7 +39,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.datasets.cvmhat import (
+    IMAGE_SIZE,
+    default_cvmhat_dir,
+    read_sequence,
+    sequence_names,
+    site_of,
+)
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes, shift_frames
 from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
@@ -47,7 +53,6 @@ from xvmatch.geometry.spatial_search import associate_sequence
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
-from xvmatch.training.box_datamodule import site_of
 from xvmatch.training.fit_geometry import fit_geometry_cvmhat, peak_memory_mb
 
 SITES = ("canteen", "55", "square")

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from pathlib import Path
 
 from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes
 
-__all__ = ["IMAGE_SIZE", "default_cvmhat_dir", "read_sequence", "sequence_names"]
+__all__ = ["IMAGE_SIZE", "default_cvmhat_dir", "read_sequence", "sequence_names", "site_of"]
 
 IMAGE_SIZE = (2688, 1512)
 """Width and height of both CVMHAT views, in pixels."""
@@ -30,6 +31,14 @@ def sequence_names(folder: str | os.PathLike) -> list[str]:
         for p in folder.glob("*_top.txt")
         if (folder / p.name.replace("_top.txt", "_hor.txt")).exists()
     )
+
+
+def site_of(name: str) -> str:
+    """Site of a CVMHAT sequence name: ``V0-S_canteen_0-G_1`` -> ``canteen``."""
+    match = re.search(r"S_([A-Za-z0-9]+)", name)
+    if not match:
+        raise ValueError(f"cannot read the site of sequence {name!r} (expected '...S_<site>...')")
+    return match.group(1)
 
 
 def read_sequence(

@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from xvmatch.datasets.box_scene import write_box_scene
+from xvmatch.datasets.cvmhat import site_of
 from xvmatch.geometry.spatial_features import FeatureConfig
 from xvmatch.models.geometry_encoder import GeometryEncoder
 from xvmatch.models.matcher_file import load_matcher
@@ -19,7 +20,6 @@ from xvmatch.training.box_datamodule import (
     CvmhatBoxDataModule,
     SimBoxDataModule,
     random_scene_config,
-    site_of,
 )
 from xvmatch.training.fit_geometry import fit_geometry
 from xvmatch.training.geometry_module import GeometryMatchingModule

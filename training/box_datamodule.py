@@ -24,7 +24,6 @@ Every random choice is seeded by ``seed``.
 from __future__ import annotations
 
 import json
-import re
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
@@ -36,7 +35,13 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.datasets.cvmhat import (
+    IMAGE_SIZE,
+    default_cvmhat_dir,
+    read_sequence,
+    sequence_names,
+    site_of,
+)
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.feature_cache import (
     FeatureSet,
@@ -67,17 +72,8 @@ __all__ = [
     "labelled_sequence",
     "random_image_size",
     "random_scene_config",
-    "site_of",
     "training_offset",
 ]
-
-
-def site_of(name: str) -> str:
-    """Site of a CVMHAT sequence name: ``V0-S_canteen_0-G_1`` -> ``canteen``."""
-    match = re.search(r"S_([A-Za-z0-9]+)", name)
-    if not match:
-        raise ValueError(f"cannot read the site of sequence {name!r} (expected '...S_<site>...')")
-    return match.group(1)
 
 
 @dataclass(frozen=True, eq=False)

@@ -137,7 +137,6 @@ def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
     with ``size`` (``--image-size``) each box must lie in it, and boxes of another size are
     scaled to 2688 pixels wide into ``scratch`` (the features are resolution-free); without it
     the boxes must be consistent with 2688x1512. Else one error line."""
-    import re
     import shutil
     import warnings
     from pathlib import Path
@@ -149,7 +148,7 @@ def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
         check_boxes_in_image,
         consistent_with,
     )
-    from xvmatch.datasets.cvmhat import sequence_names
+    from xvmatch.datasets.cvmhat import sequence_names, site_of
     from xvmatch.datasets.mot_boxes import read_mot_boxes, scale_frames, write_mot_boxes
 
     if size is not None and abs(size[1] * CVMHAT_SIZE[0] / size[0] - CVMHAT_SIZE[1]) > 0.02 * \
@@ -160,8 +159,7 @@ def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
     want = tuple(size) if size is not None else CVMHAT_SIZE
     names, right, widest = [], 0.0, {}
     for name in sequence_names(folder):
-        site = re.search(r"S_([A-Za-z0-9]+)", name)
-        if sites and (site is None or site.group(1) not in sites):
+        if sites and site_of(name) not in sites:
             continue
         path = Path(folder) / f"{name}_hor.txt"
         with warnings.catch_warnings():
