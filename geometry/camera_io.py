@@ -16,6 +16,8 @@ File format (version 1)::
 The convention is that of :class:`~xvmatch.geometry.camera.Camera` and Eq. 4 of the
 geometric-priors paper, ``lambda [u, v, 1]^T = K R (X - c)``. Camera names are free strings;
 the pipeline uses ``"top"`` (static overview camera) and ``"ego"`` (egocentric camera).
+A camera may instead be ``{"H": [[...]], "width": W, "height": H}``, an image -> ground
+homography (:func:`load_ground_cameras` only, for ``xvmatch multicam``).
 Unknown keys are rejected so that a typo (``"k"`` for ``"K"``) cannot go unnoticed.
 
 Every error is a :class:`CameraFileError` whose message starts with the file and the field,
@@ -35,12 +37,15 @@ from typing import Any
 import numpy as np
 
 from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.geometry.json_text import parse_json
 
-__all__ = ["FORMAT_VERSION", "CameraFileError", "load_cameras", "save_cameras"]
+__all__ = ["FORMAT_VERSION", "CameraFileError", "load_cameras", "load_ground_cameras",
+           "save_cameras"]
 
 FORMAT_VERSION = 1
 _CAMERA_FIELDS = ("K", "R", "c", "width", "height")
+_H_FIELDS = ("H", "width", "height")
 _TOP_FIELDS = ("version", "cameras")
 
 
@@ -77,6 +82,9 @@ def _size(value: Any, where: str) -> int:
 
 
 def _camera(record: Any, where: str) -> Camera:
+    if isinstance(record, dict) and "H" in record:
+        raise CameraFileError(f"{where}: a homography camera (H); this command needs K, R, c "
+                              "(only multicam reads H cameras)")
     if not isinstance(record, dict):
         raise CameraFileError(f"{where}: expected an object with {', '.join(_CAMERA_FIELDS)}")
     unknown = sorted(set(record) - set(_CAMERA_FIELDS))
@@ -103,6 +111,47 @@ def _camera(record: Any, where: str) -> Camera:
     return Camera(K=K, R=R, c=c, width=width, height=height)
 
 
+def _ground_camera(record: Any, where: str) -> GroundCamera:
+    """A camera record of either form (``K, R, c`` or ``H``) as a :class:`GroundCamera`."""
+    if not (isinstance(record, dict) and "H" in record):
+        cam = _camera(record, where)
+        try:
+            return GroundCamera.from_camera(cam)
+        except ValueError as exc:
+            raise CameraFileError(f"{where}: {exc}") from None
+    unknown = sorted(set(record) - set(_H_FIELDS))
+    if unknown:
+        raise CameraFileError(f"{where}: unknown field(s) {', '.join(unknown)} (a homography "
+                              f"camera has {', '.join(_H_FIELDS)}; K, R, c go without H)")
+    missing = [k for k in _H_FIELDS if k not in record]
+    if missing:
+        raise CameraFileError(f"{where}: missing field(s) {', '.join(missing)}")
+    H = _matrix(record["H"], 3, 3, f"{where}.H")
+    width = _size(record["width"], f"{where}.width")
+    height = _size(record["height"], f"{where}.height")
+    try:
+        return GroundCamera(H, width, height)
+    except ValueError as exc:
+        raise CameraFileError(f"{where}.H: {exc}") from None
+
+
+def load_ground_cameras(path: str | os.PathLike[str]) -> dict[str, GroundCamera]:
+    """Read named static cameras of either form for the ground plane (``xvmatch multicam``).
+
+    A camera is ``K, R, c, width, height`` as in :func:`load_cameras`, or ``H, width, height``
+    with ``H`` the image -> ground homography (``[X, Y, 1]^T ~ H [u, v, 1]^T``, metres,
+    ground z = 0; :mod:`xvmatch.geometry.ground_plane`). Version 1, the same file otherwise.
+
+    Returns:
+        ``{name: GroundCamera}`` in file order.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        CameraFileError: as :func:`load_cameras`; a singular or non-finite ``H`` too.
+    """
+    return _load(path, _ground_camera, ())
+
+
 def load_cameras(
     path: str | os.PathLike[str], *, required: Iterable[str] = ()
 ) -> dict[str, Camera]:
@@ -120,6 +169,11 @@ def load_cameras(
         CameraFileError: invalid JSON, wrong version, or an invalid field; the message is
             ``"<file>: <field path>: <problem>"``.
     """
+    return _load(path, _camera, required)
+
+
+def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str]) -> dict:
+    """The version-1 file with each camera record read by ``parse(record, where)``."""
     name = os.fspath(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -143,7 +197,7 @@ def load_cameras(
         cams = data.get("cameras")
         if not isinstance(cams, dict) or not cams:
             raise CameraFileError("cameras: expected a non-empty object {name: camera}")
-        cameras = {str(key): _camera(rec, f"cameras.{key}") for key, rec in cams.items()}
+        cameras = {str(key): parse(rec, f"cameras.{key}") for key, rec in cams.items()}
         missing = [k for k in required if k not in cameras]
         if missing:
             raise CameraFileError(
@@ -155,7 +209,8 @@ def load_cameras(
     return cameras
 
 
-def save_cameras(path: str | os.PathLike[str], cameras: Mapping[str, Camera]) -> None:
+def save_cameras(path: str | os.PathLike[str],
+                 cameras: Mapping[str, Camera | GroundCamera]) -> None:
     """Write named cameras to a version-1 camera file, atomically.
 
     The JSON is written to a temporary file in the destination directory, flushed to disk and
@@ -164,7 +219,8 @@ def save_cameras(path: str | os.PathLike[str], cameras: Mapping[str, Camera]) ->
 
     Args:
         path: destination file; its directory must exist.
-        cameras: ``{name: Camera}``, at least one, names non-empty strings.
+        cameras: ``{name: Camera}``, at least one, names non-empty strings; a
+            :class:`GroundCamera` is written as its ``Camera`` when it has one, else as ``H``.
 
     Raises:
         CameraFileError: no cameras, a bad name, or a value that is not a Camera.
@@ -177,6 +233,11 @@ def save_cameras(path: str | os.PathLike[str], cameras: Mapping[str, Camera]) ->
     for key, cam in cameras.items():
         if not isinstance(key, str) or not key:
             raise CameraFileError(f"{name}: cameras: names must be non-empty strings, got {key!r}")
+        if isinstance(cam, GroundCamera):  # an H camera, or the Camera it was made from
+            if cam.camera is None:
+                records[key] = {"H": cam.H.tolist(), "width": cam.width, "height": cam.height}
+                continue
+            cam = cam.camera
         if not isinstance(cam, Camera):
             raise CameraFileError(f"{name}: cameras.{key}: expected a Camera, got {type(cam)}")
         for field in ("K", "R", "c"):

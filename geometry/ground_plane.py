@@ -1,0 +1,256 @@
+"""The ground plane z = 0 seen by static cameras: pixel <-> ground homographies, foot points.
+
+A camera sees the ground through a plane homography. Written image -> ground, as the camera file
+stores it (``docs/formats.md``), ``[X, Y, 1]^T ~ H [u, v, 1]^T`` with ``(X, Y)`` metres on the
+ground z = 0. For a calibrated camera (Eq. 4 of the geometric-priors paper,
+``lambda [u, v, 1]^T = K R (X - c)``) the ground -> image map is ``G = K [r1, r2, -R c]``
+(``r1``, ``r2`` the first two columns of ``R``) and ``H = G^-1``; Eq. 1 of the
+trajectory-correspondence paper projects each track point to the ground with it.
+
+Sign convention. ``H`` and ``-H`` are the same homography, but the sign of the third coordinate
+``w`` of ``H [u, v, 1]^T`` tells the ground in front of the camera (``w > 0``) from the part of
+the image above the horizon, whose rays never meet the ground in front (``w < 0``); ``w = 0`` is
+the horizon. With ``H = G^-1`` of a calibrated camera, ``w = 1 / depth`` of the ground point.
+:func:`normalise_homography` fixes the sign of a user's ``H`` so that the bottom-centre pixel of
+the image, which sees the floor in any camera that watches people walk, has ``w > 0``.
+:func:`image_to_ground` refuses (or flags) pixels at or above the horizon, and those whose
+ground point is farther than ``max_range`` metres (numerically at the horizon).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from xvmatch.geometry.array_checks import as_points
+from xvmatch.geometry.camera import Camera
+
+__all__ = [
+    "MAX_RANGE",
+    "GroundCamera",
+    "HorizonError",
+    "fit_homography",
+    "foot_points",
+    "ground_from_camera",
+    "ground_to_image",
+    "image_to_ground",
+    "normalise_homography",
+]
+
+MAX_RANGE = 1e4
+"""Largest distance (metres) of a ground point from the world origin that counts as finite: a
+foot point beyond it lies numerically at the horizon (10 km is beyond any floor a camera sees)."""
+
+_COND_LIMIT = 1e12
+
+
+class HorizonError(ValueError):
+    """A pixel at or above a camera's horizon: it meets the ground behind the camera or at
+    infinity. The message names the point's index."""
+
+
+def _check_h(H: np.ndarray, name: str = "H") -> np.ndarray:
+    """``H`` as a finite, invertible (3, 3) float array; ValueError naming ``name`` otherwise."""
+    H = np.asarray(H, dtype=float)
+    if H.shape != (3, 3):
+        raise ValueError(f"{name} must be a 3x3 matrix, got shape {H.shape}")
+    if not np.isfinite(H).all():
+        raise ValueError(f"{name} contains NaN or inf")
+    scale = np.abs(H).max()
+    if scale == 0 or np.linalg.cond(H / scale) > _COND_LIMIT:
+        raise ValueError(f"{name} is singular (condition number above {_COND_LIMIT:.0e}); "
+                         "refit it from four or more image/ground point pairs, no three in line")
+    return H
+
+
+def normalise_homography(H: np.ndarray, width: int, height: int) -> np.ndarray:
+    """``H`` (image -> ground) scaled to unit Frobenius norm, signed so that the bottom-centre
+    pixel ``(width / 2, height)`` of the image has ``w > 0`` (see the module docstring).
+
+    Args:
+        H: (3, 3) image -> ground homography.
+        width, height: image size in pixels.
+
+    Returns:
+        (3, 3) the same homography, normalised.
+
+    Raises:
+        ValueError: ``H`` not finite, singular, or the bottom-centre pixel on the horizon.
+    """
+    H = _check_h(H)
+    H = H / np.linalg.norm(H)
+    w = H[2] @ np.array([width / 2.0, float(height), 1.0])
+    if abs(w) < 1e-12 * np.abs(H[2]).sum() * max(width, height, 1):
+        raise ValueError("H puts the bottom-centre pixel of the image on the horizon; the "
+                         "camera must see the floor at the bottom of its image")
+    return H if w > 0 else -H
+
+
+@dataclass(frozen=True, eq=False)
+class GroundCamera:
+    """A static camera as the ground plane sees it: its image -> ground homography, and its
+    pinhole calibration when the camera file gives ``K, R, c``.
+
+    Attributes:
+        H: (3, 3) image -> ground homography, normalised (:func:`normalise_homography`).
+        width, height: image size in pixels.
+        camera: the full :class:`~xvmatch.geometry.camera.Camera`, or None for an ``H`` camera
+            (then the camera centre and the vertical direction are unknown).
+    """
+
+    H: np.ndarray
+    width: int
+    height: int
+    camera: Camera | None = None
+    G: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
+        H = normalise_homography(self.H, int(self.width), int(self.height))
+        object.__setattr__(self, "H", H)
+        object.__setattr__(self, "G", np.linalg.inv(H))
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+
+    @classmethod
+    def from_camera(cls, camera: Camera) -> GroundCamera:
+        """The ground view of a calibrated camera (``H = G^-1``, ``G = K [r1, r2, -R c]``)."""
+        return cls(ground_from_camera(camera), camera.width, camera.height, camera)
+
+    def to_ground(self, uv: np.ndarray, max_range: float = MAX_RANGE) -> tuple[np.ndarray,
+                                                                               np.ndarray]:
+        """Ground points ``(..., 2)`` of pixels ``(..., 2)`` and their validity mask ``(...)``
+        (:func:`image_to_ground` with ``strict=False``)."""
+        return image_to_ground(self.H, uv, max_range=max_range, strict=False)
+
+    def to_image(self, xy: np.ndarray) -> np.ndarray:
+        """Pixels ``(..., 2)`` of ground points ``(..., 2)`` (NaN behind the camera)."""
+        return ground_to_image(self.G, xy)
+
+    def ground_footprint(self, max_range: float = 60.0) -> np.ndarray:
+        """The part of the ground this camera sees, as a polygon ``(P, 2)`` in metres: the
+        image border sampled and projected, cut at the horizon and at ``max_range`` metres
+        from the camera's nearest visible ground point (for drawing fields of view)."""
+        t = np.linspace(0.0, 1.0, 33)[:-1]
+        W, Hh = float(self.width), float(self.height)
+        border = np.concatenate([
+            np.stack([t * W, np.zeros_like(t)], 1), np.stack([np.full_like(t, W), t * Hh], 1),
+            np.stack([(1 - t) * W, np.full_like(t, Hh)], 1), np.stack([np.zeros_like(t),
+                                                                     (1 - t) * Hh], 1)])
+        hom = np.concatenate([border, np.ones((len(border), 1))], 1) @ self.H.T
+        w = hom[:, 2]
+        near = (self.H @ np.array([W / 2, Hh, 1.0]))
+        anchor = near[:2] / near[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = hom[:, :2] / w[:, None]
+        # Beyond the horizon or too far: pull the point in along its direction from the anchor.
+        direction = np.where((w > 0)[:, None], xy - anchor, -hom[:, :2])
+        dist = np.linalg.norm(direction, axis=1)
+        far = (w <= 0) | (dist > max_range)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            clipped = anchor + direction / dist[:, None] * max_range
+        return np.where(far[:, None], clipped, xy)
+
+
+def ground_from_camera(camera: Camera) -> np.ndarray:
+    """Image -> ground homography ``H = (K [r1, r2, -R c])^-1`` of a calibrated camera, for the
+    ground plane z = 0, normalised (Eq. 4 of the geometric-priors paper restricted to z = 0).
+
+    Raises:
+        ValueError: the camera centre lies on the ground plane (the homography is singular).
+    """
+    G = camera.K @ np.column_stack([camera.R[:, 0], camera.R[:, 1], -camera.R @ camera.c])
+    try:
+        return normalise_homography(np.linalg.inv(_check_h(G, "K [r1, r2, -R c]")),
+                                    camera.width, camera.height)
+    except np.linalg.LinAlgError:
+        raise ValueError("the camera centre lies on the ground plane: no ground homography") \
+            from None
+
+
+def image_to_ground(H: np.ndarray, uv: np.ndarray, max_range: float = MAX_RANGE,
+                    strict: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels to the ground, ``[X, Y, 1]^T ~ H [u, v, 1]^T`` (Eq. 1 of the
+    trajectory-correspondence paper).
+
+    Args:
+        H: (3, 3) image -> ground homography, normalised (:func:`normalise_homography`).
+        uv: ``(..., 2)`` pixels.
+        max_range: ground points farther than this from the origin (metres) are at the horizon.
+        strict: raise :class:`HorizonError` on the first invalid point instead of flagging it.
+
+    Returns:
+        (xy, ok): ``(..., 2)`` ground points in metres (NaN where not ok) and the ``(...)``
+        mask of points below the horizon within ``max_range``.
+
+    Raises:
+        HorizonError: with ``strict``, a pixel at or above the horizon, or beyond ``max_range``;
+            the message gives its flat index and pixel.
+    """
+    pts = as_points(uv, 2, "uv")
+    hom = pts @ H[:, :2].T + H[:, 2]
+    w = hom[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xy = hom[..., :2] / w[..., None]
+    ok = (w > 0) & np.isfinite(xy).all(axis=-1)
+    ok &= np.where(ok, np.linalg.norm(np.where(ok[..., None], xy, 0.0), axis=-1), np.inf) \
+        <= max_range
+    if strict and not ok.all():
+        k = int(np.flatnonzero(~ok.reshape(-1))[0])
+        u, v = pts.reshape(-1, 2)[k]
+        where = "behind the camera (above the horizon)" if w.reshape(-1)[k] <= 0 else \
+            f"at the horizon (farther than {max_range:g} m)"
+        raise HorizonError(f"point {k} ({u:.1f}, {v:.1f}) projects to the ground {where}")
+    return np.where(ok[..., None], xy, np.nan), ok
+
+
+def ground_to_image(G: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Ground points ``(..., 2)`` (metres, z = 0) to pixels with the ground -> image map
+    ``G = H^-1``; points behind the camera (``w <= 0``) give NaN."""
+    pts = as_points(xy, 2, "xy")
+    hom = pts @ G[:, :2].T + G[:, 2]
+    w = hom[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = hom[..., :2] / w[..., None]
+    return np.where((w > 0)[..., None], uv, np.nan)
+
+
+def foot_points(boxes_xywh: np.ndarray) -> np.ndarray:
+    """Foot pixels ``(N, 2)`` of boxes ``(N, 4)`` ``x, y, w, h``: the bottom-centre
+    ``(x + w / 2, y + h)``, where a standing person touches the ground."""
+    b = np.asarray(boxes_xywh, dtype=float).reshape(-1, 4)
+    return np.stack([b[:, 0] + 0.5 * b[:, 2], b[:, 1] + b[:, 3]], axis=1)
+
+
+def fit_homography(image_points: np.ndarray, ground_points: np.ndarray, width: int,
+                   height: int) -> np.ndarray:
+    """Image -> ground homography from four or more pixel / ground point pairs (OpenCV's
+    ``findHomography``, least squares over all pairs), normalised.
+
+    Args:
+        image_points: ``(P, 2)`` pixels (lens distortion already removed).
+        ground_points: ``(P, 2)`` the same points on the ground, metres.
+        width, height: image size in pixels.
+
+    Returns:
+        (3, 3) ``H`` with ``[X, Y, 1]^T ~ H [u, v, 1]^T``.
+
+    Raises:
+        ValueError: fewer than four pairs, non-finite values, or a degenerate configuration
+            (three or more points in line, repeated points).
+    """
+    import cv2
+
+    img = as_points(image_points, 2, "image_points", finite=True).reshape(-1, 2)
+    gnd = as_points(ground_points, 2, "ground_points", finite=True).reshape(-1, 2)
+    if img.shape != gnd.shape:
+        raise ValueError(f"image_points and ground_points differ in number: {len(img)} and "
+                         f"{len(gnd)}")
+    if len(img) < 4:
+        raise ValueError(f"a homography needs at least 4 point pairs, got {len(img)}")
+    H, _ = cv2.findHomography(img.astype(np.float64), gnd.astype(np.float64), 0)
+    if H is None or not np.isfinite(H).all():
+        raise ValueError("no homography fits these points (three or more in line, or repeated)")
+    return normalise_homography(H, width, height)
