@@ -17,18 +17,39 @@ drone views at random resolutions) can join the training set in the ``boxes`` se
 matcher keeps what the box-only model learnt. Ids only build the labels: the same id in both
 views is a match; the top-view id 0 (the camera wearer) labels the hypotheses. Geometry
 features are cached on disk (:func:`~xvmatch.datasets.feature_cache.cached_frame_features`).
+
+**Corrupted appearance** (:class:`AppCorruption`, issue 31; off by default): a frame that uses
+the ``app`` cue is given, with a seeded probability, appearance costs that cannot be trusted, so
+a matcher with an appearance confidence learns when to ignore them. The kinds
+(:data:`CORRUPTIONS`):
+
+* ``"shift"``: the costs of the same boxes on camera-shifted images
+  (:func:`~xvmatch.datasets.camera_shift.camera_shift`, both views, a strength drawn per frame
+  up to 3, one camera per image or per view; computed once per trial by
+  :class:`ShiftedCoster`);
+* ``"swap"``: the crops of one view swapped among its people (a random permutation of the
+  cost matrix's rows or columns);
+* ``"random"``: the costs of random unit embeddings (``|a - b| / 2`` of Gaussian directions).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+import zlib
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
 from xvmatch.datasets.feature_cache import FrameJob, cached_frame_features
-from xvmatch.datasets.pair_trials import PairTrial, TrialConfig, dataset_trials
+from xvmatch.datasets.pair_trials import (
+    PairTrial,
+    TrialConfig,
+    dataset_trials,
+    open_dataset,
+    scene_samples,
+)
 from xvmatch.geometry.matcher_inputs import (
     CUE_NAMES,
     INPUT_SETTINGS,
@@ -41,16 +62,149 @@ from xvmatch.geometry.spatial_features import (
     FrameFeatures,
     camera_labels,
 )
-from xvmatch.models.appearance_net import appearance_from_weights
+from xvmatch.models.appearance_net import AppearanceNet, appearance_from_weights
 from xvmatch.training.appearance_costs import AppearanceCoster
 from xvmatch.training.box_datamodule import FrameDataModule, LabelledFrames, SimBoxDataModule
 
-__all__ = ["VARIANTS", "FrameItems", "SyntheticMatcherDataModule", "trial_frames"]
+__all__ = [
+    "CORRUPTIONS",
+    "VARIANTS",
+    "AppCorruption",
+    "FrameItems",
+    "ShiftedCoster",
+    "SyntheticMatcherDataModule",
+    "corrupt_app",
+    "shifted_app_costs",
+    "trial_frames",
+]
 
 VARIANTS = INPUT_SETTINGS
 """Input settings trained on (:data:`~xvmatch.geometry.matcher_inputs.INPUT_SETTINGS`)."""
 
 Item = tuple[FrameFeatures, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+CORRUPTIONS: tuple[str, ...] = ("shift", "swap", "random")
+"""The kinds of corrupted appearance costs (module docstring)."""
+
+
+@dataclass(frozen=True)
+class AppCorruption:
+    """How often and how frames with the ``app`` cue get corrupted appearance costs.
+
+    Attributes:
+        probability: chance that one such frame is corrupted (0: never, the default).
+        kinds: which of :data:`CORRUPTIONS` to draw from.
+        weights: relative chance of each kind (same length as ``kinds``).
+        max_strength: strongest camera shift of ``"shift"`` (at most 3).
+        min_strength: weakest camera shift of ``"shift"``.
+        embedding_dim: dimension of the random unit embeddings of ``"random"``.
+        seed: seed of every draw (which frames, which kind, the permutations, the embeddings,
+            the shifted cameras).
+    """
+
+    probability: float = 0.0
+    kinds: tuple[str, ...] = CORRUPTIONS
+    weights: tuple[float, ...] = (0.6, 0.2, 0.2)
+    max_strength: float = MAX_STRENGTH
+    min_strength: float = 0.5
+    embedding_dim: int = 128
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= float(self.probability) <= 1.0:
+            raise ValueError(f"probability must be in [0, 1], got {self.probability}")
+        unknown = [k for k in self.kinds if k not in CORRUPTIONS]
+        if unknown or not self.kinds:
+            raise ValueError(f"kinds must be among {', '.join(CORRUPTIONS)}, got "
+                             f"{list(self.kinds)}")
+        if len(self.weights) != len(self.kinds) or min(self.weights) < 0 or sum(
+                self.weights) <= 0:
+            raise ValueError(f"weights must be {len(self.kinds)} non-negative numbers with a "
+                             f"positive sum, got {list(self.weights)}")
+        if not 0.0 < self.min_strength <= self.max_strength <= MAX_STRENGTH:
+            raise ValueError("strengths must satisfy 0 < min_strength <= max_strength <= "
+                             f"{MAX_STRENGTH:g}, got {self.min_strength}, {self.max_strength}")
+        if int(self.embedding_dim) < 2:
+            raise ValueError(f"embedding_dim must be >= 2, got {self.embedding_dim}")
+
+
+def corrupt_app(app: np.ndarray, kind: str, rng: np.random.Generator,
+                shifted: np.ndarray | None = None, embedding_dim: int = 128) -> np.ndarray:
+    """Corrupted ``(M, N)`` appearance costs of one frame (module docstring).
+
+    Args:
+        app: the clean costs.
+        kind: one of :data:`CORRUPTIONS`.
+        rng: the frame's random generator.
+        shifted: the costs of the camera-shifted images (needed by ``"shift"``).
+        embedding_dim: dimension of the random unit embeddings (``"random"``).
+    """
+    app = np.asarray(app, dtype=np.float64)
+    m, n = app.shape
+    if kind == "shift":
+        if shifted is None or np.shape(shifted) != (m, n):
+            raise ValueError("the 'shift' corruption needs the shifted images' costs of the "
+                             f"same shape {(m, n)}")
+        return np.asarray(shifted, dtype=np.float64)
+    if kind == "swap":
+        if rng.random() < 0.5:
+            return app[rng.permutation(m)]
+        return app[:, rng.permutation(n)]
+    if kind == "random":
+        a = rng.standard_normal((m, embedding_dim))
+        b = rng.standard_normal((n, embedding_dim))
+        a /= np.linalg.norm(a, axis=1, keepdims=True)
+        b /= np.linalg.norm(b, axis=1, keepdims=True)
+        return np.linalg.norm(a[:, None] - b[None], axis=-1) / 2.0
+    raise ValueError(f"kind must be one of {', '.join(CORRUPTIONS)}, got {kind!r}")
+
+
+class ShiftedCoster:
+    """An appearance coster whose images first go through :func:`camera_shift`.
+
+    The strength (uniform in ``[min_strength, max_strength]``), whether each image or each
+    view draws its own camera (``per_image``, half the frames each) and the cameras' seeds come
+    from ``seed`` and the two images' bytes, so a frame's ground-truth and detector-noise trials
+    see the same pictures, and every run the same.
+
+    Args:
+        coster: ``coster(top_image, top_boxes, ego_image, ego_boxes) -> (M, N)``.
+        seed: seed of the draws.
+        min_strength, max_strength: range of the strength.
+    """
+
+    def __init__(self, coster: Callable[..., np.ndarray], seed: int = 0,
+                 min_strength: float = 0.5, max_strength: float = MAX_STRENGTH) -> None:
+        self.coster = coster
+        self.seed = int(seed)
+        self.min_strength, self.max_strength = float(min_strength), float(max_strength)
+
+    def __call__(self, top_image: np.ndarray, top_boxes: np.ndarray, ego_image: np.ndarray,
+                 ego_boxes: np.ndarray) -> np.ndarray:
+        """``(M, N)`` costs of the boxes on the shifted images."""
+        crc = [zlib.crc32(np.ascontiguousarray(im).tobytes()) for im in (top_image, ego_image)]
+        rng = np.random.default_rng([self.seed, *crc])
+        strength = float(rng.uniform(self.min_strength, self.max_strength))
+        per_image = bool(rng.random() < 0.5)
+        seeds = rng.integers(0, 2**31, size=2)
+        return self.coster(camera_shift(top_image, strength, int(seeds[0]), per_image),
+                           top_boxes,
+                           camera_shift(ego_image, strength, int(seeds[1]), per_image),
+                           ego_boxes)
+
+
+def shifted_app_costs(data: str | os.PathLike, config: TrialConfig, settings: Sequence[str],
+                      coster: Callable[..., np.ndarray]) -> list[np.ndarray]:
+    """The appearance costs of :func:`~xvmatch.datasets.pair_trials.dataset_trials`'s trials
+    (same order, same boxes) through another ``coster`` (e.g. a :class:`ShiftedCoster`),
+    without the handcrafted cues."""
+    dataset = open_dataset(data)
+    out = []
+    for index, name in enumerate(dataset.scene_names):
+        for fs in scene_samples(dataset.scene(name), index, config, settings):
+            out.append(coster(fs.images["top"], fs.boxes["top"], fs.images["ego"],
+                              fs.boxes["ego"]))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,6 +253,9 @@ def trial_frames(
     cache_dir: str | os.PathLike | None = None,
     workers: int = 1,
     wearer_id: int = 0,
+    corruption: AppCorruption | None = None,
+    shifted_app: Sequence[np.ndarray] | None = None,
+    corruption_stream: int = 0,
 ) -> list[Item]:
     """Training frames of trials in each of ``variants`` (see the module docstring).
 
@@ -110,10 +267,23 @@ def trial_frames(
         cache_dir: feature cache folder.
         workers: processes computing the features.
         wearer_id: top-view id of the camera wearer (labels only).
+        corruption: corrupted appearance of frames with ``app`` (None or probability 0: none).
+            Each frame and variant draws from its own generator, seeded by (``corruption.
+            seed``, ``corruption_stream``, trial index, variant index).
+        shifted_app: per trial, the costs on shifted images (needed by the ``"shift"`` kind).
+        corruption_stream: keeps the draws of different trial lists apart (e.g. one per
+            dataset folder and setting).
     """
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"variants must be among {', '.join(VARIANTS)}, got {unknown}")
+    corrupting = corruption is not None and corruption.probability > 0
+    if corrupting and "shift" in corruption.kinds and (
+            shifted_app is None or len(shifted_app) != len(trials)):
+        raise ValueError("the 'shift' corruption needs shifted_app, one cost matrix per trial")
+    if corrupting:
+        kind_p = np.asarray(corruption.weights, dtype=np.float64)
+        kind_p = kind_p / kind_p.sum()
     rectified = any(VARIANTS[v][1] for v in variants)
     plain = any(not VARIANTS[v][1] for v in variants)
     jobs = {}
@@ -128,16 +298,25 @@ def trial_frames(
     for k, t in enumerate(trials):
         match_input = t.match()
         m, n = match_input.shape
-        for variant in variants:
+        for v_index, variant in enumerate(variants):
             cues_of, rect = VARIANTS[variant]
             feats = jobs["rectified" if rect else "plain"][k]
             wanted = [c for c in cues_of if c in names]
             if "app" in wanted and t.app is None:
                 raise ValueError(f"{t.scene}/{t.frame}: the {variant!r} setting needs "
                                  "appearance costs; build the trials with a coster")
+            app = t.app if "app" in wanted else None
+            if app is not None and corrupting:
+                rng = np.random.default_rng(
+                    [int(corruption.seed), int(corruption_stream), k, v_index])
+                if rng.random() < corruption.probability:
+                    kind = corruption.kinds[int(rng.choice(len(corruption.kinds), p=kind_p))]
+                    app = corrupt_app(app, kind, rng,
+                                      None if shifted_app is None else shifted_app[k],
+                                      corruption.embedding_dim)
             cues, mask = frame_cues(
                 (m, n), names,
-                app=t.app if "app" in wanted else None,
+                app=app,
                 ray_distance=t.costs.geo if "ray" in wanted else None,
                 cheirality=t.costs.cheirality if "cheir" in wanted else None,
             )
@@ -170,13 +349,16 @@ class SyntheticMatcherDataModule(FrameDataModule):
         cache_dir: feature cache folder.
         workers: processes computing the features.
         seed: seed of the batch order.
+        corruption: corrupted appearance costs of training frames (None: none, the default).
+        corrupt_val: corrupt the validation frames too (with ``corruption``'s probability and
+            kinds, other draws), so the best epoch is the best on clean and corrupted frames.
     """
 
     def __init__(
         self,
         train_data: str | Sequence[str],
         val_data: str | Sequence[str],
-        appearance_weights: str | None = None,
+        appearance_weights: str | AppearanceNet | None = None,
         feature_config: FeatureConfig | None = None,
         cues: Sequence[str] = CUE_NAMES,
         variants: Sequence[str] = tuple(VARIANTS),
@@ -187,6 +369,8 @@ class SyntheticMatcherDataModule(FrameDataModule):
         cache_dir: str | None = None,
         workers: int = 1,
         seed: int = 0,
+        corruption: AppCorruption | None = None,
+        corrupt_val: bool = False,
     ) -> None:
         super().__init__(batch_size, seed)
         self.train_folders = _folders(train_data)
@@ -202,12 +386,24 @@ class SyntheticMatcherDataModule(FrameDataModule):
         self.sim = sim
         self.cache_dir = cache_dir
         self.workers = workers
+        self.corruption = corruption
+        self.corrupt_val = bool(corrupt_val)
 
     def _frames(self, folder: str, config: TrialConfig, settings: tuple[str, ...], coster,
-                name: str) -> FrameItems:
+                name: str, corrupt: bool = False) -> FrameItems:
         trials = dataset_trials(folder, config, settings, coster)
+        corruption = self.corruption if corrupt and coster is not None else None
+        shifted = None
+        stream = len(self.train_parts) + 1000 * len(self.val_parts) + (
+            10**6 if name.endswith("/val") else 0)
+        if corruption is not None and corruption.probability > 0 and (
+                "shift" in corruption.kinds):
+            shifted = shifted_app_costs(folder, config, settings, ShiftedCoster(
+                coster, seed=corruption.seed + stream, min_strength=corruption.min_strength,
+                max_strength=corruption.max_strength))
         items = trial_frames(trials, self.feature_config, self.cues, self.variants,
-                             self.cache_dir, self.workers)
+                             self.cache_dir, self.workers, corruption=corruption,
+                             shifted_app=shifted, corruption_stream=stream)
         return FrameItems(items, name)
 
     def setup(self, stage: str | None = None) -> None:
@@ -216,17 +412,20 @@ class SyntheticMatcherDataModule(FrameDataModule):
             return
         coster = None
         if "app" in self.cues:
-            coster = AppearanceCoster(appearance_from_weights(self.appearance_weights))
+            net = self.appearance_weights
+            coster = AppearanceCoster(net if isinstance(net, AppearanceNet)
+                                      else appearance_from_weights(net))
         for folder in self.train_folders:
             gt = TrialConfig(scramble_seed=self.scramble_seed)
-            self.train_parts.append(self._frames(folder, gt, ("gt",), coster, f"{folder}/gt"))
+            self.train_parts.append(
+                self._frames(folder, gt, ("gt",), coster, f"{folder}/gt", corrupt=True))
             for s in self.noise_seeds:
                 det = TrialConfig(noise_seed=s, scramble_seed=self.scramble_seed)
-                self.train_parts.append(
-                    self._frames(folder, det, ("det",), coster, f"{folder}/noise{s}"))
+                self.train_parts.append(self._frames(folder, det, ("det",), coster,
+                                                     f"{folder}/noise{s}", corrupt=True))
         for folder in self.val_folders:
-            self.val_parts.append(
-                self._frames(folder, TrialConfig(), ("gt", "det"), coster, f"{folder}/val"))
+            self.val_parts.append(self._frames(folder, TrialConfig(), ("gt", "det"), coster,
+                                               f"{folder}/val", corrupt=self.corrupt_val))
         if self.sim is not None:
             self.sim.setup(stage)
             self.train_parts += [_BoxOnly(p, len(self.cues)) for p in self.sim.train_parts]

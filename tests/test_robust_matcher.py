@@ -1,0 +1,260 @@
+"""The matcher that appearance cannot drag down (issue 31): the appearance confidence of
+``CrossViewMatcher(app_confidence=True)`` and the corrupted appearance of the matcher's
+training frames (``training/matcher_datamodule.py``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from tests.conftest import TINY_APPEARANCE, TINY_GEOMETRY
+from xvmatch.datasets.pair_trials import TrialConfig, dataset_trials
+from xvmatch.geometry.spatial_features import (
+    HOR_FEATURES,
+    HYP_FEATURES,
+    PAIR_FEATURES,
+    TOP_FEATURES,
+    FeatureConfig,
+)
+from xvmatch.models.cross_view_matcher import (
+    CONFIDENCE_FEATURES,
+    CrossViewMatcher,
+    app_confidence_features,
+)
+from xvmatch.models.geometry_encoder import GeometryEncoder
+from xvmatch.training.matcher_datamodule import (
+    CORRUPTIONS,
+    AppCorruption,
+    ShiftedCoster,
+    corrupt_app,
+    shifted_app_costs,
+    trial_frames,
+)
+
+
+def _batch(b: int = 3, m: int = 5, n: int = 6, h: int = 4, seed: int = 0) -> tuple:
+    """A padded batch: frame 1 padded in both views, the others full; cue masks (app only,
+    all three, none) in turn."""
+    g = torch.Generator().manual_seed(seed)
+    top_mask = torch.ones(b, m, dtype=torch.bool)
+    hor_mask = torch.ones(b, n, dtype=torch.bool)
+    top_mask[1, m - 2:] = False
+    hor_mask[1, 2:] = False
+    cue_mask = torch.tensor([[True, False, False], [True, True, True],
+                             [False, False, False]])[torch.arange(b) % 3]
+    return (torch.randn(b, m, len(TOP_FEATURES), generator=g),
+            torch.randn(b, n, len(HOR_FEATURES), generator=g),
+            torch.randn(b, h, len(HYP_FEATURES), generator=g),
+            torch.randn(b, h, m, n, len(PAIR_FEATURES), generator=g),
+            top_mask, hor_mask, torch.ones(b, h, dtype=torch.bool),
+            torch.rand(b, m, n, 3, generator=g), cue_mask)
+
+
+def _matcher(app_confidence: bool, seed: int = 0) -> CrossViewMatcher:
+    """A tiny matcher whose cue layers matter (non-zero weights)."""
+    torch.manual_seed(seed)
+    matcher = CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), app_confidence=app_confidence)
+    for layer in (matcher.cue_embed[2], matcher.fusion[2], matcher.fusion_linear):
+        torch.nn.init.normal_(layer.weight, std=0.5)
+    return matcher.eval()
+
+
+def _previous_forward(matcher: CrossViewMatcher, *args) -> torch.Tensor:
+    """The cost of the matcher as it was computed before the appearance confidence existed."""
+    top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues, cue_mask = args
+    enc = matcher.geometry
+    avail = cue_mask.to(top.dtype)[:, None, None, :].expand_as(cues)
+    logit = torch.logit(cues.clamp(1e-4, 1.0 - 1e-4)) * avail
+    x = torch.cat([logit, avail], dim=-1)
+    a, b, pair_emb, _ = enc.encode(top, hor, hyp, pair, top_mask, hor_mask, hyp_mask,
+                                   pair_extra=matcher.cue_embed(x))
+    scores, _, _ = enc.pair_scores(a, b, pair_emb)
+    late = matcher.fusion(torch.cat([x, scores[..., None]], dim=-1)).squeeze(-1)
+    scores = scores + late + matcher.fusion_linear(x).squeeze(-1)
+    return enc.match(scores, top_mask, hor_mask)[0]
+
+
+@torch.no_grad()
+def test_flag_off_is_bit_identical_to_the_previous_matcher():
+    matcher = _matcher(False)
+    args = _batch()
+    assert "app_confidence" not in matcher.config  # older files' config, unchanged
+    assert not any(k.startswith("confidence") for k in matcher.state_dict())
+    assert torch.equal(matcher(*args).cost, _previous_forward(matcher, *args))
+
+
+@torch.no_grad()
+def test_a_fresh_confidence_head_starts_as_the_loaded_matcher():
+    plain = _matcher(False)
+    gated = CrossViewMatcher(plain.geometry, plain.cues, app_confidence=True).eval()
+    missing, unexpected = gated.load_state_dict(plain.state_dict(), strict=False)
+    assert not unexpected and all(k.startswith("confidence.") for k in missing)
+    args = _batch()
+    x = torch.zeros(3, 5, 6, 6)
+    assert torch.equal(gated.app_gates(*args, x), torch.ones(3, 2))
+    assert torch.equal(gated(*args).cost, plain(*args).cost)
+    assert gated.config["app_confidence"] is True
+
+
+def test_confidence_needs_the_app_cue():
+    with pytest.raises(ValueError, match="app_confidence needs the 'app' cue"):
+        CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), cues=("ray",), app_confidence=True)
+    with pytest.raises(ValueError, match="must be a bool"):
+        CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), app_confidence=1)
+
+
+@torch.no_grad()
+def test_features_ignore_padding_and_frames_without_the_cue():
+    g = torch.Generator().manual_seed(1)
+    app, scores = torch.rand(2, 4, 5, generator=g), torch.randn(2, 4, 5, generator=g)
+    top = torch.tensor([[True, True, False, False], [True, True, True, True]])
+    hor = torch.tensor([[True, True, True, False, False], [True] * 5])
+    avail = torch.tensor([True, False])
+    feats = app_confidence_features(app, avail, scores, top, hor)
+    assert feats.shape == (2, len(CONFIDENCE_FEATURES))
+    assert torch.equal(feats[1], torch.zeros(len(CONFIDENCE_FEATURES)))
+    garbage = app.clone()
+    garbage[0, 2:], garbage[0, :, 3:] = 5.0, -3.0  # padding holds anything
+    other = scores.clone()
+    other[0, 2:] = 1e3
+    again = app_confidence_features(garbage, avail, other, top, hor)
+    cropped = app_confidence_features(app[:1, :2, :3], avail[:1], scores[:1, :2, :3],
+                                      top[:1, :2], hor[:1, :3])
+    torch.testing.assert_close(again[0], feats[0])
+    torch.testing.assert_close(cropped[0], feats[0])
+    assert torch.isfinite(feats).all()
+
+
+@torch.no_grad()
+def test_corrupted_appearance_lowers_the_confidence_features():
+    """Geometry sure of the diagonal; clean appearance agrees, with a clear margin; swapped
+    crops and random embeddings do not."""
+    n = 6
+    mask = torch.ones(1, n, dtype=torch.bool)
+    scores = (4.0 * torch.eye(n) - 1.0)[None]
+    clean = np.full((n, n), 0.6) - 0.45 * np.eye(n)
+    rng = np.random.default_rng(0)
+    swapped = corrupt_app(clean, "swap", rng)
+    random = corrupt_app(clean, "random", rng)
+    names = list(CONFIDENCE_FEATURES)
+    feats = {k: app_confidence_features(torch.tensor(v, dtype=torch.float32)[None],
+                                        torch.tensor([True]), scores, mask, mask)[0]
+             for k, v in (("clean", clean), ("swap", swapped), ("random", random))}
+    for kind in ("swap", "random"):
+        for name in ("row_agree", "col_agree", "geo_best_gap", "geo_corr"):
+            i = names.index(name)
+            assert feats[kind][i] < feats["clean"][i], (kind, name)
+    assert feats["clean"][names.index("row_agree")] == 1.0
+    margin = names.index("row_margin")
+    assert feats["random"][margin] < feats["clean"][margin]
+
+
+def test_confidence_path_exports_to_onnx_and_matches_torch(tmp_path, tiny_synth):
+    import onnxruntime as ort
+
+    from xvmatch.export.onnx_export import export_bundle
+    from xvmatch.models.appearance_net import appearance_small
+    from xvmatch.models.matcher_file import load_matcher, save_matcher
+
+    matcher = _matcher(True)
+    torch.nn.init.normal_(matcher.confidence[2].weight, std=1.0)
+    torch.nn.init.normal_(matcher.confidence[2].bias, std=1.0)
+    args = _batch()
+    with torch.no_grad():
+        gates = matcher.app_gates(*args, torch.zeros(3, 5, 6, 6))
+    assert not torch.allclose(gates[:2], torch.ones(2, 2))  # the gates do something
+    path = tmp_path / "robust.pt"
+    save_matcher(path, matcher, FeatureConfig(n_hypotheses=3, dtheta_deg=4.0), 0.5,
+                 appearance=appearance_small(**TINY_APPEARANCE).eval())
+    loaded = load_matcher(path)
+    assert loaded.matcher.config["app_confidence"] is True
+    bundle = tmp_path / "bundle"
+    export_bundle(path, bundle, parity_data=tiny_synth["overview"])  # parity gate included
+    session = ort.InferenceSession(str(bundle / "matcher.onnx"))
+    names = [i.name for i in session.get_inputs()]
+    assert names == ["top", "hor", "hyp", "pair", "top_mask", "hor_mask", "hyp_mask", "cues",
+                     "cue_mask"]  # the interface of every matcher.onnx
+    for shape in ((3, 5, 6, 4), (2, 7, 3, 2)):  # not the export's example sizes
+        batch = _batch(*shape, seed=2)
+        with torch.no_grad():
+            expected = loaded.matcher(*batch).cost.numpy()
+        got = session.run(None, {k: v.numpy() for k, v in zip(names, batch, strict=True)})[0]
+        np.testing.assert_allclose(got, expected, atol=1e-5)
+
+
+def test_corrupt_app_kinds():
+    app = np.random.default_rng(3).uniform(0.2, 0.9, (4, 5))
+    swapped = corrupt_app(app, "swap", np.random.default_rng(1))
+    rows = sorted(map(tuple, swapped)) == sorted(map(tuple, app))
+    cols = sorted(map(tuple, swapped.T)) == sorted(map(tuple, app.T))
+    assert rows or cols
+    random = corrupt_app(app, "random", np.random.default_rng(1), embedding_dim=128)
+    assert random.shape == (4, 5) and 0.6 < random.mean() < 0.8 and random.std() < 0.08
+    np.testing.assert_array_equal(random, corrupt_app(app, "random", np.random.default_rng(1)))
+    shifted = app[::-1].copy()
+    assert corrupt_app(app, "shift", np.random.default_rng(1), shifted) is not None
+    np.testing.assert_array_equal(corrupt_app(app, "shift", np.random.default_rng(1), shifted),
+                                  shifted)
+    with pytest.raises(ValueError, match="needs the shifted images' costs"):
+        corrupt_app(app, "shift", np.random.default_rng(1))
+    with pytest.raises(ValueError, match="kind must be one of"):
+        corrupt_app(app, "blur", np.random.default_rng(1))
+    with pytest.raises(ValueError, match="probability must be in"):
+        AppCorruption(probability=1.5)
+    with pytest.raises(ValueError, match="kinds must be among"):
+        AppCorruption(kinds=("blur",), weights=(1.0,))
+
+
+def _colour_coster(top_image, top_boxes, ego_image, ego_boxes) -> np.ndarray:
+    """Appearance costs from the boxes' mean colours (a real, cheap, deterministic coster)."""
+    def colours(image, boxes):
+        out = []
+        for x1, y1, x2, y2 in np.asarray(boxes, dtype=int):
+            patch = image[max(y1, 0):max(y2, y1 + 1), max(x1, 0):max(x2, x1 + 1)]
+            out.append(patch.reshape(-1, 3).mean(0) if patch.size else np.zeros(3))
+        return np.asarray(out, dtype=np.float64).reshape(-1, 3) / 255.0
+
+    a, b = colours(top_image, top_boxes), colours(ego_image, ego_boxes)
+    return np.clip(np.linalg.norm(a[:, None] - b[None], axis=-1) / np.sqrt(3.0), 0.0, 1.0)
+
+
+def test_training_frames_are_corrupted_as_drawn_and_reproducibly(tiny_synth, tmp_path):
+    data = tiny_synth["overview"]
+    config = TrialConfig()
+    trials = dataset_trials(data, config, ("gt", "det"), _colour_coster)
+    shifter = ShiftedCoster(_colour_coster, seed=4)
+    shifted = shifted_app_costs(data, config, ("gt", "det"), shifter)
+    assert [s.shape for s in shifted] == [t.app.shape for t in trials]
+    again = shifted_app_costs(data, config, ("gt", "det"), shifter)
+    assert all(np.array_equal(a, b) for a, b in zip(shifted, again, strict=True))  # seeded
+    assert any(not np.allclose(s, t.app) for s, t in zip(shifted, trials, strict=True))
+    features = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
+    variants = ("boxes", "images")
+
+    def app_of(corruption):
+        items = trial_frames(trials, features, variants=variants, cache_dir=tmp_path,
+                             corruption=corruption, shifted_app=shifted)
+        return [(it[3][..., 0].copy(), bool(it[4][0])) for it in items]
+
+    clean = app_of(None)
+    assert [c for _, c in clean] == [False, True] * len(trials)
+    assert all(np.array_equal(a, b) for (a, _), (b, _) in
+               zip(clean, app_of(AppCorruption(probability=0.0)), strict=True))
+    for kind in CORRUPTIONS:
+        corruption = AppCorruption(probability=1.0, kinds=(kind,), weights=(1.0,), seed=7)
+        got = app_of(corruption)
+        assert all(np.array_equal(a, b) for (a, _), (b, _) in
+                   zip(got, app_of(corruption), strict=True))  # seeded
+        for k, t in enumerate(trials):
+            assert np.array_equal(got[2 * k][0], clean[2 * k][0])  # boxes frames untouched
+            rng = np.random.default_rng([7, 0, k, 1])
+            rng.random(), rng.choice(1, p=[1.0])
+            expected = corrupt_app(t.app, kind, rng, shifted[k])
+            order = trial_frames([t], features, variants=("images",), cache_dir=tmp_path)[0][0]
+            np.testing.assert_allclose(
+                got[2 * k + 1][0], expected[order.top_order][:, order.hor_order].astype(
+                    np.float32))
+    mixed = app_of(AppCorruption(probability=0.5, seed=1))
+    changed = sum(not np.array_equal(a, b) for (a, _), (b, _) in zip(mixed, clean, strict=True))
+    assert 0 < changed < len(trials)

@@ -1,0 +1,148 @@
+"""Fine-tune a matcher so that unreliable appearance cannot drag it down (issue 31).
+
+Starts from a matcher file with the ``app`` cue (default: the shipped
+``models/default_matcher.pt``), adds the appearance confidence
+(:class:`~xvmatch.models.cross_view_matcher.CrossViewMatcher` with ``app_confidence=True``: a
+box-only pass, per-frame statistics of the appearance costs against it, two gates of the
+``app`` cue; zero-initialised, so training starts as the loaded matcher) and trains it on the
+default recipe's matcher renders (``training/make_default_bundle.py``'s ``match_*`` and
+``val_*`` sets, rendered into ``--work`` when missing) in the two input settings with images
+(images; images and cameras), where a share of the frames get corrupted appearance costs
+(:class:`~xvmatch.training.matcher_datamodule.AppCorruption`: camera-shifted images up to
+strength 3, swapped crops, random embeddings). Validation frames are corrupted the same way
+(other draws), so the best epoch is the best on clean and corrupted frames together.
+
+``--train gates`` (default) trains the confidence head alone: the geometry encoder and the cue
+layers keep the loaded weights, so the boxes-only matcher is exactly the loaded one and a gate
+of 1 gives exactly the loaded matcher with images. ``--train cues`` also trains the cue layers
+(the geometry encoder stays frozen).
+
+``--install`` copies the result to ``--model-out`` (default ``models/default_matcher.pt``) and
+exports ``--bundle-out`` (default ``inference/default_bundle/``) with the recipe's export
+command (parity check on ``val_overview``, INT8 calibrated on ``int8_overview``).
+
+Usage:
+    OMP_NUM_THREADS=1 python training/make_robust_matcher.py [--work runs/default_bundle]
+        [--base models/default_matcher.pt] [--out runs/robust/robust_matcher.pt]
+        [--epochs 6] [--probability 0.5] [--install]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
+
+import make_default_bundle as recipe  # noqa: E402  (the recipe's renders and log)
+
+TRAINED = {"gates": ("confidence.",), "cues": ("confidence.", "cue_embed.", "fusion.",
+                                               "fusion_linear.")}
+"""``--train``: the parameter name prefixes that learn; every other weight is frozen."""
+
+
+def robust_matcher(base, trained: str):
+    """The loaded matcher with the appearance confidence added, only ``TRAINED[trained]``
+    learning."""
+    from xvmatch.models.cross_view_matcher import CrossViewMatcher
+
+    config = {k: v for k, v in base.matcher.config.items() if k != "app_confidence"}
+    model = CrossViewMatcher(base.matcher.geometry, **config, app_confidence=True)
+    missing, unexpected = model.load_state_dict(base.matcher.state_dict(), strict=False)
+    if unexpected or any(not k.startswith("confidence.") for k in missing):
+        raise ValueError(f"unexpected weights: missing {missing}, unexpected {unexpected}")
+    for name, p in model.named_parameters():
+        p.requires_grad_(name.startswith(TRAINED[trained]))
+    return model
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Fine-tune (and optionally install) the robust matcher; 0 on success."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path, default=Path("runs/default_bundle"),
+                        help="the recipe's working folder (its renders are reused)")
+    parser.add_argument("--base", default="default", help="matcher file to start from "
+                        "(default: the shipped one)")
+    parser.add_argument("--out", type=Path, default=Path("runs/robust/robust_matcher.pt"))
+    parser.add_argument("--train", choices=sorted(TRAINED), default="gates",
+                        help="what learns (default gates: the confidence head alone)")
+    parser.add_argument("--epochs", type=int, default=6, help="most epochs (default 6)")
+    parser.add_argument("--learning-rate", type=float, default=3e-3,
+                        help="peak learning rate (default 3e-3)")
+    parser.add_argument("--probability", type=float, default=0.5,
+                        help="share of the frames with images that are corrupted (default 0.5)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
+    parser.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    parser.add_argument("--cache", default=None, help="feature cache folder")
+    parser.add_argument("--install", action="store_true",
+                        help="copy to --model-out and export --bundle-out")
+    parser.add_argument("--model-out", type=Path, default=ROOT / "models" / "default_matcher.pt")
+    parser.add_argument("--bundle-out", type=Path,
+                        default=ROOT / "inference" / "default_bundle")
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    import lightning as L
+
+    from xvmatch.models.appearance_net import save_appearance_weights
+    from xvmatch.models.matcher_file import load_matcher
+    from xvmatch.training.fit_geometry import fit_matcher
+    from xvmatch.training.matcher_datamodule import AppCorruption, SyntheticMatcherDataModule
+
+    work = args.work
+    work.mkdir(parents=True, exist_ok=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    data = recipe.render(work, args.workers)
+    base = load_matcher(args.base)
+    if base.appearance is None:
+        parser.error(f"--base {args.base}: a matcher with the 'app' cue is needed")
+    weights = args.out.with_name(args.out.stem + "_appearance.pt")
+    save_appearance_weights(base.appearance, weights)
+    L.seed_everything(args.seed, workers=True, verbose=False)  # the confidence head's weights
+    model = robust_matcher(base, args.train)
+    corruption = AppCorruption(probability=args.probability, seed=args.seed)
+    dm = SyntheticMatcherDataModule(
+        train_data=[data["match_drone"], data["match_overview"]],
+        val_data=[data["val_drone"], data["val_overview"]],
+        appearance_weights=os.fspath(weights), feature_config=base.feature_config,
+        cues=base.matcher.cues, variants=("images", "images+cameras"), noise_seeds=(11,),
+        cache_dir=args.cache, workers=args.workers, seed=args.seed, corruption=corruption,
+        corrupt_val=True)
+    result = fit_matcher(
+        dm, args.out, matcher=model, feature_config=base.feature_config,
+        appearance=base.appearance, epochs=args.epochs, seed=args.seed,
+        learning_rate=args.learning_rate, gamma=base.gamma,
+        run_dir=args.out.with_name(args.out.name + ".run"), progress=False, threads=1,
+        patience=3, meta={
+            "trained_on": "synthetic renders (drone, overview), appearance corrupted; no "
+            "CVMHAT file", "script": "training/make_robust_matcher.py",
+            "base": os.fspath(base.path), "base_meta": base.meta, "train": args.train,
+            "corruption": {"probability": corruption.probability,
+                           "kinds": list(corruption.kinds),
+                           "weights": list(corruption.weights),
+                           "strengths": [corruption.min_strength, corruption.max_strength],
+                           "seed": corruption.seed}})
+    recipe.log(f"fine-tuned the robust matcher: validation CVIDF1 {result.best_score:.1f} "
+               f"(clean and corrupted frames), {result.epochs} epochs, "
+               f"{result.wall_time_s:.0f} s, peak {result.peak_memory_mb:.0f} MiB")
+    if args.install:
+        shutil.copy(args.out, args.model_out)
+        subprocess.run([sys.executable, "-m", "xvmatch", "export", "--model",
+                        os.fspath(args.model_out), "--out", os.fspath(args.bundle_out),
+                        "--parity-data", os.fspath(data["val_overview"]), "--int8",
+                        "--calibration", os.fspath(data["int8_overview"])], check=True)
+        manifest = json.loads((args.bundle_out / "manifest.json").read_text())
+        recipe.log(f"wrote {args.model_out} and {args.bundle_out}; parity "
+                   f"{json.dumps(manifest['parity'])}")
+    recipe.log(f"{time.perf_counter() - start:.0f} s in all")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
