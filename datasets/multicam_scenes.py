@@ -236,15 +236,31 @@ def add_tracker_noise(scene: MulticamScene, noise: TrackerNoise, seed: int) -> M
     """The scene with ``noise`` on every camera's input boxes (``gt`` unchanged), seeded.
 
     Camera ``i`` (0-based) draws detector noise with seed ``seed * 64 + i`` (view ``"hor"``)
-    and its switches and fragments from ``default_rng([seed, i, 7])``.
+    and its switches and fragments from ``default_rng([seed, i, 7])``. False boxes whose foot
+    point lies above the horizon (in the sky of an oblique camera) are dropped: ``xvmatch
+    multicam`` refuses such input, and a real detector's false boxes stand on something.
     """
     noisy = {}
     for i, (name, frames) in enumerate(scene.boxes.items()):
         cam = scene.cameras[name]
         det = apply_detector_noise(frames, cam.image_size, noise.detector, seed=seed * 64 + i,
                                    view="hor")
+        det = _on_the_floor(det, cam)
         noisy[name] = _switch_and_fragment(det, noise, np.random.default_rng([seed, i, 7]))
     return replace(scene, boxes=noisy)
+
+
+def _on_the_floor(frames: dict[int, FrameBoxes], camera: Camera) -> dict[int, FrameBoxes]:
+    """Drop boxes whose foot point lies above the camera's horizon (false boxes drawn in the
+    sky of an oblique camera: no person stands there, and multicam refuses such input)."""
+    from xvmatch.geometry.ground_plane import GroundCamera, foot_points
+
+    ground = GroundCamera.from_camera(camera)
+    out = {}
+    for f, rec in frames.items():
+        _, ok = ground.to_ground(foot_points(rec.boxes))
+        out[f] = FrameBoxes(f, rec.ids[ok], rec.boxes[ok])
+    return out
 
 
 def _switch_and_fragment(frames: dict[int, FrameBoxes], noise: TrackerNoise,
