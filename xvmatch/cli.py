@@ -68,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     from xvmatch.cli_export import add_export_parser
     from xvmatch.cli_fit_geometry import add_fit_geometry_parser
     from xvmatch.cli_multi_ego import add_multi_ego_parser
+    from xvmatch.cli_multicam import add_multicam_parser
     from xvmatch.cli_synth import add_show_parser, add_synth_parser
     from xvmatch.cli_track import add_track_parser
     from xvmatch.cli_train import add_train_parser
@@ -88,6 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
         cli_evaluate.add_evaluate_parser,
         add_track_parser,
         add_multi_ego_parser,
+        add_multicam_parser,
         cli_offset.add_offset_parser,
         add_synth_parser,
         add_show_parser,

@@ -1,5 +1,7 @@
 """The ``xvmatch evaluate`` command: score predicted pairs (CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9
-accuracy), or tracks with ``--tracks`` (:func:`xvmatch.cli_track.evaluate_tracks_command`)."""
+accuracy), or tracks with ``--tracks`` (:func:`xvmatch.cli_track.evaluate_tracks_command`), or
+a multi-camera association with ``--multicam``
+(:func:`xvmatch.cli_multicam.evaluate_multicam_command`)."""
 
 from __future__ import annotations
 
@@ -29,6 +31,18 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
                         help="tracks of xvmatch track (DIR/top.txt, DIR/hor.txt); per-view "
                         "metrics need TrackEval (pip install --no-deps trackeval; without it "
                         "the cross-view scores alone, with a note)")
+    scored.add_argument("--multicam", metavar="DIR",
+                        help="output folder of xvmatch multicam, scored against --gt: the "
+                        "trajectory-correspondence paper's P and R (Eqs. 13-14) per camera "
+                        "pair, box-pair P/R/F1, global IDF1, ground error with --ground-gt")
+    p.add_argument("--gt", nargs="+", metavar="NAME=FILE", default=None,
+                   help="with --multicam: each camera's ground-truth boxes, the id a global "
+                   "person id shared across cameras")
+    p.add_argument("--ground-gt", metavar="FILE", default=None,
+                   help="with --multicam: true ground positions, CSV frame,global_id,X,Y")
+    for action in p._actions:  # --top and --hor are not asked for with --multicam
+        if action.dest in ("top", "hor"):
+            action.required = False
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
     p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
@@ -40,6 +54,12 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.multicam is not None:
+        from xvmatch.cli_multicam import evaluate_multicam_command
+
+        return evaluate_multicam_command(args)
+    if args.top is None or args.hor is None:
+        raise UsageError("give --top and --hor (or --multicam DIR --gt NAME=FILE ...)")
     if args.tracks is not None:
         from xvmatch.cli_track import evaluate_tracks_command
 

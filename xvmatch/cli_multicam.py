@@ -1,0 +1,379 @@
+"""The ``xvmatch multicam`` command: one global id per person across several static cameras and
+each person's path on the ground (issue 32; :mod:`xvmatch.inference.multicam`), and
+``--fit-homography`` to make ``H`` cameras from image/ground point pairs.
+
+Everything is read and checked, and the answer computed, before anything is written; the outputs
+are written atomically into a folder the command owns (:func:`xvmatch.output_paths.claim_folder`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
+from xvmatch.cli_types import image_size
+from xvmatch.output_paths import Input, Output, check_outputs, claim_folder
+
+__all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",
+           "read_ground_csv"]
+
+EXAMPLE = ("xvmatch multicam --boxes cam1=cam1.txt cam2=cam2.txt cam3=cam3.txt "
+           "--cameras cameras.json --out multicam_out/")
+COMMAND = "xvmatch multicam"
+"""The marker name of the command's output folders."""
+
+_CAMERA_SIZE = image_size(8, 65536, "pixels of a camera image")
+
+
+def named_paths(values: list[str] | None, option: str) -> dict[str, str]:
+    """``NAME=PATH`` arguments as ``{name: path}``; a malformed or repeated name is an error
+    naming the option."""
+    out: dict[str, str] = {}
+    for text in values or []:
+        name, sep, path = text.partition("=")
+        if not sep or not name or not path:
+            raise UsageError(f"{option} {text}: expected NAME=FILE, NAME a camera of the "
+                             "cameras file")
+        if name in out:
+            raise UsageError(f"{option}: camera {name} given twice")
+        out[name] = path
+    return out
+
+
+def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch multicam`` on ``subparsers`` and return its parser."""
+    p = add_command_parser(
+        subparsers, "multicam",
+        "Several static cameras: one global id per person across all cameras (trajectory "
+        "association on the ground plane) and each person's ground path.",
+        EXAMPLE,
+        description="Associate people across 2 or more static, calibrated, partly overlapping "
+        "cameras from each camera's boxes and track ids (ids are never compared across "
+        "cameras). Writes OUT/NAME.txt (the input rows, the id replaced by a global id), "
+        "OUT/tracks.csv (camera,track_id,global_id), OUT/ground.csv (frame,global_id,X,Y in "
+        "metres) and OUT/birdseye.png. Lens distortion must be removed beforehand. "
+        "With --fit-homography, fits H cameras from point pairs instead.",
+    )
+    p.add_argument("--boxes", nargs="+", metavar="NAME=FILE",
+                   help="each camera's MOT box file with its own track ids; NAME is a camera "
+                   "of --cameras")
+    p.add_argument("--cameras", metavar="FILE",
+                   help="camera JSON (version 1): per camera K, R, c, width, height or H, "
+                   "width, height (H maps pixels to the ground in metres)")
+    p.add_argument("--method", choices=("ours", "dtw"), default="ours",
+                   help="ours: the trajectory-correspondence paper's features, reprojection "
+                   "conflicts, fusion and linkage; dtw: its DTW baseline (M1)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output folder (new, empty, or an earlier multicam's); with "
+                   "--fit-homography the camera JSON to write")
+    p.add_argument("--fit-homography", metavar="POINTS.csv", default=None,
+                   help="fit each camera's H with OpenCV from a CSV 'camera,u,v,X,Y' (pixels, "
+                   "ground metres; 4 or more points per camera) and write the cameras file "
+                   "to --out; give each camera's --image-size")
+    p.add_argument("--image-size", nargs="+", metavar="NAME=WxH", default=None,
+                   help="with --fit-homography: each camera's image size")
+    p.add_argument("--duplicates", choices=("first", "error"), default="first",
+                   help="a repeated (frame, id) in a box file: keep the first box with a "
+                   "warning (default) or stop")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_multicam)
+    return p
+
+
+def _cmd_multicam(args: argparse.Namespace) -> int:
+    if args.out is None:
+        raise UsageError("--out is required")
+    if args.fit_homography is not None:
+        return _fit_homographies(args)
+    if args.boxes is None or args.cameras is None:
+        raise UsageError("give --boxes NAME=FILE ... and --cameras (or --fit-homography)")
+    from xvmatch.geometry.camera_io import load_ground_cameras
+    from xvmatch.inference.multicam import (
+        MulticamInputError,
+        MulticamOptions,
+        associate_cameras,
+        relabel,
+    )
+
+    files = named_paths(args.boxes, "--boxes")
+    if len(files) < 2:
+        raise UsageError(f"--boxes: multicam needs at least two cameras, got {len(files)}")
+    names = list(files)
+    outputs = (*(f"{n}.txt" for n in names), "tracks.csv", "ground.csv", "birdseye.png")
+    check_outputs([Output("--out", args.out, folder=True, files=outputs)],
+                  [Input("--cameras", args.cameras), *(Input("--boxes", f)
+                                                       for f in files.values())])
+    from xvmatch.output_paths import check_own_folder
+
+    check_own_folder(args.out, COMMAND)
+    cameras = load_ground_cameras(args.cameras)
+    for name, path in files.items():
+        if name not in cameras:
+            raise UsageError(f"--boxes {name}={path}: camera {name} is not in {args.cameras} "
+                             f"(it has {', '.join(cameras)})")
+    boxes = {name: read_boxes(path, args.duplicates) for name, path in files.items()}
+    for name, frames in boxes.items():
+        _check_inside(files[name], frames, cameras[name])
+    n_pairs = len(names) * (len(names) - 1) // 2
+    with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
+        try:
+            result = associate_cameras(cameras, boxes, MulticamOptions(method=args.method),
+                                       progress=bar.update)
+        except MulticamInputError as exc:
+            path = files[exc.camera]
+            raise UsageError(f"{path}{_line_of(path, str(exc))}: {exc}") from None
+    relabelled = relabel(boxes, result)
+    picture = _birdseye(result, cameras)
+    out = claim_folder(args.out, COMMAND)
+    _write_outputs(out, relabelled, result, picture)
+    if not args.quiet:
+        n_people = len(result.ground)
+        print(f"{n_people} global ids over {len(names)} cameras; wrote {os.fspath(out)}/")
+    return 0
+
+
+def _check_inside(path: str, frames, camera) -> None:
+    """Rule 3 of docs/formats.md: a box past its camera's image by more than 10% is an error."""
+    import numpy as np
+
+    W, H = camera.width, camera.height
+    for f in sorted(frames):
+        b = frames[f].boxes
+        bad = (b[:, 0] < -0.1 * W) | (b[:, 1] < -0.1 * H) | (b[:, 0] + b[:, 2] > 1.1 * W) | \
+            (b[:, 1] + b[:, 3] > 1.1 * H)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            where = _line_of(path, f"frame {f}, id {frames[f].ids[k]}")
+            raise UsageError(f"{path}{where}: frame {f}, id {frames[f].ids[k]}: the box lies "
+                             f"outside the camera's {W}x{H} image (more than 10% past a "
+                             "border); check the camera's width and height")
+
+
+def _line_of(path: str, message: str) -> str:
+    """``:LINE`` of the first line of ``path`` holding the frame and id a message names."""
+    import re
+
+    m = re.search(r"frame (\d+), id (-?\d+)", message)
+    if not m:
+        return ""
+    frame, ident = int(m.group(1)), int(m.group(2))
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for lineno, line in enumerate(fh, 1):
+                fields = line.split(",")
+                try:
+                    if int(float(fields[0])) == frame and int(float(fields[1])) == ident:
+                        return f":{lineno}"
+                except (ValueError, IndexError):
+                    continue
+    except OSError:
+        pass
+    return ""
+
+
+def _write_outputs(out, relabelled, result, picture: bytes) -> None:
+    """Every output file, each atomically."""
+    from xvmatch.datasets.mot_boxes import write_mot_boxes
+    from xvmatch.geometry.atomic_files import atomic_write_bytes, atomic_write_text
+
+    for name, frames in relabelled.items():
+        write_mot_boxes(out / f"{name}.txt", frames)
+    rows = ["camera,track_id,global_id"] + [
+        f"{name},{t},{g}" for name, table in result.global_ids.items()
+        for t, g in sorted(table.items())]
+    atomic_write_text(out / "tracks.csv", "\n".join(rows) + "\n")
+    lines = ["frame,global_id,X,Y"]
+    points = [(int(f), g, x, y) for g, (fr, xy) in result.ground.items()
+              for f, (x, y) in zip(fr.tolist(), xy.tolist(), strict=True)]
+    points.sort()
+    lines += [f"{f},{g},{x:.4f},{y:.4f}" for f, g, x, y in points]
+    atomic_write_text(out / "ground.csv", "\n".join(lines) + "\n")
+    atomic_write_bytes(out / "birdseye.png", picture)
+
+
+def _colour(k: int) -> tuple[int, int, int]:
+    """A distinct BGR colour for index ``k`` (golden-ratio hues)."""
+    import colorsys
+
+    r, g, b = colorsys.hsv_to_rgb((k * 0.618034) % 1.0, 0.85, 0.9)
+    return int(255 * b), int(255 * g), int(255 * r)
+
+
+def _birdseye(result, cameras, size: int = 1000) -> bytes:
+    """PNG of the global trajectories on the ground, each camera's field of view outlined."""
+    import cv2
+    import numpy as np
+
+    paths = [xy for _fr, xy in result.ground.values() if len(xy)]
+    pts = np.concatenate(paths) if paths else np.zeros((1, 2))
+    lo, hi = np.percentile(pts, 0.5, axis=0) - 3.0, np.percentile(pts, 99.5, axis=0) + 3.0
+    centres = [c.camera.c[:2] for c in cameras.values() if c.camera is not None]
+    if centres:
+        lo = np.minimum(lo, np.min(centres, axis=0) - 1.0)
+        hi = np.maximum(hi, np.max(centres, axis=0) + 1.0)
+    scale = (size - 40) / max(float((hi - lo).max()), 1e-6)
+    canvas = np.full((size, size, 3), 255, np.uint8)
+
+    def px(xy):
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        return np.stack([20 + (xy[:, 0] - lo[0]) * scale,
+                         size - 20 - (xy[:, 1] - lo[1]) * scale], 1).round().astype(np.int32)
+
+    step = 5.0
+    for x in np.arange(np.floor(lo[0] / step) * step, hi[0] + step, step):
+        cv2.line(canvas, tuple(px([x, lo[1]])[0]), tuple(px([x, hi[1]])[0]), (235, 235, 235), 1)
+    for y in np.arange(np.floor(lo[1] / step) * step, hi[1] + step, step):
+        cv2.line(canvas, tuple(px([lo[0], y])[0]), tuple(px([hi[0], y])[0]), (235, 235, 235), 1)
+    reach = float((hi - lo).max())
+    for i, cam in enumerate(cameras.values()):  # fields of view, lightly filled
+        overlay = canvas.copy()
+        cv2.fillPoly(overlay, [px(cam.ground_footprint(max_range=reach))],
+                     _colour(1000 + i), cv2.LINE_AA)
+        canvas = cv2.addWeighted(overlay, 0.08, canvas, 0.92, 0.0)
+    for i, (name, cam) in enumerate(cameras.items()):
+        colour = tuple(int(0.6 * v + 100) for v in _colour(1000 + i))
+        poly = px(cam.ground_footprint(max_range=reach))
+        cv2.polylines(canvas, [poly], True, colour, 1, cv2.LINE_AA)
+        anchor = px(cam.camera.c[:2])[0] if cam.camera is not None else poly.mean(0).astype(int)
+        cv2.circle(canvas, tuple(int(v) for v in anchor), 6, colour, -1, cv2.LINE_AA)
+        cv2.putText(canvas, name, (int(anchor[0]) + 8, int(anchor[1]) - 8),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, (60, 60, 60), 1, cv2.LINE_AA)
+    for g, (_fr, xy) in result.ground.items():
+        if len(xy) < 2:
+            continue
+        line = px(xy)
+        cv2.polylines(canvas, [line], False, _colour(g), 2, cv2.LINE_AA)
+        cv2.putText(canvas, str(g), tuple(int(v) for v in line[-1]), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.4, _colour(g), 1, cv2.LINE_AA)
+    cv2.putText(canvas, f"grid {step:g} m; {len(result.ground)} global ids", (20, 20),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    ok, png = cv2.imencode(".png", canvas)
+    if not ok:
+        raise OSError("could not encode birdseye.png")
+    return png.tobytes()
+
+
+def _fit_homographies(args: argparse.Namespace) -> int:
+    """``--fit-homography POINTS.csv``: one H per camera, written as a cameras file."""
+    import numpy as np
+
+    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.geometry.ground_plane import GroundCamera, fit_homography
+
+    check_outputs([Output("--out", args.out)], [Input("--fit-homography", args.fit_homography)])
+    sizes = {}
+    for name, text in named_paths(args.image_size, "--image-size").items():
+        try:
+            sizes[name] = _CAMERA_SIZE(text)
+        except argparse.ArgumentTypeError as exc:
+            raise UsageError(f"--image-size {name}={text}: {exc}") from None
+    path = args.fit_homography
+    points: dict[str, list[tuple[float, float, float, float]]] = {}
+    with open(path, encoding="utf-8") as fh:
+        lines = fh.read().split("\n")
+    header = [h.strip() for h in lines[0].split(",")] if lines else []
+    if header != ["camera", "u", "v", "X", "Y"]:
+        raise UsageError(f"{path}:1: expected the header camera,u,v,X,Y")
+    for lineno, line in enumerate(lines[1:], 2):
+        if not line.strip():
+            continue
+        fields = [f.strip() for f in line.split(",")]
+        if len(fields) != 5:
+            raise UsageError(f"{path}:{lineno}: expected 5 fields camera,u,v,X,Y")
+        try:
+            values = tuple(float(v) for v in fields[1:])
+        except ValueError:
+            raise UsageError(f"{path}:{lineno}: u, v, X, Y must be numbers") from None
+        if not np.isfinite(values).all():
+            raise UsageError(f"{path}:{lineno}: u, v, X, Y must be finite")
+        points.setdefault(fields[0], []).append(values)
+    if not points:
+        raise UsageError(f"{path}: no point pairs")
+    cams = {}
+    for name, rows in points.items():
+        if name not in sizes:
+            raise UsageError(f"--image-size: camera {name} of {path} has no size; give "
+                             f"--image-size {name}=WxH")
+        arr = np.array(rows)
+        try:
+            H = fit_homography(arr[:, :2], arr[:, 2:], *sizes[name])
+        except ValueError as exc:
+            raise UsageError(f"{path}: camera {name}: {exc}") from None
+        cams[name] = GroundCamera(H, *sizes[name])
+    save_cameras(args.out, cams)
+    if not args.quiet:
+        print(f"fitted {len(cams)} camera(s); wrote {args.out}")
+    return 0
+
+
+def read_ground_csv(path: str) -> dict:
+    """``{global_id: (frames, (J, 2) xy)}`` of a CSV ``frame,global_id,X,Y`` (ground.csv or
+    true positions); a bad line is an error naming the file and the line."""
+    import numpy as np
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = fh.read().split("\n")
+    except UnicodeDecodeError:
+        raise UsageError(f"{path}: not UTF-8 text") from None
+    if not lines or [h.strip() for h in lines[0].split(",")] != ["frame", "global_id", "X",
+                                                                   "Y"]:
+        raise UsageError(f"{path}:1: expected the header frame,global_id,X,Y")
+    rows: dict[int, list[tuple[int, float, float]]] = {}
+    for lineno, line in enumerate(lines[1:], 2):
+        if not line.strip():
+            continue
+        fields = line.split(",")
+        try:
+            if len(fields) != 4:
+                raise ValueError
+            frame, gid = int(fields[0]), int(fields[1])
+            x, y = float(fields[2]), float(fields[3])
+            if not (np.isfinite(x) and np.isfinite(y)):
+                raise ValueError
+        except ValueError:
+            raise UsageError(f"{path}:{lineno}: expected frame,global_id,X,Y (integers, then "
+                             "finite numbers)") from None
+        rows.setdefault(gid, []).append((frame, x, y))
+    out = {}
+    for gid, pts in rows.items():
+        pts.sort()
+        arr = np.array(pts, dtype=float)
+        out[gid] = (arr[:, 0].astype(np.int64), arr[:, 1:])
+    return out
+
+
+def evaluate_multicam_command(args: argparse.Namespace) -> int:
+    """``xvmatch evaluate --multicam OUT --gt NAME=FILE ... [--ground-gt FILE]``."""
+    import json
+    from pathlib import Path
+
+    from xvmatch.evaluation.multicam_metrics import format_multicam, multicam_scores
+
+    folder = Path(args.multicam)
+    if not folder.is_dir():
+        raise UsageError(f"--multicam {args.multicam}: no such folder (the --out of xvmatch "
+                         "multicam)")
+    gt_files = named_paths(args.gt, "--gt")
+    if len(gt_files) < 2:
+        raise UsageError("--gt: give the ground truth of at least two cameras, NAME=FILE")
+    written = sorted(p.stem for p in folder.glob("*.txt"))
+    pred, gt = {}, {}
+    for name, path in gt_files.items():
+        mine = folder / f"{name}.txt"
+        if not mine.is_file():
+            raise UsageError(f"--gt {name}={path}: {mine} does not exist (multicam wrote "
+                             f"{', '.join(written) or 'no box file'} there)")
+        pred[name] = read_boxes(str(mine), args.duplicates)
+        gt[name] = read_boxes(path, args.duplicates)
+    ground_pred = ground_gt = None
+    if args.ground_gt is not None:
+        ground_gt = read_ground_csv(args.ground_gt)
+        ground_pred = read_ground_csv(str(folder / "ground.csv"))
+    scores = multicam_scores(pred, gt, ground_pred, ground_gt)
+    if args.json:
+        print(json.dumps(scores, indent=2))
+    else:
+        print(format_multicam(scores, args.name or os.fspath(folder)))
+    return 0
