@@ -88,6 +88,12 @@ class MulticamOptions:
         link_radius_m: linkage gate at a gap of one frame, metres.
         link_growth_m: the gate grows by this many metres per frame of gap.
         max_range_m: foot points farther from the origin are at the horizon (refused).
+        split_frames: ``L > 0`` (default 20) cuts every track into pieces of ``L`` frames of
+            the sequence, associated on their own (each piece joins at most one piece of every
+            other camera) and rejoined afterwards unless the other cameras say a piece is
+            someone else (a tracker's id switch): a track may then carry several global ids,
+            one after the other, never two at once. 0 keeps each track whole, as the paper
+            does (one trajectory joins at most one of every other camera).
     """
 
     method: str = "ours"
@@ -95,13 +101,14 @@ class MulticamOptions:
     min_common: int = 5
     gate_m: float = 2.5
     conflict_margin: float = 0.5
-    reproj_gate: float = 1.0
+    reproj_gate: float = 1.5
     dtw_gate_m: float = 2.0
     smooth_window: int = 5
     link_max_gap: int = 30
     link_radius_m: float = 1.0
     link_growth_m: float = 0.1
     max_range_m: float = 1e4
+    split_frames: int = 20
 
     def __post_init__(self) -> None:
         if self.method not in ("ours", "dtw"):
@@ -109,6 +116,8 @@ class MulticamOptions:
         for name in ("min_length", "min_common", "smooth_window", "link_max_gap"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"MulticamOptions.{name} must be >= 1")
+        if int(self.split_frames) < 0:
+            raise ValueError("MulticamOptions.split_frames must be >= 0")
         for name in ("gate_m", "reproj_gate", "dtw_gate_m", "link_radius_m", "max_range_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"MulticamOptions.{name} must be > 0")
@@ -277,6 +286,19 @@ class _Link:
     cost: float
 
 
+def _row_nanmedian(d: np.ndarray) -> np.ndarray:
+    """Median of each row over its finite entries (NaN for a row without any); a fast
+    ``np.nanmedian(d, axis=1)``."""
+    if d.shape[0] == 0:
+        return np.empty(0)
+    srt = np.sort(np.where(np.isnan(d), np.inf, d), axis=1)
+    n = np.isfinite(srt).sum(axis=1)
+    rows = np.arange(len(d))
+    lo = srt[rows, np.maximum(n - 1, 0) // 2]
+    hi = srt[rows, np.maximum(n, 1) // 2 - (n == 0)]
+    return np.where(n > 0, 0.5 * (lo + hi), np.nan)
+
+
 def _pair_candidates(A: CameraTracks, B: CameraTracks, opts: MulticamOptions
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Index pairs sharing >= min_common frames among long enough tracks, their shared-frame
@@ -288,9 +310,9 @@ def _pair_candidates(A: CameraTracks, B: CameraTracks, opts: MulticamOptions
     common[:, ~okB] = 0
     ia, ib = np.nonzero(common >= opts.min_common)
     mask = A.present[ia] & B.present[ib]
-    d = np.linalg.norm(A.ground[ia] - B.ground[ib], axis=-1)
-    with np.errstate(all="ignore"):
-        med = np.nanmedian(np.where(mask, d, np.nan), axis=1) if len(ia) else np.empty(0)
+    diff = A.ground[ia] - B.ground[ib]
+    d = np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2)
+    med = _row_nanmedian(np.where(mask, d, np.nan))
     return ia, ib, mask, med
 
 
@@ -306,8 +328,28 @@ def _reprojection(A: CameraTracks, B: CameraTracks, cams: tuple[GroundCamera, Gr
         d = d / np.maximum(own.heights[idx_own], 1.0)[:, None]
         # A point behind the other camera counts as far; the median keeps a few such out.
         d = np.where(mask, np.where(np.isfinite(d), d, 10.0), np.nan)
-        with np.errstate(all="ignore"):
-            out += 0.5 * np.nanmedian(d, axis=1)
+        out += 0.5 * _row_nanmedian(d)
+    return out
+
+
+def _window(t: CameraTracks, rows: np.ndarray, cols: slice) -> CameraTracks:
+    """The tracks ``rows`` restricted to the frames ``cols``."""
+    return CameraTracks(t.name, t.ids[rows], t.present[rows, cols], t.ground[rows, cols],
+                        t.pixels[rows, cols], t.heights[rows], t.frames[cols])
+
+
+def _associate_pieces(a: int, b: int, tracks: list[CameraTracks], numbers: list[np.ndarray],
+                      cams: list[GroundCamera], opts: MulticamOptions) -> list[_Link]:
+    """:func:`_associate_pair` block by block: pieces share frames only within their block of
+    ``split_frames`` frames, so each block is associated on its own frames."""
+    L = int(opts.split_frames)
+    out = []
+    for n in np.intersect1d(numbers[a], numbers[b]):
+        ra, rb = np.flatnonzero(numbers[a] == n), np.flatnonzero(numbers[b] == n)
+        cols = slice(int(n) * L, (int(n) + 1) * L)
+        sub = [_window(tracks[a], ra, cols), _window(tracks[b], rb, cols)]
+        for lk in _associate_pair(0, 1, sub, [cams[a], cams[b]], opts):
+            out.append(_Link(a, int(ra[lk.track_a]), b, int(rb[lk.track_b]), lk.cost))
     return out
 
 
@@ -355,6 +397,28 @@ def _associate_pair(a: int, b: int, tracks: list[CameraTracks], cams: list[Groun
 
 # --------------------------------------------------------------------------------------------
 # Groups, fusion, linkage
+
+
+def _split_tracks(t: CameraTracks, length: int) -> tuple[CameraTracks, np.ndarray, np.ndarray]:
+    """Cut each track into pieces of ``length`` frames of the frame axis.
+
+    Returns:
+        (pieces, parent, number): the pieces as tracks (ids 0..P-1), the row of the track each
+        comes from and its piece number (frame position // length).
+    """
+    F = len(t.frames)
+    n_pieces = -(-F // length)
+    number = np.arange(F) // length
+    has = np.zeros((len(t.ids), n_pieces), dtype=bool)
+    rows, cols = np.nonzero(t.present)
+    has[rows, number[cols]] = True
+    parent, piece = np.nonzero(has)
+    present = t.present[parent] & (number[None, :] == piece[:, None])
+    keep = present[..., None]
+    return (CameraTracks(t.name, np.arange(len(parent)), present,
+                         np.where(keep, t.ground[parent], np.nan),
+                         np.where(keep, t.pixels[parent], np.nan), t.heights[parent], t.frames),
+            parent, piece)
 
 
 class _Groups:
@@ -463,16 +527,23 @@ class MulticamResult:
     """The answer: one global id per (camera, track) and each global trajectory on the ground.
 
     Attributes:
-        global_ids: ``{camera: {track_id: global_id}}``, every input track.
+        global_ids: ``{camera: {track_id: global_id}}``, every input track (with
+            ``split_frames``, the global id of its first piece).
         ground: ``{global_id: (frames, xy)}``: ``(J,)`` frame numbers and ``(J, 2)`` metres.
         links: the accepted pairs ``(camera_a, track_a, camera_b, track_b)``.
         frames: the common frame axis.
+        piece_ids: ``{camera: {(track_id, piece): global_id}}``; the piece of a box at frame
+            ``f`` is ``position of f in frames // split_frames`` (always 0 without splitting).
+        split_frames: the ``MulticamOptions.split_frames`` used (0: whole tracks, and
+            ``global_ids`` alone says everything).
     """
 
     global_ids: dict[str, dict[int, int]]
     ground: dict[int, tuple[np.ndarray, np.ndarray]]
     links: list[tuple[str, int, str, int]] = field(default_factory=list)
     frames: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    piece_ids: dict[str, dict[tuple[int, int], int]] = field(default_factory=dict)
+    split_frames: int = 0
 
 
 def associate_cameras(cameras: Mapping[str, GroundCamera],
@@ -505,16 +576,34 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
                                            f"the cameras file (it has {', '.join(cameras)})")
     all_frames = sorted({f for n in names for f, r in boxes[n].items() if len(r)})
     frame_axis = np.array(all_frames or [1], dtype=np.int64)
-    tracks = [camera_tracks(n, cameras[n], boxes[n], frame_axis, opts.max_range_m)
-              for n in names]
+    whole = [camera_tracks(n, cameras[n], boxes[n], frame_axis, opts.max_range_m)
+             for n in names]
+    if opts.split_frames:
+        split = [_split_tracks(t, int(opts.split_frames)) for t in whole]
+        tracks = [sp[0] for sp in split]
+        parents = [sp[1] for sp in split]
+        numbers = [sp[2] for sp in split]
+    else:
+        tracks = whole
+        parents = [np.arange(len(t.ids)) for t in whole]
+        numbers = [np.zeros(len(t.ids), dtype=np.int64) for t in whole]
     cams = [cameras[n] for n in names]
     links: list[_Link] = []
     for a in range(len(names)):
         for b in range(a + 1, len(names)):
-            links += _associate_pair(a, b, tracks, cams, opts)
+            if opts.split_frames:
+                links += _associate_pieces(a, b, tracks, numbers, cams, opts)
+            else:
+                links += _associate_pair(a, b, tracks, cams, opts)
             if progress is not None:
                 progress(1)
     links.sort(key=lambda lk: (lk.cost, lk.cam_a, lk.track_a, lk.cam_b, lk.track_b))
+    if opts.split_frames:  # rejoin each track's pieces after every cross-camera link
+        for c in range(len(names)):
+            order = np.lexsort((numbers[c], parents[c]))
+            same = parents[c][order[1:]] == parents[c][order[:-1]]
+            links += [_Link(c, int(p), c, int(q), _BIG)
+                      for p, q in zip(order[:-1][same], order[1:][same], strict=True)]
     groups = _Groups(tracks)
     kept = []
     for lk in links:
@@ -543,12 +632,17 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
     order = sorted(first, key=lambda ch: first[ch])
     gid_of_chain = {ch: g + 1 for g, ch in enumerate(order)}
     global_ids: dict[str, dict[int, int]] = {n: {} for n in names}
+    piece_ids: dict[str, dict[tuple[int, int], int]] = {n: {} for n in names}
     ground: dict[int, list] = {}
     for i, m in enumerate(group_list):
         g = gid_of_chain[chain[i]]
         for c, k in m:
-            global_ids[names[c]][int(tracks[c].ids[k])] = g
+            track = int(whole[c].ids[parents[c][k]])
+            piece_ids[names[c]][(track, int(numbers[c][k]))] = g
         ground.setdefault(g, []).append(segments[i])
+    for name in names:  # a track's global id: that of its first piece
+        for (track, _piece), g in sorted(piece_ids[name].items()):
+            global_ids[name].setdefault(track, g)
     fused = {}
     for g, segs in ground.items():
         idx = np.concatenate([s[0] for s in segs])
@@ -558,16 +652,26 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
         # Unlinked segments never overlap within a chain; keep the first at any repeat.
         uniq = np.concatenate([[True], np.diff(idx) > 0])
         fused[g] = (frame_axis[idx[uniq]], xy[uniq])
-    pairs = [(names[lk.cam_a], int(tracks[lk.cam_a].ids[lk.track_a]), names[lk.cam_b],
-              int(tracks[lk.cam_b].ids[lk.track_b])) for lk in kept]
-    return MulticamResult(global_ids, dict(sorted(fused.items())), pairs, frame_axis)
+    pairs = [(names[lk.cam_a], int(whole[lk.cam_a].ids[parents[lk.cam_a][lk.track_a]]),
+              names[lk.cam_b], int(whole[lk.cam_b].ids[parents[lk.cam_b][lk.track_b]]))
+             for lk in kept if lk.cam_a != lk.cam_b]
+    return MulticamResult(global_ids, dict(sorted(fused.items())), pairs, frame_axis,
+                          piece_ids, int(opts.split_frames))
 
 
 def relabel(boxes: Mapping[str, Mapping[int, FrameBoxes]], result: MulticamResult
             ) -> dict[str, dict[int, FrameBoxes]]:
-    """Each camera's boxes, in their order, with the track id replaced by its global id."""
+    """Each camera's boxes, in their order, with the track id replaced by its global id (the
+    global id of the track's piece holding the frame, with ``split_frames``)."""
     out: dict[str, dict[int, FrameBoxes]] = {}
     for name, frames in boxes.items():
+        if result.split_frames:
+            table = result.piece_ids[name]
+            pos = {int(f): i // result.split_frames for i, f in enumerate(result.frames)}
+            out[name] = {f: FrameBoxes(f, np.array([table[(int(t), pos.get(f, 0))]
+                                                    for t in rec.ids], np.int64), rec.boxes)
+                         for f, rec in frames.items()}
+            continue
         table = result.global_ids[name]
         out[name] = {f: FrameBoxes(f, np.array([table[int(t)] for t in rec.ids], np.int64),
                                    rec.boxes) for f, rec in frames.items()}

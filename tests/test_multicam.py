@@ -93,23 +93,30 @@ def _noisy_scene(seed: int = 2):
     return add_tracker_noise(scene, TrackerNoise(DetectorNoise(0.05, 0.1, 0.3), 0.05, 0.3), 1)
 
 
-def test_conflicts_never_put_a_trajectory_in_two_places():
+@pytest.mark.parametrize("split", [0, 20])
+def test_conflicts_never_put_a_trajectory_in_two_places(split):
     scene = _noisy_scene()
     cams = {n: GroundCamera.from_camera(c) for n, c in scene.cameras.items()}
-    res = associate_cameras(cams, scene.boxes)
-    # Every input track has exactly one global id.
+    res = associate_cameras(cams, scene.boxes, MulticamOptions(split_frames=split))
+    # Every input track has a global id.
     for name, frames in scene.boxes.items():
         tracks = {int(t) for rec in frames.values() for t in rec.ids}
         assert set(res.global_ids[name]) == tracks
-    # Each trajectory joins at most one trajectory of every other camera ...
-    seen = set()
-    for a, ta, b, tb in res.links:
-        assert (a, ta, b) not in seen and (b, tb, a) not in seen
-        seen |= {(a, ta, b), (b, tb, a)}
-    # ... and no global id holds two boxes of one camera at one frame.
-    for frames in relabel(scene.boxes, res).values():
-        for rec in frames.values():
+    if split == 0:  # whole tracks: one joins at most one trajectory of every other camera
+        seen = set()
+        for a, ta, b, tb in res.links:
+            assert (a, ta, b) not in seen and (b, tb, a) not in seen
+            seen |= {(a, ta, b), (b, tb, a)}
+    # No global id holds two boxes of one camera at one frame, and a track keeps its global
+    # id within a piece.
+    relabelled = relabel(scene.boxes, res)
+    for name, frames in relabelled.items():
+        owner: dict[tuple[int, int], int] = {}
+        for f, rec in frames.items():
             assert len(np.unique(rec.ids)) == len(rec.ids)
+            piece = 0 if split == 0 else int(np.searchsorted(res.frames, f)) // split
+            for t, g in zip(scene.boxes[name][f].ids.tolist(), rec.ids.tolist(), strict=True):
+                assert owner.setdefault((t, piece), g) == g
 
 
 def test_answer_does_not_depend_on_the_ids():
@@ -193,3 +200,15 @@ def test_metrics_on_a_toy_sequence():
     s = multicam_scores(pred, gt, {10: (np.array([1, 2]), np.array([[0.0, 0.5], [1, 0]]))},
                         ground)
     assert s["ground"]["median"] == pytest.approx(0.25) and s["ground"]["count"] == 2
+
+
+def test_row_nanmedian_matches_numpy():
+    from xvmatch.inference.multicam import _row_nanmedian
+
+    rng = np.random.default_rng(0)
+    d = rng.random((50, 9))
+    d[rng.random(d.shape) < 0.4] = np.nan
+    d[3] = np.nan
+    with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+        want = np.nanmedian(d, axis=1)
+    np.testing.assert_allclose(_row_nanmedian(d), want)

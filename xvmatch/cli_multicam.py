@@ -12,7 +12,7 @@ import argparse
 import os
 
 from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
-from xvmatch.cli_types import image_size
+from xvmatch.cli_types import image_size, int_in
 from xvmatch.output_paths import Input, Output, check_outputs, claim_folder
 
 __all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",
@@ -51,9 +51,9 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
         description="Associate people across 2 or more static, calibrated, partly overlapping "
         "cameras from each camera's boxes and track ids (ids are never compared across "
         "cameras). Writes OUT/NAME.txt (the input rows, the id replaced by a global id), "
-        "OUT/tracks.csv (camera,track_id,global_id), OUT/ground.csv (frame,global_id,X,Y in "
-        "metres) and OUT/birdseye.png. Lens distortion must be removed beforehand. "
-        "With --fit-homography, fits H cameras from point pairs instead.",
+        "OUT/tracks.csv (camera,track_id,first_frame,last_frame,global_id), OUT/ground.csv "
+        "(frame,global_id,X,Y in metres) and OUT/birdseye.png. Lens distortion must be "
+        "removed beforehand. With --fit-homography, fits H cameras from point pairs instead.",
     )
     p.add_argument("--boxes", nargs="+", metavar="NAME=FILE",
                    help="each camera's MOT box file with its own track ids; NAME is a camera "
@@ -64,6 +64,15 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("ours", "dtw"), default="ours",
                    help="ours: the trajectory-correspondence paper's features, reprojection "
                    "conflicts, fusion and linkage; dtw: its DTW baseline (M1)")
+    p.add_argument("--split-frames", type=int_in(0, 100000, "frames of a track piece"),
+                   default=20, metavar="L",
+                   help="associate each track in pieces of L frames, rejoined unless the other "
+                   "cameras disagree (a tracker's id switch); 0: whole tracks, as the paper "
+                   "(default 20)")
+    p.add_argument("--localise", choices=("foot", "two-best", "all"), default="foot",
+                   help="ground.csv from: foot, the fused foot points (default); two-best, "
+                   "the VRL paper's two most visible views (principal axes along the "
+                   "vertical, K R c cameras); all, every view's axes")
     p.add_argument("--out", metavar="DIR",
                    help="output folder (new, empty, or an earlier multicam's); with "
                    "--fit-homography the camera JSON to write")
@@ -118,15 +127,23 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     n_pairs = len(names) * (len(names) - 1) // 2
     with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
         try:
-            result = associate_cameras(cameras, boxes, MulticamOptions(method=args.method),
-                                       progress=bar.update)
+            result = associate_cameras(cameras, boxes, MulticamOptions(
+                method=args.method, split_frames=args.split_frames), progress=bar.update)
         except MulticamInputError as exc:
             path = files[exc.camera]
             raise UsageError(f"{path}{_line_of(path, str(exc))}: {exc}") from None
     relabelled = relabel(boxes, result)
+    if args.localise != "foot":
+        from dataclasses import replace
+
+        from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
+
+        method = "two_best" if args.localise == "two-best" else "all"
+        ground = localise(cameras, relabelled, result.ground, LocalisationOptions(method))
+        result = replace(result, ground=ground)
     picture = _birdseye(result, cameras)
     out = claim_folder(args.out, COMMAND)
-    _write_outputs(out, relabelled, result, picture)
+    _write_outputs(out, boxes, relabelled, result, picture)
     if not args.quiet:
         n_people = len(result.ground)
         print(f"{n_people} global ids over {len(names)} cameras; wrote {os.fspath(out)}/")
@@ -172,16 +189,26 @@ def _line_of(path: str, message: str) -> str:
     return ""
 
 
-def _write_outputs(out, relabelled, result, picture: bytes) -> None:
+def _write_outputs(out, boxes, relabelled, result, picture: bytes) -> None:
     """Every output file, each atomically."""
     from xvmatch.datasets.mot_boxes import write_mot_boxes
     from xvmatch.geometry.atomic_files import atomic_write_bytes, atomic_write_text
 
     for name, frames in relabelled.items():
         write_mot_boxes(out / f"{name}.txt", frames)
-    rows = ["camera,track_id,global_id"] + [
-        f"{name},{t},{g}" for name, table in result.global_ids.items()
-        for t, g in sorted(table.items())]
+    rows = ["camera,track_id,first_frame,last_frame,global_id"]
+    for name, frames in relabelled.items():  # one line per stretch of a track under one id
+        spans: list[list[int]] = []
+        open_span: dict[int, list[int]] = {}
+        for f in sorted(frames):
+            for t, g in zip(boxes[name][f].ids.tolist(), frames[f].ids.tolist(), strict=True):
+                span = open_span.get(t)
+                if span is None or span[3] != g:
+                    span = [t, f, f, g]
+                    open_span[t] = span
+                    spans.append(span)
+                span[2] = f
+        rows += [f"{name},{t},{a},{b},{g}" for t, a, b, g in sorted(spans)]
     atomic_write_text(out / "tracks.csv", "\n".join(rows) + "\n")
     lines = ["frame,global_id,X,Y"]
     points = [(int(f), g, x, y) for g, (fr, xy) in result.ground.items()
