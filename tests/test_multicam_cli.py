@@ -52,9 +52,20 @@ def test_multicam_end_to_end(scene, tmp_path, capsys):
     scores = json.loads(capsys.readouterr().out)
     assert scores["P"] >= 0.9 and scores["R"] >= 0.9 and scores["idf1"]["IDF1"] >= 0.9
     assert scores["ground"]["median"] < 0.3
-    # A second run into its own folder is allowed; dtw too.
+    # A second run into its own folder is allowed; dtw with whole tracks too, and the VRL
+    # localisation, whose ground positions are scored the same way.
     assert main(["multicam", *_boxes_args(root), "--cameras", str(root / "cameras.json"),
-                 "--out", str(out), "--quiet", "--method", "dtw"]) == 0
+                 "--out", str(out), "--quiet", "--method", "dtw", "--split-frames", "0"]) == 0
+    header, *rows = (out / "tracks.csv").read_text().splitlines()
+    assert header == "camera,track_id,first_frame,last_frame,global_id"
+    keys = [tuple(r.split(",")[:2]) for r in rows]
+    assert len(keys) == len(set(keys))  # whole tracks: one global id each
+    assert main(["multicam", *_boxes_args(root), "--cameras", str(root / "cameras.json"),
+                 "--out", str(out), "--quiet", "--localise", "two-best"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", "--multicam", str(out), "--gt", *gt, "--ground-gt",
+                 str(root / "ground_gt.csv"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["ground"]["median"] < 0.3
 
 
 def _fails(args, capsys, pattern, out=None):
