@@ -129,3 +129,22 @@ def test_fit_homography(scene, tmp_path, capsys):
     csv.write_text("camera,u,v,X,Y\ncam1,1,2,3,4\n")
     _fails(["multicam", "--fit-homography", str(csv), "--image-size", size, "--out",
             str(tmp_path / "x.json")], capsys, "at least 4 point pairs")
+
+
+def test_h_cameras_give_the_same_association(scene, tmp_path):
+    """The association reads only each camera's homography: a cameras file of H cameras
+    (what --fit-homography writes) gives the same output files but the picture."""
+    root, sc = scene
+    from xvmatch.geometry.camera_io import save_cameras
+
+    h_file = tmp_path / "h.json"
+    save_cameras(h_file, {n: GroundCamera(GroundCamera.from_camera(c).H, c.width, c.height)
+                          for n, c in sc.cameras.items()})
+    outs = []
+    for k, cams in enumerate((root / "cameras.json", h_file)):
+        out = tmp_path / f"o{k}"
+        assert main(["multicam", *_boxes_args(root), "--cameras", str(cams), "--out", str(out),
+                     "--quiet"]) == 0
+        outs.append(out)
+    for name in ("cam1.txt", "cam2.txt", "cam3.txt", "tracks.csv", "ground.csv"):
+        assert (outs[0] / name).read_text() == (outs[1] / name).read_text()
