@@ -1,7 +1,10 @@
 """Edge weights of the four-cluster tracking graph (CVMHAT paper, Sec. 3.3-3.5, Eqs. 13-18).
 
 - Cross-view (clusters 3 -> 0 and 1 -> 2): the spatial term of Eq. 13, the fraction of the
-  longer tracklet's frames on which the frame-level association (Sec. 3.2) paired the two boxes.
+  longer tracklet's frames on which the frame-level association (Sec. 3.2) paired the two boxes;
+  or its learned counterpart (:func:`learned_similarity`), the same sum over the frames two
+  tracklets share of the learned matcher's evidence, read from its cost matrices and its
+  non-association cost (the dustbin).
 - Over time (clusters 0 -> 1 and 2 -> 3): the constant-velocity motion term of Eqs. 15-16.
 - Eqs. 17 and 18 mix each with an appearance term; without images that term does not exist and
   the weight is the other term alone (the mix renormalised over the terms present), so that the
@@ -19,13 +22,23 @@ from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [
     "DUMMY_WEIGHT",
+    "LEARNED_DUMMY_WEIGHT",
+    "LEARNED_RULES",
     "MOTION_SIGMA",
+    "SOFT_TEMPERATURE",
+    "FrameCosts",
     "TrackWeights",
     "combine_cross_view",
     "combine_over_time",
+    "frame_evidence",
+    "learned_similarity",
     "motion_similarity",
     "spatial_similarity",
 ]
+
+LEARNED_RULES = ("margin", "pairs", "confidence", "soft")
+"""How :func:`learned_similarity` turns one frame's costs into evidence (:func:`frame_evidence`);
+the first is the default, chosen on the even CVMHAT dev pairs (docs/tracking.md)."""
 
 
 MOTION_SIGMA = 1.0
@@ -33,6 +46,12 @@ MOTION_SIGMA = 1.0
 
 DUMMY_WEIGHT = 0.1
 """Default ``c0`` of Eq. 1 (see :class:`TrackWeights`)."""
+
+LEARNED_DUMMY_WEIGHT = 0.02
+"""Default ``c0`` of Eq. 1 with the learned cross-view weights (:func:`learned_similarity`),
+chosen with them on the even CVMHAT dev pairs: 0.2, 0.15, 0.1, 0.05, 0.02, 0.01, 0 gave 90.5,
+91.5, 91.9, 92.0, 92.4, 92.4, 92.2 CVIDF1 clean, and 0.1, 0.05, 0.02 gave 76.9, 78.8, 79.0
+with detector noise (docs/tracking.md)."""
 
 
 @dataclass(frozen=True)
@@ -93,6 +112,107 @@ def spatial_similarity(
     if hits:
         idx = np.array(hits)
         np.add.at(out, (idx[:, 0], idx[:, 1]), 1.0)
+    lengths_t = np.array([len(t) for t in top], dtype=float)
+    lengths_h = np.array([len(h) for h in hor], dtype=float)
+    return out / np.maximum(lengths_t[:, None], lengths_h[None, :])
+
+
+@dataclass(frozen=True, eq=False)
+class FrameCosts:
+    """The learned matcher's verdict on one frame, in the rows of the detections.
+
+    Attributes:
+        top_rows: (M,) the top-view detection rows, in the order of the cost rows.
+        hor_rows: (N,) the horizontal detection rows, in the order of the cost columns.
+        cost: (M, N) the matcher's costs in [0, 1].
+        paired: (M, N) bool, the frame's assignment with the non-association cost gamma
+            (geometric-priors Eqs. 1-2): the pairs the matcher makes on this frame alone.
+    """
+
+    top_rows: np.ndarray
+    hor_rows: np.ndarray
+    cost: np.ndarray
+    paired: np.ndarray
+
+
+SOFT_TEMPERATURE = 0.1
+"""Temperature of the ``soft`` rule of :func:`frame_evidence`, in cost units."""
+
+
+def frame_evidence(costs: FrameCosts, gamma: float, rule: str = LEARNED_RULES[0]) -> np.ndarray:
+    """(M, N) evidence in [0, 1] that each pair of a frame is one person (:data:`LEARNED_RULES`).
+
+    - ``margin``: ``max(0, gamma - c) / gamma``, how far below the dustbin a pair's cost lies (0
+      for every pair the matcher would leave unmatched, 1 for a cost of 0), whether or not the
+      frame's assignment took it: the soft evidence, which still counts a pair that lost its
+      frame's assignment to a near tie;
+    - ``pairs``: 1 for the pairs of the frame's assignment, else 0 (Eq. 13 on the learned pairs);
+    - ``confidence``: ``1 - c`` for the pairs of the frame's assignment, else 0;
+    - ``soft``: a soft assignment with the dustbin: ``exp(-c / T)`` over the sum of its row's (or
+      column's) ``exp(-c / T)`` and the dustbin's ``exp(-gamma / T)``, the smaller of the two,
+      ``T`` = :data:`SOFT_TEMPERATURE` (a pair alone far below the dustbin is near 1, two
+      close rivals share it).
+    """
+    if rule == "pairs":
+        return costs.paired.astype(float)
+    if rule == "confidence":
+        return np.where(costs.paired, 1.0 - costs.cost, 0.0)
+    if rule == "soft":
+        z = np.exp(-(costs.cost - gamma) / SOFT_TEMPERATURE)  # the dustbin's weight is 1
+        row = z / (1.0 + z.sum(axis=1, keepdims=True))
+        col = z / (1.0 + z.sum(axis=0, keepdims=True))
+        return np.minimum(row, col)
+    if rule == "margin":
+        if not gamma > 0:
+            raise ValueError(f"gamma must be > 0, got {gamma}")
+        return np.clip((gamma - costs.cost) / gamma, 0.0, 1.0)
+    raise ValueError(f"rule must be one of {', '.join(LEARNED_RULES)}, got {rule!r}")
+
+
+def _frame_members(tracklets: Sequence[Tracklet]) -> dict[int, tuple[list[int], list[int]]]:
+    """``{frame: (tracklet indices, their rows on that frame)}``."""
+    out: dict[int, tuple[list[int], list[int]]] = {}
+    for k, t in enumerate(tracklets):
+        for f, r in zip(t.frames.tolist(), t.rows.tolist(), strict=True):
+            members = out.setdefault(f, ([], []))
+            members[0].append(k)
+            members[1].append(r)
+    return out
+
+
+def learned_similarity(
+    top: Sequence[Tracklet],
+    hor: Sequence[Tracklet],
+    frame_costs: Mapping[int, FrameCosts],
+    gamma: float,
+    rule: str = LEARNED_RULES[0],
+) -> np.ndarray:
+    """(len(top), len(hor)) cross-view similarity of Eq. 13 from the learned matcher's costs.
+
+    Eq. 13 counts the common frames on which the frame association paired two tracklets' boxes,
+    over the length of the longer tracklet; here each common frame adds the matcher's evidence
+    for the pair (:func:`frame_evidence`, ``rule``), so a pair seen on every frame of both
+    tracklets with cost 0 weighs 1 and a pair the matcher never puts below its dustbin
+    ``gamma`` weighs 0, the range the dummy weight ``c0`` is set against. With ``rule="pairs"``
+    it equals :func:`spatial_similarity` on the matcher's own pairs.
+    """
+    out = np.zeros((len(top), len(hor)))
+    if not top or not hor:
+        return out
+    in_top, in_hor = _frame_members(top), _frame_members(hor)
+    for f in sorted(in_top.keys() & in_hor.keys()):
+        costs = frame_costs.get(f)
+        if costs is None:
+            continue
+        pos_t = {r: i for i, r in enumerate(costs.top_rows.tolist())}
+        pos_h = {r: i for i, r in enumerate(costs.hor_rows.tolist())}
+        (k_t, r_t), (k_h, r_h) = in_top[f], in_hor[f]
+        a = [(k, pos_t[r]) for k, r in zip(k_t, r_t, strict=True) if r in pos_t]
+        b = [(k, pos_h[r]) for k, r in zip(k_h, r_h, strict=True) if r in pos_h]
+        if not a or not b:
+            continue
+        (ka, pa), (kb, pb) = zip(*a, strict=True), zip(*b, strict=True)
+        out[np.ix_(ka, kb)] += frame_evidence(costs, gamma, rule)[np.ix_(pa, pb)]
     lengths_t = np.array([len(t) for t in top], dtype=float)
     lengths_h = np.array([len(h) for h in hor], dtype=float)
     return out / np.maximum(lengths_t[:, None], lengths_h[None, :])

@@ -1,7 +1,10 @@
 """Complementary-view tracking from boxes: the whole CVMHAT pipeline (paper, Algorithm 1).
 
 1. Frame-level cross-view association of every frame (Sec. 3.2, the exhaustive search of
-   :func:`xvmatch.geometry.spatial_search.associate_frame`; O given when the wearer is known).
+   :func:`xvmatch.geometry.spatial_search.associate_frame`; O given when the wearer is known),
+   or the learned matcher's box-only association (:func:`learned_frame_evidence`: its cost
+   matrices and its non-association cost give the cross-view weights,
+   :func:`~xvmatch.inference.track_costs.learned_similarity`).
 2. Single-view tracklets in clips of ``clip_length`` frames (:mod:`.tracklets`); with images,
    the horizontal view's link by IoU and colour, and each tracklet gets its appearance
    (:mod:`.track_appearance`: colour histograms, and the network descriptor with a bundle).
@@ -25,7 +28,12 @@ from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.geometry.spatial_matching import SpatialParams
 from xvmatch.geometry.spatial_search import associate_frame
 from xvmatch.geometry.worker_pool import worker_pool
-from xvmatch.inference.learned_association import FrameImages
+from xvmatch.inference.assignment import assign
+from xvmatch.inference.learned_association import (
+    FrameImages,
+    LearnedMatcher,
+    associate_sequence_learned,
+)
 from xvmatch.inference.track_appearance import (
     Embedder,
     TrackletAppearance,
@@ -35,9 +43,12 @@ from xvmatch.inference.track_appearance import (
     frame_histograms,
 )
 from xvmatch.inference.track_costs import (
+    LEARNED_RULES,
+    FrameCosts,
     TrackWeights,
     combine_cross_view,
     combine_over_time,
+    learned_similarity,
     motion_similarity,
     spatial_similarity,
 )
@@ -49,10 +60,12 @@ from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips, v
 __all__ = [
     "SOLVERS",
     "TIME_APPEARANCE",
+    "LearnedEvidence",
     "TrackConfig",
     "TrackImages",
     "TrackResult",
     "associate_frames",
+    "learned_frame_evidence",
     "track_pair",
 ]
 
@@ -81,7 +94,16 @@ class TrackConfig:
         time_appearance: with images, the over-time appearance term of Eq. 18: ``network``
             (the appearance network's descriptors, when there is one; else colour) or
             ``colour`` (the paper's Eq. 14, histogram intersection of median colour
-            histograms). The network is ahead on rendered videos (docs/tracking.md).
+            histograms). On rendered videos the network was ahead with the bundle of its
+            first measurement, and is level with the shipped one (docs/tracking.md).
+        learned_rule: with the learned matcher's evidence (:class:`LearnedEvidence`), how each
+            frame's costs count in the cross-view weight
+            (:func:`~xvmatch.inference.track_costs.frame_evidence`); chosen on the even CVMHAT
+            dev pairs (docs/tracking.md).
+        learned_share: with the learned evidence, its share of the cross-view spatial term; the
+            rest is Eq. 13 on the handcrafted frame association (``frame_pairs``, computed when
+            not given). 1 (default): the learned evidence alone; 0.5 was behind on the even
+            dev pairs (docs/tracking.md).
     """
 
     clip_length: int = 10
@@ -93,6 +115,8 @@ class TrackConfig:
     seed: int = 0
     min_colour: float = 0.3
     time_appearance: str = "network"
+    learned_rule: str = LEARNED_RULES[0]
+    learned_share: float = 1.0
 
     def __post_init__(self) -> None:
         if self.clip_length < 1:
@@ -110,6 +134,11 @@ class TrackConfig:
         if self.time_appearance not in TIME_APPEARANCE:
             raise ValueError(f"time_appearance must be one of {', '.join(TIME_APPEARANCE)}, "
                              f"got {self.time_appearance!r}")
+        if not 0.0 <= self.learned_share <= 1.0:
+            raise ValueError(f"learned_share must be in [0, 1], got {self.learned_share}")
+        if self.learned_rule not in LEARNED_RULES:
+            raise ValueError(f"learned_rule must be one of {', '.join(LEARNED_RULES)}, "
+                             f"got {self.learned_rule!r}")
 
 
 @dataclass(frozen=True)
@@ -126,6 +155,86 @@ class TrackImages:
     top: FrameImages
     hor: FrameImages
     embed: Embedder | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class LearnedEvidence:
+    """The learned matcher's box-only frame association, the evidence of the cross-view weights.
+
+    Attributes:
+        costs: ``{frame: FrameCosts}`` of every frame with boxes in both views.
+        gamma: the matcher's non-association cost (its dustbin).
+    """
+
+    costs: dict[int, FrameCosts]
+    gamma: float
+
+    @property
+    def frame_pairs(self) -> dict[int, list[tuple[int, int]]]:
+        """``{frame: [(top row, horizontal row)]}``: the matcher's assignment on each frame."""
+        out = {}
+        for f, c in self.costs.items():
+            a, b = np.nonzero(c.paired)
+            out[f] = [(int(c.top_rows[i]), int(c.hor_rows[j]))
+                      for i, j in zip(a.tolist(), b.tolist(), strict=True)]
+        return out
+
+
+def learned_frame_evidence(
+    top: Mapping[int, FrameBoxes],
+    hor: Mapping[int, FrameBoxes],
+    hor_size: tuple[float, float],
+    matcher: LearnedMatcher | list[LearnedMatcher],
+    camera_rows: Iterable[int] | None = None,
+    workers: int = 1,
+    progress: Progress | None = None,
+    mirror: bool = False,
+) -> LearnedEvidence:
+    """The learned matcher's association of every frame both views have, from the boxes alone.
+
+    Each frame's cost matrix (:func:`~xvmatch.inference.learned_association.
+    associate_sequence_learned`, no image or camera cue even when the bundle has them) and its
+    assignment with the matcher's non-association cost (geometric-priors Eqs. 1-2).
+
+    Args:
+        top, hor: ``{frame: FrameBoxes}``, ``ids`` = detection rows, unique within a view.
+        hor_size: ``(W, H)`` of the horizontal images, pixels.
+        matcher: an opened bundle, or several (an ensemble: costs averaged).
+        camera_rows: top rows of the camera wearer (O given on frames that have one).
+        workers: processes computing the geometry features (the result does not depend on it).
+        progress: optional progress wrapper.
+        mirror: also score the scene mirrored left-right and average the costs.
+
+    Returns:
+        The :class:`LearnedEvidence`; the ids never reach the matcher.
+    """
+    models = [matcher] if isinstance(matcher, LearnedMatcher) else list(matcher)
+    frames = sorted(f for f in set(top) & set(hor) if len(top[f]) and len(hor[f]))
+    cams = set(int(r) for r in camera_rows) if camera_rows is not None else set()
+    view = top
+    camera_id = None
+    if cams:  # the matcher finds O by one id: give the wearer's rows a common id of their own
+        camera_id = min(int(top[f].ids.min()) for f in frames) - 1 if frames else -1
+        view = {f: FrameBoxes(f, np.where(np.isin(top[f].ids, list(cams)), camera_id,
+                                          top[f].ids), top[f].boxes) for f in frames}
+    wrap = None
+    if progress is not None:
+        def wrap(items):
+            return progress(items, len(frames), "associate")
+    costs: dict[int, np.ndarray] = {}
+    gamma = float(models[0].gamma)
+    associate_sequence_learned(view, hor, float(hor_size[0]), models, camera_id=camera_id,
+                               gamma=gamma, progress=wrap, hor_height=float(hor_size[1]),
+                               frames=frames, mirror=mirror, costs_out=costs,
+                               workers=workers)
+    out = {}
+    for f in frames:
+        cost = costs[f]
+        paired = np.zeros(cost.shape, dtype=bool)
+        pairs = assign(cost, gamma)
+        paired[pairs[:, 0], pairs[:, 1]] = True
+        out[f] = FrameCosts(top[f].ids.copy(), hor[f].ids.copy(), cost, paired)
+    return LearnedEvidence(out, gamma)
 
 
 @dataclass(frozen=True)
@@ -204,9 +313,13 @@ def _window_weights(
     top_t: list[Tracklet], top_u: list[Tracklet], hor_u: list[Tracklet], hor_t: list[Tracklet],
     frame_pairs: Mapping[int, list[tuple[int, int]]], weights: TrackWeights,
     app: tuple[TrackletAppearance, ...] | None = None, time_appearance: str = "network",
+    learned: LearnedEvidence | None = None, learned_rule: str = LEARNED_RULES[0],
+    learned_share: float = 1.0,
 ) -> list[np.ndarray]:
     """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t);
-    ``app``: the appearance of the same four tracklet lists, or None (boxes only)."""
+    ``app``: the appearance of the same four tracklet lists, or None (boxes only); ``learned``:
+    the learned matcher's evidence for the cross-view spatial term, or None (Eq. 13 on
+    ``frame_pairs``)."""
     a_time = a_cross = (None, None)
     if app is not None:
         a_tt, a_tu, a_hu, a_ht = app
@@ -216,12 +329,20 @@ def _window_weights(
         a_time = (over(a_tt, a_tu), over(a_ht, a_hu))
         if network:
             a_cross = (descriptor_similarity(a_tu, a_hu), descriptor_similarity(a_tt, a_ht))
+    def cross(top: list[Tracklet], hor: list[Tracklet]) -> np.ndarray:
+        if learned is None:
+            return spatial_similarity(top, hor, frame_pairs)
+        out = learned_similarity(top, hor, learned.costs, learned.gamma, learned_rule)
+        if learned_share < 1:
+            out = learned_share * out + (1 - learned_share) * spatial_similarity(
+                top, hor, frame_pairs)
+        return out
+
     c0 = combine_over_time(motion_similarity(top_t, top_u, weights.sigma), a_time[0], weights)
-    c1 = combine_cross_view(spatial_similarity(top_u, hor_u, frame_pairs), a_cross[0], weights)
+    c1 = combine_cross_view(cross(top_u, hor_u), a_cross[0], weights)
     c2 = combine_over_time(motion_similarity(hor_t, hor_u, weights.sigma), a_time[1],
                            weights).T
-    c3 = combine_cross_view(spatial_similarity(top_t, hor_t, frame_pairs), a_cross[1],
-                            weights).T
+    c3 = combine_cross_view(cross(top_t, hor_t), a_cross[1], weights).T
     return [c0, c1, c2, c3]
 
 
@@ -273,6 +394,7 @@ def track_pair(
     progress: Progress | None = None,
     frame_pairs: Mapping[int, list[tuple[int, int]]] | None = None,
     images: TrackImages | None = None,
+    learned: LearnedEvidence | None = None,
 ) -> TrackResult:
     """Track the people of a top/horizontal sequence pair with one id across views (Alg. 1).
 
@@ -287,6 +409,11 @@ def track_pair(
         frame_pairs: a frame association computed earlier (skips step 1).
         images: the images of both views (and the appearance network): the appearance terms
             of Sec. 3.3.2, 3.4.1 and 4.1; without them the weights come from the boxes alone.
+        learned: the learned matcher's evidence (:func:`learned_frame_evidence`): the spatial
+            term of the cross-view weights comes from its costs (``config.learned_rule``) and
+            the frame association is its assignment (step 1 skipped; ``frame_pairs``,
+            ``params`` and ``camera_rows`` unused, unless ``config.learned_share < 1`` mixes
+            in the handcrafted Eq. 13). None: the handcrafted Eq. 13.
 
     Only the frames present are visited (:func:`split_clips`), so a gap of any length between
     frames costs nothing.
@@ -298,7 +425,9 @@ def track_pair(
     for name, view in (("top", top), ("horizontal", hor)):
         if not any(len(rec) for rec in view.values()):
             raise ValueError(f"the {name} view has no boxes: nothing to track")
-    if frame_pairs is None:
+    if learned is not None and config.learned_share >= 1:
+        frame_pairs = learned.frame_pairs
+    elif frame_pairs is None:
         frame_pairs = associate_frames(top, hor, hor_width, params, camera_rows, workers,
                                        progress)
     clips = split_clips(sorted(set(top) | set(hor)), config.clip_length)
@@ -320,7 +449,8 @@ def track_pair(
         window_app = None if app is None else (app[t][0], app[t + 1][0], app[t + 1][1],
                                                app[t][1])
         w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
-                            config.weights, window_app, config.time_appearance)
+                            config.weights, window_app, config.time_appearance, learned,
+                            config.learned_rule, config.learned_share)
         if config.solver == "mip":
             solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
         else:

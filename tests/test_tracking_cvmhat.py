@@ -58,3 +58,25 @@ def test_tracking_beats_frame_mode_on_real_boxes(sequence):
     assert res.n_fallback == 0
     assert tracked.cvidf1 >= frame_mode.cvidf1
     assert view_track_scores(top, tr_top).idf1 >= 95.0
+
+
+def test_learned_weights_on_real_boxes(sequence):
+    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+    from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence
+
+    top, hor = sequence
+    det_top, truth_top = _detections(top, 1)
+    det_hor, truth_hor = _detections(hor, 2)
+    frames = sorted(set(top) | set(hor))
+    evidence = learned_frame_evidence(det_top, det_hor, IMAGE_SIZE, load_matcher_bundle())
+    frame_mode = summarize(count_sequence(
+        {f: [(truth_top[a], truth_hor[b]) for a, b in p]
+         for f, p in evidence.frame_pairs.items()}, top, hor, frames))
+    config = TrackConfig(weights=TrackWeights(c0=LEARNED_DUMMY_WEIGHT))
+    res = track_pair(det_top, det_hor, float(IMAGE_SIZE[0]), config=config, learned=evidence)
+    tr_top, tr_hor = _tracks(det_top, res.top_rows), _tracks(det_hor, res.hor_rows)
+    tracked = summarize(track_pair_counts(tr_top, tr_hor, top, hor, frames))
+    assert res.n_fallback == 0
+    assert tracked.cvidf1 >= max(frame_mode.cvidf1, 95.0)  # measured: 93.2 frame, 95.9 tracked
+    assert view_track_scores(top, tr_top).idf1 >= 95.0

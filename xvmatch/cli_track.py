@@ -6,9 +6,11 @@ across the views (:func:`xvmatch.inference.tracking.track_pair`, CVMHAT Algorith
 ``OUT/top.txt`` and ``OUT/hor.txt``: the input rows, text unchanged but the id field, which holds
 the track id; rows the tracker dropped are absent. With the images of both views
 (``--top-images``, ``--hor-images``: the forms ``xvmatch associate`` reads) the horizontal
-tracklets link by IoU and colour and the over-time weights mix in colour similarity; ``--model``
-adds the appearance network's cross-view term and takes over the over-time one (CVMHAT Sec.
-3.3.2, 3.4.1, 4.1). Bad input raises
+tracklets link by IoU and colour and the over-time weights mix in colour similarity. ``--model``
+gives the learned matcher: its box-only association makes the cross-view weights (``--weights
+learned``, the default with ``--model``; ``--weights handcrafted`` keeps Eq. 13 on the spatial
+search), and with images its appearance network adds the cross-view term and takes over the
+over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1). Bad input raises
 ``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
 ...`` with exit code 2.
 """
@@ -41,6 +43,7 @@ __all__ = ["EXAMPLE", "add_track_parser", "evaluate_tracks_command"]
 
 EXAMPLE = (
     "xvmatch track --top seq_top.txt --hor seq_hor.txt --out tracks/\n"
+    "  xvmatch track --top seq_top.txt --hor seq_hor.txt --model default --out tracks/\n"
     "  xvmatch evaluate --tracks tracks/ --top gt_top.txt --hor gt_hor.txt"
 )
 
@@ -62,28 +65,40 @@ def _step_progress(enabled: bool):
     return wrap
 
 
-def _open_images(args: argparse.Namespace, top, hor):
+def _cross_view_weights(args: argparse.Namespace) -> str:
+    """``--weights``, its default (``learned`` with ``--model``, else ``handcrafted``) and the
+    checks of its combinations with ``--model`` and the images."""
+    weights = args.weights or ("learned" if args.model is not None else "handcrafted")
+    if weights == "learned" and args.model is None:
+        raise ValueError("--weights learned takes the learned matcher's costs: add --model "
+                         "BUNDLE or --model default")
+    if weights == "handcrafted" and args.model is not None and args.top_images is None:
+        raise ValueError("--model with --weights handcrafted gives the appearance network, which "
+                         "needs the images: add --top-images and --hor-images, or drop --weights "
+                         "handcrafted to take the cross-view weights from the matcher")
+    return weights
+
+
+def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     """The image sources of both views, their horizontal size and the embedder (or None),
     after every check (images given together, the frames the boxes list, boxes inside the
-    images, ``--image-size`` agreeing, a bundle with an appearance network)."""
-    from xvmatch.cli_model import open_models
+    images, ``--image-size`` agreeing, a bundle with an appearance network unless the model
+    gives the learned weights)."""
     from xvmatch.datasets.box_image_size import check_boxes_in_image
     from xvmatch.inference.learned_pipeline import open_view_images
     from xvmatch.inference.tracking import TrackImages
 
     check_images_together(args)
     if args.top_images is None:
-        if args.model is not None:
-            raise ValueError("--model gives the appearance network, which needs the images: "
-                             "add --top-images and --hor-images")
         return None, [], None
     embed = None
-    if args.model is not None:
-        model = open_models([args.model])[0]
-        if model.bundle.manifest.appearance is None:
+    if model is not None:
+        if model.bundle.manifest.appearance is not None:
+            embed = model.descriptors
+        elif weights == "handcrafted":
             raise ValueError(f"{args.model}: a box-only matcher has no appearance network; "
-                             "use a bundle with one (e.g. default)")
-        embed = model.descriptors
+                             "use a bundle with one (e.g. default), or drop --weights "
+                             "handcrafted to take the cross-view weights from it")
     sources = []
     try:
         for path, frames in ((args.top_images, top), (args.hor_images, hor)):
@@ -127,7 +142,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="frames a tracklet may miss inside a clip and still continue, 0..1000 "
                    "(default 3)")
     p.add_argument("--c0", type=C0_TYPE, default=None,
-                   help="dummy-node weight of Eq. 1, in [0, 1] (default 0.1; the paper's 0.2)")
+                   help="dummy-node weight of Eq. 1, in [0, 1] (default 0.1, 0.02 with the "
+                   "learned weights; the paper's 0.2)")
     p.add_argument("--sigma", type=SIGMA_TYPE, default=None,
                    help="motion deviation scale of Eq. 15 per box height (resolution-free), in "
                    "(0, 1000] (default 1)")
@@ -145,9 +161,14 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     g = p.add_argument_group("appearance (with the images of both views)")
     add_image_options(g)
     g.add_argument("--model", default=None, metavar="BUNDLE",
-                   help="a matcher bundle with an appearance network (xvmatch export), or "
-                   "'default' for the shipped one: the cross-view appearance term of Eq. 17 "
-                   "(needs the images); the frame association stays the spatial search")
+                   help="a matcher bundle (xvmatch export), or 'default' for the shipped one: "
+                   "its box-only association gives the cross-view weights (--weights learned); "
+                   "with the images, its appearance network adds the cross-view term of Eq. 17 "
+                   "and the over-time one of Eq. 18")
+    g.add_argument("--weights", choices=("learned", "handcrafted"), default=None,
+                   help="cross-view weights (Eq. 13): learned, from the --model's costs on the "
+                   "boxes (default with --model), or handcrafted, from the spatial-distribution "
+                   "search's pairs (default without)")
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
                    "(default 0.3)")
@@ -167,17 +188,21 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.track_costs import TrackWeights
-    from xvmatch.inference.tracking import TrackConfig, track_pair
+    from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+    from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
 
     start = time.perf_counter()
     params = spatial_params(args)
+    weights = _cross_view_weights(args)
+    given = {k: getattr(args, k) for k in ("c0", "w1", "w2", "sigma")
+             if getattr(args, k) is not None}
+    if weights == "learned":
+        given.setdefault("c0", LEARNED_DUMMY_WEIGHT)
     config = TrackConfig(
         clip_length=args.clip_length,
         min_iou=args.min_iou,
         max_gap=args.max_gap,
-        weights=TrackWeights(**{k: getattr(args, k) for k in ("c0", "w1", "w2", "sigma")
-                                if getattr(args, k) is not None}),
+        weights=TrackWeights(**given),
         solver=args.solver,
         time_limit=args.time_limit,
         seed=args.seed,
@@ -198,7 +223,12 @@ def _cmd_track(args: argparse.Namespace) -> int:
          *image_inputs(args),
          Input("--model", None if args.model == "default" else args.model)],
     )
-    images, sources, size = _open_images(args, top.frames, hor.frames)
+    model = None
+    if args.model is not None:
+        from xvmatch.cli_model import open_models
+
+        model = open_models([args.model])[0]
+    images, sources, size = _open_images(args, top.frames, hor.frames, model, weights)
     try:
         from xvmatch.cli_image_size import note_if_assumed
         from xvmatch.datasets.box_image_size import resolve_size
@@ -209,9 +239,14 @@ def _cmd_track(args: argparse.Namespace) -> int:
         resolved = resolve_size(hor.frames, args.hor, given, ids=False)
         width = resolved[0][0]
         note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
+        progress = _step_progress(not args.quiet)
+        learned = None
+        if weights == "learned":
+            learned = learned_frame_evidence(top.frames, hor.frames, resolved[0], model,
+                                             camera_rows, args.workers, progress)
         result = track_pair(top.frames, hor.frames, float(width), params, config,
-                            camera_rows, args.workers, _step_progress(not args.quiet),
-                            images=images)
+                            camera_rows, args.workers, progress, images=images,
+                            learned=learned)
     finally:
         for source in sources:
             source.close()
