@@ -203,32 +203,73 @@ def localise(cameras: Mapping[str, GroundCamera],
                     per.setdefault(g, []).append((v, oo, dd))
     out_xy = {g: xy.copy() for g, (_fr, xy) in fallback.items()}
     index = {g: {int(f): i for i, f in enumerate(fr)} for g, (fr, _xy) in fallback.items()}
+    cam_c = np.array([geo[n][0] for n in names]).reshape(-1, 2)
+    cam_fwd = np.array([geo[n][1] for n in names]).reshape(-1, 2)
+    cam_half = np.array([geo[n][2] for n in names])
     previous: dict[int, np.ndarray] = {}
     for f in sorted(traces):
-        per = traces[f]
-        # The others' previous positions (Eq. 3 uses t - 1), else the fallback at t.
-        known = {g: previous.get(g, out_xy[g][index[g][f]] if f in index.get(g, {}) else None)
-                 for g in per}
-        current: dict[int, np.ndarray] = {}
-        for g, views in per.items():
-            if g not in index or f not in index[g] or len(views) < 2:
-                continue
-            v_idx = np.array([v for v, _, _ in views])
-            o = np.array([oo for _, oo, _ in views])
-            d = np.array([dd for _, _, dd in views])
-            if opts.method == "all":
-                x = _least_squares(o, d)
-            else:
-                x = _two_best(g, v_idx, o, d, known, previous.get(g), names, geo, centres,
-                              min_sin, opts)
+        per = {g: v for g, v in traces[f].items() if f in index.get(g, {})}
+        people = list(per)
+        if opts.method == "all":
+            found = {g: _least_squares(np.array([o for _, o, _ in per[g]]),
+                                       np.array([d for _, _, d in per[g]]))
+                     for g in people if len(per[g]) >= 2}
+        else:
+            # The others' previous positions (Eq. 3 uses t - 1), else the fallback at t.
+            known = np.array([previous.get(g, out_xy[g][index[g][f]]) for g in people])
+            found = _two_best_frame(people, per, known, previous, cam_c, cam_fwd, cam_half,
+                                    centres, min_sin, opts)
+        for g, x in found.items():
             if x is not None and np.isfinite(x).all():
-                current[g] = x
                 out_xy[g][index[g][f]] = x
-        for g in per:
-            if g in index and f in index[g]:
-                previous[g] = out_xy[g][index[g][f]]
-        del current
+        for g in people:
+            previous[g] = out_xy[g][index[g][f]]
     return {g: (fallback[g][0], out_xy[g]) for g in fallback}
+
+
+def _two_best_frame(people, per, known, previous, cam_c, cam_fwd, cam_half, centres, min_sin,
+                    opts) -> dict:
+    """Eqs. 1, 4, 5 for every person of one frame at once: the candidate of the view pair with
+    the best posterior (least squares over all views where no pair crosses well enough)."""
+    rows = []  # (person k, view a, view b, o_a, d_a, o_b, d_b)
+    for k, g in enumerate(people):
+        views = per[g]
+        for a in range(len(views)):
+            for b in range(a + 1, len(views)):
+                rows.append((k, views[a][0], views[b][0], views[a][1], views[a][2],
+                             views[b][1], views[b][2]))
+    found: dict[int, np.ndarray | None] = {}
+    if not rows:
+        return found
+    k = np.array([r[0] for r in rows])
+    va = np.array([r[1] for r in rows])
+    vb = np.array([r[2] for r in rows])
+    cand = _intersect(np.array([r[3] for r in rows]), np.array([r[4] for r in rows]),
+                      np.array([r[5] for r in rows]), np.array([r[6] for r in rows]), min_sin)
+    valid = np.isfinite(cand).all(1)
+    M, S = len(rows), len(people)
+    others = np.broadcast_to(known, (M, S, 2)).copy()
+    others[np.arange(M), k] = np.nan  # a person does not hide itself
+    nearest = np.linalg.norm(cand[:, None, :] - centres[None, :, :], axis=-1).min(1)
+    vis = [view_visibility(cand, cam_c[v], cam_fwd[v], cam_half[v], others, nearest, opts)
+           for v in (va, vb)]
+    joint = np.maximum(vis[0], 1e-3) * np.maximum(vis[1], 1e-3)  # Eq. 4
+    score = opts.lam * np.log(joint)
+    prev = np.array([previous.get(g, np.full(2, np.nan)) for g in people])[k]
+    step = np.linalg.norm(cand - prev, axis=1)
+    score = score - (1.0 - opts.lam) * np.where(np.isfinite(step), step, 0.0)  # Eq. 5
+    score = np.where(valid, score, -np.inf)
+    order = np.lexsort((-score, k))
+    first = order[np.concatenate([[True], k[order][1:] != k[order][:-1]])]
+    for r in first:
+        g = people[k[r]]
+        if np.isfinite(score[r]):
+            found[g] = cand[r]
+        else:
+            views = per[g]
+            found[g] = _least_squares(np.array([o for _, o, _ in views]),
+                                      np.array([d for _, _, d in views]))
+    return found
 
 
 def _least_squares(o: np.ndarray, d: np.ndarray) -> np.ndarray | None:
@@ -238,29 +279,3 @@ def _least_squares(o: np.ndarray, d: np.ndarray) -> np.ndarray | None:
     if np.linalg.cond(A) > 1e6:
         return None
     return np.linalg.solve(A, n.T @ (n * o).sum(1))
-
-
-def _two_best(g, v_idx, o, d, known, prev, names, geo, centres, min_sin, opts):
-    """Eqs. 1, 4, 5: the candidate of the view pair with the best posterior."""
-    i, j = np.triu_indices(len(v_idx), k=1)
-    cand = _intersect(o[i], d[i], o[j], d[j], min_sin)
-    ok = np.isfinite(cand).all(1)
-    if not ok.any():
-        return _least_squares(o, d)
-    cand, i, j = cand[ok], i[ok], j[ok]
-    others = np.array([p for h, p in known.items() if h != g and p is not None]).reshape(-1, 2)
-    M = len(cand)
-    nearest = np.linalg.norm(cand[:, None, :] - centres[None, :, :], axis=-1).min(1)
-    vis = []
-    for side in (i, j):
-        views = v_idx[side]
-        c = np.array([geo[names[v]][0] for v in views])
-        fwd = np.array([geo[names[v]][1] for v in views])
-        half = np.array([geo[names[v]][2] for v in views])
-        vis.append(view_visibility(cand, c, fwd, half,
-                                   np.broadcast_to(others, (M, *others.shape)), nearest, opts))
-    joint = np.maximum(vis[0], 1e-3) * np.maximum(vis[1], 1e-3)  # Eq. 4
-    score = opts.lam * np.log(joint)
-    if prev is not None:
-        score = score - (1.0 - opts.lam) * np.linalg.norm(cand - prev, axis=1)  # Eq. 5
-    return cand[int(np.argmax(score))]
