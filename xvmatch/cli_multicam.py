@@ -65,10 +65,10 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
                    help="ours: the trajectory-correspondence paper's features, reprojection "
                    "conflicts, fusion and linkage; dtw: its DTW baseline (M1)")
     p.add_argument("--split-frames", type=int_in(0, 100000, "frames of a track piece"),
-                   default=20, metavar="L",
+                   default=None, metavar="L",
                    help="associate each track in pieces of L frames, rejoined unless the other "
                    "cameras disagree (a tracker's id switch); 0: whole tracks, as the paper "
-                   "(default 20)")
+                   "(default 20 with --method ours, 0 with dtw: the paper's M1)")
     p.add_argument("--localise", choices=("foot", "two-best", "all"), default="foot",
                    help="ground.csv from: foot, the fused foot points (default); two-best, "
                    "the VRL paper's two most visible views (principal axes along the "
@@ -128,7 +128,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
         try:
             result = associate_cameras(cameras, boxes, MulticamOptions(
-                method=args.method, split_frames=args.split_frames), progress=bar.update)
+                method=args.method, split_frames=_split_frames(args)), progress=bar.update)
         except MulticamInputError as exc:
             path = files[exc.camera]
             raise UsageError(f"{path}{_line_of(path, str(exc))}: {exc}") from None
@@ -148,6 +148,13 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         n_people = len(result.ground)
         print(f"{n_people} global ids over {len(names)} cameras; wrote {os.fspath(out)}/")
     return 0
+
+
+def _split_frames(args: argparse.Namespace) -> int:
+    """``--split-frames``, or its default for the method (20 for ours, 0 for dtw)."""
+    if args.split_frames is not None:
+        return args.split_frames
+    return 0 if args.method == "dtw" else 20
 
 
 def _check_inside(path: str, frames, camera) -> None:
