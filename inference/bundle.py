@@ -6,6 +6,8 @@ A bundle is a folder written by ``xvmatch export`` (:mod:`xvmatch.export.onnx_ex
                        sha256 of every file, the parity figures measured at export
     matcher.onnx       padded geometry features and pair cues -> cost 1 - P
     appearance.onnx    uint8 BGR crops -> unit descriptors (absent for a box-only matcher)
+    adaptation.npz     a site bundle's adaptation of the descriptors (``xvmatch adapt``,
+                       :mod:`xvmatch.inference.site_adaptation`); absent in other bundles
 
 Loading checks the format and its version, every field's type and range, and each file's
 sha256 before onnxruntime opens it, and reports any problem in one line naming the file.
@@ -28,6 +30,11 @@ from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import CUE_NAMES
 from xvmatch.geometry.record_fields import typed_field
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
+from xvmatch.inference.site_adaptation import (
+    ADAPTATION_FORMAT_VERSION,
+    SiteAdaptation,
+    load_adaptation,
+)
 
 __all__ = [
     "APPEARANCE_INPUT",
@@ -40,6 +47,7 @@ __all__ = [
     "MATCHER_OUTPUT",
     "OPSET",
     "PRECISIONS",
+    "AdaptationRecord",
     "AppearanceSpec",
     "Bundle",
     "BundleError",
@@ -106,6 +114,23 @@ class AppearanceSpec:
 
 
 @dataclass(frozen=True)
+class AdaptationRecord:
+    """A site bundle's adaptation (the manifest's optional ``adaptation`` object).
+
+    Attributes:
+        file: ``adaptation.npz`` in the bundle.
+        sha256: its checksum.
+        rank: the rank of its projection (0: standardisation alone).
+        record: the whole object (what it was fitted on, its held-out figures, ...).
+    """
+
+    file: str
+    sha256: str
+    rank: int
+    record: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Manifest:
     """A bundle's manifest, validated.
 
@@ -120,6 +145,7 @@ class Manifest:
         parity: the figures measured at export.
         meta: the training notes of the source model.
         raw: the whole JSON document.
+        adaptation: a site bundle's adaptation (``xvmatch adapt``), or None.
     """
 
     folder: Path
@@ -134,6 +160,7 @@ class Manifest:
     parity: dict = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
     raw: dict = field(default_factory=dict, repr=False)
+    adaptation: AdaptationRecord | None = None
 
     @property
     def uses_images(self) -> bool:
@@ -165,11 +192,11 @@ def _number(doc: dict, key: str, where: Path, low: float, high: float, prefix: s
     return value
 
 
-def _file_name(doc: dict, where: Path, prefix: str) -> tuple[str, str]:
+def _file_name(doc: dict, where: Path, prefix: str, suffix: str = ".onnx") -> tuple[str, str]:
     name = _get(doc, "file", str, where, prefix)
-    if Path(name).name != name or not name.endswith(".onnx"):
-        raise _fail(where, f"manifest field {prefix}file must be an .onnx file name inside the "
-                    f"bundle, got {name!r}")
+    if Path(name).name != name or not name.endswith(suffix):
+        raise _fail(where, f"manifest field {prefix}file must be an {suffix} file name inside "
+                    f"the bundle, got {name!r}")
     sha = _get(doc, "sha256", str, where, prefix)
     if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
         raise _fail(where, f"manifest field {prefix}sha256 must be 64 hex digits, got {sha!r:.70}")
@@ -266,7 +293,30 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     parity = _get(doc, "parity", dict, path)
     meta = _get(doc, "meta", dict, path)
     return Manifest(folder, config, gamma, tuple(cues), margin, beta, matcher_file, matcher_sha,
-                    spec, parity, meta, doc)
+                    spec, parity, meta, doc, _adaptation_record(doc, path, spec))
+
+
+def _adaptation_record(doc: dict, path: Path, spec: AppearanceSpec | None
+                       ) -> AdaptationRecord | None:
+    """The optional ``adaptation`` object of a site bundle's manifest, checked field by field."""
+    adapt = _get(doc, "adaptation", (dict, type(None)), path) if "adaptation" in doc else None
+    if adapt is None:
+        return None
+    if spec is None:
+        raise _fail(path, "manifest field 'adaptation' needs an appearance network (this "
+                    "bundle has none)")
+    name, sha = _file_name(adapt, path, "adaptation.", ".npz")
+    version = _get(adapt, "format_version", int, path, "adaptation.")
+    if version != ADAPTATION_FORMAT_VERSION:
+        raise _fail(path, f"adaptation format version {version}, this xvmatch reads "
+                    f"{ADAPTATION_FORMAT_VERSION}; run xvmatch adapt again")
+    rank = _get(adapt, "rank", int, path, "adaptation.")
+    if not 0 <= rank <= spec.embedding_dim:
+        raise _fail(path, f"manifest field 'adaptation.rank' must be in 0-{spec.embedding_dim}, "
+                    f"got {rank}")
+    for key in ("fitted_on", "heldout"):
+        _get(adapt, key, dict, path, "adaptation.")
+    return AdaptationRecord(name, sha, rank, dict(adapt))
 
 
 def _checked_file(folder: Path, name: str, sha: str) -> Path:
@@ -307,6 +357,7 @@ class Bundle:
         appearance: the session of the appearance network, or None.
         threads: onnxruntime intra-op threads of each session.
         precision: the appearance network in use, ``"fp32"`` or ``"int8"`` (None without one).
+        adaptation: a site bundle's adaptation of the descriptors, or None.
     """
 
     manifest: Manifest
@@ -314,6 +365,7 @@ class Bundle:
     appearance: Any = None
     threads: int = 1
     precision: str | None = None
+    adaptation: SiteAdaptation | None = None
 
     @property
     def name(self) -> str:
@@ -431,4 +483,15 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
         inputs = appearance.get_inputs()
         if [i.name for i in inputs] != [APPEARANCE_INPUT]:
             raise _fail(app_path, f"not an appearance graph (inputs {[i.name for i in inputs]})")
-    return Bundle(manifest, matcher, appearance, int(threads), used)
+    adaptation = None
+    record = manifest.adaptation
+    if record is not None and manifest.appearance is not None:
+        adapt_path = _checked_file(folder, record.file, record.sha256)
+        try:
+            adaptation = load_adaptation(adapt_path, manifest.appearance.embedding_dim)
+        except ValueError as exc:
+            raise _fail(adapt_path, str(exc)) from None
+        if adaptation.rank != record.rank:
+            raise _fail(adapt_path, f"rank {adaptation.rank} but the manifest says "
+                        f"{record.rank}; run xvmatch adapt again")
+    return Bundle(manifest, matcher, appearance, int(threads), used, adaptation)

@@ -80,6 +80,15 @@ class LearnedMatcher:
             raise ValueError(f"{self.bundle.name}: this bundle has no appearance network")
         return self.bundle.embed(box_crops(image, boxes, spec.crop_size, spec.context))
 
+    def appearance_cost(self, top: np.ndarray, hor: np.ndarray) -> np.ndarray:
+        """``(M, N)`` appearance cue of raw top ``(M, D)`` and horizontal ``(N, D)``
+        descriptors: ``|a - b| / 2``, or a site bundle's adapted cost
+        (:meth:`~xvmatch.inference.site_adaptation.SiteAdaptation.cost`: each view standardised
+        on its own, projected, recalibrated)."""
+        if self.bundle.adaptation is not None:
+            return self.bundle.adaptation.cost(top, hor)
+        return appearance_cost(top, hor)
+
     def inputs(
         self,
         features: FrameFeatures,
@@ -296,7 +305,7 @@ def associate_sequence_learned(
             for m in models:
                 a = m.descriptors(top_images.get(frame), t_boxes)
                 b = m.descriptors(hor_images.get(frame), h_boxes)
-                per_model.append(appearance_cost(a, b))
+                per_model.append(m.appearance_cost(a, b))
             cues["app"] = per_model
         if cameras is not None:
             ray, cheir = camera_cues(cameras.get(frame), t_boxes, h_boxes, manifest.margin,

@@ -63,6 +63,7 @@ class _VersionAction(argparse.Action):
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command (also used to render the README's examples)."""
     from xvmatch.cli_ablate import add_ablate_parser
+    from xvmatch.cli_adapt import add_adapt_parser
     from xvmatch.cli_baseline import add_baseline_parser
     from xvmatch.cli_demo import add_demo_parser
     from xvmatch.cli_export import add_export_parser
@@ -89,6 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
         cli_evaluate.add_evaluate_parser,
         add_track_parser,
         add_multi_ego_parser,
+        add_adapt_parser,
         add_multicam_parser,
         cli_offset.add_offset_parser,
         add_synth_parser,

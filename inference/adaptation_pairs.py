@@ -1,0 +1,367 @@
+"""Training pairs for site adaptation, mined from a site's unlabelled video pair (no identities).
+
+The frames are read in **bursts**: runs of ``burst`` consecutive frames with boxes in both views,
+spread evenly over the video (at most ``max_frames`` frames in all, so a long video costs no more
+than a short one). In each burst:
+
+* **within each view**, boxes are linked over the burst into tracklets by IoU
+  (:func:`xvmatch.inference.tracklets.clip_tracklets`, the tracking code's links; the box files'
+  ids only name the boxes of a frame): a tracklet's boxes in two frames are a positive pair, two
+  boxes of one frame a negative pair;
+* **across views**, the box-only learned matcher (the bundle's ``matcher.onnx`` without the
+  appearance cue; with the cameras when given) scores every frame of the burst
+  (:func:`box_only_costs`). A pair it assigns is *confident* when its cost is below every
+  alternative of its row and column and below the non-association cost gamma (the dustbin) by at
+  least ``margin``; a pair of tracklets is a pseudo-match when it is confident in at least
+  ``agree`` consecutive frames and neither tracklet is confidently matched to another. Boxes
+  nobody is sure of stay unlabelled: the camera wearer, who is not in the horizontal view, and
+  anyone the matcher doubts (pseudo-labels allow "no match"). A pseudo-matched box against every
+  other box of the other view in that frame is a cross-view negative.
+
+Only the first, middle and last frames of each burst are embedded by the appearance network
+(:attr:`MinedPairs.embed_frames`, every box of both views): the descriptors
+(:func:`embed_frames`) and the index pairs make a :class:`~xvmatch.inference.site_adaptation.
+PairSet`. Each pair carries its burst number, so a fit can hold out the last part of the video.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.inference.assignment import assign
+from xvmatch.inference.site_adaptation import VIEWS, PairSet
+from xvmatch.inference.tracklets import clip_tracklets
+
+__all__ = [
+    "MinedPairs",
+    "MiningConfig",
+    "box_only_costs",
+    "confident_pairs",
+    "embed_frames",
+    "mine_pairs",
+    "plan_bursts",
+    "reference_costs",
+]
+
+REFERENCE_SCENES: tuple[tuple[str, int], ...] = (("drone", 9101), ("drone", 9102),
+                                                   ("overview", 9103), ("overview", 9104))
+"""Rendered scenes (scenario, seed) on which :func:`reference_costs` measures the network in the
+domain it was trained on (seeds no training or test set uses)."""
+
+
+@dataclass(frozen=True)
+class MiningConfig:
+    """How pairs are mined.
+
+    Attributes:
+        burst: consecutive frames per burst (>= ``agree``).
+        max_frames: most frames scored by the box-only matcher (bursts spread evenly).
+        margin: a confident pair's cost is below every alternative (and gamma) by this much.
+        agree: consecutive confident frames a pseudo-match needs.
+        min_iou: IoU of a tracklet link.
+        max_gap: frames a tracklet may skip.
+    """
+
+    burst: int = 10
+    max_frames: int = 1500
+    margin: float = 0.3
+    agree: int = 3
+    min_iou: float = 0.5
+    max_gap: int = 1
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.agree <= self.burst:
+            raise ValueError(f"agree must be in 1..burst ({self.burst}), got {self.agree}")
+        if self.max_frames < self.burst:
+            raise ValueError(f"max_frames ({self.max_frames}) must be >= burst ({self.burst})")
+        if not 0.0 <= self.margin <= 1.0:
+            raise ValueError(f"margin must be in [0, 1], got {self.margin}")
+
+
+def plan_bursts(frames: Iterable[int], burst: int, max_frames: int) -> list[np.ndarray]:
+    """Bursts of ``burst`` consecutive frame numbers among ``frames`` (those with boxes in both
+    views), at most ``max_frames // burst`` of them, spread evenly in time; a run shorter than
+    ``burst`` is skipped. Returns one ascending ``(burst,)`` int64 array per burst."""
+    present = np.unique(np.asarray(list(frames), dtype=np.int64))
+    if present.size == 0:
+        return []
+    starts = np.flatnonzero(np.r_[True, np.diff(present) != 1])
+    ends = np.r_[starts[1:], present.size]
+    windows = [present[s + k * burst: s + (k + 1) * burst]
+               for s, e in zip(starts.tolist(), ends.tolist(), strict=True)
+               for k in range((e - s) // burst)]
+    most = max(int(max_frames) // int(burst), 1)
+    if len(windows) > most:
+        pick = np.unique(np.round(np.linspace(0, len(windows) - 1, most)).astype(int))
+        windows = [windows[i] for i in pick.tolist()]
+    return windows
+
+
+def confident_pairs(cost: np.ndarray, gamma: float, margin: float) -> list[tuple[int, int]]:
+    """The assigned pairs ``(row, col)`` of an ``(M, N)`` cost matrix (Hungarian with the
+    non-association cost ``gamma``) whose cost is below gamma and below every other entry of its
+    row and of its column by at least ``margin``."""
+    cost = np.asarray(cost, dtype=np.float64)
+    out = []
+    for i, j in assign(cost, gamma):
+        row = np.delete(cost[i], j)
+        col = np.delete(cost[:, j], i)
+        alternative = min(float(gamma), float(row.min()) if row.size else np.inf,
+                          float(col.min()) if col.size else np.inf)
+        if alternative - cost[i, j] >= margin:
+            out.append((int(i), int(j)))
+    return out
+
+
+def box_only_costs(
+    top: Mapping,
+    hor: Mapping,
+    frames: Sequence[int],
+    matcher,
+    hor_size: tuple[int, int],
+    cameras=None,
+    camera_id: int | None = None,
+    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+    workers: int = 1,
+) -> dict[int, np.ndarray]:
+    """``{frame: (M, N) cost}`` (input order) of the matcher without the appearance cue.
+
+    Args:
+        top, hor: ``{frame: FrameBoxes}``.
+        frames: the frames to score.
+        matcher: a :class:`~xvmatch.inference.learned_association.LearnedMatcher`.
+        hor_size: ``(W, H)`` of the horizontal images.
+        cameras: a camera source (``get(frame)``) or None.
+        camera_id: the wearer's top-view id, when known.
+        progress: wraps the frame iterator.
+        workers: processes for the geometry features.
+    """
+    from xvmatch.inference.learned_association import associate_sequence_learned
+
+    costs: dict[int, np.ndarray] = {}
+    associate_sequence_learned(top, hor, hor_size[0], matcher, camera_id=camera_id,
+                               hor_height=hor_size[1], frames=frames, costs_out=costs,
+                               progress=progress, cameras=cameras, workers=workers)
+    return costs
+
+
+@dataclass(frozen=True, eq=False)
+class MinedPairs:
+    """Pairs among the boxes of the embedded frames (indices: boxes in frame order, then in
+    record order, per view).
+
+    Attributes:
+        embed_frames: ``(F,)`` the frames whose boxes are embedded.
+        n_boxes: ``{view: K_v}`` boxes of those frames.
+        within_pos, within_neg, cross_pos, cross_neg: index pairs as in
+            :class:`~xvmatch.inference.site_adaptation.PairSet`.
+        within_pos_group, within_neg_group, cross_pos_group, cross_neg_group: the burst of
+            each pair.
+        bursts: bursts scored; agreed: tracklet pairs agreed on.
+    """
+
+    embed_frames: np.ndarray
+    n_boxes: dict[str, int]
+    within_pos: dict[str, np.ndarray]
+    within_neg: dict[str, np.ndarray]
+    cross_pos: np.ndarray
+    cross_neg: np.ndarray
+    within_pos_group: dict[str, np.ndarray]
+    within_neg_group: dict[str, np.ndarray]
+    cross_pos_group: np.ndarray
+    cross_neg_group: np.ndarray
+    bursts: int
+    agreed: int
+
+    def pair_set(self, top: np.ndarray, hor: np.ndarray) -> PairSet:
+        """The :class:`PairSet` of these pairs with the boxes' descriptors
+        (:func:`embed_frames`)."""
+        for view, d in (("top", top), ("hor", hor)):
+            if len(d) != self.n_boxes[view]:
+                raise ValueError(f"{view}: {len(d)} descriptors for {self.n_boxes[view]} boxes")
+        return PairSet(np.asarray(top, np.float64), np.asarray(hor, np.float64),
+                       self.within_pos, self.within_neg, self.cross_pos, self.cross_neg,
+                       self.within_pos_group, self.within_neg_group, self.cross_pos_group,
+                       self.cross_neg_group)
+
+
+def _longest_run(frames: list[int]) -> int:
+    """Longest run of consecutive numbers in an ascending list."""
+    best = run = 1
+    for a, b in itertools.pairwise(frames):
+        run = run + 1 if b == a + 1 else 1
+        best = max(best, run)
+    return best if frames else 0
+
+
+def _pairs(idx: list[tuple[int, int]]) -> np.ndarray:
+    return np.array(sorted(set(idx)), dtype=np.int64).reshape(-1, 2)
+
+
+def mine_pairs(
+    top: Mapping,
+    hor: Mapping,
+    bursts: Sequence[np.ndarray],
+    costs: Mapping[int, np.ndarray],
+    gamma: float,
+    config: MiningConfig | None = None,
+) -> MinedPairs:
+    """Mine the pairs of every burst (see the module docstring).
+
+    Args:
+        top, hor: ``{frame: FrameBoxes}`` (``ids`` unique within a frame: they only name boxes).
+        bursts: from :func:`plan_bursts`.
+        costs: ``{frame: (M, N)}`` box-only costs in input order (:func:`box_only_costs`).
+        gamma: the matcher's non-association cost.
+        config: the mining settings.
+    """
+    config = config or MiningConfig()
+    views = {"top": top, "hor": hor}
+    embed: list[int] = []
+    for b in bursts:
+        b = np.asarray(b, dtype=np.int64)
+        embed += sorted({int(b[0]), int(b[len(b) // 2]), int(b[-1])})
+    offset = {v: {} for v in VIEWS}
+    count = dict.fromkeys(VIEWS, 0)
+    for f in embed:
+        for v in VIEWS:
+            offset[v][f] = count[v]
+            count[v] += len(views[v][f].ids)
+    wpos = {v: [] for v in VIEWS}
+    wneg = {v: [] for v in VIEWS}
+    wpos_g = {v: [] for v in VIEWS}
+    wneg_g = {v: [] for v in VIEWS}
+    cpos, cneg, cpos_g, cneg_g = [], [], [], []
+    agreed_total = 0
+    for k, b in enumerate(bursts):
+        b = np.asarray(b, dtype=np.int64)
+        shots = sorted({int(b[0]), int(b[len(b) // 2]), int(b[-1])})
+        owner: dict[str, dict[tuple[int, int], int]] = {}
+        for v in VIEWS:
+            owner[v] = {}
+            for t, tr in enumerate(clip_tracklets(views[v], b, k, config.min_iou,
+                                                  config.max_gap)):
+                for f, r in zip(tr.frames.tolist(), tr.rows.tolist(), strict=True):
+                    row = int(np.flatnonzero(views[v][f].ids == r)[0])
+                    owner[v][(f, row)] = t
+            for f in shots:  # within-view negatives: two boxes of one frame
+                n, o = len(views[v][f].ids), offset[v][f]
+                a, c = np.triu_indices(n, 1)
+                wneg[v] += list(zip((o + a).tolist(), (o + c).tolist(), strict=True))
+                wneg_g[v] += [k] * a.size
+            by_tracklet: dict[int, list[int]] = {}
+            for f in shots:
+                for row in range(len(views[v][f].ids)):
+                    by_tracklet.setdefault(owner[v][(f, row)], []).append(offset[v][f] + row)
+            for boxes in by_tracklet.values():
+                for i in range(len(boxes)):
+                    for j in range(i + 1, len(boxes)):
+                        wpos[v].append((boxes[i], boxes[j]))
+                        wpos_g[v].append(k)
+        seen: dict[tuple[int, int], list[int]] = {}
+        for f in b.tolist():
+            if f not in costs:
+                continue
+            for i, j in confident_pairs(costs[f], gamma, config.margin):
+                seen.setdefault((owner["top"][(f, i)], owner["hor"][(f, j)]), []).append(f)
+        agreed = {p for p, fs in seen.items() if _longest_run(fs) >= config.agree}
+        tops = [p[0] for p in seen]
+        hors = [p[1] for p in seen]
+        agreed = {p for p in agreed if tops.count(p[0]) == 1 and hors.count(p[1]) == 1}
+        agreed_total += len(agreed)
+        for f in shots:
+            t_of = {owner["top"][(f, i)]: i for i in range(len(top[f].ids))}
+            h_of = {owner["hor"][(f, j)]: j for j in range(len(hor[f].ids))}
+            ot, oh = offset["top"][f], offset["hor"][f]
+            for tt, th in agreed:
+                if tt not in t_of or th not in h_of:
+                    continue
+                i, j = t_of[tt], h_of[th]
+                cpos.append((ot + i, oh + j))
+                cpos_g.append(k)
+                others = [(ot + i, oh + jj) for jj in range(len(hor[f].ids)) if jj != j]
+                others += [(ot + ii, oh + j) for ii in range(len(top[f].ids)) if ii != i]
+                cneg += others
+                cneg_g += [k] * len(others)
+
+    def unique(pairs: list, groups: list) -> tuple[np.ndarray, np.ndarray]:
+        first: dict[tuple[int, int], int] = {}
+        for p, g in zip(pairs, groups, strict=True):
+            first.setdefault(p, g)
+        keys = sorted(first)
+        return (np.array(keys, dtype=np.int64).reshape(-1, 2),
+                np.array([first[p] for p in keys], dtype=np.int64))
+
+    cp, cpg = unique(cpos, cpos_g)
+    cn, cng = unique(cneg, cneg_g)
+    wp, wn, wpg, wng = {}, {}, {}, {}
+    for v in VIEWS:
+        wp[v], wpg[v] = unique(wpos[v], wpos_g[v])
+        wn[v], wng[v] = unique(wneg[v], wneg_g[v])
+    return MinedPairs(np.array(embed, dtype=np.int64), count, wp, wn, cp, cn, wpg, wng, cpg,
+                      cng, len(bursts), agreed_total)
+
+
+def embed_frames(
+    frames: Sequence[int],
+    records: Mapping,
+    source,
+    embed: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+) -> np.ndarray:
+    """``(K, D)`` descriptors of every box of ``frames`` of one view, in frame order then record
+    order (the indices of :class:`MinedPairs`).
+
+    Args:
+        frames: :attr:`MinedPairs.embed_frames`.
+        records: ``{frame: FrameBoxes}`` of the view.
+        source: its images (``get(frame)``).
+        embed: ``embed(image, boxes) -> (K, D)`` raw descriptors (e.g.
+            :meth:`~xvmatch.inference.learned_association.LearnedMatcher.descriptors`).
+        progress: wraps the frame iterator.
+    """
+    out = []
+    for f in progress(list(frames)) if progress else frames:
+        boxes = records[f].boxes
+        if len(boxes):
+            out.append(np.asarray(embed(source.get(f), boxes), dtype=np.float64))
+    return np.concatenate(out) if out else np.zeros((0, 0))
+
+
+def reference_costs(
+    embed: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    scenes: Sequence[tuple[str, int]] = REFERENCE_SCENES,
+    frames: Sequence[int] = (1, 6, 12),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Raw appearance costs ``|a - b| / 2`` of the network on renders (the domain it was trained
+    on): ``(positives, negatives)``, the same rendered person in both views or two different
+    ones, over ``frames`` of each of ``scenes``. The scale the matcher's fusion expects, for
+    the cost's recalibration; rendered (no real image), seeded, the same every time.
+
+    Args:
+        embed: ``embed(image, boxes) -> (K, D)`` raw descriptors.
+        scenes: ``(scenario, seed)`` of each rendered scene.
+        frames: the frames of each scene used.
+    """
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+    from xvmatch.datasets.tracking_video import render_tracking_video
+    from xvmatch.geometry.matcher_inputs import appearance_cost
+
+    pos, neg = [], []
+    for scenario, seed in scenes:
+        video = render_tracking_video(seed, max(frames), SynthConfig(scenario=scenario,
+                                                                   fps=25.0))
+        for f in frames:
+            t, h = video.top[f], video.hor[f]
+            if not (len(t.ids) and len(h.ids)):
+                continue
+            cost = appearance_cost(embed(video.top_images[f], t.boxes),
+                                   embed(video.hor_images[f], h.boxes))
+            same = t.ids[:, None] == h.ids[None, :]
+            pos.append(cost[same])
+            neg.append(cost[~same])
+    return np.concatenate(pos), np.concatenate(neg)

@@ -1,0 +1,504 @@
+"""Site adaptation of the appearance cue: fitted in numpy/scipy on a site's own unlabelled videos.
+
+The appearance network (``appearance.onnx``) was fine-tuned on renders; at a real site each
+camera adds its own colour cast, blur and noise, and the appearance cost ``|a - b| / 2`` of two
+views' descriptors loses its meaning. :class:`SiteAdaptation` is a small map on the network's
+``(K, D)`` unit descriptors, learned from pairs mined on the site's own videos
+(:mod:`xvmatch.inference.adaptation_pairs`), with no identities:
+
+1. **per-view standardisation** ``x = (d - mean_v) / scale_v`` (``v`` = top or horizontal): a
+   camera's colour cast moves all of its descriptors the same way, and this removes it;
+2. **a low-rank linear metric** ``z = P^T x`` (``P``: ``(D, r)``), normalised to unit length:
+   ``P`` holds the leading generalised eigenvectors of the difference scatter of negative pairs
+   against that of positive pairs (``S_neg v = lambda S_pos v``, a whitened LDA / KISSME-style
+   metric: directions where the same person differs little and different people differ much),
+   the rank ``r`` chosen on held-out pairs; ``r = 0`` denotes the standardisation alone (``P``
+   the identity);
+3. **the cost** ``|z_a - z_b| / 2``, recalibrated by a logit-affine map
+   ``logit(c') = a logit(c) + b`` so that each cost carries the likelihood ratio it carries on
+   the renders the network was trained on (a class-balanced logistic fit of "same person" on
+   ``logit(c)``, on the site's held-out pairs and on reference renders): the fusion of
+   ``matcher.onnx`` sees costs on the scale it was trained with, and a weak cue is pulled towards
+   the neutral cost instead of passing for a strong one.
+
+:func:`fit_site_adaptation` fits it (float64, deterministic eigen-solver, no randomness), chooses
+the rank by the verification AUC of held-out cross-view pairs (the last part of the video: a
+split by time), and refuses (``accepted`` False) when no rank beats the unadapted descriptors
+there by more than twice the AUC's standard error. :func:`adaptation_bytes` /
+:func:`load_adaptation` store it as ``adaptation.npz`` in a
+bundle (read with ``allow_pickle=False``, every array checked). Numpy and scipy only.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from xvmatch.geometry.matcher_inputs import appearance_cost
+
+__all__ = [
+    "ADAPTATION_FILE",
+    "ADAPTATION_FORMAT_VERSION",
+    "CALIBRATIONS",
+    "DEFAULT_RANKS",
+    "VIEWS",
+    "AdaptationFit",
+    "PairSet",
+    "SiteAdaptation",
+    "adaptation_bytes",
+    "auc_standard_error",
+    "fit_site_adaptation",
+    "load_adaptation",
+    "pair_auc",
+]
+
+ADAPTATION_FILE = "adaptation.npz"
+"""The adaptation's file name in a site bundle."""
+ADAPTATION_FORMAT_VERSION = 1
+"""Version of the arrays stored in ``adaptation.npz``."""
+VIEWS: tuple[str, ...] = ("top", "hor")
+"""The two views, each with its own standardisation."""
+DEFAULT_RANKS: tuple[int, ...] = (0, 2, 4, 8, 16, 32, 64)
+"""Ranks tried (0: the standardisation alone); those above the descriptor size are skipped."""
+CALIBRATIONS: tuple[str, ...] = ("odds", "median", "site", "none")
+"""Ways to recalibrate the adapted cost (:func:`fit_site_adaptation`)."""
+_EPS = 1e-6
+
+
+def _logit(c: np.ndarray) -> np.ndarray:
+    c = np.clip(c, _EPS, 1.0 - _EPS)
+    return np.log(c) - np.log1p(-c)
+
+
+@dataclass(frozen=True, eq=False)
+class SiteAdaptation:
+    """The fitted map of one site (see the module docstring).
+
+    Attributes:
+        top_mean, top_scale: ``(D,)`` standardisation of the top view's descriptors.
+        hor_mean, hor_scale: ``(D,)`` the same for the horizontal view.
+        projection: ``(D, r)`` metric projection (``r = D`` and the identity for rank 0).
+        calibration: ``(2,)`` ``a, b`` of the logit-affine cost map (``1, 0``: none).
+        rank: the rank chosen (0: the standardisation alone).
+    """
+
+    top_mean: np.ndarray
+    top_scale: np.ndarray
+    hor_mean: np.ndarray
+    hor_scale: np.ndarray
+    projection: np.ndarray
+    calibration: np.ndarray
+    rank: int
+
+    @property
+    def dim(self) -> int:
+        """The descriptor size ``D`` it takes."""
+        return int(self.top_mean.shape[0])
+
+    @classmethod
+    def identity(cls, dim: int) -> SiteAdaptation:
+        """The map that changes nothing: descriptors and costs as the network gives them."""
+        zeros, ones = np.zeros(dim), np.ones(dim)
+        return cls(zeros, ones, zeros.copy(), ones.copy(), np.eye(dim), np.array([1.0, 0.0]), 0)
+
+    def transform(self, descriptors: np.ndarray, view: str) -> np.ndarray:
+        """``(K, r)`` float64 unit adapted descriptors of ``(K, D)`` descriptors of ``view``.
+
+        Raises:
+            ValueError: an unknown view or a descriptor size other than :attr:`dim`.
+        """
+        if view not in VIEWS:
+            raise ValueError(f"view must be one of {VIEWS}, got {view!r}")
+        d = np.asarray(descriptors, dtype=np.float64)
+        if d.ndim != 2 or d.shape[1] != self.dim:
+            raise ValueError(f"descriptors must be (K, {self.dim}), got {d.shape}")
+        mean, scale = ((self.top_mean, self.top_scale) if view == "top"
+                       else (self.hor_mean, self.hor_scale))
+        z = ((d - mean) / scale) @ self.projection
+        norm = np.linalg.norm(z, axis=1, keepdims=True)
+        return z / np.maximum(norm, 1e-12)
+
+    def calibrate(self, cost: np.ndarray) -> np.ndarray:
+        """The logit-affine map of a raw adapted cost ``|z_a - z_b| / 2`` (in [0, 1])."""
+        cost = np.asarray(cost, dtype=np.float64)
+        a, b = (float(v) for v in self.calibration)
+        if a == 1.0 and b == 0.0:
+            return cost
+        return 1.0 / (1.0 + np.exp(-(a * _logit(cost) + b)))
+
+    def cost(self, top: np.ndarray, hor: np.ndarray) -> np.ndarray:
+        """``(M, N)`` adapted appearance cost in [0, 1] of raw top ``(M, D)`` and horizontal
+        ``(N, D)`` descriptors: the cue ``matcher.onnx`` receives."""
+        return self.calibrate(appearance_cost(self.transform(top, "top"),
+                                              self.transform(hor, "hor")))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The arrays stored in ``adaptation.npz``."""
+        return {"format_version": np.array(ADAPTATION_FORMAT_VERSION),
+                "top_mean": self.top_mean, "top_scale": self.top_scale,
+                "hor_mean": self.hor_mean, "hor_scale": self.hor_scale,
+                "projection": self.projection, "calibration": self.calibration,
+                "rank": np.array(self.rank)}
+
+
+def adaptation_bytes(adaptation: SiteAdaptation) -> bytes:
+    """``adaptation.npz``'s bytes (uncompressed, float64; the same fit gives the same bytes)."""
+    buf = io.BytesIO()
+    np.savez(buf, **adaptation.arrays())
+    return buf.getvalue()
+
+
+def load_adaptation(path: str | os.PathLike, dim: int) -> SiteAdaptation:
+    """Read ``adaptation.npz`` for descriptors of size ``dim``, every array checked.
+
+    Raises:
+        ValueError: unreadable, a pickled object, an array missing, of the wrong shape or not
+            finite, a non-positive scale or calibration slope (the message names the array).
+    """
+    try:
+        with np.load(os.fspath(path), allow_pickle=False) as npz:
+            arrays = {k: np.array(npz[k]) for k in npz.files}
+    except (OSError, ValueError, EOFError) as exc:
+        raise ValueError(f"not a readable adaptation file ({str(exc)[:120]})") from None
+    want = {"format_version": (), "top_mean": (dim,), "top_scale": (dim,), "hor_mean": (dim,),
+            "hor_scale": (dim,), "calibration": (2,), "rank": ()}
+    for key, shape in want.items():
+        if key not in arrays:
+            raise ValueError(f"array {key!r} is missing")
+        if arrays[key].shape != shape or arrays[key].dtype.kind not in "fiu":
+            raise ValueError(f"array {key!r} must be numbers of shape {shape}, got "
+                             f"{arrays[key].dtype} {arrays[key].shape}")
+    if int(arrays["format_version"]) != ADAPTATION_FORMAT_VERSION:
+        raise ValueError(f"format version {int(arrays['format_version'])}, this xvmatch reads "
+                         f"{ADAPTATION_FORMAT_VERSION}; run xvmatch adapt again")
+    rank = int(arrays["rank"])
+    proj = arrays.get("projection")
+    cols = dim if rank == 0 else rank
+    if proj is None or proj.shape != (dim, cols) or proj.dtype.kind != "f" or not 0 <= rank <= dim:
+        raise ValueError(f"array 'projection' must be ({dim}, {cols}) floats for rank {rank}")
+    for key in ("top_mean", "top_scale", "hor_mean", "hor_scale", "projection", "calibration"):
+        if not np.isfinite(arrays.get(key, proj)).all():
+            raise ValueError(f"array {key!r} holds NaN or infinite values")
+    if (arrays["top_scale"] <= 0).any() or (arrays["hor_scale"] <= 0).any():
+        raise ValueError("arrays 'top_scale' and 'hor_scale' must be > 0")
+    if arrays["calibration"][0] <= 0:
+        raise ValueError("array 'calibration' must have a slope > 0")
+    f64 = {k: np.asarray(arrays[k], dtype=np.float64) for k in
+           ("top_mean", "top_scale", "hor_mean", "hor_scale", "calibration")}
+    return SiteAdaptation(f64["top_mean"], f64["top_scale"], f64["hor_mean"], f64["hor_scale"],
+                          np.asarray(proj, dtype=np.float64), f64["calibration"], rank)
+
+
+@dataclass(frozen=True, eq=False)
+class PairSet:
+    """Descriptors of a site's boxes and the pairs mined among them (no identities).
+
+    Attributes:
+        top, hor: ``(K_v, D)`` raw descriptors of the boxes of each view.
+        within_pos, within_neg: ``{view: (P, 2)}`` index pairs into that view's descriptors:
+            the same tracklet in two frames / two boxes of one frame.
+        cross_pos, cross_neg: ``(P, 2)`` index pairs ``(top, hor)``: confident pseudo-matches
+            of the box-only matcher / a pseudo-matched box against another box of its frame.
+        within_group, cross_pos_group, cross_neg_group: the time group (burst) of each pair,
+            ``{view: (P,)}`` for the within-view positives and negatives stacked in that order,
+            for the held-out split by time.
+    """
+
+    top: np.ndarray
+    hor: np.ndarray
+    within_pos: dict[str, np.ndarray]
+    within_neg: dict[str, np.ndarray]
+    cross_pos: np.ndarray
+    cross_neg: np.ndarray
+    within_pos_group: dict[str, np.ndarray] = field(default_factory=dict)
+    within_neg_group: dict[str, np.ndarray] = field(default_factory=dict)
+    cross_pos_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    cross_neg_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    def counts(self) -> dict[str, int]:
+        """How many pairs of each kind (for the manifest's record)."""
+        out = {"cross_pos": len(self.cross_pos), "cross_neg": len(self.cross_neg)}
+        for v in VIEWS:
+            out[f"{v}_pos"] = len(self.within_pos[v])
+            out[f"{v}_neg"] = len(self.within_neg[v])
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class AdaptationFit:
+    """The outcome of :func:`fit_site_adaptation`.
+
+    Attributes:
+        adaptation: the map (fitted on all pairs with the rank chosen); the identity when
+            refused.
+        accepted: whether it beat the unadapted descriptors on the held-out pairs.
+        reason: why it was refused ('' when accepted).
+        auc_before: held-out cross-view verification AUC of the unadapted cost.
+        auc_after: that of the chosen rank (fitted without the held-out pairs).
+        auc_by_rank: ``{rank: held-out AUC}`` of every rank tried.
+        heldout_pairs: ``(positives, negatives)`` held out.
+    """
+
+    adaptation: SiteAdaptation
+    accepted: bool
+    reason: str
+    auc_before: float
+    auc_after: float
+    auc_by_rank: dict[int, float]
+    heldout_pairs: tuple[int, int]
+
+
+def pair_auc(pos: np.ndarray, neg: np.ndarray) -> float:
+    """Verification AUC of costs: the probability that a positive pair costs less than a
+    negative one (ties count half; Mann-Whitney U over ranks). NaN without both kinds."""
+    pos, neg = np.asarray(pos, np.float64).ravel(), np.asarray(neg, np.float64).ravel()
+    if pos.size == 0 or neg.size == 0:
+        return float("nan")
+    from scipy.stats import rankdata
+
+    ranks = rankdata(np.concatenate([pos, neg]))
+    u = ranks[: pos.size].sum() - pos.size * (pos.size + 1) / 2.0
+    return float(1.0 - u / (pos.size * neg.size))
+
+
+def auc_standard_error(auc: float, n_pos: int, n_neg: int) -> float:
+    """Standard error of an AUC measured on ``n_pos`` positives and ``n_neg`` negatives (Hanley
+    and McNeil, Radiology 1982, Eq. 2)."""
+    a = float(auc)
+    q1, q2 = a / (2.0 - a), 2.0 * a * a / (1.0 + a)
+    var = (a * (1 - a) + (n_pos - 1) * (q1 - a * a) + (n_neg - 1) * (q2 - a * a)) / max(
+        n_pos * n_neg, 1)
+    return float(np.sqrt(max(var, 0.0)))
+
+
+def _scatter(diff: list[np.ndarray], weights: list[float], dim: int) -> np.ndarray:
+    """Weighted mean over groups of each group's mean outer product of differences."""
+    out = np.zeros((dim, dim))
+    total = 0.0
+    for d, w in zip(diff, weights, strict=True):
+        if len(d) and w > 0:
+            out += w * (d.T @ d) / len(d)
+            total += w
+    return out / max(total, 1e-12)
+
+
+def _standardisation(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    mean = x.mean(axis=0)
+    std = x.std(axis=0)
+    floor = max(float(np.median(std)) * 1e-2, 1e-6)
+    return mean, np.maximum(std, floor)
+
+
+def _fit(pairs: PairSet, masks: dict[str, np.ndarray], ranks: Sequence[int],
+         reg: float, within: float) -> dict[int, SiteAdaptation]:
+    """Uncalibrated maps of each rank fitted on the pairs selected by ``masks``."""
+    dim = pairs.top.shape[1]
+    used = {v: np.zeros(len(getattr(pairs, v)), bool) for v in VIEWS}
+    for key, idx in (("cross_pos", pairs.cross_pos), ("cross_neg", pairs.cross_neg)):
+        sel = idx[masks[key]]
+        used["top"][sel[:, 0]] = True
+        used["hor"][sel[:, 1]] = True
+    for v in VIEWS:
+        for key in ("within_pos", "within_neg"):
+            used[v][getattr(pairs, key)[v][masks[f"{v}_{key}"]].ravel()] = True
+    stats = {}
+    for v in VIEWS:
+        d = getattr(pairs, v)
+        stats[v] = _standardisation(d[used[v]] if used[v].any() else d)
+    x = {v: (getattr(pairs, v) - stats[v][0]) / stats[v][1] for v in VIEWS}
+
+    def diffs(a: str, b: str, idx: np.ndarray) -> np.ndarray:
+        return x[a][idx[:, 0]] - x[b][idx[:, 1]]
+
+    pos = [diffs("top", "hor", pairs.cross_pos[masks["cross_pos"]])]
+    neg = [diffs("top", "hor", pairs.cross_neg[masks["cross_neg"]])]
+    for v in VIEWS:
+        pos.append(diffs(v, v, pairs.within_pos[v][masks[f"{v}_within_pos"]]))
+        neg.append(diffs(v, v, pairs.within_neg[v][masks[f"{v}_within_neg"]]))
+    weights = [1.0, within, within]
+    s_pos, s_neg = _scatter(pos, weights, dim), _scatter(neg, weights, dim)
+    s_pos += reg * (np.trace(s_pos) / dim + 1e-12) * np.eye(dim)
+    s_neg += 1e-9 * (np.trace(s_neg) / dim + 1e-12) * np.eye(dim)
+    from scipy.linalg import eigh
+
+    values, vectors = eigh(s_neg, s_pos, driver="gv")
+    order = np.argsort(-values, kind="stable")
+    vectors = vectors[:, order]
+    signs = np.sign(vectors[np.argmax(np.abs(vectors), axis=0), np.arange(dim)])
+    vectors = vectors * np.where(signs == 0, 1.0, signs)
+    out = {}
+    for r in ranks:
+        proj = np.eye(dim) if r == 0 else vectors[:, :r].copy()
+        out[r] = SiteAdaptation(stats["top"][0], stats["top"][1], stats["hor"][0],
+                                stats["hor"][1], proj, np.array([1.0, 0.0]), int(r))
+    return out
+
+
+def _pair_costs(adaptation: SiteAdaptation | None, pairs: PairSet, idx: np.ndarray
+                ) -> np.ndarray:
+    """Costs of ``(top, hor)`` index pairs: raw ``|a - b| / 2``, or ``adaptation``'s uncalibrated
+    cost."""
+    a, b = pairs.top[idx[:, 0]], pairs.hor[idx[:, 1]]
+    if adaptation is not None:
+        a, b = adaptation.transform(a, "top"), adaptation.transform(b, "hor")
+    return 0.5 * np.linalg.norm(np.asarray(a, np.float64) - np.asarray(b, np.float64), axis=1)
+
+
+def _log_odds(pos: np.ndarray, neg: np.ndarray, ridge: float = 1e-3) -> tuple[float, float]:
+    """``alpha, beta`` of a class-balanced logistic regression of "same person" on
+    ``logit(cost)`` (``log-odds = alpha logit(c) + beta``), by Newton's method (deterministic)."""
+    x = np.concatenate([_logit(pos), _logit(neg)])
+    y = np.concatenate([np.ones(len(pos)), np.zeros(len(neg))])
+    w = np.concatenate([np.full(len(pos), 0.5 / len(pos)), np.full(len(neg), 0.5 / len(neg))])
+    X = np.stack([x, np.ones_like(x)], axis=1)
+    theta = np.zeros(2)
+    for _ in range(50):
+        p = 1.0 / (1.0 + np.exp(-(X @ theta)))
+        grad = X.T @ (w * (p - y)) + ridge * theta
+        hess = (X * (w * p * (1.0 - p))[:, None]).T @ X + ridge * np.eye(2)
+        step = np.linalg.solve(hess, grad)
+        theta = theta - step
+        if np.abs(step).max() < 1e-10:
+            break
+    return float(theta[0]), float(theta[1])
+
+
+def _calibration(raw_pos, raw_neg, new_pos, new_neg) -> np.ndarray:
+    """``a, b`` mapping the medians of the adapted positive and negative costs (logits) onto
+    those of the unadapted ones; ``1, 0`` when either set is empty or degenerate."""
+    if min(len(raw_pos), len(raw_neg), len(new_pos), len(new_neg)) == 0:
+        return np.array([1.0, 0.0])
+    rp, rn = (float(np.median(_logit(c))) for c in (raw_pos, raw_neg))
+    np_, nn = (float(np.median(_logit(c))) for c in (new_pos, new_neg))
+    if not (nn - np_ > 1e-6 and rn - rp > 1e-6):
+        return np.array([1.0, 0.0])
+    a = (rn - rp) / (nn - np_)
+    return np.array([a, rp - a * np_])
+
+
+def _odds_calibration(ref_pos, ref_neg, new_pos, new_neg) -> np.ndarray:
+    """``a, b`` giving each adapted cost the reference cost of the same likelihood ratio: with
+    ``log-odds = alpha logit(c) + beta`` fitted on the site's pairs (``new``) and on the
+    reference (``ref``, the network on the renders it was trained on),
+    ``logit(c') = (alpha logit(c) + beta - beta_ref) / alpha_ref``."""
+    if min(len(ref_pos), len(ref_neg), len(new_pos), len(new_neg)) == 0:
+        return np.array([1.0, 0.0])
+    alpha, beta = _log_odds(new_pos, new_neg)
+    alpha_ref, beta_ref = _log_odds(ref_pos, ref_neg)
+    if not (alpha < 0 and alpha_ref < 0):  # a lower cost must mean more likely the same person
+        return np.array([1.0, 0.0])
+    return np.array([alpha / alpha_ref, (beta - beta_ref) / alpha_ref])
+
+
+def fit_site_adaptation(
+    pairs: PairSet,
+    ranks: Sequence[int] = DEFAULT_RANKS,
+    heldout: float = 0.25,
+    min_gain: float = 0.005,
+    min_heldout: int = 10,
+    reg: float = 0.01,
+    within: float = 0.5,
+    calibration: str | None = None,
+    reference: tuple[np.ndarray, np.ndarray] | None = None,
+) -> AdaptationFit:
+    """Fit, choose and check a :class:`SiteAdaptation` (see the module docstring).
+
+    Args:
+        pairs: the mined descriptors and pairs.
+        ranks: the ranks tried (0: the standardisation alone); those above ``D`` are skipped.
+        heldout: the fraction of the time groups (the last ones) held out to choose the rank.
+        min_gain: the held-out AUC must beat the unadapted one by this much, and by twice its
+            standard error (:func:`auc_standard_error`), else the fit is refused.
+        min_heldout: fewest held-out cross-view positives (and negatives) to judge at all.
+        reg: ridge on the positive scatter, a fraction of its mean eigenvalue.
+        within: weight of each view's within-view pairs in the scatters against the cross-view
+            pairs' 1.
+        calibration: how the adapted cost is put on the scale the fusion expects
+            (:data:`CALIBRATIONS`): ``"odds"``, each cost gets the reference cost of the same
+            likelihood ratio; ``"median"``, the medians of positives and negatives go to the
+            reference's; ``"site"``, to the unadapted cost's on the same pairs; ``"none"``.
+            None: ``"odds"`` with a ``reference``, else ``"none"``. The likelihood ratios and
+            medians of the adapted cost are measured on the held-out pairs.
+        reference: ``(positive, negative)`` raw costs of the network on its training domain
+            (:func:`xvmatch.inference.adaptation_pairs.reference_costs`), for ``"odds"`` and
+            ``"median"``.
+
+    Returns:
+        The :class:`AdaptationFit`; when refused, :attr:`AdaptationFit.adaptation` is the
+        identity and ``reason`` says why.
+    """
+    if calibration is None:
+        calibration = "odds" if reference is not None else "none"
+    if calibration not in CALIBRATIONS:
+        raise ValueError(f"calibration must be one of {CALIBRATIONS}, got {calibration!r}")
+    if calibration in ("odds", "median") and reference is None:
+        raise ValueError(f"calibration {calibration!r} needs the reference costs")
+    dim = int(pairs.top.shape[1])
+    if pairs.hor.shape[1] != dim:
+        raise ValueError(f"top and horizontal descriptors differ in size ({dim}, "
+                         f"{pairs.hor.shape[1]})")
+    if not 0.0 < heldout < 1.0:
+        raise ValueError(f"heldout must be in (0, 1), got {heldout}")
+    ranks = sorted({int(r) for r in ranks if 0 <= int(r) <= dim})
+    if not ranks:
+        raise ValueError(f"no rank in 0..{dim} to try")
+    groups = np.concatenate([pairs.cross_pos_group, pairs.cross_neg_group,
+                             *(pairs.within_pos_group.get(v, np.zeros(0, np.int64))
+                               for v in VIEWS)]).astype(np.int64)
+    unique = np.unique(groups)
+    cut = unique[int(np.floor(len(unique) * (1.0 - heldout)))] if len(unique) > 1 else None
+
+    def masks(train: bool) -> dict[str, np.ndarray]:
+        def pick(g: np.ndarray) -> np.ndarray:
+            g = np.asarray(g, np.int64)
+            if cut is None:
+                return np.full(len(g), train)
+            return g < cut if train else g >= cut
+
+        out = {"cross_pos": pick(pairs.cross_pos_group), "cross_neg": pick(pairs.cross_neg_group)}
+        for v in VIEWS:
+            for key, grp in (("within_pos", pairs.within_pos_group),
+                             ("within_neg", pairs.within_neg_group)):
+                n = len(getattr(pairs, key)[v])
+                out[f"{v}_{key}"] = pick(grp.get(v, np.zeros(n, np.int64)))
+        return out
+
+    identity = SiteAdaptation.identity(dim)
+    test = masks(False)
+    hp, hn = pairs.cross_pos[test["cross_pos"]], pairs.cross_neg[test["cross_neg"]]
+    nan = float("nan")
+    if cut is None or min(len(hp), len(hn)) < min_heldout:
+        return AdaptationFit(identity, False, f"too few confident cross-view pairs to judge the "
+                             f"adaptation ({len(hp)} positives and {len(hn)} negatives held out, "
+                             f"{min_heldout} of each needed): give more frames or video",
+                             nan, nan, {}, (len(hp), len(hn)))
+    before = pair_auc(_pair_costs(None, pairs, hp), _pair_costs(None, pairs, hn))
+    candidates = _fit(pairs, masks(True), ranks, reg, within)
+    by_rank = {r: pair_auc(_pair_costs(m, pairs, hp), _pair_costs(m, pairs, hn))
+               for r, m in candidates.items()}
+    best = max(ranks, key=lambda r: (round(by_rank[r], 6), -r))
+    needed = max(min_gain, 2.0 * auc_standard_error(by_rank[best], len(hp), len(hn)))
+    if not by_rank[best] >= before + needed:
+        return AdaptationFit(identity, False, f"adaptation does not help on the held-out pairs "
+                             f"(AUC {by_rank[best]:.4f} at rank {best} against {before:.4f} "
+                             f"unadapted; it must gain {needed:.4f}, twice its standard error)",
+                             before, by_rank[best], by_rank, (len(hp), len(hn)))
+    every = {k: np.ones_like(v) for k, v in test.items()}
+    final = _fit(pairs, every, [best], reg, within)[best]
+    if calibration != "none":
+        # On the held-out pairs, by the map fitted without them: the reliability of the cue on
+        # pairs it was not fitted to (the fit's own pairs would make it look surer than it is).
+        new = (_pair_costs(candidates[best], pairs, hp), _pair_costs(candidates[best], pairs, hn))
+        if calibration == "site":
+            cal = _calibration(_pair_costs(None, pairs, hp), _pair_costs(None, pairs, hn), *new)
+        elif calibration == "median":
+            cal = _calibration(*reference, *new)
+        else:
+            cal = _odds_calibration(*reference, *new)
+        final = SiteAdaptation(final.top_mean, final.top_scale, final.hor_mean, final.hor_scale,
+                               final.projection, cal, final.rank)
+    return AdaptationFit(final, True, "", before, by_rank[best], by_rank, (len(hp), len(hn)))

@@ -1,0 +1,226 @@
+"""A site bundle: a bundle adapted to one site's cameras from the site's own unlabelled videos.
+
+:func:`adapt_to_site` runs the whole adaptation on opened inputs: bursts of frames
+(:func:`~xvmatch.inference.adaptation_pairs.plan_bursts`), the box-only matcher's costs on them,
+the mined pairs, the appearance network's descriptors of the embedded frames, the reference
+costs of the network on renders, and the fit (:func:`~xvmatch.inference.site_adaptation.
+fit_site_adaptation`). :func:`write_site_bundle` writes the source bundle's files unchanged
+(byte-identical ONNX files, same sha256) plus ``adaptation.npz`` and a manifest with an
+``adaptation`` record: what it was fitted on, the pair counts, the rank and the held-out
+figures. Every file is written into a temporary folder first and moved into place, the manifest
+last, so a crash never leaves a half-written bundle. Torch-free.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from xvmatch.inference.adaptation_pairs import (
+    MinedPairs,
+    MiningConfig,
+    box_only_costs,
+    embed_frames,
+    mine_pairs,
+    plan_bursts,
+    reference_costs,
+)
+from xvmatch.inference.bundle import MANIFEST
+from xvmatch.inference.site_adaptation import (
+    ADAPTATION_FILE,
+    ADAPTATION_FORMAT_VERSION,
+    AdaptationFit,
+    adaptation_bytes,
+    fit_site_adaptation,
+)
+
+__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "write_site_bundle"]
+
+Progress = Callable[[Iterable, int, str], Iterable]
+"""``progress(items, total, what)``: wraps an iterator (e.g. a progress bar)."""
+
+
+@dataclass(frozen=True, eq=False)
+class SiteRun:
+    """What :func:`adapt_to_site` found.
+
+    Attributes:
+        fit: the fit (accepted or refused, with its held-out figures).
+        mined: the mined pairs.
+        counts: pairs of each kind.
+        frames_scored: frames the box-only matcher scored.
+    """
+
+    fit: AdaptationFit
+    mined: MinedPairs
+    counts: dict[str, int]
+    frames_scored: int
+
+
+def adapt_to_site(
+    top: Mapping,
+    hor: Mapping,
+    matcher,
+    top_images,
+    hor_images,
+    hor_size: tuple[int, int],
+    cameras=None,
+    camera_id: int | None = None,
+    config: MiningConfig | None = None,
+    progress: Progress | None = None,
+    workers: int = 1,
+) -> SiteRun:
+    """Mine pairs on a site's videos and fit its adaptation (see the module docstring).
+
+    Args:
+        top, hor: ``{frame: FrameBoxes}`` of each view (ids only name boxes).
+        matcher: a :class:`~xvmatch.inference.learned_association.LearnedMatcher` with an
+            appearance network (its raw descriptors are adapted).
+        top_images, hor_images: image sources (``get(frame)``) of the views.
+        hor_size: ``(W, H)`` of the horizontal images.
+        cameras: a camera source, or None.
+        camera_id: the wearer's top-view id, when known.
+        config: the mining settings.
+        progress: wraps each stage's iterator.
+        workers: processes for the geometry features.
+
+    Raises:
+        ValueError: a matcher without an appearance network, or no frame with boxes in both
+            views.
+    """
+    if matcher.bundle.manifest.appearance is None:
+        raise ValueError(f"{matcher.bundle.name}: a box-only matcher has no appearance network "
+                         "to adapt; use a bundle with one (e.g. default)")
+    config = config or MiningConfig()
+    both = [f for f in sorted(set(top) & set(hor)) if len(top[f].ids) and len(hor[f].ids)]
+    bursts = plan_bursts(both, config.burst, config.max_frames)
+    if not bursts:
+        raise ValueError(f"no run of {config.burst} consecutive frames with boxes in both views: "
+                         "adapt needs video (consecutive frames), not single frames")
+    scored = [int(f) for b in bursts for f in b]
+
+    def stage(what: str, total: int):
+        if progress is None:
+            return None
+        return lambda items: progress(items, total, what)
+
+    costs = box_only_costs(top, hor, scored, matcher, hor_size, cameras, camera_id,
+                           stage("boxes", len(scored)), workers)
+    mined = mine_pairs(top, hor, bursts, costs, matcher.gamma, config)
+    n = len(mined.embed_frames)
+    top_desc = embed_frames(mined.embed_frames, top, top_images, matcher.descriptors,
+                            stage("top crops", n))
+    hor_desc = embed_frames(mined.embed_frames, hor, hor_images, matcher.descriptors,
+                            stage("horizontal crops", n))
+    pairs = mined.pair_set(top_desc, hor_desc)
+    reference = reference_costs(matcher.descriptors)
+    fit = fit_site_adaptation(pairs, calibration="odds", reference=reference)
+    return SiteRun(fit, mined, pairs.counts(), len(scored))
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def adaptation_record(run: SiteRun, inputs: Mapping[str, str | os.PathLike], sha256: str,
+                      version: str) -> dict:
+    """The manifest's ``adaptation`` object of an accepted run.
+
+    Args:
+        run: the accepted :class:`SiteRun`.
+        inputs: ``{role: path}`` of what it was fitted on (box files, images, cameras): each
+            recorded by name with its sha256 (files) or size in entries (folders, videos too).
+        sha256: the checksum of ``adaptation.npz``.
+        version: the xvmatch version.
+    """
+    fitted = {}
+    for role, path in inputs.items():
+        p = Path(path)
+        if p.is_file():
+            fitted[role] = {"name": p.name, "sha256": _sha256(p), "bytes": p.stat().st_size}
+        elif p.is_dir():
+            fitted[role] = {"name": p.name, "entries": sum(1 for _ in p.iterdir())}
+        else:
+            fitted[role] = {"name": p.name}
+    fit = run.fit
+    return {
+        "file": ADAPTATION_FILE,
+        "sha256": sha256,
+        "format_version": ADAPTATION_FORMAT_VERSION,
+        "rank": int(fit.adaptation.rank),
+        "calibration": [float(v) for v in fit.adaptation.calibration],
+        "fitted_on": {**fitted, "frames_scored": run.frames_scored,
+                      "frames_embedded": len(run.mined.embed_frames),
+                      "bursts": run.mined.bursts, "pairs": run.counts},
+        "heldout": {"metric": "cross-view verification AUC of pseudo-pairs, last 25% of bursts",
+                    "before": round(fit.auc_before, 6), "after": round(fit.auc_after, 6),
+                    "by_rank": {str(k): round(v, 6) for k, v in fit.auc_by_rank.items()},
+                    "pairs": list(fit.heldout_pairs)},
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "xvmatch": version,
+    }
+
+
+def _source_files(manifest: Mapping) -> list[str]:
+    """The files of a bundle its manifest names, and its licence notice."""
+    names = [manifest["matcher"]["file"]]
+    app = manifest.get("appearance") or {}
+    if app:
+        names.append(app["file"])
+        if isinstance(app.get("int8"), dict):
+            names.append(app["int8"]["file"])
+    return names
+
+
+def write_site_bundle(source: str | os.PathLike, out: str | os.PathLike, run: SiteRun,
+                      inputs: Mapping[str, str | os.PathLike], version: str) -> Path:
+    """Write the site bundle into the folder ``out`` (which must exist).
+
+    Args:
+        source: the source bundle folder (its manifest and files are copied unchanged).
+        out: the site bundle folder.
+        run: an accepted :class:`SiteRun`.
+        inputs: what it was fitted on (:func:`adaptation_record`).
+        version: the xvmatch version.
+
+    Returns:
+        The path of the written manifest.
+
+    Raises:
+        ValueError: a refused run.
+    """
+    if not run.fit.accepted:
+        raise ValueError(f"adaptation refused: {run.fit.reason}")
+    source, out = Path(source), Path(out)
+    manifest = json.loads((source / MANIFEST).read_text(encoding="utf-8"))
+    names = _source_files(manifest)
+    if (source / "NOTICE.txt").is_file():
+        names.append("NOTICE.txt")
+    tmp = Path(tempfile.mkdtemp(prefix=".adapt-", dir=out))
+    try:
+        for name in names:
+            shutil.copyfile(source / name, tmp / name)
+        data = adaptation_bytes(run.fit.adaptation)
+        (tmp / ADAPTATION_FILE).write_bytes(data)
+        manifest["adaptation"] = adaptation_record(run, inputs,
+                                                   hashlib.sha256(data).hexdigest(), version)
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+        stale = out / MANIFEST
+        if stale.exists():
+            stale.unlink()  # no manifest naming files that are being replaced
+        for name in [*names, ADAPTATION_FILE, MANIFEST]:
+            os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out / MANIFEST

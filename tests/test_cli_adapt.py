@@ -1,0 +1,84 @@
+"""``xvmatch adapt`` end to end on a short rendered video pair (64 frames): the site bundle it
+writes (the source's ONNX files byte-identical, ``adaptation.npz``, the manifest's record), its
+use by ``associate --model SITE/``, and one-line refusals that write nothing."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from xvmatch.cli import main
+from xvmatch.datasets.synthetic_scenes import SynthConfig
+from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.inference.bundle import DEFAULT_BUNDLE, load_bundle
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("video")
+    v = render_tracking_video(1, 64, SynthConfig(scenario="drone", n_people=(8, 12), fps=25.0))
+    return write_tracking_video(v, folder)
+
+
+def _args(video: dict[str, Path], out: Path, *extra: str) -> list[str]:
+    return ["adapt", "--top", str(video["top"]), "--hor", str(video["hor"]),
+            "--top-images", str(video["top_images"]), "--hor-images", str(video["hor_images"]),
+            "--out", str(out), "--burst", "8", "--quiet", *extra]
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
+    site = tmp_path / "site"
+    assert main(_args(video, site)) == 0
+    for name in ("matcher.onnx", "appearance.onnx"):
+        assert _sha(site / name) == _sha(DEFAULT_BUNDLE / name), name
+    doc = json.loads((site / "manifest.json").read_text())
+    record = doc["adaptation"]
+    assert record["sha256"] == _sha(site / "adaptation.npz")
+    assert record["fitted_on"]["top"]["sha256"] == _sha(video["top"])
+    assert record["fitted_on"]["frames_scored"] == 64
+    assert record["fitted_on"]["pairs"]["cross_pos"] > 0
+    assert record["heldout"]["after"] > record["heldout"]["before"]
+    bundle = load_bundle(site)
+    assert bundle.adaptation is not None and bundle.adaptation.rank == record["rank"]
+    pred = tmp_path / "pred.csv"
+    short = {}
+    for view in ("top", "hor"):  # the first 6 frames are enough to run it
+        short[view] = tmp_path / f"{view}.txt"
+        short[view].write_text("".join(line + "\n" for line in
+                                       video[view].read_text().splitlines()
+                                       if int(line.split(",")[0]) <= 6))
+    assert main(["associate", "--model", str(site), "--top", str(short["top"]), "--hor",
+                 str(short["hor"]), "--top-images", str(video["top_images"]), "--hor-images",
+                 str(video["hor_images"]), "--out", str(pred), "--quiet"]) == 0
+    assert len(pred.read_text().splitlines()) > 6
+
+
+def test_adapt_refusals_write_nothing(video, tmp_path, capsys) -> None:
+    def refused(args: list[str], message: str) -> None:
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+
+    out = tmp_path / "site"
+    # a single burst: nothing to hold out, so nothing can be judged
+    refused(_args(video, out, "--max-frames", "10", "--burst", "10"),
+            "adaptation refused, nothing written: too few confident cross-view pairs")
+    assert not out.exists()
+    no_images = [a for a in _args(video, out) if a not in ("--top-images",
+                                                           str(video["top_images"]))]
+    refused(no_images, "give --top-images and --hor-images")
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep")
+    refused(_args(video, foreign), "not made by xvmatch adapt")
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
+    with pytest.raises(SystemExit):  # checked while parsing
+        main(_args(video, out, "--burst", "2"))
+    assert "--burst: expected an integer in [3, 100]" in capsys.readouterr().err

@@ -1,0 +1,230 @@
+"""Site adaptation's fit and its file (inference/site_adaptation.py), and how a bundle reads it
+(inference/bundle.py): synthetic descriptors with a known camera cast, no network needed except
+for the bundle checks (the shipped default's files, copied)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from xvmatch.geometry.matcher_inputs import appearance_cost
+from xvmatch.inference.bundle import DEFAULT_BUNDLE, BundleError, load_bundle, read_manifest
+from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.inference.site_adaptation import (
+    ADAPTATION_FILE,
+    PairSet,
+    SiteAdaptation,
+    adaptation_bytes,
+    fit_site_adaptation,
+    load_adaptation,
+    pair_auc,
+)
+
+DIM = 16
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+def _site(seed: int, cast: float = 3.0, signal: float = 1.0, people: int = 12,
+          frames: int = 40) -> PairSet:
+    """Descriptors of ``people`` identities seen by two cameras over ``frames`` frames: each view
+    adds its own strong cast (a fixed offset and per-dimension gains) and noise; every frame's
+    people give cross-view positives (same identity) and negatives (another identity of the
+    frame), within-view positives (same identity, next frame) and negatives. ``signal`` 0: the
+    descriptors carry no identity at all."""
+    rng = np.random.default_rng(seed)
+    identity = rng.normal(size=(people, DIM))
+    casts = {v: (cast * rng.normal(size=DIM), np.exp(rng.normal(0, 0.7, DIM))) for v in "th"}
+    desc = {"t": [], "h": []}
+    for _ in range(frames):
+        for v in "th":
+            offset, gain = casts[v]
+            x = signal * identity + rng.normal(0, 0.6, (people, DIM))
+            desc[v].append(_unit(gain * x + offset))
+    top, hor = np.concatenate(desc["t"]), np.concatenate(desc["h"])
+    base = np.arange(frames)[:, None] * people
+    ids = np.arange(people)[None, :]
+    same = np.stack([(base + ids).ravel()] * 2, axis=1)
+    other = np.stack([(base + ids).ravel(), (base + (ids + 1) % people).ravel()], axis=1)
+    nxt = np.stack([(base[:-1] + ids).ravel(), (base[1:] + ids).ravel()], axis=1)
+    group = (np.arange(frames)[:, None] * np.ones((1, people), int)).ravel()
+    return PairSet(top, hor, {"top": nxt, "hor": nxt}, {"top": other, "hor": other}, same,
+                   other, {"top": group[:len(nxt)], "hor": group[:len(nxt)]},
+                   {"top": group, "hor": group}, group, group)
+
+
+def test_pair_auc_values() -> None:
+    assert pair_auc(np.array([0.1, 0.2]), np.array([0.3, 0.4])) == 1.0
+    assert pair_auc(np.array([0.5]), np.array([0.5])) == 0.5
+    assert pair_auc(np.array([0.9]), np.array([0.1, 0.2])) == 0.0
+    assert np.isnan(pair_auc(np.zeros(0), np.array([0.1])))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 6), st.integers(1, 6))
+def test_identity_changes_no_cost(seed: int, m: int, n: int) -> None:
+    """The identity adaptation (what a refused fit gives) leaves the appearance cost as it is."""
+    rng = np.random.default_rng(seed)
+    a, b = _unit(rng.normal(size=(m, DIM))), _unit(rng.normal(size=(n, DIM)))
+    assert np.allclose(SiteAdaptation.identity(DIM).cost(a, b), appearance_cost(a, b),
+                       atol=1e-12)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000))
+def test_transform_follows_a_shifted_camera(seed: int) -> None:
+    """Moving a view's descriptors and its mean by the same vector changes nothing (the
+    standardisation removes a camera's cast); outputs are unit vectors of the projection's
+    rank; the other view is untouched."""
+    rng = np.random.default_rng(seed)
+    proj = rng.normal(size=(DIM, 5))
+    mean, scale = rng.normal(size=DIM), np.exp(rng.normal(size=DIM))
+    ad = SiteAdaptation(mean, scale, np.zeros(DIM), np.ones(DIM), proj, np.array([1.0, 0.0]), 5)
+    d, shift = rng.normal(size=(7, DIM)), rng.normal(size=DIM)
+    moved = SiteAdaptation(mean + shift, scale, np.zeros(DIM), np.ones(DIM), proj,
+                           np.array([1.0, 0.0]), 5)
+    z = ad.transform(d, "top")
+    assert z.shape == (7, 5)
+    assert np.allclose(np.linalg.norm(z, axis=1), 1.0)
+    assert np.allclose(moved.transform(d + shift, "top"), z, atol=1e-9)
+    assert np.allclose(moved.transform(d, "hor"), ad.transform(d, "hor"))
+
+
+def test_transform_rejects_bad_input() -> None:
+    ad = SiteAdaptation.identity(DIM)
+    with pytest.raises(ValueError, match="view must be"):
+        ad.transform(np.zeros((1, DIM)), "ego")
+    with pytest.raises(ValueError, match=r"descriptors must be \(K, 16\)"):
+        ad.transform(np.zeros((1, DIM + 1)), "top")
+
+
+def test_fit_undoes_a_camera_cast() -> None:
+    """Under a strong per-view cast the raw cost barely separates identities; the fit accepts,
+    beats it on the held-out frames by a wide margin, and its costs rank the held-out pairs
+    better too."""
+    pairs = _site(0)
+    fit = fit_site_adaptation(pairs, calibration="none")
+    assert fit.accepted, fit.reason
+    assert fit.auc_after > fit.auc_before + 0.1
+    assert fit.auc_after > 0.9
+    assert set(fit.auc_by_rank) == {0, 2, 4, 8, 16}
+    test = pairs.cross_pos_group >= 30
+    ad = fit.adaptation
+    pos = np.diag(ad.cost(pairs.top[pairs.cross_pos[test, 0]], pairs.hor[pairs.cross_pos[test, 1]]))
+    neg = np.diag(ad.cost(pairs.top[pairs.cross_neg[test, 0]], pairs.hor[pairs.cross_neg[test, 1]]))
+    assert pair_auc(pos, neg) > 0.9
+
+
+def test_fit_is_deterministic() -> None:
+    pairs = _site(1)
+    ref = (np.array([0.1, 0.2, 0.15, 0.05]), np.array([0.4, 0.5, 0.45, 0.35]))
+    a = fit_site_adaptation(pairs, calibration="odds", reference=ref)
+    b = fit_site_adaptation(_site(1), calibration="odds", reference=ref)
+    assert adaptation_bytes(a.adaptation) == adaptation_bytes(b.adaptation)
+    assert a.adaptation.calibration[0] > 0
+
+
+def test_fit_refuses_what_does_not_help() -> None:
+    """Descriptors without identity: no rank beats the raw cost on the held-out frames, the fit
+    is refused and its adaptation is the identity."""
+    fit = fit_site_adaptation(_site(2, signal=0.0))
+    assert not fit.accepted
+    assert "does not help" in fit.reason
+    assert fit.adaptation.rank == 0 and np.array_equal(fit.adaptation.projection, np.eye(DIM))
+
+
+def test_fit_refuses_too_few_pairs() -> None:
+    pairs = _site(3, people=2, frames=6)
+    fit = fit_site_adaptation(pairs, min_heldout=10)
+    assert not fit.accepted and "too few" in fit.reason
+
+
+def test_fit_bad_arguments() -> None:
+    with pytest.raises(ValueError, match="calibration must be"):
+        fit_site_adaptation(_site(4), calibration="magic")
+    with pytest.raises(ValueError, match="needs the reference"):
+        fit_site_adaptation(_site(4), calibration="odds")
+
+
+def test_file_round_trip_and_checks(tmp_path) -> None:
+    fit = fit_site_adaptation(_site(5), calibration="none")
+    path = tmp_path / ADAPTATION_FILE
+    path.write_bytes(adaptation_bytes(fit.adaptation))
+    back = load_adaptation(path, DIM)
+    for key, value in fit.adaptation.arrays().items():
+        assert np.array_equal(back.arrays()[key], value), key
+    with pytest.raises(ValueError, match="'top_mean' must be numbers of shape"):
+        load_adaptation(path, DIM + 1)
+    arrays = fit.adaptation.arrays()
+    arrays["top_scale"] = -arrays["top_scale"]
+    np.savez(path, **arrays)
+    with pytest.raises(ValueError, match="must be > 0"):
+        load_adaptation(path, DIM)
+    arrays = fit.adaptation.arrays()
+    arrays["projection"] = np.array([object()] * 3, dtype=object)
+    np.savez(path, **arrays)
+    with pytest.raises(ValueError, match=r"not a readable adaptation file|projection"):
+        load_adaptation(path, DIM)
+    path.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a readable adaptation file"):
+        load_adaptation(path, DIM)
+
+
+def _site_bundle(tmp_path, adaptation: SiteAdaptation, **record) -> tuple:
+    """The shipped default's files plus ``adaptation`` and its manifest record."""
+    folder = tmp_path / "site"
+    shutil.copytree(DEFAULT_BUNDLE, folder)
+    data = adaptation_bytes(adaptation)
+    (folder / ADAPTATION_FILE).write_bytes(data)
+    doc = json.loads((folder / "manifest.json").read_text())
+    doc["adaptation"] = {"file": ADAPTATION_FILE, "sha256": hashlib.sha256(data).hexdigest(),
+                         "format_version": 1, "rank": adaptation.rank, "fitted_on": {},
+                         "heldout": {}, **record}
+    (folder / "manifest.json").write_text(json.dumps(doc))
+    return folder, doc
+
+
+def test_bundle_reads_an_adaptation(tmp_path) -> None:
+    """A site bundle applies its adaptation to the appearance cue; the identity one gives the
+    default's costs; a bundle without the key has none."""
+    dim = read_manifest(DEFAULT_BUNDLE).appearance.embedding_dim
+    rng = np.random.default_rng(0)
+    a, b = _unit(rng.normal(size=(3, dim))), _unit(rng.normal(size=(4, dim)))
+    default = LearnedMatcher(load_bundle("default"))
+    assert default.bundle.adaptation is None
+    folder, _ = _site_bundle(tmp_path, SiteAdaptation.identity(dim))
+    site = LearnedMatcher(load_bundle(folder))
+    assert site.bundle.adaptation is not None
+    assert np.allclose(site.appearance_cost(a, b), default.appearance_cost(a, b), atol=1e-12)
+    cast = SiteAdaptation(np.full(dim, 0.1), np.ones(dim), np.zeros(dim), np.ones(dim),
+                          np.eye(dim)[:, :8], np.array([1.0, 0.0]), 8)
+    other = tmp_path / "other"
+    other.mkdir()
+    folder2, _ = _site_bundle(other, cast)
+    adapted = LearnedMatcher(load_bundle(folder2))
+    assert np.allclose(adapted.appearance_cost(a, b), cast.cost(a, b))
+    assert not np.allclose(adapted.appearance_cost(a, b), default.appearance_cost(a, b))
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"rank": 999}, "'adaptation.rank' must be in"),
+    ({"file": "../x.npz"}, "adaptation.file must be an .npz file name"),
+    ({"format_version": 7}, "adaptation format version 7"),
+    ({"sha256": "0" * 64}, "sha256 .* does not match"),
+    ({"rank": 3}, "rank 0 but the manifest says 3"),
+    ({"heldout": 1}, "heldout"),
+])
+def test_bundle_refuses_a_bad_adaptation(tmp_path, change: dict, message: str) -> None:
+    dim = read_manifest(DEFAULT_BUNDLE).appearance.embedding_dim
+    folder, _ = _site_bundle(tmp_path, SiteAdaptation.identity(dim), **change)
+    with pytest.raises(BundleError, match=message) as info:
+        load_bundle(folder)
+    assert "\n" not in str(info.value)

@@ -1,0 +1,136 @@
+"""The ``xvmatch adapt`` command: a site bundle fitted on the user's own unlabelled videos.
+
+Reads a video pair (images and box files of both views, no ids across views; optionally the
+cameras), mines pairs (:mod:`xvmatch.inference.adaptation_pairs`), fits the adaptation of the
+appearance cue (:mod:`xvmatch.inference.site_adaptation`) and writes a site bundle
+(:mod:`xvmatch.inference.site_bundle`) that ``associate --model SITE/`` uses. Torch-free: runs in
+the base install.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from xvmatch.cli_options import (
+    HOR_IMAGE_SIZE,
+    IMAGE_SIZE_HELP,
+    UsageError,
+    add_box_inputs,
+    add_command_parser,
+    add_image_options,
+    check_camera_id,
+    image_inputs,
+    progress_bar,
+    read_boxes,
+)
+from xvmatch.cli_types import box_id, int_in, thread_count, worker_count
+from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
+
+__all__ = ["ADAPT_COMMAND", "EXAMPLE", "add_adapt_parser"]
+
+EXAMPLE = ("xvmatch adapt --top top.txt --hor hor.txt --top-images top.mp4 --hor-images hor.mp4 "
+           "--out site/\n  xvmatch associate --model site/ --top top.txt --hor hor.txt "
+           "--top-images top.mp4 --hor-images hor.mp4 --out pred.csv")
+
+ADAPT_COMMAND = "xvmatch adapt"
+"""The owner of a site bundle folder (:func:`xvmatch.output_paths.claim_folder`)."""
+
+
+def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``xvmatch adapt`` on ``subparsers`` and return its parser."""
+    p = add_command_parser(
+        subparsers,
+        "adapt",
+        "Adapt the learned matcher's appearance cue to your cameras from your own unlabelled "
+        "video pair (boxes and images of both views, no ids across views): writes a site "
+        "bundle for associate --model SITE/. Refused (nothing written) when the adaptation "
+        "does not beat the unadapted network on held-out frames.",
+        EXAMPLE,
+    )
+    add_box_inputs(p)
+    add_image_options(p)
+    p.add_argument("--out", required=True, metavar="SITE",
+                   help="the site bundle folder to write: new, empty, or one adapt wrote")
+    p.add_argument("--model", default="default", metavar="BUNDLE",
+                   help="the bundle to adapt (with an appearance network; default: the shipped "
+                   "one); its files are copied unchanged")
+    p.add_argument("--cameras", default=None, metavar="CAMERAS",
+                   help="calibrated cameras 'top' and 'ego' (a file or a folder of per-frame "
+                   "files), as associate takes them: the box-only matcher that mines the "
+                   "cross-view pairs then uses them")
+    p.add_argument("--camera-id", type=box_id, default=None,
+                   help="top-view id of the horizontal camera's wearer, when known")
+    p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
+                   help=IMAGE_SIZE_HELP + "; it must agree with the horizontal images")
+    p.add_argument("--max-frames", default=1500, metavar="N",
+                   type=int_in(10, 1_000_000, "frames scored by the box-only matcher"),
+                   help="most frames read, in bursts spread over the whole video, 10..1000000 "
+                   "(default 1500: about a minute on one core, whatever the video's length)")
+    p.add_argument("--burst", default=10, metavar="K",
+                   type=int_in(3, 100, "consecutive frames whose matches must agree"),
+                   help="consecutive frames per burst, 3..100 (default 10)")
+    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                   help="processes for the geometry features, 1..64 (default 1; same output)")
+    p.add_argument("--threads", type=thread_count, default=1, metavar="K",
+                   help="onnxruntime threads, 1..64 (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.set_defaults(func=_cmd_adapt)
+    return p
+
+
+def _cmd_adapt(args: argparse.Namespace) -> int:
+    from xvmatch import __version__
+    from xvmatch.cli_model import horizontal_size, open_models
+    from xvmatch.inference.adaptation_pairs import MiningConfig
+    from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
+    from xvmatch.inference.site_bundle import adapt_to_site, write_site_bundle
+    from xvmatch.output_paths import claim_folder
+
+    if args.top_images is None or args.hor_images is None:
+        raise UsageError("adapt learns from the images: give --top-images and --hor-images")
+    top = read_boxes(args.top, args.duplicates)
+    hor = read_boxes(args.hor, args.duplicates)
+    check_camera_id(args.camera_id, top, args.top)
+    check_outputs([Output("--out", args.out, folder=True)],
+                  [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
+                   Input("--cameras", args.cameras),
+                   Input("--model", None if args.model == "default" else args.model)])
+    check_own_folder(args.out, ADAPT_COMMAND)
+    config = MiningConfig(burst=args.burst, max_frames=max(args.max_frames, args.burst),
+                          agree=min(3, args.burst))
+    model = open_models([args.model], args.threads)[0]
+    if model.bundle.manifest.appearance is None:
+        raise UsageError(f"--model {args.model}: a box-only matcher has no appearance network "
+                         "to adapt; use a bundle with one (e.g. default)")
+    hor_size = horizontal_size(args, hor)
+    both = [f for f in sorted(set(top) & set(hor)) if len(top[f].ids) and len(hor[f].ids)]
+    options = LearnedRunOptions(models=(model,), hor_size=tuple(hor_size[0]),
+                                hor_size_source=hor_size[1], names=(args.model,),
+                                top_images=args.top_images, hor_images=args.hor_images,
+                                cameras=args.cameras, top_boxes=args.top,
+                                camera_id=args.camera_id, workers=args.workers)
+
+    def progress(items, total, what):
+        return progress_bar(total, what, "frame", not args.quiet, items)
+
+    with open_learned_inputs(top, hor, both, options) as inputs:
+        run = adapt_to_site(top, hor, model, inputs.images["top"], inputs.images["hor"],
+                            tuple(hor_size[0]), inputs.cameras, args.camera_id, config,
+                            progress, args.workers)
+    fit = run.fit
+    if not fit.accepted:
+        raise UsageError(f"adaptation refused, nothing written: {fit.reason}; keep using "
+                         f"--model {args.model}")
+    out = claim_folder(args.out, ADAPT_COMMAND)
+    roles = {"top": args.top, "hor": args.hor, "top_images": args.top_images,
+             "hor_images": args.hor_images}
+    if args.cameras is not None:
+        roles["cameras"] = args.cameras
+    write_site_bundle(model.bundle.manifest.folder, out, run, roles, __version__)
+    if not args.quiet:
+        print(f"adapted on {run.frames_scored} frames ({len(run.mined.embed_frames)} embedded): "
+              f"{run.counts['cross_pos']} cross-view pseudo-matches; rank "
+              f"{fit.adaptation.rank}; held-out AUC {fit.auc_before:.3f} -> {fit.auc_after:.3f}; "
+              f"wrote {out}/ (use: xvmatch associate --model {out} ...)", file=sys.stderr)
+    return 0
