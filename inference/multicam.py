@@ -105,8 +105,8 @@ class MulticamOptions:
     dtw_gate_m: float = 2.0
     smooth_window: int = 5
     link_max_gap: int = 30
-    link_radius_m: float = 1.0
-    link_growth_m: float = 0.1
+    link_radius_m: float = 0.5
+    link_growth_m: float = 0.05
     max_range_m: float = 1e4
     split_frames: int = 20
 
