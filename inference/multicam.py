@@ -487,9 +487,12 @@ def _fuse(members: list[tuple[int, int]], tracks: list[CameraTracks], window: in
     return idx, xy
 
 
-def _link(segments: list[tuple[np.ndarray, np.ndarray]], opts: MulticamOptions) -> np.ndarray:
-    """Eq. 12: chain segments end-to-start; returns each segment's chain index."""
+def _link(segments: list[tuple[np.ndarray, np.ndarray]], frames: np.ndarray,
+          opts: MulticamOptions) -> np.ndarray:
+    """Eq. 12: chain segments end-to-start; returns each segment's chain index. Gaps and
+    velocities are in frames (``frames[idx]``), not positions on the frame axis."""
     n = len(segments)
+    segments = [(frames[idx], xy) for idx, xy in segments]
     starts = np.array([s[0][0] for s in segments])
     ends = np.array([s[0][-1] for s in segments])
     p_end = np.array([s[1][-1] for s in segments]).reshape(-1, 2)
@@ -621,7 +624,7 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
                 if len(m) > 1 or tracks[m[0][0]].lengths[m[0][1]] >= opts.min_length]
     chain = np.arange(len(group_list))
     if linkable:
-        sub = _link([segments[i] for i in linkable], opts)
+        sub = _link([segments[i] for i in linkable], frame_axis, opts)
         for j, i in enumerate(linkable):
             chain[i] = linkable[sub[j]]
     # Global ids: chains ordered by first frame, then by first position, numbered from 1.
