@@ -458,6 +458,28 @@ class _Groups:
         return True
 
 
+def _rejoin_pieces(groups: _Groups, parents: list[np.ndarray], numbers: list[np.ndarray]
+                   ) -> None:
+    """Join the groups of consecutive pieces of the cameras' tracks, by majority.
+
+    Every two consecutive pieces of one track are a vote that the group of the first continues
+    into the group of the second. Continuations are merged most votes first, under the
+    cannot-link rule, so that a single camera's wrong piece link, outvoted by the other
+    cameras' tracks, stays one piece's error instead of carrying a person's later history into
+    another person's global id; a continuation no other one contradicts is merged whatever its
+    votes (a piece another camera missed)."""
+    votes: dict[tuple[int, int], int] = {}
+    for c in range(len(parents)):
+        order = np.lexsort((numbers[c], parents[c]))
+        same = parents[c][order[1:]] == parents[c][order[:-1]]
+        for p, q in zip(order[:-1][same], order[1:][same], strict=True):
+            key = (groups.find(int(groups.offset[c] + p)), groups.find(int(groups.offset[c] + q)))
+            if key[0] != key[1]:
+                votes[key] = votes.get(key, 0) + 1
+    for (a, b), _n in sorted(votes.items(), key=lambda kv: (-kv[1], kv[0])):
+        groups.union(a, b)
+
+
 def _fuse(members: list[tuple[int, int]], tracks: list[CameraTracks], window: int
           ) -> tuple[np.ndarray, np.ndarray]:
     """Eqs. 10-11 and the moving average: the fused ground trajectory of one group.
@@ -601,18 +623,14 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
             if progress is not None:
                 progress(1)
     links.sort(key=lambda lk: (lk.cost, lk.cam_a, lk.track_a, lk.cam_b, lk.track_b))
-    if opts.split_frames:  # rejoin each track's pieces after every cross-camera link
-        for c in range(len(names)):
-            order = np.lexsort((numbers[c], parents[c]))
-            same = parents[c][order[1:]] == parents[c][order[:-1]]
-            links += [_Link(c, int(p), c, int(q), _BIG)
-                      for p, q in zip(order[:-1][same], order[1:][same], strict=True)]
     groups = _Groups(tracks)
     kept = []
     for lk in links:
         if groups.union(int(groups.offset[lk.cam_a] + lk.track_a),
                         int(groups.offset[lk.cam_b] + lk.track_b)):
             kept.append(lk)
+    if opts.split_frames:
+        _rejoin_pieces(groups, parents, numbers)
     members: dict[int, list[tuple[int, int]]] = {}
     for c, t in enumerate(tracks):
         for k in range(len(t.ids)):
