@@ -1,0 +1,264 @@
+"""Several static cameras (issue 32): association, linkage and localisation on simulated scenes.
+
+Scenes of ``datasets/multicam_scenes.py`` (20 people on a 24 m floor, 400 frames at 10 frames/s,
+2, 4 and 7 static cameras around it; each camera's track ids scrambled on their own, so ids are
+never equal across cameras), three seeds each, in three conditions:
+
+* ``gt``: ground-truth boxes and per-camera track ids (a new id whenever a person comes back
+  into a camera's view);
+* ``noise``: what ``xvmatch noise`` does on every camera (5% box jitter, 10% misses, 0.3 false
+  boxes per frame);
+* ``tracker``: that and a tracker's id switches (0.02 per frame and camera) and fragments (0.2
+  per track).
+
+For each: ``--method ours`` (tracks in pieces of 20 frames, the default), ours with whole
+tracks (``--split-frames 0``, as the paper) and ``--method dtw`` (paper 004's M1) scored with
+``evaluation/multicam_metrics.py`` (Eqs. 13-14 P and R averaged over overlapping camera pairs,
+box-pair F1, global IDF1, ground error of the fused foot points), and the localisation of paper
+003 (two most visible views against all views, principal axes along the vertical against image
+columns), with our association's ids and with the true ids (to separate localisation from
+association errors). Then the speed case, 7 cameras x 400 frames x 20 people, timed as the
+whole ``xvmatch multicam`` command (a fresh process of the base install when ``--xvmatch`` is
+given, else this interpreter), both methods in the same run.
+
+Usage:
+    python benchmarks/multicam_eval.py [--seeds 1 2 3] [--cameras 2 4 7] [--out DIR]
+        [--xvmatch .venv-base/bin/xvmatch] [--write DIR --write-cameras 4 [--write-noise]]
+
+``--write DIR`` only writes one simulated scene as files (cameras.json, boxes/, gt/,
+ground_gt.csv) for trying the command, and exits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from xvmatch.datasets.detector_noise import DetectorNoise
+from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.datasets.multicam_scenes import (
+    MulticamConfig,
+    TrackerNoise,
+    add_tracker_noise,
+    simulate_multicam_scene,
+    write_multicam_scene,
+)
+from xvmatch.evaluation.multicam_metrics import match_to_truth, multicam_scores
+from xvmatch.geometry.ground_plane import GroundCamera
+from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
+from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
+
+CONDITIONS = {
+    "gt": None,
+    "noise": TrackerNoise(DetectorNoise(0.05, 0.10, 0.3), 0.0, 0.0),
+    "tracker": TrackerNoise(DetectorNoise(0.05, 0.10, 0.3), 0.02, 0.2),
+}
+METHODS = {
+    "ours": MulticamOptions(),
+    "ours, whole tracks": MulticamOptions(split_frames=0),
+    "dtw": MulticamOptions(method="dtw", split_frames=0),
+}
+LOCALISERS = {
+    "two best views, vertical axes": LocalisationOptions("two_best", "vertical"),
+    "all views, vertical axes": LocalisationOptions("all", "vertical"),
+    "two best views, image columns": LocalisationOptions("two_best", "column"),
+    "all views, image columns": LocalisationOptions("all", "column"),
+}
+
+
+def _scene(n_cameras: int, seed: int, frames: int, people: int, condition: str):
+    scene = simulate_multicam_scene(
+        MulticamConfig(n_cameras=n_cameras, n_people=(people, people)), frames, seed)
+    noise = CONDITIONS[condition]
+    return scene if noise is None else add_tracker_noise(scene, noise, seed)
+
+
+def _truth_ground(scene) -> dict:
+    return {k + 1: (np.arange(1, scene.n_frames + 1), scene.positions[:, k])
+            for k in range(scene.positions.shape[1])}
+
+
+def _true_ids(scene) -> dict:
+    """Each camera's input boxes with their true global ids (false boxes dropped)."""
+    out = {}
+    for name, frames in scene.boxes.items():
+        truth = match_to_truth(frames, scene.gt[name])
+        out[name] = {f: FrameBoxes(f, truth[f][truth[f] >= 0], rec.boxes[truth[f] >= 0])
+                     for f, rec in frames.items()}
+    return out
+
+
+def _foot_fusion(cameras, boxes) -> dict:
+    """Per true id and frame, the mean of its foot points on the ground over the cameras."""
+    from xvmatch.geometry.ground_plane import foot_points
+
+    acc: dict[int, dict[int, list]] = {}
+    for name, frames in boxes.items():
+        for f, rec in frames.items():
+            if not len(rec):
+                continue
+            xy, ok = cameras[name].to_ground(foot_points(rec.boxes))
+            for g, p, good in zip(rec.ids.tolist(), xy, ok, strict=True):
+                if good:
+                    acc.setdefault(g, {}).setdefault(f, []).append(p)
+    out = {}
+    for g, per in acc.items():
+        fr = np.array(sorted(per))
+        out[g] = (fr, np.array([np.mean(per[f], axis=0) for f in fr]))
+    return out
+
+
+def evaluate(n_cameras: int, seed: int, frames: int, people: int, condition: str) -> dict:
+    """Every score of one scene and condition."""
+    scene = _scene(n_cameras, seed, frames, people, condition)
+    cams = {n: GroundCamera.from_camera(c) for n, c in scene.cameras.items()}
+    truth = _truth_ground(scene)
+    row = {"cameras": n_cameras, "seed": seed, "condition": condition}
+    for method, options in METHODS.items():
+        start = time.perf_counter()
+        res = associate_cameras(cams, scene.boxes, options)
+        seconds = time.perf_counter() - start
+        rl = relabel(scene.boxes, res)
+        s = multicam_scores(rl, scene.gt, res.ground, truth)
+        row[method] = {"P": s["P"], "R": s["R"], "box_F1": s["box_pairs"]["F1"],
+                       "IDF1": s["idf1"]["IDF1"], "ground_median": s["ground"]["median"],
+                       "seconds": seconds, "pairs": s["overlapping_pairs"]}
+        if method == "ours":
+            ours_rl, ours_res = rl, res
+    loc = {"foot points, fused (association)": row["ours"]["ground_median"]}
+    true_rl = _true_ids(scene)
+    foot = _foot_fusion(cams, true_rl)
+    oracle = {"foot points, fused": _median_error(foot, truth)}
+    for label, opts in LOCALISERS.items():
+        est = localise(cams, ours_rl, ours_res.ground, opts)
+        loc[label] = multicam_scores(ours_rl, scene.gt, est, truth)["ground"]["median"]
+        oracle[label] = _median_error(localise(cams, true_rl, foot, opts), truth)
+    row["localisation"] = loc
+    row["localisation_true_ids"] = oracle
+    return row
+
+
+def _median_error(est: dict, truth: dict) -> float:
+    errors = []
+    for g, (fr, xy) in est.items():
+        tf, txy = truth[g]
+        _, ia, ib = np.intersect1d(fr, tf, return_indices=True)
+        errors.append(np.linalg.norm(xy[ia] - txy[ib], axis=1))
+    return float(np.median(np.concatenate(errors)))
+
+
+def speed_case(xvmatch: str | None, seed: int = 1) -> dict:
+    """Wall time of the whole ``xvmatch multicam`` command, 7 cameras x 400 frames x 20
+    people, both methods, on files written here."""
+    scene = _scene(7, seed, 400, 20, "gt")
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = write_multicam_scene(Path(tmp) / "scene", scene)
+        boxes = [f"{n}={paths['boxes'] / (n + '.txt')}" for n in scene.cameras]
+        for method in ("ours", "dtw"):
+            args = ["multicam", "--boxes", *boxes, "--cameras", str(paths["cameras"]),
+                    "--method", method, "--out", str(Path(tmp) / f"out_{method}"), "--quiet"]
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            start = time.perf_counter()
+            subprocess.run([xvmatch or sys.executable, *([] if xvmatch else
+                                                         ["-m", "xvmatch"]), *args], check=True)
+            wall = time.perf_counter() - start
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+            out[method] = {"wall": wall, "cpu": cpu}
+    return out
+
+
+def _mean(rows, *keys):
+    vals = []
+    for r in rows:
+        v = r
+        for k in keys:
+            v = v[k]
+        vals.append(v)
+    return float(np.mean(vals))
+
+
+def report(rows: list[dict], speed: dict) -> str:
+    """Markdown tables of the means over seeds."""
+    lines = ["| cameras | boxes | method | P | R | box-pair F1 | global IDF1 | ground median (m) "
+             "| seconds |", "|---|---|---|---|---|---|---|---|---|"]
+    keys = sorted({(r["cameras"], r["condition"]) for r in rows},
+                  key=lambda k: (k[0], list(CONDITIONS).index(k[1])))
+    for cams, cond in keys:
+        sel = [r for r in rows if r["cameras"] == cams and r["condition"] == cond]
+        for method in METHODS:
+            lines.append(
+                f"| {cams} | {cond} | {method} | {_mean(sel, method, 'P'):.3f} | "
+                f"{_mean(sel, method, 'R'):.3f} | {_mean(sel, method, 'box_F1'):.3f} | "
+                f"{_mean(sel, method, 'IDF1'):.3f} | {_mean(sel, method, 'ground_median'):.3f} "
+                f"| {_mean(sel, method, 'seconds'):.2f} |")
+    lines += ["", "Localisation, median ground error (m); our association's ids / true ids:",
+              "", "| cameras | boxes | " + " | ".join(["foot points, fused", *LOCALISERS])
+              + " |", "|---|---|" + "---|" * (1 + len(LOCALISERS))]
+    for cams, cond in keys:
+        sel = [r for r in rows if r["cameras"] == cams and r["condition"] == cond]
+        cells = [f"{_mean(sel, 'localisation', 'foot points, fused (association)'):.3f} / "
+                 f"{_mean(sel, 'localisation_true_ids', 'foot points, fused'):.3f}"]
+        for label in LOCALISERS:
+            cells.append(f"{_mean(sel, 'localisation', label):.3f} / "
+                         f"{_mean(sel, 'localisation_true_ids', label):.3f}")
+        lines.append(f"| {cams} | {cond} | " + " | ".join(cells) + " |")
+    if speed:
+        lines += ["", "Whole command, 7 cameras x 400 frames x 20 people (fresh process): "
+                  + ", ".join(f"{m} {t['wall']:.2f} s wall, {t['cpu']:.2f} s CPU"
+                              for m, t in speed.items())]
+    return "\n".join(lines)
+
+
+def main() -> int:
+    """Run the benchmark (or write one scene with ``--write``)."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    p.add_argument("--cameras", type=int, nargs="+", default=[2, 4, 7])
+    p.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(CONDITIONS))
+    p.add_argument("--frames", type=int, default=400)
+    p.add_argument("--people", type=int, default=20)
+    p.add_argument("--out", default=None, help="folder for results.json")
+    p.add_argument("--xvmatch", default=None, help="xvmatch executable for the speed case")
+    p.add_argument("--no-speed", action="store_true")
+    p.add_argument("--write", default=None, metavar="DIR", help="write one scene and exit")
+    p.add_argument("--write-cameras", type=int, default=4)
+    p.add_argument("--write-noise", action="store_true")
+    args = p.parse_args()
+    if args.write:
+        scene = _scene(args.write_cameras, args.seeds[0], args.frames, args.people,
+                       "noise" if args.write_noise else "gt")
+        paths = write_multicam_scene(args.write, scene)
+        print(json.dumps({k: os.fspath(v) for k, v in paths.items()}, indent=2))
+        return 0
+    start = time.perf_counter()
+    rows = []
+    for cams in args.cameras:
+        for cond in args.conditions:
+            for seed in args.seeds:
+                rows.append(evaluate(cams, seed, args.frames, args.people, cond))
+                print(f"{cams} cameras, {cond}, seed {seed}: ours IDF1 "
+                      f"{rows[-1]['ours']['IDF1']:.3f}", file=sys.stderr)
+    speed = {} if args.no_speed else speed_case(args.xvmatch)
+    text = report(rows, speed)
+    print(text)
+    print(f"\nbenchmark wall time {time.perf_counter() - start:.0f} s")
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "results.json").write_text(json.dumps({"rows": rows, "speed": speed},
+                                                                indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
