@@ -108,7 +108,7 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     frames = sorted(top)
     adapt_frames = [f for f in frames if f < cut and len(top[f].ids) and len(hor[f].ids)]
     test = [f for f in frames if f >= cut]
-    config = MiningConfig()
+    config = MiningConfig(shots=args.shots)
     bursts = plan_bursts(adapt_frames, config.burst, config.max_frames)
     costs = box_only_costs(top, hor, [int(f) for b in bursts for f in b], matcher,
                            video.hor_size)
@@ -234,6 +234,8 @@ def main() -> int:
     parser.add_argument("--adapt-fraction", type=float, default=0.6)
     parser.add_argument("--calibrations", nargs="+", default=["odds"], choices=CALIBRATIONS)
     parser.add_argument("--model", default="default")
+    parser.add_argument("--shots", type=int, default=MiningConfig().shots,
+                        help="frames embedded per burst")
     parser.add_argument("--cli", action="store_true", help="also time the command line")
     parser.add_argument("--work", default="runs/site_adaptation")
     args = parser.parse_args()

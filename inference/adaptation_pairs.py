@@ -18,7 +18,7 @@ than a short one). In each burst:
   anyone the matcher doubts (pseudo-labels allow "no match"). A pseudo-matched box against every
   other box of the other view in that frame is a cross-view negative.
 
-Only the first, middle and last frames of each burst are embedded by the appearance network
+Only ``shots`` frames of each burst (first, last, evenly between) are embedded by the network
 (:attr:`MinedPairs.embed_frames`, every box of both views): the descriptors
 (:func:`embed_frames`) and the index pairs make a :class:`~xvmatch.inference.site_adaptation.
 PairSet`. Each pair carries its burst number, so a fit can hold out the last part of the video.
@@ -64,6 +64,8 @@ class MiningConfig:
         agree: consecutive confident frames a pseudo-match needs.
         min_iou: IoU of a tracklet link.
         max_gap: frames a tracklet may skip.
+        shots: frames of each burst embedded by the appearance network, evenly spaced from
+            its first to its last frame (2..burst).
     """
 
     burst: int = 10
@@ -72,8 +74,11 @@ class MiningConfig:
     agree: int = 3
     min_iou: float = 0.5
     max_gap: int = 1
+    shots: int = 3
 
     def __post_init__(self) -> None:
+        if not 2 <= self.shots <= self.burst:
+            raise ValueError(f"shots must be in 2..burst ({self.burst}), got {self.shots}")
         if not 1 <= self.agree <= self.burst:
             raise ValueError(f"agree must be in 1..burst ({self.burst}), got {self.agree}")
         if self.max_frames < self.burst:
@@ -221,10 +226,13 @@ def mine_pairs(
     """
     config = config or MiningConfig()
     views = {"top": top, "hor": hor}
+    def shots_of(burst: np.ndarray) -> list[int]:
+        index = np.round(np.linspace(0, len(burst) - 1, config.shots)).astype(int)
+        return sorted({int(burst[i]) for i in index.tolist()})
+
     embed: list[int] = []
     for b in bursts:
-        b = np.asarray(b, dtype=np.int64)
-        embed += sorted({int(b[0]), int(b[len(b) // 2]), int(b[-1])})
+        embed += shots_of(np.asarray(b, dtype=np.int64))
     offset = {v: {} for v in VIEWS}
     count = dict.fromkeys(VIEWS, 0)
     for f in embed:
@@ -239,7 +247,7 @@ def mine_pairs(
     agreed_total = 0
     for k, b in enumerate(bursts):
         b = np.asarray(b, dtype=np.int64)
-        shots = sorted({int(b[0]), int(b[len(b) // 2]), int(b[-1])})
+        shots = shots_of(b)
         owner: dict[str, dict[tuple[int, int], int]] = {}
         for v in VIEWS:
             owner[v] = {}

@@ -70,8 +70,8 @@ def _ids(records, frames) -> np.ndarray:
 def test_mine_pairs_on_a_clear_scene() -> None:
     top, hor, costs = _walk(20, 4)
     bursts = plan_bursts(range(1, 21), 10, 1000)
-    mined = mine_pairs(top, hor, bursts, costs, 0.5, MiningConfig(burst=10))
-    assert mined.embed_frames.tolist() == [1, 6, 10, 11, 16, 20]
+    mined = mine_pairs(top, hor, bursts, costs, 0.5, MiningConfig(burst=10, shots=3))
+    assert mined.embed_frames.tolist() == [1, 5, 10, 11, 15, 20]
     assert mined.n_boxes == {"top": 6 * 5, "hor": 6 * 4}
     t, h = _ids(top, mined.embed_frames), _ids(hor, mined.embed_frames)
     # every person seen in both views, in every embedded frame; never the wearer
@@ -102,7 +102,9 @@ def test_no_pseudo_match_without_agreement() -> None:
 
 def test_mining_config_checks() -> None:
     with pytest.raises(ValueError, match="agree must be in"):
-        MiningConfig(burst=3, agree=4)
+        MiningConfig(burst=3, agree=4, shots=3)
+    with pytest.raises(ValueError, match="shots must be in"):
+        MiningConfig(burst=4, shots=5)
     with pytest.raises(ValueError, match="max_frames"):
         MiningConfig(burst=10, max_frames=5)
 

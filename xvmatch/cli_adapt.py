@@ -66,7 +66,7 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--max-frames", default=1500, metavar="N",
                    type=int_in(10, 1_000_000, "frames scored by the box-only matcher"),
                    help="most frames read, in bursts spread over the whole video, 10..1000000 "
-                   "(default 1500: about a minute on one core, whatever the video's length)")
+                   "(default 1500, whatever the video's length)")
     p.add_argument("--burst", default=10, metavar="K",
                    type=int_in(3, 100, "consecutive frames whose matches must agree"),
                    help="consecutive frames per burst, 3..100 (default 10)")
@@ -98,7 +98,7 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
                    Input("--model", None if args.model == "default" else args.model)])
     check_own_folder(args.out, ADAPT_COMMAND)
     config = MiningConfig(burst=args.burst, max_frames=max(args.max_frames, args.burst),
-                          agree=min(3, args.burst))
+                          agree=3)
     model = open_models([args.model], args.threads)[0]
     if model.bundle.manifest.appearance is None:
         raise UsageError(f"--model {args.model}: a box-only matcher has no appearance network "
