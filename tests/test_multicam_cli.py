@@ -107,6 +107,19 @@ def test_bad_input(scene, tmp_path, capsys):
     _fails(["multicam", "--boxes", f"cam1={sky}", f"cam2={root / 'boxes/cam2.txt'}",
             "--cameras", str(tilted), "--out", str(out)], capsys,
            f"{sky}:1: frame 1, id 777: the box's foot point", out)
+    # --above-horizon drop: such boxes (here every box above the level camera's horizon) sit
+    # out with a warning, each track of them under a global id of its own.
+    assert main(["multicam", "--boxes", f"cam1={sky}", f"cam2={root / 'boxes/cam2.txt'}",
+                 "--cameras", str(tilted), "--out", str(out), "--quiet",
+                 "--above-horizon", "drop"]) == 0
+    assert "foot point lies above camera cam1's horizon" in capsys.readouterr().err
+    rows = [r.split(",") for r in (out / "cam1.txt").read_text().splitlines()]
+    assert len(rows) == len(lines)
+    sky_id = [r[1] for r in rows
+              if r[0] == "1" and float(r[2]) == level.width / 2 and float(r[3]) == 40.0]
+    assert len(sky_id) == 1
+    other_ids = {r[1] for r in (out / "cam2.txt").read_text().splitlines() for r in [r.split(",")]}
+    assert sky_id[0] not in other_ids
 
 
 def test_fit_homography(scene, tmp_path, capsys):

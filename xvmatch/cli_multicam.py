@@ -85,6 +85,11 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--duplicates", choices=("first", "error"), default="first",
                    help="a repeated (frame, id) in a box file: keep the first box with a "
                    "warning (default) or stop")
+    p.add_argument("--above-horizon", choices=("error", "drop"), default="error",
+                   help="a box whose foot point lies at or above its camera's horizon (no "
+                   "person stands there: a false detection or a wrong calibration): stop with "
+                   "its file and line (default), or leave it out of the association with a "
+                   "warning (it keeps a global id of its own)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_multicam)
     return p
@@ -124,15 +129,20 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     boxes = {name: read_boxes(path, args.duplicates) for name, path in files.items()}
     for name, frames in boxes.items():
         _check_inside(files[name], frames, cameras[name])
+    kept, above = boxes, {}
+    if args.above_horizon == "drop":
+        kept, above = _drop_above_horizon(boxes, cameras, files)
     n_pairs = len(names) * (len(names) - 1) // 2
     with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
         try:
-            result = associate_cameras(cameras, boxes, MulticamOptions(
+            result = associate_cameras(cameras, kept, MulticamOptions(
                 method=args.method, split_frames=_split_frames(args)), progress=bar.update)
         except MulticamInputError as exc:
             path = files[exc.camera]
             raise UsageError(f"{path}{_line_of(path, str(exc))}: {exc}") from None
-    relabelled = relabel(boxes, result)
+    relabelled = relabel(kept, result)
+    if above:
+        relabelled = _put_back(boxes, relabelled, above, max(result.ground, default=0))
     if args.localise != "foot":
         from dataclasses import replace
 
@@ -148,6 +158,51 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         n_people = len(result.ground)
         print(f"{n_people} global ids over {len(names)} cameras; wrote {os.fspath(out)}/")
     return 0
+
+
+def _drop_above_horizon(boxes, cameras, files):
+    """``--above-horizon drop``: each camera's boxes without those whose foot point lies at or
+    above its horizon, and ``{camera: {frame: mask of the dropped}}``; one warning per camera."""
+    import sys
+
+    from xvmatch.datasets.mot_boxes import FrameBoxes
+    from xvmatch.geometry.ground_plane import foot_points
+
+    kept, above = {}, {}
+    for name, frames in boxes.items():
+        kept[name], above[name], n = {}, {}, 0
+        for f, rec in frames.items():
+            _, ok = cameras[name].to_ground(foot_points(rec.boxes))
+            kept[name][f] = FrameBoxes(f, rec.ids[ok], rec.boxes[ok])
+            above[name][f] = ~ok
+            n += int((~ok).sum())
+        if n:
+            print(f"xvmatch: warning: {files[name]}: {n} box(es) whose foot point lies above "
+                  f"camera {name}'s horizon take no part (each gets a global id of its own)",
+                  file=sys.stderr)
+    return kept, above
+
+
+def _put_back(boxes, relabelled, above, last_id: int):
+    """The dropped boxes back in their places, a new global id per (camera, track id)."""
+    import numpy as np
+
+    from xvmatch.datasets.mot_boxes import FrameBoxes
+
+    out, fresh = {}, {}
+    for name, frames in boxes.items():
+        out[name] = {}
+        for f, rec in frames.items():
+            ids = np.empty(len(rec), dtype=np.int64)
+            mask = above[name][f]
+            ids[~mask] = relabelled[name][f].ids
+            for k in np.flatnonzero(mask):
+                key = (name, int(rec.ids[k]))
+                if key not in fresh:
+                    fresh[key] = last_id + 1 + len(fresh)
+                ids[k] = fresh[key]
+            out[name][f] = FrameBoxes(f, ids, rec.boxes)
+    return out
 
 
 def _split_frames(args: argparse.Namespace) -> int:
