@@ -86,6 +86,14 @@ def test_bad_input(scene, tmp_path, capsys):
     _fails(["multicam", "--boxes", f"cam1={root / 'boxes/cam1.txt'}",
             f"cam9={root / 'boxes/cam2.txt'}", "--cameras", cams, "--out", str(out)],
            capsys, "camera cam9 is not in", out)
+    # A box entirely outside its camera's image: the file, its line, the camera's size.
+    lines = (root / "boxes" / "cam2.txt").read_text().splitlines()
+    lines.insert(2, "1,555,5000.0,100.0,30.0,80.0,-1,-1,-1,-1")
+    off = tmp_path / "off.txt"
+    off.write_text("\n".join(lines) + "\n")
+    _fails(["multicam", "--boxes", f"cam1={root / 'boxes/cam1.txt'}", f"cam2={off}",
+            "--cameras", cams, "--out", str(out)], capsys,
+           f"{off}:3: frame 1, id 555: the box lies entirely outside", out)
     # A singular homography, named with its file and camera.
     data = json.loads((root / "cameras.json").read_text())
     data["cameras"]["cam2"] = {"H": [[1, 2, 3], [2, 4, 6], [0, 0, 1]], "width": 1920,
