@@ -220,8 +220,8 @@ def synthetic_main(args: argparse.Namespace) -> int:
     print(f"{args.synthetic} rendered drone videos of {args.synthetic_frames} frames (25 fps, "
           f"seeds {args.seed}..{args.seed + args.synthetic - 1}), ground-truth boxes, ids "
           f"replaced by shuffled row numbers per view; MIP, c0 {hand.c0:g} (learned weights: "
-          f"{learned.c0:g}), sigma {args.sigma:g}, w1 {hand.w1:g}, w2 {hand.w2:g}; network: "
-          f"{args.model}")
+          f"{learned.c0:g}), clips of {args.clip_length}, sigma {args.sigma:g}, w1 "
+          f"{hand.w1:g}, w2 {hand.w2:g}; network: {args.model}")
     head = (f"{'scene':<20} {'frames':>5} {'CVIDF1':>6} {'CVMA':>6} | top IDF1 MOTA HOTA IDSW"
             f" | hor IDF1 MOTA HOTA IDSW")
     print(head)
@@ -253,7 +253,8 @@ def synthetic_main(args: argparse.Namespace) -> int:
             if not arm.startswith("boxes"):
                 images = TrackImages(video.top_images, video.hor_images,
                                      None if arm == "colour" else model.descriptors)
-            config = TrackConfig(min_iou=args.min_iou, max_gap=args.max_gap,
+            config = TrackConfig(clip_length=args.clip_length, min_iou=args.min_iou,
+                                 max_gap=args.max_gap,
                                  weights=learned if arm.endswith("-learned") else hand,
                                  time_appearance="colour" if arm == "network-cv"
                                  else "network")
@@ -297,6 +298,8 @@ def main() -> int:
     parser.add_argument("--sigma", type=float, default=TrackWeights().sigma,
                         help="Eq. 15 scale per box height")
     parser.add_argument("--max-gap", type=int, default=3, help="frames a tracklet may miss")
+    parser.add_argument("--clip-length", type=int, default=TrackConfig().clip_length,
+                        help="frames per clip (tracking; the tracklet table keeps 10)")
     parser.add_argument("--min-iou", type=float, default=0.5, help="tracklet IoU link")
     parser.add_argument("--time-sequence", default="V1-S_55-G_1")
     parser.add_argument("--no-timing", action="store_true")
@@ -349,7 +352,8 @@ def main() -> int:
         return LEARNED_DUMMY_WEIGHT if arm.endswith("-learned") else TrackWeights().c0
 
     def config(arm: str) -> TrackConfig:
-        return TrackConfig(min_iou=args.min_iou, max_gap=args.max_gap,
+        return TrackConfig(clip_length=args.clip_length, min_iou=args.min_iou,
+                           max_gap=args.max_gap,
                            weights=TrackWeights(c0=c0(arm), sigma=args.sigma),
                            solver=arm.split("-")[0], learned_rule=args.learned_rule,
                            learned_share=args.learned_share)
@@ -361,7 +365,7 @@ def main() -> int:
              f"noisy (seeds {' '.join(map(str, args.noise))}, pooled)")
     print(f"O {'given' if args.camera_given else 'searched'}; {boxes} boxes, ids replaced "
           f"by shuffled row numbers per view; c0 {' / '.join(f'{c0(a):g}' for a in arms)} "
-          f"({' / '.join(arms)}), sigma {args.sigma:g}, min IoU "
+          f"({' / '.join(arms)}), clip length {args.clip_length}, sigma {args.sigma:g}, min IoU "
           f"{args.min_iou:g}" + (f"; learned: {args.model}, rule {args.learned_rule}"
                                  f"{', mirror' if args.mirror else ''}" if learned else ""))
     print(head)

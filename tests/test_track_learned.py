@@ -52,8 +52,9 @@ def test_track_model_default_from_boxes_only(scene_files, tmp_path, capsys):
     assert main(["evaluate", "--tracks", str(out), "--top", str(scene_files["gt_top"]),
                  "--hor", str(scene_files["gt_hor"]), "--json"]) == 0
     scores = json.loads(capsys.readouterr().out)
-    # The handcrafted weights score 83.3 CVIDF1 (precision 100.0) on this scene.
-    assert scores["cross_view"]["cvidp"] > 90 and scores["cross_view"]["cvidf1"] > 80
+    # Measured: precision 100.0, CVIDF1 83.3 (the handcrafted weights score the same here): no
+    # wrong pair, some pairs missed.
+    assert scores["cross_view"]["cvidp"] > 95 and scores["cross_view"]["cvidf1"] > 80
 
 
 # sha256 of top.txt + hor.txt written by `xvmatch track` (no --model) on the scene above with
