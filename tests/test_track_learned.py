@@ -172,3 +172,19 @@ def test_learned_weights_give_the_right_tracks_on_a_known_case():
     swapped = {f: _costs(c.top_rows, c.hor_rows, c.cost[:, ::-1]) for f, c in costs.items()}
     res = track_pair(top, hor, 1280.0, learned=LearnedEvidence(swapped, 0.5))
     assert all(res.top_rows[2 * f] == res.hor_rows[1001 + 2 * f] for f in range(1, 21))
+
+
+def test_learned_tracks_do_not_depend_on_workers(tmp_path):
+    # 40 frames: more than one chunk of the learned association's feature pool (32 frames), so
+    # that --workers 2 really shares them between processes.
+    scene = simulate_box_scene(SceneConfig(), n_frames=40, seed=11)
+    files = {}
+    for view, frames in (("top", scene.top), ("hor", scene.hor)):
+        write_mot_boxes(tmp_path / f"gt_{view}.txt", frames)
+        lines = (tmp_path / f"gt_{view}.txt").read_text().splitlines()
+        det = [",".join([ln.split(",")[0], "-1", *ln.split(",")[2:]]) for ln in lines]
+        files[f"det_{view}"] = tmp_path / f"det_{view}.txt"
+        files[f"det_{view}"].write_text("\n".join(det) + "\n")
+    assert _track(files, tmp_path / "one", "--model", "default") == 0
+    assert _track(files, tmp_path / "two", "--model", "default", "--workers", "2") == 0
+    assert _digest(tmp_path / "one") == _digest(tmp_path / "two")
