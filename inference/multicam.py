@@ -26,6 +26,11 @@ per-camera track ids (ids are never compared across cameras):
    floor no camera pair shares, or where a track was cut) are chained, one assignment of segment
    ends to segment starts, gated by the distance from the constant-velocity prediction.
 
+By default (``split_frames=20``) the unit of steps 2-3 is a piece of 20 frames of a track, not
+the whole track; each track's pieces are joined again by majority afterwards
+(:func:`_rejoin_pieces`), so that a person back in a camera's view under a new track id, or a
+tracker's id switch, costs a piece, not the person's whole path (``docs/multicam.md``).
+
 ``method="dtw"`` is the paper's M1 baseline: the same steps with step 2 replaced by dynamic time
 warping between the two whole ground trajectories, one assignment per camera pair.
 
