@@ -40,6 +40,9 @@ __all__ = [
 Embedder = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``embed(image (H, W, 3) uint8 BGR, boxes (K, 4)) -> (K, D)`` unit descriptors, e.g.
 :meth:`xvmatch.inference.learned_association.LearnedMatcher.descriptors`."""
+CostOfDescriptors = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``cost(top (M, D), horizontal (N, D)) -> (M, N)`` appearance cost in [0, 1] of raw
+descriptors."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,12 +126,15 @@ def colour_similarity(a: TrackletAppearance, b: TrackletAppearance) -> np.ndarra
     return histogram_intersection(a.histograms, b.histograms)
 
 
-def descriptor_similarity(a: TrackletAppearance, b: TrackletAppearance) -> np.ndarray:
-    """(T_a, T_b) network appearance similarity ``1 - |d_a - d_b| / 2`` of the tracklets'
-    middle-box descriptors (Sec. 3.3.2), in [0, 1]."""
+def descriptor_similarity(a: TrackletAppearance, b: TrackletAppearance,
+                          cost: CostOfDescriptors | None = None) -> np.ndarray:
+    """(T_a, T_b) network appearance similarity ``1 - cost(d_a, d_b)`` of the tracklets'
+    middle-box descriptors (Sec. 3.3.2), in [0, 1]; ``cost`` defaults to ``|d_a - d_b| / 2``
+    (a site bundle's adapted cross-view cost: ``LearnedMatcher.appearance_cost``)."""
     if a.descriptors is None or b.descriptors is None:
         raise ValueError("descriptor_similarity needs descriptors: pass an appearance network")
     n_a, n_b = a.histograms.shape[0], b.histograms.shape[0]
     if n_a == 0 or n_b == 0:
         return np.zeros((n_a, n_b))
-    return 1.0 - appearance_cost(a.descriptors, b.descriptors)
+    cost = appearance_cost if cost is None else cost
+    return 1.0 - np.asarray(cost(a.descriptors, b.descriptors), dtype=np.float64)

@@ -35,6 +35,7 @@ from xvmatch.inference.learned_association import (
     associate_sequence_learned,
 )
 from xvmatch.inference.track_appearance import (
+    CostOfDescriptors,
     Embedder,
     TrackletAppearance,
     clip_appearance,
@@ -150,11 +151,16 @@ class TrackImages:
         embed: ``embed(image, boxes) -> (K, D)`` unit descriptors (the deployed appearance
             network, cut as the runtime cuts crops), or None: colour terms only, and the
             cross-view weight stays the spatial term alone.
+        cross_cost: the cross-view appearance cost of raw top and horizontal descriptors
+            (a site bundle's adapted cost, ``LearnedMatcher.appearance_cost``), or None:
+            ``|a - b| / 2``. The over-time terms compare descriptors of one view, whose
+            camera is the same, and stay ``|a - b| / 2``.
     """
 
     top: FrameImages
     hor: FrameImages
     embed: Embedder | None = None
+    cross_cost: CostOfDescriptors | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -314,12 +320,12 @@ def _window_weights(
     frame_pairs: Mapping[int, list[tuple[int, int]]], weights: TrackWeights,
     app: tuple[TrackletAppearance, ...] | None = None, time_appearance: str = "network",
     learned: LearnedEvidence | None = None, learned_rule: str = LEARNED_RULES[0],
-    learned_share: float = 1.0,
+    learned_share: float = 1.0, cross_cost: CostOfDescriptors | None = None,
 ) -> list[np.ndarray]:
     """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t);
     ``app``: the appearance of the same four tracklet lists, or None (boxes only); ``learned``:
     the learned matcher's evidence for the cross-view spatial term, or None (Eq. 13 on
-    ``frame_pairs``)."""
+    ``frame_pairs``); ``cross_cost``: the cross-view appearance cost (None: ``|a - b| / 2``)."""
     a_time = a_cross = (None, None)
     if app is not None:
         a_tt, a_tu, a_hu, a_ht = app
@@ -328,7 +334,8 @@ def _window_weights(
                 else colour_similarity)
         a_time = (over(a_tt, a_tu), over(a_ht, a_hu))
         if network:
-            a_cross = (descriptor_similarity(a_tu, a_hu), descriptor_similarity(a_tt, a_ht))
+            a_cross = (descriptor_similarity(a_tu, a_hu, cross_cost),
+                       descriptor_similarity(a_tt, a_ht, cross_cost))
     def cross(top: list[Tracklet], hor: list[Tracklet]) -> np.ndarray:
         if learned is None:
             return spatial_similarity(top, hor, frame_pairs)
@@ -450,7 +457,8 @@ def track_pair(
                                                app[t][1])
         w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
                             config.weights, window_app, config.time_appearance, learned,
-                            config.learned_rule, config.learned_share)
+                            config.learned_rule, config.learned_share,
+                            None if images is None else images.cross_cost)
         if config.solver == "mip":
             solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
         else:

@@ -58,6 +58,12 @@ def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
                  str(short["hor"]), "--top-images", str(video["top_images"]), "--hor-images",
                  str(video["hor_images"]), "--out", str(pred), "--quiet"]) == 0
     assert len(pred.read_text().splitlines()) > 6
+    # Tracking takes the site's adapted cross-view appearance cost too.
+    tracks = tmp_path / "tracks"
+    assert main(["track", "--model", str(site), "--top", str(short["top"]), "--hor",
+                 str(short["hor"]), "--top-images", str(video["top_images"]), "--hor-images",
+                 str(video["hor_images"]), "--out", str(tracks), "--quiet"]) == 0
+    assert (tracks / "top.txt").read_text() and (tracks / "hor.txt").read_text()
 
 
 def test_adapt_refusals_write_nothing(video, tmp_path, capsys) -> None:

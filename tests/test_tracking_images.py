@@ -120,6 +120,16 @@ def test_network_appearance_of_tracklets():
     assert ((sim >= 0) & (sim <= 1 + 1e-9)).all()
     with pytest.raises(ValueError, match="needs descriptors"):
         descriptor_similarity(clip_appearance(tracklets, video.top, hist, video.top_images), app)
+    # A site bundle's cross-view cost replaces |a - b| / 2 (xvmatch adapt); shape (M, N).
+    calls = []
+
+    def site_cost(a, b):
+        calls.append((a.shape, b.shape))
+        return np.full((a.shape[0], b.shape[0]), 0.25)
+
+    np.testing.assert_array_equal(descriptor_similarity(app, app, site_cost),
+                                  np.full((len(tracklets),) * 2, 0.75))
+    assert calls == [((len(tracklets), 128), (len(tracklets), 128))]
 
 
 def _as_rows(frames):

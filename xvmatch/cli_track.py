@@ -111,7 +111,8 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
         for source in sources:
             source.close()
         raise
-    return TrackImages(sources[0], sources[1], embed), sources, size
+    cross_cost = model.appearance_cost if embed is not None else None  # a site's adaptation
+    return TrackImages(sources[0], sources[1], embed, cross_cost), sources, size
 
 
 def add_track_parser(subparsers) -> argparse.ArgumentParser:
