@@ -4,6 +4,8 @@ training frames (``training/matcher_datamodule.py``)."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import torch
@@ -150,10 +152,15 @@ def test_corrupted_appearance_lowers_the_confidence_features():
     assert feats["random"][margin] < feats["clean"][margin]
 
 
-def test_confidence_path_exports_to_onnx_and_matches_torch(tmp_path, tiny_synth):
+def test_confidence_path_exports_to_onnx_and_matches_torch(tmp_path):
+    """The graph ``xvmatch export`` writes (``MatcherGraph``, opset and dynamic axes of every
+    ``matcher.onnx``), run by onnxruntime on batches of other sizes than the traced one."""
+    import warnings
+
     import onnxruntime as ort
 
-    from xvmatch.export.onnx_export import export_bundle
+    from xvmatch.export.onnx_export import MatcherGraph
+    from xvmatch.inference.bundle import MATCHER_OUTPUT, OPSET
     from xvmatch.models.appearance_net import appearance_small
     from xvmatch.models.matcher_file import load_matcher, save_matcher
 
@@ -167,18 +174,26 @@ def test_confidence_path_exports_to_onnx_and_matches_torch(tmp_path, tiny_synth)
     path = tmp_path / "robust.pt"
     save_matcher(path, matcher, FeatureConfig(n_hypotheses=3, dtheta_deg=4.0), 0.5,
                  appearance=appearance_small(**TINY_APPEARANCE).eval())
-    loaded = load_matcher(path)
-    assert loaded.matcher.config["app_confidence"] is True
-    bundle = tmp_path / "bundle"
-    export_bundle(path, bundle, parity_data=tiny_synth["overview"])  # parity gate included
-    session = ort.InferenceSession(str(bundle / "matcher.onnx"))
-    names = [i.name for i in session.get_inputs()]
-    assert names == ["top", "hor", "hyp", "pair", "top_mask", "hor_mask", "hyp_mask", "cues",
-                     "cue_mask"]  # the interface of every matcher.onnx
-    for shape in ((3, 5, 6, 4), (2, 7, 3, 2)):  # not the export's example sizes
+    loaded = load_matcher(path).matcher
+    assert loaded.config["app_confidence"] is True
+    names = ["top", "hor", "hyp", "pair", "top_mask", "hor_mask", "hyp_mask", "cues",
+             "cue_mask"]
+    people = {"top": "m", "hor": "n", "hyp": "h", "top_mask": "m", "hor_mask": "n",
+              "hyp_mask": "h"}
+    dynamic = {k: {0: "b", 1: people[k]} for k in people}
+    dynamic |= {"pair": {0: "b", 1: "h", 2: "m", 3: "n"}, "cues": {0: "b", 1: "m", 2: "n"},
+                "cue_mask": {0: "b"}, MATCHER_OUTPUT: {0: "b", 1: "m", 2: "n"}}
+    onnx_path = tmp_path / "matcher.onnx"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(MatcherGraph(loaded), args, str(onnx_path), dynamo=False,
+                          input_names=names, output_names=[MATCHER_OUTPUT],
+                          dynamic_axes=dynamic, opset_version=OPSET)
+    session = ort.InferenceSession(str(onnx_path))
+    for shape in ((3, 5, 6, 4), (2, 7, 3, 2), (4, 1, 1, 1)):
         batch = _batch(*shape, seed=2)
         with torch.no_grad():
-            expected = loaded.matcher(*batch).cost.numpy()
+            expected = loaded(*batch).cost.numpy()
         got = session.run(None, {k: v.numpy() for k, v in zip(names, batch, strict=True)})[0]
         np.testing.assert_allclose(got, expected, atol=1e-5)
 
@@ -258,3 +273,29 @@ def test_training_frames_are_corrupted_as_drawn_and_reproducibly(tiny_synth, tmp
     mixed = app_of(AppCorruption(probability=0.5, seed=1))
     changed = sum(not np.array_equal(a, b) for (a, _), (b, _) in zip(mixed, clean, strict=True))
     assert 0 < changed < len(trials)
+
+
+def test_the_data_module_keeps_appearance_costs_between_runs(tiny_synth, tmp_path):
+    from xvmatch.models.appearance_net import appearance_small, save_appearance_weights
+    from xvmatch.training.matcher_datamodule import SyntheticMatcherDataModule
+
+    torch.manual_seed(0)
+    weights = tmp_path / "app.pt"
+    save_appearance_weights(appearance_small(**TINY_APPEARANCE).eval(), weights)
+
+    def frames(app_cache):
+        dm = SyntheticMatcherDataModule(
+            tiny_synth["overview"], tiny_synth["drone"], os.fspath(weights),
+            FeatureConfig(n_hypotheses=3, dtheta_deg=4.0), variants=("images",),
+            cache_dir=os.fspath(tmp_path / "features"), app_cache=app_cache,
+            corruption=AppCorruption(probability=0.5, seed=3), corrupt_val=True)
+        dm.setup("fit")
+        return [it[3] for part in dm.train_parts + dm.val_parts for it in part.items]
+
+    fresh = frames(None)
+    first = frames(tmp_path / "app_costs")
+    assert len(list((tmp_path / "app_costs").glob("*.npz"))) == 6  # 3 trial sets x 2 kinds
+    again = frames(tmp_path / "app_costs")
+    for a, b, c in zip(fresh, first, again, strict=True):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)

@@ -10,7 +10,8 @@ default recipe's matcher renders (``training/make_default_bundle.py``'s ``match_
 (images; images and cameras), where a share of the frames get corrupted appearance costs
 (:class:`~xvmatch.training.matcher_datamodule.AppCorruption`: camera-shifted images up to
 strength 3, swapped crops, random embeddings). Validation frames are corrupted the same way
-(other draws), so the best epoch is the best on clean and corrupted frames together.
+(other draws), so the best epoch is the best on clean and corrupted frames together. The
+appearance costs are kept in ``--work``/``app_costs`` for the next run.
 
 ``--train gates`` (default) trains the confidence head alone: the geometry encoder and the cue
 layers keep the loaded weights, so the boxes-only matcher is exactly the loaded one and a gate
@@ -78,6 +79,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="peak learning rate (default 3e-3)")
     parser.add_argument("--probability", type=float, default=0.5,
                         help="share of the frames with images that are corrupted (default 0.5)")
+    parser.add_argument("--min-strength", type=float, default=0.5,
+                        help="weakest camera shift of the 'shift' corruption (default 0.5; "
+                        "the strongest is 3)")
+    parser.add_argument("--kind-weights", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+                        metavar=("SHIFT", "SWAP", "RANDOM"),
+                        help="relative chance of each corruption (default 0.6 0.2 0.2)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
     parser.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     parser.add_argument("--cache", default=None, help="feature cache folder")
@@ -106,14 +113,15 @@ def main(argv: list[str] | None = None) -> int:
     save_appearance_weights(base.appearance, weights)
     L.seed_everything(args.seed, workers=True, verbose=False)  # the confidence head's weights
     model = robust_matcher(base, args.train)
-    corruption = AppCorruption(probability=args.probability, seed=args.seed)
+    corruption = AppCorruption(probability=args.probability, weights=tuple(args.kind_weights),
+                               min_strength=args.min_strength, seed=args.seed)
     dm = SyntheticMatcherDataModule(
         train_data=[data["match_drone"], data["match_overview"]],
         val_data=[data["val_drone"], data["val_overview"]],
         appearance_weights=os.fspath(weights), feature_config=base.feature_config,
         cues=base.matcher.cues, variants=("images", "images+cameras"), noise_seeds=(11,),
         cache_dir=args.cache, workers=args.workers, seed=args.seed, corruption=corruption,
-        corrupt_val=True)
+        corrupt_val=True, app_cache=work / "app_costs")
     result = fit_matcher(
         dm, args.out, matcher=model, feature_config=base.feature_config,
         appearance=base.appearance, epochs=args.epochs, seed=args.seed,

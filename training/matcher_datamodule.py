@@ -34,10 +34,14 @@ a matcher with an appearance confidence learns when to ignore them. The kinds
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import os
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -352,6 +356,9 @@ class SyntheticMatcherDataModule(FrameDataModule):
         corruption: corrupted appearance costs of training frames (None: none, the default).
         corrupt_val: corrupt the validation frames too (with ``corruption``'s probability and
             kinds, other draws), so the best epoch is the best on clean and corrupted frames.
+        app_cache: folder keeping the appearance costs (clean and shifted) between runs, keyed
+            by the dataset's content, the trials' configuration, the network's weights and the
+            shift's draws; None: computed every time.
     """
 
     def __init__(
@@ -371,6 +378,7 @@ class SyntheticMatcherDataModule(FrameDataModule):
         seed: int = 0,
         corruption: AppCorruption | None = None,
         corrupt_val: bool = False,
+        app_cache: str | os.PathLike | None = None,
     ) -> None:
         super().__init__(batch_size, seed)
         self.train_folders = _folders(train_data)
@@ -388,19 +396,46 @@ class SyntheticMatcherDataModule(FrameDataModule):
         self.workers = workers
         self.corruption = corruption
         self.corrupt_val = bool(corrupt_val)
+        self.app_cache = None if app_cache is None else os.fspath(app_cache)
+        self._net_digest = ""
+
+    def _app_costs(self, folder: str, config: TrialConfig, settings: tuple[str, ...], coster,
+                   what: str) -> list[np.ndarray]:
+        """:func:`shifted_app_costs` through ``coster``, read from or written to
+        ``app_cache``."""
+        if self.app_cache is None:
+            return shifted_app_costs(folder, config, settings, coster)
+        key = hashlib.sha256(json.dumps([
+            open_dataset(folder).content_sha256(), repr(config), list(settings),
+            self._net_digest, what]).encode()).hexdigest()[:32]
+        path = Path(self.app_cache) / f"{key}.npz"
+        if path.is_file():
+            with np.load(path) as stored:
+                return [stored[str(i)] for i in range(len(stored.files))]
+        costs = shifted_app_costs(folder, config, settings, coster)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{key}.tmp.npz")
+        np.savez(tmp, **{str(i): c for i, c in enumerate(costs)})
+        os.replace(tmp, path)
+        return costs
 
     def _frames(self, folder: str, config: TrialConfig, settings: tuple[str, ...], coster,
                 name: str, corrupt: bool = False) -> FrameItems:
-        trials = dataset_trials(folder, config, settings, coster)
+        trials = dataset_trials(folder, config, settings, None)
+        if coster is not None:
+            apps = self._app_costs(folder, config, settings, coster, "clean")
+            trials = [dataclasses.replace(t, app=a) for t, a in zip(trials, apps, strict=True)]
         corruption = self.corruption if corrupt and coster is not None else None
         shifted = None
         stream = len(self.train_parts) + 1000 * len(self.val_parts) + (
             10**6 if name.endswith("/val") else 0)
         if corruption is not None and corruption.probability > 0 and (
                 "shift" in corruption.kinds):
-            shifted = shifted_app_costs(folder, config, settings, ShiftedCoster(
-                coster, seed=corruption.seed + stream, min_strength=corruption.min_strength,
-                max_strength=corruption.max_strength))
+            shifter = ShiftedCoster(coster, seed=corruption.seed + stream,
+                                    min_strength=corruption.min_strength,
+                                    max_strength=corruption.max_strength)
+            shifted = self._app_costs(folder, config, settings, shifter, json.dumps(
+                ["shift", shifter.seed, shifter.min_strength, shifter.max_strength]))
         items = trial_frames(trials, self.feature_config, self.cues, self.variants,
                              self.cache_dir, self.workers, corruption=corruption,
                              shifted_app=shifted, corruption_stream=stream)
@@ -413,8 +448,13 @@ class SyntheticMatcherDataModule(FrameDataModule):
         coster = None
         if "app" in self.cues:
             net = self.appearance_weights
-            coster = AppearanceCoster(net if isinstance(net, AppearanceNet)
-                                      else appearance_from_weights(net))
+            net = net if isinstance(net, AppearanceNet) else appearance_from_weights(net)
+            coster = AppearanceCoster(net)
+            digest = hashlib.sha256()
+            for name, tensor in net.state_dict().items():
+                digest.update(name.encode())
+                digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
+            self._net_digest = digest.hexdigest()
         for folder in self.train_folders:
             gt = TrialConfig(scramble_seed=self.scramble_seed)
             self.train_parts.append(
