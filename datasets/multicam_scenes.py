@@ -46,6 +46,8 @@ __all__ = [
     "MulticamScene",
     "TrackerNoise",
     "add_tracker_noise",
+    "multicam_walks",
+    "per_camera_track_ids",
     "simulate_multicam_scene",
     "static_cameras",
     "write_multicam_scene",
@@ -176,6 +178,37 @@ def _track_ids(gt: dict[int, FrameBoxes], gap: int, rng: np.random.Generator
     return {f: FrameBoxes(f, names[raw[f]], gt[f].boxes) for f in sorted(gt)}
 
 
+def _walk_config(config: MulticamConfig) -> SceneConfig:
+    """The walk model's configuration of a multi-camera scene."""
+    return SceneConfig(n_people=config.n_people, area=config.area, fps=config.fps,
+                       walk_speed=config.walk_speed, min_separation=0.6,
+                       min_visible_fraction=config.min_visible_fraction, hor_near_clip=0.5)
+
+
+def multicam_walks(config: MulticamConfig, n_frames: int, seed: int
+                   ) -> tuple[PeopleState, dict[str, Camera], np.random.Generator]:
+    """The people's walks and the static cameras of the scene of ``seed``, and the generator
+    they were drawn from (its later draws give the per-camera track ids).
+
+    :func:`simulate_multicam_scene` and the renderer
+    (:mod:`xvmatch.datasets.multicam_render`) both start here, so a seed gives the same people
+    and cameras to the box simulator and to the images. Person ``k`` of the walks has global id
+    ``k + 1``.
+    """
+    rng = np.random.default_rng([int(seed), 32])
+    walks = simulate_walks(_walk_config(config), n_frames, rng)
+    cameras = static_cameras(config, rng)
+    return walks, cameras, rng
+
+
+def per_camera_track_ids(gt: dict[int, FrameBoxes], gap: int, rng: np.random.Generator
+                         ) -> dict[int, FrameBoxes]:
+    """One camera's boxes with per-camera track ids instead of global ids: a new id per
+    (person, visit), a visit ending after more than ``gap`` unseen frames, scrambled (drawn
+    without replacement from 1..900000 with ``rng``)."""
+    return _track_ids(gt, gap, rng)
+
+
 def simulate_multicam_scene(config: MulticamConfig | None = None, n_frames: int = 200,
                             seed: int = 0) -> MulticamScene:
     """A seeded multi-camera scene (deterministic: the same seed gives the same scene).
@@ -189,12 +222,8 @@ def simulate_multicam_scene(config: MulticamConfig | None = None, n_frames: int 
         The :class:`MulticamScene`, without noise (:func:`add_tracker_noise` adds it).
     """
     config = config or MulticamConfig()
-    rng = np.random.default_rng([int(seed), 32])
-    walk_cfg = SceneConfig(n_people=config.n_people, area=config.area, fps=config.fps,
-                           walk_speed=config.walk_speed, min_separation=0.6,
-                           min_visible_fraction=config.min_visible_fraction, hor_near_clip=0.5)
-    walks = simulate_walks(walk_cfg, n_frames, rng)
-    cameras = static_cameras(config, rng)
+    walks, cameras, rng = multicam_walks(config, n_frames, seed)
+    walk_cfg = _walk_config(config)
     n = walks.n_people
     # Global ids 1..N; a placeholder "wearer" (id 0) far off the floor, which
     # project_hor_boxes leaves out of every view, lets us reuse its occlusion model as is.
