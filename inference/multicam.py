@@ -31,6 +31,13 @@ the whole track; each track's pieces are joined again by majority afterwards
 (:func:`_rejoin_pieces`), so that a person back in a camera's view under a new track id, or a
 tracker's id switch, costs a piece, not the person's whole path (``docs/multicam.md``).
 
+**Appearance** (optional, issue 32 item 5): with an embedder per camera (``appearance``: e.g.
+the deployed bundle's appearance network on that camera's images), each trajectory (piece) that
+is a candidate gets the mean of the unit descriptors of ``appearance_boxes`` of its boxes
+(first, middle, last), and ``appearance_weight * |a - b| / 2`` of two candidates' descriptors is
+added to their reprojection distance where the conflicts are resolved (Eq. 9's assignment) and
+the links are ordered; the gates stay geometric.
+
 ``method="dtw"`` is the paper's M1 baseline: the same steps with step 2 replaced by dynamic time
 warping between the two whole ground trajectories, one assignment per camera pair.
 
@@ -53,6 +60,7 @@ from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera, foot_points, image_to_ground
 
 __all__ = [
+    "BoxEmbedder",
     "CameraTracks",
     "MulticamInputError",
     "MulticamOptions",
@@ -65,6 +73,10 @@ __all__ = [
 ]
 
 _BIG = 1e9
+
+BoxEmbedder = Callable[[int, np.ndarray], np.ndarray]
+"""``embed(frame, boxes (K, 4)) -> (K, D)`` appearance descriptors of one camera's boxes of one
+frame (e.g. ``LearnedMatcher.descriptors`` on that camera's image of the frame)."""
 
 
 class MulticamInputError(ValueError):
@@ -99,6 +111,11 @@ class MulticamOptions:
             someone else (a tracker's id switch): a track may then carry several global ids,
             one after the other, never two at once. 0 keeps each track whole, as the paper
             does (one trajectory joins at most one of every other camera).
+        appearance_weight: weight of the appearance cost ``|a - b| / 2`` (in [0, 1]) added to
+            the reprojection distance (in box heights) of a candidate pair, when both cameras
+            have an embedder (``associate_cameras(appearance=...)``); 0 turns it off.
+        appearance_boxes: boxes of a trajectory (piece) embedded for its descriptor (evenly
+            spread over its frames: first, middle, last for 3).
     """
 
     method: str = "ours"
@@ -114,6 +131,8 @@ class MulticamOptions:
     link_growth_m: float = 0.05
     max_range_m: float = 1e4
     split_frames: int = 20
+    appearance_weight: float = 1.0
+    appearance_boxes: int = 3
 
     def __post_init__(self) -> None:
         if self.method not in ("ours", "dtw"):
@@ -123,6 +142,10 @@ class MulticamOptions:
                 raise ValueError(f"MulticamOptions.{name} must be >= 1")
         if int(self.split_frames) < 0:
             raise ValueError("MulticamOptions.split_frames must be >= 0")
+        if not self.appearance_weight >= 0:
+            raise ValueError("MulticamOptions.appearance_weight must be >= 0")
+        if int(self.appearance_boxes) < 1:
+            raise ValueError("MulticamOptions.appearance_boxes must be >= 1")
         for name in ("gate_m", "reproj_gate", "dtw_gate_m", "link_radius_m", "max_range_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"MulticamOptions.{name} must be > 0")
@@ -343,8 +366,71 @@ def _window(t: CameraTracks, rows: np.ndarray, cols: slice) -> CameraTracks:
                         t.pixels[rows, cols], t.heights[rows], t.frames[cols])
 
 
+class _Appearance:
+    """Descriptors of the cameras' trajectories (pieces), computed when first asked for and
+    kept: the mean of the unit descriptors of ``n_boxes`` of a trajectory's boxes (evenly
+    spread over its frames), made unit again; each camera's boxes embedded frame by frame.
+
+    Args:
+        tracks: each camera's trajectories (pieces).
+        track_ids: each camera's input track id of every trajectory row.
+        boxes: each camera's ``{frame: FrameBoxes}`` (input track ids).
+        embed: each camera's embedder, or None (no descriptors: no appearance term).
+        n_boxes: boxes embedded per trajectory.
+    """
+
+    def __init__(self, tracks: list[CameraTracks], track_ids: list[np.ndarray],
+                 boxes: list[Mapping[int, FrameBoxes]], embed: list[BoxEmbedder | None],
+                 n_boxes: int):
+        self.tracks, self.track_ids, self.boxes, self.embed = tracks, track_ids, boxes, embed
+        self.n_boxes = int(n_boxes)
+        self.cache: list[dict[int, np.ndarray]] = [{} for _ in tracks]
+
+    def get(self, c: int, rows: np.ndarray) -> np.ndarray | None:
+        """``(len(rows), D)`` unit descriptors of camera ``c``'s trajectories ``rows``, or None
+        when the camera has no embedder."""
+        embed = self.embed[c]
+        if embed is None:
+            return None
+        cache, t = self.cache[c], self.tracks[c]
+        missing = sorted({int(r) for r in rows} - cache.keys())
+        wanted: dict[int, list[tuple[int, np.ndarray]]] = {}
+        for r in missing:
+            idx = np.flatnonzero(t.present[r])
+            pick = np.unique(idx[np.round(np.linspace(0, len(idx) - 1, self.n_boxes))
+                                 .astype(int)])
+            tid = self.track_ids[c][r]
+            for i in pick.tolist():
+                f = int(t.frames[i])
+                rec = self.boxes[c][f]
+                j = int(np.flatnonzero(rec.ids == tid)[0])
+                wanted.setdefault(f, []).append((r, rec.boxes[j]))
+        sums: dict[int, np.ndarray] = {}
+        for f in sorted(wanted):
+            who = [r for r, _ in wanted[f]]
+            d = np.asarray(embed(f, np.array([b for _, b in wanted[f]])), dtype=np.float64)
+            d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+            for r, v in zip(who, d, strict=True):
+                sums[r] = sums[r] + v if r in sums else v.copy()
+        for r in missing:
+            cache[r] = sums[r] / max(float(np.linalg.norm(sums[r])), 1e-12)
+        return np.stack([cache[int(r)] for r in rows]) if len(rows) else None
+
+
+def _appearance_cost(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(K,)`` appearance cost ``|a - b| / 2`` in [0, 1] of unit descriptors row by row (as
+    :func:`xvmatch.geometry.matcher_inputs.appearance_cost`, the distance the network is
+    trained on)."""
+    cosine = (a * b).sum(axis=1)
+    return np.clip(0.5 * np.sqrt(np.clip(2.0 - 2.0 * cosine, 0.0, None)), 0.0, 1.0)
+
+
+_Descriptors = Callable[[int, np.ndarray], "np.ndarray | None"]
+
+
 def _associate_pieces(a: int, b: int, tracks: list[CameraTracks], numbers: list[np.ndarray],
-                      cams: list[GroundCamera], opts: MulticamOptions) -> list[_Link]:
+                      cams: list[GroundCamera], opts: MulticamOptions,
+                      appearance: _Appearance | None = None) -> list[_Link]:
     """:func:`_associate_pair` block by block: pieces share frames only within their block of
     ``split_frames`` frames, so each block is associated on its own frames."""
     L = int(opts.split_frames)
@@ -353,14 +439,20 @@ def _associate_pieces(a: int, b: int, tracks: list[CameraTracks], numbers: list[
         ra, rb = np.flatnonzero(numbers[a] == n), np.flatnonzero(numbers[b] == n)
         cols = slice(int(n) * L, (int(n) + 1) * L)
         sub = [_window(tracks[a], ra, cols), _window(tracks[b], rb, cols)]
-        for lk in _associate_pair(0, 1, sub, [cams[a], cams[b]], opts):
+        desc = None
+        if appearance is not None:
+            def desc(side, rows, ra=ra, rb=rb):
+                return appearance.get(a if side == 0 else b, (ra if side == 0 else rb)[rows])
+        for lk in _associate_pair(0, 1, sub, [cams[a], cams[b]], opts, desc):
             out.append(_Link(a, int(ra[lk.track_a]), b, int(rb[lk.track_b]), lk.cost))
     return out
 
 
 def _associate_pair(a: int, b: int, tracks: list[CameraTracks], cams: list[GroundCamera],
-                    opts: MulticamOptions) -> list[_Link]:
-    """The one-to-one trajectory pairs of cameras ``a`` and ``b``."""
+                    opts: MulticamOptions, descriptors: _Descriptors | None = None
+                    ) -> list[_Link]:
+    """The one-to-one trajectory pairs of cameras ``a`` and ``b``; ``descriptors(camera,
+    rows)`` gives the trajectories' appearance descriptors (None: no appearance term)."""
     A, B = tracks[a], tracks[b]
     ia, ib, mask, med = _pair_candidates(A, B, opts)
     if opts.method == "dtw":
@@ -391,6 +483,12 @@ def _associate_pair(a: int, b: int, tracks: list[CameraTracks], cams: list[Groun
     if not allowed.any():
         return []
     ia, ib, cost = ia[allowed], ib[allowed], cost[allowed]
+    if descriptors is not None and opts.method == "ours" and opts.appearance_weight > 0:
+        ua, inv_a = np.unique(ia, return_inverse=True)
+        ub, inv_b = np.unique(ib, return_inverse=True)
+        da, db = descriptors(a, ua), descriptors(b, ub)
+        if da is not None and db is not None:
+            cost = cost + opts.appearance_weight * _appearance_cost(da[inv_a], db[inv_b])
     ua, ra = np.unique(ia, return_inverse=True)
     ub, rb = np.unique(ib, return_inverse=True)
     M = np.full((len(ua), len(ub)), _BIG)
@@ -579,7 +677,8 @@ class MulticamResult:
 def associate_cameras(cameras: Mapping[str, GroundCamera],
                       boxes: Mapping[str, Mapping[int, FrameBoxes]],
                       options: MulticamOptions | None = None,
-                      progress: Callable[[int], None] | None = None) -> MulticamResult:
+                      progress: Callable[[int], None] | None = None,
+                      appearance: Mapping[str, BoxEmbedder] | None = None) -> MulticamResult:
     """One global id per person across static cameras, and each person's path on the ground.
 
     Args:
@@ -588,6 +687,8 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
             across cameras).
         options: parameters (:class:`MulticamOptions`).
         progress: called with 1 after each camera pair (for a progress bar).
+        appearance: ``{name: embedder}`` of the cameras with images (any subset): the
+            appearance term of ``options.appearance_weight`` between two of them (``ours``).
 
     Returns:
         The :class:`MulticamResult`.
@@ -618,13 +719,22 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
         parents = [np.arange(len(t.ids)) for t in whole]
         numbers = [np.zeros(len(t.ids), dtype=np.int64) for t in whole]
     cams = [cameras[n] for n in names]
+    app = None
+    if appearance and opts.method == "ours" and opts.appearance_weight > 0:
+        for name in appearance:
+            if name not in boxes:
+                raise MulticamInputError(name, f"camera {name!r} has images but no boxes")
+        app = _Appearance(tracks, [w.ids[p] for w, p in zip(whole, parents, strict=True)],
+                          [boxes[n] for n in names], [appearance.get(n) for n in names],
+                          opts.appearance_boxes)
     links: list[_Link] = []
     for a in range(len(names)):
         for b in range(a + 1, len(names)):
             if opts.split_frames:
-                links += _associate_pieces(a, b, tracks, numbers, cams, opts)
+                links += _associate_pieces(a, b, tracks, numbers, cams, opts, app)
             else:
-                links += _associate_pair(a, b, tracks, cams, opts)
+                links += _associate_pair(a, b, tracks, cams, opts,
+                                         None if app is None else app.get)
             if progress is not None:
                 progress(1)
     links.sort(key=lambda lk: (lk.cost, lk.cam_a, lk.track_a, lk.cam_b, lk.track_b))

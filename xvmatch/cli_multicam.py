@@ -12,7 +12,7 @@ import argparse
 import os
 
 from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
-from xvmatch.cli_types import image_size, int_in
+from xvmatch.cli_types import float_in, image_size, int_in
 from xvmatch.output_paths import Input, Output, check_outputs, claim_folder
 
 __all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",
@@ -24,6 +24,7 @@ COMMAND = "xvmatch multicam"
 """The marker name of the command's output folders."""
 
 _CAMERA_SIZE = image_size(8, 65536, "pixels of a camera image")
+_DEFAULT_WEIGHT = 1.0  # MulticamOptions().appearance_weight, without importing numpy here
 
 
 def named_paths(values: list[str] | None, option: str) -> dict[str, str]:
@@ -90,6 +91,21 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
                    "person stands there: a false detection or a wrong calibration): stop with "
                    "its file and line (default), or leave it out of the association with a "
                    "warning (it keeps a global id of its own)")
+    p.add_argument("--images", nargs="+", metavar="NAME=PATH", default=None,
+                   help="optional: a camera's images (a folder of numbered frames, a quoted "
+                   "glob pattern or a video; its size the camera's), for any of the cameras "
+                   "of --boxes: an appearance cost (the --model's appearance network) between "
+                   "trajectories of two cameras with images joins the geometry where "
+                   "conflicts are resolved (--method ours)")
+    p.add_argument("--model", metavar="default|BUNDLE", default=None,
+                   help="with --images: the bundle whose appearance network embeds the boxes "
+                   "(default: the shipped one); a site bundle's adaptation (xvmatch adapt) is "
+                   "for top/horizontal pairs and is not used here: raw descriptors")
+    p.add_argument("--appearance-weight", type=float_in(0.0, 100.0, "weight"), default=None,
+                   metavar="W",
+                   help="with --images: weight of the appearance cost |a-b|/2 added to the "
+                   "reprojection distance in box heights (default "
+                   f"{_DEFAULT_WEIGHT:g}, chosen on rendered scenes; 0: off)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_multicam)
     return p
@@ -113,11 +129,21 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     files = named_paths(args.boxes, "--boxes")
     if len(files) < 2:
         raise UsageError(f"--boxes: multicam needs at least two cameras, got {len(files)}")
+    images = named_paths(args.images, "--images")
+    for name, path in images.items():
+        if name not in files:
+            raise UsageError(f"--images {name}={path}: camera {name} has no --boxes (it has "
+                             f"{', '.join(files)}); give --boxes {name}=FILE or drop its images")
+    if not images and (args.model is not None or args.appearance_weight is not None):
+        raise UsageError("--model and --appearance-weight need --images")
+    if images and args.method != "ours":
+        raise UsageError("--images needs --method ours (dtw has no appearance term)")
     names = list(files)
     outputs = (*(f"{n}.txt" for n in names), "tracks.csv", "ground.csv", "birdseye.png")
     check_outputs([Output("--out", args.out, folder=True, files=outputs)],
-                  [Input("--cameras", args.cameras), *(Input("--boxes", f)
-                                                       for f in files.values())])
+                  [Input("--cameras", args.cameras),
+                   *(Input("--boxes", f) for f in files.values()),
+                   *(Input("--images", f) for f in images.values())])
     from xvmatch.output_paths import check_own_folder
 
     check_own_folder(args.out, COMMAND)
@@ -132,14 +158,24 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     kept, above = boxes, {}
     if args.above_horizon == "drop":
         kept, above = _drop_above_horizon(boxes, cameras, files)
+    options = MulticamOptions(method=args.method, split_frames=_split_frames(args))
+    if args.appearance_weight is not None:
+        from dataclasses import replace
+
+        options = replace(options, appearance_weight=args.appearance_weight)
+    sources, embedders = _open_images(args, images, kept, cameras)
     n_pairs = len(names) * (len(names) - 1) // 2
-    with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
-        try:
-            result = associate_cameras(cameras, kept, MulticamOptions(
-                method=args.method, split_frames=_split_frames(args)), progress=bar.update)
-        except MulticamInputError as exc:
-            path = files[exc.camera]
-            raise UsageError(f"{path}{_line_of(path, str(exc))}: {exc}") from None
+    try:
+        with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
+            try:
+                result = associate_cameras(cameras, kept, options, progress=bar.update,
+                                           appearance=embedders or None)
+            except MulticamInputError as exc:
+                path = files[exc.camera]
+                raise UsageError(f"{path}{_line_of(path, str(exc))}: {exc}") from None
+    finally:
+        for source in sources:
+            source.close()
     relabelled = relabel(kept, result)
     if above:
         relabelled = _put_back(boxes, relabelled, above, max(result.ground, default=0))
@@ -158,6 +194,57 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         n_people = len(result.ground)
         print(f"{n_people} global ids over {len(names)} cameras; wrote {os.fspath(out)}/")
     return 0
+
+
+def _open_images(args: argparse.Namespace, images: dict[str, str], boxes, cameras):
+    """``--images``: each camera's open image source (every frame with boxes checked, its size
+    the camera's) and embedder ``(frame, boxes) -> descriptors`` with the ``--model``'s
+    appearance network; nothing without ``--images``."""
+    import sys
+
+    if not images:
+        return [], {}
+    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.learned_pipeline import open_view_images
+
+    model_name = args.model or "default"
+    matcher = load_matcher_bundle(model_name)
+    if matcher.bundle.manifest.appearance is None:
+        raise UsageError(f"--model {model_name}: a box-only bundle has no appearance network; "
+                         "use one with images (e.g. default)")
+    if matcher.bundle.adaptation is not None and not args.quiet:
+        print(f"xvmatch: note: --model {model_name}: its site adaptation is for top/horizontal "
+              "view pairs; multicam compares raw descriptors", file=sys.stderr)
+    sources, embedders = [], {}
+    try:
+        for name, path in images.items():
+            frames = boxes[name]
+            source = open_view_images(path, frames, [f for f in sorted(frames) if len(frames[f])])
+            sources.append(source)
+            cam = cameras[name]
+            if tuple(source.size) != (cam.width, cam.height):
+                raise UsageError(f"--images {name}={path}: the images are "
+                                 f"{source.size[0]}x{source.size[1]} but camera {name} is "
+                                 f"{cam.width}x{cam.height} in {args.cameras}")
+            embedders[name] = _embedder(source, matcher)
+    except BaseException:
+        for source in sources:
+            source.close()
+        raise
+    return sources, embedders
+
+
+def _embedder(source, matcher):
+    """``embed(frame, boxes)``: the matcher's descriptors of the boxes on the source's image of
+    the frame (the last image read is kept: the association asks frame by frame)."""
+    last: dict = {}
+
+    def embed(frame: int, boxes):
+        if last.get("frame") != frame:
+            last["frame"], last["image"] = frame, source.get(frame)
+        return matcher.descriptors(last["image"], boxes)
+
+    return embed
 
 
 def _drop_above_horizon(boxes, cameras, files):
