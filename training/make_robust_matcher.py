@@ -25,7 +25,11 @@ command (parity check on ``val_overview``, INT8 calibrated on ``int8_overview``)
 Usage:
     OMP_NUM_THREADS=1 python training/make_robust_matcher.py [--work runs/default_bundle]
         [--base models/default_matcher.pt] [--out runs/robust/robust_matcher.pt]
-        [--epochs 6] [--probability 0.5] [--install]
+        [--epochs 12] [--probability 0.15] [--min-strength 1] [--kind-weights 0.7 0.1 0.2]
+        [--train gates|cues] [--install]
+
+The defaults are the run measured in docs/training.md (not shipped: its clean figures miss the
+bar by 0.18 points on one cell, see there).
 """
 
 from __future__ import annotations
@@ -74,17 +78,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("runs/robust/robust_matcher.pt"))
     parser.add_argument("--train", choices=sorted(TRAINED), default="gates",
                         help="what learns (default gates: the confidence head alone)")
-    parser.add_argument("--epochs", type=int, default=6, help="most epochs (default 6)")
+    parser.add_argument("--epochs", type=int, default=12, help="most epochs (default 12)")
     parser.add_argument("--learning-rate", type=float, default=3e-3,
                         help="peak learning rate (default 3e-3)")
-    parser.add_argument("--probability", type=float, default=0.5,
-                        help="share of the frames with images that are corrupted (default 0.5)")
-    parser.add_argument("--min-strength", type=float, default=0.5,
-                        help="weakest camera shift of the 'shift' corruption (default 0.5; "
+    parser.add_argument("--probability", type=float, default=0.15,
+                        help="share of the frames with images that are corrupted (default "
+                        "0.15)")
+    parser.add_argument("--min-strength", type=float, default=1.0,
+                        help="weakest camera shift of the 'shift' corruption (default 1; "
                         "the strongest is 3)")
-    parser.add_argument("--kind-weights", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+    parser.add_argument("--kind-weights", type=float, nargs=3, default=[0.7, 0.1, 0.2],
                         metavar=("SHIFT", "SWAP", "RANDOM"),
-                        help="relative chance of each corruption (default 0.6 0.2 0.2)")
+                        help="relative chance of each corruption (default 0.7 0.1 0.2)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
     parser.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     parser.add_argument("--cache", default=None, help="feature cache folder")

@@ -108,9 +108,9 @@ class AppCorruption:
 
     probability: float = 0.0
     kinds: tuple[str, ...] = CORRUPTIONS
-    weights: tuple[float, ...] = (0.6, 0.2, 0.2)
+    weights: tuple[float, ...] = (0.7, 0.1, 0.2)
     max_strength: float = MAX_STRENGTH
-    min_strength: float = 0.5
+    min_strength: float = 1.0
     embedding_dim: int = 128
     seed: int = 0
 
