@@ -18,6 +18,17 @@ them (:data:`~xvmatch.inference.multi_view_costs.EGO_APPEARANCE`,
 :data:`~xvmatch.inference.multi_view_costs.SPATIAL_VOTE`).
 
     python benchmarks/multi_ego_eval.py --scenes 40 --seed 1000
+
+``--tracks`` compares, on scenes of ``--frames`` frames and the learned costs, the
+frame-by-frame joint MIP of ``associate-multi`` with ``associate-multi --tracks``
+(:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view, the joint
+program per clip, clips linked over time) on ground-truth boxes and on boxes with the noise of
+``xvmatch noise`` (its defaults: 5% jitter, 10% misses, 0.3 false boxes per frame and view;
+one run per ``--noise-seeds`` seed); besides the per-frame pair scores, ``IDF1 over time`` is
+the identity F1 of each view's ids over the whole scene (a global id must name one person in
+every frame it is used).
+
+    python benchmarks/multi_ego_eval.py --tracks --scenes 16 --frames 20 --n-ego 3
 """
 
 from __future__ import annotations
@@ -29,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.multi_ego_scenes import MultiEgoFrame, render_multi_ego, view_names
 from xvmatch.datasets.pair_trials import match_to_ground_truth, noise_seed_of
@@ -41,6 +53,7 @@ from xvmatch.evaluation.multi_view_metrics import (
 )
 from xvmatch.geometry.matcher_inputs import FrameCameras, appearance_cost
 from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.inference.multi_ego_tracking import pairs_from_ids, track_multi_view
 from xvmatch.inference.multi_view_assignment import (
     consistent_hungarian,
     pairwise_hungarian,
@@ -78,8 +91,10 @@ class Sample:
     gt_ids: list[dict[int, np.ndarray]]
 
 
-def make_sample(frames: list[MultiEgoFrame], scene: int, setting: str, seed: int) -> Sample:
-    """Boxes of every view, shuffled, in ``setting`` (``gt`` or ``det``)."""
+def make_sample(frames: list[MultiEgoFrame], scene: int, setting: str, seed: int,
+                noise_seed: int = 0) -> Sample:
+    """Boxes of every view, shuffled, in ``setting`` (``gt``, ``det`` or ``noise``: the
+    defaults of ``xvmatch noise`` with seed ``noise_seed``)."""
     n_views = len(frames[0].views)
     boxes, stands, gts = [], [], []
     for v in range(n_views):
@@ -90,6 +105,10 @@ def make_sample(frames: list[MultiEgoFrame], scene: int, setting: str, seed: int
             det = apply_visibility_noise(gt, visible, frames[0].views[v].camera.image_size,
                                          VisibilityNoise(), noise_seed_of(seed, 10 * scene + v),
                                          "top" if v == 0 else "ego")
+        elif setting == "noise":
+            det = apply_detector_noise(gt, frames[0].views[v].camera.image_size, DetectorNoise(),
+                                       noise_seed_of(noise_seed, 10 * scene + v),
+                                       "top" if v == 0 else "hor")
         else:
             det = gt
         b_v, s_v = {}, {}
@@ -97,8 +116,9 @@ def make_sample(frames: list[MultiEgoFrame], scene: int, setting: str, seed: int
             rec = det[f.frame]
             ids = (rec.ids if setting == "gt" else
                    match_to_ground_truth(rec.boxes, gt[f.frame].boxes, gt[f.frame].ids))
-            order = np.random.default_rng([seed, scene, f.frame, v, setting == "det"]
-                                          ).permutation(len(ids))
+            key = [seed, scene, f.frame, v, setting != "gt"]
+            key += [noise_seed] if setting == "noise" else []
+            order = np.random.default_rng(key).permutation(len(ids))
             b_v[f.frame] = FrameBoxes(f.frame, np.arange(len(ids), dtype=np.int64),
                                       np.asarray(rec.boxes, float)[order].reshape(-1, 4))
             s_v[f.frame] = np.asarray(ids, np.int64)[order]
@@ -175,6 +195,108 @@ def calibrate(args: argparse.Namespace, matcher) -> None:
               f"{neutral:.3f}")
 
 
+def _print_header(header: list[str]) -> None:
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+
+
+def _pair_cells(per_frame: list, status: dict[str, int]) -> tuple[list[str], str]:
+    """The cells of one row: per view pair ACC9 / CVIDF1, the two means; and the statuses."""
+    scores = summarize_views(per_frame)
+    mean = mean_scores(scores)
+    cells = [f"{scores[p].acc9:.1f} / {scores[p].cvidf1:.1f}" for p in sorted(scores)]
+    cells += [f"{mean['acc9']:.1f}", f"{mean['cvidf1']:.1f}"]
+    return cells, ", ".join(f"{k} {v}" for k, v in sorted(status.items()))
+
+
+def identity_f1(pred: list[np.ndarray], truth: list[np.ndarray], n_truth: int) -> tuple[int, int]:
+    """``(IDTP, IDTP denominator)`` of one view over a scene: predicted and true ids of its
+    boxes frame by frame (true id < 0: a false box), matched one-to-one over the scene
+    (Hungarian on co-occurrence counts); IDF1 = 2 IDTP / (predicted boxes + true boxes)."""
+    from scipy.optimize import linear_sum_assignment
+
+    p, t = np.concatenate(pred), np.concatenate(truth)
+    real = t >= 0
+    if not real.any():
+        return 0, p.size + n_truth
+    pu, pi = np.unique(p[real], return_inverse=True)
+    tu, ti = np.unique(t[real], return_inverse=True)
+    counts = np.zeros((pu.size, tu.size))
+    np.add.at(counts, (pi, ti), 1.0)
+    r, c = linear_sum_assignment(-counts)
+    return int(counts[r, c].sum()), p.size + n_truth
+
+
+def run_tracks(args: argparse.Namespace, matcher) -> None:
+    """Frame-by-frame joint MIP against ``associate-multi --tracks`` (the module docstring)."""
+    names = view_names(args.n_ego)
+    settings = [("gt", 0)] + [("noise", s) for s in args.noise_seeds]
+    methods = ("frame-by-frame MIP", "tracks")
+    counts = {(s, m): [] for s, _ in settings for m in methods}
+    cycles = {k: [0, 0] for k in counts}
+    seconds = {k: 0.0 for k in counts}
+    idf = {k: [0, 0] for k in counts}
+    status: dict[tuple, dict[str, int]] = {k: {} for k in counts}
+    start = time.perf_counter()
+    for i in range(args.scenes):
+        frames = render_multi_ego([args.seed, i], args.n_ego, args.frames)
+        for setting, noise_seed in settings:
+            sample = make_sample(frames, i, setting, args.seed, noise_seed)
+            problems = sample_costs(sample, "learned", matcher)
+            order = sorted(problems)
+            answers = {}
+            t0 = time.perf_counter()
+            per_frame = {f: solve(problems[f], "mip", args.time_limit) for f in order}
+            seconds[(setting, methods[0])] += time.perf_counter() - t0
+            for sol in per_frame.values():
+                status[(setting, methods[0])][sol.status] = (
+                    status[(setting, methods[0])].get(sol.status, 0) + 1)
+            offset = np.cumsum([0, *(max((int(p.max()) + 1 for p in per_frame[f].person
+                                          if p.size), default=0) for f in order)])
+            answers[methods[0]] = {f: [p + 1 + offset[k] for p in per_frame[f].person]
+                                   for k, f in enumerate(order)}
+            t0 = time.perf_counter()
+            tracks = track_multi_view(sample.boxes, problems, args.clip_length,
+                                      time_limit=args.time_limit)
+            seconds[(setting, methods[1])] += time.perf_counter() - t0
+            for st in tracks.statuses:
+                status[(setting, methods[1])][st] = status[(setting, methods[1])].get(st, 0) + 1
+            answers[methods[1]] = {f: [tracks.person[v][f] for v in range(len(names))]
+                                   for f in order}
+            for method, ids in answers.items():
+                key = (setting, method)
+                for f in order:
+                    pairs = pairs_from_ids(ids[f])
+                    views = range(len(names))
+                    counts[key].append(count_views([sample.gt_ids[v][f] for v in views],
+                                                   [sample.stands_for[v][f] for v in views],
+                                                   pairs, f))
+                    broken, closed = cycle_counts(pairs, problems[f].sizes)
+                    cycles[key][0] += broken
+                    cycles[key][1] += closed
+                for v in range(len(names)):
+                    tp, den = identity_f1([ids[f][v] for f in order],
+                                          [sample.stands_for[v][f] for f in order],
+                                          sum(len(sample.gt_ids[v][f]) for f in order))
+                    idf[key][0] += tp
+                    idf[key][1] += den
+        print(f"scene {i + 1}/{args.scenes} ({time.perf_counter() - start:.0f} s)",
+              file=sys.stderr)
+    pair_names = [f"{names[a]}-{names[b]}" for a, b in view_pairs(len(names))]
+    print(f"# {args.scenes} scenes x {args.frames} frames, 1 top + {args.n_ego} ego, seed "
+          f"{args.seed}, learned costs, clips of {args.clip_length}; noise: xvmatch noise "
+          f"defaults, seeds {args.noise_seeds}; Eq. 9 accuracy / CVIDF1 (%) per view pair")
+    _print_header(["boxes", "method", *pair_names, "mean ACC9", "mean CVIDF1",
+                   "IDF1 over time", "inconsistent triples", "ms/frame", "status"])
+    for key, per_frame in counts.items():
+        cells, stat = _pair_cells(per_frame, status[key])
+        print("| " + " | ".join([*key, *cells,
+                                 f"{200.0 * idf[key][0] / max(idf[key][1], 1):.1f}",
+                                 str(cycles[key][0]),
+                                 f"{1000 * seconds[key] / len(per_frame):.1f}", stat]) + " |")
+    print(f"# total {time.perf_counter() - start:.0f} s")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark (see the module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -187,10 +309,17 @@ def main(argv: list[str] | None = None) -> int:
                         choices=("learned", "handcrafted"))
     parser.add_argument("--time-limit", type=float, default=10.0)
     parser.add_argument("--calibrate", action="store_true")
+    parser.add_argument("--tracks", action="store_true",
+                        help="frame-by-frame MIP against associate-multi --tracks")
+    parser.add_argument("--clip-length", type=int, default=10)
+    parser.add_argument("--noise-seeds", type=int, nargs="+", default=[1, 2, 3])
     args = parser.parse_args(argv)
     matcher = load_matcher_bundle("default")
     if args.calibrate:
         calibrate(args, matcher)
+        return 0
+    if args.tracks:
+        run_tracks(args, matcher)
         return 0
     names = view_names(args.n_ego)
     pair_names = [f"{names[a]}-{names[b]}" for a, b in view_pairs(len(names))]
@@ -224,20 +353,14 @@ def main(argv: list[str] | None = None) -> int:
     n_frames = args.scenes * args.frames
     print(f"# {args.scenes} scenes x {args.frames} frame(s), 1 top + {args.n_ego} ego, seed "
           f"{args.seed}; Eq. 9 accuracy / CVIDF1 (%) per view pair")
-    header = ["variant", "setting", "solver", *pair_names, "mean ACC9", "mean CVIDF1",
-              "inconsistent %", "ms/frame", "status"]
-    print("| " + " | ".join(header) + " |")
-    print("|" + "---|" * len(header))
+    _print_header(["variant", "setting", "solver", *pair_names, "mean ACC9", "mean CVIDF1",
+                   "inconsistent %", "ms/frame", "status"])
     for key, per_frame in counts.items():
-        scores = summarize_views(per_frame)
-        mean = mean_scores(scores)
         broken, closed = cycles[key]
         rate = 100.0 * broken / (broken + closed) if broken + closed else 0.0
-        cells = [f"{scores[p].acc9:.1f} / {scores[p].cvidf1:.1f}" for p in sorted(scores)]
-        stat = ", ".join(f"{k} {v}" for k, v in sorted(status[key].items()))
-        print("| " + " | ".join([*key, *cells, f"{mean['acc9']:.1f}", f"{mean['cvidf1']:.1f}",
-                                 f"{rate:.1f}", f"{1000 * seconds[key] / n_frames:.1f}",
-                                 stat]) + " |")
+        cells, stat = _pair_cells(per_frame, status[key])
+        print("| " + " | ".join([*key, *cells, f"{rate:.1f}",
+                                 f"{1000 * seconds[key] / n_frames:.1f}", stat]) + " |")
     print(f"# total {time.perf_counter() - start:.0f} s")
     return 0
 

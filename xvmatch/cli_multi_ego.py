@@ -8,7 +8,9 @@ solves the joint cycle-consistent program of every frame
 (:func:`xvmatch.inference.multi_view_assignment.solve_multi_view`), and writes ``OUT/top.txt``,
 ``OUT/hor1.txt``, ...: the input rows, text unchanged but the id field, which holds a person id;
 the same id in two views of a frame is the same person (ids are unique over the whole output and
-do not carry over frames: ``xvmatch track`` follows people over time). Bad input raises
+do not carry over frames). With ``--tracks`` the ids carry over frames
+(:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view smooth the
+costs, every frame is solved with the cycle constraints, ids follow the tracklets). Bad input raises
 ``ValueError`` with one line, printed by the main entry point as ``xvmatch: error: ...``.
 """
 
@@ -30,7 +32,7 @@ from xvmatch.cli_options import (
     image_inputs,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, float_in, thread_count, worker_count
+from xvmatch.cli_types import box_id, float_in, int_in, thread_count, worker_count
 from xvmatch.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_multi_ego_parser"]
@@ -42,6 +44,7 @@ MAX_HOR = 3
 """Most horizontal views (issue 17: one top view and two or three horizontal ones)."""
 
 TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per frame before the greedy fallback")
+CLIP_TYPE = int_in(1, 1000, "frames per clip of tracklets")
 
 
 def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
@@ -81,6 +84,11 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=5.0, metavar="S",
                    help="seconds per frame for the MIP, in [0.01, 600] (default 5); past it "
                    "the greedy answer is used and counted in a warning")
+    p.add_argument("--tracks", action="store_true",
+                   help="follow people over time: tracklets per view smooth the costs and "
+                   "carry the ids over frames (still one box per view and person on a frame)")
+    p.add_argument("--clip-length", type=CLIP_TYPE, default=10, metavar="N",
+                   help="with --tracks, frames per clip of tracklets, 1..1000 (default 10)")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for the learned matcher's features, 1..64 (default 1)")
     p.add_argument("--threads", type=thread_count, default=1, metavar="K",
@@ -205,7 +213,17 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             source.close()
     person: list[dict[int, int]] = [{} for _ in paths]
     next_id, n_fallback = 1, 0
-    for f in frames:
+    if args.tracks:
+        from xvmatch.inference.multi_ego_tracking import track_multi_view
+
+        tracks = track_multi_view(views, problems, args.clip_length, solver=args.solver,
+                                  time_limit=args.time_limit)
+        n_fallback = tracks.statuses.count("fallback")
+        for v, per_frame in enumerate(tracks.person):
+            for f, ids in per_frame.items():
+                person[v].update(zip(views[v][f].ids.tolist(), ids.tolist(), strict=True))
+        next_id = tracks.n_people + 1
+    for f in frames if not args.tracks else ():
         problem = problems[f]
         if args.solver == "mip":
             sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma, args.time_limit)
