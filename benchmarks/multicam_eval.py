@@ -26,7 +26,18 @@ Usage:
         [--xvmatch .venv-base/bin/xvmatch] [--write DIR --write-cameras 4 [--write-noise]]
 
 ``--write DIR`` only writes one simulated scene as files (cameras.json, boxes/, gt/,
-ground_gt.csv) for trying the command, and exits.
+ground_gt.csv) for trying the command, and exits (``--write-rendered``: rendered, with
+images/NAME/ folders).
+
+``--rendered`` (issue 32, item 5): rendered scenes instead (:mod:`xvmatch.datasets.
+multicam_render`: the same people and cameras, 640x360 images, each camera its own photometry,
+boxes from the rendered pixels, track ids scrambled per camera), 2 and 4 cameras, 200 frames,
+``gt``, ``noise`` and ``tracker`` boxes; ``ours`` without and with the images (the deployed
+bundle's appearance network, ``--model``, on each camera's JPEG frames read back as ``xvmatch
+multicam --images`` reads them). The appearance weight is chosen on ``--tune-seeds`` (mean
+global IDF1 over the grid ``--weights``) and reported on ``--seeds``:
+
+    python benchmarks/multicam_eval.py --rendered --seeds 1 2 3 --tune-seeds 101 102
 """
 
 from __future__ import annotations
@@ -62,6 +73,7 @@ CONDITIONS = {
     "noise": TrackerNoise(DetectorNoise(0.05, 0.10, 0.3), 0.0, 0.0),
     "tracker": TrackerNoise(DetectorNoise(0.05, 0.10, 0.3), 0.02, 0.2),
 }
+RENDERED_CONDITIONS = ("gt", "noise", "tracker")
 METHODS = {
     "ours": MulticamOptions(),
     "ours, whole tracks": MulticamOptions(split_frames=0),
@@ -220,6 +232,110 @@ def report(rows: list[dict], speed: dict) -> str:
     return "\n".join(lines)
 
 
+def _embedder(model, path: str, memo: dict):
+    """``embed(frame, boxes)`` of one camera's image folder with ``model``'s network, memoised
+    on (frame, boxes) so that a sweep embeds each crop once."""
+    from xvmatch.datasets.frame_sources import open_frames
+
+    source = open_frames(path)
+    last: dict = {}
+
+    def embed(frame: int, boxes: np.ndarray) -> np.ndarray:
+        key = (path, frame, np.asarray(boxes, dtype=float).tobytes())
+        if key not in memo:
+            if last.get("frame") != frame:
+                last["frame"], last["image"] = frame, source.get(frame)
+            memo[key] = model.descriptors(last["image"], boxes)
+        return memo[key]
+
+    return embed
+
+
+def rendered_rows(n_cameras: int, seed: int, frames: int, people: int, model, weights,
+                  work: Path) -> list[dict]:
+    """Scores of one rendered scene, ``gt`` and ``noise`` boxes, ours without images (weight
+    ``None``) and with images at each appearance weight."""
+    from dataclasses import replace as dc_replace
+
+    from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+
+    config = MulticamConfig(n_cameras=n_cameras, n_people=(people, people))
+    start = time.perf_counter()
+    scene, paths = write_rendered_multicam_scene(work / f"r{n_cameras}_{seed}", config,
+                                                 frames, seed)
+    render_s = time.perf_counter() - start
+    cams = {n: GroundCamera.from_camera(c) for n, c in scene.cameras.items()}
+    truth = _truth_ground(scene)
+    memo: dict = {}
+    embed = {n: _embedder(model, str(paths["images"] / n), memo) for n in scene.cameras}
+    rows = []
+    for condition in RENDERED_CONDITIONS:
+        noise = CONDITIONS[condition]
+        sc = scene if noise is None else add_tracker_noise(scene, noise, seed)
+        for w in [None, *weights]:
+            opts = MulticamOptions() if w is None else dc_replace(MulticamOptions(),
+                                                                   appearance_weight=w)
+            start = time.perf_counter()
+            res = associate_cameras(cams, sc.boxes, opts, appearance=None if w is None
+                                    else embed)
+            seconds = time.perf_counter() - start
+            s = multicam_scores(relabel(sc.boxes, res), sc.gt, res.ground, truth)
+            rows.append({"cameras": n_cameras, "seed": seed, "condition": condition,
+                         "weight": w, "P": s["P"], "R": s["R"],
+                         "box_F1": s["box_pairs"]["F1"], "IDF1": s["idf1"]["IDF1"],
+                         "seconds": seconds, "render_seconds": render_s})
+    return rows
+
+
+def rendered_main(args) -> int:
+    """``--rendered``: tune the appearance weight on the tuning seeds, report on the others."""
+    from xvmatch.inference.learned_association import load_matcher_bundle
+
+    start = time.perf_counter()
+    model = load_matcher_bundle(args.model)
+    if model.bundle.adaptation is not None:
+        print(f"{args.model}: a site adaptation is for top/horizontal pairs; multicam uses the "
+              "raw descriptors", file=sys.stderr)
+    weights = list(args.weights)
+    with tempfile.TemporaryDirectory() as tmp:
+        tune = [r for cams in args.cameras for seed in args.tune_seeds
+                for r in rendered_rows(cams, seed, args.frames, args.people, model, weights,
+                                       Path(tmp))]
+        score = {w: float(np.mean([r["IDF1"] for r in tune if r["weight"] == w]))
+                 for w in weights}
+        best = max(weights, key=lambda w: (score[w], -w))
+        print("tuning seeds, mean global IDF1 by weight: " + ", ".join(
+            f"{w:g}: {score[w]:.4f}" for w in weights) + f"; none: "
+            f"{np.mean([r['IDF1'] for r in tune if r['weight'] is None]):.4f}; chosen {best:g}",
+            file=sys.stderr)
+        test = [r for cams in args.cameras for seed in args.seeds
+                for r in rendered_rows(cams, seed, args.frames, args.people, model, [best],
+                                       Path(tmp))]
+    lines = [f"Rendered scenes, seeds {' '.join(map(str, args.seeds))} (appearance weight "
+             f"{best:g}, chosen on seeds {' '.join(map(str, args.tune_seeds))}):", "",
+             "| cameras | boxes | images | P | R | box-pair F1 | global IDF1 | seconds |",
+             "|---|---|---|---|---|---|---|---|"]
+    for cams in args.cameras:
+        for cond in RENDERED_CONDITIONS:
+            for w, label in ((None, "no"), (best, "yes")):
+                sel = [r for r in test if r["cameras"] == cams and r["condition"] == cond
+                       and r["weight"] == w]
+                lines.append(f"| {cams} | {cond} | {label} | {_mean(sel, 'P'):.3f} | "
+                             f"{_mean(sel, 'R'):.3f} | {_mean(sel, 'box_F1'):.3f} | "
+                             f"{_mean(sel, 'IDF1'):.3f} | {_mean(sel, 'seconds'):.2f} |")
+    renders = {(r["cameras"], r["seed"]): r["render_seconds"] for r in test}
+    lines += ["", "Render and write (s), per scene: " + ", ".join(
+        f"{c} cameras seed {s}: {t:.1f}" for (c, s), t in sorted(renders.items()))]
+    text = "\n".join(lines)
+    print(text)
+    print(f"\nbenchmark wall time {time.perf_counter() - start:.0f} s")
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "rendered_results.json").write_text(json.dumps(
+            {"tuning": tune, "test": test, "weights": weights, "chosen": best}, indent=1))
+    return 0
+
+
 def main() -> int:
     """Run the benchmark (or write one scene with ``--write``)."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -234,7 +350,28 @@ def main() -> int:
     p.add_argument("--write", default=None, metavar="DIR", help="write one scene and exit")
     p.add_argument("--write-cameras", type=int, default=4)
     p.add_argument("--write-noise", action="store_true")
+    p.add_argument("--write-rendered", action="store_true")
+    p.add_argument("--rendered", action="store_true",
+                   help="rendered scenes, ours without and with images (see the docstring)")
+    p.add_argument("--tune-seeds", type=int, nargs="+", default=[101, 102])
+    p.add_argument("--weights", type=float, nargs="+", default=[0.5, 1.0, 2.0, 4.0, 8.0, 16.0])
+    p.add_argument("--model", default="default", help="bundle of the appearance network")
     args = p.parse_args()
+    if args.rendered:
+        if args.cameras == [2, 4, 7]:
+            args.cameras = [2, 4]
+        if args.frames == 400:
+            args.frames = 200
+        return rendered_main(args)
+    if args.write and args.write_rendered:
+        from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+
+        _, paths = write_rendered_multicam_scene(
+            args.write, MulticamConfig(n_cameras=args.write_cameras,
+                                       n_people=(args.people, args.people)),
+            args.frames, args.seeds[0])
+        print(json.dumps({k: os.fspath(v) for k, v in paths.items()}, indent=2))
+        return 0
     if args.write:
         scene = _scene(args.write_cameras, args.seeds[0], args.frames, args.people,
                        "noise" if args.write_noise else "gt")

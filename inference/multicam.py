@@ -131,7 +131,7 @@ class MulticamOptions:
     link_growth_m: float = 0.05
     max_range_m: float = 1e4
     split_frames: int = 20
-    appearance_weight: float = 1.0
+    appearance_weight: float = 4.0
     appearance_boxes: int = 3
 
     def __post_init__(self) -> None:

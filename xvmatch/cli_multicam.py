@@ -24,7 +24,7 @@ COMMAND = "xvmatch multicam"
 """The marker name of the command's output folders."""
 
 _CAMERA_SIZE = image_size(8, 65536, "pixels of a camera image")
-_DEFAULT_WEIGHT = 1.0  # MulticamOptions().appearance_weight, without importing numpy here
+_DEFAULT_WEIGHT = 4.0  # MulticamOptions().appearance_weight, without importing numpy here
 
 
 def named_paths(values: list[str] | None, option: str) -> dict[str, str]:
