@@ -1,5 +1,9 @@
 """The ``xvmatch synth`` and ``xvmatch show`` commands: render a labelled dataset, draw a pair.
 
+``synth --cameras N`` writes one scene of N static cameras instead (the input of ``xvmatch
+multicam``): rendered (:mod:`xvmatch.datasets.multicam_render`) or, with ``--boxes-only``, from the
+box simulator (:mod:`xvmatch.datasets.multicam_scenes`), optionally with tracker-like noise.
+
 Each ``add_*_parser`` registers one sub-command on the ``subparsers`` of the main parser; the
 command's ``func`` takes the parsed arguments and returns an exit code. Imports are lazy so that
 other commands never load OpenCV. Bad input raises ``ValueError`` with a one-line message, which
@@ -9,6 +13,7 @@ the main entry point prints as ``xvmatch: error: ...``.
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -27,7 +32,7 @@ __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
 
 EXAMPLES = {
     "synth": "xvmatch synth --out data/synth --scenario drone --scenes 100 --frames 20 "
-    "--seed 0 --workers 2",
+    "--seed 0 --workers 2\n  xvmatch synth --cameras 4 --frames 100 --out data/cams4",
     "show": "xvmatch show data/synth/images/top/s00000_000001.jpg --out pair.png",
 }
 
@@ -67,13 +72,23 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output folder (new, empty, or a previous "
                    "synth output)")
-    p.add_argument("--scenario", choices=("drone", "overview"), default="drone",
+    p.add_argument("--scenario", choices=("drone", "overview"), default=None,
                    help="drone: nadir camera 20-60 m up + head-worn camera (CVMHAT); overview: "
                    "building camera 8-25 m up + hand-held camera (default drone)")
-    p.add_argument("--scenes", default=10,
+    p.add_argument("--scenes", default=None,
                    type=int_in(1, 100_000, "a bound on the run's time and disk: 100000 scenes "
                                "is ten times the largest training set"),
                    help="number of scenes, 1..100000 (default 10)")
+    g = p.add_argument_group("several static cameras (one scene, the input of xvmatch multicam)")
+    g.add_argument("--cameras", default=None, type=int_in(2, 8, "static cameras per scene"),
+                   help="write one scene of N static calibrated cameras, 2..8: cameras.json, "
+                   "boxes/NAME.txt (per-camera track ids), gt/NAME.txt (global ids), "
+                   "ground_gt.csv, images/NAME/ (default people 12:12, --size 640x360)")
+    g.add_argument("--boxes-only", action="store_true",
+                   help="with --cameras: the box simulator, no images (fast)")
+    g.add_argument("--tracker-noise", action="store_true",
+                   help="with --cameras: tracker-like noise on boxes/ (jitter, misses, false "
+                   "boxes, id switches, fragments; gt/ stays clean)")
     p.add_argument("--frames", default=10,
                    type=int_in(1, MAX_FRAMES, "frames per scene: a scene's walk is held in "
                                "memory"),
@@ -81,7 +96,7 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    "(default 10)")
     p.add_argument("--seed", type=seed_value, default=0, help="random seed, 0..2**32-1 "
                    "(default 0); the output is identical for any --workers")
-    p.add_argument("--people", type=_people_range, default=(3, 14), metavar="MIN:MAX",
+    p.add_argument("--people", type=_people_range, default=None, metavar="MIN:MAX",
                    help=f"people per scene, camera wearer included, 1 <= MIN <= MAX <= "
                    f"{MAX_PEOPLE} (default 3:14)")
     p.add_argument("--size", default=(640, 360), metavar="WxH",
@@ -105,9 +120,17 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from xvmatch.datasets.synthetic_io import generate_dataset
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
+    if args.cameras is not None:
+        return _synth_cameras(args)
+    for option, given in (("--boxes-only", args.boxes_only),
+                          ("--tracker-noise", args.tracker_noise)):
+        if given:
+            raise ValueError(f"{option} needs --cameras N (a scene of several static cameras)")
+    args.scenario = args.scenario or "drone"
+    args.scenes = 10 if args.scenes is None else args.scenes
     check_outputs([Output("--out", args.out, folder=True)])
-    config = SynthConfig(scenario=args.scenario, n_people=args.people, top_size=args.size,
-                         ego_size=args.size, fps=args.fps)
+    config = SynthConfig(scenario=args.scenario, n_people=args.people or (3, 14),
+                         top_size=args.size, ego_size=args.size, fps=args.fps)
     total = args.scenes * args.frames
     start = time.perf_counter()
     with progress_bar(total, "synth", "pair", not args.quiet) as bar:
@@ -121,6 +144,63 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         print(f"wrote {total} pairs ({args.scenes} scenes x {args.frames} frames, "
               f"{args.scenario}) to {manifest.parent} in {elapsed:.1f} s "
               f"({total / max(elapsed, 1e-9):.1f} pairs/s)", file=sys.stderr)
+    return 0
+
+
+SYNTH_CAMERAS = "synth --cameras"
+"""The command name in the marker of a ``synth --cameras`` folder (it may replace only its own)."""
+
+
+def _synth_cameras(args: argparse.Namespace) -> int:
+    """``synth --cameras N``: one multi-camera scene, rendered or box-only (issue 32)."""
+    from xvmatch.datasets.image_render import Difficulty
+    from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+    from xvmatch.datasets.multicam_scenes import (
+        MulticamConfig,
+        TrackerNoise,
+        add_tracker_noise,
+        simulate_multicam_scene,
+        write_multicam_scene,
+    )
+    from xvmatch.output_paths import check_own_folder, claim_folder
+
+    for option, wrong in (("--scenario", args.scenario is not None),
+                          ("--scenes", args.scenes not in (None, 1))):
+        if wrong:
+            raise ValueError(f"{option} does not apply to --cameras (one scene of static "
+                             "cameras per run; run again with another --seed for more)")
+    width, height = args.size
+    if height != round(width * 9 / 16):
+        raise ValueError(f"--size {width}x{height}: with --cameras every camera is 16:9; give "
+                         f"{width}x{round(width * 9 / 16)}")
+    if not args.boxes_only and not 8 <= width <= 4096:
+        raise ValueError(f"--size: with --cameras the width must be in 8..4096, got {width}")
+    check_outputs([Output("--out", args.out, folder=True)])
+    check_own_folder(args.out, SYNTH_CAMERAS)
+    config = MulticamConfig(n_cameras=args.cameras, n_people=args.people or (12, 12),
+                            fps=args.fps)
+    start = time.perf_counter()
+    root = claim_folder(args.out, SYNTH_CAMERAS)
+    for name in ("boxes", "gt", "images"):  # an earlier scene of this command: no stale camera
+        shutil.rmtree(root / name, ignore_errors=True)
+    if args.boxes_only:
+        scene = simulate_multicam_scene(config, args.frames, args.seed)
+    else:
+        with progress_bar(1, "synth", "scene", not args.quiet) as bar:
+            scene, _ = write_rendered_multicam_scene(
+                root, config, args.frames, args.seed, width=width,
+                difficulty=Difficulty.preset(args.difficulty))
+            bar.update(1)
+    if args.tracker_noise:
+        scene = add_tracker_noise(scene, TrackerNoise(), args.seed)
+    if args.boxes_only or args.tracker_noise:
+        write_multicam_scene(root, scene)
+    if not args.quiet:
+        kind = "box-only" if args.boxes_only else "rendered"
+        print(f"wrote a {kind} scene of {args.cameras} static cameras x {args.frames} frames to "
+              f"{root} in {time.perf_counter() - start:.1f} s; try: xvmatch multicam --boxes "
+              + " ".join(f"{n}={root / 'boxes' / (n + '.txt')}" for n in scene.cameras)
+              + f" --cameras {root / 'cameras.json'} --out OUT/", file=sys.stderr)
     return 0
 
 
