@@ -123,6 +123,12 @@ def app_confidence_features(app: Tensor, available: Tensor, geometry_scores: Ten
     return torch.stack(feats, dim=-1) * has[:, None]
 
 
+def _cap(gates: Tensor) -> Tensor:
+    """``min(1, gates)``; at exactly 1 (a fresh head) half the gradient still passes
+    (``torch.minimum``; ``clamp`` passes none there, and the head would never move)."""
+    return torch.minimum(gates, torch.ones_like(gates))
+
+
 class CrossViewMatcher(nn.Module):
     """Geometry encoder plus optional pair cues, fused early and late, with one dustbin.
 
@@ -134,11 +140,15 @@ class CrossViewMatcher(nn.Module):
         app_confidence: gate the ``app`` cue by its per-frame confidence (module docstring);
             needs the ``app`` cue. False: the matcher as before (the stored config then has no
             such key, so older files load unchanged).
+        app_gate_cap: cap both gates at 1 (``min(1, gate)``: the confidence can only
+            down-weight the ``app`` cue); needs ``app_confidence``. Stored in the config only
+            when on, so older files load unchanged.
     """
 
     def __init__(
         self, geometry: GeometryEncoder, cues: Sequence[str] = CUES, hidden: int = 32,
         app_confidence: bool = False,
+        app_gate_cap: bool = False,
     ) -> None:
         super().__init__()
         cues = tuple(cues)
@@ -158,6 +168,14 @@ class CrossViewMatcher(nn.Module):
         self.app_confidence = app_confidence
         if app_confidence:
             self.config["app_confidence"] = True
+        if not isinstance(app_gate_cap, bool):
+            raise ValueError(f"app_gate_cap must be a bool, got {app_gate_cap!r}")
+        if app_gate_cap and not app_confidence:
+            raise ValueError("app_gate_cap needs app_confidence")
+        self.app_gate_cap = app_gate_cap
+        if app_gate_cap:
+            self.config["app_gate_cap"] = True
+        self.last_gates: Tensor | None = None
         k = len(cues)
         if k:
             width = int(geometry.config["width"])
@@ -214,6 +232,8 @@ class CrossViewMatcher(nn.Module):
             :class:`~xvmatch.models.geometry_encoder.GeometryOutput` of the fused matcher.
         """
         enc = self.geometry
+        if self.app_confidence:
+            self.last_gates = None
         extra = None
         x = None
         x_late = None
@@ -223,8 +243,13 @@ class CrossViewMatcher(nn.Module):
             x = torch.cat([logit, avail], dim=-1)  # (B, M, N, 2K)
             x_late = x
             if self.app_confidence:
-                gates = self.app_gates(top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues,
-                                       cue_mask, x)
+                gates = self._gates(top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues,
+                                    cue_mask, x)
+                # Read by a training loss's clean-frame term; before the cap, so that the term
+                # can pull a gate out of the cap's flat region (where the cost has no gradient).
+                self.last_gates = gates
+                if self.app_gate_cap:
+                    gates = _cap(gates)
                 x, x_late = (x * (1.0 + self.app_columns * (gates[:, i, None] - 1.0))[
                     :, None, None, :] for i in (0, 1))
             extra = self.cue_embed(x)
@@ -254,7 +279,14 @@ class CrossViewMatcher(nn.Module):
         """``(B, 2)`` gates in [0, 2] of the ``app`` cue (early, late) of a matcher built with
         ``app_confidence``: its statistics (:func:`app_confidence_features`) against a
         box-only pass of this matcher (no gradient), and the cue mask, through
-        :attr:`confidence`."""
+        :attr:`confidence` (capped at 1 with ``app_gate_cap``)."""
+        gates = self._gates(top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues, cue_mask, x)
+        return _cap(gates) if self.app_gate_cap else gates
+
+    def _gates(self, top: Tensor, hor: Tensor, hyp: Tensor, pair: Tensor, top_mask: Tensor,
+               hor_mask: Tensor, hyp_mask: Tensor, cues: Tensor, cue_mask: Tensor,
+               x: Tensor) -> Tensor:
+        """The gates of :meth:`app_gates` before the cap."""
         with torch.no_grad():
             x0 = torch.zeros_like(x)
             a, b, pair_emb, _ = self.geometry.encode(

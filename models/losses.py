@@ -141,6 +141,9 @@ class GeometryMatchingLoss(nn.Module):
         cost_margin: contrastive margin on costs.
         embedding_margin: contrastive margin on descriptor distances.
         hard_negatives: hardest negatives kept per row and column.
+        gate_weight: weight of the clean-frame term of an appearance-confidence fine-tune
+            (:meth:`gate_term`, added by the training module where the batch marks the frames
+            with corrupted appearance); 0 (default): none.
     """
 
     def __init__(
@@ -152,8 +155,12 @@ class GeometryMatchingLoss(nn.Module):
         cost_margin: float = 0.9,
         embedding_margin: float = 0.5,
         hard_negatives: int = 2,
+        gate_weight: float = 0.0,
     ) -> None:
         super().__init__()
+        if not float(gate_weight) >= 0:
+            raise ValueError(f"gate_weight must be >= 0, got {gate_weight}")
+        self.gate_weight = float(gate_weight)
         self.weights = {
             "nll": float(nll_weight),
             "cost": float(cost_weight),
@@ -195,3 +202,14 @@ class GeometryMatchingLoss(nn.Module):
         }
         terms["total"] = sum(self.weights[k] * v for k, v in terms.items())
         return terms
+
+    def gate_term(self, gates: Tensor, clean: Tensor) -> Tensor:
+        """Clean-frame term of the appearance confidence: the mean over the ``clean`` frames of
+        the squared distances of both gates from 1 (0 when no frame is clean).
+
+        Args:
+            gates: ``(B, 2)`` gates of the ``app`` cue (early, late).
+            clean: ``(B,)`` bool, frames whose appearance costs are not corrupted (and present).
+        """
+        per_frame = ((gates - 1.0) ** 2).sum(dim=-1)
+        return _mean(per_frame, clean)

@@ -299,3 +299,99 @@ def test_the_data_module_keeps_appearance_costs_between_runs(tiny_synth, tmp_pat
     for a, b, c in zip(fresh, first, again, strict=True):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(a, c)
+
+
+def test_gate_cap_only_down_weights_and_is_stored_only_when_on(tmp_path):
+    from xvmatch.models.appearance_net import appearance_small
+    from xvmatch.models.matcher_file import load_matcher, save_matcher
+
+    with pytest.raises(ValueError, match="app_gate_cap needs app_confidence"):
+        CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), app_gate_cap=True)
+    with pytest.raises(ValueError, match="app_gate_cap must be a bool"):
+        CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), app_confidence=True, app_gate_cap=1)
+    assert "app_gate_cap" not in _matcher(True).config  # off: files as before
+    fresh = CrossViewMatcher(GeometryEncoder(**TINY_GEOMETRY), app_confidence=True,
+                             app_gate_cap=True)
+    (-fresh.app_gates(*_batch(), torch.zeros(3, 5, 6, 6)).sum()).backward()
+    assert fresh.confidence[2].bias.grad.abs().sum() > 0  # a fresh capped head can learn
+    free = _matcher(True)
+    torch.nn.init.normal_(free.confidence[2].weight, std=1.0)
+    torch.nn.init.normal_(free.confidence[2].bias, std=1.0)
+    capped = CrossViewMatcher(free.geometry, free.cues, app_confidence=True,
+                              app_gate_cap=True).eval()
+    capped.load_state_dict(free.state_dict())
+    args = _batch()
+    x = torch.zeros(3, 5, 6, 6)
+    with torch.no_grad():
+        g_free, g_cap = free.app_gates(*args, x), capped.app_gates(*args, x)
+        assert (g_free > 1).any() and (g_free < 1).any()
+        assert torch.equal(g_cap, g_free.clamp(max=1.0))
+        expected = capped(*args).cost
+    path = tmp_path / "capped.pt"
+    save_matcher(path, capped, FeatureConfig(n_hypotheses=3, dtheta_deg=4.0), 0.5,
+                 appearance=appearance_small(**TINY_APPEARANCE).eval())
+    loaded = load_matcher(path).matcher.eval()
+    assert loaded.config["app_gate_cap"] is True and loaded.app_gate_cap
+    with torch.no_grad():
+        assert torch.equal(loaded(*args).cost, expected)
+
+
+def test_clean_frame_term_pulls_only_the_gates_of_clean_frames():
+    from xvmatch.models.losses import GeometryMatchingLoss
+    from xvmatch.training.geometry_module import GeometryMatchingModule
+
+    loss = GeometryMatchingLoss(gate_weight=2.0)
+    gates = torch.tensor([[0.5, 1.0], [1.5, 0.0], [0.0, 0.0]])
+    clean = torch.tensor([True, True, False])
+    assert torch.isclose(loss.gate_term(gates, clean), torch.tensor((0.25 + 0.25 + 1.0) / 2))
+    assert loss.gate_term(gates, torch.zeros(3, dtype=torch.bool)) == 0
+    with pytest.raises(ValueError, match="gate_weight must be >= 0"):
+        GeometryMatchingLoss(gate_weight=-1.0)
+
+    top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues, cue_mask = _batch()
+    batch = {"top": top, "hor": hor, "hyp": hyp, "pair": pair, "top_mask": top_mask,
+             "hor_mask": hor_mask, "hyp_mask": hyp_mask, "cues": cues, "cue_mask": cue_mask,
+             "match": torch.zeros(3, 5, 6, dtype=torch.bool),
+             "camera_correct": torch.zeros(3, 4, dtype=torch.bool)}
+    batch["match"][:, 0, 0] = True
+    matcher = _matcher(True).train()
+    torch.nn.init.normal_(matcher.confidence[2].weight, std=1.0)
+    plain = GeometryMatchingModule(matcher, GeometryMatchingLoss())
+    weighted = GeometryMatchingModule(matcher, GeometryMatchingLoss(gate_weight=2.0))
+    base, _ = plain._step(batch, "train")
+    same, _ = weighted._step(batch, "train")  # no app_corrupted in the batch: no term
+    assert torch.equal(base, same)
+    flagged = dict(batch, app_corrupted=torch.tensor([False, True, False]))
+    assert torch.equal(plain._step(flagged, "train")[0], base)  # weight 0: no term
+    total, _ = weighted._step(flagged, "train")
+    gates = matcher.last_gates
+    # frame 0 (app, clean) only: frame 1 is corrupted and frame 2 has no app cue
+    expected = base + 2.0 * ((gates[0] - 1.0) ** 2).sum()
+    assert torch.allclose(total, expected)
+    matcher.zero_grad()
+    (total - base).backward()
+    assert matcher.confidence[0].weight.grad.abs().sum() > 0
+
+
+def test_training_frames_can_carry_their_corruption_flag(tiny_synth, tmp_path):
+    from xvmatch.training.box_datamodule import collate_labelled
+    from xvmatch.training.matcher_datamodule import collate_flagged
+
+    data = tiny_synth["overview"]
+    trials = dataset_trials(data, TrialConfig(), ("gt",), _colour_coster)
+    features = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
+    corruption = AppCorruption(probability=0.5, kinds=("random",), weights=(1.0,), seed=1)
+    kwargs = dict(variants=("boxes", "images"), cache_dir=tmp_path, corruption=corruption)
+    plain = trial_frames(trials, features, **kwargs)
+    flagged = trial_frames(trials, features, **kwargs, flag_corrupted=True)
+    assert all(len(it) == 5 for it in plain) and all(len(it) == 6 for it in flagged)
+    clean = trial_frames(trials, features, variants=("boxes", "images"), cache_dir=tmp_path)
+    for a, b, c in zip(plain, flagged, clean, strict=True):
+        np.testing.assert_array_equal(a[3], b[3])
+        assert bool(b[5]) == (not np.array_equal(b[3], c[3]))
+    assert 0 < sum(bool(it[5]) for it in flagged) < len(trials)
+    batch = collate_flagged(flagged[:4])
+    reference = collate_labelled(plain[:4])
+    assert set(batch) == set(reference) | {"app_corrupted"}
+    assert all(torch.equal(batch[k], reference[k]) for k in reference)
+    assert batch["app_corrupted"].tolist() == [bool(it[5]) for it in flagged[:4]]

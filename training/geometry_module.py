@@ -7,6 +7,9 @@ the association itself: each frame's cost matrix goes through the Hungarian assi
 non-association cost ``gamma`` (Eq. 2 of the geometric-priors paper) and the cross-view ID F1
 (CVIDF1, in percent) is logged as ``val_f1``, the quantity checkpointing and early stopping
 watch.
+
+A loss with a ``gate_weight`` above 0 (appearance-confidence fine-tunes, issue 31) adds its
+clean-frame term on batches that mark the frames with corrupted appearance (``app_corrupted``).
 """
 
 from __future__ import annotations
@@ -91,6 +94,15 @@ class GeometryMatchingModule(L.LightningModule):
             batch["hor_mask"],
             batch["hyp_mask"],
         )
+        gate_weight = getattr(self.loss, "gate_weight", 0.0)
+        gates = getattr(self.model, "last_gates", None)
+        if gate_weight > 0 and gates is not None and "app_corrupted" in batch:
+            # Clean-frame term: gates of frames with uncorrupted appearance pulled to 1.
+            i = self.model.cues.index("app")
+            clean = batch["cue_mask"][:, i] & ~batch["app_corrupted"]
+            terms = dict(terms)
+            terms["gate"] = self.loss.gate_term(gates, clean)
+            terms["total"] = terms["total"] + gate_weight * terms["gate"]
         size = int(batch["top"].shape[0])
         for name, value in terms.items():
             self.log(

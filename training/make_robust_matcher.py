@@ -26,7 +26,7 @@ Usage:
     OMP_NUM_THREADS=1 python training/make_robust_matcher.py [--work runs/default_bundle]
         [--base models/default_matcher.pt] [--out runs/robust/robust_matcher.pt]
         [--epochs 12] [--probability 0.15] [--min-strength 1] [--kind-weights 0.7 0.1 0.2]
-        [--train gates|cues] [--install]
+        [--train gates|cues] [--gate-weight W] [--gate-cap] [--install]
 
 The defaults are the run measured in docs/training.md (not shipped: its clean figures miss the
 bar by 0.18 points on one cell, see there).
@@ -53,13 +53,15 @@ TRAINED = {"gates": ("confidence.",), "cues": ("confidence.", "cue_embed.", "fus
 """``--train``: the parameter name prefixes that learn; every other weight is frozen."""
 
 
-def robust_matcher(base, trained: str):
-    """The loaded matcher with the appearance confidence added, only ``TRAINED[trained]``
-    learning."""
+def robust_matcher(base, trained: str, gate_cap: bool = False):
+    """The loaded matcher with the appearance confidence added (gates capped at 1 with
+    ``gate_cap``), only ``TRAINED[trained]`` learning."""
     from xvmatch.models.cross_view_matcher import CrossViewMatcher
 
-    config = {k: v for k, v in base.matcher.config.items() if k != "app_confidence"}
-    model = CrossViewMatcher(base.matcher.geometry, **config, app_confidence=True)
+    config = {k: v for k, v in base.matcher.config.items()
+              if k not in ("app_confidence", "app_gate_cap")}
+    model = CrossViewMatcher(base.matcher.geometry, **config, app_confidence=True,
+                             app_gate_cap=gate_cap)
     missing, unexpected = model.load_state_dict(base.matcher.state_dict(), strict=False)
     if unexpected or any(not k.startswith("confidence.") for k in missing):
         raise ValueError(f"unexpected weights: missing {missing}, unexpected {unexpected}")
@@ -90,6 +92,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--kind-weights", type=float, nargs=3, default=[0.7, 0.1, 0.2],
                         metavar=("SHIFT", "SWAP", "RANDOM"),
                         help="relative chance of each corruption (default 0.7 0.1 0.2)")
+    parser.add_argument("--gate-weight", type=float, default=0.0,
+                        help="weight of the clean-frame term pulling both gates to 1 on "
+                        "frames with uncorrupted appearance (default 0: none)")
+    parser.add_argument("--gate-cap", action="store_true",
+                        help="cap the gates at 1 (the confidence only down-weights images; "
+                        "stored in the matcher file)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
     parser.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     parser.add_argument("--cache", default=None, help="feature cache folder")
@@ -117,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     weights = args.out.with_name(args.out.stem + "_appearance.pt")
     save_appearance_weights(base.appearance, weights)
     L.seed_everything(args.seed, workers=True, verbose=False)  # the confidence head's weights
-    model = robust_matcher(base, args.train)
+    model = robust_matcher(base, args.train, args.gate_cap)
     corruption = AppCorruption(probability=args.probability, weights=tuple(args.kind_weights),
                                min_strength=args.min_strength, seed=args.seed)
     dm = SyntheticMatcherDataModule(
@@ -126,16 +134,19 @@ def main(argv: list[str] | None = None) -> int:
         appearance_weights=os.fspath(weights), feature_config=base.feature_config,
         cues=base.matcher.cues, variants=("images", "images+cameras"), noise_seeds=(11,),
         cache_dir=args.cache, workers=args.workers, seed=args.seed, corruption=corruption,
-        corrupt_val=True, app_cache=work / "app_costs")
+        corrupt_val=True, app_cache=work / "app_costs", flag_corrupted=args.gate_weight > 0)
     result = fit_matcher(
         dm, args.out, matcher=model, feature_config=base.feature_config,
         appearance=base.appearance, epochs=args.epochs, seed=args.seed,
         learning_rate=args.learning_rate, gamma=base.gamma,
+        loss_config={"gate_weight": args.gate_weight} if args.gate_weight > 0 else None,
         run_dir=args.out.with_name(args.out.name + ".run"), progress=False, threads=1,
         patience=3, meta={
             "trained_on": "synthetic renders (drone, overview), appearance corrupted; no "
             "CVMHAT file", "script": "training/make_robust_matcher.py",
             "base": os.fspath(base.path), "base_meta": base.meta, "train": args.train,
+            **({"gate_weight": args.gate_weight} if args.gate_weight > 0 else {}),
+            **({"gate_cap": True} if args.gate_cap else {}),
             "corruption": {"probability": corruption.probability,
                            "kinds": list(corruption.kinds),
                            "weights": list(corruption.weights),

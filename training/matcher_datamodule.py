@@ -44,6 +44,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
+from torch.utils.data import DataLoader
 
 from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
 from xvmatch.datasets.feature_cache import FrameJob, cached_frame_features
@@ -68,7 +70,13 @@ from xvmatch.geometry.spatial_features import (
 )
 from xvmatch.models.appearance_net import AppearanceNet, appearance_from_weights
 from xvmatch.training.appearance_costs import AppearanceCoster
-from xvmatch.training.box_datamodule import FrameDataModule, LabelledFrames, SimBoxDataModule
+from xvmatch.training.box_datamodule import (
+    FrameDataModule,
+    LabelledFrames,
+    SimBoxDataModule,
+    _FrameDataset,
+    collate_labelled,
+)
 
 __all__ = [
     "CORRUPTIONS",
@@ -77,6 +85,7 @@ __all__ = [
     "FrameItems",
     "ShiftedCoster",
     "SyntheticMatcherDataModule",
+    "collate_flagged",
     "corrupt_app",
     "shifted_app_costs",
     "trial_frames",
@@ -260,6 +269,7 @@ def trial_frames(
     corruption: AppCorruption | None = None,
     shifted_app: Sequence[np.ndarray] | None = None,
     corruption_stream: int = 0,
+    flag_corrupted: bool = False,
 ) -> list[Item]:
     """Training frames of trials in each of ``variants`` (see the module docstring).
 
@@ -277,6 +287,8 @@ def trial_frames(
         shifted_app: per trial, the costs on shifted images (needed by the ``"shift"`` kind).
         corruption_stream: keeps the draws of different trial lists apart (e.g. one per
             dataset folder and setting).
+        flag_corrupted: append to each item a sixth element, a bool array of shape ``()``:
+            whether its appearance costs were corrupted (default False: five elements).
     """
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
@@ -310,6 +322,7 @@ def trial_frames(
                 raise ValueError(f"{t.scene}/{t.frame}: the {variant!r} setting needs "
                                  "appearance costs; build the trials with a coster")
             app = t.app if "app" in wanted else None
+            corrupted = False
             if app is not None and corrupting:
                 rng = np.random.default_rng(
                     [int(corruption.seed), int(corruption_stream), k, v_index])
@@ -318,6 +331,7 @@ def trial_frames(
                     app = corrupt_app(app, kind, rng,
                                       None if shifted_app is None else shifted_app[k],
                                       corruption.embedding_dim)
+                    corrupted = True
             cues, mask = frame_cues(
                 (m, n), names,
                 app=app,
@@ -326,8 +340,19 @@ def trial_frames(
             )
             match = match_input[feats.top_order][:, feats.hor_order]
             cams = camera_labels(feats, t.det_top_ids, wearer_id)
-            out.append((feats, match, cams, canonical_cues(cues, feats), mask))
+            item = (feats, match, cams, canonical_cues(cues, feats), mask)
+            out.append((*item, np.asarray(corrupted)) if flag_corrupted else item)
     return out
+
+
+def collate_flagged(items: Sequence[tuple]) -> dict[str, torch.Tensor]:
+    """:func:`~xvmatch.training.box_datamodule.collate_labelled` of items with the sixth
+    element of ``trial_frames(..., flag_corrupted=True)`` (box-only items: not corrupted),
+    which adds ``app_corrupted (B,)`` bool."""
+    flags = [bool(it[5]) if len(it) == 6 else False for it in items]
+    batch = collate_labelled([it[:5] for it in items])
+    batch["app_corrupted"] = torch.tensor(flags, dtype=torch.bool)
+    return batch
 
 
 def _folders(value: str | Sequence[str]) -> list[str]:
@@ -359,6 +384,8 @@ class SyntheticMatcherDataModule(FrameDataModule):
         app_cache: folder keeping the appearance costs (clean and shifted) between runs, keyed
             by the dataset's content, the trials' configuration, the network's weights and the
             shift's draws; None: computed every time.
+        flag_corrupted: batches carry ``app_corrupted (B,)``, which frames have corrupted
+            appearance costs (for a loss's clean-frame term); default False: batches as before.
     """
 
     def __init__(
@@ -379,6 +406,7 @@ class SyntheticMatcherDataModule(FrameDataModule):
         corruption: AppCorruption | None = None,
         corrupt_val: bool = False,
         app_cache: str | os.PathLike | None = None,
+        flag_corrupted: bool = False,
     ) -> None:
         super().__init__(batch_size, seed)
         self.train_folders = _folders(train_data)
@@ -398,6 +426,7 @@ class SyntheticMatcherDataModule(FrameDataModule):
         self.corrupt_val = bool(corrupt_val)
         self.app_cache = None if app_cache is None else os.fspath(app_cache)
         self._net_digest = ""
+        self.flag_corrupted = bool(flag_corrupted)
 
     def _app_costs(self, folder: str, config: TrialConfig, settings: tuple[str, ...], coster,
                    what: str) -> list[np.ndarray]:
@@ -438,7 +467,8 @@ class SyntheticMatcherDataModule(FrameDataModule):
                 ["shift", shifter.seed, shifter.min_strength, shifter.max_strength]))
         items = trial_frames(trials, self.feature_config, self.cues, self.variants,
                              self.cache_dir, self.workers, corruption=corruption,
-                             shifted_app=shifted, corruption_stream=stream)
+                             shifted_app=shifted, corruption_stream=stream,
+                             flag_corrupted=self.flag_corrupted)
         return FrameItems(items, name)
 
     def setup(self, stage: str | None = None) -> None:
@@ -469,6 +499,23 @@ class SyntheticMatcherDataModule(FrameDataModule):
         if self.sim is not None:
             self.sim.setup(stage)
             self.train_parts += [_BoxOnly(p, len(self.cues)) for p in self.sim.train_parts]
+
+    def _flagged_loader(self, parts, shuffle: bool) -> DataLoader:
+        generator = torch.Generator().manual_seed(self.seed) if shuffle else None
+        return DataLoader(_FrameDataset(parts), batch_size=self.batch_size, shuffle=shuffle,
+                          collate_fn=collate_flagged, generator=generator, num_workers=0)
+
+    def train_dataloader(self) -> DataLoader:
+        """Training batches (with ``app_corrupted`` when ``flag_corrupted``)."""
+        if not self.flag_corrupted:
+            return super().train_dataloader()
+        return self._flagged_loader(self.train_parts, True)
+
+    def val_dataloader(self) -> DataLoader:
+        """Validation batches (with ``app_corrupted`` when ``flag_corrupted``)."""
+        if not self.flag_corrupted:
+            return super().val_dataloader()
+        return self._flagged_loader(self.val_parts, False)
 
     def describe(self) -> str:
         """One line: frames per split."""
