@@ -43,6 +43,13 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
         if process.is_alive():
             process.kill()
             process.join(timeout=1.0)
+    # Let the executor's manager thread see its dead workers and close its wake-up pipe: left
+    # running, it can close that pipe while the interpreter's exit hook writes to it (Python
+    # 3.11's ProcessPoolExecutor checks, then writes, without a lock), which printed an
+    # "Exception ignored ... Bad file descriptor" traceback after a Ctrl-C.
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if manager is not None and manager.is_alive():
+        manager.join(timeout=2.0)
 
 
 @contextmanager
