@@ -162,7 +162,7 @@ def _synth_cameras(args: argparse.Namespace) -> int:
         simulate_multicam_scene,
         write_multicam_scene,
     )
-    from xvmatch.output_paths import check_own_folder, claim_folder
+    from xvmatch.output_paths import claim_folder
 
     for option, wrong in (("--scenario", args.scenario is not None),
                           ("--scenes", args.scenes not in (None, 1))):
@@ -176,7 +176,6 @@ def _synth_cameras(args: argparse.Namespace) -> int:
     if not args.boxes_only and not 8 <= width <= 4096:
         raise ValueError(f"--size: with --cameras the width must be in 8..4096, got {width}")
     check_outputs([Output("--out", args.out, folder=True)])
-    check_own_folder(args.out, SYNTH_CAMERAS)
     config = MulticamConfig(n_cameras=args.cameras, n_people=args.people or (12, 12),
                             fps=args.fps)
     start = time.perf_counter()
