@@ -21,8 +21,9 @@ them (:data:`~xvmatch.inference.multi_view_costs.EGO_APPEARANCE`,
 
 ``--tracks`` compares, on scenes of ``--frames`` frames and the learned costs, the
 frame-by-frame joint MIP of ``associate-multi`` with ``associate-multi --tracks``
-(:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view, the joint
-program per clip, clips linked over time) on ground-truth boxes and on boxes with the noise of
+(:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view, the
+egocentric ones linked by motion, smoothing each frame's costs; the joint program per frame;
+ids carried over time) on ground-truth boxes and on boxes with the noise of
 ``xvmatch noise`` (its defaults: 5% jitter, 10% misses, 0.3 false boxes per frame and view;
 one run per ``--noise-seeds`` seed); besides the per-frame pair scores, ``IDF1 over time`` is
 the identity F1 of each view's ids over the whole scene (a global id must name one person in

@@ -4,16 +4,22 @@ The frame-by-frame program of :mod:`xvmatch.inference.multi_view_assignment` dec
 alone and its person ids do not carry over frames. Here (issue 33, item 2) tracklets, as in the
 two-view tracker (:mod:`xvmatch.inference.tracking`), carry evidence and ids over time:
 
-1. every view is cut into the same clips and its boxes linked into tracklets by IoU
-   (:func:`xvmatch.inference.tracklets.view_tracklets`, CVMHAT Sec. 4.1; ``min_iou`` 0.7 by
-   default, not the paper's 0.5: head-worn cameras shake, and at 0.5 one tracklet of a shaking
-   view too often holds two people); a tracklet continues one of the previous clip when
-   that one's last box and its first overlap the same way (:func:`view_chains`);
+1. every view is cut into the same clips and its boxes linked into tracklets
+   (:func:`xvmatch.inference.tracklets.view_tracklets`, CVMHAT Sec. 4.1): the top view by IoU
+   (>= 0.5), the egocentric views by motion (``motion`` = 0.3, a gate in box heights): a
+   head-worn camera's shake moves all its boxes alike, often by more than a box width, so a
+   box is linked to the tracklet nearest once that common shift is removed
+   (:func:`xvmatch.geometry.box_motion.motion_link_costs`). On the benchmark's tuning scenes
+   (ground-truth boxes) the egocentric tracklets held 1.8 boxes on average by IoU (>= 0.7,
+   ``motion=None``, the links before) and 5.9 by motion, with no more wrong links (98.6% and
+   99.6% of the links right). A tracklet continues one
+   of the previous clip when that one's last box and its first are linked the same way
+   (:func:`view_chains`);
 2. per clip and view pair, two tracklets' evidence is the mean, over the frames both are
    present in, of the frames' costs ``c - gamma`` (those of ``associate-multi``: minus the
    evidence, in nats, that two boxes are one person; :func:`tracklet_costs`); every box pair
    of a frame then costs ``w c + (1 - w)`` its tracklets' mean (:func:`smoothed_problems`,
-   ``w = frame_weight`` = 0.5), so one frame's mistake of the matcher is outvoted by the
+   ``w = frame_weight`` = 0.6), so one frame's mistake of the matcher is outvoted by the
    tracklets' other frames while a tracklet that wrongly holds two people cannot overrule a
    frame alone;
 3. every frame is solved by the joint program over all views with the cycle constraints
@@ -37,6 +43,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.box_motion import motion_link_costs
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.inference.multi_view_assignment import (
     consistent_hungarian,
@@ -138,7 +145,7 @@ def smoothed_problems(
     tracklets: Sequence[Sequence[Tracklet]],
     problems: Mapping[int, FrameProblem],
     views: Sequence[Mapping[int, FrameBoxes]],
-    frame_weight: float = 0.5,
+    frame_weight: float = 0.6,
 ) -> dict[int, FrameProblem]:
     """The frames of one clip with every box pair's cost ``c - gamma`` replaced by
     ``frame_weight (c - gamma) + (1 - frame_weight) m``, ``m`` the mean of ``c - gamma`` of the
@@ -173,10 +180,12 @@ def smoothed_problems(
 
 
 def _continuations(earlier: Sequence[Tracklet], later: Sequence[Tracklet], min_iou: float,
-                   max_gap: int) -> np.ndarray:
+                   max_gap: int, motion: float | None = None) -> np.ndarray:
     """For each later tracklet, the earlier one it continues (or -1): IoU of the earlier's last
-    box and the later's first >= ``min_iou``, at most ``max_gap`` frames missing between them,
-    one-to-one by Hungarian on IoU (a shorter gap wins a tie)."""
+    box and the later's first >= ``min_iou`` (with ``motion``: their motion cost,
+    :func:`~xvmatch.geometry.box_motion.motion_link_costs`, <= ``motion``), at most ``max_gap``
+    frames missing between them, one-to-one by Hungarian on IoU (on the cost); a shorter gap
+    wins a tie."""
     out = np.full(len(later), -1, dtype=np.int64)
     if not earlier or not later:
         return out
@@ -184,24 +193,31 @@ def _continuations(earlier: Sequence[Tracklet], later: Sequence[Tracklet], min_i
     first = np.array([t.boxes[0] for t in later])
     gap = (np.array([t.frames[0] for t in later])[None, :]
            - np.array([t.frames[-1] for t in earlier])[:, None] - 1).astype(float)
-    iou = box_iou(last, first)
-    ok = (iou >= min_iou) & (gap >= 0) & (gap <= max_gap)
-    r, c = linear_sum_assignment(-np.where(ok, iou - 1e-3 * gap, -1.0))
+    near = (gap >= 0) & (gap <= max_gap)
+    if motion is None:
+        iou = box_iou(last, first)
+        ok = (iou >= min_iou) & near
+        r, c = linear_sum_assignment(-np.where(ok, iou - 1e-3 * gap, -1.0))
+    else:
+        cost = motion_link_costs(last, first, near)
+        ok = cost <= motion
+        r, c = linear_sum_assignment(np.where(ok, cost + 1e-3 * gap, motion + 1.0))
     keep = ok[r, c]
     out[c[keep]] = r[keep]
     return out
 
 
 def view_chains(tracks: Sequence[Sequence[Tracklet]], min_iou: float = 0.5,
-                max_gap: int = 3) -> list[np.ndarray]:
+                max_gap: int = 3, motion: float | None = None) -> list[np.ndarray]:
     """Per clip, the chain of each tracklet of one view: a tracklet that continues one of the
-    previous clip (:func:`_continuations`) takes its chain, any other opens one (0, 1, ...)."""
+    previous clip (:func:`_continuations`, by IoU or with a ``motion`` gate) takes its chain,
+    any other opens one (0, 1, ...)."""
     chains: list[np.ndarray] = []
     n = 0
     for t, clip in enumerate(tracks):
         ids = np.full(len(clip), -1, dtype=np.int64)
         if t:
-            before = _continuations(tracks[t - 1], clip, min_iou, max_gap)
+            before = _continuations(tracks[t - 1], clip, min_iou, max_gap, motion)
             ids[before >= 0] = chains[t - 1][before[before >= 0]]
         fresh = np.flatnonzero(ids < 0)
         ids[fresh] = n + np.arange(fresh.size)
@@ -272,7 +288,8 @@ def track_multi_view(
     top_min_iou: float = 0.5,
     solver: str = "mip",
     time_limit: float = 5.0,
-    frame_weight: float = 0.5,
+    frame_weight: float = 0.6,
+    motion: float | None = 0.3,
 ) -> MultiViewTracks:
     """Follow the people of V views over time with cycle-consistent ids (module docstring).
 
@@ -283,18 +300,22 @@ def track_multi_view(
             :func:`~xvmatch.inference.multi_view_costs.multi_view_costs` builds them).
         clip_length: frames per clip (10, CVMHAT's).
         min_iou, max_gap: the tracklet rule of the egocentric views, inside a clip and across
-            clips.
-        top_min_iou: ``min_iou`` of the top view (0).
+            clips (``min_iou`` only with ``motion`` None).
+        top_min_iou: ``min_iou`` of the top view (0), always linked by IoU.
         solver: ``mip`` (the joint program per frame) or ``greedy`` (pairwise Hungarian made
             consistent).
         time_limit: seconds per frame for the MIP, past which the greedy answer is used.
         frame_weight: the share of a frame's own cost in the costs (:func:`smoothed_problems`).
+        motion: the egocentric views' links by motion, with this gate in box heights
+            (:func:`~xvmatch.geometry.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``
+            (the links before issue 33's motion step).
 
     Returns:
         The :class:`MultiViewTracks`.
 
     Raises:
-        ValueError: fewer than 2 views, a bad ``clip_length``, ``solver`` or ``frame_weight``.
+        ValueError: fewer than 2 views, a bad ``clip_length``, ``solver``, ``frame_weight`` or
+            ``motion``.
     """
     if len(views) < 2:
         raise ValueError(f"views: give the top view and >= 1 other, got {len(views)}")
@@ -302,11 +323,15 @@ def track_multi_view(
         raise ValueError(f"clip_length must be >= 1, solver 'mip' or 'greedy' and "
                          f"frame_weight in [0, 1], got {clip_length}, {solver!r}, "
                          f"{frame_weight}")
+    if motion is not None and not motion > 0:
+        raise ValueError(f"motion: the link gate must be > 0 box heights (or None for IoU "
+                         f"links), got {motion}")
     n_views = len(views)
     clips = split_clips(sorted(problems), int(clip_length))
     iou = [top_min_iou, *[min_iou] * (n_views - 1)]
-    tracks = [view_tracklets(views[v], clips, iou[v], max_gap) for v in range(n_views)]
-    chains = [view_chains(tracks[v], iou[v], max_gap) for v in range(n_views)]
+    gate = [None, *[motion] * (n_views - 1)]
+    tracks = [view_tracklets(views[v], clips, iou[v], max_gap, gate[v]) for v in range(n_views)]
+    chains = [view_chains(tracks[v], iou[v], max_gap, gate[v]) for v in range(n_views)]
     person: tuple[dict[int, np.ndarray], ...] = tuple(
         {f: np.zeros(len(rec), dtype=np.int64) for f, rec in views[v].items()}
         for v in range(n_views))

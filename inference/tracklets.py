@@ -6,7 +6,10 @@ paper's threshold; a box may also continue a tracklet last seen a few frames ear
 missed detection does not cut it) and each chain of links is a tracklet. With colour histograms
 of the boxes (the horizontal view, when images are given), a link also needs a histogram
 similarity of at least 0.3 (Sec. 4.1), and the assignment maximises IoU plus colour similarity.
-Boxes are ``x, y, w, h`` in pixels.
+For a moving camera (a head-worn one, whose shake makes a person's boxes of two frames overlap
+little), ``motion`` links instead by the distance from each tracklet's last box once the view's
+common shift is removed (:func:`xvmatch.geometry.box_motion.motion_link_costs`); IoU linking
+is the default and unchanged. Boxes are ``x, y, w, h`` in pixels.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.box_motion import motion_link_costs
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.color_histogram import histogram_intersection
 
@@ -82,6 +86,7 @@ def clip_tracklets(
     max_gap: int = 3,
     histograms: Mapping[int, np.ndarray] | None = None,
     min_colour: float = 0.3,
+    motion: float | None = None,
 ) -> list[Tracklet]:
     """Link the boxes of one clip into tracklets by IoU (Sec. 4.1), over short gaps.
 
@@ -93,7 +98,19 @@ def clip_tracklets(
     With ``histograms`` (``{frame: (N, B)}`` colour histograms of each frame's boxes, record
     order), a link also needs the histogram intersection of the two boxes to be at least
     ``min_colour``, and the assignment maximises IoU plus that similarity (Sec. 4.1).
+
+    With ``motion`` (a gate, in box heights) the links ignore IoU: a link costs the distance of
+    the box from the tracklet's last box once the frame's common shift (the camera's own motion)
+    is removed, plus the log ratio of the heights
+    (:func:`~xvmatch.geometry.box_motion.motion_link_costs`), must cost at most ``motion``, and
+    the assignment minimises the cost (a shorter gap winning a tie).
+
+    Raises:
+        ValueError: both ``histograms`` and ``motion`` given.
     """
+    if histograms is not None and motion is not None:
+        raise ValueError("clip_tracklets: give histograms (IoU and colour links) or motion "
+                         "(motion links), not both")
     chains: list[list[tuple[int, int, np.ndarray]]] = []
     colour: list[np.ndarray] = []  # per chain, the histogram of its last box
     for f in clip_frames.tolist():
@@ -105,11 +122,17 @@ def clip_tracklets(
         if open_chains:
             last = np.array([chains[k][-1][2] for k in open_chains])
             gaps = np.array([f - chains[k][-1][0] - 1 for k in open_chains], dtype=float)
-            iou = box_iou(last, rec.boxes)
-            if histograms is None:
+            if motion is not None:
+                cost = motion_link_costs(last, rec.boxes)
+                ok = cost <= motion
+                r, c = linear_sum_assignment(np.where(ok, cost + 1e-3 * gaps[:, None],
+                                                      motion + 1.0))
+            elif histograms is None:
+                iou = box_iou(last, rec.boxes)
                 r, c = linear_sum_assignment(-(iou - 1e-3 * gaps[:, None]))
                 ok = iou >= min_iou
             else:
+                iou = box_iou(last, rec.boxes)
                 sim = histogram_intersection(np.array([colour[k] for k in open_chains]),
                                              histograms[f])
                 ok = (iou >= min_iou) & (sim >= min_colour)
@@ -142,6 +165,9 @@ def view_tracklets(
     clips: Sequence[np.ndarray],
     min_iou: float = 0.5,
     max_gap: int = 3,
+    motion: float | None = None,
 ) -> list[list[Tracklet]]:
-    """The tracklets of every clip of one view (one list per clip), by IoU alone."""
-    return [clip_tracklets(frames, c, k, min_iou, max_gap) for k, c in enumerate(clips)]
+    """The tracklets of every clip of one view (one list per clip), by IoU alone, or by motion
+    with a ``motion`` gate (:func:`clip_tracklets`)."""
+    return [clip_tracklets(frames, c, k, min_iou, max_gap, motion=motion)
+            for k, c in enumerate(clips)]

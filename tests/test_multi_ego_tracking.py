@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.geometry.box_motion import common_shift, motion_link_costs
 from xvmatch.inference.multi_ego_tracking import (
     carry_ids,
     pairs_from_ids,
@@ -15,25 +16,28 @@ from xvmatch.inference.multi_ego_tracking import (
 )
 from xvmatch.inference.multi_view_assignment import cycle_violations, view_pairs
 from xvmatch.inference.multi_view_costs import FrameProblem
-from xvmatch.inference.tracklets import split_clips, view_tracklets
+from xvmatch.inference.tracklets import clip_tracklets, split_clips, view_tracklets
 
 
 def _scene(seed: int, n_views: int = 3, n_people: int = 4, n_frames: int = 12,
-           flip: int | None = None, noise: float = 0.0):
+           flip: int | None = None, noise: float = 0.0, shake: float = 0.0):
     """People walking slowly (boxes far apart, so IoU tracklets are exact), every view sees all
     of them in a shuffled order each frame; costs -2 for the same person, +2 otherwise (plus
     ``noise``), and on frame ``flip`` persons 0 and 1 of the later view of every pair swapped,
-    at -0.5 / +0.5 (a matcher's hesitant one-frame mistake). Returns views, problems and the
-    true person of each box."""
+    at -0.5 / +0.5 (a matcher's hesitant one-frame mistake); ``shake``: every box of a view but
+    the top one moved by the same offset, drawn per frame and view (normal, ``shake`` pixels: a
+    head-worn camera's shake). Returns views, problems and the true person of each box."""
     rng = np.random.default_rng(seed)
     start = rng.uniform(0, 50, size=(n_views, n_people, 2)) + 150.0 * np.arange(n_people)[:, None]
     step = rng.uniform(-1, 1, size=(n_views, n_people, 2))
+    jolt = np.random.default_rng([seed, 1]).normal(0.0, shake, size=(n_frames + 1, n_views, 2))
+    jolt[:, 0] = 0.0
     views = [dict() for _ in range(n_views)]
     truth = [dict() for _ in range(n_views)]
     for f in range(1, n_frames + 1):
         for v in range(n_views):
             order = rng.permutation(n_people)
-            xy = start[v, order] + f * step[v, order]
+            xy = start[v, order] + f * step[v, order] + jolt[f, v]
             boxes = np.c_[xy, np.full((n_people, 2), 40.0)]
             views[v][f] = FrameBoxes(f, np.arange(n_people, dtype=np.int64) + 100 * f, boxes)
             truth[v][f] = order
@@ -140,6 +144,73 @@ def test_chains_and_carry_ids():
     assert ids.tolist() == [2, 1] and nxt == 3
     ids, nxt = carry_ids([np.array([0])], [np.array([9])], owner, nxt)
     assert ids.tolist() == [3] and nxt == 4
+
+
+def test_common_shift_is_the_camera_motion_and_links_across_a_jump():
+    people = np.array([[0.0, 0, 40, 100], [100, 10, 40, 100], [260, 0, 30, 75]])
+    jump = np.array([70.0, -12.0, 0.0, 0.0])  # the camera turns: 70 px, wider than a box
+    moved = people[[2, 0, 1]] + jump
+    moved[1, 0] += 2.0  # and one walker's own step
+    cost = motion_link_costs(people, moved)
+    assert cost.shape == (3, 3)
+    assert np.argmin(cost, axis=1).tolist() == [1, 2, 0]
+    assert np.allclose(np.diag(cost[:, [1, 2, 0]]), [2.0 / 100, 0, 0])
+    # one person alone: the shift explains any jump, but not a change of size; a pair whose
+    # heights differ by more than the radius (log 1.5 > 0.3) proposes no shift at all
+    assert motion_link_costs(people[:1], people[:1] + 4 * jump)[0, 0] == 0.0
+    other = people[2:] * [1, 1, 1, 1.6]  # 120 px high, 100 before
+    assert np.isclose(motion_link_costs(people[:1], other)[0, 0], np.log(1.2))
+    assert motion_link_costs(people[:1], people[2:] * [1, 1, 1, 2])[0, 0] > 2.0
+    d = np.zeros((2, 2, 2))
+    assert np.array_equal(common_shift(d, np.ones((2, 2)), np.zeros((2, 2), bool), 0.3),
+                          [0.0, 0.0])
+    masked = motion_link_costs(people[:2], moved[:2], valid=np.eye(2, dtype=bool))
+    assert np.isinf(masked[0, 1]) and np.isinf(masked[1, 0])
+    with pytest.raises(ValueError, match="valid must be"):
+        motion_link_costs(people, moved, valid=np.ones((2, 3), bool))
+
+
+def test_like_sized_boxes_decide_the_shift():
+    # one tall track; next frame a short box 100 px to the right and a tall one 300 px: the
+    # smaller shift would win a tie of one vote each, but the short box cannot vote (its height
+    # differs by log 2 > 0.3), so the shift is 300 px and the tall box links at cost 0 (with
+    # a shift of 100 px the costs would be log 2 and 200 / 120)
+    last = np.array([[0.0, 0, 40, 120]])
+    now = np.array([[100.0, 30, 20, 60], [300, 0, 40, 120]])
+    cost = motion_link_costs(last, now)
+    assert cost[0, 1] == 0.0 and cost[0, 0] > 2.0
+
+
+def test_motion_links_a_shaking_view_that_iou_cuts():
+    views, _, truth = _scene(6, n_views=2, n_people=4, n_frames=10, shake=30.0)
+    clip = np.arange(1, 11)
+    by_iou = clip_tracklets(views[1], clip, 0, min_iou=0.7)
+    by_motion = clip_tracklets(views[1], clip, 0, motion=0.3)
+    assert len(by_iou) > 10  # the shake (about a box width) breaks the overlap
+    assert len(by_motion) == 4 and all(len(t) == 10 for t in by_motion)
+    for t in by_motion:  # each holds one person
+        rows = {f: views[1][f].ids.tolist().index(r) for f, r in zip(t.frames, t.rows, strict=True)}
+        assert len({int(truth[1][f][k]) for f, k in rows.items()}) == 1
+    with pytest.raises(ValueError, match="not both"):
+        clip_tracklets(views[1], clip, 0, histograms={}, motion=0.3)
+
+
+def test_motion_tracklets_outvote_a_mistake_in_shaking_views():
+    # every egocentric view shakes by about a box width per frame: by IoU its tracklets are
+    # single boxes, which carry no other frame's evidence, so frame 3's swap stays; by motion
+    # they span the clip and outvote it
+    views, problems, truth = _scene(7, n_views=3, n_people=4, n_frames=8, flip=3, shake=30.0)
+
+    def wrong(tracks):
+        ids = [tracks.person[v][3] for v in range(3)]
+        return sum(int((truth[a][3][p[:, 0]] != truth[b][3][p[:, 1]]).sum())
+                   for (a, b), p in pairs_from_ids(ids).items())
+
+    assert wrong(track_multi_view(views, problems, clip_length=8, motion=None)) > 0
+    tracks = track_multi_view(views, problems, clip_length=8)
+    assert wrong(tracks) == 0 and tracks.n_people == 4
+    with pytest.raises(ValueError, match="motion"):
+        track_multi_view(views, problems, motion=0.0)
 
 
 @pytest.fixture(scope="module")
