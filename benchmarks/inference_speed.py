@@ -11,8 +11,13 @@ counted from the ONNX graph's convolutions and matrix products) beside the machi
 single-precision matrix-product peak measured in the same run (numpy sgemm, 2048x2048, in a
 process with one, then two BLAS threads).
 
+It first prints the CPU's 8-bit dot-product features (VNNI, AMX, Arm's dot product: where the
+runtime picks INT8 on its own, :func:`xvmatch.inference.bundle.fast_int8_cpu`), then, for a
+bundle (``--bundle``, the shipped default unless ``--bundle none``), its own FP32 and INT8
+appearance files (the INT8 one mixed precision, as exported) with their ratio.
+
 Usage:
-    python benchmarks/inference_speed.py [--repeats 5]
+    python benchmarks/inference_speed.py [--repeats 5] [--bundle default|BUNDLE|none]
         [--archs resnet50 small mobilenetv2 efficientnet_lite0]
 """
 
@@ -101,12 +106,47 @@ def graph_gflop(path: Path, batch: int) -> float:
     return total / 1e9
 
 
+def time_bundle(bundle: str, crops: np.ndarray, repeats: int) -> None:
+    """Crops per second of a bundle's FP32 and INT8 appearance files, 1 and 2 threads."""
+    import json
+
+    import cv2
+
+    from xvmatch.inference.bundle import DEFAULT_BUNDLE, open_session
+
+    folder = DEFAULT_BUNDLE if bundle == "default" else Path(bundle)
+    app = json.loads((folder / "manifest.json").read_text())["appearance"]
+    if not app or not app.get("int8"):
+        print(f"\nbundle {bundle}: no INT8 appearance network")
+        return
+    w, h = app["crop_size"]
+    batch = np.resize(np.stack([cv2.resize(c, (w, h)) for c in crops]), (64, h, w, 3))
+    mixed = app["int8"].get("mixed_precision", {})
+    print(f"\nbundle {bundle}: {app['arch']} {h}x{w} crops; INT8 keeps "
+          f"{len(mixed.get('fp32_nodes', []))} nodes FP32 "
+          f"({100 * mixed.get('fp32_mac_share', 0.0):.0f}% of the multiply-adds)")
+    for threads in (1, 2):
+        speed = {}
+        for label, file in (("fp32", app["file"]), ("int8", app["int8"]["file"])):
+            s = open_session(folder / file, threads)
+            speed[label] = 64 / _timed(lambda s=s: s.run(None, {"crops": batch}), repeats)
+        print(f"  {threads} thread(s): FP32 {speed['fp32']:.1f} crops/s, INT8 "
+              f"{speed['int8']:.1f} crops/s, INT8/FP32 {speed['int8'] / speed['fp32']:.2f}x")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--archs", nargs="+",
                         default=["resnet50", "small", "mobilenetv2", "efficientnet_lite0"])
+    parser.add_argument("--bundle", default="default",
+                        help="bundle whose own FP32 and INT8 files are timed (none: skip)")
     args = parser.parse_args()
+    from xvmatch.inference.bundle import int8_dot_flags
+
+    found = int8_dot_flags()
+    print(f"CPU 8-bit dot products: {', '.join(found) if found else 'none'} (the runtime "
+          f"{'may pick' if found else 'never picks'} INT8 on its own here)")
 
     import onnxruntime as ort
     import torch
@@ -132,6 +172,9 @@ def main() -> int:
         data = tmp / "data"
         generate_dataset(data, SynthConfig(scenario="overview", n_people=(8, 12)), n_scenes=4,
                          n_frames=2, seed=31)
+        if args.bundle != "none":
+            time_bundle(args.bundle, calibration_crops(data, (64, 128), 0.1, max_crops=128),
+                        args.repeats)
         for arch in args.archs:
             torch.manual_seed(0)
             net = builders[arch]().eval()

@@ -1,13 +1,21 @@
-"""Static INT8 quantisation of the appearance graph (onnxruntime's QDQ tools), with the accuracy
-it keeps measured on held-out synthetic frames.
+"""Static INT8 quantisation of the appearance graph (onnxruntime's QDQ tools), mixed precision
+chosen by a per-node sensitivity sweep, with the accuracy it keeps measured on held-out
+synthetic frames.
 
 Static QDQ: onnxruntime's pre-processing (shape inference and graph optimisation), then
 ``quantize_static`` with per-channel INT8 weights and UINT8 activations (the x86 layout) whose
 ranges come from calibration crops. Calibration and measurement use disjoint scenes of one
-synthetic dataset (``xvmatch synth``): even scenes calibrate, odd scenes measure. Several
-calibration methods are tried; the one whose INT8 network keeps the best geometric-priors Eq. 9
-accuracy of the matcher with images on the measurement frames is kept (ties: the first in
-:data:`CALIBRATION_METHODS`), and every method's figures are recorded.
+synthetic dataset (``xvmatch synth``): even scenes calibrate, odd scenes measure.
+
+Quantising every node of the shipped MobileNetV2 branch lost 9.1 Eq. 9 points: one 1x1
+expansion convolution (block 2) carries BN-folded weights up to 127, so the rounding of its
+input is amplified a hundredfold. No calibration method mends that, so the nodes whose
+quantisation hurts most stay FP32, found by measuring, not guessed (:func:`node_sensitivity`,
+:func:`choose_fp32_nodes`): each node is quantised alone and the descriptors' error against
+FP32 on the calibration crops is its sensitivity; nodes are then kept FP32 in that order, each
+only if it lowers the whole network's error by :data:`MIN_GAIN` at least, until the error is
+at most ``max_error`` or the FP32 share of the multiply-accumulates would pass
+``max_fp32_share``.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ import hashlib
 import os
 import tempfile
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +33,31 @@ from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import APPEARANCE_INPUT, open_session
 from xvmatch.models.matcher_file import LoadedMatcher
 
-__all__ = ["CALIBRATION_METHODS", "add_int8", "calibration_crops", "int8_accuracy",
+__all__ = ["CALIBRATION_METHODS", "MAX_DESCRIPTOR_ERROR", "MAX_FP32_SHARE", "MIN_GAIN",
+           "QUANTISED_OPS",
+           "MixedPrecision", "add_int8", "calibration_crops", "choose_fp32_nodes",
+           "descriptor_error", "int8_accuracy", "node_macs", "node_sensitivity",
            "quantize_appearance"]
 
 CALIBRATION_METHODS: tuple[str, ...] = ("minmax", "percentile", "entropy")
 """Calibration methods tried, in order of preference on ties."""
+
+QUANTISED_OPS: tuple[str, ...] = ("Conv", "Gemm", "MatMul", "Add")
+"""Node types whose quantisation the sweep measures (the ones that carry the compute)."""
+
+MAX_DESCRIPTOR_ERROR = 2.5e-4
+"""Mixed precision stops once the INT8 descriptors' mean ``1 - cos`` against FP32 is this low
+(the shipped network: 0.096 fully quantised; 2.3e-4 kept 98.7% / 99.4% of FP32's matched
+pairs with images, docs/deployment.md)."""
+
+MAX_FP32_SHARE = 0.3
+"""Most share of the network's multiply-accumulates that may stay FP32 (beyond it INT8 is
+hardly faster)."""
+
+MIN_GAIN = 0.05
+"""Least relative drop of the descriptor error for a node to be kept FP32: the errors of the
+layers partly cancel, so a node's exclusion moves the whole error by a few percent either way,
+and below this the FP32 node would buy noise, not accuracy."""
 
 
 def calibration_crops(
@@ -94,6 +123,40 @@ class _CropReader:
         self._next = 0
 
 
+def _preprocess(fp32: str | os.PathLike, out: Path) -> None:
+    """onnxruntime's quantisation pre-processing (shape inference, graph optimisation)."""
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    quant_pre_process(os.fspath(fp32), os.fspath(out), skip_symbolic_shape=True)
+
+
+def _quantize(pre: Path, out: Path, crops: np.ndarray, method: str, input_name: str,
+              cache: Path, exclude: Sequence[str] = (), only: Sequence[str] | None = None,
+              ) -> None:
+    """``quantize_static`` of the pre-processed graph ``pre``; the calibration ranges are
+    computed once per ``cache`` file and reused (the sweep quantises the graph many times)."""
+    from onnxruntime.quantization import (
+        CalibrationMethod,
+        QuantFormat,
+        QuantType,
+        quantize_static,
+    )
+
+    methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile,
+               "entropy": CalibrationMethod.Entropy}
+    if method not in methods:
+        raise ValueError(f"method must be one of {', '.join(methods)}, got {method!r}")
+    quantize_static(
+        os.fspath(pre), os.fspath(out), _CropReader(crops, input_name),
+        quant_format=QuantFormat.QDQ, per_channel=True,
+        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+        calibrate_method=methods[method],
+        extra_options={"CalibPercentile": 99.99} if method == "percentile" else {},
+        nodes_to_exclude=list(exclude), nodes_to_quantize=list(only) if only else None,
+        calibration_cache_path=cache,
+    )
+
+
 def quantize_appearance(
     fp32: str | os.PathLike,
     out: str | os.PathLike,
@@ -101,6 +164,7 @@ def quantize_appearance(
     method: str,
     input_name: str = "crops",
     progress: Callable[[str], None] | None = None,
+    fp32_nodes: Sequence[str] = (),
 ) -> None:
     """Write the static INT8 (QDQ) version of an appearance graph.
 
@@ -111,40 +175,170 @@ def quantize_appearance(
         method: one of :data:`CALIBRATION_METHODS`.
         input_name: the graph's input.
         progress: called with a line of text.
+        fp32_nodes: nodes of the pre-processed graph left unquantised (mixed precision).
     """
-    from onnxruntime.quantization import (
-        CalibrationMethod,
-        QuantFormat,
-        QuantType,
-        quantize_static,
-    )
-    from onnxruntime.quantization.shape_inference import quant_pre_process
-
-    methods = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile,
-                "entropy": CalibrationMethod.Entropy}
-    if method not in methods:
-        raise ValueError(f"method must be one of {', '.join(methods)}, got {method!r}")
     if progress:
         progress(f"quantising the appearance network (calibration {method}, "
-                 f"{crops.shape[0]} crops)")
+                 f"{crops.shape[0]} crops, {len(fp32_nodes)} nodes FP32)")
     with tempfile.TemporaryDirectory() as tmp:
         pre = Path(tmp) / "pre.onnx"
-        quant_pre_process(os.fspath(fp32), os.fspath(pre), skip_symbolic_shape=True)
-        extra = {"CalibPercentile": 99.99} if method == "percentile" else {}
-        quantize_static(
-            os.fspath(pre), os.fspath(out), _CropReader(crops, input_name),
-            quant_format=QuantFormat.QDQ, per_channel=True,
-            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-            calibrate_method=methods[method], extra_options=extra,
-            calibration_cache_path=Path(tmp) / "calibration",
-        )
+        _preprocess(fp32, pre)
+        _quantize(pre, Path(out), crops, method, input_name, Path(tmp) / "calibration",
+                  exclude=fp32_nodes)
+
+
+def _descriptors(path: Path, crops: np.ndarray, batch: int = 64) -> np.ndarray:
+    """``(K, D)`` descriptors of ``crops`` by the graph at ``path`` (one thread)."""
+    session = open_session(path, 1)
+    name = session.get_inputs()[0].name
+    return np.concatenate([session.run(None, {name: crops[k : k + batch]})[0]
+                           for k in range(0, crops.shape[0], batch)])
+
+
+def descriptor_error(reference: np.ndarray, descriptors: np.ndarray) -> float:
+    """Mean ``1 - cos`` between each crop's descriptor and its reference (FP32) descriptor."""
+    a = reference / np.maximum(np.linalg.norm(reference, axis=1, keepdims=True), 1e-12)
+    b = descriptors / np.maximum(np.linalg.norm(descriptors, axis=1, keepdims=True), 1e-12)
+    return float(np.mean(1.0 - np.sum(a * b, axis=1)))
+
+
+def node_macs(model) -> dict[str, int]:
+    """Multiply-accumulates per image of each Conv / Gemm / MatMul node of an ONNX model with
+    inferred shapes (0 where a shape is unknown)."""
+    import onnx
+
+    inferred = onnx.shape_inference.infer_shapes(model)
+    shapes = {v.name: [d.dim_value for d in v.type.tensor_type.shape.dim]
+              for v in [*inferred.graph.value_info, *inferred.graph.output,
+                        *inferred.graph.input]}
+    weights = {t.name: list(t.dims) for t in model.graph.initializer}
+    out: dict[str, int] = {}
+    for node in model.graph.node:
+        w = weights.get(node.input[1]) if len(node.input) > 1 else None
+        y = shapes.get(node.output[0])
+        if node.op_type == "Conv" and w and y and len(y) == 4:
+            out[node.name] = int(np.prod(y[1:]) * np.prod(w[1:]))
+        elif node.op_type in ("Gemm", "MatMul") and w:
+            out[node.name] = int(np.prod(w))
+    return out
+
+
+def _fp32_group(model, name: str) -> list[str]:
+    """``name`` and the quantised node that feeds its first input: onnxruntime puts a Q/DQ pair
+    on a quantised Conv's output whatever its consumer, so keeping a node's input FP32 needs
+    its producer left unquantised too."""
+    producers = {o: n for n in model.graph.node for o in n.output}
+    node = next(n for n in model.graph.node if n.name == name)
+    src = producers.get(node.input[0]) if node.input else None
+    return [name] + ([src.name] if src is not None and src.op_type in QUANTISED_OPS else [])
+
+
+@dataclass(frozen=True)
+class MixedPrecision:
+    """The nodes an INT8 appearance network keeps FP32 and what that bought.
+
+    Attributes:
+        method: calibration method.
+        fp32_nodes: nodes left unquantised, in the order chosen.
+        error: descriptors' mean ``1 - cos`` against FP32 with them (calibration crops).
+        full_error: the same with every node quantised.
+        fp32_share: share of the multiply-accumulates that stay FP32.
+        sensitivity: each swept node's error when it alone is quantised.
+        by_method: each calibration method's ``full_error``.
+    """
+
+    method: str
+    fp32_nodes: tuple[str, ...]
+    error: float
+    full_error: float
+    fp32_share: float
+    sensitivity: dict[str, float]
+    by_method: dict[str, float]
+
+
+def node_sensitivity(pre: Path, crops: np.ndarray, reference: np.ndarray, method: str,
+                     input_name: str, cache: Path, work: Path) -> dict[str, float]:
+    """Each :data:`QUANTISED_OPS` node's descriptor error when it alone is quantised."""
+    import onnx
+
+    model = onnx.load(os.fspath(pre))
+    out = {}
+    for node in model.graph.node:
+        if node.op_type in QUANTISED_OPS:
+            path = work / "one.onnx"
+            _quantize(pre, path, crops, method, input_name, cache, only=[node.name])
+            out[node.name] = descriptor_error(reference, _descriptors(path, crops))
+    return out
+
+
+def choose_fp32_nodes(
+    fp32: str | os.PathLike,
+    crops: np.ndarray,
+    input_name: str = "crops",
+    max_error: float = MAX_DESCRIPTOR_ERROR,
+    max_fp32_share: float = MAX_FP32_SHARE,
+    max_steps: int = 16,
+    progress: Callable[[str], None] | None = None,
+) -> MixedPrecision:
+    """Calibration method and FP32 nodes of the INT8 appearance network, by measurement.
+
+    The method is the one whose fully quantised network has the lowest descriptor error; then
+    nodes are kept FP32 in order of sensitivity (:func:`node_sensitivity`), each with its input's
+    producer (:func:`_fp32_group`), only when that lowers the error by :data:`MIN_GAIN` and
+    keeps the FP32 share of the multiply-accumulates at most ``max_fp32_share``, until the
+    error is at most ``max_error`` or ``max_steps`` nodes were tried.
+    """
+    import onnx
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        pre = work / "pre.onnx"
+        _preprocess(fp32, pre)
+        reference = _descriptors(Path(fp32), crops)
+        full = {}
+        for method in CALIBRATION_METHODS:
+            path = work / f"full_{method}.onnx"
+            _quantize(pre, path, crops, method, input_name, work / f"cache_{method}")
+            full[method] = descriptor_error(reference, _descriptors(path, crops))
+        method = min(CALIBRATION_METHODS, key=lambda m: (full[m], CALIBRATION_METHODS.index(m)))
+        cache = work / f"cache_{method}"
+        if progress:
+            progress(f"INT8 sensitivity sweep ({method}): every node quantised alone")
+        sensitivity = node_sensitivity(pre, crops, reference, method, input_name, cache, work)
+        model = onnx.load(os.fspath(pre))
+        macs = node_macs(model)
+        total = max(sum(macs.values()), 1)
+        chosen: list[str] = []
+        error = full[method]
+        order = sorted(sensitivity, key=lambda n: (-sensitivity[n], n))
+        for name in order[:max_steps]:
+            if error <= max_error:
+                break
+            if name in chosen:
+                continue
+            trial = chosen + [n for n in _fp32_group(model, name) if n not in chosen]
+            if sum(macs.get(n, 0) for n in trial) / total > max_fp32_share:
+                continue
+            path = work / "trial.onnx"
+            _quantize(pre, path, crops, method, input_name, cache, exclude=trial)
+            e = descriptor_error(reference, _descriptors(path, crops))
+            if progress:
+                progress(f"  {name} FP32: descriptor error {e:.2e} (was {error:.2e})")
+            if e < (1.0 - MIN_GAIN) * error:
+                chosen, error = trial, e
+        return MixedPrecision(method, tuple(chosen), error, full[method],
+                              sum(macs.get(n, 0) for n in chosen) / total,
+                              {n: round(v, 8) for n, v in sensitivity.items()},
+                              {m: round(v, 8) for m, v in full.items()})
 
 
 def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str],
-                   files: dict[str, str]) -> dict[str, dict]:
+                  files: dict[str, str]) -> tuple[dict[str, dict], dict[str, dict]]:
     """Geometric-priors Eq. 9 accuracy and CVIDF1 (percent) of the matcher with images (and with
     images and cameras, when it takes camera cues) on ``scenes`` of ``data``, ground-truth boxes
-    and detector noise pooled, for each appearance file of ``files`` ({label: file name})."""
+    and detector noise pooled, for each appearance file of ``files`` ({label: file name}, the
+    first the reference); and for each other file the share of the reference's matched pairs
+    it keeps, per setting (what ``associate --precision`` changes for a user)."""
     from xvmatch.datasets.pair_trials import TrialConfig, scene_trials
     from xvmatch.datasets.synthetic_io import SyntheticDataset
     from xvmatch.geometry.matcher_inputs import (
@@ -163,6 +357,7 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
     index = {name: k for k, name in enumerate(dataset.scene_names)}
     settings = ["images"] + (["images+cameras"] if "ray" in spec.cues else [])
     out: dict[str, dict] = {}
+    pairs: dict[str, dict[str, list[set]]] = {}
     for label, file in files.items():
         matcher = LearnedMatcher(Bundle(spec, matcher_session, open_session(folder / file, 1)))
 
@@ -173,6 +368,7 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
                   for t in scene_trials(dataset.scene(name), index[name], TrialConfig(),
                                         coster=coster)]
         record = {}
+        pairs[label] = {}
         for setting in settings:
             _, rectified = INPUT_SETTINGS[setting]
             inputs = [matcher_inputs(
@@ -180,57 +376,75 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
                 spec.cues, app=t.app,
                 cameras=FrameCameras(t.cameras["top"], t.cameras["ego"]) if rectified else None)
                 for t in trials]
-            counts = []
+            counts, matched = [], []
             for t, f, c in zip(trials, inputs, matcher.costs(inputs), strict=True):
                 full = np.empty_like(c)
                 full[np.ix_(f.features.top_order, f.features.hor_order)] = c
+                assignment = assign(full, spec.gamma)
+                matched.append(set(map(tuple, np.asarray(assignment).tolist())))
                 counts.append(count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids,
-                                         t.det_ego_ids, assign(full, spec.gamma),
-                                         frame=t.frame))
+                                         t.det_ego_ids, assignment, frame=t.frame))
             s = summarize(counts)
             record[setting] = {"acc9": round(s.acc9, 3), "cvidf1": round(s.cvidf1, 3),
                                "trials": len(trials)}
+            pairs[label][setting] = matched
         out[label] = record
-    return out
+    reference = next(iter(files))
+    agreement = {}
+    for label in list(files)[1:]:
+        agreement[label] = {}
+        for setting in settings:
+            ref, other = pairs[reference][setting], pairs[label][setting]
+            total = sum(len(a) for a in ref)
+            kept = sum(len(a & b) for a, b in zip(ref, other, strict=True))
+            agreement[label][setting] = {"pairs": total, "kept": kept,
+                                         "share": round(kept / total, 5) if total else 1.0}
+    return out, agreement
 
 
 def add_int8(folder: Path, manifest: dict, loaded: LoadedMatcher, data: Path,
-              progress: Callable[[str], None] | None) -> None:
-    """Quantise the appearance graph (each calibration method), keep the best by measured
-    accuracy as ``appearance_int8.onnx`` and record everything in ``manifest``."""
+             progress: Callable[[str], None] | None) -> None:
+    """Quantise the appearance graph (calibration method and FP32 nodes by measurement,
+    :func:`choose_fp32_nodes`), write it as ``appearance_int8.onnx`` and record everything in
+    ``manifest``: the mixed precision, the Eq. 9 accuracy of FP32 and INT8 on held-out scenes,
+    and the share of FP32's matched pairs INT8 keeps there."""
     from xvmatch.datasets.synthetic_io import SyntheticDataset
 
     names = SyntheticDataset(data).scene_names
     calibrate, measure = names[0::2], names[1::2]
     if not measure:
         raise ValueError(f"{os.fspath(data)}: INT8 calibration needs at least two scenes "
-                          "(even ones calibrate, odd ones measure the accuracy)")
+                         "(even ones calibrate, odd ones measure the accuracy)")
     app = manifest["appearance"]
     crops = calibration_crops(data, tuple(app["crop_size"]), loaded.crop_context, calibrate)
-    files = {"fp32": app["file"]}
-    for method in CALIBRATION_METHODS:
-        files[method] = f"appearance_int8_{method}.onnx"
-        quantize_appearance(folder / app["file"], folder / files[method], crops, method,
-                            APPEARANCE_INPUT, progress)
+    mixed = choose_fp32_nodes(folder / app["file"], crops, APPEARANCE_INPUT, progress=progress)
+    final = folder / "appearance_int8.onnx"
+    quantize_appearance(folder / app["file"], final, crops, mixed.method, APPEARANCE_INPUT,
+                        progress, fp32_nodes=mixed.fp32_nodes)
     if progress:
         progress(f"measuring FP32 and INT8 accuracy on {len(measure)} held-out scenes")
-    accuracy = int8_accuracy(folder, manifest, data, measure, files)
-    best = max(CALIBRATION_METHODS,
-               key=lambda m: (accuracy[m]["images"]["acc9"], -CALIBRATION_METHODS.index(m)))
-    final = folder / "appearance_int8.onnx"
-    os.replace(folder / files[best], final)
-    for method in CALIBRATION_METHODS:
-        (folder / files[method]).unlink(missing_ok=True)
+    accuracy, agreement = int8_accuracy(folder, manifest, data, measure,
+                                        {"fp32": app["file"], "int8": final.name})
     app["int8"] = {
         "file": final.name,
         "sha256": hashlib.sha256(final.read_bytes()).hexdigest(),
         "format": "QDQ, per-channel INT8 weights, UINT8 activations (onnxruntime "
-                  "quantize_static after quant_pre_process)",
-        "calibration": {"method": best, "methods_tried": list(CALIBRATION_METHODS),
+                  "quantize_static after quant_pre_process); the nodes of "
+                  "mixed_precision.fp32_nodes unquantised",
+        "calibration": {"method": mixed.method, "methods_tried": list(CALIBRATION_METHODS),
                         "crops": int(crops.shape[0]), "data": os.fspath(data),
                         "scenes": list(calibrate)},
+        "mixed_precision": {
+            "fp32_nodes": list(mixed.fp32_nodes),
+            "fp32_mac_share": round(mixed.fp32_share, 4),
+            "descriptor_error": round(mixed.error, 8),
+            "descriptor_error_all_int8": round(mixed.full_error, 8),
+            "descriptor_error_all_int8_by_method": mixed.by_method,
+            "max_descriptor_error": MAX_DESCRIPTOR_ERROR, "max_fp32_share": MAX_FP32_SHARE,
+            "error": "mean 1 - cos of the descriptors against FP32 on the calibration crops",
+            "sensitivity": mixed.sensitivity},
         "accuracy": {"measured_on": {"data": os.fspath(data), "scenes": list(measure),
                                      "settings": "ground-truth boxes and detector noise"},
-                     "fp32": accuracy["fp32"], "int8": accuracy[best],
-                     "by_method": {m: accuracy[m] for m in CALIBRATION_METHODS}},
+                     "fp32": accuracy["fp32"], "int8": accuracy["int8"]},
+        "agreement": agreement["int8"],
     }
