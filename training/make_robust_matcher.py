@@ -53,6 +53,14 @@ TRAINED = {"gates": ("confidence.",), "cues": ("confidence.", "cue_embed.", "fus
 """``--train``: the parameter name prefixes that learn; every other weight is frozen."""
 
 
+def _repo_path(path) -> str:
+    """``path`` relative to the repository when inside it (no machine's folders in a shipped
+    manifest), else as given."""
+    resolved = Path(path).resolve()
+    return (os.fspath(resolved.relative_to(ROOT)) if resolved.is_relative_to(ROOT)
+            else os.fspath(path))
+
+
 def robust_matcher(base, trained: str, gate_cap: bool = False):
     """The loaded matcher with the appearance confidence added (gates capped at 1 with
     ``gate_cap``), only ``TRAINED[trained]`` learning."""
@@ -144,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         patience=3, meta={
             "trained_on": "synthetic renders (drone, overview), appearance corrupted; no "
             "CVMHAT file", "script": "training/make_robust_matcher.py",
-            "base": os.fspath(base.path), "base_meta": base.meta, "train": args.train,
+            "base": _repo_path(base.path), "base_meta": base.meta, "train": args.train,
             **({"gate_weight": args.gate_weight} if args.gate_weight > 0 else {}),
             **({"gate_cap": True} if args.gate_cap else {}),
             "corruption": {"probability": corruption.probability,
