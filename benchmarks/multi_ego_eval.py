@@ -22,7 +22,8 @@ them (:data:`~xvmatch.inference.multi_view_costs.EGO_APPEARANCE`,
 ``--tracks`` compares, on scenes of ``--frames`` frames and the learned costs, the
 frame-by-frame joint MIP of ``associate-multi`` with ``associate-multi --tracks``
 (:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view, the
-egocentric ones linked by motion, smoothing each frame's costs; the joint program per frame;
+egocentric ones linked by motion and, for the smoothing, cut where their confident top-view
+partner switches, smoothing each frame's costs; the joint program per frame;
 ids carried over time) on ground-truth boxes and on boxes with the noise of
 ``xvmatch noise`` (its defaults: 5% jitter, 10% misses, 0.3 false boxes per frame and view;
 one run per ``--noise-seeds`` seed); besides the per-frame pair scores, ``IDF1 over time`` is

@@ -14,7 +14,12 @@ two-view tracker (:mod:`xvmatch.inference.tracking`), carry evidence and ids ove
    ``motion=None``, the links before) and 5.9 by motion, with no more wrong links (98.6% and
    99.6% of the links right). A tracklet continues one
    of the previous clip when that one's last box and its first are linked the same way
-   (:func:`view_chains`);
+   (:func:`view_chains`). A motion link now and then joins two people (a person leaves the
+   view as another enters near the same place); such a tracklet's mean evidence (step 2) can
+   then overrule the frames of its minority person. So, for the smoothing only, an egocentric
+   tracklet is cut where the top-view tracklet it matches confidently (frame cost below
+   ``-partner_change`` = -2 nats) switches to another for at least two boxes
+   (:func:`split_at_partner_changes`); the pieces keep their tracklet's chain;
 2. per clip and view pair, two tracklets' evidence is the mean, over the frames both are
    present in, of the frames' costs ``c - gamma`` (those of ``associate-multi``: minus the
    evidence, in nats, that two boxes are one person; :func:`tracklet_costs`); every box pair
@@ -58,6 +63,7 @@ __all__ = [
     "carry_ids",
     "pairs_from_ids",
     "smoothed_problems",
+    "split_at_partner_changes",
     "track_multi_view",
     "tracklet_costs",
     "view_chains",
@@ -179,6 +185,72 @@ def smoothed_problems(
     return out
 
 
+def split_at_partner_changes(
+    top: Sequence[Tracklet],
+    ego: Sequence[Tracklet],
+    problems: Mapping[int, FrameProblem],
+    top_frames: Mapping[int, FrameBoxes],
+    ego_frames: Mapping[int, FrameBoxes],
+    view: int,
+    confident: float = 2.0,
+    persist: int = 2,
+) -> tuple[list[Tracklet], np.ndarray]:
+    """Cut the egocentric tracklets of one clip where the top-view tracklet they match changes:
+    a motion link that joined two people shows as a switch of the confident top-view partner.
+
+    A box's partner is the top-view tracklet of the top box whose frame cost with it,
+    ``c - gamma`` of the pair ``(0, view)``, is smallest, if that is below ``-confident``
+    (nats; otherwise none). Runs of consecutive boxes with one partner (boxes without one
+    skipped) count when they hold at least ``persist`` boxes; a tracklet is cut before the first
+    box of every counted run whose partner differs from the previous counted run's (boxes
+    without a partner in between stay with the earlier piece). So a shorter run, a single
+    frame's confident mistake of the matcher, cuts nothing.
+
+    Args:
+        top, ego: the clip's tracklets of the top view (0) and of egocentric view ``view``.
+        problems: ``{frame: FrameProblem}``, the frames' costs.
+        top_frames, ego_frames: ``{frame: FrameBoxes}`` of the two views.
+        view: the egocentric view's index.
+        confident: evidence (nats) a partner needs.
+        persist: boxes with the new partner a cut needs.
+
+    Returns:
+        ``(pieces, parent)``: the tracklets after the cuts, each tracklet's pieces in frame
+        order, and ``(len(pieces),)`` int64 the index in ``ego`` each piece comes from.
+
+    Raises:
+        ValueError: ``persist`` below 1.
+    """
+    if persist < 1:
+        raise ValueError(f"persist: a cut needs >= 1 box with the new partner, got {persist}")
+    partner = [np.full(len(tr), -1, dtype=np.int64) for tr in ego]
+    on_top = _presence(top, top_frames)
+    for f, (owner, pos) in _presence(ego, ego_frames).items():
+        if f not in on_top:
+            continue
+        t_owner, t_pos = on_top[f]
+        problem = problems[f]
+        c = (np.asarray(problem.costs[(0, view)], dtype=float)[np.ix_(t_pos, pos)]
+             - float(problem.gamma[(0, view)]))
+        best = np.argmin(c, axis=0)
+        sure = c[best, np.arange(pos.size)] < -confident
+        for k, b, ok in zip(owner.tolist(), best.tolist(), sure.tolist(), strict=True):
+            if ok:
+                partner[k][np.searchsorted(ego[k].frames, f)] = t_owner[b]
+    pieces: list[Tracklet] = []
+    parent: list[int] = []
+    for k, (tr, p) in enumerate(zip(ego, partner, strict=True)):
+        known = np.flatnonzero(p >= 0)
+        q = p[known]
+        runs = np.flatnonzero(np.r_[True, q[1:] != q[:-1]]) if q.size else np.zeros(0, int)
+        held = runs[np.diff(np.r_[runs, q.size]) >= persist]  # runs of >= persist boxes
+        cuts = known[held[1:][q[held[1:]] != q[held[:-1]]]]
+        for s, e in zip(np.r_[0, cuts].tolist(), np.r_[cuts, len(tr)].tolist(), strict=True):
+            pieces.append(Tracklet(tr.clip, tr.frames[s:e], tr.rows[s:e], tr.boxes[s:e]))
+            parent.append(k)
+    return pieces, np.array(parent, dtype=np.int64)
+
+
 def _continuations(earlier: Sequence[Tracklet], later: Sequence[Tracklet], min_iou: float,
                    max_gap: int, motion: float | None = None) -> np.ndarray:
     """For each later tracklet, the earlier one it continues (or -1): IoU of the earlier's last
@@ -290,6 +362,7 @@ def track_multi_view(
     time_limit: float = 5.0,
     frame_weight: float = 0.6,
     motion: float | None = 0.3,
+    partner_change: float | None = 2.0,
 ) -> MultiViewTracks:
     """Follow the people of V views over time with cycle-consistent ids (module docstring).
 
@@ -309,13 +382,17 @@ def track_multi_view(
         motion: the egocentric views' links by motion, with this gate in box heights
             (:func:`~xvmatch.geometry.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``
             (the links before issue 33's motion step).
+        partner_change: the egocentric tracklets are cut, for the smoothing only, where the
+            top-view tracklet they match with at least this evidence (nats) changes
+            (:func:`split_at_partner_changes`; the pieces keep their tracklet's chain, so ids
+            carry as before); None: never cut.
 
     Returns:
         The :class:`MultiViewTracks`.
 
     Raises:
-        ValueError: fewer than 2 views, a bad ``clip_length``, ``solver``, ``frame_weight`` or
-            ``motion``.
+        ValueError: fewer than 2 views, a bad ``clip_length``, ``solver``, ``frame_weight``,
+            ``motion`` or ``partner_change``.
     """
     if len(views) < 2:
         raise ValueError(f"views: give the top view and >= 1 other, got {len(views)}")
@@ -326,12 +403,20 @@ def track_multi_view(
     if motion is not None and not motion > 0:
         raise ValueError(f"motion: the link gate must be > 0 box heights (or None for IoU "
                          f"links), got {motion}")
+    if partner_change is not None and not partner_change >= 0:
+        raise ValueError(f"partner_change: the evidence a top-view partner needs must be >= 0 "
+                         f"nats (or None: never cut), got {partner_change}")
     n_views = len(views)
     clips = split_clips(sorted(problems), int(clip_length))
     iou = [top_min_iou, *[min_iou] * (n_views - 1)]
     gate = [None, *[motion] * (n_views - 1)]
     tracks = [view_tracklets(views[v], clips, iou[v], max_gap, gate[v]) for v in range(n_views)]
     chains = [view_chains(tracks[v], iou[v], max_gap, gate[v]) for v in range(n_views)]
+    if partner_change is not None:  # cut for the smoothing; the pieces keep their chains
+        for v, t in ((v, t) for v in range(1, n_views) for t in range(len(clips))):
+            tracks[v][t], parent = split_at_partner_changes(
+                tracks[0][t], tracks[v][t], problems, views[0], views[v], v, partner_change)
+            chains[v][t] = chains[v][t][parent]
     person: tuple[dict[int, np.ndarray], ...] = tuple(
         {f: np.zeros(len(rec), dtype=np.int64) for f, rec in views[v].items()}
         for v in range(n_views))

@@ -11,6 +11,7 @@ from xvmatch.inference.multi_ego_tracking import (
     carry_ids,
     pairs_from_ids,
     smoothed_problems,
+    split_at_partner_changes,
     track_multi_view,
     view_chains,
 )
@@ -211,6 +212,64 @@ def test_motion_tracklets_outvote_a_mistake_in_shaking_views():
     assert wrong(tracks) == 0 and tracks.n_people == 4
     with pytest.raises(ValueError, match="motion"):
         track_multi_view(views, problems, motion=0.0)
+
+
+def _handover(c_right: float, c_other: float):
+    """A top view with persons A and B on 10 frames, and an egocentric view that sees A alone
+    on frames 1-7, then B alone on frames 8-10 where A stood: one box per frame, so the common
+    shift explains the jump and the motion links join the two people into one tracklet. Costs
+    top-ego: A -3 and B +3 on frames 1-7; on frames 8-10 ``c_right`` for B and ``c_other`` for
+    A. Returns views, problems and the ego box's true top row per frame."""
+    top = {f: FrameBoxes(f, np.array([0, 1]), np.array([[100.0, 100, 10, 10],
+                                                        [300, 100, 10, 10]]))
+           for f in range(1, 11)}
+    ego = {f: FrameBoxes(f, np.array([0]), np.array([[100.0 if f < 8 else 300.0, 50, 40, 100]]))
+           for f in range(1, 11)}
+    problems = {}
+    for f in range(1, 11):
+        c = np.array([[-3.0], [3.0]]) if f < 8 else np.array([[c_other], [c_right]])
+        problems[f] = FrameProblem((2, 1), {(0, 1): c}, {(0, 1): 0.0})
+    return [top, ego], problems, [0] * 7 + [1] * 3
+
+
+def test_split_at_partner_changes_cuts_where_the_confident_top_partner_switches():
+    views, problems, _ = _handover(-2.2, -0.9)
+    clips = split_clips(sorted(problems), 10)
+    top, ego = (view_tracklets(views[v], clips, motion=None if v == 0 else 0.3)[0]
+                for v in range(2))
+    assert len(top) == 2 and len(ego) == 1 and len(ego[0]) == 10  # the wrong link is made
+    pieces, parent = split_at_partner_changes(top, ego, problems, views[0], views[1], 1)
+    assert [p.frames.tolist() for p in pieces] == [list(range(1, 8)), [8, 9, 10]]
+    assert parent.tolist() == [0, 0]
+    # evidence below the bar (-1.5 > -2 nats) names no partner: no cut
+    weak = _handover(-1.5, -0.9)[1]
+    assert len(split_at_partner_changes(top, ego, weak, views[0], views[1], 1)[0]) == 1
+    # one frame's confident switch is a matcher's mistake, not a wrong link: no cut
+    blip = dict(problems)
+    for f in (9, 10):
+        blip[f] = problems[1]
+    assert len(split_at_partner_changes(top, ego, blip, views[0], views[1], 1)[0]) == 1
+    assert len(split_at_partner_changes(top, ego, blip, views[0], views[1], 1,
+                                        persist=1)[0]) == 3
+    with pytest.raises(ValueError, match="persist"):
+        split_at_partner_changes(top, ego, problems, views[0], views[1], 1, persist=0)
+
+
+def test_cut_tracklets_stop_a_wrong_link_from_overruling_the_frames():
+    # frames 8-10 alone say B (-2.2 against -0.9); the joined tracklet's mean says A strongly
+    # enough to overrule them (0.6 * -0.9 + 0.4 * -2.37 < 0.6 * -2.2 + 0.4 * 1.44); once cut,
+    # the frames' own evidence decides, and the ids still carry (the piece keeps its chain)
+    views, problems, truth = _handover(-2.2, -0.9)
+
+    def partner(tracks):
+        return [int(np.flatnonzero(tracks.person[0][f] == tracks.person[1][f][0])[0])
+                if tracks.person[1][f][0] in tracks.person[0][f] else -1 for f in range(1, 11)]
+
+    assert partner(track_multi_view(views, problems, partner_change=None)) == [0] * 10
+    tracks = track_multi_view(views, problems)
+    assert partner(tracks) == truth and tracks.n_people == 2
+    with pytest.raises(ValueError, match="partner_change"):
+        track_multi_view(views, problems, partner_change=-1.0)
 
 
 @pytest.fixture(scope="module")
