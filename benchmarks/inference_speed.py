@@ -67,10 +67,11 @@ def sgemm_gflops(threads: int, n: int = 2048, repeats: int = 5) -> float:
 
 def graph_gflop(path: Path, batch: int) -> float:
     """Multiply-add FLOPs (x2) of the Conv, Gemm and MatMul nodes of an ONNX graph for one
-    batch, from shape inference."""
+    batch, from shape inference (:func:`xvmatch.export.int8.node_macs`)."""
     import onnx
     import onnxruntime as ort
-    from onnx import shape_inference
+
+    from xvmatch.export.int8 import node_macs
 
     # onnxruntime's basic optimisations first: they fold the traced padding arithmetic of
     # EfficientNet's "same" padding into the convolutions, so every shape can be inferred.
@@ -85,51 +86,31 @@ def graph_gflop(path: Path, batch: int) -> float:
         for d in v.type.tensor_type.shape.dim:
             if d.dim_value <= 0:
                 d.dim_value = batch
-    model = shape_inference.infer_shapes(model, data_prop=True)
-    shapes = {}
-    for v in list(model.graph.value_info) + list(model.graph.input) + list(model.graph.output):
-        dims = [d.dim_value if d.dim_value > 0 else batch for d in v.type.tensor_type.shape.dim]
-        shapes[v.name] = dims
-    weights = {w.name: list(w.dims) for w in model.graph.initializer}
-    total = 0.0
-    for node in model.graph.node:
-        if node.op_type == "Conv":
-            w = weights.get(node.input[1])
-            out = shapes.get(node.output[0])
-            if w and out:
-                total += 2.0 * np.prod(out) * np.prod(w[1:])
-        elif node.op_type in ("Gemm", "MatMul"):
-            w = weights.get(node.input[1])
-            out = shapes.get(node.output[0])
-            if w and out:
-                total += 2.0 * np.prod(out) * w[0 if node.op_type == "MatMul" else 1]
-    return total / 1e9
+    return 2.0 * batch * sum(node_macs(model).values()) / 1e9
 
 
 def time_bundle(bundle: str, crops: np.ndarray, repeats: int) -> None:
-    """Crops per second of a bundle's FP32 and INT8 appearance files, 1 and 2 threads."""
-    import json
-
+    """Crops per second of a bundle's FP32 and INT8 appearance files, 1 and 2 threads (loaded
+    and checked as the runtime loads them)."""
     import cv2
 
-    from xvmatch.inference.bundle import DEFAULT_BUNDLE, open_session
+    from xvmatch.inference.bundle import load_bundle
 
-    folder = DEFAULT_BUNDLE if bundle == "default" else Path(bundle)
-    app = json.loads((folder / "manifest.json").read_text())["appearance"]
-    if not app or not app.get("int8"):
+    spec = load_bundle(bundle).manifest.appearance
+    if spec is None or spec.int8_file is None:
         print(f"\nbundle {bundle}: no INT8 appearance network")
         return
-    w, h = app["crop_size"]
+    w, h = spec.crop_size
     batch = np.resize(np.stack([cv2.resize(c, (w, h)) for c in crops]), (64, h, w, 3))
-    mixed = app["int8"].get("mixed_precision", {})
-    print(f"\nbundle {bundle}: {app['arch']} {h}x{w} crops; INT8 keeps "
+    mixed = spec.int8.get("mixed_precision", {})
+    print(f"\nbundle {bundle}: {spec.arch} {h}x{w} crops; INT8 keeps "
           f"{len(mixed.get('fp32_nodes', []))} nodes FP32 "
           f"({100 * mixed.get('fp32_mac_share', 0.0):.0f}% of the multiply-adds)")
     for threads in (1, 2):
         speed = {}
-        for label, file in (("fp32", app["file"]), ("int8", app["int8"]["file"])):
-            s = open_session(folder / file, threads)
-            speed[label] = 64 / _timed(lambda s=s: s.run(None, {"crops": batch}), repeats)
+        for precision in ("fp32", "int8"):
+            loaded = load_bundle(bundle, threads, precision)
+            speed[precision] = 64 / _timed(lambda b=loaded: b.embed(batch), repeats)
         print(f"  {threads} thread(s): FP32 {speed['fp32']:.1f} crops/s, INT8 "
               f"{speed['int8']:.1f} crops/s, INT8/FP32 {speed['int8'] / speed['fp32']:.2f}x")
 

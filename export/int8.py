@@ -203,11 +203,11 @@ def descriptor_error(reference: np.ndarray, descriptors: np.ndarray) -> float:
 
 
 def node_macs(model) -> dict[str, int]:
-    """Multiply-accumulates per image of each Conv / Gemm / MatMul node of an ONNX model with
-    inferred shapes (0 where a shape is unknown)."""
+    """Multiply-accumulates per image of each Conv / Gemm / MatMul node of an ONNX model, from
+    its inferred shapes (a Conv whose output shape is unknown is left out)."""
     import onnx
 
-    inferred = onnx.shape_inference.infer_shapes(model)
+    inferred = onnx.shape_inference.infer_shapes(model, data_prop=True)
     shapes = {v.name: [d.dim_value for d in v.type.tensor_type.shape.dim]
               for v in [*inferred.graph.value_info, *inferred.graph.output,
                         *inferred.graph.input]}

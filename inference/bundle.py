@@ -485,8 +485,8 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
         precision: the appearance network to run: ``"int8"`` (needs one), ``"fp32"``, or None:
             the INT8 one when the bundle has it, the CPU has 8-bit dot-product instructions
             (:func:`fast_int8_cpu`; measured on an AVX2-only CPU, INT8 was 0.76x the speed of
-            FP32 for the compact network) and it kept the FP32 accuracy at export
-            and matches at export (:func:`int8_is_safe`), else FP32.
+            FP32 for the compact network) and it kept the FP32 accuracy and matches at export
+            (:func:`int8_is_safe`), else FP32.
 
     Raises:
         BundleError: anything wrong with the manifest or a file (one line naming the file).

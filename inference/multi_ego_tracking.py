@@ -48,7 +48,6 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.box_motion import motion_link_costs
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.inference.multi_view_assignment import (
     consistent_hungarian,
@@ -56,7 +55,12 @@ from xvmatch.inference.multi_view_assignment import (
     view_pairs,
 )
 from xvmatch.inference.multi_view_costs import FrameProblem
-from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets
+from xvmatch.inference.tracklets import (
+    Tracklet,
+    motion_assignment,
+    split_clips,
+    view_tracklets,
+)
 
 __all__ = [
     "MultiViewTracks",
@@ -271,9 +275,7 @@ def _continuations(earlier: Sequence[Tracklet], later: Sequence[Tracklet], min_i
         ok = (iou >= min_iou) & near
         r, c = linear_sum_assignment(-np.where(ok, iou - 1e-3 * gap, -1.0))
     else:
-        cost = motion_link_costs(last, first, near)
-        ok = cost <= motion
-        r, c = linear_sum_assignment(np.where(ok, cost + 1e-3 * gap, motion + 1.0))
+        r, c, ok = motion_assignment(last, first, motion, gap, near)
     keep = ok[r, c]
     out[c[keep]] = r[keep]
     return out

@@ -25,7 +25,7 @@ from xvmatch.geometry.box_motion import motion_link_costs
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.color_histogram import histogram_intersection
 
-__all__ = ["Tracklet", "clip_tracklets", "split_clips", "view_tracklets"]
+__all__ = ["Tracklet", "clip_tracklets", "motion_assignment", "split_clips", "view_tracklets"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +78,20 @@ def split_clips(frames: Sequence[int], length: int) -> list[np.ndarray]:
     return clips
 
 
+def motion_assignment(last: np.ndarray, boxes: np.ndarray, gate: float, gaps: np.ndarray,
+                      valid: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One-to-one links of tracks (their ``last`` boxes) to ``boxes`` by motion: Hungarian on
+    :func:`~xvmatch.geometry.box_motion.motion_link_costs` (``valid`` pairs only) plus
+    ``1e-3`` times the frames missed (``gaps``, broadcast to ``(M, N)``: a shorter gap wins a
+    tie); returns the assignment's rows, columns and ``(M, N)`` whether each pair is within
+    ``gate``."""
+    cost = motion_link_costs(last, boxes, valid)
+    ok = cost <= gate
+    r, c = linear_sum_assignment(np.where(ok, cost + 1e-3 * gaps, gate + 1.0))
+    return r, c, ok
+
+
 def clip_tracklets(
     frames: Mapping[int, FrameBoxes],
     clip_frames: np.ndarray,
@@ -123,10 +137,7 @@ def clip_tracklets(
             last = np.array([chains[k][-1][2] for k in open_chains])
             gaps = np.array([f - chains[k][-1][0] - 1 for k in open_chains], dtype=float)
             if motion is not None:
-                cost = motion_link_costs(last, rec.boxes)
-                ok = cost <= motion
-                r, c = linear_sum_assignment(np.where(ok, cost + 1e-3 * gaps[:, None],
-                                                      motion + 1.0))
+                r, c, ok = motion_assignment(last, rec.boxes, motion, gaps[:, None])
             elif histograms is None:
                 iou = box_iou(last, rec.boxes)
                 r, c = linear_sum_assignment(-(iou - 1e-3 * gaps[:, None]))
