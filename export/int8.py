@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -164,7 +165,6 @@ def quantize_appearance(
     method: str,
     input_name: str = "crops",
     progress: Callable[[str], None] | None = None,
-    fp32_nodes: Sequence[str] = (),
 ) -> None:
     """Write the static INT8 (QDQ) version of an appearance graph.
 
@@ -175,16 +175,14 @@ def quantize_appearance(
         method: one of :data:`CALIBRATION_METHODS`.
         input_name: the graph's input.
         progress: called with a line of text.
-        fp32_nodes: nodes of the pre-processed graph left unquantised (mixed precision).
     """
     if progress:
         progress(f"quantising the appearance network (calibration {method}, "
-                 f"{crops.shape[0]} crops, {len(fp32_nodes)} nodes FP32)")
+                 f"{crops.shape[0]} crops)")
     with tempfile.TemporaryDirectory() as tmp:
         pre = Path(tmp) / "pre.onnx"
         _preprocess(fp32, pre)
-        _quantize(pre, Path(out), crops, method, input_name, Path(tmp) / "calibration",
-                  exclude=fp32_nodes)
+        _quantize(pre, Path(out), crops, method, input_name, Path(tmp) / "calibration")
 
 
 def _descriptors(path: Path, crops: np.ndarray, batch: int = 64) -> np.ndarray:
@@ -274,6 +272,7 @@ def node_sensitivity(pre: Path, crops: np.ndarray, reference: np.ndarray, method
 def choose_fp32_nodes(
     fp32: str | os.PathLike,
     crops: np.ndarray,
+    out: str | os.PathLike,
     input_name: str = "crops",
     max_error: float = MAX_DESCRIPTOR_ERROR,
     max_fp32_share: float = MAX_FP32_SHARE,
@@ -286,7 +285,8 @@ def choose_fp32_nodes(
     nodes are kept FP32 in order of sensitivity (:func:`node_sensitivity`), each with its input's
     producer (:func:`_fp32_group`), only when that lowers the error by :data:`MIN_GAIN` and
     keeps the FP32 share of the multiply-accumulates at most ``max_fp32_share``, until the
-    error is at most ``max_error`` or ``max_steps`` nodes were tried.
+    error is at most ``max_error`` or ``max_steps`` nodes were tried. The chosen INT8 network
+    is written to ``out`` (the sweep's own file, not quantised again).
     """
     import onnx
 
@@ -302,6 +302,7 @@ def choose_fp32_nodes(
             full[method] = descriptor_error(reference, _descriptors(path, crops))
         method = min(CALIBRATION_METHODS, key=lambda m: (full[m], CALIBRATION_METHODS.index(m)))
         cache = work / f"cache_{method}"
+        best = work / f"full_{method}.onnx"
         if progress:
             progress(f"INT8 sensitivity sweep ({method}): every node quantised alone")
         sensitivity = node_sensitivity(pre, crops, reference, method, input_name, cache, work)
@@ -326,6 +327,8 @@ def choose_fp32_nodes(
                 progress(f"  {name} FP32: descriptor error {e:.2e} (was {error:.2e})")
             if e < (1.0 - MIN_GAIN) * error:
                 chosen, error = trial, e
+                best = path.replace(work / "best.onnx")
+        shutil.copyfile(best, out)
         return MixedPrecision(method, tuple(chosen), error, full[method],
                               sum(macs.get(n, 0) for n in chosen) / total,
                               {n: round(v, 8) for n, v in sensitivity.items()},
@@ -417,10 +420,9 @@ def add_int8(folder: Path, manifest: dict, loaded: LoadedMatcher, data: Path,
                          "(even ones calibrate, odd ones measure the accuracy)")
     app = manifest["appearance"]
     crops = calibration_crops(data, tuple(app["crop_size"]), loaded.crop_context, calibrate)
-    mixed = choose_fp32_nodes(folder / app["file"], crops, APPEARANCE_INPUT, progress=progress)
     final = folder / "appearance_int8.onnx"
-    quantize_appearance(folder / app["file"], final, crops, mixed.method, APPEARANCE_INPUT,
-                        progress, fp32_nodes=mixed.fp32_nodes)
+    mixed = choose_fp32_nodes(folder / app["file"], crops, final, APPEARANCE_INPUT,
+                              progress=progress)
     if progress:
         progress(f"measuring FP32 and INT8 accuracy on {len(measure)} held-out scenes")
     accuracy, agreement = int8_accuracy(folder, manifest, data, measure,
