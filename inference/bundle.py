@@ -58,6 +58,7 @@ __all__ = [
     "int8_agreement",
     "int8_dot_flags",
     "int8_is_safe",
+    "int8_refusal",
     "load_bundle",
     "open_session",
     "read_manifest",
@@ -446,33 +447,66 @@ by the luck of a few hundred pairs (an export measured 213 of 215 pairs, 99.1%, 
 network that kept 98.7% of 716 on the deployed benchmark)."""
 
 
+def _agreement_counts(int8: dict) -> dict[str, tuple[int, int]] | None:
+    """``{setting: (kept, pairs)}`` of the manifest's ``appearance.int8.agreement``; None when
+    it records none or a count is impossible."""
+    try:
+        counts = {str(s): (int(v["kept"]), int(v["pairs"])) for s, v in int8["agreement"].items()}
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
+    if not counts or any(n <= 0 or not 0 <= kept <= n for kept, n in counts.values()):
+        return None
+    return counts
+
+
+def _wilson_lower(kept: int, n: int, z: float) -> float:
+    """One-sided Wilson score lower bound of the share ``kept / n``."""
+    p = kept / n
+    centre = p + z * z / (2 * n)
+    spread = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return (centre - spread) / (1 + z * z / n)
+
+
 def int8_agreement(int8: dict, z: float = 1.645) -> float | None:
     """The smallest one-sided lower confidence bound (Wilson score, ``z`` 1.645: 95%) of the
     share of FP32's matched pairs INT8 kept, over the settings the manifest's
     ``appearance.int8.agreement`` records; None when it records none."""
-    try:
-        counts = [(int(v["kept"]), int(v["pairs"])) for v in int8["agreement"].values()]
-    except (KeyError, TypeError, ValueError, AttributeError):
+    counts = _agreement_counts(int8)
+    if counts is None:
         return None
-    bounds = []
-    for kept, n in counts:
-        if n <= 0 or not 0 <= kept <= n:
-            return None
-        p = kept / n
-        centre = p + z * z / (2 * n)
-        spread = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-        bounds.append((centre - spread) / (1 + z * z / n))
-    return min(bounds) if bounds else None
+    return min(_wilson_lower(kept, n, z) for kept, n in counts.values())
+
+
+def int8_refusal(int8: dict, z: float = 1.645) -> str | None:
+    """Why the runtime will not pick the INT8 network on its own (a clause for a message), or
+    None when it kept the FP32 accuracy at export (within :data:`INT8_MAX_LOSS`) and FP32's
+    matches (at least :data:`INT8_MIN_AGREEMENT` of the pairs, with confidence); unknown counts
+    as not kept."""
+    loss = int8_accuracy_loss(int8)
+    if loss is None:
+        return "the manifest records no INT8 accuracy"
+    if loss > INT8_MAX_LOSS:
+        return (f"it lost {loss:.1f} Eq. 9 points against FP32 at export (at most "
+                f"{INT8_MAX_LOSS:g})")
+    counts = _agreement_counts(int8)
+    if counts is None:
+        return "the manifest records no agreement with FP32's matched pairs"
+    setting, (kept, n) = min(counts.items(), key=lambda c: _wilson_lower(*c[1], z))
+    if _wilson_lower(kept, n, z) >= INT8_MIN_AGREEMENT:
+        return None
+    share = f"{100 * INT8_MIN_AGREEMENT:g}%"
+    if kept == n:  # all kept: n / (n + z^2) is the bound, so this many pairs are needed
+        needed = math.ceil(INT8_MIN_AGREEMENT * z * z / (1 - INT8_MIN_AGREEMENT))
+        return (f"it kept all {n} of FP32's matched pairs ({setting}), too few to show "
+                f"{share} with 95% confidence (at least {needed} are needed: calibrate on a "
+                "dataset with more scenes)")
+    return (f"it kept {kept} of FP32's {n} matched pairs ({setting}, {100 * kept / n:.1f}%), "
+            f"not shown to be {share} or more with 95% confidence")
 
 
 def int8_is_safe(int8: dict) -> bool:
-    """Whether the INT8 network kept the FP32 accuracy at export (within :data:`INT8_MAX_LOSS`)
-    and FP32's matches (at least :data:`INT8_MIN_AGREEMENT` of the pairs, with confidence);
-    unknown counts as not kept."""
-    loss = int8_accuracy_loss(int8)
-    agreement = int8_agreement(int8)
-    return (loss is not None and loss <= INT8_MAX_LOSS and agreement is not None
-            and agreement >= INT8_MIN_AGREEMENT)
+    """Whether the runtime may pick the INT8 network on its own (:func:`int8_refusal`)."""
+    return int8_refusal(int8) is None
 
 
 def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,

@@ -151,7 +151,10 @@ def test_export_and_associate_commands(tmp_path, capsys, tiny_models, tiny_synth
     assert main(["export", "--model", str(tiny_models["full"]), "--out", str(out),
                  "--parity-data", str(tiny_synth["overview"]), "--int8", "--calibration",
                  str(tiny_synth["overview"])]) == 0
-    assert "INT8 appearance" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "INT8 appearance" in err and "INT8 kept FP32's matched pairs there: " in err
+    # The tiny dataset measures a handful of pairs: never enough to show 99%.
+    assert "the runtime will not pick INT8 by itself: " in err
     assert main(["export", "--model", str(tiny_models["full"]), "--out", str(tmp_path / "c"),
                  "--int8"]) == 2
     assert "--int8 and --calibration DATA go together" in capsys.readouterr().err
@@ -212,3 +215,32 @@ def test_int8_agreement_is_a_lower_confidence_bound():
     assert both == int8_agreement(record((900, 1000)))  # the worst setting decides
     assert int8_agreement({}) is None
     assert int8_agreement(record((3, 2))) is None and int8_agreement(record((0, 0))) is None
+
+
+@pytest.mark.parametrize(("loss", "agreement", "reason"), [
+    (0.0, (2000, 2000), None),
+    (None, (2000, 2000), "records no INT8 accuracy"),
+    (1.5, (2000, 2000), "lost 1.5 Eq. 9 points"),
+    (0.0, None, "records no agreement"),
+    (0.0, (216, 216), "kept all 216 of FP32's matched pairs (images), too few to show 99% with "
+                      "95% confidence (at least 268 are needed"),
+    (0.0, (1974, 2000), "kept 1974 of FP32's 2000 matched pairs (images, 98.7%), not shown"),
+])
+def test_int8_refusal_says_why(int8_bundle, tmp_path, loss, agreement, reason):
+    from xvmatch.inference.bundle import int8_is_safe, int8_refusal
+
+    out = _with_int8_loss(int8_bundle[0], tmp_path, loss, agreement)
+    int8 = json.loads((out / "manifest.json").read_text())["appearance"]["int8"]
+    said = int8_refusal(int8)
+    assert (said is None) == (reason is None) == int8_is_safe(int8)
+    if reason is not None:
+        assert reason in said, said
+
+
+def test_the_pairs_needed_are_the_least_that_can_show_the_bar():
+    from xvmatch.inference.bundle import INT8_MIN_AGREEMENT, int8_agreement
+
+    def bound(n):
+        return int8_agreement({"agreement": {"images": {"kept": n, "pairs": n}}})
+
+    assert bound(267) < INT8_MIN_AGREEMENT <= bound(268)

@@ -47,6 +47,7 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
 def _cmd_export(args: argparse.Namespace) -> int:
     try:
         from xvmatch.export.onnx_export import ExportError, check_replaceable, export_bundle
+        from xvmatch.inference.bundle import int8_refusal
     except ImportError as exc:
         raise ValueError(f"xvmatch export needs the learn extra (torch, onnx): {exc}") from None
 
@@ -79,5 +80,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
             say(f"INT8 appearance ({int8['calibration']['method']} calibration): Eq. 9 accuracy "
                 f"with images {acc['int8']['images']['acc9']:.1f} against FP32 "
                 f"{acc['fp32']['images']['acc9']:.1f} on held-out scenes")
+            kept = [f"{v['kept']}/{v['pairs']} ({s})"
+                    for s, v in (int8.get("agreement") or {}).items()]
+            if kept:
+                say(f"INT8 kept FP32's matched pairs there: {', '.join(kept)}")
+            reason = int8_refusal(int8)
+            say("the runtime picks INT8 by itself on CPUs with 8-bit dot products (VNNI, Arm "
+                "dotprod)" if reason is None else
+                f"the runtime will not pick INT8 by itself: {reason}; --precision int8 runs it")
         say(f"wrote {args.out} (cues: {', '.join(manifest['cues']) or 'none, box-only'})")
     return 0
