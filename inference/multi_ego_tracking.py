@@ -127,12 +127,16 @@ def tracklet_costs(
         shared = np.zeros_like(total)
         for f in sorted(set(present[a]) & set(present[b])):
             (ta, pa), (tb, pb) = present[a][f], present[b][f]
-            problem = problems[f]
-            c = np.asarray(problem.costs[(a, b)], dtype=float)[np.ix_(pa, pb)]
-            total[np.ix_(ta, tb)] += c - float(problem.gamma[(a, b)])
+            total[np.ix_(ta, tb)] += _evidence(problems[f], (a, b), pa, pb)
             shared[np.ix_(ta, tb)] += 1.0
         out[(a, b)] = (total, shared)
     return out
+
+
+def _evidence(problem: FrameProblem, ab: tuple[int, int], rows: np.ndarray, cols: np.ndarray
+              ) -> np.ndarray:
+    """``c - gamma`` of view pair ``ab`` for the boxes at record positions ``rows`` x ``cols``."""
+    return np.asarray(problem.costs[ab], dtype=float)[np.ix_(rows, cols)] - float(problem.gamma[ab])
 
 
 def _presence(tracklets: Sequence[Tracklet], frames: Mapping[int, FrameBoxes]
@@ -233,9 +237,7 @@ def split_at_partner_changes(
         if f not in on_top:
             continue
         t_owner, t_pos = on_top[f]
-        problem = problems[f]
-        c = (np.asarray(problem.costs[(0, view)], dtype=float)[np.ix_(t_pos, pos)]
-             - float(problem.gamma[(0, view)]))
+        c = _evidence(problems[f], (0, view), t_pos, pos)
         best = np.argmin(c, axis=0)
         sure = c[best, np.arange(pos.size)] < -confident
         for k, b, ok in zip(owner.tolist(), best.tolist(), sure.tolist(), strict=True):
