@@ -218,6 +218,7 @@ class CrossViewMatcher(nn.Module):
         hyp_mask: Tensor,
         cues: Tensor | None = None,
         cue_mask: Tensor | None = None,
+        gates: Tensor | None = None,
     ) -> GeometryOutput:
         """Match a batch of frames.
 
@@ -227,12 +228,18 @@ class CrossViewMatcher(nn.Module):
             cues: ``(B, M, N, K)`` pair cues in [0, 1], in the order of :attr:`cues` (ignored
                 where unavailable); None for a box-only call.
             cue_mask: ``(B, K)`` bool, which cues each frame has; None: none.
+            gates: ``(B, 2)`` gates of the ``app`` cue to use instead of the confidence
+                head's (a matcher built with ``app_confidence``; not capped, not recorded in
+                :attr:`last_gates`): 0 gives the boxes-only input, 1 the cue as without the
+                confidence. Training only (the per-frame gate target); None: the head's.
 
         Returns:
             :class:`~xvmatch.models.geometry_encoder.GeometryOutput` of the fused matcher.
         """
+        if gates is not None and not self.app_confidence:
+            raise ValueError("gates need a matcher built with app_confidence")
         enc = self.geometry
-        if self.app_confidence:
+        if self.app_confidence and gates is None:
             self.last_gates = None
         extra = None
         x = None
@@ -242,14 +249,15 @@ class CrossViewMatcher(nn.Module):
             logit = torch.logit(cues.clamp(_EPS, 1.0 - _EPS)) * avail
             x = torch.cat([logit, avail], dim=-1)  # (B, M, N, 2K)
             x_late = x
-            if self.app_confidence:
+            if self.app_confidence and gates is None:
                 gates = self._gates(top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues,
                                     cue_mask, x)
-                # Read by a training loss's clean-frame term; before the cap, so that the term
-                # can pull a gate out of the cap's flat region (where the cost has no gradient).
+                # Read by a training loss's gate terms; before the cap, so that a term can
+                # pull a gate out of the cap's flat region (where the cost has no gradient).
                 self.last_gates = gates
                 if self.app_gate_cap:
                     gates = _cap(gates)
+            if self.app_confidence:
                 x, x_late = (x * (1.0 + self.app_columns * (gates[:, i, None] - 1.0))[
                     :, None, None, :] for i in (0, 1))
             extra = self.cue_embed(x)

@@ -20,7 +20,10 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-__all__ = ["AssignmentNLLLoss", "ContrastiveLoss", "GeometryMatchingLoss", "HypothesisLoss"]
+__all__ = [
+    "AssignmentNLLLoss", "ContrastiveLoss", "GeometryMatchingLoss", "HypothesisLoss",
+    "frame_nll",
+]
 
 
 def _mean(values: Tensor, mask: Tensor) -> Tensor:
@@ -99,6 +102,14 @@ def assignment_targets(match: Tensor, top_mask: Tensor, hor_mask: Tensor) -> Ten
     )
 
 
+def frame_nll(log_assignment: Tensor, match: Tensor, top_mask: Tensor,
+              hor_mask: Tensor) -> Tensor:
+    """``(B,)`` per-frame mean negative log-likelihood of the true assignment, dustbins
+    included (0 for a frame without people)."""
+    targets = assignment_targets(match, top_mask, hor_mask).to(log_assignment.dtype)
+    return (-log_assignment * targets).sum((1, 2)) / targets.sum((1, 2)).clamp(min=1.0)
+
+
 class AssignmentNLLLoss(nn.Module):
     """Mean negative log-likelihood of the true assignment, dustbins included (SuperGlue)."""
 
@@ -144,6 +155,9 @@ class GeometryMatchingLoss(nn.Module):
         gate_weight: weight of the clean-frame term of an appearance-confidence fine-tune
             (:meth:`gate_term`, added by the training module where the batch marks the frames
             with corrupted appearance); 0 (default): none.
+        gate_target_weight: weight of the per-frame gate target of an appearance-confidence
+            fine-tune (:meth:`gate_target_term`, added by the training module, which runs
+            each frame with the gates open and closed); 0 (default): none.
     """
 
     def __init__(
@@ -156,11 +170,15 @@ class GeometryMatchingLoss(nn.Module):
         embedding_margin: float = 0.5,
         hard_negatives: int = 2,
         gate_weight: float = 0.0,
+        gate_target_weight: float = 0.0,
     ) -> None:
         super().__init__()
         if not float(gate_weight) >= 0:
             raise ValueError(f"gate_weight must be >= 0, got {gate_weight}")
+        if not float(gate_target_weight) >= 0:
+            raise ValueError(f"gate_target_weight must be >= 0, got {gate_target_weight}")
         self.gate_weight = float(gate_weight)
+        self.gate_target_weight = float(gate_target_weight)
         self.weights = {
             "nll": float(nll_weight),
             "cost": float(cost_weight),
@@ -213,3 +231,23 @@ class GeometryMatchingLoss(nn.Module):
         """
         per_frame = ((gates - 1.0) ** 2).sum(dim=-1)
         return _mean(per_frame, clean)
+
+    def gate_target_term(self, gates: Tensor, nll_open: Tensor, nll_closed: Tensor,
+                         has_app: Tensor) -> Tensor:
+        """Per-frame gate target of the appearance confidence: a cost-sensitive choice
+        between the frame's two ends. The target is 1 (images as without the confidence)
+        where the gates-open pass explains the true assignment better than the gates-closed
+        (boxes-only) pass, else 0; each frame weighs by how much the choice matters, the gap
+        between the two passes' NLLs: the mean over the frames with images of that gap times
+        the squared distances of both gates from the target (0 when no frame has images).
+
+        Args:
+            gates: ``(B, 2)`` gates of the ``app`` cue (early, late).
+            nll_open, nll_closed: ``(B,)`` per-frame NLLs (:func:`frame_nll`) with both gates
+                1 and both 0; treated as constants.
+            has_app: ``(B,)`` bool, frames with the appearance cue.
+        """
+        gap = (nll_closed - nll_open).detach()
+        target = (gap > 0).to(gates.dtype)
+        per_frame = gap.abs() * ((gates - target[:, None]) ** 2).sum(dim=-1)
+        return _mean(per_frame, has_app)

@@ -373,6 +373,105 @@ def test_clean_frame_term_pulls_only_the_gates_of_clean_frames():
     assert matcher.confidence[0].weight.grad.abs().sum() > 0
 
 
+
+def test_given_gates_open_and_close_the_appearance_cue():
+    args = _batch()
+    cue_mask = args[-1]
+    matcher = _matcher(True)
+    torch.nn.init.normal_(matcher.confidence[2].weight, std=1.0)
+    with torch.no_grad():
+        matcher(*args)
+        head = matcher.last_gates
+        opened = matcher(*args, gates=torch.ones(3, 2)).cost
+        closed = matcher(*args, gates=torch.zeros(3, 2)).cost
+        assert matcher.last_gates is head  # given gates are not the head's
+        # open: the cue as without the confidence; closed: the frame without the app cue
+        assert torch.allclose(opened, _previous_forward(matcher, *args), atol=1e-6)
+        no_app = cue_mask.clone()
+        no_app[:, 0] = False
+        assert torch.allclose(closed, _previous_forward(matcher, *args[:-1], no_app),
+                              atol=1e-6)
+        assert not torch.allclose(opened[0], closed[0], atol=1e-3)  # frame 0 has app only
+    with pytest.raises(ValueError, match="app_confidence"):
+        _matcher(False)(*args, gates=torch.ones(3, 2))
+
+
+def test_frame_nll_is_the_assignment_loss_of_each_frame():
+    from xvmatch.models.losses import AssignmentNLLLoss, frame_nll
+
+    g = torch.Generator().manual_seed(3)
+    log_assignment = torch.log_softmax(torch.randn(3, 5, 6, generator=g), dim=-1)
+    top, hor = torch.ones(3, 4, dtype=torch.bool), torch.ones(3, 5, dtype=torch.bool)
+    top[1, 2:] = False
+    hor[2] = False  # no horizontal person: every top person in the dustbin
+    match = torch.zeros(3, 4, 5, dtype=torch.bool)
+    match[0, 0, 1] = match[1, 1, 0] = True
+    per_frame = frame_nll(log_assignment, match, top, hor)
+    loss = AssignmentNLLLoss()
+    for k in range(3):
+        one = loss(log_assignment[k:k + 1], match[k:k + 1], top[k:k + 1], hor[k:k + 1])
+        assert torch.isclose(per_frame[k], one)
+    empty = frame_nll(log_assignment, match, torch.zeros_like(top), torch.zeros_like(hor))
+    assert torch.equal(empty, torch.zeros(3))
+
+
+def test_gate_target_pulls_each_frame_towards_its_better_end():
+    from xvmatch.models.losses import GeometryMatchingLoss
+
+    loss = GeometryMatchingLoss(gate_target_weight=1.0)
+    gates = torch.tensor([[0.5, 1.0], [0.5, 0.0], [1.0, 1.0], [0.2, 0.2]], requires_grad=True)
+    nll_open = torch.tensor([0.2, 0.9, 0.4, 0.1])
+    nll_closed = torch.tensor([0.6, 0.3, 0.4, 5.0])
+    has_app = torch.tensor([True, True, True, False])
+    term = loss.gate_target_term(gates, nll_open, nll_closed, has_app)
+    # frame 0: images better by 0.4, target 1; frame 1: boxes better by 0.6, target 0;
+    # frame 2: a tie weighs nothing; frame 3 has no images
+    expected = (0.4 * (0.25 + 0.0) + 0.6 * (0.25 + 0.0) + 0.0) / 3
+    assert torch.isclose(term, torch.tensor(expected))
+    term.backward()
+    assert gates.grad[0, 0] < 0 and gates.grad[1, 0] > 0  # open frame 0, close frame 1
+    assert torch.equal(gates.grad[2:], torch.zeros(2, 2))
+    none = loss.gate_target_term(gates, nll_open, nll_closed, torch.zeros(4, dtype=torch.bool))
+    assert none == 0
+    with pytest.raises(ValueError, match="gate_target_weight must be >= 0"):
+        GeometryMatchingLoss(gate_target_weight=-1.0)
+
+
+def test_training_step_adds_the_gate_target_from_open_and_closed_passes():
+    from xvmatch.models.losses import GeometryMatchingLoss, frame_nll
+    from xvmatch.training.geometry_module import GeometryMatchingModule
+
+    top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues, cue_mask = _batch()
+    batch = {"top": top, "hor": hor, "hyp": hyp, "pair": pair, "top_mask": top_mask,
+             "hor_mask": hor_mask, "hyp_mask": hyp_mask, "cues": cues, "cue_mask": cue_mask,
+             "match": torch.zeros(3, 5, 6, dtype=torch.bool),
+             "camera_correct": torch.zeros(3, 4, dtype=torch.bool)}
+    batch["match"][:, 0, 0] = batch["match"][:, 1, 1] = True
+    matcher = _matcher(True)
+    torch.nn.init.normal_(matcher.confidence[2].weight, std=1.0)
+    plain = GeometryMatchingModule(matcher, GeometryMatchingLoss())
+    targeted = GeometryMatchingModule(matcher, GeometryMatchingLoss(gate_target_weight=3.0))
+    base, _ = plain._step(batch, "train")
+    total, _ = targeted._step(batch, "train")
+    gates = matcher.last_gates
+    inputs = (top, hor, hyp, pair, top_mask, hor_mask, hyp_mask, cues, cue_mask)
+    with torch.no_grad():
+        nll_open, nll_closed = (frame_nll(matcher(*inputs, gates=torch.full((3, 2), v))
+                                          .log_assignment, batch["match"], top_mask, hor_mask)
+                                for v in (1.0, 0.0))
+    gap = nll_closed - nll_open
+    assert gap[2] == 0 and gap[0] != 0  # frame 2 has no app cue: open is closed
+    per_frame = gap.abs() * ((gates - (gap > 0).float()[:, None]) ** 2).sum(-1)
+    expected = base + 3.0 * per_frame[:2].sum() / 2  # frames 0 and 1 have the app cue
+    assert torch.allclose(total, expected, atol=1e-6)
+    matcher.zero_grad()
+    targeted._gate_target(batch, gates).backward()
+    assert matcher.confidence[0].weight.grad.abs().sum() > 0
+    # the open and closed passes carry no gradient: only the head learns from the target
+    assert all(p.grad is None or not p.grad.any() for name, p in matcher.named_parameters()
+               if not name.startswith("confidence."))
+
+
 def test_training_frames_can_carry_their_corruption_flag(tiny_synth, tmp_path):
     from xvmatch.training.box_datamodule import collate_labelled
     from xvmatch.training.matcher_datamodule import collate_flagged

@@ -9,7 +9,9 @@ non-association cost ``gamma`` (Eq. 2 of the geometric-priors paper) and the cro
 watch.
 
 A loss with a ``gate_weight`` above 0 (appearance-confidence fine-tunes, issue 31) adds its
-clean-frame term on batches that mark the frames with corrupted appearance (``app_corrupted``).
+clean-frame term on batches that mark the frames with corrupted appearance (``app_corrupted``);
+one with a ``gate_target_weight`` above 0 adds its per-frame gate target, for which each batch
+runs twice more without gradient (gates open, gates closed).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from torch import Tensor, nn
 
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.cross_view_metrics import count_frame, summarize
-from xvmatch.models.losses import GeometryMatchingLoss
+from xvmatch.models.losses import GeometryMatchingLoss, frame_nll
 
 __all__ = ["GeometryMatchingModule", "frame_counts"]
 
@@ -77,12 +79,25 @@ class GeometryMatchingModule(L.LightningModule):
         self.save_hyperparameters(ignore=["model", "loss"])
         self._val_counts: list = []
 
-    def forward(self, batch: dict[str, Tensor]):
-        """The model's :class:`GeometryOutput` for a batch from ``collate_labelled``."""
+    def forward(self, batch: dict[str, Tensor], gates: Tensor | None = None):
+        """The model's :class:`GeometryOutput` for a batch from ``collate_labelled``
+        (``gates``: the ``app`` cue's gates instead of the confidence head's)."""
         inputs = [batch[k] for k in _INPUTS]
         if "cues" in batch:
+            if gates is not None:
+                return self.model(*inputs, batch["cues"], batch["cue_mask"], gates=gates)
             return self.model(*inputs, batch["cues"], batch["cue_mask"])
         return self.model(*inputs)
+
+    def _gate_target(self, batch: dict[str, Tensor], gates: Tensor) -> Tensor:
+        """The loss's per-frame gate target term: each frame run again with the ``app``
+        gates open (1) and closed (0), no gradient."""
+        with torch.no_grad():
+            nll = [frame_nll(self(batch, torch.full_like(gates, value)).log_assignment,
+                             batch["match"], batch["top_mask"], batch["hor_mask"])
+                   for value in (1.0, 0.0)]
+        has_app = batch["cue_mask"][:, self.model.cues.index("app")]
+        return self.loss.gate_target_term(gates, nll[0], nll[1], has_app)
 
     def _step(self, batch: dict[str, Tensor], stage: str) -> tuple[Tensor, object]:
         output = self(batch)
@@ -103,6 +118,11 @@ class GeometryMatchingModule(L.LightningModule):
             terms = dict(terms)
             terms["gate"] = self.loss.gate_term(gates, clean)
             terms["total"] = terms["total"] + gate_weight * terms["gate"]
+        target_weight = getattr(self.loss, "gate_target_weight", 0.0)
+        if target_weight > 0 and gates is not None:
+            terms = dict(terms)
+            terms["gate_target"] = self._gate_target(batch, gates)
+            terms["total"] = terms["total"] + target_weight * terms["gate_target"]
         size = int(batch["top"].shape[0])
         for name, value in terms.items():
             self.log(
