@@ -624,6 +624,9 @@ def test_ctrl_c_during_train_is_an_interruption_not_a_rejected_configuration(
     data = tiny_synth["overview"]
     config = Path(__file__).resolve().parents[1] / "configs" / "appearance_cpu.yaml"
     handler = signal.getsignal(signal.SIGINT)
+    # Ctrl-C as in a terminal, even when the test run was started with SIGINT ignored (in the
+    # background by a non-interactive shell).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         rc = main(["train", "--config", str(config),
                    "--data.init_args.train_data", f"[{data}]",

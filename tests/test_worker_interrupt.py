@@ -52,6 +52,13 @@ def _workers(pid: int) -> int:
     return count
 
 
+def _sigint_default() -> None:
+    """In the child before it runs: Ctrl-C at its default, as in a terminal. A test run
+    started in the background by a non-interactive shell (``make test &``) inherits SIGINT
+    ignored, and Python then never turns it into KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _interrupt(args: list[str], cwd: Path, times: int = 1, group: bool = True) -> tuple[int, str]:
     """Run ``xvmatch ARGS``, Ctrl-C it (``times`` times) once two workers are busy; returns
     the exit code and stderr, failing if it does not end within :data:`HANG` seconds. SIGINT
@@ -59,7 +66,7 @@ def _interrupt(args: list[str], cwd: Path, times: int = 1, group: bool = True) -
     (``kill -INT``: the workers are then left to the parent to stop)."""
     proc = subprocess.Popen([sys.executable, "-m", "xvmatch", *args], cwd=cwd,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_sigint_default)
     try:
         deadline = time.monotonic() + 60.0
         while _workers(proc.pid) < 2:
