@@ -229,8 +229,8 @@ class CrossViewMatcher(nn.Module):
                 where unavailable); None for a box-only call.
             cue_mask: ``(B, K)`` bool, which cues each frame has; None: none.
             gates: ``(B, 2)`` gates of the ``app`` cue to use instead of the confidence
-                head's (a matcher built with ``app_confidence``; not capped, not recorded in
-                :attr:`last_gates`): 0 gives the boxes-only input, 1 the cue as without the
+                head's (a matcher built with ``app_confidence``; not capped; :attr:`last_gates`
+                keeps the head's last ones): 0 gives the boxes-only input, 1 the cue as without the
                 confidence. Training only (the per-frame gate target); None: the head's.
 
         Returns:
