@@ -15,8 +15,9 @@ scrambled), and scores on exactly the same boxes:
 Prints one table per scenario (Eq. 9 accuracy, ground-truth boxes / detector noise), what images
 add to the learned matcher (images minus boxes, images+cameras minus cameras, in points, with a
 95% interval from resampling the 20 test scenes: 100 frames of 20 scenes move a cell by about
-+-2 points), and the milliseconds per image pair of each learned setting, and writes everything
-to ``--json``.
++-2 points; ``--scenes N`` renders N test and N validation scenes instead, seeds unchanged, so
+the first 20 are the baseline's), and the milliseconds per image pair of each learned setting,
+and writes everything to ``--json``.
 
 ``--shift S`` (S in (0, 3]) is a stress test for the real-photo gap: before the appearance
 network sees an image, each view's image gets its own camera change
@@ -27,7 +28,7 @@ unchanged, so it asks whether images still beat boxes alone when appearance is l
 
 Usage:
     python benchmarks/deployed_matcher_eval.py [--model default] [--work runs/deployed_eval]
-        [--scenarios overview drone] [--workers 2] [--shift 0.5] [--json FILE]
+        [--scenarios overview drone] [--workers 2] [--shift 0.5] [--scenes 20] [--json FILE]
 """
 
 from __future__ import annotations
@@ -56,9 +57,11 @@ ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
 SIZES = {"overview": (640, 360), "drone": (1280, 720)}
 
 
-def render(work: Path, scenario: str, role: str, workers: int) -> Path:
-    """The dataset of a role, rendered if not there yet."""
-    seed, scenes, frames = ROLES[role]
+def render(work: Path, scenario: str, role: str, workers: int, scenes: int | None = None) -> Path:
+    """The dataset of a role (``scenes``: instead of the role's 20), rendered if not there
+    yet."""
+    seed, default_scenes, frames = ROLES[role]
+    scenes = default_scenes if scenes is None else int(scenes)
     size = SIZES[scenario]
     path = work / "data" / f"{scenario}_{role}_s{seed}_{scenes}x{frames}_{size[0]}x{size[1]}"
     if (path / MANIFEST).is_file() and len(SyntheticDataset(path)) == scenes * frames:
@@ -135,7 +138,8 @@ def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
     coster = OnnxAppearanceCoster(matcher)
     if args.shift:
         coster = ShiftedCoster(coster, args.shift)
-    paths = {role: render(args.work, scenario, role, args.workers) for role in ROLES}
+    paths = {role: render(args.work, scenario, role, args.workers, args.scenes)
+             for role in ROLES}
     trials = {role: dataset_trials(paths[role], TrialConfig(), SETTINGS, coster)
               for role in ROLES}
     rows = []
@@ -195,8 +199,13 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2, help="render processes")
     parser.add_argument("--shift", type=float, default=0.0,
                         help="camera change of each view's images, strength in [0, 3] (0: none)")
+    parser.add_argument("--scenes", type=int, default=20,
+                        help="test and validation scenes per scenario, 5 frames each (default "
+                        "20, the baseline's; more narrows the intervals of what images add)")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args()
+    if args.scenes < 2:
+        parser.error(f"--scenes: expected at least 2, got {args.scenes}")
     if not 0.0 <= args.shift <= MAX_STRENGTH:
         parser.error(f"--shift: expected a number in [0, {MAX_STRENGTH:g}], got {args.shift}")
     start = time.perf_counter()
