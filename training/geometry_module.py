@@ -84,9 +84,7 @@ class GeometryMatchingModule(L.LightningModule):
         (``gates``: the ``app`` cue's gates instead of the confidence head's)."""
         inputs = [batch[k] for k in _INPUTS]
         if "cues" in batch:
-            if gates is not None:
-                return self.model(*inputs, batch["cues"], batch["cue_mask"], gates=gates)
-            return self.model(*inputs, batch["cues"], batch["cue_mask"])
+            return self.model(*inputs, batch["cues"], batch["cue_mask"], gates=gates)
         return self.model(*inputs)
 
     def _gate_target(self, batch: dict[str, Tensor], gates: Tensor) -> Tensor:
