@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.geometry.atomic_files import atomic_write_bytes
 from xvmatch.geometry.spatial_search import associate_sequence, rank_hypotheses
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
 
@@ -41,7 +42,7 @@ def save(data: Path, path: Path) -> None:
                                              costs_out=costs)
         out[name] = (pairs, best, learned, costs)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps(out))
+    atomic_write_bytes(path, pickle.dumps(out))
     print(f"wrote {path}")
 
 

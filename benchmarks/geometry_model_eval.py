@@ -48,6 +48,7 @@ from xvmatch.datasets.cvmhat import (
 )
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes, shift_frames
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
 from xvmatch.geometry.spatial_search import associate_sequence
 from xvmatch.inference.assignment import assign
@@ -253,7 +254,7 @@ def main() -> int:
             for name, s, offset, minimum, status in pool.map(
                     sync_offset, [(args.data, n, s) for n in tested for s in seeds]):
                 offsets[name, s], minima[name, s] = offset, (minimum, status)
-        saved.write_text(
+        atomic_write_text(saved,
             json.dumps([[n, s, o, *minima[n, s]] for (n, s), o in offsets.items()]) + "\n"
         )
     if args.sync:

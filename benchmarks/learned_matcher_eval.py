@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.geometry.atomic_files import atomic_write_text
+
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
 ROLES: dict[str, tuple[int, int, int]] = {
@@ -284,7 +286,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.probe_resnet50:
         record = resnet50_probe(args.probe_resnet50, max(1, args.resnet50_steps), 8)
-        args.json.write_text(json.dumps(record))
+        atomic_write_text(args.json, json.dumps(record))
         return 0
     import torch
 
@@ -295,7 +297,7 @@ def main() -> int:
     if args.resnet50_steps:
         report["resnet50"] = resnet50_cost(args, args.scenarios[0])
     if args.json:
-        args.json.write_text(json.dumps(report, indent=2))
+        atomic_write_text(args.json, json.dumps(report, indent=2))
     return 0
 
 

@@ -64,6 +64,7 @@ from xvmatch.datasets.multicam_scenes import (
     write_multicam_scene,
 )
 from xvmatch.evaluation.multicam_metrics import match_to_truth, multicam_scores
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
 from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
@@ -331,7 +332,7 @@ def rendered_main(args) -> int:
     print(f"\nbenchmark wall time {time.perf_counter() - start:.0f} s")
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "rendered_results.json").write_text(json.dumps(
+        atomic_write_text(Path(args.out) / "rendered_results.json", json.dumps(
             {"tuning": tune, "test": test, "weights": weights, "chosen": best}, indent=1))
     return 0
 
@@ -392,8 +393,8 @@ def main() -> int:
     print(f"\nbenchmark wall time {time.perf_counter() - start:.0f} s")
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "results.json").write_text(json.dumps({"rows": rows, "speed": speed},
-                                                                indent=1))
+        atomic_write_text(Path(args.out) / "results.json",
+                          json.dumps({"rows": rows, "speed": speed}, indent=1))
     return 0
 
 

@@ -37,6 +37,7 @@ from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_d
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.evaluation.learned_matcher_eval import CueRule, score_rule, tune_gamma
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.models.appearance_net import (
@@ -153,7 +154,7 @@ def main() -> int:
         results.append({"scenario": scenario, "data": {k: str(v) for k, v in paths.items()},
                         "rows": rows})
     if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        atomic_write_text(args.json, json.dumps(results, indent=2) + "\n")
     return 0
 
 

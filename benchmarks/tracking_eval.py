@@ -62,6 +62,7 @@ from xvmatch.evaluation.track_metrics import (
     tracklet_scores,
     view_track_results,
 )
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.track_costs import (
     LEARNED_DUMMY_WEIGHT,
@@ -123,7 +124,7 @@ def frame_pairs_cached(name, top, hor, camera_rows, cache: Path | None, tag: str
         return {int(f): [tuple(p) for p in v] for f, v in json.loads(path.read_text()).items()}
     pairs = associate_frames(top, hor, float(IMAGE_SIZE[0]), camera_rows=camera_rows)
     if path:
-        path.write_text(json.dumps({str(f): v for f, v in pairs.items()}))
+        atomic_write_text(path, json.dumps({str(f): v for f, v in pairs.items()}))
     return pairs
 
 
@@ -144,7 +145,7 @@ def learned_evidence_cached(name, top, hor, camera_rows, cache: Path | None, tag
     ev = learned_frame_evidence(top, hor, IMAGE_SIZE, model, camera_rows=camera_rows,
                                 mirror=mirror)
     if path:
-        path.write_text(json.dumps({"gamma": ev.gamma, "costs": {
+        atomic_write_text(path, json.dumps({"gamma": ev.gamma, "costs": {
             str(f): [c.top_rows.tolist(), c.hor_rows.tolist(), c.cost.ravel().tolist(),
                      c.paired.ravel().tolist()] for f, c in ev.costs.items()}}))
     return ev

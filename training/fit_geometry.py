@@ -27,6 +27,7 @@ import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint, TQDMProgressBar
 from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.spatial_features import FeatureConfig
 from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
@@ -183,7 +184,7 @@ def fit_matcher(
             if not k.startswith("_") and not k.endswith("_parts") and k not in ("trainer",)
         },
     }
-    (run / "config.json").write_text(json.dumps(config, indent=2, default=str) + "\n")
+    atomic_write_text(run / "config.json", json.dumps(config, indent=2, default=str) + "\n")
 
     checkpoint = ModelCheckpoint(
         dirpath=run / "checkpoints",

@@ -37,6 +37,8 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.geometry.atomic_files import atomic_write_text
+
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = {
     # name: (scenario, scenes, frames, seed)
@@ -235,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
                     "--parity-data", os.fspath(data["val_overview"]), "--int8",
                     "--calibration", os.fspath(data["int8_overview"])], check=True)
     manifest = json.loads((args.bundle_out / "manifest.json").read_text())
-    (work / "recipe.json").write_text(json.dumps(
+    atomic_write_text(work / "recipe.json", json.dumps(
         {"wall_s": round(time.perf_counter() - start), "parity": manifest["parity"]},
         indent=2) + "\n")
     log(f"wrote {args.model_out} and {args.bundle_out} "
