@@ -47,6 +47,7 @@ from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.confidence import grouped_difference_interval
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
+from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS
 from xvmatch.inference.assignment import GAMMA_GRID, assign
 from xvmatch.inference.cross_view_metrics import count_pair, summarize
@@ -82,19 +83,21 @@ class ShiftedCoster:
                            camera_shift(ego_image, self.strength, seed=1), ego_boxes)
 
 
+def frame_counts(trials, costs, gamma: float, setting: str) -> tuple[list, list]:
+    """Eq. 9 counts of each frame of one box setting under one gamma, and its scene."""
+    pairs = [(count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids, t.det_ego_ids,
+                         assign(c, gamma), frame=t.frame), t.scene)
+             for t, c in zip(trials, costs, strict=True) if t.setting == setting]
+    return [c for c, _ in pairs], [s for _, s in pairs]
+
+
 def frame_accuracies(trials, costs, gamma: float, setting: str) -> tuple[np.ndarray, list]:
     """Eq. 9 accuracy (fraction) of each frame of one box setting that has an id, and its
     scene (the frames :func:`summarize` averages)."""
-    acc, scenes = [], []
-    for t, c in zip(trials, costs, strict=True):
-        if t.setting != setting:
-            continue
-        counts = count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids, t.det_ego_ids,
-                            assign(c, gamma), frame=t.frame)
-        if counts.n_union > 0:
-            acc.append((counts.tp + counts.tn) / counts.n_union)
-            scenes.append(t.scene)
-    return np.asarray(acc, dtype=float), scenes
+    counts, scenes = frame_counts(trials, costs, gamma, setting)
+    kept = [(c, s) for c, s in zip(counts, scenes, strict=True) if c.n_union > 0]
+    return (np.asarray([(c.tp + c.tn) / c.n_union for c, _ in kept], dtype=float),
+            [s for _, s in kept])
 
 
 def image_gains(trials, costs: dict, gamma: float) -> dict:
@@ -115,13 +118,8 @@ def image_gains(trials, costs: dict, gamma: float) -> dict:
 
 def scores(trials, costs, gamma: float) -> dict[str, float]:
     """Eq. 9 accuracy (fraction) per setting of the trials under one gamma."""
-    out = {}
-    for setting in SETTINGS:
-        counts = [count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids, t.det_ego_ids,
-                             assign(c, gamma), frame=t.frame)
-                  for t, c in zip(trials, costs, strict=True) if t.setting == setting]
-        out[setting] = summarize(counts).acc9 / 100.0
-    return out
+    return {setting: summarize(frame_counts(trials, costs, gamma, setting)[0]).acc9 / 100.0
+            for setting in SETTINGS}
 
 
 def tuned(trials, costs) -> float:
@@ -212,7 +210,7 @@ def main() -> int:
     results = [scenario_run(args, s) for s in args.scenarios]
     print(f"\n{time.perf_counter() - start:.0f} s in all")
     if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        atomic_write_text(args.json, json.dumps(results, indent=2) + "\n")
     return 0
 
 
