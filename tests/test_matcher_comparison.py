@@ -1,0 +1,84 @@
+"""benchmarks/matcher_comparison.py: bundles compared on the same shifted frames, paired."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import deployed_matcher_eval  # noqa: E402
+import matcher_comparison  # noqa: E402
+
+from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials  # noqa: E402
+from xvmatch.evaluation.deployed_matcher_eval import (  # noqa: E402
+    OnnxAppearanceCoster,
+    matcher_costs,
+)
+from xvmatch.inference.learned_association import load_matcher_bundle  # noqa: E402
+
+DEFAULT_FOLDER = str(ROOT / "inference" / "default_bundle")
+
+
+def run(monkeypatch, *args: str) -> int:
+    monkeypatch.setattr(sys, "argv", ["matcher_comparison.py", *args])
+    return matcher_comparison.main()
+
+
+def test_bundles_are_compared_on_the_same_frames(tmp_path, monkeypatch, tiny_models) -> None:
+    out = tmp_path / "out.json"
+    tiny = str(tiny_models["full_bundle"])  # another appearance network: its own trials
+    assert run(monkeypatch, "--models", "default", tiny, DEFAULT_FOLDER, "--scenes", "2",
+               "--scenarios", "overview", "--shifts", "0", "1", "--workers", "1",
+               "--work", str(tmp_path / "work"), "--json", str(out)) == 0
+    rows = json.loads(out.read_text())
+    cell = {(r["shift"], r["setting"], r["model"]): r for r in rows}
+    assert len(cell) == len(rows) == 2 * len(SETTINGS) * 3
+    for strength in (0.0, 1.0):
+        for s in SETTINGS:
+            first, same = cell[strength, s, "default"], cell[strength, s, DEFAULT_FOLDER]
+            # The default named by its folder is the same matcher on the same frames.
+            assert (same["images"], same["boxes"]) == (first["images"], first["boxes"])
+            for key in ("images vs default", "boxes vs default"):
+                assert (same[key]["points"], same[key]["low"], same[key]["high"]) == (0, 0, 0)
+            other = cell[strength, s, tiny]
+            assert other["images vs default"]["points"] == pytest.approx(
+                other["images"] - first["images"])
+            assert other["images vs default"]["scenes"] == 2
+            assert first["images - boxes"]["points"] == pytest.approx(
+                first["images"] - first["boxes"])
+            # Boxes never see the images: the shift moves only the images rows.
+            assert cell[1.0, s, "default"]["boxes"] == cell[0.0, s, "default"]["boxes"]
+    assert any(cell[1.0, s, "default"]["images"] != cell[0.0, s, "default"]["images"]
+               for s in SETTINGS)
+    # The unshifted default row is the deployed benchmark's own Eq. 9 figure on these frames.
+    matcher = load_matcher_bundle("default")
+    trials = dataset_trials(Path(rows[0]["data"]), TrialConfig(), SETTINGS,
+                            OnnxAppearanceCoster(matcher))
+    scores = deployed_matcher_eval.scores(trials, matcher_costs(matcher, trials, "images"),
+                                          matcher.gamma)
+    for s in SETTINGS:
+        assert cell[0.0, s, "default"]["images"] == pytest.approx(100 * scores[s], abs=1e-9)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--scenes", "1"], "--scenes: expected at least 2, got 1"),
+    (["--shifts", "0", "3.5"], "--shifts: expected numbers in [0, 3], got 3.5"),
+    (["--models", "default", "default"], "a bundle is named twice"),
+    (["--models", "no/such/bundle"], "no/such/bundle"),
+])
+def test_bad_arguments_get_one_line(monkeypatch, capsys, args, message) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        run(monkeypatch, *args)
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_bundle_without_appearance_is_refused(monkeypatch, capsys, tiny_models) -> None:
+    with pytest.raises(SystemExit):
+        run(monkeypatch, "--models", str(tiny_models["boxes_bundle"]))
+    assert "this bundle has no appearance network" in capsys.readouterr().err
