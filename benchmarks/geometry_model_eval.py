@@ -254,9 +254,8 @@ def main() -> int:
             for name, s, offset, minimum, status in pool.map(
                     sync_offset, [(args.data, n, s) for n in tested for s in seeds]):
                 offsets[name, s], minima[name, s] = offset, (minimum, status)
-        atomic_write_text(saved,
-            json.dumps([[n, s, o, *minima[n, s]] for (n, s), o in offsets.items()]) + "\n"
-        )
+        atomic_write_text(saved, json.dumps(
+            [[n, s, o, *minima[n, s]] for (n, s), o in offsets.items()]) + "\n")
     if args.sync:
         def shown(key) -> str:
             o, (m, status) = offsets[key], minima[key]
