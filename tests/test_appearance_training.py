@@ -164,6 +164,47 @@ def test_augmentation_keeps_shapes_and_is_seeded(tiny_data: Path) -> None:
     assert torch.equal(a.match, batch.match)
 
 
+def test_camera_shift_augmentation_is_seeded_and_off_by_default(tiny_data: Path) -> None:
+    batch = collate_crop_pairs(load_crop_pairs(tiny_data, None, SIZE)[:2])
+    before = batch.top.clone()
+    plain = augment_crops(batch, torch.Generator().manual_seed(0))
+    off = augment_crops(batch, torch.Generator().manual_seed(0), shift_probability=0.0)
+    torch.testing.assert_close(plain.top, off.top)  # 0 draws nothing: the old stream
+    a = augment_crops(batch, torch.Generator().manual_seed(0), 1.0, 3.0)
+    b = augment_crops(batch, torch.Generator().manual_seed(0), 1.0, 3.0)
+    torch.testing.assert_close(a.top, b.top)
+    torch.testing.assert_close(a.ego, b.ego)
+    assert a.top.shape == batch.top.shape and float(a.top.max()) <= 255
+    assert not torch.equal(a.top, plain.top)
+    assert torch.equal(batch.top, before)  # the batch's own crops are not written over
+
+
+def test_camera_shift_gives_one_camera_per_pair_and_view(tiny_data: Path) -> None:
+    """All crops of one view of a pair go through the same camera: the shift of a pair's crops
+    side by side, crop by crop (sensor noise aside, it is one colour mapping)."""
+    batch = collate_crop_pairs(load_crop_pairs(tiny_data, None, SIZE)[:2])
+    from xvmatch.training.image_datamodule import _camera_shift_view
+
+    flat = torch.full_like(batch.top, 128)  # grey crops: only the camera changes them
+    out = _camera_shift_view(flat, torch.Generator().manual_seed(3), 1.0, 3.0).float()
+    assert out.dtype == torch.float32 and out.shape == flat.shape
+    for i in range(out.shape[0]):
+        means = out[i].mean(dim=(1, 2))  # (K, 3): each crop's mean colour
+        assert float((means - means.mean(dim=0)).abs().max()) < 3.0
+    assert float((out[0].mean(dim=(0, 1, 2)) - out[1].mean(dim=(0, 1, 2))).abs().max()) > 1.0
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"camera_shift_probability": 1.5}, "camera_shift_probability must be in [0, 1]"),
+    ({"camera_shift_max": 0.0}, "camera_shift_max must be in (0, 3]"),
+    ({"camera_shift_max": 4.0}, "camera_shift_max must be in (0, 3]"),
+])
+def test_camera_shift_options_are_checked(tiny_data: Path, kwargs, message) -> None:
+    with pytest.raises(ValueError) as info:
+        ImagePairDataModule(train_data=str(tiny_data), **kwargs)
+    assert message in str(info.value)
+
+
 # ---------------------------------------------------------------------------------------------
 # Loss and training
 
@@ -285,6 +326,16 @@ def test_lightning_cli_configs_parse(config: str, tiny_data: Path, tmp_path: Pat
     assert size == cli.datamodule.input_size
     assert size == (SIZE if config == "appearance_cpu.yaml" else (256, 128))
     assert cli.trainer.max_epochs > 0
+
+
+def test_camera_shift_options_reach_the_datamodule(tiny_data: Path, tmp_path: Path) -> None:
+    """As ``make_default_bundle.py --appearance-shift`` passes them to ``xvmatch train``."""
+    args = ["--config", str(REPO / "configs" / "appearance_cpu.yaml"),
+            *_overrides(tiny_data, tmp_path), "--data.camera_shift_probability", "0.5",
+            "--data.camera_shift_max", "2.5"]
+    cli = cli_main(args, run=False)
+    assert cli.datamodule.hparams.camera_shift_probability == 0.5
+    assert cli.datamodule.hparams.camera_shift_max == 2.5
 
 
 def test_fusion_config_parses() -> None:

@@ -20,7 +20,11 @@ Crops are cut once, in :meth:`ImagePairDataModule.setup`, at the network's input
 in memory as uint8 (about 25 kB per 128x64 crop). Training augmentations run on whole batches
 after the transfer to the device (:func:`augment_crops`): per-view camera changes (white
 balance, exposure, gamma, as the two rendered cameras differ), per-crop jitter of the box
-(scale, shift, mirror), loss of resolution, occluding patches and sensor noise.
+(scale, shift, mirror), loss of resolution, occluding patches and sensor noise. With
+``camera_shift_probability`` > 0 (issue 31, off by default), a share of each view's crops of a
+pair first go through one simulated other camera (:func:`xvmatch.datasets.camera_shift.
+camera_shift`: white balance, exposure, tone curve, hue and saturation, blur, sensor noise, JPEG)
+of a strength drawn up to ``camera_shift_max``.
 
 Splits are by scene: validation scenes are either a separate dataset folder or a seeded
 fraction of the training folders' scenes, never frames of a training scene. Nothing is
@@ -43,6 +47,7 @@ from torch import Tensor
 from torch.nn import functional as F
 from torch.utils.data import DataLoader, Dataset
 
+from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
 from xvmatch.datasets.synthetic_io import MANIFEST, PairRecord, SyntheticDataset, person_crops
 from xvmatch.geometry.ray_priors import box_rays, ray_distances
 
@@ -271,8 +276,31 @@ def _normal(shape: tuple[int, ...], std: float, g: torch.Generator,
     return std * torch.randn(shape, generator=g).to(device)
 
 
-def _augment_view(crops: Tensor, g: torch.Generator) -> Tensor:
-    """Augment ``(B, K, H, W, 3)`` crops [0, 255]: camera per (B), box and noise per crop."""
+def _camera_shift_view(crops: Tensor, g: torch.Generator, probability: float,
+                       max_strength: float) -> Tensor:
+    """``(B, K, H, W, 3)`` crops of one view, each pair's (B) crops with ``probability`` through
+    one other camera (:func:`camera_shift` of the pair's crops side by side, one camera for all,
+    strength uniform in [0, ``max_strength``]); uint8 [0, 255] on the crops' device."""
+    b, k, h, w, _ = crops.shape
+    if crops.dtype != torch.uint8:
+        crops = crops.detach().round().clamp(0, 255).to(torch.uint8)
+    x = crops.cpu().numpy().copy()
+    use = torch.rand(b, generator=g).numpy() < probability
+    strength = (max_strength * torch.rand(b, generator=g)).numpy()
+    seeds = torch.randint(0, 2**31 - 1, (b,), generator=g).numpy()
+    for i in np.flatnonzero(use & (strength > 0)):
+        side_by_side = np.ascontiguousarray(x[i].transpose(1, 0, 2, 3).reshape(h, k * w, 3))
+        shifted = camera_shift(side_by_side, float(strength[i]), int(seeds[i]), per_image=False)
+        x[i] = shifted.reshape(h, k, w, 3).transpose(1, 0, 2, 3)
+    return torch.from_numpy(x).to(crops.device)
+
+
+def _augment_view(crops: Tensor, g: torch.Generator, shift_probability: float = 0.0,
+                  shift_max: float = 2.0) -> Tensor:
+    """Augment ``(B, K, H, W, 3)`` crops [0, 255]: camera per (B), box and noise per crop
+    (first, with ``shift_probability`` > 0, :func:`_camera_shift_view`)."""
+    if shift_probability > 0:
+        crops = _camera_shift_view(crops, g, shift_probability, shift_max)
     b, k, h, w, _ = crops.shape
     dev = crops.device
     x = crops.reshape(b * k, h, w, 3).permute(0, 3, 1, 2).float() / 255.0
@@ -324,19 +352,23 @@ def _augment_view(crops: Tensor, g: torch.Generator) -> Tensor:
     return x.permute(0, 2, 3, 1).reshape(b, k, h, w, 3)
 
 
-def augment_crops(batch: CropBatch, generator: torch.Generator) -> CropBatch:
+def augment_crops(batch: CropBatch, generator: torch.Generator, shift_probability: float = 0.0,
+                  shift_max: float = 2.0) -> CropBatch:
     """Training augmentation of a batch, on whatever device it is (see the module docstring).
 
     Args:
         batch: the batch, crops uint8 or float [0, 255].
         generator: CPU generator of every random draw (so results do not depend on the device).
+        shift_probability: share of the pairs whose crops of a view first go through another
+            simulated camera (each view its own draw; 0: none, and no draw is made).
+        shift_max: the strongest such camera, in (0, 3].
 
     Returns:
         The batch with float [0, 255] crops; masks and labels unchanged. Padding crops are
         augmented too but stay masked out.
     """
-    return batch._replace(top=_augment_view(batch.top, generator),
-                          ego=_augment_view(batch.ego, generator))
+    return batch._replace(top=_augment_view(batch.top, generator, shift_probability, shift_max),
+                          ego=_augment_view(batch.ego, generator, shift_probability, shift_max))
 
 
 # --------------------------------------------------------------------------------------------
@@ -366,6 +398,9 @@ class ImagePairDataModule(L.LightningDataModule):
         hard_radius: ray distance (metres) below which a false pair is a geometrically hard
             negative.
         augment: apply :func:`augment_crops` to training batches.
+        camera_shift_probability: with ``augment``, the share of the pairs whose crops of a
+            view first go through another simulated camera (issue 31; 0, the default: none).
+        camera_shift_max: the strongest such camera, in (0, 3] (the stress test's scale).
         seed: seed of the scene split, the scrambling, the batch order and the augmentations.
         workers: threads decoding images in :meth:`setup`.
         num_workers: DataLoader worker processes (0: crops are in memory, batches are cheap).
@@ -387,6 +422,8 @@ class ImagePairDataModule(L.LightningDataModule):
         seed: int = 0,
         workers: int = 2,
         num_workers: int = 0,
+        camera_shift_probability: float = 0.0,
+        camera_shift_max: float = 2.0,
     ) -> None:
         super().__init__()
         self.save_hyperparameters()
@@ -403,6 +440,12 @@ class ImagePairDataModule(L.LightningDataModule):
         if min(self.input_size) < 16:
             raise ValueError(f"input_height and input_width must be >= 16, got {self.input_size}")
         self.batch_size = int(batch_size)
+        if not 0.0 <= camera_shift_probability <= 1.0:
+            raise ValueError("camera_shift_probability must be in [0, 1], got "
+                             f"{camera_shift_probability}")
+        if not 0.0 < camera_shift_max <= MAX_STRENGTH:
+            raise ValueError(f"camera_shift_max must be in (0, {MAX_STRENGTH:g}], got "
+                             f"{camera_shift_max}")
         self.seed = int(seed)
         self._generator = torch.Generator().manual_seed(self.seed)
         self.splits: dict[str, list[CropPair]] = {}
@@ -459,7 +502,9 @@ class ImagePairDataModule(L.LightningDataModule):
         """Augment training batches on the device (validation and test batches untouched)."""
         trainer = getattr(self, "trainer", None)
         if self.hparams.augment and trainer is not None and trainer.training:
-            return augment_crops(batch, self._generator)
+            return augment_crops(batch, self._generator,
+                                 float(self.hparams.camera_shift_probability),
+                                 float(self.hparams.camera_shift_max))
         return batch
 
     def state_dict(self) -> dict:

@@ -132,6 +132,9 @@ def appearance(args: argparse.Namespace, work: Path, data: dict[str, Path]) -> P
            "--config", os.fspath(config),
            "--data.train_data", train, "--data.val_data", val,
            "--trainer.enable_progress_bar", "false", "--seed_everything", str(args.seed)]
+    if args.appearance_shift > 0:
+        cmd += ["--data.camera_shift_probability", str(args.appearance_shift),
+                "--data.camera_shift_max", str(args.appearance_shift_max)]
     epochs = [args.appearance_epochs]
     if args.appearance == "mobilenetv2":  # as the shipped branch was trained
         cmd += ["--data.workers", "1"]
@@ -211,6 +214,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="appearance epochs (default 3 for mobilenetv2, 6 for compact)")
     parser.add_argument("--appearance-resume-epochs", type=int, default=5,
                         help="mobilenetv2: resumed to this many epochs (default 5)")
+    parser.add_argument("--appearance-shift", type=float, default=0.0,
+                        help="share of each view's training crops of a pair through another "
+                        "simulated camera (issue 31; default 0: none, the shipped branch)")
+    parser.add_argument("--appearance-shift-max", type=float, default=2.0,
+                        help="the strongest such camera, in (0, 3] (default 2)")
     parser.add_argument("--learning-rate", type=float, default=1e-3,
                         help="matcher peak learning rate (default 1e-3)")
     parser.add_argument("--sim-scenes", type=int, default=350,
@@ -221,6 +229,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--bundle-out", type=Path,
                         default=ROOT / "inference" / "default_bundle")
     args = parser.parse_args(argv)
+    if not 0.0 <= args.appearance_shift <= 1.0:
+        parser.error("--appearance-shift: expected a number in [0, 1], got "
+                     f"{args.appearance_shift}")
+    if not 0.0 < args.appearance_shift_max <= 3.0:
+        parser.error("--appearance-shift-max: expected a number in (0, 3], got "
+                     f"{args.appearance_shift_max}")
     if args.appearance_epochs is None:
         args.appearance_epochs = 3 if args.appearance == "mobilenetv2" else 6
     start = time.perf_counter()
