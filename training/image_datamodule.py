@@ -280,7 +280,8 @@ def _camera_shift_view(crops: Tensor, g: torch.Generator, probability: float,
                        max_strength: float) -> Tensor:
     """``(B, K, H, W, 3)`` crops of one view, each pair's (B) crops with ``probability`` through
     one other camera (:func:`camera_shift` of the pair's crops side by side, one camera for all,
-    strength uniform in [0, ``max_strength``]); uint8 [0, 255] on the crops' device."""
+    strength uniform in [0, ``max_strength``]); uint8 [0, 255] on the crops' device (through the
+    CPU: :func:`camera_shift` is NumPy and OpenCV)."""
     b, k, h, w, _ = crops.shape
     if crops.dtype != torch.uint8:
         crops = crops.detach().round().clamp(0, 255).to(torch.uint8)
