@@ -100,6 +100,20 @@ def frame_accuracies(trials, costs, gamma: float, setting: str) -> tuple[np.ndar
             [s for _, s in kept])
 
 
+def interval(a: np.ndarray, b: np.ndarray, scenes: list) -> dict:
+    """Mean of ``a - b`` in points (``a``, ``b``: per-frame fractions) and its 95% interval
+    from resampling whole scenes (``grouped_difference_interval``)."""
+    r = grouped_difference_interval(100.0 * a, 100.0 * b, scenes)
+    return {"points": r.difference, "low": r.low, "high": r.high, "scenes": r.n_groups}
+
+
+def shown(d: dict) -> str:
+    """``+1.2 [-0.3, +2.6]`` (no interval with fewer than two scenes)."""
+    if d["low"] is None:
+        return f"{d['points']:+.1f}"
+    return f"{d['points']:+.1f} [{d['low']:+.1f}, {d['high']:+.1f}]"
+
+
 def image_gains(trials, costs: dict, gamma: float) -> dict:
     """What images add on these frames: for images against boxes and images+cameras against
     cameras, per box setting, the Eq. 9 difference in points with its 95% interval from
@@ -110,9 +124,7 @@ def image_gains(trials, costs: dict, gamma: float) -> dict:
         for setting in SETTINGS:
             a, scenes = frame_accuracies(trials, costs[opened], gamma, setting)
             b, _ = frame_accuracies(trials, costs[closed], gamma, setting)
-            r = grouped_difference_interval(100.0 * a, 100.0 * b, scenes)
-            row[setting] = {"points": r.difference, "low": r.low, "high": r.high,
-                            "scenes": r.n_groups}
+            row[setting] = interval(a, b, scenes)
     return out
 
 
@@ -178,9 +190,7 @@ def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
     gains = image_gains(trials["test"], learned_costs, matcher.gamma)
     for name, row in gains.items():
         print(f"learned, {name} (bundle's gamma), points, 95% scene-bootstrap interval: " +
-              " / ".join(f"{r['points']:+.1f} [{r['low']:+.1f}, {r['high']:+.1f}]"
-                         if r["low"] is not None else f"{r['points']:+.1f}"
-                         for r in row.values()))
+              " / ".join(shown(r) for r in row.values()))
     print("ms per image pair (features, cues, ONNX; both box settings): " +
           ", ".join(f"{k} {v:.1f}" for k, v in timing.items()))
     return {"scenario": scenario, "shift": args.shift,

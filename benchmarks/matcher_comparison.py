@@ -30,34 +30,25 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from deployed_matcher_eval import ROLES, SIZES, ShiftedCoster, frame_accuracies, render
+from deployed_matcher_eval import (
+    ROLES,
+    SIZES,
+    ShiftedCoster,
+    frame_accuracies,
+    interval,
+    render,
+    shown,
+)
 
 from xvmatch.datasets.camera_shift import MAX_STRENGTH
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
-from xvmatch.evaluation.confidence import grouped_difference_interval
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
 
 SETTING_NAMES = {"gt": "ground-truth boxes", "det": "detector noise"}
-
-
-def interval(a: np.ndarray, b: np.ndarray, scenes: list) -> dict:
-    """Mean of ``a - b`` in points (``a``, ``b``: per-frame fractions) and its 95% scene
-    bootstrap interval."""
-    r = grouped_difference_interval(100.0 * a, 100.0 * b, scenes)
-    return {"points": r.difference, "low": r.low, "high": r.high, "scenes": r.n_groups}
-
-
-def shown(d: dict) -> str:
-    """``+1.2 [-0.3, +2.6]`` (no interval with fewer than two scenes)."""
-    if d["low"] is None:
-        return f"{d['points']:+.1f}"
-    return f"{d['points']:+.1f} [{d['low']:+.1f}, {d['high']:+.1f}]"
 
 
 def compare(models: dict[str, LearnedMatcher], trials: dict[str, list]) -> list[dict]:
