@@ -338,6 +338,23 @@ def test_camera_shift_options_reach_the_datamodule(tiny_data: Path, tmp_path: Pa
     assert cli.datamodule.hparams.camera_shift_max == 2.5
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--appearance-shift", "1.5"], "--appearance-shift: expected a number in [0, 1]"),
+    (["--appearance-shift-max", "3.5"], "--appearance-shift-max: expected a number in (0, 3]"),
+])
+def test_recipe_refuses_bad_camera_shift_options(tmp_path, capsys, monkeypatch, args,
+                                                  message) -> None:
+    """``make_default_bundle.py`` stops with one line before it renders anything."""
+    monkeypatch.syspath_prepend(str(REPO / "training"))
+    import make_default_bundle
+
+    work = tmp_path / "work"
+    with pytest.raises(SystemExit) as info:
+        make_default_bundle.main(["--work", str(work), *args])
+    assert info.value.code == 2 and message in capsys.readouterr().err
+    assert not work.exists()
+
+
 def test_fusion_config_parses() -> None:
     from xvmatch.training.fusion_datamodule import CuePairDataModule
     from xvmatch.training.fusion_module import FusionModule

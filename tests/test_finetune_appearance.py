@@ -63,3 +63,24 @@ def test_a_box_only_base_is_refused(tmp_path, capsys, tiny_models) -> None:
                                   "--out", str(tmp_path / "x.pt"), "--train-data", "a",
                                   "--val-data", "b"])
     assert "a matcher with an appearance network is needed" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("beside", ["mine_appearance.pt", "mine.pt.run"])
+def test_what_is_written_beside_the_output_is_never_written_over(tmp_path, capsys,
+                                                                  beside) -> None:
+    kept = tmp_path / beside
+    kept.write_bytes(b"a user's file")
+    with pytest.raises(SystemExit) as info:
+        finetune_appearance.main(["--out", str(tmp_path / "mine.pt")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and f"{kept}, written beside it, exists" in err
+    assert kept.read_bytes() == b"a user's file" and not (tmp_path / "mine.pt").exists()
+
+
+def test_a_missing_output_folder_is_refused_before_any_work(tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit) as info:
+        finetune_appearance.main(["--out", str(tmp_path / "no" / "x.pt")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "--out" in err and "does not exist" in err
+    assert not (tmp_path / "no").exists()
+

@@ -35,6 +35,9 @@ sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
 
 import make_default_bundle as recipe  # noqa: E402  (the recipe's renders, configs and log)
 
+from xvmatch.datasets.camera_shift import MAX_STRENGTH  # noqa: E402
+from xvmatch.output_paths import Input, Output, OutputPathError, check_outputs  # noqa: E402
+
 CONFIG_OF_ARCH = {"mobilenetv2": "mobilenetv2", "small": "compact"}
 """A network's ``arch`` -> its key in ``recipe.APPEARANCE_CONFIGS``."""
 
@@ -50,6 +53,11 @@ def module_from_config(net, arch: str, learning_rate: float):
     cls = getattr(importlib.import_module(module_name), class_name)
     kwargs = {k: v for k, v in model["init_args"].items() if k != "net"}
     return cls(net, **{**kwargs, "lr": float(learning_rate)}), config
+
+
+def output_paths(out: Path) -> tuple[Path, Path]:
+    """What a run writes beside ``--out``: its run folder and the appearance weights file."""
+    return out.with_name(out.name + ".run"), out.with_name(out.stem + "_appearance.pt")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="share of each view's crops of a pair through another simulated "
                         "camera (default 0: none)")
     parser.add_argument("--shift-max", type=float, default=2.0,
-                        help="the strongest such camera, in (0, 3] (default 2)")
+                        help=f"the strongest such camera, in (0, {MAX_STRENGTH:g}] (default 2)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
     parser.add_argument("--workers", type=int, default=1, help="render and crop threads")
     args = parser.parse_args(argv)
@@ -82,10 +90,23 @@ def main(argv: list[str] | None = None) -> int:
     if not 0.0 <= args.shift_probability <= 1.0:
         parser.error(f"--shift-probability: expected a number in [0, 1], got "
                      f"{args.shift_probability}")
-    if not 0.0 < args.shift_max <= 3.0:
-        parser.error(f"--shift-max: expected a number in (0, 3], got {args.shift_max}")
-    if args.out.exists():
-        parser.error(f"--out {args.out}: exists; choose a new file (nothing is written over)")
+    if not 0.0 < args.shift_max <= MAX_STRENGTH:
+        parser.error(f"--shift-max: expected a number in (0, {MAX_STRENGTH:g}], got "
+                     f"{args.shift_max}")
+    run, weights = output_paths(args.out)
+    for path, what in ((args.out, "exists"), (weights, f"{weights}, written beside it, exists"),
+                       (run, f"{run}, written beside it, exists")):
+        if os.path.lexists(path):
+            parser.error(f"--out {args.out}: {what}; choose a new file (nothing is written "
+                         "over)")
+    try:
+        check_outputs([Output("--out", args.out), Output("--out", weights),
+                       Output("--out", run, folder=True)],
+                      [Input("--base", None if args.base == "default" else args.base),
+                       *(Input("--train-data", d) for d in args.train_data or ()),
+                       *(Input("--val-data", d) for d in args.val_data or ())])
+    except OutputPathError as exc:
+        parser.error(str(exc))
     start = time.perf_counter()
     import lightning as L
     import torch
@@ -117,8 +138,6 @@ def main(argv: list[str] | None = None) -> int:
                              camera_shift_probability=args.shift_probability,
                              camera_shift_max=args.shift_max)
     model, config = module_from_config(base.appearance.train(), arch, args.learning_rate)
-    run = args.out.with_name(args.out.name + ".run")
-    weights = args.out.with_name(args.out.stem + "_appearance.pt")
     checkpoint = ModelCheckpoint(dirpath=run / "checkpoints", monitor="val/rank1", mode="max",
                                  save_last=True)
     trainer = L.Trainer(accelerator="cpu", devices=1, max_epochs=args.epochs,

@@ -37,6 +37,7 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.datasets.camera_shift import MAX_STRENGTH
 from xvmatch.geometry.atomic_files import atomic_write_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -218,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="share of each view's training crops of a pair through another "
                         "simulated camera (issue 31; default 0: none, the shipped branch)")
     parser.add_argument("--appearance-shift-max", type=float, default=2.0,
-                        help="the strongest such camera, in (0, 3] (default 2)")
+                        help=f"the strongest such camera, in (0, {MAX_STRENGTH:g}] (default 2)")
     parser.add_argument("--learning-rate", type=float, default=1e-3,
                         help="matcher peak learning rate (default 1e-3)")
     parser.add_argument("--sim-scenes", type=int, default=350,
@@ -232,8 +233,8 @@ def main(argv: list[str] | None = None) -> int:
     if not 0.0 <= args.appearance_shift <= 1.0:
         parser.error("--appearance-shift: expected a number in [0, 1], got "
                      f"{args.appearance_shift}")
-    if not 0.0 < args.appearance_shift_max <= 3.0:
-        parser.error("--appearance-shift-max: expected a number in (0, 3], got "
+    if not 0.0 < args.appearance_shift_max <= MAX_STRENGTH:
+        parser.error(f"--appearance-shift-max: expected a number in (0, {MAX_STRENGTH:g}], got "
                      f"{args.appearance_shift_max}")
     if args.appearance_epochs is None:
         args.appearance_epochs = 3 if args.appearance == "mobilenetv2" else 6
