@@ -24,6 +24,7 @@ from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequenc
 from xvmatch.geometry.atomic_files import atomic_write_bytes
 from xvmatch.geometry.spatial_search import associate_sequence, rank_hypotheses
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.output_paths import Input, Output, check_script_outputs
 
 
 def save(data: Path, path: Path) -> None:
@@ -82,6 +83,7 @@ def main() -> None:
     group.add_argument("--compare", type=Path, nargs=2, metavar=("A", "B"),
                        help="compare two saved runs")
     args = parser.parse_args()
+    check_script_outputs(parser, [Output("--save", args.save)], [Input("--data", args.data)])
     if args.compare:
         compare(*args.compare)
     elif not args.data.is_dir():

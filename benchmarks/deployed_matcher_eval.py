@@ -52,6 +52,7 @@ from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS
 from xvmatch.inference.assignment import GAMMA_GRID, assign
 from xvmatch.inference.cross_view_metrics import count_pair, summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.output_paths import Input, Output, check_script_outputs
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
 """role: (seed, scenes, frames per scene), as benchmarks/learned_matcher_eval.py."""
@@ -216,6 +217,7 @@ def main() -> int:
         parser.error(f"--scenes: expected at least 2, got {args.scenes}")
     if not 0.0 <= args.shift <= MAX_STRENGTH:
         parser.error(f"--shift: expected a number in [0, {MAX_STRENGTH:g}], got {args.shift}")
+    check_script_outputs(parser, [Output("--json", args.json)], [Input("--model", args.model)])
     start = time.perf_counter()
     results = [scenario_run(args, s) for s in args.scenarios]
     print(f"\n{time.perf_counter() - start:.0f} s in all")

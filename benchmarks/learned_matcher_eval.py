@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.output_paths import Output, check_script_outputs
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
@@ -284,6 +285,8 @@ def main() -> int:
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     parser.add_argument("--probe-resnet50", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if not args.probe_resnet50:  # the probe is this script's own child, writing into --work
+        check_script_outputs(parser, [Output("--json", args.json)])
     if args.probe_resnet50:
         record = resnet50_probe(args.probe_resnet50, max(1, args.resnet50_steps), 8)
         atomic_write_text(args.json, json.dumps(record))

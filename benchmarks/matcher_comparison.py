@@ -47,6 +47,7 @@ from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
+from xvmatch.output_paths import Input, Output, check_script_outputs
 
 SETTING_NAMES = {"gt": "ground-truth boxes", "det": "detector noise"}
 
@@ -102,6 +103,8 @@ def main() -> int:
             parser.error(f"--shifts: expected numbers in [0, {MAX_STRENGTH:g}], got {s:g}")
     if len(set(args.models)) != len(args.models):
         parser.error(f"--models: a bundle is named twice: {' '.join(args.models)}")
+    check_script_outputs(parser, [Output("--json", args.json)],
+                         [Input("--models", name) for name in args.models])
     models = {}
     for name in args.models:
         try:

@@ -68,6 +68,7 @@ from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
 from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
+from xvmatch.output_paths import Output, check_script_outputs
 
 CONDITIONS = {
     "gt": None,
@@ -358,6 +359,8 @@ def main() -> int:
     p.add_argument("--weights", type=float, nargs="+", default=[0.5, 1.0, 2.0, 4.0, 8.0, 16.0])
     p.add_argument("--model", default="default", help="bundle of the appearance network")
     args = p.parse_args()
+    check_script_outputs(p, [Output("--out", args.out, folder=True, files=(
+        "rendered_results.json" if args.rendered else "results.json",))])
     if args.rendered:
         if args.cameras == [2, 4, 7]:
             args.cameras = [2, 4]

@@ -46,6 +46,7 @@ from xvmatch.models.appearance_net import (
     appearance_from_weights,
     appearance_mobilenetv2,
 )
+from xvmatch.output_paths import Input, Output, check_script_outputs
 from xvmatch.training.appearance_costs import AppearanceCoster
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
@@ -117,6 +118,10 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2, help="render processes")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args()
+    check_script_outputs(parser, [Output("--json", args.json)],
+                         [Input(option, item.partition("=")[2] or None)
+                          for option, items in (("--bundles", args.bundles),
+                                                ("--weights", args.weights)) for item in items])
     torch.set_num_threads(1)
     costers = {}
     bundles = [] if args.no_default else [("shipped bundle", "default")]

@@ -77,10 +77,10 @@ def test_what_is_written_beside_the_output_is_never_written_over(tmp_path, capsy
     assert kept.read_bytes() == b"a user's file" and not (tmp_path / "mine.pt").exists()
 
 
-def test_a_missing_output_folder_is_refused_before_any_work(tmp_path, capsys) -> None:
+def test_an_output_folder_that_is_a_file_is_refused_before_any_work(tmp_path, capsys) -> None:
+    (tmp_path / "notes").write_text("a user's file")
     with pytest.raises(SystemExit) as info:
-        finetune_appearance.main(["--out", str(tmp_path / "no" / "x.pt")])
+        finetune_appearance.main(["--out", str(tmp_path / "notes" / "x.pt")])
     err = capsys.readouterr().err
-    assert info.value.code == 2 and "--out" in err and "does not exist" in err
-    assert not (tmp_path / "no").exists()
-
+    assert info.value.code == 2 and "--out" in err and "is not a folder" in err
+    assert (tmp_path / "notes").read_text() == "a user's file"

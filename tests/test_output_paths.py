@@ -24,9 +24,11 @@ from xvmatch.output_paths import (
     OutputPathError,
     check_outputs,
     check_own_folder,
+    check_script_outputs,
     claim_folder,
 )
 
+REPO = Path(__file__).resolve().parents[1]
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 
 
@@ -123,6 +125,31 @@ def test_the_folder_must_exist(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(OutputPathError, match="is not a folder"):
         check_outputs([Output("--out", tmp_path / "file" / "b", folder=True)])
+
+
+def test_a_file_whose_folder_the_command_creates(tmp_path):
+    """``parents=True``: a missing folder passes if its nearest existing parent is a folder;
+    an existing one is checked as for any file output (inputs included)."""
+    check_outputs([Output("--out", tmp_path / "a" / "b" / "p.pt", parents=True)])
+    assert list(tmp_path.iterdir()) == []  # nothing created
+    (tmp_path / "file").write_text("")
+    with pytest.raises(OutputPathError, match=r"^--out .*p.pt: cannot write: .*file is not a "):
+        check_outputs([Output("--out", tmp_path / "file" / "b" / "p.pt", parents=True)])
+    with pytest.raises(OutputPathError, match="is the input --base"):
+        check_outputs([Output("--out", tmp_path / "file", parents=True)],
+                      [Input("--base", tmp_path / "file")])
+
+
+def test_a_script_refusal_is_its_parsers_usage_error(tmp_path, capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="bench.py")
+    with pytest.raises(SystemExit) as info:
+        check_script_outputs(parser, [Output("--json", tmp_path)])
+    assert info.value.code == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[-1].startswith("bench.py: error: --json ") and "is a folder" in lines[-1]
+    check_script_outputs(parser, [Output("--json", tmp_path / "r.json")])  # passes quietly
 
 
 @pytest.mark.skipif(IS_ROOT, reason="root may write into any folder")
@@ -420,3 +447,29 @@ def test_out_of_memory_is_one_line(tmp_path):
     lines = run.stderr.strip().splitlines()
     assert lines[-1].startswith("xvmatch: error: out of memory running offset"), run.stderr
     assert "Traceback" not in run.stderr
+
+
+@pytest.mark.parametrize("script, option", [
+    ("deployed_matcher_eval.py", "--json"), ("matcher_comparison.py", "--json"),
+    ("pretrained_backbones_eval.py", "--json"), ("learned_matcher_eval.py", "--json"),
+    ("cross_cpu_costs.py", "--save"),
+])
+def test_benchmarks_check_their_output_file_before_any_work(tmp_path, script, option):
+    """A result file whose folder is missing is refused at once, not after an hour's run."""
+    out = tmp_path / "missing" / "r.json"
+    work = tmp_path / "work"
+    run = subprocess.run([sys.executable, str(REPO / "benchmarks" / script), option, str(out),
+                          *(["--work", str(work)] if script != "cross_cpu_costs.py" else [])],
+                         capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    last = run.stderr.strip().splitlines()[-1]
+    assert f"error: {option} {out}: cannot write: the folder" in last and "does not exist" in last
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_multicam_benchmark_checks_its_out_folder(tmp_path):
+    (tmp_path / "f").write_text("mine\n")
+    run = subprocess.run([sys.executable, str(REPO / "benchmarks" / "multicam_eval.py"), "--out",
+                          str(tmp_path / "f")], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "--out" in run.stderr and "not a folder" in run.stderr
+    assert (tmp_path / "f").read_text() == "mine\n"

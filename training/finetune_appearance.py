@@ -36,7 +36,7 @@ sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
 import make_default_bundle as recipe  # noqa: E402  (the recipe's renders, configs and log)
 
 from xvmatch.datasets.camera_shift import MAX_STRENGTH  # noqa: E402
-from xvmatch.output_paths import Input, Output, OutputPathError, check_outputs  # noqa: E402
+from xvmatch.output_paths import Input, Output, check_script_outputs  # noqa: E402
 
 CONFIG_OF_ARCH = {"mobilenetv2": "mobilenetv2", "small": "compact"}
 """A network's ``arch`` -> its key in ``recipe.APPEARANCE_CONFIGS``."""
@@ -99,14 +99,12 @@ def main(argv: list[str] | None = None) -> int:
         if os.path.lexists(path):
             parser.error(f"--out {args.out}: {what}; choose a new file (nothing is written "
                          "over)")
-    try:
-        check_outputs([Output("--out", args.out), Output("--out", weights),
-                       Output("--out", run, folder=True)],
-                      [Input("--base", None if args.base == "default" else args.base),
-                       *(Input("--train-data", d) for d in args.train_data or ()),
-                       *(Input("--val-data", d) for d in args.val_data or ())])
-    except OutputPathError as exc:
-        parser.error(str(exc))
+    check_script_outputs(parser, [Output("--out", args.out, parents=True),
+                                  Output("--out", weights, parents=True),
+                                  Output("--out", run, folder=True)],
+                         [Input("--base", None if args.base == "default" else args.base),
+                          *(Input("--train-data", d) for d in args.train_data or ()),
+                          *(Input("--val-data", d) for d in args.val_data or ())])
     start = time.perf_counter()
     import lightning as L
     import torch
@@ -138,6 +136,7 @@ def main(argv: list[str] | None = None) -> int:
                              camera_shift_probability=args.shift_probability,
                              camera_shift_max=args.shift_max)
     model, config = module_from_config(base.appearance.train(), arch, args.learning_rate)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     checkpoint = ModelCheckpoint(dirpath=run / "checkpoints", monitor="val/rank1", mode="max",
                                  save_last=True)
     trainer = L.Trainer(accelerator="cpu", devices=1, max_epochs=args.epochs,

@@ -48,6 +48,8 @@ sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
 
 import make_default_bundle as recipe  # noqa: E402  (the recipe's renders and log)
 
+from xvmatch.output_paths import Input, Output, check_script_outputs  # noqa: E402
+
 TRAINED = {"gates": ("confidence.",), "cues": ("confidence.", "cue_embed.", "fusion.",
                                                "fusion_linear.")}
 """``--train``: the parameter name prefixes that learn; every other weight is frozen."""
@@ -122,6 +124,15 @@ def main(argv: list[str] | None = None) -> int:
     for flag, value in (("--gate-weight", args.gate_weight), ("--gate-target", args.gate_target)):
         if not value >= 0:
             parser.error(f"{flag} must be >= 0, got {value}")
+    weights = args.out.with_name(args.out.stem + "_appearance.pt")
+    run_dir = args.out.with_name(args.out.name + ".run")
+    check_script_outputs(
+        parser, [Output("--out", args.out, parents=True),
+                 Output("--out", weights, parents=True),
+                 Output("--out", run_dir, folder=True),
+                 *((Output("--model-out", args.model_out),
+                    Output("--bundle-out", args.bundle_out, folder=True)) if args.install else ())],
+        [Input("--base", None if args.base == "default" else args.base)])
     start = time.perf_counter()
     import lightning as L
 
@@ -137,7 +148,6 @@ def main(argv: list[str] | None = None) -> int:
     base = load_matcher(args.base)
     if base.appearance is None:
         parser.error(f"--base {args.base}: a matcher with the 'app' cue is needed")
-    weights = args.out.with_name(args.out.stem + "_appearance.pt")
     save_appearance_weights(base.appearance, weights)
     L.seed_everything(args.seed, workers=True, verbose=False)  # the confidence head's weights
     model = robust_matcher(base, args.train, args.gate_cap)
@@ -156,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         learning_rate=args.learning_rate, gamma=base.gamma,
         loss_config={k: w for k, w in (("gate_weight", args.gate_weight),
                                        ("gate_target_weight", args.gate_target)) if w > 0},
-        run_dir=args.out.with_name(args.out.name + ".run"), progress=False, threads=1,
+        run_dir=run_dir, progress=False, threads=1,
         patience=3, meta={
             "trained_on": "synthetic renders (drone, overview), appearance corrupted; no "
             "CVMHAT file", "script": "training/make_robust_matcher.py",

@@ -22,6 +22,7 @@ itself (or a new or empty one): it leaves a marker file naming the command
 
 from __future__ import annotations
 
+import argparse
 import glob
 import os
 import stat
@@ -37,6 +38,7 @@ __all__ = [
     "OutputPathError",
     "check_outputs",
     "check_own_folder",
+    "check_script_outputs",
     "claim_folder",
 ]
 
@@ -55,12 +57,15 @@ class Output:
         path: the path given; None: not asked for (skipped).
         folder: a folder the command creates if missing and writes into (else one file).
         files: names the command writes inside the folder, each checked as a file output.
+        parents: a file output whose folder the command creates if missing (then the nearest
+            existing parent must be a writable folder).
     """
 
     option: str
     path: str | os.PathLike | None
     folder: bool = False
     files: tuple[str, ...] = ()
+    parents: bool = False
 
 
 @dataclass(frozen=True)
@@ -154,16 +159,30 @@ def _real_target(path: str) -> str:
     return os.path.realpath(path)
 
 
-def _check_file(option: str, path: str, inputs: list[_Seen]) -> None:
-    """One file output: regular or absent, in a writable folder, not an input."""
+def _writable_parent(path: str, what: str, option: str) -> None:
+    """A folder to be created at ``path`` (if missing): its nearest existing parent must be a
+    writable folder."""
+    parent = os.path.dirname(os.path.abspath(path))
+    while parent != os.path.dirname(parent) and _stat(parent, option) is None:
+        parent = os.path.dirname(parent)
+    _writable_folder(parent, what)
+
+
+def _check_file(option: str, path: str, inputs: list[_Seen], parents: bool = False) -> None:
+    """One file output: regular or absent, in a writable folder (or one to be created, with
+    ``parents``), not an input."""
     what = f"{option} {path}"
+    folder = os.path.dirname(os.path.abspath(path))
+    if parents and _stat(folder, option) is None:
+        _writable_parent(folder, what, option)  # nothing there yet: no file, no input
+        return
     st = _stat(path, option)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"{what}: is a folder; give a file name")
     if st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputPathError(f"{what}: is {_kind(st.st_mode)}, not a regular file; refusing "
                               "to write over it")
-    _writable_folder(os.path.dirname(os.path.abspath(path)), what)
+    _writable_folder(folder, what)
     if st is None:
         return
     real = _real_target(path)
@@ -184,10 +203,7 @@ def _check_folder(out: Output, inputs: list[_Seen]) -> None:
     if st is not None and not stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"{what}: exists and is not a folder")
     if st is None:
-        parent = os.path.dirname(os.path.abspath(path))
-        while parent != os.path.dirname(parent) and _stat(parent, out.option) is None:
-            parent = os.path.dirname(parent)
-        _writable_folder(parent, what)
+        _writable_parent(path, what, out.option)
     else:
         _writable_folder(path, what)
     real = _real_target(path)
@@ -225,7 +241,7 @@ def check_outputs(outputs: Sequence[Output], inputs: Sequence[Input] = ()) -> No
             names = [(out.option, path, os.path.join(path, n)) for n in out.files]
             names.append((out.option, path, path))
         else:
-            _check_file(out.option, path, seen)
+            _check_file(out.option, path, seen, out.parents)
             names = [(out.option, path, path)]
         for option, given, name in names:
             real = _real_target(name)
@@ -233,6 +249,16 @@ def check_outputs(outputs: Sequence[Output], inputs: Sequence[Input] = ()) -> No
                 raise OutputPathError(f"{option} {given}: is also {targets[real]}; give each "
                                       "output its own path")
             targets[real] = f"{option} {given}"
+
+
+def check_script_outputs(parser: argparse.ArgumentParser, outputs: Sequence[Output],
+                         inputs: Sequence[Input] = ()) -> None:
+    """:func:`check_outputs` for a script with its own parser (``benchmarks/``,
+    ``training/``): a refusal is the parser's one-line usage error (exit code 2)."""
+    try:
+        check_outputs(outputs, inputs)
+    except OutputPathError as exc:
+        parser.error(str(exc))
 
 
 def check_own_folder(folder: str | os.PathLike, command: str, option: str = "--out") -> None:
