@@ -49,10 +49,10 @@ from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, match
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS
+from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.assignment import GAMMA_GRID, assign
 from xvmatch.inference.cross_view_metrics import count_pair, summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.output_paths import Input, Output, check_script_outputs
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
 """role: (seed, scenes, frames per scene), as benchmarks/learned_matcher_eval.py."""

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.output_paths import Output, check_script_outputs
+from xvmatch.geometry.output_paths import Output, check_script_outputs
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"

@@ -46,8 +46,8 @@ from xvmatch.datasets.camera_shift import MAX_STRENGTH
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
-from xvmatch.output_paths import Input, Output, check_script_outputs
 
 SETTING_NAMES = {"gt": "ground-truth boxes", "det": "detector noise"}
 

@@ -66,9 +66,9 @@ from xvmatch.datasets.multicam_scenes import (
 from xvmatch.evaluation.multicam_metrics import match_to_truth, multicam_scores
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.ground_plane import GroundCamera
+from xvmatch.geometry.output_paths import Output, check_script_outputs
 from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
 from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
-from xvmatch.output_paths import Output, check_script_outputs
 
 CONDITIONS = {
     "gt": None,

@@ -38,6 +38,7 @@ from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.evaluation.learned_matcher_eval import CueRule, score_rule, tune_gamma
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.models.appearance_net import (
@@ -46,7 +47,6 @@ from xvmatch.models.appearance_net import (
     appearance_from_weights,
     appearance_mobilenetv2,
 )
-from xvmatch.output_paths import Input, Output, check_script_outputs
 from xvmatch.training.appearance_costs import AppearanceCoster
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}

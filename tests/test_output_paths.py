@@ -1,6 +1,6 @@
-"""Tests of the output-path checks (xvmatch.output_paths) and of every command's use of them
-(issue 28): each refused output gives one line naming the option, exit code 2, before any work,
-with no input, no FIFO and no foreign file changed and no partial output left."""
+"""Tests of the output-path checks (xvmatch.geometry.output_paths) and of every command's use
+of them (issue 28): each refused output gives one line naming the option, exit code 2, before
+any work, with no input, no FIFO and no foreign file changed and no partial output left."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
 from xvmatch.datasets.mot_boxes import read_mot_boxes, write_predictions
 from xvmatch.geometry.folder_marker import MARKER, is_own_folder
-from xvmatch.output_paths import (
+from xvmatch.geometry.output_paths import (
     Input,
     Output,
     OutputPathError,

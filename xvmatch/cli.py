@@ -7,8 +7,8 @@ this one. Each command imports only what it needs, so ``xvmatch associate`` star
 imports torch. Bad input ends with one line ``xvmatch: error: ...`` naming the file and line,
 exit code 2. Every size or count option has a range, given in its help and checked while the
 arguments are parsed (:mod:`xvmatch.cli_types`), before any work starts; so is every output path
-(:mod:`xvmatch.output_paths`: no FIFO, device or folder where a file goes, no input overwritten,
-no two outputs on one path, a writable folder).
+(:mod:`xvmatch.geometry.output_paths`: no FIFO, device or folder where a file goes, no input
+overwritten, no two outputs on one path, a writable folder).
 """
 
 from __future__ import annotations

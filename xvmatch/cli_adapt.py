@@ -25,7 +25,7 @@ from xvmatch.cli_options import (
     read_boxes,
 )
 from xvmatch.cli_types import box_id, int_in, thread_count, worker_count
-from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
+from xvmatch.geometry.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["ADAPT_COMMAND", "EXAMPLE", "add_adapt_parser"]
 
@@ -34,7 +34,7 @@ EXAMPLE = ("xvmatch adapt --top top.txt --hor hor.txt --top-images top.mp4 --hor
            "--top-images top.mp4 --hor-images hor.mp4 --out pred.csv")
 
 ADAPT_COMMAND = "xvmatch adapt"
-"""The owner of a site bundle folder (:func:`xvmatch.output_paths.claim_folder`)."""
+"""The owner of a site bundle folder (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
 
 
 def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
@@ -82,10 +82,10 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
 def _cmd_adapt(args: argparse.Namespace) -> int:
     from xvmatch import __version__
     from xvmatch.cli_model import horizontal_size, open_models
+    from xvmatch.geometry.output_paths import claim_folder
     from xvmatch.inference.adaptation_pairs import MiningConfig
     from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
     from xvmatch.inference.site_bundle import adapt_to_site, write_site_bundle
-    from xvmatch.output_paths import claim_folder
 
     if args.top_images is None or args.hor_images is None:
         raise UsageError("adapt learns from the images: give --top-images and --hor-images")

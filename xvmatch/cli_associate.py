@@ -41,7 +41,7 @@ from xvmatch.cli_options import (
 )
 from xvmatch.cli_types import box_id, offset_value, worker_count
 from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
-from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder
+from xvmatch.geometry.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["EXAMPLE", "add_associate_parser"]
 

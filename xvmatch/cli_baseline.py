@@ -15,7 +15,7 @@ import time
 
 from xvmatch.cli_options import add_command_parser, progress_bar
 from xvmatch.cli_types import seed_value, worker_count
-from xvmatch.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_baseline_parser"]
 

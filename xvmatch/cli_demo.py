@@ -17,7 +17,13 @@ from pathlib import Path
 
 from xvmatch.cli_options import add_command_parser
 from xvmatch.cli_types import int_in, seed_value, worker_count
-from xvmatch.output_paths import Input, Output, check_outputs, check_own_folder, claim_folder
+from xvmatch.geometry.output_paths import (
+    Input,
+    Output,
+    check_outputs,
+    check_own_folder,
+    claim_folder,
+)
 
 __all__ = ["EXAMPLES", "add_demo_parser"]
 
@@ -25,7 +31,7 @@ EXAMPLES = {"demo": "xvmatch demo --out xvmatch-demo --scenes 3 --frames 2"}
 
 DEMO_COMMAND = "xvmatch demo"
 """The owner named in the marker of a demo's folder: the demo writes only into a new or empty
-folder or one an earlier demo made (:func:`xvmatch.output_paths.claim_folder`)."""
+folder or one an earlier demo made (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
 
 _DEMO_COUNT = int_in(1, 100, "a demonstration holds every pair in memory; for more, xvmatch "
                      "synth + baseline")

@@ -12,7 +12,7 @@ import sys
 
 from xvmatch.cli_options import HOR_IMAGE_SIZE, add_command_parser
 from xvmatch.cli_types import int_in, seed_value, thread_count, worker_count
-from xvmatch.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_fit_geometry_parser"]
 

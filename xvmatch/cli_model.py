@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterable, Mapping
 
 from xvmatch.cli_options import add_image_options, check_images_together
 from xvmatch.cli_types import float_in, int_in, thread_count
-from xvmatch.output_paths import check_own_folder
+from xvmatch.geometry.output_paths import check_own_folder
 
 __all__ = [
     "DRAW_COMMAND",
@@ -90,7 +90,7 @@ def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
 
 DRAW_COMMAND = "xvmatch associate --draw"
 """The owner of a ``--draw`` folder: pictures are written only into a new or empty folder or one
-an earlier ``--draw`` made (:func:`xvmatch.output_paths.claim_folder`)."""
+an earlier ``--draw`` made (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
 
 LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs",
                 "precision")
@@ -287,6 +287,7 @@ def draw_pictures(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Ma
 
     import numpy as np
 
+    from xvmatch.geometry.output_paths import claim_folder
     from xvmatch.inference.box_canvas import blank_view, top_plan
     from xvmatch.inference.match_drawing import (
         draw_matches,
@@ -294,7 +295,6 @@ def draw_pictures(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Ma
         picture_path,
         write_match_picture,
     )
-    from xvmatch.output_paths import claim_folder
 
     out = claim_folder(folder, DRAW_COMMAND, "--draw")
     tmp = Path(tempfile.mkdtemp(prefix=".draw-", dir=out))

@@ -33,7 +33,7 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, float_in, int_in, thread_count, worker_count
-from xvmatch.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_multi_ego_parser"]
 

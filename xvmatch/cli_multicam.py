@@ -3,7 +3,8 @@ each person's path on the ground (issue 32; :mod:`xvmatch.inference.multicam`), 
 ``--fit-homography`` to make ``H`` cameras from image/ground point pairs.
 
 Everything is read and checked, and the answer computed, before anything is written; the outputs
-are written atomically into a folder the command owns (:func:`xvmatch.output_paths.claim_folder`).
+are written atomically into a folder the command owns
+(:func:`xvmatch.geometry.output_paths.claim_folder`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import os
 
 from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
 from xvmatch.cli_types import float_in, image_size, int_in
-from xvmatch.output_paths import Input, Output, check_outputs, claim_folder
+from xvmatch.geometry.output_paths import Input, Output, check_outputs, claim_folder
 
 __all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",
            "read_ground_csv"]
@@ -144,7 +145,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
                   [Input("--cameras", args.cameras),
                    *(Input("--boxes", f) for f in files.values()),
                    *(Input("--images", f) for f in images.values())])
-    from xvmatch.output_paths import check_own_folder
+    from xvmatch.geometry.output_paths import check_own_folder
 
     check_own_folder(args.out, COMMAND)
     cameras = load_ground_cameras(args.cameras)

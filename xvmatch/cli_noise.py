@@ -7,7 +7,7 @@ import argparse
 
 from xvmatch.cli_options import HOR_IMAGE_SIZE, add_command_parser, read_boxes
 from xvmatch.cli_types import box_id, float_in, seed_value
-from xvmatch.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_noise_parser"]
 

@@ -7,7 +7,7 @@ by :func:`check_images_together`), and the horizontal ``--image-size``'s type an
 come the sub-command parser (:func:`add_command_parser`), the progress bar
 (:func:`progress_bar`), the box reader that prints the reader's warnings
 (:func:`read_boxes`) and :class:`UsageError`. Output paths are checked by
-:mod:`xvmatch.output_paths`; :func:`image_inputs` lists the images as its inputs.
+:mod:`xvmatch.geometry.output_paths`; :func:`image_inputs` lists the images as its inputs.
 
 Nothing here imports :mod:`xvmatch.cli` (the root imports the command modules, never the
 reverse), and nothing heavy is imported until a command runs.
@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 
 from xvmatch.cli_types import float_in, image_size
-from xvmatch.output_paths import Input
+from xvmatch.geometry.output_paths import Input
 
 __all__ = [
     "HOR_IMAGE_SIZE",
@@ -175,7 +175,7 @@ def check_images_together(args: argparse.Namespace) -> None:
 
 def image_inputs(args: argparse.Namespace) -> list[Input]:
     """The images of :func:`add_image_options` as inputs of the output-path check
-    (:func:`xvmatch.output_paths.check_outputs`)."""
+    (:func:`xvmatch.geometry.output_paths.check_outputs`)."""
     hor = args.hor_images
     return [Input("--top-images", args.top_images),
             *(Input("--hor-images", h) for h in (hor if isinstance(hor, list) else [hor]))]

@@ -26,7 +26,7 @@ from xvmatch.cli_options import (
     read_boxes,
 )
 from xvmatch.cli_types import float_in, image_size, int_in, seed_value, worker_count
-from xvmatch.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
 
@@ -162,7 +162,7 @@ def _synth_cameras(args: argparse.Namespace) -> int:
         simulate_multicam_scene,
         write_multicam_scene,
     )
-    from xvmatch.output_paths import claim_folder
+    from xvmatch.geometry.output_paths import claim_folder
 
     for option, wrong in (("--scenario", args.scenario is not None),
                           ("--scenes", args.scenes not in (None, 1))):
