@@ -285,12 +285,11 @@ def main() -> int:
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     parser.add_argument("--probe-resnet50", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if not args.probe_resnet50:  # the probe is this script's own child, writing into --work
-        check_script_outputs(parser, [Output("--json", args.json)])
-    if args.probe_resnet50:
+    if args.probe_resnet50:  # this script's own child, writing into --work
         record = resnet50_probe(args.probe_resnet50, max(1, args.resnet50_steps), 8)
         atomic_write_text(args.json, json.dumps(record))
         return 0
+    check_script_outputs(parser, [Output("--json", args.json)])
     import torch
 
     torch.set_num_threads(args.threads)

@@ -55,8 +55,9 @@ def module_from_config(net, arch: str, learning_rate: float):
     return cls(net, **{**kwargs, "lr": float(learning_rate)}), config
 
 
-def output_paths(out: Path) -> tuple[Path, Path]:
-    """What a run writes beside ``--out``: its run folder and the appearance weights file."""
+def files_beside(out: Path) -> tuple[Path, Path]:
+    """What a run writes beside a matcher file ``out`` (this script and
+    ``make_robust_matcher.py``): its run folder and the appearance weights file."""
     return out.with_name(out.name + ".run"), out.with_name(out.stem + "_appearance.pt")
 
 
@@ -93,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     if not 0.0 < args.shift_max <= MAX_STRENGTH:
         parser.error(f"--shift-max: expected a number in (0, {MAX_STRENGTH:g}], got "
                      f"{args.shift_max}")
-    run, weights = output_paths(args.out)
+    run, weights = files_beside(args.out)
     for path, what in ((args.out, "exists"), (weights, f"{weights}, written beside it, exists"),
                        (run, f"{run}, written beside it, exists")):
         if os.path.lexists(path):

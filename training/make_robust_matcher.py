@@ -47,6 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
 
 import make_default_bundle as recipe  # noqa: E402  (the recipe's renders and log)
+from finetune_appearance import files_beside  # noqa: E402
 
 from xvmatch.geometry.output_paths import Input, Output, check_script_outputs  # noqa: E402
 
@@ -124,8 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     for flag, value in (("--gate-weight", args.gate_weight), ("--gate-target", args.gate_target)):
         if not value >= 0:
             parser.error(f"{flag} must be >= 0, got {value}")
-    weights = args.out.with_name(args.out.stem + "_appearance.pt")
-    run_dir = args.out.with_name(args.out.name + ".run")
+    run_dir, weights = files_beside(args.out)
     check_script_outputs(
         parser, [Output("--out", args.out, parents=True),
                  Output("--out", weights, parents=True),
