@@ -88,12 +88,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--epochs: expected at least 1, got {args.epochs}")
     if not args.learning_rate > 0:
         parser.error(f"--learning-rate: expected a positive number, got {args.learning_rate}")
-    if not 0.0 <= args.shift_probability <= 1.0:
-        parser.error(f"--shift-probability: expected a number in [0, 1], got "
-                     f"{args.shift_probability}")
-    if not 0.0 < args.shift_max <= MAX_STRENGTH:
-        parser.error(f"--shift-max: expected a number in (0, {MAX_STRENGTH:g}], got "
-                     f"{args.shift_max}")
+    recipe.check_camera_shift(parser, args.shift_probability, "--shift-probability",
+                              args.shift_max, "--shift-max")
     run, weights = files_beside(args.out)
     for path, what in ((args.out, "exists"), (weights, f"{weights}, written beside it, exists"),
                        (run, f"{run}, written beside it, exists")):

@@ -197,6 +197,17 @@ def matcher(args: argparse.Namespace, work: Path, data: dict[str, Path], init: P
     return out
 
 
+def check_camera_shift(parser: argparse.ArgumentParser, probability: float, probability_flag: str,
+                       strength: float, strength_flag: str) -> None:
+    """Refuse (``parser.error``) a camera-shift share outside [0, 1] or a strongest camera outside
+    (0, ``MAX_STRENGTH``]: the options of the appearance fine-tunes that simulate other cameras."""
+    if not 0.0 <= probability <= 1.0:
+        parser.error(f"{probability_flag}: expected a number in [0, 1], got {probability}")
+    if not 0.0 < strength <= MAX_STRENGTH:
+        parser.error(f"{strength_flag}: expected a number in (0, {MAX_STRENGTH:g}], got "
+                     f"{strength}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the recipe's stages (see the module docstring); 0 on success."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -230,12 +241,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--bundle-out", type=Path,
                         default=ROOT / "inference" / "default_bundle")
     args = parser.parse_args(argv)
-    if not 0.0 <= args.appearance_shift <= 1.0:
-        parser.error("--appearance-shift: expected a number in [0, 1], got "
-                     f"{args.appearance_shift}")
-    if not 0.0 < args.appearance_shift_max <= MAX_STRENGTH:
-        parser.error(f"--appearance-shift-max: expected a number in (0, {MAX_STRENGTH:g}], got "
-                     f"{args.appearance_shift_max}")
+    check_camera_shift(parser, args.appearance_shift, "--appearance-shift",
+                       args.appearance_shift_max, "--appearance-shift-max")
     if args.appearance_epochs is None:
         args.appearance_epochs = 3 if args.appearance == "mobilenetv2" else 6
     start = time.perf_counter()
