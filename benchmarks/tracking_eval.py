@@ -19,6 +19,10 @@ feeds two more rows:
 - mip-learned / spectral-learned: ``track_pair`` with the cross-view weights from its costs
   (``--learned-rule``, :func:`xvmatch.inference.track_costs.frame_evidence`).
 
+With ``--offset auto`` each pair (and noise seed) is first re-timed as ``xvmatch track --offset
+auto`` does: the offset estimated from the detections, applied when the clips back it
+(:func:`xvmatch.datasets.mot_boxes.align_views`), the ground truth re-timed the same way.
+
 OVERALL pools every frame of every sequence (cross-view counts summed, TrackEval's
 ``combine_sequences`` per view); ``--noise 1 2 3`` pools the three noise seeds the same way.
 Last, the whole ``xvmatch track`` command is timed on one 1,200-frame pair, pinned to one core
@@ -35,6 +39,7 @@ Usage:
         [--camera-given] [--time-sequence V1-S_55-G_1] [--no-timing] [--half even|odd]
         [--solvers mip spectral] [--c0 C] [--sigma S] [--noise SEED [SEED ...]]
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
+        [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
 """
 
@@ -55,7 +60,7 @@ import numpy as np
 
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.datasets.mot_boxes import FrameBoxes, align_views
 from xvmatch.evaluation.track_metrics import (
     pool_view_scores,
     track_pair_counts,
@@ -126,6 +131,22 @@ def frame_pairs_cached(name, top, hor, camera_rows, cache: Path | None, tag: str
     if path:
         atomic_write_text(path, json.dumps({str(f): v for f, v in pairs.items()}))
     return pairs
+
+
+def offset_cached(name, top, hor, cache: Path | None, tag: str) -> int:
+    """The offset ``xvmatch track --offset auto`` applies to a pair of detection files (0 when
+    the clips do not back the estimate), kept in ``cache``."""
+    from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
+    from xvmatch.geometry.spatial_matching import SpatialParams
+
+    path = cache / f"{name}.{tag}.offset.json" if cache else None
+    if path and path.exists():
+        return int(json.loads(path.read_text())["applied"])
+    est = estimate_offset(top, hor, hor_width=float(IMAGE_SIZE[0]), params=SpatialParams(),
+                          max_offset=AUTO_MAX_OFFSET)
+    if path:
+        atomic_write_text(path, json.dumps({"offset": est.offset, "applied": est.applied}))
+    return int(est.applied)
 
 
 def learned_evidence_cached(name, top, hor, camera_rows, cache: Path | None, tag: str, model,
@@ -321,6 +342,8 @@ def main() -> int:
     parser.add_argument("--learned-share", type=float, default=1.0,
                         help="share of the learned evidence in the cross-view spatial term "
                         "(the rest: Eq. 13 on the handcrafted frame association)")
+    parser.add_argument("--offset", choices=("0", "auto"), default="0",
+                        help="auto: re-time each pair as 'track --offset auto' does")
     parser.add_argument("--mirror", action="store_true",
                         help="the learned matcher also scores the mirrored scene")
     args = parser.parse_args()
@@ -390,6 +413,14 @@ def main() -> int:
                 in_hor = apply_detector_noise(hor, IMAGE_SIZE, noise, noise_seed, "hor")
             det_top, truth_top = as_detections(in_top, args.seed * 2 + 1)
             det_hor, truth_hor = as_detections(in_hor, args.seed * 2 + 2)
+            offset = 0
+            if args.offset == "auto":
+                offset = offset_cached(name, det_top, det_hor, cache, f"s{args.seed}" + (
+                    f"n{noise_seed}" if noise_seed is not None else ""))
+                if offset:
+                    det_top, det_hor = align_views(det_top, det_hor, offset)
+                    top, hor = align_views(top, hor, offset)
+                    print(f"{label}: re-timed by {offset:+d} frames")
             clips = split_clips(sorted(set(det_top) | set(det_hor)), 10)
             for view, det, truth in (("top", det_top, truth_top), ("hor", det_hor, truth_hor)):
                 base = len(people[view])  # rows of every sequence kept apart
@@ -402,7 +433,8 @@ def main() -> int:
                            else None)
             tag = ("B" if args.camera_given else "A") + f"s{args.seed}" + (
                 f"f{args.frames}" if args.frames else "") + (
-                f"n{noise_seed}" if noise_seed is not None else "")
+                f"n{noise_seed}" if noise_seed is not None else "") + (
+                f"o{offset}" if offset else "")
             frames = sorted(set(top) | set(hor))
             start = time.perf_counter()
             evidence = {"frame": frame_pairs_cached(name, det_top, det_hor, camera_rows, cache,

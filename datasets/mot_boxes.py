@@ -36,6 +36,7 @@ __all__ = [
     "PREDICTION_HEADER",
     "BoxFileError",
     "FrameBoxes",
+    "align_views",
     "read_mot_boxes",
     "read_predictions",
     "scale_frames",
@@ -143,6 +144,19 @@ def shift_frames(frames: Mapping[int, FrameBoxes], offset: int) -> dict[int, Fra
         for f, r in sorted(frames.items())
         if f - offset >= 1
     }
+
+
+def align_views(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes], offset: int
+                ) -> tuple[dict[int, FrameBoxes], dict[int, FrameBoxes]]:
+    """Both views re-timed so that top frame ``f + offset`` and horizontal frame ``f`` (the
+    convention of ``xvmatch offset``) share a frame number, no frame dropped: the view that
+    starts earlier is moved later (``offset > 0``: the horizontal one by ``offset``, else the
+    top one by ``-offset``). For a command that writes each view in its own timing (``track``);
+    :func:`shift_frames` puts the top view on the horizontal timeline instead."""
+    offset = int(offset)
+    if offset > 0:
+        return dict(top), shift_frames(hor, -offset)
+    return shift_frames(top, offset), dict(hor)
 
 
 def scale_frames(frames: Mapping[int, FrameBoxes], factor: float) -> dict[int, FrameBoxes]:

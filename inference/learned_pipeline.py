@@ -37,6 +37,7 @@ __all__ = [
     "LearnedInputs",
     "LearnedRun",
     "LearnedRunOptions",
+    "RetimedImages",
     "open_learned_inputs",
     "open_view_images",
     "run_learned_association",
@@ -121,7 +122,7 @@ class LearnedRun:
     models: tuple[LearnedMatcher, ...]
 
 
-class _Retimed:
+class RetimedImages:
     """An image source re-timed like the boxes: frame ``f`` is the source's ``f + shift``."""
 
     def __init__(self, source, shift: int) -> None:
@@ -165,7 +166,7 @@ def open_view_images(path: str, box_frames: Iterable[int], needed: Iterable[int]
     except BaseException:
         source.close()
         raise
-    return _Retimed(source, shift) if shift else source
+    return RetimedImages(source, shift) if shift else source
 
 
 def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) -> None:

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from xvmatch.datasets.detection_rows import read_detection_rows
 from xvmatch.datasets.mot_boxes import (
@@ -14,6 +16,7 @@ from xvmatch.datasets.mot_boxes import (
     PREDICTION_HEADER,
     BoxFileError,
     FrameBoxes,
+    align_views,
     read_mot_boxes,
     read_predictions,
     shift_frames,
@@ -320,3 +323,26 @@ def test_shift_frames_retimes_a_view():
     behind = shift_frames(frames, -3)
     assert sorted(behind) == [4, 5, 8] and behind[8].ids.tolist() == [5]
     assert shift_frames(frames, 0).keys() == frames.keys()
+
+
+@settings(max_examples=60, deadline=None)
+@given(top=st.sets(st.integers(1, 50), min_size=1, max_size=8),
+       hor=st.sets(st.integers(1, 50), min_size=1, max_size=8),
+       offset=st.integers(-60, 60))
+def test_align_views_lines_up_the_offset_and_drops_no_frame(top, hor, offset):
+    def view(frames):
+        return {f: FrameBoxes(f, np.array([f]), np.array([[f, 0.0, 1.0, 2.0]])) for f in frames}
+
+    a_top, a_hor = align_views(view(top), view(hor), offset)
+    # every box kept, still tagged with its input frame (its id here), frame numbers >= 1
+    assert sorted(int(r.ids[0]) for r in a_top.values()) == sorted(top)
+    assert sorted(int(r.ids[0]) for r in a_hor.values()) == sorted(hor)
+    assert min(a_top) >= 1 and min(a_hor) >= 1
+    assert all(r.frame == f for v in (a_top, a_hor) for f, r in v.items())
+    # top frame t + offset and horizontal frame t share a number: one view moved, one not
+    shift_top = {int(r.ids[0]): f for f, r in a_top.items()}
+    shift_hor = {int(r.ids[0]): f for f, r in a_hor.items()}
+    d_top = {f - t for t, f in shift_top.items()}
+    d_hor = {f - t for t, f in shift_hor.items()}
+    assert len(d_top) == 1 and len(d_hor) == 1 and 0 in d_top | d_hor
+    assert d_hor.pop() - d_top.pop() == offset

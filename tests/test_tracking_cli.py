@@ -10,7 +10,7 @@ import pytest
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import read_mot_boxes, write_mot_boxes
+from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
 
 
 @pytest.fixture(scope="module")
@@ -229,3 +229,66 @@ def test_track_help_states_the_library_defaults(capsys):
     for flag, value in (("--c0", w.c0), ("--sigma", w.sigma), ("--w1", w.w1), ("--w2", w.w2),
                         ("--min-colour", c.min_colour)):
         assert f"(default {value:g}" in options.split(f" {flag} ", 1)[1].split(" --", 1)[0], flag
+
+
+def _columns(path: Path, frame_shift: int = 0) -> list[tuple[int, str, str]]:
+    """(frame - frame_shift, track id, the rest of the row) of each row of a track file."""
+    rows = [ln.split(",", 2) for ln in path.read_text().splitlines()]
+    return [(int(f) - frame_shift, i, rest) for f, i, rest in rows]
+
+
+def test_track_with_an_offset_tracks_as_if_the_videos_were_in_sync(tmp_path, capsys):
+    # The idealised walk of test_associate_with_an_offset_re_times_the_top_view: horizontal
+    # frames renumbered by 8, so top frame = horizontal frame - 8. Tracked with --offset -8 (or
+    # auto) the pair is the synchronised one renumbered as a whole: the same tracks, written in
+    # each file's own frame numbers, and the same scores with evaluate --tracks --offset -8.
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    scene = simulate_box_scene(config, n_frames=60, seed=3)
+    files = {v: tmp_path / f"{v}.txt" for v in ("top", "hor", "late_hor")}
+    write_mot_boxes(files["top"], scene.top)
+    write_mot_boxes(files["hor"], scene.hor)
+    write_mot_boxes(files["late_hor"], {f + 8: FrameBoxes(f + 8, r.ids, r.boxes)
+                                        for f, r in scene.hor.items()})
+    base = ["track", "--top", str(files["top"]), "--camera-id", "0"]  # the wearer: O given
+    assert main([*base, "--hor", str(files["hor"]), "--out", str(tmp_path / "sync"),
+                 "--quiet"]) == 0
+    for tag, extra in [("given", ["--offset", "-8", "--quiet"]),
+                       ("auto", ["--offset", "auto", "--max-offset", "10", "--workers", "2"]),
+                       ("none", ["--quiet"])]:
+        out = tmp_path / tag
+        assert main([*base, "--hor", str(files["late_hor"]), "--out", str(out), *extra]) == 0
+        if tag == "auto":
+            assert "estimated offset -8 frames" in capsys.readouterr().err
+        same = (_columns(out / "top.txt") == _columns(tmp_path / "sync" / "top.txt")
+                and _columns(out / "hor.txt", 8) == _columns(tmp_path / "sync" / "hor.txt"))
+        assert same == (tag != "none"), tag
+    capsys.readouterr()
+    scores = []
+    for folder, hor, extra in [("sync", "hor", []), ("given", "late_hor", ["--offset", "-8"]),
+                               ("given", "late_hor", [])]:
+        assert main(["evaluate", "--tracks", str(tmp_path / folder), "--top", str(files["top"]),
+                     "--hor", str(files[hor]), "--json", *extra]) == 0
+        scores.append(json.loads(capsys.readouterr().out)["cross_view"])
+    assert scores[1] == scores[0]
+    assert scores[2] != scores[0], scores  # scored out of sync
+
+
+def test_track_with_an_offset_re_times_the_images(video_files, tmp_path):
+    # The rendered clip with its top view (boxes and image files) 5 frames later: top frame =
+    # horizontal frame + 5. With --offset 5 and the network, the tracks are those of the clip.
+    late = tmp_path / "late_top"
+    late.mkdir()
+    for image in sorted(Path(video_files["top_images"]).iterdir()):
+        frame = int("".join(c for c in image.stem if c.isdigit()))
+        (late / f"{frame + 5:06d}{image.suffix}").write_bytes(image.read_bytes())
+    rows = video_files["det_top"].read_text().splitlines()
+    late_top = tmp_path / "late_top.txt"
+    late_top.write_text("\n".join(f"{int(ln.split(',', 1)[0]) + 5},{ln.split(',', 1)[1]}"
+                                   for ln in rows) + "\n")
+    assert _track_video(video_files, tmp_path / "sync", "--model", "default") == 0
+    assert main(["track", "--top", str(late_top), "--hor", str(video_files["det_hor"]),
+                 "--top-images", str(late), "--hor-images", str(video_files["hor_images"]),
+                 "--model", "default", "--offset", "5", "--out", str(tmp_path / "late"),
+                 "--quiet"]) == 0
+    assert _columns(tmp_path / "late" / "top.txt", 5) == _columns(tmp_path / "sync" / "top.txt")
+    assert _columns(tmp_path / "late" / "hor.txt") == _columns(tmp_path / "sync" / "hor.txt")

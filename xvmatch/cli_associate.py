@@ -19,13 +19,7 @@ from xvmatch.cli_model import (
     draw_pictures,
     horizontal_size,
 )
-from xvmatch.cli_offset import (
-    MAX_OFFSET_LIMIT,
-    MAX_OFFSET_TYPE,
-    max_offset_of,
-    offset_summary,
-    unsupported_reason,
-)
+from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -39,8 +33,7 @@ from xvmatch.cli_options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, offset_value, worker_count
-from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
+from xvmatch.cli_types import box_id, worker_count
 from xvmatch.geometry.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["EXAMPLE", "add_associate_parser"]
@@ -88,25 +81,7 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         metavar="WxH",
         help=IMAGE_SIZE_HELP + "; with --hor-images or --cameras it must agree with them",
     )
-    p.add_argument(
-        "--offset",
-        type=offset_value,
-        default=0,
-        metavar="N|auto",
-        help="the videos are out of sync: top frame = horizontal frame + N (what "
-        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about a "
-        "minute per sequence on one core with the default --max-offset; see --workers) and "
-        "shifts only when the clips "
-        "back the estimate and it is more than 5 frames from 0. Pairs are written under the "
-        "horizontal frame numbers; |N| <= 100000 (default 0: frame-locked videos)",
-    )
-    p.add_argument(
-        "--max-offset",
-        type=MAX_OFFSET_TYPE,
-        default=None,
-        help=f"largest |offset| tried by --offset auto, 0..{MAX_OFFSET_LIMIT} frames and at "
-        f"most the frames the box files span (default {AUTO_MAX_OFFSET})",
-    )
+    add_offset_options(p, "Pairs are written under the horizontal frame numbers")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for --offset auto's estimate and for --model's features, "
                    "1..64 (default 1; the same output for any K)")
@@ -169,24 +144,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         from xvmatch.cli_image_size import note_if_assumed
 
         note_if_assumed(hor_size, hor, args.hor, args.quiet)
-    if args.offset == "auto":
-        from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
-
-        est = estimate_offset(top, hor, hor_width=hor_width, params=params,
-                              max_offset=max_offset, camera_id=args.camera_id,
-                              workers=args.workers)
-        offset = est.applied
-        if est.status == "unsupported":
-            print(f"warning: offset {est.offset:+d} not applied ({offset_summary(est)}): "
-                  f"{unsupported_reason(est, max_offset)}; keeping the files' timing; "
-                  "pass --offset N if you know it", file=sys.stderr)
-        elif not args.quiet:
-            kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
-                    if est.offset and not offset else "")
-            print(f"estimated offset {est.offset:+d} frames (top frame = horizontal frame "
-                  f"{est.offset:+d}; {offset_summary(est)}){kept}", file=sys.stderr)
-    else:
-        offset = args.offset
+    offset = resolve_offset(args, top, hor, hor_width, params, max_offset, args.camera_id)
     if offset:
         from xvmatch.datasets.mot_boxes import shift_frames
 

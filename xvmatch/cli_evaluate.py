@@ -46,9 +46,9 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
     p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
-                   help="score predictions made with 'associate --offset N': the top view is "
-                   "re-timed the same way (top frame = horizontal frame + N) before scoring; "
-                   "|N| <= 100000")
+                   help="score predictions made with 'associate --offset N' or tracks made "
+                   "with 'track --offset N': the views are re-timed the same way (top frame = "
+                   "horizontal frame + N) before scoring; |N| <= 100000")
     p.set_defaults(func=_cmd_evaluate)
     return p
 

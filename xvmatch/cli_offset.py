@@ -1,7 +1,8 @@
 """The ``xvmatch offset`` command: the temporal offset between the two videos (Fig. 5).
 
-Also what ``xvmatch associate --offset auto`` shares with it: the ``--max-offset`` bound
-(:func:`max_offset_of`) and the estimate's summary and refusal in words.
+Also what ``xvmatch associate`` and ``xvmatch track`` share with it: their ``--offset N|auto``
+and ``--max-offset`` options (:func:`add_offset_options`, :func:`resolve_offset`), the
+``--max-offset`` bound (:func:`max_offset_of`) and the estimate's summary and refusal in words.
 """
 
 from __future__ import annotations
@@ -21,11 +22,12 @@ from xvmatch.cli_options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, int_in, worker_count
+from xvmatch.cli_types import box_id, int_in, offset_value, worker_count
 from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
 
-__all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_parser",
-           "max_offset_of", "offset_summary", "unsupported_reason"]
+__all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_options",
+           "add_offset_parser", "max_offset_of", "offset_summary", "resolve_offset",
+           "unsupported_reason"]
 
 EXAMPLE = "xvmatch offset --top seq_top.txt --hor seq_hor.txt"
 
@@ -54,6 +56,45 @@ def max_offset_of(args: argparse.Namespace, top, hor) -> int:
             )
     return args.max_offset
 
+
+
+def add_offset_options(p: argparse.ArgumentParser, timing: str) -> None:
+    """Add ``--offset N|auto`` and ``--max-offset`` to a command that reads a video pair;
+    ``timing`` ends the help of ``--offset``: the frame numbers the command writes."""
+    p.add_argument(
+        "--offset", type=offset_value, default=0, metavar="N|auto",
+        help="the videos are out of sync: top frame = horizontal frame + N (what "
+        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about a minute "
+        "per sequence on one core with the default --max-offset; see --workers) and shifts "
+        f"only when the clips back the estimate and it is more than 5 frames from 0. {timing}; "
+        "|N| <= 100000 (default 0: frame-locked videos)")
+    p.add_argument(
+        "--max-offset", type=MAX_OFFSET_TYPE, default=None,
+        help=f"largest |offset| tried by --offset auto, 0..{MAX_OFFSET_LIMIT} frames and at "
+        f"most the frames the box files span (default {AUTO_MAX_OFFSET})")
+
+
+def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
+                   max_offset: int | None, camera_id: int | None = None) -> int:
+    """The offset to apply: ``--offset N``, or with ``auto`` the estimate when the clips back
+    it (0 otherwise, with a warning on stderr); the estimate is reported unless ``--quiet``.
+    ``max_offset``: :func:`max_offset_of`, checked before any work."""
+    if args.offset != "auto":
+        return int(args.offset)
+    from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
+
+    est = estimate_offset(top, hor, hor_width=hor_width, params=params, max_offset=max_offset,
+                          camera_id=camera_id, workers=args.workers)
+    if est.status == "unsupported":
+        print(f"warning: offset {est.offset:+d} not applied ({offset_summary(est)}): "
+              f"{unsupported_reason(est, max_offset)}; keeping the files' timing; "
+              "pass --offset N if you know it", file=sys.stderr)
+    elif not args.quiet:
+        kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
+                if est.offset and not est.applied else "")
+        print(f"estimated offset {est.offset:+d} frames (top frame = horizontal frame "
+              f"{est.offset:+d}; {offset_summary(est)}){kept}", file=sys.stderr)
+    return int(est.applied)
 
 
 def offset_summary(est) -> str:

@@ -10,7 +10,9 @@ tracklets link by IoU and colour and the over-time weights mix in colour similar
 gives the learned matcher: its box-only association makes the cross-view weights (``--weights
 learned``, the default with ``--model``; ``--weights handcrafted`` keeps Eq. 13 on the spatial
 search), and with images its appearance network adds the cross-view term and takes over the
-over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1). Bad input raises
+over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1). ``--offset N|auto`` tracks videos out of sync
+(top frame t + N with horizontal frame t), each row still written under its own frame number;
+``evaluate --tracks --offset N`` scores them. Bad input raises
 ``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
 ...`` with exit code 2.
 """
@@ -24,6 +26,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
+from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -115,6 +118,37 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     return TrackImages(sources[0], sources[1], embed, cross_cost), sources, size
 
 
+def _wearer_marked(top, camera_rows):
+    """The top view for the offset estimate, and the wearer's id there: the detections' ids
+    are row numbers (>= 0), so the rows of ``--camera-id`` become id -1 (None: no wearer)."""
+    if camera_rows is None:
+        return top, None
+    import numpy as np
+
+    from xvmatch.datasets.mot_boxes import FrameBoxes
+
+    return {f: FrameBoxes(f, np.where(np.isin(r.ids, camera_rows), -1, r.ids), r.boxes)
+            for f, r in top.items()}, -1
+
+
+def _aligned(top, hor, images, offset: int):
+    """The views (and their images) re-timed so that top frame ``t + offset`` and horizontal
+    frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.align_views`); the
+    rows, and so the written tracks, keep their own frame numbers."""
+    if not offset:
+        return top, hor, images
+    from dataclasses import replace
+
+    from xvmatch.datasets.mot_boxes import align_views
+    from xvmatch.inference.learned_pipeline import RetimedImages
+
+    top, hor = align_views(top, hor, offset)
+    if images is not None:  # an aligned frame f shows image frame f + shift
+        images = (replace(images, hor=RetimedImages(images.hor, -offset)) if offset > 0 else
+                  replace(images, top=RetimedImages(images.top, offset)))
+    return top, hor, images
+
+
 def add_track_parser(subparsers) -> argparse.ArgumentParser:
     """Register ``xvmatch track`` on ``subparsers`` and return its parser."""
     help_text = (
@@ -155,9 +189,11 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help=IMAGE_SIZE_HELP + "; with --hor-images it must agree with them")
+    add_offset_options(p, "Tracks are written in each video's own frame numbers; score them "
+                       "with 'xvmatch evaluate --tracks --offset N'")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
-                   help="processes for the frame association, 1..64 (default 1; the same "
-                   "output for any K)")
+                   help="processes for the frame association and --offset auto's estimate, "
+                   "1..64 (default 1; the same output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     g = p.add_argument_group("appearance (with the images of both views)")
     add_image_options(g)
@@ -224,6 +260,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
          *image_inputs(args),
          Input("--model", None if args.model == "default" else args.model)],
     )
+    max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
     model = None
     if args.model is not None:
         from xvmatch.cli_model import open_models
@@ -240,12 +277,15 @@ def _cmd_track(args: argparse.Namespace) -> int:
         resolved = resolve_size(hor.frames, args.hor, given, ids=False)
         width = resolved[0][0]
         note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
+        marked, wearer = _wearer_marked(top.frames, camera_rows)
+        offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
+        top_frames, hor_frames, images = _aligned(top.frames, hor.frames, images, offset)
         progress = _step_progress(not args.quiet)
         learned = None
         if weights == "learned":
-            learned = learned_frame_evidence(top.frames, hor.frames, resolved[0], model,
+            learned = learned_frame_evidence(top_frames, hor_frames, resolved[0], model,
                                              camera_rows, args.workers, progress)
-        result = track_pair(top.frames, hor.frames, float(width), params, config,
+        result = track_pair(top_frames, hor_frames, float(width), params, config,
                             camera_rows, args.workers, progress, images=images,
                             learned=learned)
     finally:
@@ -303,8 +343,6 @@ def evaluate_tracks_command(args: argparse.Namespace) -> int:
     )
     from xvmatch.inference.cross_view_metrics import format_table, summarize
 
-    if args.offset:
-        raise ValueError("--offset applies to --pred; track and score re-timed files instead")
     folder = Path(args.tracks)
     if not folder.is_dir():
         raise ValueError(f"--tracks {args.tracks}: not a folder (expected the --out of "
@@ -313,6 +351,11 @@ def evaluate_tracks_command(args: argparse.Namespace) -> int:
     tracks_hor = read_mot_boxes(folder / "hor.txt", allow_empty=True)
     gt_top = read_boxes(args.top, args.duplicates)
     gt_hor = read_boxes(args.hor, args.duplicates)
+    if args.offset:  # tracked with --offset N: both files in their own videos' timing
+        from xvmatch.datasets.mot_boxes import align_views
+
+        tracks_top, tracks_hor = align_views(tracks_top, tracks_hor, args.offset)
+        gt_top, gt_hor = align_views(gt_top, gt_hor, args.offset)
     name = args.name or args.tracks
     if not _trackeval_installed():
         cross = summarize(track_pair_counts(tracks_top, tracks_hor, gt_top, gt_hor))
