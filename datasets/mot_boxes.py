@@ -41,6 +41,7 @@ __all__ = [
     "read_predictions",
     "scale_frames",
     "shift_frames",
+    "view_shifts",
     "write_mot_boxes",
     "write_predictions",
 ]
@@ -146,17 +147,23 @@ def shift_frames(frames: Mapping[int, FrameBoxes], offset: int) -> dict[int, Fra
     }
 
 
+def view_shifts(offsets: Sequence[int]) -> list[int]:
+    """Frame shifts, top view first, that give top frame ``t + N_k`` and frame ``t`` of each
+    horizontal view ``k`` one frame number (``N_k``: ``offsets[k]``, the convention of
+    ``xvmatch offset``: top frame = horizontal frame + N) with no frame below 1: view ``v``'s
+    frame ``f`` becomes ``f + shift_v``, every shift >= 0 and the smallest 0."""
+    base = max(0, *(-int(n) for n in offsets)) if len(offsets) else 0
+    return [base, *(int(n) + base for n in offsets)]
+
+
 def align_views(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes], offset: int
                 ) -> tuple[dict[int, FrameBoxes], dict[int, FrameBoxes]]:
-    """Both views re-timed so that top frame ``f + offset`` and horizontal frame ``f`` (the
-    convention of ``xvmatch offset``) share a frame number, no frame dropped: the view that
-    starts earlier is moved later (``offset > 0``: the horizontal one by ``offset``, else the
-    top one by ``-offset``). For a command that writes each view in its own timing (``track``);
-    :func:`shift_frames` puts the top view on the horizontal timeline instead."""
-    offset = int(offset)
-    if offset > 0:
-        return dict(top), shift_frames(hor, -offset)
-    return shift_frames(top, offset), dict(hor)
+    """Both views re-timed by :func:`view_shifts`: top frame ``f + offset`` and horizontal frame
+    ``f`` share a number, no frame dropped (the view that starts earlier is moved later). For a
+    command that writes each view in its own timing (``track``); :func:`shift_frames` puts the
+    top view on the horizontal timeline instead."""
+    s_top, s_hor = view_shifts([offset])
+    return shift_frames(top, -s_top), shift_frames(hor, -s_hor)
 
 
 def scale_frames(frames: Mapping[int, FrameBoxes], factor: float) -> dict[int, FrameBoxes]:

@@ -37,7 +37,7 @@ __all__ = [
     "LearnedInputs",
     "LearnedRun",
     "LearnedRunOptions",
-    "RetimedImages",
+    "RetimedFrames",
     "open_learned_inputs",
     "open_view_images",
     "run_learned_association",
@@ -122,8 +122,9 @@ class LearnedRun:
     models: tuple[LearnedMatcher, ...]
 
 
-class RetimedImages:
-    """An image source re-timed like the boxes: frame ``f`` is the source's ``f + shift``."""
+class RetimedFrames:
+    """A per-frame source (images, cameras) re-timed like the boxes: frame ``f`` is the
+    source's ``f + shift``."""
 
     def __init__(self, source, shift: int) -> None:
         self.source, self.shift = source, int(shift)
@@ -166,7 +167,7 @@ def open_view_images(path: str, box_frames: Iterable[int], needed: Iterable[int]
     except BaseException:
         source.close()
         raise
-    return RetimedImages(source, shift) if shift else source
+    return RetimedFrames(source, shift) if shift else source
 
 
 def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) -> None:

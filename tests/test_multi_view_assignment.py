@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -376,3 +377,87 @@ def test_cli_takes_one_to_three_horizontal_views(scene, tmp_path, capsys):
     assert main(["associate-multi", "--top", top, "--hor", hor1, "--out", str(tmp_path / "one"),
                  "--quiet", "--image-size", "320x180"]) == 0
     assert sorted(p.name for p in (tmp_path / "one").iterdir()) == ["hor1.txt", "top.txt"]
+
+
+def _late(src: Path, dst: Path, frames: int) -> Path:
+    """A copy of a box file, image folder or camera folder with every frame number ``frames``
+    later (files named by frame number)."""
+    if src.is_dir():
+        dst.mkdir()
+        for item in sorted(src.iterdir()):
+            number = int(item.stem)
+            (dst / f"{number + frames:06d}{item.suffix}").write_bytes(item.read_bytes())
+        return dst
+    lines = src.read_text().splitlines()
+    dst.write_text("".join(f"{int(ln.split(',', 1)[0]) + frames},{ln.split(',', 1)[1]}\n"
+                           for ln in lines))
+    return dst
+
+
+def _rows(path: Path, late: int = 0) -> list[tuple[int, str, str]]:
+    """(frame - late, person id, the rest) of each written row."""
+    return [(f - late, pid, rest) for f, pid, rest in
+            ((int(r[0]), r[1], ",".join(r[2:])) for r in
+              (ln.split(",") for ln in path.read_text().splitlines()))]
+
+
+def test_cli_offsets_re_time_each_horizontal_view(tmp_path):
+    # Three rendered frames; the second egocentric camera's files (boxes, images, cameras)
+    # numbered 4 frames later: top frame = hor2 frame - 4. With --offset 0 -4 the views are
+    # associated as the synchronised ones, and every row keeps its own file's frame number.
+    from xvmatch.cli import main
+    from xvmatch.datasets.multi_ego_scenes import (
+        multi_ego_config,
+        render_multi_ego,
+        write_multi_ego_inputs,
+    )
+
+    config = multi_ego_config(2, top_size=(320, 180), ego_size=(320, 180), n_people=(5, 6))
+    inputs = write_multi_ego_inputs(render_multi_ego([5, 3], n_ego=2, n_frames=3,
+                                                     config=config), tmp_path / "in", seed=1)
+    late = [_late(p, tmp_path / f"late_{kind}_{p.name}", 4) for kind, p in
+            (("boxes", inputs.boxes[2]), ("images", inputs.images[2]),
+             ("cameras", inputs.cameras[1]))]
+
+    def run(out: str, hor2, images2, cameras2, *extra: str) -> int:
+        return main(["associate-multi", "--model", "default", "--top", str(inputs.boxes[0]),
+                     "--hor", str(inputs.boxes[1]), str(hor2), "--top-images",
+                     str(inputs.images[0]), "--hor-images", str(inputs.images[1]),
+                     str(images2), "--cameras", str(inputs.cameras[0]), str(cameras2),
+                     "--out", str(tmp_path / out), "--quiet", *extra])
+
+    assert run("sync", inputs.boxes[2], inputs.images[2], inputs.cameras[1]) == 0
+    assert run("late", *late, "--offset", "0", "-4") == 0
+    for name, shift in (("top.txt", 0), ("hor1.txt", 0), ("hor2.txt", 4)):
+        assert _rows(tmp_path / "late" / name, shift) == _rows(tmp_path / "sync" / name), name
+    assert run("unaligned", *late) == 0  # the files' timing: hor2 meets no top frame
+    assert _rows(tmp_path / "unaligned" / "hor2.txt", 4) != _rows(tmp_path / "sync" / "hor2.txt")
+    assert run("three", *late, "--offset", "0", "-4", "-1") == 2  # one per --hor, or one
+
+
+def test_cli_offset_auto_finds_each_view_its_own(tmp_path, capsys):
+    # The idealised walk of test_associate_with_an_offset_re_times_the_top_view seen twice by
+    # its egocentric camera: once in sync, once numbered 8 frames later (offset -8).
+    from xvmatch.cli import main
+    from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+    from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
+
+    config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
+    scene = simulate_box_scene(config, n_frames=60, seed=3)
+    top, hor1, hor2 = (tmp_path / n for n in ("top.txt", "hor1.txt", "hor2.txt"))
+    write_mot_boxes(top, scene.top)
+    write_mot_boxes(hor1, scene.hor)
+    write_mot_boxes(hor2, {f + 8: FrameBoxes(f + 8, r.ids, r.boxes)
+                           for f, r in scene.hor.items()})
+    base = ["associate-multi", "--top", str(top), "--hor", str(hor1), str(hor2),
+            "--camera-id", "0", "0", "--solver", "greedy"]
+    assert main([*base, "--out", str(tmp_path / "given"), "--offset", "0", "-8",
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    assert main([*base, "--out", str(tmp_path / "auto"), "--offset", "auto",
+                 "--max-offset", "10", "--workers", "2"]) == 0
+    err = capsys.readouterr().err
+    assert f"--hor {hor2}: estimated offset -8 frames" in err, err
+    assert f"--hor {hor1}: estimated offset +0 frames" in err, err
+    for name in ("top.txt", "hor1.txt", "hor2.txt"):
+        assert _rows(tmp_path / "auto" / name) == _rows(tmp_path / "given" / name), name

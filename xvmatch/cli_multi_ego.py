@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -89,8 +90,11 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
                    "carry the ids over frames (still one box per view and person on a frame)")
     p.add_argument("--clip-length", type=CLIP_TYPE, default=10, metavar="N",
                    help="with --tracks, frames per clip of tracklets, 1..1000 (default 10)")
+    add_offset_options(p, "Each view is associated at its moment, every row written under "
+                       "its own file's frame number", several=True)
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
-                   help="processes for the learned matcher's features, 1..64 (default 1)")
+                   help="processes for the learned matcher's features and --offset auto's "
+                   "estimates, 1..64 (default 1)")
     p.add_argument("--threads", type=thread_count, default=1, metavar="K",
                    help="onnxruntime threads, 1..64 (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -115,6 +119,38 @@ def _wearer_rows(top, camera_id: int) -> dict[int, int]:
         if hits:
             out[frame] = hits[0]
     return out
+
+
+def _offsets(args: argparse.Namespace, n_hor: int) -> list:
+    """``--offset``: one value per horizontal view (a single one is for all)."""
+    values = list(args.offset)
+    if len(values) == 1:
+        return values * n_hor
+    if len(values) != n_hor:
+        raise ValueError(f"--offset: give one per --hor file ({n_hor}) or one for all, got "
+                         f"{len(values)}")
+    return values
+
+
+def _aligned(views, offsets, images, cameras, camera_rows):
+    """Every view (and its images and cameras) re-timed so that top frame ``t + N_k`` and frame
+    ``t`` of horizontal view ``k`` share a number (:func:`xvmatch.datasets.mot_boxes.
+    view_shifts`); the rows keep their own frame numbers in the output."""
+    from xvmatch.datasets.mot_boxes import shift_frames, view_shifts
+    from xvmatch.inference.learned_pipeline import RetimedFrames
+
+    shifts = view_shifts(offsets)
+
+    def retimed(sources, moves):  # aligned frame f shows the source's frame f - shift
+        if sources is None:
+            return None
+        return [RetimedFrames(x, -m) if m else x for x, m in zip(sources, moves, strict=True)]
+
+    views = [shift_frames(v, -m) for v, m in zip(views, shifts, strict=True)]
+    if camera_rows is not None:
+        camera_rows = [{f + shifts[0]: r for f, r in rows.items()} for rows in camera_rows]
+    return (views, retimed(images, shifts), retimed(cameras, shifts[1:]), camera_rows,
+            sorted(set().union(*views)))
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
@@ -147,9 +183,12 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
          *(Input("--cameras", c) for c in args.cameras or ()),
          Input("--model", None if args.model == "default" else args.model)],
     )
+    offsets = _offsets(args, n_hor)
     rows = [read_detection_rows(p) for p in paths]
     views = [r.frames for r in rows]
     frames = sorted(set().union(*views))
+    max_offset = (max_offset_of(args, views[0], set().union(*views[1:]))
+                  if "auto" in offsets else None)
     camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
                    if args.camera_id is not None else None)
     matcher = images = cameras = None
@@ -202,6 +241,14 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         for k, r in enumerate(resolved):
             note_if_assumed(r, views[k + 1], paths[k + 1], args.quiet)
         sizes = [r[0] for r in resolved]
+        for k, value in enumerate(offsets):
+            marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
+            offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
+                                        max_offset, wearer, value,
+                                        f"--hor {paths[k + 1]}: " if n_hor > 1 else "")
+        if any(offsets):
+            views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
+                                                                   cameras, camera_rows)
         problems = multi_view_costs(
             views, sizes, frames, matcher=matcher,
             appearance=matcher if images is not None else None, images=images,

@@ -27,7 +27,7 @@ from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
 
 __all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_options",
            "add_offset_parser", "max_offset_of", "offset_summary", "resolve_offset",
-           "unsupported_reason"]
+           "unsupported_reason", "wearer_marked"]
 
 EXAMPLE = "xvmatch offset --top seq_top.txt --hor seq_hor.txt"
 
@@ -58,41 +58,67 @@ def max_offset_of(args: argparse.Namespace, top, hor) -> int:
 
 
 
-def add_offset_options(p: argparse.ArgumentParser, timing: str) -> None:
+def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = False) -> None:
     """Add ``--offset N|auto`` and ``--max-offset`` to a command that reads a video pair;
-    ``timing`` ends the help of ``--offset``: the frame numbers the command writes."""
+    ``timing`` ends the help of ``--offset``: the frame numbers the command writes. ``several``:
+    one value per horizontal view (``--hor H1 H2 ...``), or one for all."""
+    what = ("per --hor file (or one for all), the videos are out of sync: top frame = "
+            "horizontal frame + N" if several else
+            "the videos are out of sync: top frame = horizontal frame + N")
     p.add_argument(
-        "--offset", type=offset_value, default=0, metavar="N|auto",
-        help="the videos are out of sync: top frame = horizontal frame + N (what "
-        "'xvmatch offset' prints); 'auto' estimates it first from the boxes (about a minute "
-        "per sequence on one core with the default --max-offset; see --workers) and shifts "
-        f"only when the clips back the estimate and it is more than 5 frames from 0. {timing}; "
-        "|N| <= 100000 (default 0: frame-locked videos)")
+        "--offset", type=offset_value, default=[0] if several else 0,
+        nargs="+" if several else None, metavar="N|auto",
+        help=f"{what} (what 'xvmatch offset' prints); 'auto' estimates it first from the boxes "
+        "(about a minute per pair of videos on one core with the default --max-offset; see "
+        "--workers) and shifts only when the clips back the estimate and it is more than 5 "
+        f"frames from 0. {timing}; |N| <= 100000 (default 0: frame-locked videos)")
     p.add_argument(
         "--max-offset", type=MAX_OFFSET_TYPE, default=None,
         help=f"largest |offset| tried by --offset auto, 0..{MAX_OFFSET_LIMIT} frames and at "
         f"most the frames the box files span (default {AUTO_MAX_OFFSET})")
 
 
+def wearer_marked(top, positions: dict[int, int] | None):
+    """The top view for an offset estimate and the camera wearer's id there: a detection file's
+    ids are row numbers (>= 0), so the wearer's box (``positions``: ``{frame: its position in
+    the frame's record}``) becomes id -1; ``(top, None)`` when no wearer is given."""
+    if positions is None:
+        return top, None
+    import numpy as np
+
+    from xvmatch.datasets.mot_boxes import FrameBoxes
+
+    marked = {}
+    for f, r in top.items():
+        ids = np.array(r.ids, copy=True)
+        if f in positions:
+            ids[positions[f]] = -1
+        marked[f] = FrameBoxes(f, ids, r.boxes)
+    return marked, -1
+
+
 def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
-                   max_offset: int | None, camera_id: int | None = None) -> int:
-    """The offset to apply: ``--offset N``, or with ``auto`` the estimate when the clips back
-    it (0 otherwise, with a warning on stderr); the estimate is reported unless ``--quiet``.
-    ``max_offset``: :func:`max_offset_of`, checked before any work."""
-    if args.offset != "auto":
-        return int(args.offset)
+                   max_offset: int | None, camera_id: int | None = None,
+                   value: int | str | None = None, label: str = "") -> int:
+    """The offset to apply: ``value`` (default ``--offset``) when a number, or with ``auto``
+    the estimate when the clips back it (0 otherwise, with a warning on stderr); the estimate
+    is reported unless ``--quiet``, after ``label`` (which pair of views). ``max_offset``:
+    :func:`max_offset_of`, checked before any work."""
+    value = args.offset if value is None else value
+    if value != "auto":
+        return int(value)
     from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
 
     est = estimate_offset(top, hor, hor_width=hor_width, params=params, max_offset=max_offset,
                           camera_id=camera_id, workers=args.workers)
     if est.status == "unsupported":
-        print(f"warning: offset {est.offset:+d} not applied ({offset_summary(est)}): "
+        print(f"warning: {label}offset {est.offset:+d} not applied ({offset_summary(est)}): "
               f"{unsupported_reason(est, max_offset)}; keeping the files' timing; "
               "pass --offset N if you know it", file=sys.stderr)
     elif not args.quiet:
         kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
                 if est.offset and not est.applied else "")
-        print(f"estimated offset {est.offset:+d} frames (top frame = horizontal frame "
+        print(f"{label}estimated offset {est.offset:+d} frames (top frame = horizontal frame "
               f"{est.offset:+d}; {offset_summary(est)}){kept}", file=sys.stderr)
     return int(est.applied)
 

@@ -26,7 +26,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset
+from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -118,19 +118,6 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     return TrackImages(sources[0], sources[1], embed, cross_cost), sources, size
 
 
-def _wearer_marked(top, camera_rows):
-    """The top view for the offset estimate, and the wearer's id there: the detections' ids
-    are row numbers (>= 0), so the rows of ``--camera-id`` become id -1 (None: no wearer)."""
-    if camera_rows is None:
-        return top, None
-    import numpy as np
-
-    from xvmatch.datasets.mot_boxes import FrameBoxes
-
-    return {f: FrameBoxes(f, np.where(np.isin(r.ids, camera_rows), -1, r.ids), r.boxes)
-            for f, r in top.items()}, -1
-
-
 def _aligned(top, hor, images, offset: int):
     """The views (and their images) re-timed so that top frame ``t + offset`` and horizontal
     frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.align_views`); the
@@ -139,13 +126,14 @@ def _aligned(top, hor, images, offset: int):
         return top, hor, images
     from dataclasses import replace
 
-    from xvmatch.datasets.mot_boxes import align_views
-    from xvmatch.inference.learned_pipeline import RetimedImages
+    from xvmatch.datasets.mot_boxes import align_views, view_shifts
+    from xvmatch.inference.learned_pipeline import RetimedFrames
 
     top, hor = align_views(top, hor, offset)
-    if images is not None:  # an aligned frame f shows image frame f + shift
-        images = (replace(images, hor=RetimedImages(images.hor, -offset)) if offset > 0 else
-                  replace(images, top=RetimedImages(images.top, offset)))
+    if images is not None:  # aligned frame f shows the view's frame f - shift
+        s_top, s_hor = view_shifts([offset])
+        images = replace(images, top=RetimedFrames(images.top, -s_top) if s_top else images.top,
+                         hor=RetimedFrames(images.hor, -s_hor) if s_hor else images.hor)
     return top, hor, images
 
 
@@ -224,6 +212,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
     from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
@@ -277,7 +267,10 @@ def _cmd_track(args: argparse.Namespace) -> int:
         resolved = resolve_size(hor.frames, args.hor, given, ids=False)
         width = resolved[0][0]
         note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
-        marked, wearer = _wearer_marked(top.frames, camera_rows)
+        positions = None if camera_rows is None else {
+            f: int(hit[0]) for f, r in top.frames.items()
+            if (hit := np.flatnonzero(np.isin(r.ids, camera_rows))).size}
+        marked, wearer = wearer_marked(top.frames, positions)
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
         top_frames, hor_frames, images = _aligned(top.frames, hor.frames, images, offset)
         progress = _step_progress(not args.quiet)
