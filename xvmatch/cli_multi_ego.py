@@ -10,7 +10,9 @@ solves the joint cycle-consistent program of every frame
 the same id in two views of a frame is the same person (ids are unique over the whole output and
 do not carry over frames). With ``--tracks`` the ids carry over frames
 (:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view smooth the
-costs, every frame is solved with the cycle constraints, ids follow the tracklets). Bad input raises
+costs, every frame is solved with the cycle constraints, ids follow the tracklets).
+``--offset N1 N2 ...|auto`` re-times each horizontal view against the top view (cameras not
+started together); rows keep their own frame numbers. Bad input raises
 ``ValueError`` with one line, printed by the main entry point as ``xvmatch: error: ...``.
 """
 

@@ -1,8 +1,9 @@
 """The ``xvmatch offset`` command: the temporal offset between the two videos (Fig. 5).
 
-Also what ``xvmatch associate`` and ``xvmatch track`` share with it: their ``--offset N|auto``
-and ``--max-offset`` options (:func:`add_offset_options`, :func:`resolve_offset`), the
-``--max-offset`` bound (:func:`max_offset_of`) and the estimate's summary and refusal in words.
+Also what ``xvmatch associate``, ``associate-multi`` and ``track`` share with it: their
+``--offset N|auto`` and ``--max-offset`` options (:func:`add_offset_options`,
+:func:`resolve_offset`, :func:`wearer_marked`), the ``--max-offset`` bound
+(:func:`max_offset_of`) and the estimate's summary and refusal in words.
 """
 
 from __future__ import annotations
@@ -57,13 +58,12 @@ def max_offset_of(args: argparse.Namespace, top, hor) -> int:
     return args.max_offset
 
 
-
 def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = False) -> None:
     """Add ``--offset N|auto`` and ``--max-offset`` to a command that reads a video pair;
     ``timing`` ends the help of ``--offset``: the frame numbers the command writes. ``several``:
     one value per horizontal view (``--hor H1 H2 ...``), or one for all."""
-    what = ("per --hor file (or one for all), the videos are out of sync: top frame = "
-            "horizontal frame + N" if several else
+    what = ("one per --hor file, or one for all: that camera is out of sync with the top "
+            "view, top frame = its frame + N" if several else
             "the videos are out of sync: top frame = horizontal frame + N")
     p.add_argument(
         "--offset", type=offset_value, default=[0] if several else 0,
