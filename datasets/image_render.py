@@ -94,6 +94,9 @@ class Difficulty:
         jpeg_quality: (min, max) JPEG quality of a view's files.
         sunny: probability of a sunny scene (strong directional light and cast shadows);
             otherwise overcast (soft light, faint shadows).
+        texture: depth (0-1) of the photographic texture laid over each person
+            (:mod:`xvmatch.datasets.person_textures`); 0, the default, draws none and leaves
+            the renders and the manifests as before.
     """
 
     lookalike: float = 0.25
@@ -110,9 +113,10 @@ class Difficulty:
     noise: float = 4.0
     jpeg_quality: tuple[int, int] = (75, 95)
     sunny: float = 0.75
+    texture: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("lookalike", "hat", "bag", "sunny"):
+        for name in ("lookalike", "hat", "bag", "sunny", "texture"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"Difficulty.{name} must be in [0, 1], got {value}")
@@ -137,8 +141,9 @@ class Difficulty:
         return DIFFICULTIES[name]
 
     def to_dict(self) -> dict:
-        """JSON-ready record."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """JSON-ready record (``texture`` only when set: older manifests stay as they were)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name != "texture" or self.texture}
 
 
 DIFFICULTIES: dict[str, Difficulty] = {
@@ -865,6 +870,11 @@ class SceneRenderer:
             "ego": draw_photometric(rng, d, moving=True),
         }
         self._frame_seeds = rng.integers(0, 2**63 - 1, size=(scene.n_frames, 2))
+        self._textures = None
+        if d.texture > 0:  # drawn last: the rest of the scene is the untextured one
+            from xvmatch.datasets.person_textures import draw_person_textures
+
+            self._textures = draw_person_textures(rng, scene.people.n_people)
         self._phase, self._amplitude = walk_phases(scene.people, scene.config.fps)
         self._top_background: tuple[Camera, np.ndarray] | None = None
         n = scene.people.n_people
@@ -906,6 +916,11 @@ class SceneRenderer:
         _shadows(image, camera, body, self.world)
         id_image, labels = render_people(image, camera, body, self.world, people.ids,
                                          allowed=allowed, near_clip=near)
+        if self._textures is not None:
+            from xvmatch.datasets.person_textures import apply_person_textures
+
+            image = apply_person_textures(image, id_image, self._textures,
+                                          self.difficulty.texture)
         seed = int(self._frame_seeds[frame - 1, 0 if view == "top" else 1])
         params = self.photometric[view]
         image = apply_photometric(image, params, np.random.default_rng(seed))
