@@ -53,8 +53,8 @@ _CONTRAST = 0.35  # a texture value of one standard deviation changes brightness
 def _data_folder() -> Path:
     spec = importlib.util.find_spec(TEXTURE_PACKAGE)
     if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("person textures need the images of the scikit-image wheel: "
-                           "pip install --no-deps scikit-image")
+        raise FileNotFoundError("person textures need the images of the scikit-image wheel: "
+                                "pip install --no-deps scikit-image")
     return Path(next(iter(spec.submodule_search_locations))) / "data"
 
 
@@ -66,16 +66,17 @@ def load_textures() -> np.ndarray:
     deviation.
 
     Raises:
-        RuntimeError: scikit-image's images are not installed, or one is missing or unreadable.
+        FileNotFoundError: scikit-image's images are not installed, or one is missing or
+            unreadable.
     """
     folder = _data_folder()
     out = []
     for name, _ in TEXTURE_SOURCES:
         image = cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE)
         if image is None:
-            raise RuntimeError(f"{folder / name}: missing or unreadable (the scikit-image "
-                               "wheel's image); reinstall it: pip install --no-deps "
-                               "--force-reinstall scikit-image")
+            raise FileNotFoundError(f"{folder / name}: missing or unreadable (the scikit-image "
+                                    "wheel's image); reinstall it: pip install --no-deps "
+                                    "--force-reinstall scikit-image")
         h, w = image.shape
         side = min(h, w)
         y, x = (h - side) // 2, (w - side) // 2

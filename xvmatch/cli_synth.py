@@ -105,6 +105,11 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    help="image size of both views, 8..8192 a side (default 640x360)")
     p.add_argument("--difficulty", choices=("easy", "medium", "hard"), default="medium",
                    help="look-alike clothing and photometric degradation (default medium)")
+    p.add_argument("--texture", default=0.0, metavar="D",
+                   type=float_in(0, 1, "a depth of brightness modulation"),
+                   help="photographic textures over the people, depth in [0, 1] (default 0: "
+                   "none; image pairs only; needs pip install --no-deps scikit-image, whose "
+                   "CC0 and public-domain images they are)")
     p.add_argument("--fps", default=10.0,
                    type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
                    help="frame rate of the walks, in [0.1, 1000] (default 10)")
@@ -129,6 +134,14 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     args.scenario = args.scenario or "drone"
     args.scenes = 10 if args.scenes is None else args.scenes
     check_outputs([Output("--out", args.out, folder=True)])
+    difficulty = Difficulty.preset(args.difficulty)
+    if args.texture:
+        from dataclasses import replace
+
+        from xvmatch.datasets.person_textures import load_textures
+
+        load_textures()  # a missing package is one line here, not an error in each worker
+        difficulty = replace(difficulty, texture=args.texture)
     config = SynthConfig(scenario=args.scenario, n_people=args.people or (3, 14),
                          top_size=args.size, ego_size=args.size, fps=args.fps)
     total = args.scenes * args.frames
@@ -136,8 +149,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     with progress_bar(total, "synth", "pair", not args.quiet) as bar:
         manifest = generate_dataset(
             args.out, config, n_scenes=args.scenes, n_frames=args.frames, seed=args.seed,
-            workers=args.workers, difficulty=Difficulty.preset(args.difficulty),
-            progress=bar.update,
+            workers=args.workers, difficulty=difficulty, progress=bar.update,
         )
     elapsed = time.perf_counter() - start
     if not args.quiet:
@@ -164,6 +176,8 @@ def _synth_cameras(args: argparse.Namespace) -> int:
     )
     from xvmatch.geometry.output_paths import claim_folder
 
+    if args.texture:
+        raise ValueError("--texture applies to image pairs, not to --cameras")
     for option, wrong in (("--scenario", args.scenario is not None),
                           ("--scenes", args.scenes not in (None, 1))):
         if wrong:
