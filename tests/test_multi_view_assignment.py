@@ -424,7 +424,7 @@ def test_cli_offsets_re_time_each_horizontal_view(tmp_path):
                      "--hor", str(inputs.boxes[1]), str(hor2), "--top-images",
                      str(inputs.images[0]), "--hor-images", str(inputs.images[1]),
                      str(images2), "--cameras", str(inputs.cameras[0]), str(cameras2),
-                     "--out", str(tmp_path / out), "--quiet", *extra])
+                     "--out", str(tmp_path / out), "--quiet", "--time-limit", "600", *extra])
 
     assert run("sync", inputs.boxes[2], inputs.images[2], inputs.cameras[1]) == 0
     assert run("late", *late, "--offset", "0", "-4") == 0
