@@ -49,6 +49,17 @@ class DetectionRows:
         """Row numbers whose id column equals ``file_id`` (e.g. the wearer's ``--camera-id``)."""
         return np.flatnonzero(self.file_ids == int(file_id))
 
+    def positions_of_id(self, file_id: int) -> dict[int, int]:
+        """``{frame: position in the frame's record}`` of the first box whose id column equals
+        ``file_id``, on the frames that have one."""
+        rows = self.rows_with_id(file_id)
+        out = {}
+        for frame, record in self.frames.items():
+            hits = np.flatnonzero(np.isin(record.ids, rows))
+            if hits.size:
+                out[frame] = int(hits[0])
+        return out
+
 
 def read_detection_rows(path: str | os.PathLike) -> DetectionRows:
     """Read a ``frame,id,x,y,w,h[,...]`` file keeping every row; ids may repeat.

@@ -36,12 +36,12 @@ __all__ = [
     "PREDICTION_HEADER",
     "BoxFileError",
     "FrameBoxes",
+    "align_frames",
     "align_views",
     "read_mot_boxes",
     "read_predictions",
     "scale_frames",
     "shift_frames",
-    "view_shifts",
     "write_mot_boxes",
     "write_predictions",
 ]
@@ -147,23 +147,28 @@ def shift_frames(frames: Mapping[int, FrameBoxes], offset: int) -> dict[int, Fra
     }
 
 
-def view_shifts(offsets: Sequence[int]) -> list[int]:
-    """Frame shifts, top view first, that give top frame ``t + N_k`` and frame ``t`` of each
-    horizontal view ``k`` one frame number (``N_k``: ``offsets[k]``, the convention of
-    ``xvmatch offset``: top frame = horizontal frame + N) with no frame below 1: view ``v``'s
-    frame ``f`` becomes ``f + shift_v``, every shift >= 0 and the smallest 0."""
+def align_frames(views: Sequence[Mapping[int, FrameBoxes]], offsets: Sequence[int]
+                 ) -> tuple[list[dict[int, FrameBoxes]], list[int]]:
+    """The views (top first) re-timed so that top frame ``t + N_k`` and frame ``t`` of each
+    horizontal view ``k`` share a number (``N_k``: ``offsets[k]``, the convention of ``xvmatch
+    offset``: top frame = horizontal frame + N), no frame dropped: view ``v``'s frame ``f``
+    becomes ``f + shift_v``, every shift >= 0 and the smallest 0 (the views that start earlier
+    are moved later). Returns the views and the shifts. For commands that write each view in
+    its own timing (``track``, ``associate-multi``); :func:`shift_frames` puts the top view on
+    the horizontal timeline instead."""
+    if len(views) != len(offsets) + 1:
+        raise ValueError(f"{len(views)} views need {len(views) - 1} offsets, got {len(offsets)}")
     base = max(0, *(-int(n) for n in offsets)) if len(offsets) else 0
-    return [base, *(int(n) + base for n in offsets)]
+    shifts = [base, *(int(n) + base for n in offsets)]
+    return [shift_frames(v, -s) for v, s in zip(views, shifts, strict=True)], shifts
 
 
 def align_views(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes], offset: int
                 ) -> tuple[dict[int, FrameBoxes], dict[int, FrameBoxes]]:
-    """Both views re-timed by :func:`view_shifts`: top frame ``f + offset`` and horizontal frame
-    ``f`` share a number, no frame dropped (the view that starts earlier is moved later). For a
-    command that writes each view in its own timing (``track``); :func:`shift_frames` puts the
-    top view on the horizontal timeline instead."""
-    s_top, s_hor = view_shifts([offset])
-    return shift_frames(top, -s_top), shift_frames(hor, -s_hor)
+    """:func:`align_frames` of a top and a horizontal view: top frame ``f + offset`` and
+    horizontal frame ``f`` share a number."""
+    (top, hor), _ = align_frames([top, hor], [offset])
+    return top, hor
 
 
 def scale_frames(frames: Mapping[int, FrameBoxes], factor: float) -> dict[int, FrameBoxes]:

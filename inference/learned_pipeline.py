@@ -40,6 +40,7 @@ __all__ = [
     "RetimedFrames",
     "open_learned_inputs",
     "open_view_images",
+    "retimed",
     "run_learned_association",
 ]
 
@@ -167,6 +168,12 @@ def open_view_images(path: str, box_frames: Iterable[int], needed: Iterable[int]
     except BaseException:
         source.close()
         raise
+    return retimed(source, shift)
+
+
+def retimed(source, shift: int):
+    """``source`` (``get(frame)``: images, cameras) with frame ``f`` showing its frame
+    ``f + shift``: a :class:`RetimedFrames`, or ``source`` itself when ``shift`` is 0."""
     return RetimedFrames(source, shift) if shift else source
 
 

@@ -47,6 +47,7 @@ __all__ = [
     "log_odds_cost",
     "multi_view_costs",
     "spatial_vote_cost",
+    "with_wearer_tag",
 ]
 
 LOGIT_CLIP = 0.01
@@ -206,7 +207,7 @@ def multi_view_costs(
                                  if len(t) and len(h) else np.ones((len(t), len(h))))
             continue
         found: dict[int, np.ndarray] = {}
-        top_rows = {f: _with_rows(views[0][f], rows.get(f)) for f in frames if f in views[0]}
+        top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
         associate_sequence_learned(
             top_rows, {f: views[k][f] for f in frames if f in views[k]}, width, matcher,
             camera_id=-1 if rows else None, hor_height=height, frames=frames,
@@ -251,7 +252,9 @@ class _Tagged:
         return int(self.ids.shape[0])
 
 
-def _with_rows(record, wearer_row: int | None):
+def with_wearer_tag(record, wearer_row: int | None):
+    """``record`` with ids that name only the wearer: -1 at position ``wearer_row`` (None: no
+    wearer), the position elsewhere (:class:`_Tagged`), for ``camera_id=-1``."""
     n = len(record.boxes)
     ids = np.arange(n, dtype=np.int64)
     if wearer_row is not None:

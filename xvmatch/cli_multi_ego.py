@@ -112,15 +112,10 @@ def _per_view(values: list | None, n_hor: int, option: str) -> None:
 
 def _wearer_rows(top, camera_id: int) -> dict[int, int]:
     """``{frame: row within the frame's record}`` of the top box with ``camera_id``."""
-    rows = set(top.rows_with_id(camera_id).tolist())
-    if not rows:
+    positions = top.positions_of_id(camera_id)
+    if not positions:
         raise ValueError(f"{top.path}: no box has the --camera-id {camera_id}")
-    out = {}
-    for frame, rec in top.frames.items():
-        hits = [k for k, r in enumerate(rec.ids.tolist()) if r in rows]
-        if hits:
-            out[frame] = hits[0]
-    return out
+    return positions
 
 
 def _offsets(args: argparse.Namespace, n_hor: int) -> list:
@@ -137,22 +132,18 @@ def _offsets(args: argparse.Namespace, n_hor: int) -> list:
 def _aligned(views, offsets, images, cameras, camera_rows):
     """Every view (and its images and cameras) re-timed so that top frame ``t + N_k`` and frame
     ``t`` of horizontal view ``k`` share a number (:func:`xvmatch.datasets.mot_boxes.
-    view_shifts`); the rows keep their own frame numbers in the output."""
-    from xvmatch.datasets.mot_boxes import shift_frames, view_shifts
-    from xvmatch.inference.learned_pipeline import RetimedFrames
+    align_frames`); the rows keep their own frame numbers in the output."""
+    from xvmatch.datasets.mot_boxes import align_frames
+    from xvmatch.inference.learned_pipeline import retimed
 
-    shifts = view_shifts(offsets)
-
-    def retimed(sources, moves):  # aligned frame f shows the source's frame f - shift
-        if sources is None:
-            return None
-        return [RetimedFrames(x, -m) if m else x for x, m in zip(sources, moves, strict=True)]
-
-    views = [shift_frames(v, -m) for v, m in zip(views, shifts, strict=True)]
+    views, shifts = align_frames(views, offsets)
+    if images is not None:  # aligned frame f shows the source's frame f - shift
+        images = [retimed(x, -m) for x, m in zip(images, shifts, strict=True)]
+    if cameras is not None:
+        cameras = [retimed(x, -m) for x, m in zip(cameras, shifts[1:], strict=True)]
     if camera_rows is not None:
         camera_rows = [{f + shifts[0]: r for f, r in rows.items()} for rows in camera_rows]
-    return (views, retimed(images, shifts), retimed(cameras, shifts[1:]), camera_rows,
-            sorted(set().union(*views)))
+    return views, images, cameras, camera_rows, sorted(set().union(*views))
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:

@@ -79,22 +79,15 @@ def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = 
 
 
 def wearer_marked(top, positions: dict[int, int] | None):
-    """The top view for an offset estimate and the camera wearer's id there: a detection file's
-    ids are row numbers (>= 0), so the wearer's box (``positions``: ``{frame: its position in
-    the frame's record}``) becomes id -1; ``(top, None)`` when no wearer is given."""
+    """The top view for an offset estimate and the camera wearer's id there: the wearer's box
+    (``positions``: ``{frame: its position in the frame's record}``) tagged -1
+    (:func:`xvmatch.inference.multi_view_costs.with_wearer_tag`); ``(top, None)`` when no wearer
+    is given."""
     if positions is None:
         return top, None
-    import numpy as np
+    from xvmatch.inference.multi_view_costs import with_wearer_tag
 
-    from xvmatch.datasets.mot_boxes import FrameBoxes
-
-    marked = {}
-    for f, r in top.items():
-        ids = np.array(r.ids, copy=True)
-        if f in positions:
-            ids[positions[f]] = -1
-        marked[f] = FrameBoxes(f, ids, r.boxes)
-    return marked, -1
+    return {f: with_wearer_tag(r, positions.get(f)) for f, r in top.items()}, -1
 
 
 def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,

@@ -120,20 +120,18 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
 
 def _aligned(top, hor, images, offset: int):
     """The views (and their images) re-timed so that top frame ``t + offset`` and horizontal
-    frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.align_views`); the
-    rows, and so the written tracks, keep their own frame numbers."""
+    frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.align_frames`);
+    the rows, and so the written tracks, keep their own frame numbers."""
     if not offset:
         return top, hor, images
     from dataclasses import replace
 
-    from xvmatch.datasets.mot_boxes import align_views, view_shifts
-    from xvmatch.inference.learned_pipeline import RetimedFrames
+    from xvmatch.datasets.mot_boxes import align_frames
+    from xvmatch.inference.learned_pipeline import retimed
 
-    top, hor = align_views(top, hor, offset)
+    (top, hor), (s_top, s_hor) = align_frames([top, hor], [offset])
     if images is not None:  # aligned frame f shows the view's frame f - shift
-        s_top, s_hor = view_shifts([offset])
-        images = replace(images, top=RetimedFrames(images.top, -s_top) if s_top else images.top,
-                         hor=RetimedFrames(images.hor, -s_hor) if s_hor else images.hor)
+        images = replace(images, top=retimed(images.top, -s_top), hor=retimed(images.hor, -s_hor))
     return top, hor, images
 
 
@@ -212,8 +210,6 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
     from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
@@ -267,9 +263,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         resolved = resolve_size(hor.frames, args.hor, given, ids=False)
         width = resolved[0][0]
         note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
-        positions = None if camera_rows is None else {
-            f: int(hit[0]) for f, r in top.frames.items()
-            if (hit := np.flatnonzero(np.isin(r.ids, camera_rows))).size}
+        positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
         top_frames, hor_frames, images = _aligned(top.frames, hor.frames, images, offset)
