@@ -5,8 +5,10 @@ Each scene is a box-level simulation the length of a CVMHAT pair (780 frames, 30
 issue (5% jitter, 10% misses, 0.3 false boxes per frame and view). Even scene numbers are
 synchronised; odd ones have the top view re-timed by a drawn offset of 8-55 frames either way.
 ``--unrelated K`` adds K pairs whose views come from two different scenes (no offset exists).
-Each pair's 9 clip curves over +-60 frames (what ``associate --offset auto`` computes) are cached
-in ``--work`` so that other thresholds can be judged at once (``--reuse``).
+Each pair's 9 clip curves over every offset in +-60 frames are cached in ``--work`` so that other
+thresholds can be judged at once (``--reuse``), and so can the coarse-to-fine search that
+``--offset auto`` runs (``--step``, default :data:`~xvmatch.geometry.offset_estimation.OFFSET_STEP`:
+it reads the cached curve at the offsets it would have searched; ``--step 1``: every offset).
 
 Prints one row per pair (truth, minimum, evidence, agreement, verdict) and the summary the
 defaults of :func:`~xvmatch.geometry.offset_estimation.estimate_offset` were chosen from: no
@@ -32,9 +34,10 @@ from xvmatch.geometry.offset_estimation import (
     AUTO_MAX_OFFSET,
     MIN_OFFSET_EVIDENCE,
     OFFSET_ALPHA,
+    OFFSET_STEP,
     OFFSET_TOLERANCE,
     estimate_offset,
-    judge_offset,
+    search_offsets,
 )
 
 N_FRAMES = 780  # a CVMHAT pair's length
@@ -68,7 +71,7 @@ def curves(job: tuple) -> tuple[str, int | None, np.ndarray, np.ndarray]:
         if truth:
             top = shift_frames(top, -truth)  # horizontal frame f now shows top frame f + truth
         est = estimate_offset(top, hor, scene.config.hor_size[0], max_offset=AUTO_MAX_OFFSET,
-                              n_clips=CLIPS)
+                              n_clips=CLIPS, step=1)
         tmp = path.with_suffix(".tmp.npz")
         np.savez(tmp, clip_costs=est.clip_costs, offsets=est.offsets)
         tmp.replace(path)
@@ -88,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tolerance", type=int, default=OFFSET_TOLERANCE)
     parser.add_argument("--min-evidence", type=float, default=MIN_OFFSET_EVIDENCE)
     parser.add_argument("--alpha", type=float, default=OFFSET_ALPHA)
+    parser.add_argument("--step", type=int, default=OFFSET_STEP,
+                        help="coarse step of the search judged (1: every offset)")
     args = parser.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
     if not args.reuse:
@@ -100,7 +105,11 @@ def main(argv: list[str] | None = None) -> int:
     groups: dict[str, list[tuple[int | None, object]]] = {}
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         for name, truth, clip_costs, offsets in pool.map(curves, jobs):
-            est = judge_offset(clip_costs, offsets, args.tolerance, args.min_evidence, args.alpha)
+            column = {int(o): i for i, o in enumerate(offsets)}
+            est = search_offsets(
+                lambda tried, c=clip_costs, col=column: c[:, [col[int(o)] for o in tried]],
+                AUTO_MAX_OFFSET, args.step, tolerance=args.tolerance,
+                min_evidence=args.min_evidence, alpha=args.alpha)
             n = int(np.isfinite(clip_costs).any(axis=1).sum())
             print(f"{name:14s} truth {'-' if truth is None else f'{truth:+d}':>4s}  minimum "
                   f"{est.offset:+4d}  evidence t {est.evidence:6.2f}  "
@@ -110,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
             kind = ("unrelated" if truth is None else
                     f"{noise} {'synchronised' if truth == 0 else 'shifted'}")
             groups.setdefault(kind, []).append((truth, est))
-    print(f"\ntolerance {args.tolerance}, min evidence {args.min_evidence}, alpha {args.alpha}; "
+    print(f"\nstep {args.step}, tolerance {args.tolerance}, min evidence {args.min_evidence}, "
+          f"alpha {args.alpha}; "
           f"{len(jobs)} pairs in {time.perf_counter() - start:.0f} s")
     for kind, rows in groups.items():
         if kind.endswith("shifted"):

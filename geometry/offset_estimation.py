@@ -6,7 +6,7 @@ minimum of the averaged curve, and whether enough clips back it before it is app
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,15 +17,21 @@ from xvmatch.geometry.worker_pool import worker_pool
 
 __all__ = [
     "AUTO_MAX_OFFSET",
+    "CLIPS",
+    "CLIP_LENGTH",
     "MIN_AGREEING_CLIPS",
     "MIN_OFFSET_EVIDENCE",
     "OFFSET_ALPHA",
+    "OFFSET_STEP",
     "OFFSET_TOLERANCE",
+    "REFINED_MINIMA",
     "OffsetEstimate",
     "clip_cost_curves",
     "clip_starts",
+    "coarse_offsets",
     "estimate_offset",
     "judge_offset",
+    "search_offsets",
 ]
 
 
@@ -37,6 +43,19 @@ OFFSET_ALPHA = 0.05
 MIN_AGREEING_CLIPS = 2
 """Fewest clips whose own minima must agree (within the tolerance) before an offset is applied:
 one clip's minimum cannot be told from a noise dip, so a single clip is reported, never applied."""
+OFFSET_STEP = 4
+"""Spacing (frames) of the first, coarse pass of :func:`estimate_offset`; the frames around 0
+and around its :data:`REFINED_MINIMA` lowest minima are then tried one by one: about 45
+offsets instead of 121 at the default range, with as many shifts found and none wrongly
+applied on the CVMHAT pairs and the simulated scenes (``benchmarks/offset_calibration.py
+--step``)."""
+REFINED_MINIMA = 2
+"""Local minima of the coarse curve refined (besides 0): curves of detector boxes are rough,
+and the coarse pass's lowest point is not always next to the full grid's."""
+CLIPS = 9
+"""Clips spread over the video that :func:`estimate_offset` averages by default."""
+CLIP_LENGTH = 10
+"""Frames per clip (the paper's 10)."""
 AUTO_MAX_OFFSET = 60
 """Largest |offset| (frames) that ``associate --offset auto`` and ``fit-geometry`` consider (2 s
 at 30 fps; ``estimate_offset`` itself defaults to the paper's 15)."""
@@ -210,6 +229,74 @@ def clip_starts(
     return sorted({int(s) for s in np.linspace(first, last, n_clips).round()})
 
 
+def coarse_offsets(max_offset: int, step: int) -> np.ndarray:
+    """Every ``step``-th offset from 0 out to -``max_offset`` and +``max_offset``, both ends
+    included (the first pass of :func:`estimate_offset`)."""
+    half = np.arange(0, max_offset + 1, step)
+    if half[-1] != max_offset:
+        half = np.append(half, max_offset)
+    return np.concatenate([-half[:0:-1], half])
+
+
+def _normalised(curves: np.ndarray, scale_from: np.ndarray, single: bool) -> np.ndarray:
+    """Each clip's curve divided by the median of its finite ``scale_from`` values (rows that
+    never matched stay +inf; ``single``: the raw curve, as in the paper)."""
+    out = np.full(curves.shape, np.inf)
+    for k, (curve, ref) in enumerate(zip(curves, scale_from, strict=True)):
+        finite = ref[np.isfinite(ref)]
+        if finite.size:
+            out[k] = curve if single else curve / np.median(finite)
+    return out
+
+
+def _lowest_minima(curve: np.ndarray, k: int) -> np.ndarray:
+    """Indices of the ``k`` lowest finite local minima of ``curve`` (no higher than either
+    neighbour), lowest first (ties: lower index first)."""
+    lower = np.concatenate([[np.inf], curve[:-1]])
+    upper = np.concatenate([curve[1:], [np.inf]])
+    minima = np.flatnonzero(np.isfinite(curve) & (curve <= lower) & (curve <= upper))
+    return minima[np.argsort(curve[minima], kind="stable")][:k]
+
+
+def search_offsets(
+    curves_at: Callable[[np.ndarray], np.ndarray],
+    max_offset: int,
+    step: int | None = None,
+    single: bool = False,
+    tolerance: int = OFFSET_TOLERANCE,
+    min_evidence: float = MIN_OFFSET_EVIDENCE,
+    alpha: float = OFFSET_ALPHA,
+    min_agree: int = MIN_AGREEING_CLIPS,
+) -> OffsetEstimate:
+    """Judge the offsets in [-max_offset, max_offset] coarse to fine (see
+    :func:`estimate_offset`): ``curves_at(offsets)`` gives the ``(K, len(offsets))`` raw clip
+    costs at those offsets. It is asked for the coarse grid (:func:`coarse_offsets`), then
+    for every offset within ``step`` - 1 of 0 and of the :data:`REFINED_MINIMA` lowest local
+    minima of the coarse mean curve. ``single``: one clip, its raw curve kept. ``step`` None:
+    :data:`OFFSET_STEP`, or 2 * ``tolerance`` + 1 where that is smaller."""
+    _check_thresholds(tolerance, min_evidence, alpha, min_agree)
+    step = min(OFFSET_STEP, 2 * tolerance + 1) if step is None else step
+    if not 1 <= step <= 2 * tolerance + 1:
+        raise ValueError(f"need 1 <= step <= 2 * tolerance + 1 = {2 * tolerance + 1}, so that "
+                         f"every offset has a coarse one within the tolerance; got {step}")
+    coarse = coarse_offsets(max_offset, step)
+    raw = curves_at(coarse)
+    curves = _normalised(raw, raw, single)
+    if step == 1:
+        return judge_offset(curves, coarse, tolerance, min_evidence, alpha, min_agree)
+    votes = coarse[np.argmin(curves, axis=1)]  # clips that never matched are ignored
+    used = np.isfinite(curves).any(axis=1)
+    mean = curves[used].mean(axis=0) if used.any() else np.full(coarse.shape, np.inf)
+    centres = [0, *coarse[_lowest_minima(mean, REFINED_MINIMA)].tolist()]
+    near = np.unique(np.concatenate([np.arange(c - step + 1, c + step) for c in centres]))
+    fine = np.setdiff1d(near[np.abs(near) <= max_offset], coarse)
+    offsets = np.concatenate([coarse, fine])
+    order = np.argsort(offsets, kind="stable")
+    curves = _normalised(np.concatenate([raw, curves_at(fine)], axis=1), raw, single)
+    return judge_offset(curves[:, order], offsets[order], tolerance, min_evidence, alpha,
+                        min_agree, votes=votes)
+
+
 def _check_thresholds(tolerance: int, min_evidence: float, alpha: float, min_agree: int) -> None:
     if tolerance < 0 or not min_evidence >= 0.0 or not 0.0 < alpha <= 1.0 or min_agree < 1:
         raise ValueError(f"need tolerance >= 0, min_evidence >= 0, 0 < alpha <= 1 and "
@@ -224,18 +311,28 @@ def judge_offset(
     min_evidence: float = MIN_OFFSET_EVIDENCE,
     alpha: float = OFFSET_ALPHA,
     min_agree: int = MIN_AGREEING_CLIPS,
+    votes: np.ndarray | None = None,
 ) -> OffsetEstimate:
     """The offset that ``(K, N)`` clip cost curves over ``offsets`` point to, and whether to
     apply it (see :func:`estimate_offset`). Rows that are all +inf (clips that never matched)
     are ignored. An offset beyond the tolerance is applied only when at least ``min_agree``
     clips (default :data:`MIN_AGREEING_CLIPS`, 2) have their own minimum within ``tolerance``
     of it, besides the ``evidence`` and ``chance`` tests: with one clip (the paper's single
-    clip included) it is ``unsupported``, i.e. reported and not applied."""
+    clip included) it is ``unsupported``, i.e. reported and not applied.
+
+    ``votes``: ``(K,)`` each clip's own minimum as found on an evenly spaced grid, when
+    ``offsets`` is not one (a coarse grid refined around 0 and the mean's lowest minima, whose
+    extra offsets would draw the clips' minima there); default each row's minimum over
+    ``offsets``. The chance of agreement takes minima spread over the whole range of
+    ``offsets``, whatever its spacing."""
     clip_costs = np.asarray(clip_costs, dtype=float)
     offsets = np.asarray(offsets)
     if clip_costs.ndim != 2 or clip_costs.shape[1] != offsets.size or 0 not in offsets:
         raise ValueError(f"need (K, N) curves over N offsets including 0, got "
                          f"{clip_costs.shape} over {offsets.size}")
+    if votes is not None and np.shape(votes) != (clip_costs.shape[0],):
+        raise ValueError(f"need one vote per clip, got {np.shape(votes)} for "
+                         f"{clip_costs.shape[0]} clips")
     _check_thresholds(tolerance, min_evidence, alpha, min_agree)
     used = np.isfinite(clip_costs).any(axis=1)
     n_used = int(used.sum())
@@ -244,9 +341,10 @@ def judge_offset(
     best = int(np.argmin(costs)) if np.isfinite(costs).any() else zero
     offset = int(offsets[best])
     common = dict(offset=offset, offsets=offsets, costs=costs, clip_costs=clip_costs)
-    clip_best = offsets[np.argmin(clip_costs[used], axis=1)]
+    clip_best = (offsets[np.argmin(clip_costs[used], axis=1)] if votes is None
+                 else np.asarray(votes)[used])
     agree = int(np.sum(np.abs(clip_best - offset) <= tolerance))
-    p_near = min(1.0, (2 * tolerance + 1) / offsets.size)
+    p_near = min(1.0, (2 * tolerance + 1) / (int(offsets.max()) - int(offsets.min()) + 1))
     # Binomial tail P(X >= agree), X ~ B(n_used, p_near) (math.comb: scipy.stats costs the CLI
     # half a second of import time).
     chance = sum(
@@ -276,15 +374,16 @@ def estimate_offset(
     hor_width: float,
     params: SpatialParams | None = None,
     clip_start: int | None = None,
-    clip_length: int = 10,
+    clip_length: int = CLIP_LENGTH,
     max_offset: int = 15,
     camera_id: int | None = None,
-    n_clips: int = 9,
+    n_clips: int = CLIPS,
     tolerance: int = OFFSET_TOLERANCE,
     min_evidence: float = MIN_OFFSET_EVIDENCE,
     alpha: float = OFFSET_ALPHA,
     workers: int = 1,
     min_agree: int = MIN_AGREEING_CLIPS,
+    step: int | None = None,
 ) -> OffsetEstimate:
     """Estimate the temporal offset between the two videos by sliding clips (Sec. 3.2.4, Fig. 5).
 
@@ -311,6 +410,14 @@ def estimate_offset(
     ``workers`` processes compute the curves (:func:`clip_cost_curves`); the estimate is the
     same for any number.
 
+    Coarse to fine (``step`` > 1; default :data:`OFFSET_STEP`, at most 2 * ``tolerance`` + 1
+    so that every offset has a coarse one within the tolerance): the clips are first compared
+    at every ``step``-th offset (:func:`coarse_offsets`), then at each offset within
+    ``step`` - 1 of 0 and of the lowest minima of that mean curve (:func:`search_offsets`);
+    each clip's own minimum, which must agree, is taken on the coarse grid, and each curve is
+    divided by the median of its coarse part. ``step`` = 1 tries every offset, as the paper
+    does.
+
     Returns:
         :class:`OffsetEstimate` (see :func:`judge_offset`); ``costs`` is the mean normalised
         curve (raw when one clip is asked for).
@@ -328,12 +435,8 @@ def estimate_offset(
     # One clip asked for (clip_start, or n_clips = 1): the paper's estimate, its raw curve kept;
     # like a lone clip that fits a short video, it is reported but cannot be applied.
     single = clip_start is not None or n_clips == 1
-    offsets = np.arange(-max_offset, max_offset + 1)
     clips = [[f for f in range(start, start + clip_length) if f in hor] for start in starts]
-    curves = clip_cost_curves(top, hor, clips, offsets, hor_width, params, camera_id, workers)
-    clip_costs = np.full(curves.shape, np.inf)
-    for k, curve in enumerate(curves):
-        finite = curve[np.isfinite(curve)]
-        if finite.size:
-            clip_costs[k] = curve if single else curve / np.median(finite)
-    return judge_offset(clip_costs, offsets, tolerance, min_evidence, alpha, min_agree)
+    return search_offsets(
+        lambda offsets: clip_cost_curves(top, hor, clips, offsets, hor_width, params, camera_id,
+                                         workers),
+        max_offset, step, single, tolerance, min_evidence, alpha, min_agree)

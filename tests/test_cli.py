@@ -388,13 +388,18 @@ def test_offset_recovers_a_shift_end_to_end(tmp_path, capsys):
         "3",
         "--json",
     ]
+    assert main([*argv, "--step", "1"]) == 0  # every offset, as the paper
+    full = json.loads(capsys.readouterr().out)
+    assert full["offset"] == -4
+    assert full["offsets"] == list(range(-6, 7))
+    # 4 frames is within the estimate's precision: reported, not applied by --offset auto.
+    assert full["status"] == "within_tolerance" and full["applied"] == 0
+    assert full["evidence"] > 0 and 0 < full["support"] <= 1
+    # The default, coarse to fine: the same estimate from fewer offsets.
     assert main(argv) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["offset"] == -4
-    assert data["offsets"] == list(range(-6, 7))
-    # 4 frames is within the estimate's precision: reported, not applied by --offset auto.
-    assert data["status"] == "within_tolerance" and data["applied"] == 0
-    assert data["evidence"] > 0 and 0 < data["support"] <= 1
+    assert (data["offset"], data["status"], data["applied"]) == (-4, "within_tolerance", 0)
+    assert set(data["offsets"]) < set(full["offsets"])
     assert main(argv[:-1]) == 0
     assert "note: -4 is within the estimate's precision" in capsys.readouterr().err
 

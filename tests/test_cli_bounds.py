@@ -251,6 +251,7 @@ OPTIONS = [
     Option("offset", "--clip-start", "int", 1, 2**53, "1..2**53"),
     Option("offset", "--clips", "int", 1, 100, "1..100"),
     Option("offset", "--clip-length", "int", 1, 1000, "1..1000"),
+    Option("offset", "--step", "int", 1, 11, "1..11"),
     Option("offset", "--max-offset", "int", 0, 10_000, "0..10000"),
     Option("offset", "--image-size", "size", 8, 65536, "8..65536 a side"),
     # Up to 64 processes for a 2-frame clip: inside values are 1 or 2 processes.

@@ -15,10 +15,14 @@ from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.geometry.offset_estimation import (
     MIN_AGREEING_CLIPS,
+    OFFSET_STEP,
+    OFFSET_TOLERANCE,
     _curve_tasks,
     clip_starts,
+    coarse_offsets,
     estimate_offset,
     judge_offset,
+    search_offsets,
 )
 from xvmatch.geometry.spatial_matching import SpatialParams, match_vector_sets
 from xvmatch.geometry.spatial_search import (
@@ -453,7 +457,8 @@ def test_estimate_offset_recovers_a_known_shift(offset_scene, shift):
     # Several clips spread over the video (median-normalised curves averaged), 10 frames each.
     hor = _shift(offset_scene.hor, shift)
     est = estimate_offset(
-        offset_scene.top, hor, WIDTH, clip_length=10, max_offset=8, camera_id=0, n_clips=3
+        offset_scene.top, hor, WIDTH, clip_length=10, max_offset=8, camera_id=0, n_clips=3,
+        step=1,
     )
     # Horizontal frame g shows top frame g - shift: offset = -shift.
     assert est.offset == -shift
@@ -489,15 +494,34 @@ def test_estimate_offset_sign_convention_on_exact_views(scene, shift):
 
 
 def test_offset_the_clips_back_is_applied(offset_scene):
-    # O searched, five clips, +-15 frames: every clip's own minimum is at the shift.
+    # O searched, five clips, every offset in +-15 frames: every clip's own minimum is at the
+    # shift.
     hor = _shift(offset_scene.hor, 8)
-    est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5)
+    est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5, step=1)
     assert est.clip_costs.shape == (5, 31)
     clip_best = est.offsets[np.argmin(est.clip_costs, axis=1)]
     assert est.support == np.mean(np.abs(clip_best - est.offset) <= 5) == 1.0
     assert est.chance == pytest.approx((11 / 31) ** 5)  # all 5 within +-5 frames by chance
     assert est.evidence > 2.0
     assert est.status == "applied" and est.applied == est.offset == -8
+
+
+def test_coarse_to_fine_offset_search_finds_the_full_grids_estimate(offset_scene):
+    # The default search: every 4th offset, then each offset within 3 of 0 and of the coarse
+    # curve's two lowest minima.
+    hor = _shift(offset_scene.hor, 8)
+    full = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5, step=1)
+    est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5)
+    assert OFFSET_STEP == 4
+    assert set(coarse_offsets(15, 4)) | set(range(-3, 4)) <= set(est.offsets) < set(full.offsets)
+    assert (est.offset, est.status, est.applied) == (full.offset, full.status, full.applied)
+    assert est.support == full.support and est.chance == full.chance
+    assert est.evidence > 2.0
+    # The same curves, each divided by the median of its coarse part instead of its whole.
+    full_part = full.clip_costs[:, np.isin(full.offsets, est.offsets)]
+    coarse = np.isin(est.offsets, coarse_offsets(15, OFFSET_STEP))
+    scale = np.median(full_part[:, coarse], axis=1, keepdims=True)
+    np.testing.assert_allclose(est.clip_costs, full_part / scale, rtol=1e-12)
 
 
 def test_offset_within_tolerance_keeps_the_files_timing(offset_scene):
@@ -611,6 +635,55 @@ def test_judge_offset_ignores_each_clips_level_and_the_units(centres, shifts, sc
     assert moved.evidence == pytest.approx(base.evidence, rel=1e-6, abs=1e-9)
     assert base.applied in (0, base.offset)
     assert (base.status == "within_tolerance") == (abs(base.offset) <= 5)
+
+
+def test_coarse_offsets_keep_0_and_both_ends():
+    np.testing.assert_array_equal(coarse_offsets(10, 4), [-10, -8, -4, 0, 4, 8, 10])
+    np.testing.assert_array_equal(coarse_offsets(8, 4), [-8, -4, 0, 4, 8])
+    np.testing.assert_array_equal(coarse_offsets(3, 1), np.arange(-3, 4))
+    np.testing.assert_array_equal(coarse_offsets(0, 4), [0])
+
+
+def test_judge_offset_counts_the_votes_it_is_given():
+    # Every curve's minimum is at 20, but the clips' own (coarse) minima are elsewhere.
+    curves = _dips([20] * 6) + 0.01 * np.arange(6)[:, None]
+    assert judge_offset(curves, OFFSETS).applied == 20
+    est = judge_offset(curves, OFFSETS, votes=np.array([20, 20, -12, 0, 8, -28]))
+    assert est.offset == 20 and est.support == pytest.approx(2 / 6)
+    assert est.status == "unsupported"
+    with pytest.raises(ValueError, match="one vote per clip"):
+        judge_offset(curves, OFFSETS, votes=np.zeros(5))
+    # A coarse step that leaves offsets with no coarse one within the tolerance is refused.
+    with pytest.raises(ValueError, match="step <= 2 \\* tolerance \\+ 1 = 11"):
+        search_offsets(lambda o: curves[:, np.asarray(o, dtype=int) + 30], 30, 12)
+
+
+@given(
+    centre=st.integers(-30, 30),
+    step=st.integers(1, 2 * OFFSET_TOLERANCE + 1),
+    levels=st.lists(st.floats(0, 3), min_size=6, max_size=6),
+    scales=st.lists(st.floats(0.1, 10), min_size=6, max_size=6),
+)
+def test_coarse_to_fine_search_finds_a_shared_dip_exactly(centre, step, levels, scales):
+    """Clips whose (positive) curves share one dip, each with its own level and units: the
+    coarse-to-fine search decides as the full grid does, and asks only for the coarse grid and
+    the offsets near 0 and near its lowest minima, each once (any step that leaves a coarse
+    offset within the tolerance of every offset, which estimate_offset requires)."""
+    curves = (_dips([centre] * 6, depth=0.5 + 0.0371 * np.arange(6)) + np.array(levels)[:, None]
+              ) * np.array(scales)[:, None]
+    asked: list[int] = []
+
+    def curves_at(offsets):
+        asked.extend(int(o) for o in offsets)
+        return curves[:, np.asarray(offsets, dtype=int) + 30]
+
+    est = search_offsets(curves_at, 30, step)
+    full = search_offsets(lambda o: curves[:, np.asarray(o, dtype=int) + 30], 30, 1)
+    assert (est.offset, est.status, est.applied) == (full.offset, full.status, full.applied)
+    assert est.offset == centre
+    # Around 0 and around the two lowest coarse minima.
+    assert len(asked) == len(set(asked)) <= coarse_offsets(30, step).size + 6 * (step - 1)
+    np.testing.assert_array_equal(est.offsets, sorted(asked))
 
 
 def test_clip_starts_on_equal_spans_leave_max_offset_at_each_end():

@@ -254,8 +254,10 @@ def test_track_with_an_offset_tracks_as_if_the_videos_were_in_sync(tmp_path, cap
     base = ["track", "--top", str(files["top"]), "--camera-id", "0", "--solver", "spectral"]
     assert main([*base, "--hor", str(files["hor"]), "--out", str(tmp_path / "sync"),
                  "--quiet"]) == 0
+    # auto is track's default; --offset 0 keeps the files' timing.
     for tag, extra in [("auto", ["--offset", "auto", "--max-offset", "10", "--workers", "2"]),
-                       ("none", ["--quiet"])]:
+                       ("default", ["--max-offset", "10", "--quiet"]),
+                       ("none", ["--offset", "0", "--quiet"])]:
         out = tmp_path / tag
         assert main([*base, "--hor", str(files["late_hor"]), "--out", str(out), *extra]) == 0
         if tag == "auto":
@@ -263,15 +265,45 @@ def test_track_with_an_offset_tracks_as_if_the_videos_were_in_sync(tmp_path, cap
         same = (_columns(out / "top.txt") == _columns(tmp_path / "sync" / "top.txt")
                 and _columns(out / "hor.txt", 8) == _columns(tmp_path / "sync" / "hor.txt"))
         assert same == (tag != "none"), tag
+        # The offset applied is written beside the tracks.
+        recorded = json.loads((out / "offset.json").read_text())
+        assert recorded == {"offset": 0 if tag == "none" else -8}
     capsys.readouterr()
     scores = []
     for folder, hor, extra in [("sync", "hor", []), ("auto", "late_hor", ["--offset", "-8"]),
-                               ("auto", "late_hor", [])]:
+                               ("auto", "late_hor", []), ("auto", "late_hor", ["--offset", "0"])]:
         assert main(["evaluate", "--tracks", str(tmp_path / folder), "--top", str(files["top"]),
                      "--hor", str(files[hor]), "--json", *extra]) == 0
         scores.append(json.loads(capsys.readouterr().out)["cross_view"])
     assert scores[1] == scores[0]
-    assert scores[2] != scores[0], scores  # scored out of sync
+    assert scores[2] == scores[0]  # without --offset: the one track recorded
+    assert scores[3] != scores[0], scores  # scored out of sync
+
+
+def test_track_on_videos_too_short_for_the_sync_check_says_so(scene_files, tmp_path, capsys):
+    # 30 frames: with the default --max-offset 60 one clip fits, so auto (the default) keeps
+    # the files' timing without a search, and says why.
+    out = tmp_path / "tracks"
+    argv = ["track", "--top", str(scene_files["det_top"]), "--hor", str(scene_files["det_hor"]),
+            "--out", str(out)]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "videos too short for --offset auto to check their sync with --max-offset 60" in err
+    assert "estimated offset" not in err
+    assert json.loads((out / "offset.json").read_text()) == {"offset": 0}
+
+
+@pytest.mark.parametrize("record", ['{"offset": "soon"}', "{", '{"shift": 3}', '{"offset": true}'])
+def test_evaluate_tracks_refuses_a_broken_offset_record(scene_files, tmp_path, capsys, record):
+    out = tmp_path / "tracks"
+    assert _track(scene_files, out) == 0
+    (out / "offset.json").write_text(record)
+    argv = ["evaluate", "--tracks", str(out), "--top", str(scene_files["gt_top"]), "--hor",
+            str(scene_files["gt_hor"])]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{out / 'offset.json'}:" in err[0] and "--offset N" in err[0], err
+    assert main([*argv, "--offset", "0"]) == 0  # a given offset does not read it
 
 
 def test_track_with_an_offset_re_times_the_images(video_files, tmp_path):

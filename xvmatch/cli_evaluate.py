@@ -45,10 +45,11 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
             action.required = False
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--name", default=None, help="row label in the table")
-    p.add_argument("--offset", type=frame_offset, default=0, metavar="N",
+    p.add_argument("--offset", type=frame_offset, default=None, metavar="N",
                    help="score predictions made with 'associate --offset N' or tracks made "
                    "with 'track --offset N': the views are re-timed the same way (top frame = "
-                   "horizontal frame + N) before scoring; |N| <= 100000")
+                   "horizontal frame + N) before scoring; |N| <= 100000 (default 0; with "
+                   "--tracks, the offset that track applied, from DIR/offset.json)")
     p.set_defaults(func=_cmd_evaluate)
     return p
 
@@ -75,7 +76,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     top = read_boxes(args.top, args.duplicates)
     hor = read_boxes(args.hor, args.duplicates)
     pred = read_predictions(args.pred)
-    if args.offset:
+    if args.offset:  # (None: not given, 0)
         from xvmatch.datasets.mot_boxes import shift_frames
 
         top = shift_frames(top, args.offset)

@@ -24,7 +24,13 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, int_in, offset_value, worker_count
-from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET
+from xvmatch.geometry.offset_estimation import (
+    AUTO_MAX_OFFSET,
+    CLIP_LENGTH,
+    CLIPS,
+    OFFSET_STEP,
+    OFFSET_TOLERANCE,
+)
 
 __all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_options",
            "add_offset_parser", "max_offset_of", "offset_summary", "resolve_offset",
@@ -58,20 +64,24 @@ def max_offset_of(args: argparse.Namespace, top, hor) -> int:
     return args.max_offset
 
 
-def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = False) -> None:
+def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = False,
+                       default: int | str = 0) -> None:
     """Add ``--offset N|auto`` and ``--max-offset`` to a command that reads a video pair;
     ``timing`` ends the help of ``--offset``: the frame numbers the command writes. ``several``:
-    one value per horizontal view (``--hor H1 H2 ...``), or one for all."""
+    one value per horizontal view (``--hor H1 H2 ...``), or one for all. ``default``: 0
+    (frame-locked videos) or ``"auto"``."""
     what = ("one per --hor file, or one for all: that camera is out of sync with the top "
             "view, top frame = its frame + N" if several else
             "the videos are out of sync: top frame = horizontal frame + N")
+    default_text = ("auto: videos long enough for 2 clips are checked" if default == "auto"
+                    else f"{default}: frame-locked videos")
     p.add_argument(
-        "--offset", type=offset_value, default=[0] if several else 0,
+        "--offset", type=offset_value, default=[default] if several else default,
         nargs="+" if several else None, metavar="N|auto",
         help=f"{what} (what 'xvmatch offset' prints); 'auto' estimates it first from the boxes "
-        "(about a minute per pair of videos on one core with the default --max-offset; see "
+        "(about 10 s per pair of videos on one core with the default --max-offset; see "
         "--workers) and shifts only when the clips back the estimate and it is more than 5 "
-        f"frames from 0. {timing}; |N| <= 100000 (default 0: frame-locked videos)")
+        f"frames from 0. {timing}; |N| <= 100000 (default {default_text})")
     p.add_argument(
         "--max-offset", type=MAX_OFFSET_TYPE, default=None,
         help=f"largest |offset| tried by --offset auto, 0..{MAX_OFFSET_LIMIT} frames and at "
@@ -95,13 +105,24 @@ def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
                    value: int | str | None = None, label: str = "") -> int:
     """The offset to apply: ``value`` (default ``--offset``) when a number, or with ``auto``
     the estimate when the clips back it (0 otherwise, with a warning on stderr); the estimate
-    is reported unless ``--quiet``, after ``label`` (which pair of views). ``max_offset``:
-    :func:`max_offset_of`, checked before any work."""
+    is reported unless ``--quiet``, after ``label`` (which pair of views). Videos too short
+    for two clips are not searched (one clip never backs an offset): 0, with a note.
+    ``max_offset``: :func:`max_offset_of`, checked before any work."""
     value = args.offset if value is None else value
     if value != "auto":
         return int(value)
-    from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
+    from xvmatch.geometry.offset_estimation import MIN_AGREEING_CLIPS, clip_starts, estimate_offset
 
+    if top and hor:  # (empty files are refused by the estimate, with the file named)
+        starts = clip_starts((min(hor), max(hor)), (min(top), max(top)), CLIP_LENGTH,
+                             max_offset, CLIPS)
+        if len(starts) < MIN_AGREEING_CLIPS:
+            if not args.quiet:
+                print(f"note: {label}videos too short for --offset auto to check their sync "
+                      f"with --max-offset {max_offset} (one {CLIP_LENGTH}-frame clip fits, and "
+                      "one cannot back an offset); keeping the files' timing (pass --offset N, "
+                      "or a smaller --max-offset)", file=sys.stderr)
+            return 0
     est = estimate_offset(top, hor, hor_width=hor_width, params=params, max_offset=max_offset,
                           camera_id=camera_id, workers=args.workers)
     if est.status == "unsupported":
@@ -147,7 +168,7 @@ def unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> st
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:
-    from xvmatch.geometry.offset_estimation import OFFSET_TOLERANCE, estimate_offset
+    from xvmatch.geometry.offset_estimation import estimate_offset
 
     params = spatial_params(args)
     top = read_boxes(args.top, args.duplicates)
@@ -175,6 +196,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         camera_id=args.camera_id,
         n_clips=args.clips,
         workers=args.workers,
+        step=args.step,
     )
     if args.json:
         print(
@@ -224,20 +246,27 @@ def add_offset_parser(subparsers) -> argparse.ArgumentParser:
         help="first horizontal frame of a single clip (the paper's setting), 1..2**53; "
         "default: --clips clips spread over the video",
     )
-    p.add_argument("--clips", default=9,
+    p.add_argument("--clips", default=CLIPS,
                    type=int_in(1, 100, "each clip is one more search over every offset"),
-                   help="clips to average, 1..100 (default 9)")
+                   help=f"clips to average, 1..100 (default {CLIPS})")
     # clip_length >= 1 is checked by estimate_offset with the other clip settings (one line,
     # exit 2, before any search): the parser bounds only its size.
-    p.add_argument("--clip-length", default=10,
+    p.add_argument("--clip-length", default=CLIP_LENGTH,
                    type=int_in(None, 1000, "frames per clip, in [1, 1000]: each is searched at "
                                "every offset"),
-                   help="clip length in frames, 1..1000 (default 10)")
+                   help=f"clip length in frames, 1..1000 (default {CLIP_LENGTH})")
     p.add_argument(
         "--max-offset", type=MAX_OFFSET_TYPE, default=None,
         help=f"largest |offset|, 0..{MAX_OFFSET_LIMIT} frames and at most the frames the box "
         f"files span (default {AUTO_MAX_OFFSET}, as associate --offset auto)",
     )
+    p.add_argument("--step", default=OFFSET_STEP,
+                   type=int_in(1, 2 * OFFSET_TOLERANCE + 1, "every offset needs a coarse one "
+                               f"within the estimate's {OFFSET_TOLERANCE}-frame precision"),
+                   help=f"coarse step in frames, 1..{2 * OFFSET_TOLERANCE + 1} (default "
+                   f"{OFFSET_STEP}, as --offset "
+                   "auto): every S-th offset first, then each one near the best; 1 tries "
+                   "every offset, as the paper does")
     p.add_argument(
         "--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
         help=IMAGE_SIZE_HELP,

@@ -42,7 +42,12 @@ from xvmatch.cli_options import (
 from xvmatch.cli_types import box_id, float_in, int_in, seed_value, worker_count
 from xvmatch.geometry.output_paths import Input, Output, check_outputs
 
-__all__ = ["EXAMPLE", "add_track_parser", "evaluate_tracks_command"]
+__all__ = ["EXAMPLE", "OFFSET_FILE", "add_track_parser", "evaluate_tracks_command",
+           "tracked_offset"]
+
+OFFSET_FILE = "offset.json"
+"""What ``track`` writes beside the tracks: ``{"offset": N}``, the offset it applied (0 when the
+videos kept the files' timing), so that ``evaluate --tracks`` re-times the same way."""
 
 EXAMPLE = (
     "xvmatch track --top seq_top.txt --hor seq_hor.txt --out tracks/\n"
@@ -148,7 +153,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--hor", required=True,
                    help="horizontal-view detections (MOT format, ids ignored)")
     p.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder (created); top.txt and hor.txt are written atomically")
+                   help="output folder (created); top.txt, hor.txt and offset.json (the offset "
+                   "applied, which evaluate --tracks reads) are written atomically")
     p.add_argument("--solver", choices=("mip", "spectral"), default="mip",
                    help="mip: Eqs. 1-4 with HiGHS (default); spectral: the spectral-clustering "
                    "baseline on the same weights")
@@ -176,7 +182,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help=IMAGE_SIZE_HELP + "; with --hor-images it must agree with them")
     add_offset_options(p, "Tracks are written in each video's own frame numbers; score them "
-                       "with 'xvmatch evaluate --tracks --offset N'")
+                       "with 'xvmatch evaluate --tracks --offset N'", default="auto")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for the frame association and --offset auto's estimate, "
                    "1..64 (default 1; the same output for any K)")
@@ -241,7 +247,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.top}: no box has the --camera-id {args.camera_id}")
     out = Path(args.out)
     check_outputs(
-        [Output("--out", out, folder=True, files=("top.txt", "hor.txt"))],
+        [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE))],
         [Input("--top", args.top), Input("--hor", args.hor),
          *image_inputs(args),
          Input("--model", None if args.model == "default" else args.model)],
@@ -284,6 +290,9 @@ def _cmd_track(args: argparse.Namespace) -> int:
         raise OSError(f"--out {args.out}: cannot create the folder ({exc.strerror})") from None
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
     n_hor = write_track_rows(out / "hor.txt", hor, result.hor_rows)
+    from xvmatch.geometry.atomic_files import atomic_write_text
+
+    atomic_write_text(out / OFFSET_FILE, json.dumps({"offset": offset}) + "\n")
     if result.n_fallback:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows hit the MIP "
               f"time limit ({args.time_limit:g} s) or failed and used the greedy fallback; "
@@ -313,6 +322,23 @@ def _trackeval_installed() -> bool:
     return True
 
 
+def tracked_offset(folder: Path) -> int:
+    """The offset ``track`` applied to the tracks in ``folder`` (its :data:`OFFSET_FILE`; 0
+    when absent, as in folders written before it existed)."""
+    path = folder / OFFSET_FILE
+    if not path.exists():
+        return 0
+    try:
+        offset = json.loads(path.read_text())["offset"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not the offset record that xvmatch track writes "
+                         f"({exc}); pass --offset N") from None
+    if isinstance(offset, bool) or not isinstance(offset, int):
+        raise ValueError(f"{path}: offset must be an integer number of frames, got {offset!r}; "
+                         "pass --offset N")
+    return offset
+
+
 def evaluate_tracks_command(args: argparse.Namespace) -> int:
     """``xvmatch evaluate --tracks DIR``: print the tracking scores of DIR/top.txt, DIR/hor.txt.
 
@@ -338,11 +364,12 @@ def evaluate_tracks_command(args: argparse.Namespace) -> int:
     tracks_hor = read_mot_boxes(folder / "hor.txt", allow_empty=True)
     gt_top = read_boxes(args.top, args.duplicates)
     gt_hor = read_boxes(args.hor, args.duplicates)
-    if args.offset:  # tracked with --offset N: both files in their own videos' timing
+    offset = args.offset if args.offset is not None else tracked_offset(folder)
+    if offset:  # tracked with --offset N: both files in their own videos' timing
         from xvmatch.datasets.mot_boxes import align_views
 
-        tracks_top, tracks_hor = align_views(tracks_top, tracks_hor, args.offset)
-        gt_top, gt_hor = align_views(gt_top, gt_hor, args.offset)
+        tracks_top, tracks_hor = align_views(tracks_top, tracks_hor, offset)
+        gt_top, gt_hor = align_views(gt_top, gt_hor, offset)
     name = args.name or args.tracks
     if not _trackeval_installed():
         cross = summarize(track_pair_counts(tracks_top, tracks_hor, gt_top, gt_hor))
