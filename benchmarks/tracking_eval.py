@@ -27,7 +27,8 @@ OVERALL pools every frame of every sequence (cross-view counts summed, TrackEval
 ``combine_sequences`` per view); ``--noise 1 2 3`` pools the three noise seeds the same way.
 Last, the whole ``xvmatch track`` command is timed on one 1,200-frame pair, pinned to one core
 (``taskset -c 0`` where it exists), with each weighting in the same run (``--model`` for the
-learned one), in seconds and seconds per frame.
+learned one), in seconds and seconds per frame; with its defaults, so since 2026-11-27 with the
+offset estimate of its default ``--offset auto`` (10-25 s per pair).
 
 With ``--synthetic N``, rendered drone videos instead (:func:`xvmatch.datasets.tracking_video.
 render_tracking_video`, 25 fps), ids scrambled per view the same way, tracked with the MIP from
