@@ -79,7 +79,7 @@ def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = 
         "--offset", type=offset_value, default=[default] if several else default,
         nargs="+" if several else None, metavar="N|auto",
         help=f"{what} (what 'xvmatch offset' prints); 'auto' estimates it first from the boxes "
-        "(about 10 s per pair of videos on one core with the default --max-offset; see "
+        "(10-25 s per pair of videos on one core with the default --max-offset; see "
         "--workers) and shifts only when the clips back the estimate and it is more than 5 "
         f"frames from 0. {timing}; |N| <= 100000 (default {default_text})")
     p.add_argument(
@@ -113,7 +113,7 @@ def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
         return int(value)
     from xvmatch.geometry.offset_estimation import MIN_AGREEING_CLIPS, clip_starts, estimate_offset
 
-    if top and hor:  # (empty files are refused by the estimate, with the file named)
+    if top and hor:  # (a view with no frames: the estimate's own error)
         starts = clip_starts((min(hor), max(hor)), (min(top), max(top)), CLIP_LENGTH,
                              max_offset, CLIPS)
         if len(starts) < MIN_AGREEING_CLIPS:
