@@ -87,3 +87,27 @@ def tiny_models(tmp_path_factory, tiny_synth) -> dict[str, Path]:
         out[name] = path
         out[f"{name}_bundle"] = root / name
     return out
+
+
+@pytest.fixture(scope="session")
+def track_files(tmp_path_factory) -> dict[str, Path]:
+    """One 30-frame box scene for ``xvmatch track``: ground-truth files (``gt_top``, ``gt_hor``)
+    and detection files (``det_top``, ``det_hor``: ids all -1, rows shuffled)."""
+    import numpy as np
+
+    from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+    from xvmatch.datasets.mot_boxes import write_mot_boxes
+
+    folder = tmp_path_factory.mktemp("track")
+    scene = simulate_box_scene(SceneConfig(head_turn_std_deg=2.0), n_frames=30, seed=5)
+    out = {}
+    for view, frames in (("top", scene.top), ("hor", scene.hor)):
+        gt = folder / f"gt_{view}.txt"
+        write_mot_boxes(gt, frames)
+        lines = gt.read_text().splitlines()
+        rng = np.random.default_rng(7)
+        det = [",".join([ln.split(",")[0], "-1", *ln.split(",")[2:]])
+               for ln in (lines[k] for k in rng.permutation(len(lines)))]
+        (folder / f"det_{view}.txt").write_text("\n".join(det) + "\n")
+        out[f"gt_{view}"], out[f"det_{view}"] = gt, folder / f"det_{view}.txt"
+    return out

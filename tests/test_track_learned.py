@@ -21,40 +21,21 @@ from xvmatch.inference.tracking import LearnedEvidence, TrackConfig, track_pair
 from xvmatch.inference.tracklets import Tracklet
 
 
-@pytest.fixture(scope="module")
-def scene_files(tmp_path_factory) -> dict[str, Path]:
-    """The scene of tests/test_tracking_cli.py: ground truth, and detections (ids -1, rows
-    shuffled)."""
-    folder = tmp_path_factory.mktemp("track_learned")
-    scene = simulate_box_scene(SceneConfig(head_turn_std_deg=2.0), n_frames=30, seed=5)
-    out = {}
-    for view, frames in (("top", scene.top), ("hor", scene.hor)):
-        gt = folder / f"gt_{view}.txt"
-        write_mot_boxes(gt, frames)
-        lines = gt.read_text().splitlines()
-        rng = np.random.default_rng(7)
-        det = [",".join([ln.split(",")[0], "-1", *ln.split(",")[2:]])
-               for ln in (lines[k] for k in rng.permutation(len(lines)))]
-        (folder / f"det_{view}.txt").write_text("\n".join(det) + "\n")
-        out[f"gt_{view}"], out[f"det_{view}"] = gt, folder / f"det_{view}.txt"
-    return out
-
-
 def _track(files, out: Path, *extra: str) -> int:
     return main(["track", "--top", str(files["det_top"]), "--hor", str(files["det_hor"]),
                  "--out", str(out), "--quiet", *extra])
 
 
-def test_track_model_default_from_boxes_only(scene_files, tmp_path, capsys):
+def test_track_model_default_from_boxes_only(track_files, tmp_path, capsys):
     out = tmp_path / "tracks"
-    assert _track(scene_files, out, "--model", "default") == 0
+    assert _track(track_files, out, "--model", "default") == 0
     for view in ("top", "hor"):
-        det = scene_files[f"det_{view}"].read_text().splitlines()
+        det = track_files[f"det_{view}"].read_text().splitlines()
         written = (out / f"{view}.txt").read_text().splitlines()
         assert [ln.split(",", 2)[::2] for ln in written] == [ln.split(",", 2)[::2] for ln in det]
     capsys.readouterr()
-    assert main(["evaluate", "--tracks", str(out), "--top", str(scene_files["gt_top"]),
-                 "--hor", str(scene_files["gt_hor"]), "--json"]) == 0
+    assert main(["evaluate", "--tracks", str(out), "--top", str(track_files["gt_top"]),
+                 "--hor", str(track_files["gt_hor"]), "--json"]) == 0
     scores = json.loads(capsys.readouterr().out)
     # Measured: precision 100.0, CVIDF1 83.3 (the handcrafted weights score the same here): no
     # wrong pair, some pairs missed.
@@ -73,7 +54,7 @@ def _scores(files, folder: Path, capsys) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
-def test_handcrafted_weights_reproduce_the_output_before(scene_files, tmp_path, capsys):
+def test_handcrafted_weights_reproduce_the_output_before(track_files, tmp_path, capsys):
     """``--weights handcrafted`` is the tracker without ``--model``, byte for byte, and scores
     what the code before the learned weights (commit a4567a4) scored on this scene.
 
@@ -82,11 +63,11 @@ def test_handcrafted_weights_reproduce_the_output_before(scene_files, tmp_path, 
     machine), and the tracker writes the boxes it reads (sha256 260e6b7c... on an AVX-512 CPU,
     eb2dcd84... on an AVX2 one); on the same box files its output is the same bytes with every
     kernel (docs/method.md, "Determinism")."""
-    assert _track(scene_files, tmp_path / "plain") == 0
-    assert _track(scene_files, tmp_path / "hand", "--weights", "handcrafted") == 0
+    assert _track(track_files, tmp_path / "plain") == 0
+    assert _track(track_files, tmp_path / "hand", "--weights", "handcrafted") == 0
     for name in ("top.txt", "hor.txt"):
         assert (tmp_path / "plain" / name).read_bytes() == (tmp_path / "hand" / name).read_bytes()
-    scores = _scores(scene_files, tmp_path / "plain", capsys)
+    scores = _scores(track_files, tmp_path / "plain", capsys)
     cross = scores["cross_view"]
     assert (cross["tp"], cross["fp"], cross["mismatch"], cross["miss"]) == (143, 0, 0, 57)
     assert scores["top"]["idsw"] == 0 and scores["top"]["idf1"] == pytest.approx(100.0)
@@ -100,23 +81,23 @@ def test_handcrafted_weights_reproduce_the_output_before(scene_files, tmp_path, 
         (["--model", "/nonexistent/bundle"], "/nonexistent/bundle"),
     ],
 )
-def test_weight_option_errors_are_one_line(scene_files, tmp_path, capsys, extra, message):
-    assert _track(scene_files, tmp_path / "x", *extra) == 2
+def test_weight_option_errors_are_one_line(track_files, tmp_path, capsys, extra, message):
+    assert _track(track_files, tmp_path / "x", *extra) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("xvmatch: error:") and message in err[0], err
 
 
-def test_learned_weights_with_the_wearer_given(scene_files, tmp_path):
+def test_learned_weights_with_the_wearer_given(track_files, tmp_path):
     gt = {ln.split(",", 2)[2]: ln.split(",")[1]
-          for ln in scene_files["gt_top"].read_text().splitlines()}
+          for ln in track_files["gt_top"].read_text().splitlines()}
     lines = [ln.replace(",-1,", ",0,", 1) if gt[ln.split(",", 2)[2]] == "0" else ln
-             for ln in scene_files["det_top"].read_text().splitlines()]
+             for ln in track_files["det_top"].read_text().splitlines()]
     with_wearer = tmp_path / "top_wearer.txt"
     with_wearer.write_text("\n".join(lines) + "\n")
-    files = {**scene_files, "det_top": with_wearer}
+    files = {**track_files, "det_top": with_wearer}
     assert _track(files, tmp_path / "a", "--model", "default", "--camera-id", "0") == 0
     assert (tmp_path / "a" / "hor.txt").read_text().count("\n") == len(
-        scene_files["det_hor"].read_text().splitlines())
+        track_files["det_hor"].read_text().splitlines())
 
 
 def _costs(top_rows, hor_rows, cost, gamma=0.5) -> FrameCosts:
@@ -211,7 +192,7 @@ def test_learned_tracks_do_not_depend_on_workers(tmp_path):
 @pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
                     reason="OPENBLAS_CORETYPE names x86 kernels")
 @pytest.mark.parametrize("extra", [[], ["--model", "default"]], ids=["handcrafted", "learned"])
-def test_track_output_does_not_depend_on_the_blas_kernels(scene_files, tmp_path, extra):
+def test_track_output_does_not_depend_on_the_blas_kernels(track_files, tmp_path, extra):
     """The same box files give the same bytes whichever matrix kernels OpenBLAS picks for the
     CPU (AVX2 Haswell against SSE3 Prescott here; an AVX-512 CPU picks a third)."""
     digests = set()
@@ -219,7 +200,7 @@ def test_track_output_does_not_depend_on_the_blas_kernels(scene_files, tmp_path,
         out = tmp_path / core
         env = {**os.environ, "OPENBLAS_CORETYPE": core, "OMP_NUM_THREADS": "1"}
         subprocess.run([sys.executable, "-m", "xvmatch", "track", "--top",
-                        str(scene_files["det_top"]), "--hor", str(scene_files["det_hor"]),
+                        str(track_files["det_top"]), "--hor", str(track_files["det_hor"]),
                         "--out", str(out), "--quiet", *extra], env=env, check=True)
         digests.add(_digest(out))
     assert len(digests) == 1

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from xvmatch.cli import main
@@ -13,35 +12,16 @@ from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
 
 
-@pytest.fixture(scope="module")
-def scene_files(tmp_path_factory) -> dict[str, Path]:
-    """Ground-truth files and detection files (ids all -1, rows shuffled) of one scene."""
-    folder = tmp_path_factory.mktemp("track")
-    scene = simulate_box_scene(SceneConfig(head_turn_std_deg=2.0), n_frames=30, seed=5)
-    out = {}
-    for view, frames in (("top", scene.top), ("hor", scene.hor)):
-        gt = folder / f"gt_{view}.txt"
-        write_mot_boxes(gt, frames)
-        lines = gt.read_text().splitlines()
-        rng = np.random.default_rng(7)
-        det = [",".join([ln.split(",")[0], "-1", *ln.split(",")[2:]])
-               for ln in (lines[k] for k in rng.permutation(len(lines)))]
-        (folder / f"det_{view}.txt").write_text("\n".join(det) + "\n")
-        out[f"gt_{view}"], out[f"det_{view}"] = gt, folder / f"det_{view}.txt"
-    out["folder"] = folder
-    return out
-
-
 def _track(files, out: Path, *extra: str) -> int:
     return main(["track", "--top", str(files["det_top"]), "--hor", str(files["det_hor"]),
                  "--out", str(out), "--quiet", *extra])
 
 
-def test_track_writes_the_input_rows_with_track_ids(scene_files, tmp_path):
+def test_track_writes_the_input_rows_with_track_ids(track_files, tmp_path):
     out = tmp_path / "tracks"
-    assert _track(scene_files, out) == 0
+    assert _track(track_files, out) == 0
     for view in ("top", "hor"):
-        det = scene_files[f"det_{view}"].read_text().splitlines()
+        det = track_files[f"det_{view}"].read_text().splitlines()
         written = (out / f"{view}.txt").read_text().splitlines()
         assert len(written) == len(det)  # ground-truth boxes: no row is dropped
         strip = [ln.split(",", 2)[::2] for ln in written]
@@ -50,12 +30,12 @@ def test_track_writes_the_input_rows_with_track_ids(scene_files, tmp_path):
         assert all(len(r) for r in frames.values())
 
 
-def test_evaluate_tracks_scores_them(scene_files, tmp_path, capsys):
+def test_evaluate_tracks_scores_them(track_files, tmp_path, capsys):
     out = tmp_path / "tracks"
-    assert _track(scene_files, out) == 0
+    assert _track(track_files, out) == 0
     capsys.readouterr()
-    argv = ["evaluate", "--tracks", str(out), "--top", str(scene_files["gt_top"]), "--hor",
-            str(scene_files["gt_hor"]), "--json"]
+    argv = ["evaluate", "--tracks", str(out), "--top", str(track_files["gt_top"]), "--hor",
+            str(track_files["gt_hor"]), "--json"]
     assert main(argv) == 0
     scores = json.loads(capsys.readouterr().out)
     assert scores["top"]["idf1"] > 90 and scores["top"]["mota"] > 99
@@ -65,27 +45,27 @@ def test_evaluate_tracks_scores_them(scene_files, tmp_path, capsys):
     assert "CVIDF1" in capsys.readouterr().out
 
 
-def test_evaluate_tracks_with_an_empty_view_scores_it_as_missed(scene_files, tmp_path, capsys):
+def test_evaluate_tracks_with_an_empty_view_scores_it_as_missed(track_files, tmp_path, capsys):
     # A tracker that kept no horizontal track wrote an empty hor.txt: a poor result to score,
     # not a bad input file.
     folder = tmp_path / "no_hor"
     folder.mkdir()
-    (folder / "top.txt").write_text(scene_files["gt_top"].read_text())
+    (folder / "top.txt").write_text(track_files["gt_top"].read_text())
     (folder / "hor.txt").write_text("")
-    assert main(["evaluate", "--tracks", str(folder), "--top", str(scene_files["gt_top"]),
-                 "--hor", str(scene_files["gt_hor"]), "--json"]) == 0
+    assert main(["evaluate", "--tracks", str(folder), "--top", str(track_files["gt_top"]),
+                 "--hor", str(track_files["gt_hor"]), "--json"]) == 0
     scores = json.loads(capsys.readouterr().out)
     assert scores["cross_view"]["cvidr"] == pytest.approx(0.0)
     assert scores["top"]["idf1"] == pytest.approx(100.0)
 
 
-def test_evaluate_the_ground_truth_as_tracks_is_perfect(scene_files, tmp_path, capsys):
+def test_evaluate_the_ground_truth_as_tracks_is_perfect(track_files, tmp_path, capsys):
     folder = tmp_path / "perfect"
     folder.mkdir()
-    (folder / "top.txt").write_text(scene_files["gt_top"].read_text())
-    (folder / "hor.txt").write_text(scene_files["gt_hor"].read_text())
-    assert main(["evaluate", "--tracks", str(folder), "--top", str(scene_files["gt_top"]),
-                 "--hor", str(scene_files["gt_hor"]), "--json"]) == 0
+    (folder / "top.txt").write_text(track_files["gt_top"].read_text())
+    (folder / "hor.txt").write_text(track_files["gt_hor"].read_text())
+    assert main(["evaluate", "--tracks", str(folder), "--top", str(track_files["gt_top"]),
+                 "--hor", str(track_files["gt_hor"]), "--json"]) == 0
     scores = json.loads(capsys.readouterr().out)
     for key in ("cvidp", "cvidr", "cvidf1", "cvma"):
         assert scores["cross_view"][key] == pytest.approx(100.0)
@@ -94,18 +74,18 @@ def test_evaluate_the_ground_truth_as_tracks_is_perfect(scene_files, tmp_path, c
             assert scores[view][key] == pytest.approx(100.0)
 
 
-def test_spectral_and_camera_id(scene_files, tmp_path):
-    det_top = scene_files["det_top"]
+def test_spectral_and_camera_id(track_files, tmp_path):
+    det_top = track_files["det_top"]
     # Give the wearer (ground-truth id 0) its id back in the detection file.
     gt = {ln.split(",", 2)[2]: ln.split(",")[1]
-          for ln in scene_files["gt_top"].read_text().splitlines()}
+          for ln in track_files["gt_top"].read_text().splitlines()}
     lines = [ln.replace(",-1,", ",0,", 1) if gt[ln.split(",", 2)[2]] == "0" else ln
              for ln in det_top.read_text().splitlines()]
     with_wearer = tmp_path / "top_wearer.txt"
     with_wearer.write_text("\n".join(lines) + "\n")
-    files = {**scene_files, "det_top": with_wearer}
+    files = {**track_files, "det_top": with_wearer}
     assert _track(files, tmp_path / "a", "--camera-id", "0") == 0
-    assert _track(scene_files, tmp_path / "b", "--solver", "spectral", "--seed", "3") == 0
+    assert _track(track_files, tmp_path / "b", "--solver", "spectral", "--seed", "3") == 0
 
 
 @pytest.mark.parametrize(
@@ -115,16 +95,16 @@ def test_spectral_and_camera_id(scene_files, tmp_path):
         (["--top", "/nonexistent/top.txt"], "no such file"),
     ],
 )
-def test_track_errors_are_one_line(scene_files, tmp_path, capsys, extra, message):
-    assert _track(scene_files, tmp_path / "x", *extra) == 2
+def test_track_errors_are_one_line(track_files, tmp_path, capsys, extra, message):
+    assert _track(track_files, tmp_path / "x", *extra) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("xvmatch: error:") and message in err[0]
 
 
-def test_track_out_must_be_a_folder(scene_files, tmp_path, capsys):
+def test_track_out_must_be_a_folder(track_files, tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("")
-    assert _track(scene_files, blocker) == 2
+    assert _track(track_files, blocker) == 2
     assert "not a folder" in capsys.readouterr().err
 
 
@@ -136,15 +116,15 @@ def test_track_out_must_be_a_folder(scene_files, tmp_path, capsys):
      ("--seed", "-1"), ("--image-size", "4x4"), ("--w1", "1.5"), ("--w2", "-0.1"),
      ("--min-colour", "2")],
 )
-def test_track_numeric_options_are_bounded(scene_files, tmp_path, capsys, flag, value):
+def test_track_numeric_options_are_bounded(track_files, tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit) as exc:
-        _track(scene_files, tmp_path / "x", flag, value)
+        _track(track_files, tmp_path / "x", flag, value)
     assert exc.value.code == 2
     assert f"argument {flag}" in capsys.readouterr().err
 
 
-def test_evaluate_needs_pred_or_tracks(scene_files, tmp_path, capsys):
-    base = ["evaluate", "--top", str(scene_files["gt_top"]), "--hor", str(scene_files["gt_hor"])]
+def test_evaluate_needs_pred_or_tracks(track_files, tmp_path, capsys):
+    base = ["evaluate", "--top", str(track_files["gt_top"]), "--hor", str(track_files["gt_hor"])]
     with pytest.raises(SystemExit):
         main(base)
     assert "one of the arguments --pred --tracks" in capsys.readouterr().err
@@ -152,9 +132,9 @@ def test_evaluate_needs_pred_or_tracks(scene_files, tmp_path, capsys):
     assert "not a folder" in capsys.readouterr().err
 
 
-def test_track_output_does_not_depend_on_workers(scene_files, tmp_path):
-    assert _track(scene_files, tmp_path / "one") == 0
-    assert _track(scene_files, tmp_path / "two", "--workers", "2") == 0
+def test_track_output_does_not_depend_on_workers(track_files, tmp_path):
+    assert _track(track_files, tmp_path / "one") == 0
+    assert _track(track_files, tmp_path / "two", "--workers", "2") == 0
     for view in ("top.txt", "hor.txt"):
         assert (tmp_path / "one" / view).read_bytes() == (tmp_path / "two" / view).read_bytes()
 
@@ -280,11 +260,11 @@ def test_track_with_an_offset_tracks_as_if_the_videos_were_in_sync(tmp_path, cap
     assert scores[3] != scores[0], scores  # scored out of sync
 
 
-def test_track_on_videos_too_short_for_the_sync_check_says_so(scene_files, tmp_path, capsys):
+def test_track_on_videos_too_short_for_the_sync_check_says_so(track_files, tmp_path, capsys):
     # 30 frames: with the default --max-offset 60 one clip fits, so auto (the default) keeps
     # the files' timing without a search, and says why.
     out = tmp_path / "tracks"
-    argv = ["track", "--top", str(scene_files["det_top"]), "--hor", str(scene_files["det_hor"]),
+    argv = ["track", "--top", str(track_files["det_top"]), "--hor", str(track_files["det_hor"]),
             "--out", str(out)]
     assert main(argv) == 0
     err = capsys.readouterr().err
@@ -294,12 +274,12 @@ def test_track_on_videos_too_short_for_the_sync_check_says_so(scene_files, tmp_p
 
 
 @pytest.mark.parametrize("record", ['{"offset": "soon"}', "{", '{"shift": 3}', '{"offset": true}'])
-def test_evaluate_tracks_refuses_a_broken_offset_record(scene_files, tmp_path, capsys, record):
+def test_evaluate_tracks_refuses_a_broken_offset_record(track_files, tmp_path, capsys, record):
     out = tmp_path / "tracks"
-    assert _track(scene_files, out) == 0
+    assert _track(track_files, out) == 0
     (out / "offset.json").write_text(record)
-    argv = ["evaluate", "--tracks", str(out), "--top", str(scene_files["gt_top"]), "--hor",
-            str(scene_files["gt_hor"])]
+    argv = ["evaluate", "--tracks", str(out), "--top", str(track_files["gt_top"]), "--hor",
+            str(track_files["gt_hor"])]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{out / 'offset.json'}:" in err[0] and "--offset N" in err[0], err
