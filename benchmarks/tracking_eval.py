@@ -137,10 +137,11 @@ def frame_pairs_cached(name, top, hor, camera_rows, cache: Path | None, tag: str
 def offset_cached(name, top, hor, cache: Path | None, tag: str) -> int:
     """The offset ``xvmatch track --offset auto`` applies to a pair of detection files (0 when
     the clips do not back the estimate), kept in ``cache``."""
-    from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
+    from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, OFFSET_STEP, estimate_offset
     from xvmatch.geometry.spatial_matching import SpatialParams
 
-    path = cache / f"{name}.{tag}.offset.json" if cache else None
+    # The search's step in the name: a cache of another search is not reused.
+    path = cache / f"{name}.{tag}.offset-step{OFFSET_STEP}.json" if cache else None
     if path and path.exists():
         return int(json.loads(path.read_text())["applied"])
     est = estimate_offset(top, hor, hor_width=float(IMAGE_SIZE[0]), params=SpatialParams(),
