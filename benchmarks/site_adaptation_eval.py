@@ -21,7 +21,7 @@ and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``
 
 Usage:
     python benchmarks/site_adaptation_eval.py [--seeds 1 2 5 6] [--strengths 0 2 3] [--frames 400]
-        [--people 12 20] [--cli] [--work runs/site_adaptation]
+        [--people 12 20] [--vector descriptors|features] [--cli] [--work runs/site_adaptation]
 """
 
 from __future__ import annotations
@@ -55,7 +55,8 @@ from xvmatch.inference.learned_association import (
     associate_sequence_learned,
     load_matcher_bundle,
 )
-from xvmatch.inference.site_adaptation import CALIBRATIONS, fit_site_adaptation
+from xvmatch.inference.site_adaptation import CALIBRATIONS, VECTORS, fit_site_adaptation
+from xvmatch.inference.site_bundle import adapted_vector
 
 
 class _Images:
@@ -119,6 +120,9 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
            (("top", video.top), ("hor", video.hor))}
     precision = float((ids["top"][cp[:, 0]] == ids["hor"][cp[:, 1]]).mean()) if len(cp) else 0.0
 
+    def embed(image, boxes):
+        return matcher.descriptors(image, boxes, args.vector)
+
     def run(model, images):
         pred = associate_sequence_learned(
             top, hor, video.hor_size[0], model, hor_height=video.hor_size[1], frames=test,
@@ -131,10 +135,9 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     for strength in args.strengths:
         shifted = (_Images(_shifted(video.top_images, strength, 100 + seed)),
                    _Images(_shifted(video.hor_images, strength, 200 + seed)))
-        pairs = mined.pair_set(embed_frames(mined.embed_frames, top, shifted[0],
-                                            matcher.descriptors),
-                               embed_frames(mined.embed_frames, hor, shifted[1],
-                                            matcher.descriptors))
+        pairs = replace(mined.pair_set(embed_frames(mined.embed_frames, top, shifted[0], embed),
+                                       embed_frames(mined.embed_frames, hor, shifted[1], embed)),
+                        vector=args.vector)
         row = {"seed": seed, "strength": strength, **base, "shifted": run(matcher, shifted),
                "pseudo": (len(cp), precision), "counts": pairs.counts()}
         for cal in args.calibrations:
@@ -237,12 +240,17 @@ def main() -> int:
     parser.add_argument("--model", default="default")
     parser.add_argument("--shots", type=int, default=MiningConfig().shots,
                         help="frames embedded per burst")
+    parser.add_argument("--vector", choices=VECTORS, default=None,
+                        help="what the adaptation maps (default: what xvmatch adapt fits on, "
+                             "the network's features when it gives them)")
     parser.add_argument("--cli", action="store_true", help="also time the command line")
     parser.add_argument("--work", default="runs/site_adaptation")
     args = parser.parse_args()
     print("$ python " + shlex.join(sys.argv))
     t0 = time.perf_counter()
     matcher = load_matcher_bundle(args.model)
+    args.vector = args.vector or adapted_vector(matcher.bundle.manifest.appearance)
+    print(f"adapting the network's {args.vector}")
     reference = reference_costs(matcher.descriptors)
     rows = []
     for seed in args.seeds:

@@ -58,6 +58,7 @@ from xvmatch.geometry.spatial_features import (
 )
 from xvmatch.inference.bundle import (
     APPEARANCE_INPUT,
+    APPEARANCE_OUTPUTS,
     BUNDLE_FORMAT,
     BUNDLE_FORMAT_VERSION,
     MANIFEST,
@@ -78,14 +79,18 @@ class ExportError(ValueError):
 
 class AppearanceGraph(nn.Module):
     """The appearance network with its preprocessing: ``(B, H, W, 3)`` uint8 BGR crops on the
-    [0, 255] scale to ``(B, D)`` unit descriptors (what ``appearance.onnx`` computes)."""
+    [0, 255] scale to ``(B, D)`` unit descriptors and, with ``features``, also the ``(B, C)``
+    pooled trunk activations (what ``appearance.onnx`` computes)."""
 
-    def __init__(self, net: AppearanceNet) -> None:
+    def __init__(self, net: AppearanceNet, features: bool = False) -> None:
         super().__init__()
         self.net = net.eval()
+        self.features = bool(features)
 
-    def forward(self, crops: Tensor) -> Tensor:
-        """Descriptors of a batch of crops."""
+    def forward(self, crops: Tensor) -> Tensor | tuple[Tensor, Tensor]:
+        """Descriptors (and features) of a batch of crops."""
+        if self.features:
+            return self.net.descriptors_and_features(self.net.transform(crops))
         return self.net.embed_crops(crops)
 
 
@@ -203,8 +208,10 @@ def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
         h, w = net.preprocessing.input_size
         example = torch.randint(0, 256, (2, h, w, 3), dtype=torch.uint8,
                                 generator=torch.Generator().manual_seed(0))
-        _onnx_export(AppearanceGraph(net).eval(), (example,), path, [APPEARANCE_INPUT],
-                     ["descriptors"], {APPEARANCE_INPUT: {0: "crops"}, "descriptors": {0: "crops"}})
+        _onnx_export(AppearanceGraph(net, features=True).eval(), (example,), path,
+                     [APPEARANCE_INPUT], list(APPEARANCE_OUTPUTS),
+                     {APPEARANCE_INPUT: {0: "crops"}, **{o: {0: "crops"} for o in
+                                                         APPEARANCE_OUTPUTS}})
         prep = {
             "crop_size": [w, h],
             "input": "uint8 NHWC on the [0, 255] scale",
@@ -218,13 +225,17 @@ def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
         _set_metadata(path, {
             "xvmatch.role": "appearance",
             "xvmatch.preprocessing": json.dumps(prep),
-            "xvmatch.output": "unit descriptors (B, D); cost of a pair |a - b| / 2",
+            "xvmatch.output": "descriptors: unit descriptors (B, D), cost of a pair "
+                              "|a - b| / 2; features: the trunk's average-pooled activations "
+                              "(B, C), what site adaptation fits on",
         })
         notice = notice_text(net)
         if notice is not None:
             (folder / NOTICE).write_text(notice)
         records["appearance"] = {"file": path.name, "arch": net.arch,
-                                 "embedding_dim": net.embedding_dim, "precision": "fp32", **prep,
+                                 "embedding_dim": net.embedding_dim,
+                                 "features_dim": net.head[0].in_features, "precision": "fp32",
+                                 **prep,
                                  "backbone": backbone_record(net)}
     return records
 

@@ -31,13 +31,14 @@ from xvmatch.geometry.matcher_inputs import CUE_NAMES
 from xvmatch.geometry.record_fields import typed_field
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
 from xvmatch.inference.site_adaptation import (
-    ADAPTATION_FORMAT_VERSION,
+    ADAPTATION_FORMAT_VERSIONS,
     SiteAdaptation,
     load_adaptation,
 )
 
 __all__ = [
     "APPEARANCE_INPUT",
+    "APPEARANCE_OUTPUTS",
     "BUNDLE_FORMAT",
     "BUNDLE_FORMAT_VERSION",
     "DEFAULT_BUNDLE",
@@ -75,6 +76,9 @@ MATCHER_INPUTS: tuple[str, ...] = (
 """Input names of ``matcher.onnx``, in order (a graph may omit the cue inputs it ignores)."""
 MATCHER_OUTPUT = "cost"
 APPEARANCE_INPUT = "crops"
+APPEARANCE_OUTPUTS: tuple[str, ...] = ("descriptors", "features")
+"""Outputs of ``appearance.onnx``: unit descriptors, and the trunk's pooled activations (the
+second only in bundles exported since site adaptation fits on them)."""
 DEFAULT_BUNDLE = Path(__file__).resolve().parent / "default_bundle"
 """The shipped default (``training/make_default_bundle.py`` rebuilds it)."""
 
@@ -93,6 +97,8 @@ class AppearanceSpec:
         crop_size: ``(width, height)`` of the crops.
         context: relative margin cut around each box.
         embedding_dim: descriptor size.
+        features_dim: size of the graph's ``features`` output (the trunk's pooled activations),
+            or None for a graph with descriptors only (bundles exported before it).
         precision: precision of ``file``, ``"fp32"``.
         int8_file, int8_sha256: the static INT8 network beside it (``xvmatch export --int8``),
             or None.
@@ -115,6 +121,17 @@ class AppearanceSpec:
     int8: dict = field(default_factory=dict)
     arch: str | None = None
     backbone: dict = field(default_factory=dict)
+    features_dim: int | None = None
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The graph's outputs, in order: ``("descriptors",)`` or ``APPEARANCE_OUTPUTS``."""
+        return APPEARANCE_OUTPUTS[:1] if self.features_dim is None else APPEARANCE_OUTPUTS
+
+    def dim(self, vector: str) -> int | None:
+        """The size of the graph's ``vector`` output (``"descriptors"`` or ``"features"``);
+        None when the graph has no such output."""
+        return {"descriptors": self.embedding_dim, "features": self.features_dim}.get(vector)
 
 
 @dataclass(frozen=True)
@@ -287,10 +304,15 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
                 if k in ("arch", "init", "package", "version", "licence")):
             raise _fail(path, "manifest field 'appearance.backbone' must be an object of "
                         "strings (arch, init, package, version, licence) or absent")
+        features = app.get("features_dim")
+        if features is not None and (not isinstance(features, int) or isinstance(features, bool)
+                                     or not 1 <= features <= 65536):
+            raise _fail(path, f"manifest field 'appearance.features_dim' must be in 1-65536 or "
+                        f"absent, got {features!r}")
         spec = AppearanceSpec(name, sha, (size[0], size[1]),
                               _number(app, "context", path, 0.0, 1.0, "appearance."), dim,
                               precision, int8_file, int8_sha, dict(int8 or {}), arch,
-                              dict(backbone))
+                              dict(backbone), features)
     if ("app" in cues) != (spec is not None):
         raise _fail(path, "the appearance graph must be present exactly when 'app' is among "
                     f"the cues (cues {cues})")
@@ -311,13 +333,18 @@ def _adaptation_record(doc: dict, path: Path, spec: AppearanceSpec | None
                     "bundle has none)")
     name, sha = _file_name(adapt, path, "adaptation.", ".npz")
     version = _get(adapt, "format_version", int, path, "adaptation.")
-    if version != ADAPTATION_FORMAT_VERSION:
+    if version not in ADAPTATION_FORMAT_VERSIONS:
         raise _fail(path, f"adaptation format version {version}, this xvmatch reads "
-                    f"{ADAPTATION_FORMAT_VERSION}; run xvmatch adapt again")
+                    f"{', '.join(map(str, ADAPTATION_FORMAT_VERSIONS))}; run xvmatch adapt "
+                    "again")
+    vector = adapt.get("vector", "descriptors")
+    dim = spec.dim(vector) if isinstance(vector, str) else None
+    if dim is None:
+        raise _fail(path, f"manifest field 'adaptation.vector' must name an output of the "
+                    f"appearance network ({', '.join(spec.outputs)}), got {vector!r}")
     rank = _get(adapt, "rank", int, path, "adaptation.")
-    if not 0 <= rank <= spec.embedding_dim:
-        raise _fail(path, f"manifest field 'adaptation.rank' must be in 0-{spec.embedding_dim}, "
-                    f"got {rank}")
+    if not 0 <= rank <= dim:
+        raise _fail(path, f"manifest field 'adaptation.rank' must be in 0-{dim}, got {rank}")
     for key in ("fitted_on", "heldout"):
         _get(adapt, key, dict, path, "adaptation.")
     return AdaptationRecord(name, sha, rank, dict(adapt))
@@ -376,15 +403,24 @@ class Bundle:
         """The bundle folder, for messages."""
         return os.fspath(self.manifest.folder)
 
-    def embed(self, crops: np.ndarray) -> np.ndarray:
+    def embed(self, crops: np.ndarray, vector: str = "descriptors") -> np.ndarray:
         """``(K, D)`` float32 unit descriptors of ``(K, H, W, 3)`` uint8 BGR crops, in one
-        batch (``K`` may be 0)."""
+        batch (``K`` may be 0); with ``vector="features"``, the ``(K, C)`` pooled trunk
+        activations instead, scaled to unit length (onnxruntime then skips the head)."""
         spec = self.manifest.appearance
         if self.appearance is None or spec is None:
             raise BundleError(f"{self.name}: this bundle has no appearance network")
+        dim = spec.dim(vector)
+        if dim is None:
+            raise BundleError(f"{self.name}: the appearance network has no {vector!r} output "
+                              f"(it has {', '.join(spec.outputs)}); export it again")
         if crops.shape[0] == 0:
-            return np.zeros((0, spec.embedding_dim), np.float32)
-        return self.appearance.run(None, {APPEARANCE_INPUT: crops})[0]
+            return np.zeros((0, dim), np.float32)
+        out = self.appearance.run([vector], {APPEARANCE_INPUT: crops})[0]
+        if vector == "features":  # unit length: a crop's overall activation says more about
+            # its exposure than about the person
+            out = out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+        return out
 
     def costs(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """``(B, M, N)`` costs of a padded batch
@@ -555,14 +591,21 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
         inputs = appearance.get_inputs()
         if [i.name for i in inputs] != [APPEARANCE_INPUT]:
             raise _fail(app_path, f"not an appearance graph (inputs {[i.name for i in inputs]})")
+        outputs = [o.name for o in appearance.get_outputs()]
+        if outputs[:len(spec.outputs)] != list(spec.outputs):
+            raise _fail(app_path, f"the graph's outputs are {outputs}, the manifest expects "
+                        f"{list(spec.outputs)}")
     adaptation = None
     record = manifest.adaptation
     if record is not None and manifest.appearance is not None:
         adapt_path = _checked_file(folder, record.file, record.sha256)
         try:
-            adaptation = load_adaptation(adapt_path, manifest.appearance.embedding_dim)
+            adaptation = load_adaptation(adapt_path, manifest.appearance.dim)
         except ValueError as exc:
             raise _fail(adapt_path, str(exc)) from None
+        if adaptation.vector != record.record.get("vector", "descriptors"):
+            raise _fail(adapt_path, f"it maps the {adaptation.vector} but the manifest says "
+                        f"{record.record.get('vector', 'descriptors')}; run xvmatch adapt again")
         if adaptation.rank != record.rank:
             raise _fail(adapt_path, f"rank {adaptation.rank} but the manifest says "
                         f"{record.rank}; run xvmatch adapt again")

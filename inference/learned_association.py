@@ -73,18 +73,32 @@ class LearnedMatcher:
         """The pair cues the matcher takes."""
         return self.bundle.manifest.cues
 
-    def descriptors(self, image: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-        """``(K, D)`` appearance descriptors of the boxes of one image (one batch)."""
+    def descriptors(self, image: np.ndarray, boxes: np.ndarray,
+                    vector: str = "descriptors") -> np.ndarray:
+        """``(K, D)`` appearance descriptors of the boxes of one image (one batch); with
+        ``vector="features"`` the network's unit pooled features instead
+        (:meth:`~xvmatch.inference.bundle.Bundle.embed`)."""
         spec = self.bundle.manifest.appearance
         if spec is None:
             raise ValueError(f"{self.bundle.name}: this bundle has no appearance network")
-        return self.bundle.embed(box_crops(image, boxes, spec.crop_size, spec.context))
+        return self.bundle.embed(box_crops(image, boxes, spec.crop_size, spec.context), vector)
+
+    @property
+    def cue_vector(self) -> str:
+        """What the cross-view appearance cue compares: ``"features"`` for a site bundle
+        adapted on them, else ``"descriptors"``."""
+        adaptation = self.bundle.adaptation
+        return "descriptors" if adaptation is None else adaptation.vector
+
+    def cue_vectors(self, image: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """The vectors :meth:`appearance_cost` takes, of the boxes of one image."""
+        return self.descriptors(image, boxes, self.cue_vector)
 
     def appearance_cost(self, top: np.ndarray, hor: np.ndarray) -> np.ndarray:
-        """``(M, N)`` appearance cue of raw top ``(M, D)`` and horizontal ``(N, D)``
-        descriptors: ``|a - b| / 2``, or a site bundle's adapted cost
-        (:meth:`~xvmatch.inference.site_adaptation.SiteAdaptation.cost`: each view standardised
-        on its own, projected, recalibrated)."""
+        """``(M, N)`` appearance cue of raw top ``(M, D)`` and horizontal ``(N, D)`` vectors
+        (:meth:`cue_vectors`): ``|a - b| / 2`` of the descriptors, or a site bundle's adapted
+        cost (:meth:`~xvmatch.inference.site_adaptation.SiteAdaptation.cost`: each view
+        standardised on its own, projected, recalibrated)."""
         if self.bundle.adaptation is not None:
             return self.bundle.adaptation.cost(top, hor)
         return appearance_cost(top, hor)
@@ -303,8 +317,8 @@ def associate_sequence_learned(
         if top_images is not None:
             per_model = []
             for m in models:
-                a = m.descriptors(top_images.get(frame), t_boxes)
-                b = m.descriptors(hor_images.get(frame), h_boxes)
+                a = m.cue_vectors(top_images.get(frame), t_boxes)
+                b = m.cue_vectors(hor_images.get(frame), h_boxes)
                 per_model.append(m.appearance_cost(a, b))
             cues["app"] = per_model
         if cameras is not None:

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,8 +43,11 @@ from xvmatch.geometry.matcher_inputs import appearance_cost
 __all__ = [
     "ADAPTATION_FILE",
     "ADAPTATION_FORMAT_VERSION",
+    "ADAPTATION_FORMAT_VERSIONS",
     "CALIBRATIONS",
     "DEFAULT_RANKS",
+    "RIDGE",
+    "VECTORS",
     "VIEWS",
     "AdaptationFit",
     "PairSet",
@@ -58,8 +61,16 @@ __all__ = [
 
 ADAPTATION_FILE = "adaptation.npz"
 """The adaptation's file name in a site bundle."""
-ADAPTATION_FORMAT_VERSION = 1
-"""Version of the arrays stored in ``adaptation.npz``."""
+ADAPTATION_FORMAT_VERSION = 2
+"""Version of the arrays stored in ``adaptation.npz`` (2 added ``vector``)."""
+ADAPTATION_FORMAT_VERSIONS: tuple[int, ...] = (1, 2)
+"""Versions read (a version 1 file maps the descriptors)."""
+VECTORS: tuple[str, ...] = ("descriptors", "features")
+"""What an adaptation maps: the network's unit descriptors, or its pooled trunk activations (the
+head's input: more of what a camera change leaves of a person, docs/adaptation.md)."""
+RIDGE: dict[str, float] = {"descriptors": 0.01, "features": 0.3}
+"""Default ridge of the positive scatter per vector: the 1,280 features need more than the 128
+descriptors with a few hundred pairs (measured on the adaptation benchmark's renders)."""
 VIEWS: tuple[str, ...] = ("top", "hor")
 """The two views, each with its own standardisation."""
 DEFAULT_RANKS: tuple[int, ...] = (0, 2, 4, 8, 16, 32, 64)
@@ -84,6 +95,7 @@ class SiteAdaptation:
         projection: ``(D, r)`` metric projection (``r = D`` and the identity for rank 0).
         calibration: ``(2,)`` ``a, b`` of the logit-affine cost map (``1, 0``: none).
         rank: the rank chosen (0: the standardisation alone).
+        vector: what it maps, one of :data:`VECTORS`.
     """
 
     top_mean: np.ndarray
@@ -93,6 +105,7 @@ class SiteAdaptation:
     projection: np.ndarray
     calibration: np.ndarray
     rank: int
+    vector: str = "descriptors"
 
     @property
     def dim(self) -> int:
@@ -100,10 +113,11 @@ class SiteAdaptation:
         return int(self.top_mean.shape[0])
 
     @classmethod
-    def identity(cls, dim: int) -> SiteAdaptation:
+    def identity(cls, dim: int, vector: str = "descriptors") -> SiteAdaptation:
         """The map that changes nothing: descriptors and costs as the network gives them."""
         zeros, ones = np.zeros(dim), np.ones(dim)
-        return cls(zeros, ones, zeros.copy(), ones.copy(), np.eye(dim), np.array([1.0, 0.0]), 0)
+        return cls(zeros, ones, zeros.copy(), ones.copy(), np.eye(dim), np.array([1.0, 0.0]), 0,
+                   vector)
 
     def transform(self, descriptors: np.ndarray, view: str) -> np.ndarray:
         """``(K, r)`` float64 unit adapted descriptors of ``(K, D)`` descriptors of ``view``.
@@ -142,7 +156,7 @@ class SiteAdaptation:
                 "top_mean": self.top_mean, "top_scale": self.top_scale,
                 "hor_mean": self.hor_mean, "hor_scale": self.hor_scale,
                 "projection": self.projection, "calibration": self.calibration,
-                "rank": np.array(self.rank)}
+                "rank": np.array(self.rank), "vector": np.array(self.vector)}
 
 
 def adaptation_bytes(adaptation: SiteAdaptation) -> bytes:
@@ -152,19 +166,45 @@ def adaptation_bytes(adaptation: SiteAdaptation) -> bytes:
     return buf.getvalue()
 
 
-def load_adaptation(path: str | os.PathLike, dim: int) -> SiteAdaptation:
-    """Read ``adaptation.npz`` for descriptors of size ``dim``, every array checked.
+def load_adaptation(path: str | os.PathLike,
+                    dims: int | Callable[[str], int | None]) -> SiteAdaptation:
+    """Read ``adaptation.npz``, every array checked against the vector it maps.
+
+    Args:
+        path: the file.
+        dims: the size of each vector the network gives (``vector -> size or None``, e.g.
+            :meth:`xvmatch.inference.bundle.AppearanceSpec.dim`); an int: the descriptor size of
+            a network without features.
 
     Raises:
         ValueError: unreadable, a pickled object, an array missing, of the wrong shape or not
-            finite, a non-positive scale or calibration slope (the message names the array).
+            finite, a non-positive scale or calibration slope, a vector the network does not
+            give (the message names the array).
     """
     try:
         with np.load(os.fspath(path), allow_pickle=False) as npz:
             arrays = {k: np.array(npz[k]) for k in npz.files}
     except (OSError, ValueError, EOFError) as exc:
         raise ValueError(f"not a readable adaptation file ({str(exc)[:120]})") from None
-    want = {"format_version": (), "top_mean": (dim,), "top_scale": (dim,), "hor_mean": (dim,),
+    if "format_version" not in arrays or arrays["format_version"].shape != () or \
+            arrays["format_version"].dtype.kind not in "iu":
+        raise ValueError("array 'format_version' is missing or not an integer")
+    version = int(arrays["format_version"])
+    if version not in ADAPTATION_FORMAT_VERSIONS:
+        raise ValueError(f"format version {version}, this xvmatch reads "
+                         f"{', '.join(map(str, ADAPTATION_FORMAT_VERSIONS))}; run xvmatch adapt "
+                         "again")
+    vector = "descriptors"
+    if version >= 2:
+        v = arrays.get("vector")
+        if v is None or v.shape != () or v.dtype.kind != "U" or str(v) not in VECTORS:
+            raise ValueError(f"array 'vector' must be one of {VECTORS}")
+        vector = str(v)
+    dim = (dims if vector == "descriptors" else None) if isinstance(dims, int) else dims(vector)
+    if dim is None:
+        raise ValueError(f"it maps the network's {vector}, which this bundle's appearance "
+                         "network does not give; run xvmatch adapt again")
+    want = {"top_mean": (dim,), "top_scale": (dim,), "hor_mean": (dim,),
             "hor_scale": (dim,), "calibration": (2,), "rank": ()}
     for key, shape in want.items():
         if key not in arrays:
@@ -172,9 +212,6 @@ def load_adaptation(path: str | os.PathLike, dim: int) -> SiteAdaptation:
         if arrays[key].shape != shape or arrays[key].dtype.kind not in "fiu":
             raise ValueError(f"array {key!r} must be numbers of shape {shape}, got "
                              f"{arrays[key].dtype} {arrays[key].shape}")
-    if int(arrays["format_version"]) != ADAPTATION_FORMAT_VERSION:
-        raise ValueError(f"format version {int(arrays['format_version'])}, this xvmatch reads "
-                         f"{ADAPTATION_FORMAT_VERSION}; run xvmatch adapt again")
     rank = int(arrays["rank"])
     proj = arrays.get("projection")
     cols = dim if rank == 0 else rank
@@ -190,7 +227,7 @@ def load_adaptation(path: str | os.PathLike, dim: int) -> SiteAdaptation:
     f64 = {k: np.asarray(arrays[k], dtype=np.float64) for k in
            ("top_mean", "top_scale", "hor_mean", "hor_scale", "calibration")}
     return SiteAdaptation(f64["top_mean"], f64["top_scale"], f64["hor_mean"], f64["hor_scale"],
-                          np.asarray(proj, dtype=np.float64), f64["calibration"], rank)
+                          np.asarray(proj, dtype=np.float64), f64["calibration"], rank, vector)
 
 
 @dataclass(frozen=True, eq=False)
@@ -206,6 +243,7 @@ class PairSet:
         within_group, cross_pos_group, cross_neg_group: the time group (burst) of each pair,
             ``{view: (P,)}`` for the within-view positives and negatives stacked in that order,
             for the held-out split by time.
+        vector: what ``top`` and ``hor`` hold, one of :data:`VECTORS`.
     """
 
     top: np.ndarray
@@ -218,6 +256,7 @@ class PairSet:
     within_neg_group: dict[str, np.ndarray] = field(default_factory=dict)
     cross_pos_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     cross_neg_group: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    vector: str = "descriptors"
 
     def counts(self) -> dict[str, int]:
         """How many pairs of each kind (for the manifest's record)."""
@@ -334,7 +373,8 @@ def _fit(pairs: PairSet, masks: dict[str, np.ndarray], ranks: Sequence[int],
     for r in ranks:
         proj = np.eye(dim) if r == 0 else vectors[:, :r].copy()
         out[r] = SiteAdaptation(stats["top"][0], stats["top"][1], stats["hor"][0],
-                                stats["hor"][1], proj, np.array([1.0, 0.0]), int(r))
+                                stats["hor"][1], proj, np.array([1.0, 0.0]), int(r),
+                                pairs.vector)
     return out
 
 
@@ -400,7 +440,7 @@ def fit_site_adaptation(
     heldout: float = 0.25,
     min_gain: float = 0.005,
     min_heldout: int = 10,
-    reg: float = 0.01,
+    reg: float | None = None,
     within: float = 0.5,
     calibration: str | None = None,
     reference: tuple[np.ndarray, np.ndarray] | None = None,
@@ -414,7 +454,8 @@ def fit_site_adaptation(
         min_gain: the held-out AUC must beat the unadapted one by this much, and by twice its
             standard error (:func:`auc_standard_error`), else the fit is refused.
         min_heldout: fewest held-out cross-view positives (and negatives) to judge at all.
-        reg: ridge on the positive scatter, a fraction of its mean eigenvalue.
+        reg: ridge on the positive scatter, a fraction of its mean eigenvalue (None:
+            :data:`RIDGE` of the pairs' vector).
         within: weight of each view's within-view pairs in the scatters against the cross-view
             pairs' 1.
         calibration: how the adapted cost is put on the scale the fusion expects
@@ -437,6 +478,10 @@ def fit_site_adaptation(
         raise ValueError(f"calibration must be one of {CALIBRATIONS}, got {calibration!r}")
     if calibration in ("odds", "median") and reference is None:
         raise ValueError(f"calibration {calibration!r} needs the reference costs")
+    if pairs.vector not in VECTORS:
+        raise ValueError(f"pairs.vector must be one of {VECTORS}, got {pairs.vector!r}")
+    if reg is None:
+        reg = RIDGE[pairs.vector]
     dim = int(pairs.top.shape[1])
     if pairs.hor.shape[1] != dim:
         raise ValueError(f"top and horizontal descriptors differ in size ({dim}, "
@@ -467,7 +512,7 @@ def fit_site_adaptation(
                 out[f"{v}_{key}"] = pick(grp.get(v, np.zeros(n, np.int64)))
         return out
 
-    identity = SiteAdaptation.identity(dim)
+    identity = SiteAdaptation.identity(dim, pairs.vector)
     test = masks(False)
     hp, hn = pairs.cross_pos[test["cross_pos"]], pairs.cross_neg[test["cross_neg"]]
     nan = float("nan")
@@ -500,5 +545,5 @@ def fit_site_adaptation(
         else:
             cal = _odds_calibration(*reference, *new)
         final = SiteAdaptation(final.top_mean, final.top_scale, final.hor_mean, final.hor_scale,
-                               final.projection, cal, final.rank)
+                               final.projection, cal, final.rank, final.vector)
     return AdaptationFit(final, True, "", before, by_rank[best], by_rank, (len(hp), len(hn)))

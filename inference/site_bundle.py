@@ -20,7 +20,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from xvmatch.inference.adaptation_pairs import (
@@ -41,7 +41,7 @@ from xvmatch.inference.site_adaptation import (
     fit_site_adaptation,
 )
 
-__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "write_site_bundle"]
+__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vector", "write_site_bundle"]
 
 Progress = Callable[[Iterable, int, str], Iterable]
 """``progress(items, total, what)``: wraps an iterator (e.g. a progress bar)."""
@@ -115,14 +115,26 @@ def adapt_to_site(
                            stage("boxes", len(scored)), workers)
     mined = mine_pairs(top, hor, bursts, costs, matcher.gamma, config)
     n = len(mined.embed_frames)
-    top_desc = embed_frames(mined.embed_frames, top, top_images, matcher.descriptors,
-                            stage("top crops", n))
-    hor_desc = embed_frames(mined.embed_frames, hor, hor_images, matcher.descriptors,
+    vector = adapted_vector(matcher.bundle.manifest.appearance)
+
+    def embed(image, boxes):
+        return matcher.descriptors(image, boxes, vector)
+
+    top_desc = embed_frames(mined.embed_frames, top, top_images, embed, stage("top crops", n))
+    hor_desc = embed_frames(mined.embed_frames, hor, hor_images, embed,
                             stage("horizontal crops", n))
-    pairs = mined.pair_set(top_desc, hor_desc)
+    pairs = replace(mined.pair_set(top_desc, hor_desc), vector=vector)
     reference = reference_costs(matcher.descriptors)
     fit = fit_site_adaptation(pairs, calibration="odds", reference=reference)
     return SiteRun(fit, mined, pairs.counts(), len(scored))
+
+
+def adapted_vector(spec) -> str:
+    """What ``adapt`` fits on for a network with this :class:`~xvmatch.inference.bundle.
+    AppearanceSpec`: its pooled features when the graph gives them (they recover about half
+    again as much of a camera change as the descriptors, docs/adaptation.md), else its
+    descriptors."""
+    return "descriptors" if spec.features_dim is None else "features"
 
 
 def _sha256(path: Path) -> str:
@@ -158,6 +170,7 @@ def adaptation_record(run: SiteRun, inputs: Mapping[str, str | os.PathLike], sha
         "file": ADAPTATION_FILE,
         "sha256": sha256,
         "format_version": ADAPTATION_FORMAT_VERSION,
+        "vector": fit.adaptation.vector,
         "rank": int(fit.adaptation.rank),
         "calibration": [float(v) for v in fit.adaptation.calibration],
         "fitted_on": {**fitted, "frames_scored": run.frames_scored,

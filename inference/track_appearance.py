@@ -53,10 +53,13 @@ class TrackletAppearance:
         histograms: (T, 32) the median colour histogram of each tracklet (Eq. 14's descriptor).
         descriptors: (T, D) the network descriptor of each tracklet's middle box, or None
             without a network.
+        cross: (T, C) the vectors the cross-view cue compares when they are not the
+            descriptors (a site bundle adapted on the network's features), else None.
     """
 
     histograms: np.ndarray
     descriptors: np.ndarray | None
+    cross: np.ndarray | None = None
 
 
 def frame_histograms(
@@ -72,6 +75,7 @@ def clip_appearance(
     histograms: Mapping[int, np.ndarray] | None,
     images: Mapping[int, np.ndarray],
     embed: Embedder | None = None,
+    cross_embed: Embedder | None = None,
 ) -> TrackletAppearance:
     """Median histograms and middle-box descriptors of one clip's tracklets of one view.
 
@@ -83,6 +87,8 @@ def clip_appearance(
         images: ``{frame: image}`` of the clip's frames (with ``embed``, at least the frames
             of the tracklets' middle boxes).
         embed: the appearance network, or None for colour only.
+        cross_embed: the vectors of the cross-view cue when they are not ``embed``'s (with
+            ``embed`` only), or None.
     """
     hist = np.zeros((len(tracklets), 0 if histograms is None else _bins(histograms)))
     middle: dict[int, list[tuple[int, int]]] = {}
@@ -97,6 +103,17 @@ def clip_appearance(
         middle.setdefault(f, []).append((k, int(t.rows[len(t) // 2])))
     if embed is None:
         return TrackletAppearance(hist, None)
+    return TrackletAppearance(
+        hist, _middle_vectors(embed, tracklets, middle, frames, images),
+        None if cross_embed is None else _middle_vectors(cross_embed, tracklets, middle, frames,
+                                                         images))
+
+
+def _middle_vectors(embed: Embedder, tracklets: Sequence[Tracklet],
+                    middle: Mapping[int, list[tuple[int, int]]],
+                    frames: Mapping[int, FrameBoxes], images: Mapping[int, np.ndarray],
+                    ) -> np.ndarray:
+    """``(T, D)`` ``embed``'s vectors of each tracklet's middle box (``(0, 0)`` without any)."""
     desc: np.ndarray | None = None
     for f, wanted in sorted(middle.items()):
         rec = frames[f]
@@ -105,7 +122,7 @@ def clip_appearance(
         if desc is None:
             desc = np.zeros((len(tracklets), out.shape[1]))
         desc[[k for k, _ in wanted]] = out
-    return TrackletAppearance(hist, desc if desc is not None else np.zeros((0, 0)))
+    return desc if desc is not None else np.zeros((0, 0))
 
 
 def _bins(histograms: Mapping[int, np.ndarray]) -> int:
@@ -127,14 +144,18 @@ def colour_similarity(a: TrackletAppearance, b: TrackletAppearance) -> np.ndarra
 
 
 def descriptor_similarity(a: TrackletAppearance, b: TrackletAppearance,
-                          cost: CostOfDescriptors | None = None) -> np.ndarray:
+                          cost: CostOfDescriptors | None = None,
+                          cross: bool = False) -> np.ndarray:
     """(T_a, T_b) network appearance similarity ``1 - cost(d_a, d_b)`` of the tracklets'
     middle-box descriptors (Sec. 3.3.2), in [0, 1]; ``cost`` defaults to ``|d_a - d_b| / 2``
-    (a site bundle's adapted cross-view cost: ``LearnedMatcher.appearance_cost``)."""
+    (a site bundle's adapted cross-view cost: ``LearnedMatcher.appearance_cost``); ``cross``:
+    compare the cross-view cue's vectors where the tracklets hold them."""
     if a.descriptors is None or b.descriptors is None:
         raise ValueError("descriptor_similarity needs descriptors: pass an appearance network")
     n_a, n_b = a.histograms.shape[0], b.histograms.shape[0]
     if n_a == 0 or n_b == 0:
         return np.zeros((n_a, n_b))
     cost = appearance_cost if cost is None else cost
+    if cross and a.cross is not None and b.cross is not None:
+        return 1.0 - np.asarray(cost(a.cross, b.cross), dtype=np.float64)
     return 1.0 - np.asarray(cost(a.descriptors, b.descriptors), dtype=np.float64)

@@ -155,12 +155,15 @@ class TrackImages:
             (a site bundle's adapted cost, ``LearnedMatcher.appearance_cost``), or None:
             ``|a - b| / 2``. The over-time terms compare descriptors of one view, whose
             camera is the same, and stay ``|a - b| / 2``.
+        cross_embed: the vectors ``cross_cost`` takes when they are not ``embed``'s (a site
+            bundle adapted on the network's features: ``LearnedMatcher.cue_vectors``), or None.
     """
 
     top: FrameImages
     hor: FrameImages
     embed: Embedder | None = None
     cross_cost: CostOfDescriptors | None = None
+    cross_embed: Embedder | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,8 +337,8 @@ def _window_weights(
                 else colour_similarity)
         a_time = (over(a_tt, a_tu), over(a_ht, a_hu))
         if network:
-            a_cross = (descriptor_similarity(a_tu, a_hu, cross_cost),
-                       descriptor_similarity(a_tt, a_ht, cross_cost))
+            a_cross = (descriptor_similarity(a_tu, a_hu, cross_cost, cross=True),
+                       descriptor_similarity(a_tt, a_ht, cross_cost, cross=True))
     def cross(top: list[Tracklet], hor: list[Tracklet]) -> np.ndarray:
         if learned is None:
             return spatial_similarity(top, hor, frame_pairs)
@@ -383,7 +386,7 @@ def _tracklets_with_images(
                 middle = sorted({int(t.frames[len(t) // 2]) for t in tracklets})
                 imgs = {f: source.get(f) for f in middle}
             out.append((tracklets, clip_appearance(tracklets, frames, hist, imgs,
-                                                   images.embed)))
+                                                   images.embed, images.cross_embed)))
         top_tr.append(out[0][0])
         hor_tr.append(out[1][0])
         app.append((out[0][1], out[1][1]))
@@ -448,7 +451,8 @@ def track_pair(
         top_tr.append([])
         hor_tr.append([])
         if app is not None:
-            app.append(tuple(clip_appearance([], {}, {}, {}, images.embed) for _ in range(2)))
+            app.append(tuple(clip_appearance([], {}, {}, {}, images.embed, images.cross_embed)
+                             for _ in range(2)))
     n_windows = max(1, len(clips) - 1)
     solutions: list[ClusterSolution] = []
     steps = range(n_windows)

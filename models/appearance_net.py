@@ -371,8 +371,14 @@ class AppearanceNet(nn.Module):
         Returns:
             ``(B, embedding_dim)`` unit-length descriptors.
         """
+        return self.descriptors_and_features(images)[0]
+
+    def descriptors_and_features(self, images: Tensor) -> tuple[Tensor, Tensor]:
+        """``(B, embedding_dim)`` unit descriptors and ``(B, C)`` features: the trunk's
+        average-pooled activations, the head's input (site adaptation fits on them: they keep
+        what the head, trained on renders, leaves out)."""
         x = self.pool(self.trunk(images)).flatten(1)
-        return nn.functional.normalize(self.head(x), dim=1, eps=1e-8)
+        return nn.functional.normalize(self.head(x), dim=1, eps=1e-8), x
 
     def embed_crops(self, crops: Tensor) -> Tensor:
         """Descriptors of ``(B, H, W, 3)`` BGR crops on the [0, 255] scale (see

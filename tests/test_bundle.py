@@ -55,6 +55,46 @@ def test_a_valid_copy_loads(bundle):
     assert read_manifest(bundle).raw == manifest.raw
 
 
+def test_the_features_output(bundle):
+    """The appearance graph's second output, the pooled trunk activations (unit length), for
+    site adaptation; the descriptors are as before."""
+    loaded = load_bundle(bundle)
+    spec = loaded.manifest.appearance
+    assert spec.outputs == ("descriptors", "features") and spec.features_dim > 0
+    crops = np.random.default_rng(0).integers(0, 256, (3, 32, 16, 3), dtype=np.uint8)
+    feats = loaded.embed(crops, "features")
+    assert feats.shape == (3, spec.features_dim)
+    np.testing.assert_allclose(np.linalg.norm(feats, axis=1), 1.0, atol=1e-5)
+    assert loaded.embed(crops).shape == (3, 8)
+    assert loaded.embed(crops[:0], "features").shape == (0, spec.features_dim)
+    with pytest.raises(BundleError, match="no 'colour' output"):
+        loaded.embed(crops, "colour")
+
+
+def test_a_bundle_without_features_still_loads(bundle):
+    """Bundles exported before the features output: descriptors only."""
+    _edit(bundle, lambda d: d["appearance"].pop("features_dim"))
+    loaded = load_bundle(bundle)
+    assert loaded.manifest.appearance.outputs == ("descriptors",)
+    crops = np.zeros((2, 32, 16, 3), np.uint8)
+    assert loaded.embed(crops).shape == (2, 8)
+    with pytest.raises(BundleError, match=r"no .features. output .*export it again"):
+        loaded.embed(crops, "features")
+
+
+def test_a_graph_without_the_features_the_manifest_names(bundle):
+    onnx = pytest.importorskip("onnx")
+    path = bundle / "appearance.onnx"
+    model = onnx.load(path)
+    del model.graph.output[1:]
+    path.write_bytes(model.SerializeToString())
+    _edit(bundle, lambda d: d["appearance"].update(
+        sha256=hashlib.sha256(path.read_bytes()).hexdigest()))
+    with pytest.raises(BundleError, match=_names(path, r"outputs are \['descriptors'\], the "
+                                                       "manifest expects")):
+        load_bundle(bundle)
+
+
 def test_the_manifest_records_the_backbone(bundle):
     spec = read_manifest(bundle).appearance
     assert spec.arch == "small"
@@ -169,6 +209,8 @@ def test_a_field_missing(bundle, where, key, name):
         (lambda d: d["appearance"].update(colour_order="RGB"), r"colour_order' must be 'BGR'"),
         (lambda d: d["appearance"].update(precision="fp16"), r"precision' must be fp32"),
         (lambda d: d["appearance"].update(embedding_dim=0), r"embedding_dim' must be in"),
+        (lambda d: d["appearance"].update(features_dim=0), r"features_dim' must be in 1-65536"),
+        (lambda d: d["appearance"].update(features_dim="1280"), r"features_dim' must be in"),
         (lambda d: d.update(appearance=None), r"appearance graph must be present"),
         (lambda d: d["appearance"].update(arch=50), r"'appearance.arch' must be a string"),
         (lambda d: d["appearance"].update(backbone="mobilenetv2"),

@@ -47,6 +47,9 @@ def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
     assert record["heldout"]["after"] > record["heldout"]["before"]
     bundle = load_bundle(site)
     assert bundle.adaptation is not None and bundle.adaptation.rank == record["rank"]
+    # The default network gives its pooled features, and adapt fits on them.
+    assert record["vector"] == bundle.adaptation.vector == "features"
+    assert bundle.adaptation.dim == bundle.manifest.appearance.features_dim
     pred = tmp_path / "pred.csv"
     short = {}
     for view in ("top", "hor"):  # the first 6 frames are enough to run it

@@ -100,6 +100,10 @@ def test_appearance_graph_carries_its_preprocessing(exported, tiny_models):
     assert (app["crop_size"], app["colour_order"], app["mean"], app["std"]) == (
         prep["crop_size"], "BGR", prep["mean"], prep["std"])
     assert app["embedding_dim"] == net.embedding_dim
+    # The second output, the pooled trunk activations, is what site adaptation fits on.
+    graph = onnx.load(os.fspath(out / "appearance.onnx")).graph
+    assert [o.name for o in graph.output] == ["descriptors", "features"]
+    assert app["features_dim"] == net.head[0].in_features
 
 
 def test_matcher_graph_carries_the_feature_layout(exported):

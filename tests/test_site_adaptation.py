@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from xvmatch.inference.bundle import DEFAULT_BUNDLE, BundleError, load_bundle, r
 from xvmatch.inference.learned_association import LearnedMatcher
 from xvmatch.inference.site_adaptation import (
     ADAPTATION_FILE,
+    RIDGE,
     PairSet,
     SiteAdaptation,
     adaptation_bytes,
@@ -178,6 +180,49 @@ def test_file_round_trip_and_checks(tmp_path) -> None:
         load_adaptation(path, DIM)
 
 
+def test_features_take_their_own_ridge_and_vector() -> None:
+    """Pairs of the network's features are fitted with :data:`RIDGE` ``["features"]`` and the
+    map says what it maps."""
+    pairs = replace(_site(6), vector="features")
+    fit = fit_site_adaptation(pairs, calibration="none")
+    assert fit.accepted and fit.adaptation.vector == "features"
+    explicit = fit_site_adaptation(pairs, calibration="none", reg=RIDGE["features"])
+    other = fit_site_adaptation(pairs, calibration="none", reg=RIDGE["descriptors"])
+    assert np.array_equal(fit.adaptation.projection, explicit.adaptation.projection)
+    assert not np.array_equal(fit.adaptation.projection, other.adaptation.projection)
+    with pytest.raises(ValueError, match=r"pairs\.vector must be one of"):
+        fit_site_adaptation(replace(pairs, vector="colour"))
+
+
+def test_file_of_a_feature_map_and_of_version_1(tmp_path) -> None:
+    """A features map loads only where the network gives features (of its size); a version 1
+    file (before ``vector``) maps the descriptors."""
+    fit = fit_site_adaptation(replace(_site(5), vector="features"), calibration="none")
+    path = tmp_path / ADAPTATION_FILE
+    path.write_bytes(adaptation_bytes(fit.adaptation))
+    back = load_adaptation(path, {"descriptors": 128, "features": DIM}.get)
+    assert back.vector == "features" and back.dim == DIM
+    with pytest.raises(ValueError, match="maps the network's features, which this bundle"):
+        load_adaptation(path, DIM)
+    with pytest.raises(ValueError, match="'top_mean' must be numbers of shape"):
+        load_adaptation(path, {"descriptors": DIM, "features": DIM + 1}.get)
+    arrays = fit.adaptation.arrays()
+    arrays["vector"] = np.array("colour")
+    np.savez(path, **arrays)
+    with pytest.raises(ValueError, match="'vector' must be one of"):
+        load_adaptation(path, {"descriptors": 128, "features": DIM}.get)
+    old = fit_site_adaptation(_site(5), calibration="none").adaptation.arrays()
+    old.pop("vector")
+    old["format_version"] = np.array(1)
+    np.savez(path, **old)
+    back = load_adaptation(path, DIM)
+    assert back.vector == "descriptors" and back.dim == DIM
+    old["format_version"] = np.array(3)
+    np.savez(path, **old)
+    with pytest.raises(ValueError, match="format version 3, this xvmatch reads 1, 2"):
+        load_adaptation(path, DIM)
+
+
 def _site_bundle(tmp_path, adaptation: SiteAdaptation, **record) -> tuple:
     """The shipped default's files plus ``adaptation`` and its manifest record."""
     folder = tmp_path / "site"
@@ -186,7 +231,8 @@ def _site_bundle(tmp_path, adaptation: SiteAdaptation, **record) -> tuple:
     (folder / ADAPTATION_FILE).write_bytes(data)
     doc = json.loads((folder / "manifest.json").read_text())
     doc["adaptation"] = {"file": ADAPTATION_FILE, "sha256": hashlib.sha256(data).hexdigest(),
-                         "format_version": 1, "rank": adaptation.rank, "fitted_on": {},
+                         "format_version": 2, "vector": adaptation.vector,
+                         "rank": adaptation.rank, "fitted_on": {},
                          "heldout": {}, **record}
     (folder / "manifest.json").write_text(json.dumps(doc))
     return folder, doc
@@ -212,6 +258,39 @@ def test_bundle_reads_an_adaptation(tmp_path) -> None:
     adapted = LearnedMatcher(load_bundle(folder2))
     assert np.allclose(adapted.appearance_cost(a, b), cast.cost(a, b))
     assert not np.allclose(adapted.appearance_cost(a, b), default.appearance_cost(a, b))
+
+
+def test_bundle_reads_a_feature_adaptation(tmp_path) -> None:
+    """A site adapted on the network's features: the cross-view cue takes the features of the
+    boxes (``cue_vectors``), the descriptors stay the descriptors."""
+    spec = read_manifest(DEFAULT_BUNDLE).appearance
+    rng = np.random.default_rng(1)
+    dim = spec.features_dim
+    cast = SiteAdaptation(np.full(dim, 0.01), np.ones(dim), np.zeros(dim), np.ones(dim),
+                          np.eye(dim)[:, :8], np.array([1.0, 0.0]), 8, "features")
+    folder, _ = _site_bundle(tmp_path, cast)
+    site = LearnedMatcher(load_bundle(folder))
+    assert site.cue_vector == "features"
+    assert LearnedMatcher(load_bundle("default")).cue_vector == "descriptors"
+    image = rng.integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    boxes = np.array([[10.0, 10.0, 30.0, 60.0], [60.0, 20.0, 25.0, 70.0]])
+    vectors = site.cue_vectors(image, boxes)
+    assert vectors.shape == (2, dim)
+    assert site.descriptors(image, boxes).shape == (2, spec.embedding_dim)
+    assert np.allclose(site.appearance_cost(vectors, vectors), cast.cost(vectors, vectors))
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"vector": "descriptors"}, "it maps the features but the manifest says descriptors"),
+    ({"vector": "colour"}, "'adaptation.vector' must name an output"),
+    ({"rank": 2000}, "'adaptation.rank' must be in 0-1280"),
+])
+def test_bundle_refuses_a_bad_feature_adaptation(tmp_path, change: dict, message: str) -> None:
+    dim = read_manifest(DEFAULT_BUNDLE).appearance.features_dim
+    folder, _ = _site_bundle(tmp_path, SiteAdaptation.identity(dim, "features"), **change)
+    with pytest.raises(BundleError, match=message) as info:
+        load_bundle(folder)
+    assert "\n" not in str(info.value)
 
 
 @pytest.mark.parametrize(("change", "message"), [

@@ -130,6 +130,16 @@ def test_network_appearance_of_tracklets():
     np.testing.assert_array_equal(descriptor_similarity(app, app, site_cost),
                                   np.full((len(tracklets),) * 2, 0.75))
     assert calls == [((len(tracklets), 128), (len(tracklets), 128))]
+    # A site adapted on the network's features: the cross-view cue takes those, the over-time
+    # terms keep the descriptors.
+    both = clip_appearance(tracklets, video.top, hist, video.top_images, model.descriptors,
+                           lambda image, boxes: model.descriptors(image, boxes, "features"))
+    np.testing.assert_array_equal(both.descriptors, app.descriptors)
+    assert both.cross.shape == (len(tracklets), 1280)
+    calls.clear()
+    descriptor_similarity(both, both, site_cost, cross=True)
+    descriptor_similarity(both, both, site_cost)
+    assert calls == [((len(tracklets), 1280),) * 2, ((len(tracklets), 128),) * 2]
 
 
 def _as_rows(frames):

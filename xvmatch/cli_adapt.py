@@ -129,7 +129,8 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
         roles["cameras"] = args.cameras
     write_site_bundle(model.bundle.manifest.folder, out, run, roles, __version__)
     if not args.quiet:
-        print(f"adapted on {run.frames_scored} frames ({len(run.mined.embed_frames)} embedded): "
+        print(f"adapted the network's {fit.adaptation.vector} on {run.frames_scored} frames "
+              f"({len(run.mined.embed_frames)} embedded): "
               f"{run.counts['cross_pos']} cross-view pseudo-matches; rank "
               f"{fit.adaptation.rank}; held-out AUC {fit.auc_before:.3f} -> {fit.auc_after:.3f}; "
               f"wrote {out}/ (use: xvmatch associate --model {out} ...)", file=sys.stderr)

@@ -120,7 +120,9 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
             source.close()
         raise
     cross_cost = model.appearance_cost if embed is not None else None  # a site's adaptation
-    return TrackImages(sources[0], sources[1], embed, cross_cost), sources, size
+    cross_embed = (model.cue_vectors if embed is not None and model.cue_vector != "descriptors"
+                   else None)
+    return TrackImages(sources[0], sources[1], embed, cross_cost, cross_embed), sources, size
 
 
 def _aligned(top, hor, images, offset: int):
