@@ -2,8 +2,10 @@
 
 The appearance network (``appearance.onnx``) was fine-tuned on renders; at a real site each
 camera adds its own colour cast, blur and noise, and the appearance cost ``|a - b| / 2`` of two
-views' descriptors loses its meaning. :class:`SiteAdaptation` is a small map on the network's
-``(K, D)`` unit descriptors, learned from pairs mined on the site's own videos
+views' descriptors loses its meaning. :class:`SiteAdaptation` is a small map on ``(K, D)`` unit
+vectors of the network (its pooled trunk features when it gives them, which keep more of what a
+camera change leaves of a person than the head's descriptors; else the descriptors; ``vector``
+says which), learned from pairs mined on the site's own videos
 (:mod:`xvmatch.inference.adaptation_pairs`), with no identities:
 
 1. **per-view standardisation** ``x = (d - mean_v) / scale_v`` (``v`` = top or horizontal): a
