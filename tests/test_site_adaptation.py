@@ -260,6 +260,22 @@ def test_bundle_reads_an_adaptation(tmp_path) -> None:
     assert not np.allclose(adapted.appearance_cost(a, b), default.appearance_cost(a, b))
 
 
+def test_a_site_bundle_written_before_features_still_loads(tmp_path) -> None:
+    """A site bundle of format 1 (no ``vector`` in its file or manifest) maps the descriptors."""
+    dim = read_manifest(DEFAULT_BUNDLE).appearance.embedding_dim
+    folder, doc = _site_bundle(tmp_path, SiteAdaptation.identity(dim))
+    arrays = SiteAdaptation.identity(dim).arrays()
+    arrays.pop("vector")
+    arrays["format_version"] = np.array(1)
+    np.savez(folder / ADAPTATION_FILE, **arrays)
+    doc["adaptation"].pop("vector")
+    doc["adaptation"].update(format_version=1, sha256=hashlib.sha256(
+        (folder / ADAPTATION_FILE).read_bytes()).hexdigest())
+    (folder / "manifest.json").write_text(json.dumps(doc))
+    site = LearnedMatcher(load_bundle(folder))
+    assert site.bundle.adaptation.vector == "descriptors" and site.cue_vector == "descriptors"
+
+
 def test_bundle_reads_a_feature_adaptation(tmp_path) -> None:
     """A site adapted on the network's features: the cross-view cue takes the features of the
     boxes (``cue_vectors``), the descriptors stay the descriptors."""
