@@ -131,8 +131,8 @@ def adapt_to_site(
 
 def adapted_vector(spec) -> str:
     """What ``adapt`` fits on for a network with this :class:`~xvmatch.inference.bundle.
-    AppearanceSpec`: its pooled features when the graph gives them (they recover about half
-    again as much of a camera change as the descriptors, docs/adaptation.md), else its
+    AppearanceSpec`: its pooled features when the graph gives them (they recover a third to a
+    half more of a camera change than the descriptors, docs/adaptation.md), else its
     descriptors."""
     return "descriptors" if spec.features_dim is None else "features"
 
