@@ -143,12 +143,14 @@ class AdaptationRecord:
         sha256: its checksum.
         rank: the rank of its projection (0: standardisation alone).
         record: the whole object (what it was fitted on, its held-out figures, ...).
+        vector: what it maps (``"descriptors"`` when the record, of format 1, does not say).
     """
 
     file: str
     sha256: str
     rank: int
     record: dict = field(default_factory=dict)
+    vector: str = "descriptors"
 
 
 @dataclass(frozen=True)
@@ -347,7 +349,7 @@ def _adaptation_record(doc: dict, path: Path, spec: AppearanceSpec | None
         raise _fail(path, f"manifest field 'adaptation.rank' must be in 0-{dim}, got {rank}")
     for key in ("fitted_on", "heldout"):
         _get(adapt, key, dict, path, "adaptation.")
-    return AdaptationRecord(name, sha, rank, dict(adapt))
+    return AdaptationRecord(name, sha, rank, dict(adapt), vector)
 
 
 def _checked_file(folder: Path, name: str, sha: str) -> Path:
@@ -603,9 +605,9 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
             adaptation = load_adaptation(adapt_path, manifest.appearance.dim)
         except ValueError as exc:
             raise _fail(adapt_path, str(exc)) from None
-        if adaptation.vector != record.record.get("vector", "descriptors"):
+        if adaptation.vector != record.vector:
             raise _fail(adapt_path, f"it maps the {adaptation.vector} but the manifest says "
-                        f"{record.record.get('vector', 'descriptors')}; run xvmatch adapt again")
+                        f"{record.vector}; run xvmatch adapt again")
         if adaptation.rank != record.rank:
             raise _fail(adapt_path, f"rank {adaptation.rank} but the manifest says "
                         f"{record.rank}; run xvmatch adapt again")
