@@ -169,14 +169,13 @@ def adaptation_bytes(adaptation: SiteAdaptation) -> bytes:
 
 
 def load_adaptation(path: str | os.PathLike,
-                    dims: int | Callable[[str], int | None]) -> SiteAdaptation:
+                    dims: Callable[[str], int | None]) -> SiteAdaptation:
     """Read ``adaptation.npz``, every array checked against the vector it maps.
 
     Args:
         path: the file.
         dims: the size of each vector the network gives (``vector -> size or None``, e.g.
-            :meth:`xvmatch.inference.bundle.AppearanceSpec.dim`); an int: the descriptor size of
-            a network without features.
+            :meth:`xvmatch.inference.bundle.AppearanceSpec.dim`).
 
     Raises:
         ValueError: unreadable, a pickled object, an array missing, of the wrong shape or not
@@ -202,7 +201,7 @@ def load_adaptation(path: str | os.PathLike,
         if v is None or v.shape != () or v.dtype.kind != "U" or str(v) not in VECTORS:
             raise ValueError(f"array 'vector' must be one of {VECTORS}")
         vector = str(v)
-    dim = (dims if vector == "descriptors" else None) if isinstance(dims, int) else dims(vector)
+    dim = dims(vector)
     if dim is None:
         raise ValueError(f"it maps the network's {vector}, which this bundle's appearance "
                          "network does not give; run xvmatch adapt again")

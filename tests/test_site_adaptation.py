@@ -160,24 +160,24 @@ def test_file_round_trip_and_checks(tmp_path) -> None:
     fit = fit_site_adaptation(_site(5), calibration="none")
     path = tmp_path / ADAPTATION_FILE
     path.write_bytes(adaptation_bytes(fit.adaptation))
-    back = load_adaptation(path, DIM)
+    back = load_adaptation(path, {"descriptors": DIM}.get)
     for key, value in fit.adaptation.arrays().items():
         assert np.array_equal(back.arrays()[key], value), key
     with pytest.raises(ValueError, match="'top_mean' must be numbers of shape"):
-        load_adaptation(path, DIM + 1)
+        load_adaptation(path, {"descriptors": DIM + 1}.get)
     arrays = fit.adaptation.arrays()
     arrays["top_scale"] = -arrays["top_scale"]
     np.savez(path, **arrays)
     with pytest.raises(ValueError, match="must be > 0"):
-        load_adaptation(path, DIM)
+        load_adaptation(path, {"descriptors": DIM}.get)
     arrays = fit.adaptation.arrays()
     arrays["projection"] = np.array([object()] * 3, dtype=object)
     np.savez(path, **arrays)
     with pytest.raises(ValueError, match=r"not a readable adaptation file|projection"):
-        load_adaptation(path, DIM)
+        load_adaptation(path, {"descriptors": DIM}.get)
     path.write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not a readable adaptation file"):
-        load_adaptation(path, DIM)
+        load_adaptation(path, {"descriptors": DIM}.get)
 
 
 def test_features_take_their_own_ridge_and_vector() -> None:
@@ -203,7 +203,7 @@ def test_file_of_a_feature_map_and_of_version_1(tmp_path) -> None:
     back = load_adaptation(path, {"descriptors": 128, "features": DIM}.get)
     assert back.vector == "features" and back.dim == DIM
     with pytest.raises(ValueError, match="maps the network's features, which this bundle"):
-        load_adaptation(path, DIM)
+        load_adaptation(path, {"descriptors": DIM}.get)
     with pytest.raises(ValueError, match="'top_mean' must be numbers of shape"):
         load_adaptation(path, {"descriptors": DIM, "features": DIM + 1}.get)
     arrays = fit.adaptation.arrays()
@@ -215,12 +215,12 @@ def test_file_of_a_feature_map_and_of_version_1(tmp_path) -> None:
     old.pop("vector")
     old["format_version"] = np.array(1)
     np.savez(path, **old)
-    back = load_adaptation(path, DIM)
+    back = load_adaptation(path, {"descriptors": DIM}.get)
     assert back.vector == "descriptors" and back.dim == DIM
     old["format_version"] = np.array(3)
     np.savez(path, **old)
     with pytest.raises(ValueError, match="format version 3, this xvmatch reads 1, 2"):
-        load_adaptation(path, DIM)
+        load_adaptation(path, {"descriptors": DIM}.get)
 
 
 def _site_bundle(tmp_path, adaptation: SiteAdaptation, **record) -> tuple:
