@@ -18,7 +18,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-__all__ = ["GAMMA_GRID", "assign", "assignment_matrix", "augmented_cost_matrix"]
+__all__ = [
+    "GAMMA_GRID",
+    "assign",
+    "assignment_is_stable",
+    "assignment_matrix",
+    "augmented_cost_matrix",
+]
 
 GAMMA_GRID: tuple[float, ...] = tuple(round(0.05 * k, 2) for k in range(1, 21))
 """Candidate non-association costs for choosing gamma on validation data: 0.05, 0.10, ..., 1.0
@@ -98,6 +104,37 @@ def assign(cost: np.ndarray, gamma: float) -> np.ndarray:
     keep = c[rows, cols] < float(gamma)  # drop ties (c == gamma): same objective, deterministic
     pairs = np.stack([rows[keep], cols[keep]], axis=1).astype(np.int64)
     return pairs[np.argsort(pairs[:, 0], kind="stable")].reshape(-1, 2)
+
+
+def assignment_is_stable(cost: np.ndarray, gamma: float, tolerance: float) -> bool:
+    """Whether :func:`assign`'s solution stays optimal however each finite cost moves by up to
+    ``tolerance`` (``gamma`` fixed): a cost matrix known only that closely gives these pairs.
+
+    The worst case for the solution ``A`` raises its own pairs' costs and lowers every other:
+    for any ``C'`` within the tolerance and any other assignment ``B``,
+    ``C'(A) - C'(B) <= W(A) - W(B)`` with ``W`` that worst case, since the pairs both share
+    cancel. So ``A`` stays optimal for all of them exactly when it is optimal for ``W``: one more
+    Hungarian solve (ties count as stable).
+
+    Raises:
+        ValueError: as :func:`assign`, or a negative or non-finite ``tolerance``.
+    """
+    t = float(tolerance)
+    if not (np.isfinite(t) and t >= 0):
+        raise ValueError(f"tolerance must be finite and >= 0, got {tolerance}")
+    augmented = augmented_cost_matrix(cost, gamma)
+    m, n = np.asarray(cost).shape
+    if m == 0 or n == 0:
+        return True
+    rows, cols = linear_sum_assignment(augmented)
+    worst = augmented.copy()
+    worst[:m, :n] -= t  # inf stays inf: a forbidden pair stays forbidden
+    real = (rows < m) & (cols < n)
+    worst[rows[real], cols[real]] += 2.0 * t
+    chosen = worst[rows, cols].sum()
+    r, c = linear_sum_assignment(worst)
+    best = worst[r, c].sum()
+    return bool(chosen <= best + 1e-9 * max(1.0, abs(best)))
 
 
 def assignment_matrix(pairs: np.ndarray, m: int, n: int) -> np.ndarray:

@@ -59,6 +59,7 @@ __all__ = [
     "int8_agreement",
     "int8_dot_flags",
     "int8_is_safe",
+    "int8_recheck_tolerance",
     "int8_refusal",
     "load_bundle",
     "open_session",
@@ -391,6 +392,10 @@ class Bundle:
         threads: onnxruntime intra-op threads of each session.
         precision: the appearance network in use, ``"fp32"`` or ``"int8"`` (None without one).
         adaptation: a site bundle's adaptation of the descriptors, or None.
+        recheck: with INT8 opened for a caller that re-checks, the cost tolerance within which
+            a frame's assignment must be stable to keep its INT8 costs
+            (:func:`int8_recheck_tolerance`); None otherwise.
+        reference: the FP32 appearance session the re-checked frames run (with ``recheck``).
     """
 
     manifest: Manifest
@@ -399,26 +404,36 @@ class Bundle:
     threads: int = 1
     precision: str | None = None
     adaptation: SiteAdaptation | None = None
+    recheck: float | None = None
+    reference: Any = None
 
     @property
     def name(self) -> str:
         """The bundle folder, for messages."""
         return os.fspath(self.manifest.folder)
 
-    def embed(self, crops: np.ndarray, vector: str = "descriptors") -> np.ndarray:
+    def embed(self, crops: np.ndarray, vector: str = "descriptors",
+              reference: bool = False) -> np.ndarray:
         """``(K, D)`` float32 unit descriptors of ``(K, H, W, 3)`` uint8 BGR crops, in one
         batch (``K`` may be 0); with ``vector="features"``, the ``(K, C)`` pooled trunk
-        activations instead, scaled to unit length (onnxruntime then skips the head)."""
+        activations instead, scaled to unit length (onnxruntime then skips the head). With
+        ``reference``, by the FP32 network that re-checks INT8 frames."""
         spec = self.manifest.appearance
         if self.appearance is None or spec is None:
             raise BundleError(f"{self.name}: this bundle has no appearance network")
+        session = self.appearance
+        if reference:
+            if self.reference is None:
+                raise BundleError(f"{self.name}: opened without an FP32 network to re-check "
+                                  "with")
+            session = self.reference
         dim = spec.dim(vector)
         if dim is None:
             raise BundleError(f"{self.name}: the appearance network has no {vector!r} output "
                               f"(it has {', '.join(spec.outputs)}); export it again")
         if crops.shape[0] == 0:
             return np.zeros((0, dim), np.float32)
-        out = self.appearance.run([vector], {APPEARANCE_INPUT: crops})[0]
+        out = session.run([vector], {APPEARANCE_INPUT: crops})[0]
         if vector == "features":  # unit length: a crop's overall activation says more about
             # its exposure than about the person
             out = out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
@@ -485,11 +500,27 @@ by the luck of a few hundred pairs (an export measured 213 of 215 pairs, 99.1%, 
 network that kept 98.7% of 716 on the deployed benchmark)."""
 
 
-def _agreement_counts(int8: dict) -> dict[str, tuple[int, int]] | None:
-    """``{setting: (kept, pairs)}`` of the manifest's ``appearance.int8.agreement``; None when
-    it records none or a count is impossible."""
+def int8_recheck_tolerance(int8: dict) -> float | None:
+    """The manifest's ``appearance.int8.recheck.tolerance``: how far INT8 moved the matcher's
+    costs at export (the median frame's largest change). A frame whose INT8 assignment is not
+    stable within it (:func:`~xvmatch.inference.assignment.assignment_is_stable`) is run again
+    with FP32; None when the manifest records none (or an unusable one)."""
     try:
-        counts = {str(s): (int(v["kept"]), int(v["pairs"])) for s, v in int8["agreement"].items()}
+        tolerance = float(int8["recheck"]["tolerance"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return tolerance if math.isfinite(tolerance) and 0.0 <= tolerance <= 1.0 else None
+
+
+def _agreement_counts(int8: dict, recheck: bool = False) -> dict[str, tuple[int, int]] | None:
+    """``{setting: (kept, pairs)}`` of the manifest's ``appearance.int8.agreement`` (with
+    ``recheck``, of ``appearance.int8.recheck.agreement`` when it records a tolerance); None
+    when it records none or a count is impossible."""
+    try:
+        record = int8["agreement"]
+        if recheck and int8_recheck_tolerance(int8) is not None:
+            record = int8["recheck"]["agreement"]
+        counts = {str(s): (int(v["kept"]), int(v["pairs"])) for s, v in record.items()}
     except (KeyError, TypeError, ValueError, AttributeError):
         return None
     if not counts or any(n <= 0 or not 0 <= kept <= n for kept, n in counts.values()):
@@ -505,28 +536,29 @@ def _wilson_lower(kept: int, n: int, z: float) -> float:
     return (centre - spread) / (1 + z * z / n)
 
 
-def int8_agreement(int8: dict, z: float = 1.645) -> float | None:
+def int8_agreement(int8: dict, z: float = 1.645, recheck: bool = False) -> float | None:
     """The smallest one-sided lower confidence bound (Wilson score, ``z`` 1.645: 95%) of the
-    share of FP32's matched pairs INT8 kept, over the settings the manifest's
-    ``appearance.int8.agreement`` records; None when it records none."""
-    counts = _agreement_counts(int8)
+    share of FP32's matched pairs INT8 kept (with ``recheck``: INT8 with its near-tie frames
+    re-checked in FP32), over the settings the manifest records; None when it records none."""
+    counts = _agreement_counts(int8, recheck)
     if counts is None:
         return None
     return min(_wilson_lower(kept, n, z) for kept, n in counts.values())
 
 
-def int8_refusal(int8: dict, z: float = 1.645) -> str | None:
+def int8_refusal(int8: dict, z: float = 1.645, recheck: bool = False) -> str | None:
     """Why the runtime will not pick the INT8 network on its own (a clause for a message), or
     None when it kept the FP32 accuracy at export (within :data:`INT8_MAX_LOSS`) and FP32's
-    matches (at least :data:`INT8_MIN_AGREEMENT` of the pairs, with confidence); unknown counts
-    as not kept."""
+    matches (at least :data:`INT8_MIN_AGREEMENT` of the pairs, with confidence; with
+    ``recheck``, the pairs INT8 kept with its near-tie frames re-checked in FP32, for a caller
+    that re-checks them); unknown counts as not kept."""
     loss = int8_accuracy_loss(int8)
     if loss is None:
         return "the manifest records no INT8 accuracy"
     if loss > INT8_MAX_LOSS:
         return (f"it lost {loss:.1f} Eq. 9 points against FP32 at export (at most "
                 f"{INT8_MAX_LOSS:g})")
-    counts = _agreement_counts(int8)
+    counts = _agreement_counts(int8, recheck)
     if counts is None:
         return "the manifest records no agreement with FP32's matched pairs"
     setting, (kept, n) = min(counts.items(), key=lambda c: _wilson_lower(*c[1], z))
@@ -542,13 +574,13 @@ def int8_refusal(int8: dict, z: float = 1.645) -> str | None:
             f"not shown to be {share} or more with 95% confidence")
 
 
-def int8_is_safe(int8: dict) -> bool:
+def int8_is_safe(int8: dict, recheck: bool = False) -> bool:
     """Whether the runtime may pick the INT8 network on its own (:func:`int8_refusal`)."""
-    return int8_refusal(int8) is None
+    return int8_refusal(int8, recheck=recheck) is None
 
 
 def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,
-                precision: str | None = None) -> Bundle:
+                precision: str | None = None, recheck: bool = False) -> Bundle:
     """Open a bundle folder, or the shipped default with ``"default"``.
 
     Args:
@@ -558,7 +590,11 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
             the INT8 one when the bundle has it, the CPU has 8-bit dot-product instructions
             (:func:`fast_int8_cpu`; measured on an AVX2-only CPU, INT8 was 0.76x the speed of
             FP32 for the compact network) and it kept the FP32 accuracy and matches at export
-            (:func:`int8_is_safe`), else FP32.
+            (:func:`int8_is_safe`) and the bundle is not a site bundle (``adapt``), else FP32.
+        recheck: the caller re-checks INT8's near-tie frames in FP32 (``associate``): INT8 is
+            then judged by the agreement measured that way, and the bundle carries the
+            tolerance and the FP32 session (:attr:`Bundle.recheck`, :attr:`Bundle.reference`)
+            when the manifest records a tolerance.
 
     Raises:
         BundleError: anything wrong with the manifest or a file (one line naming the file).
@@ -576,11 +612,14 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
     if missing or [i.name for i in matcher.get_outputs()][:1] != [MATCHER_OUTPUT]:
         raise _fail(matcher_path, f"not a matcher graph (inputs {names}, expected "
                     f"{list(MATCHER_INPUTS)})")
-    appearance = None
+    appearance = reference = tolerance = None
     used = None
     if manifest.appearance is not None:
         spec = manifest.appearance
-        auto = precision is None and int8_is_safe(spec.int8) and fast_int8_cpu()
+        # A site bundle's adaptation was fitted on FP32 vectors, and the agreement measured
+        # without it: INT8 there only when asked for.
+        auto = (precision is None and manifest.adaptation is None
+                and int8_is_safe(spec.int8, recheck) and fast_int8_cpu())
         used = "int8" if spec.int8_file is not None and (precision == "int8" or auto) else "fp32"
         if precision == "int8" and spec.int8_file is None:
             raise _fail(folder, "this bundle has no INT8 appearance network (export it with "
@@ -589,14 +628,11 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
             app_path = _checked_file(folder, spec.int8_file, spec.int8_sha256)
         else:
             app_path = _checked_file(folder, spec.file, spec.sha256)
-        appearance = open_session(app_path, threads)
-        inputs = appearance.get_inputs()
-        if [i.name for i in inputs] != [APPEARANCE_INPUT]:
-            raise _fail(app_path, f"not an appearance graph (inputs {[i.name for i in inputs]})")
-        outputs = [o.name for o in appearance.get_outputs()]
-        if outputs[:len(spec.outputs)] != list(spec.outputs):
-            raise _fail(app_path, f"the graph's outputs are {outputs}, the manifest expects "
-                        f"{list(spec.outputs)}")
+        appearance = _appearance_session(app_path, spec, threads)
+        tolerance = int8_recheck_tolerance(spec.int8) if recheck and used == "int8" else None
+        if tolerance is not None:
+            reference = _appearance_session(_checked_file(folder, spec.file, spec.sha256), spec,
+                                            threads)
     adaptation = None
     record = manifest.adaptation
     if record is not None and manifest.appearance is not None:
@@ -611,4 +647,18 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
         if adaptation.rank != record.rank:
             raise _fail(adapt_path, f"rank {adaptation.rank} but the manifest says "
                         f"{record.rank}; run xvmatch adapt again")
-    return Bundle(manifest, matcher, appearance, int(threads), used, adaptation)
+    return Bundle(manifest, matcher, appearance, int(threads), used, adaptation, tolerance,
+                  reference)
+
+
+def _appearance_session(path: Path, spec: AppearanceSpec, threads: int):
+    """An onnxruntime session of an appearance graph, checked against the manifest."""
+    session = open_session(path, threads)
+    inputs = session.get_inputs()
+    if [i.name for i in inputs] != [APPEARANCE_INPUT]:
+        raise _fail(path, f"not an appearance graph (inputs {[i.name for i in inputs]})")
+    outputs = [o.name for o in session.get_outputs()]
+    if outputs[:len(spec.outputs)] != list(spec.outputs):
+        raise _fail(path, f"the graph's outputs are {outputs}, the manifest expects "
+                    f"{list(spec.outputs)}")
+    return session

@@ -8,6 +8,12 @@ cheirality cues. Frames go through ``matcher.onnx`` in padded batches; each cost
 [0, 1] goes through the Hungarian assignment with the non-association cost gamma (Eqs. 1-2 of
 the geometric-priors paper, :func:`xvmatch.inference.assignment.assign`).
 
+With an INT8 appearance network opened for re-checking (``load_bundle(..., recheck=True)``, as
+``associate`` does), a frame whose assignment is not stable within the tolerance the export
+measured (how far INT8 moves the costs; :func:`~xvmatch.inference.assignment.
+assignment_is_stable`) is scored again with the FP32 network: near ties, where INT8's rounding
+could flip a pair, get FP32's answer.
+
 The input settings of one bundle: boxes only (CVMHAT), images and boxes, images, boxes and
 cameras (and boxes and cameras). Ids are only used to report pairs, to find O when the user
 names the wearer's top-view id, and never reach the matcher.
@@ -35,7 +41,7 @@ from xvmatch.geometry.matcher_inputs import (
 )
 from xvmatch.geometry.spatial_features import FeatureConfig, FrameFeatures
 from xvmatch.geometry.spatial_search import FrameLike
-from xvmatch.inference.assignment import assign
+from xvmatch.inference.assignment import assign, assignment_is_stable
 from xvmatch.inference.bundle import Bundle, load_bundle
 
 __all__ = [
@@ -45,6 +51,7 @@ __all__ = [
     "associate_sequence_learned",
     "load_matcher_bundle",
     "non_association_cost",
+    "rechecked_costs",
 ]
 
 
@@ -94,6 +101,21 @@ class LearnedMatcher:
         """The vectors :meth:`appearance_cost` takes, of the boxes of one image."""
         return self.descriptors(image, boxes, self.cue_vector)
 
+    def crops(self, image: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """``(K, H, W, 3)`` uint8 crops of the boxes of one image, as the network takes them."""
+        spec = self.bundle.manifest.appearance
+        if spec is None:
+            raise ValueError(f"{self.bundle.name}: this bundle has no appearance network")
+        return box_crops(image, boxes, spec.crop_size, spec.context)
+
+    def crop_cost(self, top: np.ndarray, hor: np.ndarray, reference: bool = False
+                  ) -> np.ndarray:
+        """``(M, N)`` appearance cue of top and horizontal crops (:meth:`crops`); with
+        ``reference``, embedded by the FP32 network that re-checks INT8 frames."""
+        vector = self.cue_vector
+        return self.appearance_cost(self.bundle.embed(top, vector, reference),
+                                    self.bundle.embed(hor, vector, reference))
+
     def appearance_cost(self, top: np.ndarray, hor: np.ndarray) -> np.ndarray:
         """``(M, N)`` appearance cue of raw top ``(M, D)`` and horizontal ``(N, D)`` vectors
         (:meth:`cue_vectors`): ``|a - b| / 2`` of the descriptors, or a site bundle's adapted
@@ -137,14 +159,14 @@ class LearnedMatcher:
 
 
 def load_matcher_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,
-                        precision: str | None = None) -> LearnedMatcher:
-    """Open a bundle folder (or ``"default"``) as a :class:`LearnedMatcher` (``threads`` and
-    ``precision`` as :func:`~xvmatch.inference.bundle.load_bundle`).
+                        precision: str | None = None, recheck: bool = False) -> LearnedMatcher:
+    """Open a bundle folder (or ``"default"``) as a :class:`LearnedMatcher` (``threads``,
+    ``precision`` and ``recheck`` as :func:`~xvmatch.inference.bundle.load_bundle`).
 
     Raises:
         BundleError: an unusable bundle (one line naming the file).
     """
-    return LearnedMatcher(load_bundle(path_or_default, threads, precision))
+    return LearnedMatcher(load_bundle(path_or_default, threads, precision, recheck))
 
 
 def non_association_cost(models: Sequence[LearnedMatcher], gamma: float | None = None) -> float:
@@ -261,6 +283,7 @@ def associate_sequence_learned(
     top_images: FrameImages | None = None,
     hor_images: FrameImages | None = None,
     cameras: FrameCameraSource | None = None,
+    rechecked: list[int] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame on its own with the learned matcher; ``{frame: [(top_id, hor_id)]}``.
 
@@ -286,6 +309,9 @@ def associate_sequence_learned(
             appearance cue; both or neither.
         cameras: the calibrated cameras of each frame (``get(frame)``), for the camera cues and
             the rectified geometry.
+        rechecked: if given, filled with the frames scored again with FP32 because their INT8
+            assignment was a near tie (models opened with ``recheck``; see the module
+            docstring).
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
@@ -310,40 +336,65 @@ def associate_sequence_learned(
     out: dict[int, list[tuple[int, int]]] = {}
     pending: list[tuple[int, list[list[FrameFeatures]], dict]] = []
 
+    tolerance = max((m.bundle.recheck for m in models if m.bundle.recheck is not None),
+                    default=None) if top_images is not None else None
+
     def raw_cues(frame: int) -> dict:
-        """The frame's cues in input order: appearance cost, ray distance, cheirality."""
+        """The frame's cues in input order: appearance cost, ray distance, cheirality; and
+        the crops of each model that re-checks INT8 frames."""
         t_boxes, h_boxes = top[frame].boxes, hor[frame].boxes
         cues: dict = {}
         if top_images is not None:
-            per_model = []
+            t_image, h_image = top_images.get(frame), hor_images.get(frame)
+            per_model, crops = [], []
             for m in models:
-                a = m.cue_vectors(top_images.get(frame), t_boxes)
-                b = m.cue_vectors(hor_images.get(frame), h_boxes)
-                per_model.append(m.appearance_cost(a, b))
+                a, b = m.crops(t_image, t_boxes), m.crops(h_image, h_boxes)
+                per_model.append(m.crop_cost(a, b))
+                crops.append((a, b) if m.bundle.recheck is not None else None)
             cues["app"] = per_model
+            cues["crops"] = crops
         if cameras is not None:
             ray, cheir = camera_cues(cameras.get(frame), t_boxes, h_boxes, manifest.margin,
                                      manifest.beta)
             cues["ray_distance"], cues["cheirality"] = ray, cheir
         return cues
 
-    def flush() -> None:
+    def frame_costs(entries: list[tuple[int, list[list[FrameFeatures]], dict]]
+                    ) -> list[np.ndarray]:
+        """Each entry's cost matrix (input order), averaged over models and mirror copies."""
         per_model = []
         for k, m in enumerate(models):
             c = configs.index(m.feature_config)
             items = []
-            for frame, groups, cues in pending:
+            for frame, groups, cues in entries:
                 shape = (len(top[frame].ids), len(hor[frame].ids))
                 for feats in groups[c]:
                     items.append(m.inputs(feats, shape, cues["app"][k] if "app" in cues else None,
                                           cues.get("ray_distance"), cues.get("cheirality")))
             per_model.append(iter(m.costs(items, batch_size)))
-        for frame, groups, _ in pending:
-            cost = np.mean([
-                _input_order(f, next(costs))
-                for m, costs in zip(models, per_model, strict=True)
-                for f in groups[configs.index(m.feature_config)]
-            ], axis=0)
+        return [np.mean([_input_order(f, next(costs))
+                         for m, costs in zip(models, per_model, strict=True)
+                         for f in groups[configs.index(m.feature_config)]], axis=0)
+                for _, groups, _ in entries]
+
+    def with_reference(cues: dict) -> dict:
+        """The cues with each re-checking model's appearance cost from its FP32 network."""
+        app = [c if kept is None else m.crop_cost(*kept, reference=True)
+               for m, c, kept in zip(models, cues["app"], cues["crops"], strict=True)]
+        return {**cues, "app": app}
+
+    def flush() -> None:
+        costs = frame_costs(pending)
+        if tolerance is not None:
+            near = [k for k, cost in enumerate(costs)
+                    if not assignment_is_stable(cost, gamma, tolerance)]
+            again = frame_costs([(f, g, with_reference(c))
+                                 for f, g, c in (pending[k] for k in near)])
+            for k, cost in zip(near, again, strict=True):
+                costs[k] = cost
+            if rechecked is not None:
+                rechecked.extend(pending[k][0] for k in near)
+        for (frame, _, _), cost in zip(pending, costs, strict=True):
             if costs_out is not None:
                 costs_out[frame] = cost
             pairs = assign(cost, gamma)
@@ -378,3 +429,16 @@ def associate_sequence_learned(
     finally:
         stream.close()  # shuts the worker pool down, also on an error or an interrupt
     return {f: out[f] for f in order}
+
+
+def rechecked_costs(fp32: Sequence[np.ndarray], int8: Sequence[np.ndarray], gamma: float,
+                    tolerance: float) -> tuple[list[np.ndarray], int]:
+    """What :func:`associate_sequence_learned` uses with INT8 re-checked, for costs known with
+    both networks (evaluation): each frame's INT8 costs when its assignment is stable within
+    ``tolerance``, else its FP32 costs; and how many were re-checked."""
+    out, again = [], 0
+    for a, b in zip(fp32, int8, strict=True):
+        stable = assignment_is_stable(b, gamma, tolerance)
+        out.append(b if stable else a)
+        again += not stable
+    return out, again

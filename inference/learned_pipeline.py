@@ -22,7 +22,7 @@ lines name the command-line options that supply each input (``--top-images``, ``
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -113,6 +113,8 @@ class LearnedRun:
         hor_size: ``(W, H)`` of the horizontal images used.
         hor_size_source: where it comes from.
         models: the matchers used.
+        rechecked: the frames scored again with FP32 because their INT8 assignment was a near
+            tie (matchers opened with ``recheck``).
     """
 
     pairs: dict[int, list[tuple[int, int]]]
@@ -121,6 +123,7 @@ class LearnedRun:
     hor_size: tuple[int, int]
     hor_size_source: str
     models: tuple[LearnedMatcher, ...]
+    rechecked: list[int] = field(default_factory=list)
 
 
 class RetimedFrames:
@@ -247,6 +250,7 @@ class LearnedInputs:
         options = self.options
         width, height = options.hor_size
         costs: dict | None = {} if options.keep_costs else None
+        rechecked: list[int] = []
         pairs = associate_sequence_learned(
             self.top,
             self.hor,
@@ -263,9 +267,10 @@ class LearnedInputs:
             hor_images=self.images.get("hor"),
             cameras=self.cameras,
             costs_out=costs,
+            rechecked=rechecked,
         )
         return LearnedRun(pairs, costs, self.gamma, (width, height), options.hor_size_source,
-                          options.models)
+                          options.models, rechecked)
 
     def close(self) -> None:
         """Close the image sources."""

@@ -11,7 +11,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.inference.assignment import assign, assignment_matrix, augmented_cost_matrix
+from xvmatch.inference.assignment import (
+    assign,
+    assignment_is_stable,
+    assignment_matrix,
+    augmented_cost_matrix,
+)
 
 
 def _brute_force_objective(cost: np.ndarray, gamma: float) -> float:
@@ -143,3 +148,48 @@ def test_matches_brute_force(m: int, n: int, data: st.DataObject, gamma: float) 
     finite = cost[np.isfinite(cost)]
     if finite.size == 0 or gamma <= finite.min():
         assert len(pairs) == 0
+
+
+def _objective(cost: np.ndarray, gamma: float, pairs: np.ndarray) -> float:
+    """Eq. 1 + Eq. 2 objective, up to a constant: sum over the pairs of (c_ij - gamma)."""
+    return float(np.sum(cost[pairs[:, 0], pairs[:, 1]] - gamma)) if len(pairs) else 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(m=st.integers(1, 4), n=st.integers(1, 4), data=st.data(),
+       tolerance=st.floats(0.0, 0.3, allow_nan=False), seed=st.integers(0, 2**31 - 1))
+def test_a_stable_assignment_survives_every_move_within_the_tolerance(
+        m: int, n: int, data: st.DataObject, tolerance: float, seed: int) -> None:
+    """Stable: the pairs stay optimal for costs moved anywhere within the tolerance. Not
+    stable: a cost matrix within it has a strictly better other assignment."""
+    entries = data.draw(st.lists(_cost_entry, min_size=m * n, max_size=m * n))
+    cost = np.array(entries, dtype=float).reshape(m, n)
+    gamma = 0.5
+    pairs = assign(cost, gamma)
+    rng = np.random.default_rng(seed)
+    if assignment_is_stable(cost, gamma, tolerance):
+        for _ in range(5):
+            moved = cost + rng.uniform(-tolerance, tolerance, cost.shape)
+            other = assign(moved, gamma)
+            assert _objective(moved, gamma, pairs) <= _objective(moved, gamma, other) + 1e-9
+        assert assignment_is_stable(cost, gamma, tolerance / 2)  # a smaller one is too
+    else:
+        worst = cost - tolerance
+        if len(pairs):
+            worst[pairs[:, 0], pairs[:, 1]] += 2 * tolerance
+        better = assign(worst, gamma)
+        assert _objective(worst, gamma, better) < _objective(worst, gamma, pairs) - 1e-12
+        assert not assignment_is_stable(cost, gamma, tolerance * 2)  # nor a larger one
+
+
+def test_near_ties_are_not_stable() -> None:
+    cost = np.array([[0.10, 0.11], [0.11, 0.10]])
+    assert assignment_is_stable(cost, 0.5, 0.004)  # 0.2 against 0.22: moves of 0.005 tie
+    assert not assignment_is_stable(cost, 0.5, 0.006)
+    assert assignment_is_stable(np.zeros((0, 3)), 0.5, 1.0)
+    # A pair just below gamma is unstable once the tolerance can lift it to gamma.
+    assert not assignment_is_stable(np.array([[0.48]]), 0.5, 0.03)
+    assert assignment_is_stable(np.array([[0.48]]), 0.5, 0.01)
+    for bad in (-0.1, math.nan, math.inf):
+        with pytest.raises(ValueError, match="tolerance"):
+            assignment_is_stable(cost, 0.5, bad)

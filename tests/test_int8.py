@@ -56,18 +56,27 @@ def test_export_records_the_int8_network_and_its_accuracy(int8_bundle):
         agreement = int8["agreement"][setting]
         assert 0 <= agreement["kept"] <= agreement["pairs"]
         assert 0.0 <= agreement["share"] <= 1.0
+    recheck = int8["recheck"]
+    assert 0.0 <= recheck["tolerance"] <= 1.0 and recheck["scenes"] == ["s00000"]
+    for setting in ("images", "images+cameras"):
+        assert 0.0 <= recheck["accuracy"][setting]["rechecked"] <= 1.0
+        assert recheck["agreement"][setting]["pairs"] == int8["agreement"][setting]["pairs"]
+        # FP32's own answer on the re-checked frames: never fewer of its pairs than INT8 alone
+        assert recheck["agreement"][setting]["kept"] >= int8["agreement"][setting]["kept"]
     assert sorted(p.name for p in out.glob("appearance_int8*")) == ["appearance_int8.onnx"]
     assert json.loads((out / "manifest.json").read_text())["appearance"]["int8"] == int8
 
 
 def _with_int8_loss(out, tmp_path, loss: float | None,
-                    agreement: tuple[int, int] | None = (2000, 2000)):
+                    agreement: tuple[int, int] | None = (2000, 2000),
+                    rechecked: tuple[int, int] | None = None):
     """A copy of the bundle whose manifest records an INT8 accuracy ``loss`` points below FP32
     (None: no accuracy record) and INT8 keeping ``agreement`` = (kept, pairs) of FP32's matched
-    pairs in the images setting (None: no agreement record)."""
+    pairs in the images setting (None: no agreement record), and ``rechecked`` of them with
+    its near ties re-checked (None: no re-check record)."""
     import shutil
 
-    copy = tmp_path / f"loss_{loss}_{agreement and agreement[0]}_{agreement and agreement[1]}"
+    copy = tmp_path / f"loss_{loss}_{agreement}_{rechecked}".replace(" ", "")
     shutil.copytree(out, copy)
     manifest = json.loads((copy / "manifest.json").read_text())
     accuracy = manifest["appearance"]["int8"]["accuracy"]
@@ -80,6 +89,12 @@ def _with_int8_loss(out, tmp_path, loss: float | None,
     else:
         for setting, record in manifest["appearance"]["int8"]["agreement"].items():
             kept, pairs = agreement if setting == "images" else (2000, 2000)
+            record.update(kept=kept, pairs=pairs, share=kept / pairs)
+    if rechecked is None:
+        del manifest["appearance"]["int8"]["recheck"]
+    else:
+        for setting, record in manifest["appearance"]["int8"]["recheck"]["agreement"].items():
+            kept, pairs = rechecked if setting == "images" else (2000, 2000)
             record.update(kept=kept, pairs=pairs, share=kept / pairs)
     (copy / "manifest.json").write_text(json.dumps(manifest))
     return copy
@@ -120,6 +135,54 @@ def test_int8_is_chosen_alone_only_if_it_kept_the_accuracy_and_the_matches(
     assert load_bundle(out, precision="int8").precision == "int8"
 
 
+def test_associate_picks_int8_by_its_agreement_with_near_ties_rechecked(int8_bundle, tmp_path,
+                                                                       monkeypatch):
+    """INT8 alone kept 98.7% of FP32's pairs, with its near ties re-checked all of them: only a
+    caller that re-checks (associate) picks it, and it gets the tolerance and the FP32 network
+    to re-check with."""
+    from xvmatch.inference import bundle
+
+    monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
+    out = _with_int8_loss(int8_bundle[0], tmp_path, 0.0, (1974, 2000), (2000, 2000))
+    int8 = json.loads((out / "manifest.json").read_text())["appearance"]["int8"]
+    assert load_bundle(out).precision == "fp32"
+    checked = load_bundle(out, recheck=True)
+    assert checked.precision == "int8" and checked.reference is not None
+    assert checked.recheck == bundle.int8_recheck_tolerance(int8) == int8["recheck"]["tolerance"]
+    plain = load_bundle(out, precision="int8")
+    assert plain.recheck is None and plain.reference is None
+    assert load_bundle(out, precision="fp32", recheck=True).recheck is None
+    with pytest.raises(BundleError, match="without an FP32 network to re-check with"):
+        plain.embed(np.zeros((1, 32, 16, 3), np.uint8), reference=True)
+    crops = np.random.default_rng(1).integers(0, 256, (4, 32, 16, 3), dtype=np.uint8)
+    np.testing.assert_array_equal(checked.embed(crops, reference=True),
+                                  load_bundle(out, precision="fp32").embed(crops))
+    # no re-check record: judged by INT8 alone, and nothing to re-check with
+    bare = _with_int8_loss(int8_bundle[0], tmp_path, 0.0, (1974, 2000))
+    assert load_bundle(bare, recheck=True).precision == "fp32"
+    assert load_bundle(bare, precision="int8", recheck=True).recheck is None
+    assert bundle.int8_recheck_tolerance({"recheck": {"tolerance": "x"}}) is None
+    assert bundle.int8_recheck_tolerance({"recheck": {"tolerance": 2.0}}) is None
+
+
+def test_recheck_tolerance_and_costs():
+    from xvmatch.export.int8 import recheck_tolerance
+    from xvmatch.inference.learned_association import rechecked_costs
+
+    fp32 = [np.array([[0.1, 0.9], [0.9, 0.1]]), np.array([[0.3, 0.31], [0.31, 0.3]]),
+            np.zeros((0, 2)), np.array([[0.2]])]
+    int8 = [fp32[0] + 0.01, np.array([[0.31, 0.30], [0.30, 0.31]]), np.zeros((0, 2)),
+            np.array([[0.24]])]
+    # the largest change of each frame with pairs: 0.01, 0.01, 0.04
+    assert recheck_tolerance(fp32, int8, 0.5) == pytest.approx(0.01)
+    assert recheck_tolerance(fp32, int8, 1.0) == pytest.approx(0.04)
+    assert recheck_tolerance(fp32, int8) == pytest.approx(0.01 + 0.8 * 0.03)  # quantile 0.9
+    assert recheck_tolerance([], []) == 0.0
+    costs, again = rechecked_costs(fp32, int8, 0.5, 0.01)
+    assert again == 1  # the near tie of the second frame flipped: FP32 answers it
+    assert costs[1] is fp32[1] and costs[0] is int8[0] and costs[3] is int8[3]
+
+
 def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, tmp_path,
                                                     monkeypatch):
     from xvmatch.inference import bundle
@@ -153,6 +216,7 @@ def test_export_and_associate_commands(tmp_path, capsys, tiny_models, tiny_synth
                  str(tiny_synth["overview"])]) == 0
     err = capsys.readouterr().err
     assert "INT8 appearance" in err and "INT8 kept FP32's matched pairs there: " in err
+    assert "with near ties re-checked in FP32 (associate; cost tolerance " in err
     # The tiny dataset measures a handful of pairs: never enough to show 99%.
     assert "the runtime will not pick INT8 by itself: " in err
     assert main(["export", "--model", str(tiny_models["full"]), "--out", str(tmp_path / "c"),
@@ -235,6 +299,8 @@ def test_int8_refusal_says_why(int8_bundle, tmp_path, loss, agreement, reason):
     assert (said is None) == (reason is None) == int8_is_safe(int8)
     if reason is not None:
         assert reason in said, said
+    # without a re-check record, a caller that re-checks judges INT8 alone the same way
+    assert int8_refusal(int8, recheck=True) == said
 
 
 def test_the_pairs_needed_are_the_least_that_can_show_the_bar():

@@ -153,3 +153,34 @@ def test_images_are_retimed_and_closed(scene, default):
     assert inputs.images == {}
     with pytest.raises(Exception, match="frame"):
         open_view_images(scene.top_images, top, [max(frames) + 50])
+
+
+def test_int8_near_ties_are_scored_again_with_fp32(scene):
+    """associate's INT8 path: a frame whose INT8 assignment is not stable within the tolerance
+    gets exactly FP32's costs and pairs, a stable one keeps INT8's."""
+    from xvmatch.inference.bundle import int8_recheck_tolerance
+
+    top, hor, frames = _boxes(scene)
+
+    def run(matcher):
+        return run_learned_association(top, hor, frames, LearnedRunOptions(
+            (matcher,), SIZE, top_images=scene.top_images, hor_images=scene.hor_images,
+            keep_costs=True))
+
+    fp32 = run(load_matcher_bundle("default", precision="fp32"))
+    int8 = run(load_matcher_bundle("default", precision="int8"))
+    assert int8.rechecked == [] and fp32.rechecked == []
+    assert any(not np.allclose(c, fp32.costs[f], atol=1e-6) for f, c in int8.costs.items())
+    checked = load_matcher_bundle("default", precision="int8", recheck=True)
+    spec = checked.bundle.manifest.appearance
+    assert checked.bundle.recheck == int8_recheck_tolerance(spec.int8) > 0
+    checked.bundle.recheck = 1.0  # every assignment moves within a tolerance of 1
+    every = run(checked)
+    assert every.rechecked == sorted(every.costs) and every.pairs == fp32.pairs
+    for f, c in every.costs.items():
+        np.testing.assert_allclose(c, fp32.costs[f], atol=1e-6)
+    checked.bundle.recheck = 0.0  # none does within 0
+    none = run(checked)
+    assert none.rechecked == [] and none.pairs == int8.pairs
+    for f, c in none.costs.items():
+        np.testing.assert_array_equal(c, int8.costs[f])

@@ -238,6 +238,19 @@ def _site_bundle(tmp_path, adaptation: SiteAdaptation, **record) -> tuple:
     return folder, doc
 
 
+def test_a_site_bundle_runs_int8_only_when_asked(tmp_path, monkeypatch) -> None:
+    """The adaptation was fitted on FP32 vectors and INT8's agreement measured without it: where
+    the default would pick INT8 by itself, its site bundle keeps FP32."""
+    from xvmatch.inference import bundle
+
+    monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
+    assert load_bundle("default", recheck=True).precision == "int8"
+    dim = read_manifest(DEFAULT_BUNDLE).appearance.embedding_dim
+    folder, _ = _site_bundle(tmp_path, SiteAdaptation.identity(dim))
+    assert load_bundle(folder, recheck=True).precision == "fp32"
+    assert load_bundle(folder, precision="int8").precision == "int8"
+
+
 def test_bundle_reads_an_adaptation(tmp_path) -> None:
     """A site bundle applies its adaptation to the appearance cue; the identity one gives the
     default's costs; a bundle without the key has none."""

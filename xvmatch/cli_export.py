@@ -84,8 +84,15 @@ def _cmd_export(args: argparse.Namespace) -> int:
                     for s, v in (int8.get("agreement") or {}).items()]
             if kept:
                 say(f"INT8 kept FP32's matched pairs there: {', '.join(kept)}")
-            reason = int8_refusal(int8)
-            say("the runtime picks INT8 by itself on CPUs with 8-bit dot products (VNNI, Arm "
+            recheck = int8.get("recheck") or {}
+            share = {s: v.get("rechecked", 0.0) for s, v in (recheck.get("accuracy") or {}).items()}
+            kept = [f"{v['kept']}/{v['pairs']} ({s}, {100 * share.get(s, 0.0):.0f}% of frames "
+                    "re-checked)" for s, v in (recheck.get("agreement") or {}).items()]
+            if kept:
+                say(f"with near ties re-checked in FP32 (associate; cost tolerance "
+                    f"{recheck['tolerance']:.3f}): {', '.join(kept)}")
+            reason = int8_refusal(int8, recheck=True)
+            say("associate picks INT8 by itself on CPUs with 8-bit dot products (VNNI, Arm "
                 "dotprod)" if reason is None else
                 f"the runtime will not pick INT8 by itself: {reason}; --precision int8 runs it")
         say(f"wrote {args.out} (cues: {', '.join(manifest['cues']) or 'none, box-only'})")

@@ -68,8 +68,9 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--threads", type=thread_count, default=1, metavar="K",
                    help="onnxruntime threads, 1..64 (default 1)")
     g.add_argument("--precision", choices=("fp32", "int8"), default=None,
-                   help="appearance network to run: int8 (needs a bundle exported with --int8) "
-                   "or fp32 (default: int8 when the bundle has it and the CPU has 8-bit "
+                   help="appearance network to run: int8 (needs a bundle exported with --int8; "
+                   "near-tie frames are scored again with fp32) or fp32 (default: int8 when "
+                   "the bundle has it, kept fp32's matches at export and the CPU has 8-bit "
                    "dot-product instructions, VNNI; else fp32)")
 
 
@@ -97,7 +98,7 @@ LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs
 """Options of ``associate`` that need ``--model``."""
 
 
-def _torch_file_bundle(path: str, threads: int, precision: str | None):
+def _torch_file_bundle(path: str, threads: int, precision: str | None, recheck: bool):
     """The bundle of a torch matcher file, exported once into the cache."""
     import hashlib
     from pathlib import Path
@@ -116,11 +117,13 @@ def _torch_file_bundle(path: str, threads: int, precision: str | None):
                              ) from None
         print(f"exporting {path} to {folder} (once)", file=sys.stderr)
         export_bundle(path, folder)
-    return load_matcher_bundle(folder, threads, precision)
+    return load_matcher_bundle(folder, threads, precision, recheck)
 
 
-def open_models(names: Iterable[str], threads: int = 1, precision: str | None = None) -> list:
-    """:class:`~xvmatch.inference.learned_association.LearnedMatcher` of each ``--model``."""
+def open_models(names: Iterable[str], threads: int = 1, precision: str | None = None,
+                recheck: bool = False) -> list:
+    """:class:`~xvmatch.inference.learned_association.LearnedMatcher` of each ``--model``
+    (``recheck``: for ``associate``, which re-checks INT8's near-tie frames in FP32)."""
     import os
 
     from xvmatch.inference.learned_association import load_matcher_bundle
@@ -128,9 +131,9 @@ def open_models(names: Iterable[str], threads: int = 1, precision: str | None = 
     models = []
     for name in names:
         if name != "default" and os.path.isfile(name):
-            models.append(_torch_file_bundle(name, threads, precision))
+            models.append(_torch_file_bundle(name, threads, precision, recheck))
         else:
-            models.append(load_matcher_bundle(name, threads, precision))
+            models.append(load_matcher_bundle(name, threads, precision, recheck))
     return models
 
 
@@ -229,13 +232,18 @@ def associate_with_model(
     if draw is not None:
         check_own_folder(draw, DRAW_COMMAND, "--draw")
     names = [args.model] if isinstance(args.model, str) else list(args.model)
-    models = open_models(names, getattr(args, "threads", 1), getattr(args, "precision", None))
+    models = open_models(names, getattr(args, "threads", 1), getattr(args, "precision", None),
+                         recheck=True)
     hor_size = hor_size or horizontal_size(args, hor)
     options = learned_run_options(args, models, names, hor_size, top_offset)
     hor_path = getattr(args, "hor", "the horizontal boxes")
     with open_learned_inputs(top, hor, frames, options) as inputs:
         note_if_assumed(hor_size, hor, hor_path, bool(getattr(args, "quiet", False)))
         run = inputs.associate(progress)
+        if run.rechecked and not getattr(args, "quiet", False):
+            both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))
+            print(f"INT8 appearance network: {len(run.rechecked)} of {both} frames were near "
+                  "ties, scored again with FP32", file=sys.stderr)
         if draw is not None:
             draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, run.pairs,
                           sorted(run.costs), inputs.images or None, run.hor_size,
