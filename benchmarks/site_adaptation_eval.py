@@ -55,8 +55,13 @@ from xvmatch.inference.learned_association import (
     associate_sequence_learned,
     load_matcher_bundle,
 )
-from xvmatch.inference.site_adaptation import CALIBRATIONS, VECTORS, fit_site_adaptation
-from xvmatch.inference.site_bundle import adapted_vector
+from xvmatch.inference.site_adaptation import (
+    CALIBRATIONS,
+    VECTORS,
+    choose_fit,
+    fit_site_adaptation,
+)
+from xvmatch.inference.site_bundle import adapted_vectors
 
 
 class _Images:
@@ -120,8 +125,11 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
            (("top", video.top), ("hor", video.hor))}
     precision = float((ids["top"][cp[:, 0]] == ids["hor"][cp[:, 1]]).mean()) if len(cp) else 0.0
 
-    def embed(image, boxes):
-        return matcher.descriptors(image, boxes, args.vector)
+    spec = matcher.bundle.manifest.appearance
+
+    def embed(image, boxes):  # every vector tried, side by side, from one run
+        return np.concatenate(matcher.bundle.embed_vectors(matcher.crops(image, boxes),
+                                                           args.vectors), axis=1)
 
     def run(model, images):
         pred = associate_sequence_learned(
@@ -135,13 +143,19 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     for strength in args.strengths:
         shifted = (_Images(_shifted(video.top_images, strength, 100 + seed)),
                    _Images(_shifted(video.hor_images, strength, 200 + seed)))
-        pairs = replace(mined.pair_set(embed_frames(mined.embed_frames, top, shifted[0], embed),
-                                       embed_frames(mined.embed_frames, hor, shifted[1], embed)),
-                        vector=args.vector)
+        top_all = embed_frames(mined.embed_frames, top, shifted[0], embed)
+        hor_all = embed_frames(mined.embed_frames, hor, shifted[1], embed)
+        sets, start = {}, 0
+        for vector in args.vectors:
+            cols = slice(start, start + spec.dim(vector))
+            start = cols.stop
+            sets[vector] = replace(mined.pair_set(top_all[:, cols], hor_all[:, cols]),
+                                   vector=vector)
         row = {"seed": seed, "strength": strength, **base, "shifted": run(matcher, shifted),
-               "pseudo": (len(cp), precision), "counts": pairs.counts()}
+               "pseudo": (len(cp), precision), "counts": sets[args.vectors[0]].counts()}
         for cal in args.calibrations:
-            fit = fit_site_adaptation(pairs, calibration=cal, reference=reference)
+            fit = choose_fit({v: fit_site_adaptation(p, calibration=cal, reference=reference)
+                              for v, p in sets.items()})
             row["fit"] = fit
             site = LearnedMatcher(replace(matcher.bundle, adaptation=fit.adaptation))
             row[f"adapted {cal}"] = run(site, shifted) if fit.accepted else row["shifted"]
@@ -164,7 +178,8 @@ def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
         fit = r["fit"]
         print(f"{r['seed']} {r['strength']:g} | {cells} | {rec:.2f} | {r['pseudo'][0]} "
               f"({100 * r['pseudo'][1]:.1f}%) | {fit.auc_before:.3f} -> {fit.auc_after:.3f} "
-              f"({fit.adaptation.rank if fit.accepted else 'refused'})")
+              f"({fit.adaptation.rank if fit.accepted else 'refused'}"
+              f"{', ' + fit.adaptation.vector if fit.accepted else ''})")
     for strength in sorted({r["strength"] for r in rows}):
         sub = [r for r in rows if r["strength"] == strength]
         means = {s: np.mean([r[s] for r in sub], axis=0) for s in settings}
@@ -241,16 +256,18 @@ def main() -> int:
     parser.add_argument("--shots", type=int, default=MiningConfig().shots,
                         help="frames embedded per burst")
     parser.add_argument("--vector", choices=VECTORS, default=None,
-                        help="what the adaptation maps (default: what xvmatch adapt fits on, "
-                             "the network's features when it gives them)")
+                        help="what the adaptation maps (default: as xvmatch adapt, both the "
+                             "network's features and its descriptors when it gives them, the "
+                             "better on the held-out pairs kept)")
     parser.add_argument("--cli", action="store_true", help="also time the command line")
     parser.add_argument("--work", default="runs/site_adaptation")
     args = parser.parse_args()
     print("$ python " + shlex.join(sys.argv))
     t0 = time.perf_counter()
     matcher = load_matcher_bundle(args.model)
-    args.vector = args.vector or adapted_vector(matcher.bundle.manifest.appearance)
-    print(f"adapting the network's {args.vector}")
+    args.vectors = ((args.vector,) if args.vector else
+                    adapted_vectors(matcher.bundle.manifest.appearance))
+    print(f"adapting the network's {' or '.join(args.vectors)}")
     reference = reference_costs(matcher.descriptors)
     rows = []
     for seed in args.seeds:

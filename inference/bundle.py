@@ -20,6 +20,7 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -418,6 +419,12 @@ class Bundle:
         batch (``K`` may be 0); with ``vector="features"``, the ``(K, C)`` pooled trunk
         activations instead, scaled to unit length (onnxruntime then skips the head). With
         ``reference``, by the FP32 network that re-checks INT8 frames."""
+        return self.embed_vectors(crops, (vector,), reference)[0]
+
+    def embed_vectors(self, crops: np.ndarray, vectors: Sequence[str],
+                      reference: bool = False) -> list[np.ndarray]:
+        """:meth:`embed` of each of ``vectors`` (``"descriptors"``, ``"features"``), from one
+        run of the network."""
         spec = self.manifest.appearance
         if self.appearance is None or spec is None:
             raise BundleError(f"{self.name}: this bundle has no appearance network")
@@ -427,17 +434,19 @@ class Bundle:
                 raise BundleError(f"{self.name}: opened without an FP32 network to re-check "
                                   "with")
             session = self.reference
-        dim = spec.dim(vector)
-        if dim is None:
-            raise BundleError(f"{self.name}: the appearance network has no {vector!r} output "
-                              f"(it has {', '.join(spec.outputs)}); export it again")
+        dims = [spec.dim(v) for v in vectors]
+        for vector, dim in zip(vectors, dims, strict=True):
+            if dim is None:
+                raise BundleError(f"{self.name}: the appearance network has no {vector!r} "
+                                  f"output (it has {', '.join(spec.outputs)}); export it again")
         if crops.shape[0] == 0:
-            return np.zeros((0, dim), np.float32)
-        out = session.run([vector], {APPEARANCE_INPUT: crops})[0]
-        if vector == "features":  # unit length: a crop's overall activation says more about
-            # its exposure than about the person
-            out = out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
-        return out
+            return [np.zeros((0, dim), np.float32) for dim in dims]
+        outs = session.run(list(vectors), {APPEARANCE_INPUT: crops})
+        # features at unit length: a crop's overall activation says more about its exposure
+        # than about the person
+        return [out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+                if vector == "features" else out for vector, out in zip(vectors, outs,
+                                                                         strict=True)]
 
     def costs(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """``(B, M, N)`` costs of a padded batch

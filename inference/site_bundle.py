@@ -20,8 +20,10 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+import numpy as np
 
 from xvmatch.inference.adaptation_pairs import (
     MinedPairs,
@@ -38,10 +40,12 @@ from xvmatch.inference.site_adaptation import (
     ADAPTATION_FORMAT_VERSION,
     AdaptationFit,
     adaptation_bytes,
+    choose_fit,
     fit_site_adaptation,
 )
 
-__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vector", "write_site_bundle"]
+__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vectors",
+           "write_site_bundle"]
 
 Progress = Callable[[Iterable, int, str], Iterable]
 """``progress(items, total, what)``: wraps an iterator (e.g. a progress bar)."""
@@ -52,16 +56,18 @@ class SiteRun:
     """What :func:`adapt_to_site` found.
 
     Attributes:
-        fit: the fit (accepted or refused, with its held-out figures).
+        fit: the fit kept (accepted or refused, with its held-out figures).
         mined: the mined pairs.
         counts: pairs of each kind.
         frames_scored: frames the box-only matcher scored.
+        fits: the fit of each vector tried (:func:`adapted_vectors`), ``fit`` among them.
     """
 
     fit: AdaptationFit
     mined: MinedPairs
     counts: dict[str, int]
     frames_scored: int
+    fits: dict[str, AdaptationFit] = field(default_factory=dict)
 
 
 def adapt_to_site(
@@ -115,26 +121,34 @@ def adapt_to_site(
                            stage("boxes", len(scored)), workers)
     mined = mine_pairs(top, hor, bursts, costs, matcher.gamma, config)
     n = len(mined.embed_frames)
-    vector = adapted_vector(matcher.bundle.manifest.appearance)
+    spec = matcher.bundle.manifest.appearance
+    vectors = adapted_vectors(spec)
 
-    def embed(image, boxes):
-        return matcher.descriptors(image, boxes, vector)
+    def embed(image, boxes):  # every vector from one run, side by side
+        return np.concatenate(matcher.bundle.embed_vectors(matcher.crops(image, boxes),
+                                                           vectors), axis=1)
 
-    top_desc = embed_frames(mined.embed_frames, top, top_images, embed, stage("top crops", n))
-    hor_desc = embed_frames(mined.embed_frames, hor, hor_images, embed,
-                            stage("horizontal crops", n))
-    pairs = replace(mined.pair_set(top_desc, hor_desc), vector=vector)
+    top_all = embed_frames(mined.embed_frames, top, top_images, embed, stage("top crops", n))
+    hor_all = embed_frames(mined.embed_frames, hor, hor_images, embed,
+                           stage("horizontal crops", n))
     reference = reference_costs(matcher.descriptors)
-    fit = fit_site_adaptation(pairs, calibration="odds", reference=reference)
-    return SiteRun(fit, mined, pairs.counts(), len(scored))
+    fits, start, counts = {}, 0, {}
+    for vector in vectors:
+        cols = slice(start, start + spec.dim(vector))
+        start = cols.stop
+        pairs = replace(mined.pair_set(top_all[:, cols], hor_all[:, cols]), vector=vector)
+        fits[vector] = fit_site_adaptation(pairs, calibration="odds", reference=reference)
+        counts = pairs.counts()
+    return SiteRun(choose_fit(fits), mined, counts, len(scored), fits)
 
 
-def adapted_vector(spec) -> str:
+def adapted_vectors(spec) -> tuple[str, ...]:
     """What ``adapt`` fits on for a network with this :class:`~xvmatch.inference.bundle.
-    AppearanceSpec`: its pooled features when the graph gives them (they recover a third to a
-    half more of a camera change than the descriptors, docs/adaptation.md), else its
-    descriptors."""
-    return "descriptors" if spec.features_dim is None else "features"
+    AppearanceSpec`, in order of preference: its pooled features and its descriptors when the
+    graph gives both (the features recover a third to a half more of a camera change, but
+    each is sometimes refused where the other helps; :func:`~xvmatch.inference.
+    site_adaptation.choose_fit` keeps one), else its descriptors."""
+    return ("descriptors",) if spec.features_dim is None else ("features", "descriptors")
 
 
 def _sha256(path: Path) -> str:
@@ -143,6 +157,11 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: handle.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def _figure(value: float) -> float | None:
+    """A held-out figure for JSON (None for NaN: too few pairs to judge)."""
+    return round(float(value), 6) if np.isfinite(value) else None
 
 
 def adaptation_record(run: SiteRun, inputs: Mapping[str, str | os.PathLike], sha256: str,
@@ -179,7 +198,10 @@ def adaptation_record(run: SiteRun, inputs: Mapping[str, str | os.PathLike], sha
         "heldout": {"metric": "cross-view verification AUC of pseudo-pairs, last 25% of bursts",
                     "before": round(fit.auc_before, 6), "after": round(fit.auc_after, 6),
                     "by_rank": {str(k): round(v, 6) for k, v in fit.auc_by_rank.items()},
-                    "pairs": list(fit.heldout_pairs)},
+                    "pairs": list(fit.heldout_pairs),
+                    "vectors": {v: {"accepted": f.accepted, "before": _figure(f.auc_before),
+                                    "after": _figure(f.auc_after)}
+                                for v, f in run.fits.items()}},
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "xvmatch": version,
     }

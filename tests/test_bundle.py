@@ -69,6 +69,12 @@ def test_the_features_output(bundle):
     assert loaded.embed(crops[:0], "features").shape == (0, spec.features_dim)
     with pytest.raises(BundleError, match="no 'colour' output"):
         loaded.embed(crops, "colour")
+    # both from one run of the network, each as embed gives it alone
+    both = loaded.embed_vectors(crops, ("features", "descriptors"))
+    np.testing.assert_array_equal(both[0], feats)
+    np.testing.assert_array_equal(both[1], loaded.embed(crops))
+    assert [a.shape for a in loaded.embed_vectors(crops[:0], ("descriptors", "features"))] == \
+        [(0, 8), (0, spec.features_dim)]
 
 
 def test_a_bundle_without_features_still_loads(bundle):

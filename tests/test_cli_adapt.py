@@ -47,9 +47,14 @@ def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
     assert record["heldout"]["after"] > record["heldout"]["before"]
     bundle = load_bundle(site)
     assert bundle.adaptation is not None and bundle.adaptation.rank == record["rank"]
-    # The default network gives its pooled features, and adapt fits on them.
-    assert record["vector"] == bundle.adaptation.vector == "features"
-    assert bundle.adaptation.dim == bundle.manifest.appearance.features_dim
+    # The default network gives its pooled features and its descriptors: adapt fits both on
+    # the same pairs and keeps the accepted one with the best held-out AUC.
+    tried = record["heldout"]["vectors"]
+    assert set(tried) == {"features", "descriptors"}
+    best = max((v for v in tried if tried[v]["accepted"]), key=lambda v: tried[v]["after"])
+    assert record["vector"] == bundle.adaptation.vector == best
+    assert record["heldout"]["after"] == tried[best]["after"]
+    assert bundle.adaptation.dim == bundle.manifest.appearance.dim(best)
     pred = tmp_path / "pred.csv"
     short = {}
     for view in ("top", "hor"):  # the first 6 frames are enough to run it
@@ -74,11 +79,15 @@ def test_adapt_refusals_write_nothing(video, tmp_path, capsys) -> None:
         assert main(args) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err
+        said.append(err[0])
 
+    said: list[str] = []
     out = tmp_path / "site"
     # a single burst: nothing to hold out, so nothing can be judged
     refused(_args(video, out, "--max-frames", "10", "--burst", "10"),
-            "adaptation refused, nothing written: too few confident cross-view pairs")
+            "adaptation refused, nothing written: features: too few confident cross-view "
+            "pairs")
+    assert "; descriptors: too few confident cross-view pairs" in said[-1]  # both were tried
     assert not out.exists()
     no_images = [a for a in _args(video, out) if a not in ("--top-images",
                                                            str(video["top_images"]))]

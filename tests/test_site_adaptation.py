@@ -20,9 +20,11 @@ from xvmatch.inference.learned_association import LearnedMatcher
 from xvmatch.inference.site_adaptation import (
     ADAPTATION_FILE,
     RIDGE,
+    AdaptationFit,
     PairSet,
     SiteAdaptation,
     adaptation_bytes,
+    choose_fit,
     fit_site_adaptation,
     load_adaptation,
     pair_auc,
@@ -147,6 +149,23 @@ def test_fit_refuses_too_few_pairs() -> None:
     pairs = _site(3, people=2, frames=6)
     fit = fit_site_adaptation(pairs, min_heldout=10)
     assert not fit.accepted and "too few" in fit.reason
+
+
+def test_choose_fit_keeps_the_accepted_fit_with_the_best_heldout_auc() -> None:
+    def fit(vector: str, accepted: bool, after: float) -> AdaptationFit:
+        return AdaptationFit(SiteAdaptation.identity(4, vector), accepted,
+                             "" if accepted else "no gain", 0.8, after, {}, (20, 40))
+
+    features, descriptors = fit("features", True, 0.90), fit("descriptors", True, 0.95)
+    assert choose_fit({"features": features, "descriptors": descriptors}) is descriptors
+    refused = fit("features", False, 0.99)  # a refused fit is never kept, whatever its AUC
+    assert choose_fit({"features": refused, "descriptors": descriptors}) is descriptors
+    assert choose_fit({"features": refused, "descriptors": fit("descriptors", False, 0.7)}) \
+        is refused  # none accepted: the first one's refusal
+    tie = fit("features", True, 0.95)
+    assert choose_fit({"features": tie, "descriptors": descriptors}) is tie
+    with pytest.raises(ValueError, match="no fit"):
+        choose_fit({})
 
 
 def test_fit_bad_arguments() -> None:

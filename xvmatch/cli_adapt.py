@@ -120,7 +120,8 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
                             progress, args.workers)
     fit = run.fit
     if not fit.accepted:
-        raise UsageError(f"adaptation refused, nothing written: {fit.reason}; keep using "
+        reasons = "; ".join(f"{v}: {f.reason}" for v, f in run.fits.items()) or fit.reason
+        raise UsageError(f"adaptation refused, nothing written: {reasons}; keep using "
                          f"--model {args.model}")
     out = claim_folder(args.out, ADAPT_COMMAND)
     roles = {"top": args.top, "hor": args.hor, "top_images": args.top_images,
@@ -132,6 +133,9 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
         print(f"adapted the network's {fit.adaptation.vector} on {run.frames_scored} frames "
               f"({len(run.mined.embed_frames)} embedded): "
               f"{run.counts['cross_pos']} cross-view pseudo-matches; rank "
-              f"{fit.adaptation.rank}; held-out AUC {fit.auc_before:.3f} -> {fit.auc_after:.3f}; "
-              f"wrote {out}/ (use: xvmatch associate --model {out} ...)", file=sys.stderr)
+              f"{fit.adaptation.rank}; held-out AUC {fit.auc_before:.3f} -> {fit.auc_after:.3f}"
+              + "".join(f" ({v}: {f.auc_before:.3f} -> {f.auc_after:.3f}"
+                        f"{'' if f.accepted else ', refused'})"
+                        for v, f in run.fits.items() if f is not fit)
+              + f"; wrote {out}/ (use: xvmatch associate --model {out} ...)", file=sys.stderr)
     return 0
