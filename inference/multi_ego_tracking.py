@@ -55,6 +55,7 @@ from xvmatch.inference.multi_view_assignment import (
     view_pairs,
 )
 from xvmatch.inference.multi_view_costs import FrameProblem
+from xvmatch.inference.track_mip import MIP_TIME_LIMIT
 from xvmatch.inference.tracklets import (
     Tracklet,
     motion_assignment,
@@ -363,7 +364,7 @@ def track_multi_view(
     max_gap: int = 3,
     top_min_iou: float = 0.5,
     solver: str = "mip",
-    time_limit: float = 5.0,
+    time_limit: float = MIP_TIME_LIMIT,
     frame_weight: float = 0.6,
     motion: float | None = 0.3,
     partner_change: float | None = 2.0,
@@ -381,7 +382,8 @@ def track_multi_view(
         top_min_iou: ``min_iou`` of the top view (0), always linked by IoU.
         solver: ``mip`` (the joint program per frame) or ``greedy`` (pairwise Hungarian made
             consistent).
-        time_limit: seconds per frame for the MIP, past which the greedy answer is used.
+        time_limit: wall-time guard per frame for the MIP, past which the greedy answer is
+            used (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`).
         frame_weight: the share of a frame's own cost in the costs (:func:`smoothed_problems`).
         motion: the egocentric views' links by motion, with this gate in box heights
             (:func:`~xvmatch.geometry.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``

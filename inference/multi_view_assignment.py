@@ -36,6 +36,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from xvmatch.inference.assignment import assign
+from xvmatch.inference.track_mip import MIP_NODE_LIMIT, MIP_TIME_LIMIT
 
 __all__ = [
     "STATUSES",
@@ -250,8 +251,9 @@ def solve_multi_view(
     sizes: Sequence[int],
     costs: Mapping[tuple[int, int], np.ndarray],
     gamma: float | Mapping[tuple[int, int], float],
-    time_limit: float = 2.0,
+    time_limit: float = MIP_TIME_LIMIT,
     max_rounds: int = 50,
+    node_limit: int = MIP_NODE_LIMIT,
 ) -> MultiViewSolution:
     """Solve the joint program of the module docstring with ``scipy.optimize.milp`` (HiGHS).
 
@@ -261,6 +263,8 @@ def solve_multi_view(
         gamma: the non-association cost, one for all pairs or ``{(a, b): gamma_ab}``.
         time_limit: seconds for all rounds together; past it the greedy fallback answers.
         max_rounds: most programs solved while adding broken triangles; past it the fallback.
+        node_limit: HiGHS nodes per program (the same on every CPU,
+            :data:`~xvmatch.inference.track_mip.MIP_NODE_LIMIT`); past it the fallback.
 
     Returns:
         The :class:`MultiViewSolution`; ``status`` ``optimal`` or ``fallback``.
@@ -309,7 +313,7 @@ def solve_multi_view(
             coo_matrix((vals, (rows, cols)), shape=(n_rows, n_var)).tocsr(),
             np.full(n_rows, -np.inf), np.ones(n_rows))
         res = milp(weight, integrality=integrality, bounds=bounds, constraints=constraints,
-                   options={"time_limit": left, "disp": False})
+                   options={"time_limit": left, "node_limit": int(node_limit), "disp": False})
         if res.status != 0 or res.x is None:
             break
         x = np.round(res.x).astype(bool)

@@ -53,7 +53,7 @@ from xvmatch.inference.track_costs import (
     motion_similarity,
     spatial_similarity,
 )
-from xvmatch.inference.track_mip import ClusterSolution, solve_four_clusters
+from xvmatch.inference.track_mip import MIP_TIME_LIMIT, ClusterSolution, solve_four_clusters
 from xvmatch.inference.track_spectral import spectral_solution
 from xvmatch.inference.track_stitching import stitch_windows
 from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips, view_tracklets
@@ -88,7 +88,9 @@ class TrackConfig:
         max_gap: frames a tracklet may miss inside a clip and still be extended (3).
         weights: the edge-weight parameters (``c0``, ``w1``, ``w2``, ``sigma``).
         solver: ``mip`` (Eqs. 1-4 with HiGHS) or ``spectral`` (the Sec. 4.1 baseline).
-        time_limit: seconds per window for the MIP before the greedy fallback.
+        time_limit: wall-time guard per window for the MIP before the greedy fallback
+            (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`; the MIP's budget of work
+            is its node limit, the same on every CPU).
         seed: seed of the spectral baseline's k-means.
         min_colour: with images, the colour-histogram similarity a horizontal box needs with
             the previous box to extend its tracklet (0.3, Sec. 4.1).
@@ -112,7 +114,7 @@ class TrackConfig:
     max_gap: int = 3
     weights: TrackWeights = field(default_factory=TrackWeights)
     solver: str = "mip"
-    time_limit: float = 2.0
+    time_limit: float = MIP_TIME_LIMIT
     seed: int = 0
     min_colour: float = 0.3
     time_appearance: str = "network"

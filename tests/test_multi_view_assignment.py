@@ -155,6 +155,15 @@ def test_fallback_is_consistent_and_says_so():
         k: v.tolist() for k, v in greedy.pairs.items()}
 
 
+def test_a_node_budget_spent_falls_back_whatever_the_time():
+    sizes = [3, 3, 2]
+    costs = {(a, b): np.random.default_rng(a + 3 * b).random((sizes[a], sizes[b]))
+             for a in range(3) for b in range(a + 1, 3)}
+    assert solve_multi_view(sizes, costs, 0.5, time_limit=600.0, node_limit=0).status == \
+        "fallback"
+    assert solve_multi_view(sizes, costs, 0.5, time_limit=600.0).status == "optimal"
+
+
 def test_a_time_limit_spent_falls_back():
     sizes, costs = _broken_by_pairwise()
     sol = solve_multi_view(sizes, costs, 0.0, time_limit=1e-12)

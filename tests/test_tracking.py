@@ -256,6 +256,19 @@ def test_time_limit_falls_back_to_greedy():
     assert sol.status in ("optimal", "fallback")
 
 
+def test_the_mip_budget_is_work_not_time():
+    """A window over its node budget falls back on any CPU, however much time is left; within
+    it the answer does not depend on the time limit."""
+    rng = np.random.default_rng(3)
+    n = [4, 3, 4, 3]
+    weights = [rng.random((n[i], n[(i + 1) % 4])) for i in range(4)]
+    assert solve_four_clusters(weights, time_limit=600.0, node_limit=0).status == "fallback"
+    fast = solve_four_clusters(weights)
+    slow = solve_four_clusters(weights, time_limit=600.0)
+    assert fast.status == slow.status == "optimal"
+    assert all((a == b).all() for a, b in zip(fast.edges, slow.edges, strict=True))
+
+
 # --- spectral baseline -----------------------------------------------------------------------
 
 
