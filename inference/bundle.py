@@ -511,9 +511,10 @@ network that kept 98.7% of 716 on the deployed benchmark)."""
 
 def int8_recheck_tolerance(int8: dict) -> float | None:
     """The manifest's ``appearance.int8.recheck.tolerance``: how far INT8 moved the matcher's
-    costs at export (the median frame's largest change). A frame whose INT8 assignment is not
-    stable within it (:func:`~xvmatch.inference.assignment.assignment_is_stable`) is run again
-    with FP32; None when the manifest records none (or an unusable one)."""
+    costs at export (a high quantile over frames of a frame's largest change, the export's
+    ``RECHECK_QUANTILE``). A frame whose INT8 assignment is not stable within it
+    (:func:`~xvmatch.inference.assignment.assignment_is_stable`) is run again with FP32; None
+    when the manifest records none (or an unusable one)."""
     try:
         tolerance = float(int8["recheck"]["tolerance"])
     except (KeyError, TypeError, ValueError):
