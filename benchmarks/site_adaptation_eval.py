@@ -61,7 +61,7 @@ from xvmatch.inference.site_adaptation import (
     choose_fit,
     fit_site_adaptation,
 )
-from xvmatch.inference.site_bundle import adapted_vectors
+from xvmatch.inference.site_bundle import adapted_vectors, vector_pair_sets, vectors_embedder
 
 
 class _Images:
@@ -125,11 +125,7 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
            (("top", video.top), ("hor", video.hor))}
     precision = float((ids["top"][cp[:, 0]] == ids["hor"][cp[:, 1]]).mean()) if len(cp) else 0.0
 
-    spec = matcher.bundle.manifest.appearance
-
-    def embed(image, boxes):  # every vector tried, side by side, from one run
-        return np.concatenate(matcher.bundle.embed_vectors(matcher.crops(image, boxes),
-                                                           args.vectors), axis=1)
+    embed = vectors_embedder(matcher, args.vectors)
 
     def run(model, images):
         pred = associate_sequence_learned(
@@ -143,14 +139,9 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     for strength in args.strengths:
         shifted = (_Images(_shifted(video.top_images, strength, 100 + seed)),
                    _Images(_shifted(video.hor_images, strength, 200 + seed)))
-        top_all = embed_frames(mined.embed_frames, top, shifted[0], embed)
-        hor_all = embed_frames(mined.embed_frames, hor, shifted[1], embed)
-        sets, start = {}, 0
-        for vector in args.vectors:
-            cols = slice(start, start + spec.dim(vector))
-            start = cols.stop
-            sets[vector] = replace(mined.pair_set(top_all[:, cols], hor_all[:, cols]),
-                                   vector=vector)
+        sets = vector_pair_sets(mined, embed_frames(mined.embed_frames, top, shifted[0], embed),
+                                embed_frames(mined.embed_frames, hor, shifted[1], embed),
+                                matcher.bundle.manifest.appearance, args.vectors)
         row = {"seed": seed, "strength": strength, **base, "shifted": run(matcher, shifted),
                "pseudo": (len(cp), precision), "counts": sets[args.vectors[0]].counts()}
         for cal in args.calibrations:

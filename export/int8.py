@@ -425,15 +425,16 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
     gamma = float(manifest["gamma"])
     trials, costs = _scene_costs(folder, data, scenes, files)
     labels = list(files)
-    shares: dict[str, float] = {}
+    shares: dict[str, float] = {}  # of the re-checked label: frames re-checked per setting
+    recheck = None
     if tolerance is not None:
-        label = f"{labels[1]}+recheck"
-        costs[label] = {}
+        recheck = f"{labels[1]}+recheck"
+        costs[recheck] = {}
         for setting, reference in costs[labels[0]].items():
-            costs[label][setting], again = rechecked_costs(
+            costs[recheck][setting], again = rechecked_costs(
                 reference, costs[labels[1]][setting], gamma, tolerance)
             shares[setting] = round(again / max(len(reference), 1), 5)
-        labels.append(label)
+        labels.append(recheck)
     out: dict[str, dict] = {}
     pairs: dict[str, dict[str, list[set]]] = {}
     for label in labels:
@@ -448,7 +449,7 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
             s = summarize(counts)
             out[label][setting] = {"acc9": round(s.acc9, 3), "cvidf1": round(s.cvidf1, 3),
                                    "trials": len(trials)}
-            if label in (labels[2:] if tolerance is not None else ()):
+            if label == recheck:
                 out[label][setting]["rechecked"] = shares[setting]
             pairs[label][setting] = matched
     reference = labels[0]

@@ -85,10 +85,7 @@ class LearnedMatcher:
         """``(K, D)`` appearance descriptors of the boxes of one image (one batch); with
         ``vector="features"`` the network's unit pooled features instead
         (:meth:`~xvmatch.inference.bundle.Bundle.embed`)."""
-        spec = self.bundle.manifest.appearance
-        if spec is None:
-            raise ValueError(f"{self.bundle.name}: this bundle has no appearance network")
-        return self.bundle.embed(box_crops(image, boxes, spec.crop_size, spec.context), vector)
+        return self.bundle.embed(self.crops(image, boxes), vector)
 
     @property
     def cue_vector(self) -> str:

@@ -19,7 +19,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -39,13 +39,14 @@ from xvmatch.inference.site_adaptation import (
     ADAPTATION_FILE,
     ADAPTATION_FORMAT_VERSION,
     AdaptationFit,
+    PairSet,
     adaptation_bytes,
     choose_fit,
     fit_site_adaptation,
 )
 
 __all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vectors",
-           "write_site_bundle"]
+           "vector_pair_sets", "vectors_embedder", "write_site_bundle"]
 
 Progress = Callable[[Iterable, int, str], Iterable]
 """``progress(items, total, what)``: wraps an iterator (e.g. a progress bar)."""
@@ -121,25 +122,39 @@ def adapt_to_site(
                            stage("boxes", len(scored)), workers)
     mined = mine_pairs(top, hor, bursts, costs, matcher.gamma, config)
     n = len(mined.embed_frames)
-    spec = matcher.bundle.manifest.appearance
-    vectors = adapted_vectors(spec)
-
-    def embed(image, boxes):  # every vector from one run, side by side
-        return np.concatenate(matcher.bundle.embed_vectors(matcher.crops(image, boxes),
-                                                           vectors), axis=1)
-
+    vectors = adapted_vectors(matcher.bundle.manifest.appearance)
+    embed = vectors_embedder(matcher, vectors)
     top_all = embed_frames(mined.embed_frames, top, top_images, embed, stage("top crops", n))
     hor_all = embed_frames(mined.embed_frames, hor, hor_images, embed,
                            stage("horizontal crops", n))
+    sets = vector_pair_sets(mined, top_all, hor_all, matcher.bundle.manifest.appearance, vectors)
     reference = reference_costs(matcher.descriptors)
-    fits, start, counts = {}, 0, {}
+    fits = {v: fit_site_adaptation(p, calibration="odds", reference=reference)
+            for v, p in sets.items()}
+    return SiteRun(choose_fit(fits), mined, sets[vectors[0]].counts(), len(scored), fits)
+
+
+def vectors_embedder(matcher, vectors: Sequence[str]) -> Callable:
+    """``embed(image, boxes) -> (K, sum of sizes)``: every one of ``vectors`` of the boxes,
+    side by side, from one run of ``matcher``'s network (for :func:`~xvmatch.inference.
+    adaptation_pairs.embed_frames`; :func:`vector_pair_sets` splits them)."""
+    def embed(image, boxes):
+        return np.concatenate(matcher.bundle.embed_vectors(matcher.crops(image, boxes),
+                                                           vectors), axis=1)
+
+    return embed
+
+
+def vector_pair_sets(mined: MinedPairs, top: np.ndarray, hor: np.ndarray, spec,
+                     vectors: Sequence[str]) -> dict[str, PairSet]:
+    """``{vector: PairSet}`` of the mined pairs from :func:`vectors_embedder`'s side-by-side
+    columns (``spec``: the network's :class:`~xvmatch.inference.bundle.AppearanceSpec`)."""
+    sets, start = {}, 0
     for vector in vectors:
         cols = slice(start, start + spec.dim(vector))
         start = cols.stop
-        pairs = replace(mined.pair_set(top_all[:, cols], hor_all[:, cols]), vector=vector)
-        fits[vector] = fit_site_adaptation(pairs, calibration="odds", reference=reference)
-        counts = pairs.counts()
-    return SiteRun(choose_fit(fits), mined, counts, len(scored), fits)
+        sets[vector] = replace(mined.pair_set(top[:, cols], hor[:, cols]), vector=vector)
+    return sets
 
 
 def adapted_vectors(spec) -> tuple[str, ...]:
