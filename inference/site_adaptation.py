@@ -48,6 +48,7 @@ __all__ = [
     "ADAPTATION_FORMAT_VERSIONS",
     "CALIBRATIONS",
     "DEFAULT_RANKS",
+    "NEUTRAL_SLOPE",
     "RIDGE",
     "VECTORS",
     "VIEWS",
@@ -56,6 +57,7 @@ __all__ = [
     "SiteAdaptation",
     "adaptation_bytes",
     "auc_standard_error",
+    "better_than_chance",
     "choose_fit",
     "fit_site_adaptation",
     "load_adaptation",
@@ -332,6 +334,15 @@ def auc_standard_error(auc: float, n_pos: int, n_neg: int) -> float:
     return float(np.sqrt(max(var, 0.0)))
 
 
+def better_than_chance(auc: float, pairs: tuple[int, int], min_gain: float = 0.005) -> bool:
+    """Whether a held-out verification AUC measured on ``pairs`` ``(positives, negatives)`` is
+    above chance (0.5) by more than ``min_gain`` and twice its standard error: the same bar
+    :func:`fit_site_adaptation` sets an adaptation against the unadapted cost."""
+    if not np.isfinite(auc) or min(pairs) < 1:
+        return False
+    return auc >= 0.5 + max(min_gain, 2.0 * auc_standard_error(auc, *pairs))
+
+
 def _scatter(diff: list[np.ndarray], weights: list[float], dim: int) -> np.ndarray:
     """Weighted mean over groups of each group's mean outer product of differences."""
     out = np.zeros((dim, dim))
@@ -438,17 +449,28 @@ def _calibration(raw_pos, raw_neg, new_pos, new_neg) -> np.ndarray:
     return np.array([a, rp - a * np_])
 
 
+NEUTRAL_SLOPE = 1e-3
+"""Slope of the odds calibration of a site cue whose lower costs are no likelier the same
+person (a fitted log-odds slope >= 0): every cost goes to about the reference's neutral cost
+(likelihood ratio 1) instead of passing for the cue the network has on renders."""
+
+
 def _odds_calibration(ref_pos, ref_neg, new_pos, new_neg) -> np.ndarray:
     """``a, b`` giving each adapted cost the reference cost of the same likelihood ratio: with
     ``log-odds = alpha logit(c) + beta`` fitted on the site's pairs (``new``) and on the
     reference (``ref``, the network on the renders it was trained on),
-    ``logit(c') = (alpha logit(c) + beta - beta_ref) / alpha_ref``."""
+    ``logit(c') = (alpha logit(c) + beta - beta_ref) / alpha_ref``. A site ``alpha`` of about 0
+    or above (the cue says nothing there, or the opposite) is taken as :data:`NEUTRAL_SLOPE` times
+    ``alpha_ref`` with ``beta`` 0 (class-balanced pairs: a likelihood ratio of 1): the costs go
+    to the neutral one instead of through unchanged."""
     if min(len(ref_pos), len(ref_neg), len(new_pos), len(new_neg)) == 0:
         return np.array([1.0, 0.0])
     alpha, beta = _log_odds(new_pos, new_neg)
     alpha_ref, beta_ref = _log_odds(ref_pos, ref_neg)
-    if not (alpha < 0 and alpha_ref < 0):  # a lower cost must mean more likely the same person
+    if not alpha_ref < 0:  # on its own renders a lower cost must mean the same person
         return np.array([1.0, 0.0])
+    if alpha > NEUTRAL_SLOPE * alpha_ref:  # no evidence either way: likelihood ratio 1
+        alpha, beta = NEUTRAL_SLOPE * alpha_ref, 0.0
     return np.array([alpha / alpha_ref, (beta - beta_ref) / alpha_ref])
 
 

@@ -100,3 +100,28 @@ def test_adapt_refusals_write_nothing(video, tmp_path, capsys) -> None:
     with pytest.raises(SystemExit):  # checked while parsing
         main(_args(video, out, "--burst", "2"))
     assert "--burst: expected an integer in [3, 100]" in capsys.readouterr().err
+
+
+def test_refusal_advises_boxes_alone_when_the_cue_is_not_above_chance() -> None:
+    """A refusal says why for each vector; when the network's own descriptors are not shown
+    better than chance on the held-out pairs either, it advises matching from the boxes alone
+    (images would only add noise), else keeping the bundle."""
+    from xvmatch.cli_adapt import refusal_message
+    from xvmatch.inference.site_adaptation import AdaptationFit, SiteAdaptation
+    from xvmatch.inference.site_bundle import SiteRun
+
+    def run(before: float, pairs: tuple[int, int]) -> SiteRun:
+        fits = {v: AdaptationFit(SiteAdaptation.identity(4, v), False, f"{v} did not help",
+                                 before, before + 0.01, {}, pairs)
+                for v in ("features", "descriptors")}
+        return SiteRun(fits["features"], None, {}, 0, fits)
+
+    chance = refusal_message(run(0.505, (40, 400)), "default")
+    assert chance.startswith("adaptation refused, nothing written: features: features did not "
+                             "help; descriptors: descriptors did not help; nor is the network's")
+    assert "held-out AUC 0.505 +/- 0.0" in chance and "without --top-images and --hor-images" \
+        in chance
+    kept = refusal_message(run(0.8, (40, 400)), "my_bundle")
+    assert kept.endswith("; keep using --model my_bundle") and "boxes alone" not in kept
+    unjudged = refusal_message(run(float("nan"), (2, 3)), "default")
+    assert unjudged.endswith("keep using --model default")

@@ -23,7 +23,10 @@ from xvmatch.inference.site_adaptation import (
     AdaptationFit,
     PairSet,
     SiteAdaptation,
+    _log_odds,
+    _odds_calibration,
     adaptation_bytes,
+    better_than_chance,
     choose_fit,
     fit_site_adaptation,
     load_adaptation,
@@ -355,3 +358,33 @@ def test_bundle_refuses_a_bad_adaptation(tmp_path, change: dict, message: str) -
     with pytest.raises(BundleError, match=message) as info:
         load_bundle(folder)
     assert "\n" not in str(info.value)
+
+
+def test_better_than_chance_needs_twice_the_standard_error() -> None:
+    assert better_than_chance(0.9, (100, 1000))
+    assert not better_than_chance(0.55, (20, 200))  # 0.05 above chance, SE about 0.07
+    assert better_than_chance(0.55, (20_000, 200_000))
+    assert not better_than_chance(0.3, (1000, 1000))  # below chance is not above it
+    assert not better_than_chance(float("nan"), (100, 100))
+    assert not better_than_chance(0.9, (0, 100))
+
+
+def test_odds_calibration_sends_a_cue_without_evidence_to_the_neutral_cost() -> None:
+    """A site cue whose held-out positives cost no less than its negatives gets a calibration
+    that maps every cost to about the reference's likelihood-ratio-1 cost, not the identity
+    (which would pass the cue on at full strength)."""
+    rng = np.random.default_rng(0)
+    ref = (rng.uniform(0.05, 0.3, 400), rng.uniform(0.25, 0.6, 400))
+    inverted = (rng.uniform(0.3, 0.5, 200), rng.uniform(0.2, 0.4, 200))
+    cal = _odds_calibration(*ref, *inverted)
+    assert 0 < cal[0] < 0.01
+    mapped = SiteAdaptation.identity(DIM)
+    mapped = SiteAdaptation(mapped.top_mean, mapped.top_scale, mapped.hor_mean, mapped.hor_scale,
+                            mapped.projection, cal, 0)
+    costs = mapped.calibrate(np.linspace(0.05, 0.6, 12))
+    assert np.ptp(costs) < 0.01
+    alpha_ref, beta_ref = _log_odds(*ref)
+    logit = np.log(costs) - np.log1p(-costs)
+    assert np.allclose(alpha_ref * logit + beta_ref, 0.0, atol=0.02)  # likelihood ratio 1
+    informative = (rng.uniform(0.05, 0.3, 200), rng.uniform(0.25, 0.6, 200))
+    assert _odds_calibration(*ref, *informative)[0] > 0.5

@@ -10,6 +10,7 @@ the base install.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from xvmatch.cli_options import (
@@ -27,7 +28,7 @@ from xvmatch.cli_options import (
 from xvmatch.cli_types import box_id, int_in, thread_count, worker_count
 from xvmatch.geometry.output_paths import Input, Output, check_outputs, check_own_folder
 
-__all__ = ["ADAPT_COMMAND", "EXAMPLE", "add_adapt_parser"]
+__all__ = ["ADAPT_COMMAND", "EXAMPLE", "add_adapt_parser", "refusal_message"]
 
 EXAMPLE = ("xvmatch adapt --top top.txt --hor hor.txt --top-images top.mp4 --hor-images hor.mp4 "
            "--out site/\n  xvmatch associate --model site/ --top top.txt --hor hor.txt "
@@ -79,6 +80,27 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def refusal_message(run, model: str) -> str:
+    """The one line ``adapt`` ends with when no fit was accepted (a
+    :class:`~xvmatch.inference.site_bundle.SiteRun`): each vector's reason, then what to do.
+    When the network's own cue (its descriptors, unadapted) is not above chance on the held-out
+    pairs either, images would only add noise to the boxes: the advice is to leave them out."""
+    from xvmatch.inference.site_adaptation import auc_standard_error, better_than_chance
+
+    fit = run.fit
+    reasons = "; ".join(f"{v}: {f.reason}" for v, f in run.fits.items()) or fit.reason
+    raw = run.fits.get("descriptors", fit)
+    if math.isfinite(raw.auc_before) and not better_than_chance(raw.auc_before, raw.heldout_pairs):
+        se = auc_standard_error(raw.auc_before, *raw.heldout_pairs)
+        advice = (f"nor is the network's own appearance cue shown better than chance at this "
+                  f"site (held-out AUC {raw.auc_before:.3f} +/- {se:.3f}): images would add "
+                  "noise to the boxes, so match from the boxes alone (associate without "
+                  "--top-images and --hor-images)")
+    else:
+        advice = f"keep using --model {model}"
+    return f"adaptation refused, nothing written: {reasons}; {advice}"
+
+
 def _cmd_adapt(args: argparse.Namespace) -> int:
     from xvmatch import __version__
     from xvmatch.cli_model import horizontal_size, open_models
@@ -120,9 +142,7 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
                             progress, args.workers)
     fit = run.fit
     if not fit.accepted:
-        reasons = "; ".join(f"{v}: {f.reason}" for v, f in run.fits.items()) or fit.reason
-        raise UsageError(f"adaptation refused, nothing written: {reasons}; keep using "
-                         f"--model {args.model}")
+        raise UsageError(refusal_message(run, args.model))
     out = claim_folder(args.out, ADAPT_COMMAND)
     roles = {"top": args.top, "hor": args.hor, "top_images": args.top_images,
              "hor_images": args.hor_images}
