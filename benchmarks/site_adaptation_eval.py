@@ -11,9 +11,12 @@ them: no labels) and every setting is scored on the rest (geometric-priors Eq. 9
 CVIDF1, %):
 
 * boxes only; images (unshifted: the renders the network was trained on); images shifted;
-  images shifted + the adaptation (one row per ``--calibrations``; ``odds`` is what ``adapt``
-  writes); and the fraction of the shift's CVIDF1 loss the adaptation recovers
-  ``(adapted - shifted) / (unshifted - shifted)``.
+  images shifted with the appearance check (``associate``'s default,
+  :mod:`xvmatch.inference.appearance_check`: the boxes alone when the cue fails on the test
+  part's own box-only pseudo-matches); images shifted + the adaptation (one row per
+  ``--calibrations``; ``odds`` is what ``adapt`` writes), and with the check; and the fraction
+  of the shift's CVIDF1 loss the adaptation recovers ``(adapted - shifted) / (unshifted -
+  shifted)``.
 
 With ``--cli`` the first seed's shifted video is also written as box files and image folders,
 and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``associate
@@ -127,11 +130,14 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
 
     embed = vectors_embedder(matcher, args.vectors)
 
-    def run(model, images):
+    def run(model, images, check: bool = False):
+        checked: list = []
         pred = associate_sequence_learned(
             top, hor, video.hor_size[0], model, hor_height=video.hor_size[1], frames=test,
-            top_images=images[0] if images else None, hor_images=images[1] if images else None)
-        return _score(pred, top, hor, back_top, back_hor, video.top, video.hor, test)
+            top_images=images[0] if images else None, hor_images=images[1] if images else None,
+            appearance_check=check, checked=checked)
+        score = _score(pred, top, hor, back_top, back_hor, video.top, video.hor, test)
+        return (*score, checked[0]) if check else score
 
     base = {"boxes": run(matcher, None),
             "images": run(matcher, (_Images(video.top_images), _Images(video.hor_images)))}
@@ -142,25 +148,37 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
         sets = vector_pair_sets(mined, embed_frames(mined.embed_frames, top, shifted[0], embed),
                                 embed_frames(mined.embed_frames, hor, shifted[1], embed),
                                 matcher.bundle.manifest.appearance, args.vectors)
+        *checked, check = run(matcher, shifted, check=True)
         row = {"seed": seed, "strength": strength, **base, "shifted": run(matcher, shifted),
+               "checked": tuple(checked), "check": check,
                "pseudo": (len(cp), precision), "counts": sets[args.vectors[0]].counts()}
         for cal in args.calibrations:
             fit = choose_fit({v: fit_site_adaptation(p, calibration=cal, reference=reference)
                               for v, p in sets.items()})
             row["fit"] = fit
             site = LearnedMatcher(replace(matcher.bundle, adaptation=fit.adaptation))
-            row[f"adapted {cal}"] = run(site, shifted) if fit.accepted else row["shifted"]
+            if fit.accepted:
+                row[f"adapted {cal}"] = run(site, shifted)
+                *adapted_checked, row["adapted check"] = run(site, shifted, check=True)
+                row[f"adapted {cal}, checked"] = tuple(adapted_checked)
+            else:  # refused: the user keeps the default bundle, with its check
+                row[f"adapted {cal}"] = row["shifted"]
+                row[f"adapted {cal}, checked"] = row["checked"]
+                row["adapted check"] = check
         row["seconds"] = time.perf_counter() - t0
         rows.append(row)
     return rows
 
 
 def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
-    settings = ["boxes", "images", "shifted", *(f"adapted {c}" for c in calibrations)]
-    print("\nEq. 9 accuracy / CVIDF1 (%) on the test part; recovered = (adapted - shifted) / "
-          "(images - shifted), CVIDF1")
+    settings = ["boxes", "images", "shifted", "checked",
+                *(f"adapted {c}" for c in calibrations), f"adapted {calibrations[0]}, checked"]
+    print("\nEq. 9 accuracy / CVIDF1 (%) on the test part; checked: with the appearance check "
+          "(associate's default), which falls back to the boxes when the cue fails on the test "
+          "part's own pseudo-matches; recovered = (adapted - shifted) / (images - shifted), "
+          "CVIDF1")
     print("seed strength | " + " | ".join(settings) + " | recovered | pseudo pairs (precision) "
-          "| held-out AUC before -> after (rank)")
+          "| held-out AUC before -> after (rank) | check AUC, default / adapted")
     for r in rows:
         cells = " | ".join(f"{r[s][0]:.1f} / {r[s][1]:.1f}" for s in settings)
         lost = r["images"][1] - r["shifted"][1]
@@ -170,7 +188,8 @@ def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
         print(f"{r['seed']} {r['strength']:g} | {cells} | {rec:.2f} | {r['pseudo'][0]} "
               f"({100 * r['pseudo'][1]:.1f}%) | {fit.auc_before:.3f} -> {fit.auc_after:.3f} "
               f"({fit.adaptation.rank if fit.accepted else 'refused'}"
-              f"{', ' + fit.adaptation.vector if fit.accepted else ''})")
+              f"{', ' + fit.adaptation.vector if fit.accepted else ''}) | "
+              f"{_check(r['check'])} / {_check(r['adapted check'])}")
     for strength in sorted({r["strength"] for r in rows}):
         sub = [r for r in rows if r["strength"] == strength]
         means = {s: np.mean([r[s] for r in sub], axis=0) for s in settings}
@@ -180,6 +199,13 @@ def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
         print(f"mean, strength {strength:g} ({len(sub)} seeds) | " + " | ".join(
             f"{s} {means[s][0]:.1f} / {means[s][1]:.1f}" for s in settings)
               + f" | recovered: {rec}")
+
+
+def _check(check) -> str:
+    """An appearance check in a few characters: its AUC, and boxes when it failed."""
+    if not check.judged:
+        return "not judged"
+    return f"{check.auc:.3f}{'' if check.trusted else ' (boxes)'}"
 
 
 def _timed(cmd: list[str]) -> float:

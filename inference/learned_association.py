@@ -41,6 +41,7 @@ from xvmatch.geometry.matcher_inputs import (
 )
 from xvmatch.geometry.spatial_features import FeatureConfig, FrameFeatures
 from xvmatch.geometry.spatial_search import FrameLike
+from xvmatch.inference.appearance_check import AppearanceCheck, check_appearance
 from xvmatch.inference.assignment import assign, assignment_is_stable
 from xvmatch.inference.bundle import Bundle, load_bundle
 
@@ -281,6 +282,8 @@ def associate_sequence_learned(
     hor_images: FrameImages | None = None,
     cameras: FrameCameraSource | None = None,
     rechecked: list[int] | None = None,
+    appearance_check: bool = False,
+    checked: list[AppearanceCheck] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame on its own with the learned matcher; ``{frame: [(top_id, hor_id)]}``.
 
@@ -309,6 +312,13 @@ def associate_sequence_learned(
         rechecked: if given, filled with the frames scored again with FP32 because their INT8
             assignment was a near tie (models opened with ``recheck``; see the module
             docstring).
+        appearance_check: with images, judge the (first) model's appearance cue on these
+            frames' own box-only pseudo-matches (:func:`~xvmatch.inference.appearance_check.
+            check_appearance`) and, when it fails, match every frame from the boxes alone
+            (each frame is then also scored without images, and no frame is assigned before
+            the last one is scored).
+        checked: if given, receives the :class:`~xvmatch.inference.appearance_check.
+            AppearanceCheck` of a run with ``appearance_check`` and images.
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
@@ -380,6 +390,16 @@ def associate_sequence_learned(
                for m, c, kept in zip(models, cues["app"], cues["crops"], strict=True)]
         return {**cues, "app": app}
 
+    judge = bool(appearance_check) and top_images is not None
+    held: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # images, boxes, app cue
+
+    def finish(frame: int, cost: np.ndarray) -> None:
+        if costs_out is not None:
+            costs_out[frame] = cost
+        pairs = assign(cost, gamma)
+        t_ids, h_ids = top[frame].ids, hor[frame].ids
+        out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]
+
     def flush() -> None:
         costs = frame_costs(pending)
         if tolerance is not None:
@@ -391,12 +411,14 @@ def associate_sequence_learned(
                 costs[k] = cost
             if rechecked is not None:
                 rechecked.extend(pending[k][0] for k in near)
-        for (frame, _, _), cost in zip(pending, costs, strict=True):
-            if costs_out is not None:
-                costs_out[frame] = cost
-            pairs = assign(cost, gamma)
-            t_ids, h_ids = top[frame].ids, hor[frame].ids
-            out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]
+        if judge:
+            boxes = frame_costs([(f, g, {k: v for k, v in c.items() if k not in ("app", "crops")})
+                                 for f, g, c in pending])
+            for (frame, _, cues), cost, box_cost in zip(pending, costs, boxes, strict=True):
+                held[frame] = (cost, box_cost, cues["app"][0])
+        else:
+            for (frame, _, _), cost in zip(pending, costs, strict=True):
+                finish(frame, cost)
         pending.clear()
 
     def both(frame: int) -> bool:
@@ -425,6 +447,13 @@ def associate_sequence_learned(
             flush()
     finally:
         stream.close()  # shuts the worker pool down, also on an error or an interrupt
+    if judge:
+        result = check_appearance(top, hor, {f: h[1] for f, h in held.items()},
+                                  {f: h[2] for f, h in held.items()}, gamma)
+        if checked is not None:
+            checked.append(result)
+        for frame in sorted(held):
+            finish(frame, held[frame][0 if result.trusted else 1])
     return {f: out[f] for f in order}
 
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from xvmatch.datasets.box_image_size import check_boxes_in_image
+from xvmatch.inference.appearance_check import AppearanceCheck
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
@@ -69,6 +70,9 @@ class LearnedRunOptions:
         top_offset: the top records are already re-timed by this many frames (top frame =
             horizontal frame + offset); the top images are re-timed the same way.
         keep_costs: also return each frame's cost matrix (:attr:`LearnedRun.costs`).
+        appearance_check: with images, judge the appearance cue on the run's own box-only
+            pseudo-matches and match from the boxes alone when it fails
+            (:mod:`xvmatch.inference.appearance_check`).
     """
 
     models: tuple[LearnedMatcher, ...]
@@ -85,6 +89,7 @@ class LearnedRunOptions:
     workers: int = 1
     top_offset: int = 0
     keep_costs: bool = False
+    appearance_check: bool = False
 
     def __post_init__(self) -> None:
         if not self.models:
@@ -115,6 +120,7 @@ class LearnedRun:
         models: the matchers used.
         rechecked: the frames scored again with FP32 because their INT8 assignment was a near
             tie (matchers opened with ``recheck``).
+        checked: the appearance check of a run with ``appearance_check`` and images, else None.
     """
 
     pairs: dict[int, list[tuple[int, int]]]
@@ -124,6 +130,7 @@ class LearnedRun:
     hor_size_source: str
     models: tuple[LearnedMatcher, ...]
     rechecked: list[int] = field(default_factory=list)
+    checked: AppearanceCheck | None = None
 
 
 class RetimedFrames:
@@ -251,6 +258,7 @@ class LearnedInputs:
         width, height = options.hor_size
         costs: dict | None = {} if options.keep_costs else None
         rechecked: list[int] = []
+        checked: list[AppearanceCheck] = []
         pairs = associate_sequence_learned(
             self.top,
             self.hor,
@@ -268,9 +276,11 @@ class LearnedInputs:
             cameras=self.cameras,
             costs_out=costs,
             rechecked=rechecked,
+            appearance_check=options.appearance_check,
+            checked=checked,
         )
         return LearnedRun(pairs, costs, self.gamma, (width, height), options.hor_size_source,
-                          options.models, rechecked)
+                          options.models, rechecked, checked[0] if checked else None)
 
     def close(self) -> None:
         """Close the image sources."""

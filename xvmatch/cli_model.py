@@ -39,7 +39,8 @@ _gamma = float_in(0, 1, "the matcher's costs lie in [0, 1]", low_open=True)
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the learned matcher's options to a parser (``associate``): ``--model``, ``--gamma``,
-    ``--mirror``, the image and camera inputs, ``--costs``, ``--threads`` and ``--precision``."""
+    ``--mirror``, the image and camera inputs, ``--costs``, ``--threads``, ``--precision`` and
+    ``--appearance-check``."""
     g = parser.add_argument_group("learned matcher (--model)")
     g.add_argument(
         "--model", action="append", default=None, metavar="BUNDLE",
@@ -72,6 +73,11 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                    "near-tie frames are scored again with fp32) or fp32 (default: int8 when "
                    "the bundle has it, kept fp32's matches at export and the CPU has 8-bit "
                    "dot-product instructions, VNNI; else fp32)")
+    g.add_argument("--appearance-check", choices=("on", "off"), default="on",
+                   help="with images of a video: judge the appearance cue on the pairs the "
+                   "box-only matcher is sure of over consecutive frames, and match from the "
+                   "boxes alone when the images are shown too weak to help (default on; off: "
+                   "always use the images)")
 
 
 def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
@@ -197,6 +203,7 @@ def learned_run_options(
         top_offset=top_offset,
         keep_costs=(getattr(args, "costs", None) is not None
                     or getattr(args, "draw", None) is not None),
+        appearance_check=getattr(args, "appearance_check", "on") == "on",
     )
 
 
@@ -244,6 +251,9 @@ def associate_with_model(
             both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))
             print(f"INT8 appearance network: {len(run.rechecked)} of {both} frames were near "
                   "ties, scored again with FP32", file=sys.stderr)
+        if run.checked is not None and (not getattr(args, "quiet", False)
+                                        or not run.checked.trusted):
+            print(run.checked.message(), file=sys.stderr)
         if draw is not None:
             draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, run.pairs,
                           sorted(run.costs), inputs.images or None, run.hor_size,

@@ -1,0 +1,152 @@
+"""The appearance check (inference/appearance_check.py): a run's appearance cue judged on its own
+box-only pseudo-matches; synthetic cost matrices for the rule, a rendered video through the
+shipped bundle for ``associate_sequence_learned`` and the command line."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from xvmatch.cli import main
+from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes
+from xvmatch.datasets.synthetic_scenes import SynthConfig
+from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.inference.appearance_check import MIN_PAIRS, AppearanceCheck, check_appearance
+from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+
+PEOPLE = 5
+
+
+def _still(frames: int) -> tuple[dict, dict]:
+    """``frames`` consecutive frames of PEOPLE standing people in each view (fixed boxes: one
+    tracklet each), ids only naming boxes (the horizontal ones in another order)."""
+    boxes = np.array([[40.0 * k, 10.0, 20.0, 50.0] for k in range(PEOPLE)])
+    top = {f: FrameBoxes(f, np.arange(1, PEOPLE + 1), boxes) for f in range(1, frames + 1)}
+    hor = {f: FrameBoxes(f, np.arange(PEOPLE, 0, -1) + 100, boxes) for f in range(1, frames + 1)}
+    return top, hor
+
+
+def _costs(frames: int, app: str, seed: int = 0) -> tuple[dict, dict]:
+    """Box-only costs sure of the diagonal, and an appearance cue that agrees with it, says the
+    opposite or is noise."""
+    rng = np.random.default_rng(seed)
+    box = np.full((PEOPLE, PEOPLE), 0.9)
+    np.fill_diagonal(box, 0.05)
+    out = {}
+    for f in range(1, frames + 1):
+        noise = rng.uniform(0, 0.05, (PEOPLE, PEOPLE))
+        cue = {"agrees": np.where(np.eye(PEOPLE, dtype=bool), 0.1, 0.5),
+               "opposite": np.where(np.eye(PEOPLE, dtype=bool), 0.5, 0.1),
+               "noise": rng.uniform(0.2, 0.6, (PEOPLE, PEOPLE))}[app]
+        out[f] = cue + noise
+    return {f: box.copy() for f in range(1, frames + 1)}, out
+
+
+@pytest.mark.parametrize(("app", "trusted"), [("agrees", True), ("opposite", False),
+                                               ("noise", False)])
+def test_a_cue_is_judged_on_the_box_only_pseudo_matches(app: str, trusted: bool) -> None:
+    top, hor = _still(100)
+    box, cue = _costs(100, app)
+    check = check_appearance(top, hor, box, cue, gamma=0.5)
+    assert check.judged and check.trusted is trusted
+    assert check.positives >= MIN_PAIRS and check.negatives >= MIN_PAIRS
+    assert check.auc == (1.0 if app == "agrees" else check.auc)
+    assert (check.auc + 2 * check.error >= check.min_auc) is trusted
+    assert ("images used" in check.message()) is trusted
+    assert ("matched from the boxes alone" in check.message()) is not trusted
+
+
+def test_too_few_pairs_keep_the_images() -> None:
+    """Fewer consecutive frames than a burst, or a box-only matcher that is never sure: not
+    judged, and the images are used as before."""
+    top, hor = _still(6)
+    box, cue = _costs(6, "opposite")
+    short = check_appearance(top, hor, box, cue, gamma=0.5)
+    assert not short.judged and short.trusted and math.isnan(short.auc)
+    assert "needed to judge the images" in short.message()
+    top, hor = _still(40)
+    box, cue = _costs(40, "opposite")
+    unsure = {f: np.full_like(c, 0.45) for f, c in box.items()}  # never below gamma by 0.3
+    check = check_appearance(top, hor, unsure, cue, gamma=0.5)
+    assert not check.judged and check.trusted and check.positives == 0
+
+
+def test_a_few_pairs_do_not_condemn_a_cue() -> None:
+    """A cue of AUC 0.55 exactly (each pseudo-match costs 0.3, 11 of its frame's 20 other pairs
+    0.4 and 9 of them 0.2) passes on 2 bursts (its interval reaches 0.62) and fails on 20."""
+    weak = np.where(np.eye(PEOPLE, dtype=bool), 0.3, 0.2)
+    off = np.nonzero(~np.eye(PEOPLE, dtype=bool))
+    weak[off[0][:11], off[1][:11]] = 0.4
+    for frames, trusted in ((20, True), (200, False)):
+        top, hor = _still(frames)
+        box, _ = _costs(frames, "agrees")
+        check = check_appearance(top, hor, box, {f: weak for f in box}, gamma=0.5)
+        assert check.judged and check.auc == pytest.approx(0.55)
+        assert check.trusted is trusted, check
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("checked_video")
+    v = render_tracking_video(2, 40, SynthConfig(scenario="drone", n_people=(8, 12), fps=25.0))
+    return write_tracking_video(v, folder)
+
+
+class _Folder:
+    """PNG frames of a folder, optionally replaced by grey (a camera that keeps nothing of the
+    people: every crop the same)."""
+
+    def __init__(self, folder: Path, grey: bool = False) -> None:
+        self.folder, self.grey = folder, grey
+
+    def get(self, frame: int) -> np.ndarray:
+        import cv2
+
+        image = cv2.imread(str(self.folder / f"{frame:06d}.png"))
+        return np.full_like(image, 128) if self.grey else image
+
+
+def test_associate_drops_images_only_where_the_check_fails(video) -> None:
+    """On the shipped bundle: clean renders pass and give the images' matches; grey images
+    fail and give exactly the boxes-only matches; off, the images are always used."""
+    model = load_matcher_bundle("default")
+    top, hor = read_mot_boxes(video["top"]), read_mot_boxes(video["hor"])
+    import cv2
+
+    h, w = cv2.imread(str(video["hor_images"] / "000001.png")).shape[:2]
+
+    def run(grey: bool | None, check: bool):
+        checked: list[AppearanceCheck] = []
+        images = {} if grey is None else {
+            "top_images": _Folder(video["top_images"], grey),
+            "hor_images": _Folder(video["hor_images"], grey)}
+        pairs = associate_sequence_learned(top, hor, w, model, hor_height=h,
+                                           appearance_check=check, checked=checked, **images)
+        return pairs, checked
+
+    boxes, none = run(None, True)
+    assert none == []  # nothing to judge without images
+    clean, (passed,) = run(False, True)
+    assert passed.judged and passed.trusted and passed.auc > 0.8
+    assert clean == run(False, False)[0]
+    greyed, (failed,) = run(True, True)
+    assert failed.judged and not failed.trusted and failed.auc == 0.5
+    assert greyed == boxes
+    unchecked, nothing = run(True, False)
+    assert nothing == [] and unchecked != boxes
+
+
+def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) -> None:
+    args = ["associate", "--model", "default", "--top", str(video["top"]), "--hor",
+            str(video["hor"]), "--top-images", str(video["top_images"]), "--hor-images",
+            str(video["hor_images"]), "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "a.csv")]) == 0
+    assert "appearance check" not in capsys.readouterr().err  # quiet, and the images passed
+    assert main([*args[:-1], "--out", str(tmp_path / "b.csv")]) == 0
+    assert "appearance check: the appearance cue ranks this video's" in capsys.readouterr().err
+    assert main([*args[:-1], "--appearance-check", "off", "--out", str(tmp_path / "c.csv")]) == 0
+    assert "appearance check" not in capsys.readouterr().err
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
