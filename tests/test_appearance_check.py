@@ -4,6 +4,7 @@ shipped bundle for ``associate_sequence_learned`` and the command line."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -14,7 +15,12 @@ from xvmatch.cli import main
 from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
-from xvmatch.inference.appearance_check import MIN_PAIRS, AppearanceCheck, check_appearance
+from xvmatch.inference.appearance_check import (
+    MIN_AUC,
+    MIN_PAIRS,
+    AppearanceCheck,
+    check_appearance,
+)
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
 
 PEOPLE = 5
@@ -145,8 +151,14 @@ def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) ->
             str(video["hor_images"]), "--quiet"]
     assert main([*args, "--out", str(tmp_path / "a.csv")]) == 0
     assert "appearance check" not in capsys.readouterr().err  # quiet, and the images passed
-    assert main([*args[:-1], "--out", str(tmp_path / "b.csv")]) == 0
+    costs = tmp_path / "costs.json"
+    assert main([*args[:-1], "--out", str(tmp_path / "b.csv"), "--costs", str(costs)]) == 0
     assert "appearance check: the appearance cue ranks this video's" in capsys.readouterr().err
-    assert main([*args[:-1], "--appearance-check", "off", "--out", str(tmp_path / "c.csv")]) == 0
+    record = json.loads(costs.read_text())["appearance_check"]
+    assert record["judged"] and record["images_used"] and record["auc"] > 0.8
+    assert record["positives"] >= MIN_PAIRS and record["min_auc"] == MIN_AUC
+    assert main([*args[:-1], "--appearance-check", "off", "--out", str(tmp_path / "c.csv"),
+                 "--costs", str(costs)]) == 0
     assert "appearance check" not in capsys.readouterr().err
+    assert "appearance_check" not in json.loads(costs.read_text())
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()

@@ -259,12 +259,15 @@ def associate_with_model(
                           sorted(run.costs), inputs.images or None, run.hor_size,
                           not getattr(args, "no_labels", False))
     if getattr(args, "costs", None) is not None:
-        _write_costs(args.costs, top, hor, run.costs, run.gamma)
+        _write_costs(args.costs, top, hor, run.costs, run.gamma, run.checked)
     return run.pairs
 
 
-def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float) -> None:
+def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float,
+                 checked=None) -> None:
+    """``--costs``' JSON (docs/formats.md); ``checked``: the run's appearance check, if any."""
     import json
+    import math
 
     from xvmatch.geometry.atomic_files import atomic_write_text
 
@@ -278,6 +281,15 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
             for f, c in sorted(costs.items())
         },
     }
+    if checked is not None:
+        def figure(v: float) -> float | None:
+            return round(float(v), 6) if math.isfinite(v) else None
+
+        record["appearance_check"] = {
+            "judged": checked.judged, "images_used": checked.trusted,
+            "auc": figure(checked.auc), "standard_error": figure(checked.error),
+            "positives": checked.positives, "negatives": checked.negatives,
+            "min_auc": checked.min_auc}
     atomic_write_text(path, json.dumps(record) + "\n")
 
 
