@@ -30,6 +30,7 @@ import numpy as np
 from xvmatch.geometry.matcher_inputs import appearance_cost
 from xvmatch.geometry.spatial_matching import SpatialParams
 from xvmatch.geometry.spatial_search import best_per_candidate, rank_hypotheses
+from xvmatch.inference.appearance_check import AppearanceCheck
 from xvmatch.inference.learned_association import (
     FrameCameraSource,
     FrameImages,
@@ -162,6 +163,8 @@ def multi_view_costs(
     vote_calibration: LogisticCalibration = SPATIAL_VOTE,
     workers: int = 1,
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+    appearance_check: bool = False,
+    checked: dict[int, AppearanceCheck] | None = None,
 ) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame.
 
@@ -180,6 +183,11 @@ def multi_view_costs(
         vote_calibration: the calibration of the handcrafted top-ego vote costs.
         workers: processes for the learned matcher's geometry features.
         progress: wraps the frame iterator of each top-ego pass.
+        appearance_check: with images, judge each top-ego pass's appearance cue on its own
+            box-only pseudo-matches, that pass falling back to the boxes when it fails
+            (:mod:`xvmatch.inference.appearance_check`; the ego-ego costs are not judged).
+        checked: if given, receives ``{egocentric view (1-based): AppearanceCheck}`` of the
+            passes judged.
     """
     frames = sorted({int(f) for f in frames})
     n_views = len(views)
@@ -207,6 +215,7 @@ def multi_view_costs(
                                  if len(t) and len(h) else np.ones((len(t), len(h))))
             continue
         found: dict[int, np.ndarray] = {}
+        judged: list[AppearanceCheck] = []
         top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
         associate_sequence_learned(
             top_rows, {f: views[k][f] for f in frames if f in views[k]}, width, matcher,
@@ -215,7 +224,10 @@ def multi_view_costs(
             top_images=images[0] if images is not None else None,
             hor_images=images[k] if images is not None else None,
             cameras=cameras[k - 1] if cameras is not None else None,
+            appearance_check=appearance_check, checked=judged,
         )
+        if checked is not None and judged:
+            checked[k] = judged[0]
         for f in frames:
             top_ego[f][k] = found.get(f, np.ones(sizes[f][:1] + sizes[f][k:k + 1]))
     out = {}

@@ -162,3 +162,33 @@ def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) ->
     assert "appearance check" not in capsys.readouterr().err
     assert "appearance_check" not in json.loads(costs.read_text())
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
+
+
+def test_associate_multi_judges_each_egocentric_view(video, tmp_path, capsys) -> None:
+    """associate-multi judges each top-ego pass: grey images of the one horizontal view fail
+    and its people come out exactly as from the boxes alone."""
+    import cv2
+
+    grey = {}
+    for view in ("top_images", "hor_images"):
+        grey[view] = tmp_path / view
+        grey[view].mkdir()
+        for png in sorted(video[view].glob("*.png")):
+            image = cv2.imread(str(png))
+            cv2.imwrite(str(grey[view] / png.name), np.full_like(image, 128))
+    base = ["associate-multi", "--model", "default", "--top", str(video["top"]), "--hor",
+            str(video["hor"]), "--quiet"]
+    size = "x".join(map(str, cv2.imread(str(grey["hor_images"] / "000001.png")).shape[1::-1]))
+    assert main([*base, "--image-size", size, "--out", str(tmp_path / "boxes")]) == 0
+    assert main([*base, "--top-images", str(grey["top_images"]), "--hor-images",
+                 str(grey["hor_images"]), "--out", str(tmp_path / "grey")]) == 0
+    err = capsys.readouterr().err
+    assert f"--hor {video['hor']}: appearance check:" in err and "from the boxes alone" in err
+    for name in ("top.txt", "hor1.txt"):
+        assert (tmp_path / "grey" / name).read_bytes() == (tmp_path / "boxes" / name).read_bytes()
+    assert main([*base, "--top-images", str(grey["top_images"]), "--hor-images",
+                 str(grey["hor_images"]), "--appearance-check", "off",
+                 "--out", str(tmp_path / "unchecked")]) == 0
+    assert "appearance check" not in capsys.readouterr().err
+    assert (tmp_path / "unchecked" / "hor1.txt").read_bytes() != \
+        (tmp_path / "boxes" / "hor1.txt").read_bytes()  # grey images do change the matches

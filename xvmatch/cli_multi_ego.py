@@ -100,6 +100,11 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
                    "estimates, 1..64 (default 1)")
     p.add_argument("--threads", type=thread_count, default=1, metavar="K",
                    help="onnxruntime threads, 1..64 (default 1)")
+    p.add_argument("--appearance-check", choices=("on", "off"), default="on",
+                   help="with images of a video: judge each horizontal view's top-ego "
+                   "appearance cue on the pairs the box-only matcher is sure of over "
+                   "consecutive frames, and use that view's boxes alone when its images are "
+                   "shown too weak to help (as associate; default on)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     add_spatial_options(p)
     p.set_defaults(func=_cmd_associate_multi)
@@ -243,12 +248,17 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         if any(offsets):
             views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
                                                                    cameras, camera_rows)
+        checked: dict = {}
         problems = multi_view_costs(
             views, sizes, frames, matcher=matcher,
             appearance=matcher if images is not None else None, images=images,
             cameras=cameras, camera_rows=camera_rows, params=params, workers=args.workers,
             progress=frame_progress(len(frames), "costs", not args.quiet),
+            appearance_check=args.appearance_check == "on", checked=checked,
         )
+        for k, check in sorted(checked.items()):
+            if not args.quiet or not check.trusted:
+                print(f"--hor {paths[k]}: {check.message()}", file=sys.stderr)
     finally:
         for source in sources:
             source.close()
