@@ -317,9 +317,14 @@ def pair_auc(pos: np.ndarray, neg: np.ndarray) -> float:
     pos, neg = np.asarray(pos, np.float64).ravel(), np.asarray(neg, np.float64).ravel()
     if pos.size == 0 or neg.size == 0:
         return float("nan")
-    from scipy.stats import rankdata
-
-    ranks = rankdata(np.concatenate([pos, neg]))
+    # average ranks (ties share the mean of their places), in numpy: scipy.stats alone takes
+    # half a second to import, and associate's appearance check calls this once per run
+    x = np.concatenate([pos, neg])
+    order = np.argsort(x, kind="stable")
+    starts = np.r_[0, np.flatnonzero(np.diff(x[order])) + 1]
+    ends = np.r_[starts[1:], x.size]
+    ranks = np.empty(x.size)
+    ranks[order] = np.repeat((starts + ends + 1) / 2.0, ends - starts)
     u = ranks[: pos.size].sum() - pos.size * (pos.size + 1) / 2.0
     return float(1.0 - u / (pos.size * neg.size))
 

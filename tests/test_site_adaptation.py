@@ -68,6 +68,22 @@ def _site(seed: int, cast: float = 3.0, signal: float = 1.0, people: int = 12,
                    {"top": group, "hor": group}, group, group)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 6), min_size=1, max_size=30),
+       st.lists(st.integers(0, 6), min_size=1, max_size=30))
+def test_pair_auc_is_the_mann_whitney_statistic(pos: list[int], neg: list[int]) -> None:
+    """Ties included (small integers): the share of (positive, negative) pairs where the
+    positive costs less, ties half, as scipy's ranks give it."""
+    from scipy.stats import rankdata
+
+    p, n = np.array(pos, float) / 3, np.array(neg, float) / 3
+    brute = ((p[:, None] < n[None, :]) + 0.5 * (p[:, None] == n[None, :])).mean()
+    ranks = rankdata(np.concatenate([p, n]))
+    scipy_auc = 1.0 - (ranks[: p.size].sum() - p.size * (p.size + 1) / 2) / (p.size * n.size)
+    assert pair_auc(p, n) == pytest.approx(brute, abs=1e-12)
+    assert pair_auc(p, n) == pytest.approx(scipy_auc, abs=1e-12)
+
+
 def test_pair_auc_values() -> None:
     assert pair_auc(np.array([0.1, 0.2]), np.array([0.3, 0.4])) == 1.0
     assert pair_auc(np.array([0.5]), np.array([0.5])) == 0.5
