@@ -49,6 +49,8 @@ class AppearanceCheck:
         error: its standard error (Hanley and McNeil; NaN when not judged).
         positives, negatives: pseudo-matched pairs and the other boxes of their frames.
         min_auc: the bar it was held to.
+        bursts: runs of consecutive frames the pairs were mined on (0: single image pairs or
+            a clip too short to judge anything, about which there is nothing to say).
     """
 
     judged: bool
@@ -58,6 +60,12 @@ class AppearanceCheck:
     positives: int
     negatives: int
     min_auc: float = MIN_AUC
+    bursts: int = 0
+
+    @property
+    def worth_saying(self) -> bool:
+        """Whether the user is told: not for inputs without a run of consecutive frames."""
+        return self.judged or self.bursts > 0
 
     def message(self) -> str:
         """One line for the user."""
@@ -117,8 +125,9 @@ def check_appearance(
 
     n_pos, n_neg = len(mined.cross_pos), len(mined.cross_neg)
     if min(n_pos, n_neg) < min_pairs:
-        return AppearanceCheck(False, True, math.nan, math.nan, n_pos, n_neg, min_auc)
+        return AppearanceCheck(False, True, math.nan, math.nan, n_pos, n_neg, min_auc,
+                               len(bursts))
     auc = pair_auc(costs(mined.cross_pos), costs(mined.cross_neg))
     error = auc_standard_error(auc, n_pos, n_neg)
     return AppearanceCheck(True, bool(auc + 2.0 * error >= min_auc), auc, error, n_pos, n_neg,
-                           min_auc)
+                           min_auc, len(bursts))

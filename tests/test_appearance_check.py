@@ -73,11 +73,13 @@ def test_too_few_pairs_keep_the_images() -> None:
     short = check_appearance(top, hor, box, cue, gamma=0.5)
     assert not short.judged and short.trusted and math.isnan(short.auc)
     assert "needed to judge the images" in short.message()
+    assert short.bursts == 0 and not short.worth_saying  # single images: nothing to say
     top, hor = _still(40)
     box, cue = _costs(40, "opposite")
     unsure = {f: np.full_like(c, 0.45) for f, c in box.items()}  # never below gamma by 0.3
     check = check_appearance(top, hor, unsure, cue, gamma=0.5)
     assert not check.judged and check.trusted and check.positives == 0
+    assert check.bursts == 4 and check.worth_saying  # a video the matcher is never sure of
 
 
 def test_a_few_pairs_do_not_condemn_a_cue() -> None:
@@ -192,3 +194,17 @@ def test_associate_multi_judges_each_egocentric_view(video, tmp_path, capsys) ->
     assert "appearance check" not in capsys.readouterr().err
     assert (tmp_path / "unchecked" / "hor1.txt").read_bytes() != \
         (tmp_path / "boxes" / "hor1.txt").read_bytes()  # grey images do change the matches
+
+
+def test_single_image_pairs_say_nothing_of_the_check(video, tmp_path, capsys) -> None:
+    """Two frames hold no run of consecutive frames to judge: no line about the check."""
+    from xvmatch.datasets.mot_boxes import write_mot_boxes
+
+    for view in ("top", "hor"):
+        write_mot_boxes(tmp_path / f"{view}.txt",
+                        {f: r for f, r in read_mot_boxes(video[view]).items() if f <= 2})
+    assert main(["associate", "--model", "default", "--top", str(tmp_path / "top.txt"), "--hor",
+                 str(tmp_path / "hor.txt"), "--top-images", str(video["top_images"]),
+                 "--hor-images", str(video["hor_images"]), "--out", str(tmp_path / "p.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "wrote" in err and "appearance check" not in err
