@@ -45,7 +45,7 @@ from xvmatch.inference.site_adaptation import (
     fit_site_adaptation,
 )
 
-__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vectors",
+__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vectors", "json_figure",
            "vector_pair_sets", "vectors_embedder", "write_site_bundle"]
 
 Progress = Callable[[Iterable, int, str], Iterable]
@@ -174,8 +174,9 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def _figure(value: float) -> float | None:
-    """A held-out figure for JSON (None for NaN: too few pairs to judge)."""
+def json_figure(value: float) -> float | None:
+    """A measured figure for a JSON record: rounded to 6 decimals, None for NaN (too few pairs
+    to judge)."""
     return round(float(value), 6) if np.isfinite(value) else None
 
 
@@ -214,8 +215,8 @@ def adaptation_record(run: SiteRun, inputs: Mapping[str, str | os.PathLike], sha
                     "before": round(fit.auc_before, 6), "after": round(fit.auc_after, 6),
                     "by_rank": {str(k): round(v, 6) for k, v in fit.auc_by_rank.items()},
                     "pairs": list(fit.heldout_pairs),
-                    "vectors": {v: {"accepted": f.accepted, "before": _figure(f.auc_before),
-                                    "after": _figure(f.auc_after)}
+                    "vectors": {v: {"accepted": f.accepted, "before": json_figure(f.auc_before),
+                                    "after": json_figure(f.auc_after)}
                                 for v, f in run.fits.items()}},
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "xvmatch": version,

@@ -267,7 +267,6 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
                  checked=None) -> None:
     """``--costs``' JSON (docs/formats.md); ``checked``: the run's appearance check, if any."""
     import json
-    import math
 
     from xvmatch.geometry.atomic_files import atomic_write_text
 
@@ -282,12 +281,11 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
         },
     }
     if checked is not None:
-        def figure(v: float) -> float | None:
-            return round(float(v), 6) if math.isfinite(v) else None
+        from xvmatch.inference.site_bundle import json_figure
 
         record["appearance_check"] = {
             "judged": checked.judged, "images_used": checked.trusted,
-            "auc": figure(checked.auc), "standard_error": figure(checked.error),
+            "auc": json_figure(checked.auc), "standard_error": json_figure(checked.error),
             "positives": checked.positives, "negatives": checked.negatives,
             "min_auc": checked.min_auc}
     atomic_write_text(path, json.dumps(record) + "\n")
