@@ -30,6 +30,7 @@ from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [
     "Embedder",
+    "PairEmbedder",
     "TrackletAppearance",
     "clip_appearance",
     "colour_similarity",
@@ -40,6 +41,9 @@ __all__ = [
 Embedder = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``embed(image (H, W, 3) uint8 BGR, boxes (K, 4)) -> (K, D)`` unit descriptors, e.g.
 :meth:`xvmatch.inference.learned_association.LearnedMatcher.descriptors`."""
+PairEmbedder = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""``embed(image, boxes) -> ((K, D) descriptors, (K, C) other vectors)`` from one run of the
+network (the crops are embedded once)."""
 CostOfDescriptors = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``cost(top (M, D), horizontal (N, D)) -> (M, N)`` appearance cost in [0, 1] of raw
 descriptors."""
@@ -75,7 +79,7 @@ def clip_appearance(
     histograms: Mapping[int, np.ndarray] | None,
     images: Mapping[int, np.ndarray],
     embed: Embedder | None = None,
-    cross_embed: Embedder | None = None,
+    cross_embed: PairEmbedder | None = None,
 ) -> TrackletAppearance:
     """Median histograms and middle-box descriptors of one clip's tracklets of one view.
 
@@ -87,8 +91,9 @@ def clip_appearance(
         images: ``{frame: image}`` of the clip's frames (with ``embed``, at least the frames
             of the tracklets' middle boxes).
         embed: the appearance network, or None for colour only.
-        cross_embed: the vectors of the cross-view cue when they are not ``embed``'s (with
-            ``embed`` only), or None.
+        cross_embed: with ``embed`` only, when the cross-view cue compares other vectors than
+            ``embed``'s: the descriptors and those vectors from one network run (used instead
+            of ``embed``), or None.
     """
     hist = np.zeros((len(tracklets), 0 if histograms is None else _bins(histograms)))
     middle: dict[int, list[tuple[int, int]]] = {}
@@ -103,26 +108,31 @@ def clip_appearance(
         middle.setdefault(f, []).append((k, int(t.rows[len(t) // 2])))
     if embed is None:
         return TrackletAppearance(hist, None)
-    return TrackletAppearance(
-        hist, _middle_vectors(embed, tracklets, middle, frames, images),
-        None if cross_embed is None else _middle_vectors(cross_embed, tracklets, middle, frames,
-                                                         images))
+    if cross_embed is None:
+        (desc,) = _middle_vectors(lambda image, boxes: (embed(image, boxes),), 1, tracklets,
+                                  middle, frames, images)
+        return TrackletAppearance(hist, desc)
+    desc, cross = _middle_vectors(cross_embed, 2, tracklets, middle, frames, images)
+    return TrackletAppearance(hist, desc, cross)
 
 
-def _middle_vectors(embed: Embedder, tracklets: Sequence[Tracklet],
+def _middle_vectors(embed: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, ...]],
+                    outputs: int, tracklets: Sequence[Tracklet],
                     middle: Mapping[int, list[tuple[int, int]]],
                     frames: Mapping[int, FrameBoxes], images: Mapping[int, np.ndarray],
-                    ) -> np.ndarray:
-    """``(T, D)`` ``embed``'s vectors of each tracklet's middle box (``(0, 0)`` without any)."""
-    desc: np.ndarray | None = None
+                    ) -> list[np.ndarray]:
+    """Each of ``embed``'s ``outputs`` kinds of vectors of each tracklet's middle box,
+    ``(T, D)`` each (``(0, 0)`` without any box); one ``embed`` call per frame."""
+    out: list[np.ndarray] | None = None
     for f, wanted in sorted(middle.items()):
         rec = frames[f]
         idx = [int(np.flatnonzero(rec.ids == r)[0]) for _, r in wanted]
-        out = np.asarray(embed(images[f], rec.boxes[idx]), dtype=np.float64)
-        if desc is None:
-            desc = np.zeros((len(tracklets), out.shape[1]))
-        desc[[k for k, _ in wanted]] = out
-    return desc if desc is not None else np.zeros((0, 0))
+        vectors = [np.asarray(v, dtype=np.float64) for v in embed(images[f], rec.boxes[idx])]
+        if out is None:
+            out = [np.zeros((len(tracklets), v.shape[1])) for v in vectors]
+        for whole, v in zip(out, vectors, strict=True):
+            whole[[k for k, _ in wanted]] = v
+    return out if out is not None else [np.zeros((0, 0)) for _ in range(outputs)]
 
 
 def _bins(histograms: Mapping[int, np.ndarray]) -> int:

@@ -37,6 +37,7 @@ from xvmatch.inference.learned_association import (
 from xvmatch.inference.track_appearance import (
     CostOfDescriptors,
     Embedder,
+    PairEmbedder,
     TrackletAppearance,
     clip_appearance,
     colour_similarity,
@@ -157,15 +158,16 @@ class TrackImages:
             (a site bundle's adapted cost, ``LearnedMatcher.appearance_cost``), or None:
             ``|a - b| / 2``. The over-time terms compare descriptors of one view, whose
             camera is the same, and stay ``|a - b| / 2``.
-        cross_embed: the vectors ``cross_cost`` takes when they are not ``embed``'s (a site
-            bundle adapted on the network's features: ``LearnedMatcher.cue_vectors``), or None.
+        cross_embed: when ``cross_cost`` takes other vectors than ``embed``'s (a site bundle
+            adapted on the network's features): the descriptors and those vectors from one
+            network run (``embed(image, boxes) -> (descriptors, vectors)``), or None.
     """
 
     top: FrameImages
     hor: FrameImages
     embed: Embedder | None = None
     cross_cost: CostOfDescriptors | None = None
-    cross_embed: Embedder | None = None
+    cross_embed: PairEmbedder | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -347,6 +347,35 @@ def test_bundle_reads_a_feature_adaptation(tmp_path) -> None:
     assert np.allclose(site.appearance_cost(vectors, vectors), cast.cost(vectors, vectors))
 
 
+def test_track_embeds_a_feature_site_once_per_box(tmp_path, monkeypatch) -> None:
+    """``track --model SITE/`` with a site adapted on the features: each tracklet's middle box
+    goes through the network once for both its descriptor and its features."""
+    from xvmatch.cli import main
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+    from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+    from xvmatch.inference.bundle import Bundle
+
+    dim = read_manifest(DEFAULT_BUNDLE).appearance.features_dim
+    cast = SiteAdaptation(np.full(dim, 0.01), np.ones(dim), np.zeros(dim), np.ones(dim),
+                          np.eye(dim)[:, :8], np.array([1.0, 0.0]), 8, "features")
+    folder, _ = _site_bundle(tmp_path, cast)
+    video = write_tracking_video(render_tracking_video(2, 12, SynthConfig(
+        scenario="drone", n_people=(4, 6), fps=25.0)), tmp_path)
+    runs = []
+    original = Bundle.embed_vectors
+
+    def counted(self, crops, vectors, reference=False):
+        runs.append(tuple(vectors))
+        return original(self, crops, vectors, reference)
+
+    monkeypatch.setattr(Bundle, "embed_vectors", counted)
+    assert main(["track", "--model", str(folder), "--top", str(video["top"]), "--hor",
+                 str(video["hor"]), "--top-images", str(video["top_images"]), "--hor-images",
+                 str(video["hor_images"]), "--out", str(tmp_path / "tracks"), "--quiet"]) == 0
+    assert runs and set(runs) == {("descriptors", "features")}
+    assert (tmp_path / "tracks" / "hor.txt").read_text()
+
+
 @pytest.mark.parametrize(("change", "message"), [
     ({"vector": "descriptors"}, "it maps the features but the manifest says descriptors"),
     ({"vector": "colour"}, "'adaptation.vector' must name an output"),

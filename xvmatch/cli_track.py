@@ -120,8 +120,12 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
             source.close()
         raise
     cross_cost = model.appearance_cost if embed is not None else None  # a site's adaptation
-    cross_embed = (model.cue_vectors if embed is not None and model.cue_vector != "descriptors"
-                   else None)
+    cross_embed = None
+    if embed is not None and model.cue_vector != "descriptors":  # one network run for both
+        vectors = ("descriptors", model.cue_vector)
+
+        def cross_embed(image, boxes):
+            return tuple(model.bundle.embed_vectors(model.crops(image, boxes), vectors))
     return TrackImages(sources[0], sources[1], embed, cross_cost, cross_embed), sources, size
 
 
