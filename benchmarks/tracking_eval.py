@@ -31,9 +31,11 @@ learned one), in seconds and seconds per frame; with its defaults, so since 2026
 offset estimate of its default ``--offset auto`` (10-25 s per pair).
 
 With ``--synthetic N``, rendered drone videos instead (:func:`xvmatch.datasets.tracking_video.
-render_tracking_video`, 25 fps), ids scrambled per view the same way, tracked with the MIP from
-boxes only and with the images: colour terms alone (no network), and with the appearance
-network of ``--model`` (default: the shipped bundle).
+render_tracking_video`, 25 fps, ``--people`` 6 to 12), ids scrambled per view the same way,
+tracked with the MIP from boxes only and with the images: colour terms alone (no network), and
+with the appearance network of ``--model`` (default: the shipped bundle), the learned weights'
+row with the command's appearance check and without it. ``--shift S`` puts each view's images
+through one fixed simulated camera of strength S first (the adaptation benchmark's stress test).
 
 Usage:
     python benchmarks/tracking_eval.py [--data ../shared/data/cvmhat] [--cache DIR]
@@ -42,6 +44,7 @@ Usage:
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
         [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
+        [--people 6 12] [--shift 3]
 """
 
 from __future__ import annotations
@@ -224,15 +227,21 @@ def time_command(folder: Path, name: str, top, hor, solver: str,
 
 
 SYNTHETIC_ARMS = ("boxes", "colour", "network-cv", "network", "boxes-learned",
-                  "network-learned")
+                  "network-learned", "unchecked-learned")
 """The --synthetic rows: boxes only; images, colour terms only (no network); images and the
 appearance network across views (Eq. 17) with colour over time (Eq. 14, the paper's); the
 network across views and over time (with ``--weights handcrafted``); the learned weights from
-boxes only (``--model`` without images) and with the network (``--model`` with images)."""
+boxes only (``--model`` without images) and with the network (``--model`` with images, with
+the command's default appearance check, :func:`~xvmatch.inference.appearance_check.
+check_tracklet_appearance`); the same without the check (``--appearance-check off``)."""
 
 
 def synthetic_main(args: argparse.Namespace) -> int:
     """The --synthetic mode: rendered drone videos, boxes only against boxes and images."""
+    from dataclasses import replace
+
+    from xvmatch.datasets.camera_shift import camera_shift
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video
     from xvmatch.inference.learned_association import load_matcher_bundle
     from xvmatch.inference.tracking import TrackImages
@@ -242,6 +251,7 @@ def synthetic_main(args: argparse.Namespace) -> int:
     learned = TrackWeights(c0=LEARNED_DUMMY_WEIGHT if args.c0 is None else args.c0,
                            sigma=args.sigma)
     print(f"{args.synthetic} rendered drone videos of {args.synthetic_frames} frames (25 fps, "
+          f"{args.people[0]}-{args.people[1]} people, images camera-shifted {args.shift:g}, "
           f"seeds {args.seed}..{args.seed + args.synthetic - 1}), ground-truth boxes, ids "
           f"replaced by shuffled row numbers per view; MIP, c0 {hand.c0:g} (learned weights: "
           f"{learned.c0:g}), clips of {args.clip_length}, sigma {args.sigma:g}, w1 "
@@ -254,7 +264,14 @@ def synthetic_main(args: argparse.Namespace) -> int:
     for k in range(args.synthetic):
         seed = args.seed + k
         start = time.perf_counter()
-        video = render_tracking_video(seed, args.synthetic_frames)
+        video = render_tracking_video(seed, args.synthetic_frames, SynthConfig(
+            scenario="drone", n_people=tuple(args.people), fps=25.0))
+        if args.shift:  # each view through one fixed simulated camera of its own
+            video = replace(video, top_images={
+                f: camera_shift(im, args.shift, seed=100 + seed, per_image=False)
+                for f, im in video.top_images.items()}, hor_images={
+                f: camera_shift(im, args.shift, seed=200 + seed, per_image=False)
+                for f, im in video.hor_images.items()})
         t_render = time.perf_counter() - start
         top, hor = video.top, video.hor
         det_top, _ = as_detections(top, seed * 2 + 1)
@@ -283,11 +300,19 @@ def synthetic_main(args: argparse.Namespace) -> int:
                                  time_appearance="colour" if arm == "network-cv"
                                  else "network")
             start = time.perf_counter()
+            checked = []
             res = track_pair(det_top, det_hor, width, config=config, frame_pairs=fp,
-                             images=images, learned=ev if arm.endswith("-learned") else None)
+                             images=images, learned=ev if arm.endswith("-learned") else None,
+                             appearance_check=arm == "network-learned", checked=checked)
+            verdict = ""
+            if checked and checked[0].judged:
+                verdict = (f" check AUC {checked[0].auc:.3f}+-{checked[0].error:.3f} "
+                           f"{'kept' if checked[0].trusted else 'FELL BACK'}")
+            elif checked:
+                verdict = f" check: {checked[0].positives} pairs, not judged"
             score_tracks(f"{name} {arm}", res, (det_top, det_hor), (top, hor), frames,
                          pooled[arm], views[arm], f"track {time.perf_counter() - start:.1f}s "
-                         f"fallback {res.n_fallback}/{res.n_windows}")
+                         f"fallback {res.n_fallback}/{res.n_windows}{verdict}")
         sys.stdout.flush()
     print("-" * len(head))
     total = len(pooled["frame"])
@@ -332,6 +357,12 @@ def main() -> int:
                         "tracked from boxes only and with images (colour, the network)")
     parser.add_argument("--synthetic-frames", type=int, default=100,
                         help="frames per rendered video (25 fps)")
+    parser.add_argument("--people", type=int, nargs=2, default=[6, 12], metavar=("MIN", "MAX"),
+                        help="people per rendered video (--synthetic)")
+    parser.add_argument("--shift", type=float, default=0.0, metavar="S",
+                        help="--synthetic: each view's images through one fixed simulated "
+                        "camera of strength S (camera_shift, per_image=False), the adaptation "
+                        "benchmark's stress test")
     parser.add_argument("--model", default="default",
                         help="matcher bundle: the learned weights' matcher (boxes only), and "
                         "the appearance network for --synthetic")

@@ -26,6 +26,7 @@ PairSet`. Each pair carries its burst number, so a fit can hold out the last par
 
 from __future__ import annotations
 
+import collections
 import itertools
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -39,6 +40,7 @@ from xvmatch.inference.tracklets import clip_tracklets
 __all__ = [
     "MinedPairs",
     "MiningConfig",
+    "agreed_pairs",
     "box_only_costs",
     "confident_pairs",
     "embed_frames",
@@ -203,6 +205,17 @@ def _longest_run(frames: list[int]) -> int:
     return best if frames else 0
 
 
+def agreed_pairs(seen: Mapping[tuple[int, int], Sequence[int]], agree: int
+                 ) -> set[tuple[int, int]]:
+    """The pseudo-matches among tracklet pairs ``(top, hor)``, given the ascending frames on
+    which the box-only matcher was sure of each (``seen``): those sure on at least ``agree``
+    consecutive frames, neither of whose tracklets was ever sure of another partner."""
+    tops = collections.Counter(p[0] for p in seen)
+    hors = collections.Counter(p[1] for p in seen)
+    return {p for p, frames in seen.items() if _longest_run(list(frames)) >= agree
+            and tops[p[0]] == 1 and hors[p[1]] == 1}
+
+
 def _pairs(idx: list[tuple[int, int]]) -> np.ndarray:
     return np.array(sorted(set(idx)), dtype=np.int64).reshape(-1, 2)
 
@@ -276,10 +289,7 @@ def mine_pairs(
                 continue
             for i, j in confident_pairs(costs[f], gamma, config.margin):
                 seen.setdefault((owner["top"][(f, i)], owner["hor"][(f, j)]), []).append(f)
-        agreed = {p for p, fs in seen.items() if _longest_run(fs) >= config.agree}
-        tops = [p[0] for p in seen]
-        hors = [p[1] for p in seen]
-        agreed = {p for p in agreed if tops.count(p[0]) == 1 and hors.count(p[1]) == 1}
+        agreed = agreed_pairs(seen, config.agree)
         agreed_total += len(agreed)
         for f in shots:
             t_of = {owner["top"][(f, i)]: i for i in range(len(top[f].ids))}

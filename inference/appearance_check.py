@@ -10,32 +10,57 @@ received, on the run's own frames; when it is shown below :data:`MIN_AUC` (by tw
 standard error: a few pairs do not condemn a cue) the cue is not trusted and the run is matched
 from the boxes alone (the matcher's boxes-only setting). Where there are too few such
 pairs to judge (single image pairs, short clips, scenes the box-only matcher is never sure of)
-the cue is kept, as before. No identities are used. Numpy only.
+the cue is kept, as before. ``track`` judges its cross-view term the same way on tracklets
+(:func:`check_tracklet_appearance`: pairs of tracklets the box-only matcher is sure of, in the
+clips it tracks) and, when it fails, leaves only that term out. No identities are used. Numpy
+only.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.inference.adaptation_pairs import MiningConfig, mine_pairs, plan_bursts
+from xvmatch.inference.adaptation_pairs import (
+    MiningConfig,
+    agreed_pairs,
+    confident_pairs,
+    mine_pairs,
+    plan_bursts,
+)
 from xvmatch.inference.site_adaptation import auc_standard_error, pair_auc
+from xvmatch.inference.track_costs import FrameCosts
+from xvmatch.inference.tracklets import Tracklet
 
-__all__ = ["MIN_AUC", "MIN_PAIRS", "AppearanceCheck", "check_appearance"]
+__all__ = ["MIN_AUC", "MIN_PAIRS", "TRACK_MIN_AUC", "TRACK_MIN_PAIRS", "AppearanceCheck",
+           "check_appearance", "check_tracklet_appearance"]
 
 MIN_AUC = 0.62
 """Least verification AUC of the appearance cue on a run's pseudo-matches for the images to be
 used. Read off rendered videos under simulated cameras (docs/adaptation.md, "the appearance
 check"): of the 24 videos it was read from, the 11 whose cue fell below it had images below
 boxes only in all but one."""
+TRACK_MIN_AUC = 0.8
+"""The same bar for ``track``'s cross-view cue on tracklet pairs
+(:func:`check_tracklet_appearance`), higher: Eq. 17 gives that cue 0.7 of a cross-view weight
+(``1 - w1``) and nothing weighs it against the boxes, where ``associate``'s matcher weighs its
+cue itself. Read off rendered videos under simulated cameras (docs/tracking.md, "under a camera
+change"): of the 24 cells of 8 videos it was read from, the cross-view cue cost the tracks
+CVIDF1 in all 15 whose interval stayed below it, and gained in 7 of the other 9."""
 MIN_PAIRS = 30
 """Fewest pseudo-matched positives (and negatives) to judge the cue at all (about 10 tracklet
 pairs, each embedded in 3 frames): in a scene the box-only matcher hardly knows, its few sure
 pairs can be wrong, and would condemn a good cue (a rendered video with 5 such positives: AUC
 0.39 on them, yet images added 45 CVIDF1 points; docs/adaptation.md)."""
+TRACK_MIN_PAIRS = 20
+"""The same for ``track``'s tracklet pairs: each is a pair the box-only matcher was sure of on
+several consecutive frames, so :data:`MIN_PAIRS` boxes (about 10 tracklets in 3 frames) stand
+for about 10 of them; 20 judges a rendered video with 28 such pairs whose shifted images cost
+15.9 CVIDF1 (docs/tracking.md), and leaves alone three with 3 to 16, whose clean images gained up
+to 50 points."""
 
 
 @dataclass(frozen=True)
@@ -49,8 +74,12 @@ class AppearanceCheck:
         error: its standard error (Hanley and McNeil; NaN when not judged).
         positives, negatives: pseudo-matched pairs and the other boxes of their frames.
         min_auc: the bar it was held to.
+        min_pairs: the fewest positives (and negatives) it needed to judge.
         bursts: runs of consecutive frames the pairs were mined on (0: single image pairs or
-            a clip too short to judge anything, about which there is nothing to say).
+            a clip too short to judge anything, about which there is nothing to say); for
+            tracklets, the clips.
+        tracklets: judged on ``track``'s tracklets (:func:`check_tracklet_appearance`), whose
+            fallback drops only the cross-view appearance term.
     """
 
     judged: bool
@@ -61,6 +90,8 @@ class AppearanceCheck:
     negatives: int
     min_auc: float = MIN_AUC
     bursts: int = 0
+    min_pairs: int = MIN_PAIRS
+    tracklets: bool = False
 
     @property
     def worth_saying(self) -> bool:
@@ -69,16 +100,20 @@ class AppearanceCheck:
 
     def message(self) -> str:
         """One line for the user."""
+        pairs = "tracklet pairs" if self.tracklets else "pairs"
         if not self.judged:
-            return (f"appearance check: {self.positives} pairs the box-only matcher is sure of "
-                    f"over consecutive frames, {MIN_PAIRS} needed to judge the images; they "
+            return (f"appearance check: {self.positives} {pairs} the box-only matcher is sure of "
+                    f"over consecutive frames, {self.min_pairs} needed to judge the images; they "
                     "were used as they are")
+        fallback = ("the cross-view weights come from the boxes alone (the images still link "
+                    "each view over time)" if self.tracklets else "matched from the boxes alone")
         verdict = ("images used" if self.trusted else
                    f"below {self.min_auc:g} by more than twice its standard error, so the images "
-                   "would drag the boxes down: matched from the boxes alone")
+                   f"would drag the boxes down: {fallback}")
         return (f"appearance check: the appearance cue ranks this video's {self.positives} "
-                f"box-only pseudo-matches against {self.negatives} other pairs of their frames "
-                f"with AUC {self.auc:.3f} +/- {self.error:.3f}; {verdict}")
+                f"box-only pseudo-matched {pairs} against {self.negatives} other pairs of their "
+                f"{'clips' if self.tracklets else 'frames'} with AUC {self.auc:.3f} +/- "
+                f"{self.error:.3f}; {verdict}")
 
 
 def check_appearance(
@@ -107,7 +142,8 @@ def check_appearance(
     config = config or MiningConfig()
     bursts = plan_bursts(box_costs, config.burst, config.max_frames)
     if not bursts:
-        return AppearanceCheck(False, True, math.nan, math.nan, 0, 0, min_auc)
+        return AppearanceCheck(False, True, math.nan, math.nan, 0, 0, min_auc,
+                               min_pairs=min_pairs)
     mined = mine_pairs(top, hor, bursts, box_costs, gamma, config)
     # mined pairs index the boxes of mined.embed_frames, stacked view by view in that order
     where = {}
@@ -123,11 +159,74 @@ def check_appearance(
         return np.array([app_costs[int(f)][a, b] for f, a, b in
                          zip(frame.tolist(), i.tolist(), j.tolist(), strict=True)], np.float64)
 
-    n_pos, n_neg = len(mined.cross_pos), len(mined.cross_neg)
+    return _verdict(costs(mined.cross_pos), costs(mined.cross_neg), min_auc, min_pairs,
+                    len(bursts))
+
+
+def _verdict(pos: np.ndarray, neg: np.ndarray, min_auc: float, min_pairs: int, bursts: int,
+             tracklets: bool = False) -> AppearanceCheck:
+    """The check of a cue's costs on the positives and negatives (judged with enough of both;
+    trusted unless its AUC is below ``min_auc`` by more than twice its standard error)."""
+    n_pos, n_neg = len(pos), len(neg)
     if min(n_pos, n_neg) < min_pairs:
-        return AppearanceCheck(False, True, math.nan, math.nan, n_pos, n_neg, min_auc,
-                               len(bursts))
-    auc = pair_auc(costs(mined.cross_pos), costs(mined.cross_neg))
+        return AppearanceCheck(False, True, math.nan, math.nan, n_pos, n_neg, min_auc, bursts,
+                               min_pairs, tracklets)
+    auc = pair_auc(pos, neg)
     error = auc_standard_error(auc, n_pos, n_neg)
     return AppearanceCheck(True, bool(auc + 2.0 * error >= min_auc), auc, error, n_pos, n_neg,
-                           min_auc, len(bursts))
+                           min_auc, bursts, min_pairs, tracklets)
+
+
+def check_tracklet_appearance(
+    clips: Sequence[tuple[Sequence[Tracklet], Sequence[Tracklet], np.ndarray]],
+    costs: Mapping[int, FrameCosts],
+    gamma: float,
+    config: MiningConfig | None = None,
+    min_auc: float = TRACK_MIN_AUC,
+    min_pairs: int = TRACK_MIN_PAIRS,
+) -> AppearanceCheck:
+    """Judge ``track``'s cross-view appearance cue (the Eq. 17 term) on its own clips.
+
+    In each clip, a top and a horizontal tracklet are a pseudo-match when the box-only matcher
+    is sure of their boxes (:func:`~xvmatch.inference.adaptation_pairs.confident_pairs`) on
+    ``config.agree`` consecutive frames and neither tracklet of any other partner
+    (:func:`~xvmatch.inference.adaptation_pairs.agreed_pairs`, as ``adapt`` mines); the cue
+    must cost such a pair less than the pseudo-matched tracklets against the other tracklets of
+    their clip. Judged as :func:`check_appearance` judges, on tracklets instead of boxes.
+
+    Args:
+        clips: per clip, its top tracklets, its horizontal tracklets and the ``(T_top, T_hor)``
+            cross-view appearance cost between them (tracklet ``rows`` are the records' ids).
+        costs: the learned matcher's box-only costs of each frame
+            (:attr:`~xvmatch.inference.tracking.LearnedEvidence.costs`).
+        gamma: its non-association cost.
+        config: the margin and the agreement of a pseudo-match.
+        min_auc: the least AUC for the cue to be used (:data:`TRACK_MIN_AUC`).
+        min_pairs: fewest tracklet positives and negatives to judge
+            (:data:`TRACK_MIN_PAIRS`).
+    """
+    config = config or MiningConfig()
+    pos: list[float] = []
+    neg: list[float] = []
+    for top_tr, hor_tr, cue in clips:
+        cue = np.asarray(cue, dtype=np.float64)
+        if cue.shape != (len(top_tr), len(hor_tr)):
+            raise ValueError(f"a clip's appearance cost is {cue.shape}, its tracklets "
+                             f"{len(top_tr)} x {len(hor_tr)}")
+        owner = [{(int(f), int(r)): k for k, t in enumerate(tracklets)
+                  for f, r in zip(t.frames.tolist(), t.rows.tolist(), strict=True)}
+                 for tracklets in (top_tr, hor_tr)]
+        seen: dict[tuple[int, int], list[int]] = {}
+        for f in sorted({int(f) for t in top_tr for f in t.frames.tolist()}):
+            frame = costs.get(f)
+            if frame is None:
+                continue
+            for i, j in confident_pairs(frame.cost, gamma, config.margin):
+                a = owner[0].get((f, int(frame.top_rows[i])))
+                b = owner[1].get((f, int(frame.hor_rows[j])))
+                if a is not None and b is not None:
+                    seen.setdefault((a, b), []).append(f)
+        for a, b in sorted(agreed_pairs(seen, config.agree)):
+            pos.append(float(cue[a, b]))
+            neg += np.delete(cue[a], b).tolist() + np.delete(cue[:, b], a).tolist()
+    return _verdict(np.asarray(pos), np.asarray(neg), min_auc, min_pairs, len(clips), True)

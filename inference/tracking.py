@@ -28,6 +28,7 @@ from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.geometry.spatial_matching import SpatialParams
 from xvmatch.geometry.spatial_search import associate_frame
 from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.inference.appearance_check import AppearanceCheck, check_tracklet_appearance
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.learned_association import (
     FrameImages,
@@ -328,11 +329,14 @@ def _window_weights(
     app: tuple[TrackletAppearance, ...] | None = None, time_appearance: str = "network",
     learned: LearnedEvidence | None = None, learned_rule: str = LEARNED_RULES[0],
     learned_share: float = 1.0, cross_cost: CostOfDescriptors | None = None,
+    cross_appearance: bool = True,
 ) -> list[np.ndarray]:
     """The four weight matrices of a window (clusters 0..3 = top t, top t+1, hor t+1, hor t);
     ``app``: the appearance of the same four tracklet lists, or None (boxes only); ``learned``:
     the learned matcher's evidence for the cross-view spatial term, or None (Eq. 13 on
-    ``frame_pairs``); ``cross_cost``: the cross-view appearance cost (None: ``|a - b| / 2``)."""
+    ``frame_pairs``); ``cross_cost``: the cross-view appearance cost (None: ``|a - b| / 2``);
+    ``cross_appearance``: False leaves the network out of the cross-view weights (Eq. 17 on its
+    spatial term alone), the over-time terms keep it."""
     a_time = a_cross = (None, None)
     if app is not None:
         a_tt, a_tu, a_hu, a_ht = app
@@ -340,7 +344,7 @@ def _window_weights(
         over = (descriptor_similarity if network and time_appearance == "network"
                 else colour_similarity)
         a_time = (over(a_tt, a_tu), over(a_ht, a_hu))
-        if network:
+        if network and cross_appearance:
             a_cross = (descriptor_similarity(a_tu, a_hu, cross_cost, cross=True),
                        descriptor_similarity(a_tt, a_ht, cross_cost, cross=True))
     def cross(top: list[Tracklet], hor: list[Tracklet]) -> np.ndarray:
@@ -409,6 +413,8 @@ def track_pair(
     frame_pairs: Mapping[int, list[tuple[int, int]]] | None = None,
     images: TrackImages | None = None,
     learned: LearnedEvidence | None = None,
+    appearance_check: bool = False,
+    checked: list[AppearanceCheck] | None = None,
 ) -> TrackResult:
     """Track the people of a top/horizontal sequence pair with one id across views (Alg. 1).
 
@@ -428,6 +434,12 @@ def track_pair(
             the frame association is its assignment (step 1 skipped; ``frame_pairs``,
             ``params`` and ``camera_rows`` unused, unless ``config.learned_share < 1`` mixes
             in the handcrafted Eq. 13). None: the handcrafted Eq. 13.
+        appearance_check: with the network's images and ``learned``, judge the cross-view
+            appearance cue on the clips' own box-only pseudo-matched tracklets
+            (:func:`~xvmatch.inference.appearance_check.check_tracklet_appearance`) and, when
+            it fails, leave it out of the cross-view weights (the over-time terms keep it).
+        checked: if given, receives that :class:`~xvmatch.inference.appearance_check.
+            AppearanceCheck` (nothing when there was nothing to judge).
 
     Only the frames present are visited (:func:`split_clips`), so a gap of any length between
     frames costs nothing.
@@ -451,6 +463,15 @@ def track_pair(
         hor_tr = view_tracklets(hor, clips, config.min_iou, config.max_gap)
     else:
         top_tr, hor_tr, app = _tracklets_with_images(top, hor, clips, config, images, progress)
+    cross_appearance = True
+    if appearance_check and app is not None and images.embed is not None and learned is not None:
+        result = check_tracklet_appearance(
+            [(top_tr[k], hor_tr[k],
+              1.0 - descriptor_similarity(app[k][0], app[k][1], images.cross_cost, cross=True))
+             for k in range(len(clips))], learned.costs, learned.gamma)
+        cross_appearance = result.trusted
+        if checked is not None:
+            checked.append(result)
     if len(clips) == 1:
         top_tr.append([])
         hor_tr.append([])
@@ -466,7 +487,7 @@ def track_pair(
         w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
                             config.weights, window_app, config.time_appearance, learned,
                             config.learned_rule, config.learned_share,
-                            None if images is None else images.cross_cost)
+                            None if images is None else images.cross_cost, cross_appearance)
         if config.solver == "mip":
             solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
         else:

@@ -15,13 +15,19 @@ from xvmatch.cli import main
 from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.inference.adaptation_pairs import MiningConfig
 from xvmatch.inference.appearance_check import (
     MIN_AUC,
     MIN_PAIRS,
+    TRACK_MIN_AUC,
+    TRACK_MIN_PAIRS,
     AppearanceCheck,
     check_appearance,
+    check_tracklet_appearance,
 )
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.inference.track_costs import FrameCosts
+from xvmatch.inference.tracklets import Tracklet
 
 PEOPLE = 5
 
@@ -80,6 +86,11 @@ def test_too_few_pairs_keep_the_images() -> None:
     check = check_appearance(top, hor, unsure, cue, gamma=0.5)
     assert not check.judged and check.trusted and check.positives == 0
     assert check.bursts == 4 and check.worth_saying  # a video the matcher is never sure of
+    top, hor = _still(100)
+    box, cue = _costs(100, "opposite")
+    strict = check_appearance(top, hor, box, cue, gamma=0.5, min_pairs=10_000)
+    assert not strict.judged and strict.min_pairs == 10_000
+    assert "10000 needed to judge" in strict.message()  # the bar it was held to, not the default
 
 
 def test_a_few_pairs_do_not_condemn_a_cue() -> None:
@@ -94,6 +105,51 @@ def test_a_few_pairs_do_not_condemn_a_cue() -> None:
         check = check_appearance(top, hor, box, {f: weak for f in box}, gamma=0.5)
         assert check.judged and check.auc == pytest.approx(0.55)
         assert check.trusted is trusted, check
+
+
+def _clips(n_clips: int, length: int, box: np.ndarray, cue: np.ndarray):
+    """``n_clips`` clips of ``length`` frames with PEOPLE standing people per view (one
+    tracklet each, ids = rows unique over the view, the horizontal ones in another order),
+    every frame's box-only costs ``box`` and the clip's tracklet cue ``cue``."""
+    clips, costs = [], {}
+    for k in range(n_clips):
+        frames = np.arange(k * length + 1, (k + 1) * length + 1)
+        top_rows = [np.arange(PEOPLE) + 1000 * f for f in frames]
+        hor_rows = [np.arange(PEOPLE)[::-1] + 1000 * f + 500 for f in frames]
+        top = [Tracklet(k, frames, np.array([r[p] for r in top_rows]), np.zeros((length, 4)))
+               for p in range(PEOPLE)]
+        hor = [Tracklet(k, frames, np.array([r[PEOPLE - 1 - p] for r in hor_rows]),
+                        np.zeros((length, 4))) for p in range(PEOPLE)]
+        for f, t, h in zip(frames.tolist(), top_rows, hor_rows, strict=True):
+            costs[f] = FrameCosts(t, h, box[:, ::-1], np.zeros((PEOPLE, PEOPLE), bool))
+        clips.append((top, hor, cue))
+    return clips, costs
+
+
+@pytest.mark.parametrize(("app", "trusted"), [("agrees", True), ("opposite", False),
+                                               ("noise", False)])
+def test_track_judges_its_cross_view_cue_on_sure_tracklet_pairs(app: str, trusted: bool) -> None:
+    """``track``'s check: tracklets whose boxes the box-only matcher pairs surely on 3
+    consecutive frames are pseudo-matches (the horizontal rows come in another order: the
+    check follows the rows, not the positions); the cue between the clip's tracklets is judged
+    on them as ``associate`` judges its boxes."""
+    box, cue = _costs(1, app, seed=3)
+    clips, costs = _clips(8, 10, box[1], cue[1])
+    check = check_tracklet_appearance(clips, costs, gamma=0.5)
+    assert check.judged and check.trusted is trusted and check.tracklets
+    assert (check.positives, check.negatives, check.bursts) == (8 * PEOPLE, 8 * PEOPLE * 8, 8)
+    assert ("tracklet pairs" in check.message()) and ("clips" in check.message())
+    assert ("the cross-view weights come from the boxes alone" in check.message()) is not trusted
+    few = check_tracklet_appearance(clips[:3], costs, gamma=0.5)  # 15 positives
+    assert not few.judged and few.trusted and few.worth_saying
+    assert few.min_pairs == TRACK_MIN_PAIRS and few.min_auc == TRACK_MIN_AUC
+    assert f"{TRACK_MIN_PAIRS} needed to judge" in few.message()
+    short, short_costs = _clips(8, 2, box[1], cue[1])  # never 3 consecutive sure frames
+    unsure = check_tracklet_appearance(short, short_costs, gamma=0.5)
+    assert unsure.positives == 0 and not unsure.judged
+    assert check_tracklet_appearance(short, short_costs, 0.5, MiningConfig(agree=2)).judged
+    with pytest.raises(ValueError, match="appearance cost is"):
+        check_tracklet_appearance([(clips[0][0], clips[0][1][:2], cue[1])], costs, 0.5)
 
 
 @pytest.fixture(scope="module")
@@ -159,6 +215,7 @@ def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) ->
     record = json.loads(costs.read_text())["appearance_check"]
     assert record["judged"] and record["images_used"] and record["auc"] > 0.8
     assert record["positives"] >= MIN_PAIRS and record["min_auc"] == MIN_AUC
+    assert record["min_pairs"] == MIN_PAIRS
     assert main([*args[:-1], "--appearance-check", "off", "--out", str(tmp_path / "c.csv"),
                  "--costs", str(costs)]) == 0
     assert "appearance check" not in capsys.readouterr().err
@@ -166,18 +223,50 @@ def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) ->
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
 
 
+def _grey_copy(video: dict[str, Path], folder: Path) -> dict[str, Path]:
+    """The video's image folders with every frame grey, under ``folder``."""
+    import cv2
+
+    grey = {}
+    for view in ("top_images", "hor_images"):
+        grey[view] = folder / view
+        grey[view].mkdir()
+        for png in sorted(video[view].glob("*.png")):
+            image = cv2.imread(str(png))
+            cv2.imwrite(str(grey[view] / png.name), np.full_like(image, 128))
+    return grey
+
+
+def test_track_command_leaves_out_a_failed_cross_view_cue(video, tmp_path, capsys) -> None:
+    """``track --model``: clean renders pass (the same tracks as unchecked); grey images fail
+    and the line says the cross-view weights come from the boxes alone (also with --quiet)."""
+    base = ["track", "--model", "default", "--top", str(video["top"]), "--hor",
+            str(video["hor"]), "--clip-length", "5"]
+    clean = ["--top-images", str(video["top_images"]), "--hor-images", str(video["hor_images"])]
+    assert main([*base, *clean, "--out", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert "box-only pseudo-matched tracklet pairs against" in err and "images used" in err
+    assert main([*base, *clean, "--appearance-check", "off", "--quiet",
+                 "--out", str(tmp_path / "b")]) == 0
+    assert "appearance check" not in capsys.readouterr().err
+    for name in ("top.txt", "hor.txt"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    grey = _grey_copy(video, tmp_path)
+    greyed = ["--top-images", str(grey["top_images"]), "--hor-images", str(grey["hor_images"])]
+    assert main([*base, *greyed, "--quiet", "--out", str(tmp_path / "c")]) == 0
+    err = capsys.readouterr().err
+    assert "AUC 0.500" in err and "the cross-view weights come from the boxes alone" in err
+    assert main([*base, *greyed, "--quiet", "--appearance-check", "off",
+                 "--out", str(tmp_path / "d")]) == 0
+    assert "appearance check" not in capsys.readouterr().err
+
+
 def test_associate_multi_judges_each_egocentric_view(video, tmp_path, capsys) -> None:
     """associate-multi judges each top-ego pass: grey images of the one horizontal view fail
     and its people come out exactly as from the boxes alone."""
     import cv2
 
-    grey = {}
-    for view in ("top_images", "hor_images"):
-        grey[view] = tmp_path / view
-        grey[view].mkdir()
-        for png in sorted(video[view].glob("*.png")):
-            image = cv2.imread(str(png))
-            cv2.imwrite(str(grey[view] / png.name), np.full_like(image, 128))
+    grey = _grey_copy(video, tmp_path)
     base = ["associate-multi", "--model", "default", "--top", str(video["top"]), "--hor",
             str(video["hor"]), "--quiet"]
     size = "x".join(map(str, cv2.imread(str(grey["hor_images"] / "000001.png")).shape[1::-1]))

@@ -287,7 +287,7 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
             "judged": checked.judged, "images_used": checked.trusted,
             "auc": json_figure(checked.auc), "standard_error": json_figure(checked.error),
             "positives": checked.positives, "negatives": checked.negatives,
-            "min_auc": checked.min_auc}
+            "min_auc": checked.min_auc, "min_pairs": checked.min_pairs}
     atomic_write_text(path, json.dumps(record) + "\n")
 
 

@@ -10,9 +10,10 @@ tracklets link by IoU and colour and the over-time weights mix in colour similar
 gives the learned matcher: its box-only association makes the cross-view weights (``--weights
 learned``, the default with ``--model``; ``--weights handcrafted`` keeps Eq. 13 on the spatial
 search), and with images its appearance network adds the cross-view term and takes over the
-over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1). ``--offset N|auto`` tracks videos out of sync
-(top frame t + N with horizontal frame t), each row still written under its own frame number;
-``evaluate --tracks --offset N`` scores them. Bad input raises
+over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1), unless ``--appearance-check`` finds its
+cross-view cue too weak on the video's own sure tracklet pairs. ``--offset N|auto`` tracks
+videos out of sync (top frame t + N with horizontal frame t), each row still written under its
+own frame number; ``evaluate --tracks --offset N`` scores them. Bad input raises
 ``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
 ...`` with exit code 2.
 """
@@ -217,6 +218,11 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--time-appearance", choices=("network", "colour"), default="network",
                    help="over-time appearance term of Eq. 18: the --model's network (default; "
                    "colour without --model) or colour histograms (Eq. 14, the paper's)")
+    g.add_argument("--appearance-check", choices=("on", "off"), default="on",
+                   help="with --model's network and learned weights: judge the cross-view "
+                   "appearance cue on the tracklet pairs the box-only matcher is sure of, and "
+                   "leave it out of the cross-view weights when it is shown too weak to help "
+                   "(default on; off: always use it)")
     add_spatial_options(p)
     p.set_defaults(func=_cmd_track)
     return p
@@ -285,9 +291,11 @@ def _cmd_track(args: argparse.Namespace) -> int:
         if weights == "learned":
             learned = learned_frame_evidence(top_frames, hor_frames, resolved[0], model,
                                              camera_rows, args.workers, progress)
+        checked = []
         result = track_pair(top_frames, hor_frames, float(width), params, config,
                             camera_rows, args.workers, progress, images=images,
-                            learned=learned)
+                            learned=learned, appearance_check=args.appearance_check == "on",
+                            checked=checked)
     finally:
         for source in sources:
             source.close()
@@ -304,6 +312,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows hit the MIP's "
               f"node budget or time limit ({args.time_limit:g} s) or failed and used the greedy "
               "fallback", file=sys.stderr)
+    if checked and checked[0].worth_saying and (not args.quiet or not checked[0].trusted):
+        print(checked[0].message(), file=sys.stderr)
     if not args.quiet:
         ids = set(result.top_rows.values()) | set(result.hor_rows.values())
         print(f"wrote {n_top} top and {n_hor} horizontal boxes, {len(ids)} tracks, to {out}/ "
