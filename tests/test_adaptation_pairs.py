@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.inference.adaptation_pairs import (
     MiningConfig,
+    agreed_pairs,
     confident_pairs,
     embed_frames,
     mine_pairs,
@@ -123,3 +126,22 @@ def test_embed_frames_order() -> None:
     d = embed_frames([3, 1], top, Images(), embed)
     assert d[:, 0].tolist() == [3, 3, 3, 1, 1, 1]
     assert d[:, 1].tolist() == [*top[3].boxes[:, 0], *top[1].boxes[:, 0]]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.dictionaries(st.tuples(st.integers(0, 4), st.integers(0, 4)),
+                       st.lists(st.integers(0, 30), min_size=1, max_size=12, unique=True)
+                       .map(sorted), max_size=12),
+       st.integers(1, 5))
+def test_agreed_pairs_against_their_definition(seen: dict, agree: int) -> None:
+    """A pseudo-match: sure on ``agree`` consecutive frames, and neither tracklet sure of any
+    other partner (brute force over the pairs)."""
+    def consecutive(frames: list[int]) -> int:
+        # ascending unique frames: n of them in a row span n - 1
+        return max(n for n in range(1, len(frames) + 1)
+                   if any(frames[i + n - 1] - frames[i] == n - 1
+                          for i in range(len(frames) - n + 1)))
+
+    expected = {p for p, frames in seen.items() if consecutive(frames) >= agree
+                and all(q == p or (q[0] != p[0] and q[1] != p[1]) for q in seen)}
+    assert agreed_pairs(seen, agree) == expected
