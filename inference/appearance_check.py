@@ -98,6 +98,11 @@ class AppearanceCheck:
         """Whether the user is told: not for inputs without a run of consecutive frames."""
         return self.judged or self.bursts > 0
 
+    def to_tell(self, quiet: bool) -> bool:
+        """Whether a command prints :meth:`message`: when it is :attr:`worth_saying`, and with
+        ``--quiet`` only when the images were left out."""
+        return self.worth_saying and (not quiet or not self.trusted)
+
     def message(self) -> str:
         """One line for the user."""
         pairs = "tracklet pairs" if self.tracklets else "pairs"

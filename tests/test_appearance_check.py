@@ -80,12 +80,14 @@ def test_too_few_pairs_keep_the_images() -> None:
     assert not short.judged and short.trusted and math.isnan(short.auc)
     assert "needed to judge the images" in short.message()
     assert short.bursts == 0 and not short.worth_saying  # single images: nothing to say
+    assert not short.to_tell(quiet=False)
     top, hor = _still(40)
     box, cue = _costs(40, "opposite")
     unsure = {f: np.full_like(c, 0.45) for f, c in box.items()}  # never below gamma by 0.3
     check = check_appearance(top, hor, unsure, cue, gamma=0.5)
     assert not check.judged and check.trusted and check.positives == 0
     assert check.bursts == 4 and check.worth_saying  # a video the matcher is never sure of
+    assert check.to_tell(quiet=False) and not check.to_tell(quiet=True)  # images kept
     top, hor = _still(100)
     box, cue = _costs(100, "opposite")
     strict = check_appearance(top, hor, box, cue, gamma=0.5, min_pairs=10_000)

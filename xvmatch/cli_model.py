@@ -251,8 +251,7 @@ def associate_with_model(
             both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))
             print(f"INT8 appearance network: {len(run.rechecked)} of {both} frames were near "
                   "ties, scored again with FP32", file=sys.stderr)
-        if run.checked is not None and run.checked.worth_saying and (
-                not getattr(args, "quiet", False) or not run.checked.trusted):
+        if run.checked is not None and run.checked.to_tell(getattr(args, "quiet", False)):
             print(run.checked.message(), file=sys.stderr)
         if draw is not None:
             draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, run.pairs,

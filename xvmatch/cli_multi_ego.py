@@ -257,7 +257,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             appearance_check=args.appearance_check == "on", checked=checked,
         )
         for k, check in sorted(checked.items()):
-            if check.worth_saying and (not args.quiet or not check.trusted):
+            if check.to_tell(args.quiet):
                 print(f"--hor {paths[k]}: {check.message()}", file=sys.stderr)
     finally:
         for source in sources:

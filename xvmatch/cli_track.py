@@ -312,7 +312,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows hit the MIP's "
               f"node budget or time limit ({args.time_limit:g} s) or failed and used the greedy "
               "fallback", file=sys.stderr)
-    if checked and checked[0].worth_saying and (not args.quiet or not checked[0].trusted):
+    if checked and checked[0].to_tell(args.quiet):
         print(checked[0].message(), file=sys.stderr)
     if not args.quiet:
         ids = set(result.top_rows.values()) | set(result.hor_rows.values())
