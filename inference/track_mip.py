@@ -13,9 +13,12 @@ over time, sets 1 and 3 link the two views within a clip.
 
 The loop constraints are ``4 N0 N1 N2 N3`` in number; they are added lazily (solve, add the
 loops the solution breaks, solve again), which is exact and keeps each program small. Each
-window has a time limit; past it, or if HiGHS fails, :func:`greedy_solution` (a Hungarian
-assignment per edge set on the same weights, then the broken loops cut at their weakest edge)
-answers instead and the solution says so.
+window has a budget of work, the same on every CPU: :data:`MIP_MAX_LOOPS` loops added,
+:data:`MIP_MAX_ROUNDS` programs of at most :data:`MIP_NODE_LIMIT` nodes. Past it, or if HiGHS
+fails, the best loop-free answer seen answers instead and the solution says so: a program's
+answer with its broken loops closed or cut (:func:`repair_loops`), or :func:`greedy_solution`
+(a Hungarian assignment per edge set, repaired the same way), whichever Eq. 1 values more. A
+wall-time guard (:data:`MIP_TIME_LIMIT`) stops a program that would not end.
 """
 
 from __future__ import annotations
@@ -29,27 +32,41 @@ from scipy.optimize import Bounds, LinearConstraint, linear_sum_assignment, milp
 from scipy.sparse import coo_matrix
 
 __all__ = [
+    "MIP_MAX_LOOPS",
+    "MIP_MAX_ROUNDS",
     "MIP_NODE_LIMIT",
     "MIP_TIME_LIMIT",
     "ClusterSolution",
     "check_weights",
-    "greedy_solution",
+        "greedy_solution",
     "loop_violations",
     "objective",
+    "repair_loops",
     "solve_four_clusters",
 ]
 
 MIP_NODE_LIMIT = 1000
 """HiGHS branch-and-bound nodes per program: the MIPs' budget of work. It is the same on every
-CPU, so a window (a frame) falls back to the greedy answer on the same inputs whatever the
-machine's speed or load. Every window of the CVMHAT dev split is solved at the root node (one
+CPU, so a window (a frame) falls back on the same inputs whatever the machine's speed or
+load. Every window of the CVMHAT dev split is solved at the root node (one
 node), clean boxes or detector noise with c0 0.1 (2,682 programs, 2026-11-27)."""
+
+MIP_MAX_LOOPS = 64
+"""Loop constraints (Eq. 3) a window may add: the budget of the lazy rounds, the same on every
+CPU. Each program gets slower as loops pile up (a crowded rendered video with images: 0.05 s
+with none, 5 to 10 s past 300), so past this budget the window takes the best loop-free
+answer seen instead of its exact optimum. The CVMHAT dev split needs at most 34 (clean boxes,
+1,540 windows) and 42 with detector noise (seeds 1-3, 4,620 windows; 2026-11-28)."""
+
+MIP_MAX_ROUNDS = 50
+"""Programs a window may solve while adding loops; past it, as past :data:`MIP_MAX_LOOPS`."""
 
 MIP_TIME_LIMIT = 30.0
 """Default wall-time guard per window (frame), against a program that would not end. Unlike
-the node budget it depends on the machine, so it sits far above what a window takes: at most
-0.3 s per program on the dev split with noisy boxes, on a 2-core machine (a 2 s limit let 9 of
-780 windows fall back when five other jobs shared that machine)."""
+the budgets of work it depends on the machine, so it sits far above what a window takes: at
+most 0.3 s per program on the dev split with noisy boxes, and 6.6 s for the slowest window of
+a crowded rendered video with images within :data:`MIP_MAX_LOOPS`, on a 2-core machine (a 2 s
+limit let 9 of 780 windows fall back when five other jobs shared that machine)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,8 +76,8 @@ class ClusterSolution:
     Attributes:
         edges: four binary ``(N_i, N_{i+1})`` int8 matrices, edge sets 0..3.
         dummies: (4,) the ``d_i`` of Eqs. 1 and 4.
-        status: ``optimal`` (HiGHS proved it), ``fallback`` (time limit or solver failure:
-            greedy answer) or ``greedy`` (asked for).
+        status: ``optimal`` (HiGHS proved it), ``fallback`` (budget spent or solver failure:
+            the best loop-free answer seen) or ``greedy`` (asked for).
         rounds: how many programs were solved (one per batch of lazily added loops).
     """
 
@@ -128,7 +145,7 @@ def loop_violations(edges: Sequence[np.ndarray]) -> list[tuple[int, int, int, in
 
 def greedy_solution(weights: Sequence[np.ndarray], c0: float = 0.2) -> ClusterSolution:
     """Hungarian assignment per edge set on the weights (pairs above ``2 c0``), then every
-    broken loop of Eq. 3 cut at the weakest of its three edges; the MIP's fallback."""
+    broken loop of Eq. 3 closed or cut (:func:`repair_loops`); the MIP's last fallback."""
     mats = check_weights(weights)
     edges = []
     for w in mats:
@@ -138,15 +155,31 @@ def greedy_solution(weights: Sequence[np.ndarray], c0: float = 0.2) -> ClusterSo
             keep = w[r, c] > 2 * c0
             e[r[keep], c[keep]] = 1
         edges.append(e)
+    edges = repair_loops(mats, edges, c0)
+    return ClusterSolution(edges, _dummies(edges, _sizes(mats)), "greedy", 0)
+
+
+def repair_loops(
+    weights: Sequence[np.ndarray], edges: Sequence[np.ndarray], c0: float,
+) -> tuple[np.ndarray, ...]:
+    """Make an answer of Eq. 2 keep Eq. 3: each broken loop a->b->c->d is closed with the edge
+    d->a where both ends are free, or cut at its weakest edge, whichever Eq. 1 values more (an
+    edge is worth its weight less ``2 c0``, the two dummy ends it replaces; Eq. 4). Closing a
+    loop breaks no other. Returns a copy; ``edges`` is left as it is."""
+    out = [np.array(e, dtype=np.int8) for e in edges]
     while True:
-        broken = loop_violations(edges)
+        broken = loop_violations(out)
         if not broken:
-            break
+            return tuple(out)
         i, a, b, c, d = broken[0]
         path = [(i, a, b), ((i + 1) % 4, b, c), ((i + 2) % 4, c, d)]
-        k, r, s = min(path, key=lambda p: mats[p[0]][p[1], p[2]])
-        edges[k][r, s] = 0
-    return ClusterSolution(tuple(edges), _dummies(edges, _sizes(mats)), "greedy", 0)
+        k, r, s = min(path, key=lambda p: weights[p[0]][p[1], p[2]])
+        last = out[(i + 3) % 4]
+        close = weights[(i + 3) % 4][d, a] - 2.0 * c0
+        if not last[d].any() and not last[:, a].any() and close > 2.0 * c0 - weights[k][r, s]:
+            last[d, a] = 1
+        else:
+            out[k][r, s] = 0
 
 
 def _offsets(mats: Sequence[np.ndarray]) -> list[int]:
@@ -161,21 +194,34 @@ def solve_four_clusters(
     weights: Sequence[np.ndarray],
     c0: float = 0.2,
     time_limit: float = MIP_TIME_LIMIT,
-    max_rounds: int = 50,
+    max_rounds: int = MIP_MAX_ROUNDS,
     node_limit: int = MIP_NODE_LIMIT,
+    max_loops: int = MIP_MAX_LOOPS,
 ) -> ClusterSolution:
     """Solve Eqs. 1-4 for one window with ``scipy.optimize.milp`` (HiGHS).
 
     Args:
         weights: the four edge-weight matrices ``c^i``, shapes ``(N_i, N_{(i+1)%4})``.
         c0: dummy-node weight of Eq. 1.
-        time_limit: seconds for the whole window (every round); past it the greedy fallback.
-        max_rounds: most programs solved while adding broken loops; past it the fallback.
+        time_limit: wall-time guard for the whole window (every round), against a program
+            that would not end (:data:`MIP_TIME_LIMIT`); past it the fallback.
+        max_rounds: most programs solved while adding broken loops (:data:`MIP_MAX_ROUNDS`);
+            past it the fallback.
+        max_loops: most loop constraints added (:data:`MIP_MAX_LOOPS`); a round that would
+            pass it is not solved, and the fallback answers.
         node_limit: HiGHS nodes per program (:data:`MIP_NODE_LIMIT`); past it the fallback.
 
     Returns:
-        The :class:`ClusterSolution`; ``status`` says whether HiGHS proved it optimal.
+        The :class:`ClusterSolution`; ``status`` says whether HiGHS proved it optimal. A
+        ``fallback`` is the best loop-free answer seen: a program's answer with its broken
+        loops closed or cut (:func:`repair_loops`) or the greedy one, by Eq. 1.
+
+    Raises:
+        ValueError: bad shapes (:func:`check_weights`) or a budget out of range.
     """
+    if not time_limit > 0 or int(max_rounds) < 1 or int(max_loops) < 0:
+        raise ValueError("time_limit and max_rounds must be > 0 and max_loops >= 0, got "
+                         f"{time_limit}, {max_rounds}, {max_loops}")
     mats = check_weights(weights)
     sizes = _sizes(mats)
     if all(m.size == 0 for m in mats):
@@ -221,7 +267,10 @@ def solve_four_clusters(
     bounds = Bounds(np.zeros(n_var), np.r_[np.ones(n_e), np.full(4, 2.0 * k)])
     start = time.perf_counter()
     seen: set[tuple[int, int, int, int, int]] = set()
-    for rounds in range(1, max_rounds + 1):
+    best: tuple[np.ndarray, ...] = ()
+    best_value = -np.inf
+    rounds = 0
+    for rounds in range(1, int(max_rounds) + 1):
         left = time_limit - (time.perf_counter() - start)
         if left <= 0:
             break
@@ -242,9 +291,17 @@ def solve_four_clusters(
         broken = [v for v in loop_violations(edges) if v not in seen]
         if not broken:
             return ClusterSolution(edges, x[n_e:].copy(), "optimal", rounds)
+        repaired = repair_loops(mats, edges, c0)  # feasible, and usually near the optimum
+        value = objective(mats, repaired, c0)
+        if value > best_value:
+            best, best_value = repaired, value
+        if len(seen) + len(broken) > max_loops:
+            break
         for i, a, b, c, d in broken:  # Eq. 3 for this loop
             seen.add((i, a, b, c, d))
             add([(var(i, a, b), 1.0), (var((i + 1) % 4, b, c), 1.0),
                  (var((i + 2) % 4, c, d), 1.0), (var((i + 3) % 4, d, a), -1.0)], -np.inf, 2.0)
-    fallback = greedy_solution(mats, c0)
-    return ClusterSolution(fallback.edges, fallback.dummies, "fallback", rounds)
+    greedy = greedy_solution(mats, c0).edges
+    if objective(mats, greedy, c0) > best_value:
+        best = greedy
+    return ClusterSolution(best, _dummies(best, sizes), "fallback", rounds)

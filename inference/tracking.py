@@ -90,9 +90,9 @@ class TrackConfig:
         max_gap: frames a tracklet may miss inside a clip and still be extended (3).
         weights: the edge-weight parameters (``c0``, ``w1``, ``w2``, ``sigma``).
         solver: ``mip`` (Eqs. 1-4 with HiGHS) or ``spectral`` (the Sec. 4.1 baseline).
-        time_limit: wall-time guard per window for the MIP before the greedy fallback
-            (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`; the MIP's budget of work
-            is its node limit, the same on every CPU).
+        time_limit: wall-time guard per window for the MIP before its fallback
+            (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`; the MIP's budget of work,
+            the same on every CPU, is its loop and node limits).
         seed: seed of the spectral baseline's k-means.
         min_colour: with images, the colour-histogram similarity a horizontal box needs with
             the previous box to extend its tracklet (0.3, Sec. 4.1).
@@ -260,7 +260,8 @@ class TrackResult:
         hor_rows: ``{horizontal row: track id}``; the same id in both views is one person.
         frame_pairs: ``{frame: [(top row, horizontal row), ...]}`` of the frame association.
         n_windows: windows solved.
-        n_fallback: windows where the MIP hit its time limit or failed (greedy answer used).
+        n_fallback: windows where the MIP spent its budget or time limit or failed (the best
+            loop-free answer found used).
     """
 
     top_rows: dict[int, int]

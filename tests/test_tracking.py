@@ -23,6 +23,7 @@ from xvmatch.inference.track_mip import (
     greedy_solution,
     loop_violations,
     objective,
+    repair_loops,
     solve_four_clusters,
 )
 from xvmatch.inference.track_spectral import spectral_groups, spectral_solution
@@ -211,6 +212,10 @@ def test_mip_rejects_bad_shapes():
     with pytest.raises(ValueError, match="chained"):
         solve_four_clusters([np.zeros((2, 2)), np.zeros((3, 2)), np.zeros((2, 2)),
                              np.zeros((2, 2))])
+    ok = [np.zeros((1, 1))] * 4
+    for bad in ({"time_limit": 0.0}, {"max_rounds": 0}, {"max_loops": -1}):
+        with pytest.raises(ValueError, match="max_loops >= 0"):
+            solve_four_clusters(ok, **bad)
 
 
 @st.composite
@@ -246,14 +251,76 @@ def test_mip_is_optimal_on_tiny_problems(weights):
     assert objective(weights, sol.edges, 0.2) == pytest.approx(_brute_force(weights, 0.2))
 
 
-def test_time_limit_falls_back_to_greedy():
-    rng = np.random.default_rng(0)
-    n = [12, 12, 7, 7]
+@settings(max_examples=30, deadline=None)
+@given(_problems(max_size=4), st.integers(1, 3))
+def test_a_spent_round_budget_answers_the_best_loop_free_answer_seen(weights, rounds):
+    """Out of rounds, the answer still keeps Eqs. 2-4 and is worth at least the greedy one."""
+    sizes = [w.shape[0] for w in weights]
+    sol = solve_four_clusters(weights, max_rounds=rounds)
+    assert sol.status in ("optimal", "fallback") and sol.rounds <= rounds
+    _check_constraints(sol.edges, sizes)
+    assert (sol.dummies == 2 * max(sizes) - np.array(
+        [sol.edges[(i - 1) % 4].sum() + sol.edges[i].sum() for i in range(4)])).all()
+    greedy = objective(weights, greedy_solution(weights).edges, 0.2)
+    assert objective(weights, sol.edges, 0.2) >= greedy - 1e-9
+
+
+def test_a_spent_round_budget_keeps_the_programs_answer_not_the_greedy_one():
+    # One program leaves broken loops here; cutting them keeps it optimal (10.9306), where the
+    # greedy answer is worth 10.633: the fallback used to be the greedy one.
+    rng = np.random.default_rng(3)
+    n = [5, 5, 4, 4]
     weights = [rng.random((n[i], n[(i + 1) % 4])) ** 4 for i in range(4)]
-    sol = solve_four_clusters(weights, max_rounds=1)
-    if sol.status == "fallback":  # one round did not settle every loop
-        _check_constraints(sol.edges, n)
-    assert sol.status in ("optimal", "fallback")
+    once = solve_four_clusters(weights, max_rounds=1)
+    full = solve_four_clusters(weights)
+    assert once.status == "fallback" and full.status == "optimal"
+    spent = solve_four_clusters(weights, time_limit=600.0, max_loops=0)  # work, not time
+    assert spent.status == "fallback" and spent.rounds == 1
+    assert all((a == b).all() for a, b in zip(spent.edges, once.edges, strict=True))
+    assert objective(weights, once.edges, 0.2) == pytest.approx(objective(weights, full.edges, 0.2))
+    assert objective(weights, once.edges, 0.2) > objective(
+        weights, greedy_solution(weights).edges, 0.2) + 0.1
+
+
+@settings(max_examples=60, deadline=None)
+@given(_problems(max_size=4), st.integers(0, 2**32 - 1), st.sampled_from([0.0, 0.2, 0.5]))
+def test_repair_loops_only_cuts_or_closes_broken_loops(weights, seed, c0):
+    rng = np.random.default_rng(seed)
+    edges = []
+    for w in weights:  # any answer of Eq. 2: a random partial matching per edge set
+        e = np.zeros(w.shape, dtype=np.int8)
+        k = min(w.shape)
+        if k:
+            r, c = rng.permutation(w.shape[0])[:k], rng.permutation(w.shape[1])[:k]
+            keep = rng.random(k) < 0.8
+            e[r[keep], c[keep]] = 1
+        edges.append(e)
+    before = [e.copy() for e in edges]
+    broken = loop_violations(edges)
+    on_broken = {(i, a, b) for j, *abcd in broken
+                 for i, a, b in ((j, abcd[0], abcd[1]), ((j + 1) % 4, abcd[1], abcd[2]),
+                                 ((j + 2) % 4, abcd[2], abcd[3]))}
+    closing = {((j + 3) % 4, d, a) for j, a, _, _, d in broken}
+    fixed = repair_loops(weights, edges, c0)
+    _check_constraints(fixed, [w.shape[0] for w in weights])  # Eqs. 2 and 3
+    assert all((e == b).all() for e, b in zip(edges, before, strict=True))  # input untouched
+    for i, (f, e) in enumerate(zip(fixed, edges, strict=True)):
+        assert {(i, a, b) for a, b in zip(*np.nonzero((e == 1) & (f == 0)), strict=True)} \
+            <= on_broken
+        assert {(i, a, b) for a, b in zip(*np.nonzero((e == 0) & (f == 1)), strict=True)} \
+            <= closing
+    if not broken:
+        assert all((f == e).all() for f, e in zip(fixed, edges, strict=True))
+
+
+def test_repair_loops_closes_a_loop_worth_closing_and_cuts_one_that_is_not():
+    one = np.ones((1, 1))
+    path = [np.ones((1, 1), np.int8), np.ones((1, 1), np.int8), np.ones((1, 1), np.int8),
+            np.zeros((1, 1), np.int8)]
+    closed = repair_loops([one * 0.9, one * 0.9, one * 0.9, one * 0.5], path, 0.2)
+    assert [int(e[0, 0]) for e in closed] == [1, 1, 1, 1]  # 0.5 - 0.4 > 0.4 - 0.9
+    cut = repair_loops([one * 0.9, one * 0.3, one * 0.9, one * -1.0], path, 0.2)
+    assert [int(e[0, 0]) for e in cut] == [1, 0, 1, 0]  # the weakest edge goes
 
 
 def test_the_mip_budget_is_work_not_time():

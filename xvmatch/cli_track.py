@@ -62,7 +62,7 @@ MIN_IOU_TYPE = float_in(0, 1, "an intersection over union", low_open=True)
 C0_TYPE = float_in(0, 1, "edge weights are in [0, 1]; an edge pays off above 2 c0")
 SIGMA_TYPE = float_in(0, 1000, "per box height of motion deviation", low_open=True)
 SHARE_TYPE = float_in(0, 1, "a share of a linear combination")
-TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per window before the greedy fallback")
+TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per window before the MIP's fallback")
 
 
 def _step_progress(enabled: bool):
@@ -183,8 +183,9 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "(0, 1000] (default 1)")
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=30.0,
                    help="wall-time guard per window for the MIP, in [0.01, 600] (default 30; "
-                   "its work budget is 1000 HiGHS nodes, the same on every CPU); past either a "
-                   "greedy answer is used and counted in a warning")
+                   "its budget of work, the same on every CPU, is 64 added loops and 1000 "
+                   "HiGHS nodes per program); past either the best loop-free answer found is "
+                   "used and counted in a warning")
     p.add_argument("--seed", type=seed_value, default=0,
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
@@ -309,9 +310,9 @@ def _cmd_track(args: argparse.Namespace) -> int:
 
     atomic_write_text(out / OFFSET_FILE, json.dumps({"offset": offset}) + "\n")
     if result.n_fallback:
-        print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows hit the MIP's "
-              f"node budget or time limit ({args.time_limit:g} s) or failed and used the greedy "
-              "fallback", file=sys.stderr)
+        print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows spent the "
+              f"MIP's budget of work or time limit ({args.time_limit:g} s) or failed, and used "
+              "the best loop-free answer found instead of the optimum", file=sys.stderr)
     if checked and checked[0].to_tell(args.quiet):
         print(checked[0].message(), file=sys.stderr)
     if not args.quiet:
