@@ -38,7 +38,7 @@ __all__ = [
     "MIP_TIME_LIMIT",
     "ClusterSolution",
     "check_weights",
-        "greedy_solution",
+    "greedy_solution",
     "loop_violations",
     "objective",
     "repair_loops",
