@@ -267,8 +267,7 @@ def solve_four_clusters(
     bounds = Bounds(np.zeros(n_var), np.r_[np.ones(n_e), np.full(4, 2.0 * k)])
     start = time.perf_counter()
     seen: set[tuple[int, int, int, int, int]] = set()
-    best: tuple[np.ndarray, ...] = ()
-    best_value = -np.inf
+    answers: list[tuple[np.ndarray, ...]] = []  # each program's answer that broke loops
     rounds = 0
     for rounds in range(1, int(max_rounds) + 1):
         left = time_limit - (time.perf_counter() - start)
@@ -291,17 +290,15 @@ def solve_four_clusters(
         broken = [v for v in loop_violations(edges) if v not in seen]
         if not broken:
             return ClusterSolution(edges, x[n_e:].copy(), "optimal", rounds)
-        repaired = repair_loops(mats, edges, c0)  # feasible, and usually near the optimum
-        value = objective(mats, repaired, c0)
-        if value > best_value:
-            best, best_value = repaired, value
+        answers.append(edges)
         if len(seen) + len(broken) > max_loops:
             break
         for i, a, b, c, d in broken:  # Eq. 3 for this loop
             seen.add((i, a, b, c, d))
             add([(var(i, a, b), 1.0), (var((i + 1) % 4, b, c), 1.0),
                  (var((i + 2) % 4, c, d), 1.0), (var((i + 3) % 4, d, a), -1.0)], -np.inf, 2.0)
-    greedy = greedy_solution(mats, c0).edges
-    if objective(mats, greedy, c0) > best_value:
-        best = greedy
+    # repaired only now, so that a window solved to optimality pays nothing for it; the first
+    # best wins a tie, the greedy answer last
+    candidates = [repair_loops(mats, e, c0) for e in answers] + [greedy_solution(mats, c0).edges]
+    best = max(candidates, key=lambda e: objective(mats, e, c0))
     return ClusterSolution(best, _dummies(best, sizes), "fallback", rounds)
