@@ -57,6 +57,7 @@ from xvmatch.geometry.matcher_inputs import FrameCameras, appearance_cost
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.inference.multi_ego_tracking import pairs_from_ids, track_multi_view
 from xvmatch.inference.multi_view_assignment import (
+    MIP_MAX_TRIANGLES,
     consistent_hungarian,
     pairwise_hungarian,
     solve_multi_view,
@@ -202,13 +203,18 @@ def _print_header(header: list[str]) -> None:
     print("|" + "---|" * len(header))
 
 
-def _pair_cells(per_frame: list, status: dict[str, int]) -> tuple[list[str], str]:
-    """The cells of one row: per view pair ACC9 / CVIDF1, the two means; and the statuses."""
+def _pair_cells(per_frame: list, status: dict[str, int],
+                triangles: int | None = None) -> tuple[list[str], str]:
+    """The cells of one row: per view pair ACC9 / CVIDF1, the two means; and the statuses,
+    with the most triangles one frame's program added (MIP rows)."""
     scores = summarize_views(per_frame)
     mean = mean_scores(scores)
     cells = [f"{scores[p].acc9:.1f} / {scores[p].cvidf1:.1f}" for p in sorted(scores)]
     cells += [f"{mean['acc9']:.1f}", f"{mean['cvidf1']:.1f}"]
-    return cells, ", ".join(f"{k} {v}" for k, v in sorted(status.items()))
+    stat = ", ".join(f"{k} {v}" for k, v in sorted(status.items()))
+    if triangles is not None:
+        stat += f"; triangles <= {triangles} (budget {MIP_MAX_TRIANGLES})"
+    return cells, stat
 
 
 def identity_f1(pred: list[np.ndarray], truth: list[np.ndarray], n_truth: int) -> tuple[int, int]:
@@ -239,6 +245,7 @@ def run_tracks(args: argparse.Namespace, matcher) -> None:
     seconds = {k: 0.0 for k in counts}
     idf = {k: [0, 0] for k in counts}
     status: dict[tuple, dict[str, int]] = {k: {} for k in counts}
+    triangles = dict.fromkeys(counts, 0)
     start = time.perf_counter()
     for i in range(args.scenes):
         frames = render_multi_ego([args.seed, i], args.n_ego, args.frames)
@@ -253,6 +260,8 @@ def run_tracks(args: argparse.Namespace, matcher) -> None:
             for sol in per_frame.values():
                 status[(setting, methods[0])][sol.status] = (
                     status[(setting, methods[0])].get(sol.status, 0) + 1)
+                triangles[(setting, methods[0])] = max(triangles[(setting, methods[0])],
+                                                       sol.triangles)
             offset = np.cumsum([0, *(max((int(p.max()) + 1 for p in per_frame[f].person
                                           if p.size), default=0) for f in order)])
             answers[methods[0]] = {f: [p + 1 + offset[k] for p in per_frame[f].person]
@@ -263,6 +272,8 @@ def run_tracks(args: argparse.Namespace, matcher) -> None:
             seconds[(setting, methods[1])] += time.perf_counter() - t0
             for st in tracks.statuses:
                 status[(setting, methods[1])][st] = status[(setting, methods[1])].get(st, 0) + 1
+            triangles[(setting, methods[1])] = max(triangles[(setting, methods[1])],
+                                                   tracks.max_triangles)
             answers[methods[1]] = {f: [tracks.person[v][f] for v in range(len(names))]
                                    for f in order}
             for method, ids in answers.items():
@@ -291,7 +302,7 @@ def run_tracks(args: argparse.Namespace, matcher) -> None:
     _print_header(["boxes", "method", *pair_names, "mean ACC9", "mean CVIDF1",
                    "IDF1 over time", "inconsistent triples", "ms/frame", "status"])
     for key, per_frame in counts.items():
-        cells, stat = _pair_cells(per_frame, status[key])
+        cells, stat = _pair_cells(per_frame, status[key], triangles[key])
         print("| " + " | ".join([*key, *cells,
                                  f"{200.0 * idf[key][0] / max(idf[key][1], 1):.1f}",
                                  str(cycles[key][0]),
@@ -329,6 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     cycles = {k: [0, 0] for k in counts}
     seconds = {k: 0.0 for k in counts}
     status: dict[tuple, dict[str, int]] = {k: {} for k in counts}
+    triangles = dict.fromkeys(counts, 0)
     start = time.perf_counter()
     for i in range(args.scenes):
         frames = render_multi_ego([args.seed, i], args.n_ego, args.frames)
@@ -343,6 +355,7 @@ def main(argv: list[str] | None = None) -> int:
                         sol = solve(problem, solver, args.time_limit)
                         seconds[key] += time.perf_counter() - t0
                         status[key][sol.status] = status[key].get(sol.status, 0) + 1
+                        triangles[key] = max(triangles[key], sol.triangles)
                         views = range(len(names))
                         counts[key].append(count_views([sample.gt_ids[v][f] for v in views],
                                                        [sample.stands_for[v][f] for v in views],
@@ -360,7 +373,8 @@ def main(argv: list[str] | None = None) -> int:
     for key, per_frame in counts.items():
         broken, closed = cycles[key]
         rate = 100.0 * broken / (broken + closed) if broken + closed else 0.0
-        cells, stat = _pair_cells(per_frame, status[key])
+        cells, stat = _pair_cells(per_frame, status[key],
+                                  triangles[key] if key[2] == "mip" else None)
         print("| " + " | ".join([*key, *cells, f"{rate:.1f}",
                                  f"{1000 * seconds[key] / n_frames:.1f}", stat]) + " |")
     print(f"# total {time.perf_counter() - start:.0f} s")

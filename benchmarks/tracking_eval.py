@@ -79,6 +79,7 @@ from xvmatch.inference.track_costs import (
     FrameCosts,
     TrackWeights,
 )
+from xvmatch.inference.track_mip import MIP_MAX_LOOPS
 from xvmatch.inference.tracking import (
     LearnedEvidence,
     TrackConfig,
@@ -261,6 +262,7 @@ def synthetic_main(args: argparse.Namespace) -> int:
     print(head)
     pooled = {k: [] for k in ("frame", "frame-learned", *SYNTHETIC_ARMS)}
     views = {k: {"top": [], "hor": []} for k in SYNTHETIC_ARMS}
+    loops = dict.fromkeys(SYNTHETIC_ARMS, 0)
     for k in range(args.synthetic):
         seed = args.seed + k
         start = time.perf_counter()
@@ -310,9 +312,11 @@ def synthetic_main(args: argparse.Namespace) -> int:
                            f"{'kept' if checked[0].trusted else 'FELL BACK'}")
             elif checked:
                 verdict = f" check: {checked[0].positives} pairs, not judged"
+            loops[arm] = max(loops[arm], res.max_loops)
             score_tracks(f"{name} {arm}", res, (det_top, det_hor), (top, hor), frames,
                          pooled[arm], views[arm], f"track {time.perf_counter() - start:.1f}s "
-                         f"fallback {res.n_fallback}/{res.n_windows}{verdict}")
+                         f"fallback {res.n_fallback}/{res.n_windows} loops "
+                         f"{res.max_loops}{verdict}")
         sys.stdout.flush()
     print("-" * len(head))
     total = len(pooled["frame"])
@@ -321,7 +325,14 @@ def synthetic_main(args: argparse.Namespace) -> int:
     for arm in SYNTHETIC_ARMS:
         print(fmt_row(f"OVERALL {arm}", total, summarize(pooled[arm]),
                       pool_view_scores(views[arm]["top"]), pool_view_scores(views[arm]["hor"])))
+    print_loops(loops)
     return 0
+
+
+def print_loops(loops: dict[str, int]) -> None:
+    """The most loop constraints one window's MIP added, per row, against the budget."""
+    print("most loops one window added (MIP_MAX_LOOPS " + str(MIP_MAX_LOOPS) + "): "
+          + ", ".join(f"{arm} {n}" for arm, n in loops.items()))
 
 
 def main() -> int:
@@ -428,6 +439,7 @@ def main() -> int:
     print(head)
     pooled = {k: [] for k in (*frame_rows, *arms)}
     views = {s: {"top": [], "hor": []} for s in arms}
+    loops = dict.fromkeys(arms, 0)
     made = {"top": [], "hor": []}
     people: dict[str, dict] = {"top": {}, "hor": {}}
     for noise_seed in noise_seeds:
@@ -493,9 +505,11 @@ def main() -> int:
                                  frame_pairs=evidence["frame"],
                                  learned=ev if arm.endswith("-learned") else None)
                 t_track = time.perf_counter() - start
+                loops[arm] = max(loops[arm], res.max_loops)
                 score_tracks(f"{label} {arm}", res, (det_top, det_hor), (top, hor), frames,
                              pooled[arm], views[arm],
-                             f"track {t_track:.1f}s fallback {res.n_fallback}/{res.n_windows}")
+                             f"track {t_track:.1f}s fallback {res.n_fallback}/{res.n_windows} "
+                             f"loops {res.max_loops}")
             sys.stdout.flush()
     print("-" * len(head))
     total = len(pooled["frame"])
@@ -510,6 +524,7 @@ def main() -> int:
         hor_s = pool_view_scores(views[arm]["hor"])
         overall[arm] = (cv, top_s, hor_s)
         print(fmt_row(f"OVERALL {arm}", total, cv, top_s, hor_s))
+    print_loops({arm: n for arm, n in loops.items() if arm.startswith("mip")})
     for view in ("top", "hor"):
         ts = tracklet_scores(made[view], people[view])
         print(f"tracklets ({view}, Table 10): P {ts.precision:.2f} R {ts.recall:.2f} "

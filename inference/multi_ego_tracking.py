@@ -87,11 +87,14 @@ class MultiViewTracks:
             ``fallback`` or ``greedy``; see
             :data:`~xvmatch.inference.multi_view_assignment.STATUSES`).
         n_people: person ids used (the largest id).
+        max_triangles: the most broken triangles one frame's program added (the budget:
+            :data:`~xvmatch.inference.multi_view_assignment.MIP_MAX_TRIANGLES`).
     """
 
     person: tuple[dict[int, np.ndarray], ...]
     statuses: tuple[str, ...]
     n_people: int
+    max_triangles: int = 0
 
 
 def _positions(record: FrameBoxes | None) -> dict[int, int]:
@@ -382,8 +385,8 @@ def track_multi_view(
         top_min_iou: ``min_iou`` of the top view (0), always linked by IoU.
         solver: ``mip`` (the joint program per frame) or ``greedy`` (pairwise Hungarian made
             consistent).
-        time_limit: wall-time guard per frame for the MIP, past which the greedy answer is
-            used (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`).
+        time_limit: wall-time guard per frame for the MIP, past which its fallback is used
+            (:func:`~xvmatch.inference.multi_view_assignment.solve_multi_view`).
         frame_weight: the share of a frame's own cost in the costs (:func:`smoothed_problems`).
         motion: the egocentric views' links by motion, with this gate in box heights
             (:func:`~xvmatch.geometry.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``
@@ -427,6 +430,7 @@ def track_multi_view(
         {f: np.zeros(len(rec), dtype=np.int64) for f, rec in views[v].items()}
         for v in range(n_views))
     statuses: list[str] = []
+    triangles = 0
     owner: dict[tuple[int, int], int] = {}
     next_id = 1
     for t in range(len(clips)):
@@ -438,6 +442,7 @@ def track_multi_view(
             else:
                 sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
             statuses.append(sol.status)
+            triangles = max(triangles, sol.triangles)
             box_chains = []
             for v in range(n_views):
                 ch = np.full(int(problem.sizes[v]), -1, dtype=np.int64)
@@ -448,4 +453,4 @@ def track_multi_view(
             for v in range(n_views):
                 if f in person[v]:
                     person[v][f][:] = ids[sol.person[v]]
-    return MultiViewTracks(person, tuple(statuses), next_id - 1)
+    return MultiViewTracks(person, tuple(statuses), next_id - 1, triangles)

@@ -19,8 +19,13 @@ Without the triangle inequalities the program is the pairwise Hungarian assignme
 pair (:func:`pairwise_hungarian`, the baseline), so any change comes from consistency alone.
 The triangle inequalities (``3 n_a n_b n_c`` per triple of views) are added lazily: solve, add
 those of every triple the solution breaks, solve again, until none is broken; that is exact.
-Past a time limit, or if HiGHS fails, :func:`consistent_hungarian` answers (pairwise Hungarian
-made consistent by merging its pairs greedily, best first) and the solution says so.
+Each frame has a budget of work, the same on every CPU: :data:`MIP_MAX_TRIANGLES` triangles
+added, :data:`~xvmatch.inference.track_mip.MIP_MAX_ROUNDS` programs of at most
+:data:`~xvmatch.inference.track_mip.MIP_NODE_LIMIT` nodes. Past it, or if HiGHS fails, the best
+consistent answer seen answers instead and the solution says so: a program's answer or the
+pairwise Hungarian one, each made consistent by merging its pairs into people greedily, best
+first (:func:`repair_cycles`, :func:`consistent_hungarian`). A wall-time guard stops a program
+that would not end.
 """
 
 from __future__ import annotations
@@ -36,9 +41,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.track_mip import MIP_NODE_LIMIT, MIP_TIME_LIMIT
+from xvmatch.inference.track_mip import MIP_MAX_ROUNDS, MIP_NODE_LIMIT, MIP_TIME_LIMIT
 
 __all__ = [
+    "MIP_MAX_TRIANGLES",
     "STATUSES",
     "MultiViewSolution",
     "check_problem",
@@ -47,12 +53,24 @@ __all__ = [
     "global_ids",
     "objective",
     "pairwise_hungarian",
+    "repair_cycles",
     "solve_multi_view",
     "view_pairs",
 ]
 
+MIP_MAX_TRIANGLES = 96
+"""Broken triangles a frame's program may add (three inequalities each): the budget of the lazy
+rounds, the same on every CPU. Each program gets slower as triangles pile up (three crowded
+views of 10-20 noisy random costs: 0.01 s with 39 triangles, 3 to 10 s past 75), so past this
+budget the frame takes the best consistent answer seen instead of its exact optimum. The
+rendered scenes of ``benchmarks/multi_ego_eval.py`` (1 top + 3 egocentric views) need at most
+66 (``--tracks``, noisy boxes, 1,200 frames; it prints the most per row). On crowded random
+frames (``benchmarks/multi_view_budget.py``: 3 views of 16 or 20 people, 4 of 12) the slowest
+took 12.6 s within it on a 2-core machine (2.5 s at most within 64), under the 30 s guard."""
+
 STATUSES = ("optimal", "fallback", "greedy", "pairwise")
-"""``optimal``: HiGHS proved it; ``fallback``: time limit or solver failure, the greedy answer;
+"""``optimal``: HiGHS proved it; ``fallback``: the budget of work or the time guard spent, or a
+solver failure: the best consistent answer seen (:func:`solve_multi_view`);
 ``greedy``: :func:`consistent_hungarian` asked for; ``pairwise``: the pairwise baseline (may be
 inconsistent)."""
 
@@ -72,12 +90,15 @@ class MultiViewSolution:
             of one view).
         status: one of :data:`STATUSES`.
         rounds: programs solved (one per batch of added triangle inequalities).
+        triangles: broken triangles whose inequalities were added, against
+            :data:`MIP_MAX_TRIANGLES`.
     """
 
     pairs: Pairs
     person: tuple[np.ndarray, ...]
     status: str
     rounds: int
+    triangles: int = 0
 
     @property
     def consistent(self) -> bool:
@@ -187,9 +208,10 @@ def objective(costs: Mapping[tuple[int, int], np.ndarray],
     return total
 
 
-def _solution(pairs: Pairs, sizes: Sequence[int], status: str, rounds: int) -> MultiViewSolution:
+def _solution(pairs: Pairs, sizes: Sequence[int], status: str, rounds: int,
+              triangles: int = 0) -> MultiViewSolution:
     ordered = {ab: p[np.argsort(p[:, 0], kind="stable")] for ab, p in sorted(pairs.items())}
-    return MultiViewSolution(ordered, global_ids(ordered, sizes), status, rounds)
+    return MultiViewSolution(ordered, global_ids(ordered, sizes), status, rounds, triangles)
 
 
 def pairwise_hungarian(
@@ -209,13 +231,46 @@ def consistent_hungarian(
     costs: Mapping[tuple[int, int], np.ndarray],
     gamma: float | Mapping[tuple[int, int], float],
 ) -> MultiViewSolution:
-    """Pairwise Hungarian made consistent: its pairs, best gain ``gamma - c`` first, merge two
-    people when they share no view and no pair between them is forbidden (+inf); then every
-    two boxes of one person are matched. Consistent by construction; the MIP's fallback."""
+    """Pairwise Hungarian made consistent (:func:`repair_cycles` of its pairs); consistent by
+    construction, the MIP's fallback of last resort."""
     n, mats, gammas = check_problem(sizes, costs, gamma)
+    pairs = _merge(n, mats, gammas, {ab: assign(c, gammas[ab]) for ab, c in mats.items()})
+    return _solution(pairs, n, "greedy", 0)
+
+
+def repair_cycles(
+    sizes: Sequence[int],
+    costs: Mapping[tuple[int, int], np.ndarray],
+    gamma: float | Mapping[tuple[int, int], float],
+    pairs: Mapping[tuple[int, int], np.ndarray],
+) -> Pairs:
+    """Matches made cycle-consistent: ``pairs``, best gain ``gamma - c`` first, merge two people
+    when they share no view and no pair between them is forbidden (+inf); then every two boxes
+    of one person are matched. A consistent answer comes back with the same pairs; a view pair
+    missing from ``pairs`` has none.
+
+    Raises:
+        ValueError: as :func:`check_problem`; ``pairs`` of views that are not a pair ``a < b``
+            of the problem, not ``(K, 2)``, or with a row outside its view.
+    """
+    n, mats, gammas = check_problem(sizes, costs, gamma)
+    for ab, p in pairs.items():
+        p = np.asarray(p)
+        if ab not in mats or p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"pairs of views {ab}: expected a (K, 2) array for a view pair "
+                             f"a < b of {len(n)} views")
+        if p.size and (p.min() < 0 or p[:, 0].max() >= n[ab[0]] or p[:, 1].max() >= n[ab[1]]):
+            raise ValueError(f"pairs of views {ab}: a row outside the views' "
+                             f"{n[ab[0]]} and {n[ab[1]]} boxes")
+    return _merge(n, mats, gammas, pairs)
+
+
+def _merge(n: list[int], mats: Pairs, gammas: Mapping[tuple[int, int], float],
+           pairs: Mapping[tuple[int, int], np.ndarray]) -> Pairs:
+    """:func:`repair_cycles` on a checked problem."""
     candidates = []
     for ab, c in mats.items():
-        for i, j in assign(c, gammas[ab]).tolist():
+        for i, j in np.asarray(pairs.get(ab, np.zeros((0, 2))), np.int64).reshape(-1, 2).tolist():
             candidates.append((gammas[ab] - c[i, j], ab, i, j))
     candidates.sort(key=lambda e: (-e[0], e[1], e[2], e[3]))
     members: dict[tuple[int, int], list[tuple[int, int]]] = {
@@ -243,8 +298,7 @@ def consistent_hungarian(
         seen.add(id(group))
         for (v, i), (w, j) in itertools.combinations(sorted(group), 2):
             chosen[(v, w)].append((i, j))
-    pairs = {ab: np.array(p, dtype=np.int64).reshape(-1, 2) for ab, p in chosen.items()}
-    return _solution(pairs, n, "greedy", 0)
+    return {ab: np.array(p, dtype=np.int64).reshape(-1, 2) for ab, p in chosen.items()}
 
 
 def solve_multi_view(
@@ -252,8 +306,9 @@ def solve_multi_view(
     costs: Mapping[tuple[int, int], np.ndarray],
     gamma: float | Mapping[tuple[int, int], float],
     time_limit: float = MIP_TIME_LIMIT,
-    max_rounds: int = 50,
+    max_rounds: int = MIP_MAX_ROUNDS,
     node_limit: int = MIP_NODE_LIMIT,
+    max_triangles: int = MIP_MAX_TRIANGLES,
 ) -> MultiViewSolution:
     """Solve the joint program of the module docstring with ``scipy.optimize.milp`` (HiGHS).
 
@@ -261,19 +316,25 @@ def solve_multi_view(
         sizes: boxes per view, ``(n_0, ..., n_{V-1})``, V >= 2.
         costs: ``{(a, b): (n_a, n_b) costs}`` for every ``a < b``; ``+inf`` forbids a pair.
         gamma: the non-association cost, one for all pairs or ``{(a, b): gamma_ab}``.
-        time_limit: seconds for all rounds together; past it the greedy fallback answers.
+        time_limit: wall-time guard for all rounds together, against a program that would not
+            end (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`); past it the fallback.
         max_rounds: most programs solved while adding broken triangles; past it the fallback.
         node_limit: HiGHS nodes per program (the same on every CPU,
             :data:`~xvmatch.inference.track_mip.MIP_NODE_LIMIT`); past it the fallback.
+        max_triangles: most broken triangles added (:data:`MIP_MAX_TRIANGLES`); a round that
+            would pass it is not solved, and the fallback answers.
 
     Returns:
-        The :class:`MultiViewSolution`; ``status`` ``optimal`` or ``fallback``.
+        The :class:`MultiViewSolution`; ``status`` ``optimal`` or ``fallback``. A ``fallback``
+        is the best consistent answer seen by the joint objective: a program's answer made
+        consistent (:func:`repair_cycles`) or :func:`consistent_hungarian`'s.
 
     Raises:
-        ValueError: as :func:`check_problem`; ``time_limit`` or ``max_rounds`` not positive.
+        ValueError: as :func:`check_problem`; a budget out of range.
     """
-    if not time_limit > 0 or int(max_rounds) < 1:
-        raise ValueError(f"time_limit and max_rounds must be > 0, got {time_limit}, {max_rounds}")
+    if not time_limit > 0 or int(max_rounds) < 1 or int(max_triangles) < 0:
+        raise ValueError("time_limit and max_rounds must be > 0 and max_triangles >= 0, got "
+                         f"{time_limit}, {max_rounds}, {max_triangles}")
     n, mats, gammas = check_problem(sizes, costs, gamma)
     keys = list(mats)
     offset = dict(zip(keys, np.cumsum([0, *(mats[k].size for k in keys)])[:-1].tolist(),
@@ -304,6 +365,7 @@ def solve_multi_view(
     integrality = np.ones(n_var)
     start = time.perf_counter()
     added: set[tuple[int, int, int, int, int, int]] = set()
+    answers: list[Pairs] = []  # each program's answer that broke triangles
     rounds = 0
     for rounds in range(1, int(max_rounds) + 1):
         left = time_limit - (time.perf_counter() - start)
@@ -321,7 +383,10 @@ def solve_multi_view(
                  for ab in keys}
         broken = [t for t in cycle_violations(pairs, n) if t not in added]
         if not broken:
-            return _solution(pairs, n, "optimal", rounds)
+            return _solution(pairs, n, "optimal", rounds, len(added))
+        answers.append(pairs)
+        if len(added) + len(broken) > max_triangles:
+            break
         for a, b, c, i, j, k in broken:  # all three inequalities of the triangle
             added.add((a, b, c, i, j, k))
             e_ab, e_bc, e_ac = var((a, b), i, j), var((b, c), j, k), var((a, c), i, k)
@@ -331,5 +396,9 @@ def solve_multi_view(
                 cols.extend([*plus, minus])
                 vals.extend([1.0, 1.0, -1.0])
                 n_rows += 1
-    fallback = consistent_hungarian(n, mats, gammas)
-    return MultiViewSolution(fallback.pairs, fallback.person, "fallback", rounds)
+    # made consistent only now, so that a frame solved to optimality pays nothing for it; the
+    # first best wins a tie, the pairwise Hungarian answer last
+    candidates = [_merge(n, mats, gammas, p) for p in answers]
+    candidates.append(consistent_hungarian(n, mats, gammas).pairs)
+    best = min(candidates, key=lambda p: objective(mats, gammas, p))
+    return _solution(best, n, "fallback", rounds, len(added))

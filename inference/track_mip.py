@@ -79,12 +79,14 @@ class ClusterSolution:
         status: ``optimal`` (HiGHS proved it), ``fallback`` (budget spent or solver failure:
             the best loop-free answer seen) or ``greedy`` (asked for).
         rounds: how many programs were solved (one per batch of lazily added loops).
+        loops: how many loop constraints (Eq. 3) were added, against :data:`MIP_MAX_LOOPS`.
     """
 
     edges: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     dummies: np.ndarray
     status: str
     rounds: int
+    loops: int = 0
 
 
 def check_weights(weights: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
@@ -289,7 +291,7 @@ def solve_four_clusters(
         )
         broken = [v for v in loop_violations(edges) if v not in seen]
         if not broken:
-            return ClusterSolution(edges, x[n_e:].copy(), "optimal", rounds)
+            return ClusterSolution(edges, x[n_e:].copy(), "optimal", rounds, len(seen))
         answers.append(edges)
         if len(seen) + len(broken) > max_loops:
             break
@@ -301,4 +303,4 @@ def solve_four_clusters(
     # best wins a tie, the greedy answer last
     candidates = [repair_loops(mats, e, c0) for e in answers] + [greedy_solution(mats, c0).edges]
     best = max(candidates, key=lambda e: objective(mats, e, c0))
-    return ClusterSolution(best, _dummies(best, sizes), "fallback", rounds)
+    return ClusterSolution(best, _dummies(best, sizes), "fallback", rounds, len(seen))

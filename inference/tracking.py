@@ -262,6 +262,8 @@ class TrackResult:
         n_windows: windows solved.
         n_fallback: windows where the MIP spent its budget or time limit or failed (the best
             loop-free answer found used).
+        max_loops: the most loop constraints one window's MIP added
+            (:data:`~xvmatch.inference.track_mip.MIP_MAX_LOOPS` is the budget).
     """
 
     top_rows: dict[int, int]
@@ -269,6 +271,7 @@ class TrackResult:
     frame_pairs: dict[int, list[tuple[int, int]]]
     n_windows: int
     n_fallback: int
+    max_loops: int = 0
 
 
 def _associate_chunk(
@@ -502,4 +505,5 @@ def track_pair(
         frame_pairs=dict(frame_pairs),
         n_windows=n_windows,
         n_fallback=sum(s.status == "fallback" for s in solutions),
+        max_loops=max((s.loops for s in solutions), default=0),
     )

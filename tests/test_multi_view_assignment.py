@@ -23,6 +23,7 @@ from xvmatch.inference.multi_view_assignment import (
     global_ids,
     objective,
     pairwise_hungarian,
+    repair_cycles,
     solve_multi_view,
     view_pairs,
 )
@@ -168,6 +169,88 @@ def test_a_time_limit_spent_falls_back():
     sizes, costs = _broken_by_pairwise()
     sol = solve_multi_view(sizes, costs, 0.0, time_limit=1e-12)
     assert sol.status == "fallback" and sol.consistent
+
+
+def _needs_eight_triangles():
+    """Three views of three boxes: the optimum (-2.9) takes three programs and 8 triangles;
+    pairwise Hungarian made consistent gets -1.0."""
+    sizes = [3, 3, 3]
+    costs = {(0, 1): np.array([[0.0, 0.9, -0.7], [0.9, -0.4, -0.2], [0.7, -0.2, 0.1]]),
+             (0, 2): np.array([[-0.9, 0.5, 0.1], [-0.3, 0.6, -0.4], [-0.1, -0.7, -0.2]]),
+             (1, 2): np.array([[-0.6, -0.5, 0.5], [-0.4, 0.0, 1.0], [0.9, 0.4, 0.1]])}
+    return sizes, costs
+
+
+def test_fallback_is_the_best_consistent_answer_seen():
+    sizes, costs = _needs_eight_triangles()
+    assert objective(costs, 0.0, consistent_hungarian(sizes, costs, 0.0).pairs) == \
+        pytest.approx(-1.0)
+    exact = solve_multi_view(sizes, costs, 0.0)
+    assert (exact.status, exact.rounds, exact.triangles) == ("optimal", 3, 8)
+    assert objective(costs, 0.0, exact.pairs) == pytest.approx(-2.9)
+    # the second program's answer, made consistent, is the optimum (not proved): the greedy
+    # answer alone, the fallback before, was -1.0
+    sol = solve_multi_view(sizes, costs, 0.0, time_limit=600.0, max_rounds=2)
+    assert sol.status == "fallback" and sol.rounds == 2
+    assert objective(costs, 0.0, sol.pairs) == pytest.approx(-2.9)
+    _check_consistent(sol, sizes, costs)
+
+
+def test_the_triangle_budget_is_work_not_time():
+    sizes, costs = _needs_eight_triangles()
+    for budget, rounds, value in ((0, 1, -1.0), (4, 1, -1.0), (5, 2, -2.9)):
+        sol = solve_multi_view(sizes, costs, 0.0, time_limit=600.0, max_triangles=budget)
+        # the first program breaks 5 triangles: a budget of 4 adds none
+        assert (sol.status, sol.rounds, sol.triangles) == ("fallback", rounds, 5 * (rounds - 1))
+        assert objective(costs, 0.0, sol.pairs) == pytest.approx(value)
+    assert solve_multi_view(sizes, costs, 0.0, max_triangles=8).status == "optimal"
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems(max_views=4, max_boxes=4), st.integers(0, 3), st.integers(1, 2))
+def test_a_spent_budget_answers_consistently_and_at_least_the_greedy_value(problem, budget,
+                                                                          rounds):
+    sizes, costs = problem
+    sol = solve_multi_view(sizes, costs, 0.0, max_triangles=budget, max_rounds=rounds)
+    _check_consistent(sol, sizes, costs)
+    assert objective(costs, 0.0, sol.pairs) <= \
+        objective(costs, 0.0, consistent_hungarian(sizes, costs, 0.0).pairs) + 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems(max_views=4, max_boxes=4))
+def test_repair_cycles_keeps_a_consistent_answer_and_mends_a_broken_one(problem):
+    sizes, costs = problem
+    exact = solve_multi_view(sizes, costs, 0.0)
+    kept = repair_cycles(sizes, costs, 0.0, exact.pairs)
+    assert {ab: sorted(p.tolist()) for ab, p in kept.items()} == \
+        {ab: sorted(p.tolist()) for ab, p in exact.pairs.items()}
+    pairwise = pairwise_hungarian(sizes, costs, 0.0)
+    mended = repair_cycles(sizes, costs, 0.0, pairwise.pairs)
+    assert not cycle_violations(mended, sizes)
+    for ab, p in mended.items():
+        assert len(set(p[:, 0].tolist())) == len(p) and len(set(p[:, 1].tolist())) == len(p)
+        assert np.isfinite(costs[ab][p[:, 0], p[:, 1]]).all()
+
+
+@pytest.mark.parametrize(("pairs", "message"), [
+    ({(1, 0): np.zeros((0, 2), np.int64)}, r"pairs of views \(1, 0\): expected a \(K, 2\)"),
+    ({(0, 1): np.zeros((1, 3), np.int64)}, r"pairs of views \(0, 1\): expected"),
+    ({(0, 1): np.array([[0, 3]])}, r"pairs of views \(0, 1\): a row outside"),
+    ({(0, 2): np.array([[-1, 0]])}, r"pairs of views \(0, 2\): a row outside"),
+])
+def test_repair_cycles_refuses_bad_pairs(pairs, message):
+    sizes, costs = _needs_eight_triangles()
+    with pytest.raises(ValueError, match=message):
+        repair_cycles(sizes, costs, 0.0, pairs)
+
+
+@pytest.mark.parametrize("budget", [{"time_limit": 0.0}, {"max_rounds": 0},
+                                    {"max_triangles": -1}])
+def test_bad_budgets_are_refused(budget):
+    sizes, costs = _needs_eight_triangles()
+    with pytest.raises(ValueError, match="time_limit and max_rounds must be > 0"):
+        solve_multi_view(sizes, costs, 0.0, **budget)
 
 
 def test_global_ids_number_components_in_order():

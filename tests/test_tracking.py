@@ -274,8 +274,9 @@ def test_a_spent_round_budget_keeps_the_programs_answer_not_the_greedy_one():
     once = solve_four_clusters(weights, max_rounds=1)
     full = solve_four_clusters(weights)
     assert once.status == "fallback" and full.status == "optimal"
+    assert full.loops == 3  # the loops the first program broke
     spent = solve_four_clusters(weights, time_limit=600.0, max_loops=0)  # work, not time
-    assert spent.status == "fallback" and spent.rounds == 1
+    assert spent.status == "fallback" and spent.rounds == 1 and spent.loops == 0
     assert all((a == b).all() for a, b in zip(spent.edges, once.edges, strict=True))
     assert objective(weights, once.edges, 0.2) == pytest.approx(objective(weights, full.edges, 0.2))
     assert objective(weights, once.edges, 0.2) > objective(

@@ -46,7 +46,7 @@ EXAMPLE = ("xvmatch associate-multi --model default --top top.txt --hor hor1.txt
 MAX_HOR = 3
 """Most horizontal views (issue 17: one top view and two or three horizontal ones)."""
 
-TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per frame before the greedy fallback")
+TIME_LIMIT_TYPE = float_in(0.01, 600, "seconds per frame before the MIP's fallback")
 CLIP_TYPE = int_in(1, 1000, "frames per clip of tracklets")
 
 
@@ -86,8 +86,9 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
                    "Hungarian made consistent (the MIP's fallback)")
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=30.0, metavar="S",
                    help="wall-time guard per frame for the MIP, in [0.01, 600] (default 30; its "
-                   "work budget is 1000 HiGHS nodes, the same on every CPU); past either the "
-                   "greedy answer is used and counted in a warning")
+                   "budget of work, the same on every CPU, is 96 added triangles and 1000 "
+                   "HiGHS nodes per program); past either the best consistent answer found is "
+                   "used and counted in a warning")
     p.add_argument("--tracks", action="store_true",
                    help="follow people over time: tracklets per view smooth the costs and "
                    "carry the ids over frames (still one box per view and person on a frame)")
@@ -295,9 +296,9 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     written = [write_track_rows(out / f"{name}.txt", r, p)
                for name, r, p in zip(names, rows, person, strict=True)]
     if n_fallback:
-        print(f"xvmatch: warning: {n_fallback} of {len(frames)} frames hit the MIP's node "
-              f"budget or time limit ({args.time_limit:g} s) or failed and used the greedy "
-              "fallback", file=sys.stderr)
+        print(f"xvmatch: warning: {n_fallback} of {len(frames)} frames spent the MIP's "
+              f"budget of work or time limit ({args.time_limit:g} s) or failed, and used the "
+              "best consistent answer found instead of the optimum", file=sys.stderr)
     if not args.quiet:
         print(f"wrote {sum(written)} boxes of {len(paths)} views, {next_id - 1} people over "
               f"{len(frames)} frames, to {out}/ ({time.perf_counter() - start:.1f} s)",
