@@ -66,7 +66,8 @@ budget the frame takes the best consistent answer seen instead of its exact opti
 rendered scenes of ``benchmarks/multi_ego_eval.py`` (1 top + 3 egocentric views) need at most
 66 (``--tracks``, noisy boxes, 1,200 frames; it prints the most per row). On crowded random
 frames (``benchmarks/multi_view_budget.py``: 3 views of 16 or 20 people, 4 of 12) the slowest
-took 12.6 s within it on a 2-core machine (2.5 s at most within 64), under the 30 s guard."""
+took 16.4 s within it on a busy 2-core machine (9.3 s at most within 64), under the 30 s
+guard."""
 
 STATUSES = ("optimal", "fallback", "greedy", "pairwise")
 """``optimal``: HiGHS proved it; ``fallback``: the budget of work or the time guard spent, or a
@@ -321,8 +322,9 @@ def solve_multi_view(
         max_rounds: most programs solved while adding broken triangles; past it the fallback.
         node_limit: HiGHS nodes per program (the same on every CPU,
             :data:`~xvmatch.inference.track_mip.MIP_NODE_LIMIT`); past it the fallback.
-        max_triangles: most broken triangles added (:data:`MIP_MAX_TRIANGLES`); a round that
-            would pass it is not solved, and the fallback answers.
+        max_triangles: most broken triangles added (:data:`MIP_MAX_TRIANGLES`); when a
+            program breaks more than are left, those whose two matches gain most fill it, one
+            last program is solved, and the fallback answers unless that one is consistent.
 
     Returns:
         The :class:`MultiViewSolution`; ``status`` ``optimal`` or ``fallback``. A ``fallback``
@@ -385,8 +387,14 @@ def solve_multi_view(
         if not broken:
             return _solution(pairs, n, "optimal", rounds, len(added))
         answers.append(pairs)
-        if len(added) + len(broken) > max_triangles:
+        room = int(max_triangles) - len(added)
+        if room <= 0:
             break
+        if len(broken) > room:  # the last program: the triangles whose matches gain most
+            worth = [float((weight * x)[[var((a, b), i, j), var((b, c), j, k),
+                                         var((a, c), i, k)]].sum())
+                     for a, b, c, i, j, k in broken]  # sum of c - gamma: most negative first
+            broken = [broken[q] for q in np.lexsort((np.arange(len(broken)), worth))[:room]]
         for a, b, c, i, j, k in broken:  # all three inequalities of the triangle
             added.add((a, b, c, i, j, k))
             e_ab, e_bc, e_ac = var((a, b), i, j), var((b, c), j, k), var((a, c), i, k)
