@@ -13,9 +13,10 @@ over time, sets 1 and 3 link the two views within a clip.
 
 The loop constraints are ``4 N0 N1 N2 N3`` in number; they are added lazily (solve, add the
 loops the solution breaks, solve again), which is exact and keeps each program small. Each
-window has a budget of work, the same on every CPU: :data:`MIP_MAX_LOOPS` loops added,
-:data:`MIP_MAX_ROUNDS` programs of at most :data:`MIP_NODE_LIMIT` nodes. Past it, or if HiGHS
-fails, the best loop-free answer seen answers instead and the solution says so: a program's
+window has a budget of work, the same on every CPU: :data:`MIP_MAX_LOOPS` loops added (when a
+program breaks more than are left, those whose edges are worth most fill it for one last
+program), :data:`MIP_MAX_ROUNDS` programs of at most :data:`MIP_NODE_LIMIT` nodes. Past it, or
+if HiGHS fails, the best loop-free answer seen answers instead and the solution says so: a program's
 answer with its broken loops closed or cut (:func:`repair_loops`), or :func:`greedy_solution`
 (a Hungarian assignment per edge set, repaired the same way), whichever Eq. 1 values more. A
 wall-time guard (:data:`MIP_TIME_LIMIT`) stops a program that would not end.
@@ -209,8 +210,9 @@ def solve_four_clusters(
             that would not end (:data:`MIP_TIME_LIMIT`); past it the fallback.
         max_rounds: most programs solved while adding broken loops (:data:`MIP_MAX_ROUNDS`);
             past it the fallback.
-        max_loops: most loop constraints added (:data:`MIP_MAX_LOOPS`); a round that would
-            pass it is not solved, and the fallback answers.
+        max_loops: most loop constraints added (:data:`MIP_MAX_LOOPS`); when a program
+            breaks more than are left, those whose three edges are worth most fill it, one last
+            program is solved, and the fallback answers unless that one breaks none.
         node_limit: HiGHS nodes per program (:data:`MIP_NODE_LIMIT`); past it the fallback.
 
     Returns:
@@ -293,8 +295,14 @@ def solve_four_clusters(
         if not broken:
             return ClusterSolution(edges, x[n_e:].copy(), "optimal", rounds, len(seen))
         answers.append(edges)
-        if len(seen) + len(broken) > max_loops:
+        room = int(max_loops) - len(seen)
+        if room <= 0:
             break
+        if len(broken) > room:  # the last program: the loops whose three edges are worth most
+            worth = [mats[i][a, b] + mats[(i + 1) % 4][b, c] + mats[(i + 2) % 4][c, d]
+                     for i, a, b, c, d in broken]
+            broken = [broken[q] for q in
+                      np.lexsort((np.arange(len(broken)), -np.asarray(worth)))[:room]]
         for i, a, b, c, d in broken:  # Eq. 3 for this loop
             seen.add((i, a, b, c, d))
             add([(var(i, a, b), 1.0), (var((i + 1) % 4, b, c), 1.0),

@@ -283,6 +283,22 @@ def test_a_spent_round_budget_keeps_the_programs_answer_not_the_greedy_one():
         weights, greedy_solution(weights).edges, 0.2) + 0.1
 
 
+def test_a_loop_budget_too_small_for_a_round_fills_it_with_the_loops_worth_most():
+    # the first program breaks 4 loops; a budget of 1 adds the one whose edges are worth most
+    # and solves a last program, whose repaired answer is the optimum here (12.9952); stopping
+    # at once, as before, left the first program's repaired answer (12.938)
+    rng = np.random.default_rng(0)
+    weights = [rng.random((5, 5)) ** 3 for _ in range(4)]
+    full = solve_four_clusters(weights)
+    assert (full.status, full.loops) == ("optimal", 4)
+    none = solve_four_clusters(weights, time_limit=600.0, max_loops=0)
+    one = solve_four_clusters(weights, time_limit=600.0, max_loops=1)
+    assert (none.rounds, none.loops) == (1, 0) and (one.status, one.rounds, one.loops) == (
+        "fallback", 2, 1)
+    assert objective(weights, one.edges, 0.2) == pytest.approx(objective(weights, full.edges, 0.2))
+    assert objective(weights, one.edges, 0.2) > objective(weights, none.edges, 0.2) + 0.05
+
+
 @settings(max_examples=60, deadline=None)
 @given(_problems(max_size=4), st.integers(0, 2**32 - 1), st.sampled_from([0.0, 0.2, 0.5]))
 def test_repair_loops_only_cuts_or_closes_broken_loops(weights, seed, c0):
