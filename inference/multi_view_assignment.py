@@ -391,9 +391,10 @@ def solve_multi_view(
         if room <= 0:
             break
         if len(broken) > room:  # the last program: the triangles whose matches gain most
-            worth = [float((weight * x)[[var((a, b), i, j), var((b, c), j, k),
-                                         var((a, c), i, k)]].sum())
-                     for a, b, c, i, j, k in broken]  # sum of c - gamma: most negative first
+            chosen = np.where(x, weight, 0.0)  # c - gamma of the matches made
+            worth = [float(chosen[var((a, b), i, j)] + chosen[var((b, c), j, k)]
+                           + chosen[var((a, c), i, k)])
+                     for a, b, c, i, j, k in broken]  # most negative (worth most) first
             broken = [broken[q] for q in np.lexsort((np.arange(len(broken)), worth))[:room]]
         for a, b, c, i, j, k in broken:  # all three inequalities of the triangle
             added.add((a, b, c, i, j, k))
