@@ -16,10 +16,11 @@ loops the solution breaks, solve again), which is exact and keeps each program s
 window has a budget of work, the same on every CPU: :data:`MIP_MAX_LOOPS` loops added (when a
 program breaks more than are left, those whose edges are worth most fill it for one last
 program), :data:`MIP_MAX_ROUNDS` programs of at most :data:`MIP_NODE_LIMIT` nodes. Past it, or
-if HiGHS fails, the best loop-free answer seen answers instead and the solution says so: a program's
-answer with its broken loops closed or cut (:func:`repair_loops`), or :func:`greedy_solution`
-(a Hungarian assignment per edge set, repaired the same way), whichever Eq. 1 values more. A
-wall-time guard (:data:`MIP_TIME_LIMIT`) stops a program that would not end.
+if HiGHS fails, the best loop-free answer seen answers instead and the solution says so: a
+program's answer with its broken loops closed or cut (:func:`repair_loops`), or
+:func:`greedy_solution` (a Hungarian assignment per edge set, repaired the same way), whichever
+Eq. 1 values more. A wall-time guard (:data:`MIP_TIME_LIMIT`) stops a program that would not
+end.
 """
 
 from __future__ import annotations
