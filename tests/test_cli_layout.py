@@ -63,3 +63,17 @@ def test_one_progress_bar() -> None:
     users = sorted(p.name for p in [ROOT / "xvmatch" / "cli.py", *CLI_MODULES]
                    if any(name.split(".")[0] == "tqdm" for _, name in _imported(p)))
     assert users == ["cli_options.py"]
+
+
+@pytest.mark.parametrize(("module", "budget"), [
+    ("cli_track.py", "{MIP_MAX_LOOPS} added loops and {MIP_NODE_LIMIT} HiGHS nodes"),
+    ("cli_multi_ego.py", "{MIP_MAX_TRIANGLES} added triangles and {MIP_NODE_LIMIT} HiGHS nodes"),
+])
+def test_time_limit_help_states_the_solvers_budgets(module: str, budget: str) -> None:
+    # the command modules import no solver at start-up, so their help spells the budgets out
+    from xvmatch.inference.multi_view_assignment import MIP_MAX_TRIANGLES
+    from xvmatch.inference.track_mip import MIP_MAX_LOOPS, MIP_NODE_LIMIT
+
+    text = budget.format(MIP_MAX_LOOPS=MIP_MAX_LOOPS, MIP_NODE_LIMIT=MIP_NODE_LIMIT,
+                         MIP_MAX_TRIANGLES=MIP_MAX_TRIANGLES)
+    assert any(text in s for s in _string_constants(ROOT / "xvmatch" / module)), text
