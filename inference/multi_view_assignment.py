@@ -235,8 +235,7 @@ def consistent_hungarian(
     """Pairwise Hungarian made consistent (:func:`repair_cycles` of its pairs); consistent by
     construction, the MIP's fallback of last resort."""
     n, mats, gammas = check_problem(sizes, costs, gamma)
-    pairs = _merge(n, mats, gammas, {ab: assign(c, gammas[ab]) for ab, c in mats.items()})
-    return _solution(pairs, n, "greedy", 0)
+    return _solution(_hungarian_merged(n, mats, gammas), n, "greedy", 0)
 
 
 def repair_cycles(
@@ -264,6 +263,12 @@ def repair_cycles(
             raise ValueError(f"pairs of views {ab}: a row outside the views' "
                              f"{n[ab[0]]} and {n[ab[1]]} boxes")
     return _merge(n, mats, gammas, pairs)
+
+
+def _hungarian_merged(n: list[int], mats: Pairs, gammas: Mapping[tuple[int, int], float]
+                      ) -> Pairs:
+    """:func:`consistent_hungarian`'s pairs on a checked problem."""
+    return _merge(n, mats, gammas, {ab: assign(c, gammas[ab]) for ab, c in mats.items()})
 
 
 def _merge(n: list[int], mats: Pairs, gammas: Mapping[tuple[int, int], float],
@@ -408,6 +413,6 @@ def solve_multi_view(
     # made consistent only now, so that a frame solved to optimality pays nothing for it; the
     # first best wins a tie, the pairwise Hungarian answer last
     candidates = [_merge(n, mats, gammas, p) for p in answers]
-    candidates.append(consistent_hungarian(n, mats, gammas).pairs)
+    candidates.append(_hungarian_merged(n, mats, gammas))
     best = min(candidates, key=lambda p: objective(mats, gammas, p))
     return _solution(best, n, "fallback", rounds, len(added))

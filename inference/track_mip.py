@@ -61,7 +61,8 @@ answer seen instead of its exact optimum. The CVMHAT dev split needs at most 34 
 1,540 windows) and 42 with detector noise (seeds 1-3, 4,620 windows; 2026-11-28)."""
 
 MIP_MAX_ROUNDS = 50
-"""Programs a window may solve while adding loops; past it, as past :data:`MIP_MAX_LOOPS`."""
+"""Programs a window (or an ``associate-multi`` frame) may solve while adding loops (triangles);
+past it, as past :data:`MIP_MAX_LOOPS`."""
 
 MIP_TIME_LIMIT = 30.0
 """Default wall-time guard per window (frame), against a program that would not end. Unlike
