@@ -7,7 +7,10 @@ strength and box setting (ground truth, detector noise), this prints each bundle
 accuracy with images and with boxes only, images - boxes, and each bundle minus the first (with
 images and with boxes only), all in points with a 95% interval from resampling whole scenes
 (:func:`xvmatch.evaluation.confidence.grouped_difference_interval`; the differences are paired:
-the same frames, the same boxes, the same shifted images).
+the same frames, the same boxes, the same shifted images). ``cue AUC`` is how well each
+network's appearance cost alone tells a true pair from the other people of its frame
+(:func:`xvmatch.evaluation.deployed_matcher_eval.cue_auc`; 0.5: not at all), whatever the matcher
+makes of it.
 
 Scenes: the deployed benchmark's renders (``benchmarks/deployed_matcher_eval.py``; test seed
 1000 or validation seed 2000 with ``--split val``; ``--scenes N`` per scenario, the first 20
@@ -44,7 +47,11 @@ from deployed_matcher_eval import (
 
 from xvmatch.datasets.camera_shift import MAX_STRENGTH
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
-from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
+from xvmatch.evaluation.deployed_matcher_eval import (
+    OnnxAppearanceCoster,
+    cue_auc,
+    matcher_costs,
+)
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
@@ -69,7 +76,9 @@ def compare(models: dict[str, LearnedMatcher], trials: dict[str, list]) -> list[
             (img, scenes), (box, _) = acc[name, "images", setting], acc[name, "boxes", setting]
             row = {"setting": setting, "model": name, "frames": len(img),
                    "images": 100.0 * float(img.mean()), "boxes": 100.0 * float(box.mean()),
-                   "images - boxes": interval(img, box, scenes)}
+                   "images - boxes": interval(img, box, scenes),
+                   "cue AUC": cue_auc(trials[models[name].bundle.manifest.appearance.sha256],
+                                      setting)}
             if name != first:
                 for cue in ("images", "boxes"):
                     ref, ref_scenes = acc[first, cue, setting]
@@ -135,7 +144,8 @@ def main() -> int:
                              for cue in ("images", "boxes") if row["model"] != args.models[0])
                 print(f"{SETTING_NAMES[row['setting']]:<18} {row['model']:<{width}}  "
                       f"images {row['images']:.1f}  boxes {row['boxes']:.1f}  "
-                      f"images - boxes {shown(row['images - boxes'])}{vs}")
+                      f"images - boxes {shown(row['images - boxes'])}{vs}  "
+                      f"cue AUC {row['cue AUC']:.3f}")
                 results.append({"scenario": scenario, "split": args.split, "shift": strength,
                                 "data": str(path), **row})
             print(f"({time.perf_counter() - start:.0f} s so far)", flush=True)

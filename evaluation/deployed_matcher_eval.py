@@ -25,8 +25,9 @@ from xvmatch.geometry.matcher_inputs import (
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.cross_view_metrics import CrossViewScores, count_pair, summarize
 from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.inference.site_adaptation import pair_auc
 
-__all__ = ["OnnxAppearanceCoster", "matcher_costs", "score_matcher"]
+__all__ = ["OnnxAppearanceCoster", "cue_auc", "matcher_costs", "score_matcher"]
 
 
 class OnnxAppearanceCoster:
@@ -47,6 +48,32 @@ class OnnxAppearanceCoster:
         """``(M, N)`` appearance costs in [0, 1]."""
         return appearance_cost(self.matcher.descriptors(top_image, top_boxes),
                                self.matcher.descriptors(ego_image, ego_boxes))
+
+
+def cue_auc(trials: Sequence[PairTrial], setting: str) -> float:
+    """Verification AUC of the trials' appearance cue in one box setting: how often a true pair
+    (two boxes of one person) costs less than a box against another person's box of the other
+    view in its frame, pooled over the frames. It says how much the cue itself still tells,
+    apart from how the matcher weighs it (0.5: nothing).
+
+    Raises:
+        ValueError: a trial of that setting without appearance costs.
+    """
+    pos, neg = [], []
+    for t in trials:
+        if t.setting != setting:
+            continue
+        if t.app is None:
+            raise ValueError(f"{t.scene}/{t.frame}: no appearance costs; build the trials with "
+                             "an OnnxAppearanceCoster")
+        top, ego = np.asarray(t.det_top_ids), np.asarray(t.det_ego_ids)
+        same = (top[:, None] == ego[None, :]) & (top[:, None] >= 0)
+        real = (top[:, None] >= 0) & (ego[None, :] >= 0)  # false detections stand for no one
+        pos.append(t.app[same])
+        neg.append(t.app[real & ~same])
+    if not pos:
+        return float("nan")
+    return pair_auc(np.concatenate(pos), np.concatenate(neg))
 
 
 def matcher_costs(matcher: LearnedMatcher, trials: Sequence[PairTrial], setting: str,

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -17,6 +19,7 @@ import matcher_comparison  # noqa: E402
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials  # noqa: E402
 from xvmatch.evaluation.deployed_matcher_eval import (  # noqa: E402
     OnnxAppearanceCoster,
+    cue_auc,
     matcher_costs,
 )
 from xvmatch.inference.learned_association import load_matcher_bundle  # noqa: E402
@@ -63,6 +66,30 @@ def test_bundles_are_compared_on_the_same_frames(tmp_path, monkeypatch, tiny_mod
                                           matcher.gamma)
     for s in SETTINGS:
         assert cell[0.0, s, "default"]["images"] == pytest.approx(100 * scores[s], abs=1e-9)
+        # the cue's own AUC: the trials' costs, true pairs against the frame's other people
+        assert cell[0.0, s, "default"]["cue AUC"] == cue_auc(trials, s) > 0.75
+        assert cell[0.0, s, DEFAULT_FOLDER]["cue AUC"] == cell[0.0, s, "default"]["cue AUC"]
+        assert 0.0 <= cell[1.0, s, "default"]["cue AUC"] <= 1.0
+
+
+def _with_cue(trials, cue):
+    return [dataclasses.replace(t, app=cue(t)) for t in trials]
+
+
+def test_cue_auc_counts_true_pairs_against_the_other_people(tmp_path) -> None:
+    path = deployed_matcher_eval.render(tmp_path, "overview", "test", 1, 2)
+    trials = dataset_trials(path, TrialConfig(), SETTINGS)
+
+    def same(t):
+        top, ego = np.asarray(t.det_top_ids), np.asarray(t.det_ego_ids)
+        return (top[:, None] == ego[None, :]) & (top[:, None] >= 0)
+
+    for s in SETTINGS:
+        assert cue_auc(_with_cue(trials, lambda t: 1.0 - same(t)), s) == 1.0
+        assert cue_auc(_with_cue(trials, lambda t: same(t) + 0.0), s) == 0.0
+        assert cue_auc(_with_cue(trials, lambda t: np.zeros(same(t).shape)), s) == 0.5
+    with pytest.raises(ValueError, match="no appearance costs"):
+        cue_auc(trials, "gt")
 
 
 @pytest.mark.parametrize("args, message", [
