@@ -10,7 +10,9 @@ images and with boxes only), all in points with a 95% interval from resampling w
 the same frames, the same boxes, the same shifted images). ``cue AUC`` is how well each
 network's appearance cost alone tells a true pair from the other people of its frame
 (:func:`xvmatch.evaluation.deployed_matcher_eval.cue_auc`; 0.5: not at all), whatever the matcher
-makes of it.
+makes of it. ``checked`` (bundles with a frame check, :mod:`xvmatch.inference.frame_check`):
+the images where the check trusts a frame's cue and the boxes alone elsewhere, as ``associate``
+matches single image pairs, with its differences from boxes only and from the images.
 
 Scenes: the deployed benchmark's renders (``benchmarks/deployed_matcher_eval.py``; test seed
 1000 or validation seed 2000 with ``--split val``; ``--scenes N`` per scenario, the first 20
@@ -50,6 +52,7 @@ from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
     cue_auc,
+    frame_checked_costs,
     matcher_costs,
 )
 from xvmatch.geometry.atomic_files import atomic_write_text
@@ -65,10 +68,13 @@ def compare(models: dict[str, LearnedMatcher], trials: dict[str, list]) -> list[
     acc = {}
     for name, m in models.items():
         own = trials[m.bundle.manifest.appearance.sha256]
-        for cue in ("images", "boxes"):
-            costs = matcher_costs(m, own, cue)
+        costs = {cue: matcher_costs(m, own, cue) for cue in ("images", "boxes")}
+        check = m.bundle.manifest.frame_check if m.bundle.manifest.adaptation is None else None
+        if check is not None:
+            costs["checked"] = frame_checked_costs(check, own, costs["images"], costs["boxes"])
+        for cue, cue_costs in costs.items():
             for setting in SETTINGS:
-                acc[name, cue, setting] = frame_accuracies(own, costs, m.gamma, setting)
+                acc[name, cue, setting] = frame_accuracies(own, cue_costs, m.gamma, setting)
     first = next(iter(models))
     rows = []
     for setting in SETTINGS:
@@ -79,6 +85,11 @@ def compare(models: dict[str, LearnedMatcher], trials: dict[str, list]) -> list[
                    "images - boxes": interval(img, box, scenes),
                    "cue AUC": cue_auc(trials[models[name].bundle.manifest.appearance.sha256],
                                       setting)}
+            if (name, "checked", setting) in acc:
+                checked = acc[name, "checked", setting][0]
+                row["checked"] = 100.0 * float(checked.mean())
+                row["checked - boxes"] = interval(checked, box, scenes)
+                row["checked - images"] = interval(checked, img, scenes)
             if name != first:
                 for cue in ("images", "boxes"):
                     ref, ref_scenes = acc[first, cue, setting]
@@ -140,11 +151,14 @@ def main() -> int:
                   f"intervals")
             width = max(len(n) for n in models)
             for row in rows:
+                checked = (f"  checked {row['checked']:.1f}  checked - boxes "
+                           f"{shown(row['checked - boxes'])}  checked - images "
+                           f"{shown(row['checked - images'])}" if "checked" in row else "")
                 vs = "".join(f"  {cue} vs first {shown(row[f'{cue} vs {args.models[0]}'])}"
                              for cue in ("images", "boxes") if row["model"] != args.models[0])
                 print(f"{SETTING_NAMES[row['setting']]:<18} {row['model']:<{width}}  "
                       f"images {row['images']:.1f}  boxes {row['boxes']:.1f}  "
-                      f"images - boxes {shown(row['images - boxes'])}{vs}  "
+                      f"images - boxes {shown(row['images - boxes'])}{checked}{vs}  "
                       f"cue AUC {row['cue AUC']:.3f}")
                 results.append({"scenario": scenario, "split": args.split, "shift": strength,
                                 "data": str(path), **row})

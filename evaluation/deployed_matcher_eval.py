@@ -24,10 +24,12 @@ from xvmatch.geometry.matcher_inputs import (
 )
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.cross_view_metrics import CrossViewScores, count_pair, summarize
+from xvmatch.inference.frame_check import FEATURES, FrameCheck, frame_check_features
 from xvmatch.inference.learned_association import LearnedMatcher
 from xvmatch.inference.site_adaptation import pair_auc
 
-__all__ = ["OnnxAppearanceCoster", "cue_auc", "matcher_costs", "score_matcher"]
+__all__ = ["OnnxAppearanceCoster", "cue_auc", "frame_check_samples", "frame_checked_costs",
+           "matcher_costs", "score_matcher"]
 
 
 class OnnxAppearanceCoster:
@@ -121,3 +123,40 @@ def score_matcher(matcher: LearnedMatcher, trials: Sequence[PairTrial], setting:
                          assign(c, gamma), frame=t.frame)
               for t, c in zip(trials, costs, strict=True)]
     return summarize(counts)
+
+
+def frame_accuracy(trial: PairTrial, cost: np.ndarray, gamma: float) -> float | None:
+    """Eq. 9 accuracy (fraction) of one trial's assignment; None for a frame with no one."""
+    c = count_pair(trial.gt_top_ids, trial.gt_ego_ids, trial.det_top_ids, trial.det_ego_ids,
+                   assign(cost, gamma), frame=trial.frame)
+    return (c.tp + c.tn) / c.n_union if c.n_union > 0 else None
+
+
+def frame_check_samples(matcher: LearnedMatcher, trials: Sequence[PairTrial]
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """What :func:`~xvmatch.inference.frame_check.fit_frame_check` learns from: each frame's
+    :func:`~xvmatch.inference.frame_check.frame_check_features` (its appearance costs against
+    the matcher's boxes-only costs) and what the images gained there (Eq. 9 accuracy with
+    images minus from the boxes alone, the bundle's gamma), ``(F, len(FEATURES))`` and
+    ``(F,)``, over the frames with someone in them."""
+    images = matcher_costs(matcher, trials, "images")
+    boxes = matcher_costs(matcher, trials, "boxes")
+    feats, gains = [], []
+    for t, a, b in zip(trials, images, boxes, strict=True):
+        if t.app is None or t.app.size == 0:
+            continue
+        acc_a, acc_b = frame_accuracy(t, a, matcher.gamma), frame_accuracy(t, b, matcher.gamma)
+        if acc_a is None:
+            continue
+        feats.append(frame_check_features(t.app, b))
+        gains.append(acc_a - acc_b)
+    return np.asarray(feats).reshape(-1, len(FEATURES)), np.asarray(gains, dtype=np.float64)
+
+
+def frame_checked_costs(check: FrameCheck, trials: Sequence[PairTrial],
+                        images: Sequence[np.ndarray], boxes: Sequence[np.ndarray]
+                        ) -> list[np.ndarray]:
+    """Each trial's cost matrix as ``associate`` uses it with a frame check and no video to
+    judge: the images' costs where the check trusts the frame's cue, else the boxes-only ones."""
+    return [a if t.app is None or t.app.size == 0 or check.trusts(t.app, b) else b
+            for t, a, b in zip(trials, images, boxes, strict=True)]

@@ -10,10 +10,12 @@ received, on the run's own frames; when it is shown below :data:`MIN_AUC` (by tw
 standard error: a few pairs do not condemn a cue) the cue is not trusted and the run is matched
 from the boxes alone (the matcher's boxes-only setting). Where there are too few such
 pairs to judge (single image pairs, short clips, scenes the box-only matcher is never sure of)
-the cue is kept, as before. ``track`` judges its cross-view term the same way on tracklets
-(:func:`check_tracklet_appearance`: pairs of tracklets the box-only matcher is sure of, in the
-clips it tracks) and, when it fails, leaves only that term out. No identities are used. Numpy
-only.
+the cue is kept; where there is no run of consecutive frames at all (single image pairs, very
+short clips) and the bundle has one, each frame is judged by its frame check
+(:mod:`xvmatch.inference.frame_check`). ``track`` judges its cross-view term the same way on
+tracklets (:func:`check_tracklet_appearance`: pairs of tracklets the box-only matcher is sure
+of, in the clips it tracks) and, when it fails, leaves only that term out. No identities are
+used. Numpy only.
 """
 
 from __future__ import annotations
@@ -80,6 +82,9 @@ class AppearanceCheck:
             tracklets, the clips.
         tracklets: judged on ``track``'s tracklets (:func:`check_tracklet_appearance`), whose
             fallback drops only the cross-view appearance term.
+        frames: frames judged one by one instead, by the bundle's frame check
+            (:mod:`xvmatch.inference.frame_check`; 0: none, as when the run was judged).
+        frames_dropped: of those, the frames matched from the boxes alone.
     """
 
     judged: bool
@@ -92,24 +97,32 @@ class AppearanceCheck:
     bursts: int = 0
     min_pairs: int = MIN_PAIRS
     tracklets: bool = False
+    frames: int = 0
+    frames_dropped: int = 0
 
     @property
     def worth_saying(self) -> bool:
-        """Whether the user is told: not for inputs without a run of consecutive frames."""
-        return self.judged or self.bursts > 0
+        """Whether the user is told: not for inputs without a run of consecutive frames,
+        unless the frame check left images out."""
+        return self.judged or self.bursts > 0 or self.frames_dropped > 0
 
     def to_tell(self, quiet: bool) -> bool:
         """Whether a command prints :meth:`message`: when it is :attr:`worth_saying`, and with
         ``--quiet`` only when the images were left out."""
-        return self.worth_saying and (not quiet or not self.trusted)
+        return self.worth_saying and (not quiet or not self.trusted or self.frames_dropped > 0)
 
     def message(self) -> str:
         """One line for the user."""
         pairs = "tracklet pairs" if self.tracklets else "pairs"
         if not self.judged:
-            return (f"appearance check: {self.positives} {pairs} the box-only matcher is sure of "
-                    f"over consecutive frames, {self.min_pairs} needed to judge the images; they "
-                    "were used as they are")
+            head = (f"appearance check: {self.positives} {pairs} the box-only matcher is sure of "
+                    f"over consecutive frames, {self.min_pairs} needed to judge the images"
+                    if self.bursts or not self.frames else "appearance check: no run of "
+                    "consecutive frames to judge the images on")
+            if self.frames:
+                return (f"{head}; judged frame by frame instead, matched {self.frames_dropped} "
+                        f"of {self.frames} frames from the boxes alone")
+            return f"{head}; they were used as they are"
         fallback = ("the cross-view weights come from the boxes alone (the images still link "
                     "each view over time)" if self.tracklets else "matched from the boxes alone")
         verdict = ("images used" if self.trusted else

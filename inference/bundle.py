@@ -31,6 +31,7 @@ from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import CUE_NAMES
 from xvmatch.geometry.record_fields import typed_field
 from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
+from xvmatch.inference.frame_check import FrameCheck
 from xvmatch.inference.site_adaptation import (
     ADAPTATION_FORMAT_VERSIONS,
     SiteAdaptation,
@@ -171,6 +172,8 @@ class Manifest:
         meta: the training notes of the source model.
         raw: the whole JSON document.
         adaptation: a site bundle's adaptation (``xvmatch adapt``), or None.
+        frame_check: the per-frame appearance check fitted for this bundle
+            (:mod:`xvmatch.inference.frame_check`), or None.
     """
 
     folder: Path
@@ -186,6 +189,7 @@ class Manifest:
     meta: dict = field(default_factory=dict)
     raw: dict = field(default_factory=dict, repr=False)
     adaptation: AdaptationRecord | None = None
+    frame_check: FrameCheck | None = None
 
     @property
     def uses_images(self) -> bool:
@@ -323,7 +327,20 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     parity = _get(doc, "parity", dict, path)
     meta = _get(doc, "meta", dict, path)
     return Manifest(folder, config, gamma, tuple(cues), margin, beta, matcher_file, matcher_sha,
-                    spec, parity, meta, doc, _adaptation_record(doc, path, spec))
+                    spec, parity, meta, doc, _adaptation_record(doc, path, spec),
+                    _frame_check(doc, path, spec))
+
+
+def _frame_check(doc: dict, path: Path, spec: AppearanceSpec | None) -> FrameCheck | None:
+    """The optional ``frame_check`` object, checked field by field."""
+    if doc.get("frame_check") is None:
+        return None
+    if spec is None:
+        raise _fail(path, "manifest field 'frame_check' needs an appearance network")
+    try:
+        return FrameCheck.from_record(doc["frame_check"])
+    except ValueError as exc:
+        raise _fail(path, f"manifest field {exc}") from None
 
 
 def _adaptation_record(doc: dict, path: Path, spec: AppearanceSpec | None

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -316,7 +316,10 @@ def associate_sequence_learned(
             frames' own box-only pseudo-matches (:func:`~xvmatch.inference.appearance_check.
             check_appearance`) and, when it fails, match every frame from the boxes alone
             (each frame is then also scored without images, and no frame is assigned before
-            the last one is scored).
+            the last one is scored); where there is no run of consecutive frames to judge
+            on (single image pairs, clips shorter than a burst), a single bundle with a frame
+            check (not a site bundle), without cameras, judges each frame on its own
+            (:mod:`xvmatch.inference.frame_check`).
         checked: if given, receives the :class:`~xvmatch.inference.appearance_check.
             AppearanceCheck` of a run with ``appearance_check`` and images.
     """
@@ -450,10 +453,22 @@ def associate_sequence_learned(
     if judge:
         result = check_appearance(top, hor, {f: h[1] for f, h in held.items()},
                                   {f: h[2] for f, h in held.items()}, gamma)
+        # Fitted on single frames, for one bundle's raw cue against its boxes alone: only
+        # where no run of consecutive frames could be mined (a video the box-only matcher
+        # is rarely sure of keeps its images, which help most there), not for ensembles,
+        # site bundles (another cue) or runs with cameras (other box-only costs).
+        veto = (manifest.frame_check if len(models) == 1 and manifest.adaptation is None
+                and cameras is None and result.bursts == 0 else None)
+        if veto is not None and not result.judged and held:
+            use = {f: veto.trusts(h[2], h[1]) for f, h in held.items()}
+            dropped = sum(not u for u in use.values())
+            result = replace(result, frames=len(use), frames_dropped=dropped)
+        else:
+            use = dict.fromkeys(held, result.trusted)
         if checked is not None:
             checked.append(result)
         for frame in sorted(held):
-            finish(frame, held[frame][0 if result.trusted else 1])
+            finish(frame, held[frame][0 if use[frame] else 1])
     return {f: out[f] for f in order}
 
 

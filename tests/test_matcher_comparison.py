@@ -20,6 +20,7 @@ from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials  
 from xvmatch.evaluation.deployed_matcher_eval import (  # noqa: E402
     OnnxAppearanceCoster,
     cue_auc,
+    frame_checked_costs,
     matcher_costs,
 )
 from xvmatch.inference.learned_association import load_matcher_bundle  # noqa: E402
@@ -70,6 +71,16 @@ def test_bundles_are_compared_on_the_same_frames(tmp_path, monkeypatch, tiny_mod
         assert cell[0.0, s, "default"]["cue AUC"] == cue_auc(trials, s) > 0.75
         assert cell[0.0, s, DEFAULT_FOLDER]["cue AUC"] == cell[0.0, s, "default"]["cue AUC"]
         assert 0.0 <= cell[1.0, s, "default"]["cue AUC"] <= 1.0
+    # "checked": the shipped bundle's frame check, frame by frame images or boxes alone
+    checked = frame_checked_costs(matcher.bundle.manifest.frame_check, trials,
+                                  matcher_costs(matcher, trials, "images"),
+                                  matcher_costs(matcher, trials, "boxes"))
+    for s in SETTINGS:
+        acc, _ = deployed_matcher_eval.frame_accuracies(trials, checked, matcher.gamma, s)
+        row = cell[0.0, s, "default"]
+        assert row["checked"] == pytest.approx(100 * acc.mean(), abs=1e-9)
+        assert row["checked - boxes"]["points"] == pytest.approx(row["checked"] - row["boxes"])
+        assert "checked" not in cell[0.0, s, tiny]  # no frame check in that bundle
 
 
 def _with_cue(trials, cue):

@@ -76,8 +76,10 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--appearance-check", choices=("on", "off"), default="on",
                    help="with images of a video: judge the appearance cue on the pairs the "
                    "box-only matcher is sure of over consecutive frames, and match from the "
-                   "boxes alone when the images are shown too weak to help (default on; off: "
-                   "always use the images)")
+                   "boxes alone when the images are shown too weak to help; with no run of "
+                   "consecutive frames (single image pairs), judge each frame by the bundle's "
+                   "frame check "
+                   "(default on; off: always use the images)")
 
 
 def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
@@ -287,6 +289,9 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
             "auc": json_figure(checked.auc), "standard_error": json_figure(checked.error),
             "positives": checked.positives, "negatives": checked.negatives,
             "min_auc": checked.min_auc, "min_pairs": checked.min_pairs}
+        if checked.frames:
+            record["appearance_check"]["frame_check"] = {
+                "frames": checked.frames, "from_boxes": checked.frames_dropped}
     atomic_write_text(path, json.dumps(record) + "\n")
 
 
