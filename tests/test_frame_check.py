@@ -232,3 +232,33 @@ def test_the_fitting_script_writes_a_record_and_installs_it(tmp_path, monkeypatc
         with pytest.raises(SystemExit):  # refused before any work
             fit_frame_check.main()
         assert said in capsys.readouterr().err
+
+
+def test_associate_command_says_how_many_frames_came_from_the_boxes(tmp_path, capsys) -> None:
+    """The command line with a bundle whose frame check trusts no frame: the line is printed
+    even with --quiet, --costs records it, and the matches are the boxes-only ones."""
+    from xvmatch.cli import main
+
+    v = render_tracking_video(3, 2, SynthConfig(scenario="drone", n_people=(6, 8), fps=25.0))
+    (tmp_path / "video").mkdir()
+    video = write_tracking_video(v, tmp_path / "video")
+    bundle = tmp_path / "bundle"
+    shutil.copytree(ROOT / "inference" / "default_bundle", bundle)
+    doc = json.loads((bundle / MANIFEST).read_text())
+    doc["frame_check"] = _constant(False).to_record()
+    (bundle / MANIFEST).write_text(json.dumps(doc))
+    import cv2
+
+    size = "x".join(map(str, cv2.imread(str(video["hor_images"] / "000001.png")).shape[1::-1]))
+    args = ["associate", "--model", str(bundle), "--top", str(video["top"]), "--hor",
+            str(video["hor"]), "--quiet"]
+    assert main([*args, "--image-size", size, "--out", str(tmp_path / "boxes.csv")]) == 0
+    capsys.readouterr()
+    costs = tmp_path / "costs.json"
+    assert main([*args, "--top-images", str(video["top_images"]), "--hor-images",
+                 str(video["hor_images"]), "--out", str(tmp_path / "images.csv"),
+                 "--costs", str(costs)]) == 0
+    assert "matched 2 of 2 frames from the boxes alone" in capsys.readouterr().err
+    record = json.loads(costs.read_text())["appearance_check"]
+    assert record["frame_check"] == {"frames": 2, "from_boxes": 2} and not record["judged"]
+    assert (tmp_path / "images.csv").read_bytes() == (tmp_path / "boxes.csv").read_bytes()
