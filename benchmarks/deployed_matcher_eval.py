@@ -63,6 +63,17 @@ ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
 SIZES = {"overview": (640, 360), "drone": (1280, 720)}
 
 
+def check_scenes_and_shifts(parser: argparse.ArgumentParser, scenes: int,
+                            shifts: list[float]) -> None:
+    """Refuse (the parser's usage error) fewer than 2 scenes or a shift strength out of
+    [0, 3], as every script on these renders does."""
+    if scenes < 2:
+        parser.error(f"--scenes: expected at least 2, got {scenes}")
+    for s in shifts:
+        if not 0.0 <= s <= MAX_STRENGTH:
+            parser.error(f"--shifts: expected numbers in [0, {MAX_STRENGTH:g}], got {s:g}")
+
+
 def render(work: Path, scenario: str, role: str, workers: int, scenes: int | None = None,
            texture: float = 0.0) -> Path:
     """The dataset of a role (``scenes``: instead of the role's 20; ``texture``: the people

@@ -30,9 +30,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
-from deployed_matcher_eval import SIZES, ShiftedCoster, render
+from deployed_matcher_eval import SIZES, ShiftedCoster, check_scenes_and_shifts, render
 
-from xvmatch.datasets.camera_shift import MAX_STRENGTH
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
@@ -63,11 +62,7 @@ def main() -> int:
     parser.add_argument("--install", action="store_true",
                         help="write the record into the bundle's manifest.json")
     args = parser.parse_args()
-    if args.scenes < 2:
-        parser.error(f"--scenes: expected at least 2, got {args.scenes}")
-    for s in args.shifts:
-        if not 0.0 <= s <= MAX_STRENGTH:
-            parser.error(f"--shifts: expected numbers in [0, {MAX_STRENGTH:g}], got {s:g}")
+    check_scenes_and_shifts(parser, args.scenes, args.shifts)
     if not 0.0 < args.threshold < 1.0:
         parser.error(f"--threshold: expected a number in (0, 1), got {args.threshold:g}")
     if not args.ridge >= 0:

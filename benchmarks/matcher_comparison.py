@@ -41,13 +41,13 @@ from deployed_matcher_eval import (
     ROLES,
     SIZES,
     ShiftedCoster,
+    check_scenes_and_shifts,
     frame_accuracies,
     interval,
     render,
     shown,
 )
 
-from xvmatch.datasets.camera_shift import MAX_STRENGTH
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
@@ -116,11 +116,7 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=2, help="render processes")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args()
-    if args.scenes < 2:
-        parser.error(f"--scenes: expected at least 2, got {args.scenes}")
-    for s in args.shifts:
-        if not 0.0 <= s <= MAX_STRENGTH:
-            parser.error(f"--shifts: expected numbers in [0, {MAX_STRENGTH:g}], got {s:g}")
+    check_scenes_and_shifts(parser, args.scenes, args.shifts)
     if len(set(args.models)) != len(args.models):
         parser.error(f"--models: a bundle is named twice: {' '.join(args.models)}")
     check_script_outputs(parser, [Output("--json", args.json)],
