@@ -28,6 +28,7 @@ from xvmatch.geometry.spatial_features import (
 from xvmatch.inference.bundle import load_bundle, read_manifest
 from xvmatch.models.matcher_file import load_matcher
 
+ROOT = Path(__file__).resolve().parents[1]
 onnx = pytest.importorskip("onnx")
 
 
@@ -104,6 +105,22 @@ def test_appearance_graph_carries_its_preprocessing(exported, tiny_models):
     graph = onnx.load(os.fspath(out / "appearance.onnx")).graph
     assert [o.name for o in graph.output] == ["descriptors", "features"]
     assert app["features_dim"] == net.head[0].in_features
+    from onnx import numpy_helper
+
+    # BGR to RGB reverses the 3 channel planes after the transpose to NCHW, not the innermost
+    # axis of the NHWC input (a slow strided copy); the shipped files were rewritten to match.
+    first = [n for n in graph.node if n.op_type in ("Transpose", "Slice")][:2]
+    assert [n.op_type for n in first] == ["Transpose", "Slice"]
+    assert first[1].input[0] == first[0].output[0]
+    for folder in (out, ROOT / "inference" / "default_bundle"):
+        for name in ("appearance.onnx",) + (("appearance_int8.onnx",) if folder != out else ()):
+            g = onnx.load(os.fspath(folder / name)).graph
+            consts = {i.name: numpy_helper.to_array(i) for i in g.initializer}
+            consts.update({n.output[0]: numpy_helper.to_array(n.attribute[0].t)
+                           for n in g.node if n.op_type == "Constant"})
+            (sl,) = [n for n in g.node if n.op_type == "Slice" and "transform" in n.name]
+            assert consts[sl.input[3]].tolist() == [1], f"{folder / name}: slices axis "\
+                f"{consts[sl.input[3]].tolist()}"
 
 
 def test_matcher_graph_carries_the_feature_layout(exported):
