@@ -49,13 +49,18 @@ from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.confidence import grouped_difference_interval
-from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster, matcher_costs
+from xvmatch.evaluation.deployed_matcher_eval import (
+    OnnxAppearanceCoster,
+    frame_accuracy,
+    frame_count,
+    matcher_costs,
+)
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS
 from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
-from xvmatch.inference.assignment import GAMMA_GRID, assign
-from xvmatch.inference.cross_view_metrics import count_pair, summarize
+from xvmatch.inference.assignment import GAMMA_GRID
+from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
@@ -105,8 +110,7 @@ class ShiftedCoster:
 
 def frame_counts(trials, costs, gamma: float, setting: str) -> tuple[list, list]:
     """Eq. 9 counts of each frame of one box setting under one gamma, and its scene."""
-    pairs = [(count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids, t.det_ego_ids,
-                         assign(c, gamma), frame=t.frame), t.scene)
+    pairs = [(frame_count(t, c, gamma), t.scene)
              for t, c in zip(trials, costs, strict=True) if t.setting == setting]
     return [c for c, _ in pairs], [s for _, s in pairs]
 
@@ -114,10 +118,10 @@ def frame_counts(trials, costs, gamma: float, setting: str) -> tuple[list, list]
 def frame_accuracies(trials, costs, gamma: float, setting: str) -> tuple[np.ndarray, list]:
     """Eq. 9 accuracy (fraction) of each frame of one box setting that has an id, and its
     scene (the frames :func:`summarize` averages)."""
-    counts, scenes = frame_counts(trials, costs, gamma, setting)
-    kept = [(c, s) for c, s in zip(counts, scenes, strict=True) if c.n_union > 0]
-    return (np.asarray([(c.tp + c.tn) / c.n_union for c, _ in kept], dtype=float),
-            [s for _, s in kept])
+    pairs = [(frame_accuracy(t, c, gamma), t.scene)
+             for t, c in zip(trials, costs, strict=True) if t.setting == setting]
+    kept = [(a, s) for a, s in pairs if a is not None]
+    return np.asarray([a for a, _ in kept], dtype=float), [s for _, s in kept]
 
 
 def interval(a: np.ndarray, b: np.ndarray, scenes: list) -> dict:

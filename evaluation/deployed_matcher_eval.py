@@ -23,13 +23,18 @@ from xvmatch.geometry.matcher_inputs import (
     matcher_inputs,
 )
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.cross_view_metrics import CrossViewScores, count_pair, summarize
+from xvmatch.inference.cross_view_metrics import (
+    CrossViewScores,
+    FrameCounts,
+    count_pair,
+    summarize,
+)
 from xvmatch.inference.frame_check import FEATURES, FrameCheck, frame_check_features
 from xvmatch.inference.learned_association import LearnedMatcher
 from xvmatch.inference.site_adaptation import pair_auc
 
-__all__ = ["OnnxAppearanceCoster", "cue_auc", "frame_check_samples", "frame_checked_costs",
-           "matcher_costs", "score_matcher"]
+__all__ = ["OnnxAppearanceCoster", "cue_auc", "frame_accuracy", "frame_check_samples",
+           "frame_checked_costs", "frame_count", "matcher_costs", "score_matcher"]
 
 
 class OnnxAppearanceCoster:
@@ -119,16 +124,19 @@ def score_matcher(matcher: LearnedMatcher, trials: Sequence[PairTrial], setting:
     (gamma: the bundle's unless given; ``costs``: precomputed :func:`matcher_costs`)."""
     gamma = matcher.gamma if gamma is None else float(gamma)
     costs = matcher_costs(matcher, trials, setting) if costs is None else costs
-    counts = [count_pair(t.gt_top_ids, t.gt_ego_ids, t.det_top_ids, t.det_ego_ids,
-                         assign(c, gamma), frame=t.frame)
-              for t, c in zip(trials, costs, strict=True)]
+    counts = [frame_count(t, c, gamma) for t, c in zip(trials, costs, strict=True)]
     return summarize(counts)
+
+
+def frame_count(trial: PairTrial, cost: np.ndarray, gamma: float) -> FrameCounts:
+    """Eq. 9 and cross-view ID counts of one trial's Hungarian assignment under ``gamma``."""
+    return count_pair(trial.gt_top_ids, trial.gt_ego_ids, trial.det_top_ids, trial.det_ego_ids,
+                      assign(cost, gamma), frame=trial.frame)
 
 
 def frame_accuracy(trial: PairTrial, cost: np.ndarray, gamma: float) -> float | None:
     """Eq. 9 accuracy (fraction) of one trial's assignment; None for a frame with no one."""
-    c = count_pair(trial.gt_top_ids, trial.gt_ego_ids, trial.det_top_ids, trial.det_ego_ids,
-                   assign(cost, gamma), frame=trial.frame)
+    c = frame_count(trial, cost, gamma)
     return (c.tp + c.tn) / c.n_union if c.n_union > 0 else None
 
 

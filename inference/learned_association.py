@@ -459,7 +459,7 @@ def associate_sequence_learned(
         # site bundles (another cue) or runs with cameras (other box-only costs).
         veto = (manifest.frame_check if len(models) == 1 and manifest.adaptation is None
                 and cameras is None and result.bursts == 0 else None)
-        if veto is not None and not result.judged and held:
+        if veto is not None:  # no burst: nothing was judged over time
             use = {f: veto.trusts(h[2], h[1]) for f, h in held.items()}
             dropped = sum(not u for u in use.values())
             result = replace(result, frames=len(use), frames_dropped=dropped)
