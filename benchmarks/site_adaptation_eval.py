@@ -24,7 +24,8 @@ and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``
 
 Usage:
     python benchmarks/site_adaptation_eval.py [--seeds 1 2 5 6] [--strengths 0 2 3] [--frames 400]
-        [--people 12 20] [--vector descriptors|features] [--cli] [--work runs/site_adaptation]
+        [--people 12 20] [--vector descriptors|features|stages] [--cli]
+        [--work runs/site_adaptation]
 """
 
 from __future__ import annotations
@@ -274,8 +275,8 @@ def main() -> int:
                         help="frames embedded per burst")
     parser.add_argument("--vector", choices=VECTORS, default=None,
                         help="what the adaptation maps (default: as xvmatch adapt, both the "
-                             "network's features and its descriptors when it gives them, the "
-                             "better on the held-out pairs kept)")
+                             "network's stages (else features) and its descriptors when it gives "
+                             "them, the better on the held-out pairs kept)")
     parser.add_argument("--cli", action="store_true", help="also time the command line")
     parser.add_argument("--work", default="runs/site_adaptation")
     args = parser.parse_args()

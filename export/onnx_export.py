@@ -4,8 +4,9 @@
 
     BUNDLE/manifest.json      format, versions, preprocessing, gamma, sha256, parity figures
     BUNDLE/matcher.onnx       geometry encoder + cue fusion + dustbin + log-Sinkhorn: cost 1 - P
-    BUNDLE/appearance.onnx    the Siamese branch: uint8 BGR crops to unit descriptors (only
-                              when the matcher takes the appearance cue)
+    BUNDLE/appearance.onnx    the Siamese branch: uint8 BGR crops to unit descriptors, pooled
+                              trunk features and pooled stages (only when the matcher takes
+                              the appearance cue)
 
 What is inside the graphs and what is not: the graphs hold every learned operation (the
 appearance network with its input normalisation; the matcher from padded feature tensors to the
@@ -80,17 +81,19 @@ class ExportError(ValueError):
 class AppearanceGraph(nn.Module):
     """The appearance network with its preprocessing: ``(B, H, W, 3)`` uint8 BGR crops on the
     [0, 255] scale to ``(B, D)`` unit descriptors and, with ``features``, also the ``(B, C)``
-    pooled trunk activations (what ``appearance.onnx`` computes)."""
+    pooled trunk activations and the ``(B, S)`` unit-scaled pooled stage maps
+    (:meth:`~xvmatch.models.appearance_net.AppearanceNet.vectors`; what ``appearance.onnx``
+    computes, outputs :data:`~xvmatch.inference.bundle.APPEARANCE_OUTPUTS`)."""
 
     def __init__(self, net: AppearanceNet, features: bool = False) -> None:
         super().__init__()
         self.net = net.eval()
         self.features = bool(features)
 
-    def forward(self, crops: Tensor) -> Tensor | tuple[Tensor, Tensor]:
-        """Descriptors (and features) of a batch of crops."""
+    def forward(self, crops: Tensor) -> Tensor | tuple[Tensor, Tensor, Tensor]:
+        """Descriptors (and features and stages) of a batch of crops."""
         if self.features:
-            return self.net.descriptors_and_features(self.net.transform(crops))
+            return self.net.vectors(self.net.transform(crops))
         return self.net.embed_crops(crops)
 
 
@@ -227,14 +230,18 @@ def _write_graphs(loaded: LoadedMatcher, folder: Path) -> dict:
             "xvmatch.preprocessing": json.dumps(prep),
             "xvmatch.output": "descriptors: unit descriptors (B, D), cost of a pair "
                               "|a - b| / 2; features: the trunk's average-pooled activations "
-                              "(B, C), what site adaptation fits on",
+                              "(B, C), what site adaptation fits on; stages: the average-pooled "
+                              "activations at the end of each stage of the trunk, each scaled "
+                              "to unit length, side by side (B, S), what site adaptation fits "
+                              "on when present",
         })
         notice = notice_text(net)
         if notice is not None:
             (folder / NOTICE).write_text(notice)
         records["appearance"] = {"file": path.name, "arch": net.arch,
                                  "embedding_dim": net.embedding_dim,
-                                 "features_dim": net.head[0].in_features, "precision": "fp32",
+                                 "features_dim": net.head[0].in_features,
+                                 "stages_dim": sum(net.stage_channels), "precision": "fp32",
                                  **prep,
                                  "backbone": backbone_record(net)}
     return records

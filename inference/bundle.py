@@ -79,9 +79,10 @@ MATCHER_INPUTS: tuple[str, ...] = (
 """Input names of ``matcher.onnx``, in order (a graph may omit the cue inputs it ignores)."""
 MATCHER_OUTPUT = "cost"
 APPEARANCE_INPUT = "crops"
-APPEARANCE_OUTPUTS: tuple[str, ...] = ("descriptors", "features")
-"""Outputs of ``appearance.onnx``: unit descriptors, and the trunk's pooled activations (the
-second only in bundles exported since site adaptation fits on them)."""
+APPEARANCE_OUTPUTS: tuple[str, ...] = ("descriptors", "features", "stages")
+"""Outputs of ``appearance.onnx``: unit descriptors, the trunk's pooled activations, and the
+pooled activations of each of its stages, each scaled to unit length (the second only in bundles
+exported since site adaptation fits on them, the third since 2026-11-28)."""
 DEFAULT_BUNDLE = Path(__file__).resolve().parent / "default_bundle"
 """The shipped default (``training/make_default_bundle.py`` rebuilds it)."""
 
@@ -102,6 +103,9 @@ class AppearanceSpec:
         embedding_dim: descriptor size.
         features_dim: size of the graph's ``features`` output (the trunk's pooled activations),
             or None for a graph with descriptors only (bundles exported before it).
+        stages_dim: size of the graph's ``stages`` output (the pooled activations at the end of
+            each stage of the trunk, each at unit length, side by side), or None for a graph
+            exported before it.
         precision: precision of ``file``, ``"fp32"``.
         int8_file, int8_sha256: the static INT8 network beside it (``xvmatch export --int8``),
             or None.
@@ -125,16 +129,19 @@ class AppearanceSpec:
     arch: str | None = None
     backbone: dict = field(default_factory=dict)
     features_dim: int | None = None
+    stages_dim: int | None = None
 
     @property
     def outputs(self) -> tuple[str, ...]:
-        """The graph's outputs, in order: ``("descriptors",)`` or ``APPEARANCE_OUTPUTS``."""
-        return APPEARANCE_OUTPUTS[:1] if self.features_dim is None else APPEARANCE_OUTPUTS
+        """The graph's outputs, in order: a prefix of ``APPEARANCE_OUTPUTS``."""
+        return APPEARANCE_OUTPUTS[:1 + (self.features_dim is not None)
+                                  + (self.stages_dim is not None)]
 
     def dim(self, vector: str) -> int | None:
-        """The size of the graph's ``vector`` output (``"descriptors"`` or ``"features"``);
-        None when the graph has no such output."""
-        return {"descriptors": self.embedding_dim, "features": self.features_dim}.get(vector)
+        """The size of the graph's ``vector`` output (one of ``APPEARANCE_OUTPUTS``); None when
+        the graph has no such output."""
+        return {"descriptors": self.embedding_dim, "features": self.features_dim,
+                "stages": self.stages_dim}.get(vector)
 
 
 @dataclass(frozen=True)
@@ -312,15 +319,15 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
                 if k in ("arch", "init", "package", "version", "licence")):
             raise _fail(path, "manifest field 'appearance.backbone' must be an object of "
                         "strings (arch, init, package, version, licence) or absent")
-        features = app.get("features_dim")
-        if features is not None and (not isinstance(features, int) or isinstance(features, bool)
-                                     or not 1 <= features <= 65536):
-            raise _fail(path, f"manifest field 'appearance.features_dim' must be in 1-65536 or "
-                        f"absent, got {features!r}")
+        features, stages = (_output_dim(app, key, path) for key in ("features_dim",
+                                                                     "stages_dim"))
+        if stages is not None and features is None:
+            raise _fail(path, "manifest field 'appearance.stages_dim' needs "
+                        "'appearance.features_dim' (the graph's outputs come in that order)")
         spec = AppearanceSpec(name, sha, (size[0], size[1]),
                               _number(app, "context", path, 0.0, 1.0, "appearance."), dim,
                               precision, int8_file, int8_sha, dict(int8 or {}), arch,
-                              dict(backbone), features)
+                              dict(backbone), features, stages)
     if ("app" in cues) != (spec is not None):
         raise _fail(path, "the appearance graph must be present exactly when 'app' is among "
                     f"the cues (cues {cues})")
@@ -329,6 +336,16 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     return Manifest(folder, config, gamma, tuple(cues), margin, beta, matcher_file, matcher_sha,
                     spec, parity, meta, doc, _adaptation_record(doc, path, spec),
                     _frame_check(doc, path, spec))
+
+
+def _output_dim(app: dict, key: str, path: Path) -> int | None:
+    """The optional size of an appearance output (``appearance.KEY``), checked."""
+    value = app.get(key)
+    if value is not None and (not isinstance(value, int) or isinstance(value, bool)
+                              or not 1 <= value <= 65536):
+        raise _fail(path, f"manifest field 'appearance.{key}' must be in 1-65536 or absent, "
+                    f"got {value!r}")
+    return value
 
 
 def _frame_check(doc: dict, path: Path, spec: AppearanceSpec | None) -> FrameCheck | None:
@@ -434,13 +451,14 @@ class Bundle:
               reference: bool = False) -> np.ndarray:
         """``(K, D)`` float32 unit descriptors of ``(K, H, W, 3)`` uint8 BGR crops, in one
         batch (``K`` may be 0); with ``vector="features"``, the ``(K, C)`` pooled trunk
-        activations instead, scaled to unit length (onnxruntime then skips the head). With
+        activations instead, scaled to unit length (onnxruntime then skips the head); with
+        ``"stages"``, the ``(K, S)`` pooled stages, scaled to unit length. With
         ``reference``, by the FP32 network that re-checks INT8 frames."""
         return self.embed_vectors(crops, (vector,), reference)[0]
 
     def embed_vectors(self, crops: np.ndarray, vectors: Sequence[str],
                       reference: bool = False) -> list[np.ndarray]:
-        """:meth:`embed` of each of ``vectors`` (``"descriptors"``, ``"features"``), from one
+        """:meth:`embed` of each of ``APPEARANCE_OUTPUTS`` in ``vectors``, from one
         run of the network."""
         spec = self.manifest.appearance
         if self.appearance is None or spec is None:
@@ -458,12 +476,18 @@ class Bundle:
                                   f"output (it has {', '.join(spec.outputs)}); export it again")
         if crops.shape[0] == 0:
             return [np.zeros((0, dim), np.float32) for dim in dims]
-        outs = session.run(list(vectors), {APPEARANCE_INPUT: crops})
-        # features at unit length: a crop's overall activation says more about its exposure
-        # than about the person
-        return [out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
-                if vector == "features" else out for vector, out in zip(vectors, outs,
-                                                                         strict=True)]
+        import onnxruntime as ort
+
+        # only the nodes the outputs asked for: descriptors skip the stages' pooling, features
+        # and stages skip the head (the outputs are the same either way)
+        only = ort.RunOptions()
+        only.only_execute_path_to_fetches = True
+        outs = session.run(list(vectors), {APPEARANCE_INPUT: crops}, only)
+        # features and stages at unit length: a crop's overall activation says more about its
+        # exposure than about the person
+        return [out if vector == "descriptors" else
+                out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)
+                for vector, out in zip(vectors, outs, strict=True)]
 
     def costs(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """``(B, M, N)`` costs of a padded batch

@@ -84,14 +84,14 @@ class LearnedMatcher:
     def descriptors(self, image: np.ndarray, boxes: np.ndarray,
                     vector: str = "descriptors") -> np.ndarray:
         """``(K, D)`` appearance descriptors of the boxes of one image (one batch); with
-        ``vector="features"`` the network's unit pooled features instead
+        ``vector="features"`` or ``"stages"`` the network's unit pooled features or stages instead
         (:meth:`~xvmatch.inference.bundle.Bundle.embed`)."""
         return self.bundle.embed(self.crops(image, boxes), vector)
 
     @property
     def cue_vector(self) -> str:
-        """What the cross-view appearance cue compares: ``"features"`` for a site bundle
-        adapted on them, else ``"descriptors"``."""
+        """What the cross-view appearance cue compares: what a site bundle was adapted on
+        (``"stages"``, ``"features"`` or ``"descriptors"``), else ``"descriptors"``."""
         adaptation = self.bundle.adaptation
         return "descriptors" if adaptation is None else adaptation.vector
 

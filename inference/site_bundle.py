@@ -159,11 +159,15 @@ def vector_pair_sets(mined: MinedPairs, top: np.ndarray, hor: np.ndarray, spec,
 
 def adapted_vectors(spec) -> tuple[str, ...]:
     """What ``adapt`` fits on for a network with this :class:`~xvmatch.inference.bundle.
-    AppearanceSpec`, in order of preference: its pooled features and its descriptors when the
-    graph gives both (the features recover a third to a half more of a camera change, but
-    each is sometimes refused where the other helps; :func:`~xvmatch.inference.
-    site_adaptation.choose_fit` keeps one), else its descriptors."""
-    return ("descriptors",) if spec.features_dim is None else ("features", "descriptors")
+    AppearanceSpec`, in order of preference: its pooled stages (else its pooled features) and
+    its descriptors when the graph gives them (the stages recover more of a camera change than
+    the features, the features more than the descriptors, but each is sometimes refused where
+    the descriptors help; :func:`~xvmatch.inference.site_adaptation.choose_fit` keeps one),
+    else its descriptors alone."""
+    for vector in ("stages", "features"):
+        if spec.dim(vector) is not None:
+            return (vector, "descriptors")
+    return ("descriptors",)
 
 
 def _sha256(path: Path) -> str:
@@ -239,7 +243,8 @@ def write_site_bundle(source: str | os.PathLike, out: str | os.PathLike, run: Si
     """Write the site bundle into the folder ``out`` (which must exist).
 
     Args:
-        source: the source bundle folder (its manifest and files are copied unchanged).
+        source: the source bundle folder (its files are copied unchanged, its manifest less
+            its ``frame_check``, fitted for the unadapted cue).
         out: the site bundle folder.
         run: an accepted :class:`SiteRun`.
         inputs: what it was fitted on (:func:`adaptation_record`).
@@ -264,6 +269,8 @@ def write_site_bundle(source: str | os.PathLike, out: str | os.PathLike, run: Si
             shutil.copyfile(source / name, tmp / name)
         data = adaptation_bytes(run.fit.adaptation)
         (tmp / ADAPTATION_FILE).write_bytes(data)
+        # The source's frame check judges its unadapted cue; the site's cue is another one.
+        manifest.pop("frame_check", None)
         manifest["adaptation"] = adaptation_record(run, inputs,
                                                    hashlib.sha256(data).hexdigest(), version)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")

@@ -58,7 +58,7 @@ class TrackletAppearance:
         descriptors: (T, D) the network descriptor of each tracklet's middle box, or None
             without a network.
         cross: (T, C) the vectors the cross-view cue compares when they are not the
-            descriptors (a site bundle adapted on the network's features), else None.
+            descriptors (a site bundle adapted on the network's features or stages), else None.
     """
 
     histograms: np.ndarray

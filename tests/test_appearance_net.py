@@ -17,7 +17,9 @@ from xvmatch.models.appearance_net import (
     Preprocessing,
     ResNetTrunk,
     appearance_distance,
+    appearance_efficientnet_lite0,
     appearance_from_weights,
+    appearance_mobilenetv2,
     appearance_resnet18,
     appearance_resnet50,
     appearance_small,
@@ -69,6 +71,7 @@ def test_resnet50_is_the_papers_branch() -> None:
     net = appearance_resnet50()
     assert net.preprocessing.input_size == (256, 128)
     assert isinstance(net.trunk, ResNetTrunk) and net.trunk.depth == 50
+    assert net.stage_channels == net.trunk.stage_channels == (256, 512, 1024, 2048)
     fc1, bn, relu, drop, fc2 = net.head
     assert (fc1.in_features, fc1.out_features) == (2048, 1024)
     assert isinstance(bn, torch.nn.BatchNorm1d) and isinstance(relu, torch.nn.ReLU)
@@ -155,3 +158,77 @@ def test_compact_trunk_downsamples_by_32() -> None:
     out = trunk(torch.zeros(2, 3, 64, 32))
     assert out.shape == (2, 16, 2, 1)
     assert np.isclose(trunk.out_channels, 16)
+
+
+# Stage maps: the end of each group of equal-width blocks from stride 4 on, the last the
+# trunk's output. Widths and strides by architecture, random initialisation (no file read).
+STAGES = {
+    "small": (lambda **kw: appearance_small(widths=(4, 8, 8, 16), **kw), (4, 8, 8, 16),
+              (4, 8, 16, 32)),
+    "resnet18": (appearance_resnet18, (64, 128, 256, 512), (4, 8, 16, 32)),
+    "mobilenetv2": (appearance_mobilenetv2, (24, 32, 64, 96, 160, 320, 1280),
+                    (4, 8, 16, 16, 32, 32, 32)),
+    "efficientnet_lite0": (appearance_efficientnet_lite0, (24, 40, 80, 112, 192, 320, 1280),
+                           (4, 8, 16, 16, 32, 32, 32)),
+}
+
+
+@pytest.mark.parametrize("arch", sorted(STAGES))
+def test_vectors_pool_each_stage_to_unit_length(arch) -> None:
+    build, widths, strides = STAGES[arch]
+    torch.manual_seed(0)
+    net = build(input_size=(64, 32), hidden_dim=8, embedding_dim=6).eval()
+    assert net.arch == arch
+    assert net.stage_channels == net.trunk.stage_channels == widths
+    assert widths[-1] == net.trunk.out_channels
+    images = net.transform(_crops(3, (64, 32)))
+    with torch.no_grad():
+        maps = net.trunk.stage_maps(images)
+        descriptors, features, stages = net.vectors(images)
+        trunk_out, alone = net.trunk(images), net(images)
+    assert [tuple(m.shape[1:]) for m in maps] == [(c, 64 // s, 32 // s)
+                                                  for c, s in zip(widths, strides, strict=True)]
+    torch.testing.assert_close(maps[-1], trunk_out, rtol=0, atol=0)
+    assert stages.shape == (3, sum(widths)) and features.shape == (3, widths[-1])
+    torch.testing.assert_close(descriptors, alone)  # one code path for the descriptors
+    torch.testing.assert_close(features, trunk_out.mean((2, 3)))
+    blocks = stages.split(list(widths), dim=1)
+    for block, m in zip(blocks, maps, strict=True):
+        torch.testing.assert_close(block.norm(dim=1), torch.ones(3))
+        torch.testing.assert_close(block, torch.nn.functional.normalize(m.mean((2, 3)), dim=1))
+    torch.testing.assert_close(blocks[-1], torch.nn.functional.normalize(features, dim=1))
+
+
+class _PlainTrunk(torch.nn.Module):
+    """A user's trunk: ``out_channels`` only, no stage maps."""
+
+    out_channels = 5
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.conv = torch.nn.Conv2d(3, 5, 3, stride=4)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.conv(x)
+
+
+def test_a_trunk_without_stage_maps_is_one_stage() -> None:
+    torch.manual_seed(0)
+    net = AppearanceNet(_PlainTrunk(), input_size=(32, 16), hidden_dim=8, embedding_dim=6)
+    net.eval()
+    assert net.stage_channels == (5,)
+    images = net.transform(_crops(2, (32, 16)))
+    with torch.no_grad():
+        descriptors, features, stages = net.vectors(images)
+    torch.testing.assert_close(descriptors, net(images))
+    torch.testing.assert_close(stages, torch.nn.functional.normalize(features, dim=1))
+
+
+def test_a_trunk_with_stage_maps_needs_their_widths() -> None:
+    trunk = CompactTrunk((4, 4, 4, 8))
+    trunk.stage_channels = (4, 4, 4, 4)  # does not end with out_channels
+    with pytest.raises(ValueError, match=r"stage_channels.*ending with out_channels \(8\)"):
+        AppearanceNet(trunk)
+    del trunk.stage_channels
+    with pytest.raises(ValueError, match="a trunk with stage_maps needs stage_channels"):
+        AppearanceNet(trunk)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import re
 import shutil
@@ -60,7 +61,7 @@ def test_the_features_output(bundle):
     site adaptation; the descriptors are as before."""
     loaded = load_bundle(bundle)
     spec = loaded.manifest.appearance
-    assert spec.outputs == ("descriptors", "features") and spec.features_dim > 0
+    assert spec.outputs == ("descriptors", "features", "stages") and spec.features_dim > 0
     crops = np.random.default_rng(0).integers(0, 256, (3, 32, 16, 3), dtype=np.uint8)
     feats = loaded.embed(crops, "features")
     assert feats.shape == (3, spec.features_dim)
@@ -77,9 +78,50 @@ def test_the_features_output(bundle):
         [(0, 8), (0, spec.features_dim)]
 
 
+def test_the_stages_output(bundle):
+    """The third output: each stage of the trunk pooled and at unit length, side by side (the
+    last stage is the features), scaled to unit length as a whole."""
+    loaded = load_bundle(bundle)
+    spec = loaded.manifest.appearance
+    crops = np.random.default_rng(0).integers(0, 256, (3, 32, 16, 3), dtype=np.uint8)
+    stages, feats = loaded.embed_vectors(crops, ("stages", "features"))
+    assert stages.shape == (3, spec.stages_dim) and spec.stages_dim > spec.features_dim
+    np.testing.assert_allclose(np.linalg.norm(stages, axis=1), 1.0, atol=1e-5)
+    tail = stages[:, -spec.features_dim:]
+    np.testing.assert_allclose(tail / np.linalg.norm(tail, axis=1, keepdims=True), feats,
+                               atol=1e-5)
+
+
+def test_the_shipped_stages_leave_descriptors_and_features_as_they_were():
+    """The shipped graphs gained ``stages`` by adding nodes only: 7 MobileNetV2 stages (24 to
+    1,280 channels), each at unit length; FP32 and INT8 agree on them."""
+    rng = np.random.default_rng(3)
+    fp32, int8 = (load_bundle("default", precision=p) for p in ("fp32", "int8"))
+    spec = fp32.manifest.appearance
+    assert spec.stages_dim == 24 + 32 + 64 + 96 + 160 + 320 + 1280
+    crops = rng.integers(0, 256, (8, *spec.crop_size[::-1], 3), dtype=np.uint8)
+    raw = fp32.appearance.run(["stages"], {"crops": crops})[0]
+    widths = np.cumsum([0, 24, 32, 64, 96, 160, 320, 1280])
+    norms = [np.linalg.norm(raw[:, a:b], axis=1) for a, b in itertools.pairwise(widths)]
+    np.testing.assert_allclose(norms, 1.0, atol=1e-5)
+    a, b = fp32.embed(crops, "stages"), int8.embed(crops, "stages")
+    assert float(np.min(np.sum(a * b, axis=1))) > 0.99
+
+
+def test_a_bundle_without_stages_still_loads(bundle):
+    """Bundles exported before the stages output: descriptors and features."""
+    _edit(bundle, lambda d: d["appearance"].pop("stages_dim"))
+    loaded = load_bundle(bundle)
+    assert loaded.manifest.appearance.outputs == ("descriptors", "features")
+    crops = np.zeros((2, 32, 16, 3), np.uint8)
+    assert loaded.embed(crops, "features").shape[0] == 2
+    with pytest.raises(BundleError, match=r"no .stages. output .*export it again"):
+        loaded.embed(crops, "stages")
+
+
 def test_a_bundle_without_features_still_loads(bundle):
     """Bundles exported before the features output: descriptors only."""
-    _edit(bundle, lambda d: d["appearance"].pop("features_dim"))
+    _edit(bundle, lambda d: [d["appearance"].pop(k) for k in ("features_dim", "stages_dim")])
     loaded = load_bundle(bundle)
     assert loaded.manifest.appearance.outputs == ("descriptors",)
     crops = np.zeros((2, 32, 16, 3), np.uint8)
@@ -217,6 +259,8 @@ def test_a_field_missing(bundle, where, key, name):
         (lambda d: d["appearance"].update(embedding_dim=0), r"embedding_dim' must be in"),
         (lambda d: d["appearance"].update(features_dim=0), r"features_dim' must be in 1-65536"),
         (lambda d: d["appearance"].update(features_dim="1280"), r"features_dim' must be in"),
+        (lambda d: d["appearance"].update(stages_dim=True), r"stages_dim' must be in 1-65536"),
+        (lambda d: d["appearance"].pop("features_dim"), r"'appearance.stages_dim' needs"),
         (lambda d: d.update(appearance=None), r"appearance graph must be present"),
         (lambda d: d["appearance"].update(arch=50), r"'appearance.arch' must be a string"),
         (lambda d: d["appearance"].update(backbone="mobilenetv2"),

@@ -40,6 +40,9 @@ def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
         assert _sha(site / name) == _sha(DEFAULT_BUNDLE / name), name
     doc = json.loads((site / "manifest.json").read_text())
     record = doc["adaptation"]
+    # The default's frame check was fitted for its unadapted cue: the site bundle drops it.
+    assert "frame_check" in json.loads((DEFAULT_BUNDLE / "manifest.json").read_text())
+    assert "frame_check" not in doc
     assert record["sha256"] == _sha(site / "adaptation.npz")
     assert record["fitted_on"]["top"]["sha256"] == _sha(video["top"])
     assert record["fitted_on"]["frames_scored"] == 64
@@ -47,10 +50,10 @@ def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
     assert record["heldout"]["after"] > record["heldout"]["before"]
     bundle = load_bundle(site)
     assert bundle.adaptation is not None and bundle.adaptation.rank == record["rank"]
-    # The default network gives its pooled features and its descriptors: adapt fits both on
-    # the same pairs and keeps the accepted one with the best held-out AUC.
+    # The default network gives its pooled stages and its descriptors: adapt fits both on the
+    # same pairs and keeps the accepted one with the best held-out AUC.
     tried = record["heldout"]["vectors"]
-    assert set(tried) == {"features", "descriptors"}
+    assert set(tried) == {"stages", "descriptors"}
     best = max((v for v in tried if tried[v]["accepted"]), key=lambda v: tried[v]["after"])
     assert record["vector"] == bundle.adaptation.vector == best
     assert record["heldout"]["after"] == tried[best]["after"]
@@ -85,7 +88,7 @@ def test_adapt_refusals_write_nothing(video, tmp_path, capsys) -> None:
     out = tmp_path / "site"
     # a single burst: nothing to hold out, so nothing can be judged
     refused(_args(video, out, "--max-frames", "10", "--burst", "10"),
-            "adaptation refused, nothing written: features: too few confident cross-view "
+            "adaptation refused, nothing written: stages: too few confident cross-view "
             "pairs")
     assert "; descriptors: too few confident cross-view pairs" in said[-1]  # both were tried
     assert not out.exists()

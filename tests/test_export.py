@@ -101,10 +101,27 @@ def test_appearance_graph_carries_its_preprocessing(exported, tiny_models):
     assert (app["crop_size"], app["colour_order"], app["mean"], app["std"]) == (
         prep["crop_size"], "BGR", prep["mean"], prep["std"])
     assert app["embedding_dim"] == net.embedding_dim
-    # The second output, the pooled trunk activations, is what site adaptation fits on.
+    # The second and third outputs, the pooled trunk activations and the unit-scaled pooled
+    # stage maps, are what site adaptation fits on.
     graph = onnx.load(os.fspath(out / "appearance.onnx")).graph
-    assert [o.name for o in graph.output] == ["descriptors", "features"]
+    assert [o.name for o in graph.output] == ["descriptors", "features", "stages"]
     assert app["features_dim"] == net.head[0].in_features
+    assert app["stages_dim"] == sum(net.stage_channels) == 4 + 8 + 8 + 16
+    assert "; stages: " in meta["xvmatch.output"]
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    session = ort.InferenceSession(os.fspath(out / "appearance.onnx"), options,
+                                   providers=["CPUExecutionProvider"])
+    for k in (1, 3):
+        crops = np.random.default_rng(k).integers(0, 256, (k, h, w, 3), dtype=np.uint8)
+        got = session.run(None, {"crops": crops})
+        with torch.no_grad():
+            ref = net.vectors(net.transform(torch.from_numpy(crops)))
+        assert [g.shape for g in got] == [(k, 8), (k, 16), (k, 36)]
+        for name, g, r in zip(("descriptors", "features", "stages"), got, ref, strict=True):
+            np.testing.assert_allclose(g, r.numpy(), atol=1e-5, rtol=1e-4, err_msg=name)
     from onnx import numpy_helper
 
     # BGR to RGB reverses the 3 channel planes after the transpose to NCHW, not the innermost

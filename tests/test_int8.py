@@ -40,6 +40,11 @@ def test_export_records_the_int8_network_and_its_accuracy(int8_bundle):
     int8 = manifest["appearance"]["int8"]
     path = out / int8["file"]
     assert path.is_file() and hashlib.sha256(path.read_bytes()).hexdigest() == int8["sha256"]
+    from xvmatch.inference.bundle import open_session
+
+    # the same outputs as the FP32 graph, stages included
+    assert [o.name for o in open_session(path, 1).get_outputs()] == ["descriptors", "features",
+                                                                     "stages"]
     assert int8["calibration"]["method"] in CALIBRATION_METHODS
     assert int8["calibration"]["scenes"] == ["s00000"]  # even scenes calibrate ...
     assert int8["accuracy"]["measured_on"]["scenes"] == ["s00001"]  # ... odd ones measure

@@ -24,6 +24,7 @@ from xvmatch.models.pretrained_backbones import (
     EfficientNetLite0Trunk,
     MobileNetV2Trunk,
     PretrainedPackageMissing,
+    StagedSequential,
     load_pretrained_trunk,
     locate_weights,
     pretrained_source_record,
@@ -172,24 +173,48 @@ def test_onnx_export_takes_any_number_of_crops(arch, tmp_path):
     import onnxruntime as ort
 
     from xvmatch.export.onnx_export import AppearanceGraph, _onnx_export
+    from xvmatch.inference.bundle import APPEARANCE_OUTPUTS
 
     torch.manual_seed(0)
     net = BUILDERS[arch](input_size=(64, 32), hidden_dim=16, embedding_dim=8).eval()
     path = tmp_path / f"{arch}.onnx"
     example = torch.zeros(2, 64, 32, 3, dtype=torch.uint8)
-    _onnx_export(AppearanceGraph(net).eval(), (example,), path, ["crops"], ["descriptors"],
-                 {"crops": {0: "crops"}, "descriptors": {0: "crops"}})
+    outputs = list(APPEARANCE_OUTPUTS)
+    _onnx_export(AppearanceGraph(net, features=True).eval(), (example,), path, ["crops"],
+                 outputs, {name: {0: "crops"} for name in ["crops", *outputs]})
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    assert [o.name for o in session.get_outputs()] == ["descriptors", "features", "stages"]
     rng = np.random.default_rng(0)
     for n in (1, 5):
         crops = rng.integers(0, 256, (n, 64, 32, 3), dtype=np.uint8)
-        got = session.run(None, {"crops": crops})[0]
+        got = session.run(None, {"crops": crops})
         with torch.no_grad():
-            ref = net.embed_crops(torch.from_numpy(crops)).numpy()
-        assert got.shape == (n, 8)
-        np.testing.assert_allclose(got, ref, atol=1e-4)
+            ref = net.vectors(net.transform(torch.from_numpy(crops)))
+        assert [g.shape for g in got] == [(n, 8), (n, 1280), (n, sum(net.stage_channels))]
+        np.testing.assert_allclose(got[0], ref[0].numpy(), atol=1e-4)
+        np.testing.assert_allclose(got[1], ref[1].numpy(), atol=1e-4, rtol=1e-4)
+        np.testing.assert_allclose(got[2], ref[2].numpy(), atol=1e-5)
+
+
+def test_mobilenetv2_stage_maps_keep_torchvisions_names():
+    """The stage maps come from the blocks' own sequence: parameter names stay torchvision's
+    and a slice of it is a plain sequence of blocks."""
+    import torchvision
+
+    trunk = MobileNetV2Trunk()
+    plain = torchvision.models.mobilenet_v2(weights=None).features
+    assert list(trunk.state_dict()) == [f"features.{k}" for k in plain.state_dict()]
+    assert trunk.features.ends == (3, 6, 10, 13, 16, 17, 18)
+    head = trunk.features[:4]
+    assert type(head) is torch.nn.Sequential and list(head._modules) == ["0", "1", "2", "3"]
+    with torch.no_grad():
+        x = _probe()
+        torch.testing.assert_close(head(x), trunk.stage_maps(x)[0], rtol=0, atol=0)
+    with pytest.raises(ValueError, match=r"ends must be increasing block indices ending with "
+                       r"the last, 1"):
+        StagedSequential(torch.nn.Identity(), torch.nn.Identity(), ends=(0,))
 
 
 def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synth):
@@ -213,6 +238,7 @@ def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synt
     manifest = export_bundle(path, tmp_path / "bundle", parity_data=tiny_synth["overview"])
     assert manifest["parity"]["appearance"]["crops"] > 0
     assert manifest["parity"]["appearance"]["max_abs_descriptor_diff"] <= 1e-4
+    assert manifest["appearance"]["stages_dim"] == 1976  # 24 + 32 + 64 + 96 + 160 + 320 + 1280
     spec = read_manifest(tmp_path / "bundle").appearance
     assert spec.arch == "mobilenetv2" and spec.crop_size == (32, 64)
     notice = tmp_path / "bundle" / "NOTICE.txt"

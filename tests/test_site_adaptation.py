@@ -32,6 +32,7 @@ from xvmatch.inference.site_adaptation import (
     load_adaptation,
     pair_auc,
 )
+from xvmatch.inference.site_bundle import adapted_vectors
 
 DIM = 16
 
@@ -187,6 +188,15 @@ def test_choose_fit_keeps_the_accepted_fit_with_the_best_heldout_auc() -> None:
         choose_fit({})
 
 
+def test_adapt_fits_the_richest_vector_the_network_gives() -> None:
+    """The stages when the graph gives them, else the features; the descriptors beside them."""
+    spec = read_manifest(DEFAULT_BUNDLE).appearance
+    assert adapted_vectors(spec) == ("stages", "descriptors")
+    assert adapted_vectors(replace(spec, stages_dim=None)) == ("features", "descriptors")
+    assert adapted_vectors(replace(spec, stages_dim=None, features_dim=None)) == \
+        ("descriptors",)
+
+
 def test_fit_bad_arguments() -> None:
     with pytest.raises(ValueError, match="calibration must be"):
         fit_site_adaptation(_site(4), calibration="magic")
@@ -327,17 +337,18 @@ def test_a_site_bundle_written_before_features_still_loads(tmp_path) -> None:
     assert site.bundle.adaptation.vector == "descriptors" and site.cue_vector == "descriptors"
 
 
-def test_bundle_reads_a_feature_adaptation(tmp_path) -> None:
-    """A site adapted on the network's features: the cross-view cue takes the features of the
-    boxes (``cue_vectors``), the descriptors stay the descriptors."""
+@pytest.mark.parametrize("vector", ["features", "stages"])
+def test_bundle_reads_a_feature_adaptation(tmp_path, vector: str) -> None:
+    """A site adapted on the network's features (or stages): the cross-view cue takes those of
+    the boxes (``cue_vectors``), the descriptors stay the descriptors."""
     spec = read_manifest(DEFAULT_BUNDLE).appearance
     rng = np.random.default_rng(1)
-    dim = spec.features_dim
+    dim = spec.dim(vector)
     cast = SiteAdaptation(np.full(dim, 0.01), np.ones(dim), np.zeros(dim), np.ones(dim),
-                          np.eye(dim)[:, :8], np.array([1.0, 0.0]), 8, "features")
+                          np.eye(dim)[:, :8], np.array([1.0, 0.0]), 8, vector)
     folder, _ = _site_bundle(tmp_path, cast)
     site = LearnedMatcher(load_bundle(folder))
-    assert site.cue_vector == "features"
+    assert site.cue_vector == vector
     assert LearnedMatcher(load_bundle("default")).cue_vector == "descriptors"
     image = rng.integers(0, 256, (120, 160, 3), dtype=np.uint8)
     boxes = np.array([[10.0, 10.0, 30.0, 60.0], [60.0, 20.0, 25.0, 70.0]])
