@@ -102,7 +102,7 @@ def main() -> int:
     print("\nOn the fitting frames, images - boxes (points), without and with the check; "
           "share of frames with images:")
     for scenario, strength, f, g in parts:
-        use = check.probabilities(f) > check.threshold
+        use = check.trusted(f)
         print(f"  {scenario:<8} strength {strength:g}: {100 * g.mean():+.2f} -> "
               f"{100 * np.where(use, g, 0.0).mean():+.2f}  ({use.mean():.2f})")
     record = check.to_record()

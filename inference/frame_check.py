@@ -91,13 +91,18 @@ class FrameCheck:
         z = (np.asarray(features, dtype=np.float64) - self.mean) / self.scale
         return 1.0 / (1.0 + np.exp(-(z @ self.coef + self.intercept)))
 
+    def trusted(self, features: np.ndarray) -> np.ndarray:
+        """Whether each of ``(F, len(FEATURES))`` frames is matched with its images: the one
+        decision rule (probability above :attr:`threshold`)."""
+        return self.probabilities(features) > self.threshold
+
     def probability(self, app: np.ndarray, box_cost: np.ndarray) -> float:
         """Probability that the images help this frame."""
         return float(self.probabilities(frame_check_features(app, box_cost)[None])[0])
 
     def trusts(self, app: np.ndarray, box_cost: np.ndarray) -> bool:
         """Whether this frame is matched with its images."""
-        return self.probability(app, box_cost) > self.threshold
+        return bool(self.trusted(frame_check_features(app, box_cost)[None])[0])
 
     def to_record(self) -> dict:
         """The manifest's ``frame_check`` object."""

@@ -92,9 +92,9 @@ def test_the_stages_output(bundle):
                                atol=1e-5)
 
 
-def test_the_shipped_stages_leave_descriptors_and_features_as_they_were():
-    """The shipped graphs gained ``stages`` by adding nodes only: 7 MobileNetV2 stages (24 to
-    1,280 channels), each at unit length; FP32 and INT8 agree on them."""
+def test_the_shipped_stages_are_seven_unit_blocks():
+    """The shipped graphs' ``stages``: 7 MobileNetV2 stages (24 to 1,280 channels), each at unit
+    length; FP32 and INT8 agree on them."""
     rng = np.random.default_rng(3)
     fp32, int8 = (load_bundle("default", precision=p) for p in ("fp32", "int8"))
     spec = fp32.manifest.appearance

@@ -99,6 +99,7 @@ def test_the_fit_learns_which_frames_images_help_and_is_deterministic() -> None:
     assert not any(check.trusts(*_agreeing(5, rng, False)) for _ in range(20))
     p = check.probabilities(feats)
     assert p.shape == gains.shape and np.all((p > 0.5) == (gains > 0))
+    np.testing.assert_array_equal(check.trusted(feats), gains > 0)  # the same rule, batched
     with pytest.raises(ValueError, match="gained and frames where they lost"):
         fit_frame_check(feats, np.abs(gains))
     with pytest.raises(ValueError, match="features must be"):

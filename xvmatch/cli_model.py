@@ -78,8 +78,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                    "box-only matcher is sure of over consecutive frames, and match from the "
                    "boxes alone when the images are shown too weak to help; with no run of "
                    "consecutive frames (single image pairs), judge each frame by the bundle's "
-                   "frame check "
-                   "(default on; off: always use the images)")
+                   "frame check (default on; off: always use the images)")
 
 
 def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
