@@ -18,13 +18,17 @@ CVIDF1, %):
   of the shift's CVIDF1 loss the adaptation recovers ``(adapted - shifted) / (unshifted -
   shifted)``.
 
+With ``--ceiling`` one more row: the same fit with the ground-truth cross-view pairs of the
+embedded frames instead of the pseudo-matches (every person seen in both views; the ids of the
+render, for this upper bound only): how much better pseudo-labels could give.
+
 With ``--cli`` the first seed's shifted video is also written as box files and image folders,
 and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``associate
 --model SITE/`` against ``--model default`` on the test part (the same run, the ratio printed).
 
 Usage:
     python benchmarks/site_adaptation_eval.py [--seeds 1 2 5 6] [--strengths 0 2 3] [--frames 400]
-        [--people 12 20] [--vector descriptors|features|stages] [--cli]
+        [--people 12 20] [--vector descriptors|features|stages] [--ceiling] [--cli]
         [--work runs/site_adaptation]
 """
 
@@ -36,6 +40,7 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -46,6 +51,7 @@ from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.inference.adaptation_pairs import (
+    MinedPairs,
     MiningConfig,
     box_only_costs,
     embed_frames,
@@ -89,6 +95,29 @@ def _scrambled(frames: dict[int, FrameBoxes], rng: np.random.Generator):
             for f, r in frames.items()}, back
 
 
+def true_pairs(mined: MinedPairs, bursts: Sequence[np.ndarray], truth_top: dict,
+               truth_hor: dict) -> MinedPairs:
+    """``mined`` with its cross-view pairs replaced by the ground truth's: every top/horizontal
+    box pair of an embedded frame, positive when the true ids agree (``truth_top``,
+    ``truth_hor``: ``{frame: FrameBoxes}`` with the render's ids, in the mined records' order),
+    each in its burst's group."""
+    burst_of = {int(f): k for k, b in enumerate(bursts) for f in np.asarray(b).tolist()}
+    pos, neg = [], []
+    start = {"top": 0, "hor": 0}
+    for f in mined.embed_frames.tolist():
+        t, h = truth_top[f].ids, truth_hor[f].ids
+        a, b = np.repeat(np.arange(len(t)), len(h)), np.tile(np.arange(len(h)), len(t))
+        rows = np.stack([start["top"] + a, start["hor"] + b, np.full(a.size, burst_of[f])], 1)
+        same = t[a] == h[b]
+        pos.append(rows[same])
+        neg.append(rows[~same])
+        start["top"] += len(t)
+        start["hor"] += len(h)
+    p, n = (np.concatenate(x).astype(np.int64).reshape(-1, 3) for x in (pos, neg))
+    return replace(mined, cross_pos=p[:, :2], cross_pos_group=p[:, 2], cross_neg=n[:, :2],
+                   cross_neg_group=n[:, 2])
+
+
 def _score(pred, top, hor, back_top, back_hor, gt_top, gt_hor, frames) -> tuple[float, float]:
     """Eq. 9 accuracy and CVIDF1 (%) of predictions in scrambled ids against the ground truth."""
     real = {f: [(back_top[a], back_hor[b]) for a, b in p] for f, p in pred.items()}
@@ -129,6 +158,7 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
            (("top", video.top), ("hor", video.hor))}
     precision = float((ids["top"][cp[:, 0]] == ids["hor"][cp[:, 1]]).mean()) if len(cp) else 0.0
 
+    truth = true_pairs(mined, bursts, video.top, video.hor) if args.ceiling else None
     embed = vectors_embedder(matcher, args.vectors)
 
     def run(model, images, check: bool = False):
@@ -146,9 +176,10 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     for strength in args.strengths:
         shifted = (_Images(_shifted(video.top_images, strength, 100 + seed)),
                    _Images(_shifted(video.hor_images, strength, 200 + seed)))
-        sets = vector_pair_sets(mined, embed_frames(mined.embed_frames, top, shifted[0], embed),
-                                embed_frames(mined.embed_frames, hor, shifted[1], embed),
-                                matcher.bundle.manifest.appearance, args.vectors)
+        vectors = (embed_frames(mined.embed_frames, top, shifted[0], embed),
+                   embed_frames(mined.embed_frames, hor, shifted[1], embed))
+        sets = vector_pair_sets(mined, *vectors, matcher.bundle.manifest.appearance,
+                                args.vectors)
         *checked, check = run(matcher, shifted, check=True)
         row = {"seed": seed, "strength": strength, **base, "shifted": run(matcher, shifted),
                "checked": tuple(checked), "check": check,
@@ -166,6 +197,15 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
                 row[f"adapted {cal}"] = row["shifted"]
                 row[f"adapted {cal}, checked"] = row["checked"]
                 row["adapted check"] = check
+        if truth is not None:  # the upper bound: the same fit on the true pairs
+            fit = choose_fit({v: fit_site_adaptation(p, calibration=args.calibrations[0],
+                                                     reference=reference)
+                              for v, p in vector_pair_sets(
+                                  truth, *vectors, matcher.bundle.manifest.appearance,
+                                  args.vectors).items()})
+            row["true pairs"] = (run(LearnedMatcher(replace(matcher.bundle,
+                                                            adaptation=fit.adaptation)), shifted)
+                                 if fit.accepted else row["shifted"])
         row["seconds"] = time.perf_counter() - t0
         rows.append(row)
     return rows
@@ -173,7 +213,8 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
 
 def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
     settings = ["boxes", "images", "shifted", "checked",
-                *(f"adapted {c}" for c in calibrations), f"adapted {calibrations[0]}, checked"]
+                *(f"adapted {c}" for c in calibrations), f"adapted {calibrations[0]}, checked",
+                *(["true pairs"] if "true pairs" in rows[0] else [])]
     print("\nEq. 9 accuracy / CVIDF1 (%) on the test part; checked: with the appearance check "
           "(associate's default), which falls back to the boxes when the cue fails on the test "
           "part's own pseudo-matches; recovered = (adapted - shifted) / (images - shifted), "
@@ -195,8 +236,11 @@ def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
         sub = [r for r in rows if r["strength"] == strength]
         means = {s: np.mean([r[s] for r in sub], axis=0) for s in settings}
         lost = means["images"][1] - means["shifted"][1]
-        rec = ", ".join(f"{c} {(means[f'adapted {c}'][1] - means['shifted'][1]) / lost:.2f}"
-                        for c in calibrations) if abs(lost) > 1e-9 else "n/a"
+        named = {c: f"adapted {c}" for c in calibrations}
+        if "true pairs" in means:
+            named["true pairs"] = "true pairs"
+        rec = ", ".join(f"{name} {(means[k][1] - means['shifted'][1]) / lost:.2f}"
+                        for name, k in named.items()) if abs(lost) > 1e-9 else "n/a"
         print(f"mean, strength {strength:g} ({len(sub)} seeds) | " + " | ".join(
             f"{s} {means[s][0]:.1f} / {means[s][1]:.1f}" for s in settings)
               + f" | recovered: {rec}")
@@ -277,6 +321,9 @@ def main() -> int:
                         help="what the adaptation maps (default: as xvmatch adapt, both the "
                              "network's stages (else features) and its descriptors when it gives "
                              "them, the better on the held-out pairs kept)")
+    parser.add_argument("--ceiling", action="store_true",
+                        help="also fit on the true cross-view pairs of the embedded frames (the "
+                        "render's ids): the upper bound of better pseudo-labels")
     parser.add_argument("--cli", action="store_true", help="also time the command line")
     parser.add_argument("--work", default="runs/site_adaptation")
     args = parser.parse_args()
