@@ -41,7 +41,12 @@ from xvmatch.geometry.matcher_inputs import (
 )
 from xvmatch.geometry.spatial_features import FeatureConfig, FrameFeatures
 from xvmatch.geometry.spatial_search import FrameLike
-from xvmatch.inference.appearance_check import AppearanceCheck, check_appearance
+from xvmatch.inference.appearance_check import (
+    MIN_AUC,
+    SITE_MIN_AUC,
+    AppearanceCheck,
+    check_appearance,
+)
 from xvmatch.inference.assignment import assign, assignment_is_stable
 from xvmatch.inference.bundle import Bundle, load_bundle
 
@@ -451,8 +456,10 @@ def associate_sequence_learned(
     finally:
         stream.close()  # shuts the worker pool down, also on an error or an interrupt
     if judge:
+        # a site bundle's cue was fitted on pairs like those it is judged on: a higher bar
+        bar = SITE_MIN_AUC if models[0].bundle.adaptation is not None else MIN_AUC
         result = check_appearance(top, hor, {f: h[1] for f, h in held.items()},
-                                  {f: h[2] for f, h in held.items()}, gamma)
+                                  {f: h[2] for f, h in held.items()}, gamma, min_auc=bar)
         # Fitted on single frames, for one bundle's raw cue against its boxes alone: only
         # where no run of consecutive frames could be mined (a video the box-only matcher
         # is rarely sure of keeps its images, which help most there), not for ensembles,

@@ -4,6 +4,7 @@ shipped bundle for ``associate_sequence_learned`` and the command line."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -19,13 +20,19 @@ from xvmatch.inference.adaptation_pairs import MiningConfig
 from xvmatch.inference.appearance_check import (
     MIN_AUC,
     MIN_PAIRS,
+    SITE_MIN_AUC,
     TRACK_MIN_AUC,
     TRACK_MIN_PAIRS,
     AppearanceCheck,
     check_appearance,
     check_tracklet_appearance,
 )
-from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.inference.learned_association import (
+    LearnedMatcher,
+    associate_sequence_learned,
+    load_matcher_bundle,
+)
+from xvmatch.inference.site_adaptation import SiteAdaptation
 from xvmatch.inference.track_costs import FrameCosts
 from xvmatch.inference.tracklets import Tracklet
 
@@ -203,6 +210,28 @@ def test_associate_drops_images_only_where_the_check_fails(video) -> None:
     assert greyed == boxes
     unchecked, nothing = run(True, False)
     assert nothing == [] and unchecked != boxes
+
+
+def test_a_site_bundle_is_held_to_the_higher_bar(video) -> None:
+    """The same cue (an identity adaptation) and the same AUC, judged against SITE_MIN_AUC
+    once it comes from a site bundle."""
+    import cv2
+
+    default = load_matcher_bundle("default")
+    site = LearnedMatcher(dataclasses.replace(default.bundle, adaptation=SiteAdaptation.identity(
+        default.bundle.manifest.appearance.dim("descriptors"))))
+    top, hor = read_mot_boxes(video["top"]), read_mot_boxes(video["hor"])
+    h, w = cv2.imread(str(video["hor_images"] / "000001.png")).shape[:2]
+    checks = []
+    for model in (default, site):
+        checked: list[AppearanceCheck] = []
+        associate_sequence_learned(top, hor, w, model, hor_height=h, appearance_check=True,
+                                   checked=checked, top_images=_Folder(video["top_images"]),
+                                   hor_images=_Folder(video["hor_images"]))
+        checks.append(checked[0])
+    assert [c.min_auc for c in checks] == [MIN_AUC, SITE_MIN_AUC] and MIN_AUC < SITE_MIN_AUC
+    assert checks[0].auc == checks[1].auc and checks[1].judged
+    assert checks[1].trusted is (checks[1].auc + 2 * checks[1].error >= SITE_MIN_AUC)
 
 
 def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) -> None:
