@@ -173,22 +173,26 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     base = {"boxes": run(matcher, None),
             "images": run(matcher, (_Images(video.top_images), _Images(video.hor_images)))}
     rows = []
+    def fitted(pairs, vectors, cal: str):
+        """The fit ``adapt`` keeps on these mined pairs and vectors, and its site matcher."""
+        sets = vector_pair_sets(pairs, *vectors, matcher.bundle.manifest.appearance,
+                                args.vectors)
+        fit = choose_fit({v: fit_site_adaptation(p, calibration=cal, reference=reference)
+                          for v, p in sets.items()})
+        return fit, LearnedMatcher(replace(matcher.bundle, adaptation=fit.adaptation))
+
     for strength in args.strengths:
         shifted = (_Images(_shifted(video.top_images, strength, 100 + seed)),
                    _Images(_shifted(video.hor_images, strength, 200 + seed)))
         vectors = (embed_frames(mined.embed_frames, top, shifted[0], embed),
                    embed_frames(mined.embed_frames, hor, shifted[1], embed))
-        sets = vector_pair_sets(mined, *vectors, matcher.bundle.manifest.appearance,
-                                args.vectors)
         *checked, check = run(matcher, shifted, check=True)
         row = {"seed": seed, "strength": strength, **base, "shifted": run(matcher, shifted),
                "checked": tuple(checked), "check": check,
-               "pseudo": (len(cp), precision), "counts": sets[args.vectors[0]].counts()}
+               "pseudo": (len(cp), precision)}
         for cal in args.calibrations:
-            fit = choose_fit({v: fit_site_adaptation(p, calibration=cal, reference=reference)
-                              for v, p in sets.items()})
+            fit, site = fitted(mined, vectors, cal)
             row["fit"] = fit
-            site = LearnedMatcher(replace(matcher.bundle, adaptation=fit.adaptation))
             if fit.accepted:
                 row[f"adapted {cal}"] = run(site, shifted)
                 *adapted_checked, row["adapted check"] = run(site, shifted, check=True)
@@ -198,14 +202,8 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
                 row[f"adapted {cal}, checked"] = row["checked"]
                 row["adapted check"] = check
         if truth is not None:  # the upper bound: the same fit on the true pairs
-            fit = choose_fit({v: fit_site_adaptation(p, calibration=args.calibrations[0],
-                                                     reference=reference)
-                              for v, p in vector_pair_sets(
-                                  truth, *vectors, matcher.bundle.manifest.appearance,
-                                  args.vectors).items()})
-            row["true pairs"] = (run(LearnedMatcher(replace(matcher.bundle,
-                                                            adaptation=fit.adaptation)), shifted)
-                                 if fit.accepted else row["shifted"])
+            fit, site = fitted(truth, vectors, args.calibrations[0])
+            row["true pairs"] = run(site, shifted) if fit.accepted else row["shifted"]
         row["seconds"] = time.perf_counter() - t0
         rows.append(row)
     return rows
