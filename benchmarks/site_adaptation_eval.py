@@ -1,7 +1,8 @@
 """Site adaptation (``xvmatch adapt``) on rendered videos under a strong simulated camera change.
 
-For each seed, one rendered drone video (:func:`xvmatch.datasets.tracking_video.
-render_tracking_video`, ``--people`` people, ``--frames`` frames at 25 fps, 400 by default);
+For each seed, one rendered video (:func:`xvmatch.datasets.tracking_video.
+render_tracking_video`; ``--scenario`` drone, the default, or overview: a camera on a building;
+``--people`` people, ``--frames`` frames at 25 fps, 400 by default);
 ids scrambled per view at once (the box files' ids only name boxes; cross-view id equality is
 never an input). Each view's images go through ONE fixed simulated camera
 (:func:`xvmatch.datasets.camera_shift.camera_shift` with ``per_image=False``, strength
@@ -28,8 +29,8 @@ and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``
 
 Usage:
     python benchmarks/site_adaptation_eval.py [--seeds 1 2 5 6] [--strengths 0 2 3] [--frames 400]
-        [--people 12 20] [--vector descriptors|features|stages] [--ceiling] [--cli]
-        [--work runs/site_adaptation]
+        [--scenario drone|overview] [--people 12 20] [--vector descriptors|features|stages]
+        [--ceiling] [--cli] [--work runs/site_adaptation]
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ import numpy as np
 
 from xvmatch.datasets.camera_shift import camera_shift
 from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.datasets.synthetic_scenes import SynthConfig
+from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.inference.adaptation_pairs import (
     MinedPairs,
@@ -59,6 +60,7 @@ from xvmatch.inference.adaptation_pairs import (
     plan_bursts,
     reference_costs,
 )
+from xvmatch.inference.appearance_check import MIN_CONSISTENCY
 from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
@@ -133,7 +135,7 @@ def _video(seed: int, args):
     """The rendered video of ``seed``, its records with ids scrambled per view (and the maps
     back), and the first test frame."""
     video = render_tracking_video(seed, args.frames, SynthConfig(
-        scenario="drone", n_people=tuple(args.people), fps=25.0))
+        scenario=args.scenario, n_people=tuple(args.people), fps=25.0))
     rng = np.random.default_rng([seed, 31])
     top, back_top = _scrambled(video.top, rng)
     hor, back_hor = _scrambled(video.hor, rng)
@@ -245,9 +247,11 @@ def _print_rows(rows: list[dict], calibrations: list[str]) -> None:
 
 
 def _check(check) -> str:
-    """An appearance check in a few characters: its AUC, and boxes when it failed."""
+    """An appearance check in a few characters: its AUC, and boxes when it failed (not judged:
+    too few pairs, or the box-only matcher's consistency when below the bar)."""
     if not check.judged:
-        return "not judged"
+        unsteady = check.consistency < MIN_CONSISTENCY
+        return f"not judged{f' (consistency {check.consistency:.2f})' if unsteady else ''}"
     return f"{check.auc:.3f}{'' if check.trusted else ' (boxes)'}"
 
 
@@ -270,7 +274,7 @@ def cli_timing(args) -> None:
     seed, strength = args.seeds[0], args.strengths[-1]
     video, top, hor, _, _, cut = _video(seed, args)
     frames = sorted(top)
-    work = Path(args.work) / f"cli_seed{seed}_s{strength:g}"
+    work = Path(args.work) / f"cli_{args.scenario}_seed{seed}_s{strength:g}"
     work.mkdir(parents=True, exist_ok=True)
     paths = {}
     for part, keep in (("adapt", lambda f: f < cut), ("test", lambda f: f >= cut)):
@@ -309,6 +313,8 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 5, 6])
     parser.add_argument("--strengths", type=float, nargs="+", default=[0.0, 2.0, 3.0])
     parser.add_argument("--frames", type=int, default=400)
+    parser.add_argument("--scenario", choices=SCENARIOS, default="drone",
+                        help="the rendered scene: a drone above or a camera on a building")
     parser.add_argument("--people", type=int, nargs=2, default=[12, 20])
     parser.add_argument("--adapt-fraction", type=float, default=0.6)
     parser.add_argument("--calibrations", nargs="+", default=["odds"], choices=CALIBRATIONS)

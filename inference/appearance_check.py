@@ -10,7 +10,10 @@ received, on the run's own frames; when it is shown below :data:`MIN_AUC` (a sit
 adapted cue: :data:`SITE_MIN_AUC`) by twice its standard error (a few pairs do not condemn a
 cue), the cue is not trusted and the run is matched from the boxes alone (the matcher's
 boxes-only setting). Where there are too few such pairs to judge (single image pairs, short
-clips, scenes the box-only matcher is never sure of) the cue is kept; where there is no run of
+clips, scenes the box-only matcher is never sure of) the cue is kept, and so it is where the
+box-only matcher's sure pairs change partners over time (:func:`sure_pair_consistency` below
+:data:`MIN_CONSISTENCY`: it is then sure and wrong, as boxes alone often are under an oblique
+overview camera, and its pairs would condemn a good cue); where there is no run of
 consecutive frames at all (single image pairs, very short clips) and the bundle has one, each
 frame is judged by its frame check (:mod:`xvmatch.inference.frame_check`). ``track`` judges its
 cross-view term the same way on tracklets (:func:`check_tracklet_appearance`: pairs of tracklets
@@ -20,9 +23,10 @@ term out. No identities are used. Numpy only.
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,10 +39,11 @@ from xvmatch.inference.adaptation_pairs import (
 )
 from xvmatch.inference.site_adaptation import auc_standard_error, pair_auc
 from xvmatch.inference.track_costs import FrameCosts
-from xvmatch.inference.tracklets import Tracklet
+from xvmatch.inference.tracklets import Tracklet, clip_tracklets
 
-__all__ = ["MIN_AUC", "MIN_PAIRS", "SITE_MIN_AUC", "TRACK_MIN_AUC", "TRACK_MIN_PAIRS",
-           "AppearanceCheck", "check_appearance", "check_tracklet_appearance"]
+__all__ = ["CONSISTENCY_WINDOW", "MIN_AUC", "MIN_CONSISTENCY", "MIN_PAIRS", "SITE_MIN_AUC",
+           "TRACK_MIN_AUC", "TRACK_MIN_PAIRS", "AppearanceCheck", "check_appearance",
+           "check_tracklet_appearance", "sure_pair_consistency"]
 
 MIN_AUC = 0.62
 """Least verification AUC of the appearance cue on a run's pseudo-matches for the images to be
@@ -64,6 +69,18 @@ MIN_PAIRS = 30
 pairs, each embedded in 3 frames): in a scene the box-only matcher hardly knows, its few sure
 pairs can be wrong, and would condemn a good cue (a rendered video with 5 such positives: AUC
 0.39 on them, yet images added 45 CVIDF1 points; docs/adaptation.md)."""
+MIN_CONSISTENCY = 0.6
+"""Least :func:`sure_pair_consistency` of the box-only matcher for its pseudo-matches to judge
+the cue. Read off rendered videos (docs/adaptation.md, "when the boxes are sure and wrong"): the
+overview test parts below it had pseudo-matches 0 to 69% right where counted, and on one the
+check had dropped clean images worth 50 CVIDF1 points; the drone test parts it judged measured
+0.69 to 0.89 (one, 0.59, kept its images either way). Low on purpose: a right matcher's
+tracklets also switch people now and then, so the bar catches only a plainly unsteady one."""
+CONSISTENCY_WINDOW = 150
+"""Consecutive frames (6 s at 25 fps) over which :func:`sure_pair_consistency` follows each
+tracklet: long enough for people to move and a geometric confusion to change partner."""
+MIN_SURE_FRAMES = 5
+"""Fewest frames a tracklet must be in a sure pair to count in :func:`sure_pair_consistency`."""
 TRACK_MIN_PAIRS = 20
 """The same for ``track``'s tracklet pairs: each is a pair the box-only matcher was sure of on
 several consecutive frames, so :data:`MIN_PAIRS` boxes (about 10 tracklets in 3 frames) stand
@@ -92,6 +109,8 @@ class AppearanceCheck:
         frames: frames judged one by one instead, by the bundle's frame check
             (:mod:`xvmatch.inference.frame_check`; 0: none, as when the run was judged).
         frames_dropped: of those, the frames matched from the boxes alone.
+        consistency: the box-only matcher's :func:`sure_pair_consistency` on the run (NaN when
+            not measured); below :data:`MIN_CONSISTENCY` the run is not judged.
     """
 
     judged: bool
@@ -106,6 +125,7 @@ class AppearanceCheck:
     tracklets: bool = False
     frames: int = 0
     frames_dropped: int = 0
+    consistency: float = math.nan
 
     @property
     def worth_saying(self) -> bool:
@@ -121,6 +141,12 @@ class AppearanceCheck:
     def message(self) -> str:
         """One line for the user."""
         pairs = "tracklet pairs" if self.tracklets else "pairs"
+        if not self.judged and self.consistency < MIN_CONSISTENCY:
+            return (f"appearance check: the box-only matcher's sure pairs change partners over "
+                    f"time (a tracklet keeps its most frequent partner in "
+                    f"{self.consistency:.2f} of its sure frames, {MIN_CONSISTENCY:g} needed), so "
+                    f"its {self.positives} pseudo-matched {pairs} cannot judge the images; they "
+                    f"were used as they are")
         if not self.judged:
             head = (f"appearance check: {self.positives} {pairs} the box-only matcher is sure of "
                     f"over consecutive frames, {self.min_pairs} needed to judge the images"
@@ -184,8 +210,58 @@ def check_appearance(
         return np.array([app_costs[int(f)][a, b] for f, a, b in
                          zip(frame.tolist(), i.tolist(), j.tolist(), strict=True)], np.float64)
 
-    return _verdict(costs(mined.cross_pos), costs(mined.cross_neg), min_auc, min_pairs,
-                    len(bursts))
+    verdict = _verdict(costs(mined.cross_pos), costs(mined.cross_neg), min_auc, min_pairs,
+                       len(bursts))
+    if not verdict.judged:
+        return verdict
+    consistency = sure_pair_consistency(top, hor, box_costs, gamma, config)
+    if consistency < MIN_CONSISTENCY:  # NaN (not measured) compares False: judged as before
+        return replace(verdict, judged=False, trusted=True, auc=math.nan, error=math.nan,
+                       consistency=consistency)
+    return replace(verdict, consistency=consistency)
+
+
+def sure_pair_consistency(
+    top: Mapping,
+    hor: Mapping,
+    box_costs: Mapping[int, np.ndarray],
+    gamma: float,
+    config: MiningConfig | None = None,
+    window: int = CONSISTENCY_WINDOW,
+    min_sure: int = MIN_SURE_FRAMES,
+) -> float:
+    """How steadily the box-only matcher pairs each person over time, label-free, in [0, 1].
+
+    In windows of ``window`` consecutive frames (spread over the run as bursts are), each view's
+    boxes are linked into IoU tracklets; every frame's sure pairs
+    (:func:`~xvmatch.inference.adaptation_pairs.confident_pairs`) then give each tracklet a
+    partner tracklet of the other view. The result is the share of a tracklet's sure frames
+    spent with its most frequent partner, over tracklets sure on at least ``min_sure`` frames,
+    averaged over the two views: near 1 when the matcher is right where it is sure, lower when
+    it is sure of different partners as the people move (NaN: no window or no such tracklet).
+    """
+    config = config or MiningConfig()
+    views = {"top": top, "hor": hor}
+    partners: dict[str, dict[tuple, collections.Counter]] = {"top": {}, "hor": {}}
+    for k, frames in enumerate(plan_bursts(box_costs, window, config.max_frames)):
+        owner = {}
+        for view, records in views.items():
+            owner[view] = {}
+            for t, tr in enumerate(clip_tracklets(records, frames, k, config.min_iou,
+                                                  config.max_gap)):
+                for f, r in zip(tr.frames.tolist(), tr.rows.tolist(), strict=True):
+                    owner[view][(f, int(np.flatnonzero(records[f].ids == r)[0]))] = (k, t)
+        for f in frames.tolist():
+            for i, j in confident_pairs(box_costs[f], gamma, config.margin):
+                a, b = owner["top"][(f, i)], owner["hor"][(f, j)]
+                partners["top"].setdefault(a, collections.Counter())[b] += 1
+                partners["hor"].setdefault(b, collections.Counter())[a] += 1
+    shares = []
+    for counts in partners.values():
+        kept = [c for c in counts.values() if sum(c.values()) >= min_sure]
+        if kept:
+            shares.append(sum(max(c.values()) for c in kept) / sum(sum(c.values()) for c in kept))
+    return float(np.mean(shares)) if shares else math.nan
 
 
 def _verdict(pos: np.ndarray, neg: np.ndarray, min_auc: float, min_pairs: int, bursts: int,

@@ -18,7 +18,9 @@ from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
 from xvmatch.inference.adaptation_pairs import MiningConfig
 from xvmatch.inference.appearance_check import (
+    CONSISTENCY_WINDOW,
     MIN_AUC,
+    MIN_CONSISTENCY,
     MIN_PAIRS,
     SITE_MIN_AUC,
     TRACK_MIN_AUC,
@@ -26,6 +28,7 @@ from xvmatch.inference.appearance_check import (
     AppearanceCheck,
     check_appearance,
     check_tracklet_appearance,
+    sure_pair_consistency,
 )
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
@@ -114,6 +117,46 @@ def test_a_few_pairs_do_not_condemn_a_cue() -> None:
         check = check_appearance(top, hor, box, {f: weak for f in box}, gamma=0.5)
         assert check.judged and check.auc == pytest.approx(0.55)
         assert check.trusted is trusted, check
+
+
+def _wandering(box: dict, every: int) -> dict:
+    """``box`` with the sure partner of every top row moved on by one every ``every`` frames
+    (a box-only matcher sure of a different, wrong partner as the people move)."""
+    return {f: np.roll(c, (f - 1) // every, axis=1) for f, c in box.items()}
+
+
+def test_consistency_is_the_share_of_sure_frames_with_the_usual_partner() -> None:
+    """A steady matcher scores 1; one that moves each person on every 20 frames keeps the most
+    frequent partner for 40 of the window's 150 sure frames; a run shorter than the window is
+    not measured."""
+    top, hor = _still(200)
+    box, _ = _costs(200, "agrees")
+    assert sure_pair_consistency(top, hor, box, gamma=0.5) == 1.0
+    assert sure_pair_consistency(top, hor, _wandering(box, 20), gamma=0.5) == pytest.approx(
+        40 / CONSISTENCY_WINDOW)
+    short = {f: c for f, c in box.items() if f <= CONSISTENCY_WINDOW - 1}
+    assert math.isnan(sure_pair_consistency(top, hor, short, gamma=0.5))
+
+
+def test_a_matcher_sure_of_changing_partners_does_not_judge_the_cue() -> None:
+    """Each burst's pseudo-matches agree within the burst, but the box-only matcher changes
+    everyone's partner over time: the cue (right) would be condemned on them; instead it is not
+    judged and the images are used, and the user is told why."""
+    top, hor = _still(200)
+    box, cue = _costs(200, "agrees")
+    steady = check_appearance(top, hor, box, cue, gamma=0.5)
+    assert steady.judged and steady.consistency == 1.0
+    check = check_appearance(top, hor, _wandering(box, 20), cue, gamma=0.5)
+    assert check.positives >= MIN_PAIRS  # enough pairs: judged before the consistency gate
+    assert not check.judged and check.trusted and math.isnan(check.auc)
+    assert check.consistency < MIN_CONSISTENCY and check.worth_saying
+    assert "change partners over time" in check.message()
+    assert "0.27 of its sure frames" in check.message()
+    assert not check.to_tell(quiet=True)  # images kept: said only without --quiet
+    # shorter than the window, the consistency is not measured and the pairs condemn the cue
+    short = {f: c for f, c in _wandering(box, 20).items() if f < CONSISTENCY_WINDOW}
+    old = check_appearance(top, hor, short, cue, gamma=0.5)
+    assert old.judged and not old.trusted and math.isnan(old.consistency)
 
 
 def _clips(n_clips: int, length: int, box: np.ndarray, cue: np.ndarray):
