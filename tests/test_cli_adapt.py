@@ -124,6 +124,7 @@ def test_refusal_advises_boxes_alone_when_the_cue_is_not_above_chance() -> None:
                              "help; descriptors: descriptors did not help; nor is the network's")
     assert "held-out AUC 0.505 +/- 0.0" in chance and "without --top-images and --hor-images" \
         in chance
+    assert chance.endswith("then score both on a few frames you label")  # the yardstick's caveat
     kept = refusal_message(run(0.8, (40, 400)), "my_bundle")
     assert kept.endswith("; keep using --model my_bundle") and "boxes alone" not in kept
     unjudged = refusal_message(run(float("nan"), (2, 3)), "default")

@@ -84,7 +84,8 @@ def refusal_message(run, model: str) -> str:
     """The one line ``adapt`` ends with when no fit was accepted (a
     :class:`~xvmatch.inference.site_bundle.SiteRun`): each vector's reason, then what to do.
     When the network's own cue (its descriptors, unadapted) is not above chance on the held-out
-    pairs either, images would only add noise to the boxes: the advice is to leave them out."""
+    pairs either, images would only add noise to the boxes: the advice is to leave them out,
+    unless the box-only matcher whose pairs judged them is often wrong (docs/adaptation.md)."""
     from xvmatch.inference.site_adaptation import auc_standard_error, better_than_chance
 
     fit = run.fit
@@ -95,7 +96,9 @@ def refusal_message(run, model: str) -> str:
         advice = (f"nor is the network's own appearance cue shown better than chance at this "
                   f"site (held-out AUC {raw.auc_before:.3f} +/- {se:.3f}): images would add "
                   "noise to the boxes, so match from the boxes alone (associate without "
-                  "--top-images and --hor-images)")
+                  "--top-images and --hor-images), unless the box-only matcher is often wrong "
+                  "here (its sure pairs were the yardstick; an oblique overview camera without "
+                  "--cameras): then score both on a few frames you label")
     else:
         advice = f"keep using --model {model}"
     return f"adaptation refused, nothing written: {reasons}; {advice}"
