@@ -60,7 +60,6 @@ from xvmatch.inference.adaptation_pairs import (
     plan_bursts,
     reference_costs,
 )
-from xvmatch.inference.appearance_check import MIN_CONSISTENCY
 from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
@@ -250,8 +249,7 @@ def _check(check) -> str:
     """An appearance check in a few characters: its AUC, and boxes when it failed (not judged:
     too few pairs, or the box-only matcher's consistency when below the bar)."""
     if not check.judged:
-        unsteady = check.consistency < MIN_CONSISTENCY
-        return f"not judged{f' (consistency {check.consistency:.2f})' if unsteady else ''}"
+        return f"not judged{f' (consistency {check.consistency:.2f})' if check.unsteady else ''}"
     return f"{check.auc:.3f}{'' if check.trusted else ' (boxes)'}"
 
 

@@ -42,6 +42,7 @@ __all__ = [
     "MiningConfig",
     "agreed_pairs",
     "box_only_costs",
+    "box_tracklets",
     "confident_pairs",
     "embed_frames",
     "mine_pairs",
@@ -196,6 +197,19 @@ class MinedPairs:
                        self.cross_neg_group)
 
 
+def box_tracklets(records: Mapping, frames: np.ndarray, clip: int, config: MiningConfig
+                  ) -> dict[tuple[int, int], int]:
+    """``{(frame, row): tracklet}``: each box of ``frames`` (its row in the frame's record) and
+    the IoU tracklet of one view it belongs to, linked over those frames with ``config``'s
+    ``min_iou`` and ``max_gap`` (ids only name boxes within a frame)."""
+    owner = {}
+    for t, tr in enumerate(clip_tracklets(records, frames, clip, config.min_iou,
+                                          config.max_gap)):
+        for f, r in zip(tr.frames.tolist(), tr.rows.tolist(), strict=True):
+            owner[(f, int(np.flatnonzero(records[f].ids == r)[0]))] = t
+    return owner
+
+
 def _longest_run(frames: list[int]) -> int:
     """Longest run of consecutive numbers in an ascending list."""
     best = run = 1
@@ -261,14 +275,8 @@ def mine_pairs(
     for k, b in enumerate(bursts):
         b = np.asarray(b, dtype=np.int64)
         shots = shots_of(b)
-        owner: dict[str, dict[tuple[int, int], int]] = {}
+        owner = {v: box_tracklets(views[v], b, k, config) for v in VIEWS}
         for v in VIEWS:
-            owner[v] = {}
-            for t, tr in enumerate(clip_tracklets(views[v], b, k, config.min_iou,
-                                                  config.max_gap)):
-                for f, r in zip(tr.frames.tolist(), tr.rows.tolist(), strict=True):
-                    row = int(np.flatnonzero(views[v][f].ids == r)[0])
-                    owner[v][(f, row)] = t
             for f in shots:  # within-view negatives: two boxes of one frame
                 n, o = len(views[v][f].ids), offset[v][f]
                 a, c = np.triu_indices(n, 1)

@@ -33,13 +33,14 @@ import numpy as np
 from xvmatch.inference.adaptation_pairs import (
     MiningConfig,
     agreed_pairs,
+    box_tracklets,
     confident_pairs,
     mine_pairs,
     plan_bursts,
 )
 from xvmatch.inference.site_adaptation import auc_standard_error, pair_auc
 from xvmatch.inference.track_costs import FrameCosts
-from xvmatch.inference.tracklets import Tracklet, clip_tracklets
+from xvmatch.inference.tracklets import Tracklet
 
 __all__ = ["CONSISTENCY_WINDOW", "MIN_AUC", "MIN_CONSISTENCY", "MIN_PAIRS", "SITE_MIN_AUC",
            "TRACK_MIN_AUC", "TRACK_MIN_PAIRS", "AppearanceCheck", "check_appearance",
@@ -128,6 +129,12 @@ class AppearanceCheck:
     consistency: float = math.nan
 
     @property
+    def unsteady(self) -> bool:
+        """Whether the box-only matcher was too unsteady for its pairs to judge the cue
+        (:attr:`consistency` below :data:`MIN_CONSISTENCY`; False when not measured)."""
+        return self.consistency < MIN_CONSISTENCY
+
+    @property
     def worth_saying(self) -> bool:
         """Whether the user is told: not for inputs without a run of consecutive frames,
         unless the frame check left images out."""
@@ -141,7 +148,7 @@ class AppearanceCheck:
     def message(self) -> str:
         """One line for the user."""
         pairs = "tracklet pairs" if self.tracklets else "pairs"
-        if not self.judged and self.consistency < MIN_CONSISTENCY:
+        if not self.judged and self.unsteady:
             return (f"appearance check: the box-only matcher's sure pairs change partners over "
                     f"time (a tracklet keeps its most frequent partner in "
                     f"{self.consistency:.2f} of its sure frames, {MIN_CONSISTENCY:g} needed), so "
@@ -214,11 +221,11 @@ def check_appearance(
                        len(bursts))
     if not verdict.judged:
         return verdict
-    consistency = sure_pair_consistency(top, hor, box_costs, gamma, config)
-    if consistency < MIN_CONSISTENCY:  # NaN (not measured) compares False: judged as before
-        return replace(verdict, judged=False, trusted=True, auc=math.nan, error=math.nan,
-                       consistency=consistency)
-    return replace(verdict, consistency=consistency)
+    verdict = replace(verdict, consistency=sure_pair_consistency(top, hor, box_costs, gamma,
+                                                                 config))
+    if verdict.unsteady:  # not measured (NaN): judged as before
+        return replace(verdict, judged=False, trusted=True, auc=math.nan, error=math.nan)
+    return verdict
 
 
 def sure_pair_consistency(
@@ -244,16 +251,10 @@ def sure_pair_consistency(
     views = {"top": top, "hor": hor}
     partners: dict[str, dict[tuple, collections.Counter]] = {"top": {}, "hor": {}}
     for k, frames in enumerate(plan_bursts(box_costs, window, config.max_frames)):
-        owner = {}
-        for view, records in views.items():
-            owner[view] = {}
-            for t, tr in enumerate(clip_tracklets(records, frames, k, config.min_iou,
-                                                  config.max_gap)):
-                for f, r in zip(tr.frames.tolist(), tr.rows.tolist(), strict=True):
-                    owner[view][(f, int(np.flatnonzero(records[f].ids == r)[0]))] = (k, t)
+        owner = {v: box_tracklets(records, frames, k, config) for v, records in views.items()}
         for f in frames.tolist():
             for i, j in confident_pairs(box_costs[f], gamma, config.margin):
-                a, b = owner["top"][(f, i)], owner["hor"][(f, j)]
+                a, b = (k, owner["top"][(f, i)]), (k, owner["hor"][(f, j)])
                 partners["top"].setdefault(a, collections.Counter())[b] += 1
                 partners["hor"].setdefault(b, collections.Counter())[a] += 1
     shares = []
