@@ -30,8 +30,9 @@ Last, the whole ``xvmatch track`` command is timed on one 1,200-frame pair, pinn
 learned one), in seconds and seconds per frame; with its defaults, so since 2026-11-27 with the
 offset estimate of its default ``--offset auto`` (10-25 s per pair).
 
-With ``--synthetic N``, rendered drone videos instead (:func:`xvmatch.datasets.tracking_video.
-render_tracking_video`, 25 fps, ``--people`` 6 to 12), ids scrambled per view the same way,
+With ``--synthetic N``, rendered videos instead (:func:`xvmatch.datasets.tracking_video.
+render_tracking_video`, 25 fps, ``--people`` 6 to 12; ``--scenario`` drone, the default, or
+overview: a camera on a building), ids scrambled per view the same way,
 tracked with the MIP from boxes only and with the images: colour terms alone (no network), and
 with the appearance network of ``--model`` (default: the shipped bundle), the learned weights'
 row with the command's appearance check and without it. ``--shift S`` puts each view's images
@@ -44,7 +45,7 @@ Usage:
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
         [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
-        [--people 6 12] [--shift 3]
+        [--people 6 12] [--shift 3] [--scenario drone|overview]
 """
 
 from __future__ import annotations
@@ -65,6 +66,7 @@ import numpy as np
 from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
 from xvmatch.datasets.mot_boxes import FrameBoxes, align_views
+from xvmatch.datasets.synthetic_scenes import SCENARIOS
 from xvmatch.evaluation.track_metrics import (
     pool_view_scores,
     track_pair_counts,
@@ -238,7 +240,7 @@ check_tracklet_appearance`); the same without the check (``--appearance-check of
 
 
 def synthetic_main(args: argparse.Namespace) -> int:
-    """The --synthetic mode: rendered drone videos, boxes only against boxes and images."""
+    """The --synthetic mode: rendered videos, boxes only against boxes and images."""
     from dataclasses import replace
 
     from xvmatch.datasets.camera_shift import camera_shift
@@ -251,8 +253,9 @@ def synthetic_main(args: argparse.Namespace) -> int:
     hand = TrackWeights(c0=TrackWeights().c0 if args.c0 is None else args.c0, sigma=args.sigma)
     learned = TrackWeights(c0=LEARNED_DUMMY_WEIGHT if args.c0 is None else args.c0,
                            sigma=args.sigma)
-    print(f"{args.synthetic} rendered drone videos of {args.synthetic_frames} frames (25 fps, "
-          f"{args.people[0]}-{args.people[1]} people, images camera-shifted {args.shift:g}, "
+    print(f"{args.synthetic} rendered {args.scenario} videos of {args.synthetic_frames} frames "
+          f"(25 fps, {args.people[0]}-{args.people[1]} people, images camera-shifted "
+          f"{args.shift:g}, "
           f"seeds {args.seed}..{args.seed + args.synthetic - 1}), ground-truth boxes, ids "
           f"replaced by shuffled row numbers per view; MIP, c0 {hand.c0:g} (learned weights: "
           f"{learned.c0:g}), clips of {args.clip_length}, sigma {args.sigma:g}, w1 "
@@ -267,7 +270,7 @@ def synthetic_main(args: argparse.Namespace) -> int:
         seed = args.seed + k
         start = time.perf_counter()
         video = render_tracking_video(seed, args.synthetic_frames, SynthConfig(
-            scenario="drone", n_people=tuple(args.people), fps=25.0))
+            scenario=args.scenario, n_people=tuple(args.people), fps=25.0))
         if args.shift:  # each view through one fixed simulated camera of its own
             video = replace(video, top_images={
                 f: camera_shift(im, args.shift, seed=100 + seed, per_image=False)
@@ -364,8 +367,11 @@ def main() -> int:
     parser.add_argument("--time-sequence", default="V1-S_55-G_1")
     parser.add_argument("--no-timing", action="store_true")
     parser.add_argument("--synthetic", type=int, default=None, metavar="N",
-                        help="instead of CVMHAT: N rendered drone videos (seeds --seed ...), "
+                        help="instead of CVMHAT: N rendered videos (seeds --seed ...), "
                         "tracked from boxes only and with images (colour, the network)")
+    parser.add_argument("--scenario", choices=SCENARIOS, default="drone",
+                        help="--synthetic: the rendered scene, a drone above or a camera on a "
+                        "building")
     parser.add_argument("--synthetic-frames", type=int, default=100,
                         help="frames per rendered video (25 fps)")
     parser.add_argument("--people", type=int, nargs=2, default=[6, 12], metavar=("MIN", "MAX"),

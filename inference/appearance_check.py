@@ -18,7 +18,8 @@ consecutive frames at all (single image pairs, very short clips) and the bundle 
 frame is judged by its frame check (:mod:`xvmatch.inference.frame_check`). ``track`` judges its
 cross-view term the same way on tracklets (:func:`check_tracklet_appearance`: pairs of tracklets
 the box-only matcher is sure of, in the clips it tracks) and, when it fails, leaves only that
-term out. No identities are used. Numpy only.
+term out; it skips the steadiness bar, which its pairs, sure over consecutive frames, did not
+need on rendered overview videos (docs/tracking.md). No identities are used. Numpy only.
 """
 
 from __future__ import annotations
