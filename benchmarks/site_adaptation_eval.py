@@ -23,6 +23,10 @@ With ``--ceiling`` one more row: the same fit with the ground-truth cross-view p
 embedded frames instead of the pseudo-matches (every person seen in both views; the ids of the
 render, for this upper bound only): how much better pseudo-labels could give.
 
+With ``--cameras`` the box-only matcher (the mining, every row's matching and the check) also
+gets each frame's calibrated cameras as rendered, as ``adapt --cameras`` and ``associate
+--cameras`` would (the camera wearer found from them, not from ids).
+
 With ``--cli`` the first seed's shifted video is also written as box files and image folders,
 and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``associate
 --model SITE/`` against ``--model default`` on the test part (the same run, the ratio printed).
@@ -30,7 +34,7 @@ and the command line is timed: ``xvmatch adapt`` on the adaptation part, then ``
 Usage:
     python benchmarks/site_adaptation_eval.py [--seeds 1 2 5 6] [--strengths 0 2 3] [--frames 400]
         [--scenario drone|overview] [--people 12 20] [--vector descriptors|features|stages]
-        [--ceiling] [--cli] [--work runs/site_adaptation]
+        [--ceiling] [--cameras] [--cli] [--work runs/site_adaptation]
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.camera_shift import camera_shift
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
@@ -151,8 +156,10 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
     test = [f for f in frames if f >= cut]
     config = MiningConfig(shots=args.shots)
     bursts = plan_bursts(adapt_frames, config.burst, config.max_frames)
+    cameras = (CameraFrames("the rendered cameras", per_frame=video.cameras) if args.cameras
+               else None)
     costs = box_only_costs(top, hor, [int(f) for b in bursts for f in b], matcher,
-                           video.hor_size)
+                           video.hor_size, cameras=cameras)
     mined = mine_pairs(top, hor, bursts, costs, matcher.gamma, config)
     cp = mined.cross_pos
     ids = {v: np.concatenate([r[f].ids for f in mined.embed_frames]) for v, r in
@@ -167,7 +174,7 @@ def run_seed(seed: int, args, matcher: LearnedMatcher, reference) -> list[dict]:
         pred = associate_sequence_learned(
             top, hor, video.hor_size[0], model, hor_height=video.hor_size[1], frames=test,
             top_images=images[0] if images else None, hor_images=images[1] if images else None,
-            appearance_check=check, checked=checked)
+            cameras=cameras, appearance_check=check, checked=checked)
         score = _score(pred, top, hor, back_top, back_hor, video.top, video.hor, test)
         return (*score, checked[0]) if check else score
 
@@ -326,9 +333,13 @@ def main() -> int:
     parser.add_argument("--ceiling", action="store_true",
                         help="also fit on the true cross-view pairs of the embedded frames (the "
                         "render's ids): the upper bound of better pseudo-labels")
+    parser.add_argument("--cameras", action="store_true",
+                        help="give the box-only matcher each frame's rendered cameras")
     parser.add_argument("--cli", action="store_true", help="also time the command line")
     parser.add_argument("--work", default="runs/site_adaptation")
     args = parser.parse_args()
+    if args.cli and args.cameras:
+        parser.error("--cli times the commands without cameras: leave out --cameras")
     print("$ python " + shlex.join(sys.argv))
     t0 = time.perf_counter()
     matcher = load_matcher_bundle(args.model)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,7 @@ from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig, SyntheticScene, make_scene
 from xvmatch.geometry.atomic_files import atomic_write_bytes
 from xvmatch.geometry.camera import Camera, look_rotation
+from xvmatch.geometry.matcher_inputs import FrameCameras
 
 __all__ = ["TrackingVideo", "render_tracking_video", "write_tracking_video"]
 
@@ -42,6 +43,8 @@ class TrackingVideo:
         top_images, hor_images: ``{frame: (H, W, 3) uint8 BGR}`` images.
         hor_size: ``(width, height)`` of the egocentric image.
         fps: frames per second of the walk.
+        cameras: ``{frame: FrameCameras}``, the calibrated cameras each frame was rendered
+            with (what ``--cameras`` gives; benchmarks only, never written).
     """
 
     top: dict[int, FrameBoxes]
@@ -50,6 +53,7 @@ class TrackingVideo:
     hor_images: dict[int, np.ndarray]
     hor_size: tuple[int, int]
     fps: float
+    cameras: dict[int, FrameCameras] = field(default_factory=dict)
 
 
 def _smooth_head(scene: SyntheticScene, seconds: float) -> SyntheticScene:
@@ -99,7 +103,7 @@ def render_tracking_video(
     rng = np.random.default_rng([int(seed), 17])
     scene = _smooth_head(make_scene(config, int(n_frames), rng), head_smoothing)
     renderer = SceneRenderer(scene, rng)
-    top, hor, top_images, hor_images = {}, {}, {}, {}
+    top, hor, top_images, hor_images, cameras = {}, {}, {}, {}, {}
     for f in range(1, int(n_frames) + 1):
         pair = renderer.render(f)
         t, e = pair.top.labels, pair.ego.labels
@@ -107,9 +111,11 @@ def render_tracking_video(
         keep = (e.visible >= min_visible) & (e.visible_pixels >= min_pixels)
         hor[f] = FrameBoxes(f, e.ids[keep], e.boxes[keep])
         top_images[f], hor_images[f] = pair.top.image, pair.ego.image
+        cameras[f] = FrameCameras(pair.top.camera, pair.ego.camera)
         if progress is not None:
             progress(f)
-    return TrackingVideo(top, hor, top_images, hor_images, tuple(config.ego_size), config.fps)
+    return TrackingVideo(top, hor, top_images, hor_images, tuple(config.ego_size), config.fps,
+                         cameras)
 
 
 def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dict[str, Path]:
