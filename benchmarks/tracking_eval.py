@@ -37,6 +37,9 @@ tracked with the MIP from boxes only and with the images: colour terms alone (no
 with the appearance network of ``--model`` (default: the shipped bundle), the learned weights'
 row with the command's appearance check and without it. ``--shift S`` puts each view's images
 through one fixed simulated camera of strength S first (the adaptation benchmark's stress test).
+``--cameras`` gives the learned matcher each frame's rendered cameras, as ``xvmatch track
+--cameras`` does: the learned rows' cross-view weights (and their appearance check) then rest
+on the camera cues too; the handcrafted rows do not change.
 
 Usage:
     python benchmarks/tracking_eval.py [--data ../shared/data/cvmhat] [--cache DIR]
@@ -45,7 +48,7 @@ Usage:
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
         [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
-        [--people 6 12] [--shift 3] [--scenario drone|overview]
+        [--people 6 12] [--shift 3] [--scenario drone|overview] [--cameras]
 """
 
 from __future__ import annotations
@@ -76,6 +79,7 @@ from xvmatch.evaluation.track_metrics import (
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.track_costs import (
+    CAMERAS_SPATIAL_SHARE,
     LEARNED_DUMMY_WEIGHT,
     LEARNED_RULES,
     FrameCosts,
@@ -243,6 +247,7 @@ def synthetic_main(args: argparse.Namespace) -> int:
     """The --synthetic mode: rendered videos, boxes only against boxes and images."""
     from dataclasses import replace
 
+    from xvmatch.datasets.camera_frames import CameraFrames
     from xvmatch.datasets.camera_shift import camera_shift
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video
@@ -250,12 +255,17 @@ def synthetic_main(args: argparse.Namespace) -> int:
     from xvmatch.inference.tracking import TrackImages
 
     model = load_matcher_bundle(args.model)
-    hand = TrackWeights(c0=TrackWeights().c0 if args.c0 is None else args.c0, sigma=args.sigma)
+    w1 = TrackWeights().w1 if args.w1 is None else args.w1
+    hand = TrackWeights(c0=TrackWeights().c0 if args.c0 is None else args.c0, sigma=args.sigma,
+                        w1=w1)
     learned = TrackWeights(c0=LEARNED_DUMMY_WEIGHT if args.c0 is None else args.c0,
-                           sigma=args.sigma)
+                           sigma=args.sigma, w1=CAMERAS_SPATIAL_SHARE
+                           if args.cameras and args.w1 is None else w1)
     print(f"{args.synthetic} rendered {args.scenario} videos of {args.synthetic_frames} frames "
           f"(25 fps, {args.people[0]}-{args.people[1]} people, images camera-shifted "
           f"{args.shift:g}, "
+          f"{'the learned weights with the rendered cameras and w1 ' if args.cameras else ''}"
+          f"{f'{learned.w1:g}, ' if args.cameras else ''}"
           f"seeds {args.seed}..{args.seed + args.synthetic - 1}), ground-truth boxes, ids "
           f"replaced by shuffled row numbers per view; MIP, c0 {hand.c0:g} (learned weights: "
           f"{learned.c0:g}), clips of {args.clip_length}, sigma {args.sigma:g}, w1 "
@@ -283,7 +293,9 @@ def synthetic_main(args: argparse.Namespace) -> int:
         det_hor, _ = as_detections(hor, seed * 2 + 2)
         width = float(video.hor_size[0])
         fp = associate_frames(det_top, det_hor, width)
-        ev = learned_frame_evidence(det_top, det_hor, video.hor_size, model)
+        cameras = (CameraFrames("the rendered cameras", per_frame=video.cameras)
+                   if args.cameras else None)
+        ev = learned_frame_evidence(det_top, det_hor, video.hor_size, model, cameras=cameras)
         frames = sorted(set(top) | set(hor))
         name = f"seed {seed}"
         counts = track_pair_counts(*frame_tracks(det_top, det_hor, fp), top, hor, frames)
@@ -360,6 +372,10 @@ def main() -> int:
                         "handcrafted weights, 0.02 with the learned ones)")
     parser.add_argument("--sigma", type=float, default=TrackWeights().sigma,
                         help="Eq. 15 scale per box height")
+    parser.add_argument("--w1", type=float, default=None,
+                        help="--synthetic: share of the spatial term in a cross-view weight "
+                        "(Eq. 17; 1: the images only over time; default the command's, 0.3, "
+                        "and for the learned rows 1 with --cameras)")
     parser.add_argument("--max-gap", type=int, default=3, help="frames a tracklet may miss")
     parser.add_argument("--clip-length", type=int, default=TrackConfig().clip_length,
                         help="frames per clip (tracking; the tracklet table keeps 10)")
@@ -380,6 +396,10 @@ def main() -> int:
                         help="--synthetic: each view's images through one fixed simulated "
                         "camera of strength S (camera_shift, per_image=False), the adaptation "
                         "benchmark's stress test")
+    parser.add_argument("--cameras", action="store_true",
+                        help="--synthetic: the learned weights' matcher also gets each frame's "
+                        "rendered cameras, as 'xvmatch track --cameras' would (the wearer "
+                        "found from them, not from ids)")
     parser.add_argument("--model", default="default",
                         help="matcher bundle: the learned weights' matcher (boxes only), and "
                         "the appearance network for --synthetic")
@@ -397,6 +417,8 @@ def main() -> int:
     parser.add_argument("--mirror", action="store_true",
                         help="the learned matcher also scores the mirrored scene")
     args = parser.parse_args()
+    if args.cameras and not args.synthetic:
+        parser.error("--cameras gives the rendered cameras: it needs --synthetic N")
     if args.synthetic:
         return synthetic_main(args)
     folder = Path(args.data) if args.data else default_cvmhat_dir()

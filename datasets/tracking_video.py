@@ -44,7 +44,7 @@ class TrackingVideo:
         hor_size: ``(width, height)`` of the egocentric image.
         fps: frames per second of the walk.
         cameras: ``{frame: FrameCameras}``, the calibrated cameras each frame was rendered
-            with (what ``--cameras`` gives; benchmarks only, never written).
+            with (what ``--cameras`` gives).
     """
 
     top: dict[int, FrameBoxes]
@@ -119,10 +119,14 @@ def render_tracking_video(
 
 
 def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dict[str, Path]:
-    """Write ``top.txt``, ``hor.txt`` (MOT boxes, ground-truth ids) and the image folders
-    ``top/`` and ``hor/`` (``000001.png`` ...) into ``folder``; returns their paths by name
-    (``top``, ``hor``, ``top_images``, ``hor_images``)."""
+    """Write ``top.txt``, ``hor.txt`` (MOT boxes, ground-truth ids), the image folders
+    ``top/`` and ``hor/`` (``000001.png`` ...) and, when the video records them, the folder
+    ``cameras/`` of per-frame camera files (``000001.json``: ``top`` and ``ego``, the form
+    ``--cameras`` reads) into ``folder``; returns their paths by name (``top``, ``hor``,
+    ``top_images``, ``hor_images``, and ``cameras`` when written)."""
     import cv2
+
+    from xvmatch.geometry.camera_io import save_cameras
 
     folder = Path(folder)
     out = {"top": folder / "top.txt", "hor": folder / "hor.txt",
@@ -136,4 +140,9 @@ def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dic
             if not ok:
                 raise ValueError(f"{out[view]}: cannot encode frame {f} as PNG")
             atomic_write_bytes(out[view] / f"{f:06d}.png", data.tobytes(), fsync=False)
+    if video.cameras:
+        out["cameras"] = folder / "cameras"
+        out["cameras"].mkdir(parents=True, exist_ok=True)
+        for f, cams in video.cameras.items():
+            save_cameras(out["cameras"] / f"{f:06d}.json", {"top": cams.top, "ego": cams.hor})
     return out

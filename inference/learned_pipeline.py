@@ -40,6 +40,7 @@ __all__ = [
     "LearnedRunOptions",
     "RetimedFrames",
     "open_learned_inputs",
+    "open_matcher_cameras",
     "open_view_images",
     "retimed",
     "run_learned_association",
@@ -187,6 +188,24 @@ def retimed(source, shift: int):
     return RetimedFrames(source, shift) if shift else source
 
 
+def open_matcher_cameras(path: str, named: Iterable[tuple[LearnedMatcher, str]],
+                         frames: Iterable[int],
+                         sizes: dict[str, tuple[tuple[int, int], str]]):
+    """Open ``--cameras`` for the matchers ``named`` (``(matcher, its name)``), after the
+    checks: every matcher takes camera cues, a folder holds a file for each of ``frames``, and
+    every camera's image size is its view's (``sizes``: ``"top"``/``"hor"`` -> (size, where
+    that size comes from)). Returns the :class:`~xvmatch.datasets.camera_frames.CameraFrames`."""
+    from xvmatch.datasets.camera_frames import open_cameras
+
+    for m, name in named:
+        if not m.bundle.manifest.uses_cameras:
+            raise ValueError(f"{name}: this matcher takes no camera cues; drop --cameras "
+                             "or use a bundle trained with cameras (e.g. default)")
+    cameras = open_cameras(path, sorted(frames))
+    _check_camera_sizes(cameras, sizes)
+    return cameras
+
+
 def _check_camera_sizes(cameras, sizes: dict[str, tuple[tuple[int, int], str]]) -> None:
     """Every camera's image size must be its view's image size (``sizes``: view -> (size,
     where that size comes from))."""
@@ -238,18 +257,11 @@ class LearnedInputs:
                 sizes[view] = tuple(self.images[view].size)
             check_boxes_in_image(top, sizes["top"], options.top_boxes, "the images")
         if options.cameras is not None:
-            from xvmatch.datasets.camera_frames import open_cameras
-
-            for m, name in named:
-                if not m.bundle.manifest.uses_cameras:
-                    raise ValueError(f"{name}: this matcher takes no camera cues; drop --cameras "
-                                     "or use a bundle trained with cameras (e.g. default)")
-            self.cameras = open_cameras(options.cameras, both)
             wanted = {"hor": (tuple(options.hor_size),
                               "the images" if sizes else options.hor_size_source)}
             if "top" in sizes:
                 wanted["top"] = (sizes["top"], "the images")
-            _check_camera_sizes(self.cameras, wanted)
+            self.cameras = open_matcher_cameras(options.cameras, named, both, wanted)
 
     def associate(self, progress: Callable[[Iterable[int]], Iterable[int]] | None = None
                   ) -> LearnedRun:

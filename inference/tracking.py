@@ -31,6 +31,7 @@ from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.appearance_check import AppearanceCheck, check_tracklet_appearance
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.learned_association import (
+    FrameCameraSource,
     FrameImages,
     LearnedMatcher,
     associate_sequence_learned,
@@ -203,12 +204,15 @@ def learned_frame_evidence(
     workers: int = 1,
     progress: Progress | None = None,
     mirror: bool = False,
+    cameras: FrameCameraSource | None = None,
 ) -> LearnedEvidence:
-    """The learned matcher's association of every frame both views have, from the boxes alone.
+    """The learned matcher's association of every frame both views have, from the boxes alone
+    (and the cameras, when given).
 
     Each frame's cost matrix (:func:`~xvmatch.inference.learned_association.
-    associate_sequence_learned`, no image or camera cue even when the bundle has them) and its
-    assignment with the matcher's non-association cost (geometric-priors Eqs. 1-2).
+    associate_sequence_learned`, no image cue even when the bundle has one; the camera cues
+    and the rectified geometry only with ``cameras``) and its assignment with the matcher's
+    non-association cost (geometric-priors Eqs. 1-2).
 
     Args:
         top, hor: ``{frame: FrameBoxes}``, ``ids`` = detection rows, unique within a view.
@@ -218,6 +222,8 @@ def learned_frame_evidence(
         workers: processes computing the geometry features (the result does not depend on it).
         progress: optional progress wrapper.
         mirror: also score the scene mirrored left-right and average the costs.
+        cameras: the calibrated cameras of each frame (``get(frame)``), or None; the matchers
+            must take camera cues.
 
     Returns:
         The :class:`LearnedEvidence`; the ids never reach the matcher.
@@ -240,7 +246,7 @@ def learned_frame_evidence(
     associate_sequence_learned(view, hor, float(hor_size[0]), models, camera_id=camera_id,
                                gamma=gamma, progress=wrap, hor_height=float(hor_size[1]),
                                frames=frames, mirror=mirror, costs_out=costs,
-                               workers=workers)
+                               workers=workers, cameras=cameras)
     out = {}
     for f in frames:
         cost = costs[f]
@@ -438,8 +444,9 @@ def track_pair(
             the frame association is its assignment (step 1 skipped; ``frame_pairs``,
             ``params`` and ``camera_rows`` unused, unless ``config.learned_share < 1`` mixes
             in the handcrafted Eq. 13). None: the handcrafted Eq. 13.
-        appearance_check: with the network's images and ``learned``, judge the cross-view
-            appearance cue on the clips' own box-only pseudo-matched tracklets
+        appearance_check: with the network's images, ``learned`` and a cross-view appearance
+            term (``config.weights.w1`` < 1), judge that cue on the clips' own box-only
+            pseudo-matched tracklets
             (:func:`~xvmatch.inference.appearance_check.check_tracklet_appearance`) and, when
             it fails, leave it out of the cross-view weights (the over-time terms keep it).
         checked: if given, receives that :class:`~xvmatch.inference.appearance_check.
@@ -468,7 +475,8 @@ def track_pair(
     else:
         top_tr, hor_tr, app = _tracklets_with_images(top, hor, clips, config, images, progress)
     cross_appearance = True
-    if appearance_check and app is not None and images.embed is not None and learned is not None:
+    if (appearance_check and app is not None and images.embed is not None
+            and learned is not None and config.weights.w1 < 1):  # w1 1: no cue to judge
         result = check_tracklet_appearance(
             [(top_tr[k], hor_tr[k],
               1.0 - descriptor_similarity(app[k][0], app[k][1], images.cross_cost, cross=True))

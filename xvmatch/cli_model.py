@@ -28,6 +28,7 @@ __all__ = [
     "add_model_arguments",
     "associate_with_model",
     "draw_pictures",
+    "ego_camera_size",
     "horizontal_size",
     "learned_run_options",
     "open_models",
@@ -162,15 +163,22 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
             given.append((tuple(source.size), f"the horizontal images {args.hor_images}"))
     elif getattr(args, "model", None) is not None and getattr(args, "cameras", None):
         # with images, each camera file is checked against them (inference/learned_pipeline.py)
-        from xvmatch.datasets.camera_frames import open_cameras
-
-        sizes = {tuple(c.hor.image_size) for _, c in open_cameras(args.cameras).all()}
-        if len(sizes) != 1:
-            raise ValueError(f"{args.cameras}: the ego cameras have several image sizes "
-                             f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))}); pass "
-                             "--image-size")
-        given.append((sizes.pop(), f"the camera files {args.cameras}"))
+        given.append(ego_camera_size(args.cameras))
     return resolve_size(hor, getattr(args, "hor", "the horizontal boxes"), given)
+
+
+def ego_camera_size(cameras: str) -> tuple[tuple[int, int], str]:
+    """The horizontal image size that ``--cameras``' ego cameras give, and where it comes
+    from (for :func:`~xvmatch.datasets.box_image_size.resolve_size`); one size for all of
+    them, or an error asking for ``--image-size``."""
+    from xvmatch.datasets.camera_frames import open_cameras
+
+    sizes = {tuple(c.hor.image_size) for _, c in open_cameras(cameras).all()}
+    if len(sizes) != 1:
+        raise ValueError(f"{cameras}: the ego cameras have several image sizes "
+                         f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))}); pass "
+                         "--image-size")
+    return sizes.pop(), f"the camera files {cameras}"
 
 
 def learned_run_options(

@@ -11,7 +11,9 @@ gives the learned matcher: its box-only association makes the cross-view weights
 learned``, the default with ``--model``; ``--weights handcrafted`` keeps Eq. 13 on the spatial
 search), and with images its appearance network adds the cross-view term and takes over the
 over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1), unless ``--appearance-check`` finds its
-cross-view cue too weak on the video's own sure tracklet pairs. ``--offset N|auto`` tracks
+cross-view cue too weak on the video's own sure tracklet pairs. ``--cameras`` gives the learned
+matcher the calibrated cameras (a file, or per-frame files numbered by the horizontal frames);
+the images then serve only over time (``--w1`` 1 by default). ``--offset N|auto`` tracks
 videos out of sync (top frame t + N with horizontal frame t), each row still written under its
 own frame number; ``evaluate --tracks --offset N`` scores them. Bad input raises
 ``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
@@ -81,6 +83,11 @@ def _cross_view_weights(args: argparse.Namespace) -> str:
     if weights == "learned" and args.model is None:
         raise ValueError("--weights learned takes the learned matcher's costs: add --model "
                          "BUNDLE or --model default")
+    if args.cameras is not None and weights != "learned":
+        raise ValueError("--cameras feeds the learned matcher's cross-view weights: add --model "
+                         "BUNDLE or --model default" if args.model is None else
+                         "--cameras feeds the learned matcher's cross-view weights: drop "
+                         "--weights handcrafted")
     if weights == "handcrafted" and args.model is not None and args.top_images is None:
         raise ValueError("--model with --weights handcrafted gives the appearance network, which "
                          "needs the images: add --top-images and --hor-images, or drop --weights "
@@ -130,12 +137,31 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     return TrackImages(sources[0], sources[1], embed, cross_cost, cross_embed), sources, size
 
 
-def _aligned(top, hor, images, offset: int):
-    """The views (and their images) re-timed so that top frame ``t + offset`` and horizontal
-    frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.align_frames`);
-    the rows, and so the written tracks, keep their own frame numbers."""
+def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolved, sources):
+    """``--cameras`` opened and checked (:func:`~xvmatch.inference.learned_pipeline.
+    open_matcher_cameras`), or None: a file for every horizontal frame ``f`` with boxes, and
+    boxes in top frame ``f + offset`` (the files are numbered by the horizontal frames, as
+    ``associate`` reads them), each camera the size of its view's images (``sources``: the
+    open top and horizontal images, or none; else the horizontal size ``resolved``)."""
+    if args.cameras is None:
+        return None
+    from xvmatch.inference.learned_pipeline import open_matcher_cameras
+
+    wanted = {"hor": (tuple(resolved[0]), resolved[1])}
+    if sources:
+        wanted["top"] = (tuple(sources[0].size), f"the images {args.top_images}")
+        wanted["hor"] = (tuple(sources[1].size), f"the images {args.hor_images}")
+    frames = [f for f in hor if len(hor[f]) and len(top.get(f + offset, ()))]
+    return open_matcher_cameras(args.cameras, [(model, args.model)], frames, wanted)
+
+
+def _aligned(top, hor, images, cameras, offset: int):
+    """The views (and their images and cameras) re-timed so that top frame ``t + offset`` and
+    horizontal frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.
+    align_frames`); the rows, and so the written tracks, keep their own frame numbers. The
+    cameras are numbered by the horizontal frames."""
     if not offset:
-        return top, hor, images
+        return top, hor, images, cameras
     from dataclasses import replace
 
     from xvmatch.datasets.mot_boxes import align_frames
@@ -144,7 +170,9 @@ def _aligned(top, hor, images, offset: int):
     (top, hor), (s_top, s_hor) = align_frames([top, hor], [offset])
     if images is not None:  # aligned frame f shows the view's frame f - shift
         images = replace(images, top=retimed(images.top, -s_top), hor=retimed(images.hor, -s_hor))
-    return top, hor, images
+    if cameras is not None:
+        cameras = retimed(cameras, -s_hor)
+    return top, hor, images, cameras
 
 
 def add_track_parser(subparsers) -> argparse.ArgumentParser:
@@ -207,9 +235,14 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="cross-view weights (Eq. 13): learned, from the --model's costs on the "
                    "boxes (default with --model), or handcrafted, from the spatial-distribution "
                    "search's pairs (default without)")
+    g.add_argument("--cameras", default=None, metavar="CAMERAS",
+                   help="calibrated cameras 'top' and 'ego' (a camera file, or a folder of "
+                   "per-frame files numbered by the horizontal frames) for the --model's "
+                   "cross-view weights: its camera cues and the rectified geometry, as "
+                   "'associate --cameras' (an oblique overview camera wants them)")
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
-                   "(default 0.3)")
+                   "(default 0.3; 1 with --cameras: the images then serve only over time)")
     g.add_argument("--w2", type=SHARE_TYPE, default=None,
                    help="share of the appearance term in an over-time weight (Eq. 18), in "
                    "[0, 1] (default 0.6)")
@@ -223,7 +256,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="with --model's network and learned weights: judge the cross-view "
                    "appearance cue on the tracklet pairs the box-only matcher is sure of, and "
                    "leave it out of the cross-view weights when it is shown too weak to help "
-                   "(default on; off: always use it)")
+                   "(default on; off: always use it; nothing to judge with --w1 1)")
     add_spatial_options(p)
     p.set_defaults(func=_cmd_track)
     return p
@@ -231,7 +264,11 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+    from xvmatch.inference.track_costs import (
+        CAMERAS_SPATIAL_SHARE,
+        LEARNED_DUMMY_WEIGHT,
+        TrackWeights,
+    )
     from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
 
     start = time.perf_counter()
@@ -241,6 +278,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
              if getattr(args, k) is not None}
     if weights == "learned":
         given.setdefault("c0", LEARNED_DUMMY_WEIGHT)
+    if args.cameras is not None:
+        given.setdefault("w1", CAMERAS_SPATIAL_SHARE)
     config = TrackConfig(
         clip_length=args.clip_length,
         min_iou=args.min_iou,
@@ -263,7 +302,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     check_outputs(
         [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE))],
         [Input("--top", args.top), Input("--hor", args.hor),
-         *image_inputs(args),
+         *image_inputs(args), Input("--cameras", args.cameras),
          Input("--model", None if args.model == "default" else args.model)],
     )
     max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
@@ -280,18 +319,25 @@ def _cmd_track(args: argparse.Namespace) -> int:
         given = [] if args.image_size is None else [(args.image_size, "--image-size")]
         if size is not None:
             given.append((size, f"the horizontal images {args.hor_images}"))
+        elif args.cameras is not None:  # with images, each camera is checked against them
+            from xvmatch.cli_model import ego_camera_size
+
+            given.append(ego_camera_size(args.cameras))
         resolved = resolve_size(hor.frames, args.hor, given, ids=False)
         width = resolved[0][0]
         note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
-        top_frames, hor_frames, images = _aligned(top.frames, hor.frames, images, offset)
+        cameras = _open_cameras(args, model, top.frames, hor.frames, offset, resolved, sources)
+        top_frames, hor_frames, images, cameras = _aligned(top.frames, hor.frames, images,
+                                                           cameras, offset)
         progress = _step_progress(not args.quiet)
         learned = None
         if weights == "learned":
             learned = learned_frame_evidence(top_frames, hor_frames, resolved[0], model,
-                                             camera_rows, args.workers, progress)
+                                             camera_rows, args.workers, progress,
+                                             cameras=cameras)
         checked = []
         result = track_pair(top_frames, hor_frames, float(width), params, config,
                             camera_rows, args.workers, progress, images=images,
