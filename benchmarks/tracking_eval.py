@@ -39,7 +39,8 @@ row with the command's appearance check and without it. ``--shift S`` puts each 
 through one fixed simulated camera of strength S first (the adaptation benchmark's stress test).
 ``--cameras`` gives the learned matcher each frame's rendered cameras, as ``xvmatch track
 --cameras`` does: the learned rows' cross-view weights (and their appearance check) then rest
-on the camera cues too; the handcrafted rows do not change.
+on the camera cues too; the handcrafted rows do not change. ``--camera-error DEG`` gives them
+calibrated with an error (:func:`with_camera_error`), ``--w1`` sets Eq. 17's share.
 
 Usage:
     python benchmarks/tracking_eval.py [--data ../shared/data/cvmhat] [--cache DIR]
@@ -48,7 +49,7 @@ Usage:
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
         [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
-        [--people 6 12] [--shift 3] [--scenario drone|overview] [--cameras]
+        [--people 6 12] [--shift 3] [--scenario drone|overview] [--cameras [--camera-error 2]]
 """
 
 from __future__ import annotations
@@ -79,7 +80,6 @@ from xvmatch.evaluation.track_metrics import (
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.track_costs import (
-    CAMERAS_SPATIAL_SHARE,
     LEARNED_DUMMY_WEIGHT,
     LEARNED_RULES,
     FrameCosts,
@@ -243,6 +243,30 @@ the command's default appearance check, :func:`~xvmatch.inference.appearance_che
 check_tracklet_appearance`); the same without the check (``--appearance-check off``)."""
 
 
+def with_camera_error(cameras: dict, degrees: float, seed: int) -> dict:
+    """``{frame: FrameCameras}`` as a calibration would give them with an error: each camera
+    turned by ``degrees`` about a random axis and moved ``degrees / 10`` metres in a random
+    direction; the top camera once for the whole video (a fixed camera's calibration), the
+    egocentric one anew every frame (its pose tracked frame by frame)."""
+    from scipy.spatial.transform import Rotation
+
+    from xvmatch.geometry.camera import Camera
+    from xvmatch.geometry.matcher_inputs import FrameCameras
+
+    rng = np.random.default_rng(seed)
+
+    def off(cam: Camera) -> Camera:
+        axis, step = rng.normal(size=3), rng.normal(size=3)
+        turn = Rotation.from_rotvec(np.radians(degrees) * axis / np.linalg.norm(axis))
+        return Camera(K=cam.K, R=cam.R @ turn.as_matrix().T,
+                      c=cam.c + degrees / 10 * step / np.linalg.norm(step),
+                      width=cam.width, height=cam.height)
+
+    frames = sorted(cameras)
+    top = off(cameras[frames[0]].top) if frames else None
+    return {f: FrameCameras(top, off(cameras[f].hor)) for f in frames}
+
+
 def synthetic_main(args: argparse.Namespace) -> int:
     """The --synthetic mode: rendered videos, boxes only against boxes and images."""
     from dataclasses import replace
@@ -259,13 +283,13 @@ def synthetic_main(args: argparse.Namespace) -> int:
     hand = TrackWeights(c0=TrackWeights().c0 if args.c0 is None else args.c0, sigma=args.sigma,
                         w1=w1)
     learned = TrackWeights(c0=LEARNED_DUMMY_WEIGHT if args.c0 is None else args.c0,
-                           sigma=args.sigma, w1=CAMERAS_SPATIAL_SHARE
-                           if args.cameras and args.w1 is None else w1)
+                           sigma=args.sigma, w1=w1)
     print(f"{args.synthetic} rendered {args.scenario} videos of {args.synthetic_frames} frames "
           f"(25 fps, {args.people[0]}-{args.people[1]} people, images camera-shifted "
           f"{args.shift:g}, "
-          f"{'the learned weights with the rendered cameras and w1 ' if args.cameras else ''}"
-          f"{f'{learned.w1:g}, ' if args.cameras else ''}"
+          f"{'the learned weights with the rendered cameras' if args.cameras else ''}"
+          f"{f' (calibrated {args.camera_error:g} deg off)' if args.camera_error else ''}"
+          f"{', ' if args.cameras else ''}"
           f"seeds {args.seed}..{args.seed + args.synthetic - 1}), ground-truth boxes, ids "
           f"replaced by shuffled row numbers per view; MIP, c0 {hand.c0:g} (learned weights: "
           f"{learned.c0:g}), clips of {args.clip_length}, sigma {args.sigma:g}, w1 "
@@ -293,8 +317,11 @@ def synthetic_main(args: argparse.Namespace) -> int:
         det_hor, _ = as_detections(hor, seed * 2 + 2)
         width = float(video.hor_size[0])
         fp = associate_frames(det_top, det_hor, width)
-        cameras = (CameraFrames("the rendered cameras", per_frame=video.cameras)
-                   if args.cameras else None)
+        cameras = None
+        if args.cameras:
+            cameras = CameraFrames("the rendered cameras", per_frame=video.cameras
+                                   if not args.camera_error else
+                                   with_camera_error(video.cameras, args.camera_error, seed))
         ev = learned_frame_evidence(det_top, det_hor, video.hor_size, model, cameras=cameras)
         frames = sorted(set(top) | set(hor))
         name = f"seed {seed}"
@@ -372,10 +399,13 @@ def main() -> int:
                         "handcrafted weights, 0.02 with the learned ones)")
     parser.add_argument("--sigma", type=float, default=TrackWeights().sigma,
                         help="Eq. 15 scale per box height")
+    parser.add_argument("--camera-error", type=float, default=0.0, metavar="DEG",
+                        help="--cameras: calibrate them with an error, each camera turned by "
+                        "DEG degrees and moved DEG / 10 m (the top camera once, the egocentric "
+                        "one every frame)")
     parser.add_argument("--w1", type=float, default=None,
                         help="--synthetic: share of the spatial term in a cross-view weight "
-                        "(Eq. 17; 1: the images only over time; default the command's, 0.3, "
-                        "and for the learned rows 1 with --cameras)")
+                        "(Eq. 17; 1: the images only over time; default the command's, 0.3)")
     parser.add_argument("--max-gap", type=int, default=3, help="frames a tracklet may miss")
     parser.add_argument("--clip-length", type=int, default=TrackConfig().clip_length,
                         help="frames per clip (tracking; the tracklet table keeps 10)")
@@ -419,6 +449,8 @@ def main() -> int:
     args = parser.parse_args()
     if args.cameras and not args.synthetic:
         parser.error("--cameras gives the rendered cameras: it needs --synthetic N")
+    if args.camera_error and not args.cameras:
+        parser.error("--camera-error is an error of the --cameras: add --cameras")
     if args.synthetic:
         return synthetic_main(args)
     folder = Path(args.data) if args.data else default_cvmhat_dir()

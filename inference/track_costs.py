@@ -21,7 +21,6 @@ import numpy as np
 from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [
-    "CAMERAS_SPATIAL_SHARE",
     "DUMMY_WEIGHT",
     "LEARNED_DUMMY_WEIGHT",
     "LEARNED_RULES",
@@ -53,13 +52,6 @@ LEARNED_DUMMY_WEIGHT = 0.02
 chosen with them on the even CVMHAT dev pairs: 0.2, 0.15, 0.1, 0.05, 0.02, 0.01, 0 gave 90.5,
 91.5, 91.9, 92.0, 92.4, 92.4, 92.2 CVIDF1 clean, and 0.1, 0.05, 0.02 gave 76.9, 78.8, 79.0
 with detector noise (docs/tracking.md)."""
-
-CAMERAS_SPATIAL_SHARE = 1.0
-"""Default ``w1`` of Eq. 17 when the learned cross-view weights have the calibrated cameras
-(``track --cameras``): the camera-aware matcher's term alone, the images only over time. On
-rendered videos with their cameras (8 overview and 8 drone, unshifted, docs/tracking.md) any
-share of the network's cross-view similarity cost CVIDF1: mean 96.3 / 96.4 with w1 0.3, 96.9 /
-96.8 with 0.8, 97.9 / 97.8 with 1, against 97.6 / 97.8 from the boxes alone."""
 
 
 @dataclass(frozen=True)

@@ -37,11 +37,11 @@ def test_synthetic_mode_tracks_the_scenario_asked_for(monkeypatch, capsys) -> No
 
 
 def test_cameras_reach_the_learned_rows_only(monkeypatch, capsys) -> None:
-    # --cameras gives the learned matcher the rendered cameras (w1 1 by default, as track
-    # --cameras): its rows change, the handcrafted rows do not.
+    # --cameras gives the learned matcher the rendered cameras, as track --cameras: its rows
+    # change, the handcrafted rows do not.
     plain = _run(monkeypatch, capsys, "--scenario", "overview")
     cams = _run(monkeypatch, capsys, "--scenario", "overview", "--cameras")
-    assert "the learned weights with the rendered cameras and w1 1," in cams
+    assert "the learned weights with the rendered cameras, " in cams
     rows = [{line.split()[1]: line for line in out.splitlines() if line.startswith("OVERALL ")}
             for out in (plain, cams)]
     assert rows[0]["frame"] == rows[1]["frame"] and rows[0]["boxes"] == rows[1]["boxes"]

@@ -12,8 +12,8 @@ learned``, the default with ``--model``; ``--weights handcrafted`` keeps Eq. 13 
 search), and with images its appearance network adds the cross-view term and takes over the
 over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1), unless ``--appearance-check`` finds its
 cross-view cue too weak on the video's own sure tracklet pairs. ``--cameras`` gives the learned
-matcher the calibrated cameras (a file, or per-frame files numbered by the horizontal frames);
-the images then serve only over time (``--w1`` 1 by default). ``--offset N|auto`` tracks
+matcher the calibrated cameras (a file, or per-frame files numbered by the horizontal frames).
+``--offset N|auto`` tracks
 videos out of sync (top frame t + N with horizontal frame t), each row still written under its
 own frame number; ``evaluate --tracks --offset N`` scores them. Bad input raises
 ``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
@@ -242,7 +242,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "'associate --cameras' (an oblique overview camera wants them)")
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
-                   "(default 0.3; 1 with --cameras: the images then serve only over time)")
+                   "(default 0.3; 1: the images serve only over time, which exact --cameras "
+                   "favour)")
     g.add_argument("--w2", type=SHARE_TYPE, default=None,
                    help="share of the appearance term in an over-time weight (Eq. 18), in "
                    "[0, 1] (default 0.6)")
@@ -264,11 +265,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.track_costs import (
-        CAMERAS_SPATIAL_SHARE,
-        LEARNED_DUMMY_WEIGHT,
-        TrackWeights,
-    )
+    from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
     from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
 
     start = time.perf_counter()
@@ -278,8 +275,6 @@ def _cmd_track(args: argparse.Namespace) -> int:
              if getattr(args, k) is not None}
     if weights == "learned":
         given.setdefault("c0", LEARNED_DUMMY_WEIGHT)
-    if args.cameras is not None:
-        given.setdefault("w1", CAMERAS_SPATIAL_SHARE)
     config = TrackConfig(
         clip_length=args.clip_length,
         min_iou=args.min_iou,
