@@ -279,11 +279,10 @@ def synthetic_main(args: argparse.Namespace) -> int:
     from xvmatch.inference.tracking import TrackImages
 
     model = load_matcher_bundle(args.model)
-    w1 = TrackWeights().w1 if args.w1 is None else args.w1
     hand = TrackWeights(c0=TrackWeights().c0 if args.c0 is None else args.c0, sigma=args.sigma,
-                        w1=w1)
+                        w1=args.w1)
     learned = TrackWeights(c0=LEARNED_DUMMY_WEIGHT if args.c0 is None else args.c0,
-                           sigma=args.sigma, w1=w1)
+                           sigma=args.sigma, w1=args.w1)
     print(f"{args.synthetic} rendered {args.scenario} videos of {args.synthetic_frames} frames "
           f"(25 fps, {args.people[0]}-{args.people[1]} people, images camera-shifted "
           f"{args.shift:g}, "
@@ -403,9 +402,9 @@ def main() -> int:
                         help="--cameras: calibrate them with an error, each camera turned by "
                         "DEG degrees and moved DEG / 10 m (the top camera once, the egocentric "
                         "one every frame)")
-    parser.add_argument("--w1", type=float, default=None,
+    parser.add_argument("--w1", type=float, default=TrackWeights().w1,
                         help="--synthetic: share of the spatial term in a cross-view weight "
-                        "(Eq. 17; 1: the images only over time; default the command's, 0.3)")
+                        "(Eq. 17; 1: the images only over time; default the command's)")
     parser.add_argument("--max-gap", type=int, default=3, help="frames a tracklet may miss")
     parser.add_argument("--clip-length", type=int, default=TrackConfig().clip_length,
                         help="frames per clip (tracking; the tracklet table keeps 10)")
