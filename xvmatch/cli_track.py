@@ -13,11 +13,10 @@ search), and with images its appearance network adds the cross-view term and tak
 over-time one (CVMHAT Sec. 3.3.2, 3.4.1, 4.1), unless ``--appearance-check`` finds its
 cross-view cue too weak on the video's own sure tracklet pairs. ``--cameras`` gives the learned
 matcher the calibrated cameras (a file, or per-frame files numbered by the horizontal frames).
-``--offset N|auto`` tracks
-videos out of sync (top frame t + N with horizontal frame t), each row still written under its
-own frame number; ``evaluate --tracks --offset N`` scores them. Bad input raises
-``ValueError`` with a one-line message, printed by the main entry point as ``xvmatch: error:
-...`` with exit code 2.
+``--offset N|auto`` tracks videos out of sync (top frame t + N with horizontal frame t), each
+row still written under its own frame number; ``evaluate --tracks --offset N`` scores them. Bad
+input raises ``ValueError`` with a one-line message, printed by the main entry point as
+``xvmatch: error: ...`` with exit code 2.
 """
 
 from __future__ import annotations
