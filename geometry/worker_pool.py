@@ -79,7 +79,9 @@ def worker_pool(workers: int, start_method: str | None = "spawn",
                                initializer=_start_worker, initargs=(initializer,))
     try:
         yield pool
+        # Inside the try: a Ctrl-C during this wait must stop the pool too, or its manager
+        # thread stays on the exit hook's list (the traceback stop_pool describes).
+        pool.shutdown(wait=True)
     except BaseException:
         stop_pool(pool)
         raise
-    pool.shutdown(wait=True)
