@@ -40,7 +40,9 @@ through one fixed simulated camera of strength S first (the adaptation benchmark
 ``--cameras`` gives the learned matcher each frame's rendered cameras, as ``xvmatch track
 --cameras`` does: the learned rows' cross-view weights (and their appearance check) then rest
 on the camera cues too; the handcrafted rows do not change. ``--camera-error DEG`` gives them
-calibrated with an error (:func:`with_camera_error`), ``--w1`` sets Eq. 17's share.
+calibrated with an error (:func:`with_camera_error`); the fixed top camera is then refined on
+each video's boxes as the command does (:mod:`xvmatch.inference.camera_refinement`; its line is
+printed), unless ``--refine-top-camera off``. ``--w1`` sets Eq. 17's share.
 
 Usage:
     python benchmarks/tracking_eval.py [--data ../shared/data/cvmhat] [--cache DIR]
@@ -49,7 +51,8 @@ Usage:
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
         [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
-        [--people 6 12] [--shift 3] [--scenario drone|overview] [--cameras [--camera-error 2]]
+        [--people 6 12] [--shift 3] [--scenario drone|overview] [--cameras [--camera-error 2]
+        [--refine-top-camera off]]
 """
 
 from __future__ import annotations
@@ -275,6 +278,7 @@ def synthetic_main(args: argparse.Namespace) -> int:
     from xvmatch.datasets.camera_shift import camera_shift
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video
+    from xvmatch.inference.camera_refinement import refine_run_cameras
     from xvmatch.inference.learned_association import load_matcher_bundle
     from xvmatch.inference.tracking import TrackImages
 
@@ -321,6 +325,9 @@ def synthetic_main(args: argparse.Namespace) -> int:
             cameras = CameraFrames("the rendered cameras", per_frame=video.cameras
                                    if not args.camera_error else
                                    with_camera_error(video.cameras, args.camera_error, seed))
+            if args.refine_top_camera == "auto":
+                cameras, refinement = refine_run_cameras(cameras, det_top, det_hor, sorted(hor))
+                print(f"seed {seed} {refinement.message}")
         ev = learned_frame_evidence(det_top, det_hor, video.hor_size, model, cameras=cameras)
         frames = sorted(set(top) | set(hor))
         name = f"seed {seed}"
@@ -402,6 +409,9 @@ def main() -> int:
                         help="--cameras: calibrate them with an error, each camera turned by "
                         "DEG degrees and moved DEG / 10 m (the top camera once, the egocentric "
                         "one every frame)")
+    parser.add_argument("--refine-top-camera", choices=("auto", "off"), default="auto",
+                        help="--cameras: refine the fixed top camera on each video's boxes, as "
+                        "the command does (default auto)")
     parser.add_argument("--w1", type=float, default=TrackWeights().w1,
                         help="--synthetic: share of the spatial term in a cross-view weight "
                         "(Eq. 17; 1: the images only over time; default the command's)")

@@ -28,6 +28,7 @@ import numpy as np
 
 from xvmatch.datasets.box_image_size import check_boxes_in_image
 from xvmatch.inference.appearance_check import AppearanceCheck
+from xvmatch.inference.camera_refinement import CameraRefinement, refine_run_cameras
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
@@ -74,6 +75,8 @@ class LearnedRunOptions:
         appearance_check: with images, judge the appearance cue on the run's own box-only
             pseudo-matches and match from the boxes alone when it fails
             (:mod:`xvmatch.inference.appearance_check`).
+        refine_top_camera: with cameras, turn a fixed top camera to fit the run's head rays
+            when the fit is clear (:mod:`xvmatch.inference.camera_refinement`).
     """
 
     models: tuple[LearnedMatcher, ...]
@@ -91,6 +94,7 @@ class LearnedRunOptions:
     top_offset: int = 0
     keep_costs: bool = False
     appearance_check: bool = False
+    refine_top_camera: bool = False
 
     def __post_init__(self) -> None:
         if not self.models:
@@ -122,6 +126,8 @@ class LearnedRun:
         rechecked: the frames scored again with FP32 because their INT8 assignment was a near
             tie (matchers opened with ``recheck``).
         checked: the appearance check of a run with ``appearance_check`` and images, else None.
+        cameras: what became of the top camera of a run with cameras and
+            ``refine_top_camera``, else None.
     """
 
     pairs: dict[int, list[tuple[int, int]]]
@@ -132,6 +138,7 @@ class LearnedRun:
     models: tuple[LearnedMatcher, ...]
     rechecked: list[int] = field(default_factory=list)
     checked: AppearanceCheck | None = None
+    cameras: CameraRefinement | None = None
 
 
 class RetimedFrames:
@@ -229,7 +236,8 @@ class LearnedInputs:
         options: the run's options.
         frames: the frames to associate.
         images: ``{"top": source, "hor": source}`` (re-timed), or ``{}`` without images.
-        cameras: the camera source, or None.
+        cameras: the camera source (its top camera refined when asked), or None.
+        refinement: what became of the top camera (``refine_top_camera``), or None.
         gamma: the non-association cost (given, else the model's own).
     """
 
@@ -238,6 +246,7 @@ class LearnedInputs:
         self.top, self.hor, self.frames, self.options = top, hor, frames, options
         self.images: dict = {}
         self.cameras = None
+        self.refinement: CameraRefinement | None = None
         self.gamma = non_association_cost(options.models, options.gamma)
 
     def _open(self) -> None:
@@ -262,6 +271,8 @@ class LearnedInputs:
             if "top" in sizes:
                 wanted["top"] = (sizes["top"], "the images")
             self.cameras = open_matcher_cameras(options.cameras, named, both, wanted)
+            if options.refine_top_camera:
+                self.cameras, self.refinement = refine_run_cameras(self.cameras, top, hor, both)
 
     def associate(self, progress: Callable[[Iterable[int]], Iterable[int]] | None = None
                   ) -> LearnedRun:
@@ -292,7 +303,8 @@ class LearnedInputs:
             checked=checked,
         )
         return LearnedRun(pairs, costs, self.gamma, (width, height), options.hor_size_source,
-                          options.models, rechecked, checked[0] if checked else None)
+                          options.models, rechecked, checked[0] if checked else None,
+                          self.refinement)
 
     def close(self) -> None:
         """Close the image sources."""

@@ -13,6 +13,7 @@ import argparse
 import math
 import sys
 
+from xvmatch.cli_model import add_refine_top_camera
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -60,6 +61,7 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
                    help="calibrated cameras 'top' and 'ego' (a file or a folder of per-frame "
                    "files), as associate takes them: the box-only matcher that mines the "
                    "cross-view pairs then uses them")
+    add_refine_top_camera(p)
     p.add_argument("--camera-id", type=box_id, default=None,
                    help="top-view id of the horizontal camera's wearer, when known")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
@@ -106,7 +108,7 @@ def refusal_message(run, model: str) -> str:
 
 def _cmd_adapt(args: argparse.Namespace) -> int:
     from xvmatch import __version__
-    from xvmatch.cli_model import horizontal_size, open_models
+    from xvmatch.cli_model import horizontal_size, note_camera_refinement, open_models
     from xvmatch.geometry.output_paths import claim_folder
     from xvmatch.inference.adaptation_pairs import MiningConfig
     from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
@@ -134,12 +136,14 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
                                 hor_size_source=hor_size[1], names=(args.model,),
                                 top_images=args.top_images, hor_images=args.hor_images,
                                 cameras=args.cameras, top_boxes=args.top,
-                                camera_id=args.camera_id, workers=args.workers)
+                                camera_id=args.camera_id, workers=args.workers,
+                                refine_top_camera=args.refine_top_camera == "auto")
 
     def progress(items, total, what):
         return progress_bar(total, what, "frame", not args.quiet, items)
 
     with open_learned_inputs(top, hor, both, options) as inputs:
+        note_camera_refinement(inputs.refinement, args.quiet)
         run = adapt_to_site(top, hor, model, inputs.images["top"], inputs.images["hor"],
                             tuple(hor_size[0]), inputs.cameras, args.camera_id, config,
                             progress, args.workers)

@@ -26,11 +26,13 @@ __all__ = [
     "LEARNED_ONLY",
     "add_draw_arguments",
     "add_model_arguments",
+    "add_refine_top_camera",
     "associate_with_model",
     "draw_pictures",
     "ego_camera_size",
     "horizontal_size",
     "learned_run_options",
+    "note_camera_refinement",
     "open_models",
 ]
 
@@ -65,6 +67,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
         help="calibrated cameras 'top' and 'ego': a camera file (both fixed) or a folder of "
         "per-frame camera files named by frame number",
     )
+    add_refine_top_camera(g)
     g.add_argument("--costs", default=None, metavar="JSON",
                    help="also write each frame's ids and cost matrix (written atomically)")
     g.add_argument("--threads", type=thread_count, default=1, metavar="K",
@@ -80,6 +83,22 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                    "boxes alone when the images are shown too weak to help; with no run of "
                    "consecutive frames (single image pairs), judge each frame by the bundle's "
                    "frame check (default on; off: always use the images)")
+
+
+def add_refine_top_camera(group) -> None:
+    """Add ``--refine-top-camera`` (``associate``, ``track``, ``adapt``)."""
+    group.add_argument(
+        "--refine-top-camera", choices=("auto", "off"), default="auto",
+        help="with --cameras: turn a top camera that is the same on every frame to fit the "
+        "video's head rays when the fit is clear (10 or more frames with boxes in both views; "
+        "a degree of calibration error costs the matcher more than the cameras give), and "
+        "say so (default auto; off: use it as given)")
+
+
+def note_camera_refinement(refinement, quiet: bool) -> None:
+    """Print what became of the top camera: always when it was turned, else unless quiet."""
+    if refinement is not None and (refinement.turned or not quiet):
+        print(refinement.message, file=sys.stderr)
 
 
 def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
@@ -213,6 +232,7 @@ def learned_run_options(
         keep_costs=(getattr(args, "costs", None) is not None
                     or getattr(args, "draw", None) is not None),
         appearance_check=getattr(args, "appearance_check", "on") == "on",
+        refine_top_camera=getattr(args, "refine_top_camera", "auto") == "auto",
     )
 
 
@@ -255,6 +275,7 @@ def associate_with_model(
     hor_path = getattr(args, "hor", "the horizontal boxes")
     with open_learned_inputs(top, hor, frames, options) as inputs:
         note_if_assumed(hor_size, hor, hor_path, bool(getattr(args, "quiet", False)))
+        note_camera_refinement(inputs.refinement, bool(getattr(args, "quiet", False)))
         run = inputs.associate(progress)
         if run.rechecked and not getattr(args, "quiet", False):
             both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))

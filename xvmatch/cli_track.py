@@ -28,6 +28,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
+from xvmatch.cli_model import add_refine_top_camera
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
@@ -141,7 +142,9 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
     open_matcher_cameras`), or None: a file for every horizontal frame ``f`` with boxes, and
     boxes in top frame ``f + offset`` (the files are numbered by the horizontal frames, as
     ``associate`` reads them), each camera the size of its view's images (``sources``: the
-    open top and horizontal images, or none; else the horizontal size ``resolved``)."""
+    open top and horizontal images, or none; else the horizontal size ``resolved``); a fixed
+    top camera refined on the boxes unless ``--refine-top-camera off``
+    (:mod:`xvmatch.inference.camera_refinement`)."""
     if args.cameras is None:
         return None
     from xvmatch.inference.learned_pipeline import open_matcher_cameras
@@ -151,7 +154,14 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
         wanted["top"] = (tuple(sources[0].size), f"the images {args.top_images}")
         wanted["hor"] = (tuple(sources[1].size), f"the images {args.hor_images}")
     frames = [f for f in hor if len(hor[f]) and len(top.get(f + offset, ()))]
-    return open_matcher_cameras(args.cameras, [(model, args.model)], frames, wanted)
+    cameras = open_matcher_cameras(args.cameras, [(model, args.model)], frames, wanted)
+    if args.refine_top_camera == "auto":
+        from xvmatch.cli_model import note_camera_refinement
+        from xvmatch.inference.camera_refinement import refine_run_cameras
+
+        cameras, refinement = refine_run_cameras(cameras, top, hor, frames, offset)
+        note_camera_refinement(refinement, args.quiet)
+    return cameras
 
 
 def _aligned(top, hor, images, cameras, offset: int):
@@ -239,6 +249,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "per-frame files numbered by the horizontal frames) for the --model's "
                    "cross-view weights: its camera cues and the rectified geometry, as "
                    "'associate --cameras' (an oblique overview camera wants them)")
+    add_refine_top_camera(g)
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
                    "(default 0.3; 1: the images serve only over time, which exact --cameras "

@@ -1,0 +1,223 @@
+"""A fixed top camera's orientation refined from the video itself.
+
+A top camera calibrated a degree or two off moves its head rays (geometric-priors Eq. 5) by a
+metre or more at the scene, and the learned matcher, trained with exact cameras, trusts the ray
+distance (Eq. 6): on rendered videos a 2-degree error of the fixed top camera brings per-frame
+association below the boxes alone, while the same error of the egocentric camera, frame by
+frame, costs next to nothing (docs/method.md, "How exact they must be"). A fixed top camera
+has one orientation for the whole video, so the video can correct it:
+
+* every horizontal head ray should meet the head ray of a different top box (Eq. 6 distance,
+  robust loss ``d^2 / (d^2 + s^2)``, one-to-one by the Hungarian method; pairs that fail the
+  cheirality test of Eq. 7 count as missing);
+* one top head ray should pass through the egocentric camera or just above it (its wearer
+  is in the top view; :data:`WEARER_HEAD`).
+
+The rotation of the top camera about its centre that minimises the mean loss over a sample of
+frames, plus a small price per squared degree (of two fits alike, the smaller turn), is searched
+on a grid within ``max_deg``, then by Nelder-Mead from the best grid points and the given
+orientation at shrinking scales ``s`` (the best two go on to the finest); the lowest final loss
+wins. Only the orientation is refined: a centre a few decimetres off moves the rays by as much,
+a turn of 2 degrees by metres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment, minimize
+from scipy.spatial.transform import Rotation
+
+from xvmatch.geometry.array_checks import as_boxes
+from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.ray_priors import METRIC_MARGIN, box_rays
+
+__all__ = ["MIN_REFINE_FRAMES", "WEARER_HEAD", "TopCameraRefinement", "refine_top_camera"]
+
+MIN_REFINE_FRAMES: int = 10
+"""Fewest frames with boxes in both views to refine on: a few frames hold too few people to
+tell a turn of the camera from a chance alignment of unrelated heads."""
+
+WEARER_HEAD: float = 0.5
+"""Metres from the egocentric camera up to its wearer's head top, at most (a camera worn at the
+eyes: about 0.1; on the chest: about 0.4)."""
+
+_SCALES = (1.0, 0.5, 0.25, 0.12)  # metres, the robust loss's scale s, coarse to fine
+_STARTS = 4  # best grid points refined (and the given orientation)
+_FINE = 2  # of those, the best taken on to the fine scales
+_MISS = 10.0  # metres: a pair behind a camera (Eq. 7) or padding, beyond any scale
+_GRID_SCALE = 0.5  # metres, the scale the grid is ranked at
+_PRIOR = 0.002  # loss per squared degree of turn: of two fits alike, the smaller turn
+
+
+@dataclass(frozen=True)
+class TopCameraRefinement:
+    """What :func:`refine_top_camera` found.
+
+    Attributes:
+        camera: the top camera turned by ``rotation_deg`` (the given one when ``angle_deg`` is 0).
+        rotation_deg: ``(3,)`` rotation vector, degrees, that turns the top camera's world ray
+            directions (``R' = R Q^T`` with ``Q`` this rotation).
+        angle_deg: its angle, degrees.
+        frames: the frames it was fitted on.
+        loss_before, loss_after: mean robust loss at the finest scale, given and refined
+            (0: every head ray meets its partner; 1: none does).
+    """
+
+    camera: Camera
+    rotation_deg: tuple[float, float, float]
+    angle_deg: float
+    frames: int
+    loss_before: float
+    loss_after: float
+
+    def describe(self) -> str:
+        """One line for the user."""
+        return (f"turned the top camera {self.angle_deg:.2f} degrees to fit the head rays of "
+                f"{self.frames} frames (loss {self.loss_before:.3f} -> {self.loss_after:.3f})")
+
+
+class _RayFrames:
+    """The sampled frames' head rays, padded to ``(F, M, 3)`` and ``(F, N, 3)``."""
+
+    def __init__(self, top: Camera, hor_cameras: Sequence[Camera],
+                 top_boxes: Sequence[np.ndarray], hor_boxes: Sequence[np.ndarray],
+                 margin: float) -> None:
+        f = len(hor_cameras)
+        m = max(len(b) for b in top_boxes)
+        n = max(len(b) for b in hor_boxes)
+        self.top_dirs = np.zeros((f, m, 3))
+        self.hor_dirs = np.zeros((f, n, 3))
+        self.top_mask = np.zeros((f, m), bool)
+        self.hor_mask = np.zeros((f, n), bool)
+        self.baseline = np.zeros((f, 3))
+        self.sizes = []
+        for k, (cam, tb, hb) in enumerate(zip(hor_cameras, top_boxes, hor_boxes, strict=True)):
+            self.top_dirs[k, :len(tb)] = box_rays(top, tb).directions
+            self.hor_dirs[k, :len(hb)] = box_rays(cam, hb).directions
+            self.top_mask[k, :len(tb)] = True
+            self.hor_mask[k, :len(hb)] = True
+            self.baseline[k] = cam.c - top.c
+            self.sizes.append((len(tb), len(hb)))
+        self.margin = margin
+
+    def loss(self, rotvec_deg: np.ndarray, scale: float) -> float:
+        """Mean robust loss of the one-to-one head-ray pairs and the wearer term."""
+        q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
+        nt = self.top_dirs @ q.T                                   # (F, M, 3)
+        nh = self.hor_dirs                                         # (F, N, 3)
+        b = self.baseline[:, None, None, :]
+        u, v = nt[:, :, None, :], nh[:, None, :, :]  # n_i x n_j of Eq. 6, written out (fast)
+        cross = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1],
+                          u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
+                          u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], -1)  # (F, M, N, 3)
+        sin = np.linalg.norm(cross, axis=-1)
+        dist = np.abs(np.sum(cross * b, axis=-1)) / np.maximum(sin, 1e-9)
+        cos = np.einsum("fmk,fnk->fmn", nt, nh)
+        bt = np.einsum("fmk,fk->fm", nt, self.baseline)[:, :, None]
+        bh = np.einsum("fnk,fk->fn", nh, self.baseline)[:, None, :]
+        den = np.maximum(1.0 - cos ** 2, 1e-9)
+        depth_top = (bt - cos * bh) / den                          # along the top ray
+        depth_hor = (cos * bt - bh) / den                          # along the horizontal ray
+        ok = (depth_top > self.margin) & (depth_hor > self.margin)
+        ok &= self.top_mask[:, :, None] & self.hor_mask[:, None, :]
+        dist = np.where(ok, dist, _MISS)
+        rho = dist ** 2 / (dist ** 2 + scale ** 2)
+        total = 0.0
+        for k, (m, n) in enumerate(self.sizes):
+            r, c = linear_sum_assignment(rho[k, :m, :n])
+            total += float(rho[k, r, c].sum()) + (n - len(r))      # unpaired heads: 1 each
+        # the wearer: one top head ray passes through the egocentric camera or up to
+        # WEARER_HEAD metres above it (worn at the eyes or on the chest); the closest point of
+        # that vertical segment to each ray (its squared distance is convex in the height)
+        up = np.array([0.0, 0.0, 1.0])
+        along_b = np.einsum("fk,fmk->fm", self.baseline, nt)
+        p_b = self.baseline[:, None, :] - along_b[..., None] * nt     # (F, M, 3), off the ray
+        p_up = up - nt[..., 2:3] * nt                                  # (F, M, 3)
+        height = -np.sum(p_b * p_up, axis=-1) / np.maximum(np.sum(p_up ** 2, axis=-1), 1e-12)
+        height = np.clip(height, 0.0, WEARER_HEAD)
+        perp = np.linalg.norm(p_b + height[..., None] * p_up, axis=-1)
+        along = along_b + height * nt[..., 2]
+        perp = np.where((along > 0) & self.top_mask, perp, _MISS).min(axis=1)
+        total += float(np.sum(perp ** 2 / (perp ** 2 + scale ** 2)))
+        count = sum(n for _, n in self.sizes) + len(self.sizes)
+        return total / count + _PRIOR * float(np.sum(np.square(rotvec_deg)))
+
+
+def _sample(n: int, most: int) -> np.ndarray:
+    """``most`` indices spread evenly over ``range(n)`` (all of them when ``n <= most``)."""
+    if n <= most:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0, n - 1, most)).astype(int))
+
+
+def refine_top_camera(
+    top: Camera,
+    hor_cameras: Sequence[Camera],
+    top_boxes: Sequence[np.ndarray],
+    hor_boxes: Sequence[np.ndarray],
+    *,
+    max_deg: float = 4.0,
+    grid_step_deg: float = 1.0,
+    max_frames: int = 30,
+    margin: float = METRIC_MARGIN,
+) -> TopCameraRefinement:
+    """Refine the orientation of a top camera fixed over a video (see the module docstring).
+
+    Args:
+        top: the fixed top camera as calibrated.
+        hor_cameras: the egocentric camera of each frame.
+        top_boxes, hor_boxes: ``(M, 4)`` and ``(N, 4)`` x, y, w, h boxes of each frame, pixels.
+        max_deg: the largest turn searched (grid half-width), degrees.
+        grid_step_deg: the grid's step, degrees.
+        max_frames: frames sampled, evenly spread (the result is the same on any machine).
+        margin: the cheirality test's depth margin, metres (Eq. 7).
+
+    Returns:
+        The refinement; the rotation is rounded to 1e-4 degrees so that last-bit differences
+        between machines do not reach the matcher.
+
+    Raises:
+        ValueError: fewer than :data:`MIN_REFINE_FRAMES` frames with boxes in both views, or
+            inputs of different lengths.
+    """
+    if not len(hor_cameras) == len(top_boxes) == len(hor_boxes):
+        raise ValueError(f"hor_cameras, top_boxes and hor_boxes differ in length: "
+                         f"{len(hor_cameras)}, {len(top_boxes)}, {len(hor_boxes)}")
+    keep = [k for k in range(len(hor_cameras)) if len(top_boxes[k]) and len(hor_boxes[k])]
+    if len(keep) < MIN_REFINE_FRAMES:
+        raise ValueError(f"{len(keep)} frame(s) with boxes in both views; refining the top "
+                         f"camera needs {MIN_REFINE_FRAMES}")
+    keep = [keep[i] for i in _sample(len(keep), max_frames)]
+    rays = _RayFrames(top, [hor_cameras[k] for k in keep],
+                      [as_boxes(top_boxes[k], "top_boxes") for k in keep],
+                      [as_boxes(hor_boxes[k], "hor_boxes") for k in keep], margin)
+    axis = np.arange(-max_deg, max_deg + 1e-9, grid_step_deg)
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    grid_loss = np.array([rays.loss(g, _GRID_SCALE) for g in grid])
+    starts = [np.zeros(3)] + [grid[i] for i in np.argsort(grid_loss, kind="stable")[:_STARTS]]
+
+    def descend(x: np.ndarray, scales: tuple[float, ...]) -> np.ndarray:
+        for scale in scales:
+            x = minimize(rays.loss, x, args=(scale,), method="Nelder-Mead",
+                         options={"xatol": 0.01, "fatol": 1e-7, "maxiter": 400}).x
+        return x
+
+    # every start at the coarse scales, the best _FINE of them on to the fine ones
+    half = len(_SCALES) // 2
+    coarse = [descend(x, _SCALES[:half]) for x in starts]
+    order = np.argsort([rays.loss(x, _SCALES[half - 1]) for x in coarse], kind="stable")
+    best_x, best_loss = np.zeros(3), rays.loss(np.zeros(3), _SCALES[-1])
+    before = best_loss
+    for i in order[:_FINE]:
+        x = np.round(descend(coarse[i], _SCALES[half:]), 4)
+        value = rays.loss(x, _SCALES[-1])
+        if value < best_loss:
+            best_x, best_loss = x, value
+    q = Rotation.from_rotvec(np.radians(best_x)).as_matrix()
+    camera = top if not best_x.any() else Camera(
+        K=top.K, R=top.R @ q.T, c=top.c, width=top.width, height=top.height)
+    return TopCameraRefinement(camera, tuple(float(v) for v in best_x),
+                               float(np.linalg.norm(best_x)), len(keep), before, best_loss)

@@ -1,0 +1,103 @@
+"""``--cameras``' top camera refined on the run's own boxes before the learned matcher uses it.
+
+A fixed top camera calibrated a degree or two off costs the learned matcher more than the
+cameras give (docs/method.md, "How exact they must be"); :func:`~xvmatch.geometry.
+top_camera_refinement.refine_top_camera` turns it to fit the video's head rays. This module
+decides when (a top camera that is the same on every frame, enough frames with boxes in both
+views), keeps the given camera when the fit gains too little to trust, and says what it did in
+one line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from xvmatch.datasets.camera_frames import CameraFrames
+from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.matcher_inputs import FrameCameras
+from xvmatch.geometry.top_camera_refinement import (
+    MIN_REFINE_FRAMES,
+    TopCameraRefinement,
+    refine_top_camera,
+)
+
+__all__ = ["MIN_GAIN", "CameraRefinement", "refine_run_cameras"]
+
+MIN_GAIN: float = 0.05
+"""Least drop of the refinement's loss (:class:`~xvmatch.geometry.top_camera_refinement.
+TopCameraRefinement`, 0 to 1) for the turned camera to be used: smaller gains are as often a
+chance alignment of unrelated heads as a real correction (renders, docs/method.md)."""
+
+OFF_HINT = "--refine-top-camera off uses it as given"
+
+
+@dataclass(frozen=True)
+class CameraRefinement:
+    """What became of the top camera.
+
+    Attributes:
+        turned: the refined top camera is used.
+        fit: the refinement, or None when none was tried (``message`` says why).
+        message: one line for the user.
+    """
+
+    turned: bool
+    fit: TopCameraRefinement | None
+    message: str
+
+
+def _same_camera(a: Camera, b: Camera) -> bool:
+    return (a.image_size == b.image_size and np.array_equal(a.K, b.K)
+            and np.array_equal(a.R, b.R) and np.array_equal(a.c, b.c))
+
+
+def _with_top(cameras: CameraFrames, top: Camera) -> CameraFrames:
+    if cameras.static is not None:
+        return replace(cameras, static=FrameCameras(top, cameras.static.hor))
+    return replace(cameras, per_frame={f: FrameCameras(top, c.hor)
+                                       for f, c in cameras.per_frame.items()})
+
+
+def refine_run_cameras(
+    cameras: CameraFrames,
+    top: Mapping,
+    hor: Mapping,
+    frames: Iterable[int],
+    top_offset: int = 0,
+) -> tuple[CameraFrames, CameraRefinement]:
+    """The run's cameras with the top camera refined when it is fixed and the fit is clear.
+
+    Args:
+        cameras: the opened ``--cameras`` (numbered by the horizontal frames).
+        top, hor: ``{frame: record}`` with ``boxes`` of each view.
+        frames: the horizontal frames of the run; top frame ``f + top_offset`` is shown with
+            horizontal frame ``f``.
+        top_offset: see ``frames`` (0 when ``top`` is already re-timed).
+
+    Returns:
+        ``(cameras to use, what was done)``.
+    """
+    both = [f for f in sorted(set(int(f) for f in frames))
+            if len(hor.get(f, ())) and len(top.get(f + top_offset, ()))]
+    held = ([cameras.static] if cameras.static is not None
+            else [cameras.per_frame[f] for f in sorted(cameras.per_frame)])
+    if not all(_same_camera(held[0].top, c.top) for c in held[1:]):
+        return cameras, CameraRefinement(False, None, "cameras: the top camera changes from "
+                                         "frame to frame; used as given")
+    if len(both) < MIN_REFINE_FRAMES:
+        return cameras, CameraRefinement(
+            False, None, f"cameras: {len(both)} frame(s) with boxes in both views, too few to "
+            f"check the top camera against ({MIN_REFINE_FRAMES} needed); used as given")
+    fit = refine_top_camera(held[0].top, [cameras.get(f).hor for f in both],
+                            [top[f + top_offset].boxes for f in both],
+                            [hor[f].boxes for f in both])
+    if fit.angle_deg == 0.0 or fit.loss_before - fit.loss_after < MIN_GAIN:
+        return cameras, CameraRefinement(
+            False, fit, f"cameras: the top camera fits the head rays of {fit.frames} frames "
+            f"about as well as given (loss {fit.loss_before:.3f}, refined "
+            f"{fit.loss_after:.3f}); used as given")
+    return _with_top(cameras, fit.camera), CameraRefinement(
+        True, fit, f"cameras: {fit.describe()}; {OFF_HINT}")

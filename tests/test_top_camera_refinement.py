@@ -1,0 +1,105 @@
+"""Refining a fixed top camera from the head rays of a video (geometry/top_camera_refinement.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import Phase, given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+from xvmatch.geometry.top_camera_refinement import (
+    MIN_REFINE_FRAMES,
+    refine_top_camera,
+)
+
+TOP_SIZE, HOR_SIZE = (1280, 720), (640, 360)
+
+
+def _boxes(camera: Camera, heads: np.ndarray) -> np.ndarray:
+    """Boxes whose top centre is each head's projection (in the image and in front)."""
+    uv, depth = camera.project(heads)
+    keep = (depth > 0.5) & camera.in_image(uv)
+    uv = uv[keep]
+    w = np.full(len(uv), 12.0)
+    return np.column_stack([uv[:, 0] - w / 2, uv[:, 1], w, 3 * w])
+
+
+def _scene(seed: int, frames: int = 24, top_height: float = 18.0):
+    """Heads of 14 people walking in a 16 m square, an oblique top camera on a building and
+    the egocentric camera of a 15th person, turning as it walks: the exact cameras and the
+    boxes of each frame."""
+    rng = np.random.default_rng(seed)
+    start = rng.uniform(-8, 8, (14, 2))
+    velocity = rng.normal(0, 1.2, (14, 2))
+    height = rng.uniform(1.55, 1.9, 14)
+    top = Camera(K=intrinsics_from_fov(*TOP_SIZE, 70.0),
+                 R=look_rotation(np.pi / 2, np.radians(42)),
+                 c=np.array([0.0, -22.0, top_height]), width=TOP_SIZE[0], height=TOP_SIZE[1])
+    k_hor = intrinsics_from_fov(*HOR_SIZE, 90.0)
+    wearer = rng.uniform(-6, -2, 2)
+    hors, top_boxes, hor_boxes = [], [], []
+    for f in range(frames):
+        t = f / 5.0
+        xy = start + velocity * t
+        heads = np.column_stack([xy, height])
+        yaw = np.radians(60.0 + 2.0 * f)
+        eye = np.array([*wearer + 0.2 * f * np.array([np.cos(yaw), np.sin(yaw)]), 1.65])
+        hor = Camera(K=k_hor, R=look_rotation(yaw, np.radians(5.0)), c=eye,
+                     width=HOR_SIZE[0], height=HOR_SIZE[1])
+        wearer_head = np.array([[*eye[:2], 1.75]])
+        hors.append(hor)
+        top_boxes.append(_boxes(top, np.vstack([heads, wearer_head])))
+        hor_boxes.append(_boxes(hor, heads))
+    return top, hors, top_boxes, hor_boxes
+
+
+def _turned(camera: Camera, rotvec_deg: np.ndarray) -> Camera:
+    q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
+    return Camera(K=camera.K, R=camera.R @ q.T, c=camera.c, width=camera.width,
+                  height=camera.height)
+
+
+def _angle(a: Camera, b: Camera) -> float:
+    return float(np.degrees(Rotation.from_matrix(a.R @ b.R.T).magnitude()))
+
+
+@settings(max_examples=4, phases=(Phase.explicit, Phase.generate))  # seconds each: no shrinking
+@given(seed=st.integers(0, 10_000), axis=st.tuples(*[st.floats(-1, 1)] * 3)
+       .filter(lambda v: np.linalg.norm(v) > 0.2), degrees=st.floats(1.0, 3.0))
+def test_a_turned_top_camera_is_found_again(seed, axis, degrees) -> None:
+    top, hors, top_boxes, hor_boxes = _scene(seed)
+    axis = np.asarray(axis) / np.linalg.norm(axis)
+    wrong = _turned(top, degrees * axis)
+    fit = refine_top_camera(wrong, hors, top_boxes, hor_boxes)
+    assert _angle(fit.camera, top) < 0.3 < degrees - 0.5 < _angle(wrong, top) + 0.5
+    assert fit.loss_after < fit.loss_before
+
+
+def test_an_exact_camera_is_left_about_where_it_was() -> None:
+    top, hors, top_boxes, hor_boxes = _scene(7)
+    fit = refine_top_camera(top, hors, top_boxes, hor_boxes)
+    assert fit.angle_deg < 0.2
+    assert fit.loss_before < 0.01
+
+
+def test_the_same_input_gives_the_same_camera() -> None:
+    top, hors, top_boxes, hor_boxes = _scene(3)
+    wrong = _turned(top, np.array([1.0, -1.5, 0.5]))
+    a = refine_top_camera(wrong, hors, top_boxes, hor_boxes)
+    b = refine_top_camera(wrong, hors[::-1][::-1], list(top_boxes), list(hor_boxes))
+    assert a.rotation_deg == b.rotation_deg
+    assert np.array_equal(a.camera.R, b.camera.R)
+    # rounded to 1e-4 degrees: last-bit differences between CPUs do not reach the matcher
+    assert all(round(v, 4) == v for v in a.rotation_deg)
+
+
+def test_too_few_frames_or_mismatched_inputs_are_refused() -> None:
+    top, hors, top_boxes, hor_boxes = _scene(1, frames=MIN_REFINE_FRAMES)
+    empty = [np.zeros((0, 4)), *top_boxes[1:]]
+    with pytest.raises(ValueError, match=f"{MIN_REFINE_FRAMES - 1} frame.*needs "
+                       f"{MIN_REFINE_FRAMES}"):
+        refine_top_camera(top, hors, empty, hor_boxes)
+    with pytest.raises(ValueError, match="differ in length"):
+        refine_top_camera(top, hors[:-1], top_boxes, hor_boxes)
