@@ -93,6 +93,8 @@ class _RayFrames:
         self.top_mask = np.zeros((f, m), bool)
         self.hor_mask = np.zeros((f, n), bool)
         self.baseline = np.zeros((f, 3))
+        self.hor_axis = np.zeros((f, 3))  # optical axes in the world (depth = axis . (X - c))
+        self.top_axis = top.R[2].copy()
         self.sizes = []
         for k, (cam, tb, hb) in enumerate(zip(hor_cameras, top_boxes, hor_boxes, strict=True)):
             self.top_dirs[k, :len(tb)] = box_rays(top, tb).directions
@@ -100,11 +102,16 @@ class _RayFrames:
             self.top_mask[k, :len(tb)] = True
             self.hor_mask[k, :len(hb)] = True
             self.baseline[k] = cam.c - top.c
+            self.hor_axis[k] = cam.R[2]
             self.sizes.append((len(tb), len(hb)))
         self.margin = margin
 
-    def loss(self, rotvec_deg: np.ndarray, scale: float) -> float:
-        """Mean robust loss of the one-to-one head-ray pairs and the wearer term."""
+    def distances(self, rotvec_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(F, M, N)`` Eq. 6 distances of every frame's head rays with the top ones turned by
+        ``rotvec_deg``, :data:`_MISS` where Eq. 7 fails (the batched form of
+        :func:`~xvmatch.geometry.ray_priors.ray_distances` and
+        :func:`~xvmatch.geometry.ray_priors.cheirality_mask`, for the search's inner loop), and
+        the turned top directions ``(F, M, 3)``."""
         q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
         nt = self.top_dirs @ q.T                                   # (F, M, 3)
         nh = self.hor_dirs                                         # (F, N, 3)
@@ -119,11 +126,21 @@ class _RayFrames:
         bt = np.einsum("fmk,fk->fm", nt, self.baseline)[:, :, None]
         bh = np.einsum("fnk,fk->fn", nh, self.baseline)[:, None, :]
         den = np.maximum(1.0 - cos ** 2, 1e-9)
-        depth_top = (bt - cos * bh) / den                          # along the top ray
-        depth_hor = (cos * bt - bh) / den                          # along the horizontal ray
-        ok = (depth_top > self.margin) & (depth_hor > self.margin)
+        along_top = (bt - cos * bh) / den          # the closest points, along the top ray
+        along_hor = (cos * bt - bh) / den          # and along the horizontal one
+        # their midpoint q (Eq. 7), its depth in each camera: q - c_top, q - c_hor
+        half = 0.5 * (along_top[..., None] * u + along_hor[..., None] * v)
+        axis_top = q @ self.top_axis
+        depth_top = half @ axis_top + 0.5 * (self.baseline @ axis_top)[:, None, None]
+        depth_hor = (np.einsum("fmnk,fk->fmn", half, self.hor_axis)
+                     - 0.5 * np.einsum("fk,fk->f", self.baseline, self.hor_axis)[:, None, None])
+        ok = (depth_top > self.margin) & (depth_hor > self.margin) & (sin >= 1e-9)
         ok &= self.top_mask[:, :, None] & self.hor_mask[:, None, :]
-        dist = np.where(ok, dist, _MISS)
+        return np.where(ok, dist, _MISS), nt
+
+    def loss(self, rotvec_deg: np.ndarray, scale: float) -> float:
+        """Mean robust loss of the one-to-one head-ray pairs and the wearer term."""
+        dist, nt = self.distances(rotvec_deg)
         rho = dist ** 2 / (dist ** 2 + scale ** 2)
         total = 0.0
         for k, (m, n) in enumerate(self.sizes):

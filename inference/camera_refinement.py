@@ -50,8 +50,11 @@ class CameraRefinement:
 
 
 def _same_camera(a: Camera, b: Camera) -> bool:
-    return (a.image_size == b.image_size and np.array_equal(a.K, b.K)
-            and np.array_equal(a.R, b.R) and np.array_equal(a.c, b.c))
+    """The same camera, up to what writing a file can change (1e-9 of a rotation entry, a
+    micrometre, a millionth of a pixel)."""
+    return (a.image_size == b.image_size and np.allclose(a.K, b.K, rtol=0, atol=1e-6)
+            and np.allclose(a.R, b.R, rtol=0, atol=1e-9)
+            and np.allclose(a.c, b.c, rtol=0, atol=1e-6))
 
 
 def _with_top(cameras: CameraFrames, top: Camera) -> CameraFrames:

@@ -126,7 +126,7 @@ class LearnedRun:
         rechecked: the frames scored again with FP32 because their INT8 assignment was a near
             tie (matchers opened with ``recheck``).
         checked: the appearance check of a run with ``appearance_check`` and images, else None.
-        cameras: what became of the top camera of a run with cameras and
+        refinement: what became of the top camera of a run with cameras and
             ``refine_top_camera``, else None.
     """
 
@@ -138,7 +138,7 @@ class LearnedRun:
     models: tuple[LearnedMatcher, ...]
     rechecked: list[int] = field(default_factory=list)
     checked: AppearanceCheck | None = None
-    cameras: CameraRefinement | None = None
+    refinement: CameraRefinement | None = None
 
 
 class RetimedFrames:

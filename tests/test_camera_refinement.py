@@ -125,7 +125,7 @@ def test_refinement_mends_the_matcher_on_a_miscalibrated_top_camera(overview) ->
     off = run_learned_association(video.top, video.hor, frames, options)
     auto = run_learned_association(video.top, video.hor, frames,
                                    replace(options, refine_top_camera=True))
-    assert off.cameras is None and auto.cameras.turned
+    assert off.refinement is None and auto.refinement.turned
     assert _right(video, off.pairs) < 0.7 and _right(video, auto.pairs) > 0.95, (
         _right(video, off.pairs), _right(video, auto.pairs))
 

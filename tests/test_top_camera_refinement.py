@@ -103,3 +103,29 @@ def test_too_few_frames_or_mismatched_inputs_are_refused() -> None:
         refine_top_camera(top, hors, empty, hor_boxes)
     with pytest.raises(ValueError, match="differ in length"):
         refine_top_camera(top, hors[:-1], top_boxes, hor_boxes)
+
+
+def test_the_batched_rays_are_eqs_6_and_7() -> None:
+    # The search's batched distances (top camera turned) are ray_priors' Eq. 6 distances where
+    # Eq. 7 holds (with the metric margin) on the turned camera, frame by frame.
+    from xvmatch.geometry.ray_priors import (
+        METRIC_MARGIN,
+        box_rays,
+        cheirality_mask,
+        ray_distances,
+    )
+    from xvmatch.geometry.top_camera_refinement import _MISS, _RayFrames
+
+    top, hors, top_boxes, hor_boxes = _scene(5, frames=12)
+    turn = np.array([0.7, -1.1, 2.0])
+    rays = _RayFrames(top, hors, top_boxes, hor_boxes, METRIC_MARGIN)
+    batched, _ = rays.distances(turn)
+    turned = _turned(top, turn)
+    misses = 0
+    for k, (hor, tb, hb) in enumerate(zip(hors, top_boxes, hor_boxes, strict=True)):
+        rt, rh = box_rays(turned, tb), box_rays(hor, hb)
+        ok = cheirality_mask(rt, rh, margin=METRIC_MARGIN)
+        want = np.where(ok, ray_distances(rt, rh), _MISS)
+        np.testing.assert_allclose(batched[k, :len(tb), :len(hb)], want, rtol=1e-9, atol=1e-9)
+        misses += int((~ok).sum())
+    assert misses > 0  # the cheirality test did reject some pairs here
