@@ -34,7 +34,8 @@ from xvmatch.geometry.array_checks import as_boxes
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.ray_priors import METRIC_MARGIN, box_rays
 
-__all__ = ["MIN_REFINE_FRAMES", "WEARER_HEAD", "TopCameraRefinement", "refine_top_camera"]
+__all__ = ["MAX_PAIRS", "MIN_REFINE_FRAMES", "WEARER_HEAD", "TopCameraRefinement",
+           "refine_top_camera"]
 
 MIN_REFINE_FRAMES: int = 10
 """Fewest frames with boxes in both views to refine on: a few frames hold too few people to
@@ -43,6 +44,10 @@ tell a turn of the camera from a chance alignment of unrelated heads."""
 WEARER_HEAD: float = 0.5
 """Metres from the egocentric camera up to its wearer's head top, at most (a camera worn at the
 eyes: about 0.1; on the chest: about 0.4)."""
+
+MAX_PAIRS: int = 20_000
+"""Top x horizontal box pairs the search holds at once (over its frames), by default: 30 frames
+of 30 x 20 people; a crowd is refined on fewer frames."""
 
 _SCALES = (1.0, 0.5, 0.25, 0.12)  # metres, the robust loss's scale s, coarse to fine
 _STARTS = 4  # best grid points refined (and the given orientation)
@@ -179,6 +184,7 @@ def refine_top_camera(
     max_deg: float = 4.0,
     grid_step_deg: float = 1.0,
     max_frames: int = 30,
+    max_pairs: int = MAX_PAIRS,
     margin: float = METRIC_MARGIN,
 ) -> TopCameraRefinement:
     """Refine the orientation of a top camera fixed over a video (see the module docstring).
@@ -190,6 +196,9 @@ def refine_top_camera(
         max_deg: the largest turn searched (grid half-width), degrees.
         grid_step_deg: the grid's step, degrees.
         max_frames: frames sampled, evenly spread (the result is the same on any machine).
+        max_pairs: fewer frames (down to :data:`MIN_REFINE_FRAMES`) when a frame's top x
+            horizontal box pairs (the median) times ``max_frames`` exceed this: the search's
+            time and memory grow with the pairs.
         margin: the cheirality test's depth margin, metres (Eq. 7).
 
     Returns:
@@ -207,7 +216,9 @@ def refine_top_camera(
     if len(keep) < MIN_REFINE_FRAMES:
         raise ValueError(f"{len(keep)} frame(s) with boxes in both views; refining the top "
                          f"camera needs {MIN_REFINE_FRAMES}")
-    keep = [keep[i] for i in _sample(len(keep), max_frames)]
+    pairs = float(np.median([len(top_boxes[k]) * len(hor_boxes[k]) for k in keep]))
+    most = int(np.clip(max_pairs // max(pairs, 1.0), MIN_REFINE_FRAMES, max_frames))
+    keep = [keep[i] for i in _sample(len(keep), most)]
     rays = _RayFrames(top, [hor_cameras[k] for k in keep],
                       [as_boxes(top_boxes[k], "top_boxes") for k in keep],
                       [as_boxes(hor_boxes[k], "hor_boxes") for k in keep], margin)

@@ -24,7 +24,7 @@ from xvmatch.geometry.top_camera_refinement import (
     refine_top_camera,
 )
 
-__all__ = ["MIN_GAIN", "CameraRefinement", "refine_run_cameras"]
+__all__ = ["CROWD_PAIRS", "MIN_GAIN", "CameraRefinement", "refine_run_cameras"]
 
 MIN_GAIN: float = 0.05
 """Least drop of the refinement's loss (:class:`~xvmatch.geometry.top_camera_refinement.
@@ -32,6 +32,12 @@ TopCameraRefinement`, 0 to 1) for the turned camera to be used: smaller gains ar
 chance alignment of unrelated heads as a real correction (renders, docs/method.md)."""
 
 OFF_HINT = "--refine-top-camera off uses it as given"
+
+CROWD_PAIRS: int = 50_000
+"""Most top x horizontal box pairs over :data:`~xvmatch.geometry.top_camera_refinement.
+MIN_REFINE_FRAMES` typical frames that are refined (10 frames of 100 x 50 people: 20 s on this
+project's 2-core machine, where 30 frames of 20 x 10 take 3 s); a denser crowd uses its camera
+as given, and says so."""
 
 
 @dataclass(frozen=True)
@@ -94,6 +100,12 @@ def refine_run_cameras(
         return cameras, CameraRefinement(
             False, None, f"cameras: {len(both)} frame(s) with boxes in both views, too few to "
             f"check the top camera against ({MIN_REFINE_FRAMES} needed); used as given")
+    pairs = sorted(len(top[f + top_offset].boxes) * len(hor[f].boxes) for f in both)
+    if pairs[len(pairs) // 2] * MIN_REFINE_FRAMES > CROWD_PAIRS:
+        return cameras, CameraRefinement(
+            False, None, f"cameras: {pairs[len(pairs) // 2]} top x horizontal box pairs in a "
+            "typical frame, too many to check the top camera against in reasonable time; used "
+            "as given")
     fit = refine_top_camera(held[0].top, [cameras.get(f).hor for f in both],
                             [top[f + top_offset].boxes for f in both],
                             [hor[f].boxes for f in both])

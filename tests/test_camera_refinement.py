@@ -141,3 +141,19 @@ def test_associate_says_what_it_did(overview, tmp_path, capsys) -> None:
                  "--refine-top-camera", "off"]) == 0
     assert "cameras:" not in capsys.readouterr().err
     assert (tmp_path / "a.txt").read_bytes() != (tmp_path / "b.txt").read_bytes()
+
+
+def test_a_dense_crowd_is_used_as_given(scene) -> None:
+    # 120 x 50 people a frame: the search would hold 60,000 pairs over its 10 frames at least.
+    top, hors, _, _ = scene
+    rng = np.random.default_rng(0)
+
+    def boxes(n: int, size: tuple[int, int]) -> np.ndarray:
+        xy = rng.uniform([0, 0], [size[0] - 20, size[1] - 60], (n, 2))
+        return np.column_stack([xy, np.full(n, 12.0), np.full(n, 36.0)])
+
+    cameras = CameraFrames("cams.json", static=FrameCameras(_turned(top, TURN), hors[0]))
+    used, what = refine_run_cameras(cameras, _records([boxes(120, (1280, 720))] * 12),
+                                    _records([boxes(50, (640, 360))] * 12), range(1, 13))
+    assert used is cameras and what.fit is None
+    assert what.message.startswith("cameras: 6000 top x horizontal box pairs in a typical frame")

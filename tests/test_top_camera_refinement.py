@@ -129,3 +129,13 @@ def test_the_batched_rays_are_eqs_6_and_7() -> None:
         np.testing.assert_allclose(batched[k, :len(tb), :len(hb)], want, rtol=1e-9, atol=1e-9)
         misses += int((~ok).sum())
     assert misses > 0  # the cheirality test did reject some pairs here
+
+
+def test_a_crowd_is_refined_on_fewer_frames() -> None:
+    top, hors, top_boxes, hor_boxes = _scene(2)
+    pairs = np.median([len(t) * len(h) for t, h in zip(top_boxes, hor_boxes, strict=True)])
+    assert refine_top_camera(top, hors, top_boxes, hor_boxes).frames == len(hors)
+    fewer = refine_top_camera(top, hors, top_boxes, hor_boxes, max_pairs=int(12 * pairs))
+    assert fewer.frames == 12
+    least = refine_top_camera(top, hors, top_boxes, hor_boxes, max_pairs=1)
+    assert least.frames == MIN_REFINE_FRAMES
