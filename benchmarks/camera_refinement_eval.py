@@ -12,9 +12,18 @@ video's line (the turn found, how far the refined top camera still is from the t
 Eq. 9 accuracy of each) and the means per scenario and error: Eq. 9 accuracy and CVIDF1 of every
 frame, and the refinement's time against the association's in the same run.
 
+With ``--multi-ego N`` (2 or 3), ``xvmatch associate-multi`` instead: rendered drone videos of
+N egocentric views (:func:`xvmatch.datasets.multi_ego_scenes.render_multi_ego`, written as the
+command's input files), every view's camera folder holding the top camera turned D degrees
+(the egocentric cameras exact), run with no cameras, the cameras as given
+(``--refine-top-camera off``) and refined (the default); prints each video's line and the mean
+F1 of the top-egocentric pairs.
+
 Usage:
     python benchmarks/camera_refinement_eval.py [--scenario overview drone] [--frames 60]
         [--seeds 1 2 5 6 11 12 13 16] [--errors 0 0.5 1 2 3] [--people 12 20] [--model default]
+    python benchmarks/camera_refinement_eval.py --multi-ego 2 --frames 40 --seeds 1 2 3
+        --errors 2 3
 """
 
 from __future__ import annotations
@@ -29,7 +38,7 @@ from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from tracking_eval import as_detections, with_camera_error
+from tracking_eval import ERROR_VIEWS, as_detections, with_camera_error
 
 from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.synthetic_scenes import SynthConfig
@@ -48,6 +57,94 @@ def scored(pairs, truth_top, truth_hor, top, hor):
     return count_sequence(pred, top, hor)
 
 
+def _rows(path: Path) -> list[tuple[int, int]]:
+    """(frame, id) of each row of a MOT file, in order."""
+    return [(int(r[0]), int(float(r[1]))) for r in
+            (line.split(",") for line in path.read_text().splitlines())]
+
+
+def multi_pair_counts(inputs, out: Path) -> tuple[int, int, int]:
+    """(right, wrong, missed) top-egocentric pairs of ``associate-multi``'s output folder
+    ``out`` (its rows are the input rows in order; the input ids, the renders' people, score
+    only)."""
+    top_in, top_out = _rows(inputs.boxes[0]), _rows(out / "top.txt")
+    right = wrong = true = 0
+    for k in range(1, len(inputs.boxes)):
+        hor_in, hor_out = _rows(inputs.boxes[k]), _rows(out / f"hor{k}.txt")
+        for f in sorted({f for f, _ in hor_in}):
+            person = {p: t for (g, t), (_, p) in zip(top_in, top_out, strict=True) if g == f}
+            hor = [(t, p) for (g, t), (_, p) in zip(hor_in, hor_out, strict=True) if g == f]
+            true += len(set(person.values()) & {t for t, _ in hor})
+            found = [person[p] == t for t, p in hor if p in person]
+            right, wrong = right + sum(found), wrong + len(found) - sum(found)
+    return right, wrong, true - right
+
+
+def multi_ego_main(args: argparse.Namespace) -> int:
+    """The ``--multi-ego N`` mode (module docstring)."""
+    import tempfile
+
+    from xvmatch.cli import main as cli
+    from xvmatch.datasets.multi_ego_scenes import (
+        multi_ego_config,
+        render_multi_ego,
+        write_multi_ego_inputs,
+    )
+    from xvmatch.geometry.camera import Camera
+    from xvmatch.geometry.camera_io import save_cameras
+
+    print(f"associate-multi --model {args.model}, {args.multi_ego} egocentric views, drone "
+          f"videos of {args.frames} frames, the top camera turned; F1 of the top-egocentric "
+          "pairs, %")
+    f1 = {(d, arm): [] for d in args.errors for arm in ARMS}
+    for seed in args.seeds:
+        frames = render_multi_ego([seed, 0], n_ego=args.multi_ego, n_frames=args.frames,
+                                  config=multi_ego_config(args.multi_ego, fps=25.0))
+        axis = np.random.default_rng(seed).normal(size=3)
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp)
+            inputs = write_multi_ego_inputs(frames, folder / "in", seed)
+            size = "x".join(map(str, frames[0].views[1].camera.image_size))
+            base = ["associate-multi", "--top", str(inputs.boxes[0]), "--hor",
+                    *map(str, inputs.boxes[1:]), "--model", args.model, "--image-size", size,
+                    "--quiet"]
+
+            def score(name: str, *extra: str, base=base, folder=folder, inputs=inputs,
+                      seed=seed) -> float:
+                if cli([*base, "--out", str(folder / name), *extra]) != 0:
+                    raise SystemExit(f"associate-multi failed on seed {seed}")
+                right, wrong, missed = multi_pair_counts(inputs, folder / name)
+                return 100.0 * 2 * right / max(2 * right + wrong + missed, 1)
+
+            none = score("none")
+            for d in args.errors:
+                q = Rotation.from_rotvec(np.radians(d) * axis / np.linalg.norm(axis)).as_matrix()
+                top = frames[0].views[0].camera
+                turned = Camera(K=top.K, R=top.R @ q.T, c=top.c, width=top.width,
+                                height=top.height)
+                cams = []
+                for v in range(1, args.multi_ego + 1):
+                    cam_folder = folder / f"cams_{d:g}_{v}"
+                    cam_folder.mkdir()
+                    for f in frames:
+                        save_cameras(cam_folder / f"{f.frame:06d}.json",
+                                     {"top": turned, "ego": f.views[v].camera})
+                    cams.append(str(cam_folder))
+                row = {"none": none,
+                       "given": score(f"given_{d:g}", "--cameras", *cams,
+                                      "--refine-top-camera", "off"),
+                       "refined": score(f"refined_{d:g}", "--cameras", *cams)}
+                for arm in ARMS:
+                    f1[(d, arm)].append(row[arm])
+                print(f"seed {seed:3d} error {d:g}: " + " ".join(
+                    f"{arm} {row[arm]:.1f}" for arm in ARMS), flush=True)
+    print(f"\nmean over {len(args.seeds)} videos, F1 of the top-egocentric pairs")
+    print(f"{'error (deg)':>11} " + " ".join(f"{arm:>8}" for arm in ARMS))
+    for d in args.errors:
+        print(f"{d:>11g} " + " ".join(f"{np.mean(f1[(d, arm)]):8.1f}" for arm in ARMS))
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", nargs="+", default=["overview", "drone"],
@@ -56,9 +153,15 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=60, help="frames per video")
     parser.add_argument("--errors", type=float, nargs="+", default=[0, 0.5, 1, 2, 3],
                         metavar="DEG", help="calibration errors, degrees")
+    parser.add_argument("--error-on", choices=tuple(ERROR_VIEWS), default="both",
+                        help="the cameras given with the error (default both)")
     parser.add_argument("--people", type=int, nargs=2, default=[12, 20])
     parser.add_argument("--model", default="default")
+    parser.add_argument("--multi-ego", type=int, choices=(2, 3), default=None, metavar="N",
+                        help="associate-multi with N egocentric views instead (module docstring)")
     args = parser.parse_args()
+    if args.multi_ego:
+        return multi_ego_main(args)
     model = load_matcher_bundle(args.model)
     print(f"learned matcher {args.model}, boxes only, frame by frame; {len(args.seeds)} videos "
           f"of {args.frames} frames per scenario, {args.people[0]}-{args.people[1]} people, ids "
@@ -81,7 +184,7 @@ def main() -> int:
             none = scored(run(None), truth_top, truth_hor, video.top, video.hor)
             for d in args.errors:
                 given = CameraFrames("rendered", per_frame=with_camera_error(
-                    video.cameras, d, seed) if d else video.cameras)
+                    video.cameras, d, seed, ERROR_VIEWS[args.error_on]) if d else video.cameras)
                 start = time.perf_counter()
                 refined, what = refine_run_cameras(given, det_top, det_hor, frames)
                 timing["refine"] += time.perf_counter() - start
@@ -97,7 +200,9 @@ def main() -> int:
                 left = np.degrees(Rotation.from_matrix(
                     refined.get(frames[0]).top.R @ true_top.R.T).magnitude())
                 turn = what.fit.angle_deg if what.turned else 0.0
-                print(f"{scenario} seed {seed:3d} error {d:g}: turned {turn:.2f} deg, "
+                loss = ("" if what.fit is None else
+                        f" (loss {what.fit.loss_before:.3f} -> {what.fit.loss_after:.3f})")
+                print(f"{scenario} seed {seed:3d} error {d:g}: turned {turn:.2f} deg{loss}, "
                       f"{left:.2f} from the true camera; Eq. 9 "
                       + " ".join(f"{arm} {summarize(rows[arm]).acc9:.1f}" for arm in ARMS),
                       flush=True)

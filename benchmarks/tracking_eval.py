@@ -83,6 +83,7 @@ from xvmatch.evaluation.track_metrics import (
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.track_costs import (
+    FITTED_CAMERAS_W1,
     LEARNED_DUMMY_WEIGHT,
     LEARNED_RULES,
     FrameCosts,
@@ -246,11 +247,16 @@ the command's default appearance check, :func:`~xvmatch.inference.appearance_che
 check_tracklet_appearance`); the same without the check (``--appearance-check off``)."""
 
 
-def with_camera_error(cameras: dict, degrees: float, seed: int) -> dict:
-    """``{frame: FrameCameras}`` as a calibration would give them with an error: each camera
-    turned by ``degrees`` about a random axis and moved ``degrees / 10`` metres in a random
-    direction; the top camera once for the whole video (a fixed camera's calibration), the
-    egocentric one anew every frame (its pose tracked frame by frame)."""
+ERROR_VIEWS = {"both": ("top", "hor"), "top": ("top",), "ego": ("hor",)}
+"""``--error-on``: the views :func:`with_camera_error` puts the error on."""
+
+
+def with_camera_error(cameras: dict, degrees: float, seed: int,
+                      views: tuple[str, ...] = ("top", "hor")) -> dict:
+    """``{frame: FrameCameras}`` as a calibration would give them with an error: each camera of
+    ``views`` turned by ``degrees`` about a random axis and moved ``degrees / 10`` metres in a
+    random direction; the top camera once for the whole video (a fixed camera's calibration),
+    the egocentric one anew every frame (its pose tracked frame by frame)."""
     from scipy.spatial.transform import Rotation
 
     from xvmatch.geometry.camera import Camera
@@ -266,8 +272,11 @@ def with_camera_error(cameras: dict, degrees: float, seed: int) -> dict:
                       width=cam.width, height=cam.height)
 
     frames = sorted(cameras)
-    top = off(cameras[frames[0]].top) if frames else None
-    return {f: FrameCameras(top, off(cameras[f].hor)) for f in frames}
+    top = cameras[frames[0]].top if frames else None
+    if top is not None and "top" in views:
+        top = off(top)
+    return {f: FrameCameras(top, off(cameras[f].hor) if "hor" in views else cameras[f].hor)
+            for f in frames}
 
 
 def synthetic_main(args: argparse.Namespace) -> int:
@@ -283,10 +292,12 @@ def synthetic_main(args: argparse.Namespace) -> int:
     from xvmatch.inference.tracking import TrackImages
 
     model = load_matcher_bundle(args.model)
+    w1 = TrackWeights().w1 if args.w1 is None else args.w1
+    auto_w1 = args.cameras and args.w1 is None and args.refine_top_camera == "auto"
     hand = TrackWeights(c0=TrackWeights().c0 if args.c0 is None else args.c0, sigma=args.sigma,
-                        w1=args.w1)
+                        w1=w1)
     learned = TrackWeights(c0=LEARNED_DUMMY_WEIGHT if args.c0 is None else args.c0,
-                           sigma=args.sigma, w1=args.w1)
+                           sigma=args.sigma, w1=w1)
     print(f"{args.synthetic} rendered {args.scenario} videos of {args.synthetic_frames} frames "
           f"(25 fps, {args.people[0]}-{args.people[1]} people, images camera-shifted "
           f"{args.shift:g}, "
@@ -296,13 +307,15 @@ def synthetic_main(args: argparse.Namespace) -> int:
           f"seeds {args.seed}..{args.seed + args.synthetic - 1}), ground-truth boxes, ids "
           f"replaced by shuffled row numbers per view; MIP, c0 {hand.c0:g} (learned weights: "
           f"{learned.c0:g}), clips of {args.clip_length}, sigma {args.sigma:g}, w1 "
-          f"{hand.w1:g}, w2 {hand.w2:g}; network: {args.model}")
+          f"{hand.w1:g}{' (learned: 1 where the cameras fit)' if auto_w1 else ''}, w2 "
+          f"{hand.w2:g}; network: {args.model}")
     head = (f"{'scene':<20} {'frames':>5} {'CVIDF1':>6} {'CVMA':>6} | top IDF1 MOTA HOTA IDSW"
             f" | hor IDF1 MOTA HOTA IDSW")
     print(head)
-    pooled = {k: [] for k in ("frame", "frame-learned", *SYNTHETIC_ARMS)}
-    views = {k: {"top": [], "hor": []} for k in SYNTHETIC_ARMS}
-    loops = dict.fromkeys(SYNTHETIC_ARMS, 0)
+    arms = [a for a in SYNTHETIC_ARMS if a in args.arms]
+    pooled = {k: [] for k in ("frame", "frame-learned", *arms)}
+    views = {k: {"top": [], "hor": []} for k in arms}
+    loops = dict.fromkeys(arms, 0)
     for k in range(args.synthetic):
         seed = args.seed + k
         start = time.perf_counter()
@@ -320,14 +333,18 @@ def synthetic_main(args: argparse.Namespace) -> int:
         det_hor, _ = as_detections(hor, seed * 2 + 2)
         width = float(video.hor_size[0])
         fp = associate_frames(det_top, det_hor, width)
-        cameras = None
+        cameras, fitted = None, learned
         if args.cameras:
             cameras = CameraFrames("the rendered cameras", per_frame=video.cameras
                                    if not args.camera_error else
-                                   with_camera_error(video.cameras, args.camera_error, seed))
+                                   with_camera_error(video.cameras, args.camera_error, seed,
+                                                     ERROR_VIEWS[args.error_on]))
             if args.refine_top_camera == "auto":
                 cameras, refinement = refine_run_cameras(cameras, det_top, det_hor, sorted(hor))
                 print(f"seed {seed} {refinement.message}")
+                if args.w1 is None and refinement.fits:  # as track does
+                    fitted = replace(learned, w1=FITTED_CAMERAS_W1)
+                    print(f"seed {seed} the top camera fits: w1 {FITTED_CAMERAS_W1:g}")
         ev = learned_frame_evidence(det_top, det_hor, video.hor_size, model, cameras=cameras)
         frames = sorted(set(top) | set(hor))
         name = f"seed {seed}"
@@ -339,14 +356,14 @@ def synthetic_main(args: argparse.Namespace) -> int:
                                    frames)
         pooled["frame-learned"] += counts
         print(fmt_row(f"{name} frame-learned", len(frames), summarize(counts)))
-        for arm in SYNTHETIC_ARMS:
+        for arm in arms:
             images = None
             if not arm.startswith("boxes"):
                 images = TrackImages(video.top_images, video.hor_images,
                                      None if arm == "colour" else model.descriptors)
             config = TrackConfig(clip_length=args.clip_length, min_iou=args.min_iou,
                                  max_gap=args.max_gap,
-                                 weights=learned if arm.endswith("-learned") else hand,
+                                 weights=fitted if arm.endswith("-learned") else hand,
                                  time_appearance="colour" if arm == "network-cv"
                                  else "network")
             start = time.perf_counter()
@@ -370,7 +387,7 @@ def synthetic_main(args: argparse.Namespace) -> int:
     total = len(pooled["frame"])
     print(fmt_row("OVERALL frame", total, summarize(pooled["frame"])))
     print(fmt_row("OVERALL frame-learned", total, summarize(pooled["frame-learned"])))
-    for arm in SYNTHETIC_ARMS:
+    for arm in arms:
         print(fmt_row(f"OVERALL {arm}", total, summarize(pooled[arm]),
                       pool_view_scores(views[arm]["top"]), pool_view_scores(views[arm]["hor"])))
     print_loops(loops)
@@ -409,12 +426,15 @@ def main() -> int:
                         help="--cameras: calibrate them with an error, each camera turned by "
                         "DEG degrees and moved DEG / 10 m (the top camera once, the egocentric "
                         "one every frame)")
+    parser.add_argument("--error-on", choices=tuple(ERROR_VIEWS), default="both",
+                        help="with --camera-error: the cameras given with the error")
     parser.add_argument("--refine-top-camera", choices=("auto", "off"), default="auto",
                         help="--cameras: refine the fixed top camera on each video's boxes, as "
                         "the command does (default auto)")
-    parser.add_argument("--w1", type=float, default=TrackWeights().w1,
+    parser.add_argument("--w1", type=float, default=None,
                         help="--synthetic: share of the spatial term in a cross-view weight "
-                        "(Eq. 17; 1: the images only over time; default the command's)")
+                        "(Eq. 17; 1: the images only over time; default the command's: 0.3, "
+                        "or 1 for the learned weights when the refined cameras fit)")
     parser.add_argument("--max-gap", type=int, default=3, help="frames a tracklet may miss")
     parser.add_argument("--clip-length", type=int, default=TrackConfig().clip_length,
                         help="frames per clip (tracking; the tracklet table keeps 10)")
@@ -435,6 +455,8 @@ def main() -> int:
                         help="--synthetic: each view's images through one fixed simulated "
                         "camera of strength S (camera_shift, per_image=False), the adaptation "
                         "benchmark's stress test")
+    parser.add_argument("--arms", nargs="+", choices=SYNTHETIC_ARMS, default=SYNTHETIC_ARMS,
+                        help="with --synthetic: the rows to track (default all)")
     parser.add_argument("--cameras", action="store_true",
                         help="--synthetic: the learned weights' matcher also gets each frame's "
                         "rendered cameras, as 'xvmatch track --cameras' would (the wearer "

@@ -10,7 +10,7 @@ one line.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -24,12 +24,20 @@ from xvmatch.geometry.top_camera_refinement import (
     refine_top_camera,
 )
 
-__all__ = ["CROWD_PAIRS", "MIN_GAIN", "CameraRefinement", "refine_run_cameras"]
+__all__ = ["CROWD_PAIRS", "FIT_LOSS", "MIN_GAIN", "CameraRefinement", "refine_run_cameras",
+           "refine_views_cameras"]
 
 MIN_GAIN: float = 0.05
 """Least drop of the refinement's loss (:class:`~xvmatch.geometry.top_camera_refinement.
 TopCameraRefinement`, 0 to 1) for the turned camera to be used: smaller gains are as often a
 chance alignment of unrelated heads as a real correction (renders, docs/method.md)."""
+
+FIT_LOSS: float = 0.2
+"""Highest loss of a top camera kept as given for it to count as fitting the head rays
+(:attr:`CameraRefinement.fits`). Rendered videos (docs/tracking.md): exact cameras kept as
+given 0.08 to 0.13; a top camera 3 degrees off whose fit was refused, or an exact one with the
+egocentric camera 3 degrees off frame by frame, 0.35 and more; the two cannot be told apart, so
+neither counts."""
 
 OFF_HINT = "--refine-top-camera off uses it as given"
 
@@ -53,6 +61,13 @@ class CameraRefinement:
     turned: bool
     fit: TopCameraRefinement | None
     message: str
+
+    @property
+    def fits(self) -> bool:
+        """The top camera in use fits the video's head rays: turned to fit them, or kept as
+        given with a loss of at most :data:`FIT_LOSS` (``track`` then leaves the images to the
+        over-time terms, :data:`~xvmatch.inference.track_costs.FITTED_CAMERAS_W1`)."""
+        return self.turned or (self.fit is not None and self.fit.loss_after <= FIT_LOSS)
 
 
 def _same_camera(a: Camera, b: Camera) -> bool:
@@ -89,30 +104,60 @@ def refine_run_cameras(
     Returns:
         ``(cameras to use, what was done)``.
     """
-    both = [f for f in sorted(set(int(f) for f in frames))
-            if len(hor.get(f, ())) and len(top.get(f + top_offset, ()))]
-    held = ([cameras.static] if cameras.static is not None
-            else [cameras.per_frame[f] for f in sorted(cameras.per_frame)])
+    used, what = refine_views_cameras([cameras], top, [hor], [frames], [top_offset])
+    return used[0], what
+
+
+def refine_views_cameras(
+    cameras: Sequence[CameraFrames],
+    top: Mapping,
+    hors: Sequence[Mapping],
+    frames: Sequence[Iterable[int]],
+    top_offsets: Sequence[int],
+) -> tuple[list[CameraFrames], CameraRefinement]:
+    """:func:`refine_run_cameras` for several horizontal views that share one top view
+    (``associate-multi``): one fit over the head rays of every view, so that the top camera
+    all of their files hold, when it is one and the same fixed camera, is turned once for all.
+
+    Args:
+        cameras: per horizontal view, its opened ``--cameras`` (numbered by its frames).
+        top: ``{frame: record}`` of the top view.
+        hors: per horizontal view, ``{frame: record}``.
+        frames: per horizontal view, its frames; top frame ``f + top_offsets[k]`` is shown
+            with frame ``f`` of view ``k``.
+        top_offsets: see ``frames``.
+
+    Returns:
+        ``(cameras to use, per view; what was done)``.
+    """
+    both = [[f for f in sorted(set(int(f) for f in fs))
+             if len(hor.get(f, ())) and len(top.get(f + shift, ()))]
+            for hor, fs, shift in zip(hors, frames, top_offsets, strict=True)]
+    held = [c for cams in cameras for c in ([cams.static] if cams.static is not None else
+                                            [cams.per_frame[f] for f in sorted(cams.per_frame)])]
     if not all(_same_camera(held[0].top, c.top) for c in held[1:]):
-        return cameras, CameraRefinement(False, None, "cameras: the top camera changes from "
-                                         "frame to frame; used as given")
-    if len(both) < MIN_REFINE_FRAMES:
-        return cameras, CameraRefinement(
-            False, None, f"cameras: {len(both)} frame(s) with boxes in both views, too few to "
-            f"check the top camera against ({MIN_REFINE_FRAMES} needed); used as given")
-    pairs = sorted(len(top[f + top_offset].boxes) * len(hor[f].boxes) for f in both)
+        return list(cameras), CameraRefinement(
+            False, None, "cameras: the top camera changes from frame to frame"
+            + (" or between the views' files" if len(cameras) > 1 else "") + "; used as given")
+    samples = [(k, f) for k, fs in enumerate(both) for f in fs]
+    if len(samples) < MIN_REFINE_FRAMES:
+        return list(cameras), CameraRefinement(
+            False, None, f"cameras: {len(samples)} frame(s) with boxes in both views, too few "
+            f"to check the top camera against ({MIN_REFINE_FRAMES} needed); used as given")
+    pairs = sorted(len(top[f + top_offsets[k]].boxes) * len(hors[k][f].boxes)
+                   for k, f in samples)
     if pairs[len(pairs) // 2] * MIN_REFINE_FRAMES > CROWD_PAIRS:
-        return cameras, CameraRefinement(
+        return list(cameras), CameraRefinement(
             False, None, f"cameras: {pairs[len(pairs) // 2]} top x horizontal box pairs in a "
             "typical frame, too many to check the top camera against in reasonable time; used "
             "as given")
-    fit = refine_top_camera(held[0].top, [cameras.get(f).hor for f in both],
-                            [top[f + top_offset].boxes for f in both],
-                            [hor[f].boxes for f in both])
+    fit = refine_top_camera(held[0].top, [cameras[k].get(f).hor for k, f in samples],
+                            [top[f + top_offsets[k]].boxes for k, f in samples],
+                            [hors[k][f].boxes for k, f in samples])
     if fit.angle_deg == 0.0 or fit.loss_before - fit.loss_after < MIN_GAIN:
-        return cameras, CameraRefinement(
+        return list(cameras), CameraRefinement(
             False, fit, f"cameras: the top camera fits the head rays of {fit.frames} frames "
             f"about as well as given (loss {fit.loss_before:.3f}, refined "
             f"{fit.loss_after:.3f}); used as given")
-    return _with_top(cameras, fit.camera), CameraRefinement(
+    return [_with_top(c, fit.camera) for c in cameras], CameraRefinement(
         True, fit, f"cameras: {fit.describe()}; {OFF_HINT}")

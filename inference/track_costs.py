@@ -22,6 +22,7 @@ from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [
     "DUMMY_WEIGHT",
+    "FITTED_CAMERAS_W1",
     "LEARNED_DUMMY_WEIGHT",
     "LEARNED_RULES",
     "MOTION_SIGMA",
@@ -52,6 +53,15 @@ LEARNED_DUMMY_WEIGHT = 0.02
 chosen with them on the even CVMHAT dev pairs: 0.2, 0.15, 0.1, 0.05, 0.02, 0.01, 0 gave 90.5,
 91.5, 91.9, 92.0, 92.4, 92.4, 92.2 CVIDF1 clean, and 0.1, 0.05, 0.02 gave 76.9, 78.8, 79.0
 with detector noise (docs/tracking.md)."""
+
+FITTED_CAMERAS_W1 = 1.0
+"""``w1`` of Eq. 17 when ``track``'s ``--cameras`` fit the video (a fixed top camera turned to
+fit its head rays, or kept as given because it already does:
+:attr:`~xvmatch.inference.camera_refinement.CameraRefinement.fits`) and ``--w1`` is not given:
+the camera-aware spatial term is then nearly right, and the network's similarity across views,
+well above zero for two different people, only adds wrong edges; the images still serve over
+time (Eq. 18). On rendered videos it gained 0.9 to 2.1 CVIDF1 over 0.3 with exact cameras and
+with both cameras 2 or 3 degrees off (docs/tracking.md, "With the cameras")."""
 
 
 @dataclass(frozen=True)

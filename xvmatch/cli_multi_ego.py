@@ -23,6 +23,7 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.cli_model import add_refine_top_camera, note_camera_refinement
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
@@ -75,6 +76,7 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--cameras", default=None, nargs="+", metavar="CAMERAS",
                    help="per horizontal view, a camera file or folder with cameras 'top' and "
                    "'ego' (as associate; needs --model)")
+    add_refine_top_camera(p)
     p.add_argument("--camera-id", default=None, nargs="+", type=box_id, metavar="ID",
                    help="per horizontal view, the top-file id of its wearer (O given; "
                    "|id| <= 2**53); without it O is searched")
@@ -246,6 +248,12 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
                                         max_offset, wearer, value,
                                         f"--hor {paths[k + 1]}: " if n_hor > 1 else "")
+        if cameras is not None and args.refine_top_camera == "auto":
+            from xvmatch.inference.camera_refinement import refine_views_cameras
+
+            cameras, refinement = refine_views_cameras(
+                cameras, views[0], views[1:], [sorted(v) for v in views[1:]], offsets)
+            note_camera_refinement(refinement, args.quiet)
         if any(offsets):
             views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
                                                                    cameras, camera_rows)

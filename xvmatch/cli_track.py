@@ -138,15 +138,15 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
 
 
 def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolved, sources):
-    """``--cameras`` opened and checked (:func:`~xvmatch.inference.learned_pipeline.
-    open_matcher_cameras`), or None: a file for every horizontal frame ``f`` with boxes, and
-    boxes in top frame ``f + offset`` (the files are numbered by the horizontal frames, as
-    ``associate`` reads them), each camera the size of its view's images (``sources``: the
-    open top and horizontal images, or none; else the horizontal size ``resolved``); a fixed
-    top camera refined on the boxes unless ``--refine-top-camera off``
-    (:mod:`xvmatch.inference.camera_refinement`)."""
+    """``(cameras, refinement)``: ``--cameras`` opened and checked (:func:`~xvmatch.inference.
+    learned_pipeline.open_matcher_cameras`), or None: a file for every horizontal frame ``f``
+    with boxes, and boxes in top frame ``f + offset`` (the files are numbered by the horizontal
+    frames, as ``associate`` reads them), each camera the size of its view's images
+    (``sources``: the open top and horizontal images, or none; else the horizontal size
+    ``resolved``); a fixed top camera refined on the boxes unless ``--refine-top-camera off``
+    (:mod:`xvmatch.inference.camera_refinement`; the refinement is None when off)."""
     if args.cameras is None:
-        return None
+        return None, None
     from xvmatch.inference.learned_pipeline import open_matcher_cameras
 
     wanted = {"hor": (tuple(resolved[0]), resolved[1])}
@@ -155,13 +155,31 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
         wanted["hor"] = (tuple(sources[1].size), f"the images {args.hor_images}")
     frames = [f for f in hor if len(hor[f]) and len(top.get(f + offset, ()))]
     cameras = open_matcher_cameras(args.cameras, [(model, args.model)], frames, wanted)
-    if args.refine_top_camera == "auto":
-        from xvmatch.cli_model import note_camera_refinement
-        from xvmatch.inference.camera_refinement import refine_run_cameras
+    if args.refine_top_camera == "off":
+        return cameras, None
+    from xvmatch.cli_model import note_camera_refinement
+    from xvmatch.inference.camera_refinement import refine_run_cameras
 
-        cameras, refinement = refine_run_cameras(cameras, top, hor, frames, offset)
-        note_camera_refinement(refinement, args.quiet)
-    return cameras
+    cameras, refinement = refine_run_cameras(cameras, top, hor, frames, offset)
+    note_camera_refinement(refinement, args.quiet)
+    return cameras, refinement
+
+
+def _fitted_cameras_config(args: argparse.Namespace, config, refinement, images):
+    """``config`` with Eq. 17's ``w1`` at :data:`~xvmatch.inference.track_costs.
+    FITTED_CAMERAS_W1` when the images would enter the cross-view weights, ``--w1`` is not
+    given and the refined cameras fit the video (:attr:`~xvmatch.inference.camera_refinement.
+    CameraRefinement.fits`); says so unless quiet."""
+    if args.w1 is not None or images is None or refinement is None or not refinement.fits:
+        return config
+    from dataclasses import replace
+
+    from xvmatch.inference.track_costs import FITTED_CAMERAS_W1
+
+    if not args.quiet:
+        print(f"track: the top camera fits the head rays, so the images serve over time only "
+              f"(--w1 {FITTED_CAMERAS_W1:g}; give --w1 to choose)", file=sys.stderr)
+    return replace(config, weights=replace(config.weights, w1=FITTED_CAMERAS_W1))
 
 
 def _aligned(top, hor, images, cameras, offset: int):
@@ -252,8 +270,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     add_refine_top_camera(g)
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
-                   "(default 0.3; 1: the images serve only over time, which exact --cameras "
-                   "favour)")
+                   "(default 0.3, or 1 when --cameras' top camera fits the video's head rays "
+                   "after --refine-top-camera: the images then serve only over time)")
     g.add_argument("--w2", type=SHARE_TYPE, default=None,
                    help="share of the appearance term in an over-time weight (Eq. 18), in "
                    "[0, 1] (default 0.6)")
@@ -334,7 +352,9 @@ def _cmd_track(args: argparse.Namespace) -> int:
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
-        cameras = _open_cameras(args, model, top.frames, hor.frames, offset, resolved, sources)
+        cameras, refinement = _open_cameras(args, model, top.frames, hor.frames, offset,
+                                            resolved, sources)
+        config = _fitted_cameras_config(args, config, refinement, images)
         top_frames, hor_frames, images, cameras = _aligned(top.frames, hor.frames, images,
                                                            cameras, offset)
         progress = _step_progress(not args.quiet)
