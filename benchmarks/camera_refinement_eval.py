@@ -90,8 +90,8 @@ def multi_ego_main(args: argparse.Namespace) -> int:
         render_multi_ego,
         write_multi_ego_inputs,
     )
-    from xvmatch.geometry.camera import Camera
     from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.geometry.top_camera_refinement import turned_camera
 
     print(f"associate-multi --model {args.model}, {args.multi_ego} egocentric views, drone "
           f"videos of {args.frames} frames, the top camera turned; F1 of the top-egocentric "
@@ -118,10 +118,8 @@ def multi_ego_main(args: argparse.Namespace) -> int:
 
             none = score("none")
             for d in args.errors:
-                q = Rotation.from_rotvec(np.radians(d) * axis / np.linalg.norm(axis)).as_matrix()
-                top = frames[0].views[0].camera
-                turned = Camera(K=top.K, R=top.R @ q.T, c=top.c, width=top.width,
-                                height=top.height)
+                turned = turned_camera(frames[0].views[0].camera,
+                                       d * axis / np.linalg.norm(axis))
                 cams = []
                 for v in range(1, args.multi_ego + 1):
                     cam_folder = folder / f"cams_{d:g}_{v}"

@@ -35,7 +35,7 @@ from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.ray_priors import METRIC_MARGIN, box_rays
 
 __all__ = ["MAX_PAIRS", "MIN_REFINE_FRAMES", "WEARER_HEAD", "TopCameraRefinement",
-           "refine_top_camera"]
+           "refine_top_camera", "turned_camera"]
 
 MIN_REFINE_FRAMES: int = 10
 """Fewest frames with boxes in both views to refine on: a few frames hold too few people to
@@ -168,6 +168,14 @@ class _RayFrames:
         return total / count + _PRIOR * float(np.sum(np.square(rotvec_deg)))
 
 
+def turned_camera(camera: Camera, rotvec_deg) -> Camera:
+    """``camera`` turned about its centre by the rotation vector ``rotvec_deg`` (degrees), which
+    turns its world ray directions: ``R' = R Q^T``."""
+    q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
+    return Camera(K=camera.K, R=camera.R @ q.T, c=camera.c, width=camera.width,
+                  height=camera.height)
+
+
 def _sample(n: int, most: int) -> np.ndarray:
     """``most`` indices spread evenly over ``range(n)`` (all of them when ``n <= most``)."""
     if n <= most:
@@ -244,8 +252,6 @@ def refine_top_camera(
         value = rays.loss(x, _SCALES[-1])
         if value < best_loss:
             best_x, best_loss = x, value
-    q = Rotation.from_rotvec(np.radians(best_x)).as_matrix()
-    camera = top if not best_x.any() else Camera(
-        K=top.K, R=top.R @ q.T, c=top.c, width=top.width, height=top.height)
+    camera = top if not best_x.any() else turned_camera(top, best_x)
     return TopCameraRefinement(camera, tuple(float(v) for v in best_x),
                                float(np.linalg.norm(best_x)), len(keep), before, best_loss)

@@ -12,6 +12,7 @@ from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.top_camera_refinement import (
     MIN_REFINE_FRAMES,
     refine_top_camera,
+    turned_camera,
 )
 
 TOP_SIZE, HOR_SIZE = (1280, 720), (640, 360)
@@ -56,9 +57,7 @@ def _scene(seed: int, frames: int = 24, top_height: float = 18.0):
 
 
 def _turned(camera: Camera, rotvec_deg: np.ndarray) -> Camera:
-    q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
-    return Camera(K=camera.K, R=camera.R @ q.T, c=camera.c, width=camera.width,
-                  height=camera.height)
+    return turned_camera(camera, rotvec_deg)
 
 
 def _angle(a: Camera, b: Camera) -> float:
