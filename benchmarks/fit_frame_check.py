@@ -7,22 +7,26 @@ more likely to hurt than to help from the boxes alone. This fits it for one bund
 validation renders of ``benchmarks/deployed_matcher_eval.py`` (seed 2000, ``--scenes`` per
 scenario, both scenarios), each image through its own simulated camera at every strength of
 ``--shifts`` (0: none), ground-truth and detector-noise boxes; each frame is weighted by what the
-images gained or lost there (Eq. 9 accuracy with images minus boxes only). It prints, per
-scenario and strength, images minus boxes before and after the check on those (fitting) frames;
+images gained or lost there (Eq. 9 accuracy with images minus boxes only). The threshold is
+chosen by two-fold cross-validation over scenes (:mod:`xvmatch.evaluation.frame_check_threshold`:
+the lowest whose worst held-out cell is not below boxes only; ``--threshold`` a number to set
+it). It prints, per scenario and strength, images minus boxes before and after the check on
+those (fitting) frames;
 judge it on the test split with ``benchmarks/matcher_comparison.py``, whose ``checked`` column
 applies the bundle's frame check. ``--out`` writes the manifest record (JSON); ``--install``
 writes it into the bundle's ``manifest.json`` (the only file changed; the bundle's files and
 their sha256 stay as they are).
 
 Usage:
-    python benchmarks/fit_frame_check.py [--bundle default] [--scenes 60] [--shifts 0 1 2 3]
-        [--work runs/deployed_eval] [--out record.json] [--install]
+    python benchmarks/fit_frame_check.py [--bundle default] [--scenes 150] [--shifts 0 1 2 3]
+        [--threshold auto] [--work runs/deployed_eval] [--out record.json] [--install]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -37,6 +41,11 @@ from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
     frame_check_samples,
 )
+from xvmatch.evaluation.frame_check_threshold import (
+    THRESHOLDS,
+    choose_threshold,
+    cross_validate_thresholds,
+)
 from xvmatch.geometry.atomic_files import atomic_write_text
 from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.bundle import MANIFEST, read_manifest
@@ -48,13 +57,15 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bundle", default="default", help="a bundle with an appearance "
                         "network (default: the shipped one)")
-    parser.add_argument("--scenes", type=int, default=60, help="validation scenes per "
-                        "scenario, 5 frames each (default 60)")
+    parser.add_argument("--scenes", type=int, default=150, help="validation scenes per "
+                        "scenario, 5 frames each (default 150)")
     parser.add_argument("--shifts", nargs="+", type=float, default=[0.0, 1.0, 2.0, 3.0],
                         help="camera-shift strengths, each in [0, 3] (0: none)")
-    parser.add_argument("--threshold", type=float, default=0.5,
+    parser.add_argument("--threshold", default="auto",
                         help="probability that images help above which they are used, in "
-                        "(0, 1) (default 0.5)")
+                        "(0, 1), or auto (default): the lowest of "
+                        f"{' '.join(map(str, THRESHOLDS))} whose worst cell, cross-validated "
+                        "over scenes, is not below boxes only")
     parser.add_argument("--ridge", type=float, default=1.0, help="L2 penalty, >= 0")
     parser.add_argument("--work", type=Path, default=Path("runs/deployed_eval"))
     parser.add_argument("--workers", type=int, default=2, help="render processes")
@@ -63,8 +74,15 @@ def main() -> int:
                         help="write the record into the bundle's manifest.json")
     args = parser.parse_args()
     check_scenes_and_shifts(parser, args.scenes, args.shifts)
-    if not 0.0 < args.threshold < 1.0:
-        parser.error(f"--threshold: expected a number in (0, 1), got {args.threshold:g}")
+    threshold = None  # auto: cross-validated below
+    if args.threshold != "auto":
+        try:
+            threshold = float(args.threshold)
+        except ValueError:
+            threshold = math.nan
+        if not 0.0 < threshold < 1.0:
+            parser.error(f"--threshold: expected auto or a number in (0, 1), got "
+                         f"{args.threshold}")
     if not args.ridge >= 0:
         parser.error(f"--ridge: expected a number >= 0, got {args.ridge:g}")
     check_script_outputs(parser, [Output("--out", args.out)], [Input("--bundle", args.bundle)])
@@ -86,23 +104,41 @@ def main() -> int:
             if strength:
                 coster = ShiftedCoster(coster, strength)
             trials = dataset_trials(path, TrialConfig(), SETTINGS, coster)
-            feats, gains = frame_check_samples(matcher, trials)
-            parts.append((scenario, strength, feats, gains))
-            print(f"{scenario}, strength {strength:g}: {len(gains)} frames, images - boxes "
-                  f"{100 * gains.mean():+.2f} points ({time.perf_counter() - start:.0f} s)",
-                  flush=True)
-    feats = np.concatenate([p[2] for p in parts])
-    gains = np.concatenate([p[3] for p in parts])
+            samples = frame_check_samples(matcher, trials)
+            parts.append((scenario, strength, samples))
+            print(f"{scenario}, strength {strength:g}: {len(samples.gains)} frames, images - "
+                  f"boxes {100 * samples.gains.mean():+.2f} points "
+                  f"({time.perf_counter() - start:.0f} s)", flush=True)
+    feats = np.concatenate([p[2].features for p in parts])
+    gains = np.concatenate([p[2].gains for p in parts])
+    choice = None
+    if threshold is None:
+        try:
+            scores = cross_validate_thresholds([p[2] for p in parts], THRESHOLDS, args.ridge)
+        except ValueError as exc:
+            parser.error(f"--threshold auto: {exc} (give more --scenes, or a number)")
+        print("\nThresholds, cross-validated over scenes (2 folds), images - boxes on the held-out"
+              " scenes (points): worst cell, all cells summed")
+        for s in scores:
+            print(f"  {s.threshold:.2f}: worst {s.worst:+.2f}  summed {s.total:+.2f}")
+        threshold = choose_threshold(scores).threshold
+        print(f"  chosen: {threshold:.2f}")
+        choice = {"rule": "lowest threshold whose worst held-out cell is >= 0 points "
+                          "(2 folds of scenes)",
+                  "scores": [[s.threshold, round(s.worst, 3), round(s.total, 3)]
+                             for s in scores]}
     fitted = {"data": "deployed benchmark validation renders (seed 2000), "
                       f"{args.scenes} scenes x 5 frames per scenario, both scenarios",
               "shifts": [float(s) for s in args.shifts], "box_settings": list(SETTINGS),
               "frames": len(gains), "ridge": float(args.ridge),
               "command": "python benchmarks/fit_frame_check.py " + " ".join(sys.argv[1:])}
-    check = fit_frame_check(feats, gains, args.threshold, args.ridge, fitted)
+    if choice is not None:
+        fitted["threshold_choice"] = choice
+    check = fit_frame_check(feats, gains, threshold, args.ridge, fitted)
     print("\nOn the fitting frames, images - boxes (points), without and with the check; "
           "share of frames with images:")
-    for scenario, strength, f, g in parts:
-        use = check.trusted(f)
+    for scenario, strength, samples in parts:
+        use, g = check.trusted(samples.features), samples.gains
         print(f"  {scenario:<8} strength {strength:g}: {100 * g.mean():+.2f} -> "
               f"{100 * np.where(use, g, 0.0).mean():+.2f}  ({use.mean():.2f})")
     record = check.to_record()

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from xvmatch.datasets.pair_trials import PairTrial
+from xvmatch.evaluation.frame_check_threshold import FrameSamples
 from xvmatch.geometry.matcher_inputs import (
     INPUT_SETTINGS,
     FrameCameras,
@@ -140,16 +141,15 @@ def frame_accuracy(trial: PairTrial, cost: np.ndarray, gamma: float) -> float | 
     return (c.tp + c.tn) / c.n_union if c.n_union > 0 else None
 
 
-def frame_check_samples(matcher: LearnedMatcher, trials: Sequence[PairTrial]
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def frame_check_samples(matcher: LearnedMatcher, trials: Sequence[PairTrial]) -> FrameSamples:
     """What :func:`~xvmatch.inference.frame_check.fit_frame_check` learns from: each frame's
     :func:`~xvmatch.inference.frame_check.frame_check_features` (its appearance costs against
-    the matcher's boxes-only costs) and what the images gained there (Eq. 9 accuracy with
-    images minus from the boxes alone, the bundle's gamma), ``(F, len(FEATURES))`` and
-    ``(F,)``, over the frames with someone in them."""
+    the matcher's boxes-only costs), what the images gained there (Eq. 9 accuracy with images
+    minus from the boxes alone, the bundle's gamma), its scene and box setting, over the frames
+    with someone in them."""
     images = matcher_costs(matcher, trials, "images")
     boxes = matcher_costs(matcher, trials, "boxes")
-    feats, gains = [], []
+    feats, gains, scenes, settings = [], [], [], []
     for t, a, b in zip(trials, images, boxes, strict=True):
         if t.app is None or t.app.size == 0:
             continue
@@ -158,7 +158,11 @@ def frame_check_samples(matcher: LearnedMatcher, trials: Sequence[PairTrial]
             continue
         feats.append(frame_check_features(t.app, b))
         gains.append(acc_a - acc_b)
-    return np.asarray(feats).reshape(-1, len(FEATURES)), np.asarray(gains, dtype=np.float64)
+        scenes.append(t.scene)
+        settings.append(t.setting)
+    return FrameSamples(np.asarray(feats).reshape(-1, len(FEATURES)),
+                        np.asarray(gains, dtype=np.float64), np.asarray(scenes, dtype=str),
+                        np.asarray(settings, dtype=str))
 
 
 def frame_checked_costs(check: FrameCheck, trials: Sequence[PairTrial],

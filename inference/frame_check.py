@@ -19,20 +19,28 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import linear_sum_assignment, minimize
 
 __all__ = ["FEATURES", "FORMAT_VERSION", "FrameCheck", "fit_frame_check",
            "frame_check_features"]
 
 FEATURES = ("app_mean", "app_std", "row_gap", "row_agree", "col_gap", "col_agree",
-            "best_margin", "box_correlation", "rows", "cols")
+            "best_margin", "box_correlation", "rows", "cols", "box_assignment_agree",
+            "box_row_gap", "box_col_gap", "box_pair_z", "box_pair_rank", "box_row_min")
 """The statistics of a frame's ``(M, N)`` appearance costs ``a`` and box-only matcher costs
 ``b`` (:func:`frame_check_features`): the mean and spread of ``a``; the mean gap between each
 row's cheapest and second-cheapest cost and the share of rows whose cheapest partner is the
 box-only matcher's (then the same for columns); the mean of ``a`` minus its mean at the box-only
-matcher's best partner of each row; the correlation of ``a`` with ``b``; ``M`` and ``N``."""
-FORMAT_VERSION = 1
-"""Version of the manifest's ``frame_check`` record."""
+matcher's best partner of each row; the correlation of ``a`` with ``b``; ``M`` and ``N``. Then
+how sure the boxes are and where the cue puts their choice: the share of the box-only optimal
+assignment's pairs that the optimal assignment of ``a`` also makes; the mean gap between each
+row's (column's) cheapest and second-cheapest box-only cost, and the mean cheapest one of each
+row; at the box-only assignment's pairs, ``a`` standardised within the frame and the share of
+the column's other rows that ``a`` finds cheaper. Version-1 records use the first ten."""
+FORMAT_VERSION = 2
+"""Version of the manifest's ``frame_check`` record written (version 1, with the first ten
+:data:`FEATURES`, is still read)."""
+_VERSION_FEATURES = {1: FEATURES[:10], 2: FEATURES}
 
 
 def frame_check_features(app: np.ndarray, box_cost: np.ndarray) -> np.ndarray:
@@ -52,11 +60,7 @@ def frame_check_features(app: np.ndarray, box_cost: np.ndarray) -> np.ndarray:
     m, n = a.shape
     out = [a.mean(), a.std()]
     for x, y in ((a, b), (a.T, b.T)):
-        if x.shape[1] >= 2:
-            two = np.partition(x, 1, axis=1)[:, :2]
-            out.append(float((two[:, 1] - two[:, 0]).mean()))
-        else:
-            out.append(0.0)
+        out.append(_second_gap(x))
         out.append(float((x.argmin(axis=1) == y.argmin(axis=1)).mean()))
     out.append(a.mean() - a[np.arange(m), b.argmin(axis=1)].mean())
     corr = 0.0
@@ -64,7 +68,25 @@ def frame_check_features(app: np.ndarray, box_cost: np.ndarray) -> np.ndarray:
         corr = float(np.corrcoef(a.ravel(), b.ravel())[0, 1])
     out.append(corr)
     out += [float(m), float(n)]
+    rows, cols = linear_sum_assignment(b)
+    a_rows, a_cols = linear_sum_assignment(a)
+    agree = np.zeros((m, n), dtype=bool)
+    agree[a_rows, a_cols] = True
+    out.append(float(agree[rows, cols].mean()))
+    spread = a.std() if a.std() > 0 else 1.0
+    cheaper = (a[:, cols] < a[rows, cols][None, :]).sum(axis=0)
+    out += [_second_gap(b), _second_gap(b.T),
+            float(((a[rows, cols] - a.mean()) / spread).mean()),
+            float((cheaper / max(m - 1, 1)).mean()), float(b.min(axis=1).mean())]
     return np.asarray(out, dtype=np.float64)
+
+
+def _second_gap(x: np.ndarray) -> float:
+    """Mean gap between each row's cheapest and second-cheapest entry (0 with one column)."""
+    if x.shape[1] < 2:
+        return 0.0
+    two = np.partition(x, 1, axis=1)[:, :2]
+    return float((two[:, 1] - two[:, 0]).mean())
 
 
 @dataclass(frozen=True)
@@ -72,7 +94,8 @@ class FrameCheck:
     """A fitted logistic model of :data:`FEATURES`: the probability that a frame's images help.
 
     Attributes:
-        mean, scale: standardisation of each feature.
+        mean, scale: standardisation of each feature (all :data:`FEATURES`, or the first ten
+            of a version-1 record).
         coef: the weight of each standardised feature.
         intercept: the bias.
         threshold: the images are used when the probability is above it.
@@ -87,8 +110,10 @@ class FrameCheck:
     fitted: dict = field(default_factory=dict)
 
     def probabilities(self, features: np.ndarray) -> np.ndarray:
-        """Probability that the images help, for ``(F, len(FEATURES))`` frames' features."""
-        z = (np.asarray(features, dtype=np.float64) - self.mean) / self.scale
+        """Probability that the images help, for ``(F, len(FEATURES))`` frames' features (a
+        version-1 check reads the first ten)."""
+        x = np.asarray(features, dtype=np.float64)[:, :len(self.coef)]
+        z = (x - self.mean) / self.scale
         return 1.0 / (1.0 + np.exp(-(z @ self.coef + self.intercept)))
 
     def trusted(self, features: np.ndarray) -> np.ndarray:
@@ -106,7 +131,8 @@ class FrameCheck:
 
     def to_record(self) -> dict:
         """The manifest's ``frame_check`` object."""
-        return {"format_version": FORMAT_VERSION, "features": list(FEATURES),
+        version = 1 if len(self.coef) == len(_VERSION_FEATURES[1]) else FORMAT_VERSION
+        return {"format_version": version, "features": list(_VERSION_FEATURES[version]),
                 "mean": self.mean.tolist(), "scale": self.scale.tolist(),
                 "coef": self.coef.tolist(), "intercept": float(self.intercept),
                 "threshold": float(self.threshold), "fitted": dict(self.fitted)}
@@ -121,18 +147,19 @@ class FrameCheck:
         if not isinstance(doc, Mapping):
             raise ValueError("'frame_check' must be an object")
         version = doc.get("format_version")
-        if version != FORMAT_VERSION:
+        if type(version) is not int or version not in _VERSION_FEATURES:
             raise ValueError(f"'frame_check.format_version' is {version!r}, this xvmatch reads "
-                             f"{FORMAT_VERSION}")
-        if list(doc.get("features", [])) != list(FEATURES):
-            raise ValueError(f"'frame_check.features' must be {list(FEATURES)}")
+                             f"{', '.join(map(str, _VERSION_FEATURES))}")
+        names = _VERSION_FEATURES[version]
+        if list(doc.get("features", [])) != list(names):
+            raise ValueError(f"'frame_check.features' must be {list(names)} (version {version})")
         vectors = {}
         for key in ("mean", "scale", "coef"):
             v = doc.get(key)
-            ok = (isinstance(v, list) and len(v) == len(FEATURES)
+            ok = (isinstance(v, list) and len(v) == len(names)
                   and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v))
             if not ok or not np.all(np.isfinite(np.asarray(v, dtype=np.float64))):
-                raise ValueError(f"'frame_check.{key}' must be {len(FEATURES)} finite numbers")
+                raise ValueError(f"'frame_check.{key}' must be {len(names)} finite numbers")
             vectors[key] = np.asarray(v, dtype=np.float64)
         if not np.all(vectors["scale"] > 0):
             raise ValueError("'frame_check.scale' must be positive")

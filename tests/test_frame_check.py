@@ -52,6 +52,14 @@ def test_features_of_a_cue_that_agrees_with_the_boxes() -> None:
     assert f["best_margin"] == pytest.approx(app.mean() - 0.05)
     assert f["row_gap"] == pytest.approx((np.sort(app, axis=1)[:, 1] - 0.05).mean())
     assert f["box_correlation"] > 0.5
+    # the boxes are sure of the diagonal and the cue puts it first: the statistics of the pairs
+    assert f["box_assignment_agree"] == 1.0 and f["box_pair_rank"] == 0.0
+    assert f["box_row_gap"] == f["box_col_gap"] == pytest.approx(0.8)
+    assert f["box_row_min"] == pytest.approx(0.1)
+    assert f["box_pair_z"] == pytest.approx((0.05 - app.mean()) / app.std())
+    noise = dict(zip(FEATURES, frame_check_features(
+        *_agreeing(6, np.random.default_rng(3), False)), strict=True))
+    assert noise["box_assignment_agree"] < 1.0 and noise["box_pair_rank"] > 0.0
     # a single column: no second-best to compare with, a constant: no correlation
     one = frame_check_features(np.full((3, 1), 0.4), np.array([[0.1], [0.2], [0.3]]))
     assert one[FEATURES.index("row_gap")] == 0.0
@@ -116,13 +124,36 @@ def test_the_record_reads_back_and_names_a_bad_field() -> None:
         np.testing.assert_array_equal(getattr(back, key), getattr(check, key))
     assert (back.intercept, back.threshold, back.fitted) == (check.intercept, 0.6,
                                                               {"frames": 300})
-    bad = {"format_version": 2, "features": ["x"], "coef": [1.0], "scale": [0.0] * 10,
+    assert record["format_version"] == 2 and record["features"] == list(FEATURES)
+    for version in (3, "2", [2], True):
+        with pytest.raises(ValueError, match=r"'frame_check\.format_version'"):
+            FrameCheck.from_record({**record, "format_version": version})
+    bad = {"features": ["x"], "coef": [1.0], "scale": [0.0] * 16,
            "threshold": 1.5, "intercept": "a"}
     for key, value in bad.items():
         with pytest.raises(ValueError, match=f"'frame_check.{key}'"):
             FrameCheck.from_record({**record, key: value})
     with pytest.raises(ValueError, match="finite"):
-        FrameCheck.from_record({**record, "mean": [float("nan")] * 10})
+        FrameCheck.from_record({**record, "mean": [float("nan")] * 16})
+
+
+def test_a_version_1_record_reads_the_first_ten_statistics() -> None:
+    """Checks fitted before the box statistics were added still read and judge frames on the
+    ten they were fitted on; a record that mixes the versions is refused."""
+    feats, gains = _samples()
+    check = fit_frame_check(feats, gains)
+    old = {**check.to_record(), "format_version": 1, "features": list(FEATURES[:10])}
+    for key in ("mean", "scale", "coef"):
+        old[key] = old[key][:10]
+    back = FrameCheck.from_record(old)
+    assert back.to_record()["format_version"] == 1
+    z = (feats[:, :10] - back.mean) / back.scale
+    np.testing.assert_allclose(back.probabilities(feats),
+                               1.0 / (1.0 + np.exp(-(z @ back.coef + back.intercept))))
+    with pytest.raises(ValueError, match=r"'frame_check.features' must be .*\(version 1\)"):
+        FrameCheck.from_record({**old, "features": list(FEATURES)})
+    with pytest.raises(ValueError, match=r"'frame_check.coef' must be 10 finite numbers"):
+        FrameCheck.from_record({**old, "coef": check.to_record()["coef"]})
 
 
 def test_a_bundle_manifest_with_a_bad_frame_check_names_the_field(tmp_path) -> None:
@@ -142,6 +173,9 @@ def test_the_shipped_bundle_carries_a_frame_check() -> None:
     check = read_manifest(ROOT / "inference" / "default_bundle").frame_check
     assert check is not None and check.fitted["frames"] > 1000
     assert "fit_frame_check.py" in check.fitted["command"]
+    assert len(check.coef) == len(FEATURES)  # fitted on every statistic
+    scores = check.fitted["threshold_choice"]["scores"]
+    assert check.threshold in [s[0] for s in scores]  # the cross-validated choice
 
 
 def _with_check(model: LearnedMatcher, check: FrameCheck | None) -> LearnedMatcher:
@@ -215,19 +249,25 @@ def test_the_fitting_script_writes_a_record_and_installs_it(tmp_path, monkeypatc
     (bundle / MANIFEST).write_text(json.dumps(doc))
     onnx_before = {p.name: p.read_bytes() for p in bundle.glob("*.onnx")}
     out = tmp_path / "record.json"
-    monkeypatch.setattr(sys, "argv", [
-        "fit_frame_check.py", "--bundle", str(bundle), "--scenes", "2", "--shifts", "0", "3",
-        "--workers", "1", "--work", str(tmp_path / "work"), "--out", str(out), "--install"])
+    args = ["fit_frame_check.py", "--bundle", str(bundle), "--scenes", "2", "--shifts", "0", "3",
+            "--workers", "1", "--work", str(tmp_path / "work"), "--out", str(out), "--install"]
+    monkeypatch.setattr(sys, "argv", args)  # 2 scenes: both in one fold, nothing to fit on
+    with pytest.raises(SystemExit):
+        fit_frame_check.main()
+    assert "--threshold auto:" in capsys.readouterr().err and not out.exists()
+    monkeypatch.setattr(sys, "argv", [*args, "--threshold", "0.6"])
     assert fit_frame_check.main() == 0
     printed = capsys.readouterr().out
     assert "drone, strength 3" in printed and "installed in" in printed
     record = FrameCheck.from_record(json.loads(out.read_text()))
     assert record.fitted["shifts"] == [0.0, 3.0] and record.fitted["frames"] > 20
+    assert record.threshold == 0.6 and "threshold_choice" not in record.fitted
     installed = read_manifest(bundle).frame_check
     np.testing.assert_array_equal(installed.coef, record.coef)
     assert {p.name: p.read_bytes() for p in bundle.glob("*.onnx")} == onnx_before
-    for bad, said in (("--out", "is a folder"), ("--threshold", "expected a number in (0, 1)")):
-        value = str(tmp_path) if bad == "--out" else "1"
+    for bad, value, said in (("--out", str(tmp_path), "is a folder"),
+                             ("--threshold", "1", "expected auto or a number in (0, 1)"),
+                             ("--threshold", "half", "expected auto or a number in (0, 1)")):
         monkeypatch.setattr(sys, "argv", ["fit_frame_check.py", "--bundle", str(bundle),
                                           bad, value])
         with pytest.raises(SystemExit):  # refused before any work
