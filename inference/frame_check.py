@@ -58,11 +58,12 @@ def frame_check_features(app: np.ndarray, box_cost: np.ndarray) -> np.ndarray:
         raise ValueError(f"app and box_cost must be the same non-empty (M, N), got {a.shape} "
                          f"and {b.shape}")
     m, n = a.shape
-    out = [a.mean(), a.std()]
+    mean, std = a.mean(), a.std()
+    out = [mean, std]
     for x, y in ((a, b), (a.T, b.T)):
         out.append(_second_gap(x))
         out.append(float((x.argmin(axis=1) == y.argmin(axis=1)).mean()))
-    out.append(a.mean() - a[np.arange(m), b.argmin(axis=1)].mean())
+    out.append(mean - a[np.arange(m), b.argmin(axis=1)].mean())
     corr = 0.0
     if a.size > 2 and np.ptp(a) > 0 and np.ptp(b) > 0:
         corr = float(np.corrcoef(a.ravel(), b.ravel())[0, 1])
@@ -73,10 +74,9 @@ def frame_check_features(app: np.ndarray, box_cost: np.ndarray) -> np.ndarray:
     agree = np.zeros((m, n), dtype=bool)
     agree[a_rows, a_cols] = True
     out.append(float(agree[rows, cols].mean()))
-    spread = a.std() if a.std() > 0 else 1.0
     cheaper = (a[:, cols] < a[rows, cols][None, :]).sum(axis=0)
     out += [_second_gap(b), _second_gap(b.T),
-            float(((a[rows, cols] - a.mean()) / spread).mean()),
+            float(((a[rows, cols] - mean) / (std if std > 0 else 1.0)).mean()),
             float((cheaper / max(m - 1, 1)).mean()), float(b.min(axis=1).mean())]
     return np.asarray(out, dtype=np.float64)
 

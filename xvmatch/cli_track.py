@@ -26,9 +26,10 @@ import json
 import sys
 import time
 from collections.abc import Iterable
+from dataclasses import replace
 from pathlib import Path
 
-from xvmatch.cli_model import add_refine_top_camera
+from xvmatch.cli_model import add_refine_top_camera, note_camera_refinement
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
@@ -157,7 +158,6 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
     cameras = open_matcher_cameras(args.cameras, [(model, args.model)], frames, wanted)
     if args.refine_top_camera == "off":
         return cameras, None
-    from xvmatch.cli_model import note_camera_refinement
     from xvmatch.inference.camera_refinement import refine_run_cameras
 
     cameras, refinement = refine_run_cameras(cameras, top, hor, frames, offset)
@@ -172,8 +172,6 @@ def _fitted_cameras_config(args: argparse.Namespace, config, refinement, images)
     CameraRefinement.fits`); says so unless quiet."""
     if args.w1 is not None or images is None or refinement is None or not refinement.fits:
         return config
-    from dataclasses import replace
-
     from xvmatch.inference.track_costs import FITTED_CAMERAS_W1
 
     if not args.quiet:
@@ -189,8 +187,6 @@ def _aligned(top, hor, images, cameras, offset: int):
     cameras are numbered by the horizontal frames."""
     if not offset:
         return top, hor, images, cameras
-    from dataclasses import replace
-
     from xvmatch.datasets.mot_boxes import align_frames
     from xvmatch.inference.learned_pipeline import retimed
 
