@@ -17,8 +17,12 @@ The rotation of the top camera about its centre that minimises the mean loss ove
 frames, plus a small price per squared degree (of two fits alike, the smaller turn), is searched
 on a grid within ``max_deg``, then by Nelder-Mead from the best grid points and the given
 orientation at shrinking scales ``s`` (the best two go on to the finest); the lowest final loss
-wins. Only the orientation is refined: a centre a few decimetres off moves the rays by as much,
-a turn of 2 degrees by metres.
+wins. When that fit stays poor (loss above :data:`WIDE_LOSS`: a camera further off than the
+grid, or both cameras off), a coarser grid out to ``wide_deg`` is searched the same way (ranked
+at a scale as much coarser as its step), and its fit is kept if its loss is
+:data:`WIDE_GAIN` lower; a good fit within ``max_deg`` is never searched further.
+Only the orientation is refined: a centre a few decimetres off moves the rays by as much, a
+turn of 2 degrees by metres.
 """
 
 from __future__ import annotations
@@ -34,8 +38,8 @@ from xvmatch.geometry.array_checks import as_boxes
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.ray_priors import METRIC_MARGIN, box_rays
 
-__all__ = ["MAX_PAIRS", "MIN_REFINE_FRAMES", "WEARER_HEAD", "TopCameraRefinement",
-           "refine_top_camera", "turned_camera"]
+__all__ = ["MAX_PAIRS", "MIN_REFINE_FRAMES", "WEARER_HEAD", "WIDE_GAIN", "WIDE_LOSS",
+           "TopCameraRefinement", "refine_top_camera", "turned_camera"]
 
 MIN_REFINE_FRAMES: int = 10
 """Fewest frames with boxes in both views to refine on: a few frames hold too few people to
@@ -49,11 +53,23 @@ MAX_PAIRS: int = 20_000
 """Top x horizontal box pairs the search holds at once (over its frames), by default: 30 frames
 of 30 x 20 people; a crowd is refined on fewer frames."""
 
+WIDE_LOSS: float = 0.3
+"""Loss (with its price per squared degree) above which the fit within ``max_deg`` is not taken
+as final and the wider grid is searched too. Rendered videos (docs/method.md): a top camera
+off alone ends at 0.12 to 0.38 when its turn is found, at 0.49 to 0.81 when the grid does not
+reach it; with both cameras 2 degrees or more off it stays above 0.3 however good the fit,
+hence also :data:`WIDE_GAIN`."""
+
+WIDE_GAIN: float = 0.05
+"""Least drop of the loss for the wider grid's fit to replace the one within ``max_deg``: a
+camera far off drops it by 0.2 and more, while both cameras a few degrees off leave a rough
+loss whose other dips, a few thousandths lower, lie degrees away (renders, docs/method.md)."""
+
 _SCALES = (1.0, 0.5, 0.25, 0.12)  # metres, the robust loss's scale s, coarse to fine
 _STARTS = 4  # best grid points refined (and the given orientation)
 _FINE = 2  # of those, the best taken on to the fine scales
 _MISS = 10.0  # metres: a pair behind a camera (Eq. 7) or padding, beyond any scale
-_GRID_SCALE = 0.5  # metres, the scale the grid is ranked at
+_GRID_SCALE = 0.5  # metres per degree of the grid's step: the scale a grid is ranked at
 _PRIOR = 0.002  # loss per squared degree of turn: of two fits alike, the smaller turn
 
 
@@ -168,6 +184,43 @@ class _RayFrames:
         return total / count + _PRIOR * float(np.sum(np.square(rotvec_deg)))
 
 
+def _grid(half_width: float, step: float) -> np.ndarray:
+    """``(G, 3)`` rotation vectors, degrees: a cubic grid of ``step`` within ``half_width``."""
+    axis = np.arange(-half_width, half_width + 1e-9, step)
+    return np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+
+
+def _grid_starts(rays: _RayFrames, grid: np.ndarray, step: float) -> list[np.ndarray]:
+    """The :data:`_STARTS` points of ``grid`` with the lowest loss at the scale
+    ``_GRID_SCALE * step``: a coarser grid's points lie further from the best turn, so their
+    rays miss by more."""
+    grid_loss = np.array([rays.loss(g, _GRID_SCALE * step) for g in grid])
+    return [grid[i] for i in np.argsort(grid_loss, kind="stable")[:_STARTS]]
+
+
+def _search(rays: _RayFrames, starts: list[np.ndarray]) -> tuple[np.ndarray, float]:
+    """The best fit from ``starts`` and its loss at the finest scale: every start descended by
+    Nelder-Mead at the coarse scales, the best :data:`_FINE` of them on to the fine ones,
+    rounded to 1e-4 degrees."""
+
+    def descend(x: np.ndarray, scales: tuple[float, ...]) -> np.ndarray:
+        for scale in scales:
+            x = minimize(rays.loss, x, args=(scale,), method="Nelder-Mead",
+                         options={"xatol": 0.01, "fatol": 1e-7, "maxiter": 400}).x
+        return x
+
+    half = len(_SCALES) // 2
+    coarse = [descend(x, _SCALES[:half]) for x in starts]
+    order = np.argsort([rays.loss(x, _SCALES[half - 1]) for x in coarse], kind="stable")
+    best_x, best_loss = starts[0], np.inf
+    for i in order[:_FINE]:
+        x = np.round(descend(coarse[i], _SCALES[half:]), 4)
+        value = rays.loss(x, _SCALES[-1])
+        if value < best_loss:
+            best_x, best_loss = x, value
+    return best_x, best_loss
+
+
 def turned_camera(camera: Camera, rotvec_deg) -> Camera:
     """``camera`` turned about its centre by the rotation vector ``rotvec_deg`` (degrees), which
     turns its world ray directions: ``R' = R Q^T``."""
@@ -191,6 +244,8 @@ def refine_top_camera(
     *,
     max_deg: float = 4.0,
     grid_step_deg: float = 1.0,
+    wide_deg: float = 10.0,
+    wide_step_deg: float = 2.0,
     max_frames: int = 30,
     max_pairs: int = MAX_PAIRS,
     margin: float = METRIC_MARGIN,
@@ -203,6 +258,9 @@ def refine_top_camera(
         top_boxes, hor_boxes: ``(M, 4)`` and ``(N, 4)`` x, y, w, h boxes of each frame, pixels.
         max_deg: the largest turn searched (grid half-width), degrees.
         grid_step_deg: the grid's step, degrees.
+        wide_deg, wide_step_deg: the wider, coarser grid searched when the fit within
+            ``max_deg`` has a loss above :data:`WIDE_LOSS` (its points beyond ``max_deg``; its
+            fit kept when :data:`WIDE_GAIN` lower); ``wide_deg <= max_deg``: none.
         max_frames: frames sampled, evenly spread (the result is the same on any machine).
         max_pairs: fewer frames (down to :data:`MIN_REFINE_FRAMES`) when a frame's top x
             horizontal box pairs (the median) times ``max_frames`` exceed this: the search's
@@ -230,27 +288,17 @@ def refine_top_camera(
     rays = _RayFrames(top, [hor_cameras[k] for k in keep],
                       [as_boxes(top_boxes[k], "top_boxes") for k in keep],
                       [as_boxes(hor_boxes[k], "hor_boxes") for k in keep], margin)
-    axis = np.arange(-max_deg, max_deg + 1e-9, grid_step_deg)
-    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-    grid_loss = np.array([rays.loss(g, _GRID_SCALE) for g in grid])
-    starts = [np.zeros(3)] + [grid[i] for i in np.argsort(grid_loss, kind="stable")[:_STARTS]]
-
-    def descend(x: np.ndarray, scales: tuple[float, ...]) -> np.ndarray:
-        for scale in scales:
-            x = minimize(rays.loss, x, args=(scale,), method="Nelder-Mead",
-                         options={"xatol": 0.01, "fatol": 1e-7, "maxiter": 400}).x
-        return x
-
-    # every start at the coarse scales, the best _FINE of them on to the fine ones
-    half = len(_SCALES) // 2
-    coarse = [descend(x, _SCALES[:half]) for x in starts]
-    order = np.argsort([rays.loss(x, _SCALES[half - 1]) for x in coarse], kind="stable")
-    best_x, best_loss = np.zeros(3), rays.loss(np.zeros(3), _SCALES[-1])
-    before = best_loss
-    for i in order[:_FINE]:
-        x = np.round(descend(coarse[i], _SCALES[half:]), 4)
-        value = rays.loss(x, _SCALES[-1])
-        if value < best_loss:
+    before = rays.loss(np.zeros(3), _SCALES[-1])
+    starts = [np.zeros(3), *_grid_starts(rays, _grid(max_deg, grid_step_deg), grid_step_deg)]
+    best_x, best_loss = np.zeros(3), before
+    x, value = _search(rays, starts)
+    if value < best_loss:
+        best_x, best_loss = x, value
+    if best_loss > WIDE_LOSS and wide_deg > max_deg:
+        wide = _grid(wide_deg, wide_step_deg)
+        wide = wide[np.abs(wide).max(axis=1) > max_deg + 1e-9]  # the inner grid is done
+        x, value = _search(rays, _grid_starts(rays, wide, wide_step_deg))
+        if value < best_loss - WIDE_GAIN:
             best_x, best_loss = x, value
     camera = top if not best_x.any() else turned_camera(top, best_x)
     return TopCameraRefinement(camera, tuple(float(v) for v in best_x),

@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.top_camera_refinement import (
     MIN_REFINE_FRAMES,
+    WIDE_LOSS,
     refine_top_camera,
     turned_camera,
 )
@@ -138,3 +139,18 @@ def test_a_crowd_is_refined_on_fewer_frames() -> None:
     assert fewer.frames == 12
     least = refine_top_camera(top, hors, top_boxes, hor_boxes, max_pairs=1)
     assert least.frames == MIN_REFINE_FRAMES
+
+
+def test_a_camera_beyond_the_grid_is_found_by_the_wider_search() -> None:
+    # 11 degrees off: the fit within the 4-degree grid stays poor (a wrong turn), so the wider
+    # 2-degree grid out to 10 is searched and finds it; without it (wide_deg at the grid's own
+    # 4 degrees) the camera stays far off.
+    top, hors, top_boxes, hor_boxes = _scene(9)
+    wrong = _turned(top, 11.0 * np.array([0.0, 1.0, 1.0]) / np.sqrt(2.0))
+    fit = refine_top_camera(wrong, hors, top_boxes, hor_boxes)
+    assert _angle(fit.camera, top) < 0.3
+    narrow = refine_top_camera(wrong, hors, top_boxes, hor_boxes, wide_deg=4.0)
+    assert _angle(narrow.camera, top) > 5.0
+    assert WIDE_LOSS < narrow.loss_after
+    assert fit.loss_after < narrow.loss_after
+
