@@ -56,7 +56,7 @@ of 30 x 20 people; a crowd is refined on fewer frames."""
 WIDE_LOSS: float = 0.3
 """Loss (with its price per squared degree) above which the fit within ``max_deg`` is not taken
 as final and the wider grid is searched too. Rendered videos (docs/method.md): a top camera
-off alone ends at 0.12 to 0.38 when its turn is found, at 0.49 to 0.81 when the grid does not
+off alone ends at 0.09 to 0.38 when its turn is found, at 0.49 to 0.81 when the grid does not
 reach it; with both cameras 2 degrees or more off it stays above 0.3 however good the fit,
 hence also :data:`WIDE_GAIN`."""
 
