@@ -212,13 +212,10 @@ def _search(rays: _RayFrames, starts: list[np.ndarray]) -> tuple[np.ndarray, flo
     half = len(_SCALES) // 2
     coarse = [descend(x, _SCALES[:half]) for x in starts]
     order = np.argsort([rays.loss(x, _SCALES[half - 1]) for x in coarse], kind="stable")
-    best_x, best_loss = starts[0], np.inf
-    for i in order[:_FINE]:
-        x = np.round(descend(coarse[i], _SCALES[half:]), 4)
-        value = rays.loss(x, _SCALES[-1])
-        if value < best_loss:
-            best_x, best_loss = x, value
-    return best_x, best_loss
+    fits = [np.round(descend(coarse[i], _SCALES[half:]), 4) for i in order[:_FINE]]
+    losses = [rays.loss(x, _SCALES[-1]) for x in fits]
+    best = int(np.argmin(losses))  # the first of equals
+    return fits[best], losses[best]
 
 
 def turned_camera(camera: Camera, rotvec_deg) -> Camera:
