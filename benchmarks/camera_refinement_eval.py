@@ -7,17 +7,20 @@ frame: what ``associate --model M --cameras`` does) the cameras turned D degrees
 axis and moved D / 10 m (:func:`tracking_eval.with_camera_error`: the top camera once for the
 video, the egocentric one anew every frame), then the same cameras with the top one refined on
 the video's boxes (:func:`xvmatch.inference.camera_refinement.refine_run_cameras`, what
-``--refine-top-camera auto`` does), and scores both against no cameras at all. Prints each
-video's line (the turn found, how far the refined top camera still is from the true one, the
-Eq. 9 accuracy of each) and the means per scenario and error: Eq. 9 accuracy and CVIDF1 of every
-frame, and the refinement's time against the association's in the same run.
+``--refine-top-camera auto`` does), and scores both against no cameras at all; "checked" is
+what ``--camera-check on`` (the default) then does: the refined cameras, or none when the camera
+check (:func:`xvmatch.inference.camera_check.check_run_cameras`) leaves them out (it judges
+only videos of 150 frames or more: ``--frames 160``). Prints each video's line (the turn found,
+how far the refined top camera still is from the true one, the check's share of pseudo-matches
+kept, the Eq. 9 accuracy of each) and the means per scenario and error: Eq. 9 accuracy and
+CVIDF1 of every frame, and the refinement's time against the association's in the same run.
 
 With ``--multi-ego N`` (2 or 3), ``xvmatch associate-multi`` instead: rendered drone videos of
 N egocentric views (:func:`xvmatch.datasets.multi_ego_scenes.render_multi_ego`, written as the
 command's input files), every view's camera folder holding the top camera turned D degrees
 (the egocentric cameras exact), run with no cameras, the cameras as given
-(``--refine-top-camera off``) and refined (the default); prints each video's line and the mean
-F1 of the top-egocentric pairs.
+(``--refine-top-camera off``) and refined (the default; the camera check does not judge videos
+this short); prints each video's line and the mean F1 of the top-egocentric pairs.
 
 Usage:
     python benchmarks/camera_refinement_eval.py [--scenario overview drone] [--frames 60]
@@ -43,12 +46,14 @@ from tracking_eval import ERROR_VIEWS, as_detections, with_camera_error
 from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
+from xvmatch.inference.camera_check import DOUBT_LOSS, check_run_cameras
 from xvmatch.inference.camera_refinement import refine_run_cameras
 from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.inference.tracking import learned_frame_evidence
 
 ARMS = ("none", "given", "refined")
+CHECKED_ARMS = (*ARMS, "checked")
 
 
 def scored(pairs, truth_top, truth_hor, top, hor):
@@ -165,7 +170,7 @@ def main() -> int:
           f"of {args.frames} frames per scenario, {args.people[0]}-{args.people[1]} people, ids "
           "scrambled per view")
     for scenario in args.scenario:
-        counts = {(d, arm): [] for d in args.errors for arm in ARMS}
+        counts = {(d, arm): [] for d in args.errors for arm in CHECKED_ARMS}
         timing = {"refine": 0.0, "associate": 0.0}
         for seed in args.seeds:
             video = render_tracking_video(seed, args.frames, SynthConfig(
@@ -192,7 +197,10 @@ def main() -> int:
                 timing["associate"] += time.perf_counter() - start
                 rows["refined"] = (rows["given"] if refined is given else scored(
                     run(refined), truth_top, truth_hor, video.top, video.hor))
-                for arm in ARMS:
+                check = check_run_cameras(det_top, det_hor, frames, model, video.hor_size,
+                                          refined, float(model.gamma), what.fit_loss)
+                rows["checked"] = rows["refined"] if check.trusted else none
+                for arm in CHECKED_ARMS:
                     counts[(d, arm)] += rows[arm]
                 true_top = video.cameras[frames[0]].top
                 left = np.degrees(Rotation.from_matrix(
@@ -200,14 +208,18 @@ def main() -> int:
                 turn = what.fit.angle_deg if what.turned else 0.0
                 loss = ("" if what.fit is None else
                         f" (loss {what.fit.loss_before:.3f} -> {what.fit.loss_after:.3f})")
+                verdict = ("not doubted" if not (what.fit_loss or 0.0) > DOUBT_LOSS else
+                           "not judged" if not check.judged else
+                           "kept" if check.trusted else "left out")
                 print(f"{scenario} seed {seed:3d} error {d:g}: turned {turn:.2f} deg{loss}, "
-                      f"{left:.2f} from the true camera; Eq. 9 "
-                      + " ".join(f"{arm} {summarize(rows[arm]).acc9:.1f}" for arm in ARMS),
-                      flush=True)
+                      f"{left:.2f} from the true camera; check {check.kept}/{check.positives} "
+                      f"{verdict}; Eq. 9 "
+                      + " ".join(f"{arm} {summarize(rows[arm]).acc9:.1f}"
+                                 for arm in CHECKED_ARMS), flush=True)
         print(f"\n{scenario}: mean over {len(args.seeds)} videos, Eq. 9 accuracy / CVIDF1")
-        print(f"{'error (deg)':>11} " + " ".join(f"{arm:>13}" for arm in ARMS))
+        print(f"{'error (deg)':>11} " + " ".join(f"{arm:>13}" for arm in CHECKED_ARMS))
         for d in args.errors:
-            cells = [summarize(counts[(d, arm)]) for arm in ARMS]
+            cells = [summarize(counts[(d, arm)]) for arm in CHECKED_ARMS]
             print(f"{d:>11g} " + " ".join(f"{c.acc9:6.1f} /{c.cvidf1:5.1f}" for c in cells))
         print(f"refinement {timing['refine']:.1f} s in all, "
               f"{timing['refine'] / max(timing['associate'], 1e-9):.2f}x the time of the "

@@ -185,6 +185,26 @@ class MinedPairs:
     bursts: int
     agreed: int
 
+    def frame_pairs(self, top: Mapping, hor: Mapping) -> tuple[np.ndarray, np.ndarray]:
+        """The cross-view positives and negatives as ``(P, 3)`` int64 rows ``(frame, top row,
+        hor row)`` (rows: a box's place in its frame's record), for ``top`` and ``hor`` the
+        records they were mined from: to read any cue's cost of a pair in its frame."""
+        where = {}
+        for view, records in (("top", top), ("hor", hor)):
+            frames = [np.full(len(records[f].ids), f, dtype=np.int64) for f in self.embed_frames]
+            rows = [np.arange(len(records[f].ids), dtype=np.int64) for f in self.embed_frames]
+            where[view] = (np.concatenate(frames) if frames else np.zeros(0, np.int64),
+                           np.concatenate(rows) if rows else np.zeros(0, np.int64))
+            if len(where[view][0]) != self.n_boxes[view]:
+                raise ValueError(f"{view}: {len(where[view][0])} boxes in the records' embedded "
+                                 f"frames, {self.n_boxes[view]} mined")
+
+        def rows(pairs: np.ndarray) -> np.ndarray:
+            return np.stack([where["top"][0][pairs[:, 0]], where["top"][1][pairs[:, 0]],
+                             where["hor"][1][pairs[:, 1]]], axis=1).reshape(-1, 3)
+
+        return rows(self.cross_pos), rows(self.cross_neg)
+
     def pair_set(self, top: np.ndarray, hor: np.ndarray) -> PairSet:
         """The :class:`PairSet` of these pairs with the boxes' descriptors
         (:func:`embed_frames`)."""

@@ -204,22 +204,12 @@ def check_appearance(
         return AppearanceCheck(False, True, math.nan, math.nan, 0, 0, min_auc,
                                min_pairs=min_pairs)
     mined = mine_pairs(top, hor, bursts, box_costs, gamma, config)
-    # mined pairs index the boxes of mined.embed_frames, stacked view by view in that order
-    where = {}
-    for view, records in (("top", top), ("hor", hor)):
-        frames = [np.full(len(records[f].ids), f, dtype=np.int64) for f in mined.embed_frames]
-        rows = [np.arange(len(records[f].ids)) for f in mined.embed_frames]
-        where[view] = (np.concatenate(frames) if frames else np.zeros(0, np.int64),
-                       np.concatenate(rows) if rows else np.zeros(0, np.int64))
+    pos, neg = mined.frame_pairs(top, hor)
 
     def costs(pairs: np.ndarray) -> np.ndarray:
-        frame, i = where["top"][0][pairs[:, 0]], where["top"][1][pairs[:, 0]]
-        j = where["hor"][1][pairs[:, 1]]
-        return np.array([app_costs[int(f)][a, b] for f, a, b in
-                         zip(frame.tolist(), i.tolist(), j.tolist(), strict=True)], np.float64)
+        return np.array([app_costs[f][a, b] for f, a, b in pairs.tolist()], np.float64)
 
-    verdict = _verdict(costs(mined.cross_pos), costs(mined.cross_neg), min_auc, min_pairs,
-                       len(bursts))
+    verdict = _verdict(costs(pos), costs(neg), min_auc, min_pairs, len(bursts))
     if not verdict.judged:
         return verdict
     verdict = replace(verdict, consistency=sure_pair_consistency(top, hor, box_costs, gamma,

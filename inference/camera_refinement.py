@@ -63,6 +63,13 @@ class CameraRefinement:
     message: str
 
     @property
+    def fit_loss(self) -> float | None:
+        """The loss of the best fit found (0 to 1; whether used or not), or None when none was
+        tried: how far even the best turn of the top camera leaves the head rays apart
+        (:mod:`xvmatch.inference.camera_check` judges the cameras above its ``DOUBT_LOSS``)."""
+        return None if self.fit is None else self.fit.loss_after
+
+    @property
     def fits(self) -> bool:
         """The top camera in use fits the video's head rays: turned to fit them, or kept as
         given with a loss of at most :data:`FIT_LOSS` (``track`` then leaves the images to the

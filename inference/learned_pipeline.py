@@ -28,6 +28,7 @@ import numpy as np
 
 from xvmatch.datasets.box_image_size import check_boxes_in_image
 from xvmatch.inference.appearance_check import AppearanceCheck
+from xvmatch.inference.camera_check import CameraCheck, check_run_cameras
 from xvmatch.inference.camera_refinement import CameraRefinement, refine_run_cameras
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
@@ -77,6 +78,9 @@ class LearnedRunOptions:
             (:mod:`xvmatch.inference.appearance_check`).
         refine_top_camera: with cameras, turn a fixed top camera to fit the run's head rays
             when the fit is clear (:mod:`xvmatch.inference.camera_refinement`).
+        camera_check: with cameras (refined when asked), judge them on the run's own box-only
+            pseudo-matches and match without them when they fail
+            (:mod:`xvmatch.inference.camera_check`).
     """
 
     models: tuple[LearnedMatcher, ...]
@@ -95,6 +99,7 @@ class LearnedRunOptions:
     keep_costs: bool = False
     appearance_check: bool = False
     refine_top_camera: bool = False
+    camera_check: bool = False
 
     def __post_init__(self) -> None:
         if not self.models:
@@ -128,6 +133,8 @@ class LearnedRun:
         checked: the appearance check of a run with ``appearance_check`` and images, else None.
         refinement: what became of the top camera of a run with cameras and
             ``refine_top_camera``, else None.
+        camera_checked: the camera check of a run with cameras and ``camera_check``, else
+            None (when it failed, the run was matched without the cameras).
     """
 
     pairs: dict[int, list[tuple[int, int]]]
@@ -139,6 +146,7 @@ class LearnedRun:
     rechecked: list[int] = field(default_factory=list)
     checked: AppearanceCheck | None = None
     refinement: CameraRefinement | None = None
+    camera_checked: CameraCheck | None = None
 
 
 class RetimedFrames:
@@ -236,8 +244,10 @@ class LearnedInputs:
         options: the run's options.
         frames: the frames to associate.
         images: ``{"top": source, "hor": source}`` (re-timed), or ``{}`` without images.
-        cameras: the camera source (its top camera refined when asked), or None.
+        cameras: the camera source (its top camera refined when asked), or None (also when
+            the camera check failed).
         refinement: what became of the top camera (``refine_top_camera``), or None.
+        camera_checked: the camera check (``camera_check``), or None.
         gamma: the non-association cost (given, else the model's own).
     """
 
@@ -247,6 +257,7 @@ class LearnedInputs:
         self.images: dict = {}
         self.cameras = None
         self.refinement: CameraRefinement | None = None
+        self.camera_checked: CameraCheck | None = None
         self.gamma = non_association_cost(options.models, options.gamma)
 
     def _open(self) -> None:
@@ -273,6 +284,14 @@ class LearnedInputs:
             self.cameras = open_matcher_cameras(options.cameras, named, both, wanted)
             if options.refine_top_camera:
                 self.cameras, self.refinement = refine_run_cameras(self.cameras, top, hor, both)
+            if options.camera_check:
+                self.camera_checked = check_run_cameras(
+                    top, hor, both, list(options.models), tuple(options.hor_size),
+                    self.cameras, self.gamma,
+                    None if self.refinement is None else self.refinement.fit_loss,
+                    options.camera_id, workers=options.workers)
+                if not self.camera_checked.trusted:
+                    self.cameras = None
 
     def associate(self, progress: Callable[[Iterable[int]], Iterable[int]] | None = None
                   ) -> LearnedRun:
@@ -304,7 +323,7 @@ class LearnedInputs:
         )
         return LearnedRun(pairs, costs, self.gamma, (width, height), options.hor_size_source,
                           options.models, rechecked, checked[0] if checked else None,
-                          self.refinement)
+                          self.refinement, self.camera_checked)
 
     def close(self) -> None:
         """Close the image sources."""

@@ -13,7 +13,7 @@ import argparse
 import math
 import sys
 
-from xvmatch.cli_model import add_refine_top_camera
+from xvmatch.cli_model import add_camera_check, add_refine_top_camera
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -62,6 +62,7 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
                    "files), as associate takes them: the box-only matcher that mines the "
                    "cross-view pairs then uses them")
     add_refine_top_camera(p)
+    add_camera_check(p)
     p.add_argument("--camera-id", type=box_id, default=None,
                    help="top-view id of the horizontal camera's wearer, when known")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
@@ -108,7 +109,12 @@ def refusal_message(run, model: str) -> str:
 
 def _cmd_adapt(args: argparse.Namespace) -> int:
     from xvmatch import __version__
-    from xvmatch.cli_model import horizontal_size, note_camera_refinement, open_models
+    from xvmatch.cli_model import (
+        horizontal_size,
+        note_camera_check,
+        note_camera_refinement,
+        open_models,
+    )
     from xvmatch.geometry.output_paths import claim_folder
     from xvmatch.inference.adaptation_pairs import MiningConfig
     from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
@@ -137,23 +143,26 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
                                 top_images=args.top_images, hor_images=args.hor_images,
                                 cameras=args.cameras, top_boxes=args.top,
                                 camera_id=args.camera_id, workers=args.workers,
-                                refine_top_camera=args.refine_top_camera == "auto")
+                                refine_top_camera=args.refine_top_camera == "auto",
+                                camera_check=args.camera_check == "on")
 
     def progress(items, total, what):
         return progress_bar(total, what, "frame", not args.quiet, items)
 
     with open_learned_inputs(top, hor, both, options) as inputs:
         note_camera_refinement(inputs.refinement, args.quiet)
+        note_camera_check(inputs.camera_checked, args.quiet)
         run = adapt_to_site(top, hor, model, inputs.images["top"], inputs.images["hor"],
                             tuple(hor_size[0]), inputs.cameras, args.camera_id, config,
                             progress, args.workers)
+        mined_with_cameras = inputs.cameras is not None  # not when the camera check failed
     fit = run.fit
     if not fit.accepted:
         raise UsageError(refusal_message(run, args.model))
     out = claim_folder(args.out, ADAPT_COMMAND)
     roles = {"top": args.top, "hor": args.hor, "top_images": args.top_images,
              "hor_images": args.hor_images}
-    if args.cameras is not None:
+    if mined_with_cameras:
         roles["cameras"] = args.cameras
     write_site_bundle(model.bundle.manifest.folder, out, run, roles, __version__)
     if not args.quiet:

@@ -24,6 +24,7 @@ from xvmatch.geometry.output_paths import check_own_folder
 __all__ = [
     "DRAW_COMMAND",
     "LEARNED_ONLY",
+    "add_camera_check",
     "add_draw_arguments",
     "add_model_arguments",
     "add_refine_top_camera",
@@ -32,6 +33,7 @@ __all__ = [
     "ego_camera_size",
     "horizontal_size",
     "learned_run_options",
+    "note_camera_check",
     "note_camera_refinement",
     "open_models",
 ]
@@ -68,6 +70,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
         "per-frame camera files named by frame number",
     )
     add_refine_top_camera(g)
+    add_camera_check(g)
     g.add_argument("--costs", default=None, metavar="JSON",
                    help="also write each frame's ids and cost matrix (written atomically)")
     g.add_argument("--threads", type=thread_count, default=1, metavar="K",
@@ -93,6 +96,24 @@ def add_refine_top_camera(group) -> None:
         "video's head rays when the fit is clear (10 or more frames with boxes in both views; "
         "a degree of calibration error costs the matcher more than the cameras give), and "
         "say so (default auto; off: use it as given)")
+
+
+def add_camera_check(group) -> None:
+    """Add ``--camera-check`` (``associate``, ``track``, ``adapt``, ``associate-multi``)."""
+    group.add_argument(
+        "--camera-check", choices=("on", "off"), default="on",
+        help="with --cameras: when even the refined top camera fits the video's head rays "
+        "poorly, judge the cameras on the pairs the box-only matcher is sure of over "
+        "consecutive frames, and match without them when they re-pair too many of those "
+        "(cameras calibrated far off); only on videos of 6 s or more where those pairs are "
+        "steady (default on; off: always use them)")
+
+
+def note_camera_check(check, quiet: bool, prefix: str = "") -> None:
+    """Print the camera check's line: when it had a run of frames to judge on, and with
+    ``quiet`` only when the cameras were left out."""
+    if check is not None and check.to_tell(quiet):
+        print(f"{prefix}{check.message()}", file=sys.stderr)
 
 
 def note_camera_refinement(refinement, quiet: bool) -> None:
@@ -233,6 +254,7 @@ def learned_run_options(
                     or getattr(args, "draw", None) is not None),
         appearance_check=getattr(args, "appearance_check", "on") == "on",
         refine_top_camera=getattr(args, "refine_top_camera", "auto") == "auto",
+        camera_check=getattr(args, "camera_check", "on") == "on",
     )
 
 
@@ -276,6 +298,7 @@ def associate_with_model(
     with open_learned_inputs(top, hor, frames, options) as inputs:
         note_if_assumed(hor_size, hor, hor_path, bool(getattr(args, "quiet", False)))
         note_camera_refinement(inputs.refinement, bool(getattr(args, "quiet", False)))
+        note_camera_check(inputs.camera_checked, bool(getattr(args, "quiet", False)))
         run = inputs.associate(progress)
         if run.rechecked and not getattr(args, "quiet", False):
             both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))
@@ -288,13 +311,15 @@ def associate_with_model(
                           sorted(run.costs), inputs.images or None, run.hor_size,
                           not getattr(args, "no_labels", False))
     if getattr(args, "costs", None) is not None:
-        _write_costs(args.costs, top, hor, run.costs, run.gamma, run.checked)
+        _write_costs(args.costs, top, hor, run.costs, run.gamma, run.checked,
+                     run.camera_checked)
     return run.pairs
 
 
 def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float,
-                 checked=None) -> None:
-    """``--costs``' JSON (docs/formats.md); ``checked``: the run's appearance check, if any."""
+                 checked=None, camera_checked=None) -> None:
+    """``--costs``' JSON (docs/formats.md); ``checked``, ``camera_checked``: the run's
+    appearance and camera checks, if any."""
     import json
 
     from xvmatch.geometry.atomic_files import atomic_write_text
@@ -309,9 +334,18 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
             for f, c in sorted(costs.items())
         },
     }
-    if checked is not None:
-        from xvmatch.inference.site_bundle import json_figure
+    from xvmatch.inference.site_bundle import json_figure
 
+    if camera_checked is not None:
+        record["camera_check"] = {
+            "judged": camera_checked.judged, "cameras_used": camera_checked.trusted,
+            "kept": camera_checked.kept, "positives": camera_checked.positives,
+            "share": json_figure(camera_checked.share),
+            "standard_error": json_figure(camera_checked.error),
+            "consistency": json_figure(camera_checked.consistency),
+            "fit_loss": json_figure(camera_checked.fit_loss),
+            "min_keep": camera_checked.min_keep, "min_pairs": camera_checked.min_pairs}
+    if checked is not None:
         record["appearance_check"] = {
             "judged": checked.judged, "images_used": checked.trusted,
             "auc": json_figure(checked.auc), "standard_error": json_figure(checked.error),

@@ -23,7 +23,12 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.cli_model import add_refine_top_camera, note_camera_refinement
+from xvmatch.cli_model import (
+    add_camera_check,
+    add_refine_top_camera,
+    note_camera_check,
+    note_camera_refinement,
+)
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
@@ -77,6 +82,7 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
                    help="per horizontal view, a camera file or folder with cameras 'top' and "
                    "'ego' (as associate; needs --model)")
     add_refine_top_camera(p)
+    add_camera_check(p)
     p.add_argument("--camera-id", default=None, nargs="+", type=box_id, metavar="ID",
                    help="per horizontal view, the top-file id of its wearer (O given; "
                    "|id| <= 2**53); without it O is searched")
@@ -248,6 +254,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
                                         max_offset, wearer, value,
                                         f"--hor {paths[k + 1]}: " if n_hor > 1 else "")
+        refinement = None
         if cameras is not None and args.refine_top_camera == "auto":
             from xvmatch.inference.camera_refinement import refine_views_cameras
 
@@ -257,6 +264,18 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         if any(offsets):
             views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
                                                                    cameras, camera_rows)
+        if refinement is not None and args.camera_check == "on":
+            from xvmatch.inference.camera_check import check_run_cameras
+
+            cameras = list(cameras)
+            for k in range(n_hor):  # a view whose cameras fail is matched without them
+                check = check_run_cameras(views[0], views[k + 1], sorted(views[k + 1]),
+                                          matcher, tuple(sizes[k]), cameras[k],
+                                          float(matcher.gamma), refinement.fit_loss,
+                                          workers=args.workers)
+                note_camera_check(check, args.quiet, f"--hor {paths[k + 1]}: ")
+                if not check.trusted:
+                    cameras[k] = None
         checked: dict = {}
         problems = multi_view_costs(
             views, sizes, frames, matcher=matcher,

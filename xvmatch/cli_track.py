@@ -29,7 +29,12 @@ from collections.abc import Iterable
 from dataclasses import replace
 from pathlib import Path
 
-from xvmatch.cli_model import add_refine_top_camera, note_camera_refinement
+from xvmatch.cli_model import (
+    add_camera_check,
+    add_refine_top_camera,
+    note_camera_check,
+    note_camera_refinement,
+)
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
     HOR_IMAGE_SIZE,
@@ -165,6 +170,22 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
     return cameras, refinement
 
 
+def _checked_cameras(args: argparse.Namespace, model, top, hor, resolved, cameras, refinement):
+    """``(cameras, refinement)`` after ``--camera-check`` (:mod:`xvmatch.inference.
+    camera_check`; ``top`` and ``hor`` aligned): as they are when the check is off or passes,
+    ``(None, None)`` when it fails (the cross-view weights then come from the boxes alone)."""
+    if cameras is None or args.camera_check == "off":
+        return cameras, refinement
+    from xvmatch.inference.camera_check import check_run_cameras
+
+    check = check_run_cameras(top, hor, sorted(hor), model, tuple(resolved[0]), cameras,
+                              float(model.gamma),
+                              None if refinement is None else refinement.fit_loss,
+                              workers=args.workers)
+    note_camera_check(check, args.quiet)
+    return (cameras, refinement) if check.trusted else (None, None)
+
+
 def _fitted_cameras_config(args: argparse.Namespace, config, refinement, images):
     """``config`` with Eq. 17's ``w1`` at :data:`~xvmatch.inference.track_costs.
     FITTED_CAMERAS_W1` when the images would enter the cross-view weights, ``--w1`` is not
@@ -264,6 +285,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "cross-view weights: its camera cues and the rectified geometry, as "
                    "'associate --cameras' (an oblique overview camera wants them)")
     add_refine_top_camera(g)
+    add_camera_check(g)
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
                    "(default 0.3, or 1 when --cameras' top camera fits the video's head rays "
@@ -350,9 +372,11 @@ def _cmd_track(args: argparse.Namespace) -> int:
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
         cameras, refinement = _open_cameras(args, model, top.frames, hor.frames, offset,
                                             resolved, sources)
-        config = _fitted_cameras_config(args, config, refinement, images)
         top_frames, hor_frames, images, cameras = _aligned(top.frames, hor.frames, images,
                                                            cameras, offset)
+        cameras, refinement = _checked_cameras(args, model, top_frames, hor_frames, resolved,
+                                               cameras, refinement)
+        config = _fitted_cameras_config(args, config, refinement, images)
         progress = _step_progress(not args.quiet)
         learned = None
         if weights == "learned":
