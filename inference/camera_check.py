@@ -30,7 +30,7 @@ unsteady on keep their cameras. No identities are used. Numpy only (and the bund
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -184,16 +184,13 @@ def check_cameras(
                              f"{box_costs[f].shape}")
         paired[f] = {(int(i), int(j)) for i, j in assign(camera_costs[f], gamma)}
     kept = sum((i, j) in paired[f] for f, i, j in pos.tolist())
+    check = CameraCheck(False, True, kept, len(pos), len(bursts), min_keep, min_pairs)
     if len(pos) < min_pairs:
-        return CameraCheck(False, True, kept, len(pos), len(bursts), min_keep, min_pairs)
-    consistency = sure_pair_consistency(top, hor, box_costs, gamma, config)
-    if not consistency >= MIN_CONSISTENCY:  # NaN too: not measured
-        return CameraCheck(False, True, kept, len(pos), len(bursts), min_keep, min_pairs,
-                           consistency)
-    p = kept / len(pos)
-    error = math.sqrt(p * (1.0 - p) / len(pos))
-    return CameraCheck(True, bool(p + 2.0 * error >= min_keep), kept, len(pos), len(bursts),
-                       min_keep, min_pairs, consistency)
+        return check
+    check = replace(check, consistency=sure_pair_consistency(top, hor, box_costs, gamma, config))
+    if not check.consistency >= MIN_CONSISTENCY:  # NaN too: not measured
+        return check
+    return replace(check, judged=True, trusted=bool(check.share + 2.0 * check.error >= min_keep))
 
 
 def check_run_cameras(
@@ -208,7 +205,6 @@ def check_run_cameras(
     camera_id: int | None = None,
     config: MiningConfig | None = None,
     workers: int = 1,
-    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
     min_keep: float = MIN_KEEP,
 ) -> CameraCheck:
     """Judge a run's cameras when ``fit_loss`` is above :data:`DOUBT_LOSS` (else they are
@@ -231,7 +227,6 @@ def check_run_cameras(
         camera_id: the wearer's top-view id, when known.
         config: how pseudo-matches are mined (default: :data:`MAX_FRAMES` frames).
         workers: processes for the geometry features (the result does not depend on it).
-        progress: wraps each scoring's frame iterator.
         min_keep: the least share kept for the cameras to be used.
     """
     if fit_loss is None or not fit_loss > DOUBT_LOSS:
@@ -245,8 +240,8 @@ def check_run_cameras(
     if not mined:
         return CameraCheck(False, True, 0, 0, 0, min_keep, fit_loss=float(fit_loss))
     box = box_only_costs(top, hor, sorted(set(mined) | set(steady)), matcher, hor_size,
-                         camera_id=camera_id, progress=progress, workers=workers)
+                         camera_id=camera_id, workers=workers)
     camera = box_only_costs(top, hor, sorted(mined), matcher, hor_size, cameras=cameras,
-                            camera_id=camera_id, progress=progress, workers=workers)
+                            camera_id=camera_id, workers=workers)
     return replace(check_cameras(top, hor, box, camera, gamma, config, min_keep),
                    fit_loss=float(fit_loss))
