@@ -89,13 +89,11 @@ def test_a_short_clip_or_an_unsteady_matcher_keeps_the_cameras() -> None:
         check_cameras(top, hor, box, {f: c[:, :2] for f, c in box.items()}, gamma=0.5)
 
 
-@pytest.fixture(scope="module")
-def drone(tmp_path_factory):
-    """A rendered drone video just long enough to judge (CONSISTENCY_WINDOW frames), its files,
-    and a camera folder whose top camera was calibrated 20 degrees off."""
+def _turned_video(folder, frames: int):
+    """A rendered drone video of ``frames`` frames, its files, and a camera folder whose top
+    camera was calibrated 20 degrees off."""
     config = SynthConfig(scenario="drone", n_people=(8, 12), fps=25.0)
-    video = render_tracking_video(2, CONSISTENCY_WINDOW, config)
-    folder = tmp_path_factory.mktemp("drone")
+    video = render_tracking_video(2, frames, config)
     files = write_tracking_video(video, folder)
     wrong = turned_camera(video.cameras[1].top, [12.0, -10.0, 11.0])
     turned = folder / "turned"
@@ -103,6 +101,12 @@ def drone(tmp_path_factory):
     for f, cams in video.cameras.items():
         save_cameras(turned / f"{f:06d}.json", {"top": wrong, "ego": cams.hor})
     return video, files, turned
+
+
+@pytest.fixture(scope="module")
+def drone(tmp_path_factory):
+    """Just long enough to judge the cameras (CONSISTENCY_WINDOW frames)."""
+    return _turned_video(tmp_path_factory.mktemp("drone"), CONSISTENCY_WINDOW)
 
 
 def test_misleading_cameras_are_left_out_and_exact_ones_kept(drone) -> None:
@@ -178,3 +182,22 @@ def test_track_and_associate_multi_leave_out_cameras_that_fail(drone, tmp_path, 
     for name in ("top.txt", "hor1.txt"):
         assert (tmp_path / "m_none" / name).read_bytes() == (
             tmp_path / "m_cams" / name).read_bytes()
+
+
+def test_adapt_mines_without_cameras_that_fail(tmp_path, capsys) -> None:
+    """``adapt`` then mines its pairs from the boxes alone: the site bundle is the one fitted
+    without --cameras, byte for byte, and its manifest names no camera file. (240 frames: the
+    check needs 150, the adaptation a quarter of its bursts held out.)"""
+    video, files, turned = _turned_video(tmp_path, 240)
+    base = ["adapt", "--top", str(files["top"]), "--hor", str(files["hor"]), "--top-images",
+            str(files["top_images"]), "--hor-images", str(files["hor_images"]), "--image-size",
+            "x".join(map(str, video.hor_size)), "--burst", "8", "--quiet"]
+    assert main([*base, "--cameras", str(turned), "--out", str(tmp_path / "with")]) == 0
+    said = capsys.readouterr().err
+    assert "camera check: the top camera fits the head rays poorly" in said
+    assert "matched without them" in said
+    assert main([*base, "--out", str(tmp_path / "none")]) == 0
+    fitted = json.loads((tmp_path / "with" / "manifest.json").read_text())["adaptation"]
+    assert "cameras" not in fitted["fitted_on"] and fitted["fitted_on"]["frames_scored"] == 240
+    assert (tmp_path / "with" / "adaptation.npz").read_bytes() == (
+        tmp_path / "none" / "adaptation.npz").read_bytes()
