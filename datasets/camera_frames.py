@@ -14,10 +14,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from xvmatch.geometry.camera_io import CameraFileError, load_cameras
+from xvmatch.geometry.camera_io import CameraFileError, load_cameras, save_cameras
 from xvmatch.geometry.matcher_inputs import FrameCameras
 
-__all__ = ["CameraFrames", "open_cameras"]
+__all__ = ["CameraFrames", "open_cameras", "save_camera_frames"]
 
 _TRAILING_NUMBER = re.compile(r"(\d+)$")
 
@@ -99,3 +99,15 @@ def open_cameras(path: str | os.PathLike, frames: Sequence[int] = ()) -> CameraF
         raise CameraFileError(f"{name}: no camera file for frame {missing[0]} (the boxes have "
                               f"it; {len(missing)} frame(s) missing)")
     return CameraFrames(name, per_frame=per_frame, files=files)
+
+
+def save_camera_frames(cameras: CameraFrames, path: str | os.PathLike) -> None:
+    """Write ``cameras`` where :func:`open_cameras` reads them back the same: a camera file for
+    ``static`` ones; else, in the existing folder ``path``, one file per frame under the name of
+    the file it was read from. Each file is written atomically (a round trip is exact)."""
+    if cameras.static is not None:
+        save_cameras(path, {"top": cameras.static.top, "ego": cameras.static.hor})
+        return
+    for frame, cams in sorted(cameras.per_frame.items()):
+        name = Path(cameras.files[frame]).name if frame in cameras.files else f"{frame:06d}.json"
+        save_cameras(Path(path) / name, {"top": cams.top, "ego": cams.hor})

@@ -246,6 +246,8 @@ class LearnedInputs:
         images: ``{"top": source, "hor": source}`` (re-timed), or ``{}`` without images.
         cameras: the camera source (its top camera refined when asked), or None (also when
             the camera check failed).
+        refined_cameras: the camera source as refined, also when the check left it out (for
+            ``--write-cameras``), or None without cameras.
         refinement: what became of the top camera (``refine_top_camera``), or None.
         camera_checked: the camera check (``camera_check``), or None.
         gamma: the non-association cost (given, else the model's own).
@@ -256,6 +258,7 @@ class LearnedInputs:
         self.top, self.hor, self.frames, self.options = top, hor, frames, options
         self.images: dict = {}
         self.cameras = None
+        self.refined_cameras = None
         self.refinement: CameraRefinement | None = None
         self.camera_checked: CameraCheck | None = None
         self.gamma = non_association_cost(options.models, options.gamma)
@@ -284,6 +287,7 @@ class LearnedInputs:
             self.cameras = open_matcher_cameras(options.cameras, named, both, wanted)
             if options.refine_top_camera:
                 self.cameras, self.refinement = refine_run_cameras(self.cameras, top, hor, both)
+            self.refined_cameras = self.cameras
             if options.camera_check:
                 self.camera_checked = check_run_cameras(
                     top, hor, both, list(options.models), tuple(options.hor_size),

@@ -12,7 +12,7 @@ import pytest
 
 from tests.test_top_camera_refinement import _angle, _scene, _turned
 from xvmatch.cli import main
-from xvmatch.datasets.camera_frames import CameraFrames
+from xvmatch.datasets.camera_frames import CameraFrames, open_cameras, save_camera_frames
 from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
@@ -182,6 +182,58 @@ def test_associate_says_what_it_did(overview, tmp_path, capsys) -> None:
                  "--refine-top-camera", "off"]) == 0
     assert "cameras:" not in capsys.readouterr().err
     assert (tmp_path / "a.txt").read_bytes() != (tmp_path / "b.txt").read_bytes()
+
+
+def test_write_cameras_keeps_the_refined_cameras_for_next_time(overview, tmp_path, capsys) -> None:
+    """``--write-cameras`` writes ``--cameras``' folder with the top camera as turned (the
+    egocentric cameras as given): given back with ``--refine-top-camera off``, the same pairs,
+    and ``track`` writes the same files. It replaces only a folder it made."""
+    video, files, turned = overview
+    base = ["associate", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
+            "default"]
+    written = tmp_path / "refined"
+    assert main([*base, "--cameras", str(turned), "--out", str(tmp_path / "a.txt"),
+                 "--write-cameras", str(written)]) == 0
+    said = capsys.readouterr().err
+    assert f"cameras: wrote {written} (the top camera turned 2." in said
+    given, again = open_cameras(turned), open_cameras(written)
+    assert sorted(again.files) == sorted(given.files) == sorted(video.cameras)
+    assert {Path(f).name for f in again.files.values()} == {p.name for p in turned.iterdir()}
+    assert all(np.array_equal(again.get(f).hor.R, given.get(f).hor.R) for f in video.cameras)
+    # 0.53 degrees from the true camera, 2.15 from the one given (2 degrees off)
+    assert _angle(again.get(1).top, video.cameras[1].top) < 1.0
+    assert _angle(again.get(1).top, given.get(1).top) > 1.5
+    assert main([*base, "--cameras", str(written), "--refine-top-camera", "off", "--out",
+                 str(tmp_path / "b.txt"), "--quiet"]) == 0
+    assert (tmp_path / "a.txt").read_bytes() == (tmp_path / "b.txt").read_bytes()
+    by_associate = {p.name: p.read_bytes() for p in written.glob("*.json")}
+    track = ["track", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
+             "default", "--cameras", str(turned), "--offset", "0", "--quiet"]
+    assert main([*track, "--out", str(tmp_path / "t"), "--write-cameras", str(written)]) == 0
+    assert {p.name: p.read_bytes() for p in written.glob("*.json")} == by_associate
+    assert main([*track, "--out", str(tmp_path / "t2"), "--write-cameras",
+                 str(files["cameras"])]) == 2  # a folder it did not make
+    assert "--write-cameras" in capsys.readouterr().err and not (tmp_path / "t2").exists()
+    for extra, message in ((["--refine-top-camera", "off"], "drop --refine-top-camera off"),
+                           ([], "give --cameras")):
+        args = [*base, "--out", str(tmp_path / "c.txt"), "--write-cameras",
+                str(tmp_path / "x.json"), *extra]
+        if extra:
+            args += ["--cameras", str(turned)]
+        assert main(args) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "c.txt").exists() and not (tmp_path / "x.json").exists()
+
+
+def test_a_static_camera_file_is_written_as_one(scene, tmp_path) -> None:
+    top, hors, _, _ = scene
+    cameras = CameraFrames("cams.json", static=FrameCameras(_turned(top, TURN), hors[0]))
+    save_camera_frames(cameras, tmp_path / "cams.json")
+    again = open_cameras(tmp_path / "cams.json")
+    assert again.static is not None and not again.per_frame
+    for a, b in ((again.static.top, cameras.static.top), (again.static.hor, hors[0])):
+        assert all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("K", "R", "c"))
+        assert a.image_size == b.image_size
 
 
 def test_a_dense_crowd_is_used_as_given(scene) -> None:

@@ -14,21 +14,25 @@ point prints as ``xvmatch: error: ...``.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
-from xvmatch.cli_options import add_image_options, check_images_together
+from xvmatch.cli_options import UsageError, add_image_options, check_images_together
 from xvmatch.cli_types import float_in, int_in, thread_count
-from xvmatch.geometry.output_paths import check_own_folder
+from xvmatch.geometry.output_paths import Output, check_own_folder
 
 __all__ = [
+    "CAMERAS_COMMAND",
     "DRAW_COMMAND",
     "LEARNED_ONLY",
     "add_camera_check",
     "add_draw_arguments",
     "add_model_arguments",
     "add_refine_top_camera",
+    "add_write_cameras",
     "associate_with_model",
+    "check_write_cameras",
     "draw_pictures",
     "ego_camera_size",
     "horizontal_size",
@@ -36,6 +40,7 @@ __all__ = [
     "note_camera_check",
     "note_camera_refinement",
     "open_models",
+    "write_cameras",
 ]
 
 _gamma = float_in(0, 1, "the matcher's costs lie in [0, 1]", low_open=True)
@@ -70,6 +75,7 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
         "per-frame camera files named by frame number",
     )
     add_refine_top_camera(g)
+    add_write_cameras(g)
     add_camera_check(g)
     g.add_argument("--costs", default=None, metavar="JSON",
                    help="also write each frame's ids and cost matrix (written atomically)")
@@ -96,6 +102,58 @@ def add_refine_top_camera(group) -> None:
         "video's head rays when the fit is clear (10 or more frames with boxes in both views; "
         "a degree of calibration error costs the matcher more than the cameras give), and "
         "say so (default auto; off: use it as given)")
+
+
+CAMERAS_COMMAND = "xvmatch --write-cameras"
+"""The marker of a camera folder ``--write-cameras`` made (it replaces only its own)."""
+
+
+def add_write_cameras(group) -> None:
+    """Add ``--write-cameras`` (``associate``, ``track``)."""
+    group.add_argument(
+        "--write-cameras", default=None, metavar="PATH",
+        help="with --cameras: also write them as refined (the top camera turned to fit the "
+        "head rays, else as given), in --cameras' form: a camera file, or a folder of "
+        "per-frame files under the same names (a new or empty folder, or one an earlier "
+        "--write-cameras made); give it as --cameras with --refine-top-camera off next time")
+
+
+def check_write_cameras(args: argparse.Namespace) -> Output:
+    """``--write-cameras``' output for :func:`~xvmatch.geometry.output_paths.check_outputs`,
+    after refusing it without ``--cameras`` or with ``--refine-top-camera off``, and a folder
+    that is neither new, empty nor its own."""
+    path = getattr(args, "write_cameras", None)
+    if path is None:
+        return Output("--write-cameras", None)
+    if getattr(args, "cameras", None) is None:
+        raise UsageError("--write-cameras writes the cameras of --cameras as refined: give "
+                         "--cameras")
+    if getattr(args, "refine_top_camera", "auto") == "off":
+        raise UsageError("--write-cameras writes the cameras as refined: drop "
+                         "--refine-top-camera off (else they are --cameras as given)")
+    folder = os.path.isdir(args.cameras)
+    if folder:
+        check_own_folder(path, CAMERAS_COMMAND, "--write-cameras")
+    return Output("--write-cameras", path, folder=folder)
+
+
+def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
+    """Write ``--write-cameras`` (when given): ``cameras``, the run's
+    :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined, in ``--cameras``' form;
+    say what they hold unless quiet."""
+    path = getattr(args, "write_cameras", None)
+    if path is None:
+        return
+    from xvmatch.datasets.camera_frames import save_camera_frames
+    from xvmatch.geometry.output_paths import claim_folder
+
+    save_camera_frames(cameras, path if cameras.static is not None else
+                       claim_folder(path, CAMERAS_COMMAND, "--write-cameras"))
+    if not getattr(args, "quiet", False):
+        turned = refinement is not None and refinement.turned
+        what = (f"the top camera turned {refinement.fit.angle_deg:.2f} degrees" if turned
+                else "the top camera as given")
+        print(f"cameras: wrote {path} ({what})", file=sys.stderr)
 
 
 def add_camera_check(group) -> None:
@@ -142,7 +200,7 @@ DRAW_COMMAND = "xvmatch associate --draw"
 an earlier ``--draw`` made (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
 
 LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs",
-                "precision")
+                "precision", "write_cameras")
 """Options of ``associate`` that need ``--model``."""
 
 
@@ -313,6 +371,7 @@ def associate_with_model(
     if getattr(args, "costs", None) is not None:
         _write_costs(args.costs, top, hor, run.costs, run.gamma, run.checked,
                      run.camera_checked)
+    write_cameras(args, inputs.refined_cameras, inputs.refinement)
     return run.pairs
 
 

@@ -32,8 +32,11 @@ from pathlib import Path
 from xvmatch.cli_model import (
     add_camera_check,
     add_refine_top_camera,
+    add_write_cameras,
+    check_write_cameras,
     note_camera_check,
     note_camera_refinement,
+    write_cameras,
 )
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
@@ -285,6 +288,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "cross-view weights: its camera cues and the rectified geometry, as "
                    "'associate --cameras' (an oblique overview camera wants them)")
     add_refine_top_camera(g)
+    add_write_cameras(g)
     add_camera_check(g)
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
@@ -341,7 +345,8 @@ def _cmd_track(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.top}: no box has the --camera-id {args.camera_id}")
     out = Path(args.out)
     check_outputs(
-        [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE))],
+        [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE)),
+         check_write_cameras(args)],
         [Input("--top", args.top), Input("--hor", args.hor),
          *image_inputs(args), Input("--cameras", args.cameras),
          Input("--model", None if args.model == "default" else args.model)],
@@ -372,6 +377,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
         cameras, refinement = _open_cameras(args, model, top.frames, hor.frames, offset,
                                             resolved, sources)
+        refined = cameras
         top_frames, hor_frames, images, cameras = _aligned(top.frames, hor.frames, images,
                                                            cameras, offset)
         cameras, refinement = _checked_cameras(args, model, top_frames, hor_frames, resolved,
@@ -400,6 +406,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.geometry.atomic_files import atomic_write_text
 
     atomic_write_text(out / OFFSET_FILE, json.dumps({"offset": offset}) + "\n")
+    write_cameras(args, refined, refinement)
     if result.n_fallback:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows spent the "
               f"MIP's budget of work or time limit ({args.time_limit:g} s) or failed, and used "
