@@ -15,6 +15,10 @@ how far the refined top camera still is from the true one, the check's share of 
 kept, the Eq. 9 accuracy of each) and the means per scenario and error: Eq. 9 accuracy and
 CVIDF1 of every frame, and the refinement's time against the association's in the same run.
 
+With ``--moved``, the errors are metres instead: the top camera's centre moved that far in a
+random direction (the same for every error of a seed), its orientation and the egocentric
+cameras exact (what a drone's satellite positioning gets wrong).
+
 With ``--multi-ego N`` (2 or 3), ``xvmatch associate-multi`` instead: rendered drone videos of
 N egocentric views (:func:`xvmatch.datasets.multi_ego_scenes.render_multi_ego`, written as the
 command's input files), every view's camera folder holding the top camera turned D degrees
@@ -25,6 +29,7 @@ this short); prints each video's line and the mean F1 of the top-egocentric pair
 Usage:
     python benchmarks/camera_refinement_eval.py [--scenario overview drone] [--frames 60]
         [--seeds 1 2 5 6 11 12 13 16] [--errors 0 0.5 1 2 3] [--people 12 20] [--model default]
+    python benchmarks/camera_refinement_eval.py --moved --errors 0.5 1 2 4 8
     python benchmarks/camera_refinement_eval.py --multi-ego 2 --frames 40 --seeds 1 2 3
         --errors 2 3
 """
@@ -34,6 +39,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +72,17 @@ def _rows(path: Path) -> list[tuple[int, int]]:
     """(frame, id) of each row of a MOT file, in order."""
     return [(int(r[0]), int(float(r[1]))) for r in
             (line.split(",") for line in path.read_text().splitlines())]
+
+
+def with_moved_top(cameras: dict, metres: float, seed: int) -> dict:
+    """``{frame: FrameCameras}`` with the top camera's centre moved ``metres`` in a random
+    direction drawn from ``seed`` (``--moved``)."""
+    from xvmatch.geometry.matcher_inputs import FrameCameras
+
+    step = np.random.default_rng([seed, 7]).normal(size=3)
+    top = cameras[min(cameras)].top
+    moved = replace(top, c=top.c + metres * step / np.linalg.norm(step))
+    return {f: FrameCameras(moved, c.hor) for f, c in cameras.items()}
 
 
 def multi_pair_counts(inputs, out: Path) -> tuple[int, int, int]:
@@ -158,6 +175,9 @@ def main() -> int:
                         metavar="DEG", help="calibration errors, degrees")
     parser.add_argument("--error-on", choices=tuple(ERROR_VIEWS), default="both",
                         help="the cameras given with the error (default both)")
+    parser.add_argument("--moved", action="store_true",
+                        help="--errors are metres the top camera's centre is moved (module "
+                        "docstring)")
     parser.add_argument("--people", type=int, nargs=2, default=[12, 20])
     parser.add_argument("--model", default="default")
     parser.add_argument("--multi-ego", type=int, choices=(2, 3), default=None, metavar="N",
@@ -186,8 +206,10 @@ def main() -> int:
 
             none = scored(run(None), truth_top, truth_hor, video.top, video.hor)
             for d in args.errors:
-                given = CameraFrames("rendered", per_frame=with_camera_error(
-                    video.cameras, d, seed, ERROR_VIEWS[args.error_on]) if d else video.cameras)
+                given = CameraFrames("rendered", per_frame=(
+                    video.cameras if not d else with_moved_top(video.cameras, d, seed)
+                    if args.moved else with_camera_error(video.cameras, d, seed,
+                                                         ERROR_VIEWS[args.error_on])))
                 start = time.perf_counter()
                 refined, what = refine_run_cameras(given, det_top, det_hor, frames)
                 timing["refine"] += time.perf_counter() - start
@@ -217,7 +239,8 @@ def main() -> int:
                       + " ".join(f"{arm} {summarize(rows[arm]).acc9:.1f}"
                                  for arm in CHECKED_ARMS), flush=True)
         print(f"\n{scenario}: mean over {len(args.seeds)} videos, Eq. 9 accuracy / CVIDF1")
-        print(f"{'error (deg)':>11} " + " ".join(f"{arm:>13}" for arm in CHECKED_ARMS))
+        unit = "m" if args.moved else "deg"
+        print(f"{f'error ({unit})':>11} " + " ".join(f"{arm:>13}" for arm in CHECKED_ARMS))
         for d in args.errors:
             cells = [summarize(counts[(d, arm)]) for arm in CHECKED_ARMS]
             print(f"{d:>11g} " + " ".join(f"{c.acc9:6.1f} /{c.cvidf1:5.1f}" for c in cells))
