@@ -101,13 +101,20 @@ def open_cameras(path: str | os.PathLike, frames: Sequence[int] = ()) -> CameraF
     return CameraFrames(name, per_frame=per_frame, files=files)
 
 
-def save_camera_frames(cameras: CameraFrames, path: str | os.PathLike) -> None:
+def save_camera_frames(cameras: CameraFrames, path: str | os.PathLike) -> list[Path]:
     """Write ``cameras`` where :func:`open_cameras` reads them back the same: a camera file for
     ``static`` ones; else, in the existing folder ``path``, one file per frame under the name of
-    the file it was read from. Each file is written atomically (a round trip is exact)."""
+    the file it was read from. Each file is written atomically (a round trip is exact).
+
+    Returns:
+        The files written.
+    """
     if cameras.static is not None:
         save_cameras(path, {"top": cameras.static.top, "ego": cameras.static.hor})
-        return
+        return [Path(path)]
+    written = []
     for frame, cams in sorted(cameras.per_frame.items()):
         name = Path(cameras.files[frame]).name if frame in cameras.files else f"{frame:06d}.json"
-        save_cameras(Path(path) / name, {"top": cams.top, "ego": cams.hor})
+        written.append(Path(path) / name)
+        save_cameras(written[-1], {"top": cams.top, "ego": cams.hor})
+    return written

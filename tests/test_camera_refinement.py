@@ -207,10 +207,11 @@ def test_write_cameras_keeps_the_refined_cameras_for_next_time(overview, tmp_pat
                  str(tmp_path / "b.txt"), "--quiet"]) == 0
     assert (tmp_path / "a.txt").read_bytes() == (tmp_path / "b.txt").read_bytes()
     by_associate = {p.name: p.read_bytes() for p in written.glob("*.json")}
+    (written / "000999.json").write_bytes(by_associate["000001.json"])  # an earlier video's
     track = ["track", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
              "default", "--cameras", str(turned), "--offset", "0", "--quiet"]
     assert main([*track, "--out", str(tmp_path / "t"), "--write-cameras", str(written)]) == 0
-    assert {p.name: p.read_bytes() for p in written.glob("*.json")} == by_associate
+    assert {p.name: p.read_bytes() for p in written.glob("*.json")} == by_associate  # gone
     assert main([*track, "--out", str(tmp_path / "t2"), "--write-cameras",
                  str(files["cameras"])]) == 2  # a folder it did not make
     assert "--write-cameras" in capsys.readouterr().err and not (tmp_path / "t2").exists()

@@ -139,16 +139,23 @@ def check_write_cameras(args: argparse.Namespace) -> Output:
 
 def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
     """Write ``--write-cameras`` (when given): ``cameras``, the run's
-    :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined, in ``--cameras``' form;
-    say what they hold unless quiet."""
+    :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined, in ``--cameras``' form
+    (a folder it made before loses the camera files of frames this run has not: they would be
+    read with the new ones); say what they hold unless quiet."""
     path = getattr(args, "write_cameras", None)
     if path is None:
         return
     from xvmatch.datasets.camera_frames import save_camera_frames
     from xvmatch.geometry.output_paths import claim_folder
 
-    save_camera_frames(cameras, path if cameras.static is not None else
-                       claim_folder(path, CAMERAS_COMMAND, "--write-cameras"))
+    if cameras.static is not None:
+        save_camera_frames(cameras, path)
+    else:
+        folder = claim_folder(path, CAMERAS_COMMAND, "--write-cameras")
+        written = set(save_camera_frames(cameras, folder))
+        for stale in set(folder.glob("*.json")) - written:  # an earlier run's other frames
+            if not stale.name.startswith("."):
+                stale.unlink()
     if not getattr(args, "quiet", False):
         turned = refinement is not None and refinement.turned
         what = (f"the top camera turned {refinement.fit.angle_deg:.2f} degrees" if turned
