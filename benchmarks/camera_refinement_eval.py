@@ -89,13 +89,18 @@ def multi_pair_counts(inputs, out: Path) -> tuple[int, int, int]:
     """(right, wrong, missed) top-egocentric pairs of ``associate-multi``'s output folder
     ``out`` (its rows are the input rows in order; the input ids, the renders' people, score
     only)."""
-    top_in, top_out = _rows(inputs.boxes[0]), _rows(out / "top.txt")
+    def by_frame(view: str, given: Path) -> dict[int, list[tuple[int, int]]]:
+        """``{frame: [(input id, output id)]}`` of one view, the rows in order."""
+        rows: dict[int, list[tuple[int, int]]] = {}
+        for (f, t), (_, p) in zip(_rows(given), _rows(out / view), strict=True):
+            rows.setdefault(f, []).append((t, p))
+        return rows
+
+    top = by_frame("top.txt", inputs.boxes[0])
     right = wrong = true = 0
     for k in range(1, len(inputs.boxes)):
-        hor_in, hor_out = _rows(inputs.boxes[k]), _rows(out / f"hor{k}.txt")
-        for f in sorted({f for f, _ in hor_in}):
-            person = {p: t for (g, t), (_, p) in zip(top_in, top_out, strict=True) if g == f}
-            hor = [(t, p) for (g, t), (_, p) in zip(hor_in, hor_out, strict=True) if g == f]
+        for f, hor in sorted(by_frame(f"hor{k}.txt", inputs.boxes[k]).items()):
+            person = {p: t for t, p in top.get(f, [])}
             true += len(set(person.values()) & {t for t, _ in hor})
             found = [person[p] == t for t, p in hor if p in person]
             right, wrong = right + sum(found), wrong + len(found) - sum(found)

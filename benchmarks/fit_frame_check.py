@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -36,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np
 from deployed_matcher_eval import SIZES, ShiftedCoster, check_scenes_and_shifts, render
 
+from xvmatch.cli_types import float_in
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
@@ -53,6 +53,12 @@ from xvmatch.inference.frame_check import fit_frame_check
 from xvmatch.inference.learned_association import load_matcher_bundle
 
 
+def _threshold(text: str) -> str | float:
+    """``--threshold``: ``auto`` or a probability in (0, 1)."""
+    return "auto" if text == "auto" else float_in(0, 1, "or auto", low_open=True,
+                                                   high_open=True)(text)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bundle", default="default", help="a bundle with an appearance "
@@ -61,7 +67,7 @@ def main() -> int:
                         "scenario, 5 frames each (default 150)")
     parser.add_argument("--shifts", nargs="+", type=float, default=[0.0, 1.0, 2.0, 3.0],
                         help="camera-shift strengths, each in [0, 3] (0: none)")
-    parser.add_argument("--threshold", default="auto",
+    parser.add_argument("--threshold", default="auto", type=_threshold,
                         help="probability that images help above which they are used, in "
                         "(0, 1), or auto (default): the lowest of "
                         f"{' '.join(map(str, THRESHOLDS))} whose worst cell, cross-validated "
@@ -74,15 +80,7 @@ def main() -> int:
                         help="write the record into the bundle's manifest.json")
     args = parser.parse_args()
     check_scenes_and_shifts(parser, args.scenes, args.shifts)
-    threshold = None  # auto: cross-validated below
-    if args.threshold != "auto":
-        try:
-            threshold = float(args.threshold)
-        except ValueError:
-            threshold = math.nan
-        if not 0.0 < threshold < 1.0:
-            parser.error(f"--threshold: expected auto or a number in (0, 1), got "
-                         f"{args.threshold}")
+    threshold = None if args.threshold == "auto" else args.threshold  # auto: cross-validated
     if not args.ridge >= 0:
         parser.error(f"--ridge: expected a number >= 0, got {args.ridge:g}")
     check_script_outputs(parser, [Output("--out", args.out)], [Input("--bundle", args.bundle)])
