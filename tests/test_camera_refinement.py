@@ -277,9 +277,17 @@ def test_associate_multi_refines_the_shared_top_camera(tmp_path, capsys) -> None
     base = ["associate-multi", "--top", str(inputs.boxes[0]), "--hor", *map(str, inputs.boxes[1:]),
             "--model", "default", "--image-size", size, "--quiet", "--cameras", *folders]
     capsys.readouterr()
-    assert main([*base, "--out", str(tmp_path / "auto")]) == 0
+    written = [str(tmp_path / f"refined{v}") for v in (1, 2)]
+    assert main([*base, "--out", str(tmp_path / "auto"), "--write-cameras", *written]) == 0
     said = capsys.readouterr().err
     assert "cameras: turned the top camera" in said and OFF_HINT in said
+    assert main([*base, "--out", str(tmp_path / "again"), "--refine-top-camera", "off",
+                 "--cameras", *written]) == 0  # the second --cameras wins: the ones written
+    for name in ("top.txt", "hor1.txt", "hor2.txt"):
+        assert (tmp_path / "auto" / name).read_bytes() == (tmp_path / "again" / name
+                                                           ).read_bytes()
+    assert main([*base, "--out", str(tmp_path / "one"), "--write-cameras", written[0]]) == 2
+    assert "--write-cameras: one path per --cameras (2), got 1" in capsys.readouterr().err
     assert main([*base, "--out", str(tmp_path / "off"), "--refine-top-camera", "off"]) == 0
     assert "cameras:" not in capsys.readouterr().err
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -132,7 +132,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     models = [m for m in args.model or () if m != "default"]
     check_outputs(
         [Output("--out", args.out), Output("--costs", args.costs),
-         Output("--draw", args.draw, folder=True), check_write_cameras(args)],
+         Output("--draw", args.draw, folder=True), *check_write_cameras(args)],
         [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
          Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
     )

@@ -108,59 +108,73 @@ CAMERAS_COMMAND = "xvmatch --write-cameras"
 """The marker of a camera folder ``--write-cameras`` made (it replaces only its own)."""
 
 
-def add_write_cameras(group) -> None:
-    """Add ``--write-cameras`` (``associate``, ``track``)."""
+def add_write_cameras(group, several: bool = False) -> None:
+    """Add ``--write-cameras`` (``associate``, ``track``; ``several``: one per ``--cameras``,
+    ``associate-multi``)."""
     group.add_argument(
-        "--write-cameras", default=None, metavar="PATH",
-        help="with --cameras: also write them as refined (the top camera turned to fit the "
-        "head rays, else as given), in --cameras' form: a camera file, or a folder of "
-        "per-frame files under the same names (a new or empty folder, or one an earlier "
-        "--write-cameras made); give it as --cameras with --refine-top-camera off next time")
+        "--write-cameras", default=None, metavar="PATH", nargs="+" if several else None,
+        help=("with --cameras: also write them as refined (the top camera turned to fit the "
+              "head rays, else as given), in --cameras' form: a camera file, or a folder of "
+              "per-frame files under the same names (a new or empty folder, or one an earlier "
+              "--write-cameras made); give it as --cameras with --refine-top-camera off next "
+              "time") + ("; one per --cameras, in their order" if several else ""))
 
 
-def check_write_cameras(args: argparse.Namespace) -> Output:
-    """``--write-cameras``' output for :func:`~xvmatch.geometry.output_paths.check_outputs`,
-    after refusing it without ``--cameras`` or with ``--refine-top-camera off``, and a folder
-    that is neither new, empty nor its own."""
-    path = getattr(args, "write_cameras", None)
-    if path is None:
-        return Output("--write-cameras", None)
-    if getattr(args, "cameras", None) is None:
+def _listed(value) -> list:
+    """An option's value as a list: ``[]`` for None, one item for a single value."""
+    return [] if value is None else list(value) if isinstance(value, list) else [value]
+
+
+def check_write_cameras(args: argparse.Namespace) -> list[Output]:
+    """``--write-cameras``' outputs for :func:`~xvmatch.geometry.output_paths.check_outputs`,
+    after refusing them without ``--cameras``, not one per ``--cameras``, or with
+    ``--refine-top-camera off``, and a folder that is neither new, empty nor its own."""
+    paths = _listed(getattr(args, "write_cameras", None))
+    given = _listed(getattr(args, "cameras", None))
+    if not paths:
+        return []
+    if not given:
         raise UsageError("--write-cameras writes the cameras of --cameras as refined: give "
                          "--cameras")
+    if len(paths) != len(given):
+        raise UsageError(f"--write-cameras: one path per --cameras ({len(given)}), got "
+                         f"{len(paths)}")
     if getattr(args, "refine_top_camera", "auto") == "off":
         raise UsageError("--write-cameras writes the cameras as refined: drop "
                          "--refine-top-camera off (else they are --cameras as given)")
-    folder = os.path.isdir(args.cameras)
-    if folder:
-        check_own_folder(path, CAMERAS_COMMAND, "--write-cameras")
-    return Output("--write-cameras", path, folder=folder)
+    outputs = []
+    for path, cameras in zip(paths, given, strict=True):
+        folder = os.path.isdir(cameras)
+        if folder:
+            check_own_folder(path, CAMERAS_COMMAND, "--write-cameras")
+        outputs.append(Output("--write-cameras", path, folder=folder))
+    return outputs
 
 
 def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
     """Write ``--write-cameras`` (when given): ``cameras``, the run's
-    :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined, in ``--cameras``' form
-    (a folder it made before loses the camera files of frames this run has not: they would be
-    read with the new ones); say what they hold unless quiet."""
-    path = getattr(args, "write_cameras", None)
-    if path is None:
-        return
+    :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined (a list, one per path,
+    for ``associate-multi``), in ``--cameras``' form (a folder it made before loses the camera
+    files of frames this run has not: they would be read with the new ones); say what they
+    hold unless quiet."""
     from xvmatch.datasets.camera_frames import save_camera_frames
     from xvmatch.geometry.output_paths import claim_folder
 
-    if cameras.static is not None:
-        save_camera_frames(cameras, path)
-    else:
+    paths = _listed(getattr(args, "write_cameras", None))
+    for path, cams in zip(paths, _listed(cameras) if paths else [], strict=True):
+        if cams.static is not None:
+            save_camera_frames(cams, path)
+            continue
         folder = claim_folder(path, CAMERAS_COMMAND, "--write-cameras")
-        written = set(save_camera_frames(cameras, folder))
+        written = set(save_camera_frames(cams, folder))
         for stale in set(folder.glob("*.json")) - written:  # an earlier run's other frames
             if not stale.name.startswith("."):
                 stale.unlink()
-    if not getattr(args, "quiet", False):
+    if paths and not getattr(args, "quiet", False):
         turned = refinement is not None and refinement.turned
         what = (f"the top camera turned {refinement.fit.angle_deg:.2f} degrees" if turned
                 else "the top camera as given")
-        print(f"cameras: wrote {path} ({what})", file=sys.stderr)
+        print(f"cameras: wrote {', '.join(map(str, paths))} ({what})", file=sys.stderr)
 
 
 def add_camera_check(group) -> None:

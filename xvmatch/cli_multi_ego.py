@@ -26,8 +26,11 @@ from pathlib import Path
 from xvmatch.cli_model import (
     add_camera_check,
     add_refine_top_camera,
+    add_write_cameras,
+    check_write_cameras,
     note_camera_check,
     note_camera_refinement,
+    write_cameras,
 )
 from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.cli_options import (
@@ -82,6 +85,7 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
                    help="per horizontal view, a camera file or folder with cameras 'top' and "
                    "'ego' (as associate; needs --model)")
     add_refine_top_camera(p)
+    add_write_cameras(p, several=True)
     add_camera_check(p)
     p.add_argument("--camera-id", default=None, nargs="+", type=box_id, metavar="ID",
                    help="per horizontal view, the top-file id of its wearer (O given; "
@@ -185,7 +189,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_outputs(
         [Output("--out", out, folder=True,
-                files=("top.txt", *(f"hor{k}.txt" for k in range(1, n_hor + 1))))],
+                files=("top.txt", *(f"hor{k}.txt" for k in range(1, n_hor + 1)))),
+         *check_write_cameras(args)],
         [Input("--top", args.top), *(Input("--hor", h) for h in args.hor),
          *image_inputs(args),
          *(Input("--cameras", c) for c in args.cameras or ()),
@@ -261,6 +266,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             cameras, refinement = refine_views_cameras(
                 cameras, views[0], views[1:], [sorted(v) for v in views[1:]], offsets)
             note_camera_refinement(refinement, args.quiet)
+        refined = cameras
         if any(offsets):
             views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
                                                                    cameras, camera_rows)
@@ -322,6 +328,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     names = ["top", *(f"hor{k}" for k in range(1, n_hor + 1))]
     written = [write_track_rows(out / f"{name}.txt", r, p)
                for name, r, p in zip(names, rows, person, strict=True)]
+    write_cameras(args, refined, refinement)
     if n_fallback:
         print(f"xvmatch: warning: {n_fallback} of {len(frames)} frames spent the MIP's "
               f"budget of work or time limit ({args.time_limit:g} s) or failed, and used the "

@@ -346,7 +346,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_outputs(
         [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE)),
-         check_write_cameras(args)],
+         *check_write_cameras(args)],
         [Input("--top", args.top), Input("--hor", args.hor),
          *image_inputs(args), Input("--cameras", args.cameras),
          Input("--model", None if args.model == "default" else args.model)],
