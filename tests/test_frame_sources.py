@@ -249,6 +249,29 @@ def test_folder_frames_are_the_sorted_numbers_whatever_the_prefix(data, frames):
 # Single images
 
 
+def _with_orientation(jpeg: bytes, orientation: int) -> bytes:
+    """``jpeg`` with an EXIF segment holding only the orientation tag (0x0112), as a phone
+    writes a photo it stored sideways."""
+    tiff = (b"MM\x00\x2a\x00\x00\x00\x08" + b"\x00\x01"  # big-endian header, one entry
+            + b"\x01\x12\x00\x03\x00\x00\x00\x01" + orientation.to_bytes(2, "big")
+            + b"\x00\x00" + b"\x00\x00\x00\x00")  # SHORT value, padding, no next IFD
+    body = b"Exif\x00\x00" + tiff
+    return jpeg[:2] + b"\xff\xe1" + (len(body) + 2).to_bytes(2, "big") + body + jpeg[2:]
+
+
+def test_a_photo_stored_sideways_is_read_upright(tmp_path):
+    """An EXIF orientation tag is applied, as photo viewers (and box tools) show the picture:
+    orientation 6 (turn 90 degrees clockwise) swaps the width and height."""
+    ok, jpeg = cv2.imencode(".jpg", _smooth(1), [cv2.IMWRITE_JPEG_QUALITY, 100])
+    assert ok
+    path = tmp_path / "photo.jpg"
+    path.write_bytes(_with_orientation(jpeg.tobytes(), 6))
+    with open_frames(path) as source:
+        assert source.size == (H, W)
+        upright = cv2.rotate(cv2.imdecode(jpeg, cv2.IMREAD_COLOR), cv2.ROTATE_90_CLOCKWISE)
+        np.testing.assert_array_equal(source.get(1), upright)
+
+
 def test_single_image_exact_pixels(tmp_path):
     path = _write(tmp_path / "top.png", _image(5))
     with open_frames(path) as source:
