@@ -266,8 +266,8 @@ def test_the_fitting_script_writes_a_record_and_installs_it(tmp_path, monkeypatc
     np.testing.assert_array_equal(installed.coef, record.coef)
     assert {p.name: p.read_bytes() for p in bundle.glob("*.onnx")} == onnx_before
     for bad, value, said in (("--out", str(tmp_path), "is a folder"),
-                             ("--threshold", "1", "expected auto or a number in (0, 1)"),
-                             ("--threshold", "half", "expected auto or a number in (0, 1)")):
+                             ("--threshold", "1", "expected a number in (0, 1) (or auto), got"),
+                             ("--threshold", "half", "expected a number in (0, 1) (or auto), got")):
         monkeypatch.setattr(sys, "argv", ["fit_frame_check.py", "--bundle", str(bundle),
                                           bad, value])
         with pytest.raises(SystemExit):  # refused before any work
