@@ -215,6 +215,18 @@ def test_write_cameras_keeps_the_refined_cameras_for_next_time(overview, tmp_pat
     assert main([*track, "--out", str(tmp_path / "t2"), "--write-cameras",
                  str(files["cameras"])]) == 2  # a folder it did not make
     assert "--write-cameras" in capsys.readouterr().err and not (tmp_path / "t2").exists()
+    # One camera file (frame 1's cameras) for a run of 3 frames, too few to refine: the file
+    # is written as given, in the same form.
+    static = tmp_path / "static.json"
+    save_cameras(static, {"top": given.get(1).top, "ego": given.get(1).hor})
+    short = tmp_path / "short.txt"
+    short.write_text("".join(line + "\n" for line in files["hor"].read_text().splitlines()
+                             if int(line.split(",")[0]) <= 3))
+    assert main(["associate", "--top", str(files["top"]), "--hor", str(short), "--model",
+                 "default", "--cameras", str(static), "--out", str(tmp_path / "s.txt"),
+                 "--write-cameras", str(tmp_path / "static_out.json")]) == 0
+    assert "(the top camera as given)" in capsys.readouterr().err
+    assert (tmp_path / "static_out.json").read_text() == static.read_text()
     for extra, message in ((["--refine-top-camera", "off"], "drop --refine-top-camera off"),
                            ([], "give --cameras")):
         args = [*base, "--out", str(tmp_path / "c.txt"), "--write-cameras",
