@@ -168,9 +168,12 @@ def test_track_and_associate_multi_leave_out_cameras_that_fail(drone, tmp_path, 
     track = ["track", "--model", "default", "--top", str(files["top"]), "--hor",
              str(files["hor"]), "--image-size", size, "--offset", "0", "--quiet"]
     assert main([*track, "--out", str(tmp_path / "t_none")]) == 0
-    assert main([*track, "--cameras", str(turned), "--out", str(tmp_path / "t_cams")]) == 0
+    assert main([*[a for a in track if a != "--quiet"], "--cameras", str(turned), "--out",
+                 str(tmp_path / "t_cams"), "--write-cameras", str(tmp_path / "refined")]) == 0
     said = capsys.readouterr().err
     assert "camera check:" in said and "matched without them" in said
+    # the cameras written are those refined, though the run left them out
+    assert f"cameras: wrote {tmp_path / 'refined'} (the top camera turned " in said
     for name in ("top.txt", "hor.txt"):
         assert (tmp_path / "t_none" / name).read_bytes() == (
             tmp_path / "t_cams" / name).read_bytes()

@@ -377,7 +377,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
         cameras, refinement = _open_cameras(args, model, top.frames, hor.frames, offset,
                                             resolved, sources)
-        refined = cameras
+        refined = (cameras, refinement)  # --write-cameras: also when the check drops them
         top_frames, hor_frames, images, cameras = _aligned(top.frames, hor.frames, images,
                                                            cameras, offset)
         cameras, refinement = _checked_cameras(args, model, top_frames, hor_frames, resolved,
@@ -406,7 +406,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.geometry.atomic_files import atomic_write_text
 
     atomic_write_text(out / OFFSET_FILE, json.dumps({"offset": offset}) + "\n")
-    write_cameras(args, refined, refinement)
+    write_cameras(args, *refined)
     if result.n_fallback:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows spent the "
               f"MIP's budget of work or time limit ({args.time_limit:g} s) or failed, and used "
