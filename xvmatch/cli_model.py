@@ -161,7 +161,9 @@ def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
     from xvmatch.geometry.output_paths import claim_folder
 
     paths = _listed(getattr(args, "write_cameras", None))
-    for path, cams in zip(paths, _listed(cameras) if paths else [], strict=True):
+    if not paths:
+        return
+    for path, cams in zip(paths, _listed(cameras), strict=True):
         if cams.static is not None:
             save_camera_frames(cams, path)
             continue
@@ -170,7 +172,7 @@ def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
         for stale in set(folder.glob("*.json")) - written:  # an earlier run's other frames
             if not stale.name.startswith("."):
                 stale.unlink()
-    if paths and not getattr(args, "quiet", False):
+    if not getattr(args, "quiet", False):
         turned = refinement is not None and refinement.turned
         what = (f"the top camera turned {refinement.fit.angle_deg:.2f} degrees" if turned
                 else "the top camera as given")
