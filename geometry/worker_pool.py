@@ -31,8 +31,10 @@ def _start_worker(initializer: Callable[[], object] | None) -> None:
 def stop_pool(pool: ProcessPoolExecutor) -> None:
     """Cancel ``pool``'s pending tasks and terminate its workers now, without waiting for the
     tasks they are running (their results are dropped)."""
-    # The executor has no public handle on its processes; _processes is the only one.
+    # The executor has no public handle on its processes nor on its manager thread; these
+    # are the only ones, and shutdown() below sets both to None: read them first.
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     # Terminate first: a second Ctrl-C arriving during what follows then finds no worker left
     # that the interpreter's exit would wait for.
     for process in processes:
@@ -48,7 +50,6 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
     # running, it can close that pipe while the interpreter's exit hook writes to it (Python
     # 3.11's ProcessPoolExecutor checks, then writes, without a lock), which printed an
     # "Exception ignored ... Bad file descriptor" traceback after a Ctrl-C.
-    manager = getattr(pool, "_executor_manager_thread", None)
     if manager is not None and manager.is_alive():
         manager.join(timeout=2.0)
     # The join is bounded, and a loaded machine can outlast it (the traceback came back in a
