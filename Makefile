@@ -34,9 +34,15 @@ $(DEMO_STAMP): pyproject.toml
 demo: $(DEMO_STAMP)
 	$(DEMO_VENV)/bin/xvmatch demo --out xvmatch-demo
 
+# Test processes: one per core, at most 4 (each holds torch and its own fixtures); a number
+# instead of auto sets them, 0 runs every test in this one process. A file's tests stay in one
+# process, so its fixtures are built once.
+TEST_WORKERS ?= auto
+
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) $(if $(filter auto,$(TEST_WORKERS)),--maxprocesses 4) \
+		--dist loadfile
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
