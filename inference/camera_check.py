@@ -7,7 +7,9 @@ and it trusts them: on rendered videos it then falls up to 35 Eq. 9 points below
 
 * even the best turn of the top camera leaves the head rays apart: the refinement's loss
   (:mod:`xvmatch.inference.camera_refinement`) stays above :data:`DOUBT_LOSS`. Cameras that help
-  can also end there (an egocentric camera off anew every frame), so this only opens the check;
+  can also end there (an egocentric camera off anew every frame), so this only opens the check.
+  A top camera that changes from frame to frame (a drone in flight, from its telemetry) is not
+  refined, so nothing vouches for it: its check is always open;
 * the box-only matcher's pseudo-matches, the pairs it is sure of on consecutive frames
   (:func:`~xvmatch.inference.adaptation_pairs.mine_pairs`, those the appearance check and
   ``adapt`` use), are mostly right, good cameras keep them, and misleading ones have the
@@ -21,8 +23,8 @@ their partners over :data:`~xvmatch.inference.appearance_check.CONSISTENCY_WINDO
 :data:`~xvmatch.inference.appearance_check.MIN_CONSISTENCY`). Under an oblique overview camera
 it can be sure and wrong, and exact cameras then "lose" its pairs (rendered overview videos:
 3 of 35 kept by exact cameras that add 55 points, at a steadiness of 0.6 or more; hence the
-fit's loss as well). So cameras that fit the head rays, or that no fit was tried for
-(``--refine-top-camera off``, a moving top camera), clips too short to measure the steadiness
+fit's loss as well). So cameras that fit the head rays, or that no fit was tried for with
+``--refine-top-camera off``, clips too short to measure the steadiness
 (under 6 s at 25 fps), single image pairs, and scenes the box-only matcher is rarely sure of or
 unsteady on keep their cameras. No identities are used. Numpy only (and the bundle's matcher).
 """
@@ -92,6 +94,7 @@ class CameraCheck:
             :data:`~xvmatch.inference.appearance_check.MIN_CONSISTENCY` or more.
         fit_loss: the refinement's loss that opened the check (NaN: none given, as for the
             pure :func:`check_cameras`).
+        moving: the check was opened by a top camera that changes from frame to frame.
     """
 
     judged: bool
@@ -103,6 +106,7 @@ class CameraCheck:
     min_pairs: int = MIN_PAIRS
     consistency: float = math.nan
     fit_loss: float = math.nan
+    moving: bool = False
 
     @property
     def share(self) -> float:
@@ -136,7 +140,8 @@ class CameraCheck:
                        f"its sure frames, {MIN_CONSISTENCY:g} needed), so they cannot judge the "
                        "cameras")
             return f"camera check: {why}; they were used as they are"
-        fit = ("" if math.isnan(self.fit_loss) else
+        fit = ("the top camera changes from frame to frame (not refined) and " if self.moving
+               else "" if math.isnan(self.fit_loss) else
                f"the top camera fits the head rays poorly (loss {self.fit_loss:.3f}) and ")
         head = (f"camera check: {fit}the matcher with the cameras keeps {self.kept} of this "
                 f"video's {self.positives} box-only pseudo-matched pairs ({self.share:.2f} +/- "
@@ -206,11 +211,12 @@ def check_run_cameras(
     config: MiningConfig | None = None,
     workers: int = 1,
     min_keep: float = MIN_KEEP,
+    moving: bool = False,
 ) -> CameraCheck:
-    """Judge a run's cameras when ``fit_loss`` is above :data:`DOUBT_LOSS` (else they are
-    kept, unjudged and unsaid): score the frames the check reads without and with ``cameras``
-    and judge them (:func:`check_cameras`): bursts of consecutive frames to mine (at most
-    ``config.max_frames``) both ways, and windows of
+    """Judge a run's cameras when ``fit_loss`` is above :data:`DOUBT_LOSS` or the top camera
+    moves (else they are kept, unjudged and unsaid): score the frames the check reads without
+    and with ``cameras`` and judge them (:func:`check_cameras`): bursts of consecutive frames to
+    mine (at most ``config.max_frames``) both ways, and windows of
     :data:`~xvmatch.inference.appearance_check.CONSISTENCY_WINDOW` frames (as many) without.
 
     Args:
@@ -223,25 +229,28 @@ def check_run_cameras(
         gamma: the run's non-association cost.
         fit_loss: the loss of the top camera's refinement (its best fit,
             :attr:`~xvmatch.inference.camera_refinement.CameraRefinement.fit_loss`), or None
-            when none was tried (the cameras are then kept).
+            when none was tried (the cameras are then kept, unless ``moving``).
         camera_id: the wearer's top-view id, when known.
         config: how pseudo-matches are mined (default: :data:`MAX_FRAMES` frames).
         workers: processes for the geometry features (the result does not depend on it).
         min_keep: the least share kept for the cameras to be used.
+        moving: the top camera changes from frame to frame, so no fit was tried
+            (:attr:`~xvmatch.inference.camera_refinement.CameraRefinement.moving`): judged
+            whatever ``fit_loss``.
     """
-    if fit_loss is None or not fit_loss > DOUBT_LOSS:
-        return CameraCheck(False, True, 0, 0, 0, min_keep,
-                           fit_loss=math.nan if fit_loss is None else float(fit_loss))
+    loss = math.nan if fit_loss is None else float(fit_loss)
+    if not moving and not loss > DOUBT_LOSS:
+        return CameraCheck(False, True, 0, 0, 0, min_keep, fit_loss=loss)
     config = config or MiningConfig(max_frames=MAX_FRAMES)
     both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
     mined = [int(f) for b in plan_bursts(both, config.burst, config.max_frames) for f in b]
     steady = [int(f) for b in plan_bursts(both, CONSISTENCY_WINDOW, config.max_frames)
               for f in b]
     if not mined:
-        return CameraCheck(False, True, 0, 0, 0, min_keep, fit_loss=float(fit_loss))
+        return CameraCheck(False, True, 0, 0, 0, min_keep, fit_loss=loss, moving=moving)
     box = box_only_costs(top, hor, sorted(set(mined) | set(steady)), matcher, hor_size,
                          camera_id=camera_id, workers=workers)
     camera = box_only_costs(top, hor, sorted(mined), matcher, hor_size, cameras=cameras,
                             camera_id=camera_id, workers=workers)
     return replace(check_cameras(top, hor, box, camera, gamma, config, min_keep),
-                   fit_loss=float(fit_loss))
+                   fit_loss=loss, moving=moving)

@@ -56,11 +56,15 @@ class CameraRefinement:
         turned: the refined top camera is used.
         fit: the refinement, or None when none was tried (``message`` says why).
         message: one line for the user.
+        moving: none was tried because the top camera changes from frame to frame (a drone
+            in flight): nothing tells whether it fits, so the camera check judges it
+            (:mod:`xvmatch.inference.camera_check`).
     """
 
     turned: bool
     fit: TopCameraRefinement | None
     message: str
+    moving: bool = False
 
     @property
     def fit_loss(self) -> float | None:
@@ -145,7 +149,8 @@ def refine_views_cameras(
     if not all(_same_camera(held[0].top, c.top) for c in held[1:]):
         return list(cameras), CameraRefinement(
             False, None, "cameras: the top camera changes from frame to frame"
-            + (" or between the views' files" if len(cameras) > 1 else "") + "; used as given")
+            + (" or between the views' files" if len(cameras) > 1 else "") + "; used as given",
+            moving=True)
     samples = [(k, f) for k, fs in enumerate(both) for f in fs]
     if len(samples) < MIN_REFINE_FRAMES:
         return list(cameras), CameraRefinement(

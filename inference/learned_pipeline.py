@@ -293,7 +293,8 @@ class LearnedInputs:
                     top, hor, both, list(options.models), tuple(options.hor_size),
                     self.cameras, self.gamma,
                     None if self.refinement is None else self.refinement.fit_loss,
-                    options.camera_id, workers=options.workers)
+                    options.camera_id, workers=options.workers,
+                    moving=self.refinement is not None and self.refinement.moving)
                 if not self.camera_checked.trusted:
                     self.cameras = None
 

@@ -139,6 +139,43 @@ def test_misleading_cameras_are_left_out_and_exact_ones_kept(drone) -> None:
     assert checked.pairs == none.pairs and _right(video, none.pairs) > _right(video, given.pairs)
 
 
+def test_a_top_camera_that_moves_is_always_judged(drone, tmp_path) -> None:
+    """A top camera that changes from frame to frame (a drone's telemetry) is never refined, so
+    no fit can doubt it: the check judges it all the same. Exact cameras pass; a constant error
+    of 19 degrees fails, and the run is then exactly the run without cameras."""
+    video, _, _ = drone
+    model = load_matcher_bundle("default")
+    frames = sorted(video.hor)
+
+    def moving(name: str, error: list[float]) -> str:
+        folder = tmp_path / name
+        folder.mkdir()
+        for f, cams in video.cameras.items():  # a thousandth of a degree more every frame
+            top = turned_camera(cams.top, np.add(error, [0.0, 0.0, 1e-3 * f]))
+            save_cameras(folder / f"{f:06d}.json", {"top": top, "ego": cams.hor})
+        return str(folder)
+
+    options = LearnedRunOptions((model,), video.hor_size, refine_top_camera=True,
+                                camera_check=True)
+    none = run_learned_association(video.top, video.hor, frames, options)
+    exact = run_learned_association(video.top, video.hor, frames,
+                                     replace(options, cameras=moving("exact", [0.0, 0.0, 0.0])))
+    assert exact.refinement.moving and exact.refinement.fit is None
+    kept = exact.camera_checked
+    assert kept.judged and kept.trusted and kept.moving and kept.share > 0.9, kept
+    assert kept.message().startswith("camera check: the top camera changes from frame to frame "
+                                     "(not refined) and the matcher with the cameras keeps")
+    wrong = moving("wrong", [12.0, -10.0, 11.0])
+    failed = run_learned_association(video.top, video.hor, frames,
+                                     replace(options, cameras=wrong))
+    assert failed.camera_checked.judged and not failed.camera_checked.trusted
+    assert failed.pairs == none.pairs
+    given = run_learned_association(video.top, video.hor, frames,
+                                    replace(options, cameras=wrong, camera_check=False))
+    assert _right(video, none.pairs) > _right(video, given.pairs)
+    assert _right(video, exact.pairs) > _right(video, none.pairs)
+
+
 def test_associate_matches_without_cameras_that_fail(drone, tmp_path, capsys) -> None:
     video, files, turned = drone
     base = ["associate", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",

@@ -184,8 +184,9 @@ def add_camera_check(group) -> None:
     group.add_argument(
         "--camera-check", choices=("on", "off"), default="on",
         help="with --cameras: when even the refined top camera fits the video's head rays "
-        "poorly, judge the cameras on the pairs the box-only matcher is sure of over "
-        "consecutive frames, and match without them when they re-pair too many of those "
+        "poorly, or the top camera moves (never refined), judge the cameras on the pairs the "
+        "box-only matcher is sure of over consecutive frames, and match without them when "
+        "they re-pair too many of those "
         "(cameras calibrated far off); only on videos of 6 s or more where those pairs are "
         "steady (default on; off: always use them)")
 
@@ -426,6 +427,7 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
             "standard_error": json_figure(camera_checked.error),
             "consistency": json_figure(camera_checked.consistency),
             "fit_loss": json_figure(camera_checked.fit_loss),
+            "top_camera_moving": camera_checked.moving,
             "min_keep": camera_checked.min_keep, "min_pairs": camera_checked.min_pairs}
     if checked is not None:
         record["appearance_check"] = {

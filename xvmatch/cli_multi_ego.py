@@ -278,7 +278,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                 check = check_run_cameras(views[0], views[k + 1], sorted(views[k + 1]),
                                           matcher, tuple(sizes[k]), cameras[k],
                                           float(matcher.gamma), refinement.fit_loss,
-                                          workers=args.workers)
+                                          workers=args.workers, moving=refinement.moving)
                 note_camera_check(check, args.quiet, f"--hor {paths[k + 1]}: ")
                 if not check.trusted:
                     cameras[k] = None

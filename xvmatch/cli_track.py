@@ -184,7 +184,8 @@ def _checked_cameras(args: argparse.Namespace, model, top, hor, resolved, camera
     check = check_run_cameras(top, hor, sorted(hor), model, tuple(resolved[0]), cameras,
                               float(model.gamma),
                               None if refinement is None else refinement.fit_loss,
-                              workers=args.workers)
+                              workers=args.workers,
+                              moving=refinement is not None and refinement.moving)
     note_camera_check(check, args.quiet)
     return (cameras, refinement) if check.trusted else (None, None)
 
