@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
+from scipy.spatial.transform import Rotation
 
 from xvmatch.datasets.image_render import SceneRenderer
 from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
@@ -72,6 +73,24 @@ def _smooth_head(scene: SyntheticScene, seconds: float) -> SyntheticScene:
     return replace(scene, people=people, ego_cameras=cameras)
 
 
+FLIGHT_HEADING = np.array([1.0, 0.3, 0.0]) / np.hypot(1.0, 0.3)
+"""Unit world direction a flying top camera moves along (:func:`render_tracking_video`)."""
+
+
+def _fly(scene: SyntheticScene, speed: float, yaw_rate: float) -> SyntheticScene:
+    """The scene with its top camera in flight: moved ``speed`` m/s along
+    :data:`FLIGHT_HEADING`, through its drawn place at the video's middle, and turned
+    ``yaw_rate`` degrees/s about the vertical (as a drone's telemetry would give it per frame)."""
+    t = np.arange(len(scene.top_cameras)) / scene.config.fps
+    cameras = []
+    for cam, s in zip(scene.top_cameras, t.tolist(), strict=True):
+        turn = Rotation.from_euler("z", yaw_rate * s, degrees=True).as_matrix()
+        cameras.append(Camera(K=cam.K, R=cam.R @ turn.T,
+                              c=cam.c + speed * (s - t[-1] / 2) * FLIGHT_HEADING,
+                              width=cam.width, height=cam.height))
+    return replace(scene, top_cameras=cameras)
+
+
 def render_tracking_video(
     seed: int,
     n_frames: int = 60,
@@ -80,6 +99,7 @@ def render_tracking_video(
     min_pixels: int = 100,
     head_smoothing: float = 1.0,
     progress: Callable[[int], None] | None = None,
+    flight: tuple[float, float] | None = None,
 ) -> TrackingVideo:
     """Render ``n_frames`` consecutive frames of one drone scene drawn from ``seed``.
 
@@ -93,6 +113,8 @@ def render_tracking_video(
         head_smoothing: seconds (standard deviation) of the head-pose smoothing; 0 keeps the
             walk model's per-frame gaze.
         progress: called with each rendered frame number.
+        flight: ``(speed m/s, yaw rate degrees/s)`` of a top camera in flight (a drone; see
+            :func:`_fly`; the same people and world, drawn before it), or None: fixed.
 
     Returns:
         The :class:`TrackingVideo`.
@@ -102,6 +124,8 @@ def render_tracking_video(
     config = config or SynthConfig(scenario="drone", n_people=(6, 12), fps=25.0)
     rng = np.random.default_rng([int(seed), 17])
     scene = _smooth_head(make_scene(config, int(n_frames), rng), head_smoothing)
+    if flight is not None:
+        scene = _fly(scene, *map(float, flight))
     renderer = SceneRenderer(scene, rng)
     top, hor, top_images, hor_images, cameras = {}, {}, {}, {}, {}
     for f in range(1, int(n_frames) + 1):

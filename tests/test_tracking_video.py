@@ -5,10 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from xvmatch.datasets.camera_frames import open_cameras
 from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
-from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.datasets.tracking_video import (
+    FLIGHT_HEADING,
+    render_tracking_video,
+    write_tracking_video,
+)
 from xvmatch.geometry.matcher_inputs import wearer_row
 
 
@@ -36,3 +41,21 @@ def test_written_cameras_read_back_as_rendered(tmp_path) -> None:
             for name in ("K", "R", "c"):
                 np.testing.assert_array_equal(getattr(mine, name), getattr(theirs, name))
             assert mine.image_size == theirs.image_size
+
+
+def test_a_flying_top_camera_moves_and_turns_over_the_same_walk() -> None:
+    # flight=(2 m/s, 5 deg/s): frame 3 is 2/25 s after frame 1, so the top camera is 0.16 m
+    # further along FLIGHT_HEADING and turned 0.4 degrees about the vertical; the people, the
+    # egocentric camera and its boxes are those of the fixed render of the same seed.
+    config = SynthConfig(scenario="drone", n_people=(4, 6), fps=25.0)
+    fixed = render_tracking_video(3, 3, config)
+    flying = render_tracking_video(3, 3, config, flight=(2.0, 5.0))
+    first, last = flying.cameras[1].top, flying.cameras[3].top
+    np.testing.assert_allclose(last.c - first.c, 0.16 * FLIGHT_HEADING, atol=1e-12)
+    turn = Rotation.from_matrix(last.R.T @ first.R)  # the world turn between the two
+    np.testing.assert_allclose(turn.as_rotvec(degrees=True), [0.0, 0.0, 0.4], atol=1e-9)
+    np.testing.assert_allclose(first.c + last.c, 2 * fixed.cameras[2].top.c, atol=1e-12)
+    for f in fixed.hor:
+        np.testing.assert_array_equal(flying.hor[f].boxes, fixed.hor[f].boxes)
+        np.testing.assert_array_equal(flying.cameras[f].hor.R, fixed.cameras[f].hor.R)
+    assert any(not np.array_equal(flying.top[f].boxes, fixed.top[f].boxes) for f in fixed.top)
