@@ -1,16 +1,17 @@
 """The learned matcher under a top camera in flight, its per-frame cameras exact or biased.
 
 A drone's telemetry gives its camera per frame; a constant attitude error (the camera's mount,
-or the heading) is not refined for such a camera (:mod:`xvmatch.inference.camera_refinement`
-refines only a fixed one), and the camera check judges it instead
+or the heading) is refined away as for a fixed camera, in the camera's own frame or in the
+world (:mod:`xvmatch.inference.camera_refinement`), and the camera check then judges the result
 (:mod:`xvmatch.inference.camera_check`, ``moving``). For each seed this renders a drone video
 whose top camera flies (:func:`xvmatch.datasets.tracking_video.render_tracking_video`,
 ``flight``), scrambles the ids per view, and associates the frames with the shipped matcher
 (boxes only) given no cameras, the exact ones, the top camera turned by ``--bias`` (a rotation
 vector, degrees) in its own frame on every frame ("mount"), or in the world ("heading"); each
-camera arm as given and after the camera check ("checked": the run without cameras where the
-check left them out). Prints per video each arm's Eq. 9 accuracy and the check's verdict, then
-the frames of all videos pooled: Eq. 9 accuracy / CVIDF1 (renders only; ids score only).
+camera arm as given, refined, and refined then checked ("checked": the run without cameras
+where the check left them out). Prints per video each arm's Eq. 9 accuracy, the refinement's
+turn and the check's verdict, then the frames of all videos pooled: Eq. 9 accuracy / CVIDF1
+(renders only; ids score only).
 
 Usage:
     python benchmarks/flying_camera_eval.py [--seeds 1 2 3 4] [--frames 100] [--speed 2]
@@ -80,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"drone videos of {args.frames} frames, the top camera flying {args.speed:g} m/s and "
           f"turning {args.yaw_rate:g} deg/s; attitude error {np.linalg.norm(bias):.2f} deg; "
           f"{args.people[0]}-{args.people[1]} people, ids scrambled per view, boxes only")
-    arms = ["none", *CAMERAS, *(f"{c} checked" for c in CAMERAS)]
+    arms = ["none", *CAMERAS, *(f"{c} {stage}" for stage in ("refined", "checked")
+                                for c in CAMERAS)]
     counts = {arm: [] for arm in arms}
     for seed in args.seeds:
         start = time.perf_counter()
@@ -101,19 +103,22 @@ def main(argv: list[str] | None = None) -> int:
         verdicts = []
         for kind in CAMERAS:
             given = CameraFrames("rendered", per_frame=biased(video.cameras, kind, bias))
+            rows[kind] = run(given)
             used, what = refine_run_cameras(given, det_top, det_hor, frames)
-            rows[kind] = run(used)
+            rows[f"{kind} refined"] = run(used) if what.turned else rows[kind]
             check = check_run_cameras(det_top, det_hor, frames, model, video.hor_size, used,
                                       float(model.gamma), what.fit_loss, moving=what.moving)
-            rows[f"{kind} checked"] = rows[kind] if check.trusted else rows["none"]
-            verdicts.append(f"{kind} " + ("not judged" if not check.judged else
-                                          f"kept {check.share:.2f}" if check.trusted else
-                                          f"left out {check.share:.2f}"))
+            rows[f"{kind} checked"] = rows[f"{kind} refined"] if check.trusted else rows["none"]
+            turn = (f"turned {what.fit.angle_deg:.2f} deg ({what.fit.frame})" if what.turned
+                    else "kept")
+            verdicts.append(f"{kind} {turn}, " + (
+                "not judged" if not check.judged else f"kept {check.share:.2f}"
+                if check.trusted else f"left out {check.share:.2f}"))
         for arm in arms:
             counts[arm] += rows[arm]
         print(f"seed {seed}: " + " ".join(f"{arm} {summarize(rows[arm]).acc9:.1f}"
                                           for arm in arms)
-              + f"; check: {', '.join(verdicts)} ({time.perf_counter() - start:.0f} s)",
+              + f"; {'; '.join(verdicts)} ({time.perf_counter() - start:.0f} s)",
               flush=True)
     print(f"\nall {len(args.seeds)} videos, frames pooled: Eq. 9 accuracy / CVIDF1")
     for arm in arms:

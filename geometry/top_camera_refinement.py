@@ -23,12 +23,19 @@ at a scale as much coarser as its step), and its fit is kept if its loss is
 :data:`WIDE_GAIN` lower; a good fit within ``max_deg`` is never searched further.
 Only the orientation is refined: a centre a few decimetres off moves the rays by as much, a
 turn of 2 degrees by metres.
+
+A top camera that moves (a drone in flight, its camera per frame from telemetry) is refined the
+same way for the error that stays constant while it flies: either a turn in the camera's own
+frame (its mount, or a gimbal's offset: frame ``f``'s world directions turned by
+``A_f^T Q A_f`` with ``A_f = R_0^T R_f``, frame 0 the first sampled one) or one in the world
+(a heading or levelling bias: ``Q`` on every frame). Both are searched, the lower loss wins;
+for a fixed camera the two are the same turn.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment, minimize
@@ -78,13 +85,19 @@ class TopCameraRefinement:
     """What :func:`refine_top_camera` found.
 
     Attributes:
-        camera: the top camera turned by ``rotation_deg`` (the given one when ``angle_deg`` is 0).
+        camera: the top camera turned by ``rotation_deg`` (the given one when ``angle_deg`` is 0);
+            for a moving one, the first sampled frame's (:meth:`turn` turns any frame's).
         rotation_deg: ``(3,)`` rotation vector, degrees, that turns the top camera's world ray
-            directions (``R' = R Q^T`` with ``Q`` this rotation).
+            directions (``R' = R Q^T`` with ``Q`` this rotation; a moving camera's ``camera``
+            frame: on the first sampled frame).
         angle_deg: its angle, degrees.
         frames: the frames it was fitted on.
         loss_before, loss_after: mean robust loss at the finest scale, given and refined
             (0: every head ray meets its partner; 1: none does).
+        frame: ``"fixed"`` (one top camera), or for a moving one the frame the turn is
+            constant in: ``"camera"`` (its mount) or ``"world"`` (its heading or levelling).
+        reference: the first sampled frame's top camera (``"camera"`` turns are relative to
+            it), or None.
     """
 
     camera: Camera
@@ -93,20 +106,42 @@ class TopCameraRefinement:
     frames: int
     loss_before: float
     loss_after: float
+    frame: str = "fixed"
+    reference: Camera | None = None
+
+    def turn(self, top: Camera) -> Camera:
+        """``top``, a frame's top camera as given, turned as the fit says (``A_f^T Q A_f``
+        with ``A_f = R_0^T R_f`` in the camera's frame; ``Q`` otherwise); itself when the
+        fit did not turn."""
+        if self.angle_deg == 0.0:
+            return top
+        rotvec = np.asarray(self.rotation_deg, dtype=float)
+        if self.frame == "camera":
+            rotvec = (self.reference.R.T @ top.R).T @ rotvec  # the rotation vector of A^T Q A
+        return turned_camera(top, rotvec)
 
     def describe(self) -> str:
         """One line for the user."""
-        return (f"turned the top camera {self.angle_deg:.2f} degrees to fit the head rays of "
-                f"{self.frames} frames (loss {self.loss_before:.3f} -> {self.loss_after:.3f})")
+        what = {"fixed": "the top camera",
+                "camera": "the moving top camera in its own frame (a mount offset)",
+                "world": "the moving top camera in the world (a heading or level offset)"}
+        return (f"turned {what[self.frame]} {self.angle_deg:.2f} degrees to fit the head rays "
+                f"of {self.frames} frames (loss {self.loss_before:.3f} -> "
+                f"{self.loss_after:.3f})")
 
 
 class _RayFrames:
-    """The sampled frames' head rays, padded to ``(F, M, 3)`` and ``(F, N, 3)``."""
+    """The sampled frames' head rays, padded to ``(F, M, 3)`` and ``(F, N, 3)``.
 
-    def __init__(self, top: Camera, hor_cameras: Sequence[Camera],
+    ``top`` is one fixed camera, or each frame's with ``turns`` ``(F, 3, 3)``: the ``A_f`` of
+    the module docstring (identities for a turn constant in the world)."""
+
+    def __init__(self, top: Camera | Sequence[Camera], hor_cameras: Sequence[Camera],
                  top_boxes: Sequence[np.ndarray], hor_boxes: Sequence[np.ndarray],
-                 margin: float) -> None:
+                 margin: float, turns: np.ndarray | None = None) -> None:
         f = len(hor_cameras)
+        tops = [top] * f if isinstance(top, Camera) else list(top)
+        self.turns = turns
         m = max(len(b) for b in top_boxes)
         n = max(len(b) for b in hor_boxes)
         self.top_dirs = np.zeros((f, m, 3))
@@ -115,14 +150,16 @@ class _RayFrames:
         self.hor_mask = np.zeros((f, n), bool)
         self.baseline = np.zeros((f, 3))
         self.hor_axis = np.zeros((f, 3))  # optical axes in the world (depth = axis . (X - c))
-        self.top_axis = top.R[2].copy()
+        # one optical axis for a fixed camera, (F, 3) for a moving one
+        self.top_axis = tops[0].R[2].copy() if turns is None else np.stack([t.R[2] for t in tops])
         self.sizes = []
-        for k, (cam, tb, hb) in enumerate(zip(hor_cameras, top_boxes, hor_boxes, strict=True)):
-            self.top_dirs[k, :len(tb)] = box_rays(top, tb).directions
+        for k, (cam, tb, hb, tc) in enumerate(zip(hor_cameras, top_boxes, hor_boxes, tops,
+                                                  strict=True)):
+            self.top_dirs[k, :len(tb)] = box_rays(tc, tb).directions
             self.hor_dirs[k, :len(hb)] = box_rays(cam, hb).directions
             self.top_mask[k, :len(tb)] = True
             self.hor_mask[k, :len(hb)] = True
-            self.baseline[k] = cam.c - top.c
+            self.baseline[k] = cam.c - tc.c
             self.hor_axis[k] = cam.R[2]
             self.sizes.append((len(tb), len(hb)))
         self.margin = margin
@@ -134,7 +171,11 @@ class _RayFrames:
         :func:`~xvmatch.geometry.ray_priors.cheirality_mask`, for the search's inner loop), and
         the turned top directions ``(F, M, 3)``."""
         q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
-        nt = self.top_dirs @ q.T                                   # (F, M, 3)
+        if self.turns is not None:  # each frame's turn A_f^T Q A_f
+            q = np.einsum("fji,jk,fkl->fil", self.turns, q, self.turns)
+            nt = np.einsum("fmk,fjk->fmj", self.top_dirs, q)       # (F, M, 3)
+        else:
+            nt = self.top_dirs @ q.T                               # (F, M, 3)
         nh = self.hor_dirs                                         # (F, N, 3)
         b = self.baseline[:, None, None, :]
         u, v = nt[:, :, None, :], nh[:, None, :, :]  # n_i x n_j of Eq. 6, written out (fast)
@@ -151,8 +192,13 @@ class _RayFrames:
         along_hor = (cos * bt - bh) / den          # and along the horizontal one
         # their midpoint q (Eq. 7), its depth in each camera: q - c_top, q - c_hor
         half = 0.5 * (along_top[..., None] * u + along_hor[..., None] * v)
-        axis_top = q @ self.top_axis
-        depth_top = half @ axis_top + 0.5 * (self.baseline @ axis_top)[:, None, None]
+        if self.turns is not None:
+            axis_top = np.einsum("fij,fj->fi", q, self.top_axis)
+            depth_top = (np.einsum("fmnk,fk->fmn", half, axis_top)
+                         + 0.5 * np.einsum("fk,fk->f", self.baseline, axis_top)[:, None, None])
+        else:
+            axis_top = q @ self.top_axis
+            depth_top = half @ axis_top + 0.5 * (self.baseline @ axis_top)[:, None, None]
         depth_hor = (np.einsum("fmnk,fk->fmn", half, self.hor_axis)
                      - 0.5 * np.einsum("fk,fk->f", self.baseline, self.hor_axis)[:, None, None])
         ok = (depth_top > self.margin) & (depth_hor > self.margin) & (sin >= 1e-9)
@@ -233,8 +279,27 @@ def _sample(n: int, most: int) -> np.ndarray:
     return np.unique(np.round(np.linspace(0, n - 1, most)).astype(int))
 
 
+def _fit(rays: _RayFrames, max_deg: float, grid_step_deg: float, wide_deg: float,
+         wide_step_deg: float) -> tuple[np.ndarray, float, float]:
+    """The search of the module docstring on ``rays``: ``(rotation vector, degrees; loss
+    given; loss refined)``, the zero vector and the given loss when nothing fits better."""
+    before = rays.loss(np.zeros(3), _SCALES[-1])
+    starts = [np.zeros(3), *_grid_starts(rays, _grid(max_deg, grid_step_deg), grid_step_deg)]
+    best_x, best_loss = np.zeros(3), before
+    x, value = _search(rays, starts)
+    if value < best_loss:
+        best_x, best_loss = x, value
+    if best_loss > WIDE_LOSS and wide_deg > max_deg:
+        wide = _grid(wide_deg, wide_step_deg)
+        wide = wide[np.abs(wide).max(axis=1) > max_deg + 1e-9]  # the inner grid is done
+        x, value = _search(rays, _grid_starts(rays, wide, wide_step_deg))
+        if value < best_loss - WIDE_GAIN:
+            best_x, best_loss = x, value
+    return best_x, before, best_loss
+
+
 def refine_top_camera(
-    top: Camera,
+    top: Camera | Sequence[Camera],
     hor_cameras: Sequence[Camera],
     top_boxes: Sequence[np.ndarray],
     hor_boxes: Sequence[np.ndarray],
@@ -247,10 +312,12 @@ def refine_top_camera(
     max_pairs: int = MAX_PAIRS,
     margin: float = METRIC_MARGIN,
 ) -> TopCameraRefinement:
-    """Refine the orientation of a top camera fixed over a video (see the module docstring).
+    """Refine the orientation of a top camera fixed over a video, or the constant part of a
+    moving one's error (see the module docstring).
 
     Args:
-        top: the fixed top camera as calibrated.
+        top: the fixed top camera as calibrated, or each frame's (a moving camera; a sequence
+            of equal cameras is a fixed one).
         hor_cameras: the egocentric camera of each frame.
         top_boxes, hor_boxes: ``(M, 4)`` and ``(N, 4)`` x, y, w, h boxes of each frame, pixels.
         max_deg: the largest turn searched (grid half-width), degrees.
@@ -272,9 +339,10 @@ def refine_top_camera(
         ValueError: fewer than :data:`MIN_REFINE_FRAMES` frames with boxes in both views, or
             inputs of different lengths.
     """
-    if not len(hor_cameras) == len(top_boxes) == len(hor_boxes):
-        raise ValueError(f"hor_cameras, top_boxes and hor_boxes differ in length: "
-                         f"{len(hor_cameras)}, {len(top_boxes)}, {len(hor_boxes)}")
+    tops = [top] * len(hor_cameras) if isinstance(top, Camera) else list(top)
+    if not len(hor_cameras) == len(top_boxes) == len(hor_boxes) == len(tops):
+        raise ValueError(f"top, hor_cameras, top_boxes and hor_boxes differ in length: "
+                         f"{len(tops)}, {len(hor_cameras)}, {len(top_boxes)}, {len(hor_boxes)}")
     keep = [k for k in range(len(hor_cameras)) if len(top_boxes[k]) and len(hor_boxes[k])]
     if len(keep) < MIN_REFINE_FRAMES:
         raise ValueError(f"{len(keep)} frame(s) with boxes in both views; refining the top "
@@ -282,21 +350,24 @@ def refine_top_camera(
     pairs = float(np.median([len(top_boxes[k]) * len(hor_boxes[k]) for k in keep]))
     most = int(np.clip(max_pairs // max(pairs, 1.0), MIN_REFINE_FRAMES, max_frames))
     keep = [keep[i] for i in _sample(len(keep), most)]
-    rays = _RayFrames(top, [hor_cameras[k] for k in keep],
-                      [as_boxes(top_boxes[k], "top_boxes") for k in keep],
-                      [as_boxes(hor_boxes[k], "hor_boxes") for k in keep], margin)
-    before = rays.loss(np.zeros(3), _SCALES[-1])
-    starts = [np.zeros(3), *_grid_starts(rays, _grid(max_deg, grid_step_deg), grid_step_deg)]
-    best_x, best_loss = np.zeros(3), before
-    x, value = _search(rays, starts)
-    if value < best_loss:
-        best_x, best_loss = x, value
-    if best_loss > WIDE_LOSS and wide_deg > max_deg:
-        wide = _grid(wide_deg, wide_step_deg)
-        wide = wide[np.abs(wide).max(axis=1) > max_deg + 1e-9]  # the inner grid is done
-        x, value = _search(rays, _grid_starts(rays, wide, wide_step_deg))
-        if value < best_loss - WIDE_GAIN:
-            best_x, best_loss = x, value
-    camera = top if not best_x.any() else turned_camera(top, best_x)
-    return TopCameraRefinement(camera, tuple(float(v) for v in best_x),
-                               float(np.linalg.norm(best_x)), len(keep), before, best_loss)
+    args = ([hor_cameras[k] for k in keep], [as_boxes(top_boxes[k], "top_boxes") for k in keep],
+            [as_boxes(hor_boxes[k], "hor_boxes") for k in keep], margin)
+    search = (max_deg, grid_step_deg, wide_deg, wide_step_deg)
+    first = tops[keep[0]]
+    if all(t is first or (np.array_equal(t.R, first.R) and np.array_equal(t.c, first.c)
+                          and np.array_equal(t.K, first.K)) for t in tops):
+        best_x, before, best_loss = _fit(_RayFrames(first, *args), *search)
+        camera = first if not best_x.any() else turned_camera(first, best_x)
+        return TopCameraRefinement(camera, tuple(float(v) for v in best_x),
+                                   float(np.linalg.norm(best_x)), len(keep), before, best_loss)
+    sampled = [tops[k] for k in keep]
+    relative = np.stack([first.R.T @ t.R for t in sampled])  # A_f = R_0^T R_f
+    world = np.broadcast_to(np.eye(3), relative.shape)
+    fits = {name: _fit(_RayFrames(sampled, *args, turns=turns), *search)
+            for name, turns in (("camera", relative), ("world", world))}
+    name = min(fits, key=lambda n: fits[n][2])  # the camera's frame on a tie
+    best_x, before, best_loss = fits[name]
+    fit = TopCameraRefinement(first, tuple(float(v) for v in best_x),
+                              float(np.linalg.norm(best_x)), len(keep), before, best_loss,
+                              frame=name, reference=first)
+    return replace(fit, camera=fit.turn(first))

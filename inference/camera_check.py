@@ -140,7 +140,7 @@ class CameraCheck:
                        f"its sure frames, {MIN_CONSISTENCY:g} needed), so they cannot judge the "
                        "cameras")
             return f"camera check: {why}; they were used as they are"
-        fit = ("the top camera changes from frame to frame (not refined) and " if self.moving
+        fit = ("the top camera changes from frame to frame and " if self.moving
                else "" if math.isnan(self.fit_loss) else
                f"the top camera fits the head rays poorly (loss {self.fit_loss:.3f}) and ")
         head = (f"camera check: {fit}the matcher with the cameras keeps {self.kept} of this "
@@ -234,9 +234,9 @@ def check_run_cameras(
         config: how pseudo-matches are mined (default: :data:`MAX_FRAMES` frames).
         workers: processes for the geometry features (the result does not depend on it).
         min_keep: the least share kept for the cameras to be used.
-        moving: the top camera changes from frame to frame, so no fit was tried
-            (:attr:`~xvmatch.inference.camera_refinement.CameraRefinement.moving`): judged
-            whatever ``fit_loss``.
+        moving: the top camera changes from frame to frame (:attr:`~xvmatch.inference.
+            camera_refinement.CameraRefinement.moving`; at most the constant part of its error
+            was refined): judged whatever ``fit_loss``.
     """
     loss = math.nan if fit_loss is None else float(fit_loss)
     if not moving and not loss > DOUBT_LOSS:

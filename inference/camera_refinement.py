@@ -3,9 +3,11 @@
 A fixed top camera calibrated a degree or two off costs the learned matcher more than the
 cameras give (docs/method.md, "How exact they must be"); :func:`~xvmatch.geometry.
 top_camera_refinement.refine_top_camera` turns it to fit the video's head rays. This module
-decides when (a top camera that is the same on every frame, enough frames with boxes in both
-views), keeps the given camera when the fit gains too little to trust, and says what it did in
-one line.
+decides when (enough frames with boxes in both views, a crowd not too dense), keeps the given
+camera when the fit gains too little to trust, and says what it did in one line. A top camera
+that changes from frame to frame (a drone in flight) has the constant part of its error
+refined (in its own frame or in the world) and is marked ``moving``: the camera check then
+judges it whatever the fit.
 """
 
 from __future__ import annotations
@@ -56,9 +58,9 @@ class CameraRefinement:
         turned: the refined top camera is used.
         fit: the refinement, or None when none was tried (``message`` says why).
         message: one line for the user.
-        moving: none was tried because the top camera changes from frame to frame (a drone
-            in flight): nothing tells whether it fits, so the camera check judges it
-            (:mod:`xvmatch.inference.camera_check`).
+        moving: the top camera changes from frame to frame (a drone in flight): only the
+            constant part of its error can be refined, and a fit says little of the rest,
+            so the camera check judges it (:mod:`xvmatch.inference.camera_check`).
     """
 
     turned: bool
@@ -89,10 +91,19 @@ def _same_camera(a: Camera, b: Camera) -> bool:
             and np.allclose(a.c, b.c, rtol=0, atol=1e-6))
 
 
-def _with_top(cameras: CameraFrames, top: Camera) -> CameraFrames:
+def _turned_top(cameras: CameraFrames, fit: TopCameraRefinement, moving: bool) -> CameraFrames:
+    """``cameras`` with each top camera turned as ``fit`` says: a fixed one is the fit's camera
+    on every frame; a moving one's frames are turned one by one (also when the sampled frames
+    happened to share one camera)."""
+    if not moving:
+        if cameras.static is not None:
+            return replace(cameras, static=FrameCameras(fit.camera, cameras.static.hor))
+        return replace(cameras, per_frame={f: FrameCameras(fit.camera, c.hor)
+                                           for f, c in cameras.per_frame.items()})
     if cameras.static is not None:
-        return replace(cameras, static=FrameCameras(top, cameras.static.hor))
-    return replace(cameras, per_frame={f: FrameCameras(top, c.hor)
+        return replace(cameras, static=FrameCameras(fit.turn(cameras.static.top),
+                                                    cameras.static.hor))
+    return replace(cameras, per_frame={f: FrameCameras(fit.turn(c.top), c.hor)
                                        for f, c in cameras.per_frame.items()})
 
 
@@ -144,32 +155,38 @@ def refine_views_cameras(
     both = [[f for f in sorted(set(int(f) for f in fs))
              if len(hor.get(f, ())) and len(top.get(f + shift, ()))]
             for hor, fs, shift in zip(hors, frames, top_offsets, strict=True)]
-    held = [c for cams in cameras for c in ([cams.static] if cams.static is not None else
-                                            [cams.per_frame[f] for f in sorted(cams.per_frame)])]
-    if not all(_same_camera(held[0].top, c.top) for c in held[1:]):
+    views = [[cams.static] if cams.static is not None else
+             [cams.per_frame[f] for f in sorted(cams.per_frame)] for cams in cameras]
+    held = [c for view in views for c in view]
+    moving = not all(_same_camera(held[0].top, c.top) for c in held[1:])
+    if moving and all(_same_camera(v[0].top, c.top) for v in views for c in v[1:]):
+        # each view's file holds one fixed top camera, but not the same: one of them is wrong
         return list(cameras), CameraRefinement(
-            False, None, "cameras: the top camera changes from frame to frame"
-            + (" or between the views' files" if len(cameras) > 1 else "") + "; used as given",
-            moving=True)
+            False, None, "cameras: the top camera differs between the views' files; used as "
+            "given", moving=True)
+    changes = "the top camera changes from frame to frame"
     samples = [(k, f) for k, fs in enumerate(both) for f in fs]
     if len(samples) < MIN_REFINE_FRAMES:
         return list(cameras), CameraRefinement(
             False, None, f"cameras: {len(samples)} frame(s) with boxes in both views, too few "
-            f"to check the top camera against ({MIN_REFINE_FRAMES} needed); used as given")
+            f"to check the top camera against ({MIN_REFINE_FRAMES} needed); used as given",
+            moving=moving)
     pairs = sorted(len(top[f + top_offsets[k]].boxes) * len(hors[k][f].boxes)
                    for k, f in samples)
     if pairs[len(pairs) // 2] * MIN_REFINE_FRAMES > CROWD_PAIRS:
         return list(cameras), CameraRefinement(
             False, None, f"cameras: {pairs[len(pairs) // 2]} top x horizontal box pairs in a "
             "typical frame, too many to check the top camera against in reasonable time; used "
-            "as given")
-    fit = refine_top_camera(held[0].top, [cameras[k].get(f).hor for k, f in samples],
+            "as given", moving=moving)
+    tops = [cameras[k].get(f).top for k, f in samples] if moving else held[0].top
+    fit = refine_top_camera(tops, [cameras[k].get(f).hor for k, f in samples],
                             [top[f + top_offsets[k]].boxes for k, f in samples],
                             [hors[k][f].boxes for k, f in samples])
     if fit.angle_deg == 0.0 or fit.loss_before - fit.loss_after < MIN_GAIN:
         return list(cameras), CameraRefinement(
-            False, fit, f"cameras: the top camera fits the head rays of {fit.frames} frames "
-            f"about as well as given (loss {fit.loss_before:.3f}, refined "
-            f"{fit.loss_after:.3f}); used as given")
-    return [_with_top(c, fit.camera) for c in cameras], CameraRefinement(
-        True, fit, f"cameras: {fit.describe()}; {OFF_HINT}")
+            False, fit, f"cameras: {changes + '; it' if moving else 'the top camera'} fits the "
+            f"head rays of {fit.frames} frames about as well as given (loss "
+            f"{fit.loss_before:.3f}, refined {fit.loss_after:.3f}); used as given",
+            moving=moving)
+    return [_turned_top(c, fit, moving) for c in cameras], CameraRefinement(
+        True, fit, f"cameras: {fit.describe()}; {OFF_HINT}", moving=moving)

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.test_top_camera_refinement import _angle, _scene, _turned
+from tests.test_top_camera_refinement import _angle, _flying_scene, _mounted, _scene, _turned
 from xvmatch.cli import main
 from xvmatch.datasets.camera_frames import CameraFrames, open_cameras, save_camera_frames
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.datasets.mot_boxes import FrameBoxes, read_predictions
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
 from xvmatch.geometry.camera_io import save_cameras
@@ -87,19 +87,52 @@ def test_an_exact_camera_is_used_as_given(scene) -> None:
     assert not poor.fits and poor.turned == what.turned
 
 
-def test_a_moving_top_camera_or_a_short_clip_is_used_as_given(scene) -> None:
+def test_a_flying_top_camera_is_turned_back_frame_by_frame() -> None:
+    # A drone's per-frame cameras with a constant mount offset: each frame's top camera is
+    # turned back by its own A_f^T Q A_f, the egocentric ones are kept, and the refinement
+    # stays marked as moving (the camera check judges it whatever the fit).
+    tops, hors, top_boxes, hor_boxes = _flying_scene(4)
+    frames = range(1, len(hors) + 1)
+    flying = CameraFrames("cams/", per_frame={
+        1 + k: FrameCameras(_mounted(t, [1.5, -1.6, 1.2]), h)
+        for k, (t, h) in enumerate(zip(tops, hors, strict=True))})
+    used, what = refine_run_cameras(flying, _records(top_boxes), _records(hor_boxes), frames)
+    assert what.turned and what.moving and what.fits and what.fit.frame == "camera"
+    assert what.message.startswith("cameras: turned the moving top camera in its own frame")
+    assert max(_angle(used.get(f).top, tops[f - 1]) for f in frames) < 0.3
+    assert all(used.get(f).hor is flying.get(f).hor for f in frames)
+    # exact telemetry: kept as given, still moving
+    exact = CameraFrames("cams/", per_frame={1 + k: FrameCameras(t, h) for k, (t, h) in
+                                             enumerate(zip(tops, hors, strict=True))})
+    used, what = refine_run_cameras(exact, _records(top_boxes), _records(hor_boxes), frames)
+    assert used is exact and not what.turned and what.moving
+    assert what.message.startswith("cameras: the top camera changes from frame to frame; it "
+                                   "fits the head rays of 24 frames about as well as given")
+
+
+def test_a_moving_camera_still_on_its_sampled_frames_is_turned_frame_by_frame(scene) -> None:
+    # The top camera is the same on every frame with boxes, another on a frame without any:
+    # the fit is a fixed camera's, and that frame keeps its own camera, turned the same way.
     top, hors, top_boxes, hor_boxes = scene
-    moving = CameraFrames("cams/", per_frame={
-        1 + k: FrameCameras(_turned(top, TURN * k / len(hors)), h) for k, h in enumerate(hors)})
-    used, what = refine_run_cameras(moving, _records(top_boxes), _records(hor_boxes),
-                                    range(1, len(hors) + 1))
-    assert used is moving and what.fit is None and not what.fits
-    assert what.message == ("cameras: the top camera changes from frame to frame; used as "
-                            "given")
+    wrong = _turned(top, TURN)
+    elsewhere = _turned(wrong, [0.0, 0.0, 30.0])
+    last = len(hors) + 1
+    cameras = CameraFrames("cams/", per_frame={
+        **{1 + k: FrameCameras(wrong, h) for k, h in enumerate(hors)},
+        last: FrameCameras(elsewhere, hors[-1])})
+    used, what = refine_run_cameras(cameras, _records(top_boxes), _records(hor_boxes),
+                                    range(1, last + 1))
+    assert what.turned and what.moving and what.fit.frame == "fixed"
+    assert _angle(used.get(1).top, top) < 0.3
+    assert np.array_equal(used.get(last).top.R, _turned(elsewhere, what.fit.rotation_deg).R)
+
+
+def test_a_short_clip_is_used_as_given(scene) -> None:
+    top, hors, top_boxes, hor_boxes = scene
     short = CameraFrames("cams.json", static=FrameCameras(_turned(top, TURN), hors[0]))
     used, what = refine_run_cameras(short, _records(top_boxes[:4]), _records(hor_boxes[:4]),
                                     range(1, 5))
-    assert used is short and what.fit is None
+    assert used is short and what.fit is None and not what.moving
     assert "4 frame(s) with boxes in both views, too few" in what.message
 
 
@@ -127,8 +160,8 @@ def test_several_views_share_one_fit(scene) -> None:
     given = [view(0, wrong), view(1, top)]
     used, what = refine_views_cameras(given, _records(top_boxes), hor, frames, [0, half])
     assert all(a is b for a, b in zip(used, given, strict=True)) and what.fit is None
-    assert what.message == ("cameras: the top camera changes from frame to frame or between "
-                            "the views' files; used as given")
+    assert what.message == "cameras: the top camera differs between the views' files; used as given"
+    assert what.moving
 
 
 @pytest.fixture(scope="module")
@@ -311,3 +344,38 @@ def test_associate_multi_refines_the_shared_top_camera(tmp_path, capsys) -> None
 
     off, auto = right(tmp_path / "off"), right(tmp_path / "auto")
     assert off < 0.7 and auto > 0.95, (off, auto)
+
+
+def test_a_flying_drone_s_cameras_are_mended_and_written(tmp_path, capsys) -> None:
+    """``associate`` on a drone in flight whose telemetry carries a constant mount offset: the
+    moving top camera is turned back frame by frame (the line says so), ``--write-cameras``
+    writes each frame's camera as turned, and given back with ``--refine-top-camera off``
+    they give the same pairs, closer to the truth than the cameras as given."""
+    video = render_tracking_video(5, 40, SynthConfig(scenario="drone", n_people=(8, 12),
+                                                     fps=25.0), flight=(2.0, 5.0))
+    files = write_tracking_video(video, tmp_path)
+    given = tmp_path / "telemetry"
+    given.mkdir()
+    for f, cams in video.cameras.items():
+        save_cameras(given / f"{f:06d}.json", {"top": _mounted(cams.top, [2.0, -1.5, 1.0]),
+                                               "ego": cams.hor})
+    base = ["associate", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
+            "default", "--camera-check", "off"]
+    written = tmp_path / "refined"
+    assert main([*base, "--cameras", str(given), "--out", str(tmp_path / "a.txt"),
+                 "--write-cameras", str(written)]) == 0
+    said = capsys.readouterr().err
+    assert "cameras: turned the moving top camera in its own frame" in said
+    assert f"cameras: wrote {written} (the moving top camera turned 2." in said
+    again, before = open_cameras(written), open_cameras(given)
+    for f in video.cameras:
+        assert _angle(again.get(f).top, video.cameras[f].top) < 1.0
+        assert _angle(before.get(f).top, video.cameras[f].top) > 2.5
+    assert main([*base, "--cameras", str(written), "--refine-top-camera", "off", "--out",
+                 str(tmp_path / "b.txt"), "--quiet"]) == 0
+    assert (tmp_path / "a.txt").read_bytes() == (tmp_path / "b.txt").read_bytes()
+    assert main([*base, "--cameras", str(given), "--refine-top-camera", "off", "--out",
+                 str(tmp_path / "c.txt"), "--quiet"]) == 0
+    pairs = {name: read_predictions(tmp_path / name) for name in ("a.txt", "c.txt")}
+    assert _right(video, pairs["a.txt"]) > _right(video, pairs["c.txt"]) + 0.1, {
+        name: _right(video, p) for name, p in pairs.items()}

@@ -154,3 +154,90 @@ def test_a_camera_beyond_the_grid_is_found_by_the_wider_search() -> None:
     assert WIDE_LOSS < narrow.loss_after
     assert fit.loss_after < narrow.loss_after
 
+
+
+def _flying_scene(seed: int, frames: int = 24):
+    """The walking scene seen from a drone in flight: its camera 25 degrees off nadir, 20 m up,
+    moving 1 m and turning 2 degrees about the vertical every frame; each frame's exact top
+    camera, the egocentric cameras and the boxes."""
+    _, hors, _, hor_boxes = _scene(seed, frames)
+    rng = np.random.default_rng(seed)
+    start = rng.uniform(-8, 8, (14, 2))
+    velocity = rng.normal(0, 1.2, (14, 2))
+    height = rng.uniform(1.55, 1.9, 14)
+    tops, top_boxes = [], []
+    for f, hor in enumerate(hors):
+        xy = start + velocity * f / 5.0
+        heads = np.vstack([np.column_stack([xy, height]), [[*hor.c[:2], 1.75]]])
+        yaw = np.radians(90.0 + 2.0 * f)
+        top = Camera(K=intrinsics_from_fov(*TOP_SIZE, 70.0), R=look_rotation(yaw, np.radians(65)),
+                     c=np.array([-12.0 + 1.0 * f, -9.0, 20.0]), width=TOP_SIZE[0],
+                     height=TOP_SIZE[1])
+        tops.append(top)
+        top_boxes.append(_boxes(top, heads))
+    return tops, hors, top_boxes, hor_boxes
+
+
+def _mounted(camera: Camera, rotvec_deg: np.ndarray) -> Camera:
+    """``camera`` turned by ``rotvec_deg`` in its own frame (a mount offset: ``R' = B R``)."""
+    b = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
+    return Camera(K=camera.K, R=b @ camera.R, c=camera.c, width=camera.width,
+                  height=camera.height)
+
+
+@pytest.mark.parametrize("frame", ["camera", "world"])
+def test_a_flying_camera_has_its_constant_error_found(frame) -> None:
+    # A drone's telemetry with a 2.5-degree error that stays the same in the camera's frame
+    # (its mount) or in the world (its heading and level): each frame's camera is turned back,
+    # and the turn is read in the right frame (the camera turns 46 degrees over the clip, so
+    # the other reading misses by degrees at its ends).
+    tops, hors, top_boxes, hor_boxes = _flying_scene(4)
+    bias = np.array([1.5, -1.6, 1.2])
+    wrong = [_mounted(t, bias) if frame == "camera" else _turned(t, bias) for t in tops]
+    assert all(_angle(w, t) > 2.0 for w, t in zip(wrong, tops, strict=True))
+    fit = refine_top_camera(wrong, hors, top_boxes, hor_boxes)
+    assert fit.frame == frame and fit.reference is wrong[0]
+    assert max(_angle(fit.turn(w), t) for w, t in zip(wrong, tops, strict=True)) < 0.3
+    assert _angle(fit.camera, tops[0]) < 0.3 and fit.loss_after < fit.loss_before
+    assert f"in {'its own frame' if frame == 'camera' else 'the world'}" in fit.describe()
+
+
+def test_an_exact_flying_camera_is_left_about_where_it_was() -> None:
+    tops, hors, top_boxes, hor_boxes = _flying_scene(6)
+    fit = refine_top_camera(tops, hors, top_boxes, hor_boxes)
+    assert fit.frame in ("camera", "world") and fit.angle_deg < 0.2
+    assert fit.loss_after <= fit.loss_before  # not 0: some heads leave the drone's view
+    # equal cameras in a sequence are one fixed camera, and its search is the fixed one's
+    n = MIN_REFINE_FRAMES
+    fixed = refine_top_camera([tops[0]] * n, [hors[0]] * n, [top_boxes[0]] * n,
+                              [hor_boxes[0]] * n)
+    assert fixed.frame == "fixed" and fixed.reference is None
+
+
+def test_the_batched_rays_of_a_flying_camera_are_eqs_6_and_7() -> None:
+    # Each frame's turn A_f^T Q A_f: the batched distances are those of fit.turn's camera.
+    from xvmatch.geometry.ray_priors import (
+        METRIC_MARGIN,
+        box_rays,
+        cheirality_mask,
+        ray_distances,
+    )
+    from xvmatch.geometry.top_camera_refinement import (
+        _MISS,
+        TopCameraRefinement,
+        _RayFrames,
+    )
+
+    tops, hors, top_boxes, hor_boxes = _flying_scene(5, frames=12)
+    rotvec = (0.7, -1.1, 2.0)
+    relative = np.stack([tops[0].R.T @ t.R for t in tops])
+    rays = _RayFrames(tops, hors, top_boxes, hor_boxes, METRIC_MARGIN, turns=relative)
+    batched, _ = rays.distances(np.array(rotvec))
+    fit = TopCameraRefinement(tops[0], rotvec, float(np.linalg.norm(rotvec)), 12, 1.0, 1.0,
+                              frame="camera", reference=tops[0])
+    for k, (top, hor, tb, hb) in enumerate(zip(tops, hors, top_boxes, hor_boxes, strict=True)):
+        rt, rh = box_rays(fit.turn(top), tb), box_rays(hor, hb)
+        ok = cheirality_mask(rt, rh, margin=METRIC_MARGIN)
+        want = np.where(ok, ray_distances(rt, rh), _MISS)
+        np.testing.assert_allclose(batched[k, :len(tb), :len(hb)], want, rtol=1e-9, atol=1e-9)
+    assert fit.turn(tops[0]).R.tolist() == _turned(tops[0], rotvec).R.tolist()

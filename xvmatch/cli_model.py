@@ -98,10 +98,11 @@ def add_refine_top_camera(group) -> None:
     """Add ``--refine-top-camera`` (``associate``, ``track``, ``adapt``)."""
     group.add_argument(
         "--refine-top-camera", choices=("auto", "off"), default="auto",
-        help="with --cameras: turn a top camera that is the same on every frame to fit the "
-        "video's head rays when the fit is clear (10 or more frames with boxes in both views; "
-        "a degree of calibration error costs the matcher more than the cameras give), and "
-        "say so (default auto; off: use it as given)")
+        help="with --cameras: turn the top camera to fit the video's head rays when the fit "
+        "is clear (10 or more frames with boxes in both views; a degree of calibration error "
+        "costs the matcher more than the cameras give; a top camera that moves, per-frame "
+        "files from a drone's telemetry, has its constant error turned away, in its own frame "
+        "or the world), and say so (default auto; off: use it as given)")
 
 
 CAMERAS_COMMAND = "xvmatch --write-cameras"
@@ -174,7 +175,8 @@ def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
                 stale.unlink()
     if not getattr(args, "quiet", False):
         turned = refinement is not None and refinement.turned
-        what = (f"the top camera turned {refinement.fit.angle_deg:.2f} degrees" if turned
+        what = (f"the {'moving ' if refinement.moving else ''}top camera turned "
+                f"{refinement.fit.angle_deg:.2f} degrees" if turned
                 else "the top camera as given")
         print(f"cameras: wrote {', '.join(map(str, paths))} ({what})", file=sys.stderr)
 
@@ -184,7 +186,8 @@ def add_camera_check(group) -> None:
     group.add_argument(
         "--camera-check", choices=("on", "off"), default="on",
         help="with --cameras: when even the refined top camera fits the video's head rays "
-        "poorly, or the top camera moves (never refined), judge the cameras on the pairs the "
+        "poorly, or the top camera moves (only its constant error refined), judge the cameras "
+        "on the pairs the "
         "box-only matcher is sure of over consecutive frames, and match without them when "
         "they re-pair too many of those "
         "(cameras calibrated far off); only on videos of 6 s or more where those pairs are "
