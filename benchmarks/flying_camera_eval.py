@@ -15,7 +15,7 @@ turn and the check's verdict, then the frames of all videos pooled: Eq. 9 accura
 
 Usage:
     python benchmarks/flying_camera_eval.py [--seeds 1 2 3 4] [--frames 100] [--speed 2]
-        [--yaw-rate 5] [--bias 2 -1.5 1] [--model default]
+        [--yaw-rate 5] [--bias 2 -1.5 1] [--jitter 0] [--model default]
 """
 
 from __future__ import annotations
@@ -48,17 +48,24 @@ from xvmatch.inference.tracking import learned_frame_evidence
 CAMERAS = ("exact", "mount", "heading")
 
 
-def biased(cameras: dict, kind: str, bias_deg: np.ndarray) -> dict:
+def biased(cameras: dict, kind: str, bias_deg: np.ndarray, jitter_deg: float = 0.0,
+           seed: int = 0) -> dict:
     """``{frame: FrameCameras}`` with every frame's top camera turned by ``bias_deg`` in its
-    own frame (``mount``: ``R' = B R``) or in the world (``heading``), or as they are."""
-    if kind == "exact":
+    own frame (``mount``: ``R' = B R``) or in the world (``heading``), or as they are
+    (``exact``); then, with ``jitter_deg``, each frame's turned anew in the world by a rotation
+    vector of ``jitter_deg`` degrees per axis (normal; the same draws in every arm of a seed)."""
+    if kind == "exact" and not jitter_deg:
         return cameras
     b = Rotation.from_rotvec(np.radians(bias_deg)).as_matrix()
+    rng = np.random.default_rng([seed, 31])
     out = {}
-    for f, c in cameras.items():
-        top = (Camera(K=c.top.K, R=b @ c.top.R, c=c.top.c, width=c.top.width,
+    for f, c in sorted(cameras.items()):
+        top = (c.top if kind == "exact" else
+               Camera(K=c.top.K, R=b @ c.top.R, c=c.top.c, width=c.top.width,
                       height=c.top.height) if kind == "mount" else
                turned_camera(c.top, bias_deg))
+        if jitter_deg:
+            top = turned_camera(top, rng.normal(0.0, jitter_deg, 3))
         out[f] = FrameCameras(top, c.hor)
     return out
 
@@ -71,15 +78,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--yaw-rate", type=float, default=5.0, help="degrees/s")
     parser.add_argument("--bias", type=float, nargs=3, default=[2.0, -1.5, 1.0],
                         help="rotation vector of the attitude error, degrees")
+    parser.add_argument("--jitter", type=float, default=0.0,
+                        help="telemetry noise: each frame's top camera also turned by a rotation "
+                        "vector of this many degrees per axis, drawn anew (default 0)")
     parser.add_argument("--people", type=int, nargs=2, default=[8, 12])
     parser.add_argument("--model", default="default")
     args = parser.parse_args(argv)
     if args.frames < 10 or args.people[0] < 1 or args.people[1] < args.people[0]:
         parser.error("--frames 10 or more, --people LOW HIGH with 1 <= LOW <= HIGH")
+    if not args.jitter >= 0.0:
+        parser.error(f"--jitter: expected degrees, 0 or more, got {args.jitter}")
     model = load_matcher_bundle(args.model)
     bias = np.asarray(args.bias, dtype=float)
     print(f"drone videos of {args.frames} frames, the top camera flying {args.speed:g} m/s and "
-          f"turning {args.yaw_rate:g} deg/s; attitude error {np.linalg.norm(bias):.2f} deg; "
+          f"turning {args.yaw_rate:g} deg/s; attitude error {np.linalg.norm(bias):.2f} deg, "
+          f"jitter {args.jitter:g} deg per axis; "
           f"{args.people[0]}-{args.people[1]} people, ids scrambled per view, boxes only")
     arms = ["none", *CAMERAS, *(f"{c} {stage}" for stage in ("refined", "checked")
                                 for c in CAMERAS)]
@@ -102,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = {"none": run(None)}
         verdicts = []
         for kind in CAMERAS:
-            given = CameraFrames("rendered", per_frame=biased(video.cameras, kind, bias))
+            given = CameraFrames("rendered", per_frame=biased(video.cameras, kind, bias,
+                                                              args.jitter, seed))
             rows[kind] = run(given)
             used, what = refine_run_cameras(given, det_top, det_hor, frames)
             rows[f"{kind} refined"] = run(used) if what.turned else rows[kind]

@@ -164,6 +164,29 @@ def test_several_views_share_one_fit(scene) -> None:
     assert what.moving
 
 
+def test_several_views_of_a_flying_camera_share_one_fit() -> None:
+    # associate-multi under a drone in flight: each view's folder holds the drone's per-frame
+    # telemetry (the same mount offset) for its own frames; view 2's frame f is shown with top
+    # frame f + 12. One fit over both views turns every frame's top camera back.
+    tops, hors, top_boxes, hor_boxes = _flying_scene(4)
+    half = len(hors) // 2
+    bias = [1.5, -1.6, 1.2]
+
+    def view(v: int) -> CameraFrames:
+        return CameraFrames(f"cams{v}/", per_frame={
+            1 + k: FrameCameras(_mounted(tops[v * half + k], bias), hors[v * half + k])
+            for k in range(half)})
+
+    given = [view(0), view(1)]
+    used, what = refine_views_cameras(given, _records(top_boxes),
+                                      [_records(hor_boxes[:half]), _records(hor_boxes[half:])],
+                                      [range(1, half + 1)] * 2, [0, half])
+    assert what.turned and what.moving and what.fit.frame == "camera"
+    assert what.fit.frames == 2 * half
+    assert max(_angle(used[v].get(f).top, tops[v * half + f - 1])
+               for v in (0, 1) for f in range(1, half + 1)) < 0.3
+
+
 @pytest.fixture(scope="module")
 def overview(tmp_path_factory):
     """A 40-frame rendered overview video, its files, and a camera folder whose top camera
