@@ -42,7 +42,9 @@ through one fixed simulated camera of strength S first (the adaptation benchmark
 on the camera cues too; the handcrafted rows do not change. ``--camera-error DEG`` gives them
 calibrated with an error (:func:`with_camera_error`); the fixed top camera is then refined on
 each video's boxes as the command does (:mod:`xvmatch.inference.camera_refinement`; its line is
-printed), unless ``--refine-top-camera off``. ``--w1`` sets Eq. 17's share.
+printed), unless ``--refine-top-camera off``. ``--w1`` sets Eq. 17's share. ``--flight SPEED
+YAW_RATE`` flies the drone's top camera (its cameras per frame, a telemetry error a mount
+offset shared by every frame).
 
 Usage:
     python benchmarks/tracking_eval.py [--data ../shared/data/cvmhat] [--cache DIR]
@@ -51,8 +53,8 @@ Usage:
         [--weights handcrafted learned] [--model default] [--learned-rule margin] [--mirror]
         [--offset auto]
     python benchmarks/tracking_eval.py --synthetic 8 [--synthetic-frames 100] [--model default]
-        [--people 6 12] [--shift 3] [--scenario drone|overview] [--cameras [--camera-error 2]
-        [--refine-top-camera off]]
+        [--people 6 12] [--shift 3] [--scenario drone|overview] [--flight 2 5]
+        [--cameras [--camera-error 2] [--refine-top-camera off]]
 """
 
 from __future__ import annotations
@@ -255,8 +257,10 @@ def with_camera_error(cameras: dict, degrees: float, seed: int,
                       views: tuple[str, ...] = ("top", "hor")) -> dict:
     """``{frame: FrameCameras}`` as a calibration would give them with an error: each camera of
     ``views`` turned by ``degrees`` about a random axis and moved ``degrees / 10`` metres in a
-    random direction; the top camera once for the whole video (a fixed camera's calibration),
-    the egocentric one anew every frame (its pose tracked frame by frame)."""
+    random direction; the top camera once for the whole video (a fixed camera's calibration;
+    a top camera in flight: every frame's by the same turn in its own frame, a mount offset,
+    and the same step), the egocentric one anew every frame (its pose tracked frame by
+    frame)."""
     from scipy.spatial.transform import Rotation
 
     from xvmatch.geometry.camera import Camera
@@ -273,9 +277,19 @@ def with_camera_error(cameras: dict, degrees: float, seed: int,
 
     frames = sorted(cameras)
     top = cameras[frames[0]].top if frames else None
+    tops = dict.fromkeys(frames, top)
     if top is not None and "top" in views:
-        top = off(top)
-    return {f: FrameCameras(top, off(cameras[f].hor) if "hor" in views else cameras[f].hor)
+        moved = off(top)
+        if all(cameras[f].top is top for f in frames):
+            tops = dict.fromkeys(frames, moved)
+        else:  # in flight: the same mount offset (R' = B R) and step on every frame
+            mount, step = moved.R @ top.R.T, moved.c - top.c
+            tops = {f: Camera(K=cameras[f].top.K, R=mount @ cameras[f].top.R,
+                              c=cameras[f].top.c + step, width=cameras[f].top.width,
+                              height=cameras[f].top.height) for f in frames}
+    elif top is not None:
+        tops = {f: cameras[f].top for f in frames}
+    return {f: FrameCameras(tops[f], off(cameras[f].hor) if "hor" in views else cameras[f].hor)
             for f in frames}
 
 
@@ -320,7 +334,8 @@ def synthetic_main(args: argparse.Namespace) -> int:
         seed = args.seed + k
         start = time.perf_counter()
         video = render_tracking_video(seed, args.synthetic_frames, SynthConfig(
-            scenario=args.scenario, n_people=tuple(args.people), fps=25.0))
+            scenario=args.scenario, n_people=tuple(args.people), fps=25.0),
+            flight=None if args.flight is None else tuple(args.flight))
         if args.shift:  # each view through one fixed simulated camera of its own
             video = replace(video, top_images={
                 f: camera_shift(im, args.shift, seed=100 + seed, per_image=False)
@@ -449,6 +464,10 @@ def main() -> int:
                         "building")
     parser.add_argument("--synthetic-frames", type=int, default=100,
                         help="frames per rendered video (25 fps)")
+    parser.add_argument("--flight", type=float, nargs=2, default=None,
+                        metavar=("SPEED", "YAW_RATE"),
+                        help="--synthetic drone: the top camera flies (m/s, degrees/s; "
+                        "render_tracking_video's flight), its cameras per frame")
     parser.add_argument("--people", type=int, nargs=2, default=[6, 12], metavar=("MIN", "MAX"),
                         help="people per rendered video (--synthetic)")
     parser.add_argument("--shift", type=float, default=0.0, metavar="S",
@@ -482,6 +501,9 @@ def main() -> int:
         parser.error("--cameras gives the rendered cameras: it needs --synthetic N")
     if args.camera_error and not args.cameras:
         parser.error("--camera-error is an error of the --cameras: add --cameras")
+    if args.flight is not None and (not args.synthetic or args.scenario != "drone"):
+        parser.error("--flight flies the drone's top camera: it needs --synthetic N and the "
+                     "drone scenario")
     if args.synthetic:
         return synthetic_main(args)
     folder = Path(args.data) if args.data else default_cvmhat_dir()

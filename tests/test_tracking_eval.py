@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,3 +47,32 @@ def test_cameras_reach_the_learned_rows_only(monkeypatch, capsys) -> None:
             for out in (plain, cams)]
     assert rows[0]["frame"] == rows[1]["frame"] and rows[0]["boxes"] == rows[1]["boxes"]
     assert rows[0]["frame-learned"] != rows[1]["frame-learned"]
+
+
+def test_a_flying_top_camera_gets_one_mount_offset(monkeypatch, capsys) -> None:
+    # --flight: each frame's rendered top camera differs; --camera-error puts the same turn
+    # in the camera's own frame (and the same step) on every frame's, and the refinement turns
+    # the moving camera back.
+    from scipy.spatial.transform import Rotation
+
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+    from xvmatch.datasets.tracking_video import render_tracking_video
+
+    video = render_tracking_video(3, 6, SynthConfig(scenario="drone", n_people=(4, 6),
+                                                    fps=25.0), flight=(2.0, 5.0))
+    given = tracking_eval.with_camera_error(video.cameras, 2.0, 3, ("top",))
+    mounts = [given[f].top.R @ video.cameras[f].top.R.T for f in sorted(video.cameras)]
+    steps = [given[f].top.c - video.cameras[f].top.c for f in sorted(video.cameras)]
+    assert all(np.allclose(m, mounts[0], atol=1e-12) for m in mounts)
+    assert all(np.allclose(s, steps[0], atol=1e-12) for s in steps)
+    assert abs(np.degrees(Rotation.from_matrix(mounts[0]).magnitude()) - 2.0) < 1e-6
+    assert all(given[f].hor is video.cameras[f].hor for f in video.cameras)
+    out = _run(monkeypatch, capsys, "--flight", "2", "5", "--cameras", "--camera-error", "2",
+               "--error-on", "top", "--arms", "boxes-learned")
+    assert "cameras: turned the moving top camera" in out
+    monkeypatch.setattr(sys, "argv", ["tracking_eval.py", "--synthetic", "1", "--scenario",
+                                      "overview", "--flight", "2", "5"])
+    with pytest.raises(SystemExit) as exit_info:
+        tracking_eval.main()
+    assert exit_info.value.code == 2
+    assert "--flight flies the drone's top camera" in capsys.readouterr().err
