@@ -15,7 +15,7 @@ turn and the check's verdict, then the frames of all videos pooled: Eq. 9 accura
 
 Usage:
     python benchmarks/flying_camera_eval.py [--seeds 1 2 3 4] [--frames 100] [--speed 2]
-        [--yaw-rate 5] [--bias 2 -1.5 1] [--jitter 0] [--model default]
+        [--yaw-rate 5] [--bias 2 -1.5 1] [--jitter 0] [--drift 0] [--model default]
 """
 
 from __future__ import annotations
@@ -49,13 +49,16 @@ CAMERAS = ("exact", "mount", "heading")
 
 
 def biased(cameras: dict, kind: str, bias_deg: np.ndarray, jitter_deg: float = 0.0,
-           seed: int = 0) -> dict:
+           seed: int = 0, drift_deg: float = 0.0) -> dict:
     """``{frame: FrameCameras}`` with every frame's top camera turned by ``bias_deg`` in its
     own frame (``mount``: ``R' = B R``) or in the world (``heading``), or as they are
-    (``exact``); then, with ``jitter_deg``, each frame's turned anew in the world by a rotation
-    vector of ``jitter_deg`` degrees per axis (normal; the same draws in every arm of a seed)."""
-    if kind == "exact" and not jitter_deg:
+    (``exact``); then, with ``drift_deg``, turned about the vertical by an angle growing
+    evenly from 0 on the first frame to ``drift_deg`` on the last (a heading that drifts);
+    then, with ``jitter_deg``, each frame's turned anew in the world by a rotation vector of
+    ``jitter_deg`` degrees per axis (normal; the same draws in every arm of a seed)."""
+    if kind == "exact" and not jitter_deg and not drift_deg:
         return cameras
+    frames = sorted(cameras)
     b = Rotation.from_rotvec(np.radians(bias_deg)).as_matrix()
     rng = np.random.default_rng([seed, 31])
     out = {}
@@ -64,6 +67,9 @@ def biased(cameras: dict, kind: str, bias_deg: np.ndarray, jitter_deg: float = 0
                Camera(K=c.top.K, R=b @ c.top.R, c=c.top.c, width=c.top.width,
                       height=c.top.height) if kind == "mount" else
                turned_camera(c.top, bias_deg))
+        if drift_deg:
+            share = (f - frames[0]) / max(frames[-1] - frames[0], 1)
+            top = turned_camera(top, [0.0, 0.0, drift_deg * share])
         if jitter_deg:
             top = turned_camera(top, rng.normal(0.0, jitter_deg, 3))
         out[f] = FrameCameras(top, c.hor)
@@ -81,6 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jitter", type=float, default=0.0,
                         help="telemetry noise: each frame's top camera also turned by a rotation "
                         "vector of this many degrees per axis, drawn anew (default 0)")
+    parser.add_argument("--drift", type=float, default=0.0,
+                        help="a heading that drifts: each frame's top camera also turned about "
+                        "the vertical, from 0 degrees on the first frame to this on the last "
+                        "(default 0)")
     parser.add_argument("--people", type=int, nargs=2, default=[8, 12])
     parser.add_argument("--model", default="default")
     args = parser.parse_args(argv)
@@ -92,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     bias = np.asarray(args.bias, dtype=float)
     print(f"drone videos of {args.frames} frames, the top camera flying {args.speed:g} m/s and "
           f"turning {args.yaw_rate:g} deg/s; attitude error {np.linalg.norm(bias):.2f} deg, "
-          f"jitter {args.jitter:g} deg per axis; "
+          f"jitter {args.jitter:g} deg per axis, drift {args.drift:g} deg; "
           f"{args.people[0]}-{args.people[1]} people, ids scrambled per view, boxes only")
     arms = ["none", *CAMERAS, *(f"{c} {stage}" for stage in ("refined", "checked")
                                 for c in CAMERAS)]
@@ -116,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         verdicts = []
         for kind in CAMERAS:
             given = CameraFrames("rendered", per_frame=biased(video.cameras, kind, bias,
-                                                              args.jitter, seed))
+                                                              args.jitter, seed, args.drift))
             rows[kind] = run(given)
             used, what = refine_run_cameras(given, det_top, det_hor, frames)
             rows[f"{kind} refined"] = run(used) if what.turned else rows[kind]

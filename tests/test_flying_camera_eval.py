@@ -48,6 +48,18 @@ def test_the_biases_and_the_jitter(cameras) -> None:
     assert not any(np.array_equal(a[f].top.R, c[f].top.R) for f in cameras)
 
 
+def test_a_drifting_heading(cameras) -> None:
+    # from 0 on the first frame to --drift on the last, about the vertical
+    frames = sorted(cameras)
+    drifting = flying_camera_eval.biased(cameras, "exact", np.zeros(3), drift_deg=3.0)
+    angles = [_angle(drifting[f].top, cameras[f].top) for f in frames]
+    assert angles[0] < 1e-9 and abs(angles[-1] - 3.0) < 1e-6
+    assert np.all(np.diff(angles) > 0)
+    last = drifting[frames[-1]].top.R.T @ cameras[frames[-1]].top.R  # Q of R' = R Q^T
+    axis = Rotation.from_matrix(last).as_rotvec()
+    assert np.allclose(axis / np.linalg.norm(axis), [0.0, 0.0, 1.0], atol=1e-9)
+
+
 def test_a_short_run_mends_the_biased_cameras(capsys) -> None:
     # Measured: mount 74.6, heading 84.2 as given; 100.0 each refined (turned 2.42 degrees in
     # the camera's frame, 2.30 in the world; the error is 2.69).
