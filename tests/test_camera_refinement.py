@@ -3,6 +3,7 @@ it does for the learned matcher (inference/camera_refinement.py)."""
 
 from __future__ import annotations
 
+import json
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -386,10 +387,16 @@ def test_a_flying_drone_s_cameras_are_mended_and_written(tmp_path, capsys) -> No
             "default", "--camera-check", "off"]
     written = tmp_path / "refined"
     assert main([*base, "--cameras", str(given), "--out", str(tmp_path / "a.txt"),
-                 "--write-cameras", str(written)]) == 0
+                 "--write-cameras", str(written), "--costs", str(tmp_path / "costs.json")]) == 0
     said = capsys.readouterr().err
     assert "cameras: turned the moving top camera in its own frame" in said
     assert f"cameras: wrote {written} (the moving top camera turned 2." in said
+    # --costs records what the refinement did
+    record = json.loads((tmp_path / "costs.json").read_text())["top_camera_refinement"]
+    assert record["turned"] and record["moving"] and record["message"] in said
+    fit = record["fit"]
+    assert fit["frame"] == "camera" and fit["frames"] == 30 and 2.0 < fit["angle_deg"] < 3.0
+    assert fit["loss_after"] < fit["loss_before"] and len(fit["rotation_deg"]) == 3
     again, before = open_cameras(written), open_cameras(given)
     for f in video.cameras:
         assert _angle(again.get(f).top, video.cameras[f].top) < 1.0
@@ -402,3 +409,26 @@ def test_a_flying_drone_s_cameras_are_mended_and_written(tmp_path, capsys) -> No
     pairs = {name: read_predictions(tmp_path / name) for name in ("a.txt", "c.txt")}
     assert _right(video, pairs["a.txt"]) > _right(video, pairs["c.txt"]) + 0.1, {
         name: _right(video, p) for name, p in pairs.items()}
+
+
+def test_costs_say_when_no_fit_was_tried(scene, tmp_path) -> None:
+    """A run too short to refine on: ``--costs`` records the refinement's line and no fit."""
+    top, hors, top_boxes, hor_boxes = scene
+    write = {"top": tmp_path / "top.txt", "hor": tmp_path / "hor.txt"}
+    for name, boxes in (("top", top_boxes[:4]), ("hor", hor_boxes[:4])):
+        write[name].write_text("".join(
+            f"{f + 1},{i + 1},{x:.2f},{y:.2f},{w:.2f},{h:.2f},1,-1,-1,-1\n"
+            for f, b in enumerate(boxes) for i, (x, y, w, h) in enumerate(b)))
+    cameras = tmp_path / "cams.json"
+    save_cameras(cameras, {"top": top, "ego": hors[0]})
+    assert main(["associate", "--top", str(write["top"]), "--hor", str(write["hor"]),
+                 "--model", "default", "--cameras", str(cameras), "--out",
+                 str(tmp_path / "a.txt"), "--costs", str(tmp_path / "c.json"), "--quiet"]) == 0
+    record = json.loads((tmp_path / "c.json").read_text())["top_camera_refinement"]
+    assert record["fit"] is None and not record["turned"] and not record["moving"]
+    assert "4 frame(s) with boxes in both views, too few" in record["message"]
+    assert main(["associate", "--top", str(write["top"]), "--hor", str(write["hor"]),
+                 "--model", "default", "--cameras", str(cameras), "--out",
+                 str(tmp_path / "b.txt"), "--costs", str(tmp_path / "d.json"), "--quiet",
+                 "--refine-top-camera", "off"]) == 0
+    assert "top_camera_refinement" not in json.loads((tmp_path / "d.json").read_text())

@@ -397,15 +397,15 @@ def associate_with_model(
                           not getattr(args, "no_labels", False))
     if getattr(args, "costs", None) is not None:
         _write_costs(args.costs, top, hor, run.costs, run.gamma, run.checked,
-                     run.camera_checked)
+                     run.camera_checked, inputs.refinement)
     write_cameras(args, inputs.refined_cameras, inputs.refinement)
     return run.pairs
 
 
 def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: float,
-                 checked=None, camera_checked=None) -> None:
-    """``--costs``' JSON (docs/formats.md); ``checked``, ``camera_checked``: the run's
-    appearance and camera checks, if any."""
+                 checked=None, camera_checked=None, refinement=None) -> None:
+    """``--costs``' JSON (docs/formats.md); ``checked``, ``camera_checked``, ``refinement``:
+    the run's appearance and camera checks and its top camera refinement, if any."""
     import json
 
     from xvmatch.geometry.atomic_files import atomic_write_text
@@ -422,6 +422,15 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
     }
     from xvmatch.inference.site_bundle import json_figure
 
+    if refinement is not None:
+        fit = refinement.fit
+        record["top_camera_refinement"] = {
+            "turned": refinement.turned, "moving": refinement.moving,
+            "message": refinement.message, "fit": None if fit is None else {
+                "frame": fit.frame, "rotation_deg": list(fit.rotation_deg),
+                "angle_deg": fit.angle_deg, "frames": fit.frames,
+                "loss_before": json_figure(fit.loss_before),
+                "loss_after": json_figure(fit.loss_after)}}
     if camera_checked is not None:
         record["camera_check"] = {
             "judged": camera_checked.judged, "cameras_used": camera_checked.trusted,
