@@ -12,7 +12,7 @@ import numpy as np
 
 from xvmatch.geometry.array_checks import as_points
 
-__all__ = ["Camera", "intrinsics_from_fov", "look_rotation"]
+__all__ = ["Camera", "intrinsics_from_fov", "look_rotation", "same_camera"]
 
 
 def intrinsics_from_fov(width: int, height: int, hfov_deg: float) -> np.ndarray:
@@ -160,3 +160,11 @@ class Camera:
             width=data["width"],
             height=data["height"],
         )
+
+
+def same_camera(a: Camera, b: Camera) -> bool:
+    """The same camera, up to what writing a file can change (1e-9 of a rotation entry, a
+    micrometre, a millionth of a pixel)."""
+    return (a.image_size == b.image_size and np.allclose(a.K, b.K, rtol=0, atol=1e-6)
+            and np.allclose(a.R, b.R, rtol=0, atol=1e-9)
+            and np.allclose(a.c, b.c, rtol=0, atol=1e-6))

@@ -42,7 +42,7 @@ from scipy.optimize import linear_sum_assignment, minimize
 from scipy.spatial.transform import Rotation
 
 from xvmatch.geometry.array_checks import as_boxes
-from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.camera import Camera, same_camera
 from xvmatch.geometry.ray_priors import METRIC_MARGIN, box_rays
 
 __all__ = ["MAX_PAIRS", "MIN_REFINE_FRAMES", "WEARER_HEAD", "WIDE_GAIN", "WIDE_LOSS",
@@ -317,7 +317,8 @@ def refine_top_camera(
 
     Args:
         top: the fixed top camera as calibrated, or each frame's (a moving camera; a sequence
-            of equal cameras is a fixed one).
+            of cameras all the same (:func:`~xvmatch.geometry.camera.same_camera`) is a fixed
+            one).
         hor_cameras: the egocentric camera of each frame.
         top_boxes, hor_boxes: ``(M, 4)`` and ``(N, 4)`` x, y, w, h boxes of each frame, pixels.
         max_deg: the largest turn searched (grid half-width), degrees.
@@ -354,8 +355,7 @@ def refine_top_camera(
             [as_boxes(hor_boxes[k], "hor_boxes") for k in keep], margin)
     search = (max_deg, grid_step_deg, wide_deg, wide_step_deg)
     first = tops[keep[0]]
-    if all(t is first or (np.array_equal(t.R, first.R) and np.array_equal(t.c, first.c)
-                          and np.array_equal(t.K, first.K)) for t in tops):
+    if all(same_camera(t, first) for t in tops):
         best_x, before, best_loss = _fit(_RayFrames(first, *args), *search)
         camera = first if not best_x.any() else turned_camera(first, best_x)
         return TopCameraRefinement(camera, tuple(float(v) for v in best_x),

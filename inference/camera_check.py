@@ -8,8 +8,9 @@ and it trusts them: on rendered videos it then falls up to 35 Eq. 9 points below
 * even the best turn of the top camera leaves the head rays apart: the refinement's loss
   (:mod:`xvmatch.inference.camera_refinement`) stays above :data:`DOUBT_LOSS`. Cameras that help
   can also end there (an egocentric camera off anew every frame), so this only opens the check.
-  A top camera that changes from frame to frame (a drone in flight, from its telemetry) is not
-  refined, so nothing vouches for it: its check is always open;
+  A top camera that changes from frame to frame (a drone in flight, from its telemetry) has at
+  most the constant part of its error refined, so nothing vouches for the rest: its check is
+  always open;
 * the box-only matcher's pseudo-matches, the pairs it is sure of on consecutive frames
   (:func:`~xvmatch.inference.adaptation_pairs.mine_pairs`, those the appearance check and
   ``adapt`` use), are mostly right, good cameras keep them, and misleading ones have the

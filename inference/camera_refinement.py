@@ -15,10 +15,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
-import numpy as np
-
 from xvmatch.datasets.camera_frames import CameraFrames
-from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.camera import same_camera
 from xvmatch.geometry.matcher_inputs import FrameCameras
 from xvmatch.geometry.top_camera_refinement import (
     MIN_REFINE_FRAMES,
@@ -83,28 +81,17 @@ class CameraRefinement:
         return self.turned or (self.fit is not None and self.fit.loss_after <= FIT_LOSS)
 
 
-def _same_camera(a: Camera, b: Camera) -> bool:
-    """The same camera, up to what writing a file can change (1e-9 of a rotation entry, a
-    micrometre, a millionth of a pixel)."""
-    return (a.image_size == b.image_size and np.allclose(a.K, b.K, rtol=0, atol=1e-6)
-            and np.allclose(a.R, b.R, rtol=0, atol=1e-9)
-            and np.allclose(a.c, b.c, rtol=0, atol=1e-6))
-
-
 def _turned_top(cameras: CameraFrames, fit: TopCameraRefinement, moving: bool) -> CameraFrames:
     """``cameras`` with each top camera turned as ``fit`` says: a fixed one is the fit's camera
     on every frame; a moving one's frames are turned one by one (also when the sampled frames
     happened to share one camera)."""
-    if not moving:
-        if cameras.static is not None:
-            return replace(cameras, static=FrameCameras(fit.camera, cameras.static.hor))
-        return replace(cameras, per_frame={f: FrameCameras(fit.camera, c.hor)
-                                           for f, c in cameras.per_frame.items()})
+
+    def turned(c: FrameCameras) -> FrameCameras:
+        return FrameCameras(fit.turn(c.top) if moving else fit.camera, c.hor)
+
     if cameras.static is not None:
-        return replace(cameras, static=FrameCameras(fit.turn(cameras.static.top),
-                                                    cameras.static.hor))
-    return replace(cameras, per_frame={f: FrameCameras(fit.turn(c.top), c.hor)
-                                       for f, c in cameras.per_frame.items()})
+        return replace(cameras, static=turned(cameras.static))
+    return replace(cameras, per_frame={f: turned(c) for f, c in cameras.per_frame.items()})
 
 
 def refine_run_cameras(
@@ -158,8 +145,8 @@ def refine_views_cameras(
     views = [[cams.static] if cams.static is not None else
              [cams.per_frame[f] for f in sorted(cams.per_frame)] for cams in cameras]
     held = [c for view in views for c in view]
-    moving = not all(_same_camera(held[0].top, c.top) for c in held[1:])
-    if moving and all(_same_camera(v[0].top, c.top) for v in views for c in v[1:]):
+    moving = not all(same_camera(held[0].top, c.top) for c in held[1:])
+    if moving and all(same_camera(v[0].top, c.top) for v in views for c in v[1:]):
         # each view's file holds one fixed top camera, but not the same: one of them is wrong
         return list(cameras), CameraRefinement(
             False, None, "cameras: the top camera differs between the views' files; used as "
