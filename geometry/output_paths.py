@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import glob
 import os
+import re
 import stat
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -40,7 +41,10 @@ __all__ = [
     "check_own_folder",
     "check_script_outputs",
     "claim_folder",
+    "plain_name",
 ]
+
+_NAME_CHARS = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
 
 
 
@@ -231,8 +235,8 @@ def check_outputs(outputs: Sequence[Output], inputs: Sequence[Input] = ()) -> No
         OutputPathError: one line naming the option and the path.
     """
     seen = [s for item in inputs for s in _expand(item)]
-    targets: dict[str, str] = {}
-    for out in outputs:
+    targets: dict[str, tuple[int, str]] = {}
+    for index, out in enumerate(outputs):
         if out.path is None:
             continue
         path = os.fspath(out.path)
@@ -245,10 +249,10 @@ def check_outputs(outputs: Sequence[Output], inputs: Sequence[Input] = ()) -> No
             names = [(out.option, path, path)]
         for option, given, name in names:
             real = _real_target(name)
-            if real in targets and targets[real] != f"{option} {given}":
-                raise OutputPathError(f"{option} {given}: is also {targets[real]}; give each "
+            if real in targets and targets[real][0] != index:
+                raise OutputPathError(f"{option} {given}: is also {targets[real][1]}; give each "
                                       "output its own path")
-            targets[real] = f"{option} {given}"
+            targets[real] = (index, f"{option} {given}")
 
 
 def check_script_outputs(parser: argparse.ArgumentParser, outputs: Sequence[Output],
@@ -282,3 +286,20 @@ def claim_folder(folder: str | os.PathLike, command: str, option: str = "--out")
     and leave the marker naming ``command``; a folder already marked is kept as it is."""
     check_own_folder(folder, command, option)
     return mark_own_folder(folder, command)
+
+
+def plain_name(name: str, what: str) -> str:
+    """``name`` if it may name a file: a name from the user's data (a camera, a scene) becomes
+    a file name in an output folder, so it must never be a path. Allowed: 1-64 characters of
+    letters, digits and ``_ . + -``, starting with a letter or a digit (no ``/``, ``..``,
+    absolute path, hidden file, space or control character, the same on every system).
+
+    Raises:
+        OutputPathError: one line naming ``what`` (e.g. ``--boxes ../x=cam.txt``) and the rule.
+    """
+    if not _NAME_CHARS.fullmatch(name):
+        raise OutputPathError(f"{what}: the name {name!r} is used as a file name, so it must be "
+                              "1-64 letters, digits, '_', '.', '+' or '-', starting with a "
+                              "letter or a digit (no '/', no '..')")
+    return name
+

@@ -4,6 +4,7 @@ it does for the learned matcher (inference/camera_refinement.py)."""
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -264,11 +265,20 @@ def test_write_cameras_keeps_the_refined_cameras_for_next_time(overview, tmp_pat
                  str(tmp_path / "b.txt"), "--quiet"]) == 0
     assert (tmp_path / "a.txt").read_bytes() == (tmp_path / "b.txt").read_bytes()
     by_associate = {p.name: p.read_bytes() for p in written.glob("*.json")}
-    (written / "000999.json").write_bytes(by_associate["000001.json"])  # an earlier video's
+    more = tmp_path / "more"  # --cameras with a frame the boxes have not: written too
+    shutil.copytree(turned, more)
+    (more / "000999.json").write_bytes((turned / "000001.json").read_bytes())
+    assert main([*base, "--cameras", str(more), "--out", str(tmp_path / "m.txt"), "--quiet",
+                 "--write-cameras", str(written)]) == 0
+    assert (written / "000999.json").is_file()
+    (written / "notes.json").write_text("{}")  # the user's: never removed
     track = ["track", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
              "default", "--cameras", str(turned), "--offset", "0", "--quiet"]
     assert main([*track, "--out", str(tmp_path / "t"), "--write-cameras", str(written)]) == 0
-    assert {p.name: p.read_bytes() for p in written.glob("*.json")} == by_associate  # gone
+    assert (written / "notes.json").read_text() == "{}"
+    (written / "notes.json").unlink()
+    # the earlier run's frame 999 is gone, the rest as associate wrote it
+    assert {p.name: p.read_bytes() for p in written.glob("*.json")} == by_associate
     assert main([*track, "--out", str(tmp_path / "t2"), "--write-cameras",
                  str(files["cameras"])]) == 2  # a folder it did not make
     assert "--write-cameras" in capsys.readouterr().err and not (tmp_path / "t2").exists()

@@ -15,9 +15,18 @@ import time
 
 from xvmatch.cli_options import add_command_parser, progress_bar
 from xvmatch.cli_types import seed_value, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import (
+    Input,
+    Output,
+    check_outputs,
+    check_own_folder,
+    claim_folder,
+)
 
 __all__ = ["EXAMPLE", "add_baseline_parser"]
+
+FIGURES_COMMAND = "xvmatch baseline --figures"
+"""The marker name of a ``--figures`` folder (the command writes only into a folder it made)."""
 
 EXAMPLE = (
     "xvmatch synth --out data/ov_test --scenario overview --scenes 20 --frames 5 --seed 1000\n"
@@ -96,13 +105,17 @@ def _cmd_baseline(args: argparse.Namespace) -> int:
     )
     check_outputs([Output("--figures", args.figures, folder=True,
                           files=tuple(FIGURE_FILES.values()))], [Input("--data", args.data)])
+    if args.figures:
+        check_own_folder(args.figures, FIGURES_COMMAND, "--figures")
     dataset = open_dataset(args.data)
     start = time.perf_counter()
     with progress_bar(len(dataset), "baseline", "pair", not args.quiet) as bar:
         result = evaluate_baseline(args.data, config, workers=args.workers,
                                    progress=bar.update)
     elapsed = time.perf_counter() - start
-    figures = save_cost_figures(result.samples, args.figures) if args.figures else []
+    figures = (save_cost_figures(result.samples, claim_folder(args.figures, FIGURES_COMMAND,
+                                                              "--figures"))
+               if args.figures else [])
     if args.json:
         record = result.to_dict()
         record["figures"] = [str(f) for f in figures]

@@ -10,7 +10,9 @@ and a scene laid out as a user's data with the command that matches it. Torch-fr
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -64,6 +66,20 @@ def add_demo_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    """``xvmatch demo``; a run that fails or is interrupted removes the folder it made (a
+    half-made demo folder would pass for one)."""
+    from xvmatch.geometry.folder_marker import is_own_folder
+
+    made = not os.path.lexists(args.out)
+    try:
+        return _run_demo(args)
+    except BaseException:
+        if made and is_own_folder(args.out, DEMO_COMMAND):
+            shutil.rmtree(args.out, ignore_errors=True)
+        raise
+
+
+def _run_demo(args: argparse.Namespace) -> int:
     from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
     from xvmatch.datasets.synthetic_io import (
         MANIFEST,
@@ -156,9 +172,6 @@ def xvmatch_command() -> str:
     ``xvmatch`` when that name on ``PATH`` is the running entry point; else the full path of
     the entry point beside the running interpreter (a virtual environment not activated);
     else ``PYTHON -m xvmatch`` with the running interpreter's path. Quoted for a POSIX shell."""
-    import os
-    import shutil
-
     here = os.path.join(os.path.dirname(sys.executable), "xvmatch")
     if os.path.isfile(here) and os.access(here, os.X_OK):
         found = shutil.which("xvmatch")

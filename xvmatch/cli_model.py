@@ -32,6 +32,7 @@ __all__ = [
     "add_refine_top_camera",
     "add_write_cameras",
     "associate_with_model",
+    "check_precision",
     "check_write_cameras",
     "draw_pictures",
     "ego_camera_size",
@@ -156,29 +157,33 @@ def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
     """Write ``--write-cameras`` (when given): ``cameras``, the run's
     :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined (a list, one per path,
     for ``associate-multi``), in ``--cameras``' form (a folder it made before loses the camera
-    files of frames this run has not: they would be read with the new ones); say what they
-    hold unless quiet."""
+    files it wrote of frames this run has not: they would be read with the new ones; a file the
+    user put there is kept); say what they hold unless quiet."""
     from xvmatch.datasets.camera_frames import save_camera_frames
+    from xvmatch.geometry.folder_marker import record_own_files, remove_own_files
     from xvmatch.geometry.output_paths import claim_folder
 
     paths = _listed(getattr(args, "write_cameras", None))
     if not paths:
         return
+    counts = []
     for path, cams in zip(paths, _listed(cameras), strict=True):
         if cams.static is not None:
             save_camera_frames(cams, path)
             continue
         folder = claim_folder(path, CAMERAS_COMMAND, "--write-cameras")
-        written = set(save_camera_frames(cams, folder))
-        for stale in set(folder.glob("*.json")) - written:  # an earlier run's other frames
-            if not stale.name.startswith("."):
-                stale.unlink()
+        written = [p.name for p in save_camera_frames(cams, folder)]
+        # an earlier run's other frames would be read with these: remove them, and only them
+        remove_own_files(folder, CAMERAS_COMMAND, keep=written)
+        record_own_files(folder, CAMERAS_COMMAND, written)
+        counts.append(f"{path}: {len(written)} camera files, one per frame of its --cameras")
     if not getattr(args, "quiet", False):
         turned = refinement is not None and refinement.turned
         what = (f"the {'moving ' if refinement.moving else ''}top camera turned "
                 f"{refinement.fit.angle_deg:.2f} degrees" if turned
                 else "the top camera as given")
-        print(f"cameras: wrote {', '.join(map(str, paths))} ({what})", file=sys.stderr)
+        print(f"cameras: wrote {', '.join(map(str, paths))} ({what})"
+              + "".join(f"; {c}" for c in counts), file=sys.stderr)
 
 
 def add_camera_check(group) -> None:
@@ -268,6 +273,29 @@ def open_models(names: Iterable[str], threads: int = 1, precision: str | None = 
         else:
             models.append(load_matcher_bundle(name, threads, precision, recheck))
     return models
+
+
+def check_precision(precision: str | None, images: bool, models: Iterable = (),
+                    names: Iterable[str] = ()) -> None:
+    """Refuse ``--precision`` where no appearance network runs: without images (the run
+    matches boxes alone), or when none of ``models`` (opened from ``names``) has one (a
+    box-only bundle). Call it once before opening the models (``models`` empty) and once
+    after.
+
+    Raises:
+        UsageError: one line naming ``--precision`` and what to do.
+    """
+    if precision is None:
+        return
+    if not images:
+        raise UsageError(f"--precision {precision} chooses the appearance network, which runs "
+                         "only on images: give --top-images and --hor-images, or leave "
+                         "--precision out")
+    models, names = list(models), list(names)
+    if models and all(m.bundle.manifest.appearance is None for m in models):
+        which = ", ".join(names) or "the model"
+        raise UsageError(f"--precision {precision}: --model {which} has no appearance network "
+                         "(a box-only matcher) for it to choose; leave --precision out")
 
 
 def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, int], str]:
@@ -375,8 +403,11 @@ def associate_with_model(
     if draw is not None:
         check_own_folder(draw, DRAW_COMMAND, "--draw")
     names = [args.model] if isinstance(args.model, str) else list(args.model)
-    models = open_models(names, getattr(args, "threads", 1), getattr(args, "precision", None),
-                         recheck=True)
+    precision = getattr(args, "precision", None)
+    images = getattr(args, "top_images", None) is not None
+    check_precision(precision, images)
+    models = open_models(names, getattr(args, "threads", 1), precision, recheck=True)
+    check_precision(precision, images, models, names)
     hor_size = hor_size or horizontal_size(args, hor)
     options = learned_run_options(args, models, names, hor_size, top_offset)
     hor_path = getattr(args, "hor", "the horizontal boxes")

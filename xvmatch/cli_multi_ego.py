@@ -45,9 +45,18 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, float_in, int_in, thread_count, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import (
+    Input,
+    Output,
+    check_outputs,
+    check_own_folder,
+    claim_folder,
+)
 
 __all__ = ["EXAMPLE", "add_multi_ego_parser"]
+
+MULTI_COMMAND = "xvmatch associate-multi"
+"""The marker name of the command's output folders (it writes only into a folder it made)."""
 
 EXAMPLE = ("xvmatch associate-multi --model default --top top.txt --hor hor1.txt hor2.txt "
            "hor3.txt --out people/")
@@ -196,6 +205,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
          *(Input("--cameras", c) for c in args.cameras or ()),
          Input("--model", None if args.model == "default" else args.model)],
     )
+    check_own_folder(out, MULTI_COMMAND)
     offsets = _offsets(args, n_hor)
     rows = [read_detection_rows(p) for p in paths]
     views = [r.frames for r in rows]
@@ -321,10 +331,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                 strict=True):
                 person[v][row] = next_id + pid
         next_id += int(max((int(ids.max()) + 1 for ids in sol.person if ids.size), default=0))
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OSError(f"--out {args.out}: cannot create the folder ({exc.strerror})") from None
+    claim_folder(out, MULTI_COMMAND)
     names = ["top", *(f"hor{k}" for k in range(1, n_hor + 1))]
     written = [write_track_rows(out / f"{name}.txt", r, p)
                for name, r, p in zip(names, rows, person, strict=True)]

@@ -14,7 +14,7 @@ import os
 
 from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
 from xvmatch.cli_types import float_in, image_size, int_in
-from xvmatch.geometry.output_paths import Input, Output, check_outputs, claim_folder
+from xvmatch.geometry.output_paths import Input, Output, check_outputs, claim_folder, plain_name
 
 __all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",
            "read_ground_csv"]
@@ -37,6 +37,7 @@ def named_paths(values: list[str] | None, option: str) -> dict[str, str]:
         if not sep or not name or not path:
             raise UsageError(f"{option} {text}: expected NAME=FILE, NAME a camera of the "
                              "cameras file")
+        plain_name(name, f"{option} {text}")
         if name in out:
             raise UsageError(f"{option}: camera {name} given twice")
         out[name] = path
@@ -440,6 +441,7 @@ def _fit_homographies(args: argparse.Namespace) -> int:
 
     from xvmatch.geometry.camera_io import save_cameras
     from xvmatch.geometry.ground_plane import GroundCamera, fit_homography
+    from xvmatch.geometry.input_files import read_input_text
 
     check_outputs([Output("--out", args.out)], [Input("--fit-homography", args.fit_homography)])
     sizes = {}
@@ -450,8 +452,7 @@ def _fit_homographies(args: argparse.Namespace) -> int:
             raise UsageError(f"--image-size {name}={text}: {exc}") from None
     path = args.fit_homography
     points: dict[str, list[tuple[float, float, float, float]]] = {}
-    with open(path, encoding="utf-8") as fh:
-        lines = fh.read().split("\n")
+    lines = read_input_text(path, "--fit-homography").split("\n")
     header = [h.strip() for h in lines[0].split(",")] if lines else []
     if header != ["camera", "u", "v", "X", "Y"]:
         raise UsageError(f"{path}:1: expected the header camera,u,v,X,Y")
@@ -476,11 +477,11 @@ def _fit_homographies(args: argparse.Namespace) -> int:
             raise UsageError(f"--image-size: camera {name} of {path} has no size; give "
                              f"--image-size {name}=WxH")
         arr = np.array(rows)
-        try:
-            H = fit_homography(arr[:, :2], arr[:, 2:], *sizes[name])
+        try:  # too few pairs, points in line, a horizon across them: one line each
+            cams[name] = GroundCamera(fit_homography(arr[:, :2], arr[:, 2:], *sizes[name]),
+                                      *sizes[name])
         except ValueError as exc:
             raise UsageError(f"{path}: camera {name}: {exc}") from None
-        cams[name] = GroundCamera(H, *sizes[name])
     save_cameras(args.out, cams)
     if not args.quiet:
         print(f"fitted {len(cams)} camera(s); wrote {args.out}")

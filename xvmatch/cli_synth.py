@@ -13,7 +13,6 @@ the main entry point prints as ``xvmatch: error: ...``.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -174,6 +173,7 @@ def _synth_cameras(args: argparse.Namespace) -> int:
         simulate_multicam_scene,
         write_multicam_scene,
     )
+    from xvmatch.geometry.folder_marker import files_under, record_own_files, remove_own_files
     from xvmatch.geometry.output_paths import claim_folder
 
     if args.texture:
@@ -194,8 +194,8 @@ def _synth_cameras(args: argparse.Namespace) -> int:
                             fps=args.fps)
     start = time.perf_counter()
     root = claim_folder(args.out, SYNTH_CAMERAS)
-    for name in ("boxes", "gt", "images"):  # an earlier scene of this command: no stale camera
-        shutil.rmtree(root / name, ignore_errors=True)
+    remove_own_files(root, SYNTH_CAMERAS)  # an earlier scene of this command: no stale camera
+    kept = files_under(root)  # the user's: never removed, and not listed as written
     if args.boxes_only:
         scene = simulate_multicam_scene(config, args.frames, args.seed)
     else:
@@ -208,6 +208,7 @@ def _synth_cameras(args: argparse.Namespace) -> int:
         scene = add_tracker_noise(scene, TrackerNoise(), args.seed)
     if args.boxes_only or args.tracker_noise:
         write_multicam_scene(root, scene)
+    record_own_files(root, SYNTH_CAMERAS, files_under(root) - kept)
     if not args.quiet:
         kind = "box-only" if args.boxes_only else "rendered"
         print(f"wrote a {kind} scene of {args.cameras} static cameras x {args.frames} frames to "
@@ -355,8 +356,12 @@ def _cmd_show(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise ValueError(f"--out {args.out}: use a .png or .jpg file name")
     pair = record.pairs[frame - 1]
+    from xvmatch.datasets.synthetic_io import MANIFEST
+
+    # the whole data set is input: never write over another pair's image or annotation
+    dataset = root if (Path(root) / MANIFEST).is_file() else None
     check_outputs([Output("--out", out)],
-                  [Input("PAIR", args.pair), Input("PAIR", annotation),
+                  [Input("PAIR", args.pair), Input("PAIR", annotation), Input("PAIR", dataset),
                    Input("PAIR", pair.top.image_path), Input("PAIR", pair.ego.image_path)])
     picture = draw_pair(pair, full_boxes=args.full_boxes)
     if args.bits < 8:

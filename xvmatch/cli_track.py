@@ -52,7 +52,13 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, float_in, int_in, seed_value, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.geometry.output_paths import (
+    Input,
+    Output,
+    check_outputs,
+    check_own_folder,
+    claim_folder,
+)
 
 __all__ = ["EXAMPLE", "OFFSET_FILE", "add_track_parser", "evaluate_tracks_command",
            "tracked_offset"]
@@ -60,6 +66,9 @@ __all__ = ["EXAMPLE", "OFFSET_FILE", "add_track_parser", "evaluate_tracks_comman
 OFFSET_FILE = "offset.json"
 """What ``track`` writes beside the tracks: ``{"offset": N}``, the offset it applied (0 when the
 videos kept the files' timing), so that ``evaluate --tracks`` re-times the same way."""
+
+TRACK_COMMAND = "xvmatch track"
+"""The marker name of the command's output folders (it writes only into a folder it made)."""
 
 EXAMPLE = (
     "xvmatch track --top seq_top.txt --hor seq_hor.txt --out tracks/\n"
@@ -352,6 +361,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
          *image_inputs(args), Input("--cameras", args.cameras),
          Input("--model", None if args.model == "default" else args.model)],
     )
+    check_own_folder(out, TRACK_COMMAND)
     max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
     model = None
     if args.model is not None:
@@ -398,10 +408,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     finally:
         for source in sources:
             source.close()
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OSError(f"--out {args.out}: cannot create the folder ({exc.strerror})") from None
+    claim_folder(out, TRACK_COMMAND)
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
     n_hor = write_track_rows(out / "hor.txt", hor, result.hor_rows)
     from xvmatch.geometry.atomic_files import atomic_write_text
@@ -440,20 +447,15 @@ def _trackeval_installed() -> bool:
 
 
 def tracked_offset(folder: Path) -> int:
-    """The offset ``track`` applied to the tracks in ``folder`` (its :data:`OFFSET_FILE`; 0
-    when absent, as in folders written before it existed)."""
+    """The offset ``track`` applied to the tracks in ``folder`` (its :data:`OFFSET_FILE`,
+    checked as ``--offset`` is: :func:`~xvmatch.cli_offset.read_offset_record`; 0 when absent,
+    as in folders written before it existed)."""
+    from xvmatch.cli_offset import read_offset_record
+
     path = folder / OFFSET_FILE
     if not path.exists():
         return 0
-    try:
-        offset = json.loads(path.read_text())["offset"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"{path}: not the offset record that xvmatch track writes "
-                         f"({exc}); pass --offset N") from None
-    if isinstance(offset, bool) or not isinstance(offset, int):
-        raise ValueError(f"{path}: offset must be an integer number of frames, got {offset!r}; "
-                         "pass --offset N")
-    return offset
+    return read_offset_record(path)
 
 
 def evaluate_tracks_command(args: argparse.Namespace) -> int:
