@@ -32,6 +32,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from xvmatch.geometry.input_files import InputFileError, read_input_text
+
 __all__ = [
     "ASSUMED",
     "CVMHAT_SIZE",
@@ -90,9 +92,8 @@ def consistent_with(frames: Mapping, size: tuple[int, int] = CVMHAT_SIZE) -> boo
 def _line_of(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:
     """The 1-based line of ``path`` holding ``box`` of ``frame`` (the first such line)."""
     try:
-        with open(path, encoding="utf-8-sig", newline="") as handle:
-            lines = handle.read().split("\n")
-    except (OSError, UnicodeDecodeError):
+        lines = read_input_text(path, encoding="utf-8-sig").split("\n")
+    except (InputFileError, OSError):
         return None
     for k, line in enumerate(lines, start=1):
         fields = line.strip().split(",")

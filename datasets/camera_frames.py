@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from xvmatch.geometry.camera_io import CameraFileError, load_cameras, save_cameras
+from xvmatch.geometry.input_files import InputFileError, check_input_file
 from xvmatch.geometry.matcher_inputs import FrameCameras
 
 __all__ = ["CameraFrames", "open_cameras", "save_camera_frames"]
@@ -59,6 +60,13 @@ class CameraFrames:
 
 
 def _pair(path: str | os.PathLike) -> FrameCameras:
+    """The ``top`` and ``ego`` cameras of the camera file ``path``, a regular file: a FIFO, a
+    device or a folder named like one is refused at once, never read (it would block or never
+    end)."""
+    try:
+        check_input_file(path)
+    except InputFileError as exc:
+        raise CameraFileError(str(exc)) from None
     cams = load_cameras(path, required=("top", "ego"))
     return FrameCameras(cams["top"], cams["ego"])
 
@@ -76,10 +84,10 @@ def open_cameras(path: str | os.PathLike, frames: Sequence[int] = ()) -> CameraF
             a file.
     """
     name = os.fspath(path)
-    if os.path.isfile(name):
-        return CameraFrames(name, static=_pair(name))
-    if not os.path.isdir(name):
+    if not os.path.lexists(name):
         raise CameraFileError(f"{name}: no such camera file or folder")
+    if not os.path.isdir(name):
+        return CameraFrames(name, static=_pair(name))
     per_frame: dict[int, FrameCameras] = {}
     files: dict[int, str] = {}
     for entry in sorted(Path(name).glob("*.json")):

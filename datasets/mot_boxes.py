@@ -11,7 +11,10 @@ files of ~10k lines per sequence; only when that fast path rejects a file does a
 run, to name the exact bad line. Every problem is a :class:`BoxFileError` whose message is one line,
 ``"<path>:<line>: <what is wrong>"``, so editors and terminals can jump to it: lines are counted at
 ``\\n`` only (``\\r\\n`` too), and a file holding another line-break character (form feed,
-U+2028, ...) is refused at that line. A box file without any box is refused as well.
+U+2028, ...) is refused at that line. A box file without any box is refused as well. Files are
+opened through :mod:`~xvmatch.geometry.input_files`: a FIFO, a device or a folder is refused at
+once, a NUL byte or a line over a megabyte as soon as it is read. Frames and ids are integers
+read exactly: one beyond 2**53 in size is refused, as a float would round it onto another.
 
 All writes go through :func:`~xvmatch.geometry.atomic_files.atomic_write_text` (temporary file
 in the same directory, then ``os.replace``), so a crash never leaves a half-written file that a
@@ -26,10 +29,12 @@ import re
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.geometry.input_files import InputFileError, read_input_text
 
 __all__ = [
     "MAX_PIXELS",
@@ -38,6 +43,7 @@ __all__ = [
     "FrameBoxes",
     "align_frames",
     "align_views",
+    "check_common_frames",
     "read_mot_boxes",
     "read_predictions",
     "scale_frames",
@@ -77,8 +83,8 @@ class BoxFileError(ValueError):
     """A box or prediction file that cannot be read as such.
 
     The message is always a single line, ``"<path>:<line>: <what is wrong>"``; the line number is
-    left out only for whole-file problems (missing file, not text). ``path`` and ``line`` are also
-    kept as attributes for programs that want them.
+    left out only for whole-file problems (a missing file, a FIFO, a device or a folder).
+    ``path`` and ``line`` are also kept as attributes for programs that want them.
     """
 
     def __init__(self, message: str, *, path: str | None = None, line: int | None = None):
@@ -171,6 +177,40 @@ def align_views(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes], of
     return top, hor
 
 
+def _frame_span(frames: Mapping[int, FrameBoxes]) -> str:
+    """``first..last`` of the frames with boxes, or ``none``."""
+    used = [f for f, rec in frames.items() if len(rec)]
+    return f"{min(used)}..{max(used)}" if used else "none"
+
+
+def check_common_frames(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes],
+                        offset: int = 0, names: tuple[str, str] = ("top", "horizontal"),
+                        what: str = "nothing to pair") -> None:
+    """Refuse a top and a horizontal view that share no frame with boxes in both once the top
+    one is re-timed by ``offset`` (top frame = horizontal frame + offset): pairing them gives
+    an empty result that would pass for a real one ("wrote 0 pairs").
+
+    Args:
+        top: the top view, in its file's frame numbers.
+        hor: the horizontal view, in its file's frame numbers.
+        offset: the offset applied (``xvmatch offset``'s convention), 0 for none.
+        names: the two files (or views) as the message names them.
+        what: what the refusal means for the command, first in the message.
+
+    Raises:
+        ValueError: one line naming both files, their frame ranges and the offset.
+    """
+    offset = int(offset)
+    top_used = {f for f, rec in top.items() if len(rec)}
+    if any(len(rec) and f + offset in top_used for f, rec in hor.items()):
+        return
+    shifted = (f" after --offset {offset} (top frame = horizontal frame {offset:+d})"
+               if offset else "")
+    raise ValueError(f"{what}: {names[0]} and {names[1]} share no frame with boxes in both "
+                     f"views{shifted} (top frames {_frame_span(top)}, horizontal frames "
+                     f"{_frame_span(hor)}); check the files and --offset")
+
+
 def scale_frames(frames: Mapping[int, FrameBoxes], factor: float) -> dict[int, FrameBoxes]:
     """A view's boxes at another resolution: every coordinate multiplied by ``factor`` (the same
     video exported ``factor`` times as wide)."""
@@ -204,18 +244,18 @@ _PRED_COLUMNS = (_Column("frame", "frame"), _Column("top_id", "id"), _Column("ho
 
 
 def _read_text(path: str | os.PathLike) -> str:
-    """The whole file as text, line ends untranslated (:func:`_split_lines` splits them), with
-    whole-file problems turned into :class:`BoxFileError`."""
+    """The whole file as text, line ends untranslated (:func:`_split_lines` splits them), a
+    byte-order mark dropped, read through :func:`~xvmatch.geometry.input_files.read_input_text`
+    (no blocking on a FIFO, no device, no NUL byte, no line over a megabyte), its refusals
+    turned into :class:`BoxFileError`."""
     try:
-        with open(path, encoding="utf-8-sig", newline="") as handle:
-            return handle.read()
-    except FileNotFoundError:
-        raise _error(path, None, "no such file") from None
-    except IsADirectoryError:
-        raise _error(path, None, "is a directory, expected a text file") from None
-    except UnicodeDecodeError as exc:
-        raise _error(path, None, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except OSError as exc:
+        return read_input_text(path, encoding="utf-8-sig")
+    except InputFileError as exc:
+        message = str(exc)
+        numbered = re.match(re.escape(os.fspath(path)) + r":(\d+): ", message)
+        line = int(numbered.group(1)) if numbered else None
+        raise BoxFileError(message, path=os.fspath(path), line=line) from None
+    except OSError as exc:  # a read error after the open
         raise _error(path, None, f"cannot read: {exc.strerror or exc}") from None
 
 
@@ -242,9 +282,12 @@ def _require_rows(path: str | os.PathLike, data: np.ndarray) -> None:
 
 
 def _is_int(values: np.ndarray) -> np.ndarray:
-    """Element-wise: finite, integer-valued and exactly representable."""
+    """Element-wise: finite, integer-valued and below :data:`_MAX_EXACT_INT` in size.
+
+    A value of that size or more may be the rounding of another integer's text (2**53 + 1
+    reads as 2**53), so it fails here and :func:`_check_value` judges its text instead."""
     with np.errstate(invalid="ignore"):
-        exact = np.abs(values) <= _MAX_EXACT_INT
+        exact = np.abs(values) < _MAX_EXACT_INT
         return np.isfinite(values) & (values == np.round(values)) & exact
 
 
@@ -290,6 +333,29 @@ def _line_numbers(lines: Sequence[str], first_lineno: int) -> np.ndarray:
     return np.flatnonzero([bool(ln.strip()) for ln in lines]) + first_lineno
 
 
+def _integer_problem(text: str, value: float, col: _Column) -> str | None:
+    """What is wrong with a frame or id field ``text`` (read as ``value``), or None.
+
+    From :data:`_MAX_EXACT_INT` up the float may be another integer's rounding, so there the
+    text itself is read exactly: frame 9007199254740993 would otherwise become 2**53 and be
+    matched with that frame."""
+    if value != round(value):
+        return f"{col.name} must be an integer, got {text!r}"
+    if abs(value) < _MAX_EXACT_INT:
+        return None
+    shown = text if len(text) <= 40 else text[:37] + "..."
+    try:
+        exact = Fraction(text)
+    except ValueError:  # digits beyond what Python converts to an integer
+        exact = None
+    if exact is not None and exact.denominator != 1:
+        return f"{col.name} must be an integer, got {shown!r}"
+    if exact is None or abs(exact) > _MAX_EXACT_INT:
+        return (f"{col.name} {shown} is beyond 2**53 = {_MAX_EXACT_INT} in size, the largest "
+                "integer read exactly; renumber the file")
+    return None
+
+
 def _check_value(text: str, col: _Column) -> str | float:
     """Parse one field; returns the value or, when it is invalid, what is wrong with it."""
     if not _NUMBER.fullmatch(text):
@@ -298,8 +364,9 @@ def _check_value(text: str, col: _Column) -> str | float:
     if not np.isfinite(value):
         return f"{col.name} must be finite, got {text!r}"
     if col.kind in ("frame", "id"):
-        if value != round(value) or abs(value) > _MAX_EXACT_INT:
-            return f"{col.name} must be an integer, got {text!r}"
+        problem = _integer_problem(text, value, col)
+        if problem:
+            return problem
         if col.kind == "frame" and value < 1:
             return f"frame must be >= 1 (frames are 1-based), got {text!r}"
     if col.kind == "size" and value <= 0:
@@ -441,10 +508,12 @@ def read_mot_boxes(
         order. Frames without boxes are absent.
 
     Raises:
-        BoxFileError: missing or unreadable file, no boxes at all (unless ``allow_empty``), a
-            line-break character other than ``\\n`` / ``\\r\\n``, fewer than 6 fields, a
-            non-numeric, NaN or infinite field, a frame that is not an integer >= 1, a
-            non-integer id, ``w`` or ``h`` <= 0, a coordinate or size beyond
+        BoxFileError: missing or unreadable file, not a regular file (a FIFO, a device, a
+            folder), not text (a NUL byte, a line over a megabyte, not UTF-8), no boxes at all
+            (unless ``allow_empty``), a line-break character other than ``\\n`` /
+            ``\\r\\n``, fewer than 6 fields, a non-numeric, NaN or infinite field, a frame
+            that is not an integer >= 1, a non-integer id, a frame or id beyond 2**53 in size
+            (not read exactly), ``w`` or ``h`` <= 0, a coordinate or size beyond
             :data:`MAX_PIXELS`, or (unless ``duplicates="first"``) the same ``(frame, id)``
             twice. The message names file and line.
         ValueError: ``duplicates`` is neither ``"error"`` nor ``"first"``.
@@ -482,10 +551,11 @@ def read_predictions(path: str | os.PathLike) -> dict[int, list[tuple[int, int]]
         Frames without a predicted pair are absent (an empty prediction, not an error).
 
     Raises:
-        BoxFileError: missing file, wrong header, a line-break character other than ``\\n`` /
-            ``\\r\\n``, not exactly 3 fields, a non-integer value,
-            a frame < 1, or a ``top_id`` or ``hor_id`` used twice in one frame (the association
-            is one-to-one). The message names file and line.
+        BoxFileError: missing file, not a regular text file (as :func:`read_mot_boxes`), wrong
+            header, a line-break character other than ``\\n`` / ``\\r\\n``, not exactly 3
+            fields, a non-integer value or one beyond 2**53 in size, a frame < 1, or a
+            ``top_id`` or ``hor_id`` used twice in one frame (the association is one-to-one).
+            The message names file and line.
     """
     lines = _split_lines(path, _read_text(path))
     if not lines or not lines[0].strip():

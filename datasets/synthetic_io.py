@@ -46,6 +46,12 @@ from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
 from xvmatch.geometry.atomic_files import atomic_write_bytes, atomic_write_text
 from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.input_files import (
+    MAX_INPUT_BYTES,
+    InputFileError,
+    check_input_file,
+    read_input_text,
+)
 from xvmatch.geometry.json_text import parse_json
 from xvmatch.geometry.worker_pool import worker_pool
 
@@ -218,8 +224,8 @@ def _write_scene_task(args: tuple) -> dict:
 def _is_own_dataset(root: Path) -> bool:
     """Whether ``root`` holds only a dataset this module wrote (its manifest and folders)."""
     try:
-        manifest = json.loads((root / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        manifest = json.loads(_json_text(root / MANIFEST))
+    except (OSError, ValueError, RecursionError):  # InputFileError is a ValueError
         return False
     if not isinstance(manifest, dict) or manifest.get("schema") != SCHEMA_NAME + ".dataset":
         return False
@@ -424,13 +430,23 @@ class _Doc:
         return float(v)
 
 
+def _json_text(path: Path) -> str:
+    """A manifest or annotation file's text through
+    :func:`~xvmatch.geometry.input_files.read_input_text`: a FIFO, a device or a file with a
+    NUL byte is refused at once. Without its line bound: an annotation is written as one
+    compact line, about 10 kB a frame, so a long scene's is tens of megabytes."""
+    return read_input_text(path, max_line=MAX_INPUT_BYTES)
+
+
 def _load_json(path: Path) -> object:
+    """The JSON document of a manifest or annotation file (:func:`_json_text`); every problem
+    is a one-line :class:`SchemaError`."""
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SchemaError(f"{os.fspath(path)}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SchemaError(f"{os.fspath(path)}: cannot read: {exc}") from None
+        text = _json_text(path)
+    except InputFileError as exc:
+        raise SchemaError(str(exc)) from None
+    except OSError as exc:
+        raise SchemaError(f"{os.fspath(path)}: cannot read: {exc.strerror or exc}") from None
     return parse_json(text, os.fspath(path), SchemaError)  # syntax, nesting depth: one line
 
 
@@ -680,6 +696,8 @@ class SyntheticDataset:
 
         Raises:
             OSError: a file cannot be read.
+            InputFileError: a manifest or annotation that is not a regular file (a FIFO, a
+                device), refused before it is read.
         """
         files = [MANIFEST, *(annotation for _, annotation, _ in self._entries)]
         images = self.root / "images"
@@ -690,7 +708,7 @@ class SyntheticDataset:
         for rel in files:
             path = self.root / rel
             digest.update(f"{rel}\0{path.stat().st_size}\0".encode())
-            with open(path, "rb") as handle:
+            with open(check_input_file(path), "rb") as handle:
                 while chunk := handle.read(1 << 20):
                     digest.update(chunk)
         return digest.hexdigest()

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.geometry.input_files import MAX_INPUT_BYTES, read_input_text
 
 __all__ = ["MARKER", "files_under", "is_own_folder", "mark_own_folder", "own_files",
            "record_own_files", "remove_own_files"]
@@ -18,10 +19,13 @@ MARKER = ".xvmatch-output.json"
 
 
 def _record(folder: str | os.PathLike) -> dict | None:
-    """The marker's record, or None when missing, unreadable or malformed."""
+    """The marker's record, or None when missing, unreadable or malformed: a marker that is a
+    FIFO, a device or not text is no marker, refused at once, never read (it would block or
+    never end). Its one compact JSON line may be long (the list of files a run wrote)."""
     try:
-        record = json.loads((Path(folder) / MARKER).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        text = read_input_text(Path(folder) / MARKER, max_line=MAX_INPUT_BYTES)
+        record = json.loads(text)
+    except (OSError, ValueError, RecursionError):  # InputFileError is a ValueError
         return None
     return record if isinstance(record, dict) else None
 

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from xvmatch.geometry.input_files import InputFileError, read_input_text
 from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import CUE_NAMES
 from xvmatch.geometry.record_fields import typed_field
@@ -253,8 +254,10 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     if not path.is_file():
         raise _fail(path, "no manifest: not a bundle folder (xvmatch export writes one)")
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = read_input_text(path)
+    except InputFileError as exc:  # a FIFO, a device, a NUL byte, a line over a megabyte
+        raise BundleError(str(exc)) from None
+    except OSError as exc:
         raise _fail(path, f"not a readable JSON manifest ({exc})") from None
     try:
         doc = json.loads(text)

@@ -258,8 +258,10 @@ def write_site_bundle(source: str | os.PathLike, out: str | os.PathLike, run: Si
     """
     if not run.fit.accepted:
         raise ValueError(f"adaptation refused: {run.fit.reason}")
+    from xvmatch.geometry.input_files import read_input_text
+
     source, out = Path(source), Path(out)
-    manifest = json.loads((source / MANIFEST).read_text(encoding="utf-8"))
+    manifest = json.loads(read_input_text(source / MANIFEST))  # never blocks, bounded lines
     names = _source_files(manifest)
     if (source / "NOTICE.txt").is_file():
         names.append("NOTICE.txt")

@@ -88,3 +88,86 @@ def test_a_box_file_without_boxes_is_one_line(scene_files, tmp_path, capsys, com
         assert main(_commands(top, hor, out)[command]) == 2
         assert f"{empty}: no boxes" in _error_line(capsys)
     assert list(out.iterdir()) == []
+
+
+# Frames and ids are integers read exactly (issue 65): 2**53 + 1 once read as 2**53 and was
+# matched with that frame.
+
+BEYOND = 2**53 + 1
+
+
+@pytest.mark.parametrize(("bad", "field"), [
+    (f"{BEYOND},99,10,20,30,40", "frame"),
+    (f"2,{BEYOND},10,20,30,40", "id"),
+    (f"2,-{BEYOND},10,20,30,40", "id"),
+    ("2,9.007199254740993e15,10,20,30,40", "id"),
+])
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_frame_or_id_beyond_2_53_is_refused_at_its_line(scene_files, tmp_path, capsys,
+                                                          command, bad, field):
+    top, line = _with_bad_top(scene_files, tmp_path, bad)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(_commands(top, scene_files[1], out)[command]) == 2
+    message = _error_line(capsys)
+    assert f"{top}:{line}: {field} " in message and "beyond 2**53" in message, message
+    assert list(out.iterdir()) == []
+
+
+def test_frames_and_ids_of_2_53_are_read_exactly(tmp_path):
+    from xvmatch.datasets.mot_boxes import read_mot_boxes, read_predictions
+
+    boxes = tmp_path / "boxes.txt"
+    boxes.write_text(f"{2**53},1,10,20,30,40\n{2**53 - 1},{-(2**53)},10,20,30,40\n"
+                     f"1,{2**53}.0,10,20,30,40\n")
+    frames = read_mot_boxes(boxes)
+    assert sorted(frames) == [1, 2**53 - 1, 2**53]
+    assert frames[2**53 - 1].ids.tolist() == [-(2**53)]
+    assert frames[1].ids.tolist() == [2**53]
+    pred = tmp_path / "pred.csv"
+    pred.write_text(f"frame,top_id,hor_id\n{2**53},1,2\n")
+    assert read_predictions(pred) == {2**53: [(1, 2)]}
+    pred.write_text(f"frame,top_id,hor_id\n{BEYOND},1,2\n")
+    with pytest.raises(ValueError, match=f"pred.csv:2: frame {BEYOND} is beyond 2\\*\\*53"):
+        read_predictions(pred)
+
+
+# Views with no frame in common (issue 65): once "wrote 0 pairs over 40 frames" and exit 0.
+
+
+def _late(path: Path, folder: Path, shift: int) -> Path:
+    """``path``'s boxes ``shift`` frames later, written in ``folder``."""
+    from xvmatch.datasets.mot_boxes import read_mot_boxes, shift_frames, write_mot_boxes
+
+    late = folder / f"late_{Path(path).name}"
+    write_mot_boxes(late, shift_frames(read_mot_boxes(path), -shift))
+    return late
+
+
+PAIRING = [c for c in COMMANDS if c != "offset"]
+
+
+@pytest.mark.parametrize("command", ["associate", "track", "associate-multi"])
+def test_an_offset_that_lines_the_views_up_runs(scene_files, tmp_path, capsys, command):
+    hor = _late(scene_files[1], tmp_path, 100)
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = [*_commands(scene_files[0], hor, out)[command], "--offset", "-100"]
+    assert main(argv) == 0, capsys.readouterr().err
+
+
+def test_evaluate_and_adapt_refuse_views_without_a_common_frame(scene_files, tmp_path, capsys):
+    hor = _late(scene_files[1], tmp_path, 100)
+    pred = tmp_path / "pred.csv"
+    pred.write_text("frame,top_id,hor_id\n")
+    assert main(["evaluate", "--pred", str(pred), "--top", str(scene_files[0]), "--hor",
+                 str(hor)]) == 2
+    assert (f"nothing to score: {scene_files[0]} and {hor} share no frame"
+            in _error_line(capsys))
+    out = tmp_path / "site"
+    assert main(["adapt", "--top", str(scene_files[0]), "--hor", str(hor), "--top-images",
+                 str(tmp_path / "top"), "--hor-images", str(tmp_path / "hor"), "--out",
+                 str(out), "--quiet"]) == 2
+    assert (f"nothing to adapt on: {scene_files[0]} and {hor} share no frame"
+            in _error_line(capsys))
+    assert not out.exists()

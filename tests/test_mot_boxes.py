@@ -152,10 +152,10 @@ def test_coordinates_up_to_max_pixels_are_read(tmp_path):
     np.testing.assert_array_equal(read_mot_boxes(path)[1].boxes, [[-1e6, 1e6, 1e6, 0.5]])
 
 
-def test_not_utf8_is_a_whole_file_error(tmp_path):
+def test_not_utf8_is_refused_at_its_line(tmp_path):
     path = tmp_path / "boxes.txt"
     path.write_bytes(b"1,1,10,20,30,40\n\xff\xfe\n")
-    _expect_error(path, None, "not UTF-8")
+    _expect_error(path, 2, "not UTF-8")
 
 
 def test_duplicates_first_keeps_first_box_and_warns(tmp_path):

@@ -115,6 +115,7 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
         note_camera_refinement,
         open_models,
     )
+    from xvmatch.datasets.mot_boxes import check_common_frames
     from xvmatch.geometry.output_paths import claim_folder
     from xvmatch.inference.adaptation_pairs import MiningConfig
     from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
@@ -124,6 +125,7 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
         raise UsageError("adapt learns from the images: give --top-images and --hor-images")
     top = read_boxes(args.top, args.duplicates)
     hor = read_boxes(args.hor, args.duplicates)
+    check_common_frames(top, hor, 0, (args.top, args.hor), "nothing to adapt on")
     check_camera_id(args.camera_id, top, args.top)
     check_outputs([Output("--out", args.out, folder=True)],
                   [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),

@@ -65,7 +65,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from xvmatch.cli_track import evaluate_tracks_command
 
         return evaluate_tracks_command(args)
-    from xvmatch.datasets.mot_boxes import read_predictions
+    from xvmatch.datasets.mot_boxes import check_common_frames, read_predictions, shift_frames
     from xvmatch.inference.cross_view_metrics import (
         count_sequence,
         format_table,
@@ -76,11 +76,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     top = read_boxes(args.top, args.duplicates)
     hor = read_boxes(args.hor, args.duplicates)
     pred = read_predictions(args.pred)
+    check_common_frames(top, hor, args.offset or 0, (args.top, args.hor), "nothing to score")
     if args.offset:  # (None: not given, 0)
-        from xvmatch.datasets.mot_boxes import shift_frames
-
         top = shift_frames(top, args.offset)
-    _check_common_frames(top, hor, args)
     try:
         counts = count_sequence(pred, top, hor)
     except ValueError as exc:
@@ -92,18 +90,3 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         print(format_table([(args.name or args.pred, scores)]))
     return 0
 
-
-def _check_common_frames(top, hor, args: argparse.Namespace) -> None:
-    """Scores need a frame with boxes in both views: without one every score is empty."""
-    common = {f for f, rec in top.items() if len(rec)} & {f for f, rec in hor.items() if len(rec)}
-    if common:
-        return
-
-    def span(frames) -> str:
-        used = [f for f, rec in frames.items() if len(rec)]
-        return f"{min(used)}..{max(used)}" if used else "none"
-
-    shifted = f" after --offset {args.offset}" if args.offset else ""
-    raise UsageError(f"nothing to score: {args.top} and {args.hor} share no frame with boxes in "
-                     f"both views{shifted} (top frames {span(top)}, horizontal frames "
-                     f"{span(hor)}); check the files and --offset")
