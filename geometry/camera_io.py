@@ -20,30 +20,43 @@ A camera may instead be ``{"H": [[...]], "width": W, "height": H}``, an image ->
 homography (:func:`load_ground_cameras` only, for ``xvmatch multicam``).
 Unknown keys are rejected so that a typo (``"k"`` for ``"K"``) cannot go unnoticed.
 
+Every camera is checked for physical sense as it is read
+(:func:`~xvmatch.geometry.camera.check_camera_sense`: focal lengths > 0, a proper rotation, a
+centre within 100 km and above the ground z = 0, some ground in the image; the camera named
+:data:`TOP_CAMERA` must also look down), and an ``H`` camera, or the homography of a ``K, R, c``
+camera in :func:`load_ground_cameras`, must see the ground along the bottom edge of its image
+(:func:`~xvmatch.geometry.ground_plane.check_ground_view`). The file is opened with
+:func:`~xvmatch.geometry.input_files.read_input_text`, so a FIFO or a device is refused at once.
+
 Every error is a :class:`CameraFileError` whose message starts with the file and the field,
-e.g. ``cams.json: cameras.ego.K: expected 3x3 numbers``.
+e.g. ``cams.json: cameras.ego.K: expected 3x3 numbers`` or
+``cams/top.json: cameras.top.K: focal length fx = -800 must be > 0``.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
 import tempfile
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from xvmatch.geometry.camera import Camera
-from xvmatch.geometry.ground_plane import GroundCamera
+from xvmatch.geometry.camera import Camera, CameraSenseError, check_camera_sense
+from xvmatch.geometry.ground_plane import GroundCamera, check_ground_view
+from xvmatch.geometry.input_files import InputFileError, read_input_text
 from xvmatch.geometry.json_text import parse_json
 
-__all__ = ["FORMAT_VERSION", "CameraFileError", "load_cameras", "load_ground_cameras",
-           "save_cameras"]
+__all__ = ["FORMAT_VERSION", "TOP_CAMERA", "CameraFileError", "load_cameras",
+           "load_ground_cameras", "save_cameras"]
 
 FORMAT_VERSION = 1
+TOP_CAMERA = "top"
+"""Name of the top (overview, drone) camera in the files of ``associate`` and ``track``: the
+one camera that must look down."""
 _CAMERA_FIELDS = ("K", "R", "c", "width", "height")
 _H_FIELDS = ("H", "width", "height")
 _TOP_FIELDS = ("version", "cameras")
@@ -81,7 +94,8 @@ def _size(value: Any, where: str) -> int:
     return int(value)
 
 
-def _camera(record: Any, where: str) -> Camera:
+def _camera(record: Any, where: str, top: bool = False) -> Camera:
+    """A ``K, R, c`` record as a Camera that makes physical sense (``top``: it looks down)."""
     if isinstance(record, dict) and "H" in record:
         raise CameraFileError(f"{where}: a homography camera (H); this command needs K, R, c "
                               "(only multicam reads H cameras)")
@@ -99,26 +113,35 @@ def _camera(record: Any, where: str) -> Camera:
     if abs(np.linalg.det(K)) < 1e-12:
         raise CameraFileError(f"{where}.K: singular intrinsic matrix (det = 0); check fx, fy")
     R = _matrix(record["R"], 3, 3, f"{where}.R")
-    err = float(np.abs(R @ R.T - np.eye(3)).max())
-    if err > 1e-6 or np.linalg.det(R) < 0:
-        raise CameraFileError(
-            f"{where}.R: not a proper rotation (max |R R^T - I| = {err:.2g}, "
-            f"det = {np.linalg.det(R):.6g}); store R with full precision, world -> camera"
-        )
     c = _matrix(record["c"], 3, 0, f"{where}.c")
     width = _size(record["width"], f"{where}.width")
     height = _size(record["height"], f"{where}.height")
+    try:
+        check_camera_sense(K, R, c, width, height, top=top)
+    except CameraSenseError as exc:
+        raise CameraFileError(f"{where}.{exc.field}: {exc.reason}") from None
     return Camera(K=K, R=R, c=c, width=width, height=height)
 
 
-def _ground_camera(record: Any, where: str) -> GroundCamera:
-    """A camera record of either form (``K, R, c`` or ``H``) as a :class:`GroundCamera`."""
+def _ground_view(ground: GroundCamera, where: str) -> GroundCamera:
+    """``ground`` if its image sees the ground along its bottom edge; CameraFileError if not."""
+    try:
+        check_ground_view(ground.H, ground.width, ground.height)
+    except ValueError as exc:
+        raise CameraFileError(f"{where}: {exc}") from None
+    return ground
+
+
+def _ground_camera(record: Any, where: str, top: bool = False) -> GroundCamera:
+    """A camera record of either form (``K, R, c`` or ``H``) as a :class:`GroundCamera`
+    (``top`` is not used: the static cameras of multicam have no top camera)."""
     if not (isinstance(record, dict) and "H" in record):
         cam = _camera(record, where)
         try:
-            return GroundCamera.from_camera(cam)
+            ground = GroundCamera.from_camera(cam)
         except ValueError as exc:
             raise CameraFileError(f"{where}: {exc}") from None
+        return _ground_view(ground, where)
     unknown = sorted(set(record) - set(_H_FIELDS))
     if unknown:
         raise CameraFileError(f"{where}: unknown field(s) {', '.join(unknown)} (a homography "
@@ -130,9 +153,10 @@ def _ground_camera(record: Any, where: str) -> GroundCamera:
     width = _size(record["width"], f"{where}.width")
     height = _size(record["height"], f"{where}.height")
     try:
-        return GroundCamera(H, width, height)
+        ground = GroundCamera(H, width, height)
     except ValueError as exc:
         raise CameraFileError(f"{where}.H: {exc}") from None
+    return _ground_view(ground, f"{where}.H")
 
 
 def load_ground_cameras(path: str | os.PathLike[str]) -> dict[str, GroundCamera]:
@@ -141,15 +165,18 @@ def load_ground_cameras(path: str | os.PathLike[str]) -> dict[str, GroundCamera]
     A camera is ``K, R, c, width, height`` as in :func:`load_cameras`, or ``H, width, height``
     with ``H`` the image -> ground homography (``[X, Y, 1]^T ~ H [u, v, 1]^T``, metres,
     ground z = 0; :mod:`xvmatch.geometry.ground_plane`). Version 1, the same file otherwise.
+    Each camera must see the ground along the bottom edge of its image; no camera is held to
+    look down (none is the top camera).
 
     Returns:
         ``{name: GroundCamera}`` in file order.
 
     Raises:
         FileNotFoundError: the file does not exist.
-        CameraFileError: as :func:`load_cameras`; a singular or non-finite ``H`` too.
+        CameraFileError: as :func:`load_cameras`; a singular or non-finite ``H``, or an image
+            whose bottom edge sees no ground in front, too.
     """
-    return _load(path, _ground_camera, ())
+    return _load(path, _ground_camera, (), top=None)
 
 
 def load_cameras(
@@ -164,21 +191,35 @@ def load_cameras(
     Returns:
         ``{name: Camera}`` in file order.
 
+    Every camera must make physical sense
+    (:func:`~xvmatch.geometry.camera.check_camera_sense`); the one named :data:`TOP_CAMERA`
+    must also look down.
+
     Raises:
         FileNotFoundError: the file does not exist.
-        CameraFileError: invalid JSON, wrong version, or an invalid field; the message is
+        CameraFileError: not a regular file (a FIFO, a device), invalid JSON, wrong version, an
+            invalid field, or a camera that makes no physical sense; the message is
             ``"<file>: <field path>: <problem>"``.
     """
-    return _load(path, _camera, required)
+    return _load(path, _camera, required, top=TOP_CAMERA)
 
 
-def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str]) -> dict:
-    """The version-1 file with each camera record read by ``parse(record, where)``."""
-    name = os.fspath(path)
+def _read_text(name: str) -> str:
+    """The file's text, read without blocking (a FIFO or a device refused at once)."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise CameraFileError(f"{name}: not UTF-8 text ({exc.reason})") from exc
+        return read_input_text(name)
+    except InputFileError as exc:
+        if not os.path.lexists(name):
+            raise FileNotFoundError(errno.ENOENT, "No such file or directory", name) from None
+        raise CameraFileError(str(exc)) from None
+
+
+def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str],
+          top: str | None) -> dict:
+    """The version-1 file with each camera record read by ``parse(record, where, is_top)``,
+    ``is_top`` true for the camera named ``top``."""
+    name = os.fspath(path)
+    text = _read_text(name)
     data = parse_json(text, name, CameraFileError)  # syntax, nesting depth: one line
     try:
         if not isinstance(data, dict):
@@ -197,7 +238,8 @@ def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str]) -> 
         cams = data.get("cameras")
         if not isinstance(cams, dict) or not cams:
             raise CameraFileError("cameras: expected a non-empty object {name: camera}")
-        cameras = {str(key): parse(rec, f"cameras.{key}") for key, rec in cams.items()}
+        cameras = {str(key): parse(rec, f"cameras.{key}", key == top)
+                   for key, rec in cams.items()}
         missing = [k for k in required if k not in cameras]
         if missing:
             raise CameraFileError(

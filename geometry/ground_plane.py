@@ -15,6 +15,12 @@ the horizon. With ``H = G^-1`` of a calibrated camera, ``w = 1 / depth`` of the 
 the image, which sees the floor in any camera that watches people walk, has ``w > 0``.
 :func:`image_to_ground` refuses (or flags) pixels at or above the horizon, and those whose
 ground point is farther than ``max_range`` metres (numerically at the horizon).
+
+Physical sense. A camera file's homography must see the ground along the bottom edge of its
+image (:func:`check_ground_view`); a calibrated camera whose bottom-centre pixel looks at the
+sky has no such homography (:func:`ground_from_camera`); and :func:`fit_homography` refuses
+fewer than :data:`MIN_POINT_PAIRS` pairs and point sets in (nearly) one line
+(:data:`COLLINEAR_TOL`).
 """
 
 from __future__ import annotations
@@ -27,9 +33,12 @@ from xvmatch.geometry.array_checks import as_points
 from xvmatch.geometry.camera import Camera
 
 __all__ = [
+    "COLLINEAR_TOL",
     "MAX_RANGE",
+    "MIN_POINT_PAIRS",
     "GroundCamera",
     "HorizonError",
+    "check_ground_view",
     "fit_homography",
     "foot_points",
     "ground_from_camera",
@@ -41,6 +50,14 @@ __all__ = [
 MAX_RANGE = 1e4
 """Largest distance (metres) of a ground point from the world origin that counts as finite: a
 foot point beyond it lies numerically at the horizon (10 km is beyond any floor a camera sees)."""
+
+MIN_POINT_PAIRS = 4
+"""Fewest image / ground point pairs a homography is fitted from (its 8 degrees of freedom)."""
+
+COLLINEAR_TOL = 1e-2
+"""A point set is (nearly) in one line when its spread across its best line is less than this
+fraction of its spread along it (ratio of the singular values of the centred points); at 1 %
+a pixel of noise moves the fitted horizon by tens of pixels."""
 
 _COND_LIMIT = 1e12
 
@@ -159,15 +176,20 @@ def ground_from_camera(camera: Camera) -> np.ndarray:
     ground plane z = 0, normalised (Eq. 4 of the geometric-priors paper restricted to z = 0).
 
     Raises:
-        ValueError: the camera centre lies on the ground plane (the homography is singular).
+        ValueError: the camera centre lies on the ground plane (the homography is singular), or
+            the bottom-centre pixel of the image sees no ground in front of the camera.
     """
     G = camera.K @ np.column_stack([camera.R[:, 0], camera.R[:, 1], -camera.R @ camera.c])
     try:
-        return normalise_homography(np.linalg.inv(_check_h(G, "K [r1, r2, -R c]")),
-                                    camera.width, camera.height)
+        H = np.linalg.inv(_check_h(G, "K [r1, r2, -R c]"))
     except np.linalg.LinAlgError:
         raise ValueError("the camera centre lies on the ground plane: no ground homography") \
             from None
+    # Unscaled, w = 1 / depth of the ground point: its sign tells ground from sky.
+    if H[2] @ np.array([camera.width / 2.0, float(camera.height), 1.0]) <= 0:
+        raise ValueError("the bottom-centre pixel of the image sees no ground in front of the "
+                         "camera (it looks up, or is upside down); R is world -> camera, z up")
+    return normalise_homography(H, camera.width, camera.height)
 
 
 def image_to_ground(H: np.ndarray, uv: np.ndarray, max_range: float = MAX_RANGE,
@@ -224,10 +246,79 @@ def foot_points(boxes_xywh: np.ndarray) -> np.ndarray:
     return np.stack([b[:, 0] + 0.5 * b[:, 2], b[:, 1] + b[:, 3]], axis=1)
 
 
+def check_ground_view(H: np.ndarray, width: int, height: int,
+                      points: np.ndarray | None = None) -> None:
+    """Refuse a homography whose image does not see the ground in front along its bottom edge.
+
+    The bottom corners and the bottom-centre pixel (and ``points``, if given) must map to the
+    ground in front of the camera (``w > 0``) within :data:`MAX_RANGE` of the origin: the horizon
+    may cross the image, but not its bottom edge, as in any camera that watches people walk.
+
+    Args:
+        H: (3, 3) image -> ground homography, normalised (:func:`normalise_homography`).
+        width, height: image size in pixels.
+        points: optional ``(P, 2)`` pixels that must see the ground too (fitted points).
+
+    Raises:
+        ValueError: the first pixel that does not, in one line.
+    """
+    edge = np.array([[0.0, height], [width / 2.0, height], [float(width), height]])
+    names = ["the bottom-left corner", "the bottom-centre pixel", "the bottom-right corner"]
+    if points is not None:
+        edge = np.concatenate([edge, np.asarray(points, dtype=float).reshape(-1, 2)])
+        names += [f"image point {k}" for k in range(len(edge) - 3)]
+    _, ok = image_to_ground(H, edge, strict=False)
+    if ok.all():
+        return
+    k = int(np.flatnonzero(~ok)[0])
+    u, v = edge[k]
+    w = H[2] @ np.array([u, v, 1.0])
+    where = "sees no ground in front of the camera (it lies above the horizon)" if w <= 0 else \
+        f"meets the ground farther than {MAX_RANGE:g} m from the origin (at the horizon)"
+    hint = "the image must see the ground along its bottom edge" if k < 3 else \
+        "the fitted horizon crosses the points: check their pairing and units"
+    raise ValueError(f"{names[k]} ({u:.1f}, {v:.1f}) {where}; {hint}")
+
+
+def _thinness(points: np.ndarray) -> np.ndarray:
+    """How nearly the points lie in one line: ``(P + 1,)`` ratios of their spread across their
+    best line to their spread along it (singular values of the centred points), of all the
+    points (entry 0), then with point ``k`` left out (entry ``k + 1``)."""
+    x = points - points.mean(axis=0)
+    n = len(x)
+    s1, sxx = x.sum(axis=0), np.einsum("pi,pj->ij", x, x)
+    # Leave-one-out covariances (P + 1, 2, 2), vectorised; row 0 keeps every point.
+    sums = np.concatenate([s1[None], s1 - x])
+    outer = np.concatenate([sxx[None], sxx - np.einsum("pi,pj->pij", x, x)])
+    counts = np.concatenate([[n], np.full(n, n - 1)]).astype(float)[:, None]
+    mean = sums / counts
+    cov = outer / counts[:, :, None] - np.einsum("pi,pj->pij", mean, mean)
+    eig = np.clip(np.linalg.eigvalsh(cov), 0.0, None)  # ascending
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(eig[:, 1] > 0, np.sqrt(eig[:, 0] / eig[:, 1]), 0.0)
+
+
+def _check_spread(points: np.ndarray, name: str) -> None:
+    """Refuse points that (but for at most one) lie within :data:`COLLINEAR_TOL` of one line."""
+    ratios = _thinness(points)
+    k = 0 if ratios[0] < COLLINEAR_TOL else int(np.argmin(ratios))
+    if ratios[k] < COLLINEAR_TOL:
+        which = f"the points other than point {k - 1}" if k else "the points"
+        raise ValueError(f"{name}: {which} lie (nearly) in one line (spread across it "
+                         f"{ratios[k]:.2g} of the spread along it, below {COLLINEAR_TOL:g}); a "
+                         f"homography needs {MIN_POINT_PAIRS} points, no three in line")
+
+
 def fit_homography(image_points: np.ndarray, ground_points: np.ndarray, width: int,
                    height: int) -> np.ndarray:
     """Image -> ground homography from four or more pixel / ground point pairs (OpenCV's
     ``findHomography``, least squares over all pairs), normalised.
+
+    Degenerate input is refused before fitting: fewer than :data:`MIN_POINT_PAIRS` pairs, or
+    image or ground points that, but for at most one, lie in (nearly) one line (spread across
+    the line under :data:`COLLINEAR_TOL` of the spread along it; this covers repeated points
+    and three of four in line). The fitted ``H`` must see every given image point and the
+    bottom edge of the image on the ground in front (:func:`check_ground_view`).
 
     Args:
         image_points: ``(P, 2)`` pixels (lens distortion already removed).
@@ -238,8 +329,9 @@ def fit_homography(image_points: np.ndarray, ground_points: np.ndarray, width: i
         (3, 3) ``H`` with ``[X, Y, 1]^T ~ H [u, v, 1]^T``.
 
     Raises:
-        ValueError: fewer than four pairs, non-finite values, or a degenerate configuration
-            (three or more points in line, repeated points).
+        ValueError: fewer than four pairs, non-finite values, a degenerate configuration
+            (points in line, repeated points), or a fit whose horizon crosses the points or the
+            bottom edge of the image; one line.
     """
     import cv2
 
@@ -248,9 +340,14 @@ def fit_homography(image_points: np.ndarray, ground_points: np.ndarray, width: i
     if img.shape != gnd.shape:
         raise ValueError(f"image_points and ground_points differ in number: {len(img)} and "
                          f"{len(gnd)}")
-    if len(img) < 4:
-        raise ValueError(f"a homography needs at least 4 point pairs, got {len(img)}")
+    if len(img) < MIN_POINT_PAIRS:
+        raise ValueError(f"a homography needs at least {MIN_POINT_PAIRS} point pairs, got "
+                         f"{len(img)}")
+    _check_spread(img, "image points")
+    _check_spread(gnd, "ground points")
     H, _ = cv2.findHomography(img.astype(np.float64), gnd.astype(np.float64), 0)
     if H is None or not np.isfinite(H).all():
         raise ValueError("no homography fits these points (three or more in line, or repeated)")
-    return normalise_homography(H, width, height)
+    H = normalise_homography(H, width, height)
+    check_ground_view(H, width, height, img)
+    return H

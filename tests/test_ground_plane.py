@@ -116,7 +116,7 @@ def test_sign_and_bad_homographies():
         GroundCamera(np.array([[1, 0, 0], [0, 1, 0], [0, 0, np.inf]]), 100, 100)
     with pytest.raises(ValueError, match="at least 4"):
         fit_homography(np.zeros((3, 2)), np.zeros((3, 2)), 100, 100)
-    with pytest.raises(ValueError, match=r"no homography|singular"):
+    with pytest.raises(ValueError, match=r"image points: the points lie \(nearly\) in one line"):
         fit_homography(np.array([[0, 0], [1, 1], [2, 2], [3, 3.0]]),
                        np.array([[0, 0], [1, 1], [2, 2], [3, 3.0]]), 100, 100)
 
