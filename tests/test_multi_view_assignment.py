@@ -16,6 +16,7 @@ from xvmatch.evaluation.multi_view_metrics import (
     mean_scores,
     summarize_views,
 )
+from xvmatch.geometry.folder_marker import MARKER
 from xvmatch.inference.multi_view_assignment import (
     check_problem,
     consistent_hungarian,
@@ -469,7 +470,8 @@ def test_cli_takes_one_to_three_horizontal_views(scene, tmp_path, capsys):
     assert code == 2 and "the same file twice" in capsys.readouterr().err
     assert main(["associate-multi", "--top", top, "--hor", hor1, "--out", str(tmp_path / "one"),
                  "--quiet", "--image-size", "320x180"]) == 0
-    assert sorted(p.name for p in (tmp_path / "one").iterdir()) == ["hor1.txt", "top.txt"]
+    assert sorted(p.name for p in (tmp_path / "one").iterdir()) == [MARKER, "hor1.txt",
+                                                                    "top.txt"]
 
 
 def _late(src: Path, dst: Path, frames: int) -> Path:
