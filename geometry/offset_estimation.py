@@ -27,6 +27,7 @@ __all__ = [
     "REFINED_MINIMA",
     "OffsetEstimate",
     "clip_cost_curves",
+    "clip_start_range",
     "clip_starts",
     "coarse_offsets",
     "estimate_offset",
@@ -229,6 +230,15 @@ def clip_starts(
     return sorted({int(s) for s in np.linspace(first, last, n_clips).round()})
 
 
+def clip_start_range(hor_span: tuple[int, int], clip_length: int) -> tuple[int, int]:
+    """First and last horizontal frame a single clip of ``clip_length`` frames may start at
+    (``estimate_offset(clip_start=...)``): the whole clip inside the horizontal video's span
+    ``(first frame, last frame)``; a video shorter than the clip has the one start at its first
+    frame (the clip then holds the whole video)."""
+    first, last = int(hor_span[0]), int(hor_span[1])
+    return first, max(first, last - int(clip_length) + 1)
+
+
 def coarse_offsets(max_offset: int, step: int) -> np.ndarray:
     """Every ``step``-th offset from 0 out to -``max_offset`` and +``max_offset``, both ends
     included (the first pass of :func:`estimate_offset`)."""
@@ -421,6 +431,10 @@ def estimate_offset(
     Returns:
         :class:`OffsetEstimate` (see :func:`judge_offset`); ``costs`` is the mean normalised
         curve (raw when one clip is asked for).
+
+    Raises:
+        ValueError: bad clip settings or thresholds, an empty view, or a ``clip_start`` whose
+            clip is not inside the horizontal video (:func:`clip_start_range`).
     """
     params = params or SpatialParams()
     if clip_length < 1 or max_offset < 0 or n_clips < 1:
@@ -430,6 +444,12 @@ def estimate_offset(
         raise ValueError("the horizontal sequence has no frames")
     if not top:
         raise ValueError("the top sequence has no frames")
+    if clip_start is not None:
+        low, high = clip_start_range((min(hor), max(hor)), clip_length)
+        if not low <= clip_start <= high:
+            raise ValueError(f"clip_start {clip_start} is outside the horizontal video (frames "
+                             f"{min(hor)}..{max(hor)}): a clip of {clip_length} frames starts "
+                             f"in {low}..{high}")
     starts = [clip_start] if clip_start is not None else clip_starts(
         (min(hor), max(hor)), (min(top), max(top)), clip_length, max_offset, n_clips)
     # One clip asked for (clip_start, or n_clips = 1): the paper's estimate, its raw curve kept;

@@ -28,13 +28,18 @@ the rank by the verification AUC of held-out cross-view pairs (the last part of 
 split by time), and refuses (``accepted`` False) when no rank beats the unadapted descriptors
 there by more than twice the AUC's standard error. :func:`adaptation_bytes` /
 :func:`load_adaptation` store it as ``adaptation.npz`` in a
-bundle (read with ``allow_pickle=False``, every array checked). Numpy and scipy only.
+bundle (read without numpy's loader: each zip member's declared size is bounded by the largest
+array its vector allows before it is inflated, each ``.npy`` header checked before any
+allocation, no pickle, every array and scalar checked). Numpy and scipy only.
 """
 
 from __future__ import annotations
 
 import io
+import math
 import os
+import zipfile
+import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -48,13 +53,18 @@ __all__ = [
     "ADAPTATION_FORMAT_VERSIONS",
     "CALIBRATIONS",
     "DEFAULT_RANKS",
+    "MAX_NUMBER_BYTES",
     "NEUTRAL_SLOPE",
+    "NPY_HEADER_BYTES",
     "RIDGE",
+    "SCALE_FLOOR",
     "VECTORS",
     "VIEWS",
+    "ZIP_ENTRY_BYTES",
     "AdaptationFit",
     "PairSet",
     "SiteAdaptation",
+    "adaptation_array_bytes",
     "adaptation_bytes",
     "auc_standard_error",
     "better_than_chance",
@@ -173,9 +183,175 @@ def adaptation_bytes(adaptation: SiteAdaptation) -> bytes:
     return buf.getvalue()
 
 
+MAX_NUMBER_BYTES = 8
+"""Widest number an array of ``adaptation.npz`` may hold, in bytes: :func:`adaptation_bytes`
+writes float64 and int64; wider ones (``longdouble``, complex) are refused."""
+NPY_HEADER_BYTES = 10_000
+"""Largest ``.npy`` header of an array, in bytes (numpy's own ``max_header_size``; the headers
+:func:`adaptation_bytes` writes are 128 bytes)."""
+ZIP_ENTRY_BYTES = 1_024
+"""Room for each array's zip headers (local and central, with zip64 extras: about 200 bytes)."""
+SCALE_FLOOR = 1e-6
+"""Smallest standardisation scale a fit gives (:func:`fit_site_adaptation` floors each
+descriptor's spread there); a stored smaller one is refused."""
+_ARRAYS = ("format_version", "vector", "rank", "top_mean", "top_scale", "hor_mean", "hor_scale",
+           "calibration", "projection")
+"""The arrays of ``adaptation.npz``, in the order they are read."""
+_READ_ERRORS = (OSError, EOFError, ValueError, RuntimeError, NotImplementedError,
+                zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error)
+"""What reading a corrupt, truncated or crafted zip may raise (CRC, inflate, header errors)."""
+
+
+def adaptation_array_bytes(dim: int) -> dict[str, int]:
+    """The most bytes each array of ``adaptation.npz`` may declare for a vector of size
+    ``dim`` (``.npy`` header included): its largest shape (the projection ``(D, D)`` at rank 0,
+    each standardisation ``(D,)``, the calibration ``(2,)``, scalars, the longest name of
+    :data:`VECTORS`) at :data:`MAX_NUMBER_BYTES` a number (4 bytes a character), plus
+    :data:`NPY_HEADER_BYTES`. A zip member declaring more is refused before it is inflated."""
+    numbers = {"format_version": 1, "rank": 1, "calibration": 2, "projection": dim * dim,
+               **{k: dim for k in ("top_mean", "top_scale", "hor_mean", "hor_scale")}}
+    out = {k: n * MAX_NUMBER_BYTES + NPY_HEADER_BYTES for k, n in numbers.items()}
+    out["vector"] = 4 * max(map(len, VECTORS)) + NPY_HEADER_BYTES
+    return out
+
+
+def _file_bytes(dims: Callable[[str], int | None]) -> int:
+    """The most bytes ``adaptation.npz`` may hold for the network of ``dims``: every array of
+    its largest vector at its bound (:func:`adaptation_array_bytes`), with its zip headers."""
+    largest = max((d for d in map(dims, VECTORS) if d is not None), default=0)
+    return sum(adaptation_array_bytes(largest).values()) + ZIP_ENTRY_BYTES * (len(_ARRAYS) + 1)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return (text.splitlines()[0] if text else type(exc).__name__)[:120]
+
+
+def _npy_array(data: bytes, key: str) -> np.ndarray:
+    """The array of one member's ``.npy`` bytes, its header checked before any allocation: a
+    plain numeric or text dtype of at most :data:`MAX_NUMBER_BYTES` a number, and exactly as
+    many bytes as its shape needs (no pickle is ever read)."""
+    from numpy.lib import format as npy
+
+    fp = io.BytesIO(data)
+    version = npy.read_magic(fp)
+    if version not in ((1, 0), (2, 0)):
+        raise ValueError(f"array {key!r}: .npy format version {version} is not read")
+    read = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+    shape, fortran, dtype = read(fp, max_header_size=NPY_HEADER_BYTES)
+    wide = dtype.kind != "U" and dtype.itemsize > MAX_NUMBER_BYTES
+    if dtype.hasobject or dtype.kind not in "biufU" or dtype.fields is not None or wide:
+        raise ValueError(f"array {key!r} must hold plain numbers of at most "
+                         f"{MAX_NUMBER_BYTES} bytes, got {dtype}")
+    count = math.prod(shape)
+    if count * dtype.itemsize != len(data) - fp.tell():
+        raise ValueError(f"array {key!r}: its header says {shape} {dtype} "
+                         f"({count * dtype.itemsize:,} bytes), the file holds "
+                         f"{len(data) - fp.tell():,}; truncated or corrupt")
+    flat = np.frombuffer(data, dtype=dtype, count=count, offset=fp.tell())
+    return flat.reshape(shape, order="F" if fortran else "C").copy()
+
+
+def _read_array(archive: zipfile.ZipFile, key: str, bound: int) -> np.ndarray:
+    """Array ``key`` of the archive, its declared size checked against ``bound`` before it is
+    inflated (a zip bomb is refused unread)."""
+    info = next((i for i in archive.infolist() if i.filename == f"{key}.npy"), None)
+    if info is None:
+        raise ValueError(f"array {key!r} is missing")
+    if info.file_size > bound:
+        raise ValueError(f"array {key!r} declares {info.file_size:,} bytes, more than the "
+                         f"{bound:,} it may hold; not an adaptation file that adapt writes")
+    try:
+        with archive.open(info) as member:
+            data = member.read(bound + 1)  # zipfile stops at the declared size
+    except _READ_ERRORS as exc:
+        raise ValueError(f"array {key!r} is unreadable ({_first_line(exc)})") from None
+    try:
+        return _npy_array(data, key)
+    except _READ_ERRORS as exc:
+        if str(exc).startswith(f"array {key!r}"):  # the header's own checks, one line
+            raise
+        raise ValueError(f"array {key!r} is unreadable ({_first_line(exc)})") from None
+
+
+def _integer(value: np.ndarray, key: str, low: int, high: int) -> int:
+    """A stored scalar checked to be an integer (not a bool, not a float, even a whole one) in
+    ``low..high``."""
+    if value.shape != () or value.dtype.kind not in "iu":
+        got = (f"{value.item()!r} ({value.dtype})" if value.shape == () else
+               f"{value.dtype} of shape {value.shape}")
+        raise ValueError(f"array {key!r} must be an integer, got {got}")
+    number = int(value)
+    if not low <= number <= high:
+        raise ValueError(f"array {key!r} must be in {low}..{high}, got {number}")
+    return number
+
+
+def _vector_of(archive: zipfile.ZipFile, version: int, bound: int) -> str:
+    """What a file of format ``version`` maps (``descriptors`` before version 2)."""
+    if version < 2:
+        return "descriptors"
+    v = _read_array(archive, "vector", bound)
+    if v.shape != () or v.dtype.kind != "U" or str(v) not in VECTORS:
+        raise ValueError(f"array 'vector' must be one of {VECTORS}")
+    return str(v)
+
+
+def _checked_maps(arrays: dict[str, np.ndarray], dim: int, rank: int) -> None:
+    """The standardisations, calibration and projection checked for shape, type and sense."""
+    want = {k: (dim,) for k in ("top_mean", "top_scale", "hor_mean", "hor_scale")}
+    want["calibration"] = (2,)
+    for key, shape in want.items():
+        if arrays[key].shape != shape or arrays[key].dtype.kind not in "fiu":
+            raise ValueError(f"array {key!r} must be numbers of shape {shape}, got "
+                             f"{arrays[key].dtype} {arrays[key].shape}")
+    proj, cols = arrays["projection"], dim if rank == 0 else rank
+    if proj.shape != (dim, cols) or proj.dtype.kind != "f":
+        raise ValueError(f"array 'projection' must be ({dim}, {cols}) floats for rank {rank}")
+    for key in (*want, "projection"):
+        if not np.isfinite(arrays[key]).all():
+            raise ValueError(f"array {key!r} holds NaN or infinite values")
+    for key in ("top_scale", "hor_scale"):
+        if (arrays[key] < SCALE_FLOOR).any():
+            raise ValueError(f"array {key!r} must be > 0, at least {SCALE_FLOOR:g} (the "
+                             "smallest spread a fit gives)")
+    if arrays["calibration"][0] <= 0:
+        raise ValueError("array 'calibration' must have a slope > 0")
+
+
+def _read_adaptation(archive: zipfile.ZipFile, dims: Callable[[str], int | None]
+                     ) -> SiteAdaptation:
+    """:func:`load_adaptation` of an opened archive."""
+    small = adaptation_array_bytes(0)
+    version = _integer(_read_array(archive, "format_version", small["format_version"]),
+                       "format_version", 0, 2**31)
+    if version not in ADAPTATION_FORMAT_VERSIONS:
+        raise ValueError(f"format version {version}, this xvmatch reads "
+                         f"{', '.join(map(str, ADAPTATION_FORMAT_VERSIONS))}; run xvmatch adapt "
+                         "again")
+    vector = _vector_of(archive, version, small["vector"])
+    dim = dims(vector)
+    if dim is None:
+        raise ValueError(f"it maps the network's {vector}, which this bundle's appearance "
+                         "network does not give; run xvmatch adapt again")
+    bounds = adaptation_array_bytes(dim)
+    rank = _integer(_read_array(archive, "rank", bounds["rank"]), "rank", 0, dim)
+    arrays = {k: _read_array(archive, k, bounds[k]) for k in _ARRAYS[3:]}
+    _checked_maps(arrays, dim, rank)
+    f64 = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
+    return SiteAdaptation(f64["top_mean"], f64["top_scale"], f64["hor_mean"], f64["hor_scale"],
+                          f64["projection"], f64["calibration"], rank, vector)
+
+
 def load_adaptation(path: str | os.PathLike,
                     dims: Callable[[str], int | None]) -> SiteAdaptation:
     """Read ``adaptation.npz``, every array checked against the vector it maps.
+
+    The file is opened without blocking (a FIFO or a device is refused at once) and read whole
+    only when no larger than a complete adaptation of the network's largest vector can be;
+    each zip member's declared size is checked against the most its array may hold
+    (:func:`adaptation_array_bytes`) before it is inflated, and each ``.npy`` header before any
+    allocation; no pickle is ever read.
 
     Args:
         path: the file.
@@ -183,57 +359,25 @@ def load_adaptation(path: str | os.PathLike,
             :meth:`xvmatch.inference.bundle.AppearanceSpec.dim`).
 
     Raises:
-        ValueError: unreadable, a pickled object, an array missing, of the wrong shape or not
-            finite, a non-positive scale or calibration slope, a vector the network does not
-            give (the message names the array).
+        ValueError: one line naming the array: unreadable (truncated, not a zip, a bad CRC), a
+            pickled object, larger than its shape allows, missing, of the wrong shape or type
+            (``format_version`` and ``rank`` must be integers, ``rank`` in ``0..D``), not
+            finite, a scale under :data:`SCALE_FLOOR`, a calibration slope <= 0, a vector the
+            network does not give.
     """
+    from xvmatch.geometry.input_files import InputFileError, read_input_bytes
+
     try:
-        with np.load(os.fspath(path), allow_pickle=False) as npz:
-            arrays = {k: np.array(npz[k]) for k in npz.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise ValueError(f"not a readable adaptation file ({str(exc)[:120]})") from None
-    if "format_version" not in arrays or arrays["format_version"].shape != () or \
-            arrays["format_version"].dtype.kind not in "iu":
-        raise ValueError("array 'format_version' is missing or not an integer")
-    version = int(arrays["format_version"])
-    if version not in ADAPTATION_FORMAT_VERSIONS:
-        raise ValueError(f"format version {version}, this xvmatch reads "
-                         f"{', '.join(map(str, ADAPTATION_FORMAT_VERSIONS))}; run xvmatch adapt "
-                         "again")
-    vector = "descriptors"
-    if version >= 2:
-        v = arrays.get("vector")
-        if v is None or v.shape != () or v.dtype.kind != "U" or str(v) not in VECTORS:
-            raise ValueError(f"array 'vector' must be one of {VECTORS}")
-        vector = str(v)
-    dim = dims(vector)
-    if dim is None:
-        raise ValueError(f"it maps the network's {vector}, which this bundle's appearance "
-                         "network does not give; run xvmatch adapt again")
-    want = {"top_mean": (dim,), "top_scale": (dim,), "hor_mean": (dim,),
-            "hor_scale": (dim,), "calibration": (2,), "rank": ()}
-    for key, shape in want.items():
-        if key not in arrays:
-            raise ValueError(f"array {key!r} is missing")
-        if arrays[key].shape != shape or arrays[key].dtype.kind not in "fiu":
-            raise ValueError(f"array {key!r} must be numbers of shape {shape}, got "
-                             f"{arrays[key].dtype} {arrays[key].shape}")
-    rank = int(arrays["rank"])
-    proj = arrays.get("projection")
-    cols = dim if rank == 0 else rank
-    if proj is None or proj.shape != (dim, cols) or proj.dtype.kind != "f" or not 0 <= rank <= dim:
-        raise ValueError(f"array 'projection' must be ({dim}, {cols}) floats for rank {rank}")
-    for key in ("top_mean", "top_scale", "hor_mean", "hor_scale", "projection", "calibration"):
-        if not np.isfinite(arrays.get(key, proj)).all():
-            raise ValueError(f"array {key!r} holds NaN or infinite values")
-    if (arrays["top_scale"] <= 0).any() or (arrays["hor_scale"] <= 0).any():
-        raise ValueError("arrays 'top_scale' and 'hor_scale' must be > 0")
-    if arrays["calibration"][0] <= 0:
-        raise ValueError("array 'calibration' must have a slope > 0")
-    f64 = {k: np.asarray(arrays[k], dtype=np.float64) for k in
-           ("top_mean", "top_scale", "hor_mean", "hor_scale", "calibration")}
-    return SiteAdaptation(f64["top_mean"], f64["top_scale"], f64["hor_mean"], f64["hor_scale"],
-                          np.asarray(proj, dtype=np.float64), f64["calibration"], rank, vector)
+        data = read_input_bytes(path, max_bytes=_file_bytes(dims))
+    except InputFileError as exc:
+        reason = str(exc).removeprefix(f"{os.fspath(path)}: ")
+        raise ValueError(f"not a readable adaptation file ({reason})") from None
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+    except _READ_ERRORS as exc:
+        raise ValueError(f"not a readable adaptation file ({_first_line(exc)})") from None
+    with archive:
+        return _read_adaptation(archive, dims)
 
 
 @dataclass(frozen=True, eq=False)
@@ -364,7 +508,7 @@ def _scatter(diff: list[np.ndarray], weights: list[float], dim: int) -> np.ndarr
 def _standardisation(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     mean = x.mean(axis=0)
     std = x.std(axis=0)
-    floor = max(float(np.median(std)) * 1e-2, 1e-6)
+    floor = max(float(np.median(std)) * 1e-2, SCALE_FLOOR)
     return mean, np.maximum(std, floor)
 
 

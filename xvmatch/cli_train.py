@@ -4,8 +4,11 @@
 ``func`` takes the parsed arguments and returns an exit code. Everything after ``--config FILE``
 is handed to LightningCLI (:mod:`xvmatch.training.train_cli`), e.g. ``--trainer.max_epochs 2``
 or ``--ckpt_path last.ckpt`` to resume. ``--backbone NAME`` and ``--init imagenet`` are
-shorthands for the appearance network of the configuration (:func:`backbone_args`). Imports are
-lazy: other commands never load torch or Lightning through it.
+shorthands for the appearance network of the configuration (:func:`backbone_args`). A
+``--ckpt_path`` is checked before anything runs and read as weights only: a FIFO, a truncated or
+crafted checkpoint, or ``--weights_only false`` is one line, exit 2
+(:func:`xvmatch.training.train_cli.check_checkpoint_options`). Imports are lazy: other commands
+never load torch or Lightning through it.
 """
 
 from __future__ import annotations
@@ -97,8 +100,8 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p = add_command_parser(
         subparsers, "train", help_text, EXAMPLE,
         description=help_text + " Any further LightningCLI argument may follow, e.g. "
-        "--trainer.max_epochs 2 or --ckpt_path last.ckpt (resume); see `python -m "
-        "xvmatch.training.train_cli fit --help` for all of them.",
+        "--trainer.max_epochs 2 or --ckpt_path last.ckpt (resume; read as weights only); "
+        "see `python -m xvmatch.training.train_cli fit --help` for all of them.",
     )
     p.add_argument("--config", required=True, metavar="FILE",
                    help="YAML configuration, e.g. configs/appearance_cpu.yaml")
