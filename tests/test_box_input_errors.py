@@ -147,6 +147,30 @@ def _late(path: Path, folder: Path, shift: int) -> Path:
 PAIRING = [c for c in COMMANDS if c != "offset"]
 
 
+@pytest.mark.parametrize("command", PAIRING)
+def test_views_without_a_common_frame_are_refused(scene_files, tmp_path, capsys, command):
+    hor = _late(scene_files[1], tmp_path, 100)  # frames 101..103 against 1..3
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(_commands(scene_files[0], hor, out)[command]) == 2
+    line = _error_line(capsys)
+    assert (f"nothing to match: {scene_files[0]} and {hor} share no frame with boxes in both "
+            "views (top frames 1..3, horizontal frames 101..103)") in line, line
+    assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", PAIRING)
+def test_an_offset_that_leaves_no_common_frame_is_named(scene_files, tmp_path, capsys,
+                                                        command):
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = [*_commands(scene_files[0], scene_files[1], out)[command], "--offset", "50"]
+    assert main(argv) == 2
+    assert ("share no frame with boxes in both views after --offset 50 (top frame = "
+            "horizontal frame +50)") in _error_line(capsys)
+    assert list(out.iterdir()) == []
+
+
 @pytest.mark.parametrize("command", ["associate", "track", "associate-multi"])
 def test_an_offset_that_lines_the_views_up_runs(scene_files, tmp_path, capsys, command):
     hor = _late(scene_files[1], tmp_path, 100)
@@ -154,6 +178,16 @@ def test_an_offset_that_lines_the_views_up_runs(scene_files, tmp_path, capsys, c
     out.mkdir()
     argv = [*_commands(scene_files[0], hor, out)[command], "--offset", "-100"]
     assert main(argv) == 0, capsys.readouterr().err
+
+
+def test_associate_multi_names_the_view_without_a_common_frame(scene_files, tmp_path, capsys):
+    late = _late(scene_files[1], tmp_path, 100)
+    out = tmp_path / "multi"
+    argv = ["associate-multi", "--top", str(scene_files[0]), "--hor", str(scene_files[1]),
+            str(late), "--out", str(out), "--quiet"]
+    assert main(argv) == 2
+    assert f"{scene_files[0]} and {late} share no frame" in _error_line(capsys)
+    assert not out.exists()
 
 
 def test_evaluate_and_adapt_refuse_views_without_a_common_frame(scene_files, tmp_path, capsys):
