@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from xvmatch.geometry.input_files import InputFileError, read_input_text
+from xvmatch.geometry.input_files import InputFileError, check_input_file, read_input_text
 from xvmatch.geometry.json_text import json_problem
 from xvmatch.geometry.matcher_inputs import CUE_NAMES
 from xvmatch.geometry.record_fields import typed_field
@@ -395,7 +395,9 @@ def _checked_file(folder: Path, name: str, sha: str) -> Path:
     path = folder / name
     if not path.is_file():
         raise _fail(path, "missing from the bundle")
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    check_input_file(path)  # a regular file within the input bound, never a FIFO
+    with open(path, "rb") as handle:  # hashed in chunks: never the whole file in memory
+        digest = hashlib.file_digest(handle, "sha256").hexdigest()
     if digest != sha:
         raise _fail(path, f"sha256 {digest[:12]}... does not match the manifest's "
                     f"{sha[:12]}...; the file was changed or corrupted: export the bundle again")
