@@ -670,6 +670,9 @@ def load_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1
                     f"{list(MATCHER_INPUTS)})")
     appearance = reference = tolerance = None
     used = None
+    if precision is not None and manifest.appearance is None:
+        raise _fail(folder, f"precision {precision!r} chooses the appearance network, and this "
+                    "bundle has none (a box-only bundle)")
     if manifest.appearance is not None:
         spec = manifest.appearance
         # A site bundle's adaptation was fitted on FP32 vectors, and the agreement measured

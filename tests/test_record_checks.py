@@ -348,9 +348,13 @@ def test_precision_without_images_is_refused(tmp_path, boxes, capsys, precision)
 def test_precision_on_a_box_only_bundle_is_refused(tmp_path, boxes, capsys, tiny_models) -> None:
     from xvmatch.cli_model import check_precision, open_models
     from xvmatch.cli_options import UsageError
+    from xvmatch.inference.bundle import BundleError
 
     bundle = tiny_models["boxes_bundle"]
-    models = open_models([str(bundle)], precision="int8")
+    with pytest.raises(BundleError, match="precision 'int8' chooses the appearance network, "
+                       "and this bundle has none"):
+        open_models([str(bundle)], precision="int8")  # the library refuses it too
+    models = open_models([str(bundle)])
     with pytest.raises(UsageError, match=r"--precision int8: --model .* has no appearance "
                        r"network \(a box-only matcher\)"):
         check_precision("int8", True, models, [str(bundle)])
