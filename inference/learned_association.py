@@ -8,6 +8,15 @@ cheirality cues. Frames go through ``matcher.onnx`` in padded batches; each cost
 [0, 1] goes through the Hungarian assignment with the non-association cost gamma (Eqs. 1-2 of
 the geometric-priors paper, :func:`xvmatch.inference.assignment.assign`).
 
+Crowds: the matcher's memory grows with the hypotheses times the box pairs of the frames it
+scores at once, and the search for the camera location with the square of the top-view crowd.
+A frame over :data:`MAX_PEOPLE_PER_VIEW` people in a view or :data:`MAX_BOX_PAIRS` box pairs is
+refused before any work (:func:`check_crowd_size`, one line naming the frame, the view and the
+limit); frames under it go through the matcher in batches of at most :data:`MATCHER_BATCH_CELLS`
+(hypothesis, pair) cells and crops through the appearance network :data:`EMBED_BATCH` at a
+time, so a run's memory stays bounded whatever its length (ordinary frames, tens of people,
+are batched as before: the same costs to the bit).
+
 With an INT8 appearance network opened for re-checking (``load_bundle(..., recheck=True)``, as
 ``associate`` does), a frame whose assignment is not stable within the tolerance the export
 measured (how far INT8 moves the costs; :func:`~xvmatch.inference.assignment.
@@ -21,7 +30,9 @@ names the wearer's top-view id, and never reach the matcher.
 
 from __future__ import annotations
 
+import math
 import os
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -51,14 +62,117 @@ from xvmatch.inference.assignment import assign, assignment_is_stable
 from xvmatch.inference.bundle import Bundle, load_bundle
 
 __all__ = [
+    "EMBED_BATCH",
+    "MATCHER_BATCH_CELLS",
+    "MAX_BOX_PAIRS",
+    "MAX_PEOPLE_PER_VIEW",
     "FrameCameraSource",
     "FrameImages",
     "LearnedMatcher",
     "associate_sequence_learned",
+    "check_crowd_size",
     "load_matcher_bundle",
     "non_association_cost",
     "rechecked_costs",
 ]
+
+MAX_PEOPLE_PER_VIEW = 1000
+"""The most boxes of one view in a frame the learned matcher takes. The search for the camera
+location O tries every top-view person as O, so a frame's time grows with the square of the
+top-view crowd: on one core, 9 s for 500 people and 27-40 s for 1,000 (a few to 65 horizontal
+boxes), whose memory the search keeps within about 1 GiB
+(:data:`~xvmatch.geometry.spatial_search.HYPOTHESIS_BLOCK`); 2,000 would take about four times
+as long. The same bound holds for the horizontal view. The matcher was trained on 3-14 people
+a frame: far beyond that its costs are an extrapolation, and the handcrafted search takes any
+crowd."""
+
+MAX_BOX_PAIRS = 1 << 16
+"""The most top x horizontal box pairs (M N) in a frame the learned matcher takes (256 people in
+each view). Its graph holds about 1 KB a (hypothesis, pair) cell, with up to
+``n_hypotheses`` = 8 hypotheses: about 0.55 GB for a frame at this bound (measured: 256 x 256
+people, 0.9 GB resident in all, 1.5 s in the matcher and 3-4 s in the search on one core).
+Before this bound, one frame of 1,000 x 600 people took 127 s and 7 GB."""
+
+MATCHER_BATCH_CELLS = 1 << 20
+"""The most (hypothesis, top, horizontal) cells of a padded batch the matcher scores in one
+call: frames are batched (up to ``batch_size``) while the batch stays within it, about 1 GB of
+the graph's memory. 64 frames of 2,048 pairs (e.g. 45 x 45 people) with 8 hypotheses fill it,
+so ordinary runs are batched as they always were; a frame over it alone is scored alone (with
+:data:`MAX_BOX_PAIRS` that is at most half of it). Before this bound, 20 frames of 300 x 180
+people went in one call that asked onnxruntime for 2.2 GB in one buffer."""
+
+EMBED_BATCH = 256
+"""The most crops the appearance network embeds in one call (about 1.6 MB of its memory a
+crop: 0.4 GB for a batch); a view with more is embedded in batches of this many."""
+
+
+def check_crowd_size(
+    top: Mapping[int, FrameLike],
+    hor: Mapping[int, FrameLike],
+    frames: Iterable[int] | None = None,
+    top_name: str = "the top-view boxes",
+    hor_name: str = "the horizontal-view boxes",
+    top_offset: int = 0,
+) -> None:
+    """Refuse a run with a frame the learned matcher does not take: over
+    :data:`MAX_PEOPLE_PER_VIEW` boxes in a view or :data:`MAX_BOX_PAIRS` box pairs. Frames
+    without boxes in both views are not scored and not checked.
+
+    Args:
+        top, hor: ``{frame: record}`` with ``ids`` of each view, the top one re-timed by
+            ``top_offset``.
+        frames: the frames to associate (default: those of both views).
+        top_name, hor_name: the views' box files (or how to name them), for the message.
+        top_offset: top frame = horizontal frame + ``top_offset``; the message gives each file
+            its own frame numbers.
+
+    Raises:
+        ValueError: one line naming the first such frame, its file, the count, the limit, how
+            many more frames are over it, and what to do instead.
+    """
+    order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})
+    over = []
+    for f in order:
+        t_rec, h_rec = top.get(f), hor.get(f)
+        m = 0 if t_rec is None else len(t_rec.ids)
+        n = 0 if h_rec is None else len(h_rec.ids)
+        if m and n and (max(m, n) > MAX_PEOPLE_PER_VIEW or m * n > MAX_BOX_PAIRS):
+            over.append((f, m, n))
+    if not over:
+        return
+    f, m, n = over[0]
+    more = f" ({len(over) - 1} more frames are over a limit)" if len(over) > 1 else ""
+    if max(m, n) > MAX_PEOPLE_PER_VIEW:
+        where = (f"frame {f + top_offset} of {top_name} has {m} boxes" if m >= n else
+                 f"frame {f} of {hor_name} has {n} boxes")
+        what = (f"{where}; the learned matcher takes at most {MAX_PEOPLE_PER_VIEW} people per "
+                f"view in a frame{more}")
+    else:
+        files = (f"frame {f + top_offset} of {top_name}, frame {f} of {hor_name}" if top_offset
+                 else f"{top_name} and {hor_name}")
+        what = (f"frame {f} has {m} x {n} = {m * n:,} top x horizontal box pairs ({files}); the "
+                f"learned matcher takes at most {MAX_BOX_PAIRS:,} in a frame (256 people in each "
+                f"view){more}")
+    raise ValueError(f"{what}: its time and memory grow with the crowd; drop --model to match "
+                     "with the handcrafted search, which takes any crowd")
+
+
+def _batches(frames: Sequence[MatcherInputs], batch_size: int,
+             cells: int = MATCHER_BATCH_CELLS) -> Iterator[slice]:
+    """Consecutive slices of ``frames`` of at most ``batch_size`` frames whose padded batch
+    (:func:`~xvmatch.geometry.matcher_inputs.collate_inputs`: every frame at the batch's largest
+    H, M and N, each at least 1) holds at most ``cells`` cells; a larger frame goes alone."""
+    start, size = 0, [1, 1, 1]
+    for k, f in enumerate(frames):
+        shape = [max(1, v) for v in f.features.shape]
+        grown = [max(a, b) for a, b in zip(size, shape, strict=True)]
+        if k > start and (k - start >= batch_size or
+                          (k - start + 1) * math.prod(grown) > cells):
+            yield slice(start, k)
+            start, grown = k, shape
+        size = grown
+    if start < len(frames):
+        yield slice(start, len(frames))
 
 
 @dataclass
@@ -91,7 +205,16 @@ class LearnedMatcher:
         """``(K, D)`` appearance descriptors of the boxes of one image (one batch); with
         ``vector="features"`` or ``"stages"`` the network's unit pooled features or stages instead
         (:meth:`~xvmatch.inference.bundle.Bundle.embed`)."""
-        return self.bundle.embed(self.crops(image, boxes), vector)
+        return self.embed(self.crops(image, boxes), vector)
+
+    def embed(self, crops: np.ndarray, vector: str = "descriptors",
+              reference: bool = False) -> np.ndarray:
+        """:meth:`~xvmatch.inference.bundle.Bundle.embed` of ``(K, H, W, 3)`` crops,
+        :data:`EMBED_BATCH` at a time (one call for an ordinary frame's crops)."""
+        if crops.shape[0] <= EMBED_BATCH:
+            return self.bundle.embed(crops, vector, reference)
+        return np.concatenate([self.bundle.embed(crops[k : k + EMBED_BATCH], vector, reference)
+                               for k in range(0, crops.shape[0], EMBED_BATCH)])
 
     @property
     def cue_vector(self) -> str:
@@ -116,8 +239,8 @@ class LearnedMatcher:
         """``(M, N)`` appearance cue of top and horizontal crops (:meth:`crops`); with
         ``reference``, embedded by the FP32 network that re-checks INT8 frames."""
         vector = self.cue_vector
-        return self.appearance_cost(self.bundle.embed(top, vector, reference),
-                                    self.bundle.embed(hor, vector, reference))
+        return self.appearance_cost(self.embed(top, vector, reference),
+                                    self.embed(hor, vector, reference))
 
     def appearance_cost(self, top: np.ndarray, hor: np.ndarray) -> np.ndarray:
         """``(M, N)`` appearance cue of raw top ``(M, D)`` and horizontal ``(N, D)`` vectors
@@ -147,11 +270,26 @@ class LearnedMatcher:
         return MatcherInputs(features, canonical_cues(cues, features), mask)
 
     def costs(self, frames: Sequence[MatcherInputs], batch_size: int = 64) -> list[np.ndarray]:
-        """``(M, N)`` float64 cost matrices in [0, 1] of each frame, canonical order."""
+        """``(M, N)`` float64 cost matrices in [0, 1] of each frame, canonical order; frames
+        go through the graph ``batch_size`` at a time, fewer when their padded batch would hold
+        over :data:`MATCHER_BATCH_CELLS` cells.
+
+        Raises:
+            MemoryError: onnxruntime could not allocate the batch's memory.
+            ValueError: the graph gave non-finite costs (corrupt weights).
+        """
         out: list[np.ndarray] = []
-        for start in range(0, len(frames), batch_size):
-            chunk = list(frames[start : start + batch_size])
-            cost = self.bundle.costs(collate_inputs(chunk)).astype(np.float64)
+        for part in _batches(frames, batch_size):
+            chunk = list(frames[part])
+            try:
+                cost = self.bundle.costs(collate_inputs(chunk)).astype(np.float64)
+            except Exception as exc:  # onnxruntime raises its own exception types
+                if "Failed to allocate memory" not in str(exc):
+                    raise
+                h, m, n = (max(f.features.shape[k] for f in chunk) for k in range(3))
+                raise MemoryError(f"{self.bundle.name}: onnxruntime could not allocate the "
+                                  f"memory to score {len(chunk)} frame(s) of up to {m} x {n} "
+                                  f"people and {h} hypotheses") from None
             if not np.isfinite(cost).all():
                 raise ValueError(f"{self.bundle.name}: the matcher gave non-finite costs; its "
                                  "weights are corrupt (NaN or infinite): export it again")
@@ -262,11 +400,18 @@ def _feature_stream(
     chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
     # Spawned workers ("spawn": a forked child may inherit onnxruntime's or OpenCV's thread
     # pools and hang) that ignore Ctrl-C; closing the stream early (an error or an interrupt
-    # in the caller raises GeneratorExit here) cancels the rest and stops them at once.
-    with worker_pool(min(int(workers), len(chunks))) as pool:
-        futures = [pool.submit(_features_of_chunk, c, size, configs, mirror) for c in chunks]
-        for future in futures:
-            yield from future.result()
+    # in the caller raises GeneratorExit here) cancels the rest and stops them at once. At most
+    # two chunks per worker are asked for ahead of the caller: finished chunks wait in memory
+    # until the caller takes them, and a long crowded run must not hold all of its features.
+    workers = min(int(workers), len(chunks))
+    with worker_pool(workers) as pool:
+        ahead: deque = deque()
+        for c in chunks:
+            ahead.append(pool.submit(_features_of_chunk, c, size, configs, mirror))
+            if len(ahead) >= 2 * workers:
+                yield from ahead.popleft().result()
+        while ahead:
+            yield from ahead.popleft().result()
 
 
 def associate_sequence_learned(
@@ -303,7 +448,7 @@ def associate_sequence_learned(
         progress: optional wrapper around the frame iterator (e.g. a progress bar).
         hor_height: height of the horizontal image (default ``hor_width * 9 / 16``).
         frames: frames to process (default the union of both views' frames).
-        batch_size: frames per matcher call.
+        batch_size: frames per matcher call (fewer in crowds: :data:`MATCHER_BATCH_CELLS`).
         mirror: test-time augmentation: also score the scene mirrored left-right and average
             the two cost matrices (the cues do not change in a mirror); twice the search.
         costs_out: if given, filled with ``{frame: (M, N) cost matrix}`` (rows and columns in
@@ -327,6 +472,10 @@ def associate_sequence_learned(
             (:mod:`xvmatch.inference.frame_check`).
         checked: if given, receives the :class:`~xvmatch.inference.appearance_check.
             AppearanceCheck` of a run with ``appearance_check`` and images.
+
+    Raises:
+        ValueError: bad options, or a frame over the crowd limits (:func:`check_crowd_size`),
+            before any work.
     """
     if not hor_width > 0:
         raise ValueError(f"hor_width must be > 0, got {hor_width}")
@@ -339,6 +488,7 @@ def associate_sequence_learned(
         raise ValueError("no model given")
     if top_images is not None and any(m.bundle.manifest.appearance is None for m in models):
         raise ValueError("images were given but a bundle has no appearance network")
+    check_crowd_size(top, hor, frames)
     configs: list[FeatureConfig] = []
     for m in models:
         if m.feature_config not in configs:
@@ -350,6 +500,9 @@ def associate_sequence_learned(
     manifest = models[0].bundle.manifest
     out: dict[int, list[tuple[int, int]]] = {}
     pending: list[tuple[int, list[list[FrameFeatures]], dict]] = []
+    # (hypothesis, pair) cells of the pending frames' features (48 bytes each): a crowded run
+    # is scored before they pass about 200 MB, an ordinary one every batch_size frames
+    pending_cells = 0
 
     tolerance = max((m.bundle.recheck for m in models if m.bundle.recheck is not None),
                     default=None) if top_images is not None else None
@@ -449,8 +602,10 @@ def associate_sequence_learned(
                 out[frame] = []
                 continue
             pending.append((frame, next(stream), raw_cues(frame)))
-            if len(pending) >= batch_size:
+            pending_cells += sum(math.prod(f.shape) for g in pending[-1][1] for f in g)
+            if len(pending) >= batch_size or pending_cells >= 4 * MATCHER_BATCH_CELLS:
                 flush()
+                pending_cells = 0
         if pending:
             flush()
     finally:

@@ -1,13 +1,13 @@
 """The learned association pipeline: opened matchers, box records, images and cameras to pairs.
 
 :func:`run_learned_association` is the whole run in one call, with its options in one typed
-record (:class:`LearnedRunOptions`): it checks every input before any work starts (a box-only
-matcher given images, a matcher without camera cues given cameras, image sources lacking a frame
-the boxes list, top-view boxes outside the top images, cameras whose image size is not the
-images'), opens the image sources re-timed like the boxes (``top_offset``), settles the
-non-association cost once (:func:`~xvmatch.inference.learned_association.non_association_cost`:
-given, else the model's own), runs
-:func:`~xvmatch.inference.learned_association.associate_sequence_learned` and closes the
+record (:class:`LearnedRunOptions`): it checks every input before any work starts (a frame over
+the matcher's crowd limits, a box-only matcher given images, a matcher without camera cues given
+cameras, image sources lacking a frame the boxes list, top-view boxes outside the top images,
+cameras whose image size is not the images'), opens the image sources re-timed like the boxes
+(``top_offset``), settles the non-association cost once
+(:func:`~xvmatch.inference.learned_association.non_association_cost`: given, else the model's
+own), runs :func:`~xvmatch.inference.learned_association.associate_sequence_learned` and closes the
 sources, also on an error. :func:`open_learned_inputs` is the same in two steps, for a caller
 that uses the open images after the run (``xvmatch associate --draw``) or prints a note between
 the checks and the work.
@@ -33,6 +33,7 @@ from xvmatch.inference.camera_refinement import CameraRefinement, refine_run_cam
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
+    check_crowd_size,
     non_association_cost,
 )
 
@@ -65,7 +66,10 @@ class LearnedRunOptions:
         cameras: a camera file or folder with cameras ``top`` and ``ego``
             (:func:`xvmatch.datasets.camera_frames.open_cameras`); needs matchers that take
             camera cues.
-        top_boxes: the top-view box file, named when a top box lies outside the top images.
+        top_boxes: the top-view box file, named when a top box lies outside the top images
+            or a frame's crowd is over the matcher's limits.
+        hor_boxes: the horizontal-view box file, named when a frame's crowd is over the
+            matcher's limits (:func:`~xvmatch.inference.learned_association.check_crowd_size`).
         camera_id: top-view id of the horizontal camera's wearer (O given), or None.
         gamma: non-association cost in (0, 1]; None: the (first) model's own.
         mirror: also score the scene mirrored left-right and average the costs.
@@ -91,6 +95,7 @@ class LearnedRunOptions:
     hor_images: str | None = None
     cameras: str | None = None
     top_boxes: str = "the top-view boxes"
+    hor_boxes: str = "the horizontal-view boxes"
     camera_id: int | None = None
     gamma: float | None = None
     mirror: bool = False
@@ -265,6 +270,8 @@ class LearnedInputs:
 
     def _open(self) -> None:
         options, top, hor = self.options, self.top, self.hor
+        check_crowd_size(top, hor, self.frames, options.top_boxes, options.hor_boxes,
+                         options.top_offset)
         both = [f for f in self.frames if f in top and f in hor and len(top[f]) and len(hor[f])]
         named = list(zip(options.models, options.model_names, strict=True))
         sizes: dict[str, tuple[int, int]] = {}
