@@ -358,6 +358,8 @@ def learned_run_options(
         hor_images=getattr(args, "hor_images", None),
         cameras=getattr(args, "cameras", None),
         top_boxes=getattr(args, "top", "the top-view boxes"),
+        hor_boxes=(args.hor if isinstance(getattr(args, "hor", None), str)
+                   else "the horizontal-view boxes"),
         camera_id=getattr(args, "camera_id", None),
         gamma=getattr(args, "gamma", None),
         mirror=bool(getattr(args, "mirror", False)),
