@@ -59,7 +59,6 @@ from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.inference.adaptation_pairs import (
     MinedPairs,
     MiningConfig,
-    box_only_costs,
     embed_frames,
     mine_pairs,
     plan_bursts,
@@ -69,6 +68,7 @@ from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
+    box_only_costs,
     load_matcher_bundle,
 )
 from xvmatch.inference.site_adaptation import (

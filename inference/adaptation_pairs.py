@@ -10,11 +10,11 @@ than a short one). In each burst:
   boxes of one frame a negative pair;
 * **across views**, the box-only learned matcher (the bundle's ``matcher.onnx`` without the
   appearance cue; with the cameras when given) scores every frame of the burst
-  (:func:`box_only_costs`). A pair it assigns is *confident* when its cost is below every
-  alternative of its row and column and below the non-association cost gamma (the dustbin) by at
-  least ``margin``; a pair of tracklets is a pseudo-match when it is confident in at least
-  ``agree`` consecutive frames and neither tracklet is confidently matched to another. Boxes
-  nobody is sure of stay unlabelled: the camera wearer, who is not in the horizontal view, and
+  (``learned_association.box_only_costs``). A pair it assigns is *confident* when its cost is
+  below every alternative of its row and column and below the non-association cost gamma (the
+  dustbin) by at least ``margin``; a pair of tracklets is a pseudo-match when it is confident in
+  at least ``agree`` consecutive frames and neither tracklet is confidently matched to another.
+  Boxes nobody is sure of stay unlabelled: the camera wearer, who is not in the horizontal view, and
   anyone the matcher doubts (pseudo-labels allow "no match"). A pseudo-matched box against every
   other box of the other view in that frame is a cross-view negative.
 
@@ -41,7 +41,6 @@ __all__ = [
     "MinedPairs",
     "MiningConfig",
     "agreed_pairs",
-    "box_only_costs",
     "box_tracklets",
     "confident_pairs",
     "embed_frames",
@@ -124,37 +123,6 @@ def confident_pairs(cost: np.ndarray, gamma: float, margin: float) -> list[tuple
             out.append((int(i), int(j)))
     return out
 
-
-def box_only_costs(
-    top: Mapping,
-    hor: Mapping,
-    frames: Sequence[int],
-    matcher,
-    hor_size: tuple[int, int],
-    cameras=None,
-    camera_id: int | None = None,
-    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
-    workers: int = 1,
-) -> dict[int, np.ndarray]:
-    """``{frame: (M, N) cost}`` (input order) of the matcher without the appearance cue.
-
-    Args:
-        top, hor: ``{frame: FrameBoxes}``.
-        frames: the frames to score.
-        matcher: a :class:`~xvmatch.inference.learned_association.LearnedMatcher`.
-        hor_size: ``(W, H)`` of the horizontal images.
-        cameras: a camera source (``get(frame)``) or None.
-        camera_id: the wearer's top-view id, when known.
-        progress: wraps the frame iterator.
-        workers: processes for the geometry features.
-    """
-    from xvmatch.inference.learned_association import associate_sequence_learned
-
-    costs: dict[int, np.ndarray] = {}
-    associate_sequence_learned(top, hor, hor_size[0], matcher, camera_id=camera_id,
-                               hor_height=hor_size[1], frames=frames, costs_out=costs,
-                               progress=progress, cameras=cameras, workers=workers)
-    return costs
 
 
 @dataclass(frozen=True, eq=False)
@@ -267,7 +235,8 @@ def mine_pairs(
     Args:
         top, hor: ``{frame: FrameBoxes}`` (``ids`` unique within a frame: they only name boxes).
         bursts: from :func:`plan_bursts`.
-        costs: ``{frame: (M, N)}`` box-only costs in input order (:func:`box_only_costs`).
+        costs: ``{frame: (M, N)}`` box-only costs in input order
+            (``learned_association.box_only_costs``).
         gamma: the matcher's non-association cost.
         config: the mining settings.
     """

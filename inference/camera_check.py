@@ -38,12 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from xvmatch.inference.adaptation_pairs import (
-    MiningConfig,
-    box_only_costs,
-    mine_pairs,
-    plan_bursts,
-)
+from xvmatch.inference.adaptation_pairs import MiningConfig, mine_pairs, plan_bursts
 from xvmatch.inference.appearance_check import (
     CONSISTENCY_WINDOW,
     MIN_CONSISTENCY,
@@ -51,6 +46,7 @@ from xvmatch.inference.appearance_check import (
     sure_pair_consistency,
 )
 from xvmatch.inference.assignment import assign
+from xvmatch.inference.learned_association import box_only_costs
 
 __all__ = ["DOUBT_LOSS", "MAX_FRAMES", "MIN_KEEP", "CameraCheck", "check_cameras",
            "check_run_cameras"]

@@ -70,6 +70,7 @@ __all__ = [
     "FrameImages",
     "LearnedMatcher",
     "associate_sequence_learned",
+    "box_only_costs",
     "check_crowd_size",
     "load_matcher_bundle",
     "non_association_cost",
@@ -645,3 +646,32 @@ def rechecked_costs(fp32: Sequence[np.ndarray], int8: Sequence[np.ndarray], gamm
         out.append(b if stable else a)
         again += not stable
     return out, again
+
+def box_only_costs(
+    top: Mapping,
+    hor: Mapping,
+    frames: Sequence[int],
+    matcher,
+    hor_size: tuple[int, int],
+    cameras=None,
+    camera_id: int | None = None,
+    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+    workers: int = 1,
+) -> dict[int, np.ndarray]:
+    """``{frame: (M, N) cost}`` (input order) of the matcher without the appearance cue.
+
+    Args:
+        top, hor: ``{frame: FrameBoxes}``.
+        frames: the frames to score.
+        matcher: a :class:`LearnedMatcher`.
+        hor_size: ``(W, H)`` of the horizontal images.
+        cameras: a camera source (``get(frame)``) or None.
+        camera_id: the wearer's top-view id, when known.
+        progress: wraps the frame iterator.
+        workers: processes for the geometry features.
+    """
+    costs: dict[int, np.ndarray] = {}
+    associate_sequence_learned(top, hor, hor_size[0], matcher, camera_id=camera_id,
+                               hor_height=hor_size[1], frames=frames, costs_out=costs,
+                               progress=progress, cameras=cameras, workers=workers)
+    return costs

@@ -28,13 +28,13 @@ import numpy as np
 from xvmatch.inference.adaptation_pairs import (
     MinedPairs,
     MiningConfig,
-    box_only_costs,
     embed_frames,
     mine_pairs,
     plan_bursts,
     reference_costs,
 )
 from xvmatch.inference.bundle import MANIFEST
+from xvmatch.inference.learned_association import box_only_costs
 from xvmatch.inference.site_adaptation import (
     ADAPTATION_FILE,
     ADAPTATION_FORMAT_VERSION,
