@@ -30,13 +30,13 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from xvmatch.datasets.cvmhat import (  # noqa: E402
+from xvmatch.cues.spatial_search import associate_sequence  # noqa: E402
+from xvmatch.formats.cvmhat import (  # noqa: E402
     IMAGE_SIZE,
     default_cvmhat_dir,
     read_sequence,
     sequence_names,
 )
-from xvmatch.geometry.spatial_search import associate_sequence  # noqa: E402
 
 WIDTH = IMAGE_SIZE[0]
 

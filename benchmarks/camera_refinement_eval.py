@@ -49,14 +49,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from tracking_eval import ERROR_VIEWS, as_detections, with_camera_error
 
-from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
+from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.inference.camera_check import DOUBT_LOSS, check_run_cameras
 from xvmatch.inference.camera_refinement import refine_run_cameras
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.inference.tracking import learned_frame_evidence
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 ARMS = ("none", "given", "refined")
 CHECKED_ARMS = (*ARMS, "checked")
@@ -77,7 +77,7 @@ def _rows(path: Path) -> list[tuple[int, int]]:
 def with_moved_top(cameras: dict, metres: float, seed: int) -> dict:
     """``{frame: FrameCameras}`` with the top camera's centre moved ``metres`` in a random
     direction drawn from ``seed`` (``--moved``)."""
-    from xvmatch.geometry.matcher_inputs import FrameCameras
+    from xvmatch.geometry.camera import FrameCameras
 
     step = np.random.default_rng([seed, 7]).normal(size=3)
     top = cameras[min(cameras)].top
@@ -117,7 +117,7 @@ def multi_ego_main(args: argparse.Namespace) -> int:
         render_multi_ego,
         write_multi_ego_inputs,
     )
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.formats.camera_io import save_cameras
     from xvmatch.geometry.top_camera_refinement import turned_camera
 
     print(f"associate-multi --model {args.model}, {args.multi_ego} egocentric views, drone "

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
-from xvmatch.geometry.atomic_files import atomic_write_bytes
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
-from xvmatch.geometry.spatial_search import associate_sequence, rank_hypotheses
+from xvmatch.core.atomic_files import atomic_write_bytes
+from xvmatch.core.output_paths import Input, Output, check_script_outputs
+from xvmatch.cues.spatial_search import associate_sequence, rank_hypotheses
+from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
 
 

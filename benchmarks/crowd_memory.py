@@ -27,10 +27,10 @@ hor = np.c_[rng.uniform(0, 2600, (hor_n, 1)), rng.uniform(300, 900, (hor_n, 1)),
             np.full((hor_n, 1), 60.0), rng.uniform(100, 400, (hor_n, 1))]
 start = time.perf_counter()
 if method == "handcrafted":
-    from xvmatch.geometry.spatial_search import associate_frame
+    from xvmatch.cues.spatial_search import associate_frame
     pairs = len(associate_frame(top, hor, 2688.0).pairs)
 else:
-    from xvmatch.datasets.mot_boxes import FrameBoxes
+    from xvmatch.formats.mot_boxes import FrameBoxes
     from xvmatch.inference.learned_association import (associate_sequence_learned,
                                                         load_matcher_bundle)
     top_f = {1: FrameBoxes(1, np.arange(people), top)}

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.spatial_search import associate_sequence
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
+from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 SIZE = IMAGE_SIZE
 MODES = {"A": None, "B": 0}

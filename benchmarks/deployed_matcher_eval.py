@@ -43,12 +43,14 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.output_paths import Input, Output, check_script_outputs
+from xvmatch.cues.matcher_inputs import INPUT_SETTINGS
 from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
 from xvmatch.datasets.image_render import Difficulty
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
-from xvmatch.evaluation.confidence import grouped_difference_interval
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
     frame_accuracy,
@@ -56,12 +58,10 @@ from xvmatch.evaluation.deployed_matcher_eval import (
     matcher_costs,
 )
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.assignment import GAMMA_GRID
-from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.metrics.confidence import grouped_difference_interval
+from xvmatch.metrics.cross_view_metrics import summarize
 
 ROLES = {"test": (1000, 20, 5), "val": (2000, 20, 5)}
 """role: (seed, scenes, frames per scene), as benchmarks/learned_matcher_eval.py."""

@@ -36,6 +36,8 @@ import numpy as np
 from deployed_matcher_eval import SIZES, ShiftedCoster, check_scenes_and_shifts, render
 
 from xvmatch.cli_types import float_in
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
@@ -46,8 +48,6 @@ from xvmatch.evaluation.frame_check_threshold import (
     choose_threshold,
     cross_validate_thresholds,
 )
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.bundle import MANIFEST, read_manifest
 from xvmatch.inference.frame_check import fit_frame_check
 from xvmatch.inference.learned_association import load_matcher_bundle

@@ -33,17 +33,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from camera_refinement_eval import scored
 from tracking_eval import as_detections
 
-from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
-from xvmatch.geometry.camera import Camera
-from xvmatch.geometry.matcher_inputs import FrameCameras
+from xvmatch.formats.camera_frames import CameraFrames
+from xvmatch.geometry.camera import Camera, FrameCameras
 from xvmatch.geometry.top_camera_refinement import turned_camera
 from xvmatch.inference.camera_check import check_run_cameras
 from xvmatch.inference.camera_refinement import refine_run_cameras
-from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.inference.tracking import learned_frame_evidence
+from xvmatch.metrics.cross_view_metrics import summarize
 
 CAMERAS = ("exact", "mount", "heading")
 

@@ -5,7 +5,7 @@ association (and mapped back for scoring), on the clean boxes and with detector 
 10% misses, 0.3 false boxes per frame and view; evaluation seeds 0..``--noise-seeds``-1, distinct
 from the training-noise seeds 1000+ and the validation-noise seed 999):
 
-* handcrafted: :func:`xvmatch.geometry.spatial_search.associate_sequence` (paper defaults);
+* handcrafted: :func:`xvmatch.cues.spatial_search.associate_sequence` (paper defaults);
 * learned (LOSO): for each site, a model trained exactly as ``xvmatch fit-geometry`` does
   (:func:`~xvmatch.training.fit_geometry.fit_geometry_cvmhat`) on the other two sites (clean +
   2 noisy copies, the last 15% of each sequence for early stopping, plus ``--sim-scenes``
@@ -39,21 +39,21 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from xvmatch.datasets.cvmhat import (
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.cues.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
+from xvmatch.cues.spatial_search import associate_sequence
+from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
+from xvmatch.formats.cvmhat import (
     IMAGE_SIZE,
     default_cvmhat_dir,
     read_sequence,
     sequence_names,
     site_of,
 )
-from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes, shift_frames
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
-from xvmatch.geometry.spatial_search import associate_sequence
+from xvmatch.formats.mot_boxes import FrameBoxes, shift_frames
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 from xvmatch.training.fit_geometry import fit_geometry_cvmhat, peak_memory_mb
 
 SITES = ("canteen", "55", "square")

@@ -35,13 +35,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from deployed_matcher_eval import render
 
 from xvmatch.cli import main as xvmatch
-from xvmatch.datasets.mot_boxes import read_predictions
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import SyntheticDataset, write_scene_inputs
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
     matcher_costs,
 )
+from xvmatch.formats.mot_boxes import read_predictions
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import int8_recheck_tolerance
 from xvmatch.inference.learned_association import load_matcher_bundle, rechecked_costs

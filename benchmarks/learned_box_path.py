@@ -37,9 +37,9 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence  # noqa: E402
-from xvmatch.datasets.mot_boxes import read_predictions  # noqa: E402
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize  # noqa: E402
+from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence  # noqa: E402
+from xvmatch.formats.mot_boxes import read_predictions  # noqa: E402
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize  # noqa: E402
 
 
 def _children_cpu() -> float:
@@ -52,10 +52,10 @@ def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
     import numpy as np
     import torch
 
-    import xvmatch.geometry.spatial_features as features
-    from xvmatch.datasets.mot_boxes import read_mot_boxes, write_predictions
-    from xvmatch.geometry.spatial_features import collate_frames, frame_features
-    from xvmatch.geometry.spatial_search import rank_hypotheses
+    import xvmatch.cues.spatial_features as features
+    from xvmatch.cues.spatial_features import collate_frames, frame_features
+    from xvmatch.cues.spatial_search import rank_hypotheses
+    from xvmatch.formats.mot_boxes import read_mot_boxes, write_predictions
     from xvmatch.inference.assignment import assign
     from xvmatch.models.matcher_file import load_matcher
 

@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.output_paths import Output, check_script_outputs
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.output_paths import Output, check_script_outputs
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"

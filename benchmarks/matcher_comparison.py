@@ -6,7 +6,7 @@ moves by about +-2 points, so a point value alone cannot answer either. For each
 strength and box setting (ground truth, detector noise), this prints each bundle's Eq. 9
 accuracy with images and with boxes only, images - boxes, and each bundle minus the first (with
 images and with boxes only), all in points with a 95% interval from resampling whole scenes
-(:func:`xvmatch.evaluation.confidence.grouped_difference_interval`; the differences are paired:
+(:func:`xvmatch.metrics.confidence.grouped_difference_interval`; the differences are paired:
 the same frames, the same boxes, the same shifted images). ``cue AUC`` is how well each
 network's appearance cost alone tells a true pair from the other people of its frame
 (:func:`xvmatch.evaluation.deployed_matcher_eval.cue_auc`; 0.5: not at all), whatever the matcher
@@ -48,6 +48,8 @@ from deployed_matcher_eval import (
     shown,
 )
 
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.evaluation.deployed_matcher_eval import (
     OnnxAppearanceCoster,
@@ -55,8 +57,6 @@ from xvmatch.evaluation.deployed_matcher_eval import (
     frame_checked_costs,
     matcher_costs,
 )
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
 
 SETTING_NAMES = {"gt": "ground-truth boxes", "det": "detector noise"}

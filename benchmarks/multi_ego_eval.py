@@ -42,18 +42,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.cues.matcher_inputs import appearance_cost
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.multi_ego_scenes import MultiEgoFrame, render_multi_ego, view_names
 from xvmatch.datasets.pair_trials import match_to_ground_truth, noise_seed_of
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
-from xvmatch.evaluation.multi_view_metrics import (
-    count_views,
-    cycle_counts,
-    mean_scores,
-    summarize_views,
-)
-from xvmatch.geometry.matcher_inputs import FrameCameras, appearance_cost
+from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.geometry.camera import FrameCameras
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.inference.multi_ego_tracking import pairs_from_ids, track_multi_view
 from xvmatch.inference.multi_view_assignment import (
@@ -64,6 +59,12 @@ from xvmatch.inference.multi_view_assignment import (
     view_pairs,
 )
 from xvmatch.inference.multi_view_costs import multi_view_costs, spatial_vote_cost
+from xvmatch.metrics.multi_view_metrics import (
+    count_views,
+    cycle_counts,
+    mean_scores,
+    summarize_views,
+)
 
 SOLVERS = ("hungarian", "greedy", "mip")
 

@@ -13,7 +13,7 @@ never equal across cameras), three seeds each, in three conditions:
 
 For each: ``--method ours`` (tracks in pieces of 20 frames, the default), ours with whole
 tracks (``--split-frames 0``, as the paper) and ``--method dtw`` (paper 004's M1) scored with
-``evaluation/multicam_metrics.py`` (Eqs. 13-14 P and R averaged over overlapping camera pairs,
+``metrics/multicam_metrics.py`` (Eqs. 13-14 P and R averaged over overlapping camera pairs,
 box-pair F1, global IDF1, ground error of the fused foot points), and the localisation of paper
 003 (two most visible views against all views, principal axes along the vertical against image
 columns), with our association's ids and with the true ids (to separate localisation from
@@ -54,8 +54,9 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.output_paths import Output, check_script_outputs
 from xvmatch.datasets.detector_noise import DetectorNoise
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.multicam_scenes import (
     MulticamConfig,
     TrackerNoise,
@@ -63,12 +64,11 @@ from xvmatch.datasets.multicam_scenes import (
     simulate_multicam_scene,
     write_multicam_scene,
 )
-from xvmatch.evaluation.multicam_metrics import match_to_truth, multicam_scores
-from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera
-from xvmatch.geometry.output_paths import Output, check_script_outputs
 from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
 from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
+from xvmatch.metrics.multicam_metrics import match_to_truth, multicam_scores
 
 CONDITIONS = {
     "gt": None,
@@ -237,7 +237,7 @@ def report(rows: list[dict], speed: dict) -> str:
 def _embedder(model, path: str, memo: dict):
     """``embed(frame, boxes)`` of one camera's image folder with ``model``'s network, memoised
     on (frame, boxes) so that a sweep embeds each crop once."""
-    from xvmatch.datasets.frame_sources import open_frames
+    from xvmatch.formats.frame_sources import open_frames
 
     source = open_frames(path)
     last: dict = {}

@@ -7,11 +7,11 @@ synchronised; odd ones have the top view re-timed by a drawn offset of 8-55 fram
 ``--unrelated K`` adds K pairs whose views come from two different scenes (no offset exists).
 Each pair's 9 clip curves over every offset in +-60 frames are cached in ``--work`` so that other
 thresholds can be judged at once (``--reuse``), and so can the coarse-to-fine search that
-``--offset auto`` runs (``--step``, default :data:`~xvmatch.geometry.offset_estimation.OFFSET_STEP`:
+``--offset auto`` runs (``--step``, default :data:`~xvmatch.cues.offset_estimation.OFFSET_STEP`:
 it reads the cached curve at the offsets it would have searched; ``--step 1``: every offset).
 
 Prints one row per pair (truth, minimum, evidence, agreement, verdict) and the summary the
-defaults of :func:`~xvmatch.geometry.offset_estimation.estimate_offset` were chosen from: no
+defaults of :func:`~xvmatch.cues.offset_estimation.estimate_offset` were chosen from: no
 synchronised or unrelated pair shifted, and how many true shifts are found. CPU only.
 README figures: ``python benchmarks/offset_calibration.py --work runs/offset_cal --clean-scenes 12
 --unrelated 6`` (58 pairs, about 40-60 s each per worker on the 2-core development machine; add
@@ -27,10 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import shift_frames
-from xvmatch.geometry.offset_estimation import (
+from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
     MIN_OFFSET_EVIDENCE,
     OFFSET_ALPHA,
@@ -39,6 +36,9 @@ from xvmatch.geometry.offset_estimation import (
     estimate_offset,
     search_offsets,
 )
+from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
+from xvmatch.formats.mot_boxes import shift_frames
 
 N_FRAMES = 780  # a CVMHAT pair's length
 CLIPS = 9  # estimate_offset's default

@@ -32,15 +32,15 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.evaluation.learned_matcher_eval import CueRule, score_rule, tune_gamma
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs
-from xvmatch.inference.cross_view_metrics import summarize
 from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.metrics.cross_view_metrics import summarize
 from xvmatch.models.appearance_net import (
     AppearanceNet,
     appearance_efficientnet_lite0,

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
-from xvmatch.datasets.mot_boxes import FrameBoxes, scale_frames
-from xvmatch.geometry.spatial_search import associate_sequence
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
+from xvmatch.cues.spatial_search import associate_sequence
+from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.formats.mot_boxes import FrameBoxes, scale_frames
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 
 def scramble(frames: dict[int, FrameBoxes], rng: np.random.Generator):

@@ -51,11 +51,11 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.camera_shift import camera_shift
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
+from xvmatch.formats.camera_frames import CameraFrames
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.adaptation_pairs import (
     MinedPairs,
     MiningConfig,
@@ -64,7 +64,6 @@ from xvmatch.inference.adaptation_pairs import (
     plan_bursts,
     reference_costs,
 )
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
 from xvmatch.inference.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
@@ -78,6 +77,7 @@ from xvmatch.inference.site_adaptation import (
     fit_site_adaptation,
 )
 from xvmatch.inference.site_bundle import adapted_vectors, vector_pair_sets, vectors_embedder
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 
 class _Images:
@@ -274,7 +274,7 @@ def cli_timing(args) -> None:
     """Write the first seed's shifted video and time ``adapt`` and ``associate``."""
     import cv2
 
-    from xvmatch.datasets.mot_boxes import write_mot_boxes
+    from xvmatch.formats.mot_boxes import write_mot_boxes
 
     seed, strength = args.seeds[0], args.strengths[-1]
     video, top, hor, _, _, cut = _video(seed, args)

@@ -8,7 +8,7 @@ frames from the same evidence:
 
 - frame: the frame association's pairs, scored by the frame metrics (CVIDF1, CVMA);
 - mip / spectral: ``track_pair`` with that solver; tracks scored by
-  :func:`xvmatch.evaluation.track_metrics.evaluate_tracks` (pairs = same track id in a frame;
+  :func:`xvmatch.metrics.track_metrics.evaluate_tracks` (pairs = same track id in a frame;
   per view IDF1, MOTA, HOTA from TrackEval).
 
 With ``--weights learned`` (the default runs both), the learned matcher of ``--model``
@@ -21,7 +21,7 @@ feeds two more rows:
 
 With ``--offset auto`` each pair (and noise seed) is first re-timed as ``xvmatch track --offset
 auto`` does: the offset estimated from the detections, applied when the clips back it
-(:func:`xvmatch.datasets.mot_boxes.align_views`), the ground truth re-timed the same way.
+(:func:`xvmatch.formats.mot_boxes.align_views`), the ground truth re-timed the same way.
 
 OVERALL pools every frame of every sequence (cross-view counts summed, TrackEval's
 ``combine_sequences`` per view); ``--noise 1 2 3`` pools the three noise seeds the same way.
@@ -72,18 +72,11 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes, align_views
 from xvmatch.datasets.synthetic_scenes import SCENARIOS
-from xvmatch.evaluation.track_metrics import (
-    pool_view_scores,
-    track_pair_counts,
-    tracklet_scores,
-    view_track_results,
-)
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.inference.cross_view_metrics import summarize
+from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
+from xvmatch.formats.mot_boxes import FrameBoxes, align_views
 from xvmatch.inference.track_costs import (
     FITTED_CAMERAS_W1,
     LEARNED_DUMMY_WEIGHT,
@@ -100,6 +93,13 @@ from xvmatch.inference.tracking import (
     track_pair,
 )
 from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets
+from xvmatch.metrics.cross_view_metrics import summarize
+from xvmatch.metrics.track_metrics import (
+    pool_view_scores,
+    track_pair_counts,
+    tracklet_scores,
+    view_track_results,
+)
 
 SOLVERS = ("mip", "spectral")
 
@@ -153,8 +153,8 @@ def frame_pairs_cached(name, top, hor, camera_rows, cache: Path | None, tag: str
 def offset_cached(name, top, hor, cache: Path | None, tag: str) -> int:
     """The offset ``xvmatch track --offset auto`` applies to a pair of detection files (0 when
     the clips do not back the estimate), kept in ``cache``."""
-    from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, OFFSET_STEP, estimate_offset
-    from xvmatch.geometry.spatial_matching import SpatialParams
+    from xvmatch.cues.offset_estimation import AUTO_MAX_OFFSET, OFFSET_STEP, estimate_offset
+    from xvmatch.cues.spatial_matching import SpatialParams
 
     # The search's step in the name: a cache of another search is not reused.
     path = cache / f"{name}.{tag}.offset-step{OFFSET_STEP}.json" if cache else None
@@ -263,8 +263,7 @@ def with_camera_error(cameras: dict, degrees: float, seed: int,
     frame)."""
     from scipy.spatial.transform import Rotation
 
-    from xvmatch.geometry.camera import Camera
-    from xvmatch.geometry.matcher_inputs import FrameCameras
+    from xvmatch.geometry.camera import Camera, FrameCameras
 
     rng = np.random.default_rng(seed)
 
@@ -297,10 +296,10 @@ def synthetic_main(args: argparse.Namespace) -> int:
     """The --synthetic mode: rendered videos, boxes only against boxes and images."""
     from dataclasses import replace
 
-    from xvmatch.datasets.camera_frames import CameraFrames
     from xvmatch.datasets.camera_shift import camera_shift
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video
+    from xvmatch.formats.camera_frames import CameraFrames
     from xvmatch.inference.camera_refinement import refine_run_cameras
     from xvmatch.inference.learned_association import load_matcher_bundle
     from xvmatch.inference.tracking import TrackImages

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
+from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 
 __all__ = [

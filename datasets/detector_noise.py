@@ -18,13 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 
-__all__ = ["FALSE_ID_BASE", "FALSE_POSITIVE", "DetectorNoise", "apply_detector_noise"]
-
-FALSE_POSITIVE: int = -1
-"""Ground-truth id of a detection that stands for no person (it overlaps no ground-truth box
-enough); evaluations score pairs that include one as false positives."""
+__all__ = ["FALSE_ID_BASE", "DetectorNoise", "apply_detector_noise"]
 
 FALSE_ID_BASE: dict[str, int] = {"top": 1_000_000, "hor": 2_000_000}
 """First id of the false boxes of each view; real ids must be below the smallest."""

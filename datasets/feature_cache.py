@@ -1,10 +1,10 @@
 """Features of whole sequences: flat storage, parallel extraction and a disk cache.
 
 The per-frame features of the learned geometry model are built by
-:func:`xvmatch.geometry.spatial_features.frame_features` (one exact search per candidate camera
+:func:`xvmatch.cues.spatial_features.frame_features` (one exact search per candidate camera
 location, tens of milliseconds per frame), so training sets are extracted by several processes
 and cached on disk, keyed by a hash of the boxes, the image size, the configuration and
-:data:`~xvmatch.geometry.spatial_features.FEATURE_VERSION`.
+:data:`~xvmatch.cues.spatial_features.FEATURE_VERSION`.
 """
 
 from __future__ import annotations
@@ -22,9 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.geometry.atomic_files import atomic_write_bytes
-from xvmatch.geometry.matcher_inputs import FrameCameras, matcher_features
-from xvmatch.geometry.spatial_features import (
+from xvmatch.core.atomic_files import atomic_write_bytes
+from xvmatch.core.worker_pool import worker_pool
+from xvmatch.cues.matcher_inputs import matcher_features
+from xvmatch.cues.spatial_features import (
     FEATURE_VERSION,
     HOR_FEATURES,
     HYP_FEATURES,
@@ -34,7 +35,7 @@ from xvmatch.geometry.spatial_features import (
     FrameFeatures,
     frame_features,
 )
-from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.geometry.camera import FrameCameras
 
 __all__ = [
     "FeatureSet",
@@ -343,7 +344,7 @@ def cached_frame_features(
     progress: Callable[[Iterable], Iterable] | None = None,
     chunk: int = 32,
 ) -> list[FrameFeatures]:
-    """Matcher features (:func:`~xvmatch.geometry.matcher_inputs.matcher_features`) of many
+    """Matcher features (:func:`~xvmatch.cues.matcher_inputs.matcher_features`) of many
     frame pairs, computed by ``workers`` processes and cached under
     ``frame_features/<key>.npz`` (key: every box, size, camera row and camera, the
     configuration and the feature version). The result is the same for any ``workers``."""

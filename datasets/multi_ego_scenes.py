@@ -230,9 +230,9 @@ def write_multi_ego_inputs(frames: Sequence[MultiEgoFrame], out: str | os.PathLi
     """
     import cv2
 
-    from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
-    from xvmatch.geometry.atomic_files import atomic_write_bytes
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.core.atomic_files import atomic_write_bytes
+    from xvmatch.formats.camera_io import save_cameras
+    from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 
     if not frames:
         raise ValueError("no frames to write")

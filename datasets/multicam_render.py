@@ -42,6 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_bytes
 from xvmatch.datasets.image_render import (
     Difficulty,
     Photometric,
@@ -52,7 +53,6 @@ from xvmatch.datasets.image_render import (
     render_background,
     render_people,
 )
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.multicam_scenes import (
     MulticamConfig,
     MulticamScene,
@@ -62,7 +62,7 @@ from xvmatch.datasets.multicam_scenes import (
 )
 from xvmatch.datasets.person_render import body_frame, draw_appearances, walk_phases
 from xvmatch.datasets.synthetic_scenes import Building, _buildings
-from xvmatch.geometry.atomic_files import atomic_write_bytes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera
 
 __all__ = [

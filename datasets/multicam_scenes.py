@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.datasets.box_scene import (
     PeopleState,
     SceneConfig,
@@ -36,10 +37,9 @@ from xvmatch.datasets.box_scene import (
     simulate_walks,
 )
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
-from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.formats.camera_io import save_cameras
+from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
-from xvmatch.geometry.camera_io import save_cameras
 
 __all__ = [
     "MulticamConfig",

@@ -10,9 +10,9 @@ A trial is one image pair (``xvmatch synth``) in one setting, ready to associate
 
 Per frame and view, the boxes are shuffled with a seeded permutation before any cost is
 computed ("ids scrambled"): a method sees boxes, images and cameras only, never an id; ids are
-looked up again only to score (:func:`xvmatch.inference.cross_view_metrics.count_pair`) and to
+looked up again only to score (:func:`xvmatch.metrics.cross_view_metrics.count_pair`) and to
 build training labels. Each trial carries the handcrafted cues between its boxes
-(:func:`~xvmatch.geometry.handcrafted_costs.pair_costs`) and, when a coster is given, learned
+(:func:`~xvmatch.cues.handcrafted_costs.pair_costs`) and, when a coster is given, learned
 appearance costs. The handcrafted baseline, the learned-matcher evaluation and the fusion and
 matcher training all draw their trials here.
 """
@@ -27,12 +27,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.datasets.detector_noise import FALSE_POSITIVE
+from xvmatch.cues.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.datasets.synthetic_io import MANIFEST, PairRecord, SceneRecord, SyntheticDataset
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
+from xvmatch.formats.mot_boxes import FALSE_POSITIVE
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.camera import Camera
-from xvmatch.geometry.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.geometry.ray_priors import DEFAULT_BETA, METRIC_MARGIN
 
 __all__ = [
@@ -297,7 +297,7 @@ def scene_trials(
     coster: Callable[..., np.ndarray] | None = None,
 ) -> list[PairTrial]:
     """The trials of every frame of a scene: boxes of :func:`scene_samples`, their handcrafted
-    cues (:func:`~xvmatch.geometry.handcrafted_costs.pair_costs`) and optional learned
+    cues (:func:`~xvmatch.cues.handcrafted_costs.pair_costs`) and optional learned
     appearance costs.
 
     Args:

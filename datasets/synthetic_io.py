@@ -39,21 +39,21 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.crops import box_crops
-from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
-from xvmatch.datasets.image_size import check_image_size
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
-from xvmatch.geometry.atomic_files import atomic_write_bytes, atomic_write_text
-from xvmatch.geometry.camera import Camera
-from xvmatch.geometry.input_files import (
+from xvmatch.core.atomic_files import atomic_write_bytes, atomic_write_text
+from xvmatch.core.input_files import (
     MAX_INPUT_BYTES,
     InputFileError,
     check_input_file,
     read_input_text,
 )
-from xvmatch.geometry.json_text import parse_json
-from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.core.json_text import parse_json
+from xvmatch.core.worker_pool import worker_pool
+from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
+from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
+from xvmatch.formats.crops import box_crops
+from xvmatch.formats.image_size import check_image_size
+from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.geometry.camera import Camera
 
 __all__ = [
     "GENERATOR",
@@ -432,7 +432,7 @@ class _Doc:
 
 def _json_text(path: Path) -> str:
     """A manifest or annotation file's text through
-    :func:`~xvmatch.geometry.input_files.read_input_text`: a FIFO, a device or a file with a
+    :func:`~xvmatch.core.input_files.read_input_text`: a FIFO, a device or a file with a
     NUL byte is refused at once. Without its line bound: an annotation is written as one
     compact line, about 10 kB a frame, so a long scene's is tens of megabytes."""
     return read_input_text(path, max_line=MAX_INPUT_BYTES)
@@ -750,7 +750,7 @@ def person_crops(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Crops of the labelled people, resized to one size: the appearance branch's input.
 
-    The crop is the (visible, or ``full``) box cut by :func:`~xvmatch.datasets.crops.box_crops`.
+    The crop is the (visible, or ``full``) box cut by :func:`~xvmatch.formats.crops.box_crops`.
 
     Args:
         image: ``(H, W, 3)`` uint8 image of the view.
@@ -796,8 +796,8 @@ def write_scene_inputs(scene: SceneRecord, out: str | os.PathLike) -> SceneInput
         scene: a scene of a dataset written by :func:`generate_dataset`.
         out: folder to write ``top.txt``, ``hor.txt`` and ``cameras/`` into.
     """
-    from xvmatch.datasets.mot_boxes import write_mot_boxes
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.formats.camera_io import save_cameras
+    from xvmatch.formats.mot_boxes import write_mot_boxes
 
     out = Path(out)
     (out / "cameras").mkdir(parents=True, exist_ok=True)

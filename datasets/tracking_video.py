@@ -25,12 +25,11 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
+from xvmatch.core.atomic_files import atomic_write_bytes
 from xvmatch.datasets.image_render import SceneRenderer
-from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig, SyntheticScene, make_scene
-from xvmatch.geometry.atomic_files import atomic_write_bytes
-from xvmatch.geometry.camera import Camera, look_rotation
-from xvmatch.geometry.matcher_inputs import FrameCameras
+from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
+from xvmatch.geometry.camera import Camera, FrameCameras, look_rotation
 
 __all__ = ["TrackingVideo", "render_tracking_video", "write_tracking_video"]
 
@@ -150,7 +149,7 @@ def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dic
     ``top_images``, ``hor_images``, and ``cameras`` when written)."""
     import cv2
 
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.formats.camera_io import save_cameras
 
     folder = Path(folder)
     out = {"top": folder / "top.txt", "hor": folder / "hor.txt",

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 
 __all__ = ["VisibilityNoise", "apply_visibility_noise", "miss_probability"]
 

@@ -25,6 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.folder_marker import MARKER, is_own_folder, mark_own_folder
+from xvmatch.core.worker_pool import worker_pool
 from xvmatch.datasets.pair_trials import open_dataset
 from xvmatch.evaluation.ablation_cells import (
     DISTRIBUTION_ROWS,
@@ -56,13 +59,10 @@ from xvmatch.evaluation.ablation_report import (
     write_results,
 )
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, SWEEPS, Setting, grid_settings
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.folder_marker import MARKER, is_own_folder, mark_own_folder
-from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
 
 REPORT_COMMAND = "xvmatch ablate"
-"""The command named in the marker (:mod:`xvmatch.geometry.folder_marker`) that ``ablate``
+"""The command named in the marker (:mod:`xvmatch.core.folder_marker`) that ``ablate``
 leaves in a report folder it made; it replaces only such a folder."""
 
 __all__ = [
@@ -214,7 +214,7 @@ def plan_ablation(options: AblationOptions, matcher: LearnedMatcher) -> Ablation
         })
     cvmhat = None
     if options.cvmhat is not None:
-        from xvmatch.datasets.cvmhat import read_sequence, sequence_names
+        from xvmatch.formats.cvmhat import read_sequence, sequence_names
 
         if not Path(options.cvmhat).is_dir():
             raise ValueError(f"{options.cvmhat}: no such CVMHAT folder")

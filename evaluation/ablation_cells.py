@@ -24,6 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.json_text import json_problem
+from xvmatch.cues.matcher_inputs import camera_cues
 from xvmatch.datasets.pair_trials import (
     FrameSample,
     PairTrial,
@@ -42,11 +45,9 @@ from xvmatch.evaluation.ablation_settings import (
     scaled_noise,
 )
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.json_text import json_problem
-from xvmatch.geometry.matcher_inputs import FrameCameras, camera_cues
-from xvmatch.inference.cross_view_metrics import summarize
+from xvmatch.geometry.camera import FrameCameras
 from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.metrics.cross_view_metrics import summarize
 
 __all__ = [
     "CELL_FORMAT",

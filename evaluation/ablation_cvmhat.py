@@ -1,12 +1,12 @@
 """The box-only part of the ablation on real CVMHAT boxes (``xvmatch ablate --cvmhat DIR``).
 
 Every sequence pair ``NAME_top.txt`` / ``NAME_hor.txt`` of the folder
-(:func:`~xvmatch.datasets.cvmhat.sequence_names`), every ``step``-th frame (frames of either
+(:func:`~xvmatch.formats.cvmhat.sequence_names`), every ``step``-th frame (frames of either
 file, ascending, from the first), in two settings: the clean boxes, and the detector noise of
 :mod:`xvmatch.datasets.detector_noise` (5% jitter, 10% misses, 0.3 false boxes per frame and
 view; seeded per seed and sequence). Per frame and view the boxes are shuffled (ids scrambled)
 before association; the ids are used only to score. Two rows, both from the boxes alone: the
-handcrafted spatial-distribution search (:func:`~xvmatch.geometry.spatial_search.
+handcrafted spatial-distribution search (:func:`~xvmatch.cues.spatial_search.
 associate_frame`, the paper's parameters, O searched) and the learned geometry encoder (the
 bundle's ONNX matcher, boxes only, the bundle's gamma). Scores pooled over all sequences:
 CVIDF1 (the CVMHAT paper's metric), CVMA and the Eq. 9 accuracy.
@@ -21,19 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, read_sequence, sequence_names
-from xvmatch.datasets.detector_noise import (
-    FALSE_ID_BASE,
-    FALSE_POSITIVE,
-    DetectorNoise,
-    apply_detector_noise,
-)
+from xvmatch.cues.matcher_inputs import matcher_inputs
+from xvmatch.cues.spatial_search import associate_frame
+from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
 from xvmatch.evaluation.ablation_cells import CELL_FORMAT, CELL_VERSION
-from xvmatch.geometry.matcher_inputs import matcher_inputs
-from xvmatch.geometry.spatial_search import associate_frame
+from xvmatch.formats.cvmhat import IMAGE_SIZE, read_sequence, sequence_names
+from xvmatch.formats.mot_boxes import FALSE_POSITIVE
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.cross_view_metrics import count_pair, summarize
 from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.metrics.cross_view_metrics import count_pair, summarize
 
 __all__ = [
     "CVMHAT_ROWS",

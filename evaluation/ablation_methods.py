@@ -3,11 +3,11 @@ the CVMHAT search and the learned matcher, scored on the same trials.
 
 Rows (:data:`ROWS`), each an association of the shuffled boxes of a
 :class:`~xvmatch.datasets.pair_trials.PairTrial` scored with Eq. 9 and the cross-view ID scores
-(:func:`~xvmatch.inference.cross_view_metrics.count_pair`):
+(:func:`~xvmatch.metrics.cross_view_metrics.count_pair`):
 
 * single cues: the learned appearance cost alone, the colour histogram alone (Eq. 3), the ray
   distance alone (Eq. 6), the ray distance with the cheirality veto (Eq. 7), and the CVMHAT
-  spatial-distribution search on the boxes (:func:`~xvmatch.geometry.spatial_search.
+  spatial-distribution search on the boxes (:func:`~xvmatch.cues.spatial_search.
   associate_frame`, paper parameters, O searched);
 * the handcrafted rules of the geometric-priors paper on histogram + ray (sum with w = 0.5 and
   the product of Eq. 8, each with and without cheirality), with the paper's gammas (0.25 and
@@ -28,14 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.cues.cost_fusion import ProductFusion, SumFusion, add_cheirality
+from xvmatch.cues.spatial_search import associate_frame
 from xvmatch.datasets.pair_trials import PairTrial
 from xvmatch.evaluation.deployed_matcher_eval import matcher_costs
 from xvmatch.evaluation.handcrafted_baseline import GAMMA_PRODUCT, GAMMA_SUM, Method, fused_cost
-from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
-from xvmatch.geometry.spatial_search import associate_frame
 from xvmatch.inference.assignment import GAMMA_GRID, assign
-from xvmatch.inference.cross_view_metrics import FrameCounts, count_pair, summarize
 from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.metrics.cross_view_metrics import FrameCounts, count_pair, summarize
 
 __all__ = [
     "FAMILIES",
@@ -74,7 +74,7 @@ class Row:
         fused: the two normalised cues a fusion rule combines with the ray distance's ``geo``:
             ``"hist"`` (the paper's) or ``"app"`` (the learned appearance cost).
         setting: the learned matcher's input setting
-            (:data:`~xvmatch.geometry.matcher_inputs.INPUT_SETTINGS`).
+            (:data:`~xvmatch.cues.matcher_inputs.INPUT_SETTINGS`).
     """
 
     key: str
@@ -145,7 +145,7 @@ class RowResult:
 
     Attributes:
         gamma: the non-association cost used (None for the search).
-        counts: per test trial, its :class:`~xvmatch.inference.cross_view_metrics.FrameCounts`.
+        counts: per test trial, its :class:`~xvmatch.metrics.cross_view_metrics.FrameCounts`.
         pairs: per test trial, the ``(K, 2)`` (top row, ego column) pairs.
         costs: per test trial, the ``(M, N)`` cost matrix, or None for the search.
     """
@@ -181,8 +181,8 @@ def tune_gamma(trials: Sequence[PairTrial], costs: Sequence[np.ndarray],
 
 def _hand_costs(row: Row, trial: PairTrial) -> np.ndarray:
     """The (M, N) cost matrix of a non-learned cost row: a normalised cue, or a rule of two
-    (:class:`~xvmatch.geometry.cost_fusion.SumFusion` with w = 0.5, or
-    :class:`~xvmatch.geometry.cost_fusion.ProductFusion`, Eq. 8), plus the cheirality veto."""
+    (:class:`~xvmatch.cues.cost_fusion.SumFusion` with w = 0.5, or
+    :class:`~xvmatch.cues.cost_fusion.ProductFusion`, Eq. 8), plus the cheirality veto."""
     cues = trial.cues()
     if row.rule in ("sum", "product") and row.fused == "hist":
         return fused_cost(trial.costs, Method(row.rule, row.cheirality, _PAPER_GAMMA[row.rule]))

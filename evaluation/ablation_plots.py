@@ -6,7 +6,7 @@
 * :func:`cost_figure`: true and false pairs' costs per cue, the panels of Figs. 2-3 of the
   geometric-priors paper (:mod:`xvmatch.evaluation.cost_distributions`, OpenCV).
 * :func:`pick_disagreements` and :func:`disagreement_figure`: frames where two rows chose
-  different pairs, drawn one above the other with :func:`~xvmatch.inference.match_drawing.
+  different pairs, drawn one above the other with :func:`~xvmatch.viz.match_drawing.
   draw_matches`.
 
 Every file is written atomically.
@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from xvmatch.core.atomic_files import atomic_write_bytes
 from xvmatch.evaluation.cost_distributions import (
     CostHistogram,
     draw_cost_histograms,
     encode_png,
 )
-from xvmatch.geometry.atomic_files import atomic_write_bytes
 
 __all__ = [
     "Disagreement",
@@ -209,7 +209,7 @@ def disagreement_figure(path: str | os.PathLike, images: dict[str, np.ndarray],
     Returns:
         The path written.
     """
-    from xvmatch.inference.match_drawing import draw_matches
+    from xvmatch.viz.match_drawing import draw_matches
 
     panels = [draw_matches(images["top"], images["ego"], boxes["top"], boxes["ego"],
                            np.asarray(p, np.int64).reshape(-1, 2), ids["top"], ids["ego"],

@@ -2,7 +2,7 @@
 95% interval over seeds, and ``report.md`` with a table per data folder.
 
 :func:`result_rows` flattens the cell records; :func:`summarise` gives every (scenario, column,
-method) its :class:`~xvmatch.evaluation.confidence.MeanInterval` over seeds;
+method) its :class:`~xvmatch.metrics.confidence.MeanInterval` over seeds;
 :func:`target_check` compares the learned fusion with the best non-learned row of each column
 (paired over seeds: both are measured on the same frames); :func:`format_report` writes the
 Markdown and :func:`write_results` the CSV and JSON files.
@@ -18,11 +18,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.evaluation.ablation_cvmhat import CVMHAT_ROWS, CVMHAT_SETTINGS
 from xvmatch.evaluation.ablation_methods import FAMILIES, LEARNED_FUSION, ROWS, row_by_key
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, Setting
-from xvmatch.evaluation.confidence import MeanInterval, mean_interval
-from xvmatch.geometry.atomic_files import atomic_write_text
+from xvmatch.metrics.confidence import MeanInterval, mean_interval
 
 __all__ = [
     "CSV_COLUMNS",

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.geometry.atomic_files import atomic_write_bytes
+from xvmatch.core.atomic_files import atomic_write_bytes
 
 __all__ = [
     "FIGURE_FILES",

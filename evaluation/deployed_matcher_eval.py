@@ -3,10 +3,10 @@
 The trials are those every synthetic evaluation uses (:mod:`xvmatch.datasets.pair_trials`:
 ground-truth or detector-noise boxes, shuffled per view, ids scrambled), so the learned rows
 score exactly the frames the handcrafted baseline scores. Per trial and setting
-(:data:`~xvmatch.geometry.matcher_inputs.INPUT_SETTINGS`): the matcher's cost matrix from the
+(:data:`~xvmatch.cues.matcher_inputs.INPUT_SETTINGS`): the matcher's cost matrix from the
 boxes, the ONNX appearance cost (with images) and the camera cues and rectified geometry (with
 cameras); the Hungarian assignment with gamma; the Eq. 9 accuracy and the cross-view ID scores
-of :func:`~xvmatch.inference.cross_view_metrics.count_pair`.
+of :func:`~xvmatch.metrics.cross_view_metrics.count_pair`.
 """
 
 from __future__ import annotations
@@ -15,24 +15,20 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from xvmatch.cues.matcher_inputs import INPUT_SETTINGS, appearance_cost, matcher_inputs
 from xvmatch.datasets.pair_trials import PairTrial
 from xvmatch.evaluation.frame_check_threshold import FrameSamples
-from xvmatch.geometry.matcher_inputs import (
-    INPUT_SETTINGS,
-    FrameCameras,
-    appearance_cost,
-    matcher_inputs,
-)
+from xvmatch.geometry.camera import FrameCameras
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.cross_view_metrics import (
+from xvmatch.inference.frame_check import FEATURES, FrameCheck, frame_check_features
+from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.inference.site_adaptation import pair_auc
+from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,
     summarize,
 )
-from xvmatch.inference.frame_check import FEATURES, FrameCheck, frame_check_features
-from xvmatch.inference.learned_association import LearnedMatcher
-from xvmatch.inference.site_adaptation import pair_auc
 
 __all__ = ["OnnxAppearanceCoster", "cue_auc", "frame_accuracy", "frame_check_samples",
            "frame_checked_costs", "frame_count", "matcher_costs", "score_matcher"]

@@ -52,6 +52,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from xvmatch.core.worker_pool import worker_pool
+from xvmatch.cues.cost_fusion import ProductFusion, SumFusion, add_cheirality
+from xvmatch.cues.handcrafted_costs import PairCosts
 from xvmatch.datasets.pair_trials import (
     SETTINGS,
     PairTrial,
@@ -61,11 +64,8 @@ from xvmatch.datasets.pair_trials import (
 )
 from xvmatch.datasets.synthetic_io import SceneRecord, SyntheticDataset
 from xvmatch.evaluation.cost_distributions import CostSamples
-from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion, add_cheirality
-from xvmatch.geometry.handcrafted_costs import PairCosts
-from xvmatch.geometry.worker_pool import worker_pool
 from xvmatch.inference.assignment import GAMMA_GRID, assign
-from xvmatch.inference.cross_view_metrics import (
+from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,

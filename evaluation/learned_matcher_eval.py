@@ -37,11 +37,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from xvmatch.cues.cost_fusion import add_cheirality
 from xvmatch.datasets.pair_trials import CUES, SETTINGS, PairTrial
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
-from xvmatch.geometry.cost_fusion import add_cheirality
 from xvmatch.inference.assignment import GAMMA_GRID, assign
-from xvmatch.inference.cross_view_metrics import (
+from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_pair,

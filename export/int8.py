@@ -96,8 +96,8 @@ def calibration_crops(
     Returns:
         ``(K, H, W, 3)`` uint8 BGR crops.
     """
-    from xvmatch.datasets.crops import box_crops
     from xvmatch.datasets.synthetic_io import SyntheticDataset
+    from xvmatch.formats.crops import box_crops
 
     dataset = SyntheticDataset(data)
     names = list(scenes) if scenes is not None else dataset.scene_names
@@ -361,9 +361,10 @@ def _scene_costs(folder: Path, data: Path, scenes: Sequence[str], files: dict[st
     """The trials of ``scenes`` (ground-truth boxes and detector noise) and, for each
     appearance file of ``files`` ({label: file name}) and each image setting the matcher takes,
     their ``(M, N)`` matcher costs in the input order."""
+    from xvmatch.cues.matcher_inputs import INPUT_SETTINGS, matcher_inputs
     from xvmatch.datasets.pair_trials import TrialConfig, scene_trials
     from xvmatch.datasets.synthetic_io import SyntheticDataset
-    from xvmatch.geometry.matcher_inputs import INPUT_SETTINGS, FrameCameras, matcher_inputs
+    from xvmatch.geometry.camera import FrameCameras
     from xvmatch.inference.bundle import Bundle, read_manifest
     from xvmatch.inference.learned_association import LearnedMatcher
 
@@ -419,8 +420,8 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
     ``tolerance``, also the label ``"<second>+recheck"``: the second file's near-tie frames
     re-checked with the first (:func:`~xvmatch.inference.learned_association.
     rechecked_costs`), with the share of frames re-checked."""
-    from xvmatch.inference.cross_view_metrics import count_pair, summarize
     from xvmatch.inference.learned_association import rechecked_costs
+    from xvmatch.metrics.cross_view_metrics import count_pair, summarize
 
     gamma = float(manifest["gamma"])
     trials, costs = _scene_costs(folder, data, scenes, files)

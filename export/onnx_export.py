@@ -10,8 +10,8 @@
 
 What is inside the graphs and what is not: the graphs hold every learned operation (the
 appearance network with its input normalisation; the matcher from padded feature tensors to the
-cost matrix, Sinkhorn included). Outside them, in numpy (:mod:`xvmatch.geometry.matcher_inputs`,
-:mod:`xvmatch.datasets.crops`): cropping, the spatial-distribution search that builds the
+cost matrix, Sinkhorn included). Outside them, in numpy (:mod:`xvmatch.cues.matcher_inputs`,
+:mod:`xvmatch.formats.crops`): cropping, the spatial-distribution search that builds the
 geometry features, the camera cues, the appearance cost of two descriptors, and the Hungarian
 assignment with the non-association cost gamma (:func:`xvmatch.inference.assignment.assign`).
 
@@ -41,6 +41,13 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
+from xvmatch.cues.spatial_features import (
+    FEATURE_VERSION,
+    HOR_FEATURES,
+    HYP_FEATURES,
+    PAIR_FEATURES,
+    TOP_FEATURES,
+)
 from xvmatch.export.int8 import add_int8
 from xvmatch.export.licence_notice import NOTICE, backbone_record, notice_text
 from xvmatch.export.parity import (
@@ -50,13 +57,6 @@ from xvmatch.export.parity import (
     parity_frames,
 )
 from xvmatch.geometry.ray_priors import DEFAULT_BETA, METRIC_MARGIN
-from xvmatch.geometry.spatial_features import (
-    FEATURE_VERSION,
-    HOR_FEATURES,
-    HYP_FEATURES,
-    PAIR_FEATURES,
-    TOP_FEATURES,
-)
 from xvmatch.inference.bundle import (
     APPEARANCE_INPUT,
     APPEARANCE_OUTPUTS,

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from xvmatch.geometry.matcher_inputs import MatcherInputs, collate_inputs
+from xvmatch.cues.matcher_inputs import MatcherInputs, collate_inputs
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import APPEARANCE_INPUT, MATCHER_INPUTS, MATCHER_OUTPUT
 from xvmatch.models.appearance_net import AppearanceNet
@@ -86,11 +86,12 @@ def parity_frames(
         ``({setting: frames}, crops (C, H, W, 3) uint8)``; settings ``boxes`` always,
         ``images`` and ``cameras`` when the matcher takes those cues.
     """
-    from xvmatch.datasets.crops import box_crops
+    from xvmatch.cues.matcher_inputs import appearance_cost, matcher_inputs
     from xvmatch.datasets.pair_trials import TrialConfig, dataset_trials
     from xvmatch.datasets.synthetic_io import generate_dataset
     from xvmatch.datasets.synthetic_scenes import SynthConfig
-    from xvmatch.geometry.matcher_inputs import FrameCameras, appearance_cost, matcher_inputs
+    from xvmatch.formats.crops import box_crops
+    from xvmatch.geometry.camera import FrameCameras
 
     names = tuple(loaded.matcher.cues)
     tmp = None

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from xvmatch.geometry.array_checks import as_boxes
+from xvmatch.core.array_checks import as_boxes
 
 __all__ = ["box_iou"]
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from xvmatch.geometry.array_checks import as_points
+from xvmatch.core.array_checks import as_points
 
 __all__ = [
     "GROUND_Z",
@@ -21,6 +21,7 @@ __all__ = [
     "ROTATION_TOL",
     "Camera",
     "CameraSenseError",
+    "FrameCameras",
     "check_camera_sense",
     "intrinsics_from_fov",
     "look_rotation",
@@ -323,3 +324,16 @@ def check_camera_sense(K: np.ndarray, R: np.ndarray, c: np.ndarray, width: int, 
     if top:
         _check_looks_down(R)
     _check_sees_ground(K, R, int(width), int(height))
+
+
+@dataclass(frozen=True)
+class FrameCameras:
+    """The two calibrated cameras of a frame pair.
+
+    Attributes:
+        top: the top/overview camera.
+        hor: the horizontal/egocentric camera.
+    """
+
+    top: Camera
+    hor: Camera

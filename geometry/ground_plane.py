@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from xvmatch.geometry.array_checks import as_points
+from xvmatch.core.array_checks import as_points
 from xvmatch.geometry.camera import Camera
 
 __all__ = [

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.geometry.array_checks import as_boxes, as_points
+from xvmatch.core.array_checks import as_boxes, as_points
 from xvmatch.geometry.camera import Camera
 
 __all__ = [
@@ -212,7 +212,7 @@ def cheirality_cost(
 
     Section III-B: "setting the corresponding cost in the association matrix to a value
     beta >> 1 when the cheirality constraint does not hold". Add it to a fused cost in [0, 1]
-    (see ``xvmatch.geometry.cost_fusion.add_cheirality``) so any violating pair costs more
+    (see ``xvmatch.cues.cost_fusion.add_cheirality``) so any violating pair costs more
     than a non-association cost ``gamma < beta`` and is never matched.
 
     Args:

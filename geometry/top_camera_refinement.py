@@ -41,7 +41,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment, minimize
 from scipy.spatial.transform import Rotation
 
-from xvmatch.geometry.array_checks import as_boxes
+from xvmatch.core.array_checks import as_boxes
 from xvmatch.geometry.camera import Camera, same_camera
 from xvmatch.geometry.ray_priors import METRIC_MARGIN, box_rays
 

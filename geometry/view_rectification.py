@@ -16,7 +16,7 @@ cameras (``x_cam = R (X - c)``, pixels ``K x_cam / z``, :class:`~xvmatch.geometr
   the spatial vectors assume (Eq. 6), so ``x_hor`` (Eq. 9) is the true bearing; its height is
   the distance between its re-projected top and bottom centres.
 
-Both return ``(x, y, w, h)`` boxes for :func:`~xvmatch.geometry.spatial_features.frame_features`
+Both return ``(x, y, w, h)`` boxes for :func:`~xvmatch.cues.spatial_features.frame_features`
 (the virtual horizontal image keeps the real image's size).
 """
 
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from xvmatch.geometry.array_checks import as_boxes
+from xvmatch.core.array_checks import as_boxes
 from xvmatch.geometry.camera import Camera, look_rotation
 
 __all__ = [

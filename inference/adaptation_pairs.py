@@ -362,9 +362,9 @@ def reference_costs(
         scenes: ``(scenario, seed)`` of each rendered scene.
         frames: the frames of each scene used.
     """
+    from xvmatch.cues.matcher_inputs import appearance_cost
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video
-    from xvmatch.geometry.matcher_inputs import appearance_cost
 
     pos, neg = [], []
     for scenario, seed in scenes:

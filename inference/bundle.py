@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from xvmatch.geometry.input_files import InputFileError, check_input_file, read_input_text
-from xvmatch.geometry.json_text import json_problem
-from xvmatch.geometry.matcher_inputs import CUE_NAMES
-from xvmatch.geometry.record_fields import typed_field
-from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
+from xvmatch.core.input_files import InputFileError, check_input_file, read_input_text
+from xvmatch.core.json_text import json_problem
+from xvmatch.core.record_fields import typed_field
+from xvmatch.cues.matcher_inputs import CUE_NAMES
+from xvmatch.cues.spatial_features import FEATURE_VERSION, FeatureConfig
 from xvmatch.inference.frame_check import FrameCheck
 from xvmatch.inference.site_adaptation import (
     ADAPTATION_FORMAT_VERSIONS,
@@ -496,7 +496,7 @@ class Bundle:
 
     def costs(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """``(B, M, N)`` costs of a padded batch
-        (:func:`~xvmatch.geometry.matcher_inputs.collate_inputs`)."""
+        (:func:`~xvmatch.cues.matcher_inputs.collate_inputs`)."""
         wanted = {i.name for i in self.matcher.get_inputs()}
         return self.matcher.run([MATCHER_OUTPUT],
                                 {k: batch[k] for k in MATCHER_INPUTS if k in wanted})[0]

@@ -15,9 +15,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
-from xvmatch.datasets.camera_frames import CameraFrames
-from xvmatch.geometry.camera import same_camera
-from xvmatch.geometry.matcher_inputs import FrameCameras
+from xvmatch.formats.camera_frames import CameraFrames
+from xvmatch.geometry.camera import FrameCameras, same_camera
 from xvmatch.geometry.top_camera_refinement import (
     MIN_REFINE_FRAMES,
     TopCameraRefinement,

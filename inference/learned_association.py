@@ -1,6 +1,6 @@
 """Association with a deployed matcher bundle on the CPU, without torch.
 
-Per frame pair, in numpy (:mod:`xvmatch.geometry.matcher_inputs`): the geometry features of the
+Per frame pair, in numpy (:mod:`xvmatch.cues.matcher_inputs`): the geometry features of the
 spatial-distribution search (on boxes mapped to the ideal setting when the cameras are known),
 and the pair cues the frame has: the appearance cost of the two views' crops (embedded by
 ``appearance.onnx``, all crops of a frame in one batch) and, with cameras, the ray distance and
@@ -38,9 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from xvmatch.datasets.crops import box_crops
-from xvmatch.geometry.matcher_inputs import (
-    FrameCameras,
+from xvmatch.cues.matcher_inputs import (
     MatcherInputs,
     appearance_cost,
     camera_cues,
@@ -50,8 +48,10 @@ from xvmatch.geometry.matcher_inputs import (
     matcher_features,
     rectified_boxes,
 )
-from xvmatch.geometry.spatial_features import FeatureConfig, FrameFeatures
-from xvmatch.geometry.spatial_search import FrameLike
+from xvmatch.cues.spatial_features import FeatureConfig, FrameFeatures
+from xvmatch.cues.spatial_search import FrameLike
+from xvmatch.formats.crops import box_crops
+from xvmatch.geometry.camera import FrameCameras
 from xvmatch.inference.appearance_check import (
     MIN_AUC,
     SITE_MIN_AUC,
@@ -321,7 +321,7 @@ def non_association_cost(models: Sequence[LearnedMatcher], gamma: float | None =
 
 
 class FrameImages:
-    """Structural type of an image source (:class:`xvmatch.datasets.frame_sources.
+    """Structural type of an image source (:class:`xvmatch.formats.frame_sources.
     FrameSource`): ``get(frame) -> (H, W, 3) uint8 BGR``."""
 
     def get(self, frame: int) -> np.ndarray:  # pragma: no cover - a protocol
@@ -329,7 +329,7 @@ class FrameImages:
 
 
 class FrameCameraSource:
-    """Structural type of a camera source (:class:`xvmatch.datasets.camera_frames.
+    """Structural type of a camera source (:class:`xvmatch.formats.camera_frames.
     CameraFrames`): ``get(frame) -> FrameCameras``."""
 
     def get(self, frame: int) -> FrameCameras:  # pragma: no cover - a protocol
@@ -396,7 +396,7 @@ def _feature_stream(
         for tb, hb, cam, cams in inputs:
             yield _frame_features(tb, hb, size, configs, cam, cams, mirror)
         return
-    from xvmatch.geometry.worker_pool import worker_pool
+    from xvmatch.core.worker_pool import worker_pool
 
     chunks = [inputs[i : i + chunk] for i in range(0, len(inputs), chunk)]
     # Spawned workers ("spawn": a forked child may inherit onnxruntime's or OpenCV's thread

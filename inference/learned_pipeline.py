@@ -14,7 +14,7 @@ the checks and the work.
 
 The models come opened (:func:`~xvmatch.inference.learned_association.load_matcher_bundle`;
 the command line also exports torch matcher files into bundles first), and the horizontal image
-size comes resolved (:func:`xvmatch.datasets.box_image_size.resolve_size`), so that this module
+size comes resolved (:func:`xvmatch.formats.box_image_size.resolve_size`), so that this module
 needs neither torch nor the command line. Bad input raises ``ValueError`` with one line; the
 lines name the command-line options that supply each input (``--top-images``, ``--cameras``).
 """
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from xvmatch.datasets.box_image_size import check_boxes_in_image
+from xvmatch.formats.box_image_size import check_boxes_in_image
 from xvmatch.inference.appearance_check import AppearanceCheck
 from xvmatch.inference.camera_check import CameraCheck, check_run_cameras
 from xvmatch.inference.camera_refinement import CameraRefinement, refine_run_cameras
@@ -61,10 +61,10 @@ class LearnedRunOptions:
             named in messages.
         names: how each model was named by the user (messages); empty: the bundles' names.
         top_images, hor_images: images of both views (a folder, a video, an image or a glob:
-            :func:`xvmatch.datasets.frame_sources.open_frames`), both or neither; they need
+            :func:`xvmatch.formats.frame_sources.open_frames`), both or neither; they need
             matchers with an appearance network.
         cameras: a camera file or folder with cameras ``top`` and ``ego``
-            (:func:`xvmatch.datasets.camera_frames.open_cameras`); needs matchers that take
+            (:func:`xvmatch.formats.camera_frames.open_cameras`); needs matchers that take
             camera cues.
         top_boxes: the top-view box file, named when a top box lies outside the top images
             or a frame's crowd is over the matcher's limits.
@@ -180,7 +180,7 @@ def open_view_images(path: str, box_frames: Iterable[int], needed: Iterable[int]
     """Open one view's images and check they hold every frame the boxes need.
 
     Args:
-        path: the images (:func:`xvmatch.datasets.frame_sources.open_frames`).
+        path: the images (:func:`xvmatch.formats.frame_sources.open_frames`).
         box_frames: the frames the view's boxes list (a single image serves one of them).
         needed: the frames whose images are read, checked in the order given.
         shift: the boxes are re-timed: box frame ``f`` is image frame ``f + shift``.
@@ -191,7 +191,7 @@ def open_view_images(path: str, box_frames: Iterable[int], needed: Iterable[int]
     Raises:
         FrameSourceError: an unreadable source or a missing frame (the source is closed).
     """
-    from xvmatch.datasets.frame_sources import check_frames, open_frames
+    from xvmatch.formats.frame_sources import check_frames, open_frames
 
     source = open_frames(path, box_frames=sorted(int(f) + shift for f in box_frames))
     try:
@@ -214,8 +214,8 @@ def open_matcher_cameras(path: str, named: Iterable[tuple[LearnedMatcher, str]],
     """Open ``--cameras`` for the matchers ``named`` (``(matcher, its name)``), after the
     checks: every matcher takes camera cues, a folder holds a file for each of ``frames``, and
     every camera's image size is its view's (``sizes``: ``"top"``/``"hor"`` -> (size, where
-    that size comes from)). Returns the :class:`~xvmatch.datasets.camera_frames.CameraFrames`."""
-    from xvmatch.datasets.camera_frames import open_cameras
+    that size comes from)). Returns the :class:`~xvmatch.formats.camera_frames.CameraFrames`."""
+    from xvmatch.formats.camera_frames import open_cameras
 
     for m, name in named:
         if not m.bundle.manifest.uses_cameras:

@@ -9,7 +9,7 @@ two-view tracker (:mod:`xvmatch.inference.tracking`), carry evidence and ids ove
    (>= 0.5), the egocentric views by motion (``motion`` = 0.3, a gate in box heights): a
    head-worn camera's shake moves all its boxes alike, often by more than a box width, so a
    box is linked to the tracklet nearest once that common shift is removed
-   (:func:`xvmatch.geometry.box_motion.motion_link_costs`). On the benchmark's tuning scenes
+   (:func:`xvmatch.cues.box_motion.motion_link_costs`). On the benchmark's tuning scenes
    (ground-truth boxes) the egocentric tracklets held 1.8 boxes on average by IoU (>= 0.7,
    ``motion=None``, the links before) and 5.9 by motion, with no more wrong links (98.6% and
    99.6% of the links right). A tracklet continues one
@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.inference.multi_view_assignment import (
     consistent_hungarian,
@@ -265,7 +265,7 @@ def _continuations(earlier: Sequence[Tracklet], later: Sequence[Tracklet], min_i
                    max_gap: int, motion: float | None = None) -> np.ndarray:
     """For each later tracklet, the earlier one it continues (or -1): IoU of the earlier's last
     box and the later's first >= ``min_iou`` (with ``motion``: their motion cost,
-    :func:`~xvmatch.geometry.box_motion.motion_link_costs`, <= ``motion``), at most ``max_gap``
+    :func:`~xvmatch.cues.box_motion.motion_link_costs`, <= ``motion``), at most ``max_gap``
     frames missing between them, one-to-one by Hungarian on IoU (on the cost); a shorter gap
     wins a tie."""
     out = np.full(len(later), -1, dtype=np.int64)
@@ -389,7 +389,7 @@ def track_multi_view(
             (:func:`~xvmatch.inference.multi_view_assignment.solve_multi_view`).
         frame_weight: the share of a frame's own cost in the costs (:func:`smoothed_problems`).
         motion: the egocentric views' links by motion, with this gate in box heights
-            (:func:`~xvmatch.geometry.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``
+            (:func:`~xvmatch.cues.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``
             (the links before issue 33's motion step).
         partner_change: the egocentric tracklets are cut, for the smoothing only, where the
             top-view tracklet they match with at least this evidence (nats) changes

@@ -15,7 +15,7 @@ each matcher takes alone.
 - Ego-ego pairs are two horizontal views: people are seen from the side in both, at similar
   scales, so appearance is the natural cue, while the box layouts of two views facing different
   ways share nothing the spatial features could use. The cue is the appearance distance of the
-  bundle's network (:func:`~xvmatch.geometry.matcher_inputs.appearance_cost`) as a
+  bundle's network (:func:`~xvmatch.cues.matcher_inputs.appearance_cost`) as a
   log-likelihood ratio (:data:`EGO_APPEARANCE`). Without images the ego-ego costs are 0: no
   evidence either way, and the joint program links two egocentric views through the top view.
 """
@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.geometry.matcher_inputs import appearance_cost
-from xvmatch.geometry.spatial_matching import SpatialParams
-from xvmatch.geometry.spatial_search import best_per_candidate, rank_hypotheses
+from xvmatch.cues.matcher_inputs import appearance_cost
+from xvmatch.cues.spatial_matching import SpatialParams
+from xvmatch.cues.spatial_search import best_per_candidate, rank_hypotheses
 from xvmatch.inference.appearance_check import AppearanceCheck
 from xvmatch.inference.learned_association import (
     FrameCameraSource,

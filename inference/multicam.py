@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera, foot_points, image_to_ground
 
 __all__ = [
@@ -419,7 +419,7 @@ class _Appearance:
 
 def _appearance_cost(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``(K,)`` appearance cost ``|a - b| / 2`` in [0, 1] of unit descriptors row by row (as
-    :func:`xvmatch.geometry.matcher_inputs.appearance_cost`, the distance the network is
+    :func:`xvmatch.cues.matcher_inputs.appearance_cost`, the distance the network is
     trained on)."""
     cosine = (a * b).sum(axis=1)
     return np.clip(0.5 * np.sqrt(np.clip(2.0 - 2.0 * cosine, 0.0, None)), 0.0, 1.0)

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera
 
 __all__ = ["LocalisationOptions", "axis_traces", "localise", "view_visibility"]

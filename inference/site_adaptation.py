@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from xvmatch.geometry.matcher_inputs import appearance_cost
+from xvmatch.cues.matcher_inputs import appearance_cost
 
 __all__ = [
     "ADAPTATION_FILE",
@@ -365,7 +365,7 @@ def load_adaptation(path: str | os.PathLike,
             finite, a scale under :data:`SCALE_FLOOR`, a calibration slope <= 0, a vector the
             network does not give.
     """
-    from xvmatch.geometry.input_files import InputFileError, read_input_bytes
+    from xvmatch.core.input_files import InputFileError, read_input_bytes
 
     try:
         data = read_input_bytes(path, max_bytes=_file_bytes(dims))

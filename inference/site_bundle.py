@@ -258,7 +258,7 @@ def write_site_bundle(source: str | os.PathLike, out: str | os.PathLike, run: Si
     """
     if not run.fit.accepted:
         raise ValueError(f"adaptation refused: {run.fit.reason}")
-    from xvmatch.geometry.input_files import read_input_text
+    from xvmatch.core.input_files import read_input_text
 
     source, out = Path(source), Path(out)
     manifest = json.loads(read_input_text(source / MANIFEST))  # never blocks, bounded lines

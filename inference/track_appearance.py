@@ -1,7 +1,7 @@
 """Appearance of tracklets from the images (CVMHAT paper, Sec. 3.3.2, 3.4.1 and 4.1).
 
 With the images of both views, each clip is read once and every box gets the 8x2x2 HSV colour
-histogram of :mod:`xvmatch.geometry.color_histogram`:
+histogram of :mod:`xvmatch.cues.color_histogram`:
 
 - horizontal-view tracklets link boxes by IoU *and* colour similarity (Sec. 4.1: IoU >= 0.5 and
   histogram similarity >= 0.3; the top view links by IoU alone, its people's colours are not
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.color_histogram import box_histograms, histogram_intersection
-from xvmatch.geometry.matcher_inputs import appearance_cost
+from xvmatch.cues.color_histogram import box_histograms, histogram_intersection
+from xvmatch.cues.matcher_inputs import appearance_cost
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.tracklets import Tracklet
 
 __all__ = [

@@ -259,7 +259,7 @@ def motion_similarity(
     measures them in pixels, so that one ``sigma`` means another thing at every image size and
     in each view (a 250-pixel horizontal box against a 60-pixel top-view one on CVMHAT);
     relative to the box they are resolution-free, as Eq. 9's features are
-    (:mod:`xvmatch.geometry.spatial_features`). A pair where the later tracklet does not start
+    (:mod:`xvmatch.cues.spatial_features`). A pair where the later tracklet does not start
     after the earlier one ends gets 0.
     """
     if not earlier or not later:

@@ -1,7 +1,7 @@
 """Complementary-view tracking from boxes: the whole CVMHAT pipeline (paper, Algorithm 1).
 
 1. Frame-level cross-view association of every frame (Sec. 3.2, the exhaustive search of
-   :func:`xvmatch.geometry.spatial_search.associate_frame`; O given when the wearer is known),
+   :func:`xvmatch.cues.spatial_search.associate_frame`; O given when the wearer is known),
    or the learned matcher's box-only association (:func:`learned_frame_evidence`: its cost
    matrices and its non-association cost give the cross-view weights,
    :func:`~xvmatch.inference.track_costs.learned_similarity`).
@@ -24,10 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.spatial_matching import SpatialParams
-from xvmatch.geometry.spatial_search import associate_frame
-from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.core.worker_pool import worker_pool
+from xvmatch.cues.spatial_matching import SpatialParams
+from xvmatch.cues.spatial_search import associate_frame
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.appearance_check import AppearanceCheck, check_tracklet_appearance
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.learned_association import (

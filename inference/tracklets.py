@@ -8,7 +8,7 @@ of the boxes (the horizontal view, when images are given), a link also needs a h
 similarity of at least 0.3 (Sec. 4.1), and the assignment maximises IoU plus colour similarity.
 For a moving camera (a head-worn one, whose shake makes a person's boxes of two frames overlap
 little), ``motion`` links instead by the distance from each tracklet's last box once the view's
-common shift is removed (:func:`xvmatch.geometry.box_motion.motion_link_costs`); IoU linking
+common shift is removed (:func:`xvmatch.cues.box_motion.motion_link_costs`); IoU linking
 is the default and unchanged. Boxes are ``x, y, w, h`` in pixels.
 """
 
@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.box_motion import motion_link_costs
+from xvmatch.cues.box_motion import motion_link_costs
+from xvmatch.cues.color_histogram import histogram_intersection
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
-from xvmatch.geometry.color_histogram import histogram_intersection
 
 __all__ = ["Tracklet", "clip_tracklets", "motion_assignment", "split_clips", "view_tracklets"]
 
@@ -82,7 +82,7 @@ def motion_assignment(last: np.ndarray, boxes: np.ndarray, gate: float, gaps: np
                       valid: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One-to-one links of tracks (their ``last`` boxes) to ``boxes`` by motion: Hungarian on
-    :func:`~xvmatch.geometry.box_motion.motion_link_costs` (``valid`` pairs only) plus
+    :func:`~xvmatch.cues.box_motion.motion_link_costs` (``valid`` pairs only) plus
     ``1e-3`` times the frames missed (``gaps``, broadcast to ``(M, N)``: a shorter gap wins a
     tie); returns the assignment's rows, columns and ``(M, N)`` whether each pair is within
     ``gate``."""
@@ -116,7 +116,7 @@ def clip_tracklets(
     With ``motion`` (a gate, in box heights) the links ignore IoU: a link costs the distance of
     the box from the tracklet's last box once the frame's common shift (the camera's own motion)
     is removed, plus the log ratio of the heights
-    (:func:`~xvmatch.geometry.box_motion.motion_link_costs`), must cost at most ``motion``, and
+    (:func:`~xvmatch.cues.box_motion.motion_link_costs`), must cost at most ``motion``, and
     the assignment minimises the cost (a shorter gap winning a tie).
 
     Raises:

@@ -1,11 +1,11 @@
 """Fusion heads on torch tensors: learned, sum, product (Section III-C of the geometric-priors
 paper).
 
-The same call convention as :class:`xvmatch.geometry.cost_fusion.CostFusion`, on batched torch
+The same call convention as :class:`xvmatch.cues.cost_fusion.CostFusion`, on batched torch
 tensors: ``head({name: (..., M, N) cost in [0, 1]})`` returns one ``(..., M, N)`` cost in
 [0, 1]; names the head does not use are ignored, a missing one is an error. The rules match the
-numpy ones (:class:`~xvmatch.geometry.cost_fusion.SumFusion`,
-:class:`~xvmatch.geometry.cost_fusion.ProductFusion`); :class:`LearnedFusionHead` is a small
+numpy ones (:class:`~xvmatch.cues.cost_fusion.SumFusion`,
+:class:`~xvmatch.cues.cost_fusion.ProductFusion`); :class:`LearnedFusionHead` is a small
 per-pair MLP over the costs' logits, trained end to end. Value ranges are not checked at run time
 (that would be a data-dependent branch, which ONNX export forbids): inputs are clamped to [0, 1].
 """

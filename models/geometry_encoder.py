@@ -1,7 +1,7 @@
 """The box-only learned geometry model: attention across the two sets, dustbin, log-Sinkhorn.
 
-Input: the features of :mod:`xvmatch.geometry.spatial_features` for a batch of frames, padded
-with masks (:func:`~xvmatch.geometry.spatial_features.collate_frames`): per hypothesis h of the
+Input: the features of :mod:`xvmatch.cues.spatial_features` for a batch of frames, padded
+with masks (:func:`~xvmatch.cues.spatial_features.collate_frames`): per hypothesis h of the
 CVMHAT search (Section 3.2 of the CVMHAT paper) and pair (i, j) a feature vector, per hypothesis
 a few scalars, per person its box geometry.
 
@@ -30,7 +30,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
-from xvmatch.geometry.spatial_features import (
+from xvmatch.cues.spatial_features import (
     HOR_FEATURES,
     HYP_FEATURES,
     PAIR_FEATURES,

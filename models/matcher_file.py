@@ -28,9 +28,9 @@ from typing import Any
 
 import torch
 
-from xvmatch.geometry.atomic_files import atomic_write_bytes
-from xvmatch.geometry.record_fields import typed_field
-from xvmatch.geometry.spatial_features import FEATURE_VERSION, FeatureConfig
+from xvmatch.core.atomic_files import atomic_write_bytes
+from xvmatch.core.record_fields import typed_field
+from xvmatch.cues.spatial_features import FEATURE_VERSION, FeatureConfig
 from xvmatch.models.appearance_net import (
     AppearanceNet,
     AppearanceWeights,

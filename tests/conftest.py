@@ -11,7 +11,7 @@ from hypothesis import settings
 # Property tests draw the same examples on every run (same code, same result: CI cannot turn red
 # by chance); HYPOTHESIS_PROFILE=explore searches with fresh random examples instead. No
 # deadline: timings are benchmarks' business, and the first call of a compiled kernel (numba,
-# geometry/search_kernels.py) on a fresh clone includes its compilation.
+# cues/search_kernels.py) on a fresh clone includes its compilation.
 settings.register_profile("deterministic", derandomize=True, database=None, deadline=None)
 settings.register_profile("explore", deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
@@ -64,8 +64,8 @@ def tiny_models(tmp_path_factory, tiny_synth) -> dict[str, Path]:
     drawn so the cues matter), each ``.pt`` with its exported bundle folder beside it."""
     import torch
 
+    from xvmatch.cues.spatial_features import FeatureConfig
     from xvmatch.export.onnx_export import export_bundle
-    from xvmatch.geometry.spatial_features import FeatureConfig
     from xvmatch.models.appearance_net import appearance_small
     from xvmatch.models.cross_view_matcher import CrossViewMatcher
     from xvmatch.models.geometry_encoder import GeometryEncoder
@@ -96,7 +96,7 @@ def track_files(tmp_path_factory) -> dict[str, Path]:
     import numpy as np
 
     from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-    from xvmatch.datasets.mot_boxes import write_mot_boxes
+    from xvmatch.formats.mot_boxes import write_mot_boxes
 
     folder = tmp_path_factory.mktemp("track")
     scene = simulate_box_scene(SceneConfig(head_turn_std_deg=2.0), n_frames=30, seed=5)

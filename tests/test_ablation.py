@@ -15,7 +15,6 @@ import pytest
 
 from xvmatch.cli import main
 from xvmatch.cli_ablate import SWEEP_CHOICES
-from xvmatch.datasets.mot_boxes import write_mot_boxes
 from xvmatch.datasets.pair_trials import FALSE_POSITIVE
 from xvmatch.datasets.synthetic_io import SyntheticDataset
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
@@ -35,8 +34,9 @@ from xvmatch.evaluation.ablation_settings import (
     rotation_angle_deg,
     scaled_noise,
 )
-from xvmatch.evaluation.confidence import mean_interval
+from xvmatch.formats.mot_boxes import write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+from xvmatch.metrics.confidence import mean_interval
 
 
 def _ablate(capsys, *argv: str) -> tuple[int, str]:

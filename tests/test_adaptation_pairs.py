@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.adaptation_pairs import (
     MiningConfig,
     agreed_pairs,

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes
 from xvmatch.inference.adaptation_pairs import MiningConfig
 from xvmatch.inference.appearance_check import (
     CONSISTENCY_WINDOW,
@@ -361,7 +361,7 @@ def test_associate_multi_judges_each_egocentric_view(video, tmp_path, capsys) ->
 
 def test_single_image_pairs_say_nothing_of_the_check(video, tmp_path, capsys) -> None:
     """Two frames hold no run of consecutive frames to judge: no line about the check."""
-    from xvmatch.datasets.mot_boxes import write_mot_boxes
+    from xvmatch.formats.mot_boxes import write_mot_boxes
 
     for view in ("top", "hor"):
         write_mot_boxes(tmp_path / f"{view}.txt",

@@ -12,9 +12,9 @@ import torch
 from torch import nn
 
 from xvmatch.cli_train import add_train_parser
-from xvmatch.datasets.crops import box_crops
 from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset, person_crops
 from xvmatch.datasets.synthetic_scenes import SynthConfig
+from xvmatch.formats.crops import box_crops
 from xvmatch.models.appearance_net import (
     AppearanceWeights,
     appearance_from_weights,

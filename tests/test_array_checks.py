@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from xvmatch.geometry.array_checks import as_boxes, as_points
+from xvmatch.core.array_checks import as_boxes, as_points
 
 
 def test_as_boxes_accepts_empty_and_valid():

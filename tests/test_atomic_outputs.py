@@ -1,5 +1,5 @@
 """Every file the project's commands, training scripts and benchmarks write is written
-atomically (``xvmatch.geometry.atomic_files``) or inside a fresh temporary folder that is moved
+atomically (``xvmatch.core.atomic_files``) or inside a fresh temporary folder that is moved
 into place whole: a direct ``Path.write_text`` / ``write_bytes`` on a user's path would leave a
 half-written file behind an interrupted run."""
 
@@ -45,7 +45,7 @@ def test_outputs_are_written_atomically(folder: str) -> None:
         for line, receiver in direct_writes(path):
             if not receiver_is_temporary(receiver) and (rel, receiver) not in IN_TEMPORARY_FOLDER:
                 offenders.append(f"{rel}:{line}: {receiver}.write_...")
-    assert not offenders, "use xvmatch.geometry.atomic_files: " + ", ".join(offenders)
+    assert not offenders, "use xvmatch.core.atomic_files: " + ", ".join(offenders)
 
 
 def test_the_scan_finds_a_direct_write(tmp_path: Path) -> None:

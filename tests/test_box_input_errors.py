@@ -115,7 +115,7 @@ def test_a_frame_or_id_beyond_2_53_is_refused_at_its_line(scene_files, tmp_path,
 
 
 def test_frames_and_ids_of_2_53_are_read_exactly(tmp_path):
-    from xvmatch.datasets.mot_boxes import read_mot_boxes, read_predictions
+    from xvmatch.formats.mot_boxes import read_mot_boxes, read_predictions
 
     boxes = tmp_path / "boxes.txt"
     boxes.write_text(f"{2**53},1,10,20,30,40\n{2**53 - 1},{-(2**53)},10,20,30,40\n"
@@ -137,7 +137,7 @@ def test_frames_and_ids_of_2_53_are_read_exactly(tmp_path):
 
 def _late(path: Path, folder: Path, shift: int) -> Path:
     """``path``'s boxes ``shift`` frames later, written in ``folder``."""
-    from xvmatch.datasets.mot_boxes import read_mot_boxes, shift_frames, write_mot_boxes
+    from xvmatch.formats.mot_boxes import read_mot_boxes, shift_frames, write_mot_boxes
 
     late = folder / f"late_{Path(path).name}"
     write_mot_boxes(late, shift_frames(read_mot_boxes(path), -shift))

@@ -18,7 +18,7 @@ from xvmatch.datasets.box_scene import (
     simulate_walks,
     write_box_scene,
 )
-from xvmatch.datasets.mot_boxes import read_mot_boxes
+from xvmatch.formats.mot_boxes import read_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 
 CONFIG = SceneConfig()

@@ -13,10 +13,10 @@ import pytest
 from tests.test_appearance_check import PEOPLE, _costs, _still, _wandering
 from tests.test_camera_refinement import _right
 from xvmatch.cli import main
-from xvmatch.datasets.camera_frames import CameraFrames
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
-from xvmatch.geometry.camera_io import save_cameras
+from xvmatch.formats.camera_frames import CameraFrames
+from xvmatch.formats.camera_io import save_cameras
 from xvmatch.geometry.top_camera_refinement import turned_camera
 from xvmatch.inference.appearance_check import CONSISTENCY_WINDOW, MIN_CONSISTENCY, MIN_PAIRS
 from xvmatch.inference.camera_check import (

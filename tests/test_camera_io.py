@@ -1,4 +1,4 @@
-"""Tests of xvmatch.geometry.camera_io (version-1 camera JSON files)."""
+"""Tests of xvmatch.formats.camera_io (version-1 camera JSON files)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from xvmatch.geometry import camera_io
+from xvmatch.formats import camera_io
+from xvmatch.formats.camera_io import CameraFileError, load_cameras, save_cameras
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
-from xvmatch.geometry.camera_io import CameraFileError, load_cameras, save_cameras
 
 
 def _cameras() -> dict[str, Camera]:

@@ -14,12 +14,12 @@ import pytest
 
 from tests.test_top_camera_refinement import _angle, _flying_scene, _mounted, _scene, _turned
 from xvmatch.cli import main
-from xvmatch.datasets.camera_frames import CameraFrames, open_cameras, save_camera_frames
-from xvmatch.datasets.mot_boxes import FrameBoxes, read_predictions
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
-from xvmatch.geometry.camera_io import save_cameras
-from xvmatch.geometry.matcher_inputs import FrameCameras
+from xvmatch.formats.camera_frames import CameraFrames, open_cameras, save_camera_frames
+from xvmatch.formats.camera_io import save_cameras
+from xvmatch.formats.mot_boxes import FrameBoxes, read_predictions
+from xvmatch.geometry.camera import FrameCameras
 from xvmatch.inference.camera_refinement import (
     FIT_LOSS,
     OFF_HINT,

@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.cli import main
+from xvmatch.formats.camera_io import CameraFileError, load_cameras, load_ground_cameras
 from xvmatch.geometry.camera import (
     MAX_CENTRE_COORD,
     Camera,
@@ -25,7 +26,6 @@ from xvmatch.geometry.camera import (
     intrinsics_from_fov,
     look_rotation,
 )
-from xvmatch.geometry.camera_io import CameraFileError, load_cameras, load_ground_cameras
 from xvmatch.geometry.ground_plane import (
     COLLINEAR_TOL,
     GroundCamera,
@@ -137,7 +137,7 @@ def test_check_camera_sense_names_the_field() -> None:
 
 
 def test_per_frame_camera_files_name_the_frame_file(tmp_path: Path) -> None:
-    from xvmatch.datasets.camera_frames import open_cameras
+    from xvmatch.formats.camera_frames import open_cameras
 
     folder = tmp_path / "cams"
     folder.mkdir()

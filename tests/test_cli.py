@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import EXAMPLES, main
+from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene, write_box_scene
-from xvmatch.datasets.mot_boxes import (
+from xvmatch.formats.mot_boxes import (
     PREDICTION_HEADER,
     FrameBoxes,
     read_mot_boxes,
@@ -22,8 +23,7 @@ from xvmatch.datasets.mot_boxes import (
     write_mot_boxes,
     write_predictions,
 )
-from xvmatch.geometry.spatial_search import associate_sequence
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 WIDTH = 2688
 COMMANDS = ("associate", "evaluate", "noise", "offset", "demo")

@@ -29,7 +29,7 @@ from hypothesis import strategies as st
 
 from xvmatch.cli import build_parser, main
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-from xvmatch.datasets.mot_boxes import read_mot_boxes, write_predictions
+from xvmatch.formats.mot_boxes import read_mot_boxes, write_predictions
 
 CALL_TIMEOUT_S = 60.0
 """Most seconds one command may take in the property test."""

@@ -1,4 +1,4 @@
-"""Tests of xvmatch.geometry.color_histogram (Section IV-A histograms, Eq. 3 distance)."""
+"""Tests of xvmatch.cues.color_histogram (Section IV-A histograms, Eq. 3 distance)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from xvmatch.geometry.color_histogram import (
+from xvmatch.cues.color_histogram import (
     N_BINS,
     box_histograms,
     chi2_brd_distance,

@@ -1,4 +1,4 @@
-"""Tests of xvmatch.geometry.cost_fusion (Section III-C normalisation, sum rule, Eq. 8)."""
+"""Tests of xvmatch.cues.cost_fusion (Section III-C normalisation, sum rule, Eq. 8)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from xvmatch.geometry.cost_fusion import (
+from xvmatch.cues.cost_fusion import (
     CostFusion,
     ProductFusion,
     SumFusion,

@@ -1,4 +1,4 @@
-"""Tests of the cross-view metrics (xvmatch.inference.cross_view_metrics).
+"""Tests of the cross-view metrics (xvmatch.metrics.cross_view_metrics).
 
 Expected values are written as fractions of hand-counted toy frames; the parity test scores the
 CVMHAT authors' predictions and must reproduce shared/data/cvmhat/REFERENCE.md to its 0.1.
@@ -18,8 +18,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes, read_predictions
-from xvmatch.inference.cross_view_metrics import (
+from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, read_predictions
+from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
     count_frame,

@@ -14,9 +14,9 @@ import warnings
 
 import pytest
 
-from xvmatch.datasets.mot_boxes import read_mot_boxes, read_predictions
-from xvmatch.geometry.spatial_search import associate_sequence
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
+from xvmatch.cues.spatial_search import associate_sequence
+from xvmatch.formats.mot_boxes import read_mot_boxes, read_predictions
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 pytestmark = pytest.mark.cvmhat
 

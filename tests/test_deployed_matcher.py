@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.mot_boxes import read_mot_boxes, read_predictions
 from xvmatch.datasets.synthetic_io import SceneInputs, SyntheticDataset, write_scene_inputs
+from xvmatch.formats.mot_boxes import read_mot_boxes, read_predictions
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.bundle import read_manifest
 
@@ -131,7 +131,7 @@ def test_costs_solved_with_the_gamma_given_give_the_csv(tmp_path, scene, tiny_mo
 
 
 def test_draw_writes_one_picture_per_frame(tmp_path, scene, tiny_models, capsys):
-    from xvmatch.geometry.folder_marker import MARKER
+    from xvmatch.core.folder_marker import MARKER
 
     for every, expected in ((1, [MARKER, "frame_000001.jpg", "frame_000002.jpg"]),
                             (2, [MARKER, "frame_000001.jpg"])):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 
 SIZE = (2688, 1512)
 

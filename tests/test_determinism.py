@@ -15,10 +15,10 @@ import warnings
 import numpy as np
 import pytest
 
-from xvmatch.datasets.mot_boxes import read_mot_boxes
-from xvmatch.geometry import kernel_choice
-from xvmatch.geometry.offset_estimation import estimate_offset
-from xvmatch.geometry.spatial_search import associate_sequence, rank_hypotheses
+from xvmatch.cues import kernel_choice
+from xvmatch.cues.offset_estimation import estimate_offset
+from xvmatch.cues.spatial_search import associate_sequence, rank_hypotheses
+from xvmatch.formats.mot_boxes import read_mot_boxes
 
 pytestmark = pytest.mark.cvmhat
 

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
+from xvmatch.core.folder_marker import MARKER
 from xvmatch.datasets.box_scene import simulate_box_scene
-from xvmatch.datasets.mot_boxes import read_predictions, write_mot_boxes
-from xvmatch.geometry.folder_marker import MARKER
-from xvmatch.inference.box_canvas import CANVAS_COLOUR, blank_view, top_plan
-from xvmatch.inference.match_drawing import pair_colour
+from xvmatch.formats.mot_boxes import read_predictions, write_mot_boxes
+from xvmatch.viz.box_canvas import CANVAS_COLOUR, blank_view, top_plan
+from xvmatch.viz.match_drawing import pair_colour
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.cli_track import TRACKEVAL_MISSING
 from xvmatch.datasets.box_scene import simulate_box_scene
-from xvmatch.datasets.mot_boxes import write_mot_boxes
+from xvmatch.formats.mot_boxes import write_mot_boxes
 
 WITHOUT_TRACKEVAL = textwrap.dedent("""
     import sys

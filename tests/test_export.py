@@ -16,15 +16,15 @@ import pytest
 import torch
 
 from xvmatch.cli import main
-from xvmatch.export import onnx_export
-from xvmatch.export.onnx_export import PARITY_TOLERANCE, ExportError, export_bundle
-from xvmatch.geometry.spatial_features import (
+from xvmatch.cues.spatial_features import (
     FEATURE_VERSION,
     HOR_FEATURES,
     HYP_FEATURES,
     PAIR_FEATURES,
     TOP_FEATURES,
 )
+from xvmatch.export import onnx_export
+from xvmatch.export.onnx_export import PARITY_TOLERANCE, ExportError, export_bundle
 from xvmatch.inference.bundle import load_bundle, read_manifest
 from xvmatch.models.matcher_file import load_matcher
 

@@ -13,9 +13,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.datasets.mot_boxes import read_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.formats.mot_boxes import read_mot_boxes
 from xvmatch.inference.appearance_check import AppearanceCheck
 from xvmatch.inference.bundle import MANIFEST, BundleError, read_manifest
 from xvmatch.inference.frame_check import (

@@ -1,4 +1,4 @@
-"""Tests of reading a view's images by frame number (xvmatch.datasets.frame_sources)."""
+"""Tests of reading a view's images by frame number (xvmatch.formats.frame_sources)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.datasets import frame_sources
-from xvmatch.datasets.frame_sources import (
+from xvmatch.formats import frame_sources
+from xvmatch.formats.frame_sources import (
     FrameImage,
     FrameSource,
     FrameSourceError,

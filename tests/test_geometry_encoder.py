@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
+from xvmatch.cues.cost_fusion import ProductFusion, SumFusion
+from xvmatch.cues.spatial_features import FeatureConfig, collate_frames, frame_features
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion
-from xvmatch.geometry.spatial_features import FeatureConfig, collate_frames, frame_features
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.models.fusion_heads import LearnedFusionHead, ProductFusionHead, SumFusionHead
 from xvmatch.models.geometry_encoder import GeometryEncoder, LogSinkhorn

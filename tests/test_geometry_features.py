@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.feature_cache import FeatureSet, cached_sequence_features, sequence_features
-from xvmatch.geometry.spatial_features import (
+from xvmatch.cues.spatial_features import (
     FEATURE_VERSION,
     HOR_FEATURES,
     HYP_FEATURES,
@@ -19,6 +17,8 @@ from xvmatch.geometry.spatial_features import (
     frame_features,
     match_labels,
 )
+from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+from xvmatch.datasets.feature_cache import FeatureSet, cached_sequence_features, sequence_features
 
 SIZE = (2688, 1512)
 CONFIG = FeatureConfig(n_hypotheses=4, dtheta_deg=3.0)

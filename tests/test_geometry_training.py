@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import torch
 
+from xvmatch.cues.spatial_features import FeatureConfig
 from xvmatch.datasets.box_scene import write_box_scene
-from xvmatch.datasets.cvmhat import site_of
-from xvmatch.geometry.spatial_features import FeatureConfig
+from xvmatch.formats.cvmhat import site_of
 from xvmatch.models.geometry_encoder import GeometryEncoder
 from xvmatch.models.matcher_file import load_matcher
 from xvmatch.training.box_datamodule import (
@@ -204,7 +204,7 @@ def test_cvmhat_datamodule_re_times_an_out_of_sync_training_pair(tmp_path):
     """One training pair is the other with its horizontal frames renumbered by 8: synchronised,
     its frames carry the very features and labels of the original; the test site is untouched."""
     from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-    from xvmatch.datasets.mot_boxes import FrameBoxes
+    from xvmatch.formats.mot_boxes import FrameBoxes
 
     config = SceneConfig(n_people=(5, 6), fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
     scene = simulate_box_scene(config, n_frames=60, seed=3)

@@ -11,13 +11,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
-from xvmatch.geometry.camera_io import (
+from xvmatch.formats.camera_io import (
     CameraFileError,
     load_cameras,
     load_ground_cameras,
     save_cameras,
 )
+from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import (
     GroundCamera,
     HorizonError,

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.evaluation.confidence import grouped_difference_interval
+from xvmatch.metrics.confidence import grouped_difference_interval
 
 
 def _frames(seed: int = 1, scenes: int = 20, per_scene: int = 5):

@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.cli_baseline import add_baseline_parser
+from xvmatch.cues.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.datasets.detector_noise import DetectorNoise
 from xvmatch.datasets.pair_trials import (
     FALSE_POSITIVE,
@@ -40,9 +41,8 @@ from xvmatch.evaluation.handcrafted_baseline import (
 )
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
-from xvmatch.geometry.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.inference.assignment import GAMMA_GRID
-from xvmatch.inference.cross_view_metrics import count_frame, count_pair, summarize
+from xvmatch.metrics.cross_view_metrics import count_frame, count_pair, summarize
 
 SMALL = (320, 180)
 CONFIG = SynthConfig(scenario="overview", top_size=SMALL, ego_size=SMALL, n_people=(5, 9))

@@ -12,9 +12,9 @@ from __future__ import annotations
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.box_image_size import CVMHAT_SIZE, MIN_EXTENT, consistent_with
 from xvmatch.datasets.box_scene import simulate_box_scene
-from xvmatch.datasets.mot_boxes import (
+from xvmatch.formats.box_image_size import CVMHAT_SIZE, MIN_EXTENT, consistent_with
+from xvmatch.formats.mot_boxes import (
     FrameBoxes,
     read_mot_boxes,
     read_predictions,

@@ -11,16 +11,16 @@ from pathlib import Path
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-from xvmatch.datasets.camera_frames import open_cameras
-from xvmatch.datasets.mot_boxes import BoxFileError, read_mot_boxes
-from xvmatch.geometry.camera_io import CameraFileError
-from xvmatch.geometry.input_files import (
+from xvmatch.core.input_files import (
     MAX_LINE_BYTES,
     InputFileError,
     check_input_file,
     read_input_text,
 )
+from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
+from xvmatch.formats.camera_frames import open_cameras
+from xvmatch.formats.camera_io import CameraFileError
+from xvmatch.formats.mot_boxes import BoxFileError, read_mot_boxes
 
 WAIT_S = 20.0
 """How long a call on a FIFO may take before it counts as a hang (it takes milliseconds)."""
@@ -211,7 +211,7 @@ def test_a_folder_and_a_long_line_as_box_files_are_one_line(scene_files, tmp_pat
 
 
 def test_a_fifo_as_a_folder_marker_is_no_marker(tmp_path):
-    from xvmatch.geometry.folder_marker import MARKER, is_own_folder
+    from xvmatch.core.folder_marker import MARKER, is_own_folder
 
     os.mkfifo(tmp_path / MARKER)
     assert _at_once(lambda: is_own_folder(tmp_path, "xvmatch demo"), tmp_path / MARKER) is False

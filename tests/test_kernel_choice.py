@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from xvmatch.geometry import kernel_choice
-from xvmatch.geometry.spatial_search import associate_frame
+from xvmatch.cues import kernel_choice
+from xvmatch.cues.spatial_search import associate_frame
 
 TOP = np.array([[100, 100, 20, 20], [300, 120, 20, 20], [200, 300, 20, 20], [150, 220, 20, 20],
                 [400, 260, 20, 20]], dtype=float)
@@ -44,7 +44,7 @@ def test_bad_mode_is_a_clear_error():
 
 
 def test_environment_variable_sets_the_mode():
-    code = ("from xvmatch.geometry import kernel_choice; print(kernel_choice.mode()); "
+    code = ("from xvmatch.cues import kernel_choice; print(kernel_choice.mode()); "
             "print(kernel_choice.kernels(1) is None)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={"XVMATCH_KERNELS": "compiled", "PATH": ""}).stdout.split()

@@ -11,7 +11,7 @@ import torch
 
 from xvmatch import cli_fit_geometry, cli_model
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene, write_box_scene
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.assignment import assign
 from xvmatch.inference.learned_association import (
     associate_sequence_learned,
@@ -63,7 +63,7 @@ def test_bundle_keeps_the_model_files_settings(model, tiny_models):
 
 def test_onnx_costs_equal_the_torch_model(model, tiny_models, scene):
     """The runtime's cost matrices are the torch matcher's (the export's parity, end to end)."""
-    from xvmatch.geometry.matcher_inputs import collate_inputs, matcher_inputs
+    from xvmatch.cues.matcher_inputs import collate_inputs, matcher_inputs
 
     source = load_matcher(tiny_models["boxes"])
     frames = [f for f in sorted(scene.top) if len(scene.top[f]) and len(scene.hor[f])]

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from xvmatch.cues.cost_fusion import ProductFusion, SumFusion
 from xvmatch.datasets.pair_trials import dataset_trials, scene_trials
 from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
@@ -26,8 +27,7 @@ from xvmatch.evaluation.learned_matcher_eval import (
     score_rule,
     tune_gamma,
 )
-from xvmatch.geometry.cost_fusion import ProductFusion, SumFusion
-from xvmatch.inference.cross_view_metrics import summarize
+from xvmatch.metrics.cross_view_metrics import summarize
 from xvmatch.models.appearance_net import appearance_small, save_appearance_weights
 from xvmatch.models.fusion_heads import LearnedFusionHead
 from xvmatch.training.appearance_costs import AppearanceCoster

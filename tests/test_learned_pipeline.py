@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.mot_boxes import read_mot_boxes, read_predictions
 from xvmatch.datasets.synthetic_io import SceneInputs, SyntheticDataset, write_scene_inputs
+from xvmatch.formats.mot_boxes import read_mot_boxes, read_predictions
 from xvmatch.inference.learned_association import (
     associate_sequence_learned,
     load_matcher_bundle,

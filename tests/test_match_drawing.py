@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from xvmatch.inference.match_drawing import (
+from xvmatch.viz.match_drawing import (
     GAP_COLOUR,
     UNMATCHED_COLOUR,
     draw_matches,
@@ -103,7 +103,7 @@ def test_boxes_past_the_image_are_clipped() -> None:
 def test_labels_of_boxes_on_top_of_one_another_do_not_overlap() -> None:
     """Issue 29, item 6: two boxes at almost the same place: their ids go to different places
     (the second one's preferred place is taken, it moves to the next free one)."""
-    from xvmatch.inference import match_drawing
+    from xvmatch.viz import match_drawing
 
     placed: list = []
     rects = [np.array([40, 60, 60, 100]), np.array([42, 62, 62, 102])]

@@ -9,10 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from xvmatch.datasets.synthetic_io import SyntheticDataset
-from xvmatch.geometry.matcher_inputs import (
+from xvmatch.cues.matcher_inputs import (
     CUE_NAMES,
-    FrameCameras,
     appearance_cost,
     canonical_cues,
     collate_inputs,
@@ -20,7 +18,9 @@ from xvmatch.geometry.matcher_inputs import (
     matcher_inputs,
     wearer_row,
 )
-from xvmatch.geometry.spatial_features import FeatureConfig, frame_features
+from xvmatch.cues.spatial_features import FeatureConfig, frame_features
+from xvmatch.datasets.synthetic_io import SyntheticDataset
+from xvmatch.geometry.camera import FrameCameras
 
 CONFIG = FeatureConfig(n_hypotheses=3, dtheta_deg=4.0)
 """Few hypotheses on a coarse orientation grid: fast, and every code path still runs."""

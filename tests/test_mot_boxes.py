@@ -1,4 +1,4 @@
-"""Tests of the MOT box / prediction file reader and writer (xvmatch.datasets.mot_boxes)."""
+"""Tests of the MOT box / prediction file reader and writer (xvmatch.formats.mot_boxes)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.datasets.detection_rows import read_detection_rows
-from xvmatch.datasets.mot_boxes import (
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.formats.detection_rows import read_detection_rows
+from xvmatch.formats.mot_boxes import (
     MAX_PIXELS,
     PREDICTION_HEADER,
     BoxFileError,
@@ -23,7 +24,6 @@ from xvmatch.datasets.mot_boxes import (
     write_mot_boxes,
     write_predictions,
 )
-from xvmatch.geometry.atomic_files import atomic_write_text
 
 GOOD_LINE = "1,1,10,20,30,40,-1,-1,-1,-1"
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.box_motion import common_shift, motion_link_costs
+from xvmatch.cues.box_motion import common_shift, motion_link_costs
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.multi_ego_tracking import (
     carry_ids,
     pairs_from_ids,

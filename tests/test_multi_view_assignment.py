@@ -10,13 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.evaluation.multi_view_metrics import (
-    count_views,
-    cycle_counts,
-    mean_scores,
-    summarize_views,
-)
-from xvmatch.geometry.folder_marker import MARKER
+from xvmatch.core.folder_marker import MARKER
 from xvmatch.inference.multi_view_assignment import (
     check_problem,
     consistent_hungarian,
@@ -32,6 +26,12 @@ from xvmatch.inference.multi_view_costs import (
     LogisticCalibration,
     log_odds_cost,
     spatial_vote_cost,
+)
+from xvmatch.metrics.multi_view_metrics import (
+    count_views,
+    cycle_counts,
+    mean_scores,
+    summarize_views,
 )
 
 # --------------------------------------------------------------------------------------------
@@ -536,7 +536,7 @@ def test_cli_offset_auto_finds_each_view_its_own(tmp_path, capsys):
     # its egocentric camera: once in sync, once numbered 8 frames later (offset -8).
     from xvmatch.cli import main
     from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-    from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
+    from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 
     config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
     scene = simulate_box_scene(config, n_frames=60, seed=3)

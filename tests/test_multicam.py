@@ -1,5 +1,5 @@
 """Tests of the multi-camera association (xvmatch.inference.multicam) and its scores
-(xvmatch.evaluation.multicam_metrics): tiny scenes whose answer is known, the conflict rule,
+(xvmatch.metrics.multicam_metrics): tiny scenes whose answer is known, the conflict rule,
 id scrambling, and the metrics on hand-built toy sequences."""
 
 from __future__ import annotations
@@ -10,14 +10,13 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.detector_noise import DetectorNoise
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.multicam_scenes import (
     MulticamConfig,
     TrackerNoise,
     add_tracker_noise,
     simulate_multicam_scene,
 )
-from xvmatch.evaluation.multicam_metrics import multicam_scores
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.inference.multicam import (
@@ -28,6 +27,7 @@ from xvmatch.inference.multicam import (
     relabel,
     trajectory_features,
 )
+from xvmatch.metrics.multicam_metrics import multicam_scores
 
 
 def _cam(azimuth: float, height: float = 5.0, dist: float = 12.0) -> Camera:

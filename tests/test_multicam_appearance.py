@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.crops import box_crops
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
 from xvmatch.datasets.multicam_scenes import MulticamConfig
+from xvmatch.formats.crops import box_crops
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel

@@ -156,7 +156,7 @@ def test_h_cameras_give_the_same_association(scene, tmp_path):
     """The association reads only each camera's homography: a cameras file of H cameras
     (what --fit-homography writes) gives the same output files but the picture."""
     root, sc = scene
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.formats.camera_io import save_cameras
 
     h_file = tmp_path / "h.json"
     save_cameras(h_file, {n: GroundCamera(GroundCamera.from_camera(c).H, c.width, c.height)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.inference.multicam_localisation import (

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.detector_noise import DetectorNoise
-from xvmatch.datasets.mot_boxes import read_mot_boxes
 from xvmatch.datasets.multicam_scenes import (
     MulticamConfig,
     TrackerNoise,
@@ -14,7 +13,8 @@ from xvmatch.datasets.multicam_scenes import (
     simulate_multicam_scene,
     write_multicam_scene,
 )
-from xvmatch.geometry.camera_io import load_ground_cameras
+from xvmatch.formats.camera_io import load_ground_cameras
+from xvmatch.formats.mot_boxes import read_mot_boxes
 
 
 def _scene(seed=3, n_cameras=3):

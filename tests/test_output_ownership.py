@@ -12,19 +12,19 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from xvmatch.cli import main
+from xvmatch.core.folder_marker import (
+    files_under,
+    own_files,
+    record_own_files,
+    remove_own_files,
+)
+from xvmatch.core.output_paths import Output, OutputPathError, check_outputs, plain_name
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
 from xvmatch.datasets.multicam_scenes import (
     MulticamConfig,
     simulate_multicam_scene,
     write_multicam_scene,
 )
-from xvmatch.geometry.folder_marker import (
-    files_under,
-    own_files,
-    record_own_files,
-    remove_own_files,
-)
-from xvmatch.geometry.output_paths import Output, OutputPathError, check_outputs, plain_name
 
 
 def _refused(capsys, argv: list[str], *words: str) -> str:

@@ -1,4 +1,4 @@
-"""Tests of the output-path checks (xvmatch.geometry.output_paths) and of every command's use
+"""Tests of the output-path checks (xvmatch.core.output_paths) and of every command's use
 of them (issue 28): each refused output gives one line naming the option, exit code 2, before
 any work, with no input, no FIFO and no foreign file changed and no partial output left."""
 
@@ -15,10 +15,8 @@ from pathlib import Path
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-from xvmatch.datasets.mot_boxes import read_mot_boxes, write_predictions
-from xvmatch.geometry.folder_marker import MARKER, is_own_folder
-from xvmatch.geometry.output_paths import (
+from xvmatch.core.folder_marker import MARKER, is_own_folder
+from xvmatch.core.output_paths import (
     Input,
     Output,
     OutputPathError,
@@ -27,6 +25,8 @@ from xvmatch.geometry.output_paths import (
     check_script_outputs,
     claim_folder,
 )
+from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
+from xvmatch.formats.mot_boxes import read_mot_boxes, write_predictions
 
 REPO = Path(__file__).resolve().parents[1]
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0

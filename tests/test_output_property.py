@@ -23,8 +23,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from xvmatch.cli import main
+from xvmatch.core.folder_marker import MARKER
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-from xvmatch.geometry.folder_marker import MARKER
 
 KINDS = ("absent", "file", "fifo", "folder", "foreign", "input", "other")
 """What an output path is made to be: nothing, a regular file, a FIFO, an empty folder, a

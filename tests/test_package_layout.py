@@ -1,8 +1,10 @@
 """The package reads as a pipeline: imports run one way, and the deployed runtime needs no torch.
 
-geometry -> datasets -> models -> training | inference -> evaluation -> CLI (the ``xvmatch``
-root); ``export`` sits beside training. Every import statement of every module is read from the
-source (lazy imports inside functions included), so a rule cannot be broken by importing late.
+core -> geometry -> cues -> formats -> metrics -> datasets -> models -> inference -> training
+-> export -> viz -> evaluation -> CLI (the ``xvmatch`` root): each folder may import only the
+folders before it (``viz`` needs only ``core``). Every import statement of every module is read
+from the source (lazy imports inside functions included), so a rule cannot be broken by importing
+late.
 """
 
 from __future__ import annotations
@@ -13,31 +15,26 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SUBPACKAGES = ("geometry", "datasets", "models", "training", "export", "inference",
-               "evaluation", "xvmatch")
+PIPELINE = ("core", "geometry", "cues", "formats", "metrics", "datasets", "models", "inference",
+            "training", "export", "viz", "evaluation", "xvmatch")
+"""The subpackages in pipeline order."""
+SUBPACKAGES = PIPELINE
 
-ALLOWED: dict[str, set[str]] = {
-    "geometry": {"geometry"},
-    "datasets": {"geometry", "datasets"},
-    "models": {"geometry", "models"},
-    # Training validates with the Hungarian assignment of inference/ (a numpy module).
-    "training": {"geometry", "datasets", "models", "training", "inference"},
-    "inference": {"geometry", "datasets", "inference"},
-    "export": {"geometry", "datasets", "models", "inference", "export"},
-    "evaluation": {"geometry", "datasets", "models", "inference", "evaluation"},
-    "xvmatch": set(SUBPACKAGES),
-}
-"""Which subpackages each subpackage may import (no exceptions: the cross-view metrics that
-training and export score with live in inference/, the matcher file format in models/)."""
+ALLOWED: dict[str, set[str]] = {p: set(PIPELINE[:k + 1]) for k, p in enumerate(PIPELINE)}
+"""Which subpackages each subpackage may import: itself and those before it, no exceptions
+(``models`` and ``inference`` do not import each other: the matcher file format is in
+``models``, the deployed runtime in ``inference``)."""
+ALLOWED["inference"] -= {"models", "metrics"}
+ALLOWED["viz"] = {"core", "geometry", "cues", "formats", "viz"}
 
-TORCH_FREE = ("geometry", "datasets", "inference")
+TORCH_FREE = ("core", "geometry", "cues", "formats", "metrics", "datasets", "inference", "viz")
 """Subpackages that never import torch, lightning or onnx (the base install runs them)."""
 HEAVY = {"torch", "torchvision", "lightning", "onnx"}
 
 
 def _imports(path: Path) -> list[tuple[int, str]]:
     """``(line, dotted name)`` of every import in a file (``from x import y`` gives ``x.y``
-    for package-level names, so ``from xvmatch.inference import cross_view_metrics`` counts)."""
+    for package-level names, so ``from xvmatch.metrics import cross_view_metrics`` counts)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     out = []
     for node in ast.walk(tree):

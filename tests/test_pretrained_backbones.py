@@ -219,8 +219,8 @@ def test_mobilenetv2_stage_maps_keep_torchvisions_names():
 
 def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synth):
     """The exporter's parity gate passes and the manifest names the package and licence."""
+    from xvmatch.cues.spatial_features import FeatureConfig
     from xvmatch.export.onnx_export import export_bundle
-    from xvmatch.geometry.spatial_features import FeatureConfig
     from xvmatch.inference.bundle import read_manifest
     from xvmatch.models.cross_view_matcher import CrossViewMatcher
     from xvmatch.models.geometry_encoder import GeometryEncoder

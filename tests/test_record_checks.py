@@ -556,7 +556,7 @@ def test_a_clip_start_inside_the_video_runs(boxes, capsys) -> None:
 
 
 def test_estimate_offset_refuses_a_clip_start_beyond_the_video() -> None:
-    from xvmatch.geometry.offset_estimation import clip_start_range, estimate_offset
+    from xvmatch.cues.offset_estimation import clip_start_range, estimate_offset
 
     scene = simulate_box_scene(n_frames=30, seed=1)
     assert clip_start_range((1, 30), 4) == (1, 27)

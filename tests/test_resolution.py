@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from xvmatch.cues.spatial_features import FeatureConfig, frame_features
+from xvmatch.cues.spatial_search import associate_frame, associate_sequence
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import scale_frames
-from xvmatch.geometry.spatial_features import FeatureConfig, frame_features
-from xvmatch.geometry.spatial_search import associate_frame, associate_sequence
+from xvmatch.formats.mot_boxes import scale_frames
 from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
 
 SIZE = (2688, 1512)
@@ -54,8 +54,8 @@ def test_learned_features_are_resolution_free(top_factor, hor_factor, k):
 def test_border_margin_and_reference_y_scale_with_the_image():
     """A box touching the right border is flagged at any resolution; y_hor is in pixels of a
     2688-wide image (the paper's lambda keeps its meaning)."""
-    from xvmatch.geometry.spatial_features import HOR_FEATURES
-    from xvmatch.geometry.spatial_vectors import horizontal_vectors
+    from xvmatch.cues.spatial_features import HOR_FEATURES
+    from xvmatch.cues.spatial_vectors import horizontal_vectors
 
     boxes = np.array([[2600.0, 500.0, 87.0, 400.0], [1000.0, 500.0, 100.0, 400.0]])
     top = np.array([[100.0, 100.0, 20.0, 20.0], [300.0, 100.0, 20.0, 20.0]])

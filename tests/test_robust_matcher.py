@@ -11,14 +11,14 @@ import pytest
 import torch
 
 from tests.conftest import TINY_APPEARANCE, TINY_GEOMETRY
-from xvmatch.datasets.pair_trials import TrialConfig, dataset_trials
-from xvmatch.geometry.spatial_features import (
+from xvmatch.cues.spatial_features import (
     HOR_FEATURES,
     HYP_FEATURES,
     PAIR_FEATURES,
     TOP_FEATURES,
     FeatureConfig,
 )
+from xvmatch.datasets.pair_trials import TrialConfig, dataset_trials
 from xvmatch.models.cross_view_matcher import (
     CONFIDENCE_FEATURES,
     CrossViewMatcher,

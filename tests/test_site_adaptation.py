@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.geometry.matcher_inputs import appearance_cost
+from xvmatch.cues.matcher_inputs import appearance_cost
 from xvmatch.inference.bundle import DEFAULT_BUNDLE, BundleError, load_bundle, read_manifest
 from xvmatch.inference.learned_association import LearnedMatcher
 from xvmatch.inference.site_adaptation import (

@@ -1,4 +1,4 @@
-"""Tests of the vector-set matching (xvmatch.geometry.spatial_matching, CVMHAT Eqs. 11-12)."""
+"""Tests of the vector-set matching (xvmatch.cues.spatial_matching, CVMHAT Eqs. 11-12)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from xvmatch.geometry import kernel_choice
-from xvmatch.geometry.spatial_matching import (
+from xvmatch.cues import kernel_choice
+from xvmatch.cues.spatial_matching import (
     SpatialParams,
     cost_lower_bound,
     match_vector_sets,

@@ -1,4 +1,4 @@
-"""Tests of the (O, theta) search (xvmatch.geometry.spatial_search, CVMHAT Sec. 3.2.4)."""
+"""Tests of the (O, theta) search (xvmatch.cues.spatial_search, CVMHAT Sec. 3.2.4)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.offset_estimation import (
+from xvmatch.cues.offset_estimation import (
     MIN_AGREEING_CLIPS,
     OFFSET_STEP,
     OFFSET_TOLERANCE,
@@ -24,8 +21,8 @@ from xvmatch.geometry.offset_estimation import (
     judge_offset,
     search_offsets,
 )
-from xvmatch.geometry.spatial_matching import SpatialParams, match_vector_sets
-from xvmatch.geometry.spatial_search import (
+from xvmatch.cues.spatial_matching import SpatialParams, match_vector_sets
+from xvmatch.cues.spatial_search import (
     FollowPolicy,
     associate_frame,
     associate_sequence,
@@ -35,13 +32,16 @@ from xvmatch.geometry.spatial_search import (
     rank_hypotheses,
     search_window,
 )
-from xvmatch.geometry.spatial_vectors import (
+from xvmatch.cues.spatial_vectors import (
     box_centres,
     horizontal_vectors,
     top_geometry,
     top_vectors,
 )
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
+from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
+from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
+from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 PARAMS = SpatialParams()
 WIDTH = SceneConfig().hor_size[0]
@@ -788,7 +788,7 @@ def test_follow_votes_for_o_instead_of_trusting_the_first_frame():
 def test_search_in_blocks_of_candidates_is_the_same(monkeypatch):
     # A crowd is searched in blocks of candidates to bound memory; any block size gives the
     # same ranking, per-candidate bests and keep-best (exact branch and bound in each block).
-    from xvmatch.geometry import spatial_search
+    from xvmatch.cues import spatial_search
 
     rng = np.random.default_rng(5)
     top = np.column_stack([rng.uniform(0, 800, (14, 2)), np.full((14, 2), 20.0)])

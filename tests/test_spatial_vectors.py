@@ -1,4 +1,4 @@
-"""Tests of the spatial-distribution vectors (xvmatch.geometry.spatial_vectors, CVMHAT Eqs. 5-10).
+"""Tests of the spatial-distribution vectors (xvmatch.cues.spatial_vectors, CVMHAT Eqs. 5-10).
 
 Conventions pinned here (from the module docstring): top-image angles are counter-clockwise on
 screen, ``phi = atan2(-(v - v_O), u - u_O)``; theta is the optical axis in that convention, so a
@@ -14,8 +14,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from xvmatch.geometry import kernel_choice
-from xvmatch.geometry.spatial_vectors import (
+from xvmatch.cues import kernel_choice
+from xvmatch.cues.spatial_vectors import (
     REFERENCE_SIZE,
     box_centres,
     horizontal_vectors,
@@ -383,7 +383,7 @@ def test_take_equals_top_vectors_rows(layout, data):
 @settings(max_examples=60, deadline=None)
 @given(layout=_layouts())
 def test_compiled_vectors_are_bit_identical_to_the_numpy_forms(layout):
-    # The search's kernels (geometry/search_kernels.py) compute Eqs. 5-8 per element; they must
+    # The search's kernels (cues/search_kernels.py) compute Eqs. 5-8 per element; they must
     # give exactly the vectorised numpy values, so that features and figures do not move.
     centres, thetas, fov, tau = layout
     geo = top_geometry(centres, np.arange(len(centres)), tau)
@@ -417,7 +417,7 @@ def test_equidistant_people_within_tau_both_stay_whatever_the_box_order():
 def test_occlusion_in_blocks_of_candidates_is_the_same(monkeypatch):
     # A crowd is tested in blocks of candidates to bound memory; any block size gives the same
     # visibility, angles and distances.
-    from xvmatch.geometry import spatial_vectors
+    from xvmatch.cues import spatial_vectors
 
     rng = np.random.default_rng(3)
     centres = rng.uniform(0.0, 300.0, size=(40, 2))

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.mot_boxes import read_mot_boxes
+from xvmatch.formats.mot_boxes import read_mot_boxes
 
 
 def _exit_code(args: list[str]) -> int:

@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.camera_frames import CameraFrames
-from xvmatch.datasets.mot_boxes import read_mot_boxes, shift_frames, write_mot_boxes
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import (
     TrackingVideo,
     render_tracking_video,
     write_tracking_video,
 )
+from xvmatch.formats.camera_frames import CameraFrames
+from xvmatch.formats.mot_boxes import read_mot_boxes, shift_frames, write_mot_boxes
 from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
 from xvmatch.inference.tracking import (
     TrackConfig,
@@ -178,7 +178,7 @@ def test_a_miscalibrated_top_camera_is_refined_first(overview_video, overview, t
     # (--refine-top-camera off), 99.7 refined, as with the exact cameras.
     from tests.test_camera_refinement import TILT
     from tests.test_top_camera_refinement import _turned
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.formats.camera_io import save_cameras
 
     folder = tmp_path / "turned"
     folder.mkdir()

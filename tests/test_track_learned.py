@@ -15,7 +15,7 @@ import pytest
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import FrameBoxes, write_mot_boxes
+from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.inference.track_costs import FrameCosts, frame_evidence, learned_similarity
 from xvmatch.inference.tracking import LearnedEvidence, TrackConfig, track_pair
 from xvmatch.inference.tracklets import Tracklet

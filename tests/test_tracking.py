@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.inference.track_costs import (
     TrackWeights,
@@ -445,7 +445,7 @@ def test_track_pair_on_a_synthetic_scene(solver):
 
 
 def test_tracklet_scores_table10_toy():
-    from xvmatch.evaluation.track_metrics import tracklet_scores
+    from xvmatch.metrics.track_metrics import tracklet_scores
 
     def t(clip, rows):
         return Tracklet(clip, np.arange(len(rows)), np.array(rows), np.zeros((len(rows), 4)))

@@ -9,7 +9,7 @@ import pytest
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
+from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
 
 
 def _track(files, out: Path, *extra: str) -> int:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from xvmatch.datasets.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.evaluation.track_metrics import track_pair_counts, view_track_scores
-from xvmatch.inference.cross_view_metrics import count_sequence, summarize
+from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.tracking import associate_frames, track_pair
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
+from xvmatch.metrics.track_metrics import track_pair_counts, view_track_scores
 
 NAME = "V1-S_55-G_1"
 FRAMES = 60

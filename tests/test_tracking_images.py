@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import FrameBoxes
 from xvmatch.datasets.tracking_video import render_tracking_video
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.learned_association import load_matcher_bundle
 from xvmatch.inference.track_appearance import (
     clip_appearance,

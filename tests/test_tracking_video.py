@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from xvmatch.datasets.camera_frames import open_cameras
+from xvmatch.cues.matcher_inputs import wearer_row
 from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
 from xvmatch.datasets.tracking_video import (
     FLIGHT_HEADING,
     render_tracking_video,
     write_tracking_video,
 )
-from xvmatch.geometry.matcher_inputs import wearer_row
+from xvmatch.formats.camera_frames import open_cameras
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)

@@ -11,18 +11,18 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
+from xvmatch.core.json_text import parse_json
 from xvmatch.datasets.feature_cache import FeatureSet, cached_sequence_features
-from xvmatch.datasets.frame_sources import FrameSourceError, _decode, open_frames
-from xvmatch.datasets.image_size import (
+from xvmatch.datasets.synthetic_io import SchemaError, SyntheticDataset, read_scene
+from xvmatch.evaluation.ablation_cells import load_cells
+from xvmatch.formats.camera_io import CameraFileError, load_cameras
+from xvmatch.formats.frame_sources import FrameSourceError, _decode, open_frames
+from xvmatch.formats.image_size import (
     MAX_IMAGE_PIXELS,
     ImageTooLargeError,
     check_image_size,
     declared_image_size,
 )
-from xvmatch.datasets.synthetic_io import SchemaError, SyntheticDataset, read_scene
-from xvmatch.evaluation.ablation_cells import load_cells
-from xvmatch.geometry.camera_io import CameraFileError, load_cameras
-from xvmatch.geometry.json_text import parse_json
 from xvmatch.inference.bundle import MANIFEST, BundleError, read_manifest
 
 DEEP = "[" * 100_000  # nesting deeper than any JSON reader follows by recursion
@@ -109,8 +109,8 @@ def test_deep_json_cell_file(tmp_path: Path) -> None:
 
 
 def test_a_truncated_feature_cache_is_rebuilt_with_a_warning(tmp_path: Path) -> None:
+    from xvmatch.cues.spatial_features import FeatureConfig
     from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-    from xvmatch.geometry.spatial_features import FeatureConfig
 
     scene = simulate_box_scene(SceneConfig(n_people=(3, 4)), n_frames=2, seed=3)
     config = FeatureConfig(n_hypotheses=2)

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
+from xvmatch.core.worker_pool import worker_pool
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.mot_boxes import write_mot_boxes
-from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.formats.mot_boxes import write_mot_boxes
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/task").is_dir(),
                                 reason="finds the worker processes through /proc (Linux)")

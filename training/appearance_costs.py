@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from xvmatch.datasets.crops import box_crops
+from xvmatch.formats.crops import box_crops
 from xvmatch.models.appearance_net import AppearanceNet, appearance_distance
 
 __all__ = ["AppearanceCoster"]
@@ -15,7 +15,7 @@ __all__ = ["AppearanceCoster"]
 class AppearanceCoster:
     """Learned appearance costs between the boxes of two images.
 
-    Crops every box as in training (:func:`~xvmatch.datasets.crops.box_crops`, the
+    Crops every box as in training (:func:`~xvmatch.formats.crops.box_crops`, the
     network's input size from its weights record), embeds them with the network in eval mode
     and returns ``|a - b| / 2``.
 

@@ -1,6 +1,6 @@
 """DataModules of the box-only geometry model: CVMHAT box files by site, and the box simulator.
 
-Both turn frame pairs into the features of :mod:`xvmatch.geometry.spatial_features` (cached on
+Both turn frame pairs into the features of :mod:`xvmatch.cues.spatial_features` (cached on
 disk) plus labels. Ids are read once, to build the labels (the same id in both views is a match;
 the top-view id ``wearer_id`` is the camera location O), and never reach the features: the model
 sees boxes only, in a canonical order, so scrambling ids or shuffling boxes changes nothing.
@@ -34,14 +34,17 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
-from xvmatch.datasets.cvmhat import (
-    IMAGE_SIZE,
-    default_cvmhat_dir,
-    read_sequence,
-    sequence_names,
-    site_of,
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.core.worker_pool import worker_pool
+from xvmatch.cues.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
+from xvmatch.cues.spatial_features import (
+    FeatureConfig,
+    FrameFeatures,
+    camera_labels,
+    collate_frames,
+    match_labels,
 )
+from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.feature_cache import (
     FeatureSet,
@@ -49,17 +52,14 @@ from xvmatch.datasets.feature_cache import (
     cached_sequence_features,
     default_cache_dir,
 )
-from xvmatch.datasets.mot_boxes import FrameBoxes, scale_frames, shift_frames
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.offset_estimation import AUTO_MAX_OFFSET, estimate_offset
-from xvmatch.geometry.spatial_features import (
-    FeatureConfig,
-    FrameFeatures,
-    camera_labels,
-    collate_frames,
-    match_labels,
+from xvmatch.formats.cvmhat import (
+    IMAGE_SIZE,
+    default_cvmhat_dir,
+    read_sequence,
+    sequence_names,
+    site_of,
 )
-from xvmatch.geometry.worker_pool import worker_pool
+from xvmatch.formats.mot_boxes import FrameBoxes, scale_frames, shift_frames
 
 __all__ = [
     "CvmhatBoxDataModule",
@@ -149,7 +149,7 @@ class TrainingOffset:
         applied: frames the top view is re-timed by (0: the files' timing is kept).
         offset: the minimum of the clips' mean cost curve.
         status: ``applied``, ``within_tolerance`` or ``unsupported``
-            (:class:`~xvmatch.geometry.spatial_search.OffsetEstimate`).
+            (:class:`~xvmatch.cues.spatial_search.OffsetEstimate`).
         support: fraction of the clips whose own minimum agrees.
         evidence: paired t statistic of the clips' preference for ``offset`` over 0.
     """

@@ -35,8 +35,8 @@ sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
 
 import make_default_bundle as recipe  # noqa: E402  (the recipe's renders, configs and log)
 
+from xvmatch.core.output_paths import Input, Output, check_script_outputs  # noqa: E402
 from xvmatch.datasets.camera_shift import MAX_STRENGTH  # noqa: E402
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs  # noqa: E402
 
 CONFIG_OF_ARCH = {"mobilenetv2": "mobilenetv2", "small": "compact"}
 """A network's ``arch`` -> its key in ``recipe.APPEARANCE_CONFIGS``."""

@@ -27,8 +27,8 @@ import torch
 from lightning.pytorch.callbacks import EarlyStopping, ModelCheckpoint, TQDMProgressBar
 from lightning.pytorch.loggers import CSVLogger, TensorBoardLogger
 
-from xvmatch.geometry.atomic_files import atomic_write_text
-from xvmatch.geometry.spatial_features import FeatureConfig
+from xvmatch.core.atomic_files import atomic_write_text
+from xvmatch.cues.spatial_features import FeatureConfig
 from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.models.geometry_encoder import GeometryEncoder

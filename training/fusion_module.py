@@ -41,7 +41,7 @@ def batch_acc9(cost: np.ndarray, batch: CueBatch, gammas: Sequence[float]) -> np
 
     ``(TP + TN) / U`` with TP the predicted pairs that are true, TN the boxes of persons seen
     in one view only that are left unmatched, U the unique persons (as
-    :func:`~xvmatch.inference.cross_view_metrics.count_pair`).
+    :func:`~xvmatch.metrics.cross_view_metrics.count_pair`).
 
     Args:
         cost: ``(B, M, N)`` fused costs.

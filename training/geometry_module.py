@@ -24,7 +24,7 @@ import torch
 from torch import Tensor, nn
 
 from xvmatch.inference.assignment import assign
-from xvmatch.inference.cross_view_metrics import count_frame, summarize
+from xvmatch.metrics.cross_view_metrics import count_frame, summarize
 from xvmatch.models.losses import GeometryMatchingLoss, frame_nll
 
 __all__ = ["GeometryMatchingModule", "frame_counts"]
@@ -36,7 +36,7 @@ def frame_counts(cost: np.ndarray, match: np.ndarray, gamma: float):
     """Association counts of one frame from its cost matrix and ground-truth pairs.
 
     Rows and columns stand for people; a matched column takes its row's label, an unmatched one
-    a label of its own, so :func:`~xvmatch.inference.cross_view_metrics.count_frame` scores it
+    a label of its own, so :func:`~xvmatch.metrics.cross_view_metrics.count_frame` scores it
     like the real ids would.
     """
     m, n = cost.shape

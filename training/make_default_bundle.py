@@ -37,8 +37,8 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.datasets.camera_shift import MAX_STRENGTH
-from xvmatch.geometry.atomic_files import atomic_write_text
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = {
@@ -81,7 +81,7 @@ def render(work: Path, workers: int) -> dict[str, Path]:
 def sim_datamodule(args: argparse.Namespace, val_scenes: int, seed: int):
     """The box simulator's scenes (with the same seed as the pretraining's, features are
     cached)."""
-    from xvmatch.geometry.spatial_features import FeatureConfig
+    from xvmatch.cues.spatial_features import FeatureConfig
     from xvmatch.training.box_datamodule import SimBoxDataModule
 
     return SimBoxDataModule(n_scenes=args.sim_scenes, frames_per_scene=90, frame_step=3,
@@ -97,7 +97,7 @@ def pretrain(args: argparse.Namespace, work: Path) -> Path:
     out = work / "geometry_init.pt"
     if out.is_file():
         return out
-    from xvmatch.geometry.spatial_features import FeatureConfig
+    from xvmatch.cues.spatial_features import FeatureConfig
     from xvmatch.training.fit_geometry import fit_geometry
 
     result = fit_geometry(

@@ -49,7 +49,7 @@ sys.path.insert(0, os.fspath(Path(__file__).resolve().parent))
 import make_default_bundle as recipe  # noqa: E402  (the recipe's renders and log)
 from finetune_appearance import files_beside  # noqa: E402
 
-from xvmatch.geometry.output_paths import Input, Output, check_script_outputs  # noqa: E402
+from xvmatch.core.output_paths import Input, Output, check_script_outputs  # noqa: E402
 
 TRAINED = {"gates": ("confidence.",), "cues": ("confidence.", "cue_embed.", "fusion.",
                                                "fusion_linear.")}

@@ -47,6 +47,12 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
+from xvmatch.cues.matcher_inputs import CUE_NAMES, INPUT_SETTINGS, canonical_cues, frame_cues
+from xvmatch.cues.spatial_features import (
+    FeatureConfig,
+    FrameFeatures,
+    camera_labels,
+)
 from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
 from xvmatch.datasets.feature_cache import FrameJob, cached_frame_features
 from xvmatch.datasets.pair_trials import (
@@ -56,18 +62,7 @@ from xvmatch.datasets.pair_trials import (
     open_dataset,
     scene_samples,
 )
-from xvmatch.geometry.matcher_inputs import (
-    CUE_NAMES,
-    INPUT_SETTINGS,
-    FrameCameras,
-    canonical_cues,
-    frame_cues,
-)
-from xvmatch.geometry.spatial_features import (
-    FeatureConfig,
-    FrameFeatures,
-    camera_labels,
-)
+from xvmatch.geometry.camera import FrameCameras
 from xvmatch.models.appearance_net import AppearanceNet, appearance_from_weights
 from xvmatch.training.appearance_costs import AppearanceCoster
 from xvmatch.training.box_datamodule import (
@@ -92,7 +87,7 @@ __all__ = [
 ]
 
 VARIANTS = INPUT_SETTINGS
-"""Input settings trained on (:data:`~xvmatch.geometry.matcher_inputs.INPUT_SETTINGS`)."""
+"""Input settings trained on (:data:`~xvmatch.cues.matcher_inputs.INPUT_SETTINGS`)."""
 
 Item = tuple[FrameFeatures, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 

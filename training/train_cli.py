@@ -43,7 +43,7 @@ def check_ckpt_path(path: str, what: str = "--ckpt_path") -> None:
     Raises:
         ValueError: one line naming ``what`` and the path.
     """
-    from xvmatch.geometry.input_files import check_input_file
+    from xvmatch.core.input_files import check_input_file
 
     name = os.fspath(path)
     if name.split(":")[0] in CHECKPOINT_NAMES and not os.path.lexists(name):

@@ -7,7 +7,7 @@ this one. Each command imports only what it needs, so ``xvmatch associate`` star
 imports torch. Bad input ends with one line ``xvmatch: error: ...`` naming the file and line,
 exit code 2. Every size or count option has a range, given in its help and checked while the
 arguments are parsed (:mod:`xvmatch.cli_types`), before any work starts; so is every output path
-(:mod:`xvmatch.geometry.output_paths`: no FIFO, device or folder where a file goes, no input
+(:mod:`xvmatch.core.output_paths`: no FIFO, device or folder where a file goes, no input
 overwritten, no two outputs on one path, a writable folder).
 """
 
@@ -35,9 +35,9 @@ EXAMPLES = {
 def version_text() -> str:
     """``xvmatch --version``: the package and every on-disk format it reads and writes."""
     from xvmatch import __version__
+    from xvmatch.cues.spatial_features import FEATURE_VERSION
     from xvmatch.datasets.synthetic_io import SCHEMA_VERSION
-    from xvmatch.geometry.camera_io import FORMAT_VERSION as CAMERA_VERSION
-    from xvmatch.geometry.spatial_features import FEATURE_VERSION
+    from xvmatch.formats.camera_io import FORMAT_VERSION as CAMERA_VERSION
     from xvmatch.inference.bundle import BUNDLE_FORMAT_VERSION, OPSET
 
     try:  # the training file format needs torch (the learn extra)

@@ -15,7 +15,7 @@ import sys
 
 from xvmatch.cli_options import add_command_parser, progress_bar
 from xvmatch.cli_types import int_in, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_ablate_parser"]
 

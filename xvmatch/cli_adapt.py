@@ -27,7 +27,7 @@ from xvmatch.cli_options import (
     read_boxes,
 )
 from xvmatch.cli_types import box_id, int_in, thread_count, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs, check_own_folder
+from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["ADAPT_COMMAND", "EXAMPLE", "add_adapt_parser", "refusal_message"]
 
@@ -36,7 +36,7 @@ EXAMPLE = ("xvmatch adapt --top top.txt --hor hor.txt --top-images top.mp4 --hor
            "--top-images top.mp4 --hor-images hor.mp4 --out pred.csv")
 
 ADAPT_COMMAND = "xvmatch adapt"
-"""The owner of a site bundle folder (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
+"""The owner of a site bundle folder (:func:`xvmatch.core.output_paths.claim_folder`)."""
 
 
 def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
@@ -115,8 +115,8 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
         note_camera_refinement,
         open_models,
     )
-    from xvmatch.datasets.mot_boxes import check_common_frames
-    from xvmatch.geometry.output_paths import claim_folder
+    from xvmatch.core.output_paths import claim_folder
+    from xvmatch.formats.mot_boxes import check_common_frames
     from xvmatch.inference.adaptation_pairs import MiningConfig
     from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
     from xvmatch.inference.site_bundle import adapt_to_site, write_site_bundle

@@ -35,7 +35,7 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs, check_own_folder
+from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["EXAMPLE", "add_associate_parser"]
 
@@ -112,8 +112,8 @@ def _keep_heap_memory() -> None:
 
 
 def _cmd_associate(args: argparse.Namespace) -> int:
-    from xvmatch.datasets.mot_boxes import write_predictions
-    from xvmatch.geometry.spatial_search import associate_sequence
+    from xvmatch.cues.spatial_search import associate_sequence
+    from xvmatch.formats.mot_boxes import write_predictions
 
     _keep_heap_memory()
     params = spatial_params(args)
@@ -147,7 +147,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         note_if_assumed(hor_size, hor, args.hor, args.quiet)
     offset = resolve_offset(args, top, hor, hor_width, params, max_offset, args.camera_id)
     if offset:
-        from xvmatch.datasets.mot_boxes import shift_frames
+        from xvmatch.formats.mot_boxes import shift_frames
 
         top = shift_frames(top, offset)
     frames = sorted(set(top) | set(hor))

@@ -15,7 +15,7 @@ import time
 
 from xvmatch.cli_options import add_command_parser, progress_bar
 from xvmatch.cli_types import seed_value, worker_count
-from xvmatch.geometry.output_paths import (
+from xvmatch.core.output_paths import (
     Input,
     Output,
     check_outputs,

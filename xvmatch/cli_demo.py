@@ -19,7 +19,7 @@ from pathlib import Path
 
 from xvmatch.cli_options import add_command_parser
 from xvmatch.cli_types import int_in, seed_value, worker_count
-from xvmatch.geometry.output_paths import (
+from xvmatch.core.output_paths import (
     Input,
     Output,
     check_outputs,
@@ -33,7 +33,7 @@ EXAMPLES = {"demo": "xvmatch demo --out xvmatch-demo --scenes 3 --frames 2"}
 
 DEMO_COMMAND = "xvmatch demo"
 """The owner named in the marker of a demo's folder: the demo writes only into a new or empty
-folder or one an earlier demo made (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
+folder or one an earlier demo made (:func:`xvmatch.core.output_paths.claim_folder`)."""
 
 _DEMO_COUNT = int_in(1, 100, "a demonstration holds every pair in memory; for more, xvmatch "
                      "synth + baseline")
@@ -68,7 +68,7 @@ def add_demo_parser(subparsers) -> argparse.ArgumentParser:
 def _cmd_demo(args: argparse.Namespace) -> int:
     """``xvmatch demo``; a run that fails or is interrupted removes the folder it made (a
     half-made demo folder would pass for one)."""
-    from xvmatch.geometry.folder_marker import is_own_folder
+    from xvmatch.core.folder_marker import is_own_folder
 
     made = not os.path.lexists(args.out)
     try:
@@ -95,9 +95,9 @@ def _run_demo(args: argparse.Namespace) -> int:
     )
     from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, score_trial
     from xvmatch.inference.assignment import assign
-    from xvmatch.inference.cross_view_metrics import summarize
     from xvmatch.inference.learned_association import load_matcher_bundle
-    from xvmatch.inference.match_drawing import draw_matches, write_match_picture
+    from xvmatch.metrics.cross_view_metrics import summarize
+    from xvmatch.viz.match_drawing import draw_matches, write_match_picture
 
     start = time.perf_counter()
     out = Path(args.out)

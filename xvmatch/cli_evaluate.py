@@ -65,8 +65,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from xvmatch.cli_track import evaluate_tracks_command
 
         return evaluate_tracks_command(args)
-    from xvmatch.datasets.mot_boxes import check_common_frames, read_predictions, shift_frames
-    from xvmatch.inference.cross_view_metrics import (
+    from xvmatch.formats.mot_boxes import check_common_frames, read_predictions, shift_frames
+    from xvmatch.metrics.cross_view_metrics import (
         count_sequence,
         format_table,
         scores_to_dict,

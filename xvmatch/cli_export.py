@@ -10,7 +10,7 @@ import argparse
 import sys
 
 from xvmatch.cli_options import add_command_parser
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_export_parser"]
 

@@ -12,7 +12,7 @@ import sys
 
 from xvmatch.cli_options import HOR_IMAGE_SIZE, add_command_parser
 from xvmatch.cli_types import int_in, seed_value, thread_count, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_fit_geometry_parser"]
 
@@ -141,15 +141,15 @@ def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
     import warnings
     from pathlib import Path
 
-    from xvmatch.datasets.box_image_size import (
+    from xvmatch.formats.box_image_size import (
         CVMHAT_SIZE,
         MIN_EXTENT,
         box_extent,
         check_boxes_in_image,
         consistent_with,
     )
-    from xvmatch.datasets.cvmhat import sequence_names, site_of
-    from xvmatch.datasets.mot_boxes import read_mot_boxes, scale_frames, write_mot_boxes
+    from xvmatch.formats.cvmhat import sequence_names, site_of
+    from xvmatch.formats.mot_boxes import read_mot_boxes, scale_frames, write_mot_boxes
 
     if size is not None and abs(size[1] * CVMHAT_SIZE[0] / size[0] - CVMHAT_SIZE[1]) > 0.02 * \
             CVMHAT_SIZE[1]:

@@ -1,6 +1,6 @@
 """The command line's side of the horizontal image size rule: the rule itself (which size the
 horizontal boxes belong to, and whether they fit it) lives in
-:mod:`xvmatch.datasets.box_image_size`; this module adds the one-line note a command prints when
+:mod:`xvmatch.formats.box_image_size`; this module adds the one-line note a command prints when
 it assumed the CVMHAT size.
 """
 
@@ -10,7 +10,7 @@ import os
 import sys
 from collections.abc import Mapping
 
-from xvmatch.datasets.box_image_size import ASSUMED, box_extent
+from xvmatch.formats.box_image_size import ASSUMED, box_extent
 
 __all__ = ["note_if_assumed"]
 
@@ -19,7 +19,7 @@ def note_if_assumed(resolved: tuple[tuple[int, int], str], hor: Mapping,
                     hor_path: str | os.PathLike, quiet: bool = False,
                     option: str = "--image-size") -> None:
     """Print the one-line note on stderr when
-    :func:`~xvmatch.datasets.box_image_size.resolve_size` assumed the CVMHAT size (not with
+    :func:`~xvmatch.formats.box_image_size.resolve_size` assumed the CVMHAT size (not with
     ``quiet``). Commands call it once every check has passed, as the work starts, so
     that a refused run prints its error line alone."""
     if quiet or resolved[1] != ASSUMED:

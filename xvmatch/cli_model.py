@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Mapping
 
 from xvmatch.cli_options import UsageError, add_image_options, check_images_together
 from xvmatch.cli_types import float_in, int_in, thread_count
-from xvmatch.geometry.output_paths import Output, check_own_folder
+from xvmatch.core.output_paths import Output, check_own_folder
 
 __all__ = [
     "CAMERAS_COMMAND",
@@ -128,7 +128,7 @@ def _listed(value) -> list:
 
 
 def check_write_cameras(args: argparse.Namespace) -> list[Output]:
-    """``--write-cameras``' outputs for :func:`~xvmatch.geometry.output_paths.check_outputs`,
+    """``--write-cameras``' outputs for :func:`~xvmatch.core.output_paths.check_outputs`,
     after refusing them without ``--cameras``, not one per ``--cameras``, or with
     ``--refine-top-camera off``, and a folder that is neither new, empty nor its own."""
     paths = _listed(getattr(args, "write_cameras", None))
@@ -155,13 +155,13 @@ def check_write_cameras(args: argparse.Namespace) -> list[Output]:
 
 def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
     """Write ``--write-cameras`` (when given): ``cameras``, the run's
-    :class:`~xvmatch.datasets.camera_frames.CameraFrames` as refined (a list, one per path,
+    :class:`~xvmatch.formats.camera_frames.CameraFrames` as refined (a list, one per path,
     for ``associate-multi``), in ``--cameras``' form (a folder it made before loses the camera
     files it wrote of frames this run has not: they would be read with the new ones; a file the
     user put there is kept); say what they hold unless quiet."""
-    from xvmatch.datasets.camera_frames import save_camera_frames
-    from xvmatch.geometry.folder_marker import record_own_files, remove_own_files
-    from xvmatch.geometry.output_paths import claim_folder
+    from xvmatch.core.folder_marker import record_own_files, remove_own_files
+    from xvmatch.core.output_paths import claim_folder
+    from xvmatch.formats.camera_frames import save_camera_frames
 
     paths = _listed(getattr(args, "write_cameras", None))
     if not paths:
@@ -229,7 +229,7 @@ def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
 
 DRAW_COMMAND = "xvmatch associate --draw"
 """The owner of a ``--draw`` folder: pictures are written only into a new or empty folder or one
-an earlier ``--draw`` made (:func:`xvmatch.geometry.output_paths.claim_folder`)."""
+an earlier ``--draw`` made (:func:`xvmatch.core.output_paths.claim_folder`)."""
 
 LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs",
                 "precision", "write_cameras")
@@ -303,14 +303,14 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
     ``--image-size``, the ``--hor-images`` and the ``--cameras`` file's ego camera must agree
     when given; with none, CVMHAT's 2688x1512 when the boxes are consistent with it (a note on
     stderr), else an error asking for ``--image-size``. Every horizontal box must lie in it."""
-    from xvmatch.datasets.box_image_size import resolve_size
+    from xvmatch.formats.box_image_size import resolve_size
 
     check_images_together(args)
     given = []
     if getattr(args, "image_size", None) is not None:
         given.append((tuple(args.image_size), "--image-size"))
     if getattr(args, "model", None) is not None and getattr(args, "hor_images", None):
-        from xvmatch.datasets.frame_sources import open_frames
+        from xvmatch.formats.frame_sources import open_frames
 
         with open_frames(args.hor_images, box_frames=sorted(hor)) as source:
             given.append((tuple(source.size), f"the horizontal images {args.hor_images}"))
@@ -322,9 +322,9 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
 
 def ego_camera_size(cameras: str) -> tuple[tuple[int, int], str]:
     """The horizontal image size that ``--cameras``' ego cameras give, and where it comes
-    from (for :func:`~xvmatch.datasets.box_image_size.resolve_size`); one size for all of
+    from (for :func:`~xvmatch.formats.box_image_size.resolve_size`); one size for all of
     them, or an error asking for ``--image-size``."""
-    from xvmatch.datasets.camera_frames import open_cameras
+    from xvmatch.formats.camera_frames import open_cameras
 
     sizes = {tuple(c.hor.image_size) for _, c in open_cameras(cameras).all()}
     if len(sizes) != 1:
@@ -441,7 +441,7 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
     the run's appearance and camera checks and its top camera refinement, if any."""
     import json
 
-    from xvmatch.geometry.atomic_files import atomic_write_text
+    from xvmatch.core.atomic_files import atomic_write_text
 
     record = {
         "version": 1,
@@ -500,7 +500,7 @@ def draw_pictures(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Ma
         frames: the frames that may be drawn (those with boxes in both views).
         sources: ``{"top": source, "hor": source}`` of the images; None: boxes only, drawn on a
             blank canvas of ``hor_size`` and the top view as a plan
-            (:mod:`xvmatch.inference.box_canvas`).
+            (:mod:`xvmatch.viz.box_canvas`).
         hor_size: the horizontal image size.
         labels: print each box's id (``--no-labels``: none).
     """
@@ -510,9 +510,9 @@ def draw_pictures(folder: str, every: int, top: Mapping, hor: Mapping, pairs: Ma
 
     import numpy as np
 
-    from xvmatch.geometry.output_paths import claim_folder
-    from xvmatch.inference.box_canvas import blank_view, top_plan
-    from xvmatch.inference.match_drawing import (
+    from xvmatch.core.output_paths import claim_folder
+    from xvmatch.viz.box_canvas import blank_view, top_plan
+    from xvmatch.viz.match_drawing import (
         draw_matches,
         frames_to_draw,
         picture_path,

@@ -45,7 +45,7 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, float_in, int_in, thread_count, worker_count
-from xvmatch.geometry.output_paths import (
+from xvmatch.core.output_paths import (
     Input,
     Output,
     check_outputs,
@@ -159,9 +159,9 @@ def _offsets(args: argparse.Namespace, n_hor: int) -> list:
 
 def _aligned(views, offsets, images, cameras, camera_rows):
     """Every view (and its images and cameras) re-timed so that top frame ``t + N_k`` and frame
-    ``t`` of horizontal view ``k`` share a number (:func:`xvmatch.datasets.mot_boxes.
+    ``t`` of horizontal view ``k`` share a number (:func:`xvmatch.formats.mot_boxes.
     align_frames`); the rows keep their own frame numbers in the output."""
-    from xvmatch.datasets.mot_boxes import align_frames
+    from xvmatch.formats.mot_boxes import align_frames
     from xvmatch.inference.learned_pipeline import retimed
 
     views, shifts = align_frames(views, offsets)
@@ -176,8 +176,8 @@ def _aligned(views, offsets, images, cameras, camera_rows):
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
     from xvmatch.cli_image_size import note_if_assumed
-    from xvmatch.datasets.box_image_size import check_boxes_in_image, resolve_size
-    from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
+    from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
+    from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.multi_view_assignment import consistent_hungarian, solve_multi_view
     from xvmatch.inference.multi_view_costs import multi_view_costs
 
@@ -241,7 +241,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                          f"the images {path}", ids=False)
             images = sources
         if args.cameras is not None:
-            from xvmatch.datasets.camera_frames import open_cameras
+            from xvmatch.formats.camera_frames import open_cameras
 
             if not matcher.bundle.manifest.uses_cameras:
                 raise ValueError(f"{args.model}: this matcher takes no camera cues; drop "

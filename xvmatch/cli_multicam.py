@@ -4,7 +4,7 @@ each person's path on the ground (issue 32; :mod:`xvmatch.inference.multicam`), 
 
 Everything is read and checked, and the answer computed, before anything is written; the outputs
 are written atomically into a folder the command owns
-(:func:`xvmatch.geometry.output_paths.claim_folder`).
+(:func:`xvmatch.core.output_paths.claim_folder`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import os
 
 from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
 from xvmatch.cli_types import float_in, image_size, int_in
-from xvmatch.geometry.output_paths import Input, Output, check_outputs, claim_folder, plain_name
+from xvmatch.core.output_paths import Input, Output, check_outputs, claim_folder, plain_name
 
 __all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",
            "read_ground_csv"]
@@ -120,7 +120,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         return _fit_homographies(args)
     if args.boxes is None or args.cameras is None:
         raise UsageError("give --boxes NAME=FILE ... and --cameras (or --fit-homography)")
-    from xvmatch.geometry.camera_io import load_ground_cameras
+    from xvmatch.formats.camera_io import load_ground_cameras
     from xvmatch.inference.multicam import (
         MulticamInputError,
         MulticamOptions,
@@ -146,7 +146,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
                   [Input("--cameras", args.cameras),
                    *(Input("--boxes", f) for f in files.values()),
                    *(Input("--images", f) for f in images.values())])
-    from xvmatch.geometry.output_paths import check_own_folder
+    from xvmatch.core.output_paths import check_own_folder
 
     check_own_folder(args.out, COMMAND)
     cameras = load_ground_cameras(args.cameras)
@@ -254,7 +254,7 @@ def _drop_above_horizon(boxes, cameras, files):
     above its horizon, and ``{camera: {frame: mask of the dropped}}``; one warning per camera."""
     import sys
 
-    from xvmatch.datasets.mot_boxes import FrameBoxes
+    from xvmatch.formats.mot_boxes import FrameBoxes
     from xvmatch.geometry.ground_plane import foot_points
 
     kept, above = {}, {}
@@ -276,7 +276,7 @@ def _put_back(boxes, relabelled, above, last_id: int):
     """The dropped boxes back in their places, a new global id per (camera, track id)."""
     import numpy as np
 
-    from xvmatch.datasets.mot_boxes import FrameBoxes
+    from xvmatch.formats.mot_boxes import FrameBoxes
 
     out, fresh = {}, {}
     for name, frames in boxes.items():
@@ -345,8 +345,8 @@ def _line_of(path: str, message: str) -> str:
 
 def _write_outputs(out, boxes, relabelled, result, picture: bytes) -> None:
     """Every output file, each atomically."""
-    from xvmatch.datasets.mot_boxes import write_mot_boxes
-    from xvmatch.geometry.atomic_files import atomic_write_bytes, atomic_write_text
+    from xvmatch.core.atomic_files import atomic_write_bytes, atomic_write_text
+    from xvmatch.formats.mot_boxes import write_mot_boxes
 
     for name, frames in relabelled.items():
         write_mot_boxes(out / f"{name}.txt", frames)
@@ -439,9 +439,9 @@ def _fit_homographies(args: argparse.Namespace) -> int:
     """``--fit-homography POINTS.csv``: one H per camera, written as a cameras file."""
     import numpy as np
 
-    from xvmatch.geometry.camera_io import save_cameras
+    from xvmatch.core.input_files import read_input_text
+    from xvmatch.formats.camera_io import save_cameras
     from xvmatch.geometry.ground_plane import GroundCamera, fit_homography
-    from xvmatch.geometry.input_files import read_input_text
 
     check_outputs([Output("--out", args.out)], [Input("--fit-homography", args.fit_homography)])
     sizes = {}
@@ -530,7 +530,7 @@ def evaluate_multicam_command(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
 
-    from xvmatch.evaluation.multicam_metrics import format_multicam, multicam_scores
+    from xvmatch.metrics.multicam_metrics import format_multicam, multicam_scores
 
     folder = Path(args.multicam)
     if not folder.is_dir():

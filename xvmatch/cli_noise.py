@@ -7,7 +7,7 @@ import argparse
 
 from xvmatch.cli_options import HOR_IMAGE_SIZE, add_command_parser, read_boxes
 from xvmatch.cli_types import box_id, float_in, seed_value
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_noise_parser"]
 
@@ -57,14 +57,14 @@ def add_noise_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_noise(args: argparse.Namespace) -> int:
     from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
-    from xvmatch.datasets.mot_boxes import write_mot_boxes
+    from xvmatch.formats.mot_boxes import write_mot_boxes
 
     check_outputs([Output("--out", args.out)], [Input("--boxes", args.boxes)])
     frames = read_boxes(args.boxes, args.duplicates)
     size = args.image_size
     if args.view == "hor":  # false boxes land in this image: the associate rule's size
         from xvmatch.cli_image_size import note_if_assumed
-        from xvmatch.datasets.box_image_size import resolve_size
+        from xvmatch.formats.box_image_size import resolve_size
 
         resolved = resolve_size(frames, args.boxes, [] if size is None else
                                 [(size, "--image-size")])

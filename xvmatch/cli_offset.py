@@ -25,7 +25,7 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import MAX_FRAME_OFFSET, box_id, int_in, offset_value, worker_count
-from xvmatch.geometry.offset_estimation import (
+from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
     CLIP_LENGTH,
     CLIPS,
@@ -61,7 +61,7 @@ def read_offset_record(path: str | os.PathLike) -> int:
     Raises:
         ValueError: one line naming the file and the field, ending with what to do.
     """
-    from xvmatch.geometry.input_files import InputFileError, read_input_bytes
+    from xvmatch.core.input_files import InputFileError, read_input_bytes
 
     fix = "pass --offset N"
     where = os.fspath(path)
@@ -90,7 +90,7 @@ def read_offset_record(path: str | os.PathLike) -> int:
 def check_clip_start(clip_start: int | None, hor, clip_length: int) -> None:
     """Refuse a ``--clip-start`` whose clip of ``clip_length`` frames is not inside the
     horizontal video ``hor`` (``{frame: boxes}``): it would score no frame, or a clip cut
-    short (:func:`~xvmatch.geometry.offset_estimation.clip_start_range`).
+    short (:func:`~xvmatch.cues.offset_estimation.clip_start_range`).
 
     Raises:
         UsageError: one line naming ``--clip-start`` and the valid starts.
@@ -180,12 +180,12 @@ def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
 
     Every command that pairs views (associate, track, associate-multi) comes here, so here
     views that share no frame at the offset found are refused
-    (:func:`~xvmatch.datasets.mot_boxes.check_common_frames`): an empty result is no answer.
+    (:func:`~xvmatch.formats.mot_boxes.check_common_frames`): an empty result is no answer.
 
     Raises:
         ValueError: the views share no frame with boxes, naming both files and the offset.
     """
-    from xvmatch.datasets.mot_boxes import check_common_frames
+    from xvmatch.formats.mot_boxes import check_common_frames
 
     offset = _offset_value(args, top, hor, hor_width, params, max_offset, camera_id, value,
                            label)
@@ -201,7 +201,7 @@ def _offset_value(args: argparse.Namespace, top, hor, hor_width: float, params,
     value = args.offset if value is None else value
     if value != "auto":
         return int(value)
-    from xvmatch.geometry.offset_estimation import MIN_AGREEING_CLIPS, clip_starts, estimate_offset
+    from xvmatch.cues.offset_estimation import MIN_AGREEING_CLIPS, clip_starts, estimate_offset
 
     if top and hor:  # (a view with no frames: the estimate's own error)
         starts = clip_starts((min(hor), max(hor)), (min(top), max(top)), CLIP_LENGTH,
@@ -241,7 +241,7 @@ def unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> st
     asked for a single clip with --clips 1 or --clip-start)."""
     import numpy as np
 
-    from xvmatch.geometry.offset_estimation import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
+    from xvmatch.cues.offset_estimation import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
 
     n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
     if n < 2 and one_clip_asked:
@@ -258,7 +258,7 @@ def unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> st
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:
-    from xvmatch.geometry.offset_estimation import estimate_offset
+    from xvmatch.cues.offset_estimation import estimate_offset
 
     params = spatial_params(args)
     top = read_boxes(args.top, args.duplicates)
@@ -270,7 +270,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
                          "clip)")
     check_clip_start(args.clip_start, hor, args.clip_length)
     from xvmatch.cli_image_size import note_if_assumed
-    from xvmatch.datasets.box_image_size import resolve_size
+    from xvmatch.formats.box_image_size import resolve_size
 
     given = [] if args.image_size is None else [(args.image_size, "--image-size")]
     resolved = resolve_size(hor, args.hor, given)

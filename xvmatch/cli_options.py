@@ -7,7 +7,7 @@ by :func:`check_images_together`), and the horizontal ``--image-size``'s type an
 come the sub-command parser (:func:`add_command_parser`), the progress bar
 (:func:`progress_bar`), the box reader that prints the reader's warnings
 (:func:`read_boxes`) and :class:`UsageError`. Output paths are checked by
-:mod:`xvmatch.geometry.output_paths`; :func:`image_inputs` lists the images as its inputs.
+:mod:`xvmatch.core.output_paths`; :func:`image_inputs` lists the images as its inputs.
 
 Nothing here imports :mod:`xvmatch.cli` (the root imports the command modules, never the
 reverse), and nothing heavy is imported until a command runs.
@@ -20,7 +20,7 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 
 from xvmatch.cli_types import float_in, image_size
-from xvmatch.geometry.output_paths import Input
+from xvmatch.core.output_paths import Input
 
 __all__ = [
     "HOR_IMAGE_SIZE",
@@ -76,7 +76,7 @@ def read_boxes(path: str, duplicates: str):
     as ``xvmatch: warning: ...`` lines."""
     import warnings
 
-    from xvmatch.datasets.mot_boxes import read_mot_boxes
+    from xvmatch.formats.mot_boxes import read_mot_boxes
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -132,9 +132,9 @@ def add_spatial_options(parser: argparse.ArgumentParser) -> None:
 
 
 def spatial_params(args: argparse.Namespace):
-    """The :class:`~xvmatch.geometry.spatial_matching.SpatialParams` of the options of
+    """The :class:`~xvmatch.cues.spatial_matching.SpatialParams` of the options of
     :func:`add_spatial_options` (checked there: one line, exit 2, before any work)."""
-    from xvmatch.geometry.spatial_matching import SpatialParams
+    from xvmatch.cues.spatial_matching import SpatialParams
 
     return SpatialParams(
         rho=args.rho, lam=args.lam, tau_deg=args.tau, dtheta_deg=args.dtheta, fov_deg=args.fov
@@ -175,7 +175,7 @@ def check_images_together(args: argparse.Namespace) -> None:
 
 def image_inputs(args: argparse.Namespace) -> list[Input]:
     """The images of :func:`add_image_options` as inputs of the output-path check
-    (:func:`xvmatch.geometry.output_paths.check_outputs`)."""
+    (:func:`xvmatch.core.output_paths.check_outputs`)."""
     hor = args.hor_images
     return [Input("--top-images", args.top_images),
             *(Input("--hor-images", h) for h in (hor if isinstance(hor, list) else [hor]))]

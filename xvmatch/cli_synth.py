@@ -25,7 +25,7 @@ from xvmatch.cli_options import (
     read_boxes,
 )
 from xvmatch.cli_types import float_in, image_size, int_in, seed_value, worker_count
-from xvmatch.geometry.output_paths import Input, Output, check_outputs
+from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
 
@@ -164,6 +164,8 @@ SYNTH_CAMERAS = "synth --cameras"
 
 def _synth_cameras(args: argparse.Namespace) -> int:
     """``synth --cameras N``: one multi-camera scene, rendered or box-only (issue 32)."""
+    from xvmatch.core.folder_marker import files_under, record_own_files, remove_own_files
+    from xvmatch.core.output_paths import claim_folder
     from xvmatch.datasets.image_render import Difficulty
     from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
     from xvmatch.datasets.multicam_scenes import (
@@ -173,8 +175,6 @@ def _synth_cameras(args: argparse.Namespace) -> int:
         simulate_multicam_scene,
         write_multicam_scene,
     )
-    from xvmatch.geometry.folder_marker import files_under, record_own_files, remove_own_files
-    from xvmatch.geometry.output_paths import claim_folder
 
     if args.texture:
         raise ValueError("--texture applies to image pairs, not to --cameras")
@@ -290,10 +290,10 @@ def _show_boxes(args: argparse.Namespace) -> int:
     import numpy as np
 
     from xvmatch.cli_image_size import note_if_assumed
-    from xvmatch.datasets.box_image_size import resolve_size
-    from xvmatch.datasets.mot_boxes import read_predictions
-    from xvmatch.inference.box_canvas import blank_view, top_plan
-    from xvmatch.inference.match_drawing import draw_matches, write_match_picture
+    from xvmatch.formats.box_image_size import resolve_size
+    from xvmatch.formats.mot_boxes import read_predictions
+    from xvmatch.viz.box_canvas import blank_view, top_plan
+    from xvmatch.viz.match_drawing import draw_matches, write_match_picture
 
     if args.pair is not None or args.top is None or args.hor is None:
         raise ValueError("give either PAIR (a synthetic pair) or --top and --hor (box files)")
@@ -345,8 +345,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
         if getattr(args, option) is not None:
             raise ValueError(f"--{option.replace('_', '-')} applies to box files (--top, --hor)")
 
+    from xvmatch.core.atomic_files import atomic_write_bytes
     from xvmatch.datasets.synthetic_io import draw_pair, read_scene
-    from xvmatch.geometry.atomic_files import atomic_write_bytes
 
     annotation, root, frame = _resolve_pair(args.pair, args.scene, args.frame)
     record = read_scene(annotation, root)

@@ -52,7 +52,7 @@ from xvmatch.cli_options import (
     spatial_params,
 )
 from xvmatch.cli_types import box_id, float_in, int_in, seed_value, worker_count
-from xvmatch.geometry.output_paths import (
+from xvmatch.core.output_paths import (
     Input,
     Output,
     check_outputs,
@@ -118,7 +118,7 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     after every check (images given together, the frames the boxes list, boxes inside the
     images, ``--image-size`` agreeing, a bundle with an appearance network unless the model
     gives the learned weights)."""
-    from xvmatch.datasets.box_image_size import check_boxes_in_image
+    from xvmatch.formats.box_image_size import check_boxes_in_image
     from xvmatch.inference.learned_pipeline import open_view_images
     from xvmatch.inference.tracking import TrackImages
 
@@ -216,12 +216,12 @@ def _fitted_cameras_config(args: argparse.Namespace, config, refinement, images)
 
 def _aligned(top, hor, images, cameras, offset: int):
     """The views (and their images and cameras) re-timed so that top frame ``t + offset`` and
-    horizontal frame ``t`` are tracked as one moment (:func:`xvmatch.datasets.mot_boxes.
+    horizontal frame ``t`` are tracked as one moment (:func:`xvmatch.formats.mot_boxes.
     align_frames`); the rows, and so the written tracks, keep their own frame numbers. The
     cameras are numbered by the horizontal frames."""
     if not offset:
         return top, hor, images, cameras
-    from xvmatch.datasets.mot_boxes import align_frames
+    from xvmatch.formats.mot_boxes import align_frames
     from xvmatch.inference.learned_pipeline import retimed
 
     (top, hor), (s_top, s_hor) = align_frames([top, hor], [offset])
@@ -324,7 +324,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from xvmatch.datasets.detection_rows import read_detection_rows, write_track_rows
+    from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
     from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
 
@@ -371,7 +371,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     images, sources, size = _open_images(args, top.frames, hor.frames, model, weights)
     try:
         from xvmatch.cli_image_size import note_if_assumed
-        from xvmatch.datasets.box_image_size import resolve_size
+        from xvmatch.formats.box_image_size import resolve_size
 
         given = [] if args.image_size is None else [(args.image_size, "--image-size")]
         if size is not None:
@@ -411,7 +411,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     claim_folder(out, TRACK_COMMAND)
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
     n_hor = write_track_rows(out / "hor.txt", hor, result.hor_rows)
-    from xvmatch.geometry.atomic_files import atomic_write_text
+    from xvmatch.core.atomic_files import atomic_write_text
 
     atomic_write_text(out / OFFSET_FILE, json.dumps({"offset": offset}) + "\n")
     write_cameras(args, *refined)
@@ -466,14 +466,14 @@ def evaluate_tracks_command(args: argparse.Namespace) -> int:
     cross-view scores asked for are given (issue 29, item 4)."""
     from dataclasses import asdict
 
-    from xvmatch.datasets.mot_boxes import read_mot_boxes
-    from xvmatch.evaluation.track_metrics import (
+    from xvmatch.formats.mot_boxes import read_mot_boxes
+    from xvmatch.metrics.cross_view_metrics import format_table, summarize
+    from xvmatch.metrics.track_metrics import (
         evaluate_tracks,
         format_track_table,
         track_pair_counts,
         track_scores_to_dict,
     )
-    from xvmatch.inference.cross_view_metrics import format_table, summarize
 
     folder = Path(args.tracks)
     if not folder.is_dir():
@@ -485,7 +485,7 @@ def evaluate_tracks_command(args: argparse.Namespace) -> int:
     gt_hor = read_boxes(args.hor, args.duplicates)
     offset = args.offset if args.offset is not None else tracked_offset(folder)
     if offset:  # tracked with --offset N: both files in their own videos' timing
-        from xvmatch.datasets.mot_boxes import align_views
+        from xvmatch.formats.mot_boxes import align_views
 
         tracks_top, tracks_hor = align_views(tracks_top, tracks_hor, offset)
         gt_top, gt_hor = align_views(gt_top, gt_hor, offset)

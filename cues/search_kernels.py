@@ -1,0 +1,269 @@
+"""Compiled (numba) kernels of the (O, theta) search of CVMHAT Sec. 3.2: the hypothesis vectors
+(Eqs. 5-8), the lower bound of Phi, and the vector-set matching (Eqs. 11-12).
+
+The search scores hundreds of hypotheses per frame out of thousands, each two small DTWs, and
+the batched numpy forms spent most of their time in per-cell array calls and in arrays of the
+whole (candidate, theta, person) grid. These kernels follow the numpy definitions step by step
+(:func:`~xvmatch.cues.spatial_matching.monotonic_path` with its tie order,
+:func:`~xvmatch.cues.spatial_matching.one_to_one`, sums in NumPy's pairwise order), so costs,
+pairs and scales are bit-identical to them on every CPU (tested). They do only IEEE arithmetic
+and comparisons, never a transcendental function: tan, cos and rho^(L / kappa) come from numpy
+in both forms (numpy's SIMD tan and pow differ from libm's in the last bit on AVX-512 CPUs), and
+numba does not contract multiply-adds without ``fastmath``. Imported on first
+use only: ``import numba`` and loading the cached machine code take about a second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "sorted_order"]
+
+_BLOCK = 128  # NumPy's pairwise-summation block (PW_BLOCKSIZE)
+
+
+@njit(cache=True)
+def _block_sum(values: np.ndarray, start: int, n: int) -> float:
+    """NumPy's sum of at most one block: sequential below 8, else 8 interleaved partial sums."""
+    if n < 8:
+        total = 0.0
+        for i in range(start, start + n):
+            total += values[i]
+        return total
+    r = values[start : start + 8].copy()
+    i = 8
+    full = n - n % 8
+    while i < full:
+        for k in range(8):
+            r[k] += values[start + i + k]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        total += values[start + i]
+        i += 1
+    return total
+
+
+@njit(cache=True)
+def _pairwise_sum(values: np.ndarray) -> float:
+    """Sum of ``values`` in NumPy's pairwise order (``np.add.reduce``): blocks of at most 128,
+    halves rounded down to a multiple of 8 above. Iterative (numba cannot cache recursion)."""
+    starts = np.empty(64, dtype=np.int64)
+    sizes = np.empty(64, dtype=np.int64)
+    stages = np.zeros(64, dtype=np.int64)
+    results = np.empty(64)
+    top, n_results = 0, 0
+    starts[0], sizes[0], stages[0] = 0, values.shape[0], 0
+    while top >= 0:
+        start, n = starts[top], sizes[top]
+        half = n // 2
+        half -= half % 8
+        if n <= _BLOCK:
+            results[n_results] = _block_sum(values, start, n)
+            n_results += 1
+            top -= 1
+        elif stages[top] == 0:  # left half first
+            stages[top] = 1
+            top += 1
+            starts[top], sizes[top], stages[top] = start, half, 0
+        elif stages[top] == 1:  # then the right half
+            stages[top] = 2
+            top += 1
+            starts[top], sizes[top], stages[top] = start + half, n - half, 0
+        else:  # left + right
+            n_results -= 1
+            results[n_results - 1] = results[n_results - 1] + results[n_results]
+            top -= 1
+    return results[0]
+
+
+@njit(cache=True)
+def _path_one_to_one(cost: np.ndarray, rows: int, cols: int, acc: np.ndarray,
+                     best_col: np.ndarray, winner: np.ndarray) -> None:
+    """DTW path from (0, 0) to (rows - 1, cols - 1), then the one-to-one clean-up.
+
+    Ties as ``monotonic_path`` (diagonal, then down, then right) and ``one_to_one`` (the first
+    least dissimilar path cell of a row, then the first least dissimilar of those rows per
+    column). Leaves in ``winner[j]`` the row kept with column j, or -1; ``best_col`` is scratch.
+    """
+    acc[0, 0] = 0.0
+    for j in range(1, cols + 1):
+        acc[0, j] = np.inf
+    for i in range(1, rows + 1):
+        acc[i, 0] = np.inf
+    for i in range(rows):
+        for j in range(cols):
+            a, b, c = acc[i, j], acc[i, j + 1], acc[i + 1, j]
+            m = a if a < b else b
+            acc[i + 1, j + 1] = cost[i, j] + (m if m < c else c)
+    # Walk back; a row's path cells come right to left, so "<=" keeps its first least one.
+    best_col[:rows] = -1
+    i, j = rows, cols
+    best_col[i - 1] = j - 1
+    while i > 1 or j > 1:
+        diag, up, left = acc[i - 1, j - 1], acc[i - 1, j], acc[i, j - 1]
+        if diag <= up and diag <= left:
+            i -= 1
+            j -= 1
+        elif up <= left:
+            i -= 1
+        else:
+            j -= 1
+        r, c = i - 1, j - 1
+        if best_col[r] < 0 or cost[r, c] <= cost[r, best_col[r]]:
+            best_col[r] = c
+    winner[:cols] = -1
+    for r in range(rows):
+        c = best_col[r]
+        if winner[c] < 0 or cost[r, c] < cost[winner[c], c]:
+            winner[c] = r
+
+
+@njit(cache=True)
+def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: np.ndarray,
+                hor_y: np.ndarray, coef: np.ndarray, lam: float, scale_threshold: float,
+                cost_out: np.ndarray, pairs_out: np.ndarray, scale_out: np.ndarray) -> None:
+    """Eqs. 11-12 for every hypothesis b: Phi into ``cost_out[b]``, the kept pairs into
+    ``pairs_out[b]`` and mu into ``scale_out[b]`` (see ``match_vector_sets``); ``coef[L, k]``
+    is rho^(L / k) (``penalty_table``)."""
+    n_batch, n_rows = top_x.shape
+    n_cols = hor_x.shape[0]
+    dx = np.zeros((n_rows, n_cols))
+    dis = np.zeros((n_rows, n_cols))
+    acc = np.empty((n_rows + 1, n_cols + 1))
+    best_col = np.empty(n_rows, dtype=np.int64)
+    winner = np.empty(n_cols, dtype=np.int64)
+    terms = np.zeros(n_rows * n_cols)
+    for b in range(n_batch):
+        rows = count[b]
+        pairs_out[b] = False
+        for i in range(rows):
+            for j in range(n_cols):
+                dx[i, j] = abs(top_x[b, i] - hor_x[j])
+        # Scale mu from the matching on x alone: the mean y ratio of its kept pairs (those
+        # closer in x than the scale threshold).
+        ok, mean_ratio = False, 1.0
+        if rows > 0:
+            _path_one_to_one(dx, rows, n_cols, acc, best_col, winner)
+            terms[:] = 0.0
+            n_x = 0
+            for j in range(n_cols):
+                i = winner[j]
+                if i >= 0 and dx[i, j] < scale_threshold:
+                    terms[i * n_cols + j] = top_y[b, i] / hor_y[j]
+                    n_x += 1
+            if n_x > 0:
+                ratio = _pairwise_sum(terms) / n_x
+                if np.isfinite(ratio) and ratio > 0:
+                    ok, mean_ratio = True, ratio
+        # Eq. 11 with mu = 1 / mean ratio, then the matching and Phi (Eq. 12).
+        cost = np.inf
+        if rows > 0:
+            for i in range(rows):
+                for j in range(n_cols):
+                    dis[i, j] = lam * dx[i, j] + abs(top_y[b, i] / mean_ratio - hor_y[j])
+            _path_one_to_one(dis, rows, n_cols, acc, best_col, winner)
+            terms[:] = 0.0
+            kappa = 0
+            for j in range(n_cols):
+                i = winner[j]
+                if i >= 0:
+                    pairs_out[b, i, j] = True
+                    terms[i * n_cols + j] = dis[i, j]
+                    kappa += 1
+            if ok and kappa > 0:
+                longest = max(rows, n_cols)
+                cost = coef[longest, kappa] * _pairwise_sum(terms) / kappa
+                if np.isnan(cost):
+                    cost = np.inf
+        cost_out[b] = cost
+        scale_out[b] = 1.0 / mean_ratio
+
+
+@njit(cache=True)
+def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, coef: np.ndarray,
+                 lam: float, tight: bool, out: np.ndarray) -> None:
+    """``cost_lower_bound`` of every hypothesis into ``out`` (its docstring has the bound;
+    ``coef[L, k]`` is rho^(L / k))."""
+    n_batch, n_people = top_x.shape
+    n_cols = hor_x.shape[0]
+    gaps = np.empty(n_people)
+    for b in range(n_batch):
+        if count[b] <= 0:
+            out[b] = np.inf
+            continue
+        n = 0
+        for m in range(n_people):  # the distance of each finite x_top to its nearest x_hor
+            x = top_x[b, m]
+            if not np.isfinite(x):
+                continue
+            lo, hi = 0, n_cols  # searchsorted(hor_x, x, side="left")
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if hor_x[mid] < x:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            below = hor_x[lo - 1 if lo > 0 else 0]
+            above = hor_x[lo if lo < n_cols else n_cols - 1]
+            gap_below, gap_above = abs(x - below), abs(x - above)
+            gaps[n] = gap_below if gap_below < gap_above else gap_above
+            n += 1
+        longest = max(count[b], n_cols)
+        shortest = min(count[b], n_cols)
+        if not tight:
+            smallest = np.inf
+            for k in range(n):
+                smallest = min(smallest, gaps[k])
+            out[b] = coef[longest, shortest] * lam * smallest
+            continue
+        for k in range(1, n):  # insertion sort: a handful of people
+            value, i = gaps[k], k - 1
+            while i >= 0 and gaps[i] > value:
+                gaps[i + 1] = gaps[i]
+                i -= 1
+            gaps[i + 1] = value
+        best, partial = np.inf, 0.0
+        for kappa in range(1, min(shortest, n_people) + 1):
+            partial += gaps[kappa - 1] if kappa <= n else 0.0
+            best = min(best, coef[longest, kappa] / kappa * partial)
+        out[b] = best * lam
+
+
+@njit(cache=True)
+def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, half: float,
+                     delta: np.ndarray, inside: np.ndarray, count: np.ndarray) -> None:
+    """delta, whether in the view and |K| of every (candidate, theta) row b = c T + t, as
+    ``top_hypotheses`` defines them (x_top, Eq. 7, is numpy's tan of delta, in both forms)."""
+    n_cand, n_people = phi.shape
+    n_theta = thetas.shape[0]
+    for c in range(n_cand):
+        for t in range(n_theta):
+            b = c * n_theta + t
+            n = 0
+            for m in range(n_people):
+                d = np.mod(phi[c, m] - thetas[t] + np.pi, 2.0 * np.pi) - np.pi
+                delta[b, m] = d
+                inside[b, m] = abs(d) < half and visible[c, m]
+                n += inside[b, m]
+            count[b] = n
+
+
+@njit(cache=True)
+def sorted_order(x_all: np.ndarray, rows: np.ndarray, order_out: np.ndarray) -> None:
+    """Eq. 8's order of the hypotheses ``rows``: the first ``order_out.shape[1]`` person
+    indices of each row by x ascending, a stable sort (+inf last), as numpy's stable argsort."""
+    n_people = x_all.shape[1]
+    width = order_out.shape[1]
+    order = np.empty(n_people, dtype=np.int64)
+    for r in range(rows.shape[0]):
+        b = rows[r]
+        for m in range(n_people):  # stable insertion sort of the row's indices by x
+            value, i = x_all[b, m], m - 1
+            while i >= 0 and x_all[b, order[i]] > value:
+                order[i + 1] = order[i]
+                i -= 1
+            order[i + 1] = m
+        for k in range(width):
+            order_out[r, k] = order[k]

@@ -1,0 +1,537 @@
+"""Search over the camera location O and orientation theta (CVMHAT paper, Section 3.2.4).
+
+Frame level: every (O, theta) hypothesis is scored with Phi (Eq. 12) and the best one gives the
+association. Over a video: the reduced search limits theta to a damped window S_t around the
+previous orientation and follows O with the top view's own track ids. The temporal offset
+between two unsynchronised videos (Fig. 5) is estimated with this search in
+:mod:`xvmatch.cues.offset_estimation`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.cues import kernel_choice
+from xvmatch.cues.spatial_matching import (
+    SpatialParams,
+    cost_lower_bound,
+    match_vector_sets,
+)
+from xvmatch.cues.spatial_vectors import (
+    TopHypotheses,
+    box_centres,
+    horizontal_vectors,
+    top_geometry,
+    top_hypotheses,
+)
+
+__all__ = [
+    "SEARCH_MODES",
+    "FollowPolicy",
+    "FrameAssociation",
+    "associate_frame",
+    "associate_sequence",
+    "best_per_candidate",
+    "hypothesis_vectors",
+    "rank_hypotheses",
+    "search_window",
+]
+
+SEARCH_MODES = ("exhaustive", "reduced", "follow")
+
+
+@dataclass(frozen=True)
+class FrameAssociation:
+    """Best hypothesis of one frame.
+
+    Attributes:
+        pairs: ``(P, 2)`` indices (top box, horizontal box) of the associated people, sorted.
+        camera: index of the top box taken as the camera location O; -1 if none was scored.
+        theta: view direction of the horizontal camera in the top image (radians, CCW on screen).
+        cost: Phi of Eq. 12 for the best hypothesis (+inf when nothing could be matched).
+        scale: the factor mu of the best hypothesis.
+    """
+
+    pairs: np.ndarray
+    camera: int
+    theta: float
+    cost: float
+    scale: float
+
+
+_EMPTY = FrameAssociation(np.zeros((0, 2), dtype=np.intp), -1, 0.0, math.inf, 1.0)
+
+
+def search_window(
+    center: float, step_index: int, params: SpatialParams
+) -> np.ndarray:
+    """Orientations of the reduced search on the ``step_index``-th frame (1-based).
+
+    S_t = 2 pi (r^(t-1) + u) / (1 + u) (Sec. 3.2.4), sampled every dtheta around ``center``;
+    the first frame covers the whole circle.
+    """
+    step = math.radians(params.dtheta_deg)
+    full = max(1, round(2.0 * math.pi / step))
+    r, u = params.damping_r, params.damping_u
+    span = 2.0 * math.pi * (r ** (step_index - 1) + u) / (1.0 + u)
+    n = min(full, max(1, math.ceil(span / step - 1e-9)))
+    return center + step * (np.arange(n) - n // 2)
+
+
+def full_circle(params: SpatialParams) -> np.ndarray:
+    """Orientations of the exhaustive search: [0, 2 pi) every dtheta."""
+    step = math.radians(params.dtheta_deg)
+    return step * np.arange(max(1, round(2.0 * math.pi / step)))
+
+
+def _prepare(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    candidates: Iterable[int] | None,
+    thetas: np.ndarray | None,
+    params: SpatialParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    top_boxes = np.asarray(top_boxes, dtype=float).reshape(-1, 4)
+    hor_boxes = np.asarray(hor_boxes, dtype=float).reshape(-1, 4)
+    cand = (
+        np.arange(top_boxes.shape[0])
+        if candidates is None
+        else np.asarray(list(candidates), dtype=np.intp)
+    )
+    thetas = full_circle(params) if thetas is None else np.asarray(thetas, dtype=float).ravel()
+    return top_boxes, hor_boxes, cand, thetas
+
+
+HYPOTHESIS_BLOCK = 1 << 23
+"""(hypothesis, person) entries per block of candidate camera locations: a crowd is searched in
+blocks of candidates, so that 1,000 people in a frame stay within about 1 GiB (an ordinary
+frame, tens of people, is one block)."""
+
+
+def _candidate_blocks(
+    top_boxes: np.ndarray, cand: np.ndarray, thetas: np.ndarray, params: SpatialParams
+) -> Iterator[tuple[int, TopHypotheses]]:
+    """The hypotheses of consecutive blocks of candidates, with the index of each block's first
+    hypothesis among all (candidate-major: b = c T + t)."""
+    centres = box_centres(top_boxes)
+    step = max(1, HYPOTHESIS_BLOCK // max(1, thetas.shape[0] * centres.shape[0]))
+    for lo in range(0, cand.shape[0], step):
+        geometry = top_geometry(centres, cand[lo:lo + step], math.radians(params.tau_deg))
+        yield lo * thetas.shape[0], top_hypotheses(geometry, thetas,
+                                                   math.radians(params.fov_deg))
+
+
+def _association(found: tuple[int, float, np.ndarray, float, np.ndarray], cand: np.ndarray,
+                 thetas: np.ndarray, hor_order: np.ndarray) -> FrameAssociation:
+    """The :class:`FrameAssociation` of one scored hypothesis (index b = c T + t, cost, pairs
+    mask over the sorted vectors, scale, top person of each entry), in input box order."""
+    index, cost, pairs_mask, scale, top_index = found
+    rows, cols = np.nonzero(pairs_mask)
+    pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    n_theta = thetas.shape[0]
+    return FrameAssociation(pairs=pairs, camera=int(cand[index // n_theta]),
+                            theta=float(np.mod(thetas[index % n_theta], 2.0 * math.pi)),
+                            cost=cost, scale=scale)
+
+
+def rank_hypotheses(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    candidates: Iterable[int] | None = None,
+    thetas: np.ndarray | None = None,
+    k: int = 1,
+) -> list[FrameAssociation]:
+    """The ``k`` lowest-Phi (O, theta) hypotheses of one frame pair, best first (Sec. 3.2.4).
+
+    Exact (the same branch and bound as :func:`associate_frame`, pruning against the k-th best
+    cost); ties keep the lower hypothesis index (candidates, then orientations, in the given
+    order). Fewer than ``k`` are returned when fewer have a finite cost.
+
+    Args:
+        top_boxes, hor_boxes, hor_width, params, candidates, thetas: as in
+            :func:`associate_frame`.
+        k: number of hypotheses to return (>= 1).
+    """
+    if k < 1:
+        raise ValueError(f"k must be >= 1, got {k}")
+    params = params or SpatialParams()
+    top_boxes, hor_boxes, cand, thetas = _prepare(
+        top_boxes, hor_boxes, candidates, thetas, params
+    )
+    if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
+        return []
+    hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
+    found = []
+    for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
+        found += [(start + i, *rest) for i, *rest in _ranked(hypotheses, hor, params, k)]
+    found = sorted(found, key=lambda item: (item[1], item[0]))[:k]
+    return [_association(f, cand, thetas, hor_order) for f in found]
+
+
+def associate_frame(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    candidates: Iterable[int] | None = None,
+    thetas: np.ndarray | None = None,
+) -> FrameAssociation:
+    """Associate the people of one top/horizontal frame pair (Sec. 3.2).
+
+    Args:
+        top_boxes: ``(M, 4)`` top-view boxes x, y, w, h (pixels).
+        hor_boxes: ``(Q, 4)`` horizontal-view boxes.
+        hor_width: width W of the horizontal image (pixels), Eq. 9.
+        params: association parameters; paper defaults when None.
+        candidates: indices of top boxes that may be the camera location O; every box when None
+            (the exhaustive search), a single index when O is given.
+        thetas: orientations to try (radians), the same for every candidate; the full circle
+            every dtheta when None.
+
+    Returns:
+        The best :class:`FrameAssociation` (lowest Phi; the first one on ties, candidates in the
+        given order and orientations in the given order); an empty one (camera -1, cost +inf)
+        when nothing can be matched.
+    """
+    ranked = rank_hypotheses(top_boxes, hor_boxes, hor_width, params, candidates, thetas, k=1)
+    return ranked[0] if ranked else _EMPTY
+
+
+def best_per_candidate(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    candidates: Iterable[int] | None = None,
+    thetas: np.ndarray | None = None,
+    keep: int | None = None,
+) -> list[FrameAssociation]:
+    """The lowest-Phi orientation of every candidate camera location O, in one search.
+
+    The same result as :func:`rank_hypotheses` with ``k=1`` called for each candidate on its
+    own (ties keep the lower orientation index; costs equal to rounding), at a fraction of the
+    work: one batch of hypotheses for all candidates, pruned by a branch and bound whose
+    threshold is each candidate's own best cost so far, and, with ``keep``, the ``keep``-th
+    lowest of those (a candidate that cannot enter the ``keep`` best needs no exact answer).
+
+    Args:
+        top_boxes, hor_boxes, hor_width, params, candidates, thetas: as in
+            :func:`associate_frame`.
+        keep: only the ``keep`` lowest-cost candidates are wanted (None: all).
+
+    Returns:
+        One :class:`FrameAssociation` per candidate with a finite cost, in candidate order;
+        with ``keep``, only the ``keep`` lowest (cost, then candidate order), which are exact.
+    """
+    params = params or SpatialParams()
+    top_boxes, hor_boxes, cand, thetas = _prepare(
+        top_boxes, hor_boxes, candidates, thetas, params
+    )
+    if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
+        return []
+    hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
+    found = []
+    for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
+        found += [(start + i, *rest) for i, *rest in _best_per_group(hypotheses, hor, params,
+                                                                      keep)]
+    if keep is not None:  # each block's keep best are exact, so the keep best of all are too
+        found = sorted(sorted(found, key=lambda b: (b[1], b[0]))[:keep], key=lambda b: b[0])
+    return [_association(f, cand, thetas, hor_order) for f in found]
+
+
+def _best_per_group(
+    hypotheses: TopHypotheses,
+    hor: np.ndarray,
+    params: SpatialParams,
+    keep: int | None = None,
+    first_chunk: int = 256,
+) -> list[tuple[int, float, np.ndarray, float, np.ndarray]]:
+    """The lowest-Phi hypothesis of each candidate (group of ``n_theta`` consecutive rows),
+    exactly, by best-first branch and bound against each group's own best cost (and the
+    ``keep``-th lowest group best, when only the ``keep`` best groups are wanted).
+
+    Returns:
+        Per group with a finite cost, in group order (only the ``keep`` lowest with ``keep``):
+        (hypothesis index, cost, pairs mask, scale, top person of each entry).
+    """
+    n = hypotheses.x.shape[0]
+    group = np.arange(n) // hypotheses.n_theta
+    n_groups = int(group[-1]) + 1 if n else 0
+    hor_x = hor[:, 0]
+    best_cost = np.full(n_groups, np.inf)
+    best: list[tuple[int, float, np.ndarray, float, np.ndarray] | None] = [None] * n_groups
+
+    def score(idx: np.ndarray) -> None:
+        vectors = hypotheses.take(idx)
+        result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
+        rows = np.flatnonzero(np.isfinite(result.cost))
+        if rows.size == 0:
+            return
+        # The batch's best row of each group (lowest cost, then lowest index), then a merge
+        # with the groups' bests so far: a loop over groups, not over rows.
+        groups, costs = group[idx[rows]], result.cost[rows]
+        order = np.lexsort((idx[rows], costs, groups))
+        _, first = np.unique(groups[order], return_index=True)
+        for r in rows[order[first]]:
+            i, c = int(idx[r]), float(result.cost[r])
+            g = group[i]
+            held = best[g]
+            if c < best_cost[g] or (c == best_cost[g] and held is not None and i < held[0]):
+                best_cost[g] = c
+                best[g] = (i, c, result.pairs[r], float(result.scale[r]), vectors.index[r])
+
+    def limits(groups: np.ndarray) -> np.ndarray:
+        """What a hypothesis of each group must not exceed to matter."""
+        if keep is None or keep >= n_groups:
+            return best_cost[groups]
+        kth = float(np.partition(best_cost, keep - 1)[keep - 1])
+        return np.minimum(best_cost[groups], kth)
+
+    loose = cost_lower_bound(hypotheses.x, hypotheses.count, hor_x, params, tight=False)
+    # Seed: each group's most promising hypothesis under the loose bound.
+    order = np.lexsort((np.arange(n), loose))
+    _, first = np.unique(group[order], return_index=True)
+    seed = np.sort(order[first][np.isfinite(loose[order[first]])])
+    if seed.size == 0:
+        return []
+    score(seed)
+    done = np.zeros(n, dtype=bool)
+    done[seed] = True
+    rest = np.flatnonzero(~done & (loose <= limits(group)))
+    tight = cost_lower_bound(hypotheses.x[rest], hypotheses.count[rest], hor_x, params)
+    alive = tight <= limits(group[rest])
+    rest, tight = rest[alive], tight[alive]
+    order = np.argsort(tight, kind="stable")
+    rest, tight = rest[order], tight[order]
+    start, chunk = 0, first_chunk
+    while start < rest.shape[0] and tight[start] <= limits(group).max():
+        sel = slice(start, start + chunk)
+        idx = rest[sel][tight[sel] <= limits(group[rest[sel]])]
+        start += chunk
+        chunk *= 2
+        if idx.size:
+            score(np.sort(idx))
+    found = [b for b in best if b is not None]
+    if keep is not None:
+        found = sorted(found, key=lambda b: (b[1], b[0]))[:keep]
+        found.sort(key=lambda b: b[0])
+    return found
+
+
+def hypothesis_vectors(
+    top_boxes: np.ndarray,
+    camera: int,
+    theta: float,
+    params: SpatialParams | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Top-view vectors of every person under one hypothesis (O = ``camera``, ``theta``).
+
+    Returns:
+        ``(x, y, in_view, visible)``, each ``(M,)`` in the order of ``top_boxes``: x_top (Eq. 7,
+        +inf outside the field of view), the depth y_top = |OP| cos(delta) (pixels; also given
+        outside the view), whether the person is in the field of view and not occluded, and
+        whether it is not occluded (tau) and not O itself.
+    """
+    params = params or SpatialParams()
+    top_boxes = np.asarray(top_boxes, dtype=float).reshape(-1, 4)
+    geometry = top_geometry(box_centres(top_boxes), [camera], math.radians(params.tau_deg))
+    hyp = top_hypotheses(geometry, np.array([theta]), math.radians(params.fov_deg))
+    x = hyp.x[0]
+    y = geometry.dist[0] * np.cos(hyp.delta[0])
+    return x, y, np.isfinite(x), geometry.visible[0]
+
+
+def _ranked(
+    hypotheses: TopHypotheses,
+    hor: np.ndarray,
+    params: SpatialParams,
+    k: int,
+    first_chunk: int = 256,
+) -> list[tuple[int, float, np.ndarray, float, np.ndarray]]:
+    """The k lowest-Phi hypotheses by best-first branch and bound, exactly.
+
+    Hypotheses are scored in order of their lower bound (:func:`cost_lower_bound`), in chunks of
+    doubling size, until the next bound exceeds the k-th best cost found: the result is the same
+    as scoring every hypothesis (lowest Phi, then lowest hypothesis index on ties), at a few
+    percent of the work.
+
+    Returns:
+        Up to k tuples (hypothesis index, cost, pairs mask (K, Q), scale, top person of each of
+        the K entries), best first; only finite costs.
+    """
+    hor_x = hor[:, 0]
+    loose = cost_lower_bound(hypotheses.x, hypotheses.count, hor_x, params, tight=False)
+    pool: list[tuple[float, int, np.ndarray, float, np.ndarray]] = []
+
+    def threshold() -> float:
+        return pool[-1][0] if len(pool) >= k else math.inf
+
+    def score(idx: np.ndarray) -> None:
+        vectors = hypotheses.take(idx)
+        result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
+        limit = threshold()
+        for r in np.flatnonzero(np.isfinite(result.cost) & (result.cost <= limit)):
+            pool.append(
+                (
+                    float(result.cost[r]),
+                    int(idx[r]),
+                    result.pairs[r],
+                    float(result.scale[r]),
+                    vectors.index[r],
+                )
+            )
+        pool.sort(key=lambda item: (item[0], item[1]))
+        del pool[k:]
+
+    # Seed the pool with the most promising hypotheses under the loose bound, then bound the
+    # survivors tightly and score them best-first in chunks of doubling size.
+    seed = np.argsort(loose, kind="stable")[:first_chunk]
+    seed = np.sort(seed[np.isfinite(loose[seed])])
+    if seed.size == 0:
+        return []
+    score(seed)
+    done = np.zeros(loose.shape[0], dtype=bool)
+    done[seed] = True
+    rest = np.flatnonzero(~done & (loose <= threshold()))
+    tight = cost_lower_bound(hypotheses.x[rest], hypotheses.count[rest], hor_x, params)
+    order = np.argsort(tight, kind="stable")
+    rest, tight = rest[order], tight[order]
+    start, chunk = 0, first_chunk
+    while start < rest.shape[0] and tight[start] <= threshold():
+        sel = slice(start, start + chunk)
+        idx = np.sort(rest[sel][tight[sel] <= threshold()])
+        start += chunk
+        chunk *= 2
+        score(idx)
+    return [(i, c, p, s, t) for c, i, p, s, t in pool]
+
+
+@dataclass(frozen=True)
+class FollowPolicy:
+    """How the ``follow`` search finds the camera location O without a given camera id.
+
+    One frame's exhaustive search can pick the wrong person as O, and following it would keep
+    the mistake, so O is chosen by a vote: the first ``init_frames`` frames and then every
+    ``check_every``-th frame run the exhaustive search, and the top-view track id that won most of
+    the last ``votes`` checks is followed (the damped theta window restarts when it changes).
+
+    Attributes:
+        init_frames: exhaustive checks at the start of the sequence.
+        check_every: later, one exhaustive check every this many frames.
+        votes: how many recent checks vote.
+    """
+
+    init_frames: int = 10
+    check_every: int = 30
+    votes: int = 10
+
+    def __post_init__(self) -> None:
+        if self.init_frames < 1 or self.check_every < 1 or self.votes < 1:
+            raise ValueError(
+                f"FollowPolicy needs init_frames, check_every and votes >= 1, got {self}"
+            )
+
+
+class FrameLike:
+    """Structural type of a frame record: ``ids (N,)`` and ``boxes (N, 4)``."""
+
+    ids: np.ndarray
+    boxes: np.ndarray
+
+
+def ids_to_index(ids: np.ndarray, wanted: int) -> list[int]:
+    """Rows of a frame whose id is ``wanted`` (the camera wearer's top-view box, when given)."""
+    return [int(k) for k in np.flatnonzero(np.asarray(ids) == wanted)]
+
+
+def associate_sequence(
+    top: Mapping[int, FrameLike],
+    hor: Mapping[int, FrameLike],
+    hor_width: float,
+    params: SpatialParams | None = None,
+    search: str = "exhaustive",
+    camera_id: int | None = None,
+    frames: Iterable[int] | None = None,
+    progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+    follow: FollowPolicy = FollowPolicy(),
+) -> dict[int, list[tuple[int, int]]]:
+    """Associate every frame of a sequence pair; returns ``{frame: [(top_id, hor_id), ...]}``.
+
+    Ids are only used to report pairs, to locate O when ``camera_id`` is given, and (in the
+    ``follow`` mode) to follow O with the top view's own track ids; they are never compared
+    across views.
+
+    Args:
+        top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (e.g. ``FrameBoxes``).
+        hor_width: width of the horizontal image (pixels).
+        params: association parameters.
+        search: ``exhaustive`` (every O, every theta, each frame on its own), ``reduced``
+            (every O, theta within the damped window S_t around the previous orientation) or
+            ``follow`` (reduced theta, and O followed by its top-view track id: the id that won
+            most of the recent exhaustive checks, see :class:`FollowPolicy`).
+        camera_id: top-view id of the camera wearer (O given); frames where it is absent fall
+            back to searching every O.
+        frames: frames to process (default: the union of both views' frames, ascending).
+        progress: optional wrapper around the frame iterator (e.g. a progress bar).
+        follow: how the ``follow`` mode finds O when ``camera_id`` is not given.
+    """
+    if search not in SEARCH_MODES:
+        raise ValueError(f"search must be one of {', '.join(SEARCH_MODES)}; got {search!r}")
+    params = params or SpatialParams()
+    order = sorted(set(top) | set(hor)) if frames is None else sorted(set(frames))
+    circle = full_circle(params)
+    voting = search == "follow" and camera_id is None
+    votes: deque[int] = deque(maxlen=follow.votes)
+    followed: int | None = None
+    last_theta = 0.0
+    step_index = 0
+    checks = 0
+    out: dict[int, list[tuple[int, int]]] = {}
+    # A long run pays for loading the compiled kernels even where its calls are small.
+    with kernel_choice.planned(len(order)):
+        for frame in progress(order) if progress else order:
+            t_rec, h_rec = top.get(frame), hor.get(frame)
+            if t_rec is None or h_rec is None or len(t_rec.ids) == 0 or len(h_rec.ids) == 0:
+                out[frame] = []
+                continue
+            step_index += 1
+            if voting and (checks < follow.init_frames or step_index % follow.check_every == 0):
+                # Exhaustive check: vote for the winning O; follow the most voted top-view id.
+                checks += 1
+                result = associate_frame(t_rec.boxes, h_rec.boxes, hor_width, params)
+                if result.camera >= 0:
+                    votes.append(int(t_rec.ids[result.camera]))
+                    leader = Counter(votes).most_common(1)[0][0]
+                    if leader != followed:
+                        followed, step_index = leader, 1
+                    if int(t_rec.ids[result.camera]) != followed:
+                        own = ids_to_index(t_rec.ids, followed)
+                        if own:
+                            result = associate_frame(
+                                t_rec.boxes, h_rec.boxes, hor_width, params, own, circle
+                            )
+            else:
+                candidates: list[int] | None = None
+                if camera_id is not None:
+                    candidates = ids_to_index(t_rec.ids, camera_id) or None
+                elif search == "follow" and followed is not None:
+                    candidates = ids_to_index(t_rec.ids, followed) or None
+                thetas = (circle if search == "exhaustive"
+                          else search_window(last_theta, step_index, params))
+                result = associate_frame(
+                    t_rec.boxes, h_rec.boxes, hor_width, params, candidates, thetas
+                )
+            if result.camera >= 0:
+                last_theta = result.theta
+                if not voting:
+                    followed = int(t_rec.ids[result.camera])
+            out[frame] = [(int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs]
+    return out
