@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 DEMO_VENV ?= .venv-base
 DEMO_STAMP := $(DEMO_VENV)/.installed
 
-.PHONY: demo test lint bench install-check clean
+.PHONY: demo test test-fast lint bench install-check clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,13 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -n $(TEST_WORKERS) $(if $(filter auto,$(TEST_WORKERS)),--maxprocesses 4) \
 		--dist loadfile
+
+# The fast lane while developing: the suite without the tests marked slow (those that took
+# about a second or more alone, end-to-end runs); `make test` stays the whole suite, CI runs it.
+test-fast: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(PY) -m pytest -n $(TEST_WORKERS) $(if $(filter auto,$(TEST_WORKERS)),--maxprocesses 4) \
+		--dist loadfile -m "not slow"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

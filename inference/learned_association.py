@@ -82,7 +82,7 @@ MAX_PEOPLE_PER_VIEW = 1000
 location O tries every top-view person as O, so a frame's time grows with the square of the
 top-view crowd: on one core, 9 s for 500 people and 27-40 s for 1,000 (a few to 65 horizontal
 boxes), whose memory the search keeps within about 1 GiB
-(:data:`~xvmatch.geometry.spatial_search.HYPOTHESIS_BLOCK`); 2,000 would take about four times
+(:data:`~xvmatch.cues.spatial_search.HYPOTHESIS_BLOCK`); 2,000 would take about four times
 as long. The same bound holds for the horizontal view. The matcher was trained on 3-14 people
 a frame: far beyond that its costs are an extrapolation, and the handcrafted search takes any
 crowd."""
@@ -161,7 +161,7 @@ def check_crowd_size(
 def _batches(frames: Sequence[MatcherInputs], batch_size: int,
              cells: int = MATCHER_BATCH_CELLS) -> Iterator[slice]:
     """Consecutive slices of ``frames`` of at most ``batch_size`` frames whose padded batch
-    (:func:`~xvmatch.geometry.matcher_inputs.collate_inputs`: every frame at the batch's largest
+    (:func:`~xvmatch.cues.matcher_inputs.collate_inputs`: every frame at the batch's largest
     H, M and N, each at least 1) holds at most ``cells`` cells; a larger frame goes alone."""
     start, size = 0, [1, 1, 1]
     for k, f in enumerate(frames):

@@ -81,6 +81,7 @@ def _results(folder: Path) -> list[dict]:
 # End to end
 
 
+@pytest.mark.slow
 def test_run_writes_every_output(report: Path, args) -> None:
     settings = grid_settings("noise")
     rows = _results(report)
@@ -109,12 +110,14 @@ def test_run_writes_every_output(report: Path, args) -> None:
     assert len(list((report / "cells").glob("*.json"))) == 2 * len(settings) * 2 + 2 * 2
 
 
+@pytest.mark.slow
 def test_numbers_do_not_depend_on_workers(report: Path, args, tmp_path: Path) -> None:
     out = tmp_path / "report"
     assert main(["ablate", *args, "--out", str(out), "--workers", "2", "--quiet"]) == 0
     assert (out / "results.csv").read_text() == (report / "results.csv").read_text()
 
 
+@pytest.mark.slow
 def test_second_run_reuses_every_cell(report: Path, args, capsys) -> None:
     cells = sorted((report / "cells").glob("*.json"))
     before = {p: p.stat().st_mtime_ns for p in cells}
@@ -134,6 +137,7 @@ def test_other_options_in_the_report_folder_are_refused(report: Path, args, caps
     assert sorted(p.name for p in (report / "cells").iterdir()) == before
 
 
+@pytest.mark.slow
 def test_calibration_sweep_runs_and_zero_error_is_the_ground_truth_column(
         tiny_synth, tiny_models, tmp_path, capsys) -> None:
     out = tmp_path / "calib"

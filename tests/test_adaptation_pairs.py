@@ -128,6 +128,7 @@ def test_embed_frames_order() -> None:
     assert d[:, 1].tolist() == [*top[3].boxes[:, 0], *top[1].boxes[:, 0]]
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.dictionaries(st.tuples(st.integers(0, 4), st.integers(0, 4)),
                        st.lists(st.integers(0, 30), min_size=1, max_size=12, unique=True)

@@ -225,6 +225,7 @@ class _Folder:
         return np.full_like(image, 128) if self.grey else image
 
 
+@pytest.mark.slow
 def test_associate_drops_images_only_where_the_check_fails(video) -> None:
     """On the shipped bundle: clean renders pass and give the images' matches; grey images
     fail and give exactly the boxes-only matches; off, the images are always used."""
@@ -255,6 +256,7 @@ def test_associate_drops_images_only_where_the_check_fails(video) -> None:
     assert nothing == [] and unchecked != boxes
 
 
+@pytest.mark.slow
 def test_a_site_bundle_is_held_to_the_higher_bar(video) -> None:
     """The same cue (an identity adaptation) and the same AUC, judged against SITE_MIN_AUC
     once it comes from a site bundle."""
@@ -277,6 +279,7 @@ def test_a_site_bundle_is_held_to_the_higher_bar(video) -> None:
     assert checks[1].trusted is (checks[1].auc + 2 * checks[1].error >= SITE_MIN_AUC)
 
 
+@pytest.mark.slow
 def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) -> None:
     args = ["associate", "--model", "default", "--top", str(video["top"]), "--hor",
             str(video["hor"]), "--top-images", str(video["top_images"]), "--hor-images",
@@ -311,6 +314,7 @@ def _grey_copy(video: dict[str, Path], folder: Path) -> dict[str, Path]:
     return grey
 
 
+@pytest.mark.slow
 def test_track_command_leaves_out_a_failed_cross_view_cue(video, tmp_path, capsys) -> None:
     """``track --model``: clean renders pass (the same tracks as unchecked); grey images fail
     and the line says the cross-view weights come from the boxes alone (also with --quiet)."""
@@ -335,6 +339,7 @@ def test_track_command_leaves_out_a_failed_cross_view_cue(video, tmp_path, capsy
     assert "appearance check" not in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_associate_multi_judges_each_egocentric_view(video, tmp_path, capsys) -> None:
     """associate-multi judges each top-ego pass: grey images of the one horizontal view fail
     and its people come out exactly as from the boxes alone."""

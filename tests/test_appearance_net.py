@@ -67,6 +67,7 @@ def test_siamese_one_set_of_weights() -> None:
     torch.testing.assert_close(both[:2], both[2:])
 
 
+@pytest.mark.slow
 def test_resnet50_is_the_papers_branch() -> None:
     net = appearance_resnet50()
     assert net.preprocessing.input_size == (256, 128)
@@ -131,6 +132,7 @@ def test_weights_file_errors(tmp_path) -> None:
         appearance_from_weights(tmp_path / "other.pt")
 
 
+@pytest.mark.slow
 def test_local_torchvision_backbone_weights(tmp_path) -> None:
     torch.manual_seed(0)
     reference = torchvision.models.resnet18(weights=None)

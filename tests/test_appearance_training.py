@@ -314,6 +314,7 @@ def _overrides(tiny_data: Path, root: Path) -> list[str]:
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("config", ["appearance_cpu.yaml", "appearance_resnet50.yaml"])
 def test_lightning_cli_configs_parse(config: str, tiny_data: Path, tmp_path: Path) -> None:
     args = ["--config", str(REPO / "configs" / config)]
@@ -365,6 +366,7 @@ def test_fusion_config_parses() -> None:
     assert tuple(cli.model.head.names) == cli.datamodule.names
 
 
+@pytest.mark.slow
 def test_xvmatch_train_end_to_end(tiny_data: Path, tmp_path: Path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)  # the config's relative runs/ folder lands here
     parser = argparse.ArgumentParser()

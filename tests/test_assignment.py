@@ -113,6 +113,7 @@ def test_assignment_matrix() -> None:
         assignment_matrix(np.array([[0, 1], [1, 1]]), 2, 2)
 
 
+@pytest.mark.slow
 def test_no_torch_or_cv2_import() -> None:
     code = (
         "import sys, xvmatch.inference.assignment; "
@@ -126,6 +127,7 @@ _cost_entry = st.one_of(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     m=st.integers(0, 4),
@@ -155,6 +157,7 @@ def _objective(cost: np.ndarray, gamma: float, pairs: np.ndarray) -> float:
     return float(np.sum(cost[pairs[:, 0], pairs[:, 1]] - gamma)) if len(pairs) else 0.0
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(m=st.integers(1, 4), n=st.integers(1, 4), data=st.data(),
        tolerance=st.floats(0.0, 0.3, allow_nan=False), seed=st.integers(0, 2**31 - 1))

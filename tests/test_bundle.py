@@ -44,6 +44,7 @@ def _names(path: Path, what: str) -> str:
     return rf"^{re.escape(str(path))}: .*{what}"
 
 
+@pytest.mark.slow
 def test_a_valid_copy_loads(bundle):
     loaded = load_bundle(bundle, threads=2)
     manifest = loaded.manifest
@@ -92,6 +93,7 @@ def test_the_stages_output(bundle):
                                atol=1e-5)
 
 
+@pytest.mark.slow
 def test_the_shipped_stages_are_seven_unit_blocks():
     """The shipped graphs' ``stages``: 7 MobileNetV2 stages (24 to 1,280 channels), each at unit
     length; FP32 and INT8 agree on them."""

@@ -109,6 +109,7 @@ def drone(tmp_path_factory):
     return _turned_video(tmp_path_factory.mktemp("drone"), CONSISTENCY_WINDOW)
 
 
+@pytest.mark.slow
 def test_misleading_cameras_are_left_out_and_exact_ones_kept(drone) -> None:
     """On the shipped bundle: exact cameras are not judged unless doubted, and pass; a top
     camera 20 degrees off (beyond what the refinement searches: its fit stays poor) fails, and
@@ -139,6 +140,7 @@ def test_misleading_cameras_are_left_out_and_exact_ones_kept(drone) -> None:
     assert checked.pairs == none.pairs and _right(video, none.pairs) > _right(video, given.pairs)
 
 
+@pytest.mark.slow
 def test_a_top_camera_that_moves_is_always_judged(drone, tmp_path) -> None:
     """A top camera that changes from frame to frame (a drone's telemetry) has at most the
     constant part of its error refined, and a fit says little of the rest: the check judges
@@ -177,6 +179,7 @@ def test_a_top_camera_that_moves_is_always_judged(drone, tmp_path) -> None:
     assert _right(video, exact.pairs) > _right(video, none.pairs)
 
 
+@pytest.mark.slow
 def test_associate_matches_without_cameras_that_fail(drone, tmp_path, capsys) -> None:
     video, files, turned = drone
     base = ["associate", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
@@ -198,6 +201,7 @@ def test_associate_matches_without_cameras_that_fail(drone, tmp_path, capsys) ->
     assert (tmp_path / "a.txt").read_bytes() != (tmp_path / "b.txt").read_bytes()
 
 
+@pytest.mark.slow
 def test_track_and_associate_multi_leave_out_cameras_that_fail(drone, tmp_path, capsys) -> None:
     """``track`` then weighs the cross-view edges from the boxes alone, exactly as without
     --cameras; ``associate-multi`` matches that view without them, exactly as without."""
@@ -225,6 +229,7 @@ def test_track_and_associate_multi_leave_out_cameras_that_fail(drone, tmp_path, 
             tmp_path / "m_cams" / name).read_bytes()
 
 
+@pytest.mark.slow
 def test_adapt_mines_without_cameras_that_fail(tmp_path, capsys) -> None:
     """``adapt`` then mines its pairs from the boxes alone: the site bundle is the one fitted
     without --cameras, byte for byte, and its manifest names no camera file. (240 frames: the

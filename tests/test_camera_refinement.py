@@ -44,6 +44,7 @@ def scene():
     return _scene(11)
 
 
+@pytest.mark.slow
 def test_a_fixed_top_camera_is_turned_back(scene) -> None:
     top, hors, top_boxes, hor_boxes = scene
     wrong = _turned(top, TURN)
@@ -64,6 +65,7 @@ def test_a_fixed_top_camera_is_turned_back(scene) -> None:
     assert np.array_equal(shifted.get(1).top.R, used.get(1).top.R)
 
 
+@pytest.mark.slow
 def test_a_static_camera_file_keeps_its_form(scene) -> None:
     top, hors, top_boxes, hor_boxes = scene
     cameras = CameraFrames("cams.json", static=FrameCameras(_turned(top, TURN), hors[0]))
@@ -74,6 +76,7 @@ def test_a_static_camera_file_keeps_its_form(scene) -> None:
     assert used.static.top is (what.fit.camera if what.turned else cameras.static.top)
 
 
+@pytest.mark.slow
 def test_an_exact_camera_is_used_as_given(scene) -> None:
     top, hors, top_boxes, hor_boxes = scene
     cameras = CameraFrames("cams/", per_frame={1 + k: FrameCameras(top, h)
@@ -89,6 +92,7 @@ def test_an_exact_camera_is_used_as_given(scene) -> None:
     assert not poor.fits and poor.turned == what.turned
 
 
+@pytest.mark.slow
 def test_a_flying_top_camera_is_turned_back_frame_by_frame() -> None:
     # A drone's per-frame cameras with a constant mount offset: each frame's top camera is
     # turned back by its own A_f^T Q A_f, the egocentric ones are kept, and the refinement
@@ -112,6 +116,7 @@ def test_a_flying_top_camera_is_turned_back_frame_by_frame() -> None:
                                    "fits the head rays of 24 frames about as well as given")
 
 
+@pytest.mark.slow
 def test_a_moving_camera_still_on_its_sampled_frames_is_turned_frame_by_frame(scene) -> None:
     # The top camera is the same on every frame with boxes, another on a frame without any:
     # the fit is a fixed camera's, and that frame keeps its own camera, turned the same way.
@@ -138,6 +143,7 @@ def test_a_short_clip_is_used_as_given(scene) -> None:
     assert "4 frame(s) with boxes in both views, too few" in what.message
 
 
+@pytest.mark.slow
 def test_several_views_share_one_fit(scene) -> None:
     # associate-multi: two egocentric views of one top view, each file holding the same
     # turned top camera; one fit over both views' head rays turns it once for both. View 2's
@@ -166,6 +172,7 @@ def test_several_views_share_one_fit(scene) -> None:
     assert what.moving
 
 
+@pytest.mark.slow
 def test_several_views_of_a_flying_camera_share_one_fit() -> None:
     # associate-multi under a drone in flight: each view's folder holds the drone's per-frame
     # telemetry (the same mount offset) for its own frames; view 2's frame f is shown with top
@@ -214,6 +221,7 @@ def _right(video, pairs) -> float:
     return sum(found) / (true + len(found) - sum(found))
 
 
+@pytest.mark.slow
 def test_refinement_mends_the_matcher_on_a_miscalibrated_top_camera(overview) -> None:
     # Measured on this video: 0.415 with the camera as given, 1.000 refined (turned 2.15
     # degrees; the error was 2).
@@ -229,6 +237,7 @@ def test_refinement_mends_the_matcher_on_a_miscalibrated_top_camera(overview) ->
         _right(video, off.pairs), _right(video, auto.pairs))
 
 
+@pytest.mark.slow
 def test_associate_says_what_it_did(overview, tmp_path, capsys) -> None:
     _, files, turned = overview
     base = ["associate", "--top", str(files["top"]), "--hor", str(files["hor"]), "--model",
@@ -242,6 +251,7 @@ def test_associate_says_what_it_did(overview, tmp_path, capsys) -> None:
     assert (tmp_path / "a.txt").read_bytes() != (tmp_path / "b.txt").read_bytes()
 
 
+@pytest.mark.slow
 def test_write_cameras_keeps_the_refined_cameras_for_next_time(overview, tmp_path, capsys) -> None:
     """``--write-cameras`` writes ``--cameras``' folder with the top camera as turned (the
     egocentric cameras as given): given back with ``--refine-top-camera off``, the same pairs,
@@ -332,6 +342,7 @@ def test_a_dense_crowd_is_used_as_given(scene) -> None:
     assert what.message.startswith("cameras: 6000 top x horizontal box pairs in a typical frame")
 
 
+@pytest.mark.slow
 def test_associate_multi_refines_the_shared_top_camera(tmp_path, capsys) -> None:
     # Two egocentric views of a rendered drone video, both camera folders holding the top
     # camera 2 degrees off: associate-multi turns it back on both views' boxes. Measured:
@@ -380,6 +391,7 @@ def test_associate_multi_refines_the_shared_top_camera(tmp_path, capsys) -> None
     assert off < 0.7 and auto > 0.95, (off, auto)
 
 
+@pytest.mark.slow
 def test_a_flying_drone_s_cameras_are_mended_and_written(tmp_path, capsys) -> None:
     """``associate`` on a drone in flight whose telemetry carries a constant mount offset: the
     moving top camera is turned back frame by frame (the line says so), ``--write-cameras``

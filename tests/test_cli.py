@@ -346,6 +346,7 @@ def test_offset_json(files, capsys):
     assert capsys.readouterr().out.startswith(f"offset {data['offset']:+d} frames")
 
 
+@pytest.mark.slow
 def test_offset_from_one_asked_clip_says_why_it_is_not_applied(tmp_path, capsys):
     # A single clip the user asked for cannot be checked: it is reported, never applied, and
     # the warning says why (not that the videos are too short). The idealised walk of
@@ -366,6 +367,7 @@ def test_offset_from_one_asked_clip_says_why_it_is_not_applied(tmp_path, capsys)
     assert "videos this short" not in err
 
 
+@pytest.mark.slow
 def test_offset_recovers_a_shift_end_to_end(tmp_path, capsys):
     # An idealised walk (equal heights, level camera, 5 fps: see test_spatial_search) whose
     # horizontal frames are renumbered f -> f + 4: horizontal frame g shows top frame g - 4.
@@ -404,6 +406,7 @@ def test_offset_recovers_a_shift_end_to_end(tmp_path, capsys):
     assert "note: -4 is within the estimate's precision" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     # The idealised walk of test_offset_recovers_a_shift_end_to_end, horizontal frames
     # renumbered by 8 (beyond the 5-frame tolerance of --offset auto): horizontal frame g shows
@@ -439,6 +442,7 @@ def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     assert "estimated offset -8 frames" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_associate_keeps_the_timing_when_the_offset_is_unreliable(tmp_path, capsys):
     # Top and horizontal views of two different scenes: the clips' minima disagree.
     config = SceneConfig(fps=5.0, height_range=(1.7, 1.7), hor_wobble_deg=0.0)
@@ -472,6 +476,7 @@ def test_associate_rejects_a_bad_offset(files, tmp_path, capsys):
     assert "expected an integer number of frames or 'auto'" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_offset_on_videos_too_short_for_the_range_says_so(tmp_path, capsys):
     # The idealised walk, 35 frames, horizontal frames renumbered by 8: with the default +-60
     # one clip fits, its minimum is -8, and one clip cannot back it.
@@ -497,6 +502,7 @@ def test_offset_bad_clip_settings_are_one_line(files, capsys):
     assert "clip_length >= 1" in _error_line(capsys)
 
 
+@pytest.mark.slow
 def test_demo_prints_the_table_and_writes_the_picture(tmp_path, capsys, tiny_models):
     out = tmp_path / "demo"
     argv = ["demo", "--out", str(out), "--scenes", "1", "--frames", "2",
@@ -565,6 +571,7 @@ def test_unknown_command_is_a_usage_error(capsys):
     assert info.value.code == 2
 
 
+@pytest.mark.slow
 def test_associate_does_not_import_torch(files, tmp_path):
     # A stand-in ``torch`` package on the path makes any import of it succeed and land in
     # sys.modules, whether or not the real torch is installed here.
@@ -617,6 +624,7 @@ class CtrlC(Callback):
 '''
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_train_is_an_interruption_not_a_rejected_configuration(
         tmp_path, tiny_synth, capsys, monkeypatch):
     import signal

@@ -33,6 +33,7 @@ def _sha(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+@pytest.mark.slow
 def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
     site = tmp_path / "site"
     assert main(_args(video, site)) == 0
@@ -77,6 +78,7 @@ def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
     assert (tracks / "top.txt").read_text() and (tracks / "hor.txt").read_text()
 
 
+@pytest.mark.slow
 def test_adapt_refusals_write_nothing(video, tmp_path, capsys) -> None:
     def refused(args: list[str], message: str) -> None:
         assert main(args) == 2

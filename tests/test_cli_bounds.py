@@ -101,6 +101,7 @@ def test_offset_max_offset_beyond_any_video(inputs, capsys):
     assert "expected an integer in [0, 10000] (each clip is compared at 2 * max_offset + 1" in line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["offset", "associate"])
 def test_max_offset_beyond_the_videos_length(inputs, capsys, command):
     # Within [0, 10000] but longer than the 6 frames the two files span: refused after reading
@@ -453,6 +454,7 @@ def _values(o: Option) -> st.SearchStrategy[str]:
     return st.one_of(drawn.filter(lambda text: not o.inside(text)), o.cheap)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("option", OPTIONS, ids=lambda o: f"{o.command} {o.flag}")
 @settings(max_examples=10, deadline=None)
 @given(data=st.data())

@@ -45,6 +45,7 @@ def test_no_command_module_imports_the_root(path: Path) -> None:
     assert not bad, "only xvmatch/cli.py imports the command modules:\n" + "\n".join(bad)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("option", SHARED_OPTIONS)
 def test_shared_option_is_defined_in_one_module(option: str) -> None:
     modules = sorted({p.name for p in [ROOT / "xvmatch" / "cli.py", *CLI_MODULES]

@@ -204,6 +204,7 @@ def test_count_sequence_rejects_predictions_on_unknown_frames():
         count_sequence({1: [(2, 1)]}, top, hor)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(data=st.data())
 def test_scores_invariant_under_consistent_id_relabelling(data):

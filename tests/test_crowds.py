@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 
 from xvmatch import cli
-from xvmatch.datasets.mot_boxes import FrameBoxes
-from xvmatch.geometry.matcher_inputs import MatcherInputs
-from xvmatch.geometry.spatial_features import (
+from xvmatch.cues.matcher_inputs import MatcherInputs
+from xvmatch.cues.spatial_features import (
     HOR_FEATURES,
     HYP_FEATURES,
     PAIR_FEATURES,
     TOP_FEATURES,
     FrameFeatures,
 )
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.learned_association import (
     EMBED_BATCH,
     MATCHER_BATCH_CELLS,

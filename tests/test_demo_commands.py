@@ -25,6 +25,7 @@ def _path_without(folder: Path) -> str:
     return os.pathsep.join(keep or ["/usr/bin", "/bin"])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not ENTRY.is_file(), reason="no xvmatch entry point beside the interpreter")
 def test_the_printed_commands_run_in_a_shell_without_the_environment(tmp_path):
     env = {**os.environ, "PATH": _path_without(ENTRY.parent)}

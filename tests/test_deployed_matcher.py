@@ -324,6 +324,7 @@ def test_cameras_without_images_with_the_image_size(tmp_path, scene, tiny_models
 # The deployed runtime is torch-free
 
 
+@pytest.mark.slow
 def test_the_deployed_runtime_never_imports_torch(tmp_path, scene, tiny_models):
     argv = ["associate", "--top", str(scene.top), "--hor", str(scene.hor), "--out",
             str(tmp_path / "pred.csv"), "--quiet", "--model", str(tiny_models["full_bundle"]),

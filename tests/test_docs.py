@@ -139,6 +139,7 @@ def _undocumented() -> list[str]:
     return out
 
 
+@pytest.mark.slow
 def test_public_functions_and_classes_have_docstrings():
     missing = _undocumented()
     assert not missing, (

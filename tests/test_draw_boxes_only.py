@@ -33,6 +33,7 @@ def _associate(capsys, boxes, out, *extra):
     return code, capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", [[], ["--model", "default"]], ids=["handcrafted", "learned"])
 def test_both_methods_draw_box_only_results(boxes, tmp_path, capsys, model):
     code, err = _associate(capsys, boxes, tmp_path, "--draw", str(tmp_path / "draw"),

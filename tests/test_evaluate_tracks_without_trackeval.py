@@ -61,6 +61,7 @@ def _without_trackeval(argv):
                           text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_the_cross_view_scores_and_one_line_naming_the_package(files):
     run = _without_trackeval(_argv(files))
     assert run.returncode == 0, run.stderr
@@ -71,6 +72,7 @@ def test_the_cross_view_scores_and_one_line_naming_the_package(files):
     assert 0 < float(row[head.index("CVIDF1")]) < 100
 
 
+@pytest.mark.slow
 def test_json_gives_the_same_cross_view_scores_as_with_trackeval(files, capsys):
     run = _without_trackeval(_argv(files, "--json"))
     assert run.returncode == 0, run.stderr

@@ -65,6 +65,7 @@ def _metadata(path: Path) -> dict[str, str]:
     return {p.key: p.value for p in onnx.load(os.fspath(path)).metadata_props}
 
 
+@pytest.mark.slow
 def test_export_writes_the_three_files(exported):
     out, manifest = exported
     assert sorted(p.name for p in out.iterdir()) == ["appearance.onnx", "manifest.json",
@@ -177,6 +178,7 @@ def test_parity_figures_per_setting(exported):
     assert 0.0 <= parity["appearance"]["max_abs_descriptor_diff"] <= PARITY_TOLERANCE
 
 
+@pytest.mark.slow
 def test_a_parity_failure_raises_and_leaves_nothing(tmp_path, tiny_models, tiny_synth,
                                                    monkeypatch):
     monkeypatch.setattr(onnx_export, "PARITY_TOLERANCE", -1.0)
@@ -190,6 +192,7 @@ def test_a_parity_failure_raises_and_leaves_nothing(tmp_path, tiny_models, tiny_
     assert list(tmp_path.iterdir()) == []  # neither the bundle nor the temporary folder
 
 
+@pytest.mark.slow
 def test_exporting_over_a_bundle_replaces_it(tmp_path, tiny_models, tiny_synth):
     out = tmp_path / "bundle"
     shutil.copytree(tiny_models["full_bundle"], out)
@@ -267,6 +270,7 @@ def test_the_bundle_folder_follows_the_umask(exported, tmp_path):
     assert stat.S_IMODE(exported[0].stat().st_mode) == stat.S_IMODE(probe.stat().st_mode)
 
 
+@pytest.mark.slow
 def test_export_command_end_to_end(tmp_path, tiny_models, tiny_synth, capsys):
     out = tmp_path / "b"
     rc = main(["export", "--model", str(tiny_models["boxes"]), "--out", str(out),

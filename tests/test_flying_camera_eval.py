@@ -60,6 +60,7 @@ def test_a_drifting_heading(cameras) -> None:
     assert np.allclose(axis / np.linalg.norm(axis), [0.0, 0.0, 1.0], atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_short_run_mends_the_biased_cameras(capsys) -> None:
     # Measured: mount 74.6, heading 84.2 as given; 100.0 each refined (turned 2.42 degrees in
     # the camera's frame, 2.30 in the world; the error is 2.69).

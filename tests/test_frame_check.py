@@ -189,6 +189,7 @@ def _constant(trust: bool) -> FrameCheck:
     return FrameCheck(zeros, np.ones(len(FEATURES)), zeros, 20.0 if trust else -20.0)
 
 
+@pytest.mark.slow
 def test_associate_judges_each_frame_when_the_video_cannot_be_judged(tmp_path) -> None:
     """Three frames, too few to judge over time: a check that trusts no frame gives exactly
     the boxes-only matches and says so; one that trusts every frame, the images' matches;
@@ -233,6 +234,7 @@ def test_associate_judges_each_frame_when_the_video_cannot_be_judged(tmp_path) -
     assert run(_constant(False), appearance_check=False)[0] == plain
 
 
+@pytest.mark.slow
 def test_the_fitting_script_writes_a_record_and_installs_it(tmp_path, monkeypatch, capsys
                                                             ) -> None:
     """benchmarks/fit_frame_check.py on 2 validation scenes per scenario: a record that reads
@@ -275,6 +277,7 @@ def test_the_fitting_script_writes_a_record_and_installs_it(tmp_path, monkeypatc
         assert said in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_associate_command_says_how_many_frames_came_from_the_boxes(tmp_path, capsys) -> None:
     """The command line with a bundle whose frame check trusts no frame: the line is printed
     even with --quiet, --costs records it, and the matches are the boxes-only ones."""

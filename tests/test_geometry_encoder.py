@@ -171,6 +171,7 @@ def test_matcher_starts_as_the_geometry_model_and_masks_missing_cues(model, fram
     assert CrossViewMatcher(model, cues=()).n_cues == 0
 
 
+@pytest.mark.slow
 def test_exports_to_onnx_with_dynamic_sizes(model, frames, tmp_path):
     """No data-dependent branch: one export serves other batch, set and hypothesis sizes."""
     ort = pytest.importorskip("onnxruntime")

@@ -65,6 +65,7 @@ def _mean_loss(module: GeometryMatchingModule, batches) -> float:
     return float(np.mean(values))
 
 
+@pytest.mark.slow
 def test_a_few_training_steps_reduce_the_loss(sim_dir):
     dm = _sim(sim_dir)
     dm.setup("fit")
@@ -83,6 +84,7 @@ def test_a_few_training_steps_reduce_the_loss(sim_dir):
     assert after < 0.7 * before, (before, after)
 
 
+@pytest.mark.slow
 def test_fit_checkpoint_resume_round_trip(sim_dir, tmp_path):
     out = tmp_path / "geo.pt"
     run = tmp_path / "run"
@@ -134,6 +136,7 @@ def test_a_corrupt_resume_checkpoint_is_one_line_naming_it(sim_dir, tmp_path):
     assert not (tmp_path / "m.pt").exists()
 
 
+@pytest.mark.slow
 def test_a_resumed_best_path_outside_the_run_is_refused(sim_dir, tmp_path):
     run = tmp_path / "run"
     fit_geometry(_sim(sim_dir), tmp_path / "m.pt", feature_config=FEATURES, model_config=TINY,
@@ -200,6 +203,7 @@ def test_cvmhat_datamodule_on_box_files(tmp_path, sim_dir):
         CvmhatBoxDataModule(data_dir=str(tmp_path), clean=False)
 
 
+@pytest.mark.slow
 def test_cvmhat_datamodule_re_times_an_out_of_sync_training_pair(tmp_path):
     """One training pair is the other with its horizontal frames renumbered by 8: synchronised,
     its frames carry the very features and labels of the original; the test site is untouched."""

@@ -384,6 +384,7 @@ def _cli(argv: list[str]) -> int:
     return args.func(args)
 
 
+@pytest.mark.slow
 def test_cli_prints_the_table_and_writes_the_figures(dataset: Path, result, tmp_path: Path,
                                                      capsys) -> None:
     figures = tmp_path / "figs"

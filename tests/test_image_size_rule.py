@@ -50,6 +50,7 @@ def _run(capsys, *argv: str) -> tuple[int, str]:
     return code, capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", [[], ["--model", "default"]], ids=["handcrafted", "learned"])
 @pytest.mark.parametrize("size", list(SIZES))
 def test_boxes_only_needs_the_size_and_then_pairs_as_at_full_size(boxes, tmp_path, capsys,
@@ -85,6 +86,7 @@ def test_every_box_command_refuses_an_unknown_size(boxes, tmp_path, capsys, comm
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_track_with_the_size_gives_the_tracks_of_the_full_size(boxes, tmp_path, capsys):
     top, hor = boxes["cvmhat"]
     code, err = _run(capsys, "track", "--top", str(top), "--hor", str(hor), "--out",

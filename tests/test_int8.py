@@ -35,6 +35,7 @@ def test_calibration_crops_are_the_labelled_people(tiny_synth):
     np.testing.assert_array_equal(crops, again)  # seeded draw
 
 
+@pytest.mark.slow
 def test_export_records_the_int8_network_and_its_accuracy(int8_bundle):
     out, manifest = int8_bundle
     int8 = manifest["appearance"]["int8"]
@@ -140,6 +141,7 @@ def test_int8_is_chosen_alone_only_if_it_kept_the_accuracy_and_the_matches(
     assert load_bundle(out, precision="int8").precision == "int8"
 
 
+@pytest.mark.slow
 def test_associate_picks_int8_by_its_agreement_with_near_ties_rechecked(int8_bundle, tmp_path,
                                                                        monkeypatch):
     """INT8 alone kept 98.7% of FP32's pairs, with its near ties re-checked all of them: only a
@@ -188,6 +190,7 @@ def test_recheck_tolerance_and_costs():
     assert costs[1] is fp32[1] and costs[0] is int8[0] and costs[3] is int8[3]
 
 
+@pytest.mark.slow
 def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, tmp_path,
                                                     monkeypatch):
     from xvmatch.inference import bundle
@@ -207,6 +210,7 @@ def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, tm
     np.testing.assert_allclose(np.linalg.norm(int8, axis=1), 1.0, atol=1e-3)
 
 
+@pytest.mark.slow
 def test_int8_needs_an_appearance_network_and_two_scenes(tmp_path, tiny_models, tiny_synth):
     with pytest.raises(ExportError, match="has none"):
         export_bundle(tiny_models["boxes"], tmp_path / "b", parity_data=tiny_synth["overview"],
@@ -214,6 +218,7 @@ def test_int8_needs_an_appearance_network_and_two_scenes(tmp_path, tiny_models, 
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow
 def test_export_and_associate_commands(tmp_path, capsys, tiny_models, tiny_synth):
     out = tmp_path / "bundle"
     assert main(["export", "--model", str(tiny_models["full"]), "--out", str(out),

@@ -143,6 +143,7 @@ def test_ensemble_averages_the_models_costs(model, tiny_models, scene):
         associate_sequence_learned(scene.top, scene.hor, WIDTH, [])
 
 
+@pytest.mark.slow
 def test_workers_give_the_same_pairs_and_costs(model):
     # 70 frames with gaps and an empty frame: more than one 32-frame chunk goes to the two
     # spawned processes, and the pairs and cost matrices must come back in frame order.
@@ -172,6 +173,7 @@ def _args(**kw) -> argparse.Namespace:
     return argparse.Namespace(**{**base, **kw})
 
 
+@pytest.mark.slow
 def test_associate_with_model_cli_helper(model, tiny_models, scene, tmp_path, monkeypatch):
     frames = sorted(scene.top)
     args = _args(model=[str(tiny_models["boxes_bundle"])])
@@ -213,6 +215,7 @@ def test_fit_geometry_parser(tmp_path):
     assert sub2.parse_args(["--model", "default", "--gamma", "0.4"]).gamma == 0.4
 
 
+@pytest.mark.slow
 def test_fit_geometry_command_end_to_end(tmp_path):
     """``fit-geometry`` on a tiny CVMHAT-layout folder (two sites, a few frames) writes a
     box-only matcher file."""

@@ -155,6 +155,7 @@ def test_images_are_retimed_and_closed(scene, default):
         open_view_images(scene.top_images, top, [max(frames) + 50])
 
 
+@pytest.mark.slow
 def test_int8_near_ties_are_scored_again_with_fp32(scene):
     """associate's INT8 path: a frame whose INT8 assignment is not stable within the tolerance
     gets exactly FP32's costs and pairs, a stable one keeps INT8's."""

@@ -187,6 +187,7 @@ def _real_looking_frame(height: int, width: int) -> np.ndarray:
     return np.clip(image, 0, 255).astype(np.uint8)
 
 
+@pytest.mark.slow
 def test_pictures_are_jpeg_of_a_few_hundred_kilobytes(tmp_path: Path) -> None:
     """Issue 29, item 6: a real-size frame pair's picture was a 3 MB PNG; it is a JPEG of
     quality 90 now, a fraction of the lossless size, and decodes to nearly the same picture."""

@@ -33,6 +33,7 @@ def run(monkeypatch, *args: str) -> int:
     return matcher_comparison.main()
 
 
+@pytest.mark.slow
 def test_bundles_are_compared_on_the_same_frames(tmp_path, monkeypatch, tiny_models) -> None:
     out = tmp_path / "out.json"
     tiny = str(tiny_models["full_bundle"])  # another appearance network: its own trials

@@ -219,6 +219,7 @@ def test_a_spent_budget_answers_consistently_and_at_least_the_greedy_value(probl
         objective(costs, 0.0, consistent_hungarian(sizes, costs, 0.0).pairs) + 1e-9
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(problems(max_views=4, max_boxes=4))
 def test_repair_cycles_keeps_a_consistent_answer_and_mends_a_broken_one(problem):
@@ -351,6 +352,7 @@ def scene(tmp_path_factory):
     return frames, inputs
 
 
+@pytest.mark.slow
 def test_scenes_are_deterministic_and_labelled(scene):
     from xvmatch.datasets.multi_ego_scenes import multi_ego_config, render_multi_ego
 
@@ -393,6 +395,7 @@ def _run(inputs, out, *extra):
                  str(out), "--quiet", "--image-size", "320x180", *extra])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("learned", [True, False], ids=["model", "handcrafted"])
 def test_cli_writes_consistent_person_ids(scene, tmp_path, learned):
     _, inputs = scene
@@ -496,6 +499,7 @@ def _rows(path: Path, late: int = 0) -> list[tuple[int, str, str]]:
               (ln.split(",") for ln in path.read_text().splitlines()))]
 
 
+@pytest.mark.slow
 def test_cli_offsets_re_time_each_horizontal_view(tmp_path):
     # Three rendered frames; the second egocentric camera's files (boxes, images, cameras)
     # numbered 4 frames later: top frame = hor2 frame - 4. With --offset 0 -4 the views are
@@ -531,6 +535,7 @@ def test_cli_offsets_re_time_each_horizontal_view(tmp_path):
     assert run("three", *late, "--offset", "0", "-4", "-1") == 2  # one per --hor, or one
 
 
+@pytest.mark.slow
 def test_cli_offset_auto_finds_each_view_its_own(tmp_path, capsys):
     # The idealised walk of test_associate_with_an_offset_re_times_the_top_view seen twice by
     # its egocentric camera: once in sync, once numbered 8 frames later (offset -8).

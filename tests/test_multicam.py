@@ -137,6 +137,7 @@ def test_answer_does_not_depend_on_the_ids():
     assert len({x for x, _ in pairs}) == len(pairs) == len({y for _, y in pairs})
 
 
+@pytest.mark.slow
 def test_simulated_scene_scores_well_and_beats_dtw():
     scene = simulate_multicam_scene(MulticamConfig(n_cameras=4, n_people=(12, 12)), 150, 1)
     cams = {n: GroundCamera.from_camera(c) for n, c in scene.cameras.items()}

@@ -123,6 +123,7 @@ def test_images_of_a_camera_without_boxes_is_refused(rendered, tmp_path, capsys)
              out, capsys, "--images cam3=")
 
 
+@pytest.mark.slow
 def test_images_of_the_wrong_size_or_missing_frames_are_refused(rendered, tmp_path, capsys):
     out = tmp_path / "out"
     # cam2's images are 320x180; cam1's camera is too, so give a smaller copy of one frame.

@@ -78,6 +78,7 @@ def test_a_plain_name_stays_one_file_in_the_folder(name):
     assert os.path.dirname(os.path.abspath(os.path.join(folder, name + ".txt"))) == folder
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(name=st.one_of(st.sampled_from([n for n in HOSTILE if not n.startswith("-")]),

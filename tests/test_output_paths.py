@@ -424,6 +424,7 @@ def test_synth_and_ablate_refuse_a_file_for_a_folder(scene, tmp_path, capsys):
     assert not (scene["dataset"] / "report").exists()
 
 
+@pytest.mark.slow
 def test_out_of_memory_is_one_line(tmp_path):
     # A real MemoryError: the address space is capped just above what the process uses, then
     # the search needs far more (360000 orientations per hypothesis).
@@ -454,6 +455,7 @@ def test_out_of_memory_is_one_line(tmp_path):
     ("pretrained_backbones_eval.py", "--json"), ("learned_matcher_eval.py", "--json"),
     ("cross_cpu_costs.py", "--save"),
 ])
+@pytest.mark.slow
 def test_benchmarks_check_their_output_file_before_any_work(tmp_path, script, option):
     """A result file whose folder is missing is refused at once, not after an hour's run."""
     out = tmp_path / "missing" / "r.json"
@@ -467,6 +469,7 @@ def test_benchmarks_check_their_output_file_before_any_work(tmp_path, script, op
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_multicam_benchmark_checks_its_out_folder(tmp_path):
     (tmp_path / "f").write_text("mine\n")
     run = subprocess.run([sys.executable, str(REPO / "benchmarks" / "multicam_eval.py"), "--out",

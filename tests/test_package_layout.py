@@ -50,6 +50,7 @@ def _modules(package: str) -> list[Path]:
     return sorted((ROOT / package).glob("*.py"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("package", SUBPACKAGES)
 def test_imports_run_one_way(package: str) -> None:
     bad = []
@@ -70,6 +71,7 @@ def test_imports_run_one_way(package: str) -> None:
     assert not bad, "imports against the pipeline:\n" + "\n".join(bad)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("package", TORCH_FREE)
 def test_torch_free_subpackages_import_no_torch(package: str) -> None:
     bad = [

@@ -168,6 +168,7 @@ def test_random_init_needs_no_package_and_records_no_source(tmp_path):
     assert appearance_source(appearance_from_weights(record.path)) is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arch", ["efficientnet_lite0"])  # mobilenetv2: the bundle test below
 def test_onnx_export_takes_any_number_of_crops(arch, tmp_path):
     import onnxruntime as ort
@@ -217,6 +218,7 @@ def test_mobilenetv2_stage_maps_keep_torchvisions_names():
         StagedSequential(torch.nn.Identity(), torch.nn.Identity(), ends=(0,))
 
 
+@pytest.mark.slow
 def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synth):
     """The exporter's parity gate passes and the manifest names the package and licence."""
     from xvmatch.cues.spatial_features import FeatureConfig

@@ -204,6 +204,7 @@ _angle = st.floats(-math.pi, math.pi, allow_nan=False)
 _coord = st.floats(-20, 20, allow_nan=False)
 
 
+@pytest.mark.slow
 @settings(max_examples=80, deadline=None)
 @given(
     yaw=st.tuples(_angle, _angle),

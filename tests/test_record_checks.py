@@ -295,6 +295,7 @@ BUNDLE_CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(BUNDLE_CASES))
 def test_a_site_bundle_with_a_bad_adaptation_through_the_library_and_the_cli(
         tmp_path, boxes, capsys, case) -> None:
@@ -312,6 +313,7 @@ def test_a_site_bundle_with_a_bad_adaptation_through_the_library_and_the_cli(
     assert not (tmp_path / "pred.csv").exists()
 
 
+@pytest.mark.slow
 def test_an_adaptation_that_does_not_match_the_manifest_s_sha256_is_one_line(
         tmp_path, boxes, capsys) -> None:
     """The manifest's sha256 of ``adaptation.npz`` is checked before the file is read."""
@@ -322,6 +324,7 @@ def test_an_adaptation_that_does_not_match_the_manifest_s_sha256_is_one_line(
     _one_line(code, err, str(folder / ADAPTATION_FILE), "does not match the manifest's")
 
 
+@pytest.mark.slow
 def test_a_valid_site_bundle_still_runs_on_boxes_alone(tmp_path, boxes, capsys) -> None:
     folder = _site(tmp_path, adaptation_bytes(SiteAdaptation.identity(_default_dim())))
     assert load_bundle(folder).adaptation.rank == 0
@@ -411,6 +414,7 @@ def _saved(torch, folder: Path, obj) -> Path:
     ("truncated", "validate", "not a checkpoint read as weights only"),
     ("nodict", "fit", "not a Lightning checkpoint (no state_dict)"),
 ])
+@pytest.mark.slow
 def test_a_bad_ckpt_path_is_one_line(checkpoints, tmp_path, capsys, monkeypatch, kind, stage,
                                      message) -> None:
     monkeypatch.chdir(tmp_path)
@@ -453,6 +457,7 @@ def test_weights_only_false_is_refused(tmp_path, capsys, monkeypatch) -> None:
     _one_line(code, err, "--weights_only false")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stage", ["fit", "validate"])
 def test_a_fifo_ckpt_path_is_refused_at_once(checkpoints, tmp_path, stage) -> None:
     """Run in a subprocess with a time limit: a hang fails, never blocks the test run."""
@@ -567,6 +572,7 @@ def test_estimate_offset_refuses_a_clip_start_beyond_the_video() -> None:
                         max_offset=2)
 
 
+@pytest.mark.slow
 def test_a_real_checkpoint_still_resumes(tiny_synth, tmp_path, capsys, monkeypatch) -> None:
     """A checkpoint the run wrote itself passes the check and resumes (read as weights only)."""
     pytest.importorskip("lightning")

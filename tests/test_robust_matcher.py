@@ -152,6 +152,7 @@ def test_corrupted_appearance_lowers_the_confidence_features():
     assert feats["random"][margin] < feats["clean"][margin]
 
 
+@pytest.mark.slow
 def test_confidence_path_exports_to_onnx_and_matches_torch(tmp_path):
     """The graph ``xvmatch export`` writes (``MatcherGraph``, opset and dynamic axes of every
     ``matcher.onnx``), run by onnxruntime on batches of other sizes than the traced one."""
@@ -275,6 +276,7 @@ def test_training_frames_are_corrupted_as_drawn_and_reproducibly(tiny_synth, tmp
     assert 0 < changed < len(trials)
 
 
+@pytest.mark.slow
 def test_the_data_module_keeps_appearance_costs_between_runs(tiny_synth, tmp_path):
     from xvmatch.models.appearance_net import appearance_small, save_appearance_weights
     from xvmatch.training.matcher_datamodule import SyntheticMatcherDataModule

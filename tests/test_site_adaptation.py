@@ -299,6 +299,7 @@ def test_a_site_bundle_runs_int8_only_when_asked(tmp_path, monkeypatch) -> None:
     assert load_bundle(folder, precision="int8").precision == "int8"
 
 
+@pytest.mark.slow
 def test_bundle_reads_an_adaptation(tmp_path) -> None:
     """A site bundle applies its adaptation to the appearance cue; the identity one gives the
     default's costs; a bundle without the key has none."""
@@ -337,6 +338,7 @@ def test_a_site_bundle_written_before_features_still_loads(tmp_path) -> None:
     assert site.bundle.adaptation.vector == "descriptors" and site.cue_vector == "descriptors"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("vector", ["features", "stages"])
 def test_bundle_reads_a_feature_adaptation(tmp_path, vector: str) -> None:
     """A site adapted on the network's features (or stages): the cross-view cue takes those of
@@ -358,6 +360,7 @@ def test_bundle_reads_a_feature_adaptation(tmp_path, vector: str) -> None:
     assert np.allclose(site.appearance_cost(vectors, vectors), cast.cost(vectors, vectors))
 
 
+@pytest.mark.slow
 def test_track_embeds_a_feature_site_once_per_box(tmp_path, monkeypatch) -> None:
     """``track --model SITE/`` with a site adapted on the features: each tracklet's middle box
     goes through the network once for both its descriptor and its features."""

@@ -69,6 +69,7 @@ def _cost_batches(draw):
     return cost, rows
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(batch=_cost_batches())
 def test_monotonic_path_is_a_minimal_dtw_path(batch):
@@ -133,6 +134,7 @@ def _one_to_one_reference(path: np.ndarray, cost: np.ndarray) -> np.ndarray:
     return keep
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(
     data=st.data(),
@@ -269,6 +271,7 @@ def _top_batches(draw, max_rows: int = 6):
     )
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(batch=_top_batches())
 def test_match_is_independent_per_batch_row(batch):
@@ -306,6 +309,7 @@ def _both(run):
     return compiled, reference
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(batch=_top_batches(max_rows=20), threshold=st.sampled_from([math.inf, 0.05, 0.3]),
        ties=st.booleans())
@@ -349,6 +353,7 @@ def test_compiled_match_is_bit_identical_on_large_sets():
 # cost_lower_bound: an exact lower bound of Phi (branch-and-bound pruning must stay exact)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     batch=_top_batches(),

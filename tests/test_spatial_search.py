@@ -285,6 +285,7 @@ def test_scrambled_ids_give_the_same_pairs(scene, id_maps, search, given_o):
     assert sum(len(p) for p in base.values()) > 5 * len(base)  # a non-trivial prediction
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("search", "given_o"), [("exhaustive", False), ("exhaustive", True), ("follow", False)]
 )
@@ -321,6 +322,7 @@ def eight_scenes():
         ({"search": "follow"}, 90.0, 88.0),
     ],
 )
+@pytest.mark.slow
 def test_simulated_sequences_are_associated(eight_scenes, kwargs, min_cvidf1, min_cvma):
     counts = []
     for sc in eight_scenes:
@@ -452,6 +454,7 @@ def offset_scene():
     return simulate_box_scene(config, n_frames=80, seed=3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shift", [5, -3])
 def test_estimate_offset_recovers_a_known_shift(offset_scene, shift):
     # Several clips spread over the video (median-normalised curves averaged), 10 frames each.
@@ -484,6 +487,7 @@ def _exact_horizontal(sc, params: SpatialParams) -> dict[int, FrameBoxes]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shift", [4, 0, -6])
 def test_estimate_offset_sign_convention_on_exact_views(scene, shift):
     # The paper's single 10-frame clip and +-15 range; the true pairing costs (almost) 0.
@@ -493,6 +497,7 @@ def test_estimate_offset_sign_convention_on_exact_views(scene, shift):
     assert est.costs[np.argmin(est.costs)] < 1e-9 < np.sort(est.costs)[1]
 
 
+@pytest.mark.slow
 def test_offset_the_clips_back_is_applied(offset_scene):
     # O searched, five clips, every offset in +-15 frames: every clip's own minimum is at the
     # shift.
@@ -506,6 +511,7 @@ def test_offset_the_clips_back_is_applied(offset_scene):
     assert est.status == "applied" and est.applied == est.offset == -8
 
 
+@pytest.mark.slow
 def test_coarse_to_fine_offset_search_finds_the_full_grids_estimate(offset_scene):
     # The default search: every 4th offset, then each offset within 3 of 0 and of the coarse
     # curve's two lowest minima.
@@ -524,6 +530,7 @@ def test_coarse_to_fine_offset_search_finds_the_full_grids_estimate(offset_scene
     np.testing.assert_allclose(est.clip_costs, full_part / scale, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_offset_within_tolerance_keeps_the_files_timing(offset_scene):
     hor = _shift(offset_scene.hor, 4)
     est = estimate_offset(offset_scene.top, hor, WIDTH, max_offset=15, n_clips=5)
@@ -532,6 +539,7 @@ def test_offset_within_tolerance_keeps_the_files_timing(offset_scene):
     assert finer.status == "applied" and finer.applied == -4
 
 
+@pytest.mark.slow
 def test_offset_of_unrelated_videos_is_not_applied(offset_scene):
     """Top and horizontal views of two different scenes: the curve still has a minimum, but the
     clips do not back it, so nothing is shifted."""
@@ -711,6 +719,7 @@ def test_clip_starts_let_every_clip_score_every_offset(h0, h_len, t0, t_len, len
             assert hor_span[0] <= s and s + length - 1 <= hor_span[1]
 
 
+@pytest.mark.slow
 def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene):
     """The top video starts 12 frames after the horizontal one and ends 10 frames before it:
     the clips are placed where every offset has top frames, so no curve has a gap."""
@@ -720,6 +729,7 @@ def test_offset_of_videos_of_different_lengths_scores_every_offset(offset_scene)
     assert est.offset == 0
 
 
+@pytest.mark.slow
 def test_a_short_video_gets_one_clip_judged_not_applied(offset_scene):
     # 35 frames cannot hold 9 clips that every offset in +-15 reaches: one clip is left, and
     # one clip cannot back its minimum, so the files' timing is kept ...
@@ -735,6 +745,7 @@ def test_a_short_video_gets_one_clip_judged_not_applied(offset_scene):
     assert one.status == "unsupported" and one.applied == 0
 
 
+@pytest.mark.slow
 def test_offset_curves_are_the_same_for_any_number_of_workers(offset_scene):
     # Two spawned processes share the (clip, offset) grid; the estimate must not change.
     hor = _shift(offset_scene.hor, 8)
@@ -771,6 +782,7 @@ def test_estimate_offset_without_horizontal_frames(scene):
         estimate_offset(scene.top, {}, WIDTH)
 
 
+@pytest.mark.slow
 def test_follow_votes_for_o_instead_of_trusting_the_first_frame():
     """A wrong O on the first frame is not followed forever: exhaustive checks vote it out."""
     sc = simulate_box_scene(n_frames=150, seed=0)

@@ -309,6 +309,7 @@ def _layouts(draw):
     return centres, thetas, fov, tau
 
 
+@pytest.mark.slow
 @settings(max_examples=80, deadline=None)
 @given(layout=_layouts())
 def test_top_vectors_match_eqs_5_to_7(layout):

@@ -58,6 +58,7 @@ def test_layout(dataset: Path) -> None:
     assert not list(dataset.rglob("*.tmp"))
 
 
+@pytest.mark.slow
 def test_same_seed_same_files_any_workers(dataset: Path, tmp_path: Path) -> None:
     again = tmp_path / "again"
     generate_dataset(again, CONFIG, n_scenes=3, n_frames=2, seed=7, workers=2)

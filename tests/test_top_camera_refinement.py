@@ -65,6 +65,7 @@ def _angle(a: Camera, b: Camera) -> float:
     return float(np.degrees(Rotation.from_matrix(a.R @ b.R.T).magnitude()))
 
 
+@pytest.mark.slow
 @settings(max_examples=4, phases=(Phase.explicit, Phase.generate))  # seconds each: no shrinking
 @given(seed=st.integers(0, 10_000), axis=st.tuples(*[st.floats(-1, 1)] * 3)
        .filter(lambda v: np.linalg.norm(v) > 0.2), degrees=st.floats(1.0, 3.0))
@@ -77,6 +78,7 @@ def test_a_turned_top_camera_is_found_again(seed, axis, degrees) -> None:
     assert fit.loss_after < fit.loss_before
 
 
+@pytest.mark.slow
 def test_an_exact_camera_is_left_about_where_it_was() -> None:
     top, hors, top_boxes, hor_boxes = _scene(7)
     fit = refine_top_camera(top, hors, top_boxes, hor_boxes)
@@ -84,6 +86,7 @@ def test_an_exact_camera_is_left_about_where_it_was() -> None:
     assert fit.loss_before < 0.01
 
 
+@pytest.mark.slow
 def test_the_same_input_gives_the_same_camera() -> None:
     top, hors, top_boxes, hor_boxes = _scene(3)
     wrong = _turned(top, np.array([1.0, -1.5, 0.5]))
@@ -131,6 +134,7 @@ def test_the_batched_rays_are_eqs_6_and_7() -> None:
     assert misses > 0  # the cheirality test did reject some pairs here
 
 
+@pytest.mark.slow
 def test_a_crowd_is_refined_on_fewer_frames() -> None:
     top, hors, top_boxes, hor_boxes = _scene(2)
     pairs = np.median([len(t) * len(h) for t, h in zip(top_boxes, hor_boxes, strict=True)])
@@ -141,6 +145,7 @@ def test_a_crowd_is_refined_on_fewer_frames() -> None:
     assert least.frames == MIN_REFINE_FRAMES
 
 
+@pytest.mark.slow
 def test_a_camera_beyond_the_grid_is_found_by_the_wider_search() -> None:
     # 11 degrees off: the fit within the 4-degree grid stays poor (a wrong turn), so the wider
     # 2-degree grid out to 10 is searched and finds it; without it (wide_deg at the grid's own
@@ -185,6 +190,7 @@ def _mounted(camera: Camera, rotvec_deg: np.ndarray) -> Camera:
                   height=camera.height)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("frame", ["camera", "world"])
 def test_a_flying_camera_has_its_constant_error_found(frame) -> None:
     # A drone's telemetry with a 2.5-degree error that stays the same in the camera's frame
@@ -202,6 +208,7 @@ def test_a_flying_camera_has_its_constant_error_found(frame) -> None:
     assert f"in {'its own frame' if frame == 'camera' else 'the world'}" in fit.describe()
 
 
+@pytest.mark.slow
 def test_an_exact_flying_camera_is_left_about_where_it_was() -> None:
     tops, hors, top_boxes, hor_boxes = _flying_scene(6)
     fit = refine_top_camera(tops, hors, top_boxes, hor_boxes)

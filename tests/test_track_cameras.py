@@ -52,6 +52,7 @@ def _cvidf1(files: dict[str, Path], out: Path, capsys) -> float:
     return json.loads(capsys.readouterr().out)["cross_view"]["cvidf1"]
 
 
+@pytest.mark.slow
 def test_cameras_mend_the_oblique_view(overview, tmp_path, capsys) -> None:
     # Measured: CVIDF1 69.0 from the boxes alone, 99.7 with the cameras (the wearer found from
     # them; the files' ids are not read, no --camera-id).
@@ -62,6 +63,7 @@ def test_cameras_mend_the_oblique_view(overview, tmp_path, capsys) -> None:
     assert boxes < 85 and cams > 95, (boxes, cams)
 
 
+@pytest.mark.slow
 def test_cameras_that_fit_leave_the_images_to_the_over_time_terms(overview, tmp_path,
                                                                    capsys) -> None:
     # With cameras that fit the video (exact here) the paper's share of the network across
@@ -90,6 +92,7 @@ def test_cameras_that_fit_leave_the_images_to_the_over_time_terms(overview, tmp_
     assert _cvidf1(overview, tmp_path / "default", capsys) > 99
 
 
+@pytest.mark.slow
 def test_no_cross_view_cue_nothing_to_check(overview_video) -> None:
     # w1 1: the cross-view weights have no appearance term, so the check has nothing to judge.
     from xvmatch.inference.learned_association import load_matcher_bundle
@@ -110,6 +113,7 @@ def test_no_cross_view_cue_nothing_to_check(overview_video) -> None:
     assert seen == {0.3: 1, 1.0: 0}
 
 
+@pytest.mark.slow
 def test_cameras_follow_the_horizontal_frames_under_an_offset(overview, tmp_path) -> None:
     # The top video starts 3 frames earlier (top frame = horizontal frame + 3); the camera
     # files stay numbered by the horizontal frames, as associate reads them. Tracked with
@@ -140,6 +144,7 @@ def test_cameras_follow_the_horizontal_frames_under_an_offset(overview, tmp_path
         (["--top-images", "TOP", "--hor-images", "HOR", "--image-size", "640x360"], None),
     ],
 )
+@pytest.mark.slow
 def test_cameras_are_checked(overview, tmp_path, capsys, extra, message) -> None:
     extra = [overview["top_images"] if e == "TOP" else overview["hor_images"] if e == "HOR"
              else e for e in extra]
@@ -171,6 +176,7 @@ def test_a_missing_camera_file_is_named(overview, tmp_path, capsys) -> None:
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_a_miscalibrated_top_camera_is_refined_first(overview_video, overview, tmp_path,
                                                      capsys) -> None:
     # The top camera calibrated 2 degrees off (mostly a tilt): track turns it back on the boxes

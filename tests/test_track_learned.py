@@ -26,6 +26,7 @@ def _track(files, out: Path, *extra: str) -> int:
                  "--out", str(out), "--quiet", *extra])
 
 
+@pytest.mark.slow
 def test_track_model_default_from_boxes_only(track_files, tmp_path, capsys):
     out = tmp_path / "tracks"
     assert _track(track_files, out, "--model", "default") == 0
@@ -54,6 +55,7 @@ def _scores(files, folder: Path, capsys) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
+@pytest.mark.slow
 def test_handcrafted_weights_reproduce_the_output_before(track_files, tmp_path, capsys):
     """``--weights handcrafted`` is the tracker without ``--model``, byte for byte, and scores
     what the code before the learned weights (commit a4567a4) scored on this scene.
@@ -87,6 +89,7 @@ def test_weight_option_errors_are_one_line(track_files, tmp_path, capsys, extra,
     assert len(err) == 1 and err[0].startswith("xvmatch: error:") and message in err[0], err
 
 
+@pytest.mark.slow
 def test_learned_weights_with_the_wearer_given(track_files, tmp_path):
     gt = {ln.split(",", 2)[2]: ln.split(",")[1]
           for ln in track_files["gt_top"].read_text().splitlines()}
@@ -173,6 +176,7 @@ def test_learned_weights_give_the_right_tracks_on_a_known_case():
     assert all(res.top_rows[2 * f] == res.hor_rows[1001 + 2 * f] for f in range(1, 21))
 
 
+@pytest.mark.slow
 def test_learned_tracks_do_not_depend_on_workers(tmp_path):
     # 40 frames: more than one chunk of the learned association's feature pool (32 frames), so
     # that --workers 2 really shares them between processes.
@@ -189,6 +193,7 @@ def test_learned_tracks_do_not_depend_on_workers(tmp_path):
     assert _digest(tmp_path / "one") == _digest(tmp_path / "two")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
                     reason="OPENBLAS_CORETYPE names x86 kernels")
 @pytest.mark.parametrize("extra", [[], ["--model", "default"]], ids=["handcrafted", "learned"])

@@ -132,6 +132,7 @@ def test_evaluate_needs_pred_or_tracks(track_files, tmp_path, capsys):
     assert "not a folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_track_output_does_not_depend_on_workers(track_files, tmp_path):
     assert _track(track_files, tmp_path / "one") == 0
     assert _track(track_files, tmp_path / "two", "--workers", "2") == 0
@@ -160,6 +161,7 @@ def _track_video(files, out: Path, *extra: str) -> int:
                   "--hor-images", str(files["hor_images"]), *extra)
 
 
+@pytest.mark.slow
 def test_track_with_images_end_to_end(video_files, tmp_path, capsys):
     out = tmp_path / "tracks"
     assert _track_video(video_files, out, "--model", "default") == 0
@@ -217,6 +219,7 @@ def _columns(path: Path, frame_shift: int = 0) -> list[tuple[int, str, str]]:
     return [(int(f) - frame_shift, i, rest) for f, i, rest in rows]
 
 
+@pytest.mark.slow
 def test_track_with_an_offset_tracks_as_if_the_videos_were_in_sync(tmp_path, capsys):
     # The idealised walk of test_associate_with_an_offset_re_times_the_top_view: horizontal
     # frames renumbered by 8, so top frame = horizontal frame - 8. Tracked with --offset auto
@@ -273,6 +276,7 @@ def test_track_on_videos_too_short_for_the_sync_check_says_so(track_files, tmp_p
     assert json.loads((out / "offset.json").read_text()) == {"offset": 0}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("record", ['{"offset": "soon"}', "{", '{"shift": 3}', '{"offset": true}'])
 def test_evaluate_tracks_refuses_a_broken_offset_record(track_files, tmp_path, capsys, record):
     out = tmp_path / "tracks"
@@ -286,6 +290,7 @@ def test_evaluate_tracks_refuses_a_broken_offset_record(track_files, tmp_path, c
     assert main([*argv, "--offset", "0"]) == 0  # a given offset does not read it
 
 
+@pytest.mark.slow
 def test_track_with_an_offset_re_times_the_images(video_files, tmp_path):
     # The rendered clip with its top view (boxes and image files) 5 frames later: top frame =
     # horizontal frame + 5. With --offset 5 and the network, the tracks are those of the clip.

@@ -23,6 +23,7 @@ def _run(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, *extra:
     return capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_synthetic_mode_tracks_the_scenario_asked_for(monkeypatch, capsys) -> None:
     drone = _run(monkeypatch, capsys)
     overview = _run(monkeypatch, capsys, "--scenario", "overview")
@@ -37,6 +38,7 @@ def test_synthetic_mode_tracks_the_scenario_asked_for(monkeypatch, capsys) -> No
     assert rows["drone"]["frame"] != rows["overview"]["frame"]
 
 
+@pytest.mark.slow
 def test_cameras_reach_the_learned_rows_only(monkeypatch, capsys) -> None:
     # --cameras gives the learned matcher the rendered cameras, as track --cameras: its rows
     # change, the handcrafted rows do not.
@@ -49,6 +51,7 @@ def test_cameras_reach_the_learned_rows_only(monkeypatch, capsys) -> None:
     assert rows[0]["frame-learned"] != rows[1]["frame-learned"]
 
 
+@pytest.mark.slow
 def test_a_flying_top_camera_gets_one_mount_offset(monkeypatch, capsys) -> None:
     # --flight: each frame's rendered top camera differs; --camera-error puts the same turn
     # in the camera's own frame (and the same step) on every frame's, and the refinement turns

@@ -163,6 +163,7 @@ def _as_rows(frames):
     return out, truth
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("network", [False, True])
 def test_track_pair_with_images_on_a_rendered_clip(network):
     video = render_tracking_video(1, n_frames=30)
@@ -183,6 +184,7 @@ def test_track_pair_with_images_on_a_rendered_clip(network):
     assert good > 3 * bad and good > 0, (good, bad)
 
 
+@pytest.mark.slow
 def test_top_images_are_read_only_where_needed():
     # With the network over time the top view needs no histogram and only its tracklets'
     # middle frames: the same tracklets and descriptors as when every frame is read.

@@ -101,6 +101,7 @@ def test_offset_with_workers_stops_at_once_on_ctrl_c(long_scene, tmp_path, group
     assert "Traceback" not in err and "error" not in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("extra", [["--offset", "auto"], ["--model", "default"]],
                          ids=["offset-auto", "learned"])
 def test_associate_with_workers_stops_at_once_and_writes_nothing(long_scene, tmp_path, extra):
