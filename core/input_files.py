@@ -20,6 +20,7 @@ __all__ = [
     "MAX_LINE_BYTES",
     "InputFileError",
     "check_input_file",
+    "file_kind",
     "read_input_bytes",
     "read_input_text",
 ]
@@ -40,8 +41,9 @@ class InputFileError(ValueError):
     """An input that is not to be read; the message is one line naming the path."""
 
 
-def _kind(mode: int) -> str:
-    """A non-regular file's kind in words."""
+def file_kind(mode: int) -> str:
+    """A non-regular file's kind in words (``a FIFO``, ``a folder``, ...), for one-line refusals
+    of inputs and outputs alike."""
     for test, word in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
                        (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
                        (stat.S_ISDIR, "a folder")):
@@ -69,7 +71,7 @@ def _open(path: str | os.PathLike, what: str | None) -> tuple[int, int]:
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise InputFileError(f"{where}: is {_kind(st.st_mode)}, not a regular file; give "
+            raise InputFileError(f"{where}: is {file_kind(st.st_mode)}, not a regular file; give "
                                  "a file")
         if st.st_size > MAX_INPUT_BYTES:
             raise InputFileError(f"{where}: {st.st_size:,} bytes, more than the "

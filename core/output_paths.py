@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from xvmatch.core.folder_marker import is_own_folder, mark_own_folder
+from xvmatch.core.input_files import file_kind
 
 __all__ = [
     "Input",
@@ -82,16 +83,6 @@ class Input:
 
 
 _GLOB_CHARS = frozenset("*?[")
-
-
-def _kind(mode: int) -> str:
-    """A non-regular file's kind in words."""
-    for test, word in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
-                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISDIR, "a folder")):
-        if test(mode):
-            return word
-    return "not a regular file"
 
 
 def _stat(path: str, option: str) -> os.stat_result | None:
@@ -184,7 +175,7 @@ def _check_file(option: str, path: str, inputs: list[_Seen], parents: bool = Fal
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputPathError(f"{what}: is a folder; give a file name")
     if st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputPathError(f"{what}: is {_kind(st.st_mode)}, not a regular file; refusing "
+        raise OutputPathError(f"{what}: is {file_kind(st.st_mode)}, not a regular file; refusing "
                               "to write over it")
     _writable_folder(folder, what)
     if st is None:
