@@ -60,3 +60,30 @@ def test_a_planned_long_run_takes_the_kernels_for_small_calls_too():
         assert kernel_choice.kernels(1) is None  # the plan ends with its block
     with kernel_choice.forced("numpy"), kernel_choice.planned(10**6):
         assert kernel_choice.kernels(10**6) is None
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_learned_path_declares_its_run_as_the_search_does(monkeypatch, workers):
+    # The learned box path's many small calls run in the kernels on a long run, in the main
+    # process and in every worker (issue 70: they ran in numpy, a third of its slowdown).
+    from xvmatch.inference import learned_association
+
+    seen = []
+
+    def frame_features(*args):
+        seen.append(kernel_choice.kernels(1) is not None)
+        return [[None]]
+
+    if workers > 1:  # a worker runs _features_of_chunk itself: check its declaration directly
+        with kernel_choice.forced("auto"):
+            monkeypatch.setattr(learned_association, "_frame_features", frame_features)
+            learned_association._features_of_chunk([(TOP, HOR, None, None)], (2688.0, 1512.0),
+                                                   (), False, kernel_choice.LONG_RUN)
+        assert seen == [True]
+        return
+    inputs = [(TOP, HOR, None, None)] * kernel_choice.LONG_RUN
+    with kernel_choice.forced("auto"):
+        monkeypatch.setattr(learned_association, "_frame_features", frame_features)
+        list(learned_association._feature_stream(inputs, (2688.0, 1512.0), (), False, 1))
+        assert kernel_choice.kernels(1) is None  # declared for the run only
+    assert len(seen) == kernel_choice.LONG_RUN and all(seen)
