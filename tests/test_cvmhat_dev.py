@@ -56,6 +56,7 @@ def sequences(cvmhat_dir):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", sorted(MODES))
 def test_frame_mode_reproduces_the_authors_code(cvmhat_dir, sequences, mode):
     camera_id, every = MODES[mode]

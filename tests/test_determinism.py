@@ -53,6 +53,7 @@ def _restore_kernel_mode():
     kernel_choice.set_mode(previous)
 
 
+@pytest.mark.slow
 def test_search_costs_are_identical_under_every_kernel_choice(dev_pairs, monkeypatch):
     # The three best (O, theta) hypotheses of every 40th frame of each pair: costs, scales,
     # cameras, orientations and pairs bit for bit.
@@ -70,6 +71,7 @@ def test_search_costs_are_identical_under_every_kernel_choice(dev_pairs, monkeyp
     assert found["auto"] == found["numpy"]
 
 
+@pytest.mark.slow
 def test_sequence_association_is_identical_under_every_kernel_choice(dev_pairs, monkeypatch):
     # Frame mode (O searched) and the follow mode (O and theta carried from frame to frame) on
     # a 40-frame stretch of each pair.
@@ -86,6 +88,7 @@ def test_sequence_association_is_identical_under_every_kernel_choice(dev_pairs, 
     assert found["auto"] == found["numpy"]
 
 
+@pytest.mark.slow
 def test_offset_estimate_is_identical_for_any_workers_and_kernels(dev_pairs, monkeypatch):
     top, hor = dev_pairs["V1-S_55-G_1"]
     shifted = {f + 4: rec for f, rec in hor.items()}
@@ -102,6 +105,7 @@ def test_offset_estimate_is_identical_for_any_workers_and_kernels(dev_pairs, mon
         np.testing.assert_array_equal(value[3], first[3], err_msg=str(key))
 
 
+@pytest.mark.slow
 def test_learned_pairs_and_costs_are_identical_for_any_workers(dev_pairs, monkeypatch):
     from xvmatch.inference.learned_association import (
         associate_sequence_learned,
@@ -128,6 +132,7 @@ def test_learned_pairs_and_costs_are_identical_for_any_workers(dev_pairs, monkey
             np.testing.assert_array_equal(c[f], costs[f], err_msg=str(key))
 
 
+@pytest.mark.slow
 def test_tracks_are_identical_for_any_workers(dev_pairs, monkeypatch):
     from xvmatch.inference.tracking import associate_frames
 

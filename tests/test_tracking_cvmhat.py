@@ -43,6 +43,7 @@ def _tracks(det, rows):
             for f, rec in det.items()}
 
 
+@pytest.mark.slow
 def test_tracking_beats_frame_mode_on_real_boxes(sequence):
     top, hor = sequence
     det_top, truth_top = _detections(top, 1)
@@ -60,6 +61,7 @@ def test_tracking_beats_frame_mode_on_real_boxes(sequence):
     assert view_track_scores(top, tr_top).idf1 >= 95.0
 
 
+@pytest.mark.slow
 def test_learned_weights_on_real_boxes(sequence):
     from xvmatch.inference.learned_association import load_matcher_bundle
     from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
