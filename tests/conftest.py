@@ -111,3 +111,12 @@ def track_files(tmp_path_factory) -> dict[str, Path]:
         (folder / f"det_{view}.txt").write_text("\n".join(det) + "\n")
         out[f"gt_{view}"], out[f"det_{view}"] = gt, folder / f"det_{view}.txt"
     return out
+
+
+@pytest.fixture(scope="module")
+def scene_files(tmp_path_factory) -> tuple[Path, Path]:
+    """A 3-frame simulated scene written as ``s_top.txt`` / ``s_hor.txt``."""
+    from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
+
+    folder = tmp_path_factory.mktemp("scene")
+    return write_box_scene(simulate_box_scene(n_frames=3, seed=1), folder, "s")

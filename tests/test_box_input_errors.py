@@ -8,14 +8,6 @@ from pathlib import Path
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-
-
-@pytest.fixture(scope="module")
-def scene_files(tmp_path_factory) -> tuple[Path, Path]:
-    """A 3-frame simulated scene written as ``s_top.txt`` / ``s_hor.txt``."""
-    folder = tmp_path_factory.mktemp("scene")
-    return write_box_scene(simulate_box_scene(n_frames=3, seed=1), folder, "s")
 
 
 def _error_line(capsys) -> str:

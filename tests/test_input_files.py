@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.test_box_input_errors import _error_line
 from xvmatch.cli import main
 from xvmatch.core.input_files import (
     MAX_LINE_BYTES,
@@ -17,7 +18,6 @@ from xvmatch.core.input_files import (
     check_input_file,
     read_input_text,
 )
-from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
 from xvmatch.formats.camera_frames import open_cameras
 from xvmatch.formats.camera_io import CameraFileError
 from xvmatch.formats.mot_boxes import BoxFileError, read_mot_boxes
@@ -58,19 +58,6 @@ def fifo(tmp_path) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def scene_files(tmp_path_factory) -> tuple[Path, Path]:
-    """A 3-frame simulated scene written as ``s_top.txt`` / ``s_hor.txt``."""
-    folder = tmp_path_factory.mktemp("scene")
-    return write_box_scene(simulate_box_scene(n_frames=3, seed=1), folder, "s")
-
-
-def _error_line(capsys) -> str:
-    """The single stderr line of a failed command."""
-    err = capsys.readouterr().err
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("xvmatch: error: "), err
-    return lines[0]
 
 
 # --------------------------------------------------------------------------------------------
