@@ -505,12 +505,13 @@ def tracks(track_files, tmp_path) -> Path:
 ])
 def test_an_offset_record_out_of_range_is_one_line(track_files, tracks, capsys, record,
                                                    message) -> None:
-    from xvmatch.cli_offset import read_offset_record
+    from xvmatch.cli_types import MAX_FRAME_OFFSET
+    from xvmatch.formats.offset_record import read_offset_record
 
     path = tracks / "offset.json"
     path.write_bytes(record.encode("latin-1"))
     with pytest.raises(ValueError) as info:
-        read_offset_record(path)
+        read_offset_record(path, MAX_FRAME_OFFSET)
     assert message in str(info.value) and str(info.value).startswith(str(path))
     argv = ["evaluate", "--tracks", tracks, "--top", track_files["gt_top"], "--hor",
             track_files["gt_hor"]]
@@ -519,11 +520,12 @@ def test_an_offset_record_out_of_range_is_one_line(track_files, tracks, capsys, 
 
 
 def test_an_offset_record_in_range_is_applied(track_files, tracks, capsys) -> None:
-    from xvmatch.cli_offset import read_offset_record
+    from xvmatch.cli_types import MAX_FRAME_OFFSET
+    from xvmatch.formats.offset_record import read_offset_record
 
     for offset in (-100_000, 0, 7, 100_000):
         (tracks / "offset.json").write_text(json.dumps({"offset": offset}))
-        assert read_offset_record(tracks / "offset.json") == offset
+        assert read_offset_record(tracks / "offset.json", MAX_FRAME_OFFSET) == offset
     (tracks / "offset.json").write_text('{"offset": 0}')
     code, err = _cli(capsys, "evaluate", "--tracks", tracks, "--top", track_files["gt_top"],
                      "--hor", track_files["gt_hor"], "--json")

@@ -268,7 +268,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
             offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
                                         max_offset, wearer, value,
-                                        f"--hor {paths[k + 1]}: " if n_hor > 1 else "")
+                                        f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
+                                        hor_path=paths[k + 1])
         refinement = None
         if cameras is not None and args.refine_top_camera == "auto":
             from xvmatch.inference.camera_refinement import refine_views_cameras

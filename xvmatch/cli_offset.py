@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 
 from xvmatch.cli_options import (
@@ -24,7 +23,7 @@ from xvmatch.cli_options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.cli_types import MAX_FRAME_OFFSET, box_id, int_in, offset_value, worker_count
+from xvmatch.cli_types import box_id, int_in, offset_value, worker_count
 from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
     CLIP_LENGTH,
@@ -34,10 +33,9 @@ from xvmatch.cues.offset_estimation import (
     clip_start_range,
 )
 
-__all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "OFFSET_RECORD_BYTES",
-           "add_offset_options", "add_offset_parser", "check_clip_start", "max_offset_of",
-           "offset_summary", "read_offset_record", "resolve_offset", "unsupported_reason",
-           "wearer_marked"]
+__all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_options",
+           "add_offset_parser", "check_clip_start", "max_offset_of", "offset_summary",
+           "resolve_offset", "unsupported_reason", "wearer_marked"]
 
 EXAMPLE = "xvmatch offset --top seq_top.txt --hor seq_hor.txt"
 
@@ -47,45 +45,6 @@ MAX_OFFSET_LIMIT = 10_000
 MAX_OFFSET_TYPE = int_in(0, MAX_OFFSET_LIMIT, "each clip is compared at 2 * max_offset + 1 "
                          "offsets")
 """``--max-offset``: 0..10000 frames (and at most the videos' length: :func:`max_offset_of`)."""
-
-OFFSET_RECORD_BYTES = 4_096
-"""Largest offset record read (``track``'s ``offset.json``, ``{"offset": N}``: under 30 bytes)."""
-
-
-def read_offset_record(path: str | os.PathLike) -> int:
-    """The offset in an offset record (``{"offset": N}``, as ``xvmatch track`` writes it
-    beside its tracks), checked as ``--offset N`` is: an integer (not a bool, not a float, even
-    a whole one) with ``|N| <=`` :data:`~xvmatch.cli_types.MAX_FRAME_OFFSET`. Read without
-    blocking and at most :data:`OFFSET_RECORD_BYTES` bytes.
-
-    Raises:
-        ValueError: one line naming the file and the field, ending with what to do.
-    """
-    from xvmatch.core.input_files import InputFileError, read_input_bytes
-
-    fix = "pass --offset N"
-    where = os.fspath(path)
-    try:
-        doc = json.loads(read_input_bytes(path, max_bytes=OFFSET_RECORD_BYTES).decode("utf-8"))
-    except InputFileError as exc:
-        raise ValueError(f"{exc}; {fix}") from None
-    except ValueError as exc:  # JSON and UTF-8 errors, digits past Python's limit
-        first = str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
-        raise ValueError(f"{where}: not the offset record that xvmatch track writes ({first}); "
-                         f"{fix}") from None
-    if not isinstance(doc, dict) or "offset" not in doc:
-        raise ValueError(f"{where}: not the offset record that xvmatch track writes (expected "
-                         f'{{"offset": N}}); {fix}')
-    offset = doc["offset"]
-    if isinstance(offset, bool) or not isinstance(offset, int):
-        raise ValueError(f"{where}: field 'offset' must be an integer number of frames, got "
-                         f"{str(offset)[:40]!r}; {fix}")
-    if abs(offset) > MAX_FRAME_OFFSET:
-        got = str(offset) if len(str(offset)) <= 24 else f"{str(offset)[:20]}..."
-        raise ValueError(f"{where}: field 'offset' must be in -{MAX_FRAME_OFFSET}.."
-                         f"{MAX_FRAME_OFFSET} frames (as --offset), got {got}; {fix}")
-    return offset
-
 
 def check_clip_start(clip_start: int | None, hor, clip_length: int) -> None:
     """Refuse a ``--clip-start`` whose clip of ``clip_length`` frames is not inside the
@@ -159,19 +118,10 @@ def wearer_marked(top, positions: dict[int, int] | None):
     return {f: with_wearer_tag(r, positions.get(f)) for f, r in top.items()}, -1
 
 
-def _hor_path(args: argparse.Namespace, label: str) -> str:
-    """The horizontal box file of the pair ``label`` names (``--hor PATH: ``, or empty for
-    the only one)."""
-    if isinstance(args.hor, str):
-        return args.hor
-    if len(args.hor) == 1:
-        return args.hor[0]
-    return next((p for p in args.hor if label == f"--hor {p}: "), label.rstrip(": ") or "--hor")
-
-
 def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
                    max_offset: int | None, camera_id: int | None = None,
-                   value: int | str | None = None, label: str = "") -> int:
+                   value: int | str | None = None, label: str = "",
+                   hor_path: str | None = None) -> int:
     """The offset to apply: ``value`` (default ``--offset``) when a number, or with ``auto``
     the estimate when the clips back it (0 otherwise, with a warning on stderr); the estimate
     is reported unless ``--quiet``, after ``label`` (which pair of views). Videos too short
@@ -189,8 +139,7 @@ def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
 
     offset = _offset_value(args, top, hor, hor_width, params, max_offset, camera_id, value,
                            label)
-    check_common_frames(top, hor, offset, (args.top, _hor_path(args, label)),
-                        "nothing to match")
+    check_common_frames(top, hor, offset, (args.top, hor_path or args.hor), "nothing to match")
     return offset
 
 

@@ -411,9 +411,9 @@ def _cmd_track(args: argparse.Namespace) -> int:
     claim_folder(out, TRACK_COMMAND)
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
     n_hor = write_track_rows(out / "hor.txt", hor, result.hor_rows)
-    from xvmatch.core.atomic_files import atomic_write_text
+    from xvmatch.formats.offset_record import write_offset_record
 
-    atomic_write_text(out / OFFSET_FILE, json.dumps({"offset": offset}) + "\n")
+    write_offset_record(out / OFFSET_FILE, offset)
     write_cameras(args, *refined)
     if result.n_fallback:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows spent the "
@@ -448,14 +448,15 @@ def _trackeval_installed() -> bool:
 
 def tracked_offset(folder: Path) -> int:
     """The offset ``track`` applied to the tracks in ``folder`` (its :data:`OFFSET_FILE`,
-    checked as ``--offset`` is: :func:`~xvmatch.cli_offset.read_offset_record`; 0 when absent,
-    as in folders written before it existed)."""
-    from xvmatch.cli_offset import read_offset_record
+    checked as ``--offset`` is: :func:`~xvmatch.formats.offset_record.read_offset_record`; 0
+    when absent, as in folders written before it existed)."""
+    from xvmatch.cli_types import MAX_FRAME_OFFSET
+    from xvmatch.formats.offset_record import read_offset_record
 
     path = folder / OFFSET_FILE
     if not path.exists():
         return 0
-    return read_offset_record(path)
+    return read_offset_record(path, MAX_FRAME_OFFSET)
 
 
 def evaluate_tracks_command(args: argparse.Namespace) -> int:
