@@ -183,6 +183,109 @@ class Appearances:
         return records
 
 
+def _check_outfit_options(palette_size: int, lookalike: float, hat: float, bag: float,
+                          pattern_weights: Sequence[float]) -> np.ndarray:
+    """Refuse out-of-range options of :func:`draw_appearances`; returns the pattern weights."""
+    n_names = len(_TOP_PALETTE)
+    if not 2 <= palette_size <= n_names:
+        raise ValueError(f"palette_size must be in 2..{n_names}, got {palette_size}")
+    for label, p in (("lookalike", lookalike), ("hat", hat), ("bag", bag)):
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"{label} must be a probability in [0, 1], got {p}")
+    weights = np.asarray(pattern_weights, dtype=float)
+    if weights.shape != (3,) or (weights < 0).any() or weights.sum() <= 0:
+        raise ValueError(f"pattern_weights must be 3 non-negative weights, got {pattern_weights}")
+    return weights
+
+
+def _copy_lookalikes(rng: np.random.Generator, copy_from: np.ndarray, pattern: np.ndarray,
+                     tops: np.ndarray, scene_names: list[str], top_colour: np.ndarray,
+                     bottom_colour: np.ndarray) -> None:
+    """Give each look-alike its source's pattern and bottoms, tops re-drawn in their groups.
+
+    Args:
+        rng: random generator (draws two group and two colour indices per look-alike).
+        copy_from: ``(N,)`` source person of each look-alike, -1 if none.
+        pattern: ``(N,)`` torso patterns, updated in place.
+        tops: ``(N, 2)`` indices of the source people's top colours in ``scene_names``.
+        scene_names: the scene's palette colour names.
+        top_colour: ``(N, 2, 3)`` top colours, updated in place.
+        bottom_colour: ``(N, 3)`` bottom colours, updated in place.
+    """
+    group_of = {name: [g for g in LOOKALIKE_GROUPS if name in g] for name in _TOP_PALETTE}
+    for i in np.flatnonzero(copy_from >= 0):
+        j = copy_from[i]
+        pattern[i] = pattern[j]
+        bottom_colour[i] = bottom_colour[j]
+        for k in range(2):
+            name = scene_names[tops[j, k]]
+            group = group_of[name][int(rng.integers(0, len(group_of[name])))]
+            twin = group[int(rng.integers(0, len(group)))]
+            top_colour[i, k] = _TOP_PALETTE[twin]
+
+
+def _torso_colours(pattern: np.ndarray, top_colour: np.ndarray, colours: np.ndarray,
+                   present: np.ndarray) -> np.ndarray:
+    """Colour the torso bands by pattern, in place; returns the ``(N,)`` band counts.
+
+    Stripes alternate the two colours; two-tone puts the second colour on the lower band.
+    """
+    n_bands = np.array([1, 5, 2])[pattern]
+    band_index = np.arange(_MAX_BANDS)
+    which = np.where(pattern[:, None] == 1, band_index[None] % 2,
+                     np.where(pattern[:, None] == 2, (band_index[None] == 0).astype(int), 0))
+    colours[:, _TORSO] = np.take_along_axis(top_colour, which[..., None], axis=1)
+    present[:, _TORSO] = band_index[None] < n_bands[:, None]
+    return n_bands
+
+
+def _skin_limbs_and_hair(rng: np.random.Generator, n_bands: np.ndarray,
+                         bottom_colour: np.ndarray, draws: np.ndarray, colours: np.ndarray,
+                         present: np.ndarray) -> None:
+    """Colour arms, legs, shoes, head, neck and hair, in place (draws skin, shoes, hair).
+
+    Args:
+        rng: random generator.
+        n_bands: ``(N,)`` torso band counts (long sleeves take the upper band's colour).
+        bottom_colour: ``(N, 3)`` trouser colours.
+        draws: ``(N, 4)`` uniform draws; column 1 picks short sleeves, column 2 baldness.
+        colours, present: the outfit arrays, written in place.
+    """
+    n = n_bands.shape[0]
+    upper = np.take_along_axis(colours[:, _TORSO], (n_bands - 1)[:, None, None], axis=1)[:, 0]
+    skin = _SKIN[rng.integers(0, len(_SKIN), size=n)] + 6.0 * rng.standard_normal((n, 3))
+    short_sleeves = draws[:, 1] < 0.3
+    colours[:, _S["arm_l"]] = np.where(short_sleeves[:, None], skin, upper)
+    colours[:, _S["arm_r"]] = colours[:, _S["arm_l"]]
+    colours[:, _S["leg_l"]] = bottom_colour
+    colours[:, _S["leg_r"]] = bottom_colour
+    shoes = _SHOES[rng.integers(0, len(_SHOES), size=n)]
+    colours[:, _S["shoe_l"]] = shoes
+    colours[:, _S["shoe_r"]] = shoes
+    colours[:, _S["head"]] = skin
+    colours[:, _S["neck"]] = skin * 0.9
+    hair = _HAIR[rng.integers(0, len(_HAIR), size=n)]
+    colours[:, _S["hair_back"]] = hair
+    colours[:, _S["hair_cap"]] = hair
+    bald = draws[:, 2] < 0.06
+    present[:, _S["hair_cap"]] = ~bald
+    present[:, _S["hair_back"]] = ~bald
+
+
+def _accessories(rng: np.random.Generator, n: int, hat: float, bag: float, top_rgb: np.ndarray,
+                 colours: np.ndarray, present: np.ndarray) -> None:
+    """Draw hats and backpacks and set the (absent) device, in place."""
+    palette_size = top_rgb.shape[0]
+    has_hat = rng.random(n) < hat
+    colours[:, _S["hat"]] = top_rgb[rng.integers(0, palette_size, size=n)]
+    present[:, _S["hat"]] = has_hat
+    has_bag = rng.random(n) < bag
+    colours[:, _S["bag"]] = top_rgb[rng.integers(0, palette_size, size=n)] * 0.7
+    present[:, _S["bag"]] = has_bag
+    colours[:, _S["device"]] = _DEVICE
+    present[:, _S["device"]] = False
+
+
 def draw_appearances(
     n: int,
     rng: np.random.Generator,
@@ -214,20 +317,10 @@ def draw_appearances(
     Returns:
         The :class:`Appearances`.
     """
+    weights = _check_outfit_options(palette_size, lookalike, hat, bag, pattern_weights)
     names = list(_TOP_PALETTE)
-    if not 2 <= palette_size <= len(names):
-        raise ValueError(f"palette_size must be in 2..{len(names)}, got {palette_size}")
-    for label, p in (("lookalike", lookalike), ("hat", hat), ("bag", bag)):
-        if not 0.0 <= p <= 1.0:
-            raise ValueError(f"{label} must be a probability in [0, 1], got {p}")
-    weights = np.asarray(pattern_weights, dtype=float)
-    if weights.shape != (3,) or (weights < 0).any() or weights.sum() <= 0:
-        raise ValueError(f"pattern_weights must be 3 non-negative weights, got {pattern_weights}")
     scene_names = [names[k] for k in rng.permutation(len(names))[:palette_size]]
     top_rgb = np.array([_TOP_PALETTE[k] for k in scene_names], dtype=float)
-    group_of = {
-        name: [g for g in LOOKALIKE_GROUPS if name in g] for name in names
-    }
 
     colours = np.zeros((n, N_SLOTS, 3))
     present = np.ones((n, N_SLOTS), dtype=bool)
@@ -241,50 +334,12 @@ def draw_appearances(
             copy_from[i] = int(rng.integers(0, i))
     top_colour = top_rgb[tops]  # (n, 2, 3)
     bottom_colour = _BOTTOM_PALETTE[bottoms]
-    for i in np.flatnonzero(copy_from >= 0):
-        j = copy_from[i]
-        pattern[i] = pattern[j]
-        bottom_colour[i] = bottom_colour[j]
-        for k in range(2):
-            name = scene_names[tops[j, k]]
-            group = group_of[name][int(rng.integers(0, len(group_of[name])))]
-            twin = group[int(rng.integers(0, len(group)))]
-            top_colour[i, k] = _TOP_PALETTE[twin]
+    _copy_lookalikes(rng, copy_from, pattern, tops, scene_names, top_colour, bottom_colour)
     top_colour += colour_jitter * rng.standard_normal((n, 2, 3))
     bottom_colour += colour_jitter * rng.standard_normal((n, 3))
-    n_bands = np.array([1, 5, 2])[pattern]
-    band_index = np.arange(_MAX_BANDS)
-    # Stripes alternate the two colours; two-tone puts the second colour on the lower band.
-    which = np.where(pattern[:, None] == 1, band_index[None] % 2,
-                     np.where(pattern[:, None] == 2, (band_index[None] == 0).astype(int), 0))
-    colours[:, _TORSO] = np.take_along_axis(top_colour, which[..., None], axis=1)
-    present[:, _TORSO] = band_index[None] < n_bands[:, None]
-    upper = np.take_along_axis(colours[:, _TORSO], (n_bands - 1)[:, None, None], axis=1)[:, 0]
-    skin = _SKIN[rng.integers(0, len(_SKIN), size=n)] + 6.0 * rng.standard_normal((n, 3))
-    short_sleeves = draws[:, 1] < 0.3
-    colours[:, _S["arm_l"]] = np.where(short_sleeves[:, None], skin, upper)
-    colours[:, _S["arm_r"]] = colours[:, _S["arm_l"]]
-    colours[:, _S["leg_l"]] = bottom_colour
-    colours[:, _S["leg_r"]] = bottom_colour
-    shoes = _SHOES[rng.integers(0, len(_SHOES), size=n)]
-    colours[:, _S["shoe_l"]] = shoes
-    colours[:, _S["shoe_r"]] = shoes
-    colours[:, _S["head"]] = skin
-    colours[:, _S["neck"]] = skin * 0.9
-    hair = _HAIR[rng.integers(0, len(_HAIR), size=n)]
-    colours[:, _S["hair_back"]] = hair
-    colours[:, _S["hair_cap"]] = hair
-    bald = draws[:, 2] < 0.06
-    present[:, _S["hair_cap"]] = ~bald
-    present[:, _S["hair_back"]] = ~bald
-    has_hat = rng.random(n) < hat
-    colours[:, _S["hat"]] = top_rgb[rng.integers(0, palette_size, size=n)]
-    present[:, _S["hat"]] = has_hat
-    has_bag = rng.random(n) < bag
-    colours[:, _S["bag"]] = top_rgb[rng.integers(0, palette_size, size=n)] * 0.7
-    present[:, _S["bag"]] = has_bag
-    colours[:, _S["device"]] = _DEVICE
-    present[:, _S["device"]] = False
+    n_bands = _torso_colours(pattern, top_colour, colours, present)
+    _skin_limbs_and_hair(rng, n_bands, bottom_colour, draws, colours, present)
+    _accessories(rng, n, hat, bag, top_rgb, colours, present)
     return Appearances(
         colours=np.clip(colours, 0.0, 255.0),
         present=present,
@@ -391,6 +446,214 @@ def _swing(origin: np.ndarray, angle: np.ndarray, length: np.ndarray,
     ) / np.sqrt(1.0 + outward[:, None] ** 2)
 
 
+_Built = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""One primitive's ``(vertices, normals, axis)``, as :func:`_cylinder` gives."""
+
+
+def _leg_parts(H: np.ndarray, W: np.ndarray, swing: np.ndarray) -> list[tuple[str, _Built]]:
+    """Legs and shoes of N people in the body frame, swinging with the gait.
+
+    Args:
+        H, W: ``(N,)`` heights and shoulder widths, metres.
+        swing: ``(N,)`` signed gait swing of the frame (amplitude times sin(phase)).
+
+    Returns:
+        ``(slot name, primitive)`` pairs for both legs and both shoes.
+    """
+    zeros = np.zeros(H.shape[0])
+    parts: list[tuple[str, _Built]] = []
+    hip_z = _HIP * H
+    leg_len = hip_z - _SHOE_H * 0.6
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        hip = np.stack([zeros, sign * 0.2 * W, hip_z], axis=1)
+        foot = _swing(hip, sign * _LEG_SWING * swing, leg_len, zeros)
+        r_top = np.stack([_LEG_R[0] * H, _LEG_R[0] * H], axis=1)
+        r_bot = np.stack([_LEG_R[1] * H, _LEG_R[1] * H], axis=1)
+        parts.append((f"leg_{side}", _cylinder(foot, hip, r_bot, r_top)))
+        shoe_c = foot + np.array([0.035, 0.0, 0.0]) * (H[:, None] / 1.75)
+        shoe_b = shoe_c.copy()
+        shoe_b[:, 2] = np.maximum(foot[:, 2] - _SHOE_H * H * 0.6, 0.0)
+        shoe_t = shoe_b + np.array([0.0, 0.0, 1.0]) * (_SHOE_H * H)[:, None]
+        r = np.stack([0.072 * H / 1.75, 0.05 * H / 1.75], axis=1)
+        parts.append((f"shoe_{side}", _cylinder(shoe_b, shoe_t, r, r)))
+    return parts
+
+
+def _torso_parts(H: np.ndarray, W: np.ndarray, n_bands: np.ndarray) -> list[tuple[int, _Built]]:
+    """Torso bands from the hip to the shoulder, tapering towards the waist.
+
+    Args:
+        H, W: ``(N,)`` heights and shoulder widths, metres.
+        n_bands: ``(N,)`` number of torso bands of each person's pattern.
+
+    Returns:
+        ``(slot index, primitive)`` pairs for all :data:`_MAX_BANDS` band slots.
+    """
+    zeros = np.zeros(H.shape[0])
+    hip_z = _HIP * H
+    shoulder_z = _SHOULDER * H
+    half_w_top = 0.5 * W - 1.6 * (_ARM_R * H)
+    parts: list[tuple[int, _Built]] = []
+    for b in range(_MAX_BANDS):
+        lo = b / np.maximum(n_bands, 1)
+        hi = (b + 1) / np.maximum(n_bands, 1)
+        lo, hi = np.minimum(lo, 1.0), np.minimum(hi, 1.0)
+        z0 = hip_z + lo * (shoulder_z - hip_z)
+        z1 = hip_z + np.maximum(hi, lo + 1e-3) * (shoulder_z - hip_z)
+
+        def ring(t: np.ndarray) -> np.ndarray:
+            taper = 0.86 + 0.14 * t
+            return np.stack([_CHEST_DEPTH * H * (0.92 + 0.08 * t), half_w_top * taper], axis=1)
+
+        parts.append((int(_TORSO[b]), _cylinder(np.stack([zeros, zeros, z0], axis=1),
+                                                np.stack([zeros, zeros, z1], axis=1),
+                                                ring(lo), ring(hi))))
+    return parts
+
+
+def _arm_and_bag_parts(H: np.ndarray, W: np.ndarray,
+                       swing: np.ndarray) -> list[tuple[str, _Built]]:
+    """Arms (swinging opposite to the legs) and the backpack behind the upper torso.
+
+    Args:
+        H, W: ``(N,)`` heights and shoulder widths, metres.
+        swing: ``(N,)`` signed gait swing of the frame.
+
+    Returns:
+        ``(slot name, primitive)`` pairs for both arms and the bag.
+    """
+    n = H.shape[0]
+    zeros = np.zeros(n)
+    shoulder_z = _SHOULDER * H
+    arm_r = _ARM_R * H
+    parts: list[tuple[str, _Built]] = []
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        shoulder = np.stack([zeros, sign * (0.5 * W - arm_r), shoulder_z - arm_r], axis=1)
+        hand = _swing(shoulder, -sign * _ARM_SWING * swing, _ARM_LEN * H, sign * 0.08 + zeros)
+        r = np.stack([arm_r, arm_r], axis=1)
+        parts.append((f"arm_{side}", _cylinder(hand, shoulder, r * 0.8, r)))
+    bag_b = np.stack([-(_CHEST_DEPTH * H + 0.07), zeros, 0.60 * H], axis=1)
+    bag_t = bag_b + np.array([0.0, 0.0, 1.0]) * (0.2 * H)[:, None]
+    r = np.stack([np.full(n, 0.07), 0.33 * W], axis=1)
+    parts.append(("bag", _cylinder(bag_b, bag_t, r, r, _BOX_RING)))
+    return parts
+
+
+def _head_parts(H: np.ndarray) -> tuple[list[tuple[str, _Built]], np.ndarray, np.ndarray]:
+    """Head, neck, hair and hat of N people in the body frame.
+
+    Args:
+        H: ``(N,)`` heights, metres.
+
+    Returns:
+        ``(slot name, primitive)`` pairs, the ``(N, 3)`` head centres and ``(N, 3)`` head radii.
+    """
+    zeros = np.zeros(H.shape[0])
+    shoulder_z = _SHOULDER * H
+    radii = _HEAD_R[None] * H[:, None]
+    head_c = np.stack([zeros, zeros, H - radii[:, 2]], axis=1)
+    neck_r = np.stack([0.5 * radii[:, 0], 0.6 * radii[:, 1]], axis=1)
+    hat_b = np.stack([-0.01 * H, zeros, H - 0.45 * radii[:, 2]], axis=1)
+    hat_t = hat_b + np.array([0.0, 0.0, 1.0]) * (0.5 * radii[:, 2] + 0.03)[:, None]
+    parts = [
+        ("head", _ellipsoid(head_c, radii, _HEAD_DIRS)),
+        ("neck", _cylinder(np.stack([-0.2 * radii[:, 0], zeros, shoulder_z - 0.02 * H], axis=1),
+                           np.stack([-0.2 * radii[:, 0], zeros, head_c[:, 2]], axis=1),
+                           neck_r, neck_r)),
+        ("hair_cap", _ellipsoid(head_c, radii * 1.07, _CAP_DIRS,
+                                shift=np.stack([-0.012 * H, zeros, zeros], axis=1))),
+        ("hair_back", _ellipsoid(head_c, radii * 1.07, _BACK_DIRS)),
+        ("hat", _cylinder(hat_b, hat_t, radii[:, :2] * 1.12, radii[:, :2] * 1.02)),
+    ]
+    return parts, head_c, radii
+
+
+def _put_device(verts: np.ndarray, normals: np.ndarray, axes: np.ndarray, w: int,
+                device_style: str, device_offset: np.ndarray, head_c: np.ndarray,
+                radii: np.ndarray, arm_r: np.ndarray, cos_h: np.ndarray,
+                sin_h: np.ndarray) -> None:
+    """Draw the carrier's device (and, for a phone, the arms holding it), in place.
+
+    Args:
+        verts, normals, axes: the body-frame primitives of all people, written in place.
+        w: index of the carrier.
+        device_style: ``"head"`` or ``"hand"`` (see :func:`body_frame`).
+        device_offset: ``(3,)`` device position relative to the carrier's ground point (world).
+        head_c, radii: ``(N, 3)`` head centres and radii (:func:`_head_parts`).
+        arm_r: ``(N,)`` arm radii.
+        cos_h, sin_h: ``(N,)`` cosine and sine of the headings.
+    """
+    if device_style == "head":
+        base = head_c[w:w + 1] + np.array([[0.6, 0.0, 0.55]]) * radii[w:w + 1]
+        top = base + np.array([[0.0, 0.0, 0.05]])
+        size = np.array([[0.05, 0.035]])
+    else:
+        off = np.asarray(device_offset, dtype=float)
+        local = np.array([cos_h[w] * off[0] + sin_h[w] * off[1],
+                          -sin_h[w] * off[0] + cos_h[w] * off[1], off[2]])
+        base = local[None] - np.array([[0.0, 0.0, 0.08]])
+        top = local[None] + np.array([[0.0, 0.0, 0.08]])
+        size = np.array([[0.012, 0.045]])
+        for side, sign in (("l", 1.0), ("r", -1.0)):
+            k = _S[f"arm_{side}"]
+            shoulder = verts[w, k, 8:].mean(axis=0)
+            grip = local + np.array([-0.02, sign * 0.05, -0.05])
+            r = np.array([[arm_r[w], arm_r[w]]])
+            v, nrm, ax = _cylinder(grip[None], shoulder[None], r * 0.8, r)
+            verts[w, k], normals[w, k], axes[w, k] = v[0], nrm[0], ax[0]
+    v, nrm, ax = _cylinder(base, top, size, size, _BOX_RING)
+    k = _S["device"]
+    verts[w, k], normals[w, k], axes[w, k] = v[0], nrm[0], ax[0]
+
+
+def _to_world(people: PeopleState, f: int, verts: np.ndarray, normals: np.ndarray,
+              axes: np.ndarray, present: np.ndarray, appearances: Appearances,
+              head_c: np.ndarray) -> BodyFrame:
+    """Rotate the body-frame primitives by the headings about z and translate them to the ground.
+
+    Args:
+        people: the walks.
+        f: 0-based frame index.
+        verts, normals: ``(N, N_SLOTS, 16, 3)`` body-frame points and normals.
+        axes: ``(N, N_SLOTS, 3)`` body-frame ring axes.
+        present: ``(N, N_SLOTS)`` slots that exist.
+        appearances: clothing of the people.
+        head_c: ``(N, 3)`` body-frame head centres.
+
+    Returns:
+        The :class:`BodyFrame`.
+    """
+    n = people.n_people
+    H = people.heights
+    zeros = np.zeros(n)
+    heading = people.headings[f]
+    cos_h, sin_h = np.cos(heading), np.sin(heading)
+    rot = np.zeros((n, 3, 3))
+    rot[:, 0, 0], rot[:, 0, 1] = cos_h, -sin_h
+    rot[:, 1, 0], rot[:, 1, 1] = sin_h, cos_h
+    rot[:, 2, 2] = 1.0
+    ground = np.concatenate([people.positions[f], np.zeros((n, 1))], axis=1)
+    world = np.einsum("nij,nsvj->nsvi", rot, verts) + ground[:, None, None]
+    world_n = np.einsum("nij,nsvj->nsvi", rot, normals)
+    world_axes = np.einsum("nij,nsj->nsi", rot, axes)
+    cap = np.zeros((n, N_SLOTS), dtype=bool)
+    cap[np.arange(n), _TORSO[appearances.n_bands - 1]] = True
+    for slot in ("bag", "hat", "device"):
+        cap[:, _S[slot]] = True
+    centre = ground + np.stack([zeros, zeros, 0.5 * H], axis=1)
+    return BodyFrame(
+        vertices=world,
+        normals=world_n,
+        axis=world_axes,
+        present=present,
+        cap=cap & present,
+        colours=appearances.colours,
+        head=ground + (head_c - np.stack([zeros, zeros, zeros], axis=1)),
+        ground=ground,
+        centre=centre,
+    )
+
+
 def body_frame(
     people: PeopleState,
     frame: int,
@@ -423,126 +686,23 @@ def body_frame(
     f = frame - 1
     n = people.n_people
     H, W = people.heights, people.widths
-    zeros = np.zeros(n)
     verts = np.zeros((n, N_SLOTS, N_VERTICES, 3))
     normals = np.zeros((n, N_SLOTS, N_VERTICES, 3))
     axes = np.zeros((n, N_SLOTS, 3))
     present = appearances.present.copy()
-
-    def put(slot: str | int, built: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    swing = amplitude[f] * np.sin(phase[f])
+    head_parts, head_c, radii = _head_parts(H)
+    parts: list[tuple[str | int, _Built]] = [
+        *_leg_parts(H, W, swing), *_torso_parts(H, W, appearances.n_bands),
+        *_arm_and_bag_parts(H, W, swing), *head_parts,
+    ]
+    for slot, built in parts:
         k = _S[slot] if isinstance(slot, str) else slot
         verts[:, k], normals[:, k], axes[:, k] = built
-
-    swing = amplitude[f] * np.sin(phase[f])
-    # Legs and shoes.
-    hip_z = _HIP * H
-    leg_len = hip_z - _SHOE_H * 0.6
-    for side, sign in (("l", 1.0), ("r", -1.0)):
-        hip = np.stack([zeros, sign * 0.2 * W, hip_z], axis=1)
-        foot = _swing(hip, sign * _LEG_SWING * swing, leg_len, zeros)
-        r_top = np.stack([_LEG_R[0] * H, _LEG_R[0] * H], axis=1)
-        r_bot = np.stack([_LEG_R[1] * H, _LEG_R[1] * H], axis=1)
-        put(f"leg_{side}", _cylinder(foot, hip, r_bot, r_top))
-        shoe_c = foot + np.array([0.035, 0.0, 0.0]) * (H[:, None] / 1.75)
-        shoe_b = shoe_c.copy()
-        shoe_b[:, 2] = np.maximum(foot[:, 2] - _SHOE_H * H * 0.6, 0.0)
-        shoe_t = shoe_b + np.array([0.0, 0.0, 1.0]) * (_SHOE_H * H)[:, None]
-        r = np.stack([0.072 * H / 1.75, 0.05 * H / 1.75], axis=1)
-        put(f"shoe_{side}", _cylinder(shoe_b, shoe_t, r, r))
-    # Torso bands: from the hip to the shoulder, tapering towards the waist.
-    shoulder_z = _SHOULDER * H
-    arm_r = _ARM_R * H
-    half_w_top = 0.5 * W - 1.6 * arm_r
-    nb = appearances.n_bands
-    for b in range(_MAX_BANDS):
-        lo = b / np.maximum(nb, 1)
-        hi = (b + 1) / np.maximum(nb, 1)
-        lo, hi = np.minimum(lo, 1.0), np.minimum(hi, 1.0)
-        z0 = hip_z + lo * (shoulder_z - hip_z)
-        z1 = hip_z + np.maximum(hi, lo + 1e-3) * (shoulder_z - hip_z)
-
-        def ring(t: np.ndarray) -> np.ndarray:
-            taper = 0.86 + 0.14 * t
-            return np.stack([_CHEST_DEPTH * H * (0.92 + 0.08 * t), half_w_top * taper], axis=1)
-
-        put(int(_TORSO[b]), _cylinder(np.stack([zeros, zeros, z0], axis=1),
-                                      np.stack([zeros, zeros, z1], axis=1), ring(lo), ring(hi)))
-    # Arms swing opposite to the legs.
-    for side, sign in (("l", 1.0), ("r", -1.0)):
-        shoulder = np.stack([zeros, sign * (0.5 * W - arm_r), shoulder_z - arm_r], axis=1)
-        hand = _swing(shoulder, -sign * _ARM_SWING * swing, _ARM_LEN * H, sign * 0.08 + zeros)
-        r = np.stack([arm_r, arm_r], axis=1)
-        put(f"arm_{side}", _cylinder(hand, shoulder, r * 0.8, r))
-    # Backpack behind the upper torso.
-    bag_b = np.stack([-(_CHEST_DEPTH * H + 0.07), zeros, 0.60 * H], axis=1)
-    bag_t = bag_b + np.array([0.0, 0.0, 1.0]) * (0.2 * H)[:, None]
-    r = np.stack([np.full(n, 0.07), 0.33 * W], axis=1)
-    put("bag", _cylinder(bag_b, bag_t, r, r, _BOX_RING))
-    # Head, hair and hat.
-    radii = _HEAD_R[None] * H[:, None]
-    head_c = np.stack([zeros, zeros, H - radii[:, 2]], axis=1)
-    put("head", _ellipsoid(head_c, radii, _HEAD_DIRS))
-    neck_r = np.stack([0.5 * radii[:, 0], 0.6 * radii[:, 1]], axis=1)
-    put("neck", _cylinder(np.stack([-0.2 * radii[:, 0], zeros, shoulder_z - 0.02 * H], axis=1),
-                          np.stack([-0.2 * radii[:, 0], zeros, head_c[:, 2]], axis=1),
-                          neck_r, neck_r))
-    put("hair_cap", _ellipsoid(head_c, radii * 1.07, _CAP_DIRS,
-                               shift=np.stack([-0.012 * H, zeros, zeros], axis=1)))
-    put("hair_back", _ellipsoid(head_c, radii * 1.07, _BACK_DIRS))
-    hat_b = np.stack([-0.01 * H, zeros, H - 0.45 * radii[:, 2]], axis=1)
-    hat_t = hat_b + np.array([0.0, 0.0, 1.0]) * (0.5 * radii[:, 2] + 0.03)[:, None]
-    put("hat", _cylinder(hat_b, hat_t, radii[:, :2] * 1.12, radii[:, :2] * 1.02))
-
-    # The carrier's device (and, for a phone, the arms holding it).
-    heading = people.headings[f]
-    cos_h, sin_h = np.cos(heading), np.sin(heading)
     if device_offset is not None:
         w = people.wearer
         present[w, _S["device"]] = True
-        if device_style == "head":
-            base = head_c[w:w + 1] + np.array([[0.6, 0.0, 0.55]]) * radii[w:w + 1]
-            top = base + np.array([[0.0, 0.0, 0.05]])
-            size = np.array([[0.05, 0.035]])
-        else:
-            off = np.asarray(device_offset, dtype=float)
-            local = np.array([cos_h[w] * off[0] + sin_h[w] * off[1],
-                              -sin_h[w] * off[0] + cos_h[w] * off[1], off[2]])
-            base = local[None] - np.array([[0.0, 0.0, 0.08]])
-            top = local[None] + np.array([[0.0, 0.0, 0.08]])
-            size = np.array([[0.012, 0.045]])
-            for side, sign in (("l", 1.0), ("r", -1.0)):
-                k = _S[f"arm_{side}"]
-                shoulder = verts[w, k, 8:].mean(axis=0)
-                grip = local + np.array([-0.02, sign * 0.05, -0.05])
-                r = np.array([[arm_r[w], arm_r[w]]])
-                v, nrm, ax = _cylinder(grip[None], shoulder[None], r * 0.8, r)
-                verts[w, k], normals[w, k], axes[w, k] = v[0], nrm[0], ax[0]
-        v, nrm, ax = _cylinder(base, top, size, size, _BOX_RING)
-        k = _S["device"]
-        verts[w, k], normals[w, k], axes[w, k] = v[0], nrm[0], ax[0]
-
-    # Body frame to world: rotate by the heading about z, translate to the ground position.
-    rot = np.zeros((n, 3, 3))
-    rot[:, 0, 0], rot[:, 0, 1] = cos_h, -sin_h
-    rot[:, 1, 0], rot[:, 1, 1] = sin_h, cos_h
-    rot[:, 2, 2] = 1.0
-    ground = np.concatenate([people.positions[f], np.zeros((n, 1))], axis=1)
-    world = np.einsum("nij,nsvj->nsvi", rot, verts) + ground[:, None, None]
-    world_n = np.einsum("nij,nsvj->nsvi", rot, normals)
-    world_axes = np.einsum("nij,nsj->nsi", rot, axes)
-    cap = np.zeros((n, N_SLOTS), dtype=bool)
-    cap[np.arange(n), _TORSO[nb - 1]] = True
-    for slot in ("bag", "hat", "device"):
-        cap[:, _S[slot]] = True
-    centre = ground + np.stack([zeros, zeros, 0.5 * H], axis=1)
-    return BodyFrame(
-        vertices=world,
-        normals=world_n,
-        axis=world_axes,
-        present=present,
-        cap=cap & present,
-        colours=appearances.colours,
-        head=ground + (head_c - np.stack([zeros, zeros, zeros], axis=1)),
-        ground=ground,
-        centre=centre,
-    )
+        heading = people.headings[f]
+        _put_device(verts, normals, axes, w, device_style, device_offset, head_c, radii,
+                    _ARM_R * H, np.cos(heading), np.sin(heading))
+    return _to_world(people, f, verts, normals, axes, present, appearances, head_c)
