@@ -330,6 +330,117 @@ def _buildings(
     return buildings
 
 
+def _draw_top_camera(
+    config: SynthConfig, rng: np.random.Generator, area: float, top_yaw: float
+) -> tuple[Camera, float, float, float | None]:
+    """Draw the top (drone) or overview camera and fit its field of view to the area.
+
+    Args:
+        config: scenario configuration.
+        rng: random generator (draws the altitude, or the overview height and pitch).
+        area: drawn side of the walking square, metres.
+        top_yaw: drawn yaw of the top camera, radians.
+
+    Returns:
+        The camera, the (possibly shrunk) area, the yaw (snapped near the image axes for a
+        drone) and the azimuth where no building may stand (the overview camera's), or None.
+    """
+    if config.scenario == "drone":
+        altitude = float(rng.uniform(*config.drone_altitude))
+        # Square area roughly aligned with the image axes: it fills more of a wide image.
+        top_yaw = float(np.round(top_yaw / (np.pi / 2)) * (np.pi / 2) + 0.15 * np.sin(top_yaw))
+        R = look_rotation(top_yaw, np.pi / 2.0)
+        c = np.array([0.0, 0.0, altitude])
+        top, area = _fitted_top_camera(R, c, area, config)
+        return top, area, top_yaw, None
+    height = float(rng.uniform(*config.overview_height))
+    pitch = np.radians(rng.uniform(*config.overview_pitch))
+    # Aim at the area centre from far enough that the camera's building is outside the area.
+    distance = max(height / np.tan(pitch), area / np.sqrt(2.0) + _BUILDING_GAP)
+    pitch = float(np.arctan2(height, distance))
+    toward = np.array([np.cos(top_yaw), np.sin(top_yaw)])
+    c = np.array([*(-distance * toward), height])
+    top, area = _fitted_top_camera(look_rotation(top_yaw, pitch), c, area, config)
+    return top, area, top_yaw, top_yaw + np.pi  # azimuth of the camera seen from the centre
+
+
+def _walk_config(
+    config: SynthConfig, area: float, top: Camera, ego_hfov: float, pitch_mean: float
+) -> SceneConfig:
+    """The walk simulator's configuration for a scene of this area, top camera and ego view."""
+    return SceneConfig(
+        n_people=config.n_people,
+        area=area,
+        height_range=config.height_range,
+        width_range=config.width_range,
+        min_separation=config.min_separation,
+        fps=config.fps,
+        walk_speed=config.walk_speed,
+        stop_probability=config.stop_probability,
+        edge_margin=min(2.0, 0.2 * area),
+        gaze_at_group=config.gaze_at_group,
+        top_altitude=max(float(top.c[2]), config.height_range[1] + 1.0),
+        hor_size=config.ego_size,
+        hor_hfov_deg=ego_hfov,
+        hor_pitch_deg=pitch_mean,
+        hor_roll_deg=0.0,
+        hor_wobble_deg=config.ego_wobble,
+        eye_below_top=config.eye_below_top,
+    )
+
+
+def _handheld_views(
+    config: SynthConfig, people: PeopleState, rng: np.random.Generator, ego_hfov: float
+) -> tuple[PeopleState, list[Camera]]:
+    """Overview scenario: the carrier films with a phone held in front of them.
+
+    The carrier is redrawn taller than the phone's height, and their body turns with the
+    camera (a person filming faces where they film).
+
+    Args:
+        config: scenario configuration.
+        people: the simulated walks.
+        rng: random generator (draws the carrier's height).
+        ego_hfov: horizontal field of view of the phone, degrees.
+
+    Returns:
+        The updated walks and one egocentric camera per frame.
+    """
+    w = people.wearer
+    n_frames = people.n_frames
+    low = max(config.height_range[0], config.handheld_height + 0.1)
+    heights = people.heights.copy()
+    heights[w] = rng.uniform(low, max(low, config.height_range[1]))
+    headings = people.headings.copy()
+    headings[:, w] = people.head_yaw
+    people = replace(people, heights=heights, headings=headings)
+    K = intrinsics_from_fov(*config.ego_size, ego_hfov)
+    look = np.stack([np.cos(people.head_yaw), np.sin(people.head_yaw)], axis=1)
+    centres = np.column_stack(
+        [people.positions[:, w] + config.handheld_reach * look,
+         np.full(n_frames, config.handheld_height)]
+    )
+    ego_cameras = [
+        Camera(K=K, R=look_rotation(yaw, pitch, roll), c=centre, width=config.ego_size[0],
+               height=config.ego_size[1])
+        for yaw, pitch, roll, centre in zip(
+            people.head_yaw.tolist(), people.head_pitch.tolist(),
+            people.head_roll.tolist(), centres, strict=True,
+        )
+    ]
+    return people, ego_cameras
+
+
+def _overview_building(rng: np.random.Generator, top: Camera) -> Building:
+    """The building whose roof's front edge the overview camera stands on."""
+    depth, half_width = rng.uniform(4.0, 7.0), rng.uniform(4.0, 8.0)
+    toward = -top.c[:2] / np.linalg.norm(top.c[:2])
+    centre = top.c[:2] - (depth + 0.3) * toward
+    yaw = float(np.arctan2(toward[1], toward[0]))
+    return Building((float(centre[0]), float(centre[1])), (float(depth), float(half_width)),
+                    float(top.c[2] - 0.5), yaw)
+
+
 def make_scene(config: SynthConfig, n_frames: int, rng: np.random.Generator) -> SyntheticScene:
     """Draw one scene: area, cameras, walks and buildings, in that order, from ``rng``.
 
@@ -349,45 +460,8 @@ def make_scene(config: SynthConfig, n_frames: int, rng: np.random.Generator) -> 
     ego_hfov = float(rng.uniform(*config.ego_hfov))
     pitch_mean = float(rng.uniform(-0.5, 0.5) * config.ego_pitch_limit)
     n_buildings = int(rng.integers(config.buildings[0], config.buildings[1] + 1))
-
-    if config.scenario == "drone":
-        altitude = float(rng.uniform(*config.drone_altitude))
-        # Square area roughly aligned with the image axes: it fills more of a wide image.
-        top_yaw = float(np.round(top_yaw / (np.pi / 2)) * (np.pi / 2) + 0.15 * np.sin(top_yaw))
-        R = look_rotation(top_yaw, np.pi / 2.0)
-        c = np.array([0.0, 0.0, altitude])
-        top, area = _fitted_top_camera(R, c, area, config)
-        avoid = None
-    else:
-        height = float(rng.uniform(*config.overview_height))
-        pitch = np.radians(rng.uniform(*config.overview_pitch))
-        # Aim at the area centre from far enough that the camera's building is outside the area.
-        distance = max(height / np.tan(pitch), area / np.sqrt(2.0) + _BUILDING_GAP)
-        pitch = float(np.arctan2(height, distance))
-        toward = np.array([np.cos(top_yaw), np.sin(top_yaw)])
-        c = np.array([*(-distance * toward), height])
-        top, area = _fitted_top_camera(look_rotation(top_yaw, pitch), c, area, config)
-        avoid = top_yaw + np.pi  # azimuth of the camera seen from the area centre
-
-    walk_config = SceneConfig(
-        n_people=config.n_people,
-        area=area,
-        height_range=config.height_range,
-        width_range=config.width_range,
-        min_separation=config.min_separation,
-        fps=config.fps,
-        walk_speed=config.walk_speed,
-        stop_probability=config.stop_probability,
-        edge_margin=min(2.0, 0.2 * area),
-        gaze_at_group=config.gaze_at_group,
-        top_altitude=max(float(top.c[2]), config.height_range[1] + 1.0),
-        hor_size=config.ego_size,
-        hor_hfov_deg=ego_hfov,
-        hor_pitch_deg=pitch_mean,
-        hor_roll_deg=0.0,
-        hor_wobble_deg=config.ego_wobble,
-        eye_below_top=config.eye_below_top,
-    )
+    top, area, top_yaw, avoid = _draw_top_camera(config, rng, area, top_yaw)
+    walk_config = _walk_config(config, area, top, ego_hfov, pitch_mean)
     people = simulate_walks(walk_config, n_frames, rng)
     pitch_lim, roll_lim = np.radians(config.ego_pitch_limit), np.radians(config.ego_roll_limit)
     people = replace(
@@ -402,44 +476,14 @@ def make_scene(config: SynthConfig, n_frames: int, rng: np.random.Generator) -> 
                                                top_hfov_deg=_hfov_of(top)), top_yaw)] * n_frames
         ego_cameras = horizontal_cameras(people, walk_config)
     else:
-        # The carrier holds the camera at handheld_height: they must be taller than that.
-        low = max(config.height_range[0], config.handheld_height + 0.1)
-        heights = people.heights.copy()
-        heights[w] = rng.uniform(low, max(low, config.height_range[1]))
-        # A person filming faces where they film: the body turns with the camera.
-        headings = people.headings.copy()
-        headings[:, w] = people.head_yaw
-        people = replace(people, heights=heights, headings=headings)
+        people, ego_cameras = _handheld_views(config, people, rng, ego_hfov)
         top_cameras = [top] * n_frames
-        K = intrinsics_from_fov(*config.ego_size, ego_hfov)
-        look = np.stack([np.cos(people.head_yaw), np.sin(people.head_yaw)], axis=1)
-        centres = np.column_stack(
-            [people.positions[:, w] + config.handheld_reach * look,
-             np.full(n_frames, config.handheld_height)]
-        )
-        ego_cameras = [
-            Camera(K=K, R=look_rotation(yaw, pitch, roll), c=centre, width=config.ego_size[0],
-                   height=config.ego_size[1])
-            for yaw, pitch, roll, centre in zip(
-                people.head_yaw.tolist(), people.head_pitch.tolist(),
-                people.head_roll.tolist(), centres, strict=True,
-            )
-        ]
     device_offset = np.stack([cam.c for cam in ego_cameras]) - np.column_stack(
         [people.positions[:, w], np.zeros(n_frames)]
     )
     buildings = _buildings(rng, area, n_buildings, avoid)
     if config.scenario == "overview":
-        # The overview camera stands on the front edge of its building's roof.
-        depth, half_width = rng.uniform(4.0, 7.0), rng.uniform(4.0, 8.0)
-        toward = -top.c[:2] / np.linalg.norm(top.c[:2])
-        centre = top.c[:2] - (depth + 0.3) * toward
-        yaw = float(np.arctan2(toward[1], toward[0]))
-        buildings.insert(
-            0,
-            Building((float(centre[0]), float(centre[1])), (float(depth), float(half_width)),
-                     float(top.c[2] - 0.5), yaw),
-        )
+        buildings.insert(0, _overview_building(rng, top))
     return SyntheticScene(
         config=config,
         people=people,
