@@ -340,6 +340,99 @@ def _separate(points: np.ndarray, min_sep: float, bound: float, iters: int = 100
     return pts
 
 
+def _repulsion(pos: np.ndarray, not_self: np.ndarray, min_separation: float) -> np.ndarray:
+    """Social push ``(N, 2)`` on every person from the people within :data:`_REPULSION_RANGE`."""
+    diff = pos[:, None, :] - pos[None, :, :]
+    dist = np.hypot(diff[..., 0], diff[..., 1])
+    near = not_self & (dist < _REPULSION_RANGE)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(
+            near[..., None],
+            diff / dist[..., None]
+            * np.exp(-(dist[..., None] - min_separation) / 0.5),
+            0.0,
+        ).sum(axis=1)
+
+
+def _step_walkers(
+    rng: np.random.Generator, config: SceneConfig, pos: np.ndarray, phi: np.ndarray,
+    omega: np.ndarray, stop_left: np.ndarray, speeds: np.ndarray, bound: float,
+    not_self: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Advance every walker by one frame: turn, stop or go, avoid others, stay apart.
+
+    Draws, in order: N turn-rate noises, N stop draws and N stop durations.
+
+    Args:
+        rng: random generator.
+        config: scene configuration.
+        pos: ``(N, 2)`` positions, metres.
+        phi: ``(N,)`` walking directions, radians.
+        omega: ``(N,)`` angular velocities, radians per second.
+        stop_left: ``(N,)`` seconds of standing left (<= 0 walks).
+        speeds: ``(N,)`` preferred speeds, metres per second.
+        bound: half side of the square the positions stay in.
+        not_self: ``(N, N)`` mask of the pairs of different people.
+
+    Returns:
+        The new ``(pos, phi, omega, stop_left)``.
+    """
+    n = pos.shape[0]
+    dt = 1.0 / config.fps
+    turn_std = np.radians(config.turn_rate_std_deg)
+    omega = _ou_step(omega, turn_std, config.turn_time, dt, rng.standard_normal(n))
+    phi = phi + omega * dt
+    # Near the edge, turn back towards the centre, the harder the closer.
+    edge = np.clip(1.0 - (bound - np.abs(pos).max(axis=1)) / max(config.edge_margin, 1e-9),
+                   0.0, 1.0)
+    inward = np.arctan2(-pos[:, 1], -pos[:, 0])
+    phi = phi + _wrap(inward - phi) * np.clip(edge * _EDGE_TURN_RATE * dt, 0.0, 1.0)
+    # Stops: a walker stops with the configured rate, a stopper counts down.
+    starts = (stop_left <= 0) & (rng.random(n) < config.stop_probability * dt)
+    durations = rng.exponential(config.stop_duration, size=n)
+    stop_left = np.where(starts, durations, stop_left - dt)
+    walking = stop_left <= 0
+    vel = (speeds * walking)[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    # Social repulsion from people within range, for walkers only.
+    push = _repulsion(pos, not_self, config.min_separation)
+    vel = vel + _REPULSION_GAIN * walking[:, None] * push
+    new = _separate(pos + vel * dt, config.min_separation, bound)
+    step = new - pos
+    moved = walking & (np.hypot(step[:, 0], step[:, 1]) > 0.25 * speeds * dt)
+    phi = np.where(moved, np.arctan2(step[:, 1], step[:, 0]), phi)
+    return new, phi, omega, stop_left
+
+
+def _wearer_gaze(
+    pos: np.ndarray, phi0: float, gaze: float, first: bool, config: SceneConfig
+) -> float:
+    """The wearer's gaze: a smoothed blend of their walking direction and the group direction.
+
+    Args:
+        pos: ``(N, 2)`` positions; index 0 is the wearer.
+        phi0: the wearer's walking direction, radians.
+        gaze: the previous frame's gaze, radians.
+        first: whether this is the first frame (the gaze jumps to its target).
+        config: scene configuration.
+
+    Returns:
+        The new gaze, radians in [-pi, pi).
+    """
+    dt = 1.0 / config.fps
+    walk_dir = np.array([np.cos(phi0), np.sin(phi0)])
+    target_vec = (1.0 - config.gaze_at_group) * walk_dir
+    if pos.shape[0] > 1:
+        to_group = pos[1:].mean(axis=0) - pos[0]
+        norm = np.hypot(*to_group)
+        if norm > 1e-9:
+            target_vec = target_vec + config.gaze_at_group * to_group / norm
+    if np.hypot(*target_vec) > 1e-9:
+        target = float(np.arctan2(target_vec[1], target_vec[0]))
+        blend = 1.0 if first else 1.0 - np.exp(-dt / _GAZE_SMOOTHING)
+        gaze = float(_wrap(gaze + blend * _wrap(target - gaze)))
+    return gaze
+
+
 def simulate_walks(config: SceneConfig, n_frames: int, rng: np.random.Generator) -> PeopleState:
     """Smooth random walks with turns and stops, inside the area, never overlapping.
 
@@ -388,51 +481,12 @@ def simulate_walks(config: SceneConfig, n_frames: int, rng: np.random.Generator)
     not_self = ~np.eye(n, dtype=bool)
     for t in range(n_frames):
         if t > 0:
-            omega = _ou_step(omega, turn_std, config.turn_time, dt, rng.standard_normal(n))
-            phi = phi + omega * dt
-            # Near the edge, turn back towards the centre, the harder the closer.
-            edge = np.clip(1.0 - (bound - np.abs(pos).max(axis=1)) / max(config.edge_margin, 1e-9),
-                           0.0, 1.0)
-            inward = np.arctan2(-pos[:, 1], -pos[:, 0])
-            phi = phi + _wrap(inward - phi) * np.clip(edge * _EDGE_TURN_RATE * dt, 0.0, 1.0)
-            # Stops: a walker stops with the configured rate, a stopper counts down.
-            starts = (stop_left <= 0) & (rng.random(n) < config.stop_probability * dt)
-            durations = rng.exponential(config.stop_duration, size=n)
-            stop_left = np.where(starts, durations, stop_left - dt)
-            walking = stop_left <= 0
-            vel = (speeds * walking)[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
-            # Social repulsion from people within range, for walkers only.
-            diff = pos[:, None, :] - pos[None, :, :]
-            dist = np.hypot(diff[..., 0], diff[..., 1])
-            near = not_self & (dist < _REPULSION_RANGE)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                push = np.where(
-                    near[..., None],
-                    diff / dist[..., None]
-                    * np.exp(-(dist[..., None] - config.min_separation) / 0.5),
-                    0.0,
-                ).sum(axis=1)
-            vel = vel + _REPULSION_GAIN * walking[:, None] * push
-            new = _separate(pos + vel * dt, config.min_separation, bound)
-            step = new - pos
-            moved = walking & (np.hypot(step[:, 0], step[:, 1]) > 0.25 * speeds * dt)
-            phi = np.where(moved, np.arctan2(step[:, 1], step[:, 0]), phi)
-            pos = new
+            pos, phi, omega, stop_left = _step_walkers(rng, config, pos, phi, omega, stop_left,
+                                                       speeds, bound, not_self)
             head_turn = _ou_step(head_turn, head_std, config.head_turn_time, dt,
                                  rng.standard_normal())
             wobble = _ou_step(wobble, wobble_std, _WOBBLE_TIME, dt, rng.standard_normal(2))
-        # The wearer's gaze: a smoothed blend of walking direction and group direction.
-        walk_dir = np.array([np.cos(phi[0]), np.sin(phi[0])])
-        target_vec = (1.0 - config.gaze_at_group) * walk_dir
-        if n > 1:
-            to_group = pos[1:].mean(axis=0) - pos[0]
-            norm = np.hypot(*to_group)
-            if norm > 1e-9:
-                target_vec = target_vec + config.gaze_at_group * to_group / norm
-        if np.hypot(*target_vec) > 1e-9:
-            target = float(np.arctan2(target_vec[1], target_vec[0]))
-            blend = 1.0 if t == 0 else 1.0 - np.exp(-dt / _GAZE_SMOOTHING)
-            gaze = float(_wrap(gaze + blend * _wrap(target - gaze)))
+        gaze = _wearer_gaze(pos, phi[0], gaze, t == 0, config)
         positions[t] = pos
         headings[t] = _wrap(phi)
         head[t] = (
