@@ -55,6 +55,74 @@ class DetectorNoise:
             )
 
 
+def _jitter_and_drop(
+    rng: np.random.Generator, boxes: np.ndarray, ids: np.ndarray, noise: DetectorNoise,
+    keep_ids: Collection[int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Jitter every real box, then pick the ones a detector misses.
+
+    Draws, in order: ``(M, 2)`` shifts, ``(M, 2)`` log-scales and M miss draws.
+
+    Args:
+        rng: the view's random stream.
+        boxes: ``(M, 4)`` real boxes ``(x, y, w, h)``, pixels.
+        ids: ``(M,)`` their ids.
+        noise: the noise levels.
+        keep_ids: ids that are never dropped.
+
+    Returns:
+        The ``(M, 4)`` jittered boxes and the ``(M,)`` mask of the kept ones.
+    """
+    n_real = ids.size
+    shift = noise.jitter * rng.standard_normal((n_real, 2))
+    scale = np.exp(noise.jitter * rng.standard_normal((n_real, 2)))
+    size = boxes[:, 2:] * scale
+    # x' = (x + w/2 + shift w) - w'/2, written so that zero jitter returns x exactly.
+    corner = boxes[:, :2] + 0.5 * boxes[:, 2:] * (1.0 - scale) + shift * boxes[:, 2:]
+    noisy = np.concatenate([corner, size], axis=1)
+    kept = (rng.random(n_real) >= noise.miss_rate) | np.isin(ids, np.fromiter(keep_ids, np.int64))
+    return noisy, kept
+
+
+def _false_boxes(
+    rng: np.random.Generator, boxes: np.ndarray, counts: np.ndarray, noise: DetectorNoise,
+    width: float, height: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Draw the false boxes: a Poisson count per frame, each the size of a random real box.
+
+    The size comes from a real box of the same frame, or of any frame when that one has none;
+    the box lies inside the image. Draws, in order: the counts, one pick per false box, and
+    ``(K, 2)`` positions.
+
+    Args:
+        rng: the view's random stream.
+        boxes: ``(M, 4)`` real boxes of all frames, frame after frame.
+        counts: ``(F,)`` real boxes per frame.
+        noise: the noise levels.
+        width, height: image size, pixels.
+
+    Returns:
+        The ``(K, 4)`` false boxes, frame after frame, and the ``(F,)`` count per frame.
+    """
+    n_real, n_frames = boxes.shape[0], counts.size
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    n_false = rng.poisson(noise.false_per_frame, size=n_frames) if n_real else np.zeros(
+        n_frames, dtype=np.int64
+    )
+    owner = np.repeat(np.arange(n_frames), n_false)
+    pick = rng.random(owner.size)
+    own_count = counts[owner]
+    source = np.where(
+        own_count > 0,
+        starts[owner] + np.minimum((pick * own_count).astype(np.int64), own_count - 1),
+        np.minimum((pick * n_real).astype(np.int64), max(n_real - 1, 0)),
+    )
+    false_size = boxes[source, 2:] if n_real else np.empty((0, 2))
+    room = np.maximum(np.array([width, height]) - false_size, 0.0)
+    false_corner = rng.random((owner.size, 2)) * room
+    return np.concatenate([false_corner, false_size], axis=1), n_false
+
+
 def apply_detector_noise(
     frames: Mapping[int, FrameBoxes],
     image_size: tuple[int, int],
@@ -109,35 +177,10 @@ def apply_detector_noise(
             f"is reserved for false boxes), got id {int(ids.max())}"
         )
     rng = np.random.default_rng([int(seed), _VIEW_STREAM[view]])
-    n_real, n_frames = ids.size, len(keys)
-    starts = np.concatenate([[0], np.cumsum(counts)])
-
-    # Real boxes: jitter every box, then drop the missed ones.
-    shift = noise.jitter * rng.standard_normal((n_real, 2))
-    scale = np.exp(noise.jitter * rng.standard_normal((n_real, 2)))
-    size = boxes[:, 2:] * scale
-    # x' = (x + w/2 + shift w) - w'/2, written so that zero jitter returns x exactly.
-    corner = boxes[:, :2] + 0.5 * boxes[:, 2:] * (1.0 - scale) + shift * boxes[:, 2:]
-    noisy = np.concatenate([corner, size], axis=1)
-    kept = (rng.random(n_real) >= noise.miss_rate) | np.isin(ids, np.fromiter(keep_ids, np.int64))
-
-    # False boxes: Poisson count per frame, size of a random real box of that frame (or any).
-    n_false = rng.poisson(noise.false_per_frame, size=n_frames) if n_real else np.zeros(
-        n_frames, dtype=np.int64
-    )
-    owner = np.repeat(np.arange(n_frames), n_false)
-    pick = rng.random(owner.size)
-    own_count = counts[owner]
-    source = np.where(
-        own_count > 0,
-        starts[owner] + np.minimum((pick * own_count).astype(np.int64), own_count - 1),
-        np.minimum((pick * n_real).astype(np.int64), max(n_real - 1, 0)),
-    )
-    false_size = boxes[source, 2:] if n_real else np.empty((0, 2))
-    room = np.maximum(np.array([width, height]) - false_size, 0.0)
-    false_corner = rng.random((owner.size, 2)) * room
-    false_boxes = np.concatenate([false_corner, false_size], axis=1)
-    false_ids = FALSE_ID_BASE[view] + np.arange(owner.size, dtype=np.int64)
+    n_frames = len(keys)
+    noisy, kept = _jitter_and_drop(rng, boxes, ids, noise, keep_ids)
+    false_boxes, n_false = _false_boxes(rng, boxes, counts, noise, width, height)
+    false_ids = FALSE_ID_BASE[view] + np.arange(false_boxes.shape[0], dtype=np.int64)
 
     frame_of_real = np.repeat(np.arange(n_frames), counts)
     real_bounds = np.searchsorted(frame_of_real[kept], np.arange(n_frames + 1))
