@@ -638,6 +638,93 @@ def _shadows(image: np.ndarray, camera: Camera, body: BodyFrame, world: World) -
     roi[:] = cv2.multiply(roi, cv2.cvtColor(factor, cv2.COLOR_GRAY2BGR), scale=1.0 / 255.0)
 
 
+def _project_people(
+    camera: Camera, body: BodyFrame, allowed: np.ndarray, near_clip: float
+) -> tuple[np.ndarray, ...]:
+    """Project every primitive and find the people and primitives that can be drawn.
+
+    Args:
+        camera: the view's camera.
+        body: the people's primitives on this frame.
+        allowed: ``(N,)`` people that may appear.
+        near_clip: a person with a body point nearer than this (camera depth) is left out.
+
+    Returns:
+        ``(uv, use, lo, hi, in_image, drawable)``: ``(N, S, 16, 2)`` pixel points, ``(N, S)``
+        primitives of people in the image, ``(N, 2)`` pixel box corners of each person,
+        ``(N,)`` people in the image and ``(N, S)`` primitives whose box meets the image.
+    """
+    width, height = camera.width, camera.height
+    cam = (body.vertices - camera.c) @ camera.R.T
+    z = cam[..., 2]
+    present = body.present
+    zmin = np.where(present[..., None], z, np.inf).min(axis=(1, 2))
+    valid = allowed & (zmin > near_clip)
+    hom = cam @ camera.K.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = hom[..., :2] / np.where(hom[..., 2:3] > 1e-9, hom[..., 2:3], 1e-9)
+    use = present & valid[:, None]
+    p_lo, p_hi = uv.min(axis=2), uv.max(axis=2)  # (n, S, 2) per-primitive boxes
+    lo = np.where(use[..., None], p_lo, np.inf).min(axis=1)
+    hi = np.where(use[..., None], p_hi, -np.inf).max(axis=1)
+    in_image = valid & (hi[:, 0] > 0) & (lo[:, 0] < width) & (hi[:, 1] > 0) & (lo[:, 1] < height)
+    use &= in_image[:, None]
+    drawable = use & (p_hi[..., 0] > 0) & (p_lo[..., 0] < width) & (p_hi[..., 1] > 0) & (
+        p_lo[..., 1] < height
+    )
+    return uv, use, lo, hi, in_image, drawable
+
+
+def _painter_order(
+    camera: Camera, body: BodyFrame, drawable: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Painter's order of the drawable primitives.
+
+    Far people first; within a person far primitives first, the overlays (hair, hat, device)
+    right after the head.
+
+    Returns:
+        ``(who, slot, person_dist)``: person and slot index of each drawable primitive in
+        drawing order, and the ``(N,)`` distance of each person's centre to the camera.
+    """
+    person_dist = np.linalg.norm(body.centre - camera.c, axis=1)
+    prim_dist = np.linalg.norm(body.vertices.mean(axis=2) - camera.c, axis=2)
+    for k, slot in enumerate(OVERLAY_SLOTS):
+        prim_dist[:, slot] = prim_dist[:, _HEAD_SLOT] - 1e-4 * (k + 1)
+    who, slot = np.nonzero(drawable)
+    order = np.lexsort((-prim_dist[who, slot], who, -person_dist[who]))
+    return who[order], slot[order], person_dist
+
+
+def _shading(camera: Camera, body: BodyFrame, world: World) -> tuple[np.ndarray, ...]:
+    """Lit colour from the visible lit side, a self-shadow band, a cap if facing.
+
+    Returns:
+        ``(base, dark, capc, band, draw_band, cap_visible)``: ``(N, S, 3)`` lit, shadow and cap
+        colours, the ``(N, S, 16)`` points of the shadow band, and ``(N, S)`` whether the band
+        and the cap are drawn.
+    """
+    to_cam = camera.c - body.vertices
+    facing = np.einsum("nsvk,nsvk->nsv", body.normals, to_cam) > 0
+    n_dot_l = body.normals @ world.light
+    lit = facing & (n_dot_l > 0)
+    n_lit = lit.sum(axis=2)
+    lit_mean = np.where(lit, n_dot_l, 0.0).sum(axis=2) / np.maximum(n_lit, 1)
+    intensity = world.ambient + world.diffuse * lit_mean
+    band = facing & (n_dot_l <= 0) & _SHADED[None, :, None]
+    draw_band = (band.sum(axis=2) >= 3) & (n_lit > 0)
+    top_centre = body.vertices[:, :, 8:].mean(axis=2)
+    cap_visible = body.cap & (
+        np.einsum("nsk,nsk->ns", body.axis, camera.c - top_centre) > 0
+    )
+    cap_intensity = world.ambient + world.diffuse * np.clip(body.axis @ world.light, 0.0, None)
+    colours = body.colours
+    base = np.clip(colours * intensity[..., None], 0, 255)
+    dark = np.clip(colours * world.ambient, 0, 255)
+    capc = np.clip(colours * cap_intensity[..., None], 0, 255)
+    return base, dark, capc, band, draw_band, cap_visible
+
+
 def render_people(
     image: np.ndarray,
     camera: Camera,
@@ -670,55 +757,11 @@ def render_people(
     allowed = np.ones(n, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
     if n == 0:
         return id_image, ViewLabels.empty()
-    cam = (body.vertices - camera.c) @ camera.R.T
-    z = cam[..., 2]
-    present = body.present
-    zmin = np.where(present[..., None], z, np.inf).min(axis=(1, 2))
-    valid = allowed & (zmin > near_clip)
-    hom = cam @ camera.K.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = hom[..., :2] / np.where(hom[..., 2:3] > 1e-9, hom[..., 2:3], 1e-9)
-    use = present & valid[:, None]
-    p_lo, p_hi = uv.min(axis=2), uv.max(axis=2)  # (n, S, 2) per-primitive boxes
-    lo = np.where(use[..., None], p_lo, np.inf).min(axis=1)
-    hi = np.where(use[..., None], p_hi, -np.inf).max(axis=1)
-    in_image = valid & (hi[:, 0] > 0) & (lo[:, 0] < width) & (hi[:, 1] > 0) & (lo[:, 1] < height)
-    use &= in_image[:, None]
-    drawable = use & (p_hi[..., 0] > 0) & (p_lo[..., 0] < width) & (p_hi[..., 1] > 0) & (
-        p_lo[..., 1] < height
-    )
+    uv, use, lo, hi, in_image, drawable = _project_people(camera, body, allowed, near_clip)
     if not drawable.any():
         return id_image, ViewLabels.empty()
-
-    # Painter's order: far people first; within a person far primitives first, the overlays
-    # (hair, hat, device) right after the head.
-    person_dist = np.linalg.norm(body.centre - camera.c, axis=1)
-    prim_dist = np.linalg.norm(body.vertices.mean(axis=2) - camera.c, axis=2)
-    for k, slot in enumerate(OVERLAY_SLOTS):
-        prim_dist[:, slot] = prim_dist[:, _HEAD_SLOT] - 1e-4 * (k + 1)
-    who, slot = np.nonzero(drawable)
-    order = np.lexsort((-prim_dist[who, slot], who, -person_dist[who]))
-    who, slot = who[order], slot[order]
-
-    # Shading: lit colour from the visible lit side, a self-shadow band, a cap if facing.
-    to_cam = camera.c - body.vertices
-    facing = np.einsum("nsvk,nsvk->nsv", body.normals, to_cam) > 0
-    n_dot_l = body.normals @ world.light
-    lit = facing & (n_dot_l > 0)
-    n_lit = lit.sum(axis=2)
-    lit_mean = np.where(lit, n_dot_l, 0.0).sum(axis=2) / np.maximum(n_lit, 1)
-    intensity = world.ambient + world.diffuse * lit_mean
-    band = facing & (n_dot_l <= 0) & _SHADED[None, :, None]
-    draw_band = (band.sum(axis=2) >= 3) & (n_lit > 0)
-    top_centre = body.vertices[:, :, 8:].mean(axis=2)
-    cap_visible = body.cap & (
-        np.einsum("nsk,nsk->ns", body.axis, camera.c - top_centre) > 0
-    )
-    cap_intensity = world.ambient + world.diffuse * np.clip(body.axis @ world.light, 0.0, None)
-    colours = body.colours
-    base = np.clip(colours * intensity[..., None], 0, 255)
-    dark = np.clip(colours * world.ambient, 0, 255)
-    capc = np.clip(colours * cap_intensity[..., None], 0, 255)
+    who, slot, person_dist = _painter_order(camera, body, drawable)
+    base, dark, capc, band, draw_band, cap_visible = _shading(camera, body, world)
     fixed = _fixed(uv)
     fill = cv2.fillConvexPoly
     hull_of = cv2.convexHull
