@@ -217,6 +217,113 @@ def _label_candidates(text: str, rect: np.ndarray, scale: float) -> list[tuple[i
             (x0 - tw - 4, y0 + th + 2), (x0, (y0 + y1) // 2)]
 
 
+def _check_costs(costs: np.ndarray | None, m: int, n: int) -> np.ndarray | None:
+    """The ``(M, N)`` cost matrix as floats, or None; refuses another shape."""
+    if costs is None:
+        return None
+    cost = np.asarray(costs, dtype=float)
+    if cost.shape != (m, n):
+        raise ValueError(
+            f"costs must have shape (M, N) = ({m}, {n}) to match the boxes, got {cost.shape}"
+        )
+    return cost
+
+
+def _box_panels(
+    images: tuple[np.ndarray, np.ndarray], boxes: tuple[np.ndarray, np.ndarray],
+    pairs: np.ndarray, height: int, colours: list[tuple[int, int, int]],
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Scale both views to ``height`` and draw their boxes: unmatched greyed, pairs coloured.
+
+    Args:
+        images: the checked top and hor images.
+        boxes: their ``(M, 4)`` and ``(N, 4)`` boxes in image pixels.
+        pairs: ``(K, 2)`` sorted ``(top index, hor index)`` rows.
+        height: the common panel height, pixels.
+        colours: the colour of each pair.
+
+    Returns:
+        The two panels and the boxes' ``(x0, y0, x1, y1)`` corners in panel pixels.
+    """
+    panels, rects = [], []
+    for column, (image, view_boxes) in enumerate(zip(images, boxes, strict=True)):
+        panel, sx, sy = _panel(image, height)
+        rect = _scaled_boxes(view_boxes, sx, sy, panel.shape[1], panel.shape[0])
+        is_matched = np.zeros(len(view_boxes), dtype=bool)
+        is_matched[pairs[:, column]] = True
+        _grey_out(panel, rect, ~is_matched)
+        for x0, y0, x1, y1 in rect[~is_matched]:
+            cv2.rectangle(panel, (int(x0), int(y0)), (int(x1), int(y1)), UNMATCHED_COLOUR, 1,
+                          cv2.LINE_8)
+        panels.append(panel)
+        rects.append(rect)
+    for k, (i, j) in enumerate(pairs):
+        for rect, index, panel in ((rects[0], i, panels[0]), (rects[1], j, panels[1])):
+            x0, y0, x1, y1 = (int(v) for v in rect[index])
+            cv2.rectangle(panel, (x0, y0), (x1, y1), colours[k], 2, cv2.LINE_8)
+    return panels, rects
+
+
+def _pair_lines(
+    canvas: np.ndarray, pairs: np.ndarray, rects: list[np.ndarray],
+    offsets: tuple[tuple[int, int], tuple[int, int]], colours: list[tuple[int, int, int]],
+) -> list[list[tuple[int, int]]]:
+    """Join each pair's box centres with an outlined line; returns each line's two ends."""
+    ends = []
+    for k, (i, j) in enumerate(pairs):
+        points = []
+        for rect, index, (ox, oy) in ((rects[0], i, offsets[0]), (rects[1], j, offsets[1])):
+            x0, y0, x1, y1 = rect[index]
+            points.append((ox + int(x0 + x1) // 2, oy + int(y0 + y1) // 2))
+        cv2.line(canvas, points[0], points[1], _OUTLINE, 4, cv2.LINE_AA)
+        cv2.line(canvas, points[0], points[1], colours[k], 2, cv2.LINE_AA)
+        ends.append(points)
+    return ends
+
+
+def _id_labels(
+    canvas: np.ndarray, labels: tuple[list | None, list | None], pairs: np.ndarray,
+    rects: list[np.ndarray], offsets: tuple[tuple[int, int], tuple[int, int]],
+    x_ranges: tuple[tuple[int, int], tuple[int, int]], y_range: tuple[int, int],
+    colours: list[tuple[int, int, int]], scale: float, placed: list[tuple[int, int, int, int]],
+) -> None:
+    """Print the ids by their boxes, matched boxes first (they get the best places).
+
+    ``placed`` holds the label rectangles drawn so far and is extended in place.
+    """
+    for side, side_labels in enumerate(labels):
+        if side_labels is None:
+            continue
+        ox, oy = offsets[side]
+        pair_of = {int(idx): k for k, idx in enumerate(pairs[:, side])}
+        order = sorted(range(len(side_labels)), key=lambda i: (pair_of.get(i) is None, i))
+        for index in order:
+            text = _id_text(side_labels[index])
+            k = pair_of.get(index)
+            colour = _UNMATCHED_TEXT if k is None else colours[k]
+            rect = rects[side][index] + np.array([ox, oy, ox, oy])
+            org = _place_label(text, _label_candidates(text, rect, scale), x_ranges[side],
+                               y_range, scale, placed)
+            _put_text(canvas, text, org, colour, scale)
+
+
+def _cost_labels(
+    canvas: np.ndarray, cost: np.ndarray, pairs: np.ndarray, ends: list[list[tuple[int, int]]],
+    y_range: tuple[int, int], colours: list[tuple[int, int, int]], scale: float,
+    placed: list[tuple[int, int, int, int]],
+) -> None:
+    """Print each matched pair's cost by the middle of its line, clear of earlier labels."""
+    for k, (i, j) in enumerate(pairs):
+        text = _cost_text(float(cost[i, j]))
+        tw = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0]
+        (ax, ay), (bx, by) = ends[k]
+        mx, my = (ax + bx) // 2 - tw // 2, (ay + by) // 2
+        org = _place_label(text, [(mx, my - 5), (mx, my + 18), (mx, my - 24),
+                                  (mx, my + 36)], (0, canvas.shape[1]), y_range, scale,
+                           placed)
+        _put_text(canvas, text, org, colours[k], scale)
+
+
 def draw_matches(
     top_image: np.ndarray,
     hor_image: np.ndarray,
@@ -245,7 +352,7 @@ def draw_matches(
         top_boxes: (M, 4) float ``(x, y, w, h)`` boxes in ``top_image`` pixels; M may be 0.
         hor_boxes: (N, 4) float ``(x, y, w, h)`` boxes in ``hor_image`` pixels; N may be 0.
         pairs: (K, 2) int ``(top index, hor index)`` rows, one-to-at-most-one (as returned by
-            :func:`~xvmatch.inference.assignment.assign`); K may be 0.
+            :func:`~xvmatch.inference.linking.assignment.assign`); K may be 0.
         top_ids: M ids printed by the top boxes (e.g. track ids); ``None`` prints none. Labels
             are placed so as not to cover one another where the boxes leave room (matched
             boxes' labels first).
@@ -278,36 +385,13 @@ def draw_matches(
     p = _check_pairs(pairs, m, n)
     top_labels = _check_ids(top_ids, m, "top_ids")
     hor_labels = _check_ids(hor_ids, n, "hor_ids")
-    cost = None
-    if costs is not None:
-        cost = np.asarray(costs, dtype=float)
-        if cost.shape != (m, n):
-            raise ValueError(
-                f"costs must have shape (M, N) = ({m}, {n}) to match the boxes, got {cost.shape}"
-            )
+    cost = _check_costs(costs, m, n)
     if isinstance(max_height, bool) or int(max_height) != max_height or max_height < 1:
         raise ValueError(f"max_height must be an integer >= 1 (pixels), got {max_height!r}")
 
     height = min(int(max_height), max(top_img.shape[0], hor_img.shape[0]))
-    panels, rects, matched = [], [], []
-    for image, boxes, column in ((top_img, top_b, 0), (hor_img, hor_b, 1)):
-        panel, sx, sy = _panel(image, height)
-        rect = _scaled_boxes(boxes, sx, sy, panel.shape[1], panel.shape[0])
-        is_matched = np.zeros(len(boxes), dtype=bool)
-        is_matched[p[:, column]] = True
-        _grey_out(panel, rect, ~is_matched)
-        for x0, y0, x1, y1 in rect[~is_matched]:
-            cv2.rectangle(panel, (int(x0), int(y0)), (int(x1), int(y1)), UNMATCHED_COLOUR, 1,
-                          cv2.LINE_8)
-        panels.append(panel)
-        rects.append(rect)
-        matched.append(is_matched)
     colours = [pair_colour(k) for k in range(len(p))]
-    for k, (i, j) in enumerate(p):
-        for rect, index, panel in ((rects[0], i, panels[0]), (rects[1], j, panels[1])):
-            x0, y0, x1, y1 = (int(v) for v in rect[index])
-            cv2.rectangle(panel, (x0, y0), (x1, y1), colours[k], 2, cv2.LINE_8)
-
+    panels, rects = _box_panels((top_img, hor_img), (top_b, hor_b), p, height, colours)
     header = 26 if title is not None else 0
     w_top, w_hor = panels[0].shape[1], panels[1].shape[1]
     canvas = np.empty((header + height, w_top + _GAP + w_hor, 3), dtype=np.uint8)
@@ -317,46 +401,13 @@ def draw_matches(
     offsets = ((0, header), (w_top + _GAP, header))
     x_ranges = ((0, w_top), (w_top + _GAP, canvas.shape[1]))
     scale = 0.45 * max(height / 360.0, 0.8)
-
-    ends = []
-    for k, (i, j) in enumerate(p):
-        points = []
-        for rect, index, (ox, oy) in ((rects[0], i, offsets[0]), (rects[1], j, offsets[1])):
-            x0, y0, x1, y1 = rect[index]
-            points.append((ox + int(x0 + x1) // 2, oy + int(y0 + y1) // 2))
-        cv2.line(canvas, points[0], points[1], _OUTLINE, 4, cv2.LINE_AA)
-        cv2.line(canvas, points[0], points[1], colours[k], 2, cv2.LINE_AA)
-        ends.append(points)
-
+    ends = _pair_lines(canvas, p, rects, offsets, colours)
     placed: list[tuple[int, int, int, int]] = []  # label rectangles drawn so far
     y_range = (header, canvas.shape[0])
-    for side, labels in enumerate((top_labels, hor_labels)):
-        if labels is None:
-            continue
-        ox, oy = offsets[side]
-        pair_of = {int(idx): k for k, idx in enumerate(p[:, side])}
-        # matched boxes' labels first: they get the best places
-        order = sorted(range(len(labels)), key=lambda i: (pair_of.get(i) is None, i))
-        for index in order:
-            text = _id_text(labels[index])
-            k = pair_of.get(index)
-            colour = _UNMATCHED_TEXT if k is None else colours[k]
-            rect = rects[side][index] + np.array([ox, oy, ox, oy])
-            org = _place_label(text, _label_candidates(text, rect, scale), x_ranges[side],
-                               y_range, scale, placed)
-            _put_text(canvas, text, org, colour, scale)
-
+    _id_labels(canvas, (top_labels, hor_labels), p, rects, offsets, x_ranges, y_range, colours,
+               scale, placed)
     if cost is not None:
-        for k, (i, j) in enumerate(p):
-            text = _cost_text(float(cost[i, j]))
-            tw = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0]
-            (ax, ay), (bx, by) = ends[k]
-            mx, my = (ax + bx) // 2 - tw // 2, (ay + by) // 2
-            org = _place_label(text, [(mx, my - 5), (mx, my + 18), (mx, my - 24),
-                                      (mx, my + 36)], (0, canvas.shape[1]), y_range, scale,
-                               placed)
-            _put_text(canvas, text, org, colours[k], scale)
-
+        _cost_labels(canvas, cost, p, ends, y_range, colours, scale, placed)
     if title is not None:
         canvas[:header] = _HEADER_COLOUR
         caption = " ".join(str(title).split())
