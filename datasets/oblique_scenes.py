@@ -1,0 +1,794 @@
+"""Box-level scenes for issue 67: an oblique or nadir top camera, walking handheld cameras.
+
+The world is the one of :mod:`xvmatch.datasets.box_scene`: people walk on the ground z = 0
+(metres, z up) with :func:`~xvmatch.datasets.box_scene.simulate_walks`, 1.5-1.95 m tall. They
+are seen by
+
+* a TOP camera looking at the walking area from a pitch drawn in ``top_pitch`` (20 degrees:
+  a low building camera or oblique drone, the horizon in or above the image; 90: a nadir
+  drone), ``top_height`` metres up and ``height / tan(pitch)`` away horizontally, so that its
+  optical axis meets the ground near the centre of the shared area. It is static by default;
+  ``top_drift_speed`` and ``top_yaw_rate`` make it drift and yaw slowly (a drone);
+* one or more HORIZONTAL cameras (``"hor1"``, ``"hor2"``, ...) held at 1.4-1.7 m,
+  ``hor_reach`` in front of a walker (their holder) who never appears in their own view. The
+  holder walks slowly; the camera looks at the shared group (a smoothed gaze at its centroid),
+  with a smooth head turn, a pan now and then and a small pitch / roll wobble.
+
+**Boxes: one projection for every camera and pitch.** A person is a vertical cylinder of their
+height and width; their box is the image bounding box of the cylinder's bottom and top circles
+(32 points each), so an oblique camera sees an upright person and a nadir one a
+head-and-shoulders blob leaning away from the image centre. A person with a body point nearer
+than ``near_clip`` to the image plane (or behind it) is absent. Nearer people (smaller depth of
+the body's mid-axis) hide the part of farther people that their clipped boxes cover
+(:func:`~xvmatch.datasets.box_scene._visible_parts`); a person whose visible area is below
+``min_visible_fraction`` of the full, unclipped box (hidden or truncated by the image border) is
+dropped, the others keep the box of their visible part, inside the image.
+
+**Partial overlap: by placing part of the crowd outside one view.** The crowd is made of groups,
+each walking in its own square (walks of separate :func:`simulate_walks` calls, translated):
+
+* the SHARED group, in a square centred on the world origin, fitted inside the top image (the
+  square shrinks, then the camera rises, until it is) and in front of every handheld camera,
+  whose holder stands far enough away that the square fills at most ~85% of its field of view;
+* the TOP-ONLY group, in a square inside the top image (every frame checked) and outside every
+  handheld camera's field of view (its bearing from the holder more than ``hfov / 2 + 15``
+  degrees off the camera's mean gaze);
+* per handheld camera k, a HOR-ONLY group in a square inside that camera's field of view and
+  outside the top image on every frame (beside the top camera's footprint, under its near edge
+  or behind it).
+
+Per scene an overlap fraction is drawn for the top view and for each handheld view in
+``overlap``; the top view gets ``n_top`` people (drawn in ``n_people``), ``round(p_top * n_top)``
+of them shared, and handheld view k gets ``round(n_shared * (1 - p_k) / p_k)`` own people. Where
+no square satisfying the conditions is found (a small footprint, cameras facing each other)
+that group is left out; :attr:`ObliqueScene.overlap_target` gives the fractions the groups
+actually placed aim at. The fractions measured on the boxes scatter around them, naturally:
+handheld cameras turn and pan, near people hide far ones, the holders themselves may be in the
+top view (or in another handheld view), and a moving top camera's footprint moves.
+
+Everything random is drawn from the one generator given to :func:`make_oblique_scene`, in a
+fixed order (group sizes and fractions, the top camera, the shared square, the holders, the
+top-only and hor-only squares, the walks group by group, the holders' camera heights, the
+handheld cameras' motion), so a scene is a pure function of the generator's seed. Ids are the
+person index (ground truth; index 0 holds ``hor1``, the CVMHAT convention of id 0).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from xvmatch.datasets.box_scene import (
+    PeopleState,
+    SceneConfig,
+    _visible_parts,
+    simulate_walks,
+)
+from xvmatch.formats.camera_io import save_cameras
+from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
+from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+
+__all__ = [
+    "ObliqueScene",
+    "ObliqueSceneConfig",
+    "make_oblique_scene",
+    "project_view",
+    "write_oblique_scene",
+]
+
+# Points sampled on each of a body cylinder's two circles (bottom and top) for its image box.
+_CIRCLE_POINTS = 32
+# Height (m) up to which a group's square is checked against a camera's image (heads).
+_CHECK_HEIGHT = 2.0
+# Margin (fraction of the image width) kept between a group's square and an image border.
+_IMAGE_MARGIN = 0.03
+# Part of a handheld camera's half field of view the shared square may fill.
+_SHARED_CONE = 0.85
+# Extra angle (degrees) beyond a handheld camera's half field of view for the top-only group.
+_OUTSIDE_CONE_DEG = 15.0
+# Side (m) of the square a holder walks in, and the gap (m) kept between two groups' squares.
+_HOLDER_AREA = 2.0
+_GROUP_GAP = 1.0
+# Candidate squares tried for a top-only or hor-only group before it is left out, and holder
+# azimuths tried for a hor-only group (the candidates shared among them).
+_TRIES = 300
+_AZIMUTHS = 6
+# Time constant (s) of the smoothing of a handheld camera's gaze at the shared group.
+_GAZE_SMOOTHING = 1.0
+# Time constant (s) of the pitch / roll wobble of a handheld camera.
+_WOBBLE_TIME = 1.0
+
+
+@dataclass(frozen=True)
+class ObliqueSceneConfig:
+    """What shapes an oblique scene; lengths in metres, angles in degrees, times in seconds.
+
+    Every ``(min, max)`` pair is drawn uniformly (integers inclusive).
+
+    Attributes:
+        n_people: people in the top view's groups (shared + top-only), drawn once per scene.
+        n_hor: number of handheld cameras (``"hor1"`` ... ``"horK"``), each with its holder.
+        overlap: fraction of a view's people also seen by the other view, drawn for the top view
+            and for each handheld view (see the module docstring).
+        area: side of the shared group's square (shrunk to fit the top image if needed).
+        group_area: side of a top-only or hor-only group's square (enlarged for big groups).
+        height_range: body height, per person.
+        width_range: body width (the cylinder's diameter), per person.
+        min_separation: smallest distance between two people of a group (>= the widest body).
+        fps: frame rate.
+        walk_speed: preferred walking speed (m/s), per person.
+        stop_probability: probability per second that a walker stops.
+        top_size: top image (width, height), pixels.
+        top_pitch: downward pitch of the top camera (90: nadir).
+        top_height: height of the top camera (raised where the shared square cannot fit).
+        top_hfov: horizontal field of view of the top camera.
+        top_drift_speed: horizontal drift speed of the top camera (m/s), direction uniform;
+            (0, 0) keeps it static.
+        top_yaw_rate: yaw rate of the top camera (degrees per second), sign uniform.
+        hor_sizes: image sizes a handheld camera's is drawn from (uniformly).
+        hor_hfov: horizontal field of view of a handheld camera.
+        hor_height: height of a handheld camera (at most its holder's height - 0.1).
+        hor_reach: distance of the camera in front of its holder's body axis.
+        hor_extra_distance: added to the holder's smallest distance from the shared square's
+            centre (the one at which the square fits the camera's field of view).
+        holder_speed: walking speed of a holder (m/s), in a square of 2 m.
+        hor_pitch: mean pitch of a handheld camera (positive looks down), per camera.
+        hor_wobble: standard deviation of the smooth pitch and roll wobble about that mean.
+        head_turn_std: standard deviation of the smooth head turn about the gaze at the group.
+        head_turn_time: correlation time of that head turn.
+        pan_rate: pans per second (a pan turns away and back, smoothly).
+        pan_angle: amplitude of a pan (sign uniform).
+        pan_duration: duration of a pan, out and back.
+        near_clip: a person with a body point nearer than this to a camera's image plane is
+            absent from its view.
+        min_visible_fraction: a person whose visible area is below this fraction of the full box
+            is dropped.
+    """
+
+    n_people: tuple[int, int] = (3, 12)
+    n_hor: int = 1
+    overlap: tuple[float, float] = (0.3, 1.0)
+    area: tuple[float, float] = (5.0, 10.0)
+    group_area: tuple[float, float] = (3.0, 6.0)
+    height_range: tuple[float, float] = (1.5, 1.95)
+    width_range: tuple[float, float] = (0.4, 0.5)
+    min_separation: float = 0.6
+    fps: float = 10.0
+    walk_speed: tuple[float, float] = (0.3, 1.4)
+    stop_probability: float = 0.1
+    top_size: tuple[int, int] = (1920, 1080)
+    top_pitch: tuple[float, float] = (20.0, 90.0)
+    top_height: tuple[float, float] = (4.0, 60.0)
+    top_hfov: tuple[float, float] = (55.0, 85.0)
+    top_drift_speed: tuple[float, float] = (0.0, 0.0)
+    top_yaw_rate: tuple[float, float] = (0.0, 0.0)
+    hor_sizes: tuple[tuple[int, int], ...] = ((3640, 2048), (1920, 1080))
+    hor_hfov: tuple[float, float] = (60.0, 80.0)
+    hor_height: tuple[float, float] = (1.4, 1.7)
+    hor_reach: float = 0.3
+    hor_extra_distance: tuple[float, float] = (0.0, 4.0)
+    holder_speed: tuple[float, float] = (0.1, 0.5)
+    hor_pitch: tuple[float, float] = (-3.0, 5.0)
+    hor_wobble: float = 1.0
+    head_turn_std: float = 8.0
+    head_turn_time: float = 2.0
+    pan_rate: float = 0.05
+    pan_angle: tuple[float, float] = (15.0, 40.0)
+    pan_duration: tuple[float, float] = (1.5, 3.0)
+    near_clip: float = 0.3
+    min_visible_fraction: float = 0.3
+
+    def __post_init__(self) -> None:
+        def pair(name: str, low: float, high: float = np.inf) -> None:
+            value = getattr(self, name)
+            if len(value) != 2 or not low <= value[0] <= value[1] <= high:
+                raise ValueError(
+                    f"ObliqueSceneConfig.{name} must be (min, max) with {low} <= min <= max "
+                    f"<= {high}, got {value}"
+                )
+
+        pair("n_people", 1, 60)
+        pair("overlap", 0.05, 1.0)
+        pair("area", 1.0)
+        pair("group_area", 1.0)
+        pair("height_range", 0.5, 2.5)
+        pair("width_range", 0.1, 1.0)
+        pair("walk_speed", 0.0)
+        pair("top_pitch", 5.0, 90.0)
+        pair("top_height", 2.5)
+        pair("top_hfov", 1.0, 170.0)
+        pair("top_drift_speed", 0.0)
+        pair("top_yaw_rate", 0.0)
+        pair("hor_hfov", 1.0, 170.0)
+        pair("hor_height", 0.5)
+        pair("hor_extra_distance", 0.0)
+        pair("holder_speed", 0.0)
+        pair("hor_pitch", -45.0, 45.0)
+        pair("pan_angle", 0.0, 180.0)
+        pair("pan_duration", 1e-3)
+        if not 1 <= int(self.n_hor) <= 8:
+            raise ValueError(f"ObliqueSceneConfig.n_hor must be in 1..8, got {self.n_hor}")
+        if not self.hor_sizes:
+            raise ValueError("ObliqueSceneConfig.hor_sizes must hold at least one size")
+        sizes = [("top_size", self.top_size)]
+        sizes += [(f"hor_sizes[{i}]", size) for i, size in enumerate(self.hor_sizes)]
+        for name, size in sizes:
+            if len(size) != 2 or min(size) < 8:
+                raise ValueError(f"ObliqueSceneConfig.{name} must be (width, height) >= 8, "
+                                 f"got {size}")
+        for name in ("fps", "min_separation", "near_clip", "head_turn_time"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ObliqueSceneConfig.{name} must be > 0, "
+                                 f"got {getattr(self, name)}")
+        for name in ("hor_reach", "hor_wobble", "head_turn_std", "pan_rate", "stop_probability"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"ObliqueSceneConfig.{name} must be >= 0, "
+                                 f"got {getattr(self, name)}")
+        if self.min_separation < self.width_range[1]:
+            raise ValueError(
+                f"ObliqueSceneConfig.min_separation ({self.min_separation}) must be >= the "
+                f"largest width ({self.width_range[1]}) so that bodies never intersect"
+            )
+        if not 0.0 <= self.min_visible_fraction <= 1.0:
+            raise ValueError("ObliqueSceneConfig.min_visible_fraction must be in [0, 1], "
+                             f"got {self.min_visible_fraction}")
+
+
+@dataclass(frozen=True, eq=False)
+class ObliqueScene:
+    """A drawn scene: its people, its cameras frame by frame, and the boxes of every view.
+
+    Attributes:
+        config: the configuration it was drawn from.
+        people: the 3D state (:class:`~xvmatch.datasets.box_scene.PeopleState`); ids are the
+            person index; ``people.wearer`` (index 0) holds ``hor1``, and ``head_yaw``,
+            ``head_pitch``, ``head_roll`` are ``hor1``'s camera angles.
+        top_cameras: F top cameras, ``top_cameras[f - 1]`` for frame f.
+        hor_cameras: ``{view: F cameras}`` for the views ``"hor1"``, ``"hor2"``, ...
+        top: ``{frame: FrameBoxes}`` of the top view, frames 1..F (possibly empty records).
+        hor: ``{view: {frame: FrameBoxes}}`` of the handheld views.
+        groups: ``{name: person indices}``: ``"holders"`` (``holders[k - 1]`` holds ``horK``),
+            ``"shared"``, ``"top_only"`` and ``"horK_only"``.
+        overlap: the fractions drawn, ``{"top": p, "hor1": p1, ...}``.
+        overlap_target: the fractions the placed groups aim at (``overlap`` unless a group was
+            rounded or left out): shared / (shared + top-only) for the top view, shared /
+            (shared + horK-only) for view horK.
+    """
+
+    config: ObliqueSceneConfig
+    people: PeopleState
+    top_cameras: list[Camera]
+    hor_cameras: dict[str, list[Camera]]
+    top: dict[int, FrameBoxes]
+    hor: dict[str, dict[int, FrameBoxes]]
+    groups: dict[str, np.ndarray]
+    overlap: dict[str, float]
+    overlap_target: dict[str, float]
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames F."""
+        return self.people.n_frames
+
+
+# --------------------------------------------------------------------------------------------
+# Projection
+
+
+def project_view(
+    positions: np.ndarray,
+    heights: np.ndarray,
+    widths: np.ndarray,
+    camera: Camera,
+    *,
+    near_clip: float = 0.3,
+    min_visible_fraction: float = 0.3,
+    present: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes of upright people in one camera's image, with occlusion and truncation.
+
+    Each person is a vertical cylinder of diameter ``widths`` from the ground to ``heights``;
+    the full box is the image bounding box of 32 points on each of its two circles. A person
+    with a point nearer than ``near_clip`` to the image plane (or behind it) is absent; one
+    whose full box misses the image is absent. Visibility: the boxes clipped to the image hide
+    one another, nearest (depth of the body's mid-axis) in front
+    (:func:`~xvmatch.datasets.box_scene._visible_parts`); a person whose visible area is below
+    ``min_visible_fraction`` of the full, unclipped box is dropped, the others keep the bounding
+    box of their visible part.
+
+    Args:
+        positions: ``(N, 2)`` ground positions, metres.
+        heights: ``(N,)`` body heights, metres.
+        widths: ``(N,)`` body widths, metres.
+        camera: the camera.
+        near_clip: metres.
+        min_visible_fraction: in [0, 1].
+        present: ``(N,)`` bool, people that may be seen (e.g. not the camera's holder);
+            ``None``: everyone.
+
+    Returns:
+        (index, boxes): ``(M,)`` int64 indices into N, ascending, and ``(M, 4)`` ``x, y, w, h``
+        boxes in pixels, inside the image.
+    """
+    positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+    n = positions.shape[0]
+    heights = np.asarray(heights, dtype=float).reshape(n)
+    widths = np.asarray(widths, dtype=float).reshape(n)
+    angle = np.linspace(0.0, 2.0 * np.pi, _CIRCLE_POINTS, endpoint=False)
+    ring = np.stack([np.cos(angle), np.sin(angle)], axis=1)  # (P, 2)
+    xy = positions[:, None, :] + 0.5 * widths[:, None, None] * ring[None]  # (N, P, 2)
+    z = np.concatenate([np.zeros((n, _CIRCLE_POINTS)),
+                        np.broadcast_to(heights[:, None], (n, _CIRCLE_POINTS))], axis=1)
+    points = np.concatenate([np.concatenate([xy, xy], axis=1), z[..., None]], axis=2)
+    uv, depth = camera.project(points)  # (N, 2P, 2), (N, 2P)
+    front = (depth > near_clip).all(axis=1)
+    if present is not None:
+        front &= np.asarray(present, dtype=bool).reshape(n)
+    uv = np.where(front[:, None, None], uv, 0.0)
+    full = np.concatenate([uv.min(axis=1), uv.max(axis=1)], axis=1)  # x0, y0, x1, y1
+    full_area = (full[:, 2] - full[:, 0]) * (full[:, 3] - full[:, 1])
+    size = np.array([camera.width, camera.height, camera.width, camera.height], dtype=float)
+    clipped = np.clip(full, 0.0, size)
+    seen = front & (clipped[:, 2] > clipped[:, 0]) & (clipped[:, 3] > clipped[:, 1])
+    seen &= full_area > 0
+    idx = np.flatnonzero(seen)
+    if idx.size == 0:
+        return np.empty(0, dtype=np.int64), np.empty((0, 4))
+    mid = np.concatenate([positions[idx], 0.5 * heights[idx, None]], axis=1)
+    area, part = _visible_parts(clipped[idx], camera.depth(mid))
+    keep = (area > 0) & (area >= min_visible_fraction * full_area[idx])
+    part = part[keep]
+    boxes = np.concatenate([part[:, :2], part[:, 2:] - part[:, :2]], axis=1)
+    return idx[keep].astype(np.int64), boxes
+
+
+def _project_frames(
+    people: PeopleState,
+    cameras: Sequence[Camera],
+    config: ObliqueSceneConfig,
+    hidden: int | None = None,
+) -> dict[int, FrameBoxes]:
+    """``{frame: FrameBoxes}`` of one view over all frames (``hidden``: its camera's holder)."""
+    present = np.ones(people.n_people, dtype=bool)
+    if hidden is not None:
+        present[hidden] = False
+    records = {}
+    for f, cam in enumerate(cameras):
+        idx, boxes = project_view(
+            people.positions[f], people.heights, people.widths, cam,
+            near_clip=config.near_clip, min_visible_fraction=config.min_visible_fraction,
+            present=present,
+        )
+        records[f + 1] = FrameBoxes(f + 1, people.ids[idx], boxes)
+    return records
+
+
+# --------------------------------------------------------------------------------------------
+# Placing the groups
+
+
+def _wrap(angle: np.ndarray | float) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return np.mod(np.asarray(angle) + np.pi, 2.0 * np.pi) - np.pi
+
+
+def _square_points(centre: np.ndarray, side: float) -> np.ndarray:
+    """A 7 x 7 grid over the square at ground and head height, ``(98, 3)``."""
+    t = np.linspace(-0.5 * side, 0.5 * side, 7)
+    gx, gy = np.meshgrid(t, t)
+    xy = np.column_stack([gx.ravel(), gy.ravel()]) + np.asarray(centre)[None]
+    return np.concatenate([np.column_stack([xy, np.zeros(len(xy))]),
+                           np.column_stack([xy, np.full(len(xy), _CHECK_HEIGHT)])])
+
+
+def _inside(cameras: Sequence[Camera], points: np.ndarray, near: float) -> bool:
+    """Every point in front of every camera and inside its image, off the border."""
+    for cam in cameras:
+        uv, depth = cam.project(points)
+        m = _IMAGE_MARGIN * cam.width
+        ok = (depth > near) & (uv[:, 0] >= m) & (uv[:, 0] <= cam.width - m)
+        ok &= (uv[:, 1] >= m) & (uv[:, 1] <= cam.height - m)
+        if not ok.all():
+            return False
+    return True
+
+
+def _outside(cameras: Sequence[Camera], points: np.ndarray) -> bool:
+    """No point inside any camera's image, widened by the margin (behind it counts as out)."""
+    for cam in cameras:
+        uv, depth = cam.project(points)
+        m = _IMAGE_MARGIN * cam.width
+        inside = (depth > 0) & (uv[:, 0] >= -m) & (uv[:, 0] <= cam.width + m)
+        inside &= (uv[:, 1] >= -m) & (uv[:, 1] <= cam.height + m)
+        if inside.any():
+            return False
+    return True
+
+
+def _off_axis(apex: np.ndarray, gaze: float, points: np.ndarray) -> np.ndarray:
+    """Absolute bearing of ground points ``(..., >=2)`` from ``apex`` off ``gaze``, radians."""
+    d = np.asarray(points)[..., :2] - apex
+    return np.abs(_wrap(np.arctan2(d[..., 1], d[..., 0]) - gaze))
+
+
+@dataclass(frozen=True)
+class _Region:
+    """A group's walking square: centre (2,), side, metres."""
+
+    centre: np.ndarray
+    side: float
+
+    @property
+    def radius(self) -> float:
+        return float(self.side / np.sqrt(2.0))
+
+    def clear_of(self, others: Sequence[_Region]) -> bool:
+        return all(np.hypot(*(self.centre - o.centre)) >= self.radius + o.radius + _GROUP_GAP
+                   for o in others)
+
+
+def _group_side(n: int, drawn: float, min_sep: float) -> float:
+    """Side of a square for n people ``min_sep`` apart: ``drawn``, enlarged when too small
+    for simulate_walks (``n min_sep^2 <= (side - min_sep)^2 / 2``, with 20% to spare)."""
+    need = min_sep + 1.2 * np.sqrt(2.0 * n) * min_sep
+    return float(max(drawn, need))
+
+
+def _top_camera(yaw: float, pitch: float, height: float, aim: np.ndarray, hfov: float,
+                size: tuple[int, int], shift: np.ndarray, dyaw: float) -> Camera:
+    """The top camera looking at ground point ``aim``, moved by ``shift`` and yawed by ``dyaw``."""
+    look = np.array([np.cos(yaw), np.sin(yaw)])
+    distance = height / np.tan(pitch) if pitch < np.pi / 2 else 0.0
+    c = np.array([*(aim - distance * look + shift), height])
+    return Camera(K=intrinsics_from_fov(size[0], size[1], hfov),
+                  R=look_rotation(yaw + dyaw, pitch), c=c, width=size[0], height=size[1])
+
+
+def _check_frames(n_frames: int) -> list[int]:
+    """Frames whose cameras a placement is checked against: first, middle, last."""
+    return sorted({0, (n_frames - 1) // 2, n_frames - 1})
+
+def _hor_only_region(
+    holder: _Region,
+    gaze: float,
+    half: float,
+    side: float,
+    reach: float,
+    placed: Sequence[_Region],
+    top_checks: Sequence[Camera],
+    draws: np.ndarray,
+) -> _Region | None:
+    """A square of ``side`` within ``half`` (radians) of the holder's ``gaze``, at most
+    ``reach + 30`` m away, clear of ``placed`` and outside every top image; None if none of the
+    ``(T, 2)`` uniform ``draws`` (bearing, range) gives one."""
+    for a, b in draws:
+        r = 2.0 + side + b * (reach + 30.0)
+        bearing = gaze + (2.0 * a - 1.0) * half
+        c = holder.centre + r * np.array([np.cos(bearing), np.sin(bearing)])
+        region = _Region(c, side)
+        if not region.clear_of(placed):
+            continue
+        pts = _square_points(c, side)
+        if (_off_axis(holder.centre, gaze, pts) <= half).all() and _outside(top_checks, pts):
+            return region
+    return None
+
+
+
+# --------------------------------------------------------------------------------------------
+# Handheld cameras
+
+
+def _handheld_cameras(
+    holder_xy: np.ndarray,
+    target_xy: np.ndarray,
+    cam_height: float,
+    size: tuple[int, int],
+    hfov: float,
+    config: ObliqueSceneConfig,
+    rng: np.random.Generator,
+) -> tuple[list[Camera], np.ndarray]:
+    """F cameras of one holder, and their ``(F, 3)`` yaw, pitch, roll (radians).
+
+    The yaw is a smoothed bearing from the holder to ``target_xy`` (the shared group's
+    centroid per frame), plus an Ornstein-Uhlenbeck head turn and pans (a raised-cosine turn
+    away and back); pitch and roll wobble (Ornstein-Uhlenbeck) about a drawn mean pitch.
+    """
+    n_frames = holder_xy.shape[0]
+    dt = 1.0 / config.fps
+    mean_pitch = np.radians(rng.uniform(*config.hor_pitch))
+    noise = rng.standard_normal((n_frames, 3))
+    pan_draw = rng.random((n_frames, 4))
+    turn_std = np.radians(config.head_turn_std)
+    wobble_std = np.radians(config.hor_wobble)
+    decay_turn = np.exp(-dt / config.head_turn_time)
+    decay_wob = np.exp(-dt / _WOBBLE_TIME)
+    blend = 1.0 - np.exp(-dt / _GAZE_SMOOTHING)
+    state = np.array([turn_std, wobble_std, wobble_std]) * noise[0]
+    angles = np.empty((n_frames, 3))
+    gaze = 0.0
+    pan_left, pan_len, pan_amp = 0.0, 1.0, 0.0
+    lo_amp, hi_amp = np.radians(config.pan_angle)
+    for t in range(n_frames):
+        to = target_xy[t] - holder_xy[t]
+        bearing = float(np.arctan2(to[1], to[0]))
+        gaze = bearing if t == 0 else float(_wrap(gaze + blend * _wrap(bearing - gaze)))
+        if t > 0:
+            decay = np.array([decay_turn, decay_wob, decay_wob])
+            std = np.array([turn_std, wobble_std, wobble_std])
+            state = decay * state + std * np.sqrt(1.0 - decay**2) * noise[t]
+            if pan_left <= 0 and pan_draw[t, 0] < config.pan_rate * dt:
+                pan_len = config.pan_duration[0] + pan_draw[t, 1] * (
+                    config.pan_duration[1] - config.pan_duration[0])
+                pan_amp = (lo_amp + pan_draw[t, 2] * (hi_amp - lo_amp)) * (
+                    1.0 if pan_draw[t, 3] < 0.5 else -1.0)
+                pan_left = pan_len
+            else:
+                pan_left = max(0.0, pan_left - dt)
+        pan = pan_amp * np.sin(np.pi * (1.0 - pan_left / pan_len)) ** 2 if pan_left > 0 else 0.0
+        angles[t] = (float(_wrap(gaze + state[0] + pan)), mean_pitch + state[1], state[2])
+    K = intrinsics_from_fov(size[0], size[1], hfov)
+    cams = []
+    for (x, y), (yaw, pitch, roll) in zip(holder_xy.tolist(), angles.tolist(), strict=True):
+        c = np.array([x + config.hor_reach * np.cos(yaw), y + config.hor_reach * np.sin(yaw),
+                      cam_height])
+        cams.append(Camera(K=K, R=look_rotation(yaw, pitch, roll), c=c, width=size[0],
+                           height=size[1]))
+    return cams, angles
+
+
+# --------------------------------------------------------------------------------------------
+# The scene
+
+
+def make_oblique_scene(
+    config: ObliqueSceneConfig, n_frames: int, rng: np.random.Generator
+) -> ObliqueScene:
+    """Draw one scene (groups, cameras, walks) and project the boxes of every view.
+
+    See the module docstring for the world, the cameras, the boxes and how the overlap is
+    made.
+
+    Args:
+        config: the configuration.
+        n_frames: number of frames F >= 1 (``fps`` per second).
+        rng: the only source of randomness, e.g. ``np.random.default_rng(seed)``.
+
+    Returns:
+        The :class:`ObliqueScene`.
+    """
+    if int(n_frames) < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    n_frames = int(n_frames)
+    n_hor = int(config.n_hor)
+    hor_names = [f"hor{k}" for k in range(1, n_hor + 1)]
+    dt = 1.0 / config.fps
+    times = np.arange(n_frames) * dt
+
+    # 1. Group sizes from the drawn overlap fractions.
+    n_top = int(rng.integers(config.n_people[0], config.n_people[1] + 1))
+    p_top = float(rng.uniform(*config.overlap))
+    p_hor = [float(rng.uniform(*config.overlap)) for _ in range(n_hor)]
+    n_shared = int(np.clip(np.round(p_top * n_top), 1, n_top))
+    n_top_only = n_top - n_shared
+    n_hor_only = [int(np.round(n_shared * (1.0 - p) / p)) for p in p_hor]
+
+    # 2. The top camera, looking at the shared square; the square fitted inside its image.
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    pitch = float(np.radians(rng.uniform(*config.top_pitch)))
+    height = float(rng.uniform(*config.top_height))
+    hfov = float(rng.uniform(*config.top_hfov))
+    drift_dir = float(rng.uniform(-np.pi, np.pi))
+    drift = float(rng.uniform(*config.top_drift_speed))
+    yaw_rate = float(np.radians(rng.uniform(*config.top_yaw_rate))) * (
+        1.0 if rng.random() < 0.5 else -1.0)
+    side = float(rng.uniform(*config.area))
+    aim = rng.uniform(-0.2, 0.2, size=2) * side
+    shift = drift * times[:, None] * np.array([np.cos(drift_dir), np.sin(drift_dir)])
+    checks = _check_frames(n_frames)
+    min_side = _group_side(n_shared, 0.0, config.min_separation)
+    side = max(side, min_side)
+
+    def top_at(f: int) -> Camera:
+        return _top_camera(yaw, pitch, height, aim, hfov, config.top_size, shift[f],
+                           yaw_rate * times[f])
+
+    for _ in range(200):
+        if _inside([top_at(f) for f in checks], _square_points(np.zeros(2), side),
+                   config.near_clip):
+            break
+        if side > min_side:
+            side = max(min_side, 0.93 * side)
+        else:
+            height *= 1.05
+    top_cameras = [top_at(f) for f in range(n_frames)]
+    top_checks = [top_cameras[f] for f in checks]
+    shared = _Region(np.zeros(2), side)
+
+    # 3. Holders around the shared square, far enough for it to fit their field of view, each
+    #    with its hor-only square: in its view, outside the top image on every frame. A holder
+    #    tries a few azimuths (the first spreads the holders evenly) until that square fits.
+    hor_hfov = [float(rng.uniform(*config.hor_hfov)) for _ in range(n_hor)]
+    hor_size = [tuple(config.hor_sizes[int(rng.integers(len(config.hor_sizes)))])
+                for _ in range(n_hor)]
+    base = float(rng.uniform(-np.pi, np.pi))
+    placed = [shared]
+    holders: list[_Region] = []
+    gazes: list[float] = []
+    hor_only: list[_Region | None] = []
+    for k in range(n_hor):
+        half = _SHARED_CONE * np.radians(hor_hfov[k]) / 2.0
+        hside = _group_side(n_hor_only[k], float(rng.uniform(*config.group_area)),
+                            config.min_separation)
+        extra = rng.uniform(*config.hor_extra_distance, size=_AZIMUTHS)
+        azimuths = rng.uniform(-np.pi, np.pi, size=_AZIMUTHS)
+        azimuths[0] = base + 2.0 * np.pi * k / n_hor + (azimuths[0] / np.pi) * 0.5 * np.pi / n_hor
+        draws = rng.random((_AZIMUTHS, _TRIES // _AZIMUTHS, 2))
+        choice = None
+        for i in range(_AZIMUTHS):
+            distance = max(0.7 * side / np.sin(half) + extra[i],
+                           shared.radius + _HOLDER_AREA + _GROUP_GAP)
+            holder = _Region(distance * np.array([np.cos(azimuths[i]), np.sin(azimuths[i])]),
+                             _HOLDER_AREA)
+            gaze = float(_wrap(azimuths[i] + np.pi))
+            if not holder.clear_of(placed):
+                continue
+            if choice is None:
+                choice = (holder, gaze, None)
+            if n_hor_only[k] == 0:
+                break
+            region = _hor_only_region(holder, gaze, half, hside, distance + shared.radius,
+                                      [*placed, holder], top_checks, draws[i])
+            if region is not None:
+                choice = (holder, gaze, region)
+                break
+        if choice is None:  # every azimuth crowded: the first, uncleared
+            distance = 0.7 * side / np.sin(half) + extra[0]
+            holder = _Region(distance * np.array([np.cos(azimuths[0]), np.sin(azimuths[0])]),
+                             _HOLDER_AREA)
+            choice = (holder, float(_wrap(azimuths[0] + np.pi)), None)
+        holders.append(choice[0])
+        gazes.append(choice[1])
+        hor_only.append(choice[2])
+        placed.append(choice[0])
+        if choice[2] is None:
+            n_hor_only[k] = 0
+        else:
+            placed.append(choice[2])
+
+    # 4. The top-only square: in the top image, outside every handheld view. Holders the top
+    #    camera sees count as top-only people (fewer are placed).
+    holders_seen = sum(
+        _inside(top_checks, np.array([[*h.centre, 0.0], [*h.centre, _CHECK_HEIGHT]]),
+                config.near_clip)
+        for h in holders
+    )
+    n_top_only = max(0, n_top_only - holders_seen)
+    top_only_side = _group_side(n_top_only, float(rng.uniform(*config.group_area)),
+                                config.min_separation)
+    top_only = None
+    cand_pix = rng.uniform(0.15, 0.85, size=(_TRIES, 2)) * np.array(config.top_size)
+    if n_top_only > 0:
+        ground = top_cameras[0].ray_directions(cand_pix)
+        for ray in ground:
+            if ray[2] >= -1e-6:
+                continue
+            c = top_cameras[0].c[:2] + ray[:2] * (top_cameras[0].c[2] / -ray[2])
+            region = _Region(c, top_only_side)
+            if np.hypot(*c) > 3.0 * side + 30.0 or not region.clear_of(placed):
+                continue
+            pts = _square_points(c, top_only_side)
+            if not _inside(top_checks, pts, config.near_clip):
+                continue
+            if all((_off_axis(h.centre, g, pts) > np.radians(hf / 2.0 + _OUTSIDE_CONE_DEG)).all()
+                   for h, g, hf in zip(holders, gazes, hor_hfov, strict=True)):
+                top_only = region
+                break
+    if top_only is None:
+        n_top_only = 0
+    else:
+        placed.append(top_only)
+
+    # 6. The walks, group by group: holders, shared, top-only, hor-only.
+    def walk(n: int, region: _Region, speed: tuple[float, float]) -> PeopleState:
+        walk_config = SceneConfig(
+            n_people=(n, n), area=region.side, height_range=config.height_range,
+            width_range=config.width_range, min_separation=config.min_separation,
+            fps=config.fps, walk_speed=speed, stop_probability=config.stop_probability,
+            edge_margin=min(2.0, 0.2 * region.side), hor_wobble_deg=0.0,
+            top_altitude=max(40.0, config.height_range[1] + 1.0),
+        )
+        return simulate_walks(walk_config, n_frames, rng)
+
+    parts = [(walk(1, h, config.holder_speed), h) for h in holders]
+    parts.append((walk(n_shared, shared, config.walk_speed), shared))
+    if top_only is not None:
+        parts.append((walk(n_top_only, top_only, config.walk_speed), top_only))
+    for k, region in enumerate(hor_only):
+        if region is not None:
+            parts.append((walk(n_hor_only[k], region, config.walk_speed), region))
+    positions = np.concatenate([p.positions + r.centre for p, r in parts], axis=1)
+    heights = np.concatenate([p.heights for p, _ in parts])
+    widths = np.concatenate([p.widths for p, _ in parts])
+    headings = np.concatenate([p.headings for p, _ in parts], axis=1)
+    counts = [p.n_people for p, _ in parts]
+    starts = np.cumsum([0, *counts])
+    groups: dict[str, np.ndarray] = {"holders": np.arange(n_hor, dtype=np.int64)}
+    groups["shared"] = np.arange(starts[n_hor], starts[n_hor + 1], dtype=np.int64)
+    j = n_hor + 1
+    groups["top_only"] = np.empty(0, dtype=np.int64)
+    if top_only is not None:
+        groups["top_only"] = np.arange(starts[j], starts[j + 1], dtype=np.int64)
+        j += 1
+    for k, region in enumerate(hor_only):
+        groups[f"{hor_names[k]}_only"] = np.empty(0, dtype=np.int64)
+        if region is not None:
+            groups[f"{hor_names[k]}_only"] = np.arange(starts[j], starts[j + 1], dtype=np.int64)
+            j += 1
+
+    # 7. The handheld cameras, looking at the shared group's centroid.
+    target = positions[:, groups["shared"]].mean(axis=1)
+    hor_cameras: dict[str, list[Camera]] = {}
+    hor_angles = []
+    for k, name in enumerate(hor_names):
+        cam_height = min(float(rng.uniform(*config.hor_height)), float(heights[k]) - 0.1)
+        cams, angles = _handheld_cameras(positions[:, k], target, cam_height, hor_size[k],
+                                         hor_hfov[k], config, rng)
+        hor_cameras[name] = cams
+        hor_angles.append(angles)
+        headings[:, k] = angles[:, 0]  # a holder faces where they film
+    people = PeopleState(
+        positions=positions, heights=heights, widths=widths, headings=headings,
+        ids=np.arange(positions.shape[1], dtype=np.int64), wearer=0,
+        head_yaw=hor_angles[0][:, 0], head_pitch=hor_angles[0][:, 1],
+        head_roll=hor_angles[0][:, 2],
+    )
+
+    # 8. The boxes.
+    top = _project_frames(people, top_cameras, config)
+    hor = {name: _project_frames(people, hor_cameras[name], config, hidden=k)
+           for k, name in enumerate(hor_names)}
+    overlap = {"top": p_top, **dict(zip(hor_names, p_hor, strict=True))}
+    target_fraction = {"top": n_shared / (n_shared + n_top_only + holders_seen)}
+    for k, name in enumerate(hor_names):
+        target_fraction[name] = n_shared / (n_shared + n_hor_only[k])
+    return ObliqueScene(
+        config=config, people=people, top_cameras=top_cameras, hor_cameras=hor_cameras,
+        top=top, hor=hor, groups=groups, overlap=overlap, overlap_target=target_fraction,
+    )
+
+
+def write_oblique_scene(
+    scene: ObliqueScene, directory: str | os.PathLike, name: str
+) -> dict[str, Path]:
+    """Write the boxes and the cameras of a scene in ``directory`` (which must exist).
+
+    Files: ``NAME_top.txt``, ``NAME_hor1.txt``, ... (MOTChallenge boxes as
+    :func:`~xvmatch.datasets.box_scene.write_box_scene` writes them; frames without a box leave
+    no line), and per handheld view a folder ``NAME_cameras_horK/`` of per-frame camera files
+    ``000001.json`` ... with the cameras ``top`` and ``ego`` (that view's camera), which
+    :func:`~xvmatch.formats.camera_frames.open_cameras` reads. Every file is written
+    atomically.
+
+    Returns:
+        ``{"top": path, "hor1": path, ..., "cameras_hor1": folder, ...}``.
+    """
+    folder = Path(directory)
+    if not folder.is_dir():
+        raise ValueError(f"write_oblique_scene: directory {os.fspath(folder)!r} does not exist")
+    paths = {"top": folder / f"{name}_top.txt"}
+    write_mot_boxes(paths["top"], scene.top)
+    for view, records in scene.hor.items():
+        paths[view] = folder / f"{name}_{view}.txt"
+        write_mot_boxes(paths[view], records)
+    for view, cams in scene.hor_cameras.items():
+        cam_folder = folder / f"{name}_cameras_{view}"
+        cam_folder.mkdir(exist_ok=True)
+        for f, (top_cam, hor_cam) in enumerate(zip(scene.top_cameras, cams, strict=True)):
+            save_cameras(cam_folder / f"{f + 1:06d}.json", {"top": top_cam, "ego": hor_cam})
+        paths[f"cameras_{view}"] = cam_folder
+    return paths
