@@ -42,9 +42,11 @@ Per scene an overlap fraction is drawn for the top view and for each handheld vi
 of them shared, and handheld view k gets ``round(n_shared * (1 - p_k) / p_k)`` own people. Where
 no square satisfying the conditions is found (a small footprint, cameras facing each other)
 that group is left out; :attr:`ObliqueScene.overlap_target` gives the fractions the groups
-actually placed aim at. The fractions measured on the boxes scatter around them, naturally:
-handheld cameras turn and pan, near people hide far ones, the holders themselves may be in the
-top view (or in another handheld view), and a moving top camera's footprint moves.
+actually placed aim at (a holder the top camera sees counts as one of its top-only people).
+Measured per person over a 10 s clip (whoever is in a view at some time), the fractions match
+those targets on the tests' scenes; frame by frame they scatter around them, naturally, and the
+top view's is lower by up to about 0.2: near people hide shared ones from the level handheld
+camera, which turns and pans; a moving top camera's footprint moves.
 
 Everything random is drawn from the one generator given to :func:`make_oblique_scene`, in a
 fixed order (group sizes and fractions, the top camera, the shared square, the holders, the

@@ -1,0 +1,241 @@
+"""Tests of the oblique box-level scenes of issue 67 (xvmatch.datasets.oblique_scenes)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from xvmatch.datasets.oblique_scenes import (
+    ObliqueSceneConfig,
+    make_oblique_scene,
+    project_view,
+    write_oblique_scene,
+)
+from xvmatch.formats.camera_frames import open_cameras
+from xvmatch.formats.mot_boxes import read_mot_boxes
+from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation, same_camera
+
+CONFIG = ObliqueSceneConfig()
+NADIR = ObliqueSceneConfig(top_pitch=(90.0, 90.0), top_height=(30.0, 40.0))
+OBLIQUE = ObliqueSceneConfig(top_pitch=(25.0, 35.0), top_height=(8.0, 20.0))
+
+
+def _scene(config: ObliqueSceneConfig, seed: int, n_frames: int = 30):
+    return make_oblique_scene(config, n_frames, np.random.default_rng(seed))
+
+
+@pytest.fixture(scope="module")
+def clips():
+    """Three 10 s clips (100 frames at 10 fps) whose groups were all placed."""
+    return [_scene(CONFIG, seed, 100) for seed in (0, 6, 9)]
+
+
+@pytest.fixture(scope="module")
+def two_hor():
+    return _scene(ObliqueSceneConfig(n_hor=2, top_drift_speed=(0.2, 0.4),
+                                     top_yaw_rate=(0.5, 1.0)), 4, 40)
+
+
+def _views(scene):
+    """(records, cameras) of every view, top first."""
+    out = [(scene.top, scene.top_cameras)]
+    out += [(scene.hor[name], scene.hor_cameras[name]) for name in scene.hor]
+    return out
+
+
+def test_same_seed_same_scene_bit_for_bit():
+    a, b = _scene(CONFIG, 11), _scene(CONFIG, 11)
+    c = _scene(CONFIG, 12)
+    assert a.overlap == b.overlap and a.overlap_target == b.overlap_target
+    np.testing.assert_array_equal(a.people.positions, b.people.positions)
+    for (ra, ca), (rb, cb) in zip(_views(a), _views(b), strict=True):
+        assert sorted(ra) == sorted(rb)
+        for f in ra:
+            np.testing.assert_array_equal(ra[f].ids, rb[f].ids)
+            np.testing.assert_array_equal(ra[f].boxes, rb[f].boxes)
+        assert all(np.array_equal(x.R, y.R) and np.array_equal(x.c, y.c)
+                   for x, y in zip(ca, cb, strict=True))
+    assert not np.array_equal(a.people.positions[0, :3], c.people.positions[0, :3])
+
+
+def test_layout_names_and_holders(two_hor):
+    scene = two_hor
+    assert list(scene.hor) == ["hor1", "hor2"] and list(scene.hor_cameras) == ["hor1", "hor2"]
+    assert len(scene.top_cameras) == scene.n_frames == 40
+    assert all(len(c) == 40 for c in scene.hor_cameras.values())
+    assert sorted(scene.top) == list(range(1, 41))
+    np.testing.assert_array_equal(scene.people.ids, np.arange(scene.people.n_people))
+    np.testing.assert_array_equal(scene.groups["holders"], [0, 1])
+    for k, name in enumerate(scene.hor):  # a holder is never in their own view
+        assert all(k not in rec.ids for rec in scene.hor[name].values())
+        cams = scene.hor_cameras[name]
+        assert 1.35 <= cams[0].c[2] <= 1.7
+        assert cams[0].image_size in CONFIG.hor_sizes
+        yaw = [np.arctan2(c.R[2, 1], c.R[2, 0]) for c in cams]
+        assert np.ptp(np.unwrap(yaw)) > np.radians(1.0)  # the camera turns
+        assert np.hypot(*(cams[-1].c[:2] - cams[0].c[:2])) > 0.0  # and walks
+    # The drifting, yawing drone moves; the default top camera does not.
+    top = scene.top_cameras
+    assert np.hypot(*(top[-1].c[:2] - top[0].c[:2])) > 0.5
+    assert not np.allclose(top[-1].R, top[0].R)
+    still = _scene(CONFIG, 3, 5).top_cameras
+    assert all(np.array_equal(c.R, still[0].R) and np.array_equal(c.c, still[0].c)
+               for c in still)
+
+
+def test_boxes_inside_the_image(clips, two_hor):
+    for scene in [*clips, two_hor]:
+        for records, cams in _views(scene):
+            for f, rec in records.items():
+                cam = cams[f - 1]
+                b = rec.boxes
+                assert (b[:, 2:] > 0).all()
+                assert (b[:, :2] >= 0).all()
+                assert (b[:, 0] + b[:, 2] <= cam.width + 1e-9).all()
+                assert (b[:, 1] + b[:, 3] <= cam.height + 1e-9).all()
+                assert np.unique(rec.ids).size == len(rec)
+
+
+def _isolated_untruncated(rec, cam):
+    """Indices of boxes off the image border that overlap no other box of the frame."""
+    b = rec.boxes
+    x0, y0, x1, y1 = b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
+    ox = (np.minimum(x1[:, None], x1[None]) > np.maximum(x0[:, None], x0[None]))
+    oy = (np.minimum(y1[:, None], y1[None]) > np.maximum(y0[:, None], y0[None]))
+    overlap = ox & oy
+    np.fill_diagonal(overlap, False)
+    inner = (x0 > 1) & (y0 > 1) & (x1 < cam.width - 1) & (y1 < cam.height - 1)
+    return np.flatnonzero(inner & ~overlap.any(axis=1))
+
+
+def test_box_height_is_the_projected_person(clips):
+    """An isolated box spans head to foot: at least |v(head) - v(foot)|, at most that plus the
+    body's width seen from above (f w / depth), in every view."""
+    checked = 0
+    for scene in clips:
+        people = scene.people
+        for records, cams in _views(scene):
+            for f in range(1, scene.n_frames + 1, 5):
+                rec, cam = records[f], cams[f - 1]
+                for i in _isolated_untruncated(rec, cam):
+                    p = int(rec.ids[i])
+                    x, y = people.positions[f - 1, p]
+                    uv, depth = cam.project(np.array([[x, y, 0.0], [x, y, people.heights[p]]]))
+                    span = abs(uv[1, 1] - uv[0, 1])
+                    width_px = cam.K[1, 1] * people.widths[p] / depth.min()
+                    h = rec.boxes[i, 3]
+                    assert span - 0.5 <= h <= span + 1.05 * width_px + 0.5, (f, p, h, span)
+                    checked += 1
+    assert checked > 200
+
+
+def _fractions(scene, view):
+    """(per-frame, per-person) fraction of the top's and of the view's people seen by both."""
+    both = top_n = hor_n = 0
+    top_ids, hor_ids = set(), set()
+    for f in scene.top:
+        t, h = set(scene.top[f].ids.tolist()), set(scene.hor[view][f].ids.tolist())
+        both += len(t & h)
+        top_n += len(t)
+        hor_n += len(h)
+        top_ids |= t
+        hor_ids |= h
+    shared = len(top_ids & hor_ids)
+    return (both / top_n, both / hor_n), (shared / len(top_ids), shared / len(hor_ids))
+
+
+def test_overlap_close_to_the_drawn_fraction(clips):
+    for scene in clips:
+        n_top = len(scene.groups["shared"]) + len(scene.groups["top_only"])
+        n_hor = len(scene.groups["shared"]) + len(scene.groups["hor1_only"])
+        # The groups placed realise the drawn fractions up to rounding a count.
+        assert abs(scene.overlap_target["top"] - scene.overlap["top"]) <= 1.0 / n_top
+        assert abs(scene.overlap_target["hor1"] - scene.overlap["hor1"]) <= 1.0 / n_hor
+        (frame_top, frame_hor), (person_top, person_hor) = _fractions(scene, "hor1")
+        # Over the clip, whoever is in a view at some time: the target.
+        assert abs(person_top - scene.overlap_target["top"]) <= 0.1
+        assert abs(person_hor - scene.overlap_target["hor1"]) <= 0.1
+        # Frame by frame, lower: near people hide shared ones from the handheld camera.
+        assert scene.overlap_target["top"] - 0.2 <= frame_top <= scene.overlap_target["top"] + 0.05
+        assert abs(frame_hor - scene.overlap_target["hor1"]) <= 0.15
+    drawn = [s.overlap["top"] for s in clips]
+    assert min(drawn) >= 0.3 and max(drawn) <= 1.0
+
+
+def test_nadir_blobs_and_oblique_upright_people():
+    ratios = {}
+    for label, config in (("nadir", NADIR), ("oblique", OBLIQUE)):
+        r = []
+        for seed in (0, 1):
+            scene = _scene(config, seed, 20)
+            for f, rec in scene.top.items():
+                idx = _isolated_untruncated(rec, scene.top_cameras[f - 1])
+                r.extend((rec.boxes[idx, 3] / rec.boxes[idx, 2]).tolist())
+        ratios[label] = np.asarray(r)
+        assert len(r) > 20
+    assert 0.5 <= np.median(ratios["nadir"]) <= 1.6
+    assert np.median(ratios["oblique"]) > 2.0
+    assert (ratios["oblique"] > 1.0).mean() > 0.95
+
+
+def test_occlusion_and_truncation():
+    # Two people on the optical axis of a level camera, the far one shifted a little sideways:
+    # the near one hides most of its box, which shrinks to the visible strip.
+    cam = Camera(K=intrinsics_from_fov(1920, 1080, 70.0), R=look_rotation(0.0),
+                 c=np.array([0.0, 0.0, 1.6]), width=1920, height=1080)
+    xy = np.array([[6.0, 0.0], [12.0, -0.5], [3.0, 2.0]])
+    heights, widths = np.array([1.7, 1.8, 1.7]), np.full(3, 0.45)
+    idx, boxes = project_view(xy, heights, widths, cam, min_visible_fraction=0.0)
+    _, full = project_view(xy[1:2], heights[1:2], widths[1:2], cam)
+    np.testing.assert_array_equal(idx, [0, 1, 2])
+    assert boxes[1, 2] < 0.8 * full[0, 2]  # the far one: only its visible part
+    assert boxes[2, 0] == 0.0 and boxes[2, 1] >= 0.0  # the near one, cut by the left border
+    idx, _ = project_view(xy, heights, widths, cam, min_visible_fraction=0.9)
+    assert 1 not in idx and 2 not in idx  # mostly hidden or mostly outside: dropped
+    idx, _ = project_view(xy, heights, widths, cam, present=np.array([False, True, True]))
+    assert 0 not in idx
+    # In scenes: boxes cut by the border, and people dropped for being mostly hidden.
+    scene = _scene(CONFIG, 0, 100)
+    cut = dropped = 0
+    for name, records in scene.hor.items():
+        for f, rec in records.items():
+            cam = scene.hor_cameras[name][f - 1]
+            b = rec.boxes
+            cut += int(((b[:, 0] <= 0) | (b[:, 0] + b[:, 2] >= cam.width)).sum())
+            present = np.arange(scene.people.n_people) != int(name[3:]) - 1
+            all_idx, _ = project_view(scene.people.positions[f - 1], scene.people.heights,
+                                      scene.people.widths, cam, min_visible_fraction=0.0,
+                                      present=present)
+            dropped += len(all_idx) - len(rec)
+    assert cut > 0 and dropped > 0
+
+
+def test_written_files_read_back(tmp_path, two_hor):
+    scene = two_hor
+    paths = write_oblique_scene(scene, tmp_path, "s1")
+    assert sorted(paths) == ["cameras_hor1", "cameras_hor2", "hor1", "hor2", "top"]
+    assert paths["top"].name == "s1_top.txt" and paths["hor2"].name == "s1_hor2.txt"
+    for view, records in [("top", scene.top), *scene.hor.items()]:
+        back = read_mot_boxes(paths[view])
+        assert sorted(back) == [f for f, rec in records.items() if len(rec)]
+        for f, rec in back.items():
+            np.testing.assert_array_equal(rec.ids, records[f].ids)
+            np.testing.assert_array_equal(rec.boxes, records[f].boxes)
+    for view in scene.hor:
+        cams = open_cameras(paths[f"cameras_{view}"], frames=range(1, scene.n_frames + 1))
+        for f in range(1, scene.n_frames + 1):
+            assert same_camera(cams.get(f).top, scene.top_cameras[f - 1])
+            assert same_camera(cams.get(f).hor, scene.hor_cameras[view][f - 1])
+    with pytest.raises(ValueError, match="does not exist"):
+        write_oblique_scene(scene, tmp_path / "missing", "s1")
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="top_pitch"):
+        ObliqueSceneConfig(top_pitch=(20.0, 100.0))
+    with pytest.raises(ValueError, match="min_separation"):
+        ObliqueSceneConfig(width_range=(0.4, 0.7))
+    with pytest.raises(ValueError, match="n_hor"):
+        ObliqueSceneConfig(n_hor=0)
+    with pytest.raises(ValueError, match="n_frames"):
+        make_oblique_scene(CONFIG, 0, np.random.default_rng(0))
