@@ -49,10 +49,11 @@ top view's is lower by up to about 0.2: near people hide shared ones from the le
 camera, which turns and pans; a moving top camera's footprint moves.
 
 Everything random is drawn from the one generator given to :func:`make_oblique_scene`, in a
-fixed order (group sizes and fractions, the top camera, the shared square, the holders, the
-top-only and hor-only squares, the walks group by group, the holders' camera heights, the
-handheld cameras' motion), so a scene is a pure function of the generator's seed. Ids are the
-person index (ground truth; index 0 holds ``hor1``, the CVMHAT convention of id 0).
+fixed order (group sizes and fractions; the top camera and the shared square; the handheld
+cameras' fields of view and image sizes; each holder with its hor-only square; the top-only
+square; the walks, group by group; then per handheld camera its height and motion), so a scene
+is a pure function of the generator's seed, bit for bit. Ids are the person index (ground
+truth; index 0 holds ``hor1``, the CVMHAT convention of id 0).
 """
 
 from __future__ import annotations
