@@ -91,6 +91,118 @@ def fit_geometry(
                        **kwargs)
 
 
+def _prepare_run(
+    out: Path, run_dir: str | os.PathLike | None, resume: bool, epochs: int,
+    threads: int | None,
+) -> tuple[Path, Path | None]:
+    """Check the fit's arguments and create its run folder, before any work.
+
+    Args:
+        out: matcher file to write.
+        run_dir: checkpoints and logs (default ``<out>.run`` beside ``out``).
+        resume: continue from ``run_dir/checkpoints/last.ckpt`` when it exists.
+        epochs: most epochs (>= 1).
+        threads: torch intra-op threads (>= 1), or None for torch's default.
+
+    Returns:
+        The run folder and the checkpoint to resume from (None: a fresh start).
+    """
+    if epochs < 1:
+        raise ValueError(f"epochs must be >= 1, got {epochs}")
+    if not out.parent.is_dir():
+        raise ValueError(f"cannot write {os.fspath(out)!r}: folder {os.fspath(out.parent)!r} "
+                         "does not exist")
+    run = Path(run_dir) if run_dir is not None else out.with_name(out.name + ".run")
+    last = run / "checkpoints" / "last.ckpt"
+    resume_from = last if resume and last.exists() else None
+    if resume_from is not None:  # before any work: a corrupt file is one line naming it
+        check_checkpoint_file(resume_from)
+    run.mkdir(parents=True, exist_ok=True)
+    if threads is not None:
+        if threads < 1:
+            raise ValueError(f"threads must be >= 1, got {threads}")
+        torch.set_num_threads(threads)
+    return run, resume_from
+
+
+def _write_run_config(
+    run: Path, settings: Mapping[str, Any], matcher: CrossViewMatcher,
+    loss_config: Mapping[str, Any] | None, feature_config: FeatureConfig,
+    datamodule: L.LightningDataModule,
+) -> None:
+    """Write ``run/config.json``: the fit's settings, the model's and the data's configuration.
+
+    Args:
+        run: the run folder.
+        settings: out, seed, epochs, learning rate, weight decay, gamma and patience, in order.
+        matcher: the matcher being trained.
+        loss_config: keyword arguments of the loss.
+        feature_config: the feature configuration.
+        datamodule: the DataModule (its public settings are recorded).
+    """
+    config = {
+        **settings,
+        "model_config": matcher.geometry.config,
+        "matcher_config": matcher.config,
+        "loss_config": dict(loss_config or {}),
+        "feature_config": feature_config.to_dict(),
+        "datamodule": {
+            k: (v if isinstance(v, int | float | str | bool | type(None) | list) else str(v))
+            for k, v in vars(datamodule).items()
+            if not k.startswith("_") and not k.endswith("_parts") and k not in ("trainer",)
+        },
+    }
+    atomic_write_text(run / "config.json", json.dumps(config, indent=2, default=str) + "\n")
+
+
+def _keep_best(module: GeometryMatchingModule, checkpoint: ModelCheckpoint,
+               has_val: bool) -> float | None:
+    """Load the best validation checkpoint into ``module``; returns its score (None: no val)."""
+    best_path = best_checkpoint_path(checkpoint)  # only from the run's own checkpoint folder
+    if has_val and best_path is not None:
+        module.load_state_dict(load_checkpoint_state(best_path))
+        return float(checkpoint.best_model_score)
+    return None
+
+
+def _matcher_trainer(
+    run: Path, epochs: int, has_val: bool, patience: int, progress: bool
+) -> tuple[L.Trainer, ModelCheckpoint]:
+    """The deterministic CPU trainer of a matcher fit, and its checkpoint callback.
+
+    Keeps the best validation CVIDF1 and the last epoch, stops after ``patience`` epochs
+    without a better one (when there is validation), and logs to CSV and TensorBoard in ``run``.
+    """
+    checkpoint = ModelCheckpoint(
+        dirpath=run / "checkpoints",
+        filename="best-{epoch:02d}",
+        monitor="val_f1" if has_val else None,
+        mode="max",
+        save_last=True,
+        save_top_k=1,
+    )
+    callbacks: list = [checkpoint]
+    if has_val:
+        callbacks.append(EarlyStopping(monitor="val_f1", mode="max", patience=patience))
+    if progress:
+        callbacks.append(TQDMProgressBar(refresh_rate=20))
+    trainer = L.Trainer(
+        max_epochs=epochs,
+        accelerator="cpu",
+        devices=1,
+        deterministic=True,
+        gradient_clip_val=1.0,
+        callbacks=callbacks,
+        logger=[CSVLogger(run, name="csv"), TensorBoardLogger(run, name="tensorboard")],
+        enable_progress_bar=progress,
+        enable_model_summary=False,
+        log_every_n_steps=20,
+        num_sanity_val_steps=0,
+        limit_val_batches=1.0 if has_val else 0,
+    )
+    return trainer, checkpoint
+
+
 def fit_matcher(
     datamodule: L.LightningDataModule,
     out: str | os.PathLike,
@@ -139,95 +251,26 @@ def fit_matcher(
     """
     start = time.perf_counter()
     out = Path(out)
-    if epochs < 1:
-        raise ValueError(f"epochs must be >= 1, got {epochs}")
-    if not out.parent.is_dir():
-        raise ValueError(f"cannot write {os.fspath(out)!r}: folder {os.fspath(out.parent)!r} "
-                         "does not exist")
-    run = Path(run_dir) if run_dir is not None else out.with_name(out.name + ".run")
-    last = run / "checkpoints" / "last.ckpt"
-    resume_from = last if resume and last.exists() else None
-    if resume_from is not None:  # before any work: a corrupt file is one line naming it
-        check_checkpoint_file(resume_from)
-    run.mkdir(parents=True, exist_ok=True)
-    if threads is not None:
-        if threads < 1:
-            raise ValueError(f"threads must be >= 1, got {threads}")
-        torch.set_num_threads(threads)
+    run, resume_from = _prepare_run(out, run_dir, resume, epochs, threads)
     L.seed_everything(seed, workers=True, verbose=False)
     datamodule.setup("fit")
     has_val = bool(getattr(datamodule, "val_parts", [True]))
 
     matcher.train()  # a matcher loaded from a file comes in eval mode; Lightning keeps modes
-    module = GeometryMatchingModule(
-        matcher,
-        GeometryMatchingLoss(**dict(loss_config or {})),
-        learning_rate=learning_rate,
-        weight_decay=weight_decay,
-        gamma=gamma,
-    )
-    config = {
-        "out": os.fspath(out),
-        "seed": seed,
-        "epochs": epochs,
-        "learning_rate": learning_rate,
-        "weight_decay": weight_decay,
-        "gamma": gamma,
-        "patience": patience,
-        "model_config": matcher.geometry.config,
-        "matcher_config": matcher.config,
-        "loss_config": dict(loss_config or {}),
-        "feature_config": feature_config.to_dict(),
-        "datamodule": {
-            k: (v if isinstance(v, int | float | str | bool | type(None) | list) else str(v))
-            for k, v in vars(datamodule).items()
-            if not k.startswith("_") and not k.endswith("_parts") and k not in ("trainer",)
-        },
-    }
-    atomic_write_text(run / "config.json", json.dumps(config, indent=2, default=str) + "\n")
-
-    checkpoint = ModelCheckpoint(
-        dirpath=run / "checkpoints",
-        filename="best-{epoch:02d}",
-        monitor="val_f1" if has_val else None,
-        mode="max",
-        save_last=True,
-        save_top_k=1,
-    )
-    callbacks: list = [checkpoint]
-    if has_val:
-        callbacks.append(EarlyStopping(monitor="val_f1", mode="max", patience=patience))
-    if progress:
-        callbacks.append(TQDMProgressBar(refresh_rate=20))
-    trainer = L.Trainer(
-        max_epochs=epochs,
-        accelerator="cpu",
-        devices=1,
-        deterministic=True,
-        gradient_clip_val=1.0,
-        callbacks=callbacks,
-        logger=[CSVLogger(run, name="csv"), TensorBoardLogger(run, name="tensorboard")],
-        enable_progress_bar=progress,
-        enable_model_summary=False,
-        log_every_n_steps=20,
-        num_sanity_val_steps=0,
-        limit_val_batches=1.0 if has_val else 0,
-    )
+    module = GeometryMatchingModule(matcher, GeometryMatchingLoss(**dict(loss_config or {})),
+                                    learning_rate=learning_rate, weight_decay=weight_decay,
+                                    gamma=gamma)
+    settings = {"out": os.fspath(out), "seed": seed, "epochs": epochs,
+                "learning_rate": learning_rate, "weight_decay": weight_decay, "gamma": gamma,
+                "patience": patience}
+    _write_run_config(run, settings, matcher, loss_config, feature_config, datamodule)
+    trainer, checkpoint = _matcher_trainer(run, epochs, has_val, patience, progress)
     trainer.fit(module, datamodule=datamodule, ckpt_path=resume_from)
 
-    best_path = best_checkpoint_path(checkpoint)  # only from the run's own checkpoint folder
-    best_score = None
-    if has_val and best_path is not None:
-        module.load_state_dict(load_checkpoint_state(best_path))
-        best_score = float(checkpoint.best_model_score)
-    notes = {
-        **dict(meta or {}),
-        "seed": seed,
-        "epochs_run": int(trainer.current_epoch),
-        "best_val_f1": best_score,
-        "model_config": matcher.geometry.config,
-        "matcher_config": matcher.config,
-    }
+    best_score = _keep_best(module, checkpoint, has_val)
+    notes = {**dict(meta or {}), "seed": seed, "epochs_run": int(trainer.current_epoch),
+             "best_val_f1": best_score, "model_config": matcher.geometry.config,
+             "matcher_config": matcher.config}
     save_matcher(out, module.model, feature_config, gamma, notes, appearance=appearance)
     return FitResult(
         model_path=out,
@@ -237,6 +280,14 @@ def fit_matcher(
         peak_memory_mb=peak_memory_mb(),
         run_dir=run,
     )
+
+
+def _print_offsets(real: CvmhatBoxDataModule) -> None:
+    """Say on stderr, one line per pair, each offset that is not in sync or was applied."""
+    for name, o in real.offsets.items():
+        if o.status != "within_tolerance" or o.applied:
+            kept = "re-timed" if o.applied else "the files' timing kept"
+            print(f"{name}: offset {o.offset:+d} frames ({o.status}; {kept})", file=sys.stderr)
 
 
 def fit_geometry_cvmhat(
@@ -286,11 +337,7 @@ def fit_geometry_cvmhat(
     )
     retimed = {name: o.applied for name, o in real.training_offsets().items() if o.applied}
     if progress:
-        for name, o in real.offsets.items():
-            if o.status != "within_tolerance" or o.applied:
-                kept = "re-timed" if o.applied else "the files' timing kept"
-                print(f"{name}: offset {o.offset:+d} frames ({o.status}; {kept})",
-                      file=sys.stderr)
+        _print_offsets(real)
     dm = real
     if sim_scenes > 0:
         sim = SimBoxDataModule(
