@@ -245,18 +245,11 @@ def _gammas(rows: Sequence[dict], scenario: str, setting: str) -> str:
     return "; ".join(parts)
 
 
-def format_report(rows: Sequence[dict], context: ReportContext) -> str:
-    """``report.md``: the run, the protocol, a table per data folder (Eq. 9 accuracy and
-    CVIDF1), the target check, the CVMHAT table and the pictures."""
-    summary = summarise(rows)
-    f1 = summarise(rows, "cvidf1")
-    n_seeds = len(context.seeds)
-    interval = ("mean ± half-width of the 95% Student t interval over the "
-                f"{n_seeds} seeds" if n_seeds > 1 else
-                "one seed: single values, no interval (run with --seeds 2 or more for one)")
+def _run_lines(context: ReportContext, interval: str) -> list[str]:
+    """The report's title, the command and versions that made it, and the protocol."""
     v = context.versions
     b = context.bundle
-    lines = [
+    return [
         "# Ablation: learned against handcrafted fusion",
         "",
         "Made by",
@@ -300,6 +293,13 @@ def format_report(rows: Sequence[dict], context: ReportContext) -> str:
         "`results.json` hold every (method, column, seed).",
         "",
     ]
+
+
+def _scenario_lines(rows: Sequence[dict], context: ReportContext, interval: str,
+                    summary: dict[tuple[str, str, str], MeanInterval],
+                    f1: dict[tuple[str, str, str], MeanInterval]) -> list[str]:
+    """One section per data folder: its Eq. 9 and CVIDF1 tables and the tuned gammas."""
+    lines: list[str] = []
     col_sets = [(s.key, s.label) for s in context.settings]
     methods = [(r.key, r.label) for r in ROWS]
     for sc in context.scenarios:
@@ -324,6 +324,12 @@ def format_report(rows: Sequence[dict], context: ReportContext) -> str:
                         for s in context.settings[:2]) + ".",
             "",
         ]
+    return lines
+
+
+def _target_lines(rows: Sequence[dict], context: ReportContext) -> list[str]:
+    """The learned fusion against the best non-learned row of each column (none: no lines)."""
+    lines: list[str] = []
     checks = target_check(rows)
     if checks:
         lines += [
@@ -352,6 +358,14 @@ def format_report(rows: Sequence[dict], context: ReportContext) -> str:
                   ""]
         fam = ", ".join(f"{k}: {v}" for k, v in FAMILIES.items())
         lines += [f"Row families ({fam}).", ""]
+    return lines
+
+
+def _cvmhat_lines(context: ReportContext, interval: str,
+                  summary: dict[tuple[str, str, str], MeanInterval],
+                  f1: dict[tuple[str, str, str], MeanInterval]) -> list[str]:
+    """The real CVMHAT boxes' tables (no lines when the run had none)."""
+    lines: list[str] = []
     if context.cvmhat is not None:
         cv = context.cvmhat
         cv_sets = list(CVMHAT_SETTINGS.items())
@@ -373,6 +387,12 @@ def format_report(rows: Sequence[dict], context: ReportContext) -> str:
             *_table("cvmhat", cv_sets, cv_methods, summary),
             "",
         ]
+    return lines
+
+
+def _figure_lines(context: ReportContext) -> list[str]:
+    """The pictures, under one caption per kind (no lines when there are none)."""
+    lines: list[str] = []
     figures = context.figures
     if any(figures.values()):
         lines += ["## Pictures", ""]
@@ -387,5 +407,22 @@ def format_report(rows: Sequence[dict], context: ReportContext) -> str:
                 lines += [f"{titles[kind]}:", ""]
                 lines += [f"![{Path(p).stem}]({p})" for p in paths]
                 lines.append("")
+    return lines
+
+
+def format_report(rows: Sequence[dict], context: ReportContext) -> str:
+    """``report.md``: the run, the protocol, a table per data folder (Eq. 9 accuracy and
+    CVIDF1), the target check, the CVMHAT table and the pictures."""
+    summary = summarise(rows)
+    f1 = summarise(rows, "cvidf1")
+    n_seeds = len(context.seeds)
+    interval = ("mean ± half-width of the 95% Student t interval over the "
+                f"{n_seeds} seeds" if n_seeds > 1 else
+                "one seed: single values, no interval (run with --seeds 2 or more for one)")
+    lines = [*_run_lines(context, interval),
+             *_scenario_lines(rows, context, interval, summary, f1),
+             *_target_lines(rows, context),
+             *_cvmhat_lines(context, interval, summary, f1),
+             *_figure_lines(context)]
     return "\n".join(lines).rstrip() + "\n"
 
