@@ -59,7 +59,7 @@ from xvmatch.evaluation.ablation_report import (
     write_results,
 )
 from xvmatch.evaluation.ablation_settings import SWEEP_AXES, SWEEPS, Setting, grid_settings
-from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
+from xvmatch.inference.matching.learned_association import LearnedMatcher, load_matcher_bundle
 
 REPORT_COMMAND = "xvmatch ablate"
 """The command named in the marker (:mod:`xvmatch.core.folder_marker`) that ``ablate``
@@ -178,6 +178,62 @@ def _labels(folders: Sequence[Path]) -> list[str]:
     return labels
 
 
+def _data_folders(data: Sequence[str | os.PathLike]) -> list[Path]:
+    """The data folders, resolved; refuses one that does not exist."""
+    folders = []
+    for d in data:
+        path = Path(d)
+        if not path.is_dir():
+            raise ValueError(f"{d}: no such data folder")
+        folders.append(path.resolve())
+    return folders
+
+
+def _scenario_records(folders: Sequence[Path]) -> list[dict]:
+    """One record per data folder: label, path, scenario, content hash, scenes and pairs.
+
+    Raises:
+        ValueError: a folder that is not a dataset (from ``open_dataset``).
+    """
+    scenarios = []
+    for label, folder in zip(_labels(folders), folders, strict=True):
+        dataset = open_dataset(folder)
+        names = dataset.scene_names
+        is_val = validation_mask(len(names))
+        frames = [int(e["n_frames"]) for e in dataset.manifest["scenes"]]
+        scenarios.append({
+            "label": label, "data": os.fspath(folder), "scenario": dataset.scenario,
+            "sha256": dataset.content_sha256(),
+            "scenes": len(names),
+            "test_pairs": int(sum(f for f, v in zip(frames, is_val, strict=True) if not v)),
+            "val_pairs": int(sum(f for f, v in zip(frames, is_val, strict=True) if v)),
+        })
+    return scenarios
+
+
+def _cvmhat_record(options: AblationOptions) -> dict:
+    """The CVMHAT folder's record: path, step, sequences, frames per column and content hash.
+
+    Raises:
+        ValueError: a missing folder, or one without sequence pairs.
+    """
+    from xvmatch.formats.cvmhat import read_sequence, sequence_names
+
+    if not Path(options.cvmhat).is_dir():
+        raise ValueError(f"{options.cvmhat}: no such CVMHAT folder")
+    names = sequence_names(options.cvmhat)
+    if not names:
+        raise ValueError(f"{options.cvmhat}: no CVMHAT sequence pairs (NAME_top.txt with "
+                         "NAME_hor.txt)")
+    n_frames = 0
+    for name in names:
+        top, hor = read_sequence(options.cvmhat, name)
+        n_frames += len(sorted(set(top) | set(hor))[:: int(options.cvmhat_step)])
+    return {"folder": os.fspath(Path(options.cvmhat).resolve()),
+            "step": int(options.cvmhat_step), "sequences": len(names),
+            "frames": n_frames, "sha256": _cvmhat_sha256(options.cvmhat, names)}
+
+
 def plan_ablation(options: AblationOptions, matcher: LearnedMatcher) -> AblationPlan:
     """Check every input and lay out the grid (no work done).
 
@@ -193,42 +249,8 @@ def plan_ablation(options: AblationOptions, matcher: LearnedMatcher) -> Ablation
     if not options.data:
         raise ValueError("give at least one data folder (--data DIR)")
     check_matcher(matcher, options.model)
-    folders = []
-    for d in options.data:
-        path = Path(d)
-        if not path.is_dir():
-            raise ValueError(f"{d}: no such data folder")
-        folders.append(path.resolve())
-    scenarios = []
-    for label, folder in zip(_labels(folders), folders, strict=True):
-        dataset = open_dataset(folder)
-        names = dataset.scene_names
-        is_val = validation_mask(len(names))
-        frames = [int(e["n_frames"]) for e in dataset.manifest["scenes"]]
-        scenarios.append({
-            "label": label, "data": os.fspath(folder), "scenario": dataset.scenario,
-            "sha256": dataset.content_sha256(),
-            "scenes": len(names),
-            "test_pairs": int(sum(f for f, v in zip(frames, is_val, strict=True) if not v)),
-            "val_pairs": int(sum(f for f, v in zip(frames, is_val, strict=True) if v)),
-        })
-    cvmhat = None
-    if options.cvmhat is not None:
-        from xvmatch.formats.cvmhat import read_sequence, sequence_names
-
-        if not Path(options.cvmhat).is_dir():
-            raise ValueError(f"{options.cvmhat}: no such CVMHAT folder")
-        names = sequence_names(options.cvmhat)
-        if not names:
-            raise ValueError(f"{options.cvmhat}: no CVMHAT sequence pairs (NAME_top.txt with "
-                             "NAME_hor.txt)")
-        n_frames = 0
-        for name in names:
-            top, hor = read_sequence(options.cvmhat, name)
-            n_frames += len(sorted(set(top) | set(hor))[:: int(options.cvmhat_step)])
-        cvmhat = {"folder": os.fspath(Path(options.cvmhat).resolve()),
-                  "step": int(options.cvmhat_step), "sequences": len(names),
-                  "frames": n_frames, "sha256": _cvmhat_sha256(options.cvmhat, names)}
+    scenarios = _scenario_records(_data_folders(options.data))
+    cvmhat = _cvmhat_record(options) if options.cvmhat is not None else None
     manifest = matcher.bundle.manifest
     model = options.model if options.model == "default" else os.fspath(
         Path(options.model).resolve())
