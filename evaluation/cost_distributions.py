@@ -305,6 +305,32 @@ def _blend_bars(img: np.ndarray, rects: list[tuple[int, int, int, int]], colour)
             cv2.rectangle(img, (x0, y0), (x1, y1), dark, 1)
 
 
+def _draw_legend(img: np.ndarray, box: tuple[int, int, int, int],
+                 lines: list[tuple[str, tuple[int, int, int]]], note: str) -> None:
+    """Draw the legend in place: a framed white box, a swatch and text per line, a grey note.
+
+    Args:
+        img: the panel, BGR uint8.
+        box: ``(x0, y0, x1, y1)`` of the legend box, pixels.
+        lines: ``(text, BGR colour)`` of each series.
+        note: a last line in grey; empty for none.
+    """
+    import cv2
+
+    bx0, by0, bx1, by1 = box
+    cv2.rectangle(img, (bx0, by0), (bx1, by1), (255, 255, 255), -1)
+    cv2.rectangle(img, (bx0, by0), (bx1, by1), (150, 150, 150), 1)
+    for k, (text, colour) in enumerate(lines):
+        y = by0 + 8 + 20 * k
+        swatch = img[y : y + 12, bx0 + 8 : bx0 + 24]
+        swatch[:] = (_BAR_ALPHA * np.asarray(colour, float) + (1 - _BAR_ALPHA) * 255).astype(
+            np.uint8
+        )
+        _put_text(img, text, (bx0 + 30, y + 11), 0.42)
+    if note:
+        _put_text(img, note, (bx0 + 8, by0 + 8 + 20 * len(lines) + 10), 0.38, (90, 90, 90))
+
+
 def _draw_panel(hist: CostHistogram, size: tuple[int, int]) -> np.ndarray:
     import cv2
 
@@ -374,17 +400,7 @@ def _draw_panel(hist: CostHistogram, size: tuple[int, int]) -> np.ndarray:
     _vertical_label(img, "fraction of pairs per bin", (16, (py0 + py1) // 2), 0.45)
     _put_text(img, hist.title, ((px0 + px1) // 2, 22), 0.5, thickness=1, align="centre")
 
-    cv2.rectangle(img, (bx0, by0), (bx1, by0 + box_h), (255, 255, 255), -1)
-    cv2.rectangle(img, (bx0, by0), (bx1, by0 + box_h), (150, 150, 150), 1)
-    for k, (text, colour) in enumerate(lines):
-        y = by0 + 8 + 20 * k
-        swatch = img[y : y + 12, bx0 + 8 : bx0 + 24]
-        swatch[:] = (_BAR_ALPHA * np.asarray(colour, float) + (1 - _BAR_ALPHA) * 255).astype(
-            np.uint8
-        )
-        _put_text(img, text, (bx0 + 30, y + 11), 0.42)
-    if note:
-        _put_text(img, note, (bx0 + 8, by0 + 8 + 20 * len(lines) + 10), 0.38, (90, 90, 90))
+    _draw_legend(img, (bx0, by0, bx1, by0 + box_h), lines, note)
     return img
 
 
