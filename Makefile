@@ -69,7 +69,7 @@ install-check:
 	$$venv/bin/python -m pip install --quiet .; \
 	cd $$tmp; \
 	$$venv/bin/python -c "import importlib.util, sys; sys.exit(importlib.util.find_spec('torch') is not None)"; \
-	$$venv/bin/python -c "import sys; from xvmatch.inference.bundle import DEFAULT_BUNDLE as d; sys.exit(not (d / 'NOTICE.txt').is_file())"; \
+	$$venv/bin/python -c "import sys; from xvmatch.inference.matching.bundle import DEFAULT_BUNDLE as d; sys.exit(not (d / 'NOTICE.txt').is_file())"; \
 	$$venv/bin/xvmatch demo --out $$out --scenes 1 --frames 2; \
 	$$venv/bin/xvmatch associate --model default --top $$out/scene/top.txt --hor $$out/scene/hor.txt \
 		--top-images "$$out/data/overview/images/top/s00000_*.jpg" \

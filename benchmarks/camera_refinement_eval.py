@@ -6,10 +6,10 @@ calibration error D of ``--errors`` gives the learned matcher (``--model``, boxe
 frame: what ``associate --model M --cameras`` does) the cameras turned D degrees about a random
 axis and moved D / 10 m (:func:`tracking_eval.with_camera_error`: the top camera once for the
 video, the egocentric one anew every frame), then the same cameras with the top one refined on
-the video's boxes (:func:`xvmatch.inference.camera_refinement.refine_run_cameras`, what
+the video's boxes (:func:`xvmatch.inference.matching.camera_refinement.refine_run_cameras`, what
 ``--refine-top-camera auto`` does), and scores both against no cameras at all; "checked" is
 what ``--camera-check on`` (the default) then does: the refined cameras, or none when the camera
-check (:func:`xvmatch.inference.camera_check.check_run_cameras`) leaves them out (it judges
+check (:func:`xvmatch.inference.matching.camera_check.check_run_cameras`) leaves them out (it judges
 only videos of 150 frames or more: ``--frames 160``). Prints each video's line (the turn found,
 how far the refined top camera still is from the true one, the check's share of pseudo-matches
 kept, the Eq. 9 accuracy of each) and the means per scenario and error: Eq. 9 accuracy and
@@ -52,10 +52,10 @@ from tracking_eval import ERROR_VIEWS, as_detections, with_camera_error
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.formats.camera_frames import CameraFrames
-from xvmatch.inference.camera_check import DOUBT_LOSS, check_run_cameras
-from xvmatch.inference.camera_refinement import refine_run_cameras
-from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.inference.tracking import learned_frame_evidence
+from xvmatch.inference.matching.camera_check import DOUBT_LOSS, check_run_cameras
+from xvmatch.inference.matching.camera_refinement import refine_run_cameras
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.tracks.tracking import learned_frame_evidence
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 ARMS = ("none", "given", "refined")

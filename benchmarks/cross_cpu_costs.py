@@ -24,7 +24,10 @@ from xvmatch.core.atomic_files import atomic_write_bytes
 from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.cues.spatial_search import associate_sequence, rank_hypotheses
 from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
-from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.inference.matching.learned_association import (
+    associate_sequence_learned,
+    load_matcher_bundle,
+)
 
 
 def save(data: Path, path: Path) -> None:

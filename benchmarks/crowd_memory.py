@@ -31,7 +31,7 @@ if method == "handcrafted":
     pairs = len(associate_frame(top, hor, 2688.0).pairs)
 else:
     from xvmatch.formats.mot_boxes import FrameBoxes
-    from xvmatch.inference.learned_association import (associate_sequence_learned,
+    from xvmatch.inference.matching.learned_association import (associate_sequence_learned,
                                                         load_matcher_bundle)
     top_f = {1: FrameBoxes(1, np.arange(people), top)}
     hor_f = {1: FrameBoxes(1, np.arange(hor_n), hor)}

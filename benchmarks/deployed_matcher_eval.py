@@ -58,8 +58,8 @@ from xvmatch.evaluation.deployed_matcher_eval import (
     matcher_costs,
 )
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
-from xvmatch.inference.assignment import GAMMA_GRID
-from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.inference.linking.assignment import GAMMA_GRID
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
 from xvmatch.metrics.confidence import grouped_difference_interval
 from xvmatch.metrics.cross_view_metrics import summarize
 

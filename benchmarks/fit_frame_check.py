@@ -1,9 +1,9 @@
 """Fit a bundle's frame check (issue 31) on the deployed benchmark's validation renders.
 
 For single image pairs and short clips, ``associate`` cannot judge the appearance cue over time;
-the frame check (:mod:`xvmatch.inference.frame_check`) judges each frame from the statistics of
-its appearance costs against the box-only matcher's, and matches the frames whose images look
-more likely to hurt than to help from the boxes alone. This fits it for one bundle: the
+the frame check (:mod:`xvmatch.inference.matching.frame_check`) judges each frame from the
+statistics of its appearance costs against the box-only matcher's, and matches the frames whose
+images look more likely to hurt than to help from the boxes alone. This fits it for one bundle: the
 validation renders of ``benchmarks/deployed_matcher_eval.py`` (seed 2000, ``--scenes`` per
 scenario, both scenarios), each image through its own simulated camera at every strength of
 ``--shifts`` (0: none), ground-truth and detector-noise boxes; each frame is weighted by what the
@@ -48,9 +48,9 @@ from xvmatch.evaluation.frame_check_threshold import (
     choose_threshold,
     cross_validate_thresholds,
 )
-from xvmatch.inference.bundle import MANIFEST, read_manifest
-from xvmatch.inference.frame_check import fit_frame_check
-from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.inference.matching.bundle import MANIFEST, read_manifest
+from xvmatch.inference.matching.frame_check import fit_frame_check
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
 
 def _threshold(text: str) -> str | float:

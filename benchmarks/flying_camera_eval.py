@@ -2,9 +2,9 @@
 
 A drone's telemetry gives its camera per frame; a constant attitude error (the camera's mount,
 or the heading) is refined away as for a fixed camera, in the camera's own frame or in the
-world (:mod:`xvmatch.inference.camera_refinement`), and the camera check then judges the result
-(:mod:`xvmatch.inference.camera_check`, ``moving``). For each seed this renders a drone video
-whose top camera flies (:func:`xvmatch.datasets.tracking_video.render_tracking_video`,
+world (:mod:`xvmatch.inference.matching.camera_refinement`), and the camera check then judges the
+result (:mod:`xvmatch.inference.matching.camera_check`, ``moving``). For each seed this renders a
+drone video whose top camera flies (:func:`xvmatch.datasets.tracking_video.render_tracking_video`,
 ``flight``), scrambles the ids per view, and associates the frames with the shipped matcher
 (boxes only) given no cameras, the exact ones, the top camera turned by ``--bias`` (a rotation
 vector, degrees) in its own frame on every frame ("mount"), or in the world ("heading"); each
@@ -38,10 +38,10 @@ from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.geometry.camera import Camera, FrameCameras
 from xvmatch.geometry.top_camera_refinement import turned_camera
-from xvmatch.inference.camera_check import check_run_cameras
-from xvmatch.inference.camera_refinement import refine_run_cameras
-from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.inference.tracking import learned_frame_evidence
+from xvmatch.inference.matching.camera_check import check_run_cameras
+from xvmatch.inference.matching.camera_refinement import refine_run_cameras
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.tracks.tracking import learned_frame_evidence
 from xvmatch.metrics.cross_view_metrics import summarize
 
 CAMERAS = ("exact", "mount", "heading")

@@ -51,8 +51,11 @@ from xvmatch.formats.cvmhat import (
     site_of,
 )
 from xvmatch.formats.mot_boxes import FrameBoxes, shift_frames
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.learned_association import (
+    associate_sequence_learned,
+    load_matcher_bundle,
+)
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 from xvmatch.training.fit_geometry import fit_geometry_cvmhat, peak_memory_mb
 

@@ -12,7 +12,7 @@ single-precision matrix-product peak measured in the same run (numpy sgemm, 2048
 process with one, then two BLAS threads).
 
 It first prints the CPU's 8-bit dot-product features (VNNI, AMX, Arm's dot product: where the
-runtime picks INT8 on its own, :func:`xvmatch.inference.bundle.fast_int8_cpu`), then, for a
+runtime picks INT8 on its own, :func:`xvmatch.inference.matching.bundle.fast_int8_cpu`), then, for a
 bundle (``--bundle``, the shipped default unless ``--bundle none``), its own FP32 and INT8
 appearance files (the INT8 one mixed precision, as exported) with their ratio.
 
@@ -94,7 +94,7 @@ def time_bundle(bundle: str, crops: np.ndarray, repeats: int) -> None:
     and checked as the runtime loads them)."""
     import cv2
 
-    from xvmatch.inference.bundle import load_bundle
+    from xvmatch.inference.matching.bundle import load_bundle
 
     spec = load_bundle(bundle).manifest.appearance
     if spec is None or spec.int8_file is None:
@@ -123,7 +123,7 @@ def main() -> int:
     parser.add_argument("--bundle", default="default",
                         help="bundle whose own FP32 and INT8 files are timed (none: skip)")
     args = parser.parse_args()
-    from xvmatch.inference.bundle import int8_dot_flags
+    from xvmatch.inference.matching.bundle import int8_dot_flags
 
     found = int8_dot_flags()
     print(f"CPU 8-bit dot products: {', '.join(found) if found else 'none'} (the runtime "

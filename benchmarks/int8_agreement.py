@@ -42,9 +42,9 @@ from xvmatch.evaluation.deployed_matcher_eval import (
     matcher_costs,
 )
 from xvmatch.formats.mot_boxes import read_predictions
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.bundle import int8_recheck_tolerance
-from xvmatch.inference.learned_association import load_matcher_bundle, rechecked_costs
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.bundle import int8_recheck_tolerance
+from xvmatch.inference.matching.learned_association import load_matcher_bundle, rechecked_costs
 
 IMAGE_SETTINGS = ("images", "images+cameras")
 

@@ -56,7 +56,7 @@ def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
     from xvmatch.cues.spatial_features import collate_frames, frame_features
     from xvmatch.cues.spatial_search import rank_hypotheses
     from xvmatch.formats.mot_boxes import read_mot_boxes, write_predictions
-    from xvmatch.inference.assignment import assign
+    from xvmatch.inference.linking.assignment import assign
     from xvmatch.models.matcher_file import load_matcher
 
     def per_candidate(top, hor, width, params, candidates, keep=None):

@@ -10,9 +10,10 @@ images and with boxes only), all in points with a 95% interval from resampling w
 the same frames, the same boxes, the same shifted images). ``cue AUC`` is how well each
 network's appearance cost alone tells a true pair from the other people of its frame
 (:func:`xvmatch.evaluation.deployed_matcher_eval.cue_auc`; 0.5: not at all), whatever the matcher
-makes of it. ``checked`` (bundles with a frame check, :mod:`xvmatch.inference.frame_check`):
-the images where the check trusts a frame's cue and the boxes alone elsewhere, as ``associate``
-matches single image pairs, with its differences from boxes only and from the images.
+makes of it. ``checked`` (bundles with a frame check,
+:mod:`xvmatch.inference.matching.frame_check`): the images where the check trusts a frame's cue and
+the boxes alone elsewhere, as ``associate`` matches single image pairs, with its differences from
+boxes only and from the images.
 
 Scenes: the deployed benchmark's renders (``benchmarks/deployed_matcher_eval.py``; test seed
 1000 or validation seed 2000 with ``--split val``; ``--scenes N`` per scenario, the first 20
@@ -57,7 +58,7 @@ from xvmatch.evaluation.deployed_matcher_eval import (
     frame_checked_costs,
     matcher_costs,
 )
-from xvmatch.inference.learned_association import LearnedMatcher, load_matcher_bundle
+from xvmatch.inference.matching.learned_association import LearnedMatcher, load_matcher_bundle
 
 SETTING_NAMES = {"gt": "ground-truth boxes", "det": "detector noise"}
 

@@ -5,7 +5,7 @@ and setting (``gt``: ground-truth boxes; ``det``: the visibility-dependent detec
 the synthetic evaluations, each detection standing for the ground-truth box it overlaps with
 IoU >= 0.3), the boxes of every view are shuffled with a seed (ids scrambled: no method sees
 an id), the cost matrices of every view pair are built once per variant
-(:func:`xvmatch.inference.multi_view_costs.multi_view_costs`; ``learned``: the shipped bundle
+(:func:`xvmatch.inference.views.multi_view_costs.multi_view_costs`; ``learned``: the shipped bundle
 with images and cameras for top-ego; ``handcrafted``: the spatial-distribution search from
 boxes, O searched; ego-ego: the shipped appearance network in both) and three solvers run on
 the same costs: pairwise Hungarian, Hungarian made consistent (greedy), and the joint MIP.
@@ -14,14 +14,14 @@ mean, the cycle-inconsistency rate and the solve time.
 
 ``--calibrate`` instead fits the calibrations of the ego-ego appearance distance and of the
 handcrafted top-ego vote cost (threshold, slope) on scenes of seed ``--seed + 1`` and prints
-them (:data:`~xvmatch.inference.multi_view_costs.EGO_APPEARANCE`,
-:data:`~xvmatch.inference.multi_view_costs.SPATIAL_VOTE`).
+them (:data:`~xvmatch.inference.views.multi_view_costs.EGO_APPEARANCE`,
+:data:`~xvmatch.inference.views.multi_view_costs.SPATIAL_VOTE`).
 
     python benchmarks/multi_ego_eval.py --scenes 40 --seed 1000
 
 ``--tracks`` compares, on scenes of ``--frames`` frames and the learned costs, the
 frame-by-frame joint MIP of ``associate-multi`` with ``associate-multi --tracks``
-(:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view, the
+(:func:`xvmatch.inference.views.multi_ego_tracking.track_multi_view`: tracklets per view, the
 egocentric ones linked by motion and, for the smoothing, cut where their confident top-view
 partner switches, smoothing each frame's costs; the joint program per frame;
 ids carried over time) on ground-truth boxes and on boxes with the noise of
@@ -49,16 +49,16 @@ from xvmatch.datasets.pair_trials import match_to_ground_truth, noise_seed_of
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import FrameCameras
-from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.inference.multi_ego_tracking import pairs_from_ids, track_multi_view
-from xvmatch.inference.multi_view_assignment import (
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.views.multi_ego_tracking import pairs_from_ids, track_multi_view
+from xvmatch.inference.views.multi_view_assignment import (
     MIP_MAX_TRIANGLES,
     consistent_hungarian,
     pairwise_hungarian,
     solve_multi_view,
     view_pairs,
 )
-from xvmatch.inference.multi_view_costs import multi_view_costs, spatial_vote_cost
+from xvmatch.inference.views.multi_view_costs import multi_view_costs, spatial_vote_cost
 from xvmatch.metrics.multi_view_metrics import (
     count_views,
     cycle_counts,

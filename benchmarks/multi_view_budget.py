@@ -5,9 +5,9 @@ them; the cost of a true pair is uniform in [0, 0.6], of any other pair in [0.2,
 Gaussian noise of ``--noise`` and clipped to [0, 1]; gamma 0.5. Such frames are far harder than
 the rendered scenes of ``multi_ego_eval.py`` (many near ties), which is what the budget is for.
 Per frame (seed ``0..--frames-1``) and budget (``--budgets``, broken triangles; default the
-shipped :data:`~xvmatch.inference.multi_view_assignment.MIP_MAX_TRIANGLES`), prints the status,
-the programs solved, the triangles added, the seconds, the joint objective (lower is better) and
-that of pairwise Hungarian made consistent; last, per budget, the slowest frame and the mean
+shipped :data:`~xvmatch.inference.views.multi_view_assignment.MIP_MAX_TRIANGLES`), prints the
+status, the programs solved, the triangles added, the seconds, the joint objective (lower is better)
+and that of pairwise Hungarian made consistent; last, per budget, the slowest frame and the mean
 objective. The wall-time guard is set to 600 s, so every figure but the seconds is the same on
 any machine.
 
@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from xvmatch.inference.multi_view_assignment import (
+from xvmatch.inference.views.multi_view_assignment import (
     MIP_MAX_TRIANGLES,
     consistent_hungarian,
     objective,

@@ -66,8 +66,8 @@ from xvmatch.datasets.multicam_scenes import (
 )
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera
-from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
-from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
+from xvmatch.inference.views.multicam import MulticamOptions, associate_cameras, relabel
+from xvmatch.inference.views.multicam_localisation import LocalisationOptions, localise
 from xvmatch.metrics.multicam_metrics import match_to_truth, multicam_scores
 
 CONDITIONS = {
@@ -291,7 +291,7 @@ def rendered_rows(n_cameras: int, seed: int, frames: int, people: int, model, we
 
 def rendered_main(args) -> int:
     """``--rendered``: tune the appearance weight on the tuning seeds, report on the others."""
-    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
     start = time.perf_counter()
     model = load_matcher_bundle(args.model)

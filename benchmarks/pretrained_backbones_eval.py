@@ -39,7 +39,7 @@ from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_d
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.evaluation.learned_matcher_eval import CueRule, score_rule, tune_gamma
-from xvmatch.inference.learned_association import load_matcher_bundle
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
 from xvmatch.metrics.cross_view_metrics import summarize
 from xvmatch.models.appearance_net import (
     AppearanceNet,

@@ -22,7 +22,10 @@ import numpy as np
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.formats.mot_boxes import FrameBoxes, scale_frames
-from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.inference.matching.learned_association import (
+    associate_sequence_learned,
+    load_matcher_bundle,
+)
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 

@@ -13,7 +13,7 @@ CVIDF1, %):
 
 * boxes only; images (unshifted: the renders the network was trained on); images shifted;
   images shifted with the appearance check (``associate``'s default,
-  :mod:`xvmatch.inference.appearance_check`: the boxes alone when the cue fails on the test
+  :mod:`xvmatch.inference.matching.appearance_check`: the boxes alone when the cue fails on the test
   part's own box-only pseudo-matches); images shifted + the adaptation (one row per
   ``--calibrations``; ``odds`` is what ``adapt`` writes), and with the check; and the fraction
   of the shift's CVIDF1 loss the adaptation recovers ``(adapted - shifted) / (unshifted -
@@ -56,7 +56,7 @@ from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.adaptation_pairs import (
+from xvmatch.inference.adaptation.adaptation_pairs import (
     MinedPairs,
     MiningConfig,
     embed_frames,
@@ -64,19 +64,23 @@ from xvmatch.inference.adaptation_pairs import (
     plan_bursts,
     reference_costs,
 )
-from xvmatch.inference.learned_association import (
-    LearnedMatcher,
-    associate_sequence_learned,
-    box_only_costs,
-    load_matcher_bundle,
-)
-from xvmatch.inference.site_adaptation import (
+from xvmatch.inference.adaptation.site_adaptation import (
     CALIBRATIONS,
     VECTORS,
     choose_fit,
     fit_site_adaptation,
 )
-from xvmatch.inference.site_bundle import adapted_vectors, vector_pair_sets, vectors_embedder
+from xvmatch.inference.matching.learned_association import (
+    LearnedMatcher,
+    associate_sequence_learned,
+    box_only_costs,
+    load_matcher_bundle,
+)
+from xvmatch.inference.matching.site_bundle import (
+    adapted_vectors,
+    vector_pair_sets,
+    vectors_embedder,
+)
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 

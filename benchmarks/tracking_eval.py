@@ -17,7 +17,7 @@ feeds two more rows:
 
 - frame-learned: its pairs, scored as the frame row;
 - mip-learned / spectral-learned: ``track_pair`` with the cross-view weights from its costs
-  (``--learned-rule``, :func:`xvmatch.inference.track_costs.frame_evidence`).
+  (``--learned-rule``, :func:`xvmatch.inference.tracks.track_costs.frame_evidence`).
 
 With ``--offset auto`` each pair (and noise seed) is first re-timed as ``xvmatch track --offset
 auto`` does: the offset estimated from the detections, applied when the clips back it
@@ -41,8 +41,8 @@ through one fixed simulated camera of strength S first (the adaptation benchmark
 --cameras`` does: the learned rows' cross-view weights (and their appearance check) then rest
 on the camera cues too; the handcrafted rows do not change. ``--camera-error DEG`` gives them
 calibrated with an error (:func:`with_camera_error`); the fixed top camera is then refined on
-each video's boxes as the command does (:mod:`xvmatch.inference.camera_refinement`; its line is
-printed), unless ``--refine-top-camera off``. ``--w1`` sets Eq. 17's share. ``--flight SPEED
+each video's boxes as the command does (:mod:`xvmatch.inference.matching.camera_refinement`; its
+line is printed), unless ``--refine-top-camera off``. ``--w1`` sets Eq. 17's share. ``--flight SPEED
 YAW_RATE`` flies the drone's top camera (its cameras per frame, a telemetry error a mount
 offset shared by every frame).
 
@@ -77,22 +77,22 @@ from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_
 from xvmatch.datasets.synthetic_scenes import SCENARIOS
 from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence, sequence_names
 from xvmatch.formats.mot_boxes import FrameBoxes, align_views
-from xvmatch.inference.track_costs import (
+from xvmatch.inference.linking.assignment import FrameCosts
+from xvmatch.inference.linking.tracklets import Tracklet, split_clips, view_tracklets
+from xvmatch.inference.tracks.track_costs import (
     FITTED_CAMERAS_W1,
     LEARNED_DUMMY_WEIGHT,
     LEARNED_RULES,
-    FrameCosts,
     TrackWeights,
 )
-from xvmatch.inference.track_mip import MIP_MAX_LOOPS
-from xvmatch.inference.tracking import (
+from xvmatch.inference.tracks.track_mip import MIP_MAX_LOOPS
+from xvmatch.inference.tracks.tracking import (
     LearnedEvidence,
     TrackConfig,
     associate_frames,
     learned_frame_evidence,
     track_pair,
 )
-from xvmatch.inference.tracklets import Tracklet, split_clips, view_tracklets
 from xvmatch.metrics.cross_view_metrics import summarize
 from xvmatch.metrics.track_metrics import (
     pool_view_scores,
@@ -245,7 +245,7 @@ SYNTHETIC_ARMS = ("boxes", "colour", "network-cv", "network", "boxes-learned",
 appearance network across views (Eq. 17) with colour over time (Eq. 14, the paper's); the
 network across views and over time (with ``--weights handcrafted``); the learned weights from
 boxes only (``--model`` without images) and with the network (``--model`` with images, with
-the command's default appearance check, :func:`~xvmatch.inference.appearance_check.
+the command's default appearance check, :func:`~xvmatch.inference.matching.appearance_check.
 check_tracklet_appearance`); the same without the check (``--appearance-check off``)."""
 
 
@@ -300,9 +300,9 @@ def synthetic_main(args: argparse.Namespace) -> int:
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video
     from xvmatch.formats.camera_frames import CameraFrames
-    from xvmatch.inference.camera_refinement import refine_run_cameras
-    from xvmatch.inference.learned_association import load_matcher_bundle
-    from xvmatch.inference.tracking import TrackImages
+    from xvmatch.inference.matching.camera_refinement import refine_run_cameras
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
+    from xvmatch.inference.tracks.tracking import TrackImages
 
     model = load_matcher_bundle(args.model)
     w1 = TrackWeights().w1 if args.w1 is None else args.w1
@@ -519,7 +519,7 @@ def main() -> int:
     learned = "learned" in args.weights
     model = None
     if learned:
-        from xvmatch.inference.learned_association import load_matcher_bundle
+        from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
         model = load_matcher_bundle(args.model)
     arms = [s for s in solvers if "handcrafted" in args.weights]

@@ -46,7 +46,7 @@ from xvmatch.evaluation.ablation_settings import (
 )
 from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
 from xvmatch.geometry.camera import FrameCameras
-from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.inference.matching.learned_association import LearnedMatcher
 from xvmatch.metrics.cross_view_metrics import summarize
 
 __all__ = [

@@ -27,8 +27,8 @@ from xvmatch.datasets.detector_noise import FALSE_ID_BASE, DetectorNoise, apply_
 from xvmatch.evaluation.ablation_cells import CELL_FORMAT, CELL_VERSION
 from xvmatch.formats.cvmhat import IMAGE_SIZE, read_sequence, sequence_names
 from xvmatch.formats.mot_boxes import FALSE_POSITIVE
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.learned_association import LearnedMatcher
 from xvmatch.metrics.cross_view_metrics import count_pair, summarize
 
 __all__ = [

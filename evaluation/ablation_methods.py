@@ -17,8 +17,9 @@ Rows (:data:`ROWS`), each an association of the shuffled boxes of a
   matcher_costs`) in its four input settings: the geometry encoder alone (boxes), with the camera
   cues (cameras), the learned fusion with images, and with images and cameras; the bundle's gamma.
 
-Tuned gammas (:func:`tune_gamma`): the value of :data:`~xvmatch.inference.assignment.GAMMA_GRID`
-with the best mean Eq. 9 accuracy on the validation trials, the middle one of ties.
+Tuned gammas (:func:`tune_gamma`): the value of
+:data:`~xvmatch.inference.linking.assignment.GAMMA_GRID` with the best mean Eq. 9 accuracy on the
+validation trials, the middle one of ties.
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ from xvmatch.cues.spatial_search import associate_frame
 from xvmatch.datasets.pair_trials import PairTrial
 from xvmatch.evaluation.deployed_matcher_eval import matcher_costs
 from xvmatch.evaluation.handcrafted_baseline import GAMMA_PRODUCT, GAMMA_SUM, Method, fused_cost
-from xvmatch.inference.assignment import GAMMA_GRID, assign
-from xvmatch.inference.learned_association import LearnedMatcher
+from xvmatch.inference.linking.assignment import GAMMA_GRID, assign
+from xvmatch.inference.matching.learned_association import LearnedMatcher
 from xvmatch.metrics.cross_view_metrics import FrameCounts, count_pair, summarize
 
 __all__ = [

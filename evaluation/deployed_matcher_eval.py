@@ -19,10 +19,10 @@ from xvmatch.cues.matcher_inputs import INPUT_SETTINGS, appearance_cost, matcher
 from xvmatch.datasets.pair_trials import PairTrial
 from xvmatch.evaluation.frame_check_threshold import FrameSamples
 from xvmatch.geometry.camera import FrameCameras
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.frame_check import FEATURES, FrameCheck, frame_check_features
-from xvmatch.inference.learned_association import LearnedMatcher
-from xvmatch.inference.site_adaptation import pair_auc
+from xvmatch.inference.adaptation.site_adaptation import pair_auc
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.frame_check import FEATURES, FrameCheck, frame_check_features
+from xvmatch.inference.matching.learned_association import LearnedMatcher
 from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,
@@ -138,11 +138,11 @@ def frame_accuracy(trial: PairTrial, cost: np.ndarray, gamma: float) -> float | 
 
 
 def frame_check_samples(matcher: LearnedMatcher, trials: Sequence[PairTrial]) -> FrameSamples:
-    """What :func:`~xvmatch.inference.frame_check.fit_frame_check` learns from: each frame's
-    :func:`~xvmatch.inference.frame_check.frame_check_features` (its appearance costs against
-    the matcher's boxes-only costs), what the images gained there (Eq. 9 accuracy with images
-    minus from the boxes alone, the bundle's gamma), its scene and box setting, over the frames
-    with someone in them."""
+    """What :func:`~xvmatch.inference.matching.frame_check.fit_frame_check` learns from: each
+    frame's :func:`~xvmatch.inference.matching.frame_check.frame_check_features` (its appearance
+    costs against the matcher's boxes-only costs), what the images gained there (Eq. 9 accuracy with
+    images minus from the boxes alone, the bundle's gamma), its scene and box setting, over the
+    frames with someone in them."""
     images = matcher_costs(matcher, trials, "images")
     boxes = matcher_costs(matcher, trials, "boxes")
     feats, gains, scenes, settings = [], [], [], []

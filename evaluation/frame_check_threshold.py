@@ -1,6 +1,6 @@
 """The frame check's threshold, chosen by cross-validation over scenes (issue 31).
 
-The frame check (:mod:`xvmatch.inference.frame_check`) keeps a frame's images when the
+The frame check (:mod:`xvmatch.inference.matching.frame_check`) keeps a frame's images when the
 probability that they help is above a threshold. A low one keeps most of what images add where
 the cue is good; a high one leaves out more of the frames where a doubtful cue costs accuracy.
 The issue asks that images never fall below boxes only in any cell of the shift stress test
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.inference.frame_check import FEATURES, fit_frame_check
+from xvmatch.inference.matching.frame_check import FEATURES, fit_frame_check
 
 __all__ = ["THRESHOLDS", "FrameSamples", "ThresholdScore", "choose_threshold",
            "cross_validate_thresholds", "scene_folds"]

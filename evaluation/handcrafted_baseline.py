@@ -15,7 +15,7 @@ They are used alone or fused by the weighted sum (``w = 0.5``, ``gamma = 0.25``)
 of Eq. 8 (``gamma = 0.1``), each with and without the cheirality term of Eq. 7 (``+ beta`` where
 the midpoint of the two rays is not at least 0.5 m in front of both cameras: the synthetic
 cameras are metric). The association is the Hungarian solution of Eqs. 1-2 with the rule's
-non-association cost gamma (:func:`xvmatch.inference.assignment.assign`).
+non-association cost gamma (:func:`xvmatch.inference.linking.assignment.assign`).
 
 Non-association costs. The paper gives gamma only for the two fusion rules (Section IV-A).
 For "geometry only" and "histogram only" the defaults :data:`GAMMA_GEO` and :data:`GAMMA_HIST`
@@ -64,7 +64,7 @@ from xvmatch.datasets.pair_trials import (
 )
 from xvmatch.datasets.synthetic_io import SceneRecord, SyntheticDataset
 from xvmatch.evaluation.cost_distributions import CostSamples
-from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.linking.assignment import GAMMA_GRID, assign
 from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,

@@ -40,7 +40,7 @@ import numpy as np
 from xvmatch.cues.cost_fusion import add_cheirality
 from xvmatch.datasets.pair_trials import CUES, SETTINGS, PairTrial
 from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, Method, fused_cost
-from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.linking.assignment import GAMMA_GRID, assign
 from xvmatch.metrics.cross_view_metrics import (
     CrossViewScores,
     FrameCounts,

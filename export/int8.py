@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.bundle import APPEARANCE_INPUT, open_session
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.bundle import APPEARANCE_INPUT, open_session
 from xvmatch.models.matcher_file import LoadedMatcher
 
 __all__ = [
@@ -365,8 +365,8 @@ def _scene_costs(folder: Path, data: Path, scenes: Sequence[str], files: dict[st
     from xvmatch.datasets.pair_trials import TrialConfig, scene_trials
     from xvmatch.datasets.synthetic_io import SyntheticDataset
     from xvmatch.geometry.camera import FrameCameras
-    from xvmatch.inference.bundle import Bundle, read_manifest
-    from xvmatch.inference.learned_association import LearnedMatcher
+    from xvmatch.inference.matching.bundle import Bundle, read_manifest
+    from xvmatch.inference.matching.learned_association import LearnedMatcher
 
     spec = read_manifest(folder)
     matcher_session = open_session(folder / spec.matcher_file, 1)
@@ -418,9 +418,9 @@ def int8_accuracy(folder: Path, manifest: dict, data: Path, scenes: Sequence[str
     first the reference); and for each other file the share of the reference's matched pairs
     it keeps, per setting (what ``associate --precision`` changes for a user). With a
     ``tolerance``, also the label ``"<second>+recheck"``: the second file's near-tie frames
-    re-checked with the first (:func:`~xvmatch.inference.learned_association.
+    re-checked with the first (:func:`~xvmatch.inference.matching.learned_association.
     rechecked_costs`), with the share of frames re-checked."""
-    from xvmatch.inference.learned_association import rechecked_costs
+    from xvmatch.inference.matching.learned_association import rechecked_costs
     from xvmatch.metrics.cross_view_metrics import count_pair, summarize
 
     gamma = float(manifest["gamma"])

@@ -13,7 +13,8 @@ appearance network with its input normalisation; the matcher from padded feature
 cost matrix, Sinkhorn included). Outside them, in numpy (:mod:`xvmatch.cues.matcher_inputs`,
 :mod:`xvmatch.formats.crops`): cropping, the spatial-distribution search that builds the
 geometry features, the camera cues, the appearance cost of two descriptors, and the Hungarian
-assignment with the non-association cost gamma (:func:`xvmatch.inference.assignment.assign`).
+assignment with the non-association cost gamma
+(:func:`xvmatch.inference.linking.assignment.assign`).
 
 Every axis that varies is dynamic (frames, crops, people in each view, hypotheses), and empty
 sets are masks, never branches. The legacy TorchScript-based exporter is used (opset 17): it
@@ -57,7 +58,7 @@ from xvmatch.export.parity import (
     parity_frames,
 )
 from xvmatch.geometry.ray_priors import DEFAULT_BETA, METRIC_MARGIN
-from xvmatch.inference.bundle import (
+from xvmatch.inference.matching.bundle import (
     APPEARANCE_INPUT,
     APPEARANCE_OUTPUTS,
     BUNDLE_FORMAT,
@@ -83,7 +84,7 @@ class AppearanceGraph(nn.Module):
     [0, 255] scale to ``(B, D)`` unit descriptors and, with ``features``, also the ``(B, C)``
     pooled trunk activations and the ``(B, S)`` unit-scaled pooled stage maps
     (:meth:`~xvmatch.models.appearance_net.AppearanceNet.vectors`; what ``appearance.onnx``
-    computes, outputs :data:`~xvmatch.inference.bundle.APPEARANCE_OUTPUTS`)."""
+    computes, outputs :data:`~xvmatch.inference.matching.bundle.APPEARANCE_OUTPUTS`)."""
 
     def __init__(self, net: AppearanceNet, features: bool = False) -> None:
         super().__init__()

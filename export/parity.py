@@ -20,8 +20,8 @@ import numpy as np
 import torch
 
 from xvmatch.cues.matcher_inputs import MatcherInputs, collate_inputs
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.bundle import APPEARANCE_INPUT, MATCHER_INPUTS, MATCHER_OUTPUT
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.bundle import APPEARANCE_INPUT, MATCHER_INPUTS, MATCHER_OUTPUT
 from xvmatch.models.appearance_net import AppearanceNet
 from xvmatch.models.cross_view_matcher import CrossViewMatcher
 from xvmatch.models.matcher_file import LoadedMatcher

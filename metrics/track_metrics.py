@@ -142,7 +142,8 @@ class TrackletScores:
 
 
 class _Rows(Protocol):
-    """A tracklet as scored: its detection rows (:class:`~xvmatch.inference.tracklets.Tracklet`)."""
+    """A tracklet as scored: its detection rows
+    (:class:`~xvmatch.inference.linking.tracklets.Tracklet`)."""
 
     rows: np.ndarray
 

@@ -221,7 +221,7 @@ def test_cells_are_keyed_on_the_data_content_not_its_path(tiny_synth, tiny_model
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.evaluation.ablation import AblationOptions, plan_ablation
     from xvmatch.evaluation.ablation_cells import check_cells
-    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
     matcher = load_matcher_bundle(str(tiny_models["full_bundle"]), threads=1)
     data = tmp_path / "a" / "drone"

@@ -1,6 +1,6 @@
-"""Mining site-adaptation pairs (inference/adaptation_pairs.py) on hand-built boxes and costs:
-bursts, confident pairs with the dustbin, tracklet agreement, 'no match' for a person seen in one
-view only, and the order of the embedded boxes."""
+"""Mining site-adaptation pairs (inference/adaptation/adaptation_pairs.py) on hand-built boxes and
+costs: bursts, confident pairs with the dustbin, tracklet agreement, 'no match' for a person seen in
+one view only, and the order of the embedded boxes."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.adaptation_pairs import (
+from xvmatch.inference.adaptation.adaptation_pairs import (
     MiningConfig,
     agreed_pairs,
     confident_pairs,

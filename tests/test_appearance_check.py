@@ -1,5 +1,5 @@
-"""The appearance check (inference/appearance_check.py): a run's appearance cue judged on its own
-box-only pseudo-matches; synthetic cost matrices for the rule, a rendered video through the
+"""The appearance check (inference/matching/appearance_check.py): a run's appearance cue judged on
+its own box-only pseudo-matches; synthetic cost matrices for the rule, a rendered video through the
 shipped bundle for ``associate_sequence_learned`` and the command line."""
 
 from __future__ import annotations
@@ -16,8 +16,11 @@ from xvmatch.cli import main
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
 from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes
-from xvmatch.inference.adaptation_pairs import MiningConfig
-from xvmatch.inference.appearance_check import (
+from xvmatch.inference.adaptation.adaptation_pairs import MiningConfig
+from xvmatch.inference.adaptation.site_adaptation import SiteAdaptation
+from xvmatch.inference.linking.assignment import FrameCosts
+from xvmatch.inference.linking.tracklets import Tracklet
+from xvmatch.inference.matching.appearance_check import (
     CONSISTENCY_WINDOW,
     MIN_AUC,
     MIN_CONSISTENCY,
@@ -30,14 +33,11 @@ from xvmatch.inference.appearance_check import (
     check_tracklet_appearance,
     sure_pair_consistency,
 )
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.matching.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
     load_matcher_bundle,
 )
-from xvmatch.inference.site_adaptation import SiteAdaptation
-from xvmatch.inference.track_costs import FrameCosts
-from xvmatch.inference.tracklets import Tracklet
 
 PEOPLE = 5
 

@@ -1,4 +1,4 @@
-"""Tests of xvmatch.inference.assignment (Eqs. 1-2 of the geometric-priors paper)."""
+"""Tests of xvmatch.inference.linking.assignment (Eqs. 1-2 of the geometric-priors paper)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.inference.assignment import (
+from xvmatch.inference.linking.assignment import (
     assign,
     assignment_is_stable,
     assignment_matrix,
@@ -116,7 +116,7 @@ def test_assignment_matrix() -> None:
 @pytest.mark.slow
 def test_no_torch_or_cv2_import() -> None:
     code = (
-        "import sys, xvmatch.inference.assignment; "
+        "import sys, xvmatch.inference.linking.assignment; "
         "sys.exit(int('torch' in sys.modules or 'cv2' in sys.modules))"
     )
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0

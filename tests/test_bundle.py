@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from xvmatch.inference.bundle import (
+from xvmatch.inference.matching.bundle import (
     BUNDLE_FORMAT_VERSION,
     DEFAULT_BUNDLE,
     MANIFEST,

@@ -1,5 +1,5 @@
 """``--camera-check``: cameras judged on the box-only matcher's pseudo-matches, and a run matched
-without them when they fail (inference/camera_check.py)."""
+without them when they fail (inference/matching/camera_check.py)."""
 
 from __future__ import annotations
 
@@ -18,16 +18,20 @@ from xvmatch.datasets.tracking_video import render_tracking_video, write_trackin
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.formats.camera_io import save_cameras
 from xvmatch.geometry.top_camera_refinement import turned_camera
-from xvmatch.inference.appearance_check import CONSISTENCY_WINDOW, MIN_CONSISTENCY, MIN_PAIRS
-from xvmatch.inference.camera_check import (
+from xvmatch.inference.matching.appearance_check import (
+    CONSISTENCY_WINDOW,
+    MIN_CONSISTENCY,
+    MIN_PAIRS,
+)
+from xvmatch.inference.matching.camera_check import (
     DOUBT_LOSS,
     MIN_KEEP,
     OFF_HINT,
     check_cameras,
     check_run_cameras,
 )
-from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.inference.learned_pipeline import LearnedRunOptions, run_learned_association
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions, run_learned_association
 
 
 def _camera_costs(box: dict, moved: int) -> dict:

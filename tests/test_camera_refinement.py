@@ -1,5 +1,5 @@
 """``--refine-top-camera``: when the run's top camera is refined, what the user is told, and what
-it does for the learned matcher (inference/camera_refinement.py)."""
+it does for the learned matcher (inference/matching/camera_refinement.py)."""
 
 from __future__ import annotations
 
@@ -20,14 +20,14 @@ from xvmatch.formats.camera_frames import CameraFrames, open_cameras, save_camer
 from xvmatch.formats.camera_io import save_cameras
 from xvmatch.formats.mot_boxes import FrameBoxes, read_predictions
 from xvmatch.geometry.camera import FrameCameras
-from xvmatch.inference.camera_refinement import (
+from xvmatch.inference.matching.camera_refinement import (
     FIT_LOSS,
     OFF_HINT,
     refine_run_cameras,
     refine_views_cameras,
 )
-from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.inference.learned_pipeline import LearnedRunOptions, run_learned_association
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions, run_learned_association
 
 TURN = np.array([0.6, -1.4, 1.2])  # degrees, about 1.9 degrees in all
 TILT = 2.0 * np.array([-0.9, -0.44, 0.03]) / np.linalg.norm([-0.9, -0.44, 0.03])

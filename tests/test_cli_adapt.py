@@ -13,7 +13,7 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
-from xvmatch.inference.bundle import DEFAULT_BUNDLE, load_bundle
+from xvmatch.inference.matching.bundle import DEFAULT_BUNDLE, load_bundle
 
 
 @pytest.fixture(scope="module")
@@ -112,8 +112,8 @@ def test_refusal_advises_boxes_alone_when_the_cue_is_not_above_chance() -> None:
     better than chance on the held-out pairs either, it advises matching from the boxes alone
     (images would only add noise), else keeping the bundle."""
     from xvmatch.cli_adapt import refusal_message
-    from xvmatch.inference.site_adaptation import AdaptationFit, SiteAdaptation
-    from xvmatch.inference.site_bundle import SiteRun
+    from xvmatch.inference.adaptation.site_adaptation import AdaptationFit, SiteAdaptation
+    from xvmatch.inference.matching.site_bundle import SiteRun
 
     def run(before: float, pairs: tuple[int, int]) -> SiteRun:
         fits = {v: AdaptationFit(SiteAdaptation.identity(4, v), False, f"{v} did not help",

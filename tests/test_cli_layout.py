@@ -72,8 +72,8 @@ def test_one_progress_bar() -> None:
 ])
 def test_time_limit_help_states_the_solvers_budgets(module: str, budget: str) -> None:
     # the command modules import no solver at start-up, so their help spells the budgets out
-    from xvmatch.inference.multi_view_assignment import MIP_MAX_TRIANGLES
-    from xvmatch.inference.track_mip import MIP_MAX_LOOPS, MIP_NODE_LIMIT
+    from xvmatch.inference.tracks.track_mip import MIP_MAX_LOOPS, MIP_NODE_LIMIT
+    from xvmatch.inference.views.multi_view_assignment import MIP_MAX_TRIANGLES
 
     text = budget.format(MIP_MAX_LOOPS=MIP_MAX_LOOPS, MIP_NODE_LIMIT=MIP_NODE_LIMIT,
                          MIP_MAX_TRIANGLES=MIP_MAX_TRIANGLES)

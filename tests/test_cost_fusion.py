@@ -19,7 +19,7 @@ from xvmatch.cues.cost_fusion import (
     normalise_cosine_similarity,
     normalise_distance,
 )
-from xvmatch.inference.assignment import assign
+from xvmatch.inference.linking.assignment import assign
 
 
 def test_normalise_distance_hand_computed() -> None:

@@ -19,7 +19,7 @@ from xvmatch.cues.spatial_features import (
     FrameFeatures,
 )
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.matching.learned_association import (
     EMBED_BATCH,
     MATCHER_BATCH_CELLS,
     MAX_BOX_PAIRS,

@@ -20,8 +20,8 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.synthetic_io import SceneInputs, SyntheticDataset, write_scene_inputs
 from xvmatch.formats.mot_boxes import read_mot_boxes, read_predictions
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.bundle import read_manifest
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.bundle import read_manifest
 
 SCENE = "s00001"
 """The overview scene with the most people (6 in the top view, 2 in the egocentric one)."""

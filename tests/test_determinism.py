@@ -107,7 +107,7 @@ def test_offset_estimate_is_identical_for_any_workers_and_kernels(dev_pairs, mon
 
 @pytest.mark.slow
 def test_learned_pairs_and_costs_are_identical_for_any_workers(dev_pairs, monkeypatch):
-    from xvmatch.inference.learned_association import (
+    from xvmatch.inference.matching.learned_association import (
         associate_sequence_learned,
         load_matcher_bundle,
     )
@@ -134,7 +134,7 @@ def test_learned_pairs_and_costs_are_identical_for_any_workers(dev_pairs, monkey
 
 @pytest.mark.slow
 def test_tracks_are_identical_for_any_workers(dev_pairs, monkeypatch):
-    from xvmatch.inference.tracking import associate_frames
+    from xvmatch.inference.tracks.tracking import associate_frames
 
     top, hor = dev_pairs["V1-S_square-G_1"]
     window = sorted(set(top) & set(hor))[:120]

@@ -130,7 +130,7 @@ def _undocumented() -> list[str]:
     """``path:line name`` of every public module-level function or class without a docstring."""
     out = []
     for package in PACKAGES:
-        for path in sorted((ROOT / package).glob("*.py")):
+        for path in sorted((ROOT / package).rglob("*.py")):
             tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
             for node in tree.body:
                 if (isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef)

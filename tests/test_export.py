@@ -25,7 +25,7 @@ from xvmatch.cues.spatial_features import (
 )
 from xvmatch.export import onnx_export
 from xvmatch.export.onnx_export import PARITY_TOLERANCE, ExportError, export_bundle
-from xvmatch.inference.bundle import load_bundle, read_manifest
+from xvmatch.inference.matching.bundle import load_bundle, read_manifest
 from xvmatch.models.matcher_file import load_matcher
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,5 +1,5 @@
-"""The frame check (inference/frame_check.py): a frame's appearance cue judged from its own cost
-statistics, its fit, its manifest record, and its use in ``associate_sequence_learned``."""
+"""The frame check (inference/matching/frame_check.py): a frame's appearance cue judged from its own
+cost statistics, its fit, its manifest record, and its use in ``associate_sequence_learned``."""
 
 from __future__ import annotations
 
@@ -16,15 +16,15 @@ from hypothesis import strategies as st
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
 from xvmatch.formats.mot_boxes import read_mot_boxes
-from xvmatch.inference.appearance_check import AppearanceCheck
-from xvmatch.inference.bundle import MANIFEST, BundleError, read_manifest
-from xvmatch.inference.frame_check import (
+from xvmatch.inference.matching.appearance_check import AppearanceCheck
+from xvmatch.inference.matching.bundle import MANIFEST, BundleError, read_manifest
+from xvmatch.inference.matching.frame_check import (
     FEATURES,
     FrameCheck,
     fit_frame_check,
     frame_check_features,
 )
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.matching.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
     load_matcher_bundle,

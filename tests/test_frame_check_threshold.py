@@ -13,7 +13,7 @@ from xvmatch.evaluation.frame_check_threshold import (
     cross_validate_thresholds,
     scene_folds,
 )
-from xvmatch.inference.frame_check import frame_check_features
+from xvmatch.inference.matching.frame_check import frame_check_features
 
 
 def _cell(seed: int, agree_share: float, scenes: int = 12, frames: int = 10) -> FrameSamples:

@@ -41,7 +41,7 @@ from xvmatch.evaluation.handcrafted_baseline import (
 )
 from xvmatch.geometry.box_overlap import box_iou
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
-from xvmatch.inference.assignment import GAMMA_GRID
+from xvmatch.inference.linking.assignment import GAMMA_GRID
 from xvmatch.metrics.cross_view_metrics import count_frame, count_pair, summarize
 
 SMALL = (320, 180)

@@ -17,7 +17,7 @@ from xvmatch.export.int8 import (
     node_macs,
 )
 from xvmatch.export.onnx_export import ExportError, export_bundle
-from xvmatch.inference.bundle import BundleError, load_bundle
+from xvmatch.inference.matching.bundle import BundleError, load_bundle
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_export_records_the_int8_network_and_its_accuracy(int8_bundle):
     int8 = manifest["appearance"]["int8"]
     path = out / int8["file"]
     assert path.is_file() and hashlib.sha256(path.read_bytes()).hexdigest() == int8["sha256"]
-    from xvmatch.inference.bundle import open_session
+    from xvmatch.inference.matching.bundle import open_session
 
     # the same outputs as the FP32 graph, stages included
     assert [o.name for o in open_session(path, 1).get_outputs()] == ["descriptors", "features",
@@ -108,7 +108,7 @@ def _with_int8_loss(out, tmp_path, loss: float | None,
 
 def test_int8_is_the_default_only_on_cpus_with_int8_dot_products(int8_bundle, tmp_path,
                                                                   monkeypatch):
-    from xvmatch.inference import bundle
+    from xvmatch.inference.matching import bundle
 
     assert bundle.fast_int8_cpu("processor : 0\nflags : fpu sse avx2 fma avx512_vnni\n")
     assert bundle.fast_int8_cpu("Features : fp asimd asimddp\n")
@@ -133,7 +133,7 @@ def test_int8_is_chosen_alone_only_if_it_kept_the_accuracy_and_the_matches(
     """A fast CPU is not enough: an INT8 network that lost Eq. 9 points at export (the
     shipped MobileNetV2 branch once lost 9.1), is not shown with 95% confidence to keep 99% of
     FP32's matched pairs, or has no record runs only when asked for."""
-    from xvmatch.inference import bundle
+    from xvmatch.inference.matching import bundle
 
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
     out = _with_int8_loss(int8_bundle[0], tmp_path, loss, agreement)
@@ -147,7 +147,7 @@ def test_associate_picks_int8_by_its_agreement_with_near_ties_rechecked(int8_bun
     """INT8 alone kept 98.7% of FP32's pairs, with its near ties re-checked all of them: only a
     caller that re-checks (associate) picks it, and it gets the tolerance and the FP32 network
     to re-check with."""
-    from xvmatch.inference import bundle
+    from xvmatch.inference.matching import bundle
 
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
     out = _with_int8_loss(int8_bundle[0], tmp_path, 0.0, (1974, 2000), (2000, 2000))
@@ -174,7 +174,7 @@ def test_associate_picks_int8_by_its_agreement_with_near_ties_rechecked(int8_bun
 
 def test_recheck_tolerance_and_costs():
     from xvmatch.export.int8 import recheck_tolerance
-    from xvmatch.inference.learned_association import rechecked_costs
+    from xvmatch.inference.matching.learned_association import rechecked_costs
 
     fp32 = [np.array([[0.1, 0.9], [0.9, 0.1]]), np.array([[0.3, 0.31], [0.31, 0.3]]),
             np.zeros((0, 2)), np.array([[0.2]])]
@@ -193,7 +193,7 @@ def test_recheck_tolerance_and_costs():
 @pytest.mark.slow
 def test_runtime_prefers_int8_unless_asked_for_fp32(int8_bundle, tiny_models, tmp_path,
                                                     monkeypatch):
-    from xvmatch.inference import bundle
+    from xvmatch.inference.matching import bundle
 
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
     out = _with_int8_loss(int8_bundle[0], tmp_path, 0.0)
@@ -276,7 +276,7 @@ def test_nodes_kept_fp32_have_float_weights_in_the_int8_graph(int8_bundle):
 
 
 def test_int8_agreement_is_a_lower_confidence_bound():
-    from xvmatch.inference.bundle import int8_agreement
+    from xvmatch.inference.matching.bundle import int8_agreement
 
     def record(*counts):
         return {"agreement": {f"s{k}": {"kept": a, "pairs": n} for k, (a, n) in
@@ -301,7 +301,7 @@ def test_int8_agreement_is_a_lower_confidence_bound():
     (0.0, (1974, 2000), "kept 1974 of FP32's 2000 matched pairs (images, 98.7%), not shown"),
 ])
 def test_int8_refusal_says_why(int8_bundle, tmp_path, loss, agreement, reason):
-    from xvmatch.inference.bundle import int8_is_safe, int8_refusal
+    from xvmatch.inference.matching.bundle import int8_is_safe, int8_refusal
 
     out = _with_int8_loss(int8_bundle[0], tmp_path, loss, agreement)
     int8 = json.loads((out / "manifest.json").read_text())["appearance"]["int8"]
@@ -314,7 +314,7 @@ def test_int8_refusal_says_why(int8_bundle, tmp_path, loss, agreement, reason):
 
 
 def test_the_pairs_needed_are_the_least_that_can_show_the_bar():
-    from xvmatch.inference.bundle import INT8_MIN_AGREEMENT, int8_agreement
+    from xvmatch.inference.matching.bundle import INT8_MIN_AGREEMENT, int8_agreement
 
     def bound(n):
         return int8_agreement({"agreement": {"images": {"kept": n, "pairs": n}}})

@@ -66,7 +66,7 @@ def test_a_planned_long_run_takes_the_kernels_for_small_calls_too():
 def test_the_learned_path_declares_its_run_as_the_search_does(monkeypatch, workers):
     # The learned box path's many small calls run in the kernels on a long run, in the main
     # process and in every worker (issue 70: they ran in numpy, a third of its slowdown).
-    from xvmatch.inference import learned_association
+    from xvmatch.inference.matching import learned_association
 
     seen = []
 

@@ -12,8 +12,8 @@ import torch
 from xvmatch import cli_fit_geometry, cli_model
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene, write_box_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.learned_association import (
     associate_sequence_learned,
     load_matcher_bundle,
 )

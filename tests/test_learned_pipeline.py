@@ -1,6 +1,7 @@
-"""The learned association pipeline as a function (:mod:`xvmatch.inference.learned_pipeline`):
-the same pairs as ``xvmatch associate --model``, the gamma rule in one place, the checks before
-any work, and the image sources re-timed and closed."""
+"""The learned association pipeline as a function
+(:mod:`xvmatch.inference.matching.learned_pipeline`): the same pairs as ``xvmatch associate
+--model``, the gamma rule in one place, the checks before any work, and the image sources re-timed
+and closed."""
 
 from __future__ import annotations
 
@@ -13,12 +14,12 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.synthetic_io import SceneInputs, SyntheticDataset, write_scene_inputs
 from xvmatch.formats.mot_boxes import read_mot_boxes, read_predictions
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.matching.learned_association import (
     associate_sequence_learned,
     load_matcher_bundle,
     non_association_cost,
 )
-from xvmatch.inference.learned_pipeline import (
+from xvmatch.inference.matching.learned_pipeline import (
     LearnedRunOptions,
     open_learned_inputs,
     open_view_images,
@@ -159,7 +160,7 @@ def test_images_are_retimed_and_closed(scene, default):
 def test_int8_near_ties_are_scored_again_with_fp32(scene):
     """associate's INT8 path: a frame whose INT8 assignment is not stable within the tolerance
     gets exactly FP32's costs and pairs, a stable one keeps INT8's."""
-    from xvmatch.inference.bundle import int8_recheck_tolerance
+    from xvmatch.inference.matching.bundle import int8_recheck_tolerance
 
     top, hor, frames = _boxes(scene)
 

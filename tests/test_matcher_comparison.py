@@ -23,7 +23,7 @@ from xvmatch.evaluation.deployed_matcher_eval import (  # noqa: E402
     frame_checked_costs,
     matcher_costs,
 )
-from xvmatch.inference.learned_association import load_matcher_bundle  # noqa: E402
+from xvmatch.inference.matching.learned_association import load_matcher_bundle  # noqa: E402
 
 DEFAULT_FOLDER = str(ROOT / "inference" / "default_bundle")
 

@@ -1,4 +1,4 @@
-"""Tests of associate-multi over time (inference/multi_ego_tracking.py, --tracks)."""
+"""Tests of associate-multi over time (inference/views/multi_ego_tracking.py, --tracks)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import pytest
 
 from xvmatch.cues.box_motion import common_shift, motion_link_costs
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.multi_ego_tracking import (
+from xvmatch.inference.linking.tracklets import clip_tracklets, split_clips, view_tracklets
+from xvmatch.inference.views.multi_ego_tracking import (
     carry_ids,
     pairs_from_ids,
     smoothed_problems,
@@ -15,9 +16,8 @@ from xvmatch.inference.multi_ego_tracking import (
     track_multi_view,
     view_chains,
 )
-from xvmatch.inference.multi_view_assignment import cycle_violations, view_pairs
-from xvmatch.inference.multi_view_costs import FrameProblem
-from xvmatch.inference.tracklets import clip_tracklets, split_clips, view_tracklets
+from xvmatch.inference.views.multi_view_assignment import cycle_violations, view_pairs
+from xvmatch.inference.views.multi_view_costs import FrameProblem
 
 
 def _scene(seed: int, n_views: int = 3, n_people: int = 4, n_frames: int = 12,
@@ -69,7 +69,7 @@ def test_ids_carry_over_frames_and_agree_across_views():
 
 
 def test_tracklets_outvote_one_frame_mistake_that_the_frame_program_makes():
-    from xvmatch.inference.multi_view_assignment import solve_multi_view
+    from xvmatch.inference.views.multi_view_assignment import solve_multi_view
 
     views, problems, truth = _scene(1, flip=3)
     alone = solve_multi_view(problems[3].sizes, problems[3].costs, 0.0)

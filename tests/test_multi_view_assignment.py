@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.core.folder_marker import MARKER
-from xvmatch.inference.multi_view_assignment import (
+from xvmatch.inference.views.multi_view_assignment import (
     check_problem,
     consistent_hungarian,
     cycle_violations,
@@ -22,7 +22,7 @@ from xvmatch.inference.multi_view_assignment import (
     solve_multi_view,
     view_pairs,
 )
-from xvmatch.inference.multi_view_costs import (
+from xvmatch.inference.views.multi_view_costs import (
     LogisticCalibration,
     log_odds_cost,
     spatial_vote_cost,

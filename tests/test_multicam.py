@@ -1,4 +1,4 @@
-"""Tests of the multi-camera association (xvmatch.inference.multicam) and its scores
+"""Tests of the multi-camera association (xvmatch.inference.views.multicam) and its scores
 (xvmatch.metrics.multicam_metrics): tiny scenes whose answer is known, the conflict rule,
 id scrambling, and the metrics on hand-built toy sequences."""
 
@@ -19,7 +19,7 @@ from xvmatch.datasets.multicam_scenes import (
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import GroundCamera
-from xvmatch.inference.multicam import (
+from xvmatch.inference.views.multicam import (
     MulticamInputError,
     MulticamOptions,
     associate_cameras,
@@ -204,7 +204,7 @@ def test_metrics_on_a_toy_sequence():
 
 
 def test_row_nanmedian_matches_numpy():
-    from xvmatch.inference.multicam import _row_nanmedian
+    from xvmatch.inference.views.multicam import _row_nanmedian
 
     rng = np.random.default_rng(0)
     d = rng.random((50, 9))

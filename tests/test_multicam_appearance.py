@@ -16,7 +16,7 @@ from xvmatch.formats.crops import box_crops
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import GroundCamera
-from xvmatch.inference.multicam import MulticamOptions, associate_cameras, relabel
+from xvmatch.inference.views.multicam import MulticamOptions, associate_cameras, relabel
 
 _RED, _BLUE = (0, 0, 255), (255, 0, 0)
 

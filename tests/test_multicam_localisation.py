@@ -1,4 +1,4 @@
-"""Tests of xvmatch.inference.multicam_localisation (the VRL paper's principal axes, view
+"""Tests of xvmatch.inference.views.multicam_localisation (the VRL paper's principal axes, view
 visibility and two-best-view choice)."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.ground_plane import GroundCamera
-from xvmatch.inference.multicam_localisation import (
+from xvmatch.inference.views.multicam_localisation import (
     LocalisationOptions,
     axis_traces,
     localise,

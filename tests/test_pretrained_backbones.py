@@ -174,7 +174,7 @@ def test_onnx_export_takes_any_number_of_crops(arch, tmp_path):
     import onnxruntime as ort
 
     from xvmatch.export.onnx_export import AppearanceGraph, _onnx_export
-    from xvmatch.inference.bundle import APPEARANCE_OUTPUTS
+    from xvmatch.inference.matching.bundle import APPEARANCE_OUTPUTS
 
     torch.manual_seed(0)
     net = BUILDERS[arch](input_size=(64, 32), hidden_dim=16, embedding_dim=8).eval()
@@ -223,7 +223,7 @@ def test_a_bundle_with_a_pretrained_trunk_records_its_source(tmp_path, tiny_synt
     """The exporter's parity gate passes and the manifest names the package and licence."""
     from xvmatch.cues.spatial_features import FeatureConfig
     from xvmatch.export.onnx_export import export_bundle
-    from xvmatch.inference.bundle import read_manifest
+    from xvmatch.inference.matching.bundle import read_manifest
     from xvmatch.models.cross_view_matcher import CrossViewMatcher
     from xvmatch.models.geometry_encoder import GeometryEncoder
     from xvmatch.models.matcher_file import save_matcher

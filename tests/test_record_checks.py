@@ -23,8 +23,7 @@ import pytest
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene, write_box_scene
-from xvmatch.inference.bundle import DEFAULT_BUNDLE, MANIFEST, BundleError, load_bundle
-from xvmatch.inference.site_adaptation import (
+from xvmatch.inference.adaptation.site_adaptation import (
     ADAPTATION_FILE,
     NPY_HEADER_BYTES,
     SiteAdaptation,
@@ -32,6 +31,7 @@ from xvmatch.inference.site_adaptation import (
     adaptation_bytes,
     load_adaptation,
 )
+from xvmatch.inference.matching.bundle import DEFAULT_BUNDLE, MANIFEST, BundleError, load_bundle
 
 REPO = Path(__file__).resolve().parents[1]
 DIM = 16
@@ -351,7 +351,7 @@ def test_precision_without_images_is_refused(tmp_path, boxes, capsys, precision)
 def test_precision_on_a_box_only_bundle_is_refused(tmp_path, boxes, capsys, tiny_models) -> None:
     from xvmatch.cli_model import check_precision, open_models
     from xvmatch.cli_options import UsageError
-    from xvmatch.inference.bundle import BundleError
+    from xvmatch.inference.matching.bundle import BundleError
 
     bundle = tiny_models["boxes_bundle"]
     with pytest.raises(BundleError, match="precision 'int8' chooses the appearance network, "

@@ -16,7 +16,10 @@ from xvmatch.cues.spatial_features import FeatureConfig, frame_features
 from xvmatch.cues.spatial_search import associate_frame, associate_sequence
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.formats.mot_boxes import scale_frames
-from xvmatch.inference.learned_association import associate_sequence_learned, load_matcher_bundle
+from xvmatch.inference.matching.learned_association import (
+    associate_sequence_learned,
+    load_matcher_bundle,
+)
 
 SIZE = (2688, 1512)
 SCENE = simulate_box_scene(SceneConfig(n_people=(6, 10)), n_frames=12, seed=3)

@@ -161,7 +161,7 @@ def test_confidence_path_exports_to_onnx_and_matches_torch(tmp_path):
     import onnxruntime as ort
 
     from xvmatch.export.onnx_export import MatcherGraph
-    from xvmatch.inference.bundle import MATCHER_OUTPUT, OPSET
+    from xvmatch.inference.matching.bundle import MATCHER_OUTPUT, OPSET
     from xvmatch.models.appearance_net import appearance_small
     from xvmatch.models.matcher_file import load_matcher, save_matcher
 

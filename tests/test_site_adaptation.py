@@ -1,6 +1,6 @@
-"""Site adaptation's fit and its file (inference/site_adaptation.py), and how a bundle reads it
-(inference/bundle.py): synthetic descriptors with a known camera cast, no network needed except
-for the bundle checks (the shipped default's files, copied)."""
+"""Site adaptation's fit and its file (inference/adaptation/site_adaptation.py), and how a bundle
+reads it (inference/matching/bundle.py): synthetic descriptors with a known camera cast, no network
+needed except for the bundle checks (the shipped default's files, copied)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.cues.matcher_inputs import appearance_cost
-from xvmatch.inference.bundle import DEFAULT_BUNDLE, BundleError, load_bundle, read_manifest
-from xvmatch.inference.learned_association import LearnedMatcher
-from xvmatch.inference.site_adaptation import (
+from xvmatch.inference.adaptation.site_adaptation import (
     ADAPTATION_FILE,
     RIDGE,
     AdaptationFit,
@@ -32,7 +30,14 @@ from xvmatch.inference.site_adaptation import (
     load_adaptation,
     pair_auc,
 )
-from xvmatch.inference.site_bundle import adapted_vectors
+from xvmatch.inference.matching.bundle import (
+    DEFAULT_BUNDLE,
+    BundleError,
+    load_bundle,
+    read_manifest,
+)
+from xvmatch.inference.matching.learned_association import LearnedMatcher
+from xvmatch.inference.matching.site_bundle import adapted_vectors
 
 DIM = 16
 
@@ -289,7 +294,7 @@ def _site_bundle(tmp_path, adaptation: SiteAdaptation, **record) -> tuple:
 def test_a_site_bundle_runs_int8_only_when_asked(tmp_path, monkeypatch) -> None:
     """The adaptation was fitted on FP32 vectors and INT8's agreement measured without it: where
     the default would pick INT8 by itself, its site bundle keeps FP32."""
-    from xvmatch.inference import bundle
+    from xvmatch.inference.matching import bundle
 
     monkeypatch.setattr(bundle, "fast_int8_cpu", lambda: True)
     assert load_bundle("default", recheck=True).precision == "int8"
@@ -367,7 +372,7 @@ def test_track_embeds_a_feature_site_once_per_box(tmp_path, monkeypatch) -> None
     from xvmatch.cli import main
     from xvmatch.datasets.synthetic_scenes import SynthConfig
     from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
-    from xvmatch.inference.bundle import Bundle
+    from xvmatch.inference.matching.bundle import Bundle
 
     dim = read_manifest(DEFAULT_BUNDLE).appearance.features_dim
     cast = SiteAdaptation(np.full(dim, 0.01), np.ones(dim), np.zeros(dim), np.ones(dim),

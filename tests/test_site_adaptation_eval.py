@@ -13,7 +13,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import site_adaptation_eval  # noqa: E402
 
 from xvmatch.formats.mot_boxes import FrameBoxes  # noqa: E402
-from xvmatch.inference.adaptation_pairs import MinedPairs  # noqa: E402
+from xvmatch.inference.adaptation.adaptation_pairs import MinedPairs  # noqa: E402
 
 
 def _records(ids_by_frame: dict[int, list[int]]) -> dict[int, FrameBoxes]:

@@ -17,8 +17,8 @@ from xvmatch.datasets.tracking_video import (
 )
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.formats.mot_boxes import read_mot_boxes, shift_frames, write_mot_boxes
-from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
-from xvmatch.inference.tracking import (
+from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+from xvmatch.inference.tracks.tracking import (
     TrackConfig,
     TrackImages,
     learned_frame_evidence,
@@ -95,7 +95,7 @@ def test_cameras_that_fit_leave_the_images_to_the_over_time_terms(overview, tmp_
 @pytest.mark.slow
 def test_no_cross_view_cue_nothing_to_check(overview_video) -> None:
     # w1 1: the cross-view weights have no appearance term, so the check has nothing to judge.
-    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
     model = load_matcher_bundle("default")
     video = overview_video

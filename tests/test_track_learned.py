@@ -16,9 +16,10 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
-from xvmatch.inference.track_costs import FrameCosts, frame_evidence, learned_similarity
-from xvmatch.inference.tracking import LearnedEvidence, TrackConfig, track_pair
-from xvmatch.inference.tracklets import Tracklet
+from xvmatch.inference.linking.assignment import FrameCosts
+from xvmatch.inference.linking.tracklets import Tracklet
+from xvmatch.inference.tracks.track_costs import frame_evidence, learned_similarity
+from xvmatch.inference.tracks.tracking import LearnedEvidence, TrackConfig, track_pair
 
 
 def _track(files, out: Path, *extra: str) -> int:
@@ -104,7 +105,7 @@ def test_learned_weights_with_the_wearer_given(track_files, tmp_path):
 
 
 def _costs(top_rows, hor_rows, cost, gamma=0.5) -> FrameCosts:
-    from xvmatch.inference.assignment import assign
+    from xvmatch.inference.linking.assignment import assign
 
     cost = np.asarray(cost, dtype=float)
     paired = np.zeros(cost.shape, dtype=bool)

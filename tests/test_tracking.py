@@ -12,24 +12,24 @@ from hypothesis import strategies as st
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
-from xvmatch.inference.track_costs import (
+from xvmatch.inference.linking.tracklets import Tracklet, clip_tracklets, split_clips
+from xvmatch.inference.tracks.track_costs import (
     TrackWeights,
     combine_cross_view,
     combine_over_time,
     motion_similarity,
     spatial_similarity,
 )
-from xvmatch.inference.track_mip import (
+from xvmatch.inference.tracks.track_mip import (
     greedy_solution,
     loop_violations,
     objective,
     repair_loops,
     solve_four_clusters,
 )
-from xvmatch.inference.track_spectral import spectral_groups, spectral_solution
-from xvmatch.inference.track_stitching import stitch_windows
-from xvmatch.inference.tracking import TrackConfig, track_pair
-from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips
+from xvmatch.inference.tracks.track_spectral import spectral_groups, spectral_solution
+from xvmatch.inference.tracks.track_stitching import stitch_windows
+from xvmatch.inference.tracks.tracking import TrackConfig, track_pair
 
 
 def _tracklet(clip: int, frames, rows, centres, size=(10.0, 10.0)) -> Tracklet:

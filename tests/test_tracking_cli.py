@@ -201,8 +201,8 @@ def test_track_image_errors_are_one_line(video_files, tmp_path, capsys, extra, m
 
 
 def test_track_help_states_the_library_defaults(capsys):
-    from xvmatch.inference.track_costs import TrackWeights
-    from xvmatch.inference.tracking import TrackConfig
+    from xvmatch.inference.tracks.track_costs import TrackWeights
+    from xvmatch.inference.tracks.tracking import TrackConfig
 
     with pytest.raises(SystemExit):
         main(["track", "--help"])

@@ -7,7 +7,7 @@ import pytest
 
 from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.tracking import associate_frames, track_pair
+from xvmatch.inference.tracks.tracking import associate_frames, track_pair
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 from xvmatch.metrics.track_metrics import track_pair_counts, view_track_scores
 
@@ -63,9 +63,9 @@ def test_tracking_beats_frame_mode_on_real_boxes(sequence):
 
 @pytest.mark.slow
 def test_learned_weights_on_real_boxes(sequence):
-    from xvmatch.inference.learned_association import load_matcher_bundle
-    from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
-    from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
+    from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+    from xvmatch.inference.tracks.tracking import TrackConfig, learned_frame_evidence
 
     top, hor = sequence
     det_top, truth_top = _detections(top, 1)

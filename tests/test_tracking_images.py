@@ -10,16 +10,16 @@ from hypothesis import strategies as st
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.datasets.tracking_video import render_tracking_video
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.learned_association import load_matcher_bundle
-from xvmatch.inference.track_appearance import (
+from xvmatch.inference.linking.tracklets import clip_tracklets, split_clips, view_tracklets
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.tracks.track_appearance import (
     clip_appearance,
     colour_similarity,
     descriptor_similarity,
     frame_histograms,
 )
-from xvmatch.inference.track_costs import TrackWeights, motion_similarity, spatial_similarity
-from xvmatch.inference.tracking import TrackConfig, TrackImages, _window_weights, track_pair
-from xvmatch.inference.tracklets import clip_tracklets, split_clips, view_tracklets
+from xvmatch.inference.tracks.track_costs import TrackWeights, motion_similarity, spatial_similarity
+from xvmatch.inference.tracks.tracking import TrackConfig, TrackImages, _window_weights, track_pair
 
 
 def _scaled(frames, s):
@@ -188,7 +188,7 @@ def test_track_pair_with_images_on_a_rendered_clip(network):
 def test_top_images_are_read_only_where_needed():
     # With the network over time the top view needs no histogram and only its tracklets'
     # middle frames: the same tracklets and descriptors as when every frame is read.
-    from xvmatch.inference.tracking import _tracklets_with_images
+    from xvmatch.inference.tracks.tracking import _tracklets_with_images
 
     video = render_tracking_video(4, n_frames=12)
     top, _ = _as_rows(video.top)

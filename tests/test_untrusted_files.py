@@ -23,7 +23,7 @@ from xvmatch.formats.image_size import (
     check_image_size,
     declared_image_size,
 )
-from xvmatch.inference.bundle import MANIFEST, BundleError, read_manifest
+from xvmatch.inference.matching.bundle import MANIFEST, BundleError, read_manifest
 
 DEEP = "[" * 100_000  # nesting deeper than any JSON reader follows by recursion
 

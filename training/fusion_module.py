@@ -12,9 +12,9 @@ trains it on :class:`~xvmatch.training.fusion_datamodule.CueBatch` batches with
   differentiable), :class:`~xvmatch.models.losses.AssignmentNLLLoss`.
 
 Validation also reports ``val/acc9``: the Eq. 9 accuracy of the Hungarian association (Eqs.
-1-2, :func:`xvmatch.inference.assignment.assign`) at the best gamma of a grid, and that gamma
-(``val/gamma``), computed exactly as :func:`xvmatch.evaluation.handcrafted_baseline.count_pair`
-does from the batch's labels.
+1-2, :func:`xvmatch.inference.linking.assignment.assign`) at the best gamma of a grid, and that
+gamma (``val/gamma``), computed exactly as
+:func:`xvmatch.evaluation.handcrafted_baseline.count_pair` does from the batch's labels.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from xvmatch.inference.assignment import GAMMA_GRID, assign
+from xvmatch.inference.linking.assignment import GAMMA_GRID, assign
 from xvmatch.models.geometry_encoder import LogSinkhorn
 from xvmatch.models.losses import AssignmentNLLLoss, ContrastiveLoss
 from xvmatch.training.appearance_module import hparams_ignore

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from xvmatch.inference.assignment import assign
+from xvmatch.inference.linking.assignment import assign
 from xvmatch.metrics.cross_view_metrics import count_frame, summarize
 from xvmatch.models.losses import GeometryMatchingLoss, frame_nll
 

@@ -38,7 +38,7 @@ def version_text() -> str:
     from xvmatch.cues.spatial_features import FEATURE_VERSION
     from xvmatch.datasets.synthetic_io import SCHEMA_VERSION
     from xvmatch.formats.camera_io import FORMAT_VERSION as CAMERA_VERSION
-    from xvmatch.inference.bundle import BUNDLE_FORMAT_VERSION, OPSET
+    from xvmatch.inference.matching.bundle import BUNDLE_FORMAT_VERSION, OPSET
 
     try:  # the training file format needs torch (the learn extra)
         from xvmatch.models.matcher_file import MATCHER_FORMAT_VERSION as MATCHER
@@ -65,6 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
     from xvmatch.cli_ablate import add_ablate_parser
     from xvmatch.cli_adapt import add_adapt_parser
     from xvmatch.cli_baseline import add_baseline_parser
+    from xvmatch.cli_calibrate import add_calibrate_parser
     from xvmatch.cli_demo import add_demo_parser
     from xvmatch.cli_export import add_export_parser
     from xvmatch.cli_fit_geometry import add_fit_geometry_parser
@@ -92,6 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
         add_multi_ego_parser,
         add_adapt_parser,
         add_multicam_parser,
+        add_calibrate_parser,
         cli_offset.add_offset_parser,
         add_synth_parser,
         add_show_parser,

@@ -1,10 +1,10 @@
 """The ``xvmatch adapt`` command: a site bundle fitted on the user's own unlabelled videos.
 
 Reads a video pair (images and box files of both views, no ids across views; optionally the
-cameras), mines pairs (:mod:`xvmatch.inference.adaptation_pairs`), fits the adaptation of the
-appearance cue (:mod:`xvmatch.inference.site_adaptation`) and writes a site bundle
-(:mod:`xvmatch.inference.site_bundle`) that ``associate --model SITE/`` uses. Torch-free: runs in
-the base install.
+cameras), mines pairs (:mod:`xvmatch.inference.adaptation.adaptation_pairs`), fits the adaptation of
+the appearance cue (:mod:`xvmatch.inference.adaptation.site_adaptation`) and writes a site bundle
+(:mod:`xvmatch.inference.matching.site_bundle`) that ``associate --model SITE/`` uses. Torch-free:
+runs in the base install.
 """
 
 from __future__ import annotations
@@ -85,11 +85,11 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
 
 def refusal_message(run, model: str) -> str:
     """The one line ``adapt`` ends with when no fit was accepted (a
-    :class:`~xvmatch.inference.site_bundle.SiteRun`): each vector's reason, then what to do.
-    When the network's own cue (its descriptors, unadapted) is not above chance on the held-out
+    :class:`~xvmatch.inference.matching.site_bundle.SiteRun`): each vector's reason, then what to
+    do. When the network's own cue (its descriptors, unadapted) is not above chance on the held-out
     pairs either, images would only add noise to the boxes: the advice is to leave them out,
     unless the box-only matcher whose pairs judged them is often wrong (docs/adaptation.md)."""
-    from xvmatch.inference.site_adaptation import auc_standard_error, better_than_chance
+    from xvmatch.inference.adaptation.site_adaptation import auc_standard_error, better_than_chance
 
     fit = run.fit
     reasons = "; ".join(f"{v}: {f.reason}" for v, f in run.fits.items()) or fit.reason
@@ -117,9 +117,9 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
     )
     from xvmatch.core.output_paths import claim_folder
     from xvmatch.formats.mot_boxes import check_common_frames
-    from xvmatch.inference.adaptation_pairs import MiningConfig
-    from xvmatch.inference.learned_pipeline import LearnedRunOptions, open_learned_inputs
-    from xvmatch.inference.site_bundle import adapt_to_site, write_site_bundle
+    from xvmatch.inference.adaptation.adaptation_pairs import MiningConfig
+    from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions, open_learned_inputs
+    from xvmatch.inference.matching.site_bundle import adapt_to_site, write_site_bundle
 
     if args.top_images is None or args.hor_images is None:
         raise UsageError("adapt learns from the images: give --top-images and --hor-images")

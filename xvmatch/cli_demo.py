@@ -94,8 +94,8 @@ def _run_demo(args: argparse.Namespace) -> int:
         score_matcher,
     )
     from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, score_trial
-    from xvmatch.inference.assignment import assign
-    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.linking.assignment import assign
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
     from xvmatch.metrics.cross_view_metrics import summarize
     from xvmatch.viz.match_drawing import draw_matches, write_match_picture
 

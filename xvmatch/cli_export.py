@@ -47,7 +47,7 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
 def _cmd_export(args: argparse.Namespace) -> int:
     try:
         from xvmatch.export.onnx_export import ExportError, check_replaceable, export_bundle
-        from xvmatch.inference.bundle import int8_refusal
+        from xvmatch.inference.matching.bundle import int8_refusal
     except ImportError as exc:
         raise ValueError(f"xvmatch export needs the learn extra (torch, onnx): {exc}") from None
 

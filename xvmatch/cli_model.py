@@ -3,8 +3,8 @@
 ``add_model_arguments`` adds ``--model``, ``--gamma``, the images, the cameras and the other
 learned-matcher options to ``associate``'s parser, ``add_draw_arguments`` its ``--draw``
 pictures; ``associate_with_model`` runs the association with the models
-(:func:`xvmatch.inference.learned_pipeline.run_learned_association`'s steps, with the options
-:func:`learned_run_options` builds from the arguments), ``open_models`` opens them (also for
+(:func:`xvmatch.inference.matching.learned_pipeline.run_learned_association`'s steps, with the
+options :func:`learned_run_options` builds from the arguments), ``open_models`` opens them (also for
 ``track`` and ``associate-multi``), ``horizontal_size`` works out the horizontal image size.
 Imports are lazy: only these code paths load onnxruntime (torch only to export a .pt file
 once). Bad input raises ``ValueError`` with a one-line message, which the main entry
@@ -242,7 +242,7 @@ def _torch_file_bundle(path: str, threads: int, precision: str | None, recheck: 
     from pathlib import Path
 
     from xvmatch.datasets.feature_cache import default_cache_dir
-    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()[:20]
     folder = default_cache_dir() / "bundles" / digest
@@ -260,11 +260,11 @@ def _torch_file_bundle(path: str, threads: int, precision: str | None, recheck: 
 
 def open_models(names: Iterable[str], threads: int = 1, precision: str | None = None,
                 recheck: bool = False) -> list:
-    """:class:`~xvmatch.inference.learned_association.LearnedMatcher` of each ``--model``
+    """:class:`~xvmatch.inference.matching.learned_association.LearnedMatcher` of each ``--model``
     (``recheck``: for ``associate``, which re-checks INT8's near-tie frames in FP32)."""
     import os
 
-    from xvmatch.inference.learned_association import load_matcher_bundle
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
 
     models = []
     for name in names:
@@ -315,7 +315,8 @@ def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, 
         with open_frames(args.hor_images, box_frames=sorted(hor)) as source:
             given.append((tuple(source.size), f"the horizontal images {args.hor_images}"))
     elif getattr(args, "model", None) is not None and getattr(args, "cameras", None):
-        # with images, each camera file is checked against them (inference/learned_pipeline.py)
+        # with images, each camera file is checked against them
+        # (inference/matching/learned_pipeline.py)
         given.append(ego_camera_size(args.cameras))
     return resolve_size(hor, getattr(args, "hor", "the horizontal boxes"), given)
 
@@ -341,12 +342,12 @@ def learned_run_options(
     hor_size: tuple[tuple[int, int], str],
     top_offset: int = 0,
 ):
-    """The :class:`~xvmatch.inference.learned_pipeline.LearnedRunOptions` of ``associate``'s
-    arguments, for ``models`` already opened (:func:`open_models`) from ``names`` and the
-    horizontal size :func:`horizontal_size` resolved; options a namespace lacks take their
+    """The :class:`~xvmatch.inference.matching.learned_pipeline.LearnedRunOptions` of
+    ``associate``'s arguments, for ``models`` already opened (:func:`open_models`) from ``names``
+    and the horizontal size :func:`horizontal_size` resolved; options a namespace lacks take their
     defaults. Costs are kept when ``--costs`` or ``--draw`` asks for them (the pictures are
     of the frames that have costs)."""
-    from xvmatch.inference.learned_pipeline import LearnedRunOptions
+    from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions
 
     (width, height), said = hor_size
     return LearnedRunOptions(
@@ -383,7 +384,7 @@ def associate_with_model(
     hor_size: tuple[tuple[int, int], str] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate with ``args.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
-    hor)]}``. The command line's side of :mod:`xvmatch.inference.learned_pipeline`: checks
+    hor)]}``. The command line's side of :mod:`xvmatch.inference.matching.learned_pipeline`: checks
     the options, opens the models, builds the run's options (:func:`learned_run_options`),
     prints the note of an assumed image size, runs it, and writes ``--costs`` and ``--draw``.
     ``top`` is already re-timed by ``top_offset`` (``--offset``); the top images are re-timed
@@ -396,7 +397,7 @@ def associate_with_model(
     checked before any work starts; outputs are written only at the end.
     """
     from xvmatch.cli_image_size import note_if_assumed
-    from xvmatch.inference.learned_pipeline import open_learned_inputs
+    from xvmatch.inference.matching.learned_pipeline import open_learned_inputs
 
     if getattr(args, "mode", "frame") != "frame":
         raise ValueError("--model solves each frame on its own: use --mode frame")
@@ -453,7 +454,7 @@ def _write_costs(path: str, top: Mapping, hor: Mapping, costs: dict, gamma: floa
             for f, c in sorted(costs.items())
         },
     }
-    from xvmatch.inference.site_bundle import json_figure
+    from xvmatch.inference.matching.site_bundle import json_figure
 
     if refinement is not None:
         fit = refinement.fit

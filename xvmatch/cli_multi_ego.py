@@ -2,18 +2,19 @@
 
 Reads a top-view box file and 1..3 horizontal (egocentric) box files as detections (their id
 columns are ignored, except to find each wearer with ``--camera-id``), builds the cost matrices
-of every view pair frame by frame (:func:`xvmatch.inference.multi_view_costs.multi_view_costs`:
-the learned matcher or the handcrafted search for top-ego, the appearance network for ego-ego),
-solves the joint cycle-consistent program of every frame
-(:func:`xvmatch.inference.multi_view_assignment.solve_multi_view`), and writes ``OUT/top.txt``,
-``OUT/hor1.txt``, ...: the input rows, text unchanged but the id field, which holds a person id;
-the same id in two views of a frame is the same person (ids are unique over the whole output and
-do not carry over frames). With ``--tracks`` the ids carry over frames
-(:func:`xvmatch.inference.multi_ego_tracking.track_multi_view`: tracklets per view smooth the
-costs, every frame is solved with the cycle constraints, ids follow the tracklets).
-``--offset N1 N2 ...|auto`` re-times each horizontal view against the top view (cameras not
-started together); rows keep their own frame numbers. Bad input raises
-``ValueError`` with one line, printed by the main entry point as ``xvmatch: error: ...``.
+of every view pair frame by frame
+(:func:`xvmatch.inference.views.multi_view_costs.multi_view_costs`: the learned matcher or the
+handcrafted search for top-ego, the appearance network for ego-ego), solves the joint
+cycle-consistent program of every frame
+(:func:`xvmatch.inference.views.multi_view_assignment.solve_multi_view`), and writes
+``OUT/top.txt``, ``OUT/hor1.txt``, ...: the input rows, text unchanged but the id field, which holds
+a person id; the same id in two views of a frame is the same person (ids are unique over the whole
+output and do not carry over frames). With ``--tracks`` the ids carry over frames
+(:func:`xvmatch.inference.views.multi_ego_tracking.track_multi_view`: tracklets per view smooth the
+costs, every frame is solved with the cycle constraints, ids follow the tracklets). ``--offset N1 N2
+...|auto`` re-times each horizontal view against the top view (cameras not started together); rows
+keep their own frame numbers. Bad input raises ``ValueError`` with one line, printed by the main
+entry point as ``xvmatch: error: ...``.
 """
 
 from __future__ import annotations
@@ -162,7 +163,7 @@ def _aligned(views, offsets, images, cameras, camera_rows):
     ``t`` of horizontal view ``k`` share a number (:func:`xvmatch.formats.mot_boxes.
     align_frames`); the rows keep their own frame numbers in the output."""
     from xvmatch.formats.mot_boxes import align_frames
-    from xvmatch.inference.learned_pipeline import retimed
+    from xvmatch.inference.matching.learned_pipeline import retimed
 
     views, shifts = align_frames(views, offsets)
     if images is not None:  # aligned frame f shows the source's frame f - shift
@@ -178,8 +179,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     from xvmatch.cli_image_size import note_if_assumed
     from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
     from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.multi_view_assignment import consistent_hungarian, solve_multi_view
-    from xvmatch.inference.multi_view_costs import multi_view_costs
+    from xvmatch.inference.views.multi_view_assignment import consistent_hungarian, solve_multi_view
+    from xvmatch.inference.views.multi_view_costs import multi_view_costs
 
     start = time.perf_counter()
     n_hor = len(args.hor)
@@ -225,7 +226,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
 
             matcher = open_models([args.model], args.threads)[0]
         if args.top_images is not None:
-            from xvmatch.inference.learned_pipeline import open_view_images
+            from xvmatch.inference.matching.learned_pipeline import open_view_images
 
             if matcher.bundle.manifest.appearance is None:
                 raise ValueError(f"{args.model}: a box-only matcher cannot use images; drop "
@@ -272,7 +273,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                         hor_path=paths[k + 1])
         refinement = None
         if cameras is not None and args.refine_top_camera == "auto":
-            from xvmatch.inference.camera_refinement import refine_views_cameras
+            from xvmatch.inference.matching.camera_refinement import refine_views_cameras
 
             cameras, refinement = refine_views_cameras(
                 cameras, views[0], views[1:], [sorted(v) for v in views[1:]], offsets)
@@ -282,7 +283,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
                                                                    cameras, camera_rows)
         if refinement is not None and args.camera_check == "on":
-            from xvmatch.inference.camera_check import check_run_cameras
+            from xvmatch.inference.matching.camera_check import check_run_cameras
 
             cameras = list(cameras)
             for k in range(n_hor):  # a view whose cameras fail is matched without them
@@ -310,7 +311,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     person: list[dict[int, int]] = [{} for _ in paths]
     next_id, n_fallback = 1, 0
     if args.tracks:
-        from xvmatch.inference.multi_ego_tracking import track_multi_view
+        from xvmatch.inference.views.multi_ego_tracking import track_multi_view
 
         tracks = track_multi_view(views, problems, args.clip_length, solver=args.solver,
                                   time_limit=args.time_limit)

@@ -1,5 +1,5 @@
 """The ``xvmatch multicam`` command: one global id per person across several static cameras and
-each person's path on the ground (issue 32; :mod:`xvmatch.inference.multicam`), and
+each person's path on the ground (issue 32; :mod:`xvmatch.inference.views.multicam`), and
 ``--fit-homography`` to make ``H`` cameras from image/ground point pairs.
 
 Everything is read and checked, and the answer computed, before anything is written; the outputs
@@ -121,7 +121,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     if args.boxes is None or args.cameras is None:
         raise UsageError("give --boxes NAME=FILE ... and --cameras (or --fit-homography)")
     from xvmatch.formats.camera_io import load_ground_cameras
-    from xvmatch.inference.multicam import (
+    from xvmatch.inference.views.multicam import (
         MulticamInputError,
         MulticamOptions,
         associate_cameras,
@@ -184,7 +184,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     if args.localise != "foot":
         from dataclasses import replace
 
-        from xvmatch.inference.multicam_localisation import LocalisationOptions, localise
+        from xvmatch.inference.views.multicam_localisation import LocalisationOptions, localise
 
         method = "two_best" if args.localise == "two-best" else "all"
         ground = localise(cameras, relabelled, result.ground, LocalisationOptions(method))
@@ -206,8 +206,8 @@ def _open_images(args: argparse.Namespace, images: dict[str, str], boxes, camera
 
     if not images:
         return [], {}
-    from xvmatch.inference.learned_association import load_matcher_bundle
-    from xvmatch.inference.learned_pipeline import open_view_images
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
+    from xvmatch.inference.matching.learned_pipeline import open_view_images
 
     model_name = args.model or "default"
     matcher = load_matcher_bundle(model_name)

@@ -109,11 +109,11 @@ def add_offset_options(p: argparse.ArgumentParser, timing: str, several: bool = 
 def wearer_marked(top, positions: dict[int, int] | None):
     """The top view for an offset estimate and the camera wearer's id there: the wearer's box
     (``positions``: ``{frame: its position in the frame's record}``) tagged -1
-    (:func:`xvmatch.inference.multi_view_costs.with_wearer_tag`); ``(top, None)`` when no wearer
-    is given."""
+    (:func:`xvmatch.inference.views.multi_view_costs.with_wearer_tag`); ``(top, None)`` when no
+    wearer is given."""
     if positions is None:
         return top, None
-    from xvmatch.inference.multi_view_costs import with_wearer_tag
+    from xvmatch.inference.views.multi_view_costs import with_wearer_tag
 
     return {f: with_wearer_tag(r, positions.get(f)) for f, r in top.items()}, -1
 

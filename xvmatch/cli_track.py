@@ -2,9 +2,9 @@
 
 ``track`` reads two box files as detections (their id column is ignored, except to find the
 camera wearer with ``--camera-id``), tracks the people of both views with one id per person
-across the views (:func:`xvmatch.inference.tracking.track_pair`, CVMHAT Algorithm 1), and writes
-``OUT/top.txt`` and ``OUT/hor.txt``: the input rows, text unchanged but the id field, which holds
-the track id; rows the tracker dropped are absent. With the images of both views
+across the views (:func:`xvmatch.inference.tracks.tracking.track_pair`, CVMHAT Algorithm 1), and
+writes ``OUT/top.txt`` and ``OUT/hor.txt``: the input rows, text unchanged but the id field, which
+holds the track id; rows the tracker dropped are absent. With the images of both views
 (``--top-images``, ``--hor-images``: the forms ``xvmatch associate`` reads) the horizontal
 tracklets link by IoU and colour and the over-time weights mix in colour similarity. ``--model``
 gives the learned matcher: its box-only association makes the cross-view weights (``--weights
@@ -119,8 +119,8 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     images, ``--image-size`` agreeing, a bundle with an appearance network unless the model
     gives the learned weights)."""
     from xvmatch.formats.box_image_size import check_boxes_in_image
-    from xvmatch.inference.learned_pipeline import open_view_images
-    from xvmatch.inference.tracking import TrackImages
+    from xvmatch.inference.matching.learned_pipeline import open_view_images
+    from xvmatch.inference.tracks.tracking import TrackImages
 
     check_images_together(args)
     if args.top_images is None:
@@ -156,16 +156,16 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
 
 
 def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolved, sources):
-    """``(cameras, refinement)``: ``--cameras`` opened and checked (:func:`~xvmatch.inference.
-    learned_pipeline.open_matcher_cameras`), or None: a file for every horizontal frame ``f``
-    with boxes, and boxes in top frame ``f + offset`` (the files are numbered by the horizontal
-    frames, as ``associate`` reads them), each camera the size of its view's images
-    (``sources``: the open top and horizontal images, or none; else the horizontal size
-    ``resolved``); a fixed top camera refined on the boxes unless ``--refine-top-camera off``
-    (:mod:`xvmatch.inference.camera_refinement`; the refinement is None when off)."""
+    """``(cameras, refinement)``: ``--cameras`` opened and checked
+    (:func:`~xvmatch.inference.matching.learned_pipeline.open_matcher_cameras`), or None: a file for
+    every horizontal frame ``f`` with boxes, and boxes in top frame ``f + offset`` (the files are
+    numbered by the horizontal frames, as ``associate`` reads them), each camera the size of its
+    view's images (``sources``: the open top and horizontal images, or none; else the horizontal
+    size ``resolved``); a fixed top camera refined on the boxes unless ``--refine-top-camera off``
+    (:mod:`xvmatch.inference.matching.camera_refinement`; the refinement is None when off)."""
     if args.cameras is None:
         return None, None
-    from xvmatch.inference.learned_pipeline import open_matcher_cameras
+    from xvmatch.inference.matching.learned_pipeline import open_matcher_cameras
 
     wanted = {"hor": (tuple(resolved[0]), resolved[1])}
     if sources:
@@ -175,7 +175,7 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
     cameras = open_matcher_cameras(args.cameras, [(model, args.model)], frames, wanted)
     if args.refine_top_camera == "off":
         return cameras, None
-    from xvmatch.inference.camera_refinement import refine_run_cameras
+    from xvmatch.inference.matching.camera_refinement import refine_run_cameras
 
     cameras, refinement = refine_run_cameras(cameras, top, hor, frames, offset)
     note_camera_refinement(refinement, args.quiet)
@@ -183,12 +183,12 @@ def _open_cameras(args: argparse.Namespace, model, top, hor, offset: int, resolv
 
 
 def _checked_cameras(args: argparse.Namespace, model, top, hor, resolved, cameras, refinement):
-    """``(cameras, refinement)`` after ``--camera-check`` (:mod:`xvmatch.inference.
+    """``(cameras, refinement)`` after ``--camera-check`` (:mod:`xvmatch.inference.matching.
     camera_check`; ``top`` and ``hor`` aligned): as they are when the check is off or passes,
     ``(None, None)`` when it fails (the cross-view weights then come from the boxes alone)."""
     if cameras is None or args.camera_check == "off":
         return cameras, refinement
-    from xvmatch.inference.camera_check import check_run_cameras
+    from xvmatch.inference.matching.camera_check import check_run_cameras
 
     check = check_run_cameras(top, hor, sorted(hor), model, tuple(resolved[0]), cameras,
                               float(model.gamma),
@@ -200,13 +200,14 @@ def _checked_cameras(args: argparse.Namespace, model, top, hor, resolved, camera
 
 
 def _fitted_cameras_config(args: argparse.Namespace, config, refinement, images):
-    """``config`` with Eq. 17's ``w1`` at :data:`~xvmatch.inference.track_costs.
+    """``config`` with Eq. 17's ``w1`` at :data:`~xvmatch.inference.tracks.track_costs.
     FITTED_CAMERAS_W1` when the images would enter the cross-view weights, ``--w1`` is not
-    given and the refined cameras fit the video (:attr:`~xvmatch.inference.camera_refinement.
-    CameraRefinement.fits`); says so unless quiet."""
+    given and the refined cameras fit the video
+    (:attr:`~xvmatch.inference.matching.camera_refinement.CameraRefinement.fits`); says so unless
+    quiet."""
     if args.w1 is not None or images is None or refinement is None or not refinement.fits:
         return config
-    from xvmatch.inference.track_costs import FITTED_CAMERAS_W1
+    from xvmatch.inference.tracks.track_costs import FITTED_CAMERAS_W1
 
     if not args.quiet:
         print(f"track: the top camera fits the head rays, so the images serve over time only "
@@ -222,7 +223,7 @@ def _aligned(top, hor, images, cameras, offset: int):
     if not offset:
         return top, hor, images, cameras
     from xvmatch.formats.mot_boxes import align_frames
-    from xvmatch.inference.learned_pipeline import retimed
+    from xvmatch.inference.matching.learned_pipeline import retimed
 
     (top, hor), (s_top, s_hor) = align_frames([top, hor], [offset])
     if images is not None:  # aligned frame f shows the view's frame f - shift
@@ -325,8 +326,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
-    from xvmatch.inference.tracking import TrackConfig, learned_frame_evidence, track_pair
+    from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+    from xvmatch.inference.tracks.tracking import TrackConfig, learned_frame_evidence, track_pair
 
     start = time.perf_counter()
     params = spatial_params(args)

@@ -3,8 +3,8 @@
 On a site the appearance network never saw, images can make matching worse than boxes alone, and
 no label says so. But a video says something: the box-only matcher is sure of some pairs in
 several consecutive frames (the pseudo-matches ``xvmatch adapt`` mines,
-:func:`~xvmatch.inference.adaptation_pairs.mine_pairs`, 93-100% right on renders), and a useful
-appearance cue must rank those pairs above the other boxes of their frames.
+:func:`~xvmatch.inference.adaptation.adaptation_pairs.mine_pairs`, 93-100% right on renders), and a
+useful appearance cue must rank those pairs above the other boxes of their frames.
 :func:`check_appearance` measures that ranking, the verification AUC of the cue the matcher
 received, on the run's own frames; when it is shown below :data:`MIN_AUC` (a site bundle's
 adapted cue: :data:`SITE_MIN_AUC`) by twice its standard error (a few pairs do not condemn a
@@ -15,8 +15,8 @@ box-only matcher's sure pairs change partners over time (:func:`sure_pair_consis
 :data:`MIN_CONSISTENCY`: it is then sure and wrong, as boxes alone often are under an oblique
 overview camera, and its pairs would condemn a good cue); where there is no run of
 consecutive frames at all (single image pairs, very short clips) and the bundle has one, each
-frame is judged by its frame check (:mod:`xvmatch.inference.frame_check`). ``track`` judges its
-cross-view term the same way on tracklets (:func:`check_tracklet_appearance`: pairs of tracklets
+frame is judged by its frame check (:mod:`xvmatch.inference.matching.frame_check`). ``track`` judges
+its cross-view term the same way on tracklets (:func:`check_tracklet_appearance`: pairs of tracklets
 the box-only matcher is sure of, in the clips it tracks) and, when it fails, leaves only that
 term out; it skips the steadiness bar, which its pairs, sure over consecutive frames, did not
 need on rendered overview videos (docs/tracking.md). No identities are used. Numpy only.
@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from xvmatch.inference.adaptation_pairs import (
+from xvmatch.inference.adaptation.adaptation_pairs import (
     MiningConfig,
     agreed_pairs,
     box_tracklets,
@@ -39,9 +39,9 @@ from xvmatch.inference.adaptation_pairs import (
     mine_pairs,
     plan_bursts,
 )
-from xvmatch.inference.site_adaptation import auc_standard_error, pair_auc
-from xvmatch.inference.track_costs import FrameCosts
-from xvmatch.inference.tracklets import Tracklet
+from xvmatch.inference.adaptation.site_adaptation import auc_standard_error, pair_auc
+from xvmatch.inference.linking.assignment import FrameCosts
+from xvmatch.inference.linking.tracklets import Tracklet
 
 __all__ = ["CONSISTENCY_WINDOW", "MIN_AUC", "MIN_CONSISTENCY", "MIN_PAIRS", "SITE_MIN_AUC",
            "TRACK_MIN_AUC", "TRACK_MIN_PAIRS", "AppearanceCheck", "check_appearance",
@@ -109,7 +109,7 @@ class AppearanceCheck:
         tracklets: judged on ``track``'s tracklets (:func:`check_tracklet_appearance`), whose
             fallback drops only the cross-view appearance term.
         frames: frames judged one by one instead, by the bundle's frame check
-            (:mod:`xvmatch.inference.frame_check`; 0: none, as when the run was judged).
+            (:mod:`xvmatch.inference.matching.frame_check`; 0: none, as when the run was judged).
         frames_dropped: of those, the frames matched from the boxes alone.
         consistency: the box-only matcher's :func:`sure_pair_consistency` on the run (NaN when
             not measured); below :data:`MIN_CONSISTENCY` the run is not judged.
@@ -232,8 +232,8 @@ def sure_pair_consistency(
 
     In windows of ``window`` consecutive frames (spread over the run as bursts are), each view's
     boxes are linked into IoU tracklets; every frame's sure pairs
-    (:func:`~xvmatch.inference.adaptation_pairs.confident_pairs`) then give each tracklet a
-    partner tracklet of the other view. The result is the share of a tracklet's sure frames
+    (:func:`~xvmatch.inference.adaptation.adaptation_pairs.confident_pairs`) then give each tracklet
+    a partner tracklet of the other view. The result is the share of a tracklet's sure frames
     spent with its most frequent partner, over tracklets sure on at least ``min_sure`` frames,
     averaged over the two views: near 1 when the matcher is right where it is sure, lower when
     it is sure of different partners as the people move (NaN: no window or no such tracklet).
@@ -281,17 +281,17 @@ def check_tracklet_appearance(
     """Judge ``track``'s cross-view appearance cue (the Eq. 17 term) on its own clips.
 
     In each clip, a top and a horizontal tracklet are a pseudo-match when the box-only matcher
-    is sure of their boxes (:func:`~xvmatch.inference.adaptation_pairs.confident_pairs`) on
-    ``config.agree`` consecutive frames and neither tracklet of any other partner
-    (:func:`~xvmatch.inference.adaptation_pairs.agreed_pairs`, as ``adapt`` mines); the cue
-    must cost such a pair less than the pseudo-matched tracklets against the other tracklets of
+    is sure of their boxes (:func:`~xvmatch.inference.adaptation.adaptation_pairs.confident_pairs`)
+    on ``config.agree`` consecutive frames and neither tracklet of any other partner
+    (:func:`~xvmatch.inference.adaptation.adaptation_pairs.agreed_pairs`, as ``adapt`` mines); the
+    cue must cost such a pair less than the pseudo-matched tracklets against the other tracklets of
     their clip. Judged as :func:`check_appearance` judges, on tracklets instead of boxes.
 
     Args:
         clips: per clip, its top tracklets, its horizontal tracklets and the ``(T_top, T_hor)``
             cross-view appearance cost between them (tracklet ``rows`` are the records' ids).
         costs: the learned matcher's box-only costs of each frame
-            (:attr:`~xvmatch.inference.tracking.LearnedEvidence.costs`).
+            (:attr:`~xvmatch.inference.tracks.tracking.LearnedEvidence.costs`).
         gamma: its non-association cost.
         config: the margin and the agreement of a pseudo-match.
         min_auc: the least AUC for the cue to be used (:data:`TRACK_MIN_AUC`).

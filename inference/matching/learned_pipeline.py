@@ -6,13 +6,14 @@ the matcher's crowd limits, a box-only matcher given images, a matcher without c
 cameras, image sources lacking a frame the boxes list, top-view boxes outside the top images,
 cameras whose image size is not the images'), opens the image sources re-timed like the boxes
 (``top_offset``), settles the non-association cost once
-(:func:`~xvmatch.inference.learned_association.non_association_cost`: given, else the model's
-own), runs :func:`~xvmatch.inference.learned_association.associate_sequence_learned` and closes the
-sources, also on an error. :func:`open_learned_inputs` is the same in two steps, for a caller
-that uses the open images after the run (``xvmatch associate --draw``) or prints a note between
-the checks and the work.
+(:func:`~xvmatch.inference.matching.learned_association.non_association_cost`: given, else the
+model's own), runs
+:func:`~xvmatch.inference.matching.learned_association.associate_sequence_learned` and closes the
+sources, also on an error. :func:`open_learned_inputs` is the same in two steps, for a caller that
+uses the open images after the run (``xvmatch associate --draw``) or prints a note between the
+checks and the work.
 
-The models come opened (:func:`~xvmatch.inference.learned_association.load_matcher_bundle`;
+The models come opened (:func:`~xvmatch.inference.matching.learned_association.load_matcher_bundle`;
 the command line also exports torch matcher files into bundles first), and the horizontal image
 size comes resolved (:func:`xvmatch.formats.box_image_size.resolve_size`), so that this module
 needs neither torch nor the command line. Bad input raises ``ValueError`` with one line; the
@@ -27,10 +28,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from xvmatch.formats.box_image_size import check_boxes_in_image
-from xvmatch.inference.appearance_check import AppearanceCheck
-from xvmatch.inference.camera_check import CameraCheck, check_run_cameras
-from xvmatch.inference.camera_refinement import CameraRefinement, refine_run_cameras
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.matching.appearance_check import AppearanceCheck
+from xvmatch.inference.matching.camera_check import CameraCheck, check_run_cameras
+from xvmatch.inference.matching.camera_refinement import CameraRefinement, refine_run_cameras
+from xvmatch.inference.matching.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
     check_crowd_size,
@@ -69,7 +70,8 @@ class LearnedRunOptions:
         top_boxes: the top-view box file, named when a top box lies outside the top images
             or a frame's crowd is over the matcher's limits.
         hor_boxes: the horizontal-view box file, named when a frame's crowd is over the
-            matcher's limits (:func:`~xvmatch.inference.learned_association.check_crowd_size`).
+            matcher's limits
+            (:func:`~xvmatch.inference.matching.learned_association.check_crowd_size`).
         camera_id: top-view id of the horizontal camera's wearer (O given), or None.
         gamma: non-association cost in (0, 1]; None: the (first) model's own.
         mirror: also score the scene mirrored left-right and average the costs.
@@ -79,12 +81,12 @@ class LearnedRunOptions:
         keep_costs: also return each frame's cost matrix (:attr:`LearnedRun.costs`).
         appearance_check: with images, judge the appearance cue on the run's own box-only
             pseudo-matches and match from the boxes alone when it fails
-            (:mod:`xvmatch.inference.appearance_check`).
+            (:mod:`xvmatch.inference.matching.appearance_check`).
         refine_top_camera: with cameras, turn a fixed top camera to fit the run's head rays
-            when the fit is clear (:mod:`xvmatch.inference.camera_refinement`).
+            when the fit is clear (:mod:`xvmatch.inference.matching.camera_refinement`).
         camera_check: with cameras (refined when asked), judge them on the run's own box-only
             pseudo-matches and match without them when they fail
-            (:mod:`xvmatch.inference.camera_check`).
+            (:mod:`xvmatch.inference.matching.camera_check`).
     """
 
     models: tuple[LearnedMatcher, ...]

@@ -7,7 +7,7 @@ A bundle is a folder written by ``xvmatch export`` (:mod:`xvmatch.export.onnx_ex
     matcher.onnx       padded geometry features and pair cues -> cost 1 - P
     appearance.onnx    uint8 BGR crops -> unit descriptors (absent for a box-only matcher)
     adaptation.npz     a site bundle's adaptation of the descriptors (``xvmatch adapt``,
-                       :mod:`xvmatch.inference.site_adaptation`); absent in other bundles
+                       :mod:`xvmatch.inference.adaptation.site_adaptation`); absent in other bundles
 
 Loading checks the format and its version, every field's type and range, and each file's
 sha256 before onnxruntime opens it, and reports any problem in one line naming the file.
@@ -32,12 +32,12 @@ from xvmatch.core.json_text import json_problem
 from xvmatch.core.record_fields import typed_field
 from xvmatch.cues.matcher_inputs import CUE_NAMES
 from xvmatch.cues.spatial_features import FEATURE_VERSION, FeatureConfig
-from xvmatch.inference.frame_check import FrameCheck
-from xvmatch.inference.site_adaptation import (
+from xvmatch.inference.adaptation.site_adaptation import (
     ADAPTATION_FORMAT_VERSIONS,
     SiteAdaptation,
     load_adaptation,
 )
+from xvmatch.inference.matching.frame_check import FrameCheck
 
 __all__ = [
     "APPEARANCE_INPUT",
@@ -84,7 +84,7 @@ APPEARANCE_OUTPUTS: tuple[str, ...] = ("descriptors", "features", "stages")
 """Outputs of ``appearance.onnx``: unit descriptors, the trunk's pooled activations, and the
 pooled activations of each of its stages, each scaled to unit length (the second only in bundles
 exported since site adaptation fits on them, the third since 2026-11-28)."""
-DEFAULT_BUNDLE = Path(__file__).resolve().parent / "default_bundle"
+DEFAULT_BUNDLE = Path(__file__).resolve().parents[1] / "default_bundle"
 """The shipped default (``training/make_default_bundle.py`` rebuilds it)."""
 
 
@@ -181,7 +181,7 @@ class Manifest:
         raw: the whole JSON document.
         adaptation: a site bundle's adaptation (``xvmatch adapt``), or None.
         frame_check: the per-frame appearance check fitted for this bundle
-            (:mod:`xvmatch.inference.frame_check`), or None.
+            (:mod:`xvmatch.inference.matching.frame_check`), or None.
     """
 
     folder: Path
@@ -559,8 +559,8 @@ def int8_recheck_tolerance(int8: dict) -> float | None:
     """The manifest's ``appearance.int8.recheck.tolerance``: how far INT8 moved the matcher's
     costs at export (a high quantile over frames of a frame's largest change, the export's
     ``RECHECK_QUANTILE``). A frame whose INT8 assignment is not stable within it
-    (:func:`~xvmatch.inference.assignment.assignment_is_stable`) is run again with FP32; None
-    when the manifest records none (or an unusable one)."""
+    (:func:`~xvmatch.inference.linking.assignment.assignment_is_stable`) is run again with FP32;
+    None when the manifest records none (or an unusable one)."""
     try:
         tolerance = float(int8["recheck"]["tolerance"])
     except (KeyError, TypeError, ValueError):

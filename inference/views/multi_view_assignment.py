@@ -20,9 +20,9 @@ pair (:func:`pairwise_hungarian`, the baseline), so any change comes from consis
 The triangle inequalities (``3 n_a n_b n_c`` per triple of views) are added lazily: solve, add
 those of every triple the solution breaks, solve again, until none is broken; that is exact.
 Each frame has a budget of work, the same on every CPU: :data:`MIP_MAX_TRIANGLES` triangles
-added, :data:`~xvmatch.inference.track_mip.MIP_MAX_ROUNDS` programs of at most
-:data:`~xvmatch.inference.track_mip.MIP_NODE_LIMIT` nodes. Past it, or if HiGHS fails, the best
-consistent answer seen answers instead and the solution says so: a program's answer or the
+added, :data:`~xvmatch.inference.tracks.track_mip.MIP_MAX_ROUNDS` programs of at most
+:data:`~xvmatch.inference.tracks.track_mip.MIP_NODE_LIMIT` nodes. Past it, or if HiGHS fails, the
+best consistent answer seen answers instead and the solution says so: a program's answer or the
 pairwise Hungarian one, each made consistent by merging its pairs into people greedily, best
 first (:func:`repair_cycles`, :func:`consistent_hungarian`). A wall-time guard stops a program
 that would not end.
@@ -40,8 +40,8 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.track_mip import MIP_MAX_ROUNDS, MIP_NODE_LIMIT, MIP_TIME_LIMIT
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.tracks.track_mip import MIP_MAX_ROUNDS, MIP_NODE_LIMIT, MIP_TIME_LIMIT
 
 __all__ = [
     "MIP_MAX_TRIANGLES",
@@ -221,7 +221,7 @@ def pairwise_hungarian(
     gamma: float | Mapping[tuple[int, int], float],
 ) -> MultiViewSolution:
     """The baseline: each view pair on its own with the Hungarian algorithm and its gamma
-    (:func:`xvmatch.inference.assignment.assign`); the result may break cycles."""
+    (:func:`xvmatch.inference.linking.assignment.assign`); the result may break cycles."""
     n, mats, gammas = check_problem(sizes, costs, gamma)
     pairs = {ab: assign(mats[ab], gammas[ab]) for ab in mats}
     return _solution(pairs, n, "pairwise", 0)
@@ -323,10 +323,10 @@ def solve_multi_view(
         costs: ``{(a, b): (n_a, n_b) costs}`` for every ``a < b``; ``+inf`` forbids a pair.
         gamma: the non-association cost, one for all pairs or ``{(a, b): gamma_ab}``.
         time_limit: wall-time guard for all rounds together, against a program that would not
-            end (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`); past it the fallback.
+            end (:data:`~xvmatch.inference.tracks.track_mip.MIP_TIME_LIMIT`); past it the fallback.
         max_rounds: most programs solved while adding broken triangles; past it the fallback.
         node_limit: HiGHS nodes per program (the same on every CPU,
-            :data:`~xvmatch.inference.track_mip.MIP_NODE_LIMIT`); past it the fallback.
+            :data:`~xvmatch.inference.tracks.track_mip.MIP_NODE_LIMIT`); past it the fallback.
         max_triangles: most broken triangles added (:data:`MIP_MAX_TRIANGLES`); when a
             program breaks more than are left, those whose two matches gain most fill it, one
             last program is solved, and the fallback answers unless that one is consistent.

@@ -2,12 +2,12 @@
 
 View 0 is the top view, views 1..K the egocentric (horizontal) ones. Every cost is minus the
 evidence, in nats, that the two boxes are one person, with non-association cost 0, so that the
-joint program of :mod:`xvmatch.inference.multi_view_assignment` adds evidence of different
+joint program of :mod:`xvmatch.inference.views.multi_view_assignment` adds evidence of different
 origins in one unit (a log-odds), and pairwise Hungarian on the same matrices takes the pairs
 each matcher takes alone.
 
 - Top-ego pairs come from an existing per-pair matcher: the learned matcher of a bundle
-  (:func:`~xvmatch.inference.learned_association.associate_sequence_learned`: boxes, and
+  (:func:`~xvmatch.inference.matching.learned_association.associate_sequence_learned`: boxes, and
   images and cameras when given), its cost ``1 - P`` turned into minus the log-odds relative to
   its gamma (:func:`log_odds_cost`); or the handcrafted spatial-distribution search (CVMHAT
   Sec. 3.2), whose best hypotheses vote for pairs (:func:`spatial_vote_cost`), calibrated into
@@ -30,14 +30,14 @@ import numpy as np
 from xvmatch.cues.matcher_inputs import appearance_cost
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.cues.spatial_search import best_per_candidate, rank_hypotheses
-from xvmatch.inference.appearance_check import AppearanceCheck
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.matching.appearance_check import AppearanceCheck
+from xvmatch.inference.matching.learned_association import (
     FrameCameraSource,
     FrameImages,
     LearnedMatcher,
     associate_sequence_learned,
 )
-from xvmatch.inference.multi_view_assignment import view_pairs
+from xvmatch.inference.views.multi_view_assignment import view_pairs
 
 __all__ = [
     "EGO_APPEARANCE",
@@ -185,7 +185,7 @@ def multi_view_costs(
         progress: wraps the frame iterator of each top-ego pass.
         appearance_check: with images, judge each top-ego pass's appearance cue on its own
             box-only pseudo-matches, that pass falling back to the boxes when it fails
-            (:mod:`xvmatch.inference.appearance_check`; the ego-ego costs are not judged).
+            (:mod:`xvmatch.inference.matching.appearance_check`; the ego-ego costs are not judged).
         checked: if given, receives ``{egocentric view (1-based): AppearanceCheck}`` of the
             passes judged.
     """

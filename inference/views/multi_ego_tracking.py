@@ -1,12 +1,12 @@
 """People followed over time in one top view and several egocentric views, cycle-consistently.
 
-The frame-by-frame program of :mod:`xvmatch.inference.multi_view_assignment` decides every frame
-alone and its person ids do not carry over frames. Here (issue 33, item 2) tracklets, as in the
-two-view tracker (:mod:`xvmatch.inference.tracking`), carry evidence and ids over time:
+The frame-by-frame program of :mod:`xvmatch.inference.views.multi_view_assignment` decides every
+frame alone and its person ids do not carry over frames. Here (issue 33, item 2) tracklets, as in
+the two-view tracker (:mod:`xvmatch.inference.tracks.tracking`), carry evidence and ids over time:
 
 1. every view is cut into the same clips and its boxes linked into tracklets
-   (:func:`xvmatch.inference.tracklets.view_tracklets`, CVMHAT Sec. 4.1): the top view by IoU
-   (>= 0.5), the egocentric views by motion (``motion`` = 0.3, a gate in box heights): a
+   (:func:`xvmatch.inference.linking.tracklets.view_tracklets`, CVMHAT Sec. 4.1): the top view by
+   IoU (>= 0.5), the egocentric views by motion (``motion`` = 0.3, a gate in box heights): a
    head-worn camera's shake moves all its boxes alike, often by more than a box width, so a
    box is linked to the tracklet nearest once that common shift is removed
    (:func:`xvmatch.cues.box_motion.motion_link_costs`). On the benchmark's tuning scenes
@@ -28,7 +28,7 @@ two-view tracker (:mod:`xvmatch.inference.tracking`), carry evidence and ids ove
    tracklets' other frames while a tracklet that wrongly holds two people cannot overrule a
    frame alone;
 3. every frame is solved by the joint program over all views with the cycle constraints
-   (:func:`~xvmatch.inference.multi_view_assignment.solve_multi_view`) on those costs:
+   (:func:`~xvmatch.inference.views.multi_view_assignment.solve_multi_view`) on those costs:
    every person has at most one box per view, and the matches are cycle-consistent;
 4. a frame's people take the ids of earlier ones (:func:`carry_ids`): a person continues the
    id whose boxes, in the latest frame they were seen, lay on the same tracklet chains, in the
@@ -49,19 +49,19 @@ from scipy.optimize import linear_sum_assignment
 
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
-from xvmatch.inference.multi_view_assignment import (
-    consistent_hungarian,
-    solve_multi_view,
-    view_pairs,
-)
-from xvmatch.inference.multi_view_costs import FrameProblem
-from xvmatch.inference.track_mip import MIP_TIME_LIMIT
-from xvmatch.inference.tracklets import (
+from xvmatch.inference.linking.tracklets import (
     Tracklet,
     motion_assignment,
     split_clips,
     view_tracklets,
 )
+from xvmatch.inference.tracks.track_mip import MIP_TIME_LIMIT
+from xvmatch.inference.views.multi_view_assignment import (
+    consistent_hungarian,
+    solve_multi_view,
+    view_pairs,
+)
+from xvmatch.inference.views.multi_view_costs import FrameProblem
 
 __all__ = [
     "MultiViewTracks",
@@ -85,10 +85,10 @@ class MultiViewTracks:
             frames, is the same person.
         statuses: per frame solved, the status of its joint program (``optimal``,
             ``fallback`` or ``greedy``; see
-            :data:`~xvmatch.inference.multi_view_assignment.STATUSES`).
+            :data:`~xvmatch.inference.views.multi_view_assignment.STATUSES`).
         n_people: person ids used (the largest id).
         max_triangles: the most broken triangles one frame's program added (the budget:
-            :data:`~xvmatch.inference.multi_view_assignment.MIP_MAX_TRIANGLES`).
+            :data:`~xvmatch.inference.views.multi_view_assignment.MIP_MAX_TRIANGLES`).
     """
 
     person: tuple[dict[int, np.ndarray], ...]
@@ -114,7 +114,7 @@ def tracklet_costs(
     Args:
         tracklets: per view, the clip's tracklets.
         problems: ``{frame: FrameProblem}`` (sizes, ``{(a, b): (n_a, n_b)}`` costs in record
-            order, gammas), as :func:`~xvmatch.inference.multi_view_costs.multi_view_costs`
+            order, gammas), as :func:`~xvmatch.inference.views.multi_view_costs.multi_view_costs`
             builds them.
         views: per view, ``{frame: FrameBoxes}``; a tracklet's ``rows`` are the records' ids.
 
@@ -312,7 +312,7 @@ def carry_ids(clusters: Sequence[np.ndarray], chains: Sequence[np.ndarray],
 
     Args:
         clusters: per view, the cluster of each box of the frame (``(n,)`` int64, as
-            :attr:`~xvmatch.inference.multi_view_assignment.MultiViewSolution.person`).
+            :attr:`~xvmatch.inference.views.multi_view_assignment.MultiViewSolution.person`).
         chains: per view, the chain (:func:`view_chains`) of each box.
         owner: ``{(view, chain): person id}`` of the latest frame each chain was seen in;
             updated in place.
@@ -378,7 +378,7 @@ def track_multi_view(
         views: per view (0 the top view), ``{frame: FrameBoxes}``; the records' ``ids`` must
             be unique within a frame (they name the rows; they are never compared across views).
         problems: ``{frame: FrameProblem}`` of every frame (as
-            :func:`~xvmatch.inference.multi_view_costs.multi_view_costs` builds them).
+            :func:`~xvmatch.inference.views.multi_view_costs.multi_view_costs` builds them).
         clip_length: frames per clip (10, CVMHAT's).
         min_iou, max_gap: the tracklet rule of the egocentric views, inside a clip and across
             clips (``min_iou`` only with ``motion`` None).
@@ -386,7 +386,7 @@ def track_multi_view(
         solver: ``mip`` (the joint program per frame) or ``greedy`` (pairwise Hungarian made
             consistent).
         time_limit: wall-time guard per frame for the MIP, past which its fallback is used
-            (:func:`~xvmatch.inference.multi_view_assignment.solve_multi_view`).
+            (:func:`~xvmatch.inference.views.multi_view_assignment.solve_multi_view`).
         frame_weight: the share of a frame's own cost in the costs (:func:`smoothed_problems`).
         motion: the egocentric views' links by motion, with this gate in box heights
             (:func:`~xvmatch.cues.box_motion.motion_link_costs`); None: by IoU >= ``min_iou``

@@ -26,7 +26,7 @@ import numpy as np
 from xvmatch.cues.color_histogram import box_histograms, histogram_intersection
 from xvmatch.cues.matcher_inputs import appearance_cost
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.tracklets import Tracklet
+from xvmatch.inference.linking.tracklets import Tracklet
 
 __all__ = [
     "Embedder",
@@ -40,7 +40,7 @@ __all__ = [
 
 Embedder = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``embed(image (H, W, 3) uint8 BGR, boxes (K, 4)) -> (K, D)`` unit descriptors, e.g.
-:meth:`xvmatch.inference.learned_association.LearnedMatcher.descriptors`."""
+:meth:`xvmatch.inference.matching.learned_association.LearnedMatcher.descriptors`."""
 PairEmbedder = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``embed(image, boxes) -> ((K, D) descriptors, (K, C) other vectors)`` from one run of the
 network (the crops are embedded once)."""

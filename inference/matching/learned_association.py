@@ -6,7 +6,7 @@ and the pair cues the frame has: the appearance cost of the two views' crops (em
 ``appearance.onnx``, all crops of a frame in one batch) and, with cameras, the ray distance and
 cheirality cues. Frames go through ``matcher.onnx`` in padded batches; each cost matrix in
 [0, 1] goes through the Hungarian assignment with the non-association cost gamma (Eqs. 1-2 of
-the geometric-priors paper, :func:`xvmatch.inference.assignment.assign`).
+the geometric-priors paper, :func:`xvmatch.inference.linking.assignment.assign`).
 
 Crowds: the matcher's memory grows with the hypotheses times the box pairs of the frames it
 scores at once, and the search for the camera location with the square of the top-view crowd.
@@ -19,7 +19,7 @@ are batched as before: the same costs to the bit).
 
 With an INT8 appearance network opened for re-checking (``load_bundle(..., recheck=True)``, as
 ``associate`` does), a frame whose assignment is not stable within the tolerance the export
-measured (how far INT8 moves the costs; :func:`~xvmatch.inference.assignment.
+measured (how far INT8 moves the costs; :func:`~xvmatch.inference.linking.assignment.
 assignment_is_stable`) is scored again with the FP32 network: near ties, where INT8's rounding
 could flip a pair, get FP32's answer.
 
@@ -53,14 +53,14 @@ from xvmatch.cues.spatial_features import FeatureConfig, FrameFeatures
 from xvmatch.cues.spatial_search import FrameLike
 from xvmatch.formats.crops import box_crops
 from xvmatch.geometry.camera import FrameCameras
-from xvmatch.inference.appearance_check import (
+from xvmatch.inference.linking.assignment import assign, assignment_is_stable
+from xvmatch.inference.matching.appearance_check import (
     MIN_AUC,
     SITE_MIN_AUC,
     AppearanceCheck,
     check_appearance,
 )
-from xvmatch.inference.assignment import assign, assignment_is_stable
-from xvmatch.inference.bundle import Bundle, load_bundle
+from xvmatch.inference.matching.bundle import Bundle, load_bundle
 
 __all__ = [
     "EMBED_BATCH",
@@ -206,12 +206,12 @@ class LearnedMatcher:
                     vector: str = "descriptors") -> np.ndarray:
         """``(K, D)`` appearance descriptors of the boxes of one image (one batch); with
         ``vector="features"`` or ``"stages"`` the network's unit pooled features or stages instead
-        (:meth:`~xvmatch.inference.bundle.Bundle.embed`)."""
+        (:meth:`~xvmatch.inference.matching.bundle.Bundle.embed`)."""
         return self.embed(self.crops(image, boxes), vector)
 
     def embed(self, crops: np.ndarray, vector: str = "descriptors",
               reference: bool = False) -> np.ndarray:
-        """:meth:`~xvmatch.inference.bundle.Bundle.embed` of ``(K, H, W, 3)`` crops,
+        """:meth:`~xvmatch.inference.matching.bundle.Bundle.embed` of ``(K, H, W, 3)`` crops,
         :data:`EMBED_BATCH` at a time (one call for an ordinary frame's crops)."""
         if crops.shape[0] <= EMBED_BATCH:
             return self.bundle.embed(crops, vector, reference)
@@ -247,7 +247,7 @@ class LearnedMatcher:
     def appearance_cost(self, top: np.ndarray, hor: np.ndarray) -> np.ndarray:
         """``(M, N)`` appearance cue of raw top ``(M, D)`` and horizontal ``(N, D)`` vectors
         (:meth:`cue_vectors`): ``|a - b| / 2`` of the descriptors, or a site bundle's adapted
-        cost (:meth:`~xvmatch.inference.site_adaptation.SiteAdaptation.cost`: each view
+        cost (:meth:`~xvmatch.inference.adaptation.site_adaptation.SiteAdaptation.cost`: each view
         standardised on its own, projected, recalibrated)."""
         if self.bundle.adaptation is not None:
             return self.bundle.adaptation.cost(top, hor)
@@ -304,7 +304,7 @@ class LearnedMatcher:
 def load_matcher_bundle(path_or_default: str | os.PathLike = "default", threads: int = 1,
                         precision: str | None = None, recheck: bool = False) -> LearnedMatcher:
     """Open a bundle folder (or ``"default"``) as a :class:`LearnedMatcher` (``threads``,
-    ``precision`` and ``recheck`` as :func:`~xvmatch.inference.bundle.load_bundle`).
+    ``precision`` and ``recheck`` as :func:`~xvmatch.inference.matching.bundle.load_bundle`).
 
     Raises:
         BundleError: an unusable bundle (one line naming the file).
@@ -316,7 +316,8 @@ def non_association_cost(models: Sequence[LearnedMatcher], gamma: float | None =
     """The non-association cost of a run: ``gamma`` when given, else the (first) model's own.
 
     The one home of this rule: :func:`associate_sequence_learned` and the pipeline
-    (:mod:`xvmatch.inference.learned_pipeline`, which writes it into ``--costs``) both use it.
+    (:mod:`xvmatch.inference.matching.learned_pipeline`, which writes it into ``--costs``) both use
+    it.
     """
     return models[0].gamma if gamma is None else float(gamma)
 
@@ -475,14 +476,14 @@ def associate_sequence_learned(
             assignment was a near tie (models opened with ``recheck``; see the module
             docstring).
         appearance_check: with images, judge the (first) model's appearance cue on these
-            frames' own box-only pseudo-matches (:func:`~xvmatch.inference.appearance_check.
-            check_appearance`) and, when it fails, match every frame from the boxes alone
-            (each frame is then also scored without images, and no frame is assigned before
-            the last one is scored); where there is no run of consecutive frames to judge
-            on (single image pairs, clips shorter than a burst), a single bundle with a frame
-            check (not a site bundle), without cameras, judges each frame on its own
-            (:mod:`xvmatch.inference.frame_check`).
-        checked: if given, receives the :class:`~xvmatch.inference.appearance_check.
+            frames' own box-only pseudo-matches
+            (:func:`~xvmatch.inference.matching.appearance_check.check_appearance`) and, when it
+            fails, match every frame from the boxes alone (each frame is then also scored without
+            images, and no frame is assigned before the last one is scored); where there is no run
+            of consecutive frames to judge on (single image pairs, clips shorter than a burst), a
+            single bundle with a frame check (not a site bundle), without cameras, judges each frame
+            on its own (:mod:`xvmatch.inference.matching.frame_check`).
+        checked: if given, receives the :class:`~xvmatch.inference.matching.appearance_check.
             AppearanceCheck` of a run with ``appearance_check`` and images.
 
     Raises:

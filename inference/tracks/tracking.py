@@ -4,7 +4,7 @@
    :func:`xvmatch.cues.spatial_search.associate_frame`; O given when the wearer is known),
    or the learned matcher's box-only association (:func:`learned_frame_evidence`: its cost
    matrices and its non-association cost give the cross-view weights,
-   :func:`~xvmatch.inference.track_costs.learned_similarity`).
+   :func:`~xvmatch.inference.tracks.track_costs.learned_similarity`).
 2. Single-view tracklets in clips of ``clip_length`` frames (:mod:`.tracklets`); with images,
    the horizontal view's link by IoU and colour, and each tracklet gets its appearance
    (:mod:`.track_appearance`: colour histograms, and the network descriptor with a bundle).
@@ -28,15 +28,21 @@ from xvmatch.core.worker_pool import worker_pool
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.cues.spatial_search import associate_frame
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.inference.appearance_check import AppearanceCheck, check_tracklet_appearance
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.learned_association import (
+from xvmatch.inference.linking.assignment import FrameCosts, assign
+from xvmatch.inference.linking.tracklets import (
+    Tracklet,
+    clip_tracklets,
+    split_clips,
+    view_tracklets,
+)
+from xvmatch.inference.matching.appearance_check import AppearanceCheck, check_tracklet_appearance
+from xvmatch.inference.matching.learned_association import (
     FrameCameraSource,
     FrameImages,
     LearnedMatcher,
     associate_sequence_learned,
 )
-from xvmatch.inference.track_appearance import (
+from xvmatch.inference.tracks.track_appearance import (
     CostOfDescriptors,
     Embedder,
     PairEmbedder,
@@ -46,9 +52,8 @@ from xvmatch.inference.track_appearance import (
     descriptor_similarity,
     frame_histograms,
 )
-from xvmatch.inference.track_costs import (
+from xvmatch.inference.tracks.track_costs import (
     LEARNED_RULES,
-    FrameCosts,
     TrackWeights,
     combine_cross_view,
     combine_over_time,
@@ -56,10 +61,9 @@ from xvmatch.inference.track_costs import (
     motion_similarity,
     spatial_similarity,
 )
-from xvmatch.inference.track_mip import MIP_TIME_LIMIT, ClusterSolution, solve_four_clusters
-from xvmatch.inference.track_spectral import spectral_solution
-from xvmatch.inference.track_stitching import stitch_windows
-from xvmatch.inference.tracklets import Tracklet, clip_tracklets, split_clips, view_tracklets
+from xvmatch.inference.tracks.track_mip import MIP_TIME_LIMIT, ClusterSolution, solve_four_clusters
+from xvmatch.inference.tracks.track_spectral import spectral_solution
+from xvmatch.inference.tracks.track_stitching import stitch_windows
 
 __all__ = [
     "SOLVERS",
@@ -92,7 +96,7 @@ class TrackConfig:
         weights: the edge-weight parameters (``c0``, ``w1``, ``w2``, ``sigma``).
         solver: ``mip`` (Eqs. 1-4 with HiGHS) or ``spectral`` (the Sec. 4.1 baseline).
         time_limit: wall-time guard per window for the MIP before its fallback
-            (:data:`~xvmatch.inference.track_mip.MIP_TIME_LIMIT`; the MIP's budget of work,
+            (:data:`~xvmatch.inference.tracks.track_mip.MIP_TIME_LIMIT`; the MIP's budget of work,
             the same on every CPU, is its loop and node limits).
         seed: seed of the spectral baseline's k-means.
         min_colour: with images, the colour-histogram similarity a horizontal box needs with
@@ -104,8 +108,8 @@ class TrackConfig:
             first measurement, and is level with the shipped one (docs/tracking.md).
         learned_rule: with the learned matcher's evidence (:class:`LearnedEvidence`), how each
             frame's costs count in the cross-view weight
-            (:func:`~xvmatch.inference.track_costs.frame_evidence`); chosen on the even CVMHAT
-            dev pairs (docs/tracking.md).
+            (:func:`~xvmatch.inference.tracks.track_costs.frame_evidence`); chosen on the even
+            CVMHAT dev pairs (docs/tracking.md).
         learned_share: with the learned evidence, its share of the cross-view spatial term; the
             rest is Eq. 13 on the handcrafted frame association (``frame_pairs``, computed when
             not given). 1 (default): the learned evidence alone; 0.5 was behind on the even
@@ -209,7 +213,7 @@ def learned_frame_evidence(
     """The learned matcher's association of every frame both views have, from the boxes alone
     (and the cameras, when given).
 
-    Each frame's cost matrix (:func:`~xvmatch.inference.learned_association.
+    Each frame's cost matrix (:func:`~xvmatch.inference.matching.learned_association.
     associate_sequence_learned`, no image cue even when the bundle has one; the camera cues
     and the rectified geometry only with ``cameras``) and its assignment with the matcher's
     non-association cost (geometric-priors Eqs. 1-2).
@@ -269,7 +273,7 @@ class TrackResult:
         n_fallback: windows where the MIP spent its budget or time limit or failed (the best
             loop-free answer found used).
         max_loops: the most loop constraints one window's MIP added
-            (:data:`~xvmatch.inference.track_mip.MIP_MAX_LOOPS` is the budget).
+            (:data:`~xvmatch.inference.tracks.track_mip.MIP_MAX_LOOPS` is the budget).
     """
 
     top_rows: dict[int, int]
@@ -447,9 +451,9 @@ def track_pair(
         appearance_check: with the network's images, ``learned`` and a cross-view appearance
             term (``config.weights.w1`` < 1), judge that cue on the clips' own box-only
             pseudo-matched tracklets
-            (:func:`~xvmatch.inference.appearance_check.check_tracklet_appearance`) and, when
-            it fails, leave it out of the cross-view weights (the over-time terms keep it).
-        checked: if given, receives that :class:`~xvmatch.inference.appearance_check.
+            (:func:`~xvmatch.inference.matching.appearance_check.check_tracklet_appearance`) and,
+            when it fails, leave it out of the cross-view weights (the over-time terms keep it).
+        checked: if given, receives that :class:`~xvmatch.inference.matching.appearance_check.
             AppearanceCheck` (nothing when there was nothing to judge).
 
     Only the frames present are visited (:func:`split_clips`), so a gap of any length between

@@ -57,7 +57,7 @@ class CameraRefinement:
         message: one line for the user.
         moving: the top camera changes from frame to frame (a drone in flight): only the
             constant part of its error can be refined, and a fit says little of the rest,
-            so the camera check judges it (:mod:`xvmatch.inference.camera_check`).
+            so the camera check judges it (:mod:`xvmatch.inference.matching.camera_check`).
     """
 
     turned: bool
@@ -69,14 +69,15 @@ class CameraRefinement:
     def fit_loss(self) -> float | None:
         """The loss of the best fit found (0 to 1; whether used or not), or None when none was
         tried: how far even the best turn of the top camera leaves the head rays apart
-        (:mod:`xvmatch.inference.camera_check` judges the cameras above its ``DOUBT_LOSS``)."""
+        (:mod:`xvmatch.inference.matching.camera_check` judges the cameras above its
+        ``DOUBT_LOSS``)."""
         return None if self.fit is None else self.fit.loss_after
 
     @property
     def fits(self) -> bool:
         """The top camera in use fits the video's head rays: turned to fit them, or kept as
         given with a loss of at most :data:`FIT_LOSS` (``track`` then leaves the images to the
-        over-time terms, :data:`~xvmatch.inference.track_costs.FITTED_CAMERAS_W1`)."""
+        over-time terms, :data:`~xvmatch.inference.tracks.track_costs.FITTED_CAMERAS_W1`)."""
         return self.turned or (self.fit is not None and self.fit.loss_after <= FIT_LOSS)
 
 

@@ -6,23 +6,23 @@ and it trusts them: on rendered videos it then falls up to 35 Eq. 9 points below
 (docs/method.md, "the camera check"). Two signs, each weak alone, say so without labels:
 
 * even the best turn of the top camera leaves the head rays apart: the refinement's loss
-  (:mod:`xvmatch.inference.camera_refinement`) stays above :data:`DOUBT_LOSS`. Cameras that help
-  can also end there (an egocentric camera off anew every frame), so this only opens the check.
+  (:mod:`xvmatch.inference.matching.camera_refinement`) stays above :data:`DOUBT_LOSS`. Cameras that
+  help can also end there (an egocentric camera off anew every frame), so this only opens the check.
   A top camera that changes from frame to frame (a drone in flight, from its telemetry) has at
   most the constant part of its error refined, so nothing vouches for the rest: its check is
   always open;
 * the box-only matcher's pseudo-matches, the pairs it is sure of on consecutive frames
-  (:func:`~xvmatch.inference.adaptation_pairs.mine_pairs`, those the appearance check and
+  (:func:`~xvmatch.inference.adaptation.adaptation_pairs.mine_pairs`, those the appearance check and
   ``adapt`` use), are mostly right, good cameras keep them, and misleading ones have the
   matcher pair them otherwise. :func:`check_cameras` counts the share kept; below
   :data:`MIN_KEEP` by more than twice its standard error, the run is matched without the
   cameras (:func:`check_run_cameras` scores the frames both ways).
 
 The pseudo-matches judge only where the box-only matcher is shown steady: its sure pairs keep
-their partners over :data:`~xvmatch.inference.appearance_check.CONSISTENCY_WINDOW` frames
-(:func:`~xvmatch.inference.appearance_check.sure_pair_consistency` at least
-:data:`~xvmatch.inference.appearance_check.MIN_CONSISTENCY`). Under an oblique overview camera
-it can be sure and wrong, and exact cameras then "lose" its pairs (rendered overview videos:
+their partners over :data:`~xvmatch.inference.matching.appearance_check.CONSISTENCY_WINDOW` frames
+(:func:`~xvmatch.inference.matching.appearance_check.sure_pair_consistency` at least
+:data:`~xvmatch.inference.matching.appearance_check.MIN_CONSISTENCY`). Under an oblique overview
+camera it can be sure and wrong, and exact cameras then "lose" its pairs (rendered overview videos:
 3 of 35 kept by exact cameras that add 55 points, at a steadiness of 0.6 or more; hence the
 fit's loss as well). So cameras that fit the head rays, or that no fit was tried for with
 ``--refine-top-camera off``, clips too short to measure the steadiness
@@ -38,15 +38,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from xvmatch.inference.adaptation_pairs import MiningConfig, mine_pairs, plan_bursts
-from xvmatch.inference.appearance_check import (
+from xvmatch.inference.adaptation.adaptation_pairs import MiningConfig, mine_pairs, plan_bursts
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.matching.appearance_check import (
     CONSISTENCY_WINDOW,
     MIN_CONSISTENCY,
     MIN_PAIRS,
     sure_pair_consistency,
 )
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.learned_association import box_only_costs
+from xvmatch.inference.matching.learned_association import box_only_costs
 
 __all__ = ["DOUBT_LOSS", "MAX_FRAMES", "MIN_KEEP", "CameraCheck", "check_cameras",
            "check_run_cameras"]
@@ -66,9 +66,9 @@ ends at 0.45 to 0.56 with both cameras off."""
 
 MAX_FRAMES: int = 300
 """Frames the check mines pseudo-matches on (bursts spread over the run), and at most as many
-(:data:`~xvmatch.inference.appearance_check.CONSISTENCY_WINDOW` windows) it measures the box-only
-matcher's steadiness on: a doubted run is scored on at most 600 frames without the cameras and
-300 with them, whatever the video's length."""
+(:data:`~xvmatch.inference.matching.appearance_check.CONSISTENCY_WINDOW` windows) it measures the
+box-only matcher's steadiness on: a doubted run is scored on at most 600 frames without the cameras
+and 300 with them, whatever the video's length."""
 
 OFF_HINT = "--camera-check off uses them as given"
 
@@ -86,9 +86,9 @@ class CameraCheck:
         bursts: runs of consecutive frames they were mined on (0: none to mine on).
         min_keep: the bar it was held to.
         min_pairs: the fewest pseudo-matches it needed to judge.
-        consistency: the box-only matcher's :func:`~xvmatch.inference.appearance_check.
+        consistency: the box-only matcher's :func:`~xvmatch.inference.matching.appearance_check.
             sure_pair_consistency` (NaN: not measured, the clip is too short); judged only at
-            :data:`~xvmatch.inference.appearance_check.MIN_CONSISTENCY` or more.
+            :data:`~xvmatch.inference.matching.appearance_check.MIN_CONSISTENCY` or more.
         fit_loss: the refinement's loss that opened the check (NaN: none given, as for the
             pure :func:`check_cameras`).
         moving: the check was opened by a top camera that changes from frame to frame.
@@ -165,7 +165,7 @@ def check_cameras(
         top, hor: ``{frame: FrameBoxes}`` of each view (ids only name boxes).
         box_costs: ``{frame: (M, N)}`` the matcher's costs without the cameras (nor images),
             input order, of frames with boxes in both views: those of ``camera_costs`` and
-            the windows :func:`~xvmatch.inference.appearance_check.sure_pair_consistency`
+            the windows :func:`~xvmatch.inference.matching.appearance_check.sure_pair_consistency`
             reads.
         camera_costs: ``{frame: (M, N)}`` its costs with the cameras, of the frames the
             pseudo-matches are mined on (bursts of consecutive frames).
@@ -214,24 +214,25 @@ def check_run_cameras(
     moves (else they are kept, unjudged and unsaid): score the frames the check reads without
     and with ``cameras`` and judge them (:func:`check_cameras`): bursts of consecutive frames to
     mine (at most ``config.max_frames``) both ways, and windows of
-    :data:`~xvmatch.inference.appearance_check.CONSISTENCY_WINDOW` frames (as many) without.
+    :data:`~xvmatch.inference.matching.appearance_check.CONSISTENCY_WINDOW` frames (as many)
+    without.
 
     Args:
         top, hor: ``{frame: FrameBoxes}``, the top one re-timed to the horizontal frames.
         frames: the run's frames.
-        matcher: a :class:`~xvmatch.inference.learned_association.LearnedMatcher`, or several
-            (an ensemble, costs averaged).
+        matcher: a :class:`~xvmatch.inference.matching.learned_association.LearnedMatcher`, or
+            several (an ensemble, costs averaged).
         hor_size: ``(W, H)`` of the horizontal images.
         cameras: the run's camera source (``get(frame)``), its top camera refined if it was.
         gamma: the run's non-association cost.
         fit_loss: the loss of the top camera's refinement (its best fit,
-            :attr:`~xvmatch.inference.camera_refinement.CameraRefinement.fit_loss`), or None
-            when none was tried (the cameras are then kept, unless ``moving``).
+            :attr:`~xvmatch.inference.matching.camera_refinement.CameraRefinement.fit_loss`), or
+            None when none was tried (the cameras are then kept, unless ``moving``).
         camera_id: the wearer's top-view id, when known.
         config: how pseudo-matches are mined (default: :data:`MAX_FRAMES` frames).
         workers: processes for the geometry features (the result does not depend on it).
         min_keep: the least share kept for the cameras to be used.
-        moving: the top camera changes from frame to frame (:attr:`~xvmatch.inference.
+        moving: the top camera changes from frame to frame (:attr:`~xvmatch.inference.matching.
             camera_refinement.CameraRefinement.moving`; at most the constant part of its error
             was refined): judged whatever ``fit_loss``.
     """

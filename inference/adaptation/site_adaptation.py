@@ -6,7 +6,7 @@ views' descriptors loses its meaning. :class:`SiteAdaptation` is a small map on 
 vectors of the network (the pooled activations of its trunk's stages, or of its last stage,
 when it gives them: they keep more of what a camera change leaves of a person than the head's
 descriptors; else the descriptors; ``vector`` says which), learned from pairs mined on the
-site's own videos (:mod:`xvmatch.inference.adaptation_pairs`), with no identities:
+site's own videos (:mod:`xvmatch.inference.adaptation.adaptation_pairs`), with no identities:
 
 1. **per-view standardisation** ``x = (d - mean_v) / scale_v`` (``v`` = top or horizontal): a
    camera's colour cast moves all of its descriptors the same way, and this removes it;
@@ -356,7 +356,7 @@ def load_adaptation(path: str | os.PathLike,
     Args:
         path: the file.
         dims: the size of each vector the network gives (``vector -> size or None``, e.g.
-            :meth:`xvmatch.inference.bundle.AppearanceSpec.dim`).
+            :meth:`xvmatch.inference.matching.bundle.AppearanceSpec.dim`).
 
     Raises:
         ValueError: one line naming the array: unreadable (truncated, not a zip, a bad CRC), a
@@ -659,8 +659,8 @@ def fit_site_adaptation(
             None: ``"odds"`` with a ``reference``, else ``"none"``. The likelihood ratios and
             medians of the adapted cost are measured on the held-out pairs.
         reference: ``(positive, negative)`` raw costs of the network on its training domain
-            (:func:`xvmatch.inference.adaptation_pairs.reference_costs`), for ``"odds"`` and
-            ``"median"``.
+            (:func:`xvmatch.inference.adaptation.adaptation_pairs.reference_costs`), for ``"odds"``
+            and ``"median"``.
 
     Returns:
         The :class:`AdaptationFit`; when refused, :attr:`AdaptationFit.adaptation` is the

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.cluster.vq import kmeans2
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.inference.track_mip import ClusterSolution, _dummies, _sizes, check_weights
+from xvmatch.inference.tracks.track_mip import ClusterSolution, _dummies, _sizes, check_weights
 
 __all__ = ["spectral_groups", "spectral_solution"]
 

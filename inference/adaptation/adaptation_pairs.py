@@ -5,9 +5,9 @@ spread evenly over the video (at most ``max_frames`` frames in all, so a long vi
 than a short one). In each burst:
 
 * **within each view**, boxes are linked over the burst into tracklets by IoU
-  (:func:`xvmatch.inference.tracklets.clip_tracklets`, the tracking code's links; the box files'
-  ids only name the boxes of a frame): a tracklet's boxes in two frames are a positive pair, two
-  boxes of one frame a negative pair;
+  (:func:`xvmatch.inference.linking.tracklets.clip_tracklets`, the tracking code's links; the box
+  files' ids only name the boxes of a frame): a tracklet's boxes in two frames are a positive pair,
+  two boxes of one frame a negative pair;
 * **across views**, the box-only learned matcher (the bundle's ``matcher.onnx`` without the
   appearance cue; with the cameras when given) scores every frame of the burst
   (``learned_association.box_only_costs``). A pair it assigns is *confident* when its cost is
@@ -20,8 +20,9 @@ than a short one). In each burst:
 
 Only ``shots`` frames of each burst (first, last, evenly between) are embedded by the network
 (:attr:`MinedPairs.embed_frames`, every box of both views): the descriptors
-(:func:`embed_frames`) and the index pairs make a :class:`~xvmatch.inference.site_adaptation.
-PairSet`. Each pair carries its burst number, so a fit can hold out the last part of the video.
+(:func:`embed_frames`) and the index pairs make a
+:class:`~xvmatch.inference.adaptation.site_adaptation.PairSet`. Each pair carries its burst number,
+so a fit can hold out the last part of the video.
 """
 
 from __future__ import annotations
@@ -33,9 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.inference.assignment import assign
-from xvmatch.inference.site_adaptation import VIEWS, PairSet
-from xvmatch.inference.tracklets import clip_tracklets
+from xvmatch.inference.adaptation.site_adaptation import VIEWS, PairSet
+from xvmatch.inference.linking.assignment import assign
+from xvmatch.inference.linking.tracklets import clip_tracklets
 
 __all__ = [
     "MinedPairs",
@@ -134,7 +135,7 @@ class MinedPairs:
         embed_frames: ``(F,)`` the frames whose boxes are embedded.
         n_boxes: ``{view: K_v}`` boxes of those frames.
         within_pos, within_neg, cross_pos, cross_neg: index pairs as in
-            :class:`~xvmatch.inference.site_adaptation.PairSet`.
+            :class:`~xvmatch.inference.adaptation.site_adaptation.PairSet`.
         within_pos_group, within_neg_group, cross_pos_group, cross_neg_group: the burst of
             each pair.
         bursts: bursts scored; agreed: tracklet pairs agreed on.
@@ -336,7 +337,7 @@ def embed_frames(
         records: ``{frame: FrameBoxes}`` of the view.
         source: its images (``get(frame)``).
         embed: ``embed(image, boxes) -> (K, D)`` raw descriptors (e.g.
-            :meth:`~xvmatch.inference.learned_association.LearnedMatcher.descriptors`).
+            :meth:`~xvmatch.inference.matching.learned_association.LearnedMatcher.descriptors`).
         progress: wraps the frame iterator.
     """
     out = []

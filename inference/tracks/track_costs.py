@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.inference.tracklets import Tracklet
+from xvmatch.inference.linking.assignment import FrameCosts
+from xvmatch.inference.linking.tracklets import Tracklet
 
 __all__ = [
     "DUMMY_WEIGHT",
@@ -27,7 +28,6 @@ __all__ = [
     "LEARNED_RULES",
     "MOTION_SIGMA",
     "SOFT_TEMPERATURE",
-    "FrameCosts",
     "TrackWeights",
     "combine_cross_view",
     "combine_over_time",
@@ -57,9 +57,9 @@ with detector noise (docs/tracking.md)."""
 FITTED_CAMERAS_W1 = 1.0
 """``w1`` of Eq. 17 when ``track``'s ``--cameras`` fit the video (a fixed top camera turned to
 fit its head rays, or kept as given because it already does:
-:attr:`~xvmatch.inference.camera_refinement.CameraRefinement.fits`) and ``--w1`` is not given:
-the camera-aware spatial term is then nearly right, and the network's similarity across views,
-well above zero for two different people, only adds wrong edges; the images still serve over
+:attr:`~xvmatch.inference.matching.camera_refinement.CameraRefinement.fits`) and ``--w1`` is not
+given: the camera-aware spatial term is then nearly right, and the network's similarity across
+views, well above zero for two different people, only adds wrong edges; the images still serve over
 time (Eq. 18). On rendered videos it gained 0.9 to 2.1 CVIDF1 over 0.3 with exact cameras and
 with both cameras 2 or 3 degrees off (docs/tracking.md, "With the cameras")."""
 
@@ -125,24 +125,6 @@ def spatial_similarity(
     lengths_t = np.array([len(t) for t in top], dtype=float)
     lengths_h = np.array([len(h) for h in hor], dtype=float)
     return out / np.maximum(lengths_t[:, None], lengths_h[None, :])
-
-
-@dataclass(frozen=True, eq=False)
-class FrameCosts:
-    """The learned matcher's verdict on one frame, in the rows of the detections.
-
-    Attributes:
-        top_rows: (M,) the top-view detection rows, in the order of the cost rows.
-        hor_rows: (N,) the horizontal detection rows, in the order of the cost columns.
-        cost: (M, N) the matcher's costs in [0, 1].
-        paired: (M, N) bool, the frame's assignment with the non-association cost gamma
-            (geometric-priors Eqs. 1-2): the pairs the matcher makes on this frame alone.
-    """
-
-    top_rows: np.ndarray
-    hor_rows: np.ndarray
-    cost: np.ndarray
-    paired: np.ndarray
 
 
 SOFT_TEMPERATURE = 0.1

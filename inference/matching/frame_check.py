@@ -1,8 +1,8 @@
 """The appearance check frame by frame, for frames the video check cannot judge (issue 31).
 
-The video check (:mod:`xvmatch.inference.appearance_check`) judges the cue on pairs the box-only
-matcher is sure of over consecutive frames; single image pairs and clips shorter than a burst
-have none. A frame still says something about its cue: how its appearance costs spread, how
+The video check (:mod:`xvmatch.inference.matching.appearance_check`) judges the cue on pairs the
+box-only matcher is sure of over consecutive frames; single image pairs and clips shorter than a
+burst have none. A frame still says something about its cue: how its appearance costs spread, how
 clearly each box prefers one partner, and whether those preferences agree with the box-only
 matcher's (a cue near chance disagrees with it at random). :class:`FrameCheck` is a logistic
 model of those statistics (:data:`FEATURES`), fitted on renders seen through simulated cameras

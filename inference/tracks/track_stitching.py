@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.inference.tracklets import Tracklet
+from xvmatch.inference.linking.tracklets import Tracklet
 
 __all__ = ["StitchedTracks", "stitch_windows"]
 
@@ -70,7 +70,7 @@ def stitch_windows(
     Args:
         top, hor: per clip, the tracklets of each view (``T`` clips).
         windows: ``T - 1`` edge tuples (or one, for a single clip padded with an empty one),
-            each the four matrices of :class:`xvmatch.inference.track_mip.ClusterSolution`
+            each the four matrices of :class:`xvmatch.inference.tracks.track_mip.ClusterSolution`
             for clips ``t`` (clusters 0 and 3) and ``t + 1`` (clusters 1 and 2).
 
     Returns:

@@ -1,9 +1,9 @@
 """A site bundle: a bundle adapted to one site's cameras from the site's own unlabelled videos.
 
 :func:`adapt_to_site` runs the whole adaptation on opened inputs: bursts of frames
-(:func:`~xvmatch.inference.adaptation_pairs.plan_bursts`), the box-only matcher's costs on them,
-the mined pairs, the appearance network's descriptors of the embedded frames, the reference
-costs of the network on renders, and the fit (:func:`~xvmatch.inference.site_adaptation.
+(:func:`~xvmatch.inference.adaptation.adaptation_pairs.plan_bursts`), the box-only matcher's costs
+on them, the mined pairs, the appearance network's descriptors of the embedded frames, the reference
+costs of the network on renders, and the fit (:func:`~xvmatch.inference.adaptation.site_adaptation.
 fit_site_adaptation`). :func:`write_site_bundle` writes the source bundle's files unchanged
 (byte-identical ONNX files, same sha256) plus ``adaptation.npz`` and a manifest with an
 ``adaptation`` record: what it was fitted on, the pair counts, the rank and the held-out
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.inference.adaptation_pairs import (
+from xvmatch.inference.adaptation.adaptation_pairs import (
     MinedPairs,
     MiningConfig,
     embed_frames,
@@ -33,9 +33,7 @@ from xvmatch.inference.adaptation_pairs import (
     plan_bursts,
     reference_costs,
 )
-from xvmatch.inference.bundle import MANIFEST
-from xvmatch.inference.learned_association import box_only_costs
-from xvmatch.inference.site_adaptation import (
+from xvmatch.inference.adaptation.site_adaptation import (
     ADAPTATION_FILE,
     ADAPTATION_FORMAT_VERSION,
     AdaptationFit,
@@ -44,6 +42,8 @@ from xvmatch.inference.site_adaptation import (
     choose_fit,
     fit_site_adaptation,
 )
+from xvmatch.inference.matching.bundle import MANIFEST
+from xvmatch.inference.matching.learned_association import box_only_costs
 
 __all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vectors", "json_figure",
            "vector_pair_sets", "vectors_embedder", "write_site_bundle"]
@@ -88,7 +88,7 @@ def adapt_to_site(
 
     Args:
         top, hor: ``{frame: FrameBoxes}`` of each view (ids only name boxes).
-        matcher: a :class:`~xvmatch.inference.learned_association.LearnedMatcher` with an
+        matcher: a :class:`~xvmatch.inference.matching.learned_association.LearnedMatcher` with an
             appearance network (its raw descriptors are adapted).
         top_images, hor_images: image sources (``get(frame)``) of the views.
         hor_size: ``(W, H)`` of the horizontal images.
@@ -136,7 +136,7 @@ def adapt_to_site(
 
 def vectors_embedder(matcher, vectors: Sequence[str]) -> Callable:
     """``embed(image, boxes) -> (K, sum of sizes)``: every one of ``vectors`` of the boxes,
-    side by side, from one run of ``matcher``'s network (for :func:`~xvmatch.inference.
+    side by side, from one run of ``matcher``'s network (for :func:`~xvmatch.inference.adaptation.
     adaptation_pairs.embed_frames`; :func:`vector_pair_sets` splits them)."""
     def embed(image, boxes):
         return np.concatenate(matcher.bundle.embed_vectors(matcher.crops(image, boxes),
@@ -148,7 +148,7 @@ def vectors_embedder(matcher, vectors: Sequence[str]) -> Callable:
 def vector_pair_sets(mined: MinedPairs, top: np.ndarray, hor: np.ndarray, spec,
                      vectors: Sequence[str]) -> dict[str, PairSet]:
     """``{vector: PairSet}`` of the mined pairs from :func:`vectors_embedder`'s side-by-side
-    columns (``spec``: the network's :class:`~xvmatch.inference.bundle.AppearanceSpec`)."""
+    columns (``spec``: the network's :class:`~xvmatch.inference.matching.bundle.AppearanceSpec`)."""
     sets, start = {}, 0
     for vector in vectors:
         cols = slice(start, start + spec.dim(vector))
@@ -158,12 +158,12 @@ def vector_pair_sets(mined: MinedPairs, top: np.ndarray, hor: np.ndarray, spec,
 
 
 def adapted_vectors(spec) -> tuple[str, ...]:
-    """What ``adapt`` fits on for a network with this :class:`~xvmatch.inference.bundle.
+    """What ``adapt`` fits on for a network with this :class:`~xvmatch.inference.matching.bundle.
     AppearanceSpec`, in order of preference: its pooled stages (else its pooled features) and
     its descriptors when the graph gives them (the stages recover more of a camera change than
     the features, the features more than the descriptors, but each is sometimes refused where
-    the descriptors help; :func:`~xvmatch.inference.site_adaptation.choose_fit` keeps one),
-    else its descriptors alone."""
+    the descriptors help; :func:`~xvmatch.inference.adaptation.site_adaptation.choose_fit` keeps
+    one), else its descriptors alone."""
     for vector in ("stages", "features"):
         if spec.dim(vector) is not None:
             return (vector, "descriptors")

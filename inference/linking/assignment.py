@@ -9,17 +9,22 @@ Every feasible full assignment of the augmented matrix with K real pairs costs
 ``sum c_ij + gamma (M + N - K)``, so a pair is worth matching only when ``c_ij < gamma``:
 ``gamma`` is the largest cost still accepted. Ties at ``c_ij == gamma`` are resolved as "not
 associated", which keeps the result deterministic and does not change the optimal objective.
+:class:`FrameCosts` holds a frame's costs and its assignment, as the learned matcher gives them
+to the appearance check and the tracker.
 
 This module uses numpy and scipy only (no torch, no OpenCV).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 __all__ = [
     "GAMMA_GRID",
+    "FrameCosts",
     "assign",
     "assignment_is_stable",
     "assignment_matrix",
@@ -164,3 +169,21 @@ def assignment_matrix(pairs: np.ndarray, m: int, n: int) -> np.ndarray:
     x = np.zeros((m, n), dtype=bool)
     x[p[:, 0], p[:, 1]] = True
     return x
+
+
+@dataclass(frozen=True, eq=False)
+class FrameCosts:
+    """The learned matcher's verdict on one frame, in the rows of the detections.
+
+    Attributes:
+        top_rows: (M,) the top-view detection rows, in the order of the cost rows.
+        hor_rows: (N,) the horizontal detection rows, in the order of the cost columns.
+        cost: (M, N) the matcher's costs in [0, 1].
+        paired: (M, N) bool, the frame's assignment with the non-association cost gamma
+            (geometric-priors Eqs. 1-2): the pairs the matcher makes on this frame alone.
+    """
+
+    top_rows: np.ndarray
+    hor_rows: np.ndarray
+    cost: np.ndarray
+    paired: np.ndarray

@@ -1,7 +1,7 @@
 """Ground positions from the two most visible views (issue 32; the VRL paper, "paper 003",
 ``../shared/papers/vrl-visibility-multiview-tracking.txt``).
 
-For every person (a global id of :mod:`xvmatch.inference.multicam`) and frame:
+For every person (a global id of :mod:`xvmatch.inference.views.multicam`) and frame:
 
 1. **Principal axes along the vertical** (Sec. 3, the vertical reference lines): a calibrated
    camera's vertical vanishing point is ``K R e_z``; a person's axis is the image line through it
@@ -177,7 +177,7 @@ def localise(cameras: Mapping[str, GroundCamera],
     Args:
         cameras: ``{name: GroundCamera}``; only those with ``K, R, c`` give axes.
         boxes: ``{name: {frame: FrameBoxes}}`` whose ids are global ids (the association's
-            output, :func:`xvmatch.inference.multicam.relabel`).
+            output, :func:`xvmatch.inference.views.multicam.relabel`).
         fallback: ``{global_id: (frames, xy)}`` used where fewer than two calibrated views
             see a person (the association's fused foot points).
         options: :class:`LocalisationOptions`.
