@@ -229,6 +229,13 @@ def _check_costs(costs: np.ndarray | None, m: int, n: int) -> np.ndarray | None:
     return cost
 
 
+def _check_max_height(max_height: int) -> int:
+    """``max_height`` as an int; refuses a bool, a fraction or a value below 1."""
+    if isinstance(max_height, bool) or int(max_height) != max_height or max_height < 1:
+        raise ValueError(f"max_height must be an integer >= 1 (pixels), got {max_height!r}")
+    return int(max_height)
+
+
 def _box_panels(
     images: tuple[np.ndarray, np.ndarray], boxes: tuple[np.ndarray, np.ndarray],
     pairs: np.ndarray, height: int, colours: list[tuple[int, int, int]],
@@ -324,6 +331,34 @@ def _cost_labels(
         _put_text(canvas, text, org, colours[k], scale)
 
 
+def _side_by_side(
+    panels: list[np.ndarray], header: int
+) -> tuple[np.ndarray, tuple[tuple[int, int], ...], tuple[tuple[int, int], ...]]:
+    """Place the two panels side by side, a gap between, below a ``header``-pixel strip.
+
+    Returns:
+        The canvas, each panel's ``(x, y)`` offset in it and each panel's ``(x0, x1)`` range
+        for its labels (the hor panel's runs to the canvas's right edge).
+    """
+    height = panels[0].shape[0]
+    w_top, w_hor = panels[0].shape[1], panels[1].shape[1]
+    canvas = np.empty((header + height, w_top + _GAP + w_hor, 3), dtype=np.uint8)
+    canvas[:] = GAP_COLOUR
+    canvas[header:, :w_top] = panels[0]
+    canvas[header:, w_top + _GAP:] = panels[1]
+    offsets = ((0, header), (w_top + _GAP, header))
+    x_ranges = ((0, w_top), (w_top + _GAP, canvas.shape[1]))
+    return canvas, offsets, x_ranges
+
+
+def _draw_title(canvas: np.ndarray, header: int, title: str) -> None:
+    """Fill the header strip and write ``title`` in it on one line (whitespace collapsed)."""
+    canvas[:header] = _HEADER_COLOUR
+    caption = " ".join(str(title).split())
+    cv2.putText(canvas, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TITLE_COLOUR, 1,
+                cv2.LINE_AA)
+
+
 def draw_matches(
     top_image: np.ndarray,
     hor_image: np.ndarray,
@@ -386,20 +421,11 @@ def draw_matches(
     top_labels = _check_ids(top_ids, m, "top_ids")
     hor_labels = _check_ids(hor_ids, n, "hor_ids")
     cost = _check_costs(costs, m, n)
-    if isinstance(max_height, bool) or int(max_height) != max_height or max_height < 1:
-        raise ValueError(f"max_height must be an integer >= 1 (pixels), got {max_height!r}")
-
-    height = min(int(max_height), max(top_img.shape[0], hor_img.shape[0]))
+    height = min(_check_max_height(max_height), max(top_img.shape[0], hor_img.shape[0]))
     colours = [pair_colour(k) for k in range(len(p))]
     panels, rects = _box_panels((top_img, hor_img), (top_b, hor_b), p, height, colours)
     header = 26 if title is not None else 0
-    w_top, w_hor = panels[0].shape[1], panels[1].shape[1]
-    canvas = np.empty((header + height, w_top + _GAP + w_hor, 3), dtype=np.uint8)
-    canvas[:] = GAP_COLOUR
-    canvas[header:, :w_top] = panels[0]
-    canvas[header:, w_top + _GAP:] = panels[1]
-    offsets = ((0, header), (w_top + _GAP, header))
-    x_ranges = ((0, w_top), (w_top + _GAP, canvas.shape[1]))
+    canvas, offsets, x_ranges = _side_by_side(panels, header)
     scale = 0.45 * max(height / 360.0, 0.8)
     ends = _pair_lines(canvas, p, rects, offsets, colours)
     placed: list[tuple[int, int, int, int]] = []  # label rectangles drawn so far
@@ -409,10 +435,7 @@ def draw_matches(
     if cost is not None:
         _cost_labels(canvas, cost, p, ends, y_range, colours, scale, placed)
     if title is not None:
-        canvas[:header] = _HEADER_COLOUR
-        caption = " ".join(str(title).split())
-        cv2.putText(canvas, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TITLE_COLOUR, 1,
-                    cv2.LINE_AA)
+        _draw_title(canvas, header, title)
     return canvas
 
 
