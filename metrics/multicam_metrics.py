@@ -58,6 +58,131 @@ def _ratio(num: float, den: float) -> float:
     return float(num) / den if den else float("nan")
 
 
+def _seen_ids(
+    rows: list[tuple[int, int, int, int]], gt: Mapping[str, Mapping[int, FrameBoxes]],
+    cams: list[str],
+) -> tuple[dict[tuple[int, int], set[int]], dict[tuple[int, int], set[int]], list[int]]:
+    """The true and predicted ids each camera sees on each frame, and all frames, sorted.
+
+    Args:
+        rows: ``(camera index, frame, predicted id, true id)`` of every predicted box.
+        gt: ``{camera: {frame: FrameBoxes}}`` with true global ids.
+        cams: the camera names, in index order.
+    """
+    true_seen: dict[tuple[int, int], set[int]] = {}  # (camera, frame) -> true ids
+    for name_i, name in enumerate(cams):
+        for f, rec in gt[name].items():
+            true_seen[(name_i, f)] = set(rec.ids.tolist())
+    pred_seen: dict[tuple[int, int], set[int]] = {}
+    for c, f, p, _t in rows:
+        pred_seen.setdefault((c, f), set()).add(p)
+    frames = sorted({f for (_c, f) in true_seen} | {f for (_c, f) in pred_seen})
+    return true_seen, pred_seen, frames
+
+
+def _trajectory_scores(
+    rows: list[tuple[int, int, int, int]], cams: list[str],
+    true_seen: dict[tuple[int, int], set[int]], pred_seen: dict[tuple[int, int], set[int]],
+    frames: list[int],
+) -> tuple[list[dict], float, float, list[dict]]:
+    """Trajectory P/R per camera pair (Eqs. 13-14) and their means over overlapping pairs.
+
+    A predicted id of a camera belongs to its majority true id (ties: the smaller id).
+
+    Returns:
+        The per-pair records, mean P, mean R (NaN without overlapping pairs) and the
+        overlapping pairs' records.
+    """
+    owner: dict[tuple[int, int], int] = {}  # (camera, predicted id) -> majority true id
+    votes: dict[tuple[int, int], Counter] = {}
+    for c, _f, p, t in rows:
+        votes.setdefault((c, p), Counter())[t] += 1
+    for key, cnt in votes.items():
+        owner[key] = min(cnt.items(), key=lambda kv: (-kv[1], kv[0]))[0]
+    per_pair = []
+    for a in range(len(cams)):
+        for b in range(a + 1, len(cams)):
+            xi, est = set(), set()
+            for f in frames:
+                xi |= true_seen.get((a, f), set()) & true_seen.get((b, f), set())
+                est |= pred_seen.get((a, f), set()) & pred_seen.get((b, f), set())
+            correct = {owner[(a, g)] for g in est
+                       if owner[(a, g)] == owner[(b, g)] and owner[(a, g)] in xi}
+            n_correct_est = sum(1 for g in est if owner[(a, g)] == owner[(b, g)]
+                                and owner[(a, g)] in xi)
+            per_pair.append({"cameras": [cams[a], cams[b]], "true": len(xi), "estimated":
+                             len(est), "P": _ratio(n_correct_est, len(est)),
+                             "R": _ratio(len(correct), len(xi))})
+    overlapping = [p for p in per_pair if p["true"] > 0]
+    mean_p = float(np.nanmean([p["P"] for p in overlapping])) if overlapping else float("nan")
+    mean_r = float(np.nanmean([p["R"] for p in overlapping])) if overlapping else float("nan")
+    return per_pair, mean_p, mean_r, overlapping
+
+
+def _box_pair_counts(
+    rows: list[tuple[int, int, int, int]], n_cams: int,
+    true_seen: dict[tuple[int, int], set[int]], frames: list[int],
+) -> tuple[int, int, int]:
+    """Cross-camera box pairs: correct, predicted and true counts over all frames."""
+    tp = n_pred_pairs = n_true_pairs = 0
+    by_frame: dict[int, list] = {}
+    for c, f, p, t in rows:
+        by_frame.setdefault(f, []).append((c, p, t))
+    for f in frames:
+        items = by_frame.get(f, [])
+        pred_count = Counter((p, c) for c, p, _t in items)
+        joint = Counter((p, t, c) for c, p, t in items if t >= 0)
+        n_pred_pairs += _cross_camera_pairs(pred_count)
+        tp += _cross_camera_pairs(joint)
+        true_count = Counter()
+        for c in range(n_cams):
+            for t in true_seen.get((c, f), ()):
+                true_count[(t, c)] += 1
+        n_true_pairs += _cross_camera_pairs(true_count)
+    return tp, n_pred_pairs, n_true_pairs
+
+
+def _global_id_match(R: np.ndarray) -> tuple[int, dict[int, int]]:
+    """Global IDF1's one-to-one id match over all cameras and frames.
+
+    Args:
+        R: ``(B, 4)`` rows ``(camera, frame, predicted id, true id)``; true id -1: no match.
+
+    Returns:
+        The matched box count (IDTP) and ``{predicted id: true id}``.
+    """
+    matched = R[R[:, 3] >= 0] if len(R) else R
+    pu, pi = np.unique(matched[:, 2], return_inverse=True) if len(matched) else ([], [])
+    tu, ti = np.unique(matched[:, 3], return_inverse=True) if len(matched) else ([], [])
+    idtp, mapping = 0, {}
+    if len(matched):
+        M = np.zeros((len(pu), len(tu)), dtype=np.int64)
+        np.add.at(M, (pi, ti), 1)
+        r, c = linear_sum_assignment(-M)
+        idtp = int(M[r, c].sum())
+        mapping = {int(pu[i]): int(tu[j]) for i, j in zip(r, c, strict=True) if M[i, j] > 0}
+    return idtp, mapping
+
+
+def _ground_errors(ground_pred: Mapping[int, tuple[np.ndarray, np.ndarray]],
+                   ground_gt: Mapping[int, tuple[np.ndarray, np.ndarray]],
+                   mapping: Mapping[int, int]) -> dict:
+    """Ground-position errors (metres) of matched ids on common frames: median, mean, p90."""
+    errors = []
+    for g, (fr, xy) in ground_pred.items():
+        t = mapping.get(int(g))
+        if t is None or t not in ground_gt:
+            continue
+        tf, txy = ground_gt[t]
+        _common, ia, ib = np.intersect1d(fr, tf, return_indices=True)
+        errors.append(np.linalg.norm(xy[ia] - txy[ib], axis=1))
+    e = np.concatenate(errors) if errors else np.empty(0)
+    return {"median": float(np.median(e)) if e.size else float("nan"),
+            "mean": float(e.mean()) if e.size else float("nan"),
+            "p90": float(np.percentile(e, 90)) if e.size else float("nan"),
+            "count": int(e.size)}
+
+
 def multicam_scores(pred: Mapping[str, Mapping[int, FrameBoxes]],
                     gt: Mapping[str, Mapping[int, FrameBoxes]],
                     ground_pred: Mapping[int, tuple[np.ndarray, np.ndarray]] | None = None,
@@ -87,68 +212,17 @@ def multicam_scores(pred: Mapping[str, Mapping[int, FrameBoxes]],
     n_gt_boxes = sum(len(r) for name in cams for r in gt[name].values())
 
     # --- trajectory P/R (Eqs. 13-14)
-    owner: dict[tuple[int, int], int] = {}  # (camera, predicted id) -> majority true id
-    votes: dict[tuple[int, int], Counter] = {}
-    for c, _f, p, t in rows:
-        votes.setdefault((c, p), Counter())[t] += 1
-    for key, cnt in votes.items():
-        owner[key] = min(cnt.items(), key=lambda kv: (-kv[1], kv[0]))[0]
-    true_seen: dict[tuple[int, int], set[int]] = {}  # (camera, frame) -> true ids
-    for name_i, name in enumerate(cams):
-        for f, rec in gt[name].items():
-            true_seen[(name_i, f)] = set(rec.ids.tolist())
-    pred_seen: dict[tuple[int, int], set[int]] = {}
-    for c, f, p, _t in rows:
-        pred_seen.setdefault((c, f), set()).add(p)
-    frames = sorted({f for (_c, f) in true_seen} | {f for (_c, f) in pred_seen})
-    per_pair = []
-    for a in range(len(cams)):
-        for b in range(a + 1, len(cams)):
-            xi, est = set(), set()
-            for f in frames:
-                xi |= true_seen.get((a, f), set()) & true_seen.get((b, f), set())
-                est |= pred_seen.get((a, f), set()) & pred_seen.get((b, f), set())
-            correct = {owner[(a, g)] for g in est
-                       if owner[(a, g)] == owner[(b, g)] and owner[(a, g)] in xi}
-            n_correct_est = sum(1 for g in est if owner[(a, g)] == owner[(b, g)]
-                                and owner[(a, g)] in xi)
-            per_pair.append({"cameras": [cams[a], cams[b]], "true": len(xi), "estimated":
-                             len(est), "P": _ratio(n_correct_est, len(est)),
-                             "R": _ratio(len(correct), len(xi))})
-    overlapping = [p for p in per_pair if p["true"] > 0]
-    mean_p = float(np.nanmean([p["P"] for p in overlapping])) if overlapping else float("nan")
-    mean_r = float(np.nanmean([p["R"] for p in overlapping])) if overlapping else float("nan")
+    true_seen, pred_seen, frames = _seen_ids(rows, gt, cams)
+    per_pair, mean_p, mean_r, overlapping = _trajectory_scores(rows, cams, true_seen, pred_seen,
+                                                                frames)
 
     # --- box pairs
-    tp = n_pred_pairs = n_true_pairs = 0
-    by_frame: dict[int, list] = {}
-    for c, f, p, t in rows:
-        by_frame.setdefault(f, []).append((c, p, t))
-    for f in frames:
-        items = by_frame.get(f, [])
-        pred_count = Counter((p, c) for c, p, _t in items)
-        joint = Counter((p, t, c) for c, p, t in items if t >= 0)
-        n_pred_pairs += _cross_camera_pairs(pred_count)
-        tp += _cross_camera_pairs(joint)
-        true_count = Counter()
-        for c in range(len(cams)):
-            for t in true_seen.get((c, f), ()):
-                true_count[(t, c)] += 1
-        n_true_pairs += _cross_camera_pairs(true_count)
+    tp, n_pred_pairs, n_true_pairs = _box_pair_counts(rows, len(cams), true_seen, frames)
     bp, br = _ratio(tp, n_pred_pairs), _ratio(tp, n_true_pairs)
     bf = _ratio(2 * tp, n_pred_pairs + n_true_pairs)
 
     # --- global IDF1
-    matched = R[R[:, 3] >= 0] if len(R) else R
-    pu, pi = np.unique(matched[:, 2], return_inverse=True) if len(matched) else ([], [])
-    tu, ti = np.unique(matched[:, 3], return_inverse=True) if len(matched) else ([], [])
-    idtp, mapping = 0, {}
-    if len(matched):
-        M = np.zeros((len(pu), len(tu)), dtype=np.int64)
-        np.add.at(M, (pi, ti), 1)
-        r, c = linear_sum_assignment(-M)
-        idtp = int(M[r, c].sum())
-        mapping = {int(pu[i]): int(tu[j]) for i, j in zip(r, c, strict=True) if M[i, j] > 0}
+    idtp, mapping = _global_id_match(R)
     scores = {
         "cameras": cams,
         "pairs": per_pair,
@@ -161,19 +235,7 @@ def multicam_scores(pred: Mapping[str, Mapping[int, FrameBoxes]],
                  "IDR": _ratio(idtp, n_gt_boxes)},
     }
     if ground_pred is not None and ground_gt is not None:
-        errors = []
-        for g, (fr, xy) in ground_pred.items():
-            t = mapping.get(int(g))
-            if t is None or t not in ground_gt:
-                continue
-            tf, txy = ground_gt[t]
-            _common, ia, ib = np.intersect1d(fr, tf, return_indices=True)
-            errors.append(np.linalg.norm(xy[ia] - txy[ib], axis=1))
-        e = np.concatenate(errors) if errors else np.empty(0)
-        scores["ground"] = {"median": float(np.median(e)) if e.size else float("nan"),
-                            "mean": float(e.mean()) if e.size else float("nan"),
-                            "p90": float(np.percentile(e, 90)) if e.size else float("nan"),
-                            "count": int(e.size)}
+        scores["ground"] = _ground_errors(ground_pred, ground_gt, mapping)
     return scores
 
 
