@@ -223,6 +223,66 @@ def camera_from_pnp(
     return camera
 
 
+def _checked_pose_inputs(
+    pixels_a: np.ndarray, pixels_b: np.ndarray, K_a: np.ndarray, K_b: np.ndarray,
+    threshold_px: float, confidence: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Check the inputs of :func:`estimate_relative_pose`; returns them as float arrays.
+
+    Raises:
+        PoseEstimationError: points of the wrong shape, counts that differ or below
+            :data:`MIN_ESSENTIAL_POINTS`, bad RANSAC settings, or coincident/collinear pixels.
+    """
+    uv_a = _check_points(pixels_a, 2, "pixels_a")
+    uv_b = _check_points(pixels_b, 2, "pixels_b")
+    K_a = _check_K(K_a, "K_a")
+    K_b = _check_K(K_b, "K_b")
+    if uv_a.shape[0] != uv_b.shape[0]:
+        raise PoseEstimationError(
+            f"pixels_a and pixels_b must pair up, got {uv_a.shape[0]} and {uv_b.shape[0]} points"
+        )
+    n = uv_a.shape[0]
+    if n < MIN_ESSENTIAL_POINTS:
+        raise PoseEstimationError(
+            f"relative pose needs at least {MIN_ESSENTIAL_POINTS} correspondences, got {n}"
+        )
+    if not 0.0 < confidence < 1.0 or not threshold_px > 0:
+        raise PoseEstimationError("confidence must be in (0, 1) and threshold_px > 0")
+    if _rank(uv_a) < 2 or _rank(uv_b) < 2:
+        raise PoseEstimationError("pixels are coincident or collinear; the pose is not determined")
+    return uv_a, uv_b, K_a, K_b
+
+
+def _best_decomposition(
+    E: np.ndarray, xa: np.ndarray, xb: np.ndarray, ransac_mask: np.ndarray
+) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """Decompose each essential-matrix candidate; keep the pose with most points in front.
+
+    Args:
+        E: ``(3k, 3)`` stacked candidates (the 5-point solver may return several).
+        xa, xb: ``(N, 2)`` normalised image points.
+        ransac_mask: ``(N,)`` uint8 RANSAC inliers.
+
+    Returns:
+        ``(count, R, t, mask)`` of the best candidate: points in front of both cameras,
+        rotation, translation and the cheirality mask (count -1 and the identity if none).
+
+    Raises:
+        PoseEstimationError: ``cv2.recoverPose`` failed.
+    """
+    eye = np.eye(3)
+    count, R, t, pose_mask = -1, eye, np.zeros(3), ransac_mask
+    for k in range(E.shape[0] // 3):  # the 5-point solver may return several candidates
+        candidate = np.ascontiguousarray(E[3 * k : 3 * k + 3])
+        try:
+            found = cv2.recoverPose(candidate, xa, xb, eye, mask=ransac_mask.copy().reshape(-1, 1))
+        except cv2.error as exc:
+            raise PoseEstimationError(f"cv2.recoverPose failed: {exc}") from exc
+        if int(found[0]) > count:
+            count, R, t, pose_mask = int(found[0]), found[1], found[2], found[3]
+    return count, R, t, pose_mask
+
+
 def estimate_relative_pose(
     pixels_a: np.ndarray,
     pixels_b: np.ndarray,
@@ -262,23 +322,9 @@ def estimate_relative_pose(
         PoseEstimationError: too few or mismatched points, no essential matrix, too few
             inliers in front of both cameras, or too little parallax.
     """
-    uv_a = _check_points(pixels_a, 2, "pixels_a")
-    uv_b = _check_points(pixels_b, 2, "pixels_b")
-    K_a = _check_K(K_a, "K_a")
-    K_b = _check_K(K_b, "K_b")
-    if uv_a.shape[0] != uv_b.shape[0]:
-        raise PoseEstimationError(
-            f"pixels_a and pixels_b must pair up, got {uv_a.shape[0]} and {uv_b.shape[0]} points"
-        )
+    uv_a, uv_b, K_a, K_b = _checked_pose_inputs(pixels_a, pixels_b, K_a, K_b, threshold_px,
+                                                confidence)
     n = uv_a.shape[0]
-    if n < MIN_ESSENTIAL_POINTS:
-        raise PoseEstimationError(
-            f"relative pose needs at least {MIN_ESSENTIAL_POINTS} correspondences, got {n}"
-        )
-    if not 0.0 < confidence < 1.0 or not threshold_px > 0:
-        raise PoseEstimationError("confidence must be in (0, 1) and threshold_px > 0")
-    if _rank(uv_a) < 2 or _rank(uv_b) < 2:
-        raise PoseEstimationError("pixels are coincident or collinear; the pose is not determined")
 
     xa = _normalised(uv_a, K_a)
     xb = _normalised(uv_b, K_b)
@@ -301,15 +347,7 @@ def estimate_relative_pose(
         raise PoseEstimationError("no essential matrix found; check the correspondences")
 
     ransac_mask = mask.reshape(-1).astype(np.uint8) if mask is not None else np.ones(n, np.uint8)
-    count, R, t, pose_mask = -1, eye, np.zeros(3), ransac_mask
-    for k in range(E.shape[0] // 3):  # the 5-point solver may return several candidates
-        candidate = np.ascontiguousarray(E[3 * k : 3 * k + 3])
-        try:
-            found = cv2.recoverPose(candidate, xa, xb, eye, mask=ransac_mask.copy().reshape(-1, 1))
-        except cv2.error as exc:
-            raise PoseEstimationError(f"cv2.recoverPose failed: {exc}") from exc
-        if int(found[0]) > count:
-            count, R, t, pose_mask = int(found[0]), found[1], found[2], found[3]
+    count, R, t, pose_mask = _best_decomposition(E, xa, xb, ransac_mask)
     if count < MIN_ESSENTIAL_POINTS:
         raise PoseEstimationError(
             f"only {count} correspondences lie in front of both cameras under the best pose; "
