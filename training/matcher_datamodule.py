@@ -253,6 +253,48 @@ class _BoxOnly:
                 np.zeros(self.n_cues, bool))
 
 
+def _variant_features(
+    trials: Sequence[PairTrial], variants: Sequence[str], config: FeatureConfig,
+    cache_dir: str | os.PathLike | None, workers: int,
+) -> dict[str, list]:
+    """Geometry features of every trial, ``"plain"`` and/or ``"rectified"`` as variants need."""
+    rectified = any(VARIANTS[v][1] for v in variants)
+    plain = any(not VARIANTS[v][1] for v in variants)
+    jobs = {}
+    for key, use in (("plain", plain), ("rectified", rectified)):
+        if use:
+            jobs[key] = cached_frame_features(
+                [FrameJob(t.top_boxes, t.ego_boxes, t.cameras["ego"].image_size, None,
+                          FrameCameras(t.cameras["top"], t.cameras["ego"])
+                          if key == "rectified" else None) for t in trials],
+                config, cache_dir, workers)
+    return jobs
+
+
+def _maybe_corrupt(
+    app: np.ndarray, corruption: AppCorruption, kind_p: np.ndarray,
+    stream: tuple[int, int, int], shifted: np.ndarray | None,
+) -> tuple[np.ndarray, bool]:
+    """Corrupt one frame's appearance costs with probability ``corruption.probability``.
+
+    Args:
+        app: ``(M, N)`` appearance costs.
+        corruption: the corruption settings.
+        kind_p: probability of each of ``corruption.kinds``.
+        stream: (corruption stream, trial index, variant index); with ``corruption.seed`` it
+            seeds the frame's own generator.
+        shifted: the costs on shifted images (the ``"shift"`` kind), or None.
+
+    Returns:
+        The (possibly corrupted) costs and whether they were corrupted.
+    """
+    rng = np.random.default_rng([int(corruption.seed), *stream])
+    if rng.random() < corruption.probability:
+        kind = corruption.kinds[int(rng.choice(len(corruption.kinds), p=kind_p))]
+        return corrupt_app(app, kind, rng, shifted, corruption.embedding_dim), True
+    return app, False
+
+
 def trial_frames(
     trials: Sequence[PairTrial],
     config: FeatureConfig,
@@ -295,16 +337,7 @@ def trial_frames(
     if corrupting:
         kind_p = np.asarray(corruption.weights, dtype=np.float64)
         kind_p = kind_p / kind_p.sum()
-    rectified = any(VARIANTS[v][1] for v in variants)
-    plain = any(not VARIANTS[v][1] for v in variants)
-    jobs = {}
-    for key, use in (("plain", plain), ("rectified", rectified)):
-        if use:
-            jobs[key] = cached_frame_features(
-                [FrameJob(t.top_boxes, t.ego_boxes, t.cameras["ego"].image_size, None,
-                          FrameCameras(t.cameras["top"], t.cameras["ego"])
-                          if key == "rectified" else None) for t in trials],
-                config, cache_dir, workers)
+    jobs = _variant_features(trials, variants, config, cache_dir, workers)
     out: list[Item] = []
     for k, t in enumerate(trials):
         match_input = t.match()
@@ -319,14 +352,9 @@ def trial_frames(
             app = t.app if "app" in wanted else None
             corrupted = False
             if app is not None and corrupting:
-                rng = np.random.default_rng(
-                    [int(corruption.seed), int(corruption_stream), k, v_index])
-                if rng.random() < corruption.probability:
-                    kind = corruption.kinds[int(rng.choice(len(corruption.kinds), p=kind_p))]
-                    app = corrupt_app(app, kind, rng,
-                                      None if shifted_app is None else shifted_app[k],
-                                      corruption.embedding_dim)
-                    corrupted = True
+                app, corrupted = _maybe_corrupt(
+                    app, corruption, kind_p, (int(corruption_stream), k, v_index),
+                    None if shifted_app is None else shifted_app[k])
             cues, mask = frame_cues(
                 (m, n), names,
                 app=app,
