@@ -19,6 +19,9 @@ the pipeline uses ``"top"`` (static overview camera) and ``"ego"`` (egocentric c
 A camera may instead be ``{"H": [[...]], "width": W, "height": H}``, an image -> ground
 homography (:func:`load_ground_cameras` only, for ``xvmatch multicam``).
 Unknown keys are rejected so that a typo (``"k"`` for ``"K"``) cannot go unnoticed.
+A file ``xvmatch calibrate`` wrote also has ``"estimated": {name: record}`` (:data:`ESTIMATED`):
+its cameras are each in their own view's ground frame, so the commands that need cameras in one
+world refuse it by name; :func:`load_estimated` reads it.
 
 Every camera is checked for physical sense as it is read
 (:func:`~xvmatch.geometry.camera.check_camera_sense`: focal lengths > 0, a proper rotation, a
@@ -50,8 +53,8 @@ from xvmatch.core.json_text import parse_json
 from xvmatch.geometry.camera import Camera, CameraSenseError, check_camera_sense
 from xvmatch.geometry.ground_plane import GroundCamera, check_ground_view
 
-__all__ = ["FORMAT_VERSION", "TOP_CAMERA", "CameraFileError", "load_cameras",
-           "load_ground_cameras", "save_cameras"]
+__all__ = ["ESTIMATED", "FORMAT_VERSION", "TOP_CAMERA", "CameraFileError", "load_cameras",
+           "load_estimated", "load_ground_cameras", "save_cameras"]
 
 FORMAT_VERSION = 1
 TOP_CAMERA = "top"
@@ -59,7 +62,11 @@ TOP_CAMERA = "top"
 one camera that must look down."""
 _CAMERA_FIELDS = ("K", "R", "c", "width", "height")
 _H_FIELDS = ("H", "width", "height")
-_TOP_FIELDS = ("version", "cameras")
+_TOP_FIELDS = ("version", "cameras", "estimated")
+ESTIMATED = "estimated"
+"""Top-level field of a file ``xvmatch calibrate`` wrote: ``{camera name: how it was
+estimated}``. Its cameras were each calibrated from the people in their own view, in that
+view's own ground frame (above the origin, looking along +x): they are not in one world."""
 
 
 class CameraFileError(ValueError):
@@ -179,6 +186,21 @@ def load_ground_cameras(path: str | os.PathLike[str]) -> dict[str, GroundCamera]
     return _load(path, _ground_camera, (), top=None)
 
 
+def load_estimated(path: str | os.PathLike[str]) -> tuple[dict[str, Camera], dict[str, dict]]:
+    """Read a file ``xvmatch calibrate`` wrote: its cameras, each in its own view's ground
+    frame, and the ``estimated`` record of each (:data:`ESTIMATED`).
+
+    Raises:
+        CameraFileError: as :func:`load_cameras`; a file without ``estimated`` too.
+    """
+    found: dict[str, dict] = {}
+    cameras = _load(path, _camera, (), top=TOP_CAMERA, estimated=found)
+    if not found:
+        raise CameraFileError(f"{os.fspath(path)}: {ESTIMATED}: missing; this is not a file "
+                              "written by xvmatch calibrate")
+    return cameras, found
+
+
 def load_cameras(
     path: str | os.PathLike[str], *, required: Iterable[str] = ()
 ) -> dict[str, Camera]:
@@ -215,9 +237,10 @@ def _read_text(name: str) -> str:
 
 
 def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str],
-          top: str | None) -> dict:
+          top: str | None, estimated: dict | None = None) -> dict:
     """The version-1 file with each camera record read by ``parse(record, where, is_top)``,
-    ``is_top`` true for the camera named ``top``."""
+    ``is_top`` true for the camera named ``top``. A file with an ``estimated`` record is
+    refused unless ``estimated`` is a dict, which then receives it."""
     name = os.fspath(path)
     text = _read_text(name)
     data = parse_json(text, name, CameraFileError)  # syntax, nesting depth: one line
@@ -227,7 +250,8 @@ def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str],
         unknown = sorted(set(data) - set(_TOP_FIELDS))
         if unknown:
             raise CameraFileError(
-                f"unknown top-level field(s) {', '.join(unknown)} (expected version, cameras)"
+                f"unknown top-level field(s) {', '.join(unknown)} (expected version, cameras; "
+                f"{ESTIMATED} in a file xvmatch calibrate wrote)"
             )
         if "version" not in data:
             raise CameraFileError(f'version: missing; add "version": {FORMAT_VERSION}')
@@ -240,6 +264,7 @@ def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str],
             raise CameraFileError("cameras: expected a non-empty object {name: camera}")
         cameras = {str(key): parse(rec, f"cameras.{key}", key == top)
                    for key, rec in cams.items()}
+        _check_estimated(data.get(ESTIMATED), cameras, estimated)
         missing = [k for k in required if k not in cameras]
         if missing:
             raise CameraFileError(
@@ -251,8 +276,29 @@ def _load(path: str | os.PathLike[str], parse: Any, required: Iterable[str],
     return cameras
 
 
+def _check_estimated(record: Any, cameras: Mapping[str, Any], into: dict | None) -> None:
+    """The ``estimated`` record: absent, or ``{camera name: object}`` over the file's cameras;
+    refused where the caller needs cameras in one world (``into`` None)."""
+    if record is None:
+        return
+    if not isinstance(record, dict) or not record or not all(
+            isinstance(v, dict) for v in record.values()):
+        raise CameraFileError(f"{ESTIMATED}: expected an object {{camera name: record}}")
+    unknown = [k for k in record if k not in cameras]
+    if unknown:
+        raise CameraFileError(f"{ESTIMATED}: names camera(s) not in the file: "
+                              f"{', '.join(map(str, unknown))}")
+    if into is None:
+        raise CameraFileError(
+            f"{ESTIMATED}: these cameras were calibrated one view at a time from the people in "
+            "each (xvmatch calibrate), each in its own ground frame, not in one world; this "
+            "command needs cameras in one world (a calibration of the site)")
+    into.update(record)
+
+
 def save_cameras(path: str | os.PathLike[str],
-                 cameras: Mapping[str, Camera | GroundCamera]) -> None:
+                 cameras: Mapping[str, Camera | GroundCamera],
+                 estimated: Mapping[str, dict] | None = None) -> None:
     """Write named cameras to a version-1 camera file, atomically.
 
     The JSON is written to a temporary file in the destination directory, flushed to disk and
@@ -263,6 +309,8 @@ def save_cameras(path: str | os.PathLike[str],
         path: destination file; its directory must exist.
         cameras: ``{name: Camera}``, at least one, names non-empty strings; a
             :class:`GroundCamera` is written as its ``Camera`` when it has one, else as ``H``.
+        estimated: ``{name: record}`` of cameras estimated one view at a time
+            (:data:`ESTIMATED`; ``xvmatch calibrate``), JSON-ready, or None.
 
     Raises:
         CameraFileError: no cameras, a bad name, or a value that is not a Camera.
@@ -286,7 +334,14 @@ def save_cameras(path: str | os.PathLike[str],
             if not np.isfinite(getattr(cam, field)).all():
                 raise CameraFileError(f"{name}: cameras.{key}.{field}: contains NaN or inf")
         records[key] = cam.to_dict()
-    text = json.dumps({"version": FORMAT_VERSION, "cameras": records}, indent=2, allow_nan=False)
+    doc: dict[str, Any] = {"version": FORMAT_VERSION, "cameras": records}
+    if estimated:
+        unknown = [k for k in estimated if k not in records]
+        if unknown:
+            raise CameraFileError(f"{name}: {ESTIMATED}: names camera(s) not written: "
+                                  f"{', '.join(map(str, unknown))}")
+        doc[ESTIMATED] = dict(estimated)
+    text = json.dumps(doc, indent=2, allow_nan=False)
 
     directory = os.path.dirname(os.path.abspath(name))
     if not os.path.isdir(directory):

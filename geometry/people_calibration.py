@@ -1,0 +1,572 @@
+"""A camera calibrated from the people it sees: horizon, tilt, roll, focal length and height.
+
+People stand upright on one ground plane and are about :data:`PERSON_HEIGHT` tall (1.5-1.95 m).
+For a level camera a person's box height is linear in its foot row,
+``h = (H_person / h_camera) * (y_foot - y_horizon)``: the rows where heights vanish are the
+horizon, the slope is the person's height over the camera's. A tilted camera bends that line
+(the head is nearer the camera than the foot); the bend tells the focal length. This module fits
+the whole pinhole model to a clip's boxes:
+
+* **model**: ``K`` with square pixels and the principal point at the image centre, ``R`` =
+  ``look_rotation(0, tilt, roll)``, centre ``(0, 0, h_camera)``; each box's foot pixel (bottom
+  centre) is cast to the ground and a person of :data:`PERSON_HEIGHT` stood there; the residual
+  is ``log(predicted height / box height)``;
+* **start**: a robust linear fit of box height on foot row and column (the level-camera line,
+  which gives the horizon line and ``H_person / h_camera``), for several focal lengths;
+* **fit**: ``scipy.optimize.least_squares`` with a soft-L1 loss (people differ in height, boxes
+  are cut by occlusion) and a weak prior on the focal length (:data:`PRIOR_HFOV_DEG`), which
+  decides it only where the boxes cannot (a level camera, whose heights do not depend on it);
+* **confidence**: the spread of the fit over resamples of the clip's time blocks (seeded).
+
+A nadir camera (a drone looking straight down) shows no such line: its boxes are the heads and
+shoulders seen from above, as wide as tall. It is recognised by the boxes' shape
+(:data:`NADIR_ASPECT`) and reported as such; its ground map is the image itself, up to scale.
+
+The scale of everything (camera height, ground metres) rests on the people's mean height, so it
+is good to a few per cent; directions (tilt, roll, horizon) do not depend on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+
+__all__ = [
+    "BODY_WIDTH",
+    "MIN_BLOCKS",
+    "MIN_BOXES",
+    "NADIR_ASPECT",
+    "NADIR_TILT_DEG",
+    "PERSON_HEIGHT",
+    "PRIOR_HFOV_DEG",
+    "STEEP_ASPECT",
+    "CalibrationError",
+    "PeopleCalibration",
+    "calibrate_from_people",
+    "horizon_line",
+]
+
+PERSON_HEIGHT = 1.72
+"""Mean standing height of the people (m), the middle of 1.5-1.95 m: the calibration's scale."""
+
+BODY_WIDTH = 0.45
+"""Diameter (m) of the upright cylinder a person is modelled as: shoulders across, feet and
+stride in depth."""
+
+PRIOR_HFOV_DEG = 70.0
+"""Horizontal field of view (degrees) the focal length is drawn towards where the boxes cannot
+tell it: a phone's main camera, a drone's, a surveillance camera's (60-80)."""
+
+_PRIOR_LOG_STD = 0.4
+"""Spread of that prior on ``log f`` (a factor 1.5)."""
+
+_PRIOR_WEIGHT = 1.0
+"""The prior counts as much as this many boxes fitted exactly."""
+
+NADIR_ASPECT = 1.0
+"""A view whose median box height over width is below this looks (nearly) straight down: from
+above, a head and shoulders are about as wide as tall, or wider."""
+
+STEEP_ASPECT = 1.6
+"""Below this median height over width, a view whose boxes the pinhole fit cannot read is taken
+as looking down too: upright people seen from less than about 60 degrees below the horizontal
+are taller than that."""
+
+NADIR_TILT_DEG = 80.0
+"""A fitted tilt steeper than this is reported as a nadir camera: the image is then the ground
+up to a similarity, within a few per cent."""
+
+MIN_BOXES = 30
+"""Fewest usable boxes (inside the image, not cut by its border) a calibration is fitted from."""
+
+MIN_BLOCKS = 3
+"""Fewest stretches of 10 frames the usable boxes must come from: the confidence is the
+spread over resamples of them."""
+
+MIN_ROW_SPREAD = 0.15
+"""The usable foot rows must spread over this fraction of the image height (between their 10th
+and 90th percentiles): people at one distance cannot tell where the horizon is."""
+
+MAX_TILT_STD_DEG = 3.0
+"""A calibration whose tilt varies more than this over resamples of the clip is refused."""
+
+MAX_HORIZON_STD = 0.03
+"""Nor one whose horizon row varies more than this fraction of the image height, where the
+horizon is within an image height of the image (farther off, the tilt says it all)."""
+
+_BORDER = 2.0
+"""A box within this many pixels of the image border is cut by it: its height says nothing."""
+
+_MIN_HEIGHT_PX = 8.0
+"""Boxes lower than this (pixels) are too coarse to read a height from."""
+
+_BAD_RESIDUAL = 3.0
+"""Residual of a box whose foot the model puts at or above the horizon (log units: e^3)."""
+
+_SOFT_SCALE = 0.08
+"""Soft-L1 scale of the height residuals: people's heights differ by about 8 %."""
+
+_MIN_TRACK_BOXES = 10
+"""A track with this many usable boxes gets a height of its own (in video mode)."""
+
+_HEIGHT_STD = 0.3
+"""Spread of people's heights about :data:`PERSON_HEIGHT` (m), the prior on a track's height."""
+
+_N_RESAMPLES = 16
+_BLOCK_FRAMES = 10
+_MAX_FIT_BOXES = 4000
+_START_HFOVS = (45.0, 65.0, 90.0, 120.0)
+
+
+class CalibrationError(ValueError):
+    """The boxes cannot tell the camera: too few, too close to one distance, or a fit that
+    varies too much over the clip. The message says which and what to give instead."""
+
+
+@dataclass(frozen=True)
+class PeopleCalibration:
+    """A view's camera as its people tell it.
+
+    Attributes:
+        kind: ``"oblique"`` (any camera that sees people upright, a level one included) or
+            ``"nadir"`` (looking straight down).
+        width, height: image size, pixels.
+        focal: focal length, pixels.
+        tilt_deg: downward pitch of the optical axis (0 level, 90 straight down).
+        roll_deg: roll (look_rotation's convention, clockwise).
+        camera_height: height of the camera over the ground, metres (from :data:`PERSON_HEIGHT`).
+        horizon: ``(row at the left edge, row at the right edge)`` of the horizon line; rows
+            above the image are negative.
+        focal_from: ``"people"`` (the boxes told it), ``"prior"`` (they could not: the prior's
+            :data:`PRIOR_HFOV_DEG`) or ``"given"`` (the caller's).
+        tilt_std_deg, horizon_std_px, focal_rel_std: spread over resamples of the clip.
+        n_boxes, n_frames: the usable boxes and the frames they came from.
+    """
+
+    kind: str
+    width: int
+    height: int
+    focal: float
+    tilt_deg: float
+    roll_deg: float
+    camera_height: float
+    horizon: tuple[float, float]
+    focal_from: str
+    tilt_std_deg: float
+    horizon_std_px: float
+    focal_rel_std: float
+    n_boxes: int
+    n_frames: int
+    person_height: float = PERSON_HEIGHT
+    _camera: Camera = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        K = intrinsics_from_fov(self.width, self.height, 90.0)
+        K[0, 0] = K[1, 1] = self.focal
+        R = look_rotation(0.0, np.radians(self.tilt_deg), np.radians(self.roll_deg))
+        cam = Camera(K=K, R=R, c=np.array([0.0, 0.0, self.camera_height]), width=self.width,
+                     height=self.height)
+        object.__setattr__(self, "_camera", cam)
+
+    @property
+    def camera(self) -> Camera:
+        """The pinhole camera in the view's own ground frame: above the origin, looking along
+        +x (yaw 0), ground z = 0 in metres."""
+        return self._camera
+
+    @property
+    def hfov_deg(self) -> float:
+        """Horizontal field of view, degrees."""
+        return float(np.degrees(2.0 * np.arctan(0.5 * self.width / self.focal)))
+
+    def ground_points(self, pixels: np.ndarray) -> np.ndarray:
+        """Foot pixels ``(N, 2)`` to ground points ``(N, 2)`` in the view's own frame (metres);
+        NaN for a pixel at or above the horizon."""
+        return _to_ground(self.camera, np.asarray(pixels, dtype=float))
+
+    def to_record(self) -> dict:
+        """JSON-ready record of how the camera was estimated (the camera file's ``estimated``)."""
+        return {
+            "from": "people",
+            "kind": self.kind,
+            "tilt_deg": round(self.tilt_deg, 3),
+            "roll_deg": round(self.roll_deg, 3),
+            "horizon_rows": (None if self.kind == "nadir"
+                             else [round(self.horizon[0], 2), round(self.horizon[1], 2)]),
+            "hfov_deg": round(self.hfov_deg, 3),
+            "focal_from": self.focal_from,
+            "camera_height_m": round(self.camera_height, 3),
+            "person_height_m": self.person_height,
+            "tilt_std_deg": round(self.tilt_std_deg, 3),
+            "horizon_std_px": round(self.horizon_std_px, 2),
+            "focal_rel_std": round(self.focal_rel_std, 4),
+            "boxes": self.n_boxes,
+            "frames": self.n_frames,
+        }
+
+
+def horizon_line(camera: Camera) -> tuple[float, float]:
+    """Rows of the ground plane's vanishing line at the image's left and right edges.
+
+    The line is ``l = K^-T R n`` with ``n`` the ground normal; a camera looking straight down
+    has none (rows of +-inf)."""
+    line = np.linalg.inv(camera.K).T @ camera.R @ np.array([0.0, 0.0, 1.0])
+    if abs(line[1]) < 1e-12:
+        return (-np.inf, -np.inf)
+    rows = [-(line[0] * u + line[2]) / line[1] for u in (0.0, float(camera.width))]
+    return float(rows[0]), float(rows[1])
+
+
+def _to_ground(camera: Camera, pixels: np.ndarray) -> np.ndarray:
+    """Rays through ``pixels`` met with the ground z = 0; NaN where they do not point down."""
+    d = camera.ray_directions(pixels)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(d[:, 2] < -1e-9, -camera.c[2] / d[:, 2], np.nan)
+    return camera.c[:2] + s[:, None] * d[:, :2]
+
+
+@dataclass(frozen=True)
+class _Boxes:
+    """The usable boxes of a clip: foot column ``u``, foot row ``v``, height ``h`` (pixels),
+    and the time block of each (for resampling)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    h: np.ndarray
+    block: np.ndarray
+    track: np.ndarray
+    n_tracks: int
+
+    def take(self, index: np.ndarray) -> _Boxes:
+        return _Boxes(self.u[index], self.v[index], self.h[index], self.block[index],
+                      self.track[index], self.n_tracks)
+
+
+def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Boxes that touch the box of someone nearer (whose feet are lower in the image) in the
+    same frame: a box of the visible part of a hidden person starts or ends too soon."""
+    out = np.zeros(len(boxes), dtype=bool)
+    order = np.argsort(frames, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(frames[order]) != 0])
+    for rows in np.split(order, starts[1:]):
+        if len(rows) < 2:
+            continue
+        x, y, w, h = boxes[rows].T
+        touch = ((x[:, None] <= x[None] + w[None]) & (x[None] <= x[:, None] + w[:, None])
+                 & (y[:, None] <= y[None] + h[None]) & (y[None] <= y[:, None] + h[:, None]))
+        nearer = (y + h)[None] > (y + h)[:, None]
+        out[rows] = (touch & nearer).any(axis=1)
+    return out
+
+
+def _usable(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
+            size: tuple[int, int]) -> _Boxes:
+    """Boxes ``(N, 4)`` x, y, w, h not cut by the image border, not behind someone and tall
+    enough to read, each with its track (index 0: boxes of tracks too short to have a height of
+    their own; left out when most boxes have a track)."""
+    x, y, w, h = boxes.T
+    width, height = size
+    ok = ((x > _BORDER) & (y > _BORDER) & (x + w < width - _BORDER) & (y + h < height - _BORDER)
+          & (h >= _MIN_HEIGHT_PX) & (w > 0)) & ~_behind_someone(frames, boxes)
+    block = np.unique(frames[ok] // _BLOCK_FRAMES, return_inverse=True)[1]
+    track = np.zeros(int(ok.sum()), dtype=np.int64)
+    n_tracks = 1
+    if ids is not None:
+        _keys, inverse, counts = np.unique(ids[ok], return_inverse=True, return_counts=True)
+        long = counts >= _MIN_TRACK_BOXES
+        number = np.cumsum(long) * long  # 1.. for long tracks, 0 for short ones
+        track, n_tracks = number[inverse], int(long.sum()) + 1
+    out = _Boxes(u=x[ok] + 0.5 * w[ok], v=y[ok] + h[ok], h=h[ok], block=block, track=track,
+                 n_tracks=n_tracks)
+    if n_tracks > 1 and np.mean(track > 0) >= 0.5:
+        # Enough people were followed: the others' boxes, of mixed heights, only blur the fit.
+        out = out.take(np.flatnonzero(track > 0))
+    return out
+
+
+def _heights(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> np.ndarray:
+    """Box heights the model predicts: ``params`` = ``(tilt, roll, log f, log h_camera,
+    height of track 0, 1, ...)``; NaN where the foot is at or above the horizon.
+
+    A person is an upright cylinder :data:`BODY_WIDTH` across, stood where the ray through the
+    box's bottom meets the ground (the near edge of the feet: the axis is a radius farther); the
+    predicted height is that of the image's bounding box of its outline at the feet and at the
+    head (a camera from above sees the top of the head and the ground in front of the feet
+    inside the box). Off the image centre a tilted camera sees people lean (their verticals meet
+    below the image): the box's centre column is then halfway between the foot's and the
+    head's, and the leaning body's width adds to the box's height."""
+    tilt, roll, log_f, log_hc = params[:4]
+    person = params[4:][b.track]
+    f, hc = np.exp(log_f), np.exp(log_hc)
+    cx, cy = 0.5 * size[0], 0.5 * size[1]
+    R = look_rotation(0.0, tilt, roll)
+    camera_z = R[:, 2]  # world z axis in camera coordinates
+
+    def ground(u: np.ndarray) -> np.ndarray:
+        """The foot pixel's ground point relative to the camera centre (NaN above the
+        horizon)."""
+        d = np.column_stack([(u - cx) / f, (b.v - cy) / f, np.ones_like(u)]) @ R
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
+        return s[:, None] * d
+
+    def image(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cam = points @ R.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
+            return cx + f * cam[..., 0] / z, cy + f * cam[..., 1] / z
+
+    radius = np.full_like(person, 0.5 * BODY_WIDTH)
+
+    def axis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The body's axis at the ground and the radius along the ray: the box's bottom row
+        sees the near edge of the feet, the axis is a radius farther."""
+        rim = ground(u)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            along = np.column_stack([rim[:, 0], rim[:, 1], np.zeros_like(u)]) * (
+                radius / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
+        return rim + along, along
+
+    foot, _ = axis(b.u)
+    u_head, _ = image(foot + person[:, None] * camera_z @ R)
+    foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the middle of the lean
+    side = np.column_stack([-along[:, 1], along[:, 0], along[:, 2]])
+    up = np.zeros_like(foot)
+    up[:, 2] = person
+    rim = np.stack([side, -side, along, -along], axis=1)  # the body's outline, seen and in depth
+    corners = np.concatenate([foot[:, None] + rim, (foot + up)[:, None] + rim], axis=1)
+    _, v = image(corners)
+    return v.max(axis=1) - v.min(axis=1)
+
+
+def _residuals(params: np.ndarray, b: _Boxes, size: tuple[int, int],
+               prior_f: float) -> np.ndarray:
+    """Log height errors of the boxes, then the priors: the focal length's, each track's
+    height's (people are :data:`PERSON_HEIGHT` +- :data:`_HEIGHT_STD` tall), which also sets
+    the scale."""
+    pred = _heights(params, b, size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.log(pred / b.h)
+    r = np.where(np.isfinite(r), r, _BAD_RESIDUAL)
+    prior = np.sqrt(_PRIOR_WEIGHT) * _SOFT_SCALE * (params[2] - np.log(prior_f)) / _PRIOR_LOG_STD
+    heights = _SOFT_SCALE * (params[4:] - PERSON_HEIGHT) / _HEIGHT_STD
+    return np.concatenate([r, [prior], heights])
+
+
+def _sparsity(b: _Boxes) -> np.ndarray:
+    """Which parameters each residual depends on: a box on the camera's four and its track's
+    height, the priors on one each."""
+    n, k = len(b.h), b.n_tracks
+    out = np.zeros((n + 1 + k, 4 + k), dtype=bool)
+    out[:n, :4] = True
+    out[np.arange(n), 4 + b.track] = True
+    out[n, 2] = True
+    out[n + 1 + np.arange(k), 4 + np.arange(k)] = True
+    return out
+
+
+def _level_line(b: _Boxes, size: tuple[int, int]) -> tuple[float, float, float]:
+    """Robust fit of ``h = a (v - v0 - s (u - cx))``: slope ``a``, horizon row ``v0`` at the
+    centre column and its slope ``s`` (the level-camera line, the fit's start)."""
+    cx = 0.5 * size[0]
+    A = np.column_stack([b.v, b.u - cx, np.ones_like(b.v)])
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        return (A @ p - b.h) / np.maximum(b.h, 1.0)
+
+    p0 = np.linalg.lstsq(A, b.h, rcond=None)[0]
+    p = least_squares(resid, p0, loss="soft_l1", f_scale=_SOFT_SCALE).x
+    a = p[0]
+    if not a > 0:
+        return 0.0, np.nan, 0.0
+    return float(a), float(-p[2] / a), float(-p[1] / a)
+
+
+def _start(b: _Boxes, size: tuple[int, int], hfov: float) -> np.ndarray:
+    """Parameters (see :func:`_heights`) from the level line at a given hfov, every track
+    :data:`PERSON_HEIGHT` tall."""
+    a, v0, slope = _level_line(b, size)
+    f = 0.5 * size[0] / np.tan(np.radians(hfov) / 2.0)
+    heights = np.full(b.n_tracks, PERSON_HEIGHT)
+    if not np.isfinite(v0):
+        return np.concatenate([[np.radians(30.0), 0.0, np.log(f), np.log(10.0)], heights])
+    # Keep every foot below the start's horizon: the model needs their rays to meet the ground.
+    v0 = min(v0, float(np.min(b.v - slope * (b.u - 0.5 * size[0]))) - 1.0)
+    tilt = float(np.arctan2(0.5 * size[1] - v0, f))
+    roll = float(-np.arctan(slope))
+    hc = max(PERSON_HEIGHT / max(a, 1e-3) * np.cos(tilt), PERSON_HEIGHT * 1.05)
+    return np.concatenate([[tilt, roll, np.log(f), np.log(hc)], heights])
+
+
+_CAMERA_BOUNDS = (np.array([np.radians(-45.0), np.radians(-30.0), -np.inf, np.log(0.5)]),
+                  np.array([np.radians(89.0), np.radians(30.0), np.inf, np.log(1e3)]))
+_HEIGHT_BOUNDS = (1.0, 2.4)
+
+
+def _fit(b: _Boxes, size: tuple[int, int], prior_f: float, starts: list[np.ndarray],
+         fixed_f: float | None) -> np.ndarray:
+    """Least squares from each start (``fixed_f``: the focal length held); the parameters of
+    the lowest cost."""
+    k = b.n_tracks
+    lower = np.concatenate([_CAMERA_BOUNDS[0], np.full(k, _HEIGHT_BOUNDS[0])])
+    upper = np.concatenate([_CAMERA_BOUNDS[1], np.full(k, _HEIGHT_BOUNDS[1])])
+    free = np.ones(4 + k, dtype=bool)
+    if fixed_f is not None:
+        free[2] = False
+    sparsity = _sparsity(b)[:, free]
+    best, best_cost = None, np.inf
+    for x0 in starts:
+        full = np.clip(x0, lower + 1e-6, upper - 1e-6)
+        if fixed_f is not None:
+            full[2] = np.log(fixed_f)
+
+        def fun(p: np.ndarray, full: np.ndarray = full) -> np.ndarray:
+            x = full.copy()
+            x[free] = p
+            return _residuals(x, b, size, prior_f)
+
+        res = least_squares(fun, full[free], loss="soft_l1", f_scale=_SOFT_SCALE,
+                            bounds=(lower[free], upper[free]), jac_sparsity=sparsity)
+        if res.cost < best_cost:
+            x = full.copy()
+            x[free] = res.x
+            best, best_cost = x, res.cost
+    return best
+
+
+def _camera_of(params: np.ndarray, size: tuple[int, int]) -> Camera:
+    tilt, roll, log_f, log_hc = params[:4]
+    K = np.array([[np.exp(log_f), 0.0, 0.5 * size[0]], [0.0, np.exp(log_f), 0.5 * size[1]],
+                  [0.0, 0.0, 1.0]])
+    return Camera(K=K, R=look_rotation(0.0, tilt, roll), c=np.array([0.0, 0.0, np.exp(log_hc)]),
+                  width=size[0], height=size[1])
+
+
+def _nadir(b: _Boxes, widths: np.ndarray, size: tuple[int, int], n_frames: int,
+           hfov: float | None) -> PeopleCalibration:
+    """A camera straight down: focal from the given or prior hfov, height from the boxes'
+    width (a head and shoulders about 0.5 m across)."""
+    f = 0.5 * size[0] / np.tan(np.radians(hfov if hfov else PRIOR_HFOV_DEG) / 2.0)
+    hc = PERSON_HEIGHT + f * 0.5 / float(np.median(widths))
+    return PeopleCalibration(
+        kind="nadir", width=size[0], height=size[1], focal=float(f), tilt_deg=90.0,
+        roll_deg=0.0, camera_height=float(hc), horizon=(-np.inf, -np.inf),
+        focal_from="given" if hfov else "prior", tilt_std_deg=0.0, horizon_std_px=0.0,
+        focal_rel_std=0.0, n_boxes=len(b.h), n_frames=n_frames)
+
+
+def calibrate_from_people(
+    frames: np.ndarray,
+    boxes: np.ndarray,
+    image_size: tuple[int, int],
+    *,
+    ids: np.ndarray | None = None,
+    hfov_deg: float | None = None,
+    seed: int = 0,
+    name: str = "the view",
+) -> PeopleCalibration:
+    """Estimate a static camera from its boxes over a clip (module docstring).
+
+    Args:
+        frames: ``(N,)`` frame number of each box (time blocks for the confidence).
+        boxes: ``(N, 4)`` x, y, w, h in pixels.
+        ids: ``(N,)`` the view's own track id of each box (video mode), or None: a person
+            seen long enough gets a height of their own, so the fit reads the camera from how
+            each person's box grows and shrinks rather than from the spread of heights.
+        image_size: ``(width, height)`` of the view.
+        hfov_deg: the horizontal field of view when known (then not fitted).
+        seed: seed of the resampling behind the confidence.
+        name: the view's name for messages.
+
+    Raises:
+        CalibrationError: too few usable boxes, foot rows in too narrow a band, or a tilt or
+            horizon that the clip does not pin down (:data:`MAX_TILT_STD_DEG`,
+            :data:`MAX_HORIZON_STD`); the message says what to give instead.
+    """
+    frames = np.asarray(frames, dtype=np.int64).reshape(-1)
+    boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    size = (int(image_size[0]), int(image_size[1]))
+    give = "give its camera with --cameras (or a longer clip with more people)"
+    b = _usable(frames, None if ids is None else np.asarray(ids).reshape(-1), boxes, size)
+    _x, _y, w, h = boxes.T
+    n_frames = int(np.unique(frames).size)
+    if len(b.h) < MIN_BOXES:
+        raise CalibrationError(
+            f"{name}: {len(b.h)} boxes clear of the image border and of each other, the "
+            f"calibration needs {MIN_BOXES}; {give}")
+    if int(b.block.max()) + 1 < MIN_BLOCKS:
+        raise CalibrationError(
+            f"{name}: its usable boxes span {int(b.block.max()) + 1} stretch(es) of "
+            f"{_BLOCK_FRAMES} frames, the calibration needs {MIN_BLOCKS} to measure its "
+            f"confidence; {give}")
+    inside = (w > 0) & (h > 0)
+    aspect = float(np.median(h[inside] / w[inside]))
+    if aspect < NADIR_ASPECT:
+        return _nadir(b, w[inside], size, n_frames, hfov_deg)
+    try:
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name)
+    except CalibrationError:
+        if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
+            return _nadir(b, w[inside], size, n_frames, hfov_deg)
+        raise
+    if calib.tilt_deg > NADIR_TILT_DEG:
+        return _nadir(b, w[inside], size, n_frames, hfov_deg)
+    return calib
+
+
+def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
+             seed: int, name: str) -> PeopleCalibration:
+    """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`)."""
+    give = "give its camera with --cameras (or a longer clip with more people)"
+    lo, hi = np.percentile(b.v, [10, 90])
+    if hi - lo < MIN_ROW_SPREAD * size[1]:
+        raise CalibrationError(
+            f"{name}: the people's feet stay within {hi - lo:.0f} rows "
+            f"({100 * (hi - lo) / size[1]:.0f} % of the image height), too few distances to find "
+            f"the horizon; {give}")
+    if len(b.h) > _MAX_FIT_BOXES:  # evenly spread over the clip: same answer, bounded time
+        b = b.take(np.linspace(0, len(b.h) - 1, _MAX_FIT_BOXES).round().astype(np.int64))
+    prior_f = 0.5 * size[0] / np.tan(np.radians(hfov_deg or PRIOR_HFOV_DEG) / 2.0)
+    hfovs = (hfov_deg,) if hfov_deg else _START_HFOVS
+    fixed = prior_f if hfov_deg else None
+    params = _fit(b, size, prior_f, [_start(b, size, hf) for hf in hfovs], fixed)
+    spread = _resample_spread(b, size, prior_f, params, fixed, seed)
+    cam = _camera_of(params, size)
+    hor = horizon_line(cam)
+    focal_from = "given" if hfov_deg else ("people" if spread[2] < 0.5 * _PRIOR_LOG_STD
+                                            else "prior")
+    calib = PeopleCalibration(
+        kind="oblique", width=size[0], height=size[1], focal=float(np.exp(params[2])),
+        tilt_deg=float(np.degrees(params[0])), roll_deg=float(np.degrees(params[1])),
+        camera_height=float(np.exp(params[3])), horizon=hor, focal_from=focal_from,
+        tilt_std_deg=float(spread[0]), horizon_std_px=float(spread[1]),
+        focal_rel_std=float(spread[2]), n_boxes=len(b.h), n_frames=n_frames)
+    near = -size[1] <= np.mean(hor) <= 2 * size[1]  # a horizon far off the image is a tilt
+    if calib.tilt_std_deg > MAX_TILT_STD_DEG or (
+            near and calib.horizon_std_px > MAX_HORIZON_STD * size[1]):
+        raise CalibrationError(
+            f"{name}: the boxes do not pin the camera down (tilt {calib.tilt_deg:.1f} +- "
+            f"{calib.tilt_std_deg:.1f} degrees, horizon +- {calib.horizon_std_px:.0f} px over the "
+            f"clip); give --hfov if you know the field of view, or {give}")
+    return calib
+
+
+def _resample_spread(b: _Boxes, size: tuple[int, int], prior_f: float, params: np.ndarray,
+                     fixed_f: float | None, seed: int) -> np.ndarray:
+    """Standard deviations of (tilt degrees, horizon row at the centre, log f) over fits to
+    resamples of the clip's time blocks, each started from the whole clip's fit."""
+    rng = np.random.default_rng([seed, 67])
+    n_blocks = int(b.block.max()) + 1
+    out = []
+    for _ in range(_N_RESAMPLES):
+        picks = rng.integers(0, n_blocks, n_blocks)
+        counts = np.bincount(picks, minlength=n_blocks)
+        index = np.repeat(np.arange(len(b.h)), counts[b.block])
+        p = _fit(b.take(index), size, prior_f, [params], fixed_f)
+        cam = _camera_of(p, size)
+        out.append([np.degrees(p[0]), float(np.mean(horizon_line(cam))), p[2]])
+    return np.std(np.array(out), axis=0)
