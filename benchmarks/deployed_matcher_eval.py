@@ -26,7 +26,7 @@ saturation, blur, sensor noise, JPEG; strength 1 is stronger than the training a
 drawn from the image's own bytes so both box settings see the same picture. Box costs are
 unchanged, so it asks whether images still beat boxes alone when appearance is less reliable.
 ``--texture D`` (D in (0, 1]) renders the same scenes with photographic textures laid over the
-people (:mod:`xvmatch.datasets.person_textures`): clothing the network never saw.
+people (:mod:`xvmatch.datasets.render.person_textures`): clothing the network never saw.
 
 Usage:
     python benchmarks/deployed_matcher_eval.py [--model default] [--work runs/deployed_eval]
@@ -47,7 +47,7 @@ from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.cues.matcher_inputs import INPUT_SETTINGS
 from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
-from xvmatch.datasets.image_render import Difficulty
+from xvmatch.datasets.render.image_render import Difficulty
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
@@ -82,7 +82,7 @@ def check_scenes_and_shifts(parser: argparse.ArgumentParser, scenes: int,
 def render(work: Path, scenario: str, role: str, workers: int, scenes: int | None = None,
            texture: float = 0.0) -> Path:
     """The dataset of a role (``scenes``: instead of the role's 20; ``texture``: the people
-    wear photographic textures of that depth, :mod:`xvmatch.datasets.person_textures`, on
+    wear photographic textures of that depth, :mod:`xvmatch.datasets.render.person_textures`, on
     otherwise the same scenes), rendered if not there yet."""
     seed, default_scenes, frames = ROLES[role]
     scenes = default_scenes if scenes is None else int(scenes)

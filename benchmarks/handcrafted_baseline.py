@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from xvmatch.datasets.image_render import Difficulty
+from xvmatch.datasets.render.image_render import Difficulty
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.cost_distributions import save_cost_figures

@@ -259,7 +259,7 @@ def rendered_rows(n_cameras: int, seed: int, frames: int, people: int, model, we
     ``None``) and with images at each appearance weight."""
     from dataclasses import replace as dc_replace
 
-    from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+    from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
 
     config = MulticamConfig(n_cameras=n_cameras, n_people=(people, people))
     start = time.perf_counter()
@@ -368,7 +368,7 @@ def main() -> int:
             args.frames = 200
         return rendered_main(args)
     if args.write and args.write_rendered:
-        from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+        from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
 
         _, paths = write_rendered_multicam_scene(
             args.write, MulticamConfig(n_cameras=args.write_cameras,

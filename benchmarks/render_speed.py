@@ -26,7 +26,7 @@ import time  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from xvmatch.datasets.image_render import SceneRenderer  # noqa: E402
+from xvmatch.datasets.render.image_render import SceneRenderer  # noqa: E402
 from xvmatch.datasets.synthetic_io import generate_dataset, write_scene  # noqa: E402
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene  # noqa: E402
 

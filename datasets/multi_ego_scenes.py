@@ -7,7 +7,7 @@ others, turned by a per-wearer offset (normal, ``gaze_spread`` degrees), with th
 roll limits and a field of view drawn from the scene's :class:`SynthConfig`; so the egocentric
 views overlap, each with its own part of the crowd.
 
-Every view is drawn by :class:`~xvmatch.datasets.image_render.SceneRenderer`: one renderer per
+Every view is drawn by :class:`~xvmatch.datasets.render.image_render.SceneRenderer`: one renderer per
 egocentric camera, built from the same seed (so the people wear the same outfits and the world
 is the same), with that camera's wearer left out of its own view and a photometry of its own.
 Only the first wearer's device is drawn in the top view. Labels keep the scene's person ids
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xvmatch.datasets.image_render import (
+from xvmatch.datasets.render.image_render import (
     Difficulty,
     SceneRenderer,
     ViewLabels,

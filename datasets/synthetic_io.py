@@ -11,7 +11,7 @@ Both JSON files carry ``"schema"`` and ``"version"`` (:data:`SCHEMA_VERSION`); a
 version it does not know. The scene file holds, per frame and view, the image path (relative to
 ``ROOT``), the camera (``K``, ``R``, ``c``, ``width``, ``height`` in the convention of
 :class:`~xvmatch.geometry.camera.Camera`) and one record per visible person (the fields of
-:class:`~xvmatch.datasets.image_render.ViewLabels`). ``docs/synthetic_data.md`` documents every
+:class:`~xvmatch.datasets.render.image_render.ViewLabels`). ``docs/synthetic_data.md`` documents every
 field.
 
 Scene ``i`` of a dataset with seed ``S`` is drawn from ``numpy.random.default_rng([S, i])``
@@ -48,7 +48,7 @@ from xvmatch.core.input_files import (
 )
 from xvmatch.core.json_text import parse_json
 from xvmatch.core.worker_pool import worker_pool
-from xvmatch.datasets.image_render import Difficulty, SceneRenderer, ViewLabels
+from xvmatch.datasets.render.image_render import Difficulty, SceneRenderer, ViewLabels
 from xvmatch.datasets.synthetic_scenes import SynthConfig, make_scene
 from xvmatch.formats.crops import box_crops
 from xvmatch.formats.image_size import check_image_size

@@ -2,7 +2,7 @@
 
 :func:`render_tracking_video` draws a drone scene (:func:`xvmatch.datasets.synthetic_scenes.
 make_scene`: people walking with turns and stops, frame after frame, the egocentric camera worn
-by person 0) and renders every frame of it (:class:`xvmatch.datasets.image_render.SceneRenderer`),
+by person 0) and renders every frame of it (:class:`xvmatch.datasets.render.image_render.SceneRenderer`),
 so the boxes and images of consecutive frames show the same people a fraction of a second apart:
 what ``xvmatch track`` reads. ``xvmatch synth --frames N`` renders the same walks but stores them
 as training pairs; this keeps the video in memory and can write it as box files and image
@@ -26,7 +26,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
 from xvmatch.core.atomic_files import atomic_write_bytes
-from xvmatch.datasets.image_render import SceneRenderer
+from xvmatch.datasets.render.image_render import SceneRenderer
 from xvmatch.datasets.synthetic_scenes import SynthConfig, SyntheticScene, make_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.geometry.camera import Camera, FrameCameras, look_rotation

@@ -138,7 +138,7 @@ def render_setting(source: str | os.PathLike, setting: Setting, seed: int,
     Returns:
         The dataset folder.
     """
-    from xvmatch.datasets.image_render import Difficulty
+    from xvmatch.datasets.render.image_render import Difficulty
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
     manifest = SyntheticDataset(source).manifest

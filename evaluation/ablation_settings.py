@@ -14,7 +14,7 @@ of one sweep:
   ground-truth column.
 * ``crowd``: scenes rendered with exactly 3, 10, 20 or 30 people, ground-truth boxes.
 * ``lookalike``: scenes rendered with a look-alike rate of 0, 0.25, 0.5 or 0.75
-  (:class:`~xvmatch.datasets.image_render.Difficulty`), ground-truth boxes.
+  (:class:`~xvmatch.datasets.render.image_render.Difficulty`), ground-truth boxes.
 
 Seeds: seed ``s`` draws the detector noise and the box shuffling (``TrialConfig(noise_seed=s,
 scramble_seed=s)``), the calibration error (:func:`calibration_rng`) and, for the rendering

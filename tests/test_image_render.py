@@ -1,4 +1,4 @@
-"""Tests of rendering and pixel labels (xvmatch.datasets.image_render, person_render)."""
+"""Tests of rendering and pixel labels (xvmatch.datasets.render.image_render, person_render)."""
 
 from __future__ import annotations
 
@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.box_scene import PeopleState
-from xvmatch.datasets.image_render import (
+from xvmatch.datasets.render.image_render import (
     Difficulty,
     Photometric,
     SceneRenderer,
     apply_photometric,
     render_people,
 )
-from xvmatch.datasets.person_render import (
+from xvmatch.datasets.render.person_render import (
     N_SLOTS,
     N_VERTICES,
     body_frame,

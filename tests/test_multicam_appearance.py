@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
 from xvmatch.datasets.multicam_scenes import MulticamConfig
 from xvmatch.formats.crops import box_crops
 from xvmatch.formats.mot_boxes import FrameBoxes

@@ -1,11 +1,11 @@
-"""Tests of xvmatch.datasets.multicam_render (rendered multi-camera scenes)."""
+"""Tests of xvmatch.datasets.render.multicam_render (rendered multi-camera scenes)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from xvmatch.datasets.multicam_render import (
+from xvmatch.datasets.render.multicam_render import (
     MulticamRenderer,
     render_multicam_scene,
     write_rendered_multicam_scene,

@@ -1,4 +1,4 @@
-"""Tests of the photographic person textures (xvmatch.datasets.person_textures)."""
+"""Tests of the photographic person textures (xvmatch.datasets.render.person_textures)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import importlib.util
 import numpy as np
 import pytest
 
-from xvmatch.datasets.image_render import Difficulty, SceneRenderer
-from xvmatch.datasets.person_textures import (
+from xvmatch.datasets.render.image_render import Difficulty, SceneRenderer
+from xvmatch.datasets.render.person_textures import (
     TEXTURE_SIZE,
     TEXTURE_SOURCES,
     PersonTextures,

@@ -1,7 +1,7 @@
 """The ``xvmatch synth`` and ``xvmatch show`` commands: render a labelled dataset, draw a pair.
 
 ``synth --cameras N`` writes one scene of N static cameras instead (the input of ``xvmatch
-multicam``): rendered (:mod:`xvmatch.datasets.multicam_render`) or, with ``--boxes-only``, from the
+multicam``): rendered (:mod:`xvmatch.datasets.render.multicam_render`) or, with ``--boxes-only``, from the
 box simulator (:mod:`xvmatch.datasets.multicam_scenes`), optionally with tracker-like noise.
 
 Each ``add_*_parser`` registers one sub-command on the ``subparsers`` of the main parser; the
@@ -120,7 +120,7 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    from xvmatch.datasets.image_render import Difficulty
+    from xvmatch.datasets.render.image_render import Difficulty
     from xvmatch.datasets.synthetic_io import generate_dataset
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
@@ -137,7 +137,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     if args.texture:
         from dataclasses import replace
 
-        from xvmatch.datasets.person_textures import load_textures
+        from xvmatch.datasets.render.person_textures import load_textures
 
         load_textures()  # a missing package is one line here, not an error in each worker
         difficulty = replace(difficulty, texture=args.texture)
@@ -166,8 +166,8 @@ def _synth_cameras(args: argparse.Namespace) -> int:
     """``synth --cameras N``: one multi-camera scene, rendered or box-only (issue 32)."""
     from xvmatch.core.folder_marker import files_under, record_own_files, remove_own_files
     from xvmatch.core.output_paths import claim_folder
-    from xvmatch.datasets.image_render import Difficulty
-    from xvmatch.datasets.multicam_render import write_rendered_multicam_scene
+    from xvmatch.datasets.render.image_render import Difficulty
+    from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
     from xvmatch.datasets.multicam_scenes import (
         MulticamConfig,
         TrackerNoise,

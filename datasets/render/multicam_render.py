@@ -3,13 +3,13 @@
 The people and cameras are those of the box simulator's scene of the same seed
 (:func:`xvmatch.datasets.multicam_scenes.multicam_walks`): people walking on a square floor,
 2-8 static calibrated cameras around it, overlapping in part. Each camera's images are drawn with
-the two-view renderer's functions (:mod:`xvmatch.datasets.image_render`): outfits
-(:func:`~xvmatch.datasets.person_render.draw_appearances`), one world for the scene (ground
-texture, sky, light, buildings around the floor: :func:`~xvmatch.datasets.image_render.
+the two-view renderer's functions (:mod:`xvmatch.datasets.render.image_render`): outfits
+(:func:`~xvmatch.datasets.render.person_render.draw_appearances`), one world for the scene (ground
+texture, sky, light, buildings around the floor: :func:`~xvmatch.datasets.render.image_render.
 make_world`), each camera's static background drawn once
-(:func:`~xvmatch.datasets.image_render.render_background`), the people's cast shadows, then the
-people far to near (:func:`~xvmatch.datasets.image_render.render_people`, painter's algorithm),
-then the camera's own photometry (:func:`~xvmatch.datasets.image_render.draw_photometric` per
+(:func:`~xvmatch.datasets.render.image_render.render_background`), the people's cast shadows, then the
+people far to near (:func:`~xvmatch.datasets.render.image_render.render_people`, painter's algorithm),
+then the camera's own photometry (:func:`~xvmatch.datasets.render.image_render.draw_photometric` per
 camera: white balance, exposure, gamma, blur, noise, JPEG quality; per-frame noise from a seed
 per frame and camera). Cameras are rendered at ``width`` pixels (default 640; the simulator's
 16:9 sizes scaled, so ``K`` is scaled with them).
@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from xvmatch.core.atomic_files import atomic_write_bytes
-from xvmatch.datasets.image_render import (
+from xvmatch.datasets.render.image_render import (
     Difficulty,
     Photometric,
     _shadows,
@@ -60,7 +60,7 @@ from xvmatch.datasets.multicam_scenes import (
     per_camera_track_ids,
     write_multicam_scene,
 )
-from xvmatch.datasets.person_render import body_frame, draw_appearances, walk_phases
+from xvmatch.datasets.render.person_render import body_frame, draw_appearances, walk_phases
 from xvmatch.datasets.synthetic_scenes import Building, _buildings
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera
@@ -75,7 +75,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class _Backdrop:
-    """What :func:`~xvmatch.datasets.image_render.make_world` reads of a scene: its
+    """What :func:`~xvmatch.datasets.render.image_render.make_world` reads of a scene: its
     buildings."""
 
     buildings: tuple[Building, ...]

@@ -3,7 +3,7 @@
 A view is drawn back to front with OpenCV fills, no 3D library: the ground (a periodic texture
 mapped by the ground-plane homography of the camera), distant ground and sky bands above and
 below the horizon line, the buildings' visible faces, the people's cast shadows, then every
-person primitive (:mod:`xvmatch.datasets.person_render`) as the filled convex hull of its
+person primitive (:mod:`xvmatch.datasets.render.person_render`) as the filled convex hull of its
 projected points, in decreasing distance to the camera (painter's algorithm). Each primitive is
 shaded by the scene's sun: a lit colour, a darker self-shadow band on the side turned away from
 the light, and a cap (shoulders, hat tops) when it faces the camera.
@@ -27,7 +27,7 @@ from dataclasses import dataclass, fields
 import cv2
 import numpy as np
 
-from xvmatch.datasets.person_render import (
+from xvmatch.datasets.render.person_render import (
     N_SLOTS,
     OVERLAY_SLOTS,
     SHADED_SLOTS,
@@ -78,7 +78,7 @@ class Difficulty:
     Attributes:
         lookalike: probability that a person copies an earlier person's outfit with colours
             re-drawn within their look-alike groups (see
-            :func:`~xvmatch.datasets.person_render.draw_appearances`).
+            :func:`~xvmatch.datasets.render.person_render.draw_appearances`).
         palette_size: clothing colours available per scene (2-18); fewer means more people in
             the same colours.
         pattern_weights: relative frequency of plain, striped and two-tone torsos.
@@ -95,7 +95,7 @@ class Difficulty:
         sunny: probability of a sunny scene (strong directional light and cast shadows);
             otherwise overcast (soft light, faint shadows).
         texture: depth (0-1) of the photographic texture laid over each person
-            (:mod:`xvmatch.datasets.person_textures`); 0, the default, draws none and leaves
+            (:mod:`xvmatch.datasets.render.person_textures`); 0, the default, draws none and leaves
             the renders and the manifests as before.
     """
 
@@ -915,7 +915,7 @@ class SceneRenderer:
         self._frame_seeds = rng.integers(0, 2**63 - 1, size=(scene.n_frames, 2))
         self._textures = None
         if d.texture > 0:  # drawn last: the rest of the scene is the untextured one
-            from xvmatch.datasets.person_textures import draw_person_textures
+            from xvmatch.datasets.render.person_textures import draw_person_textures
 
             self._textures = draw_person_textures(rng, scene.people.n_people)
         self._phase, self._amplitude = walk_phases(scene.people, scene.config.fps)
@@ -960,7 +960,7 @@ class SceneRenderer:
         id_image, labels = render_people(image, camera, body, self.world, people.ids,
                                          allowed=allowed, near_clip=near)
         if self._textures is not None:
-            from xvmatch.datasets.person_textures import apply_person_textures
+            from xvmatch.datasets.render.person_textures import apply_person_textures
 
             image = apply_person_textures(image, id_image, self._textures,
                                           self.difficulty.texture)
