@@ -47,8 +47,8 @@ from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.cues.matcher_inputs import INPUT_SETTINGS
 from xvmatch.datasets.camera_shift import MAX_STRENGTH, camera_shift
-from xvmatch.datasets.render.image_render import Difficulty
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
+from xvmatch.datasets.render.image_render import Difficulty
 from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.evaluation.deployed_matcher_eval import (

@@ -7,10 +7,10 @@ others, turned by a per-wearer offset (normal, ``gaze_spread`` degrees), with th
 roll limits and a field of view drawn from the scene's :class:`SynthConfig`; so the egocentric
 views overlap, each with its own part of the crowd.
 
-Every view is drawn by :class:`~xvmatch.datasets.render.image_render.SceneRenderer`: one renderer per
-egocentric camera, built from the same seed (so the people wear the same outfits and the world
-is the same), with that camera's wearer left out of its own view and a photometry of its own.
-Only the first wearer's device is drawn in the top view. Labels keep the scene's person ids
+Every view is drawn by :class:`~xvmatch.datasets.render.image_render.SceneRenderer`: one
+renderer per egocentric camera, built from the same seed (so the people wear the same outfits and
+the world is the same), with that camera's wearer left out of its own view and a photometry of its
+own. Only the first wearer's device is drawn in the top view. Labels keep the scene's person ids
 (the same person has the same id in every view); the ids are for evaluation only.
 
 :func:`write_multi_ego_inputs` lays a scene out as a user's data: one MOT box file per view

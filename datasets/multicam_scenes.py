@@ -191,9 +191,9 @@ def multicam_walks(config: MulticamConfig, n_frames: int, seed: int
     they were drawn from (its later draws give the per-camera track ids).
 
     :func:`simulate_multicam_scene` and the renderer
-    (:mod:`xvmatch.datasets.render.multicam_render`) both start here, so a seed gives the same people
-    and cameras to the box simulator and to the images. Person ``k`` of the walks has global id
-    ``k + 1``.
+    (:mod:`xvmatch.datasets.render.multicam_render`) both start here, so a seed gives the same
+    people and cameras to the box simulator and to the images. Person ``k`` of the walks has global
+    id ``k + 1``.
     """
     rng = np.random.default_rng([int(seed), 32])
     walks = simulate_walks(_walk_config(config), n_frames, rng)

@@ -11,8 +11,8 @@ Both JSON files carry ``"schema"`` and ``"version"`` (:data:`SCHEMA_VERSION`); a
 version it does not know. The scene file holds, per frame and view, the image path (relative to
 ``ROOT``), the camera (``K``, ``R``, ``c``, ``width``, ``height`` in the convention of
 :class:`~xvmatch.geometry.camera.Camera`) and one record per visible person (the fields of
-:class:`~xvmatch.datasets.render.image_render.ViewLabels`). ``docs/synthetic_data.md`` documents every
-field.
+:class:`~xvmatch.datasets.render.image_render.ViewLabels`). ``docs/synthetic_data.md``
+documents every field.
 
 Scene ``i`` of a dataset with seed ``S`` is drawn from ``numpy.random.default_rng([S, i])``
 alone, so the files are byte-identical for any number of workers. The whole folder is written

@@ -1,17 +1,17 @@
 """Short rendered videos for complementary-view tracking: one continuous walk, both views.
 
 :func:`render_tracking_video` draws a drone scene (:func:`xvmatch.datasets.synthetic_scenes.
-make_scene`: people walking with turns and stops, frame after frame, the egocentric camera worn
-by person 0) and renders every frame of it (:class:`xvmatch.datasets.render.image_render.SceneRenderer`),
-so the boxes and images of consecutive frames show the same people a fraction of a second apart:
-what ``xvmatch track`` reads. ``xvmatch synth --frames N`` renders the same walks but stores them
-as training pairs; this keeps the video in memory and can write it as box files and image
-folders (:func:`write_tracking_video`). The walk model turns the worn camera's gaze by several
-degrees a frame (it is drawn for single frames; on a 640-pixel image, people's boxes then barely
-overlap from one frame to the next); a head-worn video turns far more smoothly, so here the
-head's yaw, pitch and roll are smoothed over time (a Gaussian of ``head_smoothing`` seconds)
-and the egocentric cameras rebuilt from them. Ids are the ground truth (the same person has the
-same id in both views); they are for evaluation only.
+make_scene`: people walking with turns and stops, frame after frame, the egocentric camera worn by
+person 0) and renders every frame of it
+(:class:`xvmatch.datasets.render.image_render.SceneRenderer`), so the boxes and images of
+consecutive frames show the same people a fraction of a second apart: what ``xvmatch track`` reads.
+``xvmatch synth --frames N`` renders the same walks but stores them as training pairs; this keeps
+the video in memory and can write it as box files and image folders (:func:`write_tracking_video`).
+The walk model turns the worn camera's gaze by several degrees a frame (it is drawn for single
+frames; on a 640-pixel image, people's boxes then barely overlap from one frame to the next); a
+head-worn video turns far more smoothly, so here the head's yaw, pitch and roll are smoothed over
+time (a Gaussian of ``head_smoothing`` seconds) and the egocentric cameras rebuilt from them. Ids
+are the ground truth (the same person has the same id in both views); they are for evaluation only.
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
 from xvmatch.datasets.multicam_scenes import MulticamConfig
+from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
 from xvmatch.formats.crops import box_crops
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation

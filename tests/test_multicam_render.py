@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from xvmatch.datasets.multicam_scenes import MulticamConfig, simulate_multicam_scene
 from xvmatch.datasets.render.multicam_render import (
     MulticamRenderer,
     render_multicam_scene,
     write_rendered_multicam_scene,
 )
-from xvmatch.datasets.multicam_scenes import MulticamConfig, simulate_multicam_scene
 from xvmatch.formats.camera_io import load_ground_cameras
 from xvmatch.formats.frame_sources import open_frames
 from xvmatch.formats.mot_boxes import read_mot_boxes

@@ -1,8 +1,9 @@
 """The ``xvmatch synth`` and ``xvmatch show`` commands: render a labelled dataset, draw a pair.
 
 ``synth --cameras N`` writes one scene of N static cameras instead (the input of ``xvmatch
-multicam``): rendered (:mod:`xvmatch.datasets.render.multicam_render`) or, with ``--boxes-only``, from the
-box simulator (:mod:`xvmatch.datasets.multicam_scenes`), optionally with tracker-like noise.
+multicam``): rendered (:mod:`xvmatch.datasets.render.multicam_render`) or, with
+``--boxes-only``, from the box simulator (:mod:`xvmatch.datasets.multicam_scenes`), optionally with
+tracker-like noise.
 
 Each ``add_*_parser`` registers one sub-command on the ``subparsers`` of the main parser; the
 command's ``func`` takes the parsed arguments and returns an exit code. Imports are lazy so that
@@ -166,8 +167,6 @@ def _synth_cameras(args: argparse.Namespace) -> int:
     """``synth --cameras N``: one multi-camera scene, rendered or box-only (issue 32)."""
     from xvmatch.core.folder_marker import files_under, record_own_files, remove_own_files
     from xvmatch.core.output_paths import claim_folder
-    from xvmatch.datasets.render.image_render import Difficulty
-    from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
     from xvmatch.datasets.multicam_scenes import (
         MulticamConfig,
         TrackerNoise,
@@ -175,6 +174,8 @@ def _synth_cameras(args: argparse.Namespace) -> int:
         simulate_multicam_scene,
         write_multicam_scene,
     )
+    from xvmatch.datasets.render.image_render import Difficulty
+    from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
 
     if args.texture:
         raise ValueError("--texture applies to image pairs, not to --cameras")

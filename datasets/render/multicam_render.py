@@ -7,12 +7,13 @@ the two-view renderer's functions (:mod:`xvmatch.datasets.render.image_render`):
 (:func:`~xvmatch.datasets.render.person_render.draw_appearances`), one world for the scene (ground
 texture, sky, light, buildings around the floor: :func:`~xvmatch.datasets.render.image_render.
 make_world`), each camera's static background drawn once
-(:func:`~xvmatch.datasets.render.image_render.render_background`), the people's cast shadows, then the
-people far to near (:func:`~xvmatch.datasets.render.image_render.render_people`, painter's algorithm),
-then the camera's own photometry (:func:`~xvmatch.datasets.render.image_render.draw_photometric` per
-camera: white balance, exposure, gamma, blur, noise, JPEG quality; per-frame noise from a seed
-per frame and camera). Cameras are rendered at ``width`` pixels (default 640; the simulator's
-16:9 sizes scaled, so ``K`` is scaled with them).
+(:func:`~xvmatch.datasets.render.image_render.render_background`), the people's cast shadows,
+then the people far to near (:func:`~xvmatch.datasets.render.image_render.render_people`,
+painter's algorithm), then the camera's own photometry
+(:func:`~xvmatch.datasets.render.image_render.draw_photometric` per camera: white balance, exposure,
+gamma, blur, noise, JPEG quality; per-frame noise from a seed per frame and camera). Cameras are
+rendered at ``width`` pixels (default 640; the simulator's 16:9 sizes scaled, so ``K`` is scaled
+with them).
 
 Labels come from the pixels: a camera's box of a person is the tight box of its visible pixels,
 kept when at least ``min_visible`` of its silhouette and ``min_pixels`` pixels are visible. Each
@@ -43,6 +44,13 @@ import cv2
 import numpy as np
 
 from xvmatch.core.atomic_files import atomic_write_bytes
+from xvmatch.datasets.multicam_scenes import (
+    MulticamConfig,
+    MulticamScene,
+    multicam_walks,
+    per_camera_track_ids,
+    write_multicam_scene,
+)
 from xvmatch.datasets.render.image_render import (
     Difficulty,
     Photometric,
@@ -52,13 +60,6 @@ from xvmatch.datasets.render.image_render import (
     make_world,
     render_background,
     render_people,
-)
-from xvmatch.datasets.multicam_scenes import (
-    MulticamConfig,
-    MulticamScene,
-    multicam_walks,
-    per_camera_track_ids,
-    write_multicam_scene,
 )
 from xvmatch.datasets.render.person_render import body_frame, draw_appearances, walk_phases
 from xvmatch.datasets.synthetic_scenes import Building, _buildings
