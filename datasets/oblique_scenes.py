@@ -548,39 +548,40 @@ def _handheld_cameras(
 # The scene
 
 
-def make_oblique_scene(
-    config: ObliqueSceneConfig, n_frames: int, rng: np.random.Generator
-) -> ObliqueScene:
-    """Draw one scene (groups, cameras, walks) and project the boxes of every view.
-
-    See the module docstring for the world, the cameras, the boxes and how the overlap is
-    made.
-
-    Args:
-        config: the configuration.
-        n_frames: number of frames F >= 1 (``fps`` per second).
-        rng: the only source of randomness, e.g. ``np.random.default_rng(seed)``.
+def _draw_group_sizes(
+    config: ObliqueSceneConfig, n_hor: int, rng: np.random.Generator
+) -> tuple[float, list[float], int, int, list[int]]:
+    """Group sizes from the drawn overlap fractions.
 
     Returns:
-        The :class:`ObliqueScene`.
+        ``(p_top, p_hor, n_shared, n_top_only, n_hor_only)``: the drawn overlap fractions of
+        the top view and of each handheld view, and the people of the shared group, of the
+        top-only group and of each hor-only group.
     """
-    if int(n_frames) < 1:
-        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
-    n_frames = int(n_frames)
-    n_hor = int(config.n_hor)
-    hor_names = [f"hor{k}" for k in range(1, n_hor + 1)]
-    dt = 1.0 / config.fps
-    times = np.arange(n_frames) * dt
-
-    # 1. Group sizes from the drawn overlap fractions.
     n_top = int(rng.integers(config.n_people[0], config.n_people[1] + 1))
     p_top = float(rng.uniform(*config.overlap))
     p_hor = [float(rng.uniform(*config.overlap)) for _ in range(n_hor)]
     n_shared = int(np.clip(np.round(p_top * n_top), 1, n_top))
-    n_top_only = n_top - n_shared
     n_hor_only = [int(np.round(n_shared * (1.0 - p) / p)) for p in p_hor]
+    return p_top, p_hor, n_shared, n_top - n_shared, n_hor_only
 
-    # 2. The top camera, looking at the shared square; the square fitted inside its image.
+
+def _place_top_camera(
+    config: ObliqueSceneConfig, times: np.ndarray, n_shared: int, rng: np.random.Generator
+) -> tuple[list[Camera], list[Camera], float]:
+    """The top camera, looking at the shared square; the square fitted inside its image.
+
+    Args:
+        config: the configuration.
+        times: ``(F,)`` frame times, seconds.
+        n_shared: people of the shared group.
+        rng: the source of randomness.
+
+    Returns:
+        ``(top_cameras, top_checks, side)``: the F top cameras, those of the check frames
+        (:func:`_check_frames`) and the side of the shared square, metres.
+    """
+    n_frames = times.shape[0]
     yaw = float(rng.uniform(-np.pi, np.pi))
     pitch = float(np.radians(rng.uniform(*config.top_pitch)))
     height = float(rng.uniform(*config.top_height))
@@ -609,71 +610,138 @@ def make_oblique_scene(
         else:
             height *= 1.05
     top_cameras = [top_at(f) for f in range(n_frames)]
-    top_checks = [top_cameras[f] for f in checks]
-    shared = _Region(np.zeros(2), side)
+    return top_cameras, [top_cameras[f] for f in checks], side
 
-    # 3. Holders around the shared square, far enough for it to fit their field of view, each
-    #    with its hor-only square: in its view, outside the top image on every frame. A holder
-    #    tries a few azimuths (the first spreads the holders evenly) until that square fits.
+
+@dataclass(frozen=True)
+class _Holders:
+    """The placed holders of the handheld cameras, one entry per view.
+
+    Attributes:
+        hfov: horizontal fields of view, degrees.
+        size: image sizes ``(width, height)``, pixels.
+        regions: the holders' walking squares.
+        gazes: the directions each holder films (radians).
+        hor_only: each view's hor-only square, None where none was placed.
+    """
+
+    hfov: list[float]
+    size: list[tuple[int, int]]
+    regions: list[_Region]
+    gazes: list[float]
+    hor_only: list[_Region | None]
+
+
+def _place_holder(
+    config: ObliqueSceneConfig,
+    azimuth0: float,
+    hfov: float,
+    n_hor_only: int,
+    shared: _Region,
+    placed: Sequence[_Region],
+    top_checks: Sequence[Camera],
+    rng: np.random.Generator,
+) -> tuple[_Region, float, _Region | None]:
+    """One holder around the shared square, far enough for it to fit their field of view.
+
+    The holder tries a few azimuths (the first is ``azimuth0`` moved by a draw) until its
+    hor-only square fits: in its view, outside the top image on every frame.
+
+    Returns:
+        ``(holder, gaze, hor_only)``: the holder's square, the direction they film (radians)
+        and their hor-only square (None where none fits or ``n_hor_only`` is 0).
+    """
+    n_hor = int(config.n_hor)
+    half = _SHARED_CONE * np.radians(hfov) / 2.0
+    hside = _group_side(n_hor_only, float(rng.uniform(*config.group_area)),
+                        config.min_separation)
+    extra = rng.uniform(*config.hor_extra_distance, size=_AZIMUTHS)
+    azimuths = rng.uniform(-np.pi, np.pi, size=_AZIMUTHS)
+    azimuths[0] = azimuth0 + (azimuths[0] / np.pi) * 0.5 * np.pi / n_hor
+    draws = rng.random((_AZIMUTHS, _TRIES // _AZIMUTHS, 2))
+    choice = None
+    for i in range(_AZIMUTHS):
+        distance = max(0.7 * shared.side / np.sin(half) + extra[i],
+                       shared.radius + _HOLDER_AREA + _GROUP_GAP)
+        holder = _Region(distance * np.array([np.cos(azimuths[i]), np.sin(azimuths[i])]),
+                         _HOLDER_AREA)
+        gaze = float(_wrap(azimuths[i] + np.pi))
+        if not holder.clear_of(placed):
+            continue
+        if choice is None:
+            choice = (holder, gaze, None)
+        if n_hor_only == 0:
+            break
+        region = _hor_only_region(holder, gaze, half, hside, distance + shared.radius,
+                                  [*placed, holder], top_checks, draws[i])
+        if region is not None:
+            return holder, gaze, region
+    if choice is None:  # every azimuth crowded: the first, uncleared
+        distance = 0.7 * shared.side / np.sin(half) + extra[0]
+        holder = _Region(distance * np.array([np.cos(azimuths[0]), np.sin(azimuths[0])]),
+                         _HOLDER_AREA)
+        choice = (holder, float(_wrap(azimuths[0] + np.pi)), None)
+    return choice
+
+
+def _place_holders(
+    config: ObliqueSceneConfig,
+    shared: _Region,
+    top_checks: Sequence[Camera],
+    n_hor_only: Sequence[int],
+    rng: np.random.Generator,
+) -> tuple[_Holders, list[_Region]]:
+    """The holders of the handheld cameras, each with its hor-only square.
+
+    Returns:
+        The :class:`_Holders` and every square placed so far (shared, holders, hor-only).
+    """
+    n_hor = int(config.n_hor)
     hor_hfov = [float(rng.uniform(*config.hor_hfov)) for _ in range(n_hor)]
     hor_size = [tuple(config.hor_sizes[int(rng.integers(len(config.hor_sizes)))])
                 for _ in range(n_hor)]
     base = float(rng.uniform(-np.pi, np.pi))
     placed = [shared]
-    holders: list[_Region] = []
-    gazes: list[float] = []
-    hor_only: list[_Region | None] = []
+    holders = _Holders(hfov=hor_hfov, size=hor_size, regions=[], gazes=[], hor_only=[])
     for k in range(n_hor):
-        half = _SHARED_CONE * np.radians(hor_hfov[k]) / 2.0
-        hside = _group_side(n_hor_only[k], float(rng.uniform(*config.group_area)),
-                            config.min_separation)
-        extra = rng.uniform(*config.hor_extra_distance, size=_AZIMUTHS)
-        azimuths = rng.uniform(-np.pi, np.pi, size=_AZIMUTHS)
-        azimuths[0] = base + 2.0 * np.pi * k / n_hor + (azimuths[0] / np.pi) * 0.5 * np.pi / n_hor
-        draws = rng.random((_AZIMUTHS, _TRIES // _AZIMUTHS, 2))
-        choice = None
-        for i in range(_AZIMUTHS):
-            distance = max(0.7 * side / np.sin(half) + extra[i],
-                           shared.radius + _HOLDER_AREA + _GROUP_GAP)
-            holder = _Region(distance * np.array([np.cos(azimuths[i]), np.sin(azimuths[i])]),
-                             _HOLDER_AREA)
-            gaze = float(_wrap(azimuths[i] + np.pi))
-            if not holder.clear_of(placed):
-                continue
-            if choice is None:
-                choice = (holder, gaze, None)
-            if n_hor_only[k] == 0:
-                break
-            region = _hor_only_region(holder, gaze, half, hside, distance + shared.radius,
-                                      [*placed, holder], top_checks, draws[i])
-            if region is not None:
-                choice = (holder, gaze, region)
-                break
-        if choice is None:  # every azimuth crowded: the first, uncleared
-            distance = 0.7 * side / np.sin(half) + extra[0]
-            holder = _Region(distance * np.array([np.cos(azimuths[0]), np.sin(azimuths[0])]),
-                             _HOLDER_AREA)
-            choice = (holder, float(_wrap(azimuths[0] + np.pi)), None)
-        holders.append(choice[0])
-        gazes.append(choice[1])
-        hor_only.append(choice[2])
-        placed.append(choice[0])
-        if choice[2] is None:
-            n_hor_only[k] = 0
-        else:
-            placed.append(choice[2])
+        holder, gaze, region = _place_holder(
+            config, base + 2.0 * np.pi * k / n_hor, hor_hfov[k], n_hor_only[k], shared, placed,
+            top_checks, rng)
+        holders.regions.append(holder)
+        holders.gazes.append(gaze)
+        holders.hor_only.append(region)
+        placed.append(holder)
+        if region is not None:
+            placed.append(region)
+    return holders, placed
 
-    # 4. The top-only square: in the top image, outside every handheld view. Holders the top
-    #    camera sees count as top-only people (fewer are placed).
+
+def _place_top_only(
+    config: ObliqueSceneConfig,
+    top_cameras: Sequence[Camera],
+    top_checks: Sequence[Camera],
+    holders: _Holders,
+    placed: Sequence[_Region],
+    n_top_only: int,
+    side: float,
+    rng: np.random.Generator,
+) -> tuple[_Region | None, int, int]:
+    """The top-only square: in the top image, outside every handheld view.
+
+    Holders the top camera sees count as top-only people (fewer are placed).
+
+    Returns:
+        ``(top_only, n_top_only, holders_seen)``: the square (None where none fits or no one
+        is left), the people placed in it (0 without it) and the holders the top camera sees.
+    """
     holders_seen = sum(
         _inside(top_checks, np.array([[*h.centre, 0.0], [*h.centre, _CHECK_HEIGHT]]),
                 config.near_clip)
-        for h in holders
+        for h in holders.regions
     )
     n_top_only = max(0, n_top_only - holders_seen)
     top_only_side = _group_side(n_top_only, float(rng.uniform(*config.group_area)),
                                 config.min_separation)
-    top_only = None
     cand_pix = rng.uniform(0.15, 0.85, size=(_TRIES, 2)) * np.array(config.top_size)
     if n_top_only > 0:
         ground = top_cameras[0].ray_directions(cand_pix)
@@ -688,59 +756,136 @@ def make_oblique_scene(
             if not _inside(top_checks, pts, config.near_clip):
                 continue
             if all((_off_axis(h.centre, g, pts) > np.radians(hf / 2.0 + _OUTSIDE_CONE_DEG)).all()
-                   for h, g, hf in zip(holders, gazes, hor_hfov, strict=True)):
-                top_only = region
-                break
-    if top_only is None:
-        n_top_only = 0
-    else:
-        placed.append(top_only)
+                   for h, g, hf in zip(holders.regions, holders.gazes, holders.hfov,
+                                       strict=True)):
+                return region, n_top_only, holders_seen
+    return None, 0, holders_seen
 
-    # 6. The walks, group by group: holders, shared, top-only, hor-only.
-    def walk(n: int, region: _Region, speed: tuple[float, float]) -> PeopleState:
-        walk_config = SceneConfig(
-            n_people=(n, n), area=region.side, height_range=config.height_range,
-            width_range=config.width_range, min_separation=config.min_separation,
-            fps=config.fps, walk_speed=speed, stop_probability=config.stop_probability,
-            edge_margin=min(2.0, 0.2 * region.side), hor_wobble_deg=0.0,
-            top_altitude=max(40.0, config.height_range[1] + 1.0),
-        )
-        return simulate_walks(walk_config, n_frames, rng)
 
-    parts = [(walk(1, h, config.holder_speed), h) for h in holders]
-    parts.append((walk(n_shared, shared, config.walk_speed), shared))
+def _walk(
+    config: ObliqueSceneConfig, n_frames: int, n: int, region: _Region,
+    speed: tuple[float, float], rng: np.random.Generator,
+) -> PeopleState:
+    """The walks of n people in ``region``'s square (centred on the origin)."""
+    walk_config = SceneConfig(
+        n_people=(n, n), area=region.side, height_range=config.height_range,
+        width_range=config.width_range, min_separation=config.min_separation,
+        fps=config.fps, walk_speed=speed, stop_probability=config.stop_probability,
+        edge_margin=min(2.0, 0.2 * region.side), hor_wobble_deg=0.0,
+        top_altitude=max(40.0, config.height_range[1] + 1.0),
+    )
+    return simulate_walks(walk_config, n_frames, rng)
+
+
+def _walk_groups(
+    config: ObliqueSceneConfig,
+    n_frames: int,
+    holders: _Holders,
+    shared: _Region,
+    top_only: _Region | None,
+    sizes: tuple[int, int, Sequence[int]],
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """The walks, group by group: holders, shared, top-only, hor-only.
+
+    Args:
+        config: the configuration.
+        n_frames: number of frames F.
+        holders: the placed holders.
+        shared: the shared square.
+        top_only: the top-only square, or None.
+        sizes: ``(n_shared, n_top_only, n_hor_only)``.
+        rng: the source of randomness.
+
+    Returns:
+        ``(positions, heights, widths, headings, groups)``: the people's walks (as in
+        :class:`~xvmatch.datasets.box_scene.PeopleState`), translated into their squares, in
+        the order holders, shared, top-only, hor-only, and ``{group name: person indices}``.
+    """
+    n_shared, n_top_only, n_hor_only = sizes
+    parts = [(_walk(config, n_frames, 1, h, config.holder_speed, rng), h)
+             for h in holders.regions]
+    parts.append((_walk(config, n_frames, n_shared, shared, config.walk_speed, rng), shared))
     if top_only is not None:
-        parts.append((walk(n_top_only, top_only, config.walk_speed), top_only))
-    for k, region in enumerate(hor_only):
+        parts.append((_walk(config, n_frames, n_top_only, top_only, config.walk_speed, rng),
+                      top_only))
+    for k, region in enumerate(holders.hor_only):
         if region is not None:
-            parts.append((walk(n_hor_only[k], region, config.walk_speed), region))
+            parts.append((_walk(config, n_frames, n_hor_only[k], region, config.walk_speed, rng),
+                          region))
     positions = np.concatenate([p.positions + r.centre for p, r in parts], axis=1)
     heights = np.concatenate([p.heights for p, _ in parts])
     widths = np.concatenate([p.widths for p, _ in parts])
     headings = np.concatenate([p.headings for p, _ in parts], axis=1)
-    counts = [p.n_people for p, _ in parts]
+    groups = _group_indices([p.n_people for p, _ in parts], top_only is not None,
+                            holders.hor_only)
+    return positions, heights, widths, headings, groups
+
+
+def _group_indices(
+    counts: Sequence[int], has_top_only: bool, hor_only: Sequence[_Region | None]
+) -> dict[str, np.ndarray]:
+    """``{group name: person indices}`` from the people counts of the walked groups (holders,
+    shared, top-only where ``has_top_only``, the hor-only squares that are not None)."""
+    n_hor = len(hor_only)
     starts = np.cumsum([0, *counts])
     groups: dict[str, np.ndarray] = {"holders": np.arange(n_hor, dtype=np.int64)}
     groups["shared"] = np.arange(starts[n_hor], starts[n_hor + 1], dtype=np.int64)
     j = n_hor + 1
     groups["top_only"] = np.empty(0, dtype=np.int64)
-    if top_only is not None:
+    if has_top_only:
         groups["top_only"] = np.arange(starts[j], starts[j + 1], dtype=np.int64)
         j += 1
     for k, region in enumerate(hor_only):
-        groups[f"{hor_names[k]}_only"] = np.empty(0, dtype=np.int64)
+        groups[f"hor{k + 1}_only"] = np.empty(0, dtype=np.int64)
         if region is not None:
-            groups[f"{hor_names[k]}_only"] = np.arange(starts[j], starts[j + 1], dtype=np.int64)
+            groups[f"hor{k + 1}_only"] = np.arange(starts[j], starts[j + 1], dtype=np.int64)
             j += 1
+    return groups
 
-    # 7. The handheld cameras, looking at the shared group's centroid.
+
+def make_oblique_scene(
+    config: ObliqueSceneConfig, n_frames: int, rng: np.random.Generator
+) -> ObliqueScene:
+    """Draw one scene (groups, cameras, walks) and project the boxes of every view.
+
+    See the module docstring for the world, the cameras, the boxes and how the overlap is
+    made.
+
+    Args:
+        config: the configuration.
+        n_frames: number of frames F >= 1 (``fps`` per second).
+        rng: the only source of randomness, e.g. ``np.random.default_rng(seed)``.
+
+    Returns:
+        The :class:`ObliqueScene`.
+    """
+    if int(n_frames) < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    n_frames = int(n_frames)
+    n_hor = int(config.n_hor)
+    hor_names = [f"hor{k}" for k in range(1, n_hor + 1)]
+    times = np.arange(n_frames) * (1.0 / config.fps)
+
+    p_top, p_hor, n_shared, n_top_only, n_hor_only = _draw_group_sizes(config, n_hor, rng)
+    top_cameras, top_checks, side = _place_top_camera(config, times, n_shared, rng)
+    shared = _Region(np.zeros(2), side)
+    holders, placed = _place_holders(config, shared, top_checks, n_hor_only, rng)
+    n_hor_only = [0 if region is None else n
+                  for n, region in zip(n_hor_only, holders.hor_only, strict=True)]
+    top_only, n_top_only, holders_seen = _place_top_only(
+        config, top_cameras, top_checks, holders, placed, n_top_only, side, rng)
+    positions, heights, widths, headings, groups = _walk_groups(
+        config, n_frames, holders, shared, top_only, (n_shared, n_top_only, n_hor_only), rng)
+
+    # The handheld cameras, looking at the shared group's centroid.
     target = positions[:, groups["shared"]].mean(axis=1)
     hor_cameras: dict[str, list[Camera]] = {}
     hor_angles = []
     for k, name in enumerate(hor_names):
         cam_height = min(float(rng.uniform(*config.hor_height)), float(heights[k]) - 0.1)
-        cams, angles = _handheld_cameras(positions[:, k], target, cam_height, hor_size[k],
-                                         hor_hfov[k], config, rng)
+        cams, angles = _handheld_cameras(positions[:, k], target, cam_height, holders.size[k],
+                                         holders.hfov[k], config, rng)
         hor_cameras[name] = cams
         hor_angles.append(angles)
         headings[:, k] = angles[:, 0]  # a holder faces where they film
@@ -751,7 +896,7 @@ def make_oblique_scene(
         head_roll=hor_angles[0][:, 2],
     )
 
-    # 8. The boxes.
+    # The boxes.
     top = _project_frames(people, top_cameras, config)
     hor = {name: _project_frames(people, hor_cameras[name], config, hidden=k)
            for k, name in enumerate(hor_names)}
