@@ -1,0 +1,82 @@
+"""Ground registration of a walking horizontal camera on the top view's ground map (issue 67):
+the pose recovered from people alone, chosen consistently over time, and the pairs under it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from xvmatch.cues import ground_registration as gr
+
+
+def _view(top: np.ndarray, centre: np.ndarray, heading: float) -> np.ndarray:
+    """Top-map points in the frame of a camera at ``centre`` looking along ``heading``."""
+    c, s = np.cos(heading), np.sin(heading)
+    rel = top - centre
+    return np.column_stack([rel[:, 0] * c + rel[:, 1] * s, -rel[:, 0] * s + rel[:, 1] * c])
+
+
+def _in_view(local: np.ndarray, hfov: float = 70.0) -> np.ndarray:
+    return (local[:, 0] > 1.0) & (np.abs(np.arctan2(local[:, 1], local[:, 0]))
+                                   < np.radians(hfov) / 2)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), heading=st.floats(-np.pi, np.pi))
+def test_pose_recovered_from_people_alone(seed: int, heading: float) -> None:
+    rng = np.random.default_rng(seed)
+    top = rng.uniform(-8, 8, (9, 2))
+    centre = -12.0 * np.array([np.cos(heading), np.sin(heading)]) + rng.normal(0, 1, 2)
+    local = _view(top, centre, heading)
+    seen = _in_view(local)
+    if seen.sum() < 4:
+        return
+    hor = local[seen] + rng.normal(0, 0.1, (int(seen.sum()), 2))
+    poses, _ = gr.pose_hypotheses(top, hor, 70.0)
+    best = poses[0]
+    assert np.hypot(*(best[:2] - centre)) < 1.0
+    assert abs(gr._wrap(best[2] - heading)) < np.radians(8.0)
+    pairs = gr.associate_on_ground(top, hor, gr.FramePose(1, best[:2], float(best[2]), 0.0))
+    assert sorted(map(tuple, pairs.tolist())) == [
+        (int(i), k) for k, i in enumerate(np.flatnonzero(seen))]
+
+
+def test_time_decides_an_ambiguous_frame() -> None:
+    """Frame 2 alone prefers a pose far from its neighbours' (a mirror); the choice over time
+    keeps the consistent one."""
+    near, far = np.array([0.0, 0.0, 0.0]), np.array([20.0, 0.0, np.pi])
+    frames = [1, 2, 3]
+    cands = [(np.array([near, far]), np.array([5.0, 1.0])),
+             (np.array([near, far]), np.array([4.0, 4.5])),
+             (np.array([near, far]), np.array([5.0, 1.0]))]
+    poses = gr.register_sequence(frames, cands, fps=10.0)
+    assert [p.frame for p in poses] == frames
+    assert all(np.allclose(p.centre, near[:2]) for p in poses)
+
+
+def test_frames_without_people_split_the_sequence() -> None:
+    empty = (np.zeros((0, 3)), np.zeros(0))
+    cands = [(np.array([[0.0, 0.0, 0.0]]), np.array([1.0])), empty,
+             (np.array([[50.0, 0.0, 1.0]]), np.array([1.0]))]
+    poses = gr.register_sequence([1, 2, 3], cands, fps=10.0)
+    assert [p.frame for p in poses] == [1, 3]
+
+
+def test_hor_ground_points_level_camera() -> None:
+    # A 1.72 m person 10 m ahead on the optical axis of a 90 degree camera 1000 px wide.
+    f = 500.0
+    h = f * 1.72 / 10.0
+    boxes = np.array([[500 - 10, 300, 20, h], [900 - 10, 300, 20, h]])
+    q = gr.hor_ground_points(boxes, (1000, 600), 90.0)
+    assert q[0] == pytest.approx([10.0, 0.0])
+    assert q[1, 1] < 0  # right of the image is to the camera's right (negative y)
+    assert np.hypot(*q[1]) == pytest.approx(10.0)
+
+
+def test_no_people_no_hypotheses() -> None:
+    poses, scores = gr.pose_hypotheses(np.zeros((0, 2)), np.ones((2, 2)), 70.0)
+    assert poses.shape == (0, 3) and scores.shape == (0,)
+    assert gr.associate_on_ground(np.ones((2, 2)), np.zeros((0, 2)),
+                                  gr.FramePose(1, np.zeros(2), 0.0, 0.0)).shape == (0, 2)
