@@ -81,8 +81,8 @@ def robust_matcher(base, trained: str, gate_cap: bool = False):
     return model
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Fine-tune (and optionally install) the robust matcher; 0 on success."""
+def _parser() -> argparse.ArgumentParser:
+    """The command line of :func:`main`."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=Path("runs/default_bundle"),
                         help="the recipe's working folder (its renders are reused)")
@@ -121,7 +121,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model-out", type=Path, default=ROOT / "models" / "default_matcher.pt")
     parser.add_argument("--bundle-out", type=Path,
                         default=ROOT / "inference" / "default_bundle")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[Path, Path]:
+    """Refuse bad weights and unsafe outputs before any work (``parser.error``); the run
+    folder and appearance weights file written beside ``--out``."""
     for flag, value in (("--gate-weight", args.gate_weight), ("--gate-target", args.gate_target)):
         if not value >= 0:
             parser.error(f"{flag} must be >= 0, got {value}")
@@ -133,6 +138,44 @@ def main(argv: list[str] | None = None) -> int:
                  *((Output("--model-out", args.model_out),
                     Output("--bundle-out", args.bundle_out, folder=True)) if args.install else ())],
         [Input("--base", None if args.base == "default" else args.base)])
+    return run_dir, weights
+
+
+def _run_meta(args: argparse.Namespace, base, corruption) -> dict:
+    """The ``meta`` recorded in the matcher file: data, script, base, what trained, the gate
+    terms used and the corruption."""
+    return {
+        "trained_on": "synthetic renders (drone, overview), appearance corrupted; no "
+        "CVMHAT file", "script": "training/make_robust_matcher.py",
+        "base": _repo_path(base.path), "base_meta": base.meta, "train": args.train,
+        **({"gate_weight": args.gate_weight} if args.gate_weight > 0 else {}),
+        **({"gate_target": args.gate_target} if args.gate_target > 0 else {}),
+        **({"gate_cap": True} if args.gate_cap else {}),
+        "corruption": {"probability": corruption.probability,
+                       "kinds": list(corruption.kinds),
+                       "weights": list(corruption.weights),
+                       "strengths": [corruption.min_strength, corruption.max_strength],
+                       "seed": corruption.seed}}
+
+
+def _install(args: argparse.Namespace, data: dict[str, Path]) -> None:
+    """Copy the matcher to ``--model-out`` and export ``--bundle-out`` with the recipe's
+    export command (parity on ``val_overview``, INT8 calibrated on ``int8_overview``)."""
+    shutil.copy(args.out, args.model_out)
+    subprocess.run([sys.executable, "-m", "xvmatch", "export", "--model",
+                    os.fspath(args.model_out), "--out", os.fspath(args.bundle_out),
+                    "--parity-data", os.fspath(data["val_overview"]), "--int8",
+                    "--calibration", os.fspath(data["int8_overview"])], check=True)
+    manifest = json.loads((args.bundle_out / "manifest.json").read_text())
+    recipe.log(f"wrote {args.model_out} and {args.bundle_out}; parity "
+               f"{json.dumps(manifest['parity'])}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Fine-tune (and optionally install) the robust matcher; 0 on success."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    run_dir, weights = _check_args(parser, args)
     start = time.perf_counter()
     import lightning as L
 
@@ -167,30 +210,12 @@ def main(argv: list[str] | None = None) -> int:
         loss_config={k: w for k, w in (("gate_weight", args.gate_weight),
                                        ("gate_target_weight", args.gate_target)) if w > 0},
         run_dir=run_dir, progress=False, threads=1,
-        patience=3, meta={
-            "trained_on": "synthetic renders (drone, overview), appearance corrupted; no "
-            "CVMHAT file", "script": "training/make_robust_matcher.py",
-            "base": _repo_path(base.path), "base_meta": base.meta, "train": args.train,
-            **({"gate_weight": args.gate_weight} if args.gate_weight > 0 else {}),
-            **({"gate_target": args.gate_target} if args.gate_target > 0 else {}),
-            **({"gate_cap": True} if args.gate_cap else {}),
-            "corruption": {"probability": corruption.probability,
-                           "kinds": list(corruption.kinds),
-                           "weights": list(corruption.weights),
-                           "strengths": [corruption.min_strength, corruption.max_strength],
-                           "seed": corruption.seed}})
+        patience=3, meta=_run_meta(args, base, corruption))
     recipe.log(f"fine-tuned the robust matcher: validation CVIDF1 {result.best_score:.1f} "
                f"(clean and corrupted frames), {result.epochs} epochs, "
                f"{result.wall_time_s:.0f} s, peak {result.peak_memory_mb:.0f} MiB")
     if args.install:
-        shutil.copy(args.out, args.model_out)
-        subprocess.run([sys.executable, "-m", "xvmatch", "export", "--model",
-                        os.fspath(args.model_out), "--out", os.fspath(args.bundle_out),
-                        "--parity-data", os.fspath(data["val_overview"]), "--int8",
-                        "--calibration", os.fspath(data["int8_overview"])], check=True)
-        manifest = json.loads((args.bundle_out / "manifest.json").read_text())
-        recipe.log(f"wrote {args.model_out} and {args.bundle_out}; parity "
-                   f"{json.dumps(manifest['parity'])}")
+        _install(args, data)
     recipe.log(f"{time.perf_counter() - start:.0f} s in all")
     return 0
 
