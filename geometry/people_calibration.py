@@ -468,6 +468,7 @@ def calibrate_from_people(
     hfov_deg: float | None = None,
     seed: int = 0,
     name: str = "the view",
+    strict: bool = True,
 ) -> PeopleCalibration:
     """Estimate a static camera from its boxes over a clip (module docstring).
 
@@ -481,6 +482,9 @@ def calibrate_from_people(
         hfov_deg: the horizontal field of view when known (then not fitted).
         seed: seed of the resampling behind the confidence.
         name: the view's name for messages.
+        strict: refuse a fit the clip does not pin down (the ``calibrate`` command); False
+            returns it anyway, its spread saying how loose it is (an association that must
+            place the view somehow is better served by a loose fit than by none).
 
     Raises:
         CalibrationError: too few usable boxes, foot rows in too narrow a band, or a tilt or
@@ -508,7 +512,7 @@ def calibrate_from_people(
     if aspect < NADIR_ASPECT:
         return _nadir(b, w[inside], size, n_frames, hfov_deg)
     try:
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name)
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict)
     except CalibrationError:
         if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
             return _nadir(b, w[inside], size, n_frames, hfov_deg)
@@ -519,11 +523,11 @@ def calibrate_from_people(
 
 
 def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
-             seed: int, name: str) -> PeopleCalibration:
+             seed: int, name: str, strict: bool = True) -> PeopleCalibration:
     """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`)."""
     give = "give its camera with --cameras (or a longer clip with more people)"
     lo, hi = np.percentile(b.v, [10, 90])
-    if hi - lo < MIN_ROW_SPREAD * size[1]:
+    if strict and hi - lo < MIN_ROW_SPREAD * size[1]:
         raise CalibrationError(
             f"{name}: the people's feet stay within {hi - lo:.0f} rows "
             f"({100 * (hi - lo) / size[1]:.0f} % of the image height), too few distances to find "
@@ -546,8 +550,9 @@ def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | 
         tilt_std_deg=float(spread[0]), horizon_std_px=float(spread[1]),
         focal_rel_std=float(spread[2]), n_boxes=len(b.h), n_frames=n_frames)
     near = -size[1] <= np.mean(hor) <= 2 * size[1]  # a horizon far off the image is a tilt
-    if calib.tilt_std_deg > MAX_TILT_STD_DEG or (
-            near and calib.horizon_std_px > MAX_HORIZON_STD * size[1]):
+    loose = calib.tilt_std_deg > MAX_TILT_STD_DEG or (
+        near and calib.horizon_std_px > MAX_HORIZON_STD * size[1])
+    if strict and loose:
         raise CalibrationError(
             f"{name}: the boxes do not pin the camera down (tilt {calib.tilt_deg:.1f} +- "
             f"{calib.tilt_std_deg:.1f} degrees, horizon +- {calib.horizon_std_px:.0f} px over the "
