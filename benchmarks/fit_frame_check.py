@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np
 from deployed_matcher_eval import SIZES, ShiftedCoster, check_scenes_and_shifts, render
 
-from xvmatch.cli_types import float_in
+from xvmatch.commands._types import float_in
 from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.core.output_paths import Input, Output, check_script_outputs
 from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.cli_ablate import SWEEP_CHOICES
+from xvmatch.commands.lab.ablate import SWEEP_CHOICES
 from xvmatch.datasets.pair_trials import FALSE_POSITIVE
 from xvmatch.datasets.synthetic_io import SyntheticDataset
 from xvmatch.datasets.visibility_noise import VisibilityNoise, apply_visibility_noise

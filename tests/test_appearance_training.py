@@ -11,7 +11,7 @@ import pytest
 import torch
 from torch import nn
 
-from xvmatch.cli_train import add_train_parser
+from xvmatch.commands.lab.train import add_train_parser
 from xvmatch.datasets.synthetic_io import SyntheticDataset, generate_dataset, person_crops
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.formats.crops import box_crops

@@ -111,7 +111,7 @@ def test_refusal_advises_boxes_alone_when_the_cue_is_not_above_chance() -> None:
     """A refusal says why for each vector; when the network's own descriptors are not shown
     better than chance on the held-out pairs either, it advises matching from the boxes alone
     (images would only add noise), else keeping the bundle."""
-    from xvmatch.cli_adapt import refusal_message
+    from xvmatch.commands.adapt import refusal_message
     from xvmatch.inference.adaptation.site_adaptation import AdaptationFit, SiteAdaptation
     from xvmatch.inference.matching.site_bundle import SiteRun
 

@@ -2,7 +2,7 @@ import argparse
 
 import pytest
 
-from xvmatch.cli_types import image_size, int_at_least, non_negative_int, positive_int
+from xvmatch.commands._types import image_size, int_at_least, non_negative_int, positive_int
 
 
 def test_integers_respect_their_minimum():
@@ -27,7 +27,7 @@ def test_image_size_parses_and_bounds():
 
 
 def test_int_in_gives_the_range_and_why():
-    from xvmatch.cli_types import int_in
+    from xvmatch.commands._types import int_in
 
     convert = int_in(1, 64, "cores")
     assert convert("1") == 1 and convert("64") == 64
@@ -43,7 +43,7 @@ def test_int_in_gives_the_range_and_why():
 
 
 def test_float_in_refuses_non_finite_and_open_bounds():
-    from xvmatch.cli_types import float_in
+    from xvmatch.commands._types import float_in
 
     dtheta = float_in(0.01, 360, "the search tries 360 / dtheta orientations")
     assert dtheta("0.01") == 0.01 and dtheta("360") == 360.0
@@ -64,7 +64,7 @@ def test_float_in_refuses_non_finite_and_open_bounds():
 
 
 def test_image_size_maximum_and_offsets():
-    from xvmatch.cli_types import offset_value
+    from xvmatch.commands._types import offset_value
 
     convert = image_size(8, 8192, "memory")
     assert convert("8192x8") == (8192, 8)

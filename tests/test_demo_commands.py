@@ -50,7 +50,7 @@ def test_the_printed_commands_run_in_a_shell_without_the_environment(tmp_path):
 
 
 def test_the_bare_name_when_it_is_the_running_one(monkeypatch):
-    from xvmatch.cli_demo import xvmatch_command
+    from xvmatch.commands.demo import xvmatch_command
 
     if not ENTRY.is_file():
         pytest.skip("no xvmatch entry point beside the interpreter")

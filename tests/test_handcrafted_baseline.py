@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from xvmatch.cli_baseline import add_baseline_parser
+from xvmatch.commands.lab.baseline import add_baseline_parser
 from xvmatch.cues.handcrafted_costs import PairCosts, pair_costs
 from xvmatch.datasets.detector_noise import DetectorNoise
 from xvmatch.datasets.pair_trials import (

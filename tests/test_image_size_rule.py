@@ -1,4 +1,5 @@
-"""The horizontal image size of box-only runs (issue 29, item 1; :mod:`xvmatch.cli_image_size`).
+"""The horizontal image size of box-only runs (issue 29, item 1;
+:mod:`xvmatch.commands._image_size`).
 
 The same scene's horizontal boxes at CVMHAT's 2688x1512, at 1399x787 (the user's camera) and at
 half size: without ``--image-size`` the CVMHAT-sized boxes run with a note and the others are

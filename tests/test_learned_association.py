@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from xvmatch import cli_fit_geometry, cli_model
+from xvmatch.commands import _model as model_command
+from xvmatch.commands.lab import fit_geometry
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene, write_box_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.linking.assignment import assign
@@ -177,30 +178,30 @@ def _args(**kw) -> argparse.Namespace:
 def test_associate_with_model_cli_helper(model, tiny_models, scene, tmp_path, monkeypatch):
     frames = sorted(scene.top)
     args = _args(model=[str(tiny_models["boxes_bundle"])])
-    pred = cli_model.associate_with_model(args, scene.top, scene.hor, frames, None)
+    pred = model_command.associate_with_model(args, scene.top, scene.hor, frames, None)
     assert pred == associate_sequence_learned(scene.top, scene.hor, WIDTH, model)
-    mirrored = cli_model.associate_with_model(_args(model=args.model, mirror=True), scene.top,
+    mirrored = model_command.associate_with_model(_args(model=args.model, mirror=True), scene.top,
                                               scene.hor, frames, None)
     assert mirrored == associate_sequence_learned(scene.top, scene.hor, WIDTH, model,
                                                   mirror=True)
     # A torch matcher file is exported once into the cache and gives the same pairs.
     monkeypatch.setenv("XVMATCH_CACHE", str(tmp_path / "cache"))
-    from_file = cli_model.associate_with_model(_args(model=[str(tiny_models["boxes"])]),
+    from_file = model_command.associate_with_model(_args(model=[str(tiny_models["boxes"])]),
                                                scene.top, scene.hor, frames, None)
     assert from_file == pred
     assert len(list((tmp_path / "cache" / "bundles").iterdir())) == 1
     with pytest.raises(ValueError, match="--mode frame"):
-        cli_model.associate_with_model(_args(model=args.model, mode="video"), scene.top,
+        model_command.associate_with_model(_args(model=args.model, mode="video"), scene.top,
                                        scene.hor, frames, None)
     with pytest.raises(ValueError, match="no such bundle folder"):
-        cli_model.associate_with_model(_args(model=["nope"]), scene.top, scene.hor, frames,
+        model_command.associate_with_model(_args(model=["nope"]), scene.top, scene.hor, frames,
                                        None)
 
 
 def test_fit_geometry_parser(tmp_path):
     parser = argparse.ArgumentParser(prog="xvmatch")
     sub = parser.add_subparsers(dest="command")
-    cli_fit_geometry.add_fit_geometry_parser(sub)
+    fit_geometry.add_fit_geometry_parser(sub)
     args = parser.parse_args(["fit-geometry", "--cvmhat", "d", "--out", "m.pt", "--sites", "a",
                               "b", "--epochs", "3", "--noise", "0"])
     assert args.sites == ["a", "b"] and args.epochs == 3 and args.noise == 0
@@ -211,7 +212,7 @@ def test_fit_geometry_parser(tmp_path):
         args.func(parser.parse_args(["fit-geometry", "--cvmhat", str(tmp_path / "x"),
                                      "--out", "m.pt"]))
     sub2 = argparse.ArgumentParser()
-    cli_model.add_model_arguments(sub2)
+    model_command.add_model_arguments(sub2)
     assert sub2.parse_args(["--model", "default", "--gamma", "0.4"]).gamma == 0.4
 
 
@@ -226,7 +227,7 @@ def test_fit_geometry_command_end_to_end(tmp_path):
         write_box_scene(scene, data, name)
     out = tmp_path / "geo.pt"
     parser = argparse.ArgumentParser(prog="xvmatch")
-    cli_fit_geometry.add_fit_geometry_parser(parser.add_subparsers())
+    fit_geometry.add_fit_geometry_parser(parser.add_subparsers())
     args = parser.parse_args(
         ["fit-geometry", "--cvmhat", str(data), "--out", str(out), "--epochs", "1",
          "--noise", "0", "--sim-scenes", "2", "--sites", "alpha", "--cache",

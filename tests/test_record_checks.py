@@ -349,8 +349,8 @@ def test_precision_without_images_is_refused(tmp_path, boxes, capsys, precision)
 
 
 def test_precision_on_a_box_only_bundle_is_refused(tmp_path, boxes, capsys, tiny_models) -> None:
-    from xvmatch.cli_model import check_precision, open_models
-    from xvmatch.cli_options import UsageError
+    from xvmatch.commands._model import check_precision, open_models
+    from xvmatch.commands._options import UsageError
     from xvmatch.inference.matching.bundle import BundleError
 
     bundle = tiny_models["boxes_bundle"]
@@ -505,7 +505,7 @@ def tracks(track_files, tmp_path) -> Path:
 ])
 def test_an_offset_record_out_of_range_is_one_line(track_files, tracks, capsys, record,
                                                    message) -> None:
-    from xvmatch.cli_types import MAX_FRAME_OFFSET
+    from xvmatch.commands._types import MAX_FRAME_OFFSET
     from xvmatch.formats.offset_record import read_offset_record
 
     path = tracks / "offset.json"
@@ -520,7 +520,7 @@ def test_an_offset_record_out_of_range_is_one_line(track_files, tracks, capsys, 
 
 
 def test_an_offset_record_in_range_is_applied(track_files, tracks, capsys) -> None:
-    from xvmatch.cli_types import MAX_FRAME_OFFSET
+    from xvmatch.commands._types import MAX_FRAME_OFFSET
     from xvmatch.formats.offset_record import read_offset_record
 
     for offset in (-100_000, 0, 7, 100_000):
@@ -533,7 +533,7 @@ def test_an_offset_record_in_range_is_applied(track_files, tracks, capsys) -> No
 
 
 def test_a_fifo_offset_record_is_refused_at_once(tracks) -> None:
-    from xvmatch.cli_track import tracked_offset
+    from xvmatch.commands.track import tracked_offset
 
     (tracks / "offset.json").unlink()
     os.mkfifo(tracks / "offset.json")

@@ -7,7 +7,7 @@ import importlib.util
 
 import pytest
 
-from xvmatch.cli_train import BACKBONES, PRETRAINED_BACKBONES, backbone_args
+from xvmatch.commands.lab.train import BACKBONES, PRETRAINED_BACKBONES, backbone_args
 
 
 def test_backbone_names_are_the_builders_of_appearance_net():

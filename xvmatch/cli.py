@@ -1,14 +1,15 @@
 """Command-line interface: ``xvmatch associate | evaluate | offset | demo | ...``.
 
-This root module only builds the parser from the command modules, one ``add_<command>_parser``
-each (``cli_associate``, ``cli_evaluate``, ``cli_track``, ...), and runs the command; the options
-several commands share are defined once in :mod:`xvmatch.cli_options`. No command module imports
+This root module only builds the parser from the command modules of :mod:`xvmatch.commands`,
+one ``add_<command>_parser`` each (``associate``, ``evaluate``, ``track``, ...; those that make
+data and models in :mod:`xvmatch.commands.lab`), and runs the command; the options several
+commands share are defined once in :mod:`xvmatch.commands._options`. No command module imports
 this one. Each command imports only what it needs, so ``xvmatch associate`` starts fast and never
 imports torch. Bad input ends with one line ``xvmatch: error: ...`` naming the file and line,
 exit code 2. Every size or count option has a range, given in its help and checked while the
-arguments are parsed (:mod:`xvmatch.cli_types`), before any work starts; so is every output path
-(:mod:`xvmatch.core.output_paths`: no FIFO, device or folder where a file goes, no input
-overwritten, no two outputs on one path, a writable folder).
+arguments are parsed (:mod:`xvmatch.commands._types`), before any work starts; so is every
+output path (:mod:`xvmatch.core.output_paths`: no FIFO, device or folder where a file goes, no
+input overwritten, no two outputs on one path, a writable folder).
 """
 
 from __future__ import annotations
@@ -17,17 +18,18 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from xvmatch import cli_associate, cli_evaluate, cli_noise, cli_offset
-from xvmatch.cli_demo import EXAMPLES as DEMO_EXAMPLES
-from xvmatch.cli_options import UsageError
+from xvmatch.commands import associate, evaluate, offset
+from xvmatch.commands._options import UsageError
+from xvmatch.commands.demo import EXAMPLES as DEMO_EXAMPLES
+from xvmatch.commands.lab import noise
 
 __all__ = ["main"]
 
 EXAMPLES = {
-    "associate": cli_associate.EXAMPLE,
-    "evaluate": cli_evaluate.EXAMPLE,
-    "noise": cli_noise.EXAMPLE,
-    "offset": cli_offset.EXAMPLE,
+    "associate": associate.EXAMPLE,
+    "evaluate": evaluate.EXAMPLE,
+    "noise": noise.EXAMPLE,
+    "offset": offset.EXAMPLE,
     **DEMO_EXAMPLES,
 }
 
@@ -62,18 +64,18 @@ class _VersionAction(argparse.Action):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command (also used to render the README's examples)."""
-    from xvmatch.cli_ablate import add_ablate_parser
-    from xvmatch.cli_adapt import add_adapt_parser
-    from xvmatch.cli_baseline import add_baseline_parser
-    from xvmatch.cli_calibrate import add_calibrate_parser
-    from xvmatch.cli_demo import add_demo_parser
-    from xvmatch.cli_export import add_export_parser
-    from xvmatch.cli_fit_geometry import add_fit_geometry_parser
-    from xvmatch.cli_multi_ego import add_multi_ego_parser
-    from xvmatch.cli_multicam import add_multicam_parser
-    from xvmatch.cli_synth import add_show_parser, add_synth_parser
-    from xvmatch.cli_track import add_track_parser
-    from xvmatch.cli_train import add_train_parser
+    from xvmatch.commands.adapt import add_adapt_parser
+    from xvmatch.commands.associate_multi import add_multi_ego_parser
+    from xvmatch.commands.calibrate import add_calibrate_parser
+    from xvmatch.commands.demo import add_demo_parser
+    from xvmatch.commands.lab.ablate import add_ablate_parser
+    from xvmatch.commands.lab.baseline import add_baseline_parser
+    from xvmatch.commands.lab.export import add_export_parser
+    from xvmatch.commands.lab.fit_geometry import add_fit_geometry_parser
+    from xvmatch.commands.lab.synth import add_show_parser, add_synth_parser
+    from xvmatch.commands.lab.train import add_train_parser
+    from xvmatch.commands.multicam import add_multicam_parser
+    from xvmatch.commands.track import add_track_parser
 
     parser = argparse.ArgumentParser(
         prog="xvmatch",
@@ -87,14 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
     # training, deployment, utilities.
     for add_parser in (
         add_demo_parser,
-        cli_associate.add_associate_parser,
-        cli_evaluate.add_evaluate_parser,
+        associate.add_associate_parser,
+        evaluate.add_evaluate_parser,
         add_track_parser,
         add_multi_ego_parser,
         add_adapt_parser,
         add_multicam_parser,
         add_calibrate_parser,
-        cli_offset.add_offset_parser,
+        offset.add_offset_parser,
         add_synth_parser,
         add_show_parser,
         add_baseline_parser,
@@ -102,7 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
         add_fit_geometry_parser,
         add_train_parser,
         add_export_parser,
-        cli_noise.add_noise_parser,
+        noise.add_noise_parser,
     ):
         add_parser(sub)
     return parser

@@ -13,8 +13,8 @@ import argparse
 import math
 import sys
 
-from xvmatch.cli_model import add_camera_check, add_refine_top_camera
-from xvmatch.cli_options import (
+from xvmatch.commands._model import add_camera_check, add_refine_top_camera
+from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
     UsageError,
@@ -26,7 +26,7 @@ from xvmatch.cli_options import (
     progress_bar,
     read_boxes,
 )
-from xvmatch.cli_types import box_id, int_in, thread_count, worker_count
+from xvmatch.commands._types import box_id, int_in, thread_count, worker_count
 from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["ADAPT_COMMAND", "EXAMPLE", "add_adapt_parser", "refusal_message"]
@@ -109,7 +109,7 @@ def refusal_message(run, model: str) -> str:
 
 def _cmd_adapt(args: argparse.Namespace) -> int:
     from xvmatch import __version__
-    from xvmatch.cli_model import (
+    from xvmatch.commands._model import (
         horizontal_size,
         note_camera_check,
         note_camera_refinement,

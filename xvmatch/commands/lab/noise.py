@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from xvmatch.cli_options import HOR_IMAGE_SIZE, add_command_parser, read_boxes
-from xvmatch.cli_types import box_id, float_in, seed_value
+from xvmatch.commands._options import HOR_IMAGE_SIZE, add_command_parser, read_boxes
+from xvmatch.commands._types import box_id, float_in, seed_value
 from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_noise_parser"]
@@ -63,7 +63,7 @@ def _cmd_noise(args: argparse.Namespace) -> int:
     frames = read_boxes(args.boxes, args.duplicates)
     size = args.image_size
     if args.view == "hor":  # false boxes land in this image: the associate rule's size
-        from xvmatch.cli_image_size import note_if_assumed
+        from xvmatch.commands._image_size import note_if_assumed
         from xvmatch.formats.box_image_size import resolve_size
 
         resolved = resolve_size(frames, args.boxes, [] if size is None else

@@ -13,8 +13,8 @@ import argparse
 import shlex
 import sys
 
-from xvmatch.cli_options import add_command_parser, progress_bar
-from xvmatch.cli_types import int_in, worker_count
+from xvmatch.commands._options import add_command_parser, progress_bar
+from xvmatch.commands._types import int_in, worker_count
 from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_ablate_parser"]

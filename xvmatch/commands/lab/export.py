@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from xvmatch.cli_options import add_command_parser
+from xvmatch.commands._options import add_command_parser
 from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_export_parser"]

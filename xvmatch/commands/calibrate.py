@@ -11,8 +11,8 @@ import os
 
 import numpy as np
 
-from xvmatch.cli_options import add_command_parser, read_boxes
-from xvmatch.cli_types import image_size
+from xvmatch.commands._options import add_command_parser, read_boxes
+from xvmatch.commands._types import image_size
 from xvmatch.core.output_paths import Input, Output, check_outputs, plain_name
 
 __all__ = ["EXAMPLE", "add_calibrate_parser"]

@@ -12,7 +12,7 @@ import argparse
 import json
 import sys
 
-from xvmatch.cli_options import (
+from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
     UsageError,
@@ -23,7 +23,7 @@ from xvmatch.cli_options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, int_in, offset_value, worker_count
+from xvmatch.commands._types import box_id, int_in, offset_value, worker_count
 from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
     CLIP_LENGTH,
@@ -218,7 +218,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         raise UsageError(f"--clip-length {args.clip_length}: need clip_length >= 1 (frames per "
                          "clip)")
     check_clip_start(args.clip_start, hor, args.clip_length)
-    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.commands._image_size import note_if_assumed
     from xvmatch.formats.box_image_size import resolve_size
 
     given = [] if args.image_size is None else [(args.image_size, "--image-size")]

@@ -1,8 +1,8 @@
 """The ``xvmatch fit-geometry`` command: train the box-only learned geometry model on
 MOT-format top/horizontal box pairs (CVMHAT layout) and write a model file for ``xvmatch
-associate --model`` (:mod:`xvmatch.cli_model`). Imports are lazy: only this command's run loads
-torch. Bad input raises ``ValueError`` with a one-line message, which the main entry point prints
-as ``xvmatch: error: ...``.
+associate --model`` (:mod:`xvmatch.commands._model`). Imports are lazy: only this command's run
+loads torch. Bad input raises ``ValueError`` with a one-line message, which the main entry point
+prints as ``xvmatch: error: ...``.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from xvmatch.cli_options import HOR_IMAGE_SIZE, add_command_parser
-from xvmatch.cli_types import int_in, seed_value, thread_count, worker_count
+from xvmatch.commands._options import HOR_IMAGE_SIZE, add_command_parser
+from xvmatch.commands._types import int_in, seed_value, thread_count, worker_count
 from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_fit_geometry_parser"]
@@ -133,10 +133,11 @@ def _fit(args: argparse.Namespace, folder):
 
 def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
     """The folder fit-geometry trains from. It trains at CVMHAT's 2688x1512, so the horizontal
-    boxes of the pairs it reads (``sites``) must be of that size (:mod:`xvmatch.cli_image_size`):
-    with ``size`` (``--image-size``) each box must lie in it, and boxes of another size are
-    scaled to 2688 pixels wide into ``scratch`` (the features are resolution-free); without it
-    the boxes must be consistent with 2688x1512. Else one error line."""
+    boxes of the pairs it reads (``sites``) must be of that size
+    (:mod:`xvmatch.commands._image_size`): with ``size`` (``--image-size``) each box must lie in
+    it, and boxes of another size are scaled to 2688 pixels wide into ``scratch`` (the features
+    are resolution-free); without it the boxes must be consistent with 2688x1512. Else one error
+    line."""
     import shutil
     import warnings
     from pathlib import Path

@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 import os
 
-from xvmatch.cli_options import UsageError, add_command_parser, progress_bar, read_boxes
-from xvmatch.cli_types import float_in, image_size, int_in
+from xvmatch.commands._options import UsageError, add_command_parser, progress_bar, read_boxes
+from xvmatch.commands._types import float_in, image_size, int_in
 from xvmatch.core.output_paths import Input, Output, check_outputs, claim_folder, plain_name
 
 __all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths",

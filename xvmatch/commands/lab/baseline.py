@@ -13,8 +13,8 @@ import json
 import sys
 import time
 
-from xvmatch.cli_options import add_command_parser, progress_bar
-from xvmatch.cli_types import seed_value, worker_count
+from xvmatch.commands._options import add_command_parser, progress_bar
+from xvmatch.commands._types import seed_value, worker_count
 from xvmatch.core.output_paths import (
     Input,
     Output,

@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.cli_model import (
+from xvmatch.commands._model import (
     add_camera_check,
     add_refine_top_camera,
     add_write_cameras,
@@ -33,8 +33,7 @@ from xvmatch.cli_model import (
     note_camera_refinement,
     write_cameras,
 )
-from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
-from xvmatch.cli_options import (
+from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
     add_command_parser,
@@ -45,7 +44,8 @@ from xvmatch.cli_options import (
     image_inputs,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, float_in, int_in, thread_count, worker_count
+from xvmatch.commands._types import box_id, float_in, int_in, thread_count, worker_count
+from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.core.output_paths import (
     Input,
     Output,
@@ -176,7 +176,7 @@ def _aligned(views, offsets, images, cameras, camera_rows):
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
-    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.commands._image_size import note_if_assumed
     from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
     from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.views.multi_view_assignment import consistent_hungarian, solve_multi_view
@@ -222,7 +222,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     sources = []
     try:
         if args.model is not None:
-            from xvmatch.cli_model import open_models
+            from xvmatch.commands._model import open_models
 
             matcher = open_models([args.model], args.threads)[0]
         if args.top_images is not None:

@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from xvmatch.cli_options import add_command_parser
+from xvmatch.commands._options import add_command_parser
 
 __all__ = ["BACKBONES", "EXAMPLE", "PRETRAINED_BACKBONES", "add_train_parser", "backbone_args"]
 

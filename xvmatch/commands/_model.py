@@ -18,8 +18,8 @@ import os
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
-from xvmatch.cli_options import UsageError, add_image_options, check_images_together
-from xvmatch.cli_types import float_in, int_in, thread_count
+from xvmatch.commands._options import UsageError, add_image_options, check_images_together
+from xvmatch.commands._types import float_in, int_in, thread_count
 from xvmatch.core.output_paths import Output, check_own_folder
 
 __all__ = [
@@ -299,7 +299,7 @@ def check_precision(precision: str | None, images: bool, models: Iterable = (),
 
 
 def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, int], str]:
-    """The horizontal image size and where it comes from (:mod:`xvmatch.cli_image_size`):
+    """The horizontal image size and where it comes from (:mod:`xvmatch.commands._image_size`):
     ``--image-size``, the ``--hor-images`` and the ``--cameras`` file's ego camera must agree
     when given; with none, CVMHAT's 2688x1512 when the boxes are consistent with it (a note on
     stderr), else an error asking for ``--image-size``. Every horizontal box must lie in it."""
@@ -396,7 +396,7 @@ def associate_with_model(
     ``args.quiet``, ``args.hor`` and what :func:`learned_run_options` reads. Every input is
     checked before any work starts; outputs are written only at the end.
     """
-    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.commands._image_size import note_if_assumed
     from xvmatch.inference.matching.learned_pipeline import open_learned_inputs
 
     if getattr(args, "mode", "frame") != "frame":

@@ -19,7 +19,7 @@ import argparse
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
-from xvmatch.cli_types import float_in, image_size
+from xvmatch.commands._types import float_in, image_size
 from xvmatch.core.output_paths import Input
 
 __all__ = [
@@ -149,7 +149,8 @@ IMAGE_SIZE_HELP = (
     "(default: the images' or the cameras' size; else 2688x1512, CVMHAT's, only when the boxes "
     "reach beyond 60%% of its width, with a note; a box more than 10%% past the image's border "
     "is an error)")
-"""The help of every ``--image-size`` of the horizontal view (:mod:`xvmatch.cli_image_size`)."""
+"""The help of every ``--image-size`` of the horizontal view
+(:mod:`xvmatch.commands._image_size`)."""
 
 TOP_IMAGES_HELP = (
     "images of the top view: one image, a folder of frames whose names end in the frame number "

@@ -17,8 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.cli_options import add_command_parser
-from xvmatch.cli_types import int_in, seed_value, worker_count
+from xvmatch.commands._options import add_command_parser
+from xvmatch.commands._types import int_in, seed_value, worker_count
 from xvmatch.core.output_paths import (
     Input,
     Output,

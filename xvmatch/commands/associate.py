@@ -1,8 +1,8 @@
 """The ``xvmatch associate`` command: pairs of the two views, frame by frame.
 
 From boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned matcher
-(``--model``, :mod:`xvmatch.cli_model`) from boxes, images and cameras; ``--offset auto``
-re-times the views first (:mod:`xvmatch.cli_offset`).
+(``--model``, :mod:`xvmatch.commands._model`) from boxes, images and cameras; ``--offset auto``
+re-times the views first (:mod:`xvmatch.commands.offset`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from xvmatch.cli_model import (
+from xvmatch.commands._model import (
     DRAW_COMMAND,
     LEARNED_ONLY,
     add_draw_arguments,
@@ -20,8 +20,7 @@ from xvmatch.cli_model import (
     draw_pictures,
     horizontal_size,
 )
-from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset
-from xvmatch.cli_options import (
+from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
     UsageError,
@@ -34,7 +33,8 @@ from xvmatch.cli_options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, worker_count
+from xvmatch.commands._types import box_id, worker_count
+from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset
 from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
 
 __all__ = ["EXAMPLE", "add_associate_parser"]
@@ -142,7 +142,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     hor_size = horizontal_size(args, hor)
     hor_width = hor_size[0][0]
     if args.model is None:
-        from xvmatch.cli_image_size import note_if_assumed
+        from xvmatch.commands._image_size import note_if_assumed
 
         note_if_assumed(hor_size, hor, args.hor, args.quiet)
     offset = resolve_offset(args, top, hor, hor_width, params, max_offset, args.camera_id)

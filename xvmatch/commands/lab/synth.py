@@ -18,14 +18,14 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.cli_options import (
+from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
     add_command_parser,
     progress_bar,
     read_boxes,
 )
-from xvmatch.cli_types import float_in, image_size, int_in, seed_value, worker_count
+from xvmatch.commands._types import float_in, image_size, int_in, seed_value, worker_count
 from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLES", "add_show_parser", "add_synth_parser"]
@@ -290,7 +290,7 @@ def _show_boxes(args: argparse.Namespace) -> int:
     """``show --top T --hor H``: one frame of box files, pairs from ``--pred`` or equal ids."""
     import numpy as np
 
-    from xvmatch.cli_image_size import note_if_assumed
+    from xvmatch.commands._image_size import note_if_assumed
     from xvmatch.formats.box_image_size import resolve_size
     from xvmatch.formats.mot_boxes import read_predictions
     from xvmatch.viz.box_canvas import blank_view, top_plan

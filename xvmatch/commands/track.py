@@ -29,7 +29,7 @@ from collections.abc import Iterable
 from dataclasses import replace
 from pathlib import Path
 
-from xvmatch.cli_model import (
+from xvmatch.commands._model import (
     add_camera_check,
     add_refine_top_camera,
     add_write_cameras,
@@ -38,8 +38,7 @@ from xvmatch.cli_model import (
     note_camera_refinement,
     write_cameras,
 )
-from xvmatch.cli_offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
-from xvmatch.cli_options import (
+from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
     add_command_parser,
@@ -51,7 +50,8 @@ from xvmatch.cli_options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.cli_types import box_id, float_in, int_in, seed_value, worker_count
+from xvmatch.commands._types import box_id, float_in, int_in, seed_value, worker_count
+from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
 from xvmatch.core.output_paths import (
     Input,
     Output,
@@ -366,19 +366,19 @@ def _cmd_track(args: argparse.Namespace) -> int:
     max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
     model = None
     if args.model is not None:
-        from xvmatch.cli_model import open_models
+        from xvmatch.commands._model import open_models
 
         model = open_models([args.model])[0]
     images, sources, size = _open_images(args, top.frames, hor.frames, model, weights)
     try:
-        from xvmatch.cli_image_size import note_if_assumed
+        from xvmatch.commands._image_size import note_if_assumed
         from xvmatch.formats.box_image_size import resolve_size
 
         given = [] if args.image_size is None else [(args.image_size, "--image-size")]
         if size is not None:
             given.append((size, f"the horizontal images {args.hor_images}"))
         elif args.cameras is not None:  # with images, each camera is checked against them
-            from xvmatch.cli_model import ego_camera_size
+            from xvmatch.commands._model import ego_camera_size
 
             given.append(ego_camera_size(args.cameras))
         resolved = resolve_size(hor.frames, args.hor, given, ids=False)
@@ -451,7 +451,7 @@ def tracked_offset(folder: Path) -> int:
     """The offset ``track`` applied to the tracks in ``folder`` (its :data:`OFFSET_FILE`,
     checked as ``--offset`` is: :func:`~xvmatch.formats.offset_record.read_offset_record`; 0
     when absent, as in folders written before it existed)."""
-    from xvmatch.cli_types import MAX_FRAME_OFFSET
+    from xvmatch.commands._types import MAX_FRAME_OFFSET
     from xvmatch.formats.offset_record import read_offset_record
 
     path = folder / OFFSET_FILE

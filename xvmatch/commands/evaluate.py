@@ -1,15 +1,15 @@
 """The ``xvmatch evaluate`` command: score predicted pairs (CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9
-accuracy), or tracks with ``--tracks`` (:func:`xvmatch.cli_track.evaluate_tracks_command`), or
+accuracy), or tracks with ``--tracks`` (:func:`xvmatch.commands.track.evaluate_tracks_command`), or
 a multi-camera association with ``--multicam``
-(:func:`xvmatch.cli_multicam.evaluate_multicam_command`)."""
+(:func:`xvmatch.commands.multicam.evaluate_multicam_command`)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 
-from xvmatch.cli_options import UsageError, add_box_inputs, add_command_parser, read_boxes
-from xvmatch.cli_types import frame_offset
+from xvmatch.commands._options import UsageError, add_box_inputs, add_command_parser, read_boxes
+from xvmatch.commands._types import frame_offset
 
 __all__ = ["EXAMPLE", "add_evaluate_parser"]
 
@@ -56,13 +56,13 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.multicam is not None:
-        from xvmatch.cli_multicam import evaluate_multicam_command
+        from xvmatch.commands.multicam import evaluate_multicam_command
 
         return evaluate_multicam_command(args)
     if args.top is None or args.hor is None:
         raise UsageError("give --top and --hor (or --multicam DIR --gt NAME=FILE ...)")
     if args.tracks is not None:
-        from xvmatch.cli_track import evaluate_tracks_command
+        from xvmatch.commands.track import evaluate_tracks_command
 
         return evaluate_tracks_command(args)
     from xvmatch.formats.mot_boxes import check_common_frames, read_predictions, shift_frames
