@@ -7,8 +7,9 @@ view's people, 30-100 % overlap), every ``--step``-th frame of a ``--seconds`` c
 methods, scored by the F1 of the cross-view pairs over all frames:
 
 * ``search``: today's ``associate`` (the CVMHAT spatial-distribution search, a nadir top view);
-* ``registered, true cameras``: :mod:`xvmatch.cues.ground_registration` with the top camera and
-  the handheld field of view known (the ceiling of this method);
+* ``registered, true cameras``: the ground registration
+  (:mod:`xvmatch.inference.matching.ground_association`) with the top camera and the handheld
+  field of view known (the ceiling of its frame-by-frame part);
 * ``registered, from people``: the same with the top camera calibrated from its boxes
   (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`) and the handheld field of
   view taken as 70 degrees (``strict=False``: a loose fit rather than none); a refused
@@ -26,17 +27,18 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
-from xvmatch.geometry.people_calibration import (
-    PRIOR_HFOV_DEG,
-    CalibrationError,
-    calibrate_from_people,
+from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibration
+from xvmatch.inference.matching.ground_association import (
+    GroundAssociationOptions,
+    run_ground_association,
+    top_calibration,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
@@ -52,42 +54,15 @@ def _scrambled(frames: dict, rng: np.random.Generator) -> tuple[dict, dict]:
              for f, r in frames.items()}, back)
 
 
-def _flat(frames: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    order = sorted(frames)
-    return (np.concatenate([np.full(len(frames[f].ids), f) for f in order]),
-            np.concatenate([frames[f].ids for f in order]),
-            np.concatenate([np.asarray(frames[f].boxes).reshape(-1, 4) for f in order]))
-
-
-def _registered(top: dict, hor: dict, frames: list[int], top_camera, hor_size, hfov: float,
-                fps: float) -> dict[int, list[tuple[int, int]]]:
-    """Pairs per frame by ground registration, the top camera given (None: no pairs)."""
-    if top_camera is None:
-        return {}
-    tops, hors, cands = [], [], []
-    for f in frames:
-        tb = np.asarray(top[f].boxes, float).reshape(-1, 4)
-        feet = np.column_stack([tb[:, 0] + 0.5 * tb[:, 2], tb[:, 1] + tb[:, 3]])
-        ground = _ground(top_camera, feet)
-        ok = np.isfinite(ground).all(axis=1)
-        P, ids = ground[ok], np.asarray(top[f].ids)[ok]
-        Q = gr.hor_ground_points(np.asarray(hor[f].boxes), hor_size, hfov)
-        tops.append((P, ids))
-        hors.append((Q, np.asarray(hor[f].ids)))
-        cands.append(gr.pose_hypotheses(P, Q, hfov))
-    poses = {p.frame: p for p in gr.register_sequence(frames, cands, fps)}
-    out = {}
-    for f, (P, ti), (Q, hi) in zip(frames, tops, hors, strict=True):
-        if f in poses:
-            out[f] = [(int(ti[a]), int(hi[b])) for a, b in gr.associate_on_ground(P, Q, poses[f])]
-    return out
-
-
-def _ground(camera, pixels: np.ndarray) -> np.ndarray:
-    d = camera.ray_directions(pixels)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(d[:, 2] < -1e-9, -camera.c[2] / d[:, 2], np.nan)
-    return camera.c[:2] + s[:, None] * d[:, :2]
+def _true_calibration(camera, size: tuple[int, int]) -> PeopleCalibration:
+    """The scene's top camera as a calibration in its own ground frame (tilt, focal, height;
+    the renders' top cameras have no roll)."""
+    tilt = float(np.degrees(np.arcsin(-camera.R[2, 2])))
+    return PeopleCalibration(kind="oblique", width=size[0], height=size[1],
+                             focal=float(camera.K[0, 0]), tilt_deg=tilt, roll_deg=0.0,
+                             camera_height=float(camera.c[2]), horizon=(0.0, 0.0),
+                             focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
+                             focal_rel_std=0.0, n_boxes=0, n_frames=0)
 
 
 def _score(pred: dict, truth: dict) -> np.ndarray:
@@ -126,16 +101,20 @@ def main(argv: list[str] | None = None) -> int:
         true_hfov = float(np.degrees(2 * np.arctan(0.5 * hor_size[0] / hor_cam.K[0, 0])))
         fps = config.fps
         search = associate_sequence(top, hor, float(hor_size[0]), frames=frames)
-        true = _registered(top, hor, frames, scene.top_cameras[0], hor_size, true_hfov, fps)
-        numbers, ids, boxes = _flat(top)
+        top_size = scene.top_cameras[0].image_size
+        known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False)
+        true = run_ground_association(top, hor, known, frames,
+                                      _true_calibration(scene.top_cameras[0], top_size)).pairs
+        options = GroundAssociationOptions(top_size, hor_size, fps=fps, consensus=False)
         try:
-            camera = calibrate_from_people(numbers, boxes, scene.top_cameras[0].image_size,
-                                           ids=ids, strict=False).camera
+            calib = top_calibration(top, top_size)
         except CalibrationError:
-            camera, refused = None, refused + 1
-        people = _registered(top, hor, frames, camera, hor_size, PRIOR_HFOV_DEG, fps)
-        present = {f: (np.asarray(top[f].ids), np.asarray(hor[f].ids)) for f in frames}
-        voted = gr.tracklet_consensus(people, present)
+            refused += 1
+            people = voted = {}
+        else:
+            people = run_ground_association(top, hor, options, frames, calib).pairs
+            voted = run_ground_association(top, hor, replace(options, consensus=True), frames,
+                                           calib).pairs
         line = []
         for name, pred in zip(names, (search, true, people, voted), strict=True):
             s = _score(pred, truth)

@@ -512,11 +512,13 @@ def calibrate_from_people(
     if aspect < NADIR_ASPECT:
         return _nadir(b, w[inside], size, n_frames, hfov_deg)
     try:
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict)
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name)
     except CalibrationError:
         if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
             return _nadir(b, w[inside], size, n_frames, hfov_deg)
-        raise
+        if strict:
+            raise
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict=False)
     if calib.tilt_deg > NADIR_TILT_DEG:
         return _nadir(b, w[inside], size, n_frames, hfov_deg)
     return calib

@@ -1,0 +1,145 @@
+"""Association through the two views' ground maps, for a top camera that is not a nadir drone
+(issue 67): the typed run behind ``associate --top-view oblique`` (and ``auto`` when the top
+view's boxes say it is oblique).
+
+1. The top camera is calibrated from its people
+   (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`, a loose fit rather than
+   none), which puts the top view's people on a metric ground map.
+2. The horizontal view's people go on its own ground map (distance from box height, bearing
+   from column), and its pose on the top map is registered frame by frame and chosen over time
+   (:mod:`xvmatch.cues.ground_registration`); pairs by Hungarian on the ground distances.
+3. With each view's own track ids (video mode), the pairs are made consistent over the clip
+   (:func:`~xvmatch.cues.ground_registration.tracklet_consensus`).
+
+``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
+which read the top image as the ground) or oblique (this run).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from xvmatch.cues import ground_registration as gr
+from xvmatch.geometry.people_calibration import (
+    PRIOR_HFOV_DEG,
+    PeopleCalibration,
+    calibrate_from_people,
+)
+
+__all__ = [
+    "TOP_VIEWS",
+    "GroundAssociation",
+    "GroundAssociationOptions",
+    "run_ground_association",
+    "top_calibration",
+]
+
+TOP_VIEWS = ("auto", "nadir", "oblique")
+"""``--top-view``: let the top view's boxes decide, or force a nadir or an oblique camera."""
+
+
+@dataclass(frozen=True)
+class GroundAssociationOptions:
+    """What the run needs besides the boxes.
+
+    Attributes:
+        top_size: the top view's image size (width, height).
+        hor_size: the horizontal view's image size.
+        hor_hfov_deg: the horizontal camera's field of view (70: a phone's, a drone's).
+        fps: frames per second of the frame numbers (the registration's pace over time).
+        consensus: make the pairs consistent over the clip with each view's track ids.
+        seed: seed of the calibration's resampling.
+    """
+
+    top_size: tuple[int, int]
+    hor_size: tuple[int, int]
+    hor_hfov_deg: float = PRIOR_HFOV_DEG
+    fps: float = 30.0
+    consensus: bool = True
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class GroundAssociation:
+    """The run's result: ``pairs`` ``{frame: [(top id, hor id), ...]}``, the top camera's
+    calibration, the horizontal camera's pose per frame, and one line saying what was
+    assumed."""
+
+    pairs: dict[int, list[tuple[int, int]]]
+    calibration: PeopleCalibration
+    poses: list[gr.FramePose]
+    summary: str
+
+
+def _flat(frames: Mapping) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    order = sorted(f for f in frames if len(frames[f].ids))
+    if not order:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 4))
+    return (np.concatenate([np.full(len(frames[f].ids), f) for f in order]),
+            np.concatenate([np.asarray(frames[f].ids) for f in order]),
+            np.concatenate([np.asarray(frames[f].boxes, float).reshape(-1, 4) for f in order]))
+
+
+def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
+                    name: str = "the top view") -> PeopleCalibration:
+    """The top camera from its people, loose rather than refused (see the module docstring);
+    raises :class:`~xvmatch.geometry.people_calibration.CalibrationError` only for too few
+    boxes."""
+    frames, ids, boxes = _flat(top)
+    return calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
+                                 strict=False)
+
+
+def _summary(calib: PeopleCalibration) -> str:
+    if calib.kind == "nadir":
+        return "top view: looking straight down (its boxes are as wide as tall)"
+    return (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- {calib.tilt_std_deg:.0f} degrees, "
+            f"about {calib.camera_height:.0f} m up (from its people); the horizontal camera "
+            "registered on its ground map frame by frame")
+
+
+def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
+                           frames: list[int] | None = None,
+                           calibration: PeopleCalibration | None = None) -> GroundAssociation:
+    """Associate every frame of ``frames`` (default: those with boxes in both views) through the
+    ground maps (module docstring).
+
+    Args:
+        top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (``FrameBoxes``).
+        options: image sizes, the horizontal field of view, the frame rate.
+        frames: the frames to associate.
+        calibration: the top camera's, when already estimated (:func:`top_calibration`).
+    """
+    calib = calibration or top_calibration(top, options.top_size, options.seed)
+    order = sorted(set(frames) if frames is not None else set(top) & set(hor))
+    tops, hors, cands = [], [], []
+    for f in order:
+        t, h = top.get(f), hor.get(f)
+        tb = np.zeros((0, 4)) if t is None else np.asarray(t.boxes, float).reshape(-1, 4)
+        hb = np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4)
+        t_ids = np.zeros(0, np.int64) if t is None else np.asarray(t.ids)
+        h_ids = np.zeros(0, np.int64) if h is None else np.asarray(h.ids)
+        feet = np.column_stack([tb[:, 0] + 0.5 * tb[:, 2], tb[:, 1] + tb[:, 3]])
+        ground = calib.ground_points(feet) if len(tb) else np.zeros((0, 2))
+        ok = np.isfinite(ground).all(axis=1)
+        q = gr.hor_ground_points(hb, options.hor_size, options.hor_hfov_deg)
+        tops.append((ground[ok], t_ids[ok]))
+        hors.append((q, h_ids))
+        cands.append(gr.pose_hypotheses(ground[ok], q, options.hor_hfov_deg))
+    poses = gr.register_sequence(order, cands, options.fps)
+    by_frame = {p.frame: p for p in poses}
+    pairs: dict[int, list[tuple[int, int]]] = {}
+    for f, (p, ti), (q, hi) in zip(order, tops, hors, strict=True):
+        if f in by_frame:
+            pairs[f] = [(int(ti[a]), int(hi[b]))
+                        for a, b in gr.associate_on_ground(p, q, by_frame[f])]
+    if options.consensus:
+        present = {f: (np.asarray(top[f].ids) if f in top else np.zeros(0, np.int64),
+                       np.asarray(hor[f].ids) if f in hor else np.zeros(0, np.int64))
+                   for f in order}
+        pairs = gr.tracklet_consensus(pairs, present)
+    return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
+                             summary=_summary(calib))

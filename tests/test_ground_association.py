@@ -1,0 +1,65 @@
+"""The ground-map association run (issue 67) on a rendered oblique scene, ids scrambled: the top
+camera calibrated from its people, the walking horizontal camera registered, pairs consistent
+over the clip."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.inference.matching.ground_association import (
+    GroundAssociationOptions,
+    run_ground_association,
+    top_calibration,
+)
+from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
+
+
+def _scrambled(frames: dict, offset: int) -> tuple[dict, dict]:
+    ids = sorted({int(i) for r in frames.values() for i in r.ids})
+    new = {i: offset + (7 * k) % len(ids) for k, i in enumerate(ids)}
+    back = {v: k for k, v in new.items()}
+    return {f: FrameBoxes(f, np.array([new[int(i)] for i in r.ids], dtype=np.int64), r.boxes)
+            for f, r in frames.items()}, back
+
+
+@pytest.fixture(scope="module")
+def scene():
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0))
+    return make_oblique_scene(config, 100, np.random.default_rng(5))
+
+
+def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
+    top, top_back = _scrambled(scene.top, 100)
+    hor, hor_back = _scrambled(scene.hor["hor1"], 500)
+    frames = [f for f in sorted(set(top) & set(hor)) if f % 3 == 1]
+    options = GroundAssociationOptions(scene.top_cameras[0].image_size,
+                                       scene.hor_cameras["hor1"][0].image_size, fps=10.0)
+    calib = top_calibration(top, options.top_size)
+    assert calib.kind == "oblique"
+    true_tilt = np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2]))
+    assert abs(calib.tilt_deg - true_tilt) < 5.0
+    scores = {}
+    for consensus in (False, True):
+        run = run_ground_association(top, hor, replace(options, consensus=consensus), frames,
+                                     calib)
+        back = {f: [(top_back[a], hor_back[b]) for a, b in p] for f, p in run.pairs.items()}
+        scores[consensus] = summarize(count_sequence(back, scene.top, scene.hor["hor1"],
+                                                     frames=frames)).cvidf1
+    assert run.summary.startswith("top view: oblique, tilt")
+    # Measured 61.2 frame by frame and 77.4 with the consensus over tracklets.
+    assert scores[False] > 50.0
+    assert scores[True] > 70.0
+
+
+def test_same_input_same_pairs(scene) -> None:
+    options = GroundAssociationOptions(scene.top_cameras[0].image_size,
+                                       scene.hor_cameras["hor1"][0].image_size, fps=10.0)
+    frames = list(range(1, 40, 3))
+    a = run_ground_association(scene.top, scene.hor["hor1"], options, frames)
+    b = run_ground_association(scene.top, scene.hor["hor1"], options, frames)
+    assert a.pairs == b.pairs and a.calibration == b.calibration
