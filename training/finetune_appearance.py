@@ -61,8 +61,8 @@ def files_beside(out: Path) -> tuple[Path, Path]:
     return out.with_name(out.name + ".run"), out.with_name(out.stem + "_appearance.pt")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Fine-tune and write the matcher file; 0 on success."""
+def _parser() -> argparse.ArgumentParser:
+    """The command line of :func:`main`."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", default="default", help="matcher file whose appearance "
                         "network to fine-tune (default: the shipped one)")
@@ -83,7 +83,12 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"the strongest such camera, in (0, {MAX_STRENGTH:g}] (default 2)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
     parser.add_argument("--workers", type=int, default=1, help="render and crop threads")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[Path, Path]:
+    """Refuse bad options and outputs that exist or are unsafe, before any work
+    (``parser.error``); the run folder and appearance weights file written beside ``--out``."""
     if args.epochs < 1:
         parser.error(f"--epochs: expected at least 1, got {args.epochs}")
     if not args.learning_rate > 0:
@@ -102,30 +107,67 @@ def main(argv: list[str] | None = None) -> int:
                          [Input("--base", None if args.base == "default" else args.base),
                           *(Input("--train-data", d) for d in args.train_data or ()),
                           *(Input("--val-data", d) for d in args.val_data or ())])
-    start = time.perf_counter()
-    import lightning as L
-    import torch
-    from lightning.pytorch.callbacks import ModelCheckpoint
-    from lightning.pytorch.loggers import CSVLogger
+    return run, weights
 
-    from xvmatch.models.appearance_net import appearance_from_weights
-    from xvmatch.models.matcher_file import load_matcher, save_matcher
-    from xvmatch.training.appearance_module import SaveAppearanceWeights
-    from xvmatch.training.image_datamodule import ImagePairDataModule
 
-    torch.set_num_threads(1)
-    L.seed_everything(args.seed, workers=True, verbose=False)
-    base = load_matcher(args.base)
+def _check_base(parser: argparse.ArgumentParser, args: argparse.Namespace, base) -> str:
+    """The base matcher's appearance ``arch``, refused (``parser.error``) without an
+    appearance network or a training config for it."""
     if base.appearance is None:
         parser.error(f"--base {args.base}: a matcher with an appearance network is needed")
     arch = base.appearance.arch
     if arch not in CONFIG_OF_ARCH:
         parser.error(f"--base {args.base}: no training config for an appearance_{arch} "
                      f"network (known: {', '.join(CONFIG_OF_ARCH)})")
+    return arch
+
+
+def _data_folders(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+    """The training and validation dataset folders: those given, else the recipe's
+    ``app_*`` and ``val_*`` renders (rendered into ``--work`` when missing)."""
     if args.train_data is None or args.val_data is None:
         data = recipe.render(args.work, args.workers)
     train = args.train_data or [os.fspath(data["app_drone"]), os.fspath(data["app_overview"])]
     val = args.val_data or [os.fspath(data["val_drone"]), os.fspath(data["val_overview"])]
+    return train, val
+
+
+def _trainer(run: Path, weights: Path, epochs: int):
+    """A CPU trainer logging to ``run``, keeping the best epoch by validation rank-1, and
+    writing the appearance weights to ``weights``; and its checkpoint callback."""
+    import lightning as L
+    from lightning.pytorch.callbacks import ModelCheckpoint
+    from lightning.pytorch.loggers import CSVLogger
+
+    from xvmatch.training.appearance_module import SaveAppearanceWeights
+
+    checkpoint = ModelCheckpoint(dirpath=run / "checkpoints", monitor="val/rank1", mode="max",
+                                 save_last=True)
+    trainer = L.Trainer(accelerator="cpu", devices=1, max_epochs=epochs,
+                        default_root_dir=run, enable_progress_bar=False,
+                        logger=CSVLogger(run, name=""), log_every_n_steps=50,
+                        callbacks=[checkpoint, SaveAppearanceWeights(path=os.fspath(weights))])
+    return trainer, checkpoint
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Fine-tune and write the matcher file; 0 on success."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    run, weights = _check_args(parser, args)
+    start = time.perf_counter()
+    import lightning as L
+    import torch
+
+    from xvmatch.models.appearance_net import appearance_from_weights
+    from xvmatch.models.matcher_file import load_matcher, save_matcher
+    from xvmatch.training.image_datamodule import ImagePairDataModule
+
+    torch.set_num_threads(1)
+    L.seed_everything(args.seed, workers=True, verbose=False)
+    base = load_matcher(args.base)
+    arch = _check_base(parser, args, base)
+    train, val = _data_folders(args)
     height, width = base.appearance.preprocessing.input_size
     dm = ImagePairDataModule(train_data=train, val_data=val, input_height=height,
                              input_width=width, batch_size=8, hard_radius=1.0, augment=True,
@@ -134,12 +176,7 @@ def main(argv: list[str] | None = None) -> int:
                              camera_shift_max=args.shift_max)
     model, config = module_from_config(base.appearance.train(), arch, args.learning_rate)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    checkpoint = ModelCheckpoint(dirpath=run / "checkpoints", monitor="val/rank1", mode="max",
-                                 save_last=True)
-    trainer = L.Trainer(accelerator="cpu", devices=1, max_epochs=args.epochs,
-                        default_root_dir=run, enable_progress_bar=False,
-                        logger=CSVLogger(run, name=""), log_every_n_steps=50,
-                        callbacks=[checkpoint, SaveAppearanceWeights(path=os.fspath(weights))])
+    trainer, checkpoint = _trainer(run, weights, args.epochs)
     before = float(trainer.validate(model, datamodule=dm, verbose=False)[0]["val/rank1"])
     trainer.fit(model, datamodule=dm)
     best = float(checkpoint.best_model_score)
