@@ -34,7 +34,7 @@ import math
 import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -427,6 +427,264 @@ def _feature_stream(
             yield from ahead.popleft().result()
 
 
+def _matcher_models(
+    model: LearnedMatcher | Sequence[LearnedMatcher],
+    hor_width: float,
+    workers: int,
+    top_images: FrameImages | None,
+    hor_images: FrameImages | None,
+) -> list[LearnedMatcher]:
+    """The list of models of :func:`associate_sequence_learned`, its options checked.
+
+    Raises:
+        ValueError: a width or worker count out of range, the images of one view only, no
+            model, or images for a bundle without an appearance network.
+    """
+    if not hor_width > 0:
+        raise ValueError(f"hor_width must be > 0, got {hor_width}")
+    if int(workers) < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if (top_images is None) != (hor_images is None):
+        raise ValueError("give the images of both views or of neither")
+    models = [model] if isinstance(model, LearnedMatcher) else list(model)
+    if not models:
+        raise ValueError("no model given")
+    if top_images is not None and any(m.bundle.manifest.appearance is None for m in models):
+        raise ValueError("images were given but a bundle has no appearance network")
+    return models
+
+
+def _has_both(top: Mapping[int, FrameLike], hor: Mapping[int, FrameLike], frame: int) -> bool:
+    """Whether the frame has at least one box in each view."""
+    t_rec, h_rec = top.get(frame), hor.get(frame)
+    return bool(t_rec is not None and h_rec is not None and len(t_rec.ids) and len(h_rec.ids))
+
+
+def _feature_inputs(
+    top: Mapping[int, FrameLike],
+    hor: Mapping[int, FrameLike],
+    order: Sequence[int],
+    camera_id: int | None,
+    cameras: FrameCameraSource | None,
+) -> list[tuple[np.ndarray, np.ndarray, int | None, FrameCameras | None]]:
+    """``(top boxes, hor boxes, camera row, cameras)`` of each frame of ``order`` with boxes in
+    both views, the inputs of :func:`_feature_stream`; the camera row is the top-view row of
+    ``camera_id`` (None where it is absent)."""
+    inputs = []
+    for frame in order:
+        if _has_both(top, hor, frame):
+            cam = None
+            if camera_id is not None:
+                hits = np.flatnonzero(np.asarray(top[frame].ids) == camera_id)
+                cam = int(hits[0]) if hits.size else None
+            inputs.append((top[frame].boxes, hor[frame].boxes, cam,
+                           cameras.get(frame) if cameras is not None else None))
+    return inputs
+
+
+@dataclass
+class _SequenceScorer:
+    """One run of :func:`associate_sequence_learned`: its frames scored in batches, then
+    assigned (at once, or after the appearance check when ``judge``).
+
+    Attributes:
+        top, hor: ``{frame: record}`` of both views.
+        models: the matchers (an ensemble is averaged).
+        configs: their distinct feature configurations.
+        gamma: the non-association cost.
+        batch_size: frames per matcher call.
+        top_images, hor_images: image sources of both views, or None.
+        cameras: the camera source, or None.
+        tolerance: the near-tie tolerance of INT8 frames re-checked with FP32 (None: none).
+        judge: whether the appearance cue is checked before any frame is assigned.
+        costs_out: receives ``{frame: cost matrix}`` when given.
+        rechecked: receives the frames scored again with FP32 when given.
+        out: ``{frame: [(top_id, hor_id)]}`` of the frames assigned so far.
+        pending: ``(frame, features, cues)`` of the frames waiting to be scored.
+        held: ``{frame: (cost, box-only cost, appearance cue)}`` of the scored frames waiting
+            for the appearance check.
+    """
+
+    top: Mapping[int, FrameLike]
+    hor: Mapping[int, FrameLike]
+    models: list[LearnedMatcher]
+    configs: list[FeatureConfig]
+    gamma: float
+    batch_size: int
+    top_images: FrameImages | None
+    hor_images: FrameImages | None
+    cameras: FrameCameraSource | None
+    tolerance: float | None
+    judge: bool
+    costs_out: dict[int, np.ndarray] | None
+    rechecked: list[int] | None
+    out: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    pending: list[tuple[int, list[list[FrameFeatures]], dict]] = field(default_factory=list)
+    held: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    @classmethod
+    def for_models(
+        cls,
+        top: Mapping[int, FrameLike],
+        hor: Mapping[int, FrameLike],
+        models: list[LearnedMatcher],
+        gamma: float | None,
+        batch_size: int,
+        top_images: FrameImages | None,
+        hor_images: FrameImages | None,
+        cameras: FrameCameraSource | None,
+        appearance_check: bool,
+        costs_out: dict[int, np.ndarray] | None,
+        rechecked: list[int] | None,
+    ) -> _SequenceScorer:
+        """The run of :func:`associate_sequence_learned`'s arguments: the models' distinct
+        feature configurations, gamma (default: the first model's), the re-check tolerance
+        (with images) and whether the appearance cue is judged (with images)."""
+        configs: list[FeatureConfig] = []
+        for m in models:
+            if m.feature_config not in configs:
+                configs.append(m.feature_config)
+        gamma = non_association_cost(models, gamma)
+        tolerance = max((m.bundle.recheck for m in models if m.bundle.recheck is not None),
+                        default=None) if top_images is not None else None
+        return cls(top=top, hor=hor, models=models, configs=configs, gamma=gamma,
+                   batch_size=batch_size, top_images=top_images, hor_images=hor_images,
+                   cameras=cameras, tolerance=tolerance,
+                   judge=bool(appearance_check) and top_images is not None,
+                   costs_out=costs_out, rechecked=rechecked)
+
+    def raw_cues(self, frame: int) -> dict:
+        """The frame's cues in input order: appearance cost, ray distance, cheirality; and
+        the crops of each model that re-checks INT8 frames."""
+        t_boxes, h_boxes = self.top[frame].boxes, self.hor[frame].boxes
+        cues: dict = {}
+        if self.top_images is not None:
+            t_image, h_image = self.top_images.get(frame), self.hor_images.get(frame)
+            per_model, crops = [], []
+            for m in self.models:
+                a, b = m.crops(t_image, t_boxes), m.crops(h_image, h_boxes)
+                per_model.append(m.crop_cost(a, b))
+                crops.append((a, b) if m.bundle.recheck is not None else None)
+            cues["app"] = per_model
+            cues["crops"] = crops
+        if self.cameras is not None:
+            manifest = self.models[0].bundle.manifest
+            ray, cheir = camera_cues(self.cameras.get(frame), t_boxes, h_boxes, manifest.margin,
+                                     manifest.beta)
+            cues["ray_distance"], cues["cheirality"] = ray, cheir
+        return cues
+
+    def frame_costs(self, entries: list[tuple[int, list[list[FrameFeatures]], dict]]
+                    ) -> list[np.ndarray]:
+        """Each entry's cost matrix (input order), averaged over models and mirror copies."""
+        models, configs = self.models, self.configs
+        per_model = []
+        for k, m in enumerate(models):
+            c = configs.index(m.feature_config)
+            items = []
+            for frame, groups, cues in entries:
+                shape = (len(self.top[frame].ids), len(self.hor[frame].ids))
+                for feats in groups[c]:
+                    items.append(m.inputs(feats, shape, cues["app"][k] if "app" in cues else None,
+                                          cues.get("ray_distance"), cues.get("cheirality")))
+            per_model.append(iter(m.costs(items, self.batch_size)))
+        return [np.mean([_input_order(f, next(costs))
+                         for m, costs in zip(models, per_model, strict=True)
+                         for f in groups[configs.index(m.feature_config)]], axis=0)
+                for _, groups, _ in entries]
+
+    def with_reference(self, cues: dict) -> dict:
+        """The cues with each re-checking model's appearance cost from its FP32 network."""
+        app = [c if kept is None else m.crop_cost(*kept, reference=True)
+               for m, c, kept in zip(self.models, cues["app"], cues["crops"], strict=True)]
+        return {**cues, "app": app}
+
+    def finish(self, frame: int, cost: np.ndarray) -> None:
+        """Assign one frame from its cost matrix (and keep the matrix in ``costs_out``)."""
+        if self.costs_out is not None:
+            self.costs_out[frame] = cost
+        pairs = assign(cost, self.gamma)
+        t_ids, h_ids = self.top[frame].ids, self.hor[frame].ids
+        self.out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]
+
+    def flush(self) -> None:
+        """Score the pending frames (near ties of INT8 again with FP32); assign them, or hold
+        them with their box-only costs for the appearance check."""
+        pending = self.pending
+        costs = self.frame_costs(pending)
+        if self.tolerance is not None:
+            near = [k for k, cost in enumerate(costs)
+                    if not assignment_is_stable(cost, self.gamma, self.tolerance)]
+            again = self.frame_costs([(f, g, self.with_reference(c))
+                                      for f, g, c in (pending[k] for k in near)])
+            for k, cost in zip(near, again, strict=True):
+                costs[k] = cost
+            if self.rechecked is not None:
+                self.rechecked.extend(pending[k][0] for k in near)
+        if self.judge:
+            boxes = self.frame_costs([(f, g, {k: v for k, v in c.items()
+                                              if k not in ("app", "crops")})
+                                      for f, g, c in pending])
+            for (frame, _, cues), cost, box_cost in zip(pending, costs, boxes, strict=True):
+                self.held[frame] = (cost, box_cost, cues["app"][0])
+        else:
+            for (frame, _, _), cost in zip(pending, costs, strict=True):
+                self.finish(frame, cost)
+        pending.clear()
+
+    def score(self, frames: Iterable[int],
+              stream: Iterator[list[list[FrameFeatures]]]) -> None:
+        """Score ``frames`` in order (their features from ``stream``, one item per frame with
+        boxes in both views), in batches of ``batch_size`` frames or of about
+        ``4 * MATCHER_BATCH_CELLS`` cells; frames without boxes in a view get no pairs."""
+        # (hypothesis, pair) cells of the pending frames' features (48 bytes each): a crowded
+        # run is scored before they pass about 200 MB, an ordinary one every batch_size frames
+        pending_cells = 0
+        for frame in frames:
+            if not _has_both(self.top, self.hor, frame):
+                self.out[frame] = []
+                continue
+            self.pending.append((frame, next(stream), self.raw_cues(frame)))
+            pending_cells += sum(math.prod(f.shape) for g in self.pending[-1][1] for f in g)
+            if len(self.pending) >= self.batch_size or pending_cells >= 4 * MATCHER_BATCH_CELLS:
+                self.flush()
+                pending_cells = 0
+        if self.pending:
+            self.flush()
+
+    def finish_judged(self, checked: list[AppearanceCheck] | None) -> None:
+        """Judge the appearance cue on the held frames (the check goes to ``checked`` when
+        given), then assign each with its cost, or its box-only cost where the cue failed."""
+        result, use = self.judge_held()
+        if checked is not None:
+            checked.append(result)
+        for frame in sorted(self.held):
+            self.finish(frame, self.held[frame][0 if use[frame] else 1])
+
+    def judge_held(self) -> tuple[AppearanceCheck, dict[int, bool]]:
+        """The appearance check of the held frames, and whether each keeps its appearance cue
+        (else it is matched from its boxes alone)."""
+        held = self.held
+        manifest = self.models[0].bundle.manifest
+        # a site bundle's cue was fitted on pairs like those it is judged on: a higher bar
+        bar = SITE_MIN_AUC if self.models[0].bundle.adaptation is not None else MIN_AUC
+        result = check_appearance(self.top, self.hor, {f: h[1] for f, h in held.items()},
+                                  {f: h[2] for f, h in held.items()}, self.gamma, min_auc=bar)
+        # Fitted on single frames, for one bundle's raw cue against its boxes alone: only
+        # where no run of consecutive frames could be mined (a video the box-only matcher
+        # is rarely sure of keeps its images, which help most there), not for ensembles,
+        # site bundles (another cue) or runs with cameras (other box-only costs).
+        veto = (manifest.frame_check if len(self.models) == 1 and manifest.adaptation is None
+                and self.cameras is None and result.bursts == 0 else None)
+        if veto is not None:  # no burst: nothing was judged over time
+            use = {f: veto.trusts(h[2], h[1]) for f, h in held.items()}
+            dropped = sum(not u for u in use.values())
+            result = replace(result, frames=len(use), frames_dropped=dropped)
+        else:
+            use = dict.fromkeys(held, result.trusted)
+        return result, use
+
+
 def associate_sequence_learned(
     top: Mapping[int, FrameLike],
     hor: Mapping[int, FrameLike],
@@ -490,161 +748,22 @@ def associate_sequence_learned(
         ValueError: bad options, or a frame over the crowd limits (:func:`check_crowd_size`),
             before any work.
     """
-    if not hor_width > 0:
-        raise ValueError(f"hor_width must be > 0, got {hor_width}")
-    if int(workers) < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
-    if (top_images is None) != (hor_images is None):
-        raise ValueError("give the images of both views or of neither")
-    models = [model] if isinstance(model, LearnedMatcher) else list(model)
-    if not models:
-        raise ValueError("no model given")
-    if top_images is not None and any(m.bundle.manifest.appearance is None for m in models):
-        raise ValueError("images were given but a bundle has no appearance network")
+    models = _matcher_models(model, hor_width, workers, top_images, hor_images)
     check_crowd_size(top, hor, frames)
-    configs: list[FeatureConfig] = []
-    for m in models:
-        if m.feature_config not in configs:
-            configs.append(m.feature_config)
-    gamma = non_association_cost(models, gamma)
+    run = _SequenceScorer.for_models(top, hor, models, gamma, batch_size, top_images,
+                                     hor_images, cameras, appearance_check, costs_out, rechecked)
     height = float(hor_height) if hor_height is not None else float(hor_width) * 9.0 / 16.0
     size = (float(hor_width), height)
     order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})
-    manifest = models[0].bundle.manifest
-    out: dict[int, list[tuple[int, int]]] = {}
-    pending: list[tuple[int, list[list[FrameFeatures]], dict]] = []
-    # (hypothesis, pair) cells of the pending frames' features (48 bytes each): a crowded run
-    # is scored before they pass about 200 MB, an ordinary one every batch_size frames
-    pending_cells = 0
-
-    tolerance = max((m.bundle.recheck for m in models if m.bundle.recheck is not None),
-                    default=None) if top_images is not None else None
-
-    def raw_cues(frame: int) -> dict:
-        """The frame's cues in input order: appearance cost, ray distance, cheirality; and
-        the crops of each model that re-checks INT8 frames."""
-        t_boxes, h_boxes = top[frame].boxes, hor[frame].boxes
-        cues: dict = {}
-        if top_images is not None:
-            t_image, h_image = top_images.get(frame), hor_images.get(frame)
-            per_model, crops = [], []
-            for m in models:
-                a, b = m.crops(t_image, t_boxes), m.crops(h_image, h_boxes)
-                per_model.append(m.crop_cost(a, b))
-                crops.append((a, b) if m.bundle.recheck is not None else None)
-            cues["app"] = per_model
-            cues["crops"] = crops
-        if cameras is not None:
-            ray, cheir = camera_cues(cameras.get(frame), t_boxes, h_boxes, manifest.margin,
-                                     manifest.beta)
-            cues["ray_distance"], cues["cheirality"] = ray, cheir
-        return cues
-
-    def frame_costs(entries: list[tuple[int, list[list[FrameFeatures]], dict]]
-                    ) -> list[np.ndarray]:
-        """Each entry's cost matrix (input order), averaged over models and mirror copies."""
-        per_model = []
-        for k, m in enumerate(models):
-            c = configs.index(m.feature_config)
-            items = []
-            for frame, groups, cues in entries:
-                shape = (len(top[frame].ids), len(hor[frame].ids))
-                for feats in groups[c]:
-                    items.append(m.inputs(feats, shape, cues["app"][k] if "app" in cues else None,
-                                          cues.get("ray_distance"), cues.get("cheirality")))
-            per_model.append(iter(m.costs(items, batch_size)))
-        return [np.mean([_input_order(f, next(costs))
-                         for m, costs in zip(models, per_model, strict=True)
-                         for f in groups[configs.index(m.feature_config)]], axis=0)
-                for _, groups, _ in entries]
-
-    def with_reference(cues: dict) -> dict:
-        """The cues with each re-checking model's appearance cost from its FP32 network."""
-        app = [c if kept is None else m.crop_cost(*kept, reference=True)
-               for m, c, kept in zip(models, cues["app"], cues["crops"], strict=True)]
-        return {**cues, "app": app}
-
-    judge = bool(appearance_check) and top_images is not None
-    held: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # images, boxes, app cue
-
-    def finish(frame: int, cost: np.ndarray) -> None:
-        if costs_out is not None:
-            costs_out[frame] = cost
-        pairs = assign(cost, gamma)
-        t_ids, h_ids = top[frame].ids, hor[frame].ids
-        out[frame] = [(int(t_ids[a]), int(h_ids[b])) for a, b in pairs]
-
-    def flush() -> None:
-        costs = frame_costs(pending)
-        if tolerance is not None:
-            near = [k for k, cost in enumerate(costs)
-                    if not assignment_is_stable(cost, gamma, tolerance)]
-            again = frame_costs([(f, g, with_reference(c))
-                                 for f, g, c in (pending[k] for k in near)])
-            for k, cost in zip(near, again, strict=True):
-                costs[k] = cost
-            if rechecked is not None:
-                rechecked.extend(pending[k][0] for k in near)
-        if judge:
-            boxes = frame_costs([(f, g, {k: v for k, v in c.items() if k not in ("app", "crops")})
-                                 for f, g, c in pending])
-            for (frame, _, cues), cost, box_cost in zip(pending, costs, boxes, strict=True):
-                held[frame] = (cost, box_cost, cues["app"][0])
-        else:
-            for (frame, _, _), cost in zip(pending, costs, strict=True):
-                finish(frame, cost)
-        pending.clear()
-
-    def both(frame: int) -> bool:
-        t_rec, h_rec = top.get(frame), hor.get(frame)
-        return bool(t_rec is not None and h_rec is not None and len(t_rec.ids) and len(h_rec.ids))
-
-    inputs = []
-    for frame in order:
-        if both(frame):
-            cam = None
-            if camera_id is not None:
-                hits = np.flatnonzero(np.asarray(top[frame].ids) == camera_id)
-                cam = int(hits[0]) if hits.size else None
-            inputs.append((top[frame].boxes, hor[frame].boxes, cam,
-                           cameras.get(frame) if cameras is not None else None))
-    stream = _feature_stream(inputs, size, configs, mirror, workers)
+    stream = _feature_stream(_feature_inputs(top, hor, order, camera_id, cameras), size,
+                             run.configs, mirror, workers)
     try:
-        for frame in progress(order) if progress else order:
-            if not both(frame):
-                out[frame] = []
-                continue
-            pending.append((frame, next(stream), raw_cues(frame)))
-            pending_cells += sum(math.prod(f.shape) for g in pending[-1][1] for f in g)
-            if len(pending) >= batch_size or pending_cells >= 4 * MATCHER_BATCH_CELLS:
-                flush()
-                pending_cells = 0
-        if pending:
-            flush()
+        run.score(progress(order) if progress else order, stream)
     finally:
         stream.close()  # shuts the worker pool down, also on an error or an interrupt
-    if judge:
-        # a site bundle's cue was fitted on pairs like those it is judged on: a higher bar
-        bar = SITE_MIN_AUC if models[0].bundle.adaptation is not None else MIN_AUC
-        result = check_appearance(top, hor, {f: h[1] for f, h in held.items()},
-                                  {f: h[2] for f, h in held.items()}, gamma, min_auc=bar)
-        # Fitted on single frames, for one bundle's raw cue against its boxes alone: only
-        # where no run of consecutive frames could be mined (a video the box-only matcher
-        # is rarely sure of keeps its images, which help most there), not for ensembles,
-        # site bundles (another cue) or runs with cameras (other box-only costs).
-        veto = (manifest.frame_check if len(models) == 1 and manifest.adaptation is None
-                and cameras is None and result.bursts == 0 else None)
-        if veto is not None:  # no burst: nothing was judged over time
-            use = {f: veto.trusts(h[2], h[1]) for f, h in held.items()}
-            dropped = sum(not u for u in use.values())
-            result = replace(result, frames=len(use), frames_dropped=dropped)
-        else:
-            use = dict.fromkeys(held, result.trusted)
-        if checked is not None:
-            checked.append(result)
-        for frame in sorted(held):
-            finish(frame, held[frame][0 if use[frame] else 1])
-    return {f: out[f] for f in order}
+    if run.judge:
+        run.finish_judged(checked)
+    return {f: run.out[f] for f in order}
 
 
 def rechecked_costs(fp32: Sequence[np.ndarray], int8: Sequence[np.ndarray], gamma: float,
