@@ -2,9 +2,11 @@
 
 ``add_model_arguments`` adds ``--model``, ``--gamma``, the images, the cameras and the other
 learned-matcher options to ``associate``'s parser, ``add_draw_arguments`` its ``--draw``
-pictures; ``associate_with_model`` runs the association with the models
+pictures; :func:`model_args` reads these options from the parsed arguments into one
+:class:`ModelArgs` record (the one place they are read), which the others take:
+``associate_with_model`` runs the association with the models
 (:func:`xvmatch.inference.matching.learned_pipeline.run_learned_association`'s steps, with the
-options :func:`learned_run_options` builds from the arguments), ``open_models`` opens them (also for
+options :func:`learned_run_options` builds from the record), ``open_models`` opens them (also for
 ``track`` and ``associate-multi``), ``horizontal_size`` works out the horizontal image size.
 Imports are lazy: only these code paths load onnxruntime (torch only to export a .pt file
 once). Bad input raises ``ValueError`` with a one-line message, which the main entry
@@ -17,6 +19,7 @@ import argparse
 import os
 import sys
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, fields
 
 from xvmatch.commands._options import UsageError, add_image_options, check_images_together
 from xvmatch.commands._types import float_in, int_in, thread_count
@@ -26,6 +29,7 @@ __all__ = [
     "CAMERAS_COMMAND",
     "DRAW_COMMAND",
     "LEARNED_ONLY",
+    "ModelArgs",
     "add_camera_check",
     "add_draw_arguments",
     "add_model_arguments",
@@ -38,6 +42,7 @@ __all__ = [
     "ego_camera_size",
     "horizontal_size",
     "learned_run_options",
+    "model_args",
     "note_camera_check",
     "note_camera_refinement",
     "open_models",
@@ -46,6 +51,47 @@ __all__ = [
 
 _gamma = float_in(0, 1, "the matcher's costs lie in [0, 1]", low_open=True)
 """``--gamma``: a non-association cost in (0, 1]."""
+
+
+@dataclass(frozen=True)
+class ModelArgs:
+    """The learned matcher's options of a command line (``associate``, ``adapt``, ``track``,
+    ``associate-multi``), read once by :func:`model_args`. An option a command does not take
+    keeps the default here, which is the default of the option where a command takes it."""
+
+    model: str | list[str] | None = None
+    """``--model``: one bundle (``track``, ``adapt``) or a list (``associate``), or None."""
+    mode: str = "frame"
+    top: str = "the top-view boxes"
+    """``--top``, or how messages name the top boxes."""
+    hor: str | list[str] | None = None
+    """``--hor``: a box file, a list of them (``associate-multi``), or None."""
+    top_images: str | None = None
+    hor_images: str | list[str] | None = None
+    cameras: str | list[str] | None = None
+    write_cameras: str | list[str] | None = None
+    refine_top_camera: str = "auto"
+    camera_check: str = "on"
+    appearance_check: str = "on"
+    image_size: tuple[int, int] | None = None
+    camera_id: int | None = None
+    gamma: float | None = None
+    mirror: bool = False
+    workers: int = 1
+    threads: int = 1
+    precision: str | None = None
+    costs: str | None = None
+    draw: str | None = None
+    draw_every: int = 1
+    no_labels: bool = False
+    quiet: bool = False
+
+
+def model_args(args: argparse.Namespace) -> ModelArgs:
+    """The :class:`ModelArgs` of parsed arguments: the options the namespace has, the record's
+    defaults for those it lacks (the one place the learned matcher's options are read)."""
+    given = vars(args)
+    return ModelArgs(**{f.name: given[f.name] for f in fields(ModelArgs) if f.name in given})
 
 
 def add_model_arguments(parser: argparse.ArgumentParser) -> None:
@@ -127,12 +173,12 @@ def _listed(value) -> list:
     return [] if value is None else list(value) if isinstance(value, list) else [value]
 
 
-def check_write_cameras(args: argparse.Namespace) -> list[Output]:
+def check_write_cameras(opts: ModelArgs) -> list[Output]:
     """``--write-cameras``' outputs for :func:`~xvmatch.core.output_paths.check_outputs`,
     after refusing them without ``--cameras``, not one per ``--cameras``, or with
     ``--refine-top-camera off``, and a folder that is neither new, empty nor its own."""
-    paths = _listed(getattr(args, "write_cameras", None))
-    given = _listed(getattr(args, "cameras", None))
+    paths = _listed(opts.write_cameras)
+    given = _listed(opts.cameras)
     if not paths:
         return []
     if not given:
@@ -141,7 +187,7 @@ def check_write_cameras(args: argparse.Namespace) -> list[Output]:
     if len(paths) != len(given):
         raise UsageError(f"--write-cameras: one path per --cameras ({len(given)}), got "
                          f"{len(paths)}")
-    if getattr(args, "refine_top_camera", "auto") == "off":
+    if opts.refine_top_camera == "off":
         raise UsageError("--write-cameras writes the cameras as refined: drop "
                          "--refine-top-camera off (else they are --cameras as given)")
     outputs = []
@@ -153,7 +199,7 @@ def check_write_cameras(args: argparse.Namespace) -> list[Output]:
     return outputs
 
 
-def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
+def write_cameras(opts: ModelArgs, cameras, refinement) -> None:
     """Write ``--write-cameras`` (when given): ``cameras``, the run's
     :class:`~xvmatch.formats.camera_frames.CameraFrames` as refined (a list, one per path,
     for ``associate-multi``), in ``--cameras``' form (a folder it made before loses the camera
@@ -163,7 +209,7 @@ def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
     from xvmatch.core.output_paths import claim_folder
     from xvmatch.formats.camera_frames import save_camera_frames
 
-    paths = _listed(getattr(args, "write_cameras", None))
+    paths = _listed(opts.write_cameras)
     if not paths:
         return
     counts = []
@@ -177,7 +223,7 @@ def write_cameras(args: argparse.Namespace, cameras, refinement) -> None:
         remove_own_files(folder, CAMERAS_COMMAND, keep=written)
         record_own_files(folder, CAMERAS_COMMAND, written)
         counts.append(f"{path}: {len(written)} camera files, one per frame of its --cameras")
-    if not getattr(args, "quiet", False):
+    if not opts.quiet:
         turned = refinement is not None and refinement.turned
         what = (f"the {'moving ' if refinement.moving else ''}top camera turned "
                 f"{refinement.fit.angle_deg:.2f} degrees" if turned
@@ -298,27 +344,32 @@ def check_precision(precision: str | None, images: bool, models: Iterable = (),
                          "(a box-only matcher) for it to choose; leave --precision out")
 
 
-def horizontal_size(args: argparse.Namespace, hor: Mapping) -> tuple[tuple[int, int], str]:
+def horizontal_size(opts: ModelArgs, hor: Mapping) -> tuple[tuple[int, int], str]:
     """The horizontal image size and where it comes from (:mod:`xvmatch.commands._image_size`):
     ``--image-size``, the ``--hor-images`` and the ``--cameras`` file's ego camera must agree
     when given; with none, CVMHAT's 2688x1512 when the boxes are consistent with it (a note on
     stderr), else an error asking for ``--image-size``. Every horizontal box must lie in it."""
     from xvmatch.formats.box_image_size import resolve_size
 
-    check_images_together(args)
+    check_images_together(opts.top_images, opts.hor_images)
     given = []
-    if getattr(args, "image_size", None) is not None:
-        given.append((tuple(args.image_size), "--image-size"))
-    if getattr(args, "model", None) is not None and getattr(args, "hor_images", None):
+    if opts.image_size is not None:
+        given.append((tuple(opts.image_size), "--image-size"))
+    if opts.model is not None and opts.hor_images:
         from xvmatch.formats.frame_sources import open_frames
 
-        with open_frames(args.hor_images, box_frames=sorted(hor)) as source:
-            given.append((tuple(source.size), f"the horizontal images {args.hor_images}"))
-    elif getattr(args, "model", None) is not None and getattr(args, "cameras", None):
+        with open_frames(opts.hor_images, box_frames=sorted(hor)) as source:
+            given.append((tuple(source.size), f"the horizontal images {opts.hor_images}"))
+    elif opts.model is not None and opts.cameras:
         # with images, each camera file is checked against them
         # (inference/matching/learned_pipeline.py)
-        given.append(ego_camera_size(args.cameras))
-    return resolve_size(hor, getattr(args, "hor", "the horizontal boxes"), given)
+        given.append(ego_camera_size(opts.cameras))
+    return resolve_size(hor, _hor_name(opts, "the horizontal boxes"), given)
+
+
+def _hor_name(opts: ModelArgs, unnamed: str) -> str | list[str]:
+    """``--hor``, or ``unnamed`` when the command has none."""
+    return unnamed if opts.hor is None else opts.hor
 
 
 def ego_camera_size(cameras: str) -> tuple[tuple[int, int], str]:
@@ -336,17 +387,16 @@ def ego_camera_size(cameras: str) -> tuple[tuple[int, int], str]:
 
 
 def learned_run_options(
-    args: argparse.Namespace,
+    opts: ModelArgs,
     models: list,
     names: list[str],
     hor_size: tuple[tuple[int, int], str],
     top_offset: int = 0,
 ):
     """The :class:`~xvmatch.inference.matching.learned_pipeline.LearnedRunOptions` of
-    ``associate``'s arguments, for ``models`` already opened (:func:`open_models`) from ``names``
-    and the horizontal size :func:`horizontal_size` resolved; options a namespace lacks take their
-    defaults. Costs are kept when ``--costs`` or ``--draw`` asks for them (the pictures are
-    of the frames that have costs)."""
+    ``associate``'s options, for ``models`` already opened (:func:`open_models`) from ``names``
+    and the horizontal size :func:`horizontal_size` resolved. Costs are kept when ``--costs``
+    or ``--draw`` asks for them (the pictures are of the frames that have costs)."""
     from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions
 
     (width, height), said = hor_size
@@ -355,27 +405,25 @@ def learned_run_options(
         hor_size=(width, height),
         hor_size_source=said,
         names=tuple(names),
-        top_images=getattr(args, "top_images", None),
-        hor_images=getattr(args, "hor_images", None),
-        cameras=getattr(args, "cameras", None),
-        top_boxes=getattr(args, "top", "the top-view boxes"),
-        hor_boxes=(args.hor if isinstance(getattr(args, "hor", None), str)
-                   else "the horizontal-view boxes"),
-        camera_id=getattr(args, "camera_id", None),
-        gamma=getattr(args, "gamma", None),
-        mirror=bool(getattr(args, "mirror", False)),
-        workers=getattr(args, "workers", 1),
+        top_images=opts.top_images,
+        hor_images=opts.hor_images,
+        cameras=opts.cameras,
+        top_boxes=opts.top,
+        hor_boxes=opts.hor if isinstance(opts.hor, str) else "the horizontal-view boxes",
+        camera_id=opts.camera_id,
+        gamma=opts.gamma,
+        mirror=bool(opts.mirror),
+        workers=opts.workers,
         top_offset=top_offset,
-        keep_costs=(getattr(args, "costs", None) is not None
-                    or getattr(args, "draw", None) is not None),
-        appearance_check=getattr(args, "appearance_check", "on") == "on",
-        refine_top_camera=getattr(args, "refine_top_camera", "auto") == "auto",
-        camera_check=getattr(args, "camera_check", "on") == "on",
+        keep_costs=opts.costs is not None or opts.draw is not None,
+        appearance_check=opts.appearance_check == "on",
+        refine_top_camera=opts.refine_top_camera == "auto",
+        camera_check=opts.camera_check == "on",
     )
 
 
 def associate_with_model(
-    args: argparse.Namespace,
+    opts: ModelArgs,
     top: Mapping,
     hor: Mapping,
     frames: Iterable[int],
@@ -383,7 +431,7 @@ def associate_with_model(
     top_offset: int = 0,
     hor_size: tuple[tuple[int, int], str] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
-    """Associate with ``args.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
+    """Associate with ``opts.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
     hor)]}``. The command line's side of :mod:`xvmatch.inference.matching.learned_pipeline`: checks
     the options, opens the models, builds the run's options (:func:`learned_run_options`),
     prints the note of an assumed image size, runs it, and writes ``--costs`` and ``--draw``.
@@ -391,48 +439,49 @@ def associate_with_model(
     the same way. ``hor_size``: :func:`horizontal_size` when the caller has it already (else it
     is worked out here).
 
-    Reads ``args.model`` and, when present, ``args.mode`` (must be ``frame``), ``args.threads``,
-    ``args.precision``, ``args.draw``, ``args.draw_every``, ``args.no_labels``, ``args.costs``,
-    ``args.quiet``, ``args.hor`` and what :func:`learned_run_options` reads. Every input is
+    Reads ``opts.model``, ``opts.mode`` (must be ``frame``), ``opts.threads``,
+    ``opts.precision``, ``opts.draw``, ``opts.draw_every``, ``opts.no_labels``, ``opts.costs``,
+    ``opts.quiet``, ``opts.hor`` and what :func:`learned_run_options` reads. Every input is
     checked before any work starts; outputs are written only at the end.
     """
     from xvmatch.commands._image_size import note_if_assumed
     from xvmatch.inference.matching.learned_pipeline import open_learned_inputs
 
-    if getattr(args, "mode", "frame") != "frame":
+    if opts.mode != "frame":
         raise ValueError("--model solves each frame on its own: use --mode frame")
-    check_images_together(args)
-    draw = getattr(args, "draw", None)
+    check_images_together(opts.top_images, opts.hor_images)
+    draw = opts.draw
     if draw is not None:
         check_own_folder(draw, DRAW_COMMAND, "--draw")
-    names = [args.model] if isinstance(args.model, str) else list(args.model)
-    precision = getattr(args, "precision", None)
-    images = getattr(args, "top_images", None) is not None
+    names = [opts.model] if isinstance(opts.model, str) else list(opts.model)
+    precision = opts.precision
+    images = opts.top_images is not None
     check_precision(precision, images)
-    models = open_models(names, getattr(args, "threads", 1), precision, recheck=True)
+    models = open_models(names, opts.threads, precision, recheck=True)
     check_precision(precision, images, models, names)
-    hor_size = hor_size or horizontal_size(args, hor)
-    options = learned_run_options(args, models, names, hor_size, top_offset)
-    hor_path = getattr(args, "hor", "the horizontal boxes")
+    hor_size = hor_size or horizontal_size(opts, hor)
+    options = learned_run_options(opts, models, names, hor_size, top_offset)
+    hor_path = _hor_name(opts, "the horizontal boxes")
+    quiet = bool(opts.quiet)
     with open_learned_inputs(top, hor, frames, options) as inputs:
-        note_if_assumed(hor_size, hor, hor_path, bool(getattr(args, "quiet", False)))
-        note_camera_refinement(inputs.refinement, bool(getattr(args, "quiet", False)))
-        note_camera_check(inputs.camera_checked, bool(getattr(args, "quiet", False)))
+        note_if_assumed(hor_size, hor, hor_path, quiet)
+        note_camera_refinement(inputs.refinement, quiet)
+        note_camera_check(inputs.camera_checked, quiet)
         run = inputs.associate(progress)
-        if run.rechecked and not getattr(args, "quiet", False):
+        if run.rechecked and not opts.quiet:
             both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))
             print(f"INT8 appearance network: {len(run.rechecked)} of {both} frames were near "
                   "ties, scored again with FP32", file=sys.stderr)
-        if run.checked is not None and run.checked.to_tell(getattr(args, "quiet", False)):
+        if run.checked is not None and run.checked.to_tell(opts.quiet):
             print(run.checked.message(), file=sys.stderr)
         if draw is not None:
-            draw_pictures(draw, getattr(args, "draw_every", 1), top, hor, run.pairs,
+            draw_pictures(draw, opts.draw_every, top, hor, run.pairs,
                           sorted(run.costs), inputs.images or None, run.hor_size,
-                          not getattr(args, "no_labels", False))
-    if getattr(args, "costs", None) is not None:
-        _write_costs(args.costs, top, hor, run.costs, run.gamma, run.checked,
+                          not opts.no_labels)
+    if opts.costs is not None:
+        _write_costs(opts.costs, top, hor, run.costs, run.gamma, run.checked,
                      run.camera_checked, inputs.refinement)
-    write_cameras(args, inputs.refined_cameras, inputs.refinement)
+    write_cameras(opts, inputs.refined_cameras, inputs.refinement)
     return run.pairs
 
 

@@ -168,9 +168,9 @@ def add_image_options(group, top_help: str = TOP_IMAGES_HELP, hor_help: str = HO
                        metavar="PATH", help=hor_help)
 
 
-def check_images_together(args: argparse.Namespace) -> None:
+def check_images_together(top_images: str | None, hor_images: str | list[str] | None) -> None:
     """``--top-images`` and ``--hor-images`` come together or not at all."""
-    if (getattr(args, "top_images", None) is None) != (getattr(args, "hor_images", None) is None):
+    if (top_images is None) != (hor_images is None):
         raise ValueError("give --top-images and --hor-images together")
 
 

@@ -111,6 +111,7 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
     from xvmatch import __version__
     from xvmatch.commands._model import (
         horizontal_size,
+        model_args,
         note_camera_check,
         note_camera_refinement,
         open_models,
@@ -138,7 +139,7 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
     if model.bundle.manifest.appearance is None:
         raise UsageError(f"--model {args.model}: a box-only matcher has no appearance network "
                          "to adapt; use a bundle with one (e.g. default)")
-    hor_size = horizontal_size(args, hor)
+    hor_size = horizontal_size(model_args(args), hor)
     both = [f for f in sorted(set(top) & set(hor)) if len(top[f].ids) and len(hor[f].ids)]
     options = LearnedRunOptions(models=(model,), hor_size=tuple(hor_size[0]),
                                 hor_size_source=hor_size[1], names=(args.model,),

@@ -19,6 +19,7 @@ from xvmatch.commands._model import (
     check_write_cameras,
     draw_pictures,
     horizontal_size,
+    model_args,
 )
 from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
@@ -129,17 +130,18 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             raise UsageError(f"{', '.join(given)} apply to a learned matcher: add --model "
                              "default (or a bundle)")
     check_camera_id(args.camera_id, top, args.top)
+    learned = model_args(args)
     models = [m for m in args.model or () if m != "default"]
     check_outputs(
         [Output("--out", args.out), Output("--costs", args.costs),
-         Output("--draw", args.draw, folder=True), *check_write_cameras(args)],
+         Output("--draw", args.draw, folder=True), *check_write_cameras(learned)],
         [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
          Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
     )
     if args.draw is not None:
         check_own_folder(args.draw, DRAW_COMMAND, "--draw")
     max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
-    hor_size = horizontal_size(args, hor)
+    hor_size = horizontal_size(learned, hor)
     hor_width = hor_size[0][0]
     if args.model is None:
         from xvmatch.commands._image_size import note_if_assumed
@@ -153,7 +155,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     frames = sorted(set(top) | set(hor))
     progress = frame_progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
-        pairs = associate_with_model(args, top, hor, frames, progress, top_offset=offset,
+        pairs = associate_with_model(learned, top, hor, frames, progress, top_offset=offset,
                                      hor_size=hor_size)
     else:
         pairs = associate_sequence(

@@ -29,6 +29,7 @@ from xvmatch.commands._model import (
     add_refine_top_camera,
     add_write_cameras,
     check_write_cameras,
+    model_args,
     note_camera_check,
     note_camera_refinement,
     write_cameras,
@@ -188,7 +189,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         raise ValueError(f"--hor: give 1 to {MAX_HOR} horizontal box files, got {n_hor}")
     for option in ("hor_images", "cameras", "camera_id"):
         _per_view(getattr(args, option), n_hor, "--" + option.replace("_", "-"))
-    check_images_together(args)
+    check_images_together(args.top_images, args.hor_images)
     if args.model is None and (args.top_images or args.cameras):
         raise ValueError("--top-images, --hor-images and --cameras feed a learned matcher: add "
                          "--model default (or a bundle)")
@@ -200,7 +201,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     check_outputs(
         [Output("--out", out, folder=True,
                 files=("top.txt", *(f"hor{k}.txt" for k in range(1, n_hor + 1)))),
-         *check_write_cameras(args)],
+         *check_write_cameras(model_args(args))],
         [Input("--top", args.top), *(Input("--hor", h) for h in args.hor),
          *image_inputs(args),
          *(Input("--cameras", c) for c in args.cameras or ()),
@@ -337,7 +338,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     names = ["top", *(f"hor{k}" for k in range(1, n_hor + 1))]
     written = [write_track_rows(out / f"{name}.txt", r, p)
                for name, r, p in zip(names, rows, person, strict=True)]
-    write_cameras(args, refined, refinement)
+    write_cameras(model_args(args), refined, refinement)
     if n_fallback:
         print(f"xvmatch: warning: {n_fallback} of {len(frames)} frames spent the MIP's "
               f"budget of work or time limit ({args.time_limit:g} s) or failed, and used the "

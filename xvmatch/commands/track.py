@@ -34,6 +34,7 @@ from xvmatch.commands._model import (
     add_refine_top_camera,
     add_write_cameras,
     check_write_cameras,
+    model_args,
     note_camera_check,
     note_camera_refinement,
     write_cameras,
@@ -122,7 +123,7 @@ def _open_images(args: argparse.Namespace, top, hor, model, weights: str):
     from xvmatch.inference.matching.learned_pipeline import open_view_images
     from xvmatch.inference.tracks.tracking import TrackImages
 
-    check_images_together(args)
+    check_images_together(args.top_images, args.hor_images)
     if args.top_images is None:
         return None, [], None
     embed = None
@@ -357,7 +358,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_outputs(
         [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE)),
-         *check_write_cameras(args)],
+         *check_write_cameras(model_args(args))],
         [Input("--top", args.top), Input("--hor", args.hor),
          *image_inputs(args), Input("--cameras", args.cameras),
          Input("--model", None if args.model == "default" else args.model)],
@@ -415,7 +416,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.formats.offset_record import write_offset_record
 
     write_offset_record(out / OFFSET_FILE, offset)
-    write_cameras(args, *refined)
+    write_cameras(model_args(args), *refined)
     if result.n_fallback:
         print(f"xvmatch: warning: {result.n_fallback} of {result.n_windows} windows spent the "
               f"MIP's budget of work or time limit ({args.time_limit:g} s) or failed, and used "
