@@ -54,6 +54,9 @@ _UNSEEN_WEIGHT = 0.3
 """Cost of a top person put in the horizontal camera's view that it does not see, against 1 for
 a horizontal person explained: low, as occlusion and partial overlap hide many."""
 
+_DIGITS = 9
+"""Scores are rounded to this many decimals: the same choices on every CPU."""
+
 _STEP_M = 1.0
 """Metres per second a handheld camera's position may drift between frames at no cost."""
 
@@ -133,7 +136,8 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
     in_view = ((forward > 0.5) & (np.abs(np.arctan2(side, forward)) < np.radians(hfov_deg) / 2)
                & (np.hypot(forward, side) < reach))
     unseen = in_view & (d2.min(axis=1) > RADIUS**2)
-    score = explained - _UNSEEN_WEIGHT * unseen.sum(axis=1)
+    # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
+    score = np.round(explained - _UNSEEN_WEIGHT * unseen.sum(axis=1), _DIGITS)
     poses = np.column_stack([centres, heading])
     order = np.argsort(-score, kind="stable")
     keep: list[int] = []
@@ -168,9 +172,9 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
         turn = np.abs(_wrap(poses[:, None, 2] - prev[None, :, 2]))
         cost = _JUMP_COST * (np.maximum(step / (_STEP_M * gap) - 1.0, 0.0)
                              + np.maximum(turn / (np.radians(_STEP_DEG) * gap) - 1.0, 0.0))
-        via = totals[k - 1][None, :] - cost
+        via = np.round(totals[k - 1][None, :] - cost, _DIGITS)
         best = np.argmax(via, axis=1)
-        totals.append(scores + via[np.arange(len(poses)), best])
+        totals.append(np.round(scores + via[np.arange(len(poses)), best], _DIGITS))
         back.append(best)
     choice = [-1] * len(candidates)
     k = len(candidates) - 1

@@ -18,7 +18,7 @@ which read the top image as the ground) or oblique (this run).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -89,8 +89,13 @@ def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
     raises :class:`~xvmatch.geometry.people_calibration.CalibrationError` only for too few
     boxes."""
     frames, ids, boxes = _flat(top)
-    return calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
-                                 strict=False)
+    calib = calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
+                                  strict=False)
+    # Rounded far below what matters (a millidegree, a hundredth of a pixel, a tenth of a
+    # millimetre), so that a last-bit difference of the fit between CPUs changes no pair.
+    return replace(calib, focal=round(calib.focal, 2), tilt_deg=round(calib.tilt_deg, 3),
+                   roll_deg=round(calib.roll_deg, 3),
+                   camera_height=round(calib.camera_height, 4))
 
 
 def _summary(calib: PeopleCalibration) -> str:
