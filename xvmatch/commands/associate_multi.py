@@ -6,7 +6,7 @@ of every view pair frame by frame
 (:func:`xvmatch.inference.views.multi_view_costs.multi_view_costs`: the learned matcher or the
 handcrafted search for top-ego, the appearance network for ego-ego), solves the joint
 cycle-consistent program of every frame
-(:func:`xvmatch.inference.views.multi_view_assignment.solve_multi_view`), and writes
+(:func:`xvmatch.inference.views.multi_view_people.assign_people`), and writes
 ``OUT/top.txt``, ``OUT/hor1.txt``, ...: the input rows, text unchanged but the id field, which holds
 a person id; the same id in two views of a frame is the same person (ids are unique over the whole
 output and do not carry over frames). With ``--tracks`` the ids carry over frames
@@ -176,14 +176,9 @@ def _aligned(views, offsets, images, cameras, camera_rows):
     return views, images, cameras, camera_rows, sorted(set().union(*views))
 
 
-def _cmd_associate_multi(args: argparse.Namespace) -> int:
-    from xvmatch.commands._image_size import note_if_assumed
-    from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
-    from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.views.multi_view_assignment import consistent_hungarian, solve_multi_view
-    from xvmatch.inference.views.multi_view_costs import multi_view_costs
-
-    start = time.perf_counter()
+def _checked_args(args: argparse.Namespace):
+    """``(out, paths, params)`` after every check of the arguments and the output paths: the
+    output folder, the box files (top first) and the spatial options."""
     n_hor = len(args.hor)
     if not 1 <= n_hor <= MAX_HOR:
         raise ValueError(f"--hor: give 1 to {MAX_HOR} horizontal box files, got {n_hor}")
@@ -208,70 +203,121 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
          Input("--model", None if args.model == "default" else args.model)],
     )
     check_own_folder(out, MULTI_COMMAND)
-    offsets = _offsets(args, n_hor)
-    rows = [read_detection_rows(p) for p in paths]
+    return out, paths, params
+
+
+def _open_images(args: argparse.Namespace, matcher, views, paths, given, sources: list):
+    """The images of every view (``sources``, top first, each added as it opens so that the
+    caller closes them), their sizes added to ``given``; the top boxes checked against theirs."""
+    from xvmatch.formats.box_image_size import check_boxes_in_image
+    from xvmatch.inference.matching.learned_pipeline import open_view_images
+
+    if matcher.bundle.manifest.appearance is None:
+        raise ValueError(f"{args.model}: a box-only matcher cannot use images; drop "
+                         "the images or use a bundle with an appearance network")
+    for v, path in enumerate([args.top_images, *args.hor_images]):
+        source = open_view_images(path, views[v],
+                                  [f for f in sorted(views[v]) if len(views[v][f])])
+        sources.append(source)
+        if v:
+            given[v - 1].append((tuple(source.size), f"the horizontal images {path}"))
+        else:
+            check_boxes_in_image(views[0], tuple(source.size), paths[0],
+                                 f"the images {path}", ids=False)
+    return sources
+
+
+def _open_cameras(args: argparse.Namespace, matcher, views, paths, given) -> list:
+    """``--cameras`` of every horizontal view, each ego camera the size ``given`` names (else
+    its size added to ``given``)."""
+    from xvmatch.formats.camera_frames import open_cameras
+
+    if not matcher.bundle.manifest.uses_cameras:
+        raise ValueError(f"{args.model}: this matcher takes no camera cues; drop "
+                         "--cameras")
+    cameras = []
+    for k, path in enumerate(args.cameras):
+        cams = open_cameras(path, sorted(views[k + 1]))
+        for where, pair in cams.all():
+            size = tuple(pair.hor.image_size)
+            if given[k] and tuple(given[k][0][0]) != size:
+                want = given[k][0][0]
+                raise ValueError(f"{where}: camera 'ego' is {size[0]}x{size[1]} but "
+                                 f"{paths[k + 1]}'s images are {want[0]}x{want[1]} "
+                                 f"(from {given[k][0][1]})")
+            if not given[k]:
+                given[k].append((size, f"the camera files {path}"))
+        cameras.append(cams)
+    return cameras
+
+
+def _sizes_and_offsets(args: argparse.Namespace, views, paths, given, offsets, camera_rows,
+                       params, max_offset):
+    """``(sizes, offsets)``: each horizontal view's image size (said when assumed) and its
+    offset against the top view (``--offset``, estimated where ``auto``)."""
+    from xvmatch.commands._image_size import note_if_assumed
+    from xvmatch.formats.box_image_size import resolve_size
+
+    n_hor = len(paths) - 1
+    resolved = [resolve_size(views[k + 1], paths[k + 1], given[k], ids=False)
+                for k in range(n_hor)]
+    for k, r in enumerate(resolved):
+        note_if_assumed(r, views[k + 1], paths[k + 1], args.quiet)
+    sizes = [r[0] for r in resolved]
+    for k, value in enumerate(offsets):
+        marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
+        offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
+                                    max_offset, wearer, value,
+                                    f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
+                                    hor_path=paths[k + 1])
+    return sizes, offsets
+
+
+def _checked_cameras(args: argparse.Namespace, matcher, views, paths, sizes, cameras,
+                     refinement):
+    """The cameras after ``--camera-check`` (``views`` aligned): a view whose cameras fail is
+    matched without them (None)."""
+    if refinement is None or args.camera_check != "on":
+        return cameras
+    from xvmatch.inference.matching.camera_check import check_run_cameras
+
+    cameras = list(cameras)
+    for k in range(len(paths) - 1):
+        check = check_run_cameras(views[0], views[k + 1], sorted(views[k + 1]),
+                                  matcher, tuple(sizes[k]), cameras[k],
+                                  float(matcher.gamma), refinement.fit_loss,
+                                  workers=args.workers, moving=refinement.moving)
+        note_camera_check(check, args.quiet, f"--hor {paths[k + 1]}: ")
+        if not check.trusted:
+            cameras[k] = None
+    return cameras
+
+
+def _costs(args: argparse.Namespace, rows, paths, params, offsets, max_offset, camera_rows):
+    """``(views, frames, problems, refined, refinement)``: every frame's cost matrices of every
+    view pair (:func:`~xvmatch.inference.views.multi_view_costs.multi_view_costs`) on the views
+    re-timed by their offsets, and the cameras as refined for ``--write-cameras``."""
+    from xvmatch.inference.views.multi_view_costs import multi_view_costs
+
+    n_hor = len(paths) - 1
     views = [r.frames for r in rows]
     frames = sorted(set().union(*views))
-    max_offset = (max_offset_of(args, views[0], set().union(*views[1:]))
-                  if "auto" in offsets else None)
-    camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
-                   if args.camera_id is not None else None)
     matcher = images = cameras = None
     given: list[list] = [[] for _ in range(n_hor)]  # per horizontal view: [(size, source)]
     if args.image_size is not None:
         given = [[(tuple(args.image_size), "--image-size")] for _ in range(n_hor)]
-    sources = []
+    sources: list = []
     try:
         if args.model is not None:
             from xvmatch.commands._model import open_models
 
             matcher = open_models([args.model], args.threads)[0]
         if args.top_images is not None:
-            from xvmatch.inference.matching.learned_pipeline import open_view_images
-
-            if matcher.bundle.manifest.appearance is None:
-                raise ValueError(f"{args.model}: a box-only matcher cannot use images; drop "
-                                 "the images or use a bundle with an appearance network")
-            for v, path in enumerate([args.top_images, *args.hor_images]):
-                source = open_view_images(path, views[v],
-                                          [f for f in sorted(views[v]) if len(views[v][f])])
-                sources.append(source)
-                if v:
-                    given[v - 1].append((tuple(source.size), f"the horizontal images {path}"))
-                else:
-                    check_boxes_in_image(views[0], tuple(source.size), paths[0],
-                                         f"the images {path}", ids=False)
-            images = sources
+            images = _open_images(args, matcher, views, paths, given, sources)
         if args.cameras is not None:
-            from xvmatch.formats.camera_frames import open_cameras
-
-            if not matcher.bundle.manifest.uses_cameras:
-                raise ValueError(f"{args.model}: this matcher takes no camera cues; drop "
-                                 "--cameras")
-            cameras = []
-            for k, path in enumerate(args.cameras):
-                cams = open_cameras(path, sorted(views[k + 1]))
-                for where, pair in cams.all():
-                    size = tuple(pair.hor.image_size)
-                    if given[k] and tuple(given[k][0][0]) != size:
-                        want = given[k][0][0]
-                        raise ValueError(f"{where}: camera 'ego' is {size[0]}x{size[1]} but "
-                                         f"{paths[k + 1]}'s images are {want[0]}x{want[1]} "
-                                         f"(from {given[k][0][1]})")
-                    if not given[k]:
-                        given[k].append((size, f"the camera files {path}"))
-                cameras.append(cams)
-        resolved = [resolve_size(views[k + 1], paths[k + 1], given[k], ids=False)
-                    for k in range(n_hor)]
-        for k, r in enumerate(resolved):
-            note_if_assumed(r, views[k + 1], paths[k + 1], args.quiet)
-        sizes = [r[0] for r in resolved]
-        for k, value in enumerate(offsets):
-            marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
-            offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
-                                        max_offset, wearer, value,
-                                        f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
-                                        hor_path=paths[k + 1])
+            cameras = _open_cameras(args, matcher, views, paths, given)
+        sizes, offsets = _sizes_and_offsets(args, views, paths, given, offsets, camera_rows,
+                                            params, max_offset)
         refinement = None
         if cameras is not None and args.refine_top_camera == "auto":
             from xvmatch.inference.matching.camera_refinement import refine_views_cameras
@@ -283,18 +329,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         if any(offsets):
             views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
                                                                    cameras, camera_rows)
-        if refinement is not None and args.camera_check == "on":
-            from xvmatch.inference.matching.camera_check import check_run_cameras
-
-            cameras = list(cameras)
-            for k in range(n_hor):  # a view whose cameras fail is matched without them
-                check = check_run_cameras(views[0], views[k + 1], sorted(views[k + 1]),
-                                          matcher, tuple(sizes[k]), cameras[k],
-                                          float(matcher.gamma), refinement.fit_loss,
-                                          workers=args.workers, moving=refinement.moving)
-                note_camera_check(check, args.quiet, f"--hor {paths[k + 1]}: ")
-                if not check.trusted:
-                    cameras[k] = None
+        cameras = _checked_cameras(args, matcher, views, paths, sizes, cameras, refinement)
         checked: dict = {}
         problems = multi_view_costs(
             views, sizes, frames, matcher=matcher,
@@ -309,42 +344,39 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
     finally:
         for source in sources:
             source.close()
-    person: list[dict[int, int]] = [{} for _ in paths]
-    next_id, n_fallback = 1, 0
-    if args.tracks:
-        from xvmatch.inference.views.multi_ego_tracking import track_multi_view
+    return views, frames, problems, refined, refinement
 
-        tracks = track_multi_view(views, problems, args.clip_length, solver=args.solver,
-                                  time_limit=args.time_limit)
-        n_fallback = tracks.statuses.count("fallback")
-        for v, per_frame in enumerate(tracks.person):
-            for f, ids in per_frame.items():
-                person[v].update(zip(views[v][f].ids.tolist(), ids.tolist(), strict=True))
-        next_id = tracks.n_people + 1
-    for f in frames if not args.tracks else ():
-        problem = problems[f]
-        if args.solver == "mip":
-            sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma, args.time_limit)
-            n_fallback += sol.status == "fallback"
-        else:
-            sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
-        for v, ids in enumerate(sol.person):
-            rec = views[v].get(f)
-            for row, pid in zip(rec.ids.tolist() if rec is not None else [], ids.tolist(),
-                                strict=True):
-                person[v][row] = next_id + pid
-        next_id += int(max((int(ids.max()) + 1 for ids in sol.person if ids.size), default=0))
+
+def _cmd_associate_multi(args: argparse.Namespace) -> int:
+    from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
+    from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
+
+    start = time.perf_counter()
+    out, paths, params = _checked_args(args)
+    n_hor = len(paths) - 1
+    offsets = _offsets(args, n_hor)
+    rows = [read_detection_rows(p) for p in paths]
+    views = [r.frames for r in rows]
+    max_offset = (max_offset_of(args, views[0], set().union(*views[1:]))
+                  if "auto" in offsets else None)
+    camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
+                   if args.camera_id is not None else None)
+    views, frames, problems, refined, refinement = _costs(args, rows, paths, params, offsets,
+                                                          max_offset, camera_rows)
+    people = assign_people(views, problems, frames, PeopleOptions(
+        solver=args.solver, time_limit=args.time_limit, tracks=args.tracks,
+        clip_length=args.clip_length))
     claim_folder(out, MULTI_COMMAND)
     names = ["top", *(f"hor{k}" for k in range(1, n_hor + 1))]
     written = [write_track_rows(out / f"{name}.txt", r, p)
-               for name, r, p in zip(names, rows, person, strict=True)]
+               for name, r, p in zip(names, rows, people.person, strict=True)]
     write_cameras(model_args(args), refined, refinement)
-    if n_fallback:
-        print(f"xvmatch: warning: {n_fallback} of {len(frames)} frames spent the MIP's "
+    if people.n_fallback:
+        print(f"xvmatch: warning: {people.n_fallback} of {len(frames)} frames spent the MIP's "
               f"budget of work or time limit ({args.time_limit:g} s) or failed, and used the "
               "best consistent answer found instead of the optimum", file=sys.stderr)
     if not args.quiet:
-        print(f"wrote {sum(written)} boxes of {len(paths)} views, {next_id - 1} people over "
+        print(f"wrote {sum(written)} boxes of {len(paths)} views, {people.n_people} people over "
               f"{len(frames)} frames, to {out}/ ({time.perf_counter() - start:.1f} s)",
               file=sys.stderr)
     return 0

@@ -79,68 +79,54 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise
 
 
-def _run_demo(args: argparse.Namespace) -> int:
+def _score_scenario(folder: Path, scenario: str, matcher, coster, rows: dict,
+                    want_picture: bool):
+    """Score every method on the dataset in ``folder`` (one row per method in ``rows``, one
+    column per ``(scenario, setting)``); the match picture of the first overview trial with
+    images and cameras when ``want_picture`` (else None)."""
     from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
-    from xvmatch.datasets.synthetic_io import (
-        MANIFEST,
-        SyntheticDataset,
-        generate_dataset,
-        write_scene_inputs,
-    )
-    from xvmatch.datasets.synthetic_scenes import SynthConfig
-    from xvmatch.evaluation.deployed_matcher_eval import (
-        OnnxAppearanceCoster,
-        matcher_costs,
-        score_matcher,
-    )
+    from xvmatch.datasets.synthetic_io import SyntheticDataset
+    from xvmatch.evaluation.deployed_matcher_eval import matcher_costs, score_matcher
     from xvmatch.evaluation.handcrafted_baseline import BaselineConfig, score_trial
     from xvmatch.inference.linking.assignment import assign
-    from xvmatch.inference.matching.learned_association import load_matcher_bundle
     from xvmatch.metrics.cross_view_metrics import summarize
-    from xvmatch.viz.match_drawing import draw_matches, write_match_picture
+    from xvmatch.viz.match_drawing import draw_matches
 
-    start = time.perf_counter()
-    out = Path(args.out)
-    check_outputs([Output("--out", out, folder=True, files=("match.png",))],
-                  [Input("--model", None if args.model == "default" else args.model)])
-    check_own_folder(out, DEMO_COMMAND)
-    matcher = load_matcher_bundle(args.model)
-    claim_folder(out, DEMO_COMMAND)
-    coster = OnnxAppearanceCoster(matcher)
     config = BaselineConfig()
-    rows: dict[str, dict[tuple[str, str], float]] = {}
     picture = None
-    for k, scenario in enumerate(("drone", "overview")):
-        folder = out / "data" / scenario
-        wanted = args.scenes * args.frames
-        if not ((folder / MANIFEST).is_file() and len(SyntheticDataset(folder)) == wanted
-                and SyntheticDataset(folder).seed == args.seed + k):
-            generate_dataset(folder, SynthConfig(scenario=scenario), n_scenes=args.scenes,
-                             n_frames=args.frames, seed=args.seed + k, workers=args.workers)
-        trials = dataset_trials(folder, TrialConfig(), SETTINGS, coster)
-        for setting in SETTINGS:
-            part = [t for t in trials if t.setting == setting]
-            for m in config.methods():
-                name = f"handcrafted: {m.name.lower()}" + (" + cheirality" if m.cheirality
-                                                           else "")
-                scores = summarize([score_trial(t, m, config.weights) for t in part])
-                rows.setdefault(name, {})[(scenario, setting)] = scores.acc9
-            for label, key in LEARNED_SETTINGS:
-                costs = matcher_costs(matcher, part, key)
-                scores = score_matcher(matcher, part, key, costs=costs)
-                rows.setdefault(f"learned (ONNX): {label}", {})[(scenario, setting)] = \
-                    scores.acc9
-                if picture is None and scenario == "overview" and key == "images+cameras":
-                    t, c = part[0], costs[0]
-                    pair = SyntheticDataset(folder).scene(t.scene).pairs[t.frame - 1]
-                    picture = draw_matches(
-                        pair.top.load_image(), pair.ego.load_image(), t.top_boxes,
-                        t.ego_boxes, assign(c, matcher.gamma), costs=c,
-                        title=f"{scenario} {t.scene} frame {t.frame}: images + cameras")
+    trials = dataset_trials(folder, TrialConfig(), SETTINGS, coster)
+    for setting in SETTINGS:
+        part = [t for t in trials if t.setting == setting]
+        for m in config.methods():
+            name = f"handcrafted: {m.name.lower()}" + (" + cheirality" if m.cheirality
+                                                       else "")
+            scores = summarize([score_trial(t, m, config.weights) for t in part])
+            rows.setdefault(name, {})[(scenario, setting)] = scores.acc9
+        for label, key in LEARNED_SETTINGS:
+            costs = matcher_costs(matcher, part, key)
+            scores = score_matcher(matcher, part, key, costs=costs)
+            rows.setdefault(f"learned (ONNX): {label}", {})[(scenario, setting)] = \
+                scores.acc9
+            if want_picture and picture is None and scenario == "overview" \
+                    and key == "images+cameras":
+                t, c = part[0], costs[0]
+                pair = SyntheticDataset(folder).scene(t.scene).pairs[t.frame - 1]
+                picture = draw_matches(
+                    pair.top.load_image(), pair.ego.load_image(), t.top_boxes,
+                    t.ego_boxes, assign(c, matcher.gamma), costs=c,
+                    title=f"{scenario} {t.scene} frame {t.frame}: images + cameras")
+    return picture
+
+
+def _print_table(rows: dict, n_pairs: int) -> None:
+    """The accuracy table: a row per method, a column per scenario and setting, the best of
+    each column starred."""
+    from xvmatch.datasets.pair_trials import SETTINGS
+
     columns = [(s, g) for s in ("drone", "overview") for g in SETTINGS]
     width = max(len(r) for r in rows)
     head = "  ".join(f"{s[:5]} {('GT' if g == 'gt' else 'det'):>3}" for s, g in columns)
-    print(f"Eq. 9 accuracy (%) on {args.scenes * args.frames} rendered pairs per scenario, "
+    print(f"Eq. 9 accuracy (%) on {n_pairs} rendered pairs per scenario, "
           "ids scrambled (GT: ground-truth boxes; det: detector noise)")
     print(f"{'method':<{width}}  {head}")
     best = {c: max(r[c] for r in rows.values()) for c in columns}
@@ -150,9 +136,14 @@ def _run_demo(args: argparse.Namespace) -> int:
         print(f"{name:<{width}}  {cells}")
     print("(* best in the column; handcrafted rows use the paper's gammas, the learned rows the "
           "bundle's)")
-    picture_path = out / "match.png"
-    if picture is not None:
-        write_match_picture(picture_path, picture)
+
+
+def _print_next_steps(args: argparse.Namespace, out: Path, picture_path: Path, start: float
+                      ) -> None:
+    """The scene's input files written, and the commands that match and score it as a user
+    would."""
+    from xvmatch.datasets.synthetic_io import SyntheticDataset, write_scene_inputs
+
     scene = SyntheticDataset(out / "data" / "overview")
     inputs = write_scene_inputs(scene.scene(scene.scene_names[0]), out / "scene")
     print(f"\nwrote {picture_path} ({time.perf_counter() - start:.0f} s). Match a scene as a "
@@ -164,6 +155,39 @@ def _run_demo(args: argparse.Namespace) -> int:
           f"{q(str(out / 'pred.csv'))} --draw {q(str(out / 'pictures'))}")
     print(f"  {xvmatch} evaluate --pred {q(str(out / 'pred.csv'))} --top {q(str(inputs.top))} "
           f"--hor {q(str(inputs.hor))}", file=sys.stdout)
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    from xvmatch.datasets.synthetic_io import MANIFEST, SyntheticDataset, generate_dataset
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+    from xvmatch.evaluation.deployed_matcher_eval import OnnxAppearanceCoster
+    from xvmatch.inference.matching.learned_association import load_matcher_bundle
+    from xvmatch.viz.match_drawing import write_match_picture
+
+    start = time.perf_counter()
+    out = Path(args.out)
+    check_outputs([Output("--out", out, folder=True, files=("match.png",))],
+                  [Input("--model", None if args.model == "default" else args.model)])
+    check_own_folder(out, DEMO_COMMAND)
+    matcher = load_matcher_bundle(args.model)
+    claim_folder(out, DEMO_COMMAND)
+    coster = OnnxAppearanceCoster(matcher)
+    rows: dict[str, dict[tuple[str, str], float]] = {}
+    picture = None
+    for k, scenario in enumerate(("drone", "overview")):
+        folder = out / "data" / scenario
+        wanted = args.scenes * args.frames
+        if not ((folder / MANIFEST).is_file() and len(SyntheticDataset(folder)) == wanted
+                and SyntheticDataset(folder).seed == args.seed + k):
+            generate_dataset(folder, SynthConfig(scenario=scenario), n_scenes=args.scenes,
+                             n_frames=args.frames, seed=args.seed + k, workers=args.workers)
+        drawn = _score_scenario(folder, scenario, matcher, coster, rows, picture is None)
+        picture = picture if picture is not None else drawn
+    _print_table(rows, args.scenes * args.frames)
+    picture_path = out / "match.png"
+    if picture is not None:
+        write_match_picture(picture_path, picture)
+    _print_next_steps(args, out, picture_path, start)
     return 0
 
 

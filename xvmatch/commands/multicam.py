@@ -128,27 +128,8 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         relabel,
     )
 
-    files = named_paths(args.boxes, "--boxes")
-    if len(files) < 2:
-        raise UsageError(f"--boxes: multicam needs at least two cameras, got {len(files)}")
-    images = named_paths(args.images, "--images")
-    for name, path in images.items():
-        if name not in files:
-            raise UsageError(f"--images {name}={path}: camera {name} has no --boxes (it has "
-                             f"{', '.join(files)}); give --boxes {name}=FILE or drop its images")
-    if not images and (args.model is not None or args.appearance_weight is not None):
-        raise UsageError("--model and --appearance-weight need --images")
-    if images and args.method != "ours":
-        raise UsageError("--images needs --method ours (dtw has no appearance term)")
+    files, images = _checked_inputs(args)
     names = list(files)
-    outputs = (*(f"{n}.txt" for n in names), "tracks.csv", "ground.csv", "birdseye.png")
-    check_outputs([Output("--out", args.out, folder=True, files=outputs)],
-                  [Input("--cameras", args.cameras),
-                   *(Input("--boxes", f) for f in files.values()),
-                   *(Input("--images", f) for f in images.values())])
-    from xvmatch.core.output_paths import check_own_folder
-
-    check_own_folder(args.out, COMMAND)
     cameras = load_ground_cameras(args.cameras)
     for name, path in files.items():
         if name not in cameras:
@@ -182,13 +163,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     if above:
         relabelled = _put_back(boxes, relabelled, above, max(result.ground, default=0))
     if args.localise != "foot":
-        from dataclasses import replace
-
-        from xvmatch.inference.views.multicam_localisation import LocalisationOptions, localise
-
-        method = "two_best" if args.localise == "two-best" else "all"
-        ground = localise(cameras, relabelled, result.ground, LocalisationOptions(method))
-        result = replace(result, ground=ground)
+        result = _localised(args.localise, cameras, relabelled, result)
     picture = _birdseye(result, cameras)
     out = claim_folder(args.out, COMMAND)
     _write_outputs(out, boxes, relabelled, result, picture)
@@ -196,6 +171,44 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         n_people = len(result.ground)
         print(f"{n_people} global ids over {len(names)} cameras; wrote {os.fspath(out)}/")
     return 0
+
+
+def _checked_inputs(args: argparse.Namespace) -> tuple[dict[str, str], dict[str, str]]:
+    """``(files, images)``: ``--boxes`` and ``--images`` by camera name, after the checks of
+    the options and of every input and output path."""
+    files = named_paths(args.boxes, "--boxes")
+    if len(files) < 2:
+        raise UsageError(f"--boxes: multicam needs at least two cameras, got {len(files)}")
+    images = named_paths(args.images, "--images")
+    for name, path in images.items():
+        if name not in files:
+            raise UsageError(f"--images {name}={path}: camera {name} has no --boxes (it has "
+                             f"{', '.join(files)}); give --boxes {name}=FILE or drop its images")
+    if not images and (args.model is not None or args.appearance_weight is not None):
+        raise UsageError("--model and --appearance-weight need --images")
+    if images and args.method != "ours":
+        raise UsageError("--images needs --method ours (dtw has no appearance term)")
+    outputs = (*(f"{n}.txt" for n in files), "tracks.csv", "ground.csv", "birdseye.png")
+    check_outputs([Output("--out", args.out, folder=True, files=outputs)],
+                  [Input("--cameras", args.cameras),
+                   *(Input("--boxes", f) for f in files.values()),
+                   *(Input("--images", f) for f in images.values())])
+    from xvmatch.core.output_paths import check_own_folder
+
+    check_own_folder(args.out, COMMAND)
+    return files, images
+
+
+def _localised(localise_option: str, cameras, relabelled, result):
+    """``result`` with each person's ground positions from ``--localise`` (``two-best`` or
+    ``all`` cameras' boxes) instead of the foot points."""
+    from dataclasses import replace
+
+    from xvmatch.inference.views.multicam_localisation import LocalisationOptions, localise
+
+    method = "two_best" if localise_option == "two-best" else "all"
+    ground = localise(cameras, relabelled, result.ground, LocalisationOptions(method))
+    return replace(result, ground=ground)
 
 
 def _open_images(args: argparse.Namespace, images: dict[str, str], boxes, cameras):

@@ -283,6 +283,15 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="processes for the frame association and --offset auto's estimate, "
                    "1..64 (default 1; the same output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    _add_appearance_options(p)
+    add_spatial_options(p)
+    p.set_defaults(func=_cmd_track)
+    return p
+
+
+def _add_appearance_options(p: argparse.ArgumentParser) -> None:
+    """``track``'s options of the appearance cue and the learned matcher (its images,
+    ``--model``, ``--weights``, ``--cameras``, the weights of Eqs. 17 and 18)."""
     g = p.add_argument_group("appearance (with the images of both views)")
     add_image_options(g)
     g.add_argument("--model", default=None, metavar="BUNDLE",
@@ -320,24 +329,19 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "appearance cue on the tracklet pairs the box-only matcher is sure of, and "
                    "leave it out of the cross-view weights when it is shown too weak to help "
                    "(default on; off: always use it; nothing to judge with --w1 1)")
-    add_spatial_options(p)
-    p.set_defaults(func=_cmd_track)
-    return p
 
 
-def _cmd_track(args: argparse.Namespace) -> int:
-    from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
+def _track_config(args: argparse.Namespace, weights: str):
+    """The tracker's :class:`~xvmatch.inference.tracks.tracking.TrackConfig` of the options (the
+    dummy weight ``c0`` of the learned weights unless given)."""
     from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
-    from xvmatch.inference.tracks.tracking import TrackConfig, learned_frame_evidence, track_pair
+    from xvmatch.inference.tracks.tracking import TrackConfig
 
-    start = time.perf_counter()
-    params = spatial_params(args)
-    weights = _cross_view_weights(args)
     given = {k: getattr(args, k) for k in ("c0", "w1", "w2", "sigma")
              if getattr(args, k) is not None}
     if weights == "learned":
         given.setdefault("c0", LEARNED_DUMMY_WEIGHT)
-    config = TrackConfig(
+    return TrackConfig(
         clip_length=args.clip_length,
         min_iou=args.min_iou,
         max_gap=args.max_gap,
@@ -348,6 +352,13 @@ def _cmd_track(args: argparse.Namespace) -> int:
         min_colour=args.min_colour,
         time_appearance=args.time_appearance,
     )
+
+
+def _read_checked(args: argparse.Namespace):
+    """``(top, hor, camera_rows, out)``: the box files read, the wearer's rows (``--camera-id``,
+    or None) and the output folder, after the checks of every input and output path."""
+    from xvmatch.formats.detection_rows import read_detection_rows
+
     top = read_detection_rows(args.top)
     hor = read_detection_rows(args.hor)
     camera_rows = None
@@ -364,27 +375,39 @@ def _cmd_track(args: argparse.Namespace) -> int:
          Input("--model", None if args.model == "default" else args.model)],
     )
     check_own_folder(out, TRACK_COMMAND)
-    max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
-    model = None
-    if args.model is not None:
-        from xvmatch.commands._model import open_models
+    return top, hor, camera_rows, out
 
-        model = open_models([args.model])[0]
+
+def _horizontal_size(args: argparse.Namespace, hor, size):
+    """The horizontal image size and where it comes from: ``--image-size``, the images' ``size``
+    (or None) or the ``--cameras``' ego camera, which must agree; said when assumed."""
+    from xvmatch.commands._image_size import note_if_assumed
+    from xvmatch.formats.box_image_size import resolve_size
+
+    given = [] if args.image_size is None else [(args.image_size, "--image-size")]
+    if size is not None:
+        given.append((size, f"the horizontal images {args.hor_images}"))
+    elif args.cameras is not None:  # with images, each camera is checked against them
+        from xvmatch.commands._model import ego_camera_size
+
+        given.append(ego_camera_size(args.cameras))
+    resolved = resolve_size(hor.frames, args.hor, given, ids=False)
+    note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
+    return resolved
+
+
+def _run_tracks(args: argparse.Namespace, top, hor, camera_rows, params, config, weights: str,
+                model, max_offset):
+    """``(result, offset, refined, checked)``: the tracks of both views
+    (:func:`~xvmatch.inference.tracks.tracking.track_pair`) on the views re-timed by the offset
+    applied, the cameras as refined (for ``--write-cameras``) and the appearance check's
+    verdict (a list of at most one)."""
+    from xvmatch.inference.tracks.tracking import learned_frame_evidence, track_pair
+
     images, sources, size = _open_images(args, top.frames, hor.frames, model, weights)
     try:
-        from xvmatch.commands._image_size import note_if_assumed
-        from xvmatch.formats.box_image_size import resolve_size
-
-        given = [] if args.image_size is None else [(args.image_size, "--image-size")]
-        if size is not None:
-            given.append((size, f"the horizontal images {args.hor_images}"))
-        elif args.cameras is not None:  # with images, each camera is checked against them
-            from xvmatch.commands._model import ego_camera_size
-
-            given.append(ego_camera_size(args.cameras))
-        resolved = resolve_size(hor.frames, args.hor, given, ids=False)
+        resolved = _horizontal_size(args, hor, size)
         width = resolved[0][0]
-        note_if_assumed(resolved, hor.frames, args.hor, args.quiet)
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         offset = resolve_offset(args, marked, hor.frames, width, params, max_offset, wearer)
@@ -410,11 +433,29 @@ def _cmd_track(args: argparse.Namespace) -> int:
     finally:
         for source in sources:
             source.close()
+    return result, offset, refined, checked
+
+
+def _cmd_track(args: argparse.Namespace) -> int:
+    from xvmatch.formats.detection_rows import write_track_rows
+    from xvmatch.formats.offset_record import write_offset_record
+
+    start = time.perf_counter()
+    params = spatial_params(args)
+    weights = _cross_view_weights(args)
+    config = _track_config(args, weights)
+    top, hor, camera_rows, out = _read_checked(args)
+    max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
+    model = None
+    if args.model is not None:
+        from xvmatch.commands._model import open_models
+
+        model = open_models([args.model])[0]
+    result, offset, refined, checked = _run_tracks(args, top, hor, camera_rows, params, config,
+                                                   weights, model, max_offset)
     claim_folder(out, TRACK_COMMAND)
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
     n_hor = write_track_rows(out / "hor.txt", hor, result.hor_rows)
-    from xvmatch.formats.offset_record import write_offset_record
-
     write_offset_record(out / OFFSET_FILE, offset)
     write_cameras(model_args(args), *refined)
     if result.n_fallback:
