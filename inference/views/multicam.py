@@ -674,6 +674,99 @@ class MulticamResult:
     split_frames: int = 0
 
 
+def _split_pieces(whole: list[CameraTracks], split_frames: int
+                  ) -> tuple[list[CameraTracks], list[np.ndarray], list[np.ndarray]]:
+    """Each camera's tracks cut into pieces of ``split_frames`` frames (0: kept whole).
+
+    Returns:
+        ``(tracks, parents, numbers)`` per camera: the pieces, the row of each piece's whole
+        track and its number within that track.
+    """
+    if split_frames:
+        split = [_split_tracks(t, int(split_frames)) for t in whole]
+        return [sp[0] for sp in split], [sp[1] for sp in split], [sp[2] for sp in split]
+    return (whole, [np.arange(len(t.ids)) for t in whole],
+            [np.zeros(len(t.ids), dtype=np.int64) for t in whole])
+
+
+def _camera_links(tracks: list[CameraTracks], numbers: list[np.ndarray],
+                  cams: list[GroundCamera], opts: MulticamOptions, app: _Appearance | None,
+                  progress: Callable[[int], None] | None) -> list[_Link]:
+    """The candidate links of every camera pair, cheapest first (ties by cameras and tracks)."""
+    links: list[_Link] = []
+    for a in range(len(cams)):
+        for b in range(a + 1, len(cams)):
+            if opts.split_frames:
+                links += _associate_pieces(a, b, tracks, numbers, cams, opts, app)
+            else:
+                links += _associate_pair(a, b, tracks, cams, opts,
+                                         None if app is None else app.get)
+            if progress is not None:
+                progress(1)
+    links.sort(key=lambda lk: (lk.cost, lk.cam_a, lk.track_a, lk.cam_b, lk.track_b))
+    return links
+
+
+def _merged_groups(tracks: list[CameraTracks], links: list[_Link], parents: list[np.ndarray],
+                   numbers: list[np.ndarray], split_frames: int
+                   ) -> tuple[list[list[tuple[int, int]]], list[_Link]]:
+    """Tracks joined along the links, cheapest first (a link inside a group is dropped).
+
+    Returns:
+        ``(groups, kept)``: each group's ``(camera, track)`` members, and the links kept.
+    """
+    groups = _Groups(tracks)
+    kept = []
+    for lk in links:
+        if groups.union(int(groups.offset[lk.cam_a] + lk.track_a),
+                        int(groups.offset[lk.cam_b] + lk.track_b)):
+            kept.append(lk)
+    if split_frames:
+        _rejoin_pieces(groups, parents, numbers)
+    members: dict[int, list[tuple[int, int]]] = {}
+    for c, t in enumerate(tracks):
+        for k in range(len(t.ids)):
+            members.setdefault(groups.find(int(groups.offset[c] + k)), []).append((c, k))
+    return list(members.values()), kept
+
+
+def _chain_ids(group_list: list[list[tuple[int, int]]], segments: list,
+               tracks: list[CameraTracks], frame_axis: np.ndarray, opts: MulticamOptions
+               ) -> list[int]:
+    """Each group's global id: groups linked over time into chains, the chains ordered by
+    first frame, then by first position, numbered from 1."""
+    # Only segments of associated or long enough tracks take part in linkage.
+    linkable = [i for i, m in enumerate(group_list)
+                if len(m) > 1 or tracks[m[0][0]].lengths[m[0][1]] >= opts.min_length]
+    chain = np.arange(len(group_list))
+    if linkable:
+        sub = _link([segments[i] for i in linkable], frame_axis, opts)
+        for j, i in enumerate(linkable):
+            chain[i] = linkable[sub[j]]
+    first = {}
+    for i, ch in enumerate(chain):
+        f0 = (int(segments[i][0][0]), float(segments[i][1][0, 0]), float(segments[i][1][0, 1]))
+        first[ch] = min(first.get(ch, f0), f0)
+    order = sorted(first, key=lambda ch: first[ch])
+    gid_of_chain = {ch: g + 1 for g, ch in enumerate(order)}
+    return [gid_of_chain[chain[i]] for i in range(len(group_list))]
+
+
+def _fused_paths(ground: dict[int, list], frame_axis: np.ndarray
+                 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """``{global id: (frames, (T, 2) ground points)}`` from each id's segments, by id."""
+    fused = {}
+    for g, segs in ground.items():
+        idx = np.concatenate([s[0] for s in segs])
+        xy = np.concatenate([s[1] for s in segs])
+        order_idx = np.argsort(idx, kind="stable")
+        idx, xy = idx[order_idx], xy[order_idx]
+        # Unlinked segments never overlap within a chain; keep the first at any repeat.
+        uniq = np.concatenate([[True], np.diff(idx) > 0])
+        fused[g] = (frame_axis[idx[uniq]], xy[uniq])
+    return dict(sorted(fused.items()))
+
+
 def associate_cameras(cameras: Mapping[str, GroundCamera],
                       boxes: Mapping[str, Mapping[int, FrameBoxes]],
                       options: MulticamOptions | None = None,
@@ -709,15 +802,7 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
     frame_axis = np.array(all_frames or [1], dtype=np.int64)
     whole = [camera_tracks(n, cameras[n], boxes[n], frame_axis, opts.max_range_m)
              for n in names]
-    if opts.split_frames:
-        split = [_split_tracks(t, int(opts.split_frames)) for t in whole]
-        tracks = [sp[0] for sp in split]
-        parents = [sp[1] for sp in split]
-        numbers = [sp[2] for sp in split]
-    else:
-        tracks = whole
-        parents = [np.arange(len(t.ids)) for t in whole]
-        numbers = [np.zeros(len(t.ids), dtype=np.int64) for t in whole]
+    tracks, parents, numbers = _split_pieces(whole, opts.split_frames)
     cams = [cameras[n] for n in names]
     app = None
     if appearance and opts.method == "ours" and opts.appearance_weight > 0:
@@ -727,51 +812,15 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
         app = _Appearance(tracks, [w.ids[p] for w, p in zip(whole, parents, strict=True)],
                           [boxes[n] for n in names], [appearance.get(n) for n in names],
                           opts.appearance_boxes)
-    links: list[_Link] = []
-    for a in range(len(names)):
-        for b in range(a + 1, len(names)):
-            if opts.split_frames:
-                links += _associate_pieces(a, b, tracks, numbers, cams, opts, app)
-            else:
-                links += _associate_pair(a, b, tracks, cams, opts,
-                                         None if app is None else app.get)
-            if progress is not None:
-                progress(1)
-    links.sort(key=lambda lk: (lk.cost, lk.cam_a, lk.track_a, lk.cam_b, lk.track_b))
-    groups = _Groups(tracks)
-    kept = []
-    for lk in links:
-        if groups.union(int(groups.offset[lk.cam_a] + lk.track_a),
-                        int(groups.offset[lk.cam_b] + lk.track_b)):
-            kept.append(lk)
-    if opts.split_frames:
-        _rejoin_pieces(groups, parents, numbers)
-    members: dict[int, list[tuple[int, int]]] = {}
-    for c, t in enumerate(tracks):
-        for k in range(len(t.ids)):
-            members.setdefault(groups.find(int(groups.offset[c] + k)), []).append((c, k))
-    group_list = list(members.values())
+    links = _camera_links(tracks, numbers, cams, opts, app, progress)
+    group_list, kept = _merged_groups(tracks, links, parents, numbers, opts.split_frames)
     segments = [_fuse(m, tracks, opts.smooth_window) for m in group_list]
-    # Only segments of associated or long enough tracks take part in linkage.
-    linkable = [i for i, m in enumerate(group_list)
-                if len(m) > 1 or tracks[m[0][0]].lengths[m[0][1]] >= opts.min_length]
-    chain = np.arange(len(group_list))
-    if linkable:
-        sub = _link([segments[i] for i in linkable], frame_axis, opts)
-        for j, i in enumerate(linkable):
-            chain[i] = linkable[sub[j]]
-    # Global ids: chains ordered by first frame, then by first position, numbered from 1.
-    first = {}
-    for i, ch in enumerate(chain):
-        f0 = (int(segments[i][0][0]), float(segments[i][1][0, 0]), float(segments[i][1][0, 1]))
-        first[ch] = min(first.get(ch, f0), f0)
-    order = sorted(first, key=lambda ch: first[ch])
-    gid_of_chain = {ch: g + 1 for g, ch in enumerate(order)}
+    gids = _chain_ids(group_list, segments, tracks, frame_axis, opts)
     global_ids: dict[str, dict[int, int]] = {n: {} for n in names}
     piece_ids: dict[str, dict[tuple[int, int], int]] = {n: {} for n in names}
     ground: dict[int, list] = {}
     for i, m in enumerate(group_list):
-        g = gid_of_chain[chain[i]]
+        g = gids[i]
         for c, k in m:
             track = int(whole[c].ids[parents[c][k]])
             piece_ids[names[c]][(track, int(numbers[c][k]))] = g
@@ -779,19 +828,10 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
     for name in names:  # a track's global id: that of its first piece
         for (track, _piece), g in sorted(piece_ids[name].items()):
             global_ids[name].setdefault(track, g)
-    fused = {}
-    for g, segs in ground.items():
-        idx = np.concatenate([s[0] for s in segs])
-        xy = np.concatenate([s[1] for s in segs])
-        order_idx = np.argsort(idx, kind="stable")
-        idx, xy = idx[order_idx], xy[order_idx]
-        # Unlinked segments never overlap within a chain; keep the first at any repeat.
-        uniq = np.concatenate([[True], np.diff(idx) > 0])
-        fused[g] = (frame_axis[idx[uniq]], xy[uniq])
     pairs = [(names[lk.cam_a], int(whole[lk.cam_a].ids[parents[lk.cam_a][lk.track_a]]),
               names[lk.cam_b], int(whole[lk.cam_b].ids[parents[lk.cam_b][lk.track_b]]))
              for lk in kept if lk.cam_a != lk.cam_b]
-    return MulticamResult(global_ids, dict(sorted(fused.items())), pairs, frame_axis,
+    return MulticamResult(global_ids, _fused_paths(ground, frame_axis), pairs, frame_axis,
                           piece_ids, int(opts.split_frames))
 
 
