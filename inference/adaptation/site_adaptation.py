@@ -628,6 +628,81 @@ def _odds_calibration(ref_pos, ref_neg, new_pos, new_neg) -> np.ndarray:
     return np.array([alpha / alpha_ref, (beta - beta_ref) / alpha_ref])
 
 
+def _checked_calibration(calibration: str | None,
+                         reference: tuple[np.ndarray, np.ndarray] | None) -> str:
+    """The calibration of :func:`fit_site_adaptation` (None: ``"odds"`` with a reference, else
+    ``"none"``), checked against :data:`CALIBRATIONS` and the reference it needs."""
+    if calibration is None:
+        calibration = "odds" if reference is not None else "none"
+    if calibration not in CALIBRATIONS:
+        raise ValueError(f"calibration must be one of {CALIBRATIONS}, got {calibration!r}")
+    if calibration in ("odds", "median") and reference is None:
+        raise ValueError(f"calibration {calibration!r} needs the reference costs")
+    return calibration
+
+
+def _checked_ranks(pairs: PairSet, ranks: Sequence[int], heldout: float) -> tuple[int, list[int]]:
+    """The descriptor size D and the ranks to try (sorted, those in 0..D), the pairs' vector,
+    sizes and the held-out fraction checked."""
+    if pairs.vector not in VECTORS:
+        raise ValueError(f"pairs.vector must be one of {VECTORS}, got {pairs.vector!r}")
+    dim = int(pairs.top.shape[1])
+    if pairs.hor.shape[1] != dim:
+        raise ValueError(f"top and horizontal descriptors differ in size ({dim}, "
+                         f"{pairs.hor.shape[1]})")
+    if not 0.0 < heldout < 1.0:
+        raise ValueError(f"heldout must be in (0, 1), got {heldout}")
+    ranks = sorted({int(r) for r in ranks if 0 <= int(r) <= dim})
+    if not ranks:
+        raise ValueError(f"no rank in 0..{dim} to try")
+    return dim, ranks
+
+
+def _heldout_cut(pairs: PairSet, heldout: float) -> int | None:
+    """The first held-out time group: the last ``heldout`` fraction of the pairs' groups are
+    held out (None: a single group, nothing to hold out)."""
+    groups = np.concatenate([pairs.cross_pos_group, pairs.cross_neg_group,
+                             *(pairs.within_pos_group.get(v, np.zeros(0, np.int64))
+                               for v in VIEWS)]).astype(np.int64)
+    unique = np.unique(groups)
+    return unique[int(np.floor(len(unique) * (1.0 - heldout)))] if len(unique) > 1 else None
+
+
+def _split_masks(pairs: PairSet, cut: int | None, train: bool) -> dict[str, np.ndarray]:
+    """Masks of the training pairs (groups before ``cut``; all without a cut) or of the
+    held-out ones (none without a cut), per kind of pair, as :func:`_fit` takes them."""
+    def pick(g: np.ndarray) -> np.ndarray:
+        g = np.asarray(g, np.int64)
+        if cut is None:
+            return np.full(len(g), train)
+        return g < cut if train else g >= cut
+
+    out = {"cross_pos": pick(pairs.cross_pos_group), "cross_neg": pick(pairs.cross_neg_group)}
+    for v in VIEWS:
+        for key, grp in (("within_pos", pairs.within_pos_group),
+                         ("within_neg", pairs.within_neg_group)):
+            n = len(getattr(pairs, key)[v])
+            out[f"{v}_{key}"] = pick(grp.get(v, np.zeros(n, np.int64)))
+    return out
+
+
+def _calibrated(final: SiteAdaptation, heldout_fit: SiteAdaptation, pairs: PairSet,
+                hp: np.ndarray, hn: np.ndarray, calibration: str,
+                reference: tuple[np.ndarray, np.ndarray] | None) -> SiteAdaptation:
+    """``final`` with the calibration measured on the held-out pairs ``hp``, ``hn`` by the
+    map fitted without them (``heldout_fit``): the reliability of the cue on pairs it was not
+    fitted to (the fit's own pairs would make it look surer than it is)."""
+    new = (_pair_costs(heldout_fit, pairs, hp), _pair_costs(heldout_fit, pairs, hn))
+    if calibration == "site":
+        cal = _calibration(_pair_costs(None, pairs, hp), _pair_costs(None, pairs, hn), *new)
+    elif calibration == "median":
+        cal = _calibration(*reference, *new)
+    else:
+        cal = _odds_calibration(*reference, *new)
+    return SiteAdaptation(final.top_mean, final.top_scale, final.hor_mean, final.hor_scale,
+                          final.projection, cal, final.rank, final.vector)
+
+
 def fit_site_adaptation(
     pairs: PairSet,
     ranks: Sequence[int] = DEFAULT_RANKS,
@@ -666,48 +741,13 @@ def fit_site_adaptation(
         The :class:`AdaptationFit`; when refused, :attr:`AdaptationFit.adaptation` is the
         identity and ``reason`` says why.
     """
-    if calibration is None:
-        calibration = "odds" if reference is not None else "none"
-    if calibration not in CALIBRATIONS:
-        raise ValueError(f"calibration must be one of {CALIBRATIONS}, got {calibration!r}")
-    if calibration in ("odds", "median") and reference is None:
-        raise ValueError(f"calibration {calibration!r} needs the reference costs")
-    if pairs.vector not in VECTORS:
-        raise ValueError(f"pairs.vector must be one of {VECTORS}, got {pairs.vector!r}")
+    calibration = _checked_calibration(calibration, reference)
+    dim, ranks = _checked_ranks(pairs, ranks, heldout)
     if reg is None:
         reg = RIDGE[pairs.vector]
-    dim = int(pairs.top.shape[1])
-    if pairs.hor.shape[1] != dim:
-        raise ValueError(f"top and horizontal descriptors differ in size ({dim}, "
-                         f"{pairs.hor.shape[1]})")
-    if not 0.0 < heldout < 1.0:
-        raise ValueError(f"heldout must be in (0, 1), got {heldout}")
-    ranks = sorted({int(r) for r in ranks if 0 <= int(r) <= dim})
-    if not ranks:
-        raise ValueError(f"no rank in 0..{dim} to try")
-    groups = np.concatenate([pairs.cross_pos_group, pairs.cross_neg_group,
-                             *(pairs.within_pos_group.get(v, np.zeros(0, np.int64))
-                               for v in VIEWS)]).astype(np.int64)
-    unique = np.unique(groups)
-    cut = unique[int(np.floor(len(unique) * (1.0 - heldout)))] if len(unique) > 1 else None
-
-    def masks(train: bool) -> dict[str, np.ndarray]:
-        def pick(g: np.ndarray) -> np.ndarray:
-            g = np.asarray(g, np.int64)
-            if cut is None:
-                return np.full(len(g), train)
-            return g < cut if train else g >= cut
-
-        out = {"cross_pos": pick(pairs.cross_pos_group), "cross_neg": pick(pairs.cross_neg_group)}
-        for v in VIEWS:
-            for key, grp in (("within_pos", pairs.within_pos_group),
-                             ("within_neg", pairs.within_neg_group)):
-                n = len(getattr(pairs, key)[v])
-                out[f"{v}_{key}"] = pick(grp.get(v, np.zeros(n, np.int64)))
-        return out
-
+    cut = _heldout_cut(pairs, heldout)
     identity = SiteAdaptation.identity(dim, pairs.vector)
-    test = masks(False)
+    test = _split_masks(pairs, cut, False)
     hp, hn = pairs.cross_pos[test["cross_pos"]], pairs.cross_neg[test["cross_neg"]]
     nan = float("nan")
     if cut is None or min(len(hp), len(hn)) < min_heldout:
@@ -716,7 +756,7 @@ def fit_site_adaptation(
                              f"{min_heldout} of each needed): give more frames or video",
                              nan, nan, {}, (len(hp), len(hn)))
     before = pair_auc(_pair_costs(None, pairs, hp), _pair_costs(None, pairs, hn))
-    candidates = _fit(pairs, masks(True), ranks, reg, within)
+    candidates = _fit(pairs, _split_masks(pairs, cut, True), ranks, reg, within)
     by_rank = {r: pair_auc(_pair_costs(m, pairs, hp), _pair_costs(m, pairs, hn))
                for r, m in candidates.items()}
     best = max(ranks, key=lambda r: (round(by_rank[r], 6), -r))
@@ -729,15 +769,5 @@ def fit_site_adaptation(
     every = {k: np.ones_like(v) for k, v in test.items()}
     final = _fit(pairs, every, [best], reg, within)[best]
     if calibration != "none":
-        # On the held-out pairs, by the map fitted without them: the reliability of the cue on
-        # pairs it was not fitted to (the fit's own pairs would make it look surer than it is).
-        new = (_pair_costs(candidates[best], pairs, hp), _pair_costs(candidates[best], pairs, hn))
-        if calibration == "site":
-            cal = _calibration(_pair_costs(None, pairs, hp), _pair_costs(None, pairs, hn), *new)
-        elif calibration == "median":
-            cal = _calibration(*reference, *new)
-        else:
-            cal = _odds_calibration(*reference, *new)
-        final = SiteAdaptation(final.top_mean, final.top_scale, final.hor_mean, final.hor_scale,
-                               final.projection, cal, final.rank, final.vector)
+        final = _calibrated(final, candidates[best], pairs, hp, hn, calibration, reference)
     return AdaptationFit(final, True, "", before, by_rank[best], by_rank, (len(hp), len(hn)))
