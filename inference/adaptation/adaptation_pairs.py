@@ -223,6 +223,99 @@ def _pairs(idx: list[tuple[int, int]]) -> np.ndarray:
     return np.array(sorted(set(idx)), dtype=np.int64).reshape(-1, 2)
 
 
+class _GroupedPairs:
+    """Pairs of box indices, each with the group (burst) it was found in, in the order found."""
+
+    def __init__(self) -> None:
+        self.pairs: list[tuple[int, int]] = []
+        self.groups: list[int] = []
+
+    def extend(self, pairs: list[tuple[int, int]], group: int) -> None:
+        """Add pairs found in one group."""
+        self.pairs += pairs
+        self.groups += [group] * len(pairs)
+
+    def unique(self) -> tuple[np.ndarray, np.ndarray]:
+        """The distinct pairs, sorted, ``(P, 2)``, and the group each was first found in."""
+        first: dict[tuple[int, int], int] = {}
+        for p, g in zip(self.pairs, self.groups, strict=True):
+            first.setdefault(p, g)
+        keys = sorted(first)
+        return (np.array(keys, dtype=np.int64).reshape(-1, 2),
+                np.array([first[p] for p in keys], dtype=np.int64))
+
+
+def _burst_shots(burst: np.ndarray, shots: int) -> list[int]:
+    """The frames of a burst whose boxes are embedded: ``shots`` evenly spaced, sorted."""
+    index = np.round(np.linspace(0, len(burst) - 1, shots)).astype(int)
+    return sorted({int(burst[i]) for i in index.tolist()})
+
+
+def _box_offsets(views: Mapping[str, Mapping], embed: list[int]
+                 ) -> tuple[dict[str, dict[int, int]], dict[str, int]]:
+    """Per view, ``{frame: index of its first box}`` among the embedded frames' boxes, in
+    order, and the number of those boxes."""
+    offset: dict[str, dict[int, int]] = {v: {} for v in VIEWS}
+    count = dict.fromkeys(VIEWS, 0)
+    for f in embed:
+        for v in VIEWS:
+            offset[v][f] = count[v]
+            count[v] += len(views[v][f].ids)
+    return offset, count
+
+
+def _within_view_pairs(records: Mapping, shots: list[int], owner: Mapping[tuple[int, int], int],
+                       offset: Mapping[int, int], k: int, pos: _GroupedPairs,
+                       neg: _GroupedPairs) -> None:
+    """One view's pairs of burst k: negatives, two boxes of one frame; positives, two boxes
+    of one tracklet (``owner``: ``{(frame, row): tracklet}``)."""
+    for f in shots:
+        n, o = len(records[f].ids), offset[f]
+        a, c = np.triu_indices(n, 1)
+        neg.extend(list(zip((o + a).tolist(), (o + c).tolist(), strict=True)), k)
+    by_tracklet: dict[int, list[int]] = {}
+    for f in shots:
+        for row in range(len(records[f].ids)):
+            by_tracklet.setdefault(owner[(f, row)], []).append(offset[f] + row)
+    for boxes in by_tracklet.values():
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                pos.extend([(boxes[i], boxes[j])], k)
+
+
+def _agreed_tracklets(burst: np.ndarray, costs: Mapping[int, np.ndarray], gamma: float,
+                      owner: Mapping[str, Mapping[tuple[int, int], int]], config: MiningConfig
+                      ) -> list[tuple[int, int]]:
+    """The (top, horizontal) tracklet pairs the burst's confident frames agree on."""
+    seen: dict[tuple[int, int], list[int]] = {}
+    for f in burst.tolist():
+        if f not in costs:
+            continue
+        for i, j in confident_pairs(costs[f], gamma, config.margin):
+            seen.setdefault((owner["top"][(f, i)], owner["hor"][(f, j)]), []).append(f)
+    return agreed_pairs(seen, config.agree)
+
+
+def _cross_view_pairs(top: Mapping, hor: Mapping, shots: list[int],
+                      owner: Mapping[str, Mapping[tuple[int, int], int]],
+                      offset: Mapping[str, Mapping[int, int]], agreed: list[tuple[int, int]],
+                      k: int, pos: _GroupedPairs, neg: _GroupedPairs) -> None:
+    """Burst k's cross-view pairs: in each shot, the boxes of an agreed tracklet pair are a
+    positive, each with the other boxes of the other view a negative."""
+    for f in shots:
+        t_of = {owner["top"][(f, i)]: i for i in range(len(top[f].ids))}
+        h_of = {owner["hor"][(f, j)]: j for j in range(len(hor[f].ids))}
+        ot, oh = offset["top"][f], offset["hor"][f]
+        for tt, th in agreed:
+            if tt not in t_of or th not in h_of:
+                continue
+            i, j = t_of[tt], h_of[th]
+            pos.extend([(ot + i, oh + j)], k)
+            others = [(ot + i, oh + jj) for jj in range(len(hor[f].ids)) if jj != j]
+            others += [(ot + ii, oh + j) for ii in range(len(top[f].ids)) if ii != i]
+            neg.extend(others, k)
+
+
 def mine_pairs(
     top: Mapping,
     hor: Mapping,
@@ -243,81 +336,29 @@ def mine_pairs(
     """
     config = config or MiningConfig()
     views = {"top": top, "hor": hor}
-    def shots_of(burst: np.ndarray) -> list[int]:
-        index = np.round(np.linspace(0, len(burst) - 1, config.shots)).astype(int)
-        return sorted({int(burst[i]) for i in index.tolist()})
-
     embed: list[int] = []
     for b in bursts:
-        embed += shots_of(np.asarray(b, dtype=np.int64))
-    offset = {v: {} for v in VIEWS}
-    count = dict.fromkeys(VIEWS, 0)
-    for f in embed:
-        for v in VIEWS:
-            offset[v][f] = count[v]
-            count[v] += len(views[v][f].ids)
-    wpos = {v: [] for v in VIEWS}
-    wneg = {v: [] for v in VIEWS}
-    wpos_g = {v: [] for v in VIEWS}
-    wneg_g = {v: [] for v in VIEWS}
-    cpos, cneg, cpos_g, cneg_g = [], [], [], []
+        embed += _burst_shots(np.asarray(b, dtype=np.int64), config.shots)
+    offset, count = _box_offsets(views, embed)
+    wpos = {v: _GroupedPairs() for v in VIEWS}
+    wneg = {v: _GroupedPairs() for v in VIEWS}
+    cpos, cneg = _GroupedPairs(), _GroupedPairs()
     agreed_total = 0
     for k, b in enumerate(bursts):
         b = np.asarray(b, dtype=np.int64)
-        shots = shots_of(b)
+        shots = _burst_shots(b, config.shots)
         owner = {v: box_tracklets(views[v], b, k, config) for v in VIEWS}
         for v in VIEWS:
-            for f in shots:  # within-view negatives: two boxes of one frame
-                n, o = len(views[v][f].ids), offset[v][f]
-                a, c = np.triu_indices(n, 1)
-                wneg[v] += list(zip((o + a).tolist(), (o + c).tolist(), strict=True))
-                wneg_g[v] += [k] * a.size
-            by_tracklet: dict[int, list[int]] = {}
-            for f in shots:
-                for row in range(len(views[v][f].ids)):
-                    by_tracklet.setdefault(owner[v][(f, row)], []).append(offset[v][f] + row)
-            for boxes in by_tracklet.values():
-                for i in range(len(boxes)):
-                    for j in range(i + 1, len(boxes)):
-                        wpos[v].append((boxes[i], boxes[j]))
-                        wpos_g[v].append(k)
-        seen: dict[tuple[int, int], list[int]] = {}
-        for f in b.tolist():
-            if f not in costs:
-                continue
-            for i, j in confident_pairs(costs[f], gamma, config.margin):
-                seen.setdefault((owner["top"][(f, i)], owner["hor"][(f, j)]), []).append(f)
-        agreed = agreed_pairs(seen, config.agree)
+            _within_view_pairs(views[v], shots, owner[v], offset[v], k, wpos[v], wneg[v])
+        agreed = _agreed_tracklets(b, costs, gamma, owner, config)
         agreed_total += len(agreed)
-        for f in shots:
-            t_of = {owner["top"][(f, i)]: i for i in range(len(top[f].ids))}
-            h_of = {owner["hor"][(f, j)]: j for j in range(len(hor[f].ids))}
-            ot, oh = offset["top"][f], offset["hor"][f]
-            for tt, th in agreed:
-                if tt not in t_of or th not in h_of:
-                    continue
-                i, j = t_of[tt], h_of[th]
-                cpos.append((ot + i, oh + j))
-                cpos_g.append(k)
-                others = [(ot + i, oh + jj) for jj in range(len(hor[f].ids)) if jj != j]
-                others += [(ot + ii, oh + j) for ii in range(len(top[f].ids)) if ii != i]
-                cneg += others
-                cneg_g += [k] * len(others)
-
-    def unique(pairs: list, groups: list) -> tuple[np.ndarray, np.ndarray]:
-        first: dict[tuple[int, int], int] = {}
-        for p, g in zip(pairs, groups, strict=True):
-            first.setdefault(p, g)
-        keys = sorted(first)
-        return (np.array(keys, dtype=np.int64).reshape(-1, 2),
-                np.array([first[p] for p in keys], dtype=np.int64))
-
-    cp, cpg = unique(cpos, cpos_g)
-    cn, cng = unique(cneg, cneg_g)
+        _cross_view_pairs(top, hor, shots, owner, offset, agreed, k, cpos, cneg)
+    cp, cpg = cpos.unique()
+    cn, cng = cneg.unique()
     wp, wn, wpg, wng = {}, {}, {}, {}
     for v in VIEWS:
-        wp[v], wpg[v] = unique(wpos[v], wpos_g[v])
-        wn[v], wng[v] = unique(wneg[v], wneg_g[v])
+        wp[v], wpg[v] = wpos[v].unique()
+        wn[v], wng[v] = wneg[v].unique()
     return MinedPairs(np.array(embed, dtype=np.int64), count, wp, wn, cp, cn, wpg, wng, cpg,
                       cng, len(bursts), agreed_total)
 
