@@ -307,6 +307,82 @@ def _merge(n: list[int], mats: Pairs, gammas: Mapping[tuple[int, int], float],
     return {ab: np.array(p, dtype=np.int64).reshape(-1, 2) for ab, p in chosen.items()}
 
 
+class _RowsAtMostOne:
+    """Sparse rows ``sum(v x[c]) <= 1`` of a program, one row added at a time."""
+
+    def __init__(self) -> None:
+        self.rows: list[int] = []
+        self.cols: list[int] = []
+        self.vals: list[float] = []
+        self.n_rows = 0
+
+    def add(self, cols: list[int], vals: list[float]) -> None:
+        """One row: ``sum(v x[c] for c, v in zip(cols, vals)) <= 1``."""
+        self.rows.extend([self.n_rows] * len(cols))
+        self.cols.extend(cols)
+        self.vals.extend(vals)
+        self.n_rows += 1
+
+    def constraint(self, n_var: int) -> LinearConstraint:
+        """The rows so far, over ``n_var`` variables."""
+        return LinearConstraint(
+            coo_matrix((self.vals, (self.rows, self.cols)), shape=(self.n_rows, n_var)).tocsr(),
+            np.full(self.n_rows, -np.inf), np.ones(self.n_rows))
+
+
+def _match_var(offset: Mapping[tuple[int, int], int], mats: Pairs, ab: tuple[int, int],
+               i: int, j: int) -> int:
+    """Index of the variable of the match (i, j) between the views ``ab``."""
+    return offset[ab] + i * mats[ab].shape[1] + j
+
+
+def _one_match_rows(mats: Pairs, offset: Mapping[tuple[int, int], int]) -> _RowsAtMostOne:
+    """The rows of at most one match per box and other view."""
+    cons = _RowsAtMostOne()
+    for ab in mats:
+        m, k = mats[ab].shape
+        grid = offset[ab] + np.arange(m * k).reshape(m, k)
+        for line in (*grid, *grid.T):
+            cons.add(line.tolist(), [1.0] * line.size)
+    return cons
+
+
+def _gaining_most(broken: list[tuple[int, int, int, int, int, int]], x: np.ndarray,
+                  weight: np.ndarray, offset: Mapping[tuple[int, int], int], mats: Pairs,
+                  room: int) -> list[tuple[int, int, int, int, int, int]]:
+    """The ``room`` broken triangles whose two matches gain most (the first of a tie)."""
+    chosen = np.where(x, weight, 0.0)  # c - gamma of the matches made
+    worth = [float(chosen[_match_var(offset, mats, (a, b), i, j)]
+                   + chosen[_match_var(offset, mats, (b, c), j, k)]
+                   + chosen[_match_var(offset, mats, (a, c), i, k)])
+             for a, b, c, i, j, k in broken]  # most negative (worth most) first
+    return [broken[q] for q in np.lexsort((np.arange(len(broken)), worth))[:room]]
+
+
+def _add_triangle_rows(cons: _RowsAtMostOne, broken: list[tuple[int, int, int, int, int, int]],
+                       added: set[tuple[int, int, int, int, int, int]],
+                       offset: Mapping[tuple[int, int], int], mats: Pairs) -> None:
+    """All three inequalities of each broken triangle, recorded in ``added``."""
+    for a, b, c, i, j, k in broken:
+        added.add((a, b, c, i, j, k))
+        e_ab = _match_var(offset, mats, (a, b), i, j)
+        e_bc = _match_var(offset, mats, (b, c), j, k)
+        e_ac = _match_var(offset, mats, (a, c), i, k)
+        for plus, minus in (((e_ab, e_bc), e_ac), ((e_ab, e_ac), e_bc),
+                            ((e_ac, e_bc), e_ab)):
+            cons.add([*plus, minus], [1.0, 1.0, -1.0])
+
+
+def _best_consistent(n: list[int], mats: Pairs, gammas: Mapping[tuple[int, int], float],
+                     answers: Sequence[Pairs]) -> Pairs:
+    """The best consistent answer by the joint objective: each program's answer made
+    consistent, then the pairwise Hungarian one; the first best wins a tie."""
+    # made consistent only now, so that a frame solved to optimality pays nothing for it
+    candidates = [_merge(n, mats, gammas, p) for p in answers]
+    candidates.append(_hungarian_merged(n, mats, gammas))
+    return min(candidates, key=lambda p: objective(mats, gammas, p))
+
+
 def solve_multi_view(
     sizes: Sequence[int],
     costs: Mapping[tuple[int, int], np.ndarray],
@@ -349,22 +425,7 @@ def solve_multi_view(
     n_var = int(sum(m.size for m in mats.values()))
     if n_var == 0:
         return _solution({ab: np.zeros((0, 2), np.int64) for ab in keys}, n, "optimal", 0)
-
-    def var(ab: tuple[int, int], i: int, j: int) -> int:
-        return offset[ab] + i * mats[ab].shape[1] + j
-
-    rows: list[int] = []
-    cols: list[int] = []
-    vals: list[float] = []
-    n_rows = 0
-    for ab in keys:  # at most one match per box and other view
-        m, k = mats[ab].shape
-        grid = offset[ab] + np.arange(m * k).reshape(m, k)
-        for line in (*grid, *grid.T):
-            rows.extend([n_rows] * line.size)
-            cols.extend(line.tolist())
-            vals.extend([1.0] * line.size)
-            n_rows += 1
+    cons = _one_match_rows(mats, offset)
     weight = np.concatenate([np.where(np.isfinite(mats[ab]), mats[ab] - gammas[ab], 0.0).ravel()
                              for ab in keys])
     upper = np.concatenate([np.isfinite(mats[ab]).ravel().astype(float) for ab in keys])
@@ -378,10 +439,8 @@ def solve_multi_view(
         left = time_limit - (time.perf_counter() - start)
         if left <= 0:
             break
-        constraints = LinearConstraint(
-            coo_matrix((vals, (rows, cols)), shape=(n_rows, n_var)).tocsr(),
-            np.full(n_rows, -np.inf), np.ones(n_rows))
-        res = milp(weight, integrality=integrality, bounds=bounds, constraints=constraints,
+        res = milp(weight, integrality=integrality, bounds=bounds,
+                   constraints=cons.constraint(n_var),
                    options={"time_limit": left, "node_limit": int(node_limit), "disp": False})
         if res.status != 0 or res.x is None:
             break
@@ -396,23 +455,7 @@ def solve_multi_view(
         if room <= 0:
             break
         if len(broken) > room:  # the last program: the triangles whose matches gain most
-            chosen = np.where(x, weight, 0.0)  # c - gamma of the matches made
-            worth = [float(chosen[var((a, b), i, j)] + chosen[var((b, c), j, k)]
-                           + chosen[var((a, c), i, k)])
-                     for a, b, c, i, j, k in broken]  # most negative (worth most) first
-            broken = [broken[q] for q in np.lexsort((np.arange(len(broken)), worth))[:room]]
-        for a, b, c, i, j, k in broken:  # all three inequalities of the triangle
-            added.add((a, b, c, i, j, k))
-            e_ab, e_bc, e_ac = var((a, b), i, j), var((b, c), j, k), var((a, c), i, k)
-            for plus, minus in (((e_ab, e_bc), e_ac), ((e_ab, e_ac), e_bc),
-                                ((e_ac, e_bc), e_ab)):
-                rows.extend([n_rows] * 3)
-                cols.extend([*plus, minus])
-                vals.extend([1.0, 1.0, -1.0])
-                n_rows += 1
-    # made consistent only now, so that a frame solved to optimality pays nothing for it; the
-    # first best wins a tie, the pairwise Hungarian answer last
-    candidates = [_merge(n, mats, gammas, p) for p in answers]
-    candidates.append(_hungarian_merged(n, mats, gammas))
-    best = min(candidates, key=lambda p: objective(mats, gammas, p))
+            broken = _gaining_most(broken, x, weight, offset, mats, room)
+        _add_triangle_rows(cons, broken, added, offset, mats)
+    best = _best_consistent(n, mats, gammas, answers)
     return _solution(best, n, "fallback", rounds, len(added))
