@@ -149,6 +149,87 @@ def spatial_vote_cost(
     return np.clip(out, 0.0, 1.0)
 
 
+def _view_boxes(views: Sequence[Mapping[int, object]], v: int, f: int) -> np.ndarray:
+    """The ``(n, 4)`` boxes of view v in frame f (none where the frame has no record)."""
+    rec = views[v].get(f)
+    return np.zeros((0, 4)) if rec is None else np.asarray(rec.boxes, float).reshape(-1, 4)
+
+
+def _check_views(views: Sequence[Mapping[int, object]], hor_sizes: Sequence[tuple[float, float]],
+                 images: Sequence[FrameImages] | None, appearance: LearnedMatcher | None) -> None:
+    """Refuse fewer than two views, a size missing, images of some views only, or ego-ego
+    appearance without images."""
+    n_views = len(views)
+    if n_views < 2 or len(hor_sizes) != n_views - 1:
+        raise ValueError(f"need a top view, >= 1 egocentric view and one size per egocentric "
+                         f"view, got {n_views} views and {len(hor_sizes)} sizes")
+    if images is not None and len(images) != n_views:
+        raise ValueError(f"give images for all {n_views} views or none")
+    if appearance is not None and images is None:
+        raise ValueError("ego-ego appearance costs need the images of every view")
+
+
+def _spatial_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: Iterable[int],
+                     width: float, params: SpatialParams | None, rows: Mapping[int, int]
+                     ) -> dict[int, np.ndarray]:
+    """``{frame: top x view-k vote costs}`` of the spatial search (all 1 where a view has no
+    box)."""
+    out = {}
+    for f in frames:
+        t, h = _view_boxes(views, 0, f), _view_boxes(views, k, f)
+        out[f] = (spatial_vote_cost(t, h, width, params, rows.get(f))
+                  if len(t) and len(h) else np.ones((len(t), len(h))))
+    return out
+
+
+def _learned_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: list[int],
+                     size: tuple[float, float], matcher: LearnedMatcher,
+                     rows: Mapping[int, int], options: dict
+                     ) -> tuple[dict[int, np.ndarray], list[AppearanceCheck]]:
+    """The learned matcher's top x view-k cost matrices, ``{frame: costs}`` of the frames
+    with boxes in both views, and the appearance check of the pass (if judged).
+
+    ``options`` are the keyword arguments passed on to
+    :func:`~xvmatch.inference.matching.learned_association.associate_sequence_learned`.
+    """
+    found: dict[int, np.ndarray] = {}
+    judged: list[AppearanceCheck] = []
+    top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
+    associate_sequence_learned(
+        top_rows, {f: views[k][f] for f in frames if f in views[k]}, size[0], matcher,
+        camera_id=-1 if rows else None, hor_height=size[1], frames=frames, costs_out=found,
+        checked=judged, **options,
+    )
+    return found, judged
+
+
+def _frame_problem(views: Sequence[Mapping[int, object]], f: int, sizes: tuple[int, ...],
+                   top_ego: Mapping[int, np.ndarray], matcher: LearnedMatcher | None,
+                   appearance: LearnedMatcher | None, images: Sequence[FrameImages] | None,
+                   calibration: LogisticCalibration, vote_calibration: LogisticCalibration
+                   ) -> FrameProblem:
+    """Frame f's problem: top-ego costs from ``top_ego`` (``{view: costs}``), ego-ego ones
+    from the appearance (0 without it), every gamma 0."""
+    n_views = len(views)
+    desc = {}
+    if appearance is not None:
+        for v in range(1, n_views):
+            b = _view_boxes(views, v, f)
+            desc[v] = appearance.descriptors(images[v].get(f), b) if len(b) else None
+    costs, gammas = {}, {}
+    for a, b in view_pairs(n_views):
+        gammas[(a, b)] = 0.0
+        if a == 0 and matcher is None:
+            costs[(a, b)] = vote_calibration.cost(top_ego[b])
+        elif a == 0:
+            costs[(a, b)] = log_odds_cost(top_ego[b], matcher.gamma)
+        elif appearance is not None and desc[a] is not None and desc[b] is not None:
+            costs[(a, b)] = calibration.cost(appearance_cost(desc[a], desc[b]))
+        else:
+            costs[(a, b)] = np.zeros((sizes[a], sizes[b]))
+    return FrameProblem(sizes, costs, gammas)
+
+
 def multi_view_costs(
     views: Sequence[Mapping[int, object]],
     hor_sizes: Sequence[tuple[float, float]],
@@ -191,65 +272,31 @@ def multi_view_costs(
     """
     frames = sorted({int(f) for f in frames})
     n_views = len(views)
-    if n_views < 2 or len(hor_sizes) != n_views - 1:
-        raise ValueError(f"need a top view, >= 1 egocentric view and one size per egocentric "
-                         f"view, got {n_views} views and {len(hor_sizes)} sizes")
-    if images is not None and len(images) != n_views:
-        raise ValueError(f"give images for all {n_views} views or none")
-    if appearance is not None and images is None:
-        raise ValueError("ego-ego appearance costs need the images of every view")
-
-    def boxes(v: int, f: int) -> np.ndarray:
-        rec = views[v].get(f)
-        return np.zeros((0, 4)) if rec is None else np.asarray(rec.boxes, float).reshape(-1, 4)
-
-    sizes = {f: tuple(len(boxes(v, f)) for v in range(n_views)) for f in frames}
+    _check_views(views, hor_sizes, images, appearance)
+    sizes = {f: tuple(len(_view_boxes(views, v, f)) for v in range(n_views)) for f in frames}
     top_ego: dict[int, dict[int, np.ndarray]] = {f: {} for f in frames}
     for k in range(1, n_views):
         rows = (camera_rows[k - 1] if camera_rows is not None else None) or {}
-        width, height = hor_sizes[k - 1]
         if matcher is None:
-            for f in progress(frames) if progress else frames:
-                t, h = boxes(0, f), boxes(k, f)
-                top_ego[f][k] = (spatial_vote_cost(t, h, width, params, rows.get(f))
-                                 if len(t) and len(h) else np.ones((len(t), len(h))))
+            spatial = _spatial_top_ego(views, k, progress(frames) if progress else frames,
+                                       hor_sizes[k - 1][0], params, rows)
+            for f, cost in spatial.items():
+                top_ego[f][k] = cost
             continue
-        found: dict[int, np.ndarray] = {}
-        judged: list[AppearanceCheck] = []
-        top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
-        associate_sequence_learned(
-            top_rows, {f: views[k][f] for f in frames if f in views[k]}, width, matcher,
-            camera_id=-1 if rows else None, hor_height=height, frames=frames,
-            workers=workers, progress=progress, costs_out=found,
-            top_images=images[0] if images is not None else None,
-            hor_images=images[k] if images is not None else None,
-            cameras=cameras[k - 1] if cameras is not None else None,
-            appearance_check=appearance_check, checked=judged,
-        )
+        found, judged = _learned_top_ego(
+            views, k, frames, hor_sizes[k - 1], matcher, rows, dict(
+                workers=workers, progress=progress,
+                top_images=images[0] if images is not None else None,
+                hor_images=images[k] if images is not None else None,
+                cameras=cameras[k - 1] if cameras is not None else None,
+                appearance_check=appearance_check))
         if checked is not None and judged:
             checked[k] = judged[0]
         for f in frames:
             top_ego[f][k] = found.get(f, np.ones(sizes[f][:1] + sizes[f][k:k + 1]))
-    out = {}
-    for f in frames:
-        desc = {}
-        if appearance is not None:
-            for v in range(1, n_views):
-                b = boxes(v, f)
-                desc[v] = appearance.descriptors(images[v].get(f), b) if len(b) else None
-        costs, gammas = {}, {}
-        for a, b in view_pairs(n_views):
-            gammas[(a, b)] = 0.0
-            if a == 0 and matcher is None:
-                costs[(a, b)] = vote_calibration.cost(top_ego[f][b])
-            elif a == 0:
-                costs[(a, b)] = log_odds_cost(top_ego[f][b], matcher.gamma)
-            elif appearance is not None and desc[a] is not None and desc[b] is not None:
-                costs[(a, b)] = calibration.cost(appearance_cost(desc[a], desc[b]))
-            else:
-                costs[(a, b)] = np.zeros((sizes[f][a], sizes[f][b]))
-        out[f] = FrameProblem(sizes[f], costs, gammas)
-    return out
+    return {f: _frame_problem(views, f, sizes[f], top_ego[f], matcher, appearance, images,
+                              calibration, vote_calibration)
+            for f in frames}
 
 
 @dataclass(frozen=True, eq=False)
