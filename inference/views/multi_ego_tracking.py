@@ -359,6 +359,53 @@ def pairs_from_ids(ids: Sequence[np.ndarray]) -> dict[tuple[int, int], np.ndarra
     return out
 
 
+def _check_track_options(n_views: int, clip_length: int, solver: str, frame_weight: float,
+                         motion: float | None, partner_change: float | None) -> None:
+    """Refuse fewer than 2 views, a bad ``clip_length``, ``solver``, ``frame_weight``,
+    ``motion`` or ``partner_change`` (:func:`track_multi_view`)."""
+    if n_views < 2:
+        raise ValueError(f"views: give the top view and >= 1 other, got {n_views}")
+    if int(clip_length) < 1 or solver not in ("mip", "greedy") or not 0 <= frame_weight <= 1:
+        raise ValueError(f"clip_length must be >= 1, solver 'mip' or 'greedy' and "
+                         f"frame_weight in [0, 1], got {clip_length}, {solver!r}, "
+                         f"{frame_weight}")
+    if motion is not None and not motion > 0:
+        raise ValueError(f"motion: the link gate must be > 0 box heights (or None for IoU "
+                         f"links), got {motion}")
+    if partner_change is not None and not partner_change >= 0:
+        raise ValueError(f"partner_change: the evidence a top-view partner needs must be >= 0 "
+                         f"nats (or None: never cut), got {partner_change}")
+
+
+def _view_tracks(views: Sequence[Mapping[int, FrameBoxes]], problems: Mapping[int, FrameProblem],
+                 clips: list, iou: list[float], gate: list[float | None], max_gap: int,
+                 partner_change: float | None) -> tuple[list, list]:
+    """Per view and clip, the tracklets and the chain of each across clips; the egocentric
+    tracklets cut where their top-view partner changes (for the smoothing; the pieces keep
+    their chains)."""
+    n_views = len(views)
+    tracks = [view_tracklets(views[v], clips, iou[v], max_gap, gate[v]) for v in range(n_views)]
+    chains = [view_chains(tracks[v], iou[v], max_gap, gate[v]) for v in range(n_views)]
+    if partner_change is not None:  # cut for the smoothing; the pieces keep their chains
+        for v, t in ((v, t) for v in range(1, n_views) for t in range(len(clips))):
+            tracks[v][t], parent = split_at_partner_changes(
+                tracks[0][t], tracks[v][t], problems, views[0], views[v], v, partner_change)
+            chains[v][t] = chains[v][t][parent]
+    return tracks, chains
+
+
+def _box_chains(sizes: Sequence[int], f: int, present: list, chains: list, t: int
+                ) -> list[np.ndarray]:
+    """Per view, the chain of each box of frame f in clip t (-1: a box in no tracklet)."""
+    box_chains = []
+    for v in range(len(present)):
+        ch = np.full(int(sizes[v]), -1, dtype=np.int64)
+        if f in present[v]:
+            ch[present[v][f][1]] = chains[v][t][present[v][f][0]]
+        box_chains.append(ch)
+    return box_chains
+
+
 def track_multi_view(
     views: Sequence[Mapping[int, FrameBoxes]],
     problems: Mapping[int, FrameProblem],
@@ -403,29 +450,12 @@ def track_multi_view(
         ValueError: fewer than 2 views, a bad ``clip_length``, ``solver``, ``frame_weight``,
             ``motion`` or ``partner_change``.
     """
-    if len(views) < 2:
-        raise ValueError(f"views: give the top view and >= 1 other, got {len(views)}")
-    if int(clip_length) < 1 or solver not in ("mip", "greedy") or not 0 <= frame_weight <= 1:
-        raise ValueError(f"clip_length must be >= 1, solver 'mip' or 'greedy' and "
-                         f"frame_weight in [0, 1], got {clip_length}, {solver!r}, "
-                         f"{frame_weight}")
-    if motion is not None and not motion > 0:
-        raise ValueError(f"motion: the link gate must be > 0 box heights (or None for IoU "
-                         f"links), got {motion}")
-    if partner_change is not None and not partner_change >= 0:
-        raise ValueError(f"partner_change: the evidence a top-view partner needs must be >= 0 "
-                         f"nats (or None: never cut), got {partner_change}")
+    _check_track_options(len(views), clip_length, solver, frame_weight, motion, partner_change)
     n_views = len(views)
     clips = split_clips(sorted(problems), int(clip_length))
     iou = [top_min_iou, *[min_iou] * (n_views - 1)]
     gate = [None, *[motion] * (n_views - 1)]
-    tracks = [view_tracklets(views[v], clips, iou[v], max_gap, gate[v]) for v in range(n_views)]
-    chains = [view_chains(tracks[v], iou[v], max_gap, gate[v]) for v in range(n_views)]
-    if partner_change is not None:  # cut for the smoothing; the pieces keep their chains
-        for v, t in ((v, t) for v in range(1, n_views) for t in range(len(clips))):
-            tracks[v][t], parent = split_at_partner_changes(
-                tracks[0][t], tracks[v][t], problems, views[0], views[v], v, partner_change)
-            chains[v][t] = chains[v][t][parent]
+    tracks, chains = _view_tracks(views, problems, clips, iou, gate, max_gap, partner_change)
     person: tuple[dict[int, np.ndarray], ...] = tuple(
         {f: np.zeros(len(rec), dtype=np.int64) for f, rec in views[v].items()}
         for v in range(n_views))
@@ -443,12 +473,7 @@ def track_multi_view(
                 sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
             statuses.append(sol.status)
             triangles = max(triangles, sol.triangles)
-            box_chains = []
-            for v in range(n_views):
-                ch = np.full(int(problem.sizes[v]), -1, dtype=np.int64)
-                if f in present[v]:
-                    ch[present[v][f][1]] = chains[v][t][present[v][f][0]]
-                box_chains.append(ch)
+            box_chains = _box_chains(problem.sizes, f, present, chains, t)
             ids, next_id = carry_ids(sol.person, box_chains, owner, next_id)
             for v in range(n_views):
                 if f in person[v]:
