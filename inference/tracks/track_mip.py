@@ -195,6 +195,93 @@ def _offsets(mats: Sequence[np.ndarray]) -> list[int]:
     return [*out, at]
 
 
+class _ConstraintRows:
+    """Sparse rows ``lo <= A x <= hi`` of a program, one row added at a time."""
+
+    def __init__(self) -> None:
+        self.rows: list[int] = []
+        self.cols: list[int] = []
+        self.vals: list[float] = []
+        self.lo: list[float] = []
+        self.hi: list[float] = []
+
+    def add(self, entries: list[tuple[int, float]], low: float, high: float) -> None:
+        """One row: ``low <= sum(v x[c] for c, v in entries) <= high``."""
+        r = len(self.lo)
+        for c, v in entries:
+            self.rows.append(r)
+            self.cols.append(c)
+            self.vals.append(v)
+        self.lo.append(low)
+        self.hi.append(high)
+
+    def constraint(self, n_var: int) -> LinearConstraint:
+        """The rows so far, over ``n_var`` variables."""
+        a_mat = coo_matrix((self.vals, (self.rows, self.cols)),
+                           shape=(len(self.lo), n_var)).tocsr()
+        return LinearConstraint(a_mat, self.lo, self.hi)
+
+
+def _edge_var(mats: Sequence[np.ndarray], off: Sequence[int], i: int, a: int, b: int) -> int:
+    """Index of the variable of edge (a, b) of matrix i."""
+    return off[i] + a * mats[i].shape[1] + b
+
+
+def _window_rows(mats: Sequence[np.ndarray], off: Sequence[int], k: int) -> _ConstraintRows:
+    """The rows of Eq. 2 (each node in at most one edge per neighbouring cluster) and of Eq. 4
+    (K fixed to the largest cluster, ``k``), the dummy variables after the edges."""
+    n_e = off[-1]
+    cons = _ConstraintRows()
+    for i, w in enumerate(mats):  # Eq. 2
+        n_a, n_b = w.shape
+        for a in range(n_a):
+            cons.add([(_edge_var(mats, off, i, a, b), 1.0) for b in range(n_b)], -np.inf, 1.0)
+        for b in range(n_b):
+            cons.add([(_edge_var(mats, off, i, a, b), 1.0) for a in range(n_a)], -np.inf, 1.0)
+    for i in range(4):  # Eq. 4, K fixed to the largest cluster
+        inc = (i - 1) % 4
+        entries = [(c, 1.0) for c in range(off[inc], off[inc + 1])]
+        entries += [(c, 1.0) for c in range(off[i], off[i + 1])]
+        entries.append((n_e + i, 1.0))
+        cons.add(entries, 2.0 * k, 2.0 * k)
+    return cons
+
+
+def _worth_most(
+    mats: Sequence[np.ndarray], broken: list[tuple[int, int, int, int, int]], room: int
+) -> list[tuple[int, int, int, int, int]]:
+    """The ``room`` broken loops whose three edges are worth most (the first of a tie)."""
+    worth = [mats[i][a, b] + mats[(i + 1) % 4][b, c] + mats[(i + 2) % 4][c, d]
+             for i, a, b, c, d in broken]
+    return [broken[q] for q in np.lexsort((np.arange(len(broken)), -np.asarray(worth)))[:room]]
+
+
+def _add_loop_rows(
+    cons: _ConstraintRows,
+    mats: Sequence[np.ndarray],
+    off: Sequence[int],
+    broken: list[tuple[int, int, int, int, int]],
+    seen: set[tuple[int, int, int, int, int]],
+) -> None:
+    """Eq. 3 for each broken loop, recorded in ``seen``."""
+    for i, a, b, c, d in broken:
+        seen.add((i, a, b, c, d))
+        cons.add([(_edge_var(mats, off, i, a, b), 1.0),
+                  (_edge_var(mats, off, (i + 1) % 4, b, c), 1.0),
+                  (_edge_var(mats, off, (i + 2) % 4, c, d), 1.0),
+                  (_edge_var(mats, off, (i + 3) % 4, d, a), -1.0)], -np.inf, 2.0)
+
+
+def _fallback(
+    mats: Sequence[np.ndarray], answers: Sequence[tuple[np.ndarray, ...]], c0: float
+) -> tuple[np.ndarray, ...]:
+    """The best loop-free answer by Eq. 1: each program's answer repaired
+    (:func:`repair_loops`), then the greedy one; the first best wins a tie."""
+    # repaired only now, so that a window solved to optimality pays nothing for it
+    candidates = [repair_loops(mats, e, c0) for e in answers] + [greedy_solution(mats, c0).edges]
+    return max(candidates, key=lambda e: objective(mats, e, c0))
+
+
 def solve_four_clusters(
     weights: Sequence[np.ndarray],
     c0: float = 0.2,
@@ -237,37 +324,7 @@ def solve_four_clusters(
     n_e = off[-1]
     n_var = n_e + 4
     k = max(sizes)
-
-    def var(i: int, a: int, b: int) -> int:
-        return off[i] + a * mats[i].shape[1] + b
-
-    rows: list[int] = []
-    cols: list[int] = []
-    vals: list[float] = []
-    lo: list[float] = []
-    hi: list[float] = []
-
-    def add(entries: list[tuple[int, float]], low: float, high: float) -> None:
-        r = len(lo)
-        for c, v in entries:
-            rows.append(r)
-            cols.append(c)
-            vals.append(v)
-        lo.append(low)
-        hi.append(high)
-
-    for i, w in enumerate(mats):  # Eq. 2
-        n_a, n_b = w.shape
-        for a in range(n_a):
-            add([(var(i, a, b), 1.0) for b in range(n_b)], -np.inf, 1.0)
-        for b in range(n_b):
-            add([(var(i, a, b), 1.0) for a in range(n_a)], -np.inf, 1.0)
-    for i in range(4):  # Eq. 4, K fixed to the largest cluster
-        inc = (i - 1) % 4
-        entries = [(c, 1.0) for c in range(off[inc], off[inc + 1])]
-        entries += [(c, 1.0) for c in range(off[i], off[i + 1])]
-        entries.append((n_e + i, 1.0))
-        add(entries, 2.0 * k, 2.0 * k)
+    cons = _window_rows(mats, off, k)
     cost = -np.concatenate([*(w.ravel() for w in mats), np.full(4, c0)])
     integrality = np.ones(n_var)
     bounds = Bounds(np.zeros(n_var), np.r_[np.ones(n_e), np.full(4, 2.0 * k)])
@@ -279,12 +336,11 @@ def solve_four_clusters(
         left = time_limit - (time.perf_counter() - start)
         if left <= 0:
             break
-        a_mat = coo_matrix((vals, (rows, cols)), shape=(len(lo), n_var)).tocsr()
         res = milp(
             cost,
             integrality=integrality,
             bounds=bounds,
-            constraints=LinearConstraint(a_mat, lo, hi),
+            constraints=cons.constraint(n_var),
             options={"time_limit": left, "node_limit": int(node_limit), "disp": False},
         )
         if res.status != 0 or res.x is None:
@@ -301,16 +357,7 @@ def solve_four_clusters(
         if room <= 0:
             break
         if len(broken) > room:  # the last program: the loops whose three edges are worth most
-            worth = [mats[i][a, b] + mats[(i + 1) % 4][b, c] + mats[(i + 2) % 4][c, d]
-                     for i, a, b, c, d in broken]
-            broken = [broken[q] for q in
-                      np.lexsort((np.arange(len(broken)), -np.asarray(worth)))[:room]]
-        for i, a, b, c, d in broken:  # Eq. 3 for this loop
-            seen.add((i, a, b, c, d))
-            add([(var(i, a, b), 1.0), (var((i + 1) % 4, b, c), 1.0),
-                 (var((i + 2) % 4, c, d), 1.0), (var((i + 3) % 4, d, a), -1.0)], -np.inf, 2.0)
-    # repaired only now, so that a window solved to optimality pays nothing for it; the first
-    # best wins a tie, the greedy answer last
-    candidates = [repair_loops(mats, e, c0) for e in answers] + [greedy_solution(mats, c0).edges]
-    best = max(candidates, key=lambda e: objective(mats, e, c0))
+            broken = _worth_most(mats, broken, room)
+        _add_loop_rows(cons, mats, off, broken, seen)
+    best = _fallback(mats, answers, c0)
     return ClusterSolution(best, _dummies(best, sizes), "fallback", rounds, len(seen))
