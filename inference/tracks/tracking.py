@@ -415,6 +415,75 @@ def _tracklets_with_images(
     return top_tr, hor_tr, app
 
 
+def _check_has_boxes(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]) -> None:
+    """Refuse a view without any box."""
+    for name, view in (("top", top), ("horizontal", hor)):
+        if not any(len(rec) for rec in view.values()):
+            raise ValueError(f"the {name} view has no boxes: nothing to track")
+
+
+def _clip_tracklets(
+    top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes], clips: list[np.ndarray],
+    config: TrackConfig, images: TrackImages | None, progress: Progress | None,
+) -> tuple[list, list, list[tuple[TrackletAppearance, ...]] | None]:
+    """Each clip's tracklets of both views and, with images, their appearance (else None)."""
+    if images is None:
+        return (view_tracklets(top, clips, config.min_iou, config.max_gap),
+                view_tracklets(hor, clips, config.min_iou, config.max_gap), None)
+    return _tracklets_with_images(top, hor, clips, config, images, progress)
+
+
+def _judged_cross_appearance(
+    top_tr: list, hor_tr: list, app: list[tuple[TrackletAppearance, ...]], images: TrackImages,
+    learned: LearnedEvidence, checked: list[AppearanceCheck] | None,
+) -> bool:
+    """Whether the cross-view appearance cue passes its check on the clips' own box-only
+    pseudo-matched tracklets (the check goes to ``checked`` when given)."""
+    result = check_tracklet_appearance(
+        [(top_tr[k], hor_tr[k],
+          1.0 - descriptor_similarity(app[k][0], app[k][1], images.cross_cost, cross=True))
+         for k in range(len(app))], learned.costs, learned.gamma)
+    if checked is not None:
+        checked.append(result)
+    return result.trusted
+
+
+def _add_empty_clip(top_tr: list, hor_tr: list,
+                    app: list[tuple[TrackletAppearance, ...]] | None,
+                    images: TrackImages | None) -> None:
+    """Append an empty clip (no tracklets, and their empty appearance), so that a single
+    clip makes one window."""
+    top_tr.append([])
+    hor_tr.append([])
+    if app is not None:
+        app.append(tuple(clip_appearance([], {}, {}, {}, images.embed, images.cross_embed)
+                         for _ in range(2)))
+
+
+def _solve_windows(
+    top_tr: list, hor_tr: list, app: list[tuple[TrackletAppearance, ...]] | None,
+    frame_pairs: Mapping[int, list[tuple[int, int]]], config: TrackConfig,
+    learned: LearnedEvidence | None, images: TrackImages | None, cross_appearance: bool,
+    n_windows: int, progress: Progress | None,
+) -> list[ClusterSolution]:
+    """The four-cluster solution of each of the ``n_windows`` windows of two consecutive
+    clips."""
+    solutions: list[ClusterSolution] = []
+    steps = range(n_windows)
+    for t in progress(steps, n_windows, "track") if progress else steps:
+        window_app = None if app is None else (app[t][0], app[t + 1][0], app[t + 1][1],
+                                               app[t][1])
+        w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
+                            config.weights, window_app, config.time_appearance, learned,
+                            config.learned_rule, config.learned_share,
+                            None if images is None else images.cross_cost, cross_appearance)
+        if config.solver == "mip":
+            solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
+        else:
+            solutions.append(spectral_solution(w, config.weights.c0, config.seed + t))
+    return solutions
+
+
 def track_pair(
     top: Mapping[int, FrameBoxes],
     hor: Mapping[int, FrameBoxes],
@@ -463,51 +532,24 @@ def track_pair(
         ValueError: a view without any box.
     """
     config = config or TrackConfig()
-    for name, view in (("top", top), ("horizontal", hor)):
-        if not any(len(rec) for rec in view.values()):
-            raise ValueError(f"the {name} view has no boxes: nothing to track")
+    _check_has_boxes(top, hor)
     if learned is not None and config.learned_share >= 1:
         frame_pairs = learned.frame_pairs
     elif frame_pairs is None:
         frame_pairs = associate_frames(top, hor, hor_width, params, camera_rows, workers,
                                        progress)
     clips = split_clips(sorted(set(top) | set(hor)), config.clip_length)
-    app: list[tuple[TrackletAppearance, ...]] | None = None
-    if images is None:
-        top_tr = view_tracklets(top, clips, config.min_iou, config.max_gap)
-        hor_tr = view_tracklets(hor, clips, config.min_iou, config.max_gap)
-    else:
-        top_tr, hor_tr, app = _tracklets_with_images(top, hor, clips, config, images, progress)
+    top_tr, hor_tr, app = _clip_tracklets(top, hor, clips, config, images, progress)
     cross_appearance = True
     if (appearance_check and app is not None and images.embed is not None
             and learned is not None and config.weights.w1 < 1):  # w1 1: no cue to judge
-        result = check_tracklet_appearance(
-            [(top_tr[k], hor_tr[k],
-              1.0 - descriptor_similarity(app[k][0], app[k][1], images.cross_cost, cross=True))
-             for k in range(len(clips))], learned.costs, learned.gamma)
-        cross_appearance = result.trusted
-        if checked is not None:
-            checked.append(result)
+        cross_appearance = _judged_cross_appearance(top_tr, hor_tr, app, images, learned,
+                                                    checked)
     if len(clips) == 1:
-        top_tr.append([])
-        hor_tr.append([])
-        if app is not None:
-            app.append(tuple(clip_appearance([], {}, {}, {}, images.embed, images.cross_embed)
-                             for _ in range(2)))
+        _add_empty_clip(top_tr, hor_tr, app, images)
     n_windows = max(1, len(clips) - 1)
-    solutions: list[ClusterSolution] = []
-    steps = range(n_windows)
-    for t in progress(steps, n_windows, "track") if progress else steps:
-        window_app = None if app is None else (app[t][0], app[t + 1][0], app[t + 1][1],
-                                               app[t][1])
-        w = _window_weights(top_tr[t], top_tr[t + 1], hor_tr[t + 1], hor_tr[t], frame_pairs,
-                            config.weights, window_app, config.time_appearance, learned,
-                            config.learned_rule, config.learned_share,
-                            None if images is None else images.cross_cost, cross_appearance)
-        if config.solver == "mip":
-            solutions.append(solve_four_clusters(w, config.weights.c0, config.time_limit))
-        else:
-            solutions.append(spectral_solution(w, config.weights.c0, config.seed + t))
+    solutions = _solve_windows(top_tr, hor_tr, app, frame_pairs, config, learned, images,
+                               cross_appearance, n_windows, progress)
     if len(clips) == 1:
         top_tr, hor_tr = top_tr[:1], hor_tr[:1]
     stitched = stitch_windows(top_tr, hor_tr, [s.edges for s in solutions])
