@@ -337,8 +337,8 @@ def _track_config(args: argparse.Namespace, weights: str):
     from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
     from xvmatch.inference.tracks.tracking import TrackConfig
 
-    given = {k: getattr(args, k) for k in ("c0", "w1", "w2", "sigma")
-             if getattr(args, k) is not None}
+    given = {k: v for k, v in (("c0", args.c0), ("w1", args.w1), ("w2", args.w2),
+                               ("sigma", args.sigma)) if v is not None}
     if weights == "learned":
         given.setdefault("c0", LEARNED_DUMMY_WEIGHT)
     return TrackConfig(

@@ -125,7 +125,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.config}: no such configuration file; see configs/ for examples")
     from xvmatch.training.train_cli import cli_args, cli_main
 
-    extra = backbone_args(getattr(args, "backbone", None), getattr(args, "init", None))
+    extra = backbone_args(args.backbone, args.init)
     extra += [a for a in args.lightning_args if a != "--"]
     try:
         cli_main(cli_args(str(config), extra, args.stage))
