@@ -240,14 +240,13 @@ def _file_name(doc: dict, where: Path, prefix: str, suffix: str = ".onnx") -> tu
     return name, sha
 
 
-def read_manifest(folder: str | os.PathLike) -> Manifest:
-    """Read and validate ``folder/manifest.json`` (every field's presence, type and range).
+def _manifest_document(folder: Path) -> tuple[Path, dict]:
+    """The manifest's path and its JSON document, checked to be an xvmatch bundle manifest.
 
     Raises:
-        BundleError: no folder or manifest, malformed JSON, another format or version, a field
-            missing or out of range (the message names the field).
+        BundleError: no folder or manifest, an unreadable file, malformed JSON or another
+            format.
     """
-    folder = Path(folder)
     path = folder / MANIFEST
     if not folder.is_dir():
         raise _fail(folder, "no such bundle folder (xvmatch export writes one)")
@@ -265,6 +264,11 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
         raise _fail(path, f"not a readable JSON manifest ({json_problem(exc)})") from None
     if not isinstance(doc, dict) or doc.get("format") != BUNDLE_FORMAT:
         raise _fail(path, f"not an xvmatch bundle manifest (format {BUNDLE_FORMAT!r} expected)")
+    return path, doc
+
+
+def _check_versions(doc: dict, path: Path) -> None:
+    """Refuse another bundle format version or feature version than this xvmatch's."""
     version = _get(doc, "format_version", int, path)
     if version != BUNDLE_FORMAT_VERSION:
         raise _fail(path, f"bundle format version {version}, this xvmatch reads "
@@ -273,6 +277,69 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     if features != FEATURE_VERSION:
         raise _fail(path, f"bundle built for feature version {features}, this xvmatch computes "
                     f"{FEATURE_VERSION}; retrain and export the model again")
+
+
+def _appearance_spec(app: dict, path: Path) -> AppearanceSpec:
+    """The manifest's ``appearance`` record, every field checked."""
+    name, sha = _file_name(app, path, "appearance.")
+    size = _get(app, "crop_size", list, path, "appearance.")
+    if len(size) != 2 or not all(isinstance(v, int) and not isinstance(v, bool)
+                                 and 8 <= v <= 1024 for v in size):
+        raise _fail(path, "manifest field 'appearance.crop_size' must be [width, height] "
+                    f"in 8-1024 pixels, got {size!r}")
+    dim = _get(app, "embedding_dim", int, path, "appearance.")
+    if not 1 <= dim <= 65536:
+        raise _fail(path, f"manifest field 'appearance.embedding_dim' must be in 1-65536, "
+                    f"got {dim}")
+    if _get(app, "colour_order", str, path, "appearance.") != "BGR":
+        raise _fail(path, "manifest field 'appearance.colour_order' must be 'BGR'")
+    precision = _get(app, "precision", str, path, "appearance.")
+    if precision != "fp32":
+        raise _fail(path, f"manifest field 'appearance.precision' must be fp32, got "
+                    f"{precision!r}")
+    int8, int8_file, int8_sha = _int8_record(app, path)
+    arch = app.get("arch")
+    if arch is not None and not isinstance(arch, str):
+        raise _fail(path, "manifest field 'appearance.arch' must be a string or absent")
+    backbone = app.get("backbone") or {}
+    if not isinstance(backbone, dict) or not all(
+            isinstance(v, str) for k, v in backbone.items()
+            if k in ("arch", "init", "package", "version", "licence")):
+        raise _fail(path, "manifest field 'appearance.backbone' must be an object of "
+                    "strings (arch, init, package, version, licence) or absent")
+    features, stages = (_output_dim(app, key, path) for key in ("features_dim",
+                                                                 "stages_dim"))
+    if stages is not None and features is None:
+        raise _fail(path, "manifest field 'appearance.stages_dim' needs "
+                    "'appearance.features_dim' (the graph's outputs come in that order)")
+    return AppearanceSpec(name, sha, (size[0], size[1]),
+                          _number(app, "context", path, 0.0, 1.0, "appearance."), dim,
+                          precision, int8_file, int8_sha, dict(int8 or {}), arch,
+                          dict(backbone), features, stages)
+
+
+def _int8_record(app: dict, path: Path) -> tuple[dict | None, str | None, str | None]:
+    """The appearance record's optional ``int8`` object, with its file name and hash (None
+    when absent)."""
+    int8 = app.get("int8")
+    int8_file = int8_sha = None
+    if int8 is not None:
+        if not isinstance(int8, dict):
+            raise _fail(path, "manifest field 'appearance.int8' must be an object or absent")
+        int8_file, int8_sha = _file_name(int8, path, "appearance.int8.")
+    return int8, int8_file, int8_sha
+
+
+def read_manifest(folder: str | os.PathLike) -> Manifest:
+    """Read and validate ``folder/manifest.json`` (every field's presence, type and range).
+
+    Raises:
+        BundleError: no folder or manifest, malformed JSON, another format or version, a field
+            missing or out of range (the message names the field).
+    """
+    folder = Path(folder)
+    path, doc = _manifest_document(folder)
+    _check_versions(doc, path)
     try:
         config = FeatureConfig.from_dict(_get(doc, "feature_config", dict, path))
     except (TypeError, ValueError) as exc:
@@ -289,48 +356,7 @@ def read_manifest(folder: str | os.PathLike) -> Manifest:
     matcher = _get(doc, "matcher", dict, path)
     matcher_file, matcher_sha = _file_name(matcher, path, "matcher.")
     app = _get(doc, "appearance", (dict, type(None)), path)
-    spec = None
-    if app is not None:
-        name, sha = _file_name(app, path, "appearance.")
-        size = _get(app, "crop_size", list, path, "appearance.")
-        if len(size) != 2 or not all(isinstance(v, int) and not isinstance(v, bool)
-                                     and 8 <= v <= 1024 for v in size):
-            raise _fail(path, "manifest field 'appearance.crop_size' must be [width, height] "
-                        f"in 8-1024 pixels, got {size!r}")
-        dim = _get(app, "embedding_dim", int, path, "appearance.")
-        if not 1 <= dim <= 65536:
-            raise _fail(path, f"manifest field 'appearance.embedding_dim' must be in 1-65536, "
-                        f"got {dim}")
-        if _get(app, "colour_order", str, path, "appearance.") != "BGR":
-            raise _fail(path, "manifest field 'appearance.colour_order' must be 'BGR'")
-        precision = _get(app, "precision", str, path, "appearance.")
-        if precision != "fp32":
-            raise _fail(path, f"manifest field 'appearance.precision' must be fp32, got "
-                        f"{precision!r}")
-        int8 = app.get("int8")
-        int8_file = int8_sha = None
-        if int8 is not None:
-            if not isinstance(int8, dict):
-                raise _fail(path, "manifest field 'appearance.int8' must be an object or absent")
-            int8_file, int8_sha = _file_name(int8, path, "appearance.int8.")
-        arch = app.get("arch")
-        if arch is not None and not isinstance(arch, str):
-            raise _fail(path, "manifest field 'appearance.arch' must be a string or absent")
-        backbone = app.get("backbone") or {}
-        if not isinstance(backbone, dict) or not all(
-                isinstance(v, str) for k, v in backbone.items()
-                if k in ("arch", "init", "package", "version", "licence")):
-            raise _fail(path, "manifest field 'appearance.backbone' must be an object of "
-                        "strings (arch, init, package, version, licence) or absent")
-        features, stages = (_output_dim(app, key, path) for key in ("features_dim",
-                                                                     "stages_dim"))
-        if stages is not None and features is None:
-            raise _fail(path, "manifest field 'appearance.stages_dim' needs "
-                        "'appearance.features_dim' (the graph's outputs come in that order)")
-        spec = AppearanceSpec(name, sha, (size[0], size[1]),
-                              _number(app, "context", path, 0.0, 1.0, "appearance."), dim,
-                              precision, int8_file, int8_sha, dict(int8 or {}), arch,
-                              dict(backbone), features, stages)
+    spec = None if app is None else _appearance_spec(app, path)
     if ("app" in cues) != (spec is not None):
         raise _fail(path, "the appearance graph must be present exactly when 'app' is among "
                     f"the cues (cues {cues})")
