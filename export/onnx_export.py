@@ -295,6 +295,89 @@ def check_replaceable(out: str | os.PathLike) -> None:
                           "which xvmatch export did not write; choose a new folder")
 
 
+def _graph_parity(loaded: LoadedMatcher, folder: Path, records: dict, frames: dict,
+                  crops) -> dict:
+    """Torch against onnxruntime on the parity frames (per input setting) and, with an
+    appearance network, on the parity crops: ``{setting or "appearance": figures}``."""
+    parity: dict = {}
+    session = open_session(folder / records["matcher"]["file"], 1)
+    for setting, items in frames.items():
+        parity[setting] = compare_matcher(loaded.matcher, session, items, loaded.gamma)
+    if loaded.appearance is not None:
+        app_session = open_session(folder / records["appearance"]["file"], 1)
+        parity["appearance"] = appearance_parity(loaded.appearance, app_session, crops)
+    return parity
+
+
+def _check_parity(parity: dict) -> None:
+    """Raise :class:`ExportError` naming every setting over :data:`PARITY_TOLERANCE` or with
+    an assignment that differs, and the appearance network if over it."""
+    failed = [
+        f"{s}: max |cost diff| {p['max_abs_cost_diff']:.2e}, identical assignments "
+        f"{p['assignments_identical']}/{p['frames']}"
+        for s, p in parity.items()
+        if "frames" in p and (p["max_abs_cost_diff"] > PARITY_TOLERANCE
+                              or p["assignments_identical"] != p["frames"])
+    ]
+    if "appearance" in parity and parity["appearance"]["max_abs_descriptor_diff"] > \
+            PARITY_TOLERANCE:
+        failed.append(f"appearance: max |descriptor diff| "
+                      f"{parity['appearance']['max_abs_descriptor_diff']:.2e}")
+    if failed:
+        raise ExportError("ONNX parity failed (tolerance "
+                          f"{PARITY_TOLERANCE:g}): " + "; ".join(failed))
+
+
+def _bundle_manifest(loaded: LoadedMatcher, records: dict, parity: dict,
+                     source: Path | None) -> dict:
+    """The manifest of a bundle of the graphs ``records`` (with their hashes), exported from
+    ``loaded`` (its file ``source``, if any), with its parity figures."""
+    return {
+        "format": BUNDLE_FORMAT,
+        "format_version": BUNDLE_FORMAT_VERSION,
+        "opset": OPSET,
+        "created_by": _versions(),
+        "feature_version": FEATURE_VERSION,
+        "feature_config": loaded.feature_config.to_dict(),
+        "gamma": loaded.gamma,
+        "cues": list(loaded.matcher.cues),
+        "camera_cues": {"margin": METRIC_MARGIN, "beta": DEFAULT_BETA},
+        "matcher": records["matcher"],
+        "appearance": records.get("appearance"),
+        "parity": {"tolerance": PARITY_TOLERANCE, **parity},
+        "source": {"file": source.name if source else None,
+                   "sha256": _sha256(source) if source and source.is_file() else None},
+        "meta": loaded.meta,
+    }
+
+
+def _write_int8(folder: Path, manifest: dict, loaded: LoadedMatcher,
+                calibration: str | os.PathLike,
+                progress: Callable[[str], None] | None) -> None:
+    """Add the INT8 appearance network (:func:`~xvmatch.export.int8.add_int8`) and rewrite the
+    manifest; unusable calibration data, or no appearance network, is an :class:`ExportError`."""
+    if loaded.appearance is None:
+        raise ExportError("--int8 quantises the appearance network, and this matcher "
+                          "has none")
+    try:
+        add_int8(folder, manifest, loaded, Path(calibration), progress)
+    except ValueError as exc:  # unusable calibration data: this export's error
+        raise ExportError(str(exc)) from None
+    (folder / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+
+
+def _publish(folder: Path, out: Path) -> None:
+    """Move the finished bundle ``folder`` to ``out`` (replacing the bundle there, checked
+    again), with the permissions ``mkdir`` would give it."""
+    umask = os.umask(0o022)
+    os.umask(umask)
+    os.chmod(folder, 0o777 & ~umask)  # as mkdir would make it (mkdtemp's is 0700)
+    if out.exists():
+        check_replaceable(out)  # again: the folder may have changed during the export
+        shutil.rmtree(out)
+    os.replace(folder, out)
+
+
 def export_bundle(
     model: str | os.PathLike | LoadedMatcher,
     out: str | os.PathLike,
@@ -339,63 +422,15 @@ def export_bundle(
         frames, crops = parity_frames(loaded, parity_data, progress=progress)
         if progress:
             progress("checking parity (torch against onnxruntime)")
-        parity: dict = {}
-        session = open_session(tmp / records["matcher"]["file"], 1)
-        for setting, items in frames.items():
-            parity[setting] = compare_matcher(loaded.matcher, session, items, loaded.gamma)
-        if loaded.appearance is not None:
-            app_session = open_session(tmp / records["appearance"]["file"], 1)
-            parity["appearance"] = appearance_parity(loaded.appearance, app_session, crops)
-        failed = [
-            f"{s}: max |cost diff| {p['max_abs_cost_diff']:.2e}, identical assignments "
-            f"{p['assignments_identical']}/{p['frames']}"
-            for s, p in parity.items()
-            if "frames" in p and (p["max_abs_cost_diff"] > PARITY_TOLERANCE
-                                  or p["assignments_identical"] != p["frames"])
-        ]
-        if "appearance" in parity and parity["appearance"]["max_abs_descriptor_diff"] > \
-                PARITY_TOLERANCE:
-            failed.append(f"appearance: max |descriptor diff| "
-                          f"{parity['appearance']['max_abs_descriptor_diff']:.2e}")
-        if failed:
-            raise ExportError("ONNX parity failed (tolerance "
-                              f"{PARITY_TOLERANCE:g}): " + "; ".join(failed))
+        parity = _graph_parity(loaded, tmp, records, frames, crops)
+        _check_parity(parity)
         for record in records.values():
             record["sha256"] = _sha256(tmp / record["file"])
-        manifest = {
-            "format": BUNDLE_FORMAT,
-            "format_version": BUNDLE_FORMAT_VERSION,
-            "opset": OPSET,
-            "created_by": _versions(),
-            "feature_version": FEATURE_VERSION,
-            "feature_config": loaded.feature_config.to_dict(),
-            "gamma": loaded.gamma,
-            "cues": list(loaded.matcher.cues),
-            "camera_cues": {"margin": METRIC_MARGIN, "beta": DEFAULT_BETA},
-            "matcher": records["matcher"],
-            "appearance": records.get("appearance"),
-            "parity": {"tolerance": PARITY_TOLERANCE, **parity},
-            "source": {"file": source.name if source else None,
-                       "sha256": _sha256(source) if source and source.is_file() else None},
-            "meta": loaded.meta,
-        }
+        manifest = _bundle_manifest(loaded, records, parity, source)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
         if int8_calibration is not None:
-            if loaded.appearance is None:
-                raise ExportError("--int8 quantises the appearance network, and this matcher "
-                                  "has none")
-            try:
-                add_int8(tmp, manifest, loaded, Path(int8_calibration), progress)
-            except ValueError as exc:  # unusable calibration data: this export's error
-                raise ExportError(str(exc)) from None
-            (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # as mkdir would make it (mkdtemp's is 0700)
-        if out.exists():
-            check_replaceable(out)  # again: the folder may have changed during the export
-            shutil.rmtree(out)
-        os.replace(tmp, out)
+            _write_int8(tmp, manifest, loaded, int8_calibration, progress)
+        _publish(tmp, out)
         return manifest
     finally:
         if tmp.exists():
