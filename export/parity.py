@@ -66,6 +66,88 @@ def compare_matcher(matcher: CrossViewMatcher, session, frames: Sequence[Matcher
             "pairs": n_pairs}
 
 
+def _render_parity_data(folder: Path, seed: int) -> list[Path]:
+    """Render a small dataset of each scenario (2 scenes of 2 frames, seeds ``seed + k``)
+    into ``folder``; their folders."""
+    from xvmatch.datasets.synthetic_io import generate_dataset
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+
+    folders = []
+    for k, scenario in enumerate(("drone", "overview")):
+        scenario_folder = folder / scenario
+        config = SynthConfig(scenario=scenario, n_people=(2, 12))
+        generate_dataset(scenario_folder, config, n_scenes=2, n_frames=2, seed=seed + k)
+        folders.append(scenario_folder)
+    return folders
+
+
+def _crop_coster(loaded: LoadedMatcher, crops_all: list[np.ndarray]
+                 ) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """The trials' appearance coster: the matcher's network on the two views' crops, each
+    crop kept in ``crops_all`` (for the appearance parity)."""
+    from xvmatch.cues.matcher_inputs import appearance_cost
+    from xvmatch.formats.crops import box_crops
+
+    net = loaded.appearance
+
+    def coster(top_image, top_boxes, hor_image, hor_boxes):
+        size = net.preprocessing.crop_size
+        a = box_crops(top_image, top_boxes, size, loaded.crop_context)
+        b = box_crops(hor_image, hor_boxes, size, loaded.crop_context)
+        crops_all.extend([a, b])
+        with torch.inference_mode():
+            da = net.embed_crops(torch.from_numpy(a)).numpy() if len(a) else np.zeros(
+                (0, net.embedding_dim), np.float32)
+            db = net.embed_crops(torch.from_numpy(b)).numpy() if len(b) else np.zeros(
+                (0, net.embedding_dim), np.float32)
+        return appearance_cost(da, db)
+
+    return coster
+
+
+def _setting_frames(trials: list, loaded: LoadedMatcher) -> dict[str, list[MatcherInputs]]:
+    """The trials' matcher inputs in each input setting the matcher takes: ``boxes``,
+    ``images`` (with ``app``) and ``cameras`` (with ``ray`` or ``cheir``)."""
+    from xvmatch.cues.matcher_inputs import matcher_inputs
+    from xvmatch.geometry.camera import FrameCameras
+
+    names = tuple(loaded.matcher.cues)
+    settings: dict[str, list[MatcherInputs]] = {"boxes": []}
+    if "app" in names:
+        settings["images"] = []
+    if "ray" in names or "cheir" in names:
+        settings["cameras"] = []
+    config = loaded.feature_config
+    for t in trials:
+        size = t.cameras["ego"].image_size
+        cams = FrameCameras(t.cameras["top"], t.cameras["ego"])
+        plain = matcher_inputs(t.top_boxes, t.ego_boxes, size, config, names)
+        settings["boxes"].append(plain)
+        if "images" in settings:
+            settings["images"].append(matcher_inputs(t.top_boxes, t.ego_boxes, size, config,
+                                                     names, app=t.app))
+        if "cameras" in settings:
+            settings["cameras"].append(matcher_inputs(t.top_boxes, t.ego_boxes, size, config,
+                                                      names, cameras=cams, app=t.app))
+    return settings
+
+
+def _edge_cases(trials: list, loaded: LoadedMatcher) -> list[MatcherInputs]:
+    """Edge cases from the most crowded trial: one person per view, an empty view (either
+    one), and the whole frame beside them in a batch."""
+    from xvmatch.cues.matcher_inputs import matcher_inputs
+
+    names, config = tuple(loaded.matcher.cues), loaded.feature_config
+    t = max(trials, key=lambda t: len(t.top_boxes) * len(t.ego_boxes))
+    size = t.cameras["ego"].image_size
+    return [
+        matcher_inputs(t.top_boxes[:1], t.ego_boxes[:1], size, config, names),
+        matcher_inputs(t.top_boxes, t.ego_boxes[:0], size, config, names),
+        matcher_inputs(t.top_boxes[:0], t.ego_boxes, size, config, names),
+        matcher_inputs(t.top_boxes, t.ego_boxes, size, config, names),
+    ]
+
+
 def parity_frames(
     loaded: LoadedMatcher,
     data: str | os.PathLike | None = None,
@@ -86,75 +168,26 @@ def parity_frames(
         ``({setting: frames}, crops (C, H, W, 3) uint8)``; settings ``boxes`` always,
         ``images`` and ``cameras`` when the matcher takes those cues.
     """
-    from xvmatch.cues.matcher_inputs import appearance_cost, matcher_inputs
     from xvmatch.datasets.pair_trials import TrialConfig, dataset_trials
-    from xvmatch.datasets.synthetic_io import generate_dataset
-    from xvmatch.datasets.synthetic_scenes import SynthConfig
-    from xvmatch.formats.crops import box_crops
-    from xvmatch.geometry.camera import FrameCameras
 
-    names = tuple(loaded.matcher.cues)
     tmp = None
     folders: list[Path]
     if data is None:
         tmp = Path(tempfile.mkdtemp(prefix="xvmatch-parity-"))
-        folders = []
-        for k, scenario in enumerate(("drone", "overview")):
-            folder = tmp / scenario
-            config = SynthConfig(scenario=scenario, n_people=(2, 12))
-            generate_dataset(folder, config, n_scenes=2, n_frames=2, seed=seed + k)
-            folders.append(folder)
+        folders = _render_parity_data(tmp, seed)
     else:
         folders = [Path(data)]
     try:
         if progress:
             progress(f"parity frames from {', '.join(map(str, folders))}")
-        net = loaded.appearance
         crops_all: list[np.ndarray] = []
-
-        def coster(top_image, top_boxes, hor_image, hor_boxes):
-            size = net.preprocessing.crop_size
-            a = box_crops(top_image, top_boxes, size, loaded.crop_context)
-            b = box_crops(hor_image, hor_boxes, size, loaded.crop_context)
-            crops_all.extend([a, b])
-            with torch.inference_mode():
-                da = net.embed_crops(torch.from_numpy(a)).numpy() if len(a) else np.zeros(
-                    (0, net.embedding_dim), np.float32)
-                db = net.embed_crops(torch.from_numpy(b)).numpy() if len(b) else np.zeros(
-                    (0, net.embedding_dim), np.float32)
-            return appearance_cost(da, db)
-
+        coster = _crop_coster(loaded, crops_all) if loaded.appearance is not None else None
         trials = []
         for folder in folders:
-            trials += dataset_trials(folder, TrialConfig(),
-                                     coster=coster if net is not None else None)
-        settings: dict[str, list[MatcherInputs]] = {"boxes": []}
-        if "app" in names:
-            settings["images"] = []
-        if "ray" in names or "cheir" in names:
-            settings["cameras"] = []
-        config = loaded.feature_config
-        for t in trials:
-            size = t.cameras["ego"].image_size
-            cams = FrameCameras(t.cameras["top"], t.cameras["ego"])
-            plain = matcher_inputs(t.top_boxes, t.ego_boxes, size, config, names)
-            settings["boxes"].append(plain)
-            if "images" in settings:
-                settings["images"].append(matcher_inputs(t.top_boxes, t.ego_boxes, size, config,
-                                                         names, app=t.app))
-            if "cameras" in settings:
-                settings["cameras"].append(matcher_inputs(t.top_boxes, t.ego_boxes, size, config,
-                                                          names, cameras=cams, app=t.app))
+            trials += dataset_trials(folder, TrialConfig(), coster=coster)
+        settings = _setting_frames(trials, loaded)
         # Edge cases: one person per view, and an empty view padded in a batch.
-        t = max(trials, key=lambda t: len(t.top_boxes) * len(t.ego_boxes))
-        size = t.cameras["ego"].image_size
-        edge = [
-            matcher_inputs(t.top_boxes[:1], t.ego_boxes[:1], size, config, names),
-            matcher_inputs(t.top_boxes, t.ego_boxes[:0], size, config, names),
-            matcher_inputs(t.top_boxes[:0], t.ego_boxes, size, config, names),
-            matcher_inputs(t.top_boxes, t.ego_boxes, size, config, names),
-        ]
-        settings["edge cases"] = edge
+        settings["edge cases"] = _edge_cases(trials, loaded)
         crops = np.concatenate(crops_all) if crops_all else np.zeros((0, 1, 1, 3), np.uint8)
         return settings, crops
     finally:
