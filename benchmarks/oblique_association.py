@@ -6,7 +6,9 @@ Per scene (default settings: top pitch 20-90 degrees, one handheld camera not am
 view's people, 30-100 % overlap), every ``--step``-th frame of a ``--seconds`` clip, three
 methods, scored by the F1 of the cross-view pairs over all frames:
 
-* ``search``: today's ``associate`` (the CVMHAT spatial-distribution search, a nadir top view);
+* ``search``: today's ``associate`` (the CVMHAT spatial-distribution search, a nadir top view),
+  and ``search, video mode``: the same with ``--mode video`` (the camera location followed by its
+  top-view track id, the orientation window);
 * ``registered, true cameras``: the ground registration
   (:mod:`xvmatch.inference.matching.ground_association`) with the top camera and the handheld
   field of view known (the ceiling of its frame-by-frame part);
@@ -81,8 +83,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     config = ObliqueSceneConfig()
-    names = ("search", "registered, true cameras", "registered, from people",
-             "registered, from people, tracklet consensus")
+    names = ("search", "search, video mode", "registered, true cameras",
+             "registered, from people", "registered, from people, tracklet consensus")
     totals = {name: np.zeros(3) for name in names}
     counts: dict[str, list] = {name: [] for name in names}
     refused = 0
@@ -101,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         true_hfov = float(np.degrees(2 * np.arctan(0.5 * hor_size[0] / hor_cam.K[0, 0])))
         fps = config.fps
         search = associate_sequence(top, hor, float(hor_size[0]), frames=frames)
+        follow = associate_sequence(top, hor, float(hor_size[0]), frames=frames, search="follow")
         top_size = scene.top_cameras[0].image_size
         known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False)
         true = run_ground_association(top, hor, known, frames,
@@ -116,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
             voted = run_ground_association(top, hor, replace(options, consensus=True), frames,
                                            calib).pairs
         line = []
-        for name, pred in zip(names, (search, true, people, voted), strict=True):
+        for name, pred in zip(names, (search, follow, true, people, voted), strict=True):
             s = _score(pred, truth)
             totals[name] += s
             back = {f: [(top_back[a], hor_back[b]) for a, b in pred.get(f, [])] for f in frames}
@@ -125,8 +128,8 @@ def main(argv: list[str] | None = None) -> int:
         pitch = float(np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2])))
         print(f"scene {k:2d} top pitch {pitch:4.1f} overlap top "
               f"{scene.overlap_target['top']:.2f} hor {scene.overlap_target['hor1']:.2f}: "
-              f"pair F1 search {line[0]}, registered (true) {line[1]}, (from people) {line[2]}, "
-              f"(+ consensus) {line[3]}", flush=True)
+              f"pair F1 search {line[0]} (video {line[1]}), registered (true) {line[2]}, "
+              f"(from people) {line[3]}, (+ consensus) {line[4]}", flush=True)
     print(f"\n{args.scenes} scenes, every {args.step}th frame of {args.seconds:g} s, "
           f"{time.perf_counter() - t0:.0f} s; top calibration refused in {refused}")
     print("| method | CVIDF1 | pair F1 | TP | FP | FN |\n|---|---|---|---|---|---|")

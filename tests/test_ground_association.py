@@ -63,3 +63,29 @@ def test_same_input_same_pairs(scene) -> None:
     a = run_ground_association(scene.top, scene.hor["hor1"], options, frames)
     b = run_ground_association(scene.top, scene.hor["hor1"], options, frames)
     assert a.pairs == b.pairs and a.calibration == b.calibration
+
+
+def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> None:
+    from xvmatch.cli import main
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    paths = write_oblique_scene(scene, tmp_path, "s")
+    hor_size = "x".join(map(str, scene.hor_cameras["hor1"][0].image_size))
+    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+            "--image-size", hor_size, "--fps", "10"]
+    out = tmp_path / "pred.csv"
+    assert main([*base, "--top-image-size", "1920x1080", "--mode", "video",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "note: top view: oblique, tilt" in err and "consistent over the clip" in err
+    assert out.read_text().startswith("frame,top_id,hor_id\n")
+    # Forced oblique needs the top image size; bad values are one line.
+    for extra, message in ((["--top-view", "oblique"], "give --top-image-size WxH"),
+                           (["--hor-hfov", "5"], "--hor-hfov 5"),
+                           (["--fps", "0"], "--fps 0")):
+        assert main([*base, *extra, "--out", str(tmp_path / "x.csv")]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and message in lines[0]
+    # Without the top image size, auto is today's nadir path, as before.
+    assert main([*base, "--out", str(tmp_path / "n.csv"), "--quiet"]) == 0
+    assert "top view" not in capsys.readouterr().err

@@ -34,6 +34,7 @@ from xvmatch.commands._options import (
     read_boxes,
     spatial_params,
 )
+from xvmatch.commands._top_view import add_top_view_arguments, check_top_view, oblique_pairs
 from xvmatch.commands._types import box_id, worker_count
 from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset
 from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
@@ -83,6 +84,7 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         metavar="WxH",
         help=IMAGE_SIZE_HELP + "; with --hor-images or --cameras it must agree with them",
     )
+    add_top_view_arguments(p)
     add_offset_options(p, "Pairs are written under the horizontal frame numbers")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for --offset auto's estimate and for --model's features, "
@@ -114,7 +116,6 @@ def _keep_heap_memory() -> None:
 
 def _cmd_associate(args: argparse.Namespace) -> int:
     from xvmatch.cues.spatial_search import associate_sequence
-    from xvmatch.formats.mot_boxes import write_predictions
 
     _keep_heap_memory()
     params = spatial_params(args)
@@ -130,6 +131,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             raise UsageError(f"{', '.join(given)} apply to a learned matcher: add --model "
                              "default (or a bundle)")
     check_camera_id(args.camera_id, top, args.top)
+    check_top_view(args)
     learned = model_args(args)
     models = [m for m in args.model or () if m != "default"]
     check_outputs(
@@ -153,6 +155,11 @@ def _cmd_associate(args: argparse.Namespace) -> int:
 
         top = shift_frames(top, offset)
     frames = sorted(set(top) | set(hor))
+    oblique = oblique_pairs(args, top, hor, hor_size[0])
+    if oblique is not None:
+        pairs = oblique
+        _write(args, pairs, frames)
+        return 0
     progress = frame_progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
         pairs = associate_with_model(learned, top, hor, frames, progress, top_offset=offset,
@@ -172,8 +179,14 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
             draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
                           not args.no_labels)
+    _write(args, pairs, frames)
+    return 0
+
+
+def _write(args: argparse.Namespace, pairs: dict, frames: list[int]) -> None:
+    from xvmatch.formats.mot_boxes import write_predictions
+
     write_predictions(args.out, pairs)
     n_pairs = sum(len(p) for p in pairs.values())
     if not args.quiet:
         print(f"wrote {n_pairs} pairs over {len(frames)} frames to {args.out}", file=sys.stderr)
-    return 0
