@@ -1,6 +1,8 @@
 """The offset record ``xvmatch track`` writes beside its tracks (``offset.json``,
 ``{"offset": N}``: top frame = horizontal frame + N) and ``xvmatch evaluate --tracks`` reads
-back, checked field by field."""
+back, checked field by field; ``xvmatch associate --offset`` writes the same record beside its
+predictions (:func:`predictions_offset_path`: ``PRED.offset.json``), which ``xvmatch evaluate``
+reads."""
 
 from __future__ import annotations
 
@@ -10,10 +12,17 @@ import os
 from xvmatch.core.atomic_files import atomic_write_text
 from xvmatch.core.input_files import InputFileError, read_input_bytes
 
-__all__ = ["OFFSET_RECORD_BYTES", "read_offset_record", "write_offset_record"]
+__all__ = ["OFFSET_RECORD_BYTES", "predictions_offset_path", "read_offset_record",
+           "write_offset_record"]
 
 OFFSET_RECORD_BYTES = 4_096
 """Largest offset record read (``track``'s ``offset.json``, ``{"offset": N}``: under 30 bytes)."""
+
+
+def predictions_offset_path(predictions: str | os.PathLike) -> str:
+    """Where ``associate`` records the offset it applied to a predictions CSV: beside it,
+    ``PRED.offset.json`` (``pred.csv`` -> ``pred.csv.offset.json``)."""
+    return os.fspath(predictions) + ".offset.json"
 
 
 def write_offset_record(path: str | os.PathLike, offset: int) -> None:
@@ -38,11 +47,11 @@ def read_offset_record(path: str | os.PathLike, max_offset: int) -> int:
         raise ValueError(f"{exc}; {fix}") from None
     except ValueError as exc:  # JSON and UTF-8 errors, digits past Python's limit
         first = str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
-        raise ValueError(f"{where}: not the offset record that xvmatch track writes ({first}); "
-                         f"{fix}") from None
+        raise ValueError(f"{where}: not the offset record that xvmatch track or associate "
+                         f"writes ({first}); {fix}") from None
     if not isinstance(doc, dict) or "offset" not in doc:
-        raise ValueError(f"{where}: not the offset record that xvmatch track writes (expected "
-                         f'{{"offset": N}}); {fix}')
+        raise ValueError(f"{where}: not the offset record that xvmatch track or associate "
+                         f'writes (expected {{"offset": N}}); {fix}')
     offset = doc["offset"]
     if isinstance(offset, bool) or not isinstance(offset, int):
         raise ValueError(f"{where}: field 'offset' must be an integer number of frames, got "

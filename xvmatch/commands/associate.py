@@ -85,7 +85,8 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         help=IMAGE_SIZE_HELP + "; with --hor-images or --cameras it must agree with them",
     )
     add_top_view_arguments(p)
-    add_offset_options(p, "Pairs are written under the horizontal frame numbers")
+    add_offset_options(p, "Pairs are written under the horizontal frame numbers, the offset "
+                       "applied in OUT.offset.json, which evaluate reads")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for --offset auto's estimate and for --model's features, "
                    "1..64 (default 1; the same output for any K)")
@@ -134,8 +135,11 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     check_top_view(args)
     learned = model_args(args)
     models = [m for m in args.model or () if m != "default"]
+    from xvmatch.formats.offset_record import predictions_offset_path
+
     check_outputs(
-        [Output("--out", args.out), Output("--costs", args.costs),
+        [Output("--out", args.out), Output("--offset", predictions_offset_path(args.out)),
+         Output("--costs", args.costs),
          Output("--draw", args.draw, folder=True), *check_write_cameras(learned)],
         [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
          Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
@@ -158,7 +162,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     oblique = oblique_pairs(args, top, hor, hor_size[0])
     if oblique is not None:
         pairs = oblique
-        _write(args, pairs, frames)
+        _write(args, pairs, frames, offset)
         return 0
     progress = frame_progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
@@ -179,14 +183,25 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
             draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
                           not args.no_labels)
-    _write(args, pairs, frames)
+    _write(args, pairs, frames, offset)
     return 0
 
 
-def _write(args: argparse.Namespace, pairs: dict, frames: list[int]) -> None:
+def _write(args: argparse.Namespace, pairs: dict, frames: list[int], offset: int) -> None:
+    """The predictions and, when ``--offset`` was given, the offset applied beside them
+    (``PRED.offset.json``, which ``evaluate`` reads); a record an earlier run left there for
+    these predictions is removed when this run applied none."""
+    import os
+
     from xvmatch.formats.mot_boxes import write_predictions
+    from xvmatch.formats.offset_record import predictions_offset_path, write_offset_record
 
     write_predictions(args.out, pairs)
+    record = predictions_offset_path(args.out)
+    if args.offset != 0:
+        write_offset_record(record, offset)
+    elif os.path.isfile(record):
+        os.unlink(record)
     n_pairs = sum(len(p) for p in pairs.values())
     if not args.quiet:
         print(f"wrote {n_pairs} pairs over {len(frames)} frames to {args.out}", file=sys.stderr)

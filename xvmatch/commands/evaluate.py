@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from xvmatch.commands._options import UsageError, add_box_inputs, add_command_parser, read_boxes
 from xvmatch.commands._types import frame_offset
@@ -76,9 +77,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     top = read_boxes(args.top, args.duplicates)
     hor = read_boxes(args.hor, args.duplicates)
     pred = read_predictions(args.pred)
-    check_common_frames(top, hor, args.offset or 0, (args.top, args.hor), "nothing to score")
-    if args.offset:  # (None: not given, 0)
-        top = shift_frames(top, args.offset)
+    offset = _recorded_offset(args)
+    check_common_frames(top, hor, offset, (args.top, args.hor), "nothing to score")
+    if offset:
+        top = shift_frames(top, offset)
     try:
         counts = count_sequence(pred, top, hor)
     except ValueError as exc:
@@ -90,3 +92,19 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         print(format_table([(args.name or args.pred, scores)]))
     return 0
 
+
+def _recorded_offset(args: argparse.Namespace) -> int:
+    """``--offset`` when given, else the offset ``associate`` recorded beside the predictions
+    (``PRED.offset.json``, said in a note), else 0."""
+    import os
+
+    from xvmatch.commands._types import MAX_FRAME_OFFSET
+    from xvmatch.formats.offset_record import predictions_offset_path, read_offset_record
+
+    record = predictions_offset_path(args.pred)
+    if args.offset is not None or not os.path.isfile(record):
+        return args.offset or 0
+    offset = read_offset_record(record, MAX_FRAME_OFFSET)
+    print(f"xvmatch: note: applying the offset {offset} that associate recorded in {record} "
+          "(--offset N to override)", file=sys.stderr)
+    return offset
