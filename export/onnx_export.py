@@ -351,19 +351,20 @@ def _bundle_manifest(loaded: LoadedMatcher, records: dict, parity: dict,
     }
 
 
-def _write_int8(folder: Path, manifest: dict, loaded: LoadedMatcher,
+def _write_int8(tmp: Path, manifest: dict, loaded: LoadedMatcher,
                 calibration: str | os.PathLike,
                 progress: Callable[[str], None] | None) -> None:
-    """Add the INT8 appearance network (:func:`~xvmatch.export.int8.add_int8`) and rewrite the
-    manifest; unusable calibration data, or no appearance network, is an :class:`ExportError`."""
+    """Add the INT8 appearance network (:func:`~xvmatch.export.int8.add_int8`) to the bundle
+    being written in the temporary folder ``tmp`` and rewrite its manifest; unusable
+    calibration data, or no appearance network, is an :class:`ExportError`."""
     if loaded.appearance is None:
         raise ExportError("--int8 quantises the appearance network, and this matcher "
                           "has none")
     try:
-        add_int8(folder, manifest, loaded, Path(calibration), progress)
+        add_int8(tmp, manifest, loaded, Path(calibration), progress)
     except ValueError as exc:  # unusable calibration data: this export's error
         raise ExportError(str(exc)) from None
-    (folder / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+    (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
 
 
 def _publish(folder: Path, out: Path) -> None:
