@@ -1,7 +1,8 @@
 """The ``xvmatch evaluate`` command: score predicted pairs (CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9
 accuracy), or tracks with ``--tracks`` (:func:`xvmatch.commands.track.evaluate_tracks_command`), or
 a multi-camera association with ``--multicam``
-(:func:`xvmatch.commands.multicam.evaluate_multicam_command`)."""
+(:func:`xvmatch.commands.multicam.evaluate_multicam_command`), or each camera's tracks with global
+ids with ``--pred NAME=FILE ... --gt NAME=FILE ...`` (the same scores)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,10 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     )
     add_box_inputs(p)
     scored = p.add_mutually_exclusive_group(required=True)
-    scored.add_argument("--pred", help="prediction CSV (frame,top_id,hor_id)")
+    scored.add_argument("--pred", nargs="+", metavar="FILE",
+                        help="prediction CSV (frame,top_id,hor_id); or, with --gt, each "
+                        "camera's boxes as NAME=FILE (MOT format, the id a global person id, "
+                        "a tracker's output as it is), scored as --multicam is")
     scored.add_argument("--tracks", metavar="DIR",
                         help="tracks of xvmatch track (DIR/top.txt, DIR/hor.txt); per-view "
                         "metrics need TrackEval (pip install --no-deps trackeval; without it "
@@ -35,10 +39,12 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     scored.add_argument("--multicam", metavar="DIR",
                         help="output folder of xvmatch multicam, scored against --gt: the "
                         "trajectory-correspondence paper's P and R (Eqs. 13-14) per camera "
-                        "pair, box-pair P/R/F1, global IDF1, ground error with --ground-gt")
+                        "pair, box-pair P/R/F1, global IDF1, CVIDP/CVIDR/CVIDF1/CVMA over "
+                        "every camera pair, MOTA/IDF1/HOTA per camera (with TrackEval), "
+                        "ground error with --ground-gt")
     p.add_argument("--gt", nargs="+", metavar="NAME=FILE", default=None,
-                   help="with --multicam: each camera's ground-truth boxes, the id a global "
-                   "person id shared across cameras")
+                   help="with --multicam or --pred NAME=FILE: each camera's ground-truth "
+                   "boxes, the id a global person id shared across cameras")
     p.add_argument("--ground-gt", metavar="FILE", default=None,
                    help="with --multicam: true ground positions, CSV frame,global_id,X,Y")
     for action in p._actions:  # --top and --hor are not asked for with --multicam
@@ -56,12 +62,20 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    if args.multicam is not None:
+    if args.multicam is not None or args.gt is not None:
+        if args.multicam is None and args.pred is None:
+            raise UsageError("--gt: give --multicam DIR or --pred NAME=FILE ... with it")
         from xvmatch.commands.multicam import evaluate_multicam_command
 
         return evaluate_multicam_command(args)
+    if args.pred is not None:
+        if len(args.pred) != 1:
+            raise UsageError(f"--pred: give one prediction CSV (got {len(args.pred)} files); "
+                             "each camera's boxes as NAME=FILE need --gt NAME=FILE ...")
+        args.pred = args.pred[0]
     if args.top is None or args.hor is None:
-        raise UsageError("give --top and --hor (or --multicam DIR --gt NAME=FILE ...)")
+        raise UsageError("give --top and --hor (or --multicam DIR --gt NAME=FILE ..., or "
+                         "--pred NAME=FILE ... --gt NAME=FILE ...)")
     if args.tracks is not None:
         from xvmatch.commands.track import evaluate_tracks_command
 

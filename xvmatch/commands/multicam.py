@@ -539,35 +539,67 @@ def read_ground_csv(path: str) -> dict:
 
 
 def evaluate_multicam_command(args: argparse.Namespace) -> int:
-    """``xvmatch evaluate --multicam OUT --gt NAME=FILE ... [--ground-gt FILE]``."""
+    """``xvmatch evaluate --multicam OUT --gt NAME=FILE ... [--ground-gt FILE]``, or with
+    ``--pred NAME=FILE ...`` (one MOT box file per camera, ids global) instead of ``--multicam``:
+    trajectory P/R, box pairs, global IDF1, CVIDP/CVIDR/CVIDF1/CVMA over every camera pair and,
+    with TrackEval, MOTA/IDF1/HOTA per camera."""
     import json
-    from pathlib import Path
 
+    from xvmatch.metrics.multicam_cross_view import (
+        cross_view_scores,
+        format_cross_view,
+        view_tracking_scores,
+    )
     from xvmatch.metrics.multicam_metrics import format_multicam, multicam_scores
 
+    gt_files = named_paths(args.gt, "--gt")
+    if len(gt_files) < 2:
+        raise UsageError("--gt: give the ground truth of at least two cameras, NAME=FILE")
+    pred_files, folder = _predicted_files(args, gt_files)
+    pred = {name: read_boxes(path, args.duplicates) for name, path in pred_files.items()}
+    gt = {name: read_boxes(path, args.duplicates) for name, path in gt_files.items()}
+    ground_pred = ground_gt = None
+    if args.ground_gt is not None:
+        if folder is None:
+            raise UsageError("--ground-gt: needs --multicam DIR (its ground.csv); with --pred "
+                             "there are no predicted ground positions")
+        ground_gt = read_ground_csv(args.ground_gt)
+        ground_pred = read_ground_csv(os.path.join(folder, "ground.csv"))
+    scores = multicam_scores(pred, gt, ground_pred, ground_gt)
+    scores["cross_view"] = cross_view_scores(pred, gt)
+    tracking = view_tracking_scores(pred, gt)
+    scores["views"] = tracking
+    if args.json:
+        print(json.dumps(scores, indent=2))
+    else:
+        label = args.name or (folder if folder is not None else "multicam tracks")
+        print(format_multicam(scores, label))
+        print(format_cross_view(scores["cross_view"], tracking))
+    return 0
+
+
+def _predicted_files(args: argparse.Namespace, gt_files: dict[str, str]
+                     ) -> tuple[dict[str, str], str | None]:
+    """Each camera's predicted box file, in the order of ``--gt``, and the ``--multicam``
+    folder (None with ``--pred``)."""
+    from pathlib import Path
+
+    if args.multicam is None:
+        pred_files = named_paths(args.pred, "--pred")
+        if set(pred_files) != set(gt_files):
+            raise UsageError(f"--pred names the cameras {', '.join(pred_files)} but --gt "
+                             f"{', '.join(gt_files)}; give both for the same cameras")
+        return {name: pred_files[name] for name in gt_files}, None
     folder = Path(args.multicam)
     if not folder.is_dir():
         raise UsageError(f"--multicam {args.multicam}: no such folder (the --out of xvmatch "
                          "multicam)")
-    gt_files = named_paths(args.gt, "--gt")
-    if len(gt_files) < 2:
-        raise UsageError("--gt: give the ground truth of at least two cameras, NAME=FILE")
     written = sorted(p.stem for p in folder.glob("*.txt"))
-    pred, gt = {}, {}
+    out = {}
     for name, path in gt_files.items():
         mine = folder / f"{name}.txt"
         if not mine.is_file():
             raise UsageError(f"--gt {name}={path}: {mine} does not exist (multicam wrote "
                              f"{', '.join(written) or 'no box file'} there)")
-        pred[name] = read_boxes(str(mine), args.duplicates)
-        gt[name] = read_boxes(path, args.duplicates)
-    ground_pred = ground_gt = None
-    if args.ground_gt is not None:
-        ground_gt = read_ground_csv(args.ground_gt)
-        ground_pred = read_ground_csv(str(folder / "ground.csv"))
-    scores = multicam_scores(pred, gt, ground_pred, ground_gt)
-    if args.json:
-        print(json.dumps(scores, indent=2))
-    else:
-        print(format_multicam(scores, args.name or os.fspath(folder)))
-    return 0
+        out[name] = str(mine)
+    return out, os.fspath(folder)
