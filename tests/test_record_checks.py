@@ -499,9 +499,9 @@ def tracks(track_files, tmp_path) -> Path:
     ('{"offset": "' + "9" * 4000 + '"}', "field 'offset' must be an integer"),
     ('{"offset": ' + "9" * 4000 + "}", "field 'offset' must be in -100000..100000 frames (as "
      "--offset), got 99999999999999999999..."),
-    ("[3]", "not the offset record that xvmatch track writes"),
+    ("[3]", "not the offset record that xvmatch track or associate writes"),
     ('{"offset": 1}' + " " * 5000, "5,013 bytes, more than the 4,096 it may hold"),
-    ("\xff", "not the offset record that xvmatch track writes"),
+    ("\xff", "not the offset record that xvmatch track or associate writes"),
 ])
 def test_an_offset_record_out_of_range_is_one_line(track_files, tracks, capsys, record,
                                                    message) -> None:

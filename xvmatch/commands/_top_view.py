@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from xvmatch.commands._options import HOR_IMAGE_SIZE, UsageError
+from xvmatch.commands._types import float_in
 
 __all__ = ["add_top_view_arguments", "check_top_view", "oblique_pairs"]
 
@@ -25,22 +26,20 @@ def add_top_view_arguments(p: argparse.ArgumentParser) -> None:
         "view's boxes decide; it needs --top-image-size, else nadir; with --cameras, the "
         "cameras decide). Default auto")
     p.add_argument("--top-image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
-                   help="the top view's image size, for --top-view auto / oblique")
-    p.add_argument("--hor-hfov", type=float, default=70.0, metavar="DEG",
+                   help="the top view's image size, 8..65536 a side, for --top-view auto / "
+                   "oblique")
+    p.add_argument("--hor-hfov", default=70.0, metavar="DEG",
+                   type=float_in(20, 150, "a camera's horizontal field of view, degrees"),
                    help="the horizontal camera's field of view for --top-view oblique, degrees "
-                   "20-150 (default 70: a phone's, a drone's)")
-    p.add_argument("--fps", type=float, default=30.0,
+                   "in [20, 150] (default 70: a phone's, a drone's)")
+    p.add_argument("--fps", default=30.0,
+                   type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
                    help="frames per second of the frame numbers, for --top-view oblique's "
-                   "registration over time (default 30)")
+                   "registration over time, in [0.1, 1000] (default 30)")
 
 
 def check_top_view(args: argparse.Namespace) -> None:
     """``--top-view`` and its options, before any work."""
-    if not 20.0 <= args.hor_hfov <= 150.0:
-        raise UsageError(f"--hor-hfov {args.hor_hfov:g}: the field of view must be 20-150 "
-                         "degrees")
-    if not 0.1 <= args.fps <= 1000.0:
-        raise UsageError(f"--fps {args.fps:g}: must be 0.1-1000 frames per second")
     if args.top_view == "oblique":
         if args.top_image_size is None:
             raise UsageError("--top-view oblique calibrates the top camera from its people: "
