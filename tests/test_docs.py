@@ -14,7 +14,7 @@ from xvmatch.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-DOC_FILES = [README, *sorted((ROOT / "docs").glob("*.md"))]
+DOC_FILES = [README, *sorted((ROOT / "docs").rglob("*.md"))]
 PACKAGES = ("geometry", "datasets", "models", "training", "export", "inference", "evaluation",
             "xvmatch")
 README_MAX_LINES = 275
