@@ -79,6 +79,10 @@ def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> No
     err = capsys.readouterr().err
     assert "note: top view: oblique, tilt" in err and "consistent over the clip" in err
     assert out.read_text().startswith("frame,top_id,hor_id\n")
+    # Options of the nadir search are said to be unused on this path.
+    assert main([*base, "--top-image-size", "1920x1080", "--camera-id", "1",
+                 "--out", str(tmp_path / "c.csv")]) == 0
+    assert "(--camera-id: not used on this path)" in capsys.readouterr().err
     # Forced oblique needs the top image size: one line.
     assert main([*base, "--top-view", "oblique", "--out", str(tmp_path / "x.csv")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()

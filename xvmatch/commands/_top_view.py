@@ -74,7 +74,10 @@ def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
                                        consensus=args.mode == "video", seed=0)
     run = run_ground_association(top, hor, options, calibration=calib)
     if not args.quiet:
-        ignored = " (--model is not used on this path)" if args.model is not None else ""
+        unused = [name for name, given in (("--model", args.model is not None),
+                                           ("--camera-id", args.camera_id is not None),
+                                           ("--search", args.search is not None)) if given]
+        ignored = f" ({', '.join(unused)}: not used on this path)" if unused else ""
         mode = ("pairs made consistent over the clip with each view's track ids" if
                 options.consensus else "each frame on its own (--mode video: consistent over "
                 "the clip)")
