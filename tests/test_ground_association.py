@@ -56,6 +56,7 @@ def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
     assert scores[True] > 70.0
 
 
+@pytest.mark.slow
 def test_same_input_same_pairs(scene) -> None:
     options = GroundAssociationOptions(scene.top_cameras[0].image_size,
                                        scene.hor_cameras["hor1"][0].image_size, fps=10.0)
@@ -65,6 +66,7 @@ def test_same_input_same_pairs(scene) -> None:
     assert a.pairs == b.pairs and a.calibration == b.calibration
 
 
+@pytest.mark.slow
 def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> None:
     from xvmatch.cli import main
     from xvmatch.datasets.oblique_scenes import write_oblique_scene

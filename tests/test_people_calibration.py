@@ -83,6 +83,7 @@ def test_static_camera_within_targets(pitch, height, hfov, roll) -> None:
     assert abs(calib.hfov_deg - hfov) < 0.15 * hfov
 
 
+@pytest.mark.slow
 def test_wide_lens_known_field_of_view_within_targets() -> None:
     """A wide lens (85 degrees) the boxes alone read as about 73: given --hfov, the tilt and
     the horizon are within the targets."""
@@ -115,6 +116,7 @@ def test_given_field_of_view_is_kept_and_same_seed_same_answer() -> None:
     _check(camera, a, tilt_tol=1.0)
 
 
+@pytest.mark.slow
 def test_nadir_camera_is_recognised() -> None:
     cfg = SceneConfig(n_people=(6, 10), fps=FPS)
     people = simulate_walks(cfg, 50, np.random.default_rng(5))
