@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.formats.mot_boxes import stack_frames
 from xvmatch.geometry.people_calibration import (
     CalibrationError,
     calibrate_from_people,
@@ -25,13 +26,6 @@ from xvmatch.geometry.people_calibration import (
 )
 
 BANDS = ((20.0, 40.0), (40.0, 60.0), (60.0, 80.0), (80.0, 90.1))
-
-
-def _flat(frames: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    order = sorted(frames)
-    return (np.concatenate([np.full(len(frames[f].ids), f) for f in order]),
-            np.concatenate([frames[f].ids for f in order]),
-            np.concatenate([np.asarray(frames[f].boxes).reshape(-1, 4) for f in order]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
         size = camera.image_size
         pitch = float(np.degrees(np.arcsin(-camera.R[2, 2])))
         true_horizon = float(np.mean(horizon_line(camera)))
-        numbers, ids, boxes = _flat(scene.top)
+        numbers, ids, boxes = stack_frames(scene.top)
         strict = "yes"
         try:
             calibrate_from_people(numbers, boxes, size, ids=ids)

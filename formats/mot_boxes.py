@@ -49,6 +49,7 @@ __all__ = [
     "read_predictions",
     "scale_frames",
     "shift_frames",
+    "stack_frames",
     "write_mot_boxes",
     "write_predictions",
 ]
@@ -143,6 +144,17 @@ class FrameBoxes:
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
+
+
+def stack_frames(frames: Mapping[int, FrameBoxes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every box of ``{frame: FrameBoxes}`` in one table, frames ascending: the frame numbers
+    ``(N,)``, the ids ``(N,)`` and the boxes ``(N, 4)`` (empty arrays for no box)."""
+    order = sorted(f for f in frames if len(frames[f].ids))
+    if not order:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 4))
+    return (np.concatenate([np.full(len(frames[f].ids), f) for f in order]),
+            np.concatenate([np.asarray(frames[f].ids) for f in order]),
+            np.concatenate([np.asarray(frames[f].boxes, float).reshape(-1, 4) for f in order]))
 
 
 def shift_frames(frames: Mapping[int, FrameBoxes], offset: int) -> dict[int, FrameBoxes]:

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+from xvmatch.geometry.camera import Camera, look_rotation
 
 __all__ = [
     "BODY_WIDTH",
@@ -165,11 +165,8 @@ class PeopleCalibration:
     _camera: Camera = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        K = intrinsics_from_fov(self.width, self.height, 90.0)
-        K[0, 0] = K[1, 1] = self.focal
-        R = look_rotation(0.0, np.radians(self.tilt_deg), np.radians(self.roll_deg))
-        cam = Camera(K=K, R=R, c=np.array([0.0, 0.0, self.camera_height]), width=self.width,
-                     height=self.height)
+        cam = _pinhole(self.focal, np.radians(self.tilt_deg), np.radians(self.roll_deg),
+                       self.camera_height, (self.width, self.height))
         object.__setattr__(self, "_camera", cam)
 
     @property
@@ -438,12 +435,19 @@ def _fit(b: _Boxes, size: tuple[int, int], prior_f: float, starts: list[np.ndarr
     return best
 
 
-def _camera_of(params: np.ndarray, size: tuple[int, int]) -> Camera:
-    tilt, roll, log_f, log_hc = params[:4]
-    K = np.array([[np.exp(log_f), 0.0, 0.5 * size[0]], [0.0, np.exp(log_f), 0.5 * size[1]],
-                  [0.0, 0.0, 1.0]])
-    return Camera(K=K, R=look_rotation(0.0, tilt, roll), c=np.array([0.0, 0.0, np.exp(log_hc)]),
+def _pinhole(focal: float, tilt: float, roll: float, height: float,
+             size: tuple[int, int]) -> Camera:
+    """The model's camera: square pixels, the principal point at the image centre, above the
+    origin looking along +x (``tilt``, ``roll`` in radians)."""
+    K = np.array([[focal, 0.0, 0.5 * size[0]], [0.0, focal, 0.5 * size[1]], [0.0, 0.0, 1.0]])
+    return Camera(K=K, R=look_rotation(0.0, tilt, roll), c=np.array([0.0, 0.0, height]),
                   width=size[0], height=size[1])
+
+
+def _camera_of(params: np.ndarray, size: tuple[int, int]) -> Camera:
+    """The camera of the fit's parameters (:func:`_heights`)."""
+    tilt, roll, log_f, log_hc = params[:4]
+    return _pinhole(np.exp(log_f), tilt, roll, np.exp(log_hc), size)
 
 
 def _nadir(b: _Boxes, widths: np.ndarray, size: tuple[int, int], n_frames: int,

@@ -15,7 +15,7 @@ from xvmatch.cli import main
 from xvmatch.datasets.box_scene import SceneConfig, project_top_boxes, simulate_walks
 from xvmatch.datasets.oblique_scenes import project_view
 from xvmatch.formats.camera_io import CameraFileError, load_cameras, load_estimated
-from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
+from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames, write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 from xvmatch.geometry.people_calibration import (
     CalibrationError,
@@ -44,13 +44,6 @@ def _scene(pitch: float, height: float, hfov: float, roll: float = 0.0, seconds:
     return camera, frames
 
 
-def _flat(frames: dict[int, FrameBoxes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    order = sorted(frames)
-    return (np.concatenate([np.full(len(frames[f].ids), f) for f in order]),
-            np.concatenate([frames[f].ids for f in order]),
-            np.concatenate([np.asarray(frames[f].boxes).reshape(-1, 4) for f in order]))
-
-
 TILT_TOL = 3.5
 """Degrees. Issue 67's target is 3; the fit's focal length leans towards 65-73 degrees of
 field of view, which costs up to 3.4 on these scenes (measured, see docs/notes)."""
@@ -76,7 +69,7 @@ def _check(camera: Camera, calib, tilt_tol: float = TILT_TOL,
 ])
 def test_static_camera_within_targets(pitch, height, hfov, roll) -> None:
     camera, frames = _scene(pitch, height, hfov, roll)
-    numbers, ids, boxes = _flat(frames)
+    numbers, ids, boxes = stack_frames(frames)
     calib = calibrate_from_people(numbers, boxes, SIZE, ids=ids)
     _check(camera, calib)
     assert abs(calib.roll_deg - roll) < 1.0
@@ -88,7 +81,7 @@ def test_wide_lens_known_field_of_view_within_targets() -> None:
     """A wide lens (85 degrees) the boxes alone read as about 73: given --hfov, the tilt and
     the horizon are within the targets."""
     camera, frames = _scene(30.0, 10.0, 85.0, 3.0)
-    numbers, ids, boxes = _flat(frames)
+    numbers, ids, boxes = stack_frames(frames)
     alone = calibrate_from_people(numbers, boxes, SIZE, ids=ids)
     assert abs(alone.tilt_deg - 30.0) < 5.0
     given_fov = calibrate_from_people(numbers, boxes, SIZE, ids=ids, hfov_deg=85.0)
@@ -101,13 +94,13 @@ def test_wide_lens_known_field_of_view_within_targets() -> None:
 ])
 def test_more_static_cameras_within_targets(pitch, height, hfov, seed) -> None:
     camera, frames = _scene(pitch, height, hfov, seed=seed)
-    numbers, ids, boxes = _flat(frames)
+    numbers, ids, boxes = stack_frames(frames)
     _check(camera, calibrate_from_people(numbers, boxes, SIZE, ids=ids))
 
 
 def test_given_field_of_view_is_kept_and_same_seed_same_answer() -> None:
     camera, frames = _scene(30.0, 10.0, 70.0)
-    numbers, ids, boxes = _flat(frames)
+    numbers, ids, boxes = stack_frames(frames)
     a = calibrate_from_people(numbers, boxes, SIZE, ids=ids, hfov_deg=70.0, seed=3)
     b = calibrate_from_people(numbers, boxes, SIZE, ids=ids, hfov_deg=70.0, seed=3)
     assert a == b
@@ -122,7 +115,7 @@ def test_nadir_camera_is_recognised() -> None:
     people = simulate_walks(cfg, 50, np.random.default_rng(5))
     camera = Camera(intrinsics_from_fov(*SIZE, 60.0), look_rotation(0.3, np.pi / 2), [0, 0, 40.0],
                     *SIZE)
-    numbers, ids, boxes = _flat(project_top_boxes(people, camera, cfg))
+    numbers, ids, boxes = stack_frames(project_top_boxes(people, camera, cfg))
     calib = calibrate_from_people(numbers, boxes, SIZE, ids=ids)
     assert calib.kind == "nadir" and calib.tilt_deg == 90.0
     assert calib.to_record()["horizon_rows"] is None
@@ -131,7 +124,7 @@ def test_nadir_camera_is_recognised() -> None:
 
 def test_too_few_boxes_refused_with_what_to_give() -> None:
     _, frames = _scene(30.0, 10.0, 70.0, seconds=0.3)
-    numbers, ids, boxes = _flat(frames)
+    numbers, ids, boxes = stack_frames(frames)
     with pytest.raises(CalibrationError,
                        match=r"cam\.txt: .* the calibration needs \d+.*; give its camera with"):
         calibrate_from_people(numbers, boxes, SIZE, ids=ids, name="cam.txt")

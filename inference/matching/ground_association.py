@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
+from xvmatch.formats.mot_boxes import stack_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     PeopleCalibration,
@@ -34,6 +35,7 @@ __all__ = [
     "GroundAssociation",
     "GroundAssociationOptions",
     "run_ground_association",
+    "run_top_view",
     "top_calibration",
 ]
 
@@ -74,21 +76,12 @@ class GroundAssociation:
     summary: str
 
 
-def _flat(frames: Mapping) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    order = sorted(f for f in frames if len(frames[f].ids))
-    if not order:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 4))
-    return (np.concatenate([np.full(len(frames[f].ids), f) for f in order]),
-            np.concatenate([np.asarray(frames[f].ids) for f in order]),
-            np.concatenate([np.asarray(frames[f].boxes, float).reshape(-1, 4) for f in order]))
-
-
 def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
                     name: str = "the top view") -> PeopleCalibration:
     """The top camera from its people, loose rather than refused (see the module docstring);
     raises :class:`~xvmatch.geometry.people_calibration.CalibrationError` only for too few
     boxes."""
-    frames, ids, boxes = _flat(top)
+    frames, ids, boxes = stack_frames(top)
     calib = calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
                                   strict=False)
     # Rounded far below what matters (a millidegree, a hundredth of a pixel, a tenth of a
@@ -148,3 +141,17 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         pairs = gr.tracklet_consensus(pairs, present)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib))
+
+
+def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
+                 top_view: str = "auto", name: str = "the top view") -> GroundAssociation | None:
+    """``--top-view auto|oblique``: the top camera calibrated from its people, then this run;
+    None when ``auto`` finds the top view looking straight down (today's nadir path serves
+    it)."""
+    if top_view not in ("auto", "oblique"):
+        raise ValueError(f"top_view must be auto or oblique here, got {top_view!r}")
+    calib = top_calibration(top, options.top_size, options.seed, name)
+    if calib.kind == "nadir" and top_view == "auto":
+        return None
+    return run_ground_association(top, hor, options, calibration=calib)
+

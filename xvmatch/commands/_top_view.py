@@ -58,21 +58,19 @@ def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
     from xvmatch.formats.box_image_size import check_boxes_in_image
     from xvmatch.inference.matching.ground_association import (
         GroundAssociationOptions,
-        run_ground_association,
-        top_calibration,
+        run_top_view,
     )
 
     check_boxes_in_image(top, args.top_image_size, args.top, "--top-image-size")
-    calib = top_calibration(top, args.top_image_size, name=args.top)
-    if calib.kind == "nadir" and args.top_view == "auto":
+    options = GroundAssociationOptions(top_size=args.top_image_size, hor_size=hor_size,
+                                       hor_hfov_deg=args.hor_hfov, fps=args.fps,
+                                       consensus=args.mode == "video", seed=0)
+    run = run_top_view(top, hor, options, args.top_view, name=args.top)
+    if run is None:
         if not args.quiet:
             print("xvmatch: note: top view: looking straight down (its boxes are as wide as "
                   "tall); associating as over a nadir drone", file=sys.stderr)
         return None
-    options = GroundAssociationOptions(top_size=args.top_image_size, hor_size=hor_size,
-                                       hor_hfov_deg=args.hor_hfov, fps=args.fps,
-                                       consensus=args.mode == "video", seed=0)
-    run = run_ground_association(top, hor, options, calibration=calib)
     if not args.quiet:
         unused = [name for name, given in (("--model", args.model is not None),
                                            ("--camera-id", args.camera_id is not None),

@@ -118,6 +118,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from xvmatch.core.atomic_files import atomic_write_bytes
     from xvmatch.formats.box_image_size import check_boxes_in_image
     from xvmatch.formats.camera_io import save_cameras
+    from xvmatch.formats.mot_boxes import stack_frames
     from xvmatch.geometry.people_calibration import calibrate_from_people
 
     check_outputs([Output("--out", args.out), Output("--draw", args.draw)],
@@ -128,10 +129,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
                          else "--image")
     if args.frame is not None and args.frame not in frames:
         raise ValueError(f"--frame {args.frame}: {args.boxes} has no box in that frame")
-    order = sorted(frames)
-    numbers = np.concatenate([np.full(len(frames[f].ids), f) for f in order])
-    ids = np.concatenate([np.asarray(frames[f].ids) for f in order])
-    boxes = np.concatenate([np.asarray(frames[f].boxes, float).reshape(-1, 4) for f in order])
+    numbers, ids, boxes = stack_frames(frames)
     calib = calibrate_from_people(numbers, boxes, size, ids=ids, hfov_deg=args.hfov,
                                   seed=args.seed, name=os.fspath(args.boxes))
     save_cameras(args.out, {args.name: calib.camera}, estimated={args.name: calib.to_record()})
@@ -141,7 +139,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         from xvmatch.viz.calibration_drawing import draw_calibration
 
         frame = args.frame if args.frame is not None else max(
-            order, key=lambda f: (len(frames[f].ids), -f))
+            sorted(frames), key=lambda f: (len(frames[f].ids), -f))
         canvas = image if image is not None else np.full((size[1], size[0], 3), 96, np.uint8)
         shown = np.asarray(frames[frame].boxes, float).reshape(-1, 4)
         feet = calib.ground_points(np.column_stack([shown[:, 0] + 0.5 * shown[:, 2],
