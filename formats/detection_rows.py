@@ -16,14 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from xvmatch.core.atomic_files import atomic_write_text
-from xvmatch.formats.mot_boxes import (
-    _BOX_COLUMNS,
-    FrameBoxes,
-    _parse_table,
-    _read_text,
-    _require_rows,
-    _split_lines,
-)
+from xvmatch.formats.mot_boxes import FrameBoxes, _read_box_table, _require_rows
 
 __all__ = ["DetectionRows", "read_detection_rows", "write_track_rows"]
 
@@ -61,16 +54,20 @@ class DetectionRows:
         return out
 
 
-def read_detection_rows(path: str | os.PathLike) -> DetectionRows:
+def read_detection_rows(path: str | os.PathLike, *, min_score: float | None = None,
+                        first_frame: int = 1) -> DetectionRows:
     """Read a ``frame,id,x,y,w,h[,...]`` file keeping every row; ids may repeat.
+
+    A header line is skipped; ``min_score`` and ``first_frame`` are those of
+    :func:`xvmatch.formats.mot_boxes.read_mot_boxes` (the rows dropped are not in ``lines``;
+    frames are 1-based in ``frames`` while ``lines`` keep the file's text).
 
     Raises:
         BoxFileError: as :func:`xvmatch.formats.mot_boxes.read_mot_boxes` (missing file, no
             boxes, bad field, ``w``/``h`` <= 0, ...), naming file and line; line numbers count
             blank lines too, as an editor does.
     """
-    all_lines = _split_lines(path, _read_text(path))
-    data = _parse_table(path, all_lines, 1, _BOX_COLUMNS, False)
+    all_lines, data = _read_box_table(path, min_score, first_frame)
     _require_rows(path, data)
     lines = [ln for ln in all_lines if ln.strip()]
     frames = data[:, 0].astype(np.int64)

@@ -2,7 +2,10 @@
 
 Box files (one per sequence and view, e.g. the CVMHAT ``NAME_top.txt`` / ``NAME_hor.txt``) hold one
 box per line, ``frame,id,x,y,w,h[,...]``: ``frame`` is 1-based, ``(x, y)`` is the top-left corner
-in pixels and ``(w, h)`` the size; trailing fields (``-1,-1,-1,-1`` in MOT files) are ignored.
+in pixels and ``(w, h)`` the size; trailing fields (``-1,-1,-1,-1`` in MOT files) are ignored,
+but for the detector's score (MOT's 7th field, ``conf``) when ``min_score`` drops the weak boxes.
+A first line of column names is skipped, and a file that counts frames from 0 is read with
+``first_frame=0`` (its frames become 1-based), each with a :class:`BoxFileNote`.
 Prediction files hold the cross-view pairs of an association run, ``frame,top_id,hor_id`` with that
 header, one matched pair per line.
 
@@ -40,7 +43,9 @@ __all__ = [
     "FALSE_POSITIVE",
     "MAX_PIXELS",
     "PREDICTION_HEADER",
+    "SCORE_NAMES",
     "BoxFileError",
+    "BoxFileNote",
     "FrameBoxes",
     "align_frames",
     "align_views",
@@ -97,6 +102,17 @@ class BoxFileError(ValueError):
         super().__init__(" ".join(str(message).splitlines()))
         self.path = path
         self.line = line
+
+
+class BoxFileNote(UserWarning):
+    """Something the box reader did that a user should hear of but that is no problem: a
+    header line skipped, rows dropped by ``min_score``, frames counted from 0. The CLI prints
+    these as ``xvmatch: note: ...`` lines (:func:`xvmatch.commands._options.read_boxes`)."""
+
+
+SCORE_NAMES = ("conf", "confidence", "score", "det_score")
+"""Header names (any case) of the detector's score column; without a header the score is the
+7th field, MOTChallenge's ``conf`` (``frame,id,bb_left,bb_top,bb_width,bb_height,conf,...``)."""
 
 
 def _error(path: str | os.PathLike, line: int | None, what: str) -> BoxFileError:
@@ -245,12 +261,15 @@ class _Column:
     """One leading column of a table: its name and what values it admits."""
 
     name: str
-    kind: str  # "frame" (integer >= 1), "id" (integer), "coord" (|v| <= MAX_PIXELS),
-    # "size" (0 < v <= MAX_PIXELS)
+    kind: str  # "frame" (integer >= 1), "box_frame" (the same in a box file, whose message
+    # names --first-frame), "frame0" (integer >= 0), "id" (integer), "coord" (|v| <=
+    # MAX_PIXELS), "size" (0 < v <= MAX_PIXELS), "number" (any finite number)
 
+
+_FRAME_KINDS = ("frame", "box_frame", "frame0")
 
 _BOX_COLUMNS = (
-    _Column("frame", "frame"),
+    _Column("frame", "box_frame"),
     _Column("id", "id"),
     _Column("x", "coord"),
     _Column("y", "coord"),
@@ -314,7 +333,8 @@ def _columns_ok(data: np.ndarray, columns: Sequence[_Column]) -> bool:
         return False
     for k, col in enumerate(columns):
         values = data[:, k]
-        if col.kind == "frame" and not (_is_int(values) & (values >= 1)).all():
+        if col.kind in _FRAME_KINDS and not (
+                _is_int(values) & (values >= (col.kind != "frame0"))).all():
             return False
         if col.kind == "id" and not _is_int(values).all():
             return False
@@ -380,12 +400,17 @@ def _check_value(text: str, col: _Column) -> str | float:
     value = float(text)
     if not np.isfinite(value):
         return f"{col.name} must be finite, got {text!r}"
-    if col.kind in ("frame", "id"):
+    if col.kind in (*_FRAME_KINDS, "id"):
         problem = _integer_problem(text, value, col)
         if problem:
             return problem
         if col.kind == "frame" and value < 1:
             return f"frame must be >= 1 (frames are 1-based), got {text!r}"
+        if col.kind == "box_frame" and value < 1:
+            return (f"frame must be >= 1 (frames are 1-based, as in MOTChallenge; a file that "
+                    f"counts from 0 needs --first-frame 0), got {text!r}")
+        if col.kind == "frame0" and value < 0:
+            return f"frame must be >= 0 (--first-frame 0: frames count from 0), got {text!r}"
     if col.kind == "size" and value <= 0:
         return f"box size {col.name} must be > 0, got {text!r}"
     if col.kind in ("coord", "size") and abs(value) > MAX_PIXELS:
@@ -500,13 +525,117 @@ def _check_repeats(
     return np.delete(data, rows, axis=0)
 
 
+# A header field: a column name such as frame, id, bb_left, "bb width", conf (a leading # too).
+_HEADER_NAME = re.compile(r"#?\s*[A-Za-z_][\w .\-]*")
+
+
+def _header_fields(lines: Sequence[str]) -> tuple[int, list[str]] | None:
+    """``(index, names)`` of a header line: the first non-blank line when its first six fields
+    are not numbers and every field looks like a column name (``frame,id,x,y,w,h,conf``);
+    None when the first line is data (or bad data, which the parser then names)."""
+    for index, line in enumerate(lines):
+        if not line.strip():
+            continue
+        names = [f.strip() for f in line.split(",")]
+        if len(names) >= 6 and all(_HEADER_NAME.fullmatch(n) and not _NUMBER.fullmatch(n)
+                                   for n in names[:6]) and all(
+                _HEADER_NAME.fullmatch(n) or not n for n in names[6:]):
+            return index, [n.lstrip("#").strip().lower() for n in names]
+        return None
+    return None
+
+
+def _read_box_table(path: str | os.PathLike, min_score: float | None, first_frame: int
+                    ) -> tuple[list[str], np.ndarray]:
+    """The lines of a box file and its ``(M, 6)`` table ``frame,id,x,y,w,h``, frames 1-based.
+
+    A header line is skipped (a :class:`BoxFileNote`); with ``first_frame == 0`` frame ``f`` is
+    read as ``f + 1`` (a note); with ``min_score`` the rows whose score (the 7th field, or the
+    column a header names ``conf``/``score``) is below it are dropped (a note says how many).
+    Lines skipped or dropped are blanked, so the returned lines' non-blank ones are the table's
+    rows and keep their file line numbers."""
+    if first_frame not in (0, 1):
+        raise ValueError(f"first_frame must be 0 or 1, got {first_frame!r}")
+    if min_score is not None and not math.isfinite(min_score):
+        raise ValueError(f"min_score must be a finite number, got {min_score!r}")
+    lines = _split_lines(path, _read_text(path))
+    header = _header_fields(lines)
+    names: list[str] = []
+    if header is not None:
+        index, names = header
+        warnings.warn(BoxFileNote(f"{os.fspath(path)}:{index + 1}: header line skipped "
+                                  f"({lines[index].strip()[:60]!r})"), stacklevel=3)
+        lines = [*lines[:index], "", *lines[index + 1:]]
+    columns = list(_BOX_COLUMNS)
+    if first_frame == 0:
+        columns[0] = _Column("frame", "frame0")
+    score = None
+    if min_score is not None:
+        named = [k for k, n in enumerate(names) if n in SCORE_NAMES and k >= 6]
+        score = named[0] if named else 6
+        columns += [_Column(names[k] if k < len(names) else f"field {k + 1}", "number")
+                    for k in range(6, score)]
+        columns.append(_Column("score", "number"))
+        _require_score_field(path, lines, score)
+    data = _parse_table(path, lines, 1, columns, False)
+    if score is not None and data.shape[0]:
+        lines, data = _drop_low_scores(path, lines, data, score, float(min_score))
+    if first_frame == 0 and data.shape[0]:
+        data[:, 0] += 1
+        warnings.warn(BoxFileNote(f"{os.fspath(path)}: frames counted from 0 (--first-frame 0):"
+                                  " frame f is read as f + 1, and what xvmatch writes counts "
+                                  "from 1"), stacklevel=3)
+    return lines, np.ascontiguousarray(data[:, :6])
+
+
+def _require_score_field(path: str | os.PathLike, lines: Sequence[str], score: int) -> None:
+    """Refuse ``min_score`` on a file whose first row has no field ``score`` (0-based): the
+    file holds no detector scores to compare with."""
+    for lineno, line in enumerate(lines, start=1):
+        if line.strip():
+            count = len(line.split(","))
+            if count <= score:
+                raise _error(path, lineno, f"--min-score needs the detector's score in field "
+                             f"{score + 1} (MOT: frame,id,x,y,w,h,conf,...), but the line has "
+                             f"{count} fields: the file has no score column; drop --min-score")
+            return
+
+
+def _drop_low_scores(path: str | os.PathLike, lines: list[str], data: np.ndarray, score: int,
+                     min_score: float) -> tuple[list[str], np.ndarray]:
+    """The rows whose score is at least ``min_score``, their dropped lines blanked; a note
+    says how many were dropped. A file whose scores are all -1 (MOT's "not given") or whose
+    every row falls below is refused."""
+    scores = data[:, score]
+    where = os.fspath(path)
+    if (scores == -1).all():
+        raise _error(path, None, f"field {score + 1} is -1 on every row (MOT's 'no score'): the "
+                     "file holds no detector scores; drop --min-score")
+    keep = scores >= min_score
+    if not keep.any():
+        raise _error(path, None, f"--min-score {min_score:g} drops every box (scores "
+                     f"{scores.min():g}..{scores.max():g} in field {score + 1})")
+    dropped = int((~keep).sum())
+    if dropped:
+        rows = np.flatnonzero([bool(ln.strip()) for ln in lines])[~keep]
+        lines = list(lines)
+        for row in rows.tolist():
+            lines[row] = ""
+    warnings.warn(BoxFileNote(f"{where}: --min-score {min_score:g} dropped {dropped} of "
+                              f"{scores.size} boxes (score in field {score + 1})"), stacklevel=4)
+    return lines, data[keep]
+
+
 def read_mot_boxes(
-    path: str | os.PathLike, *, duplicates: str = "error", allow_empty: bool = False
+    path: str | os.PathLike, *, duplicates: str = "error", allow_empty: bool = False,
+    min_score: float | None = None, first_frame: int = 1,
 ) -> dict[int, FrameBoxes]:
     """Read a MOTChallenge-style box file, ``frame,id,x,y,w,h[,...]`` per line.
 
     Lines end in ``\\n`` or ``\\r\\n`` and are numbered as editors number them; blank lines
-    are skipped; fields after the sixth are ignored. Integer-valued floats such as
+    are skipped; fields after the sixth are ignored (but the score, with ``min_score``). A
+    first line of column names (``frame,id,x,y,w,h,conf``: its first six fields not numbers)
+    is skipped with a :class:`BoxFileNote`. Integer-valued floats such as
     ``5.0`` are accepted for ``frame`` and ``id`` (some MOT tools write them), ``5.5`` is not.
 
     Args:
@@ -519,6 +648,11 @@ def read_mot_boxes(
             that continues the track in the neighbouring frames.
         allow_empty: accept a file without boxes (an empty result) instead of raising; only for
             files that may legitimately hold nothing, such as a tracker's output.
+        min_score: drop the boxes whose detector score is below it (the 7th field, MOT's
+            ``conf``, or the column a header names ``conf``/``score``), with a
+            :class:`BoxFileNote` saying how many; None (default) keeps every box.
+        first_frame: 1 (default, MOTChallenge) or 0 for a file that counts frames from 0,
+            read as ``frame + 1`` (with a note) so that the result is 1-based either way.
 
     Returns:
         ``{frame: FrameBoxes}`` with keys in ascending order; within a frame, boxes keep the file
@@ -532,13 +666,14 @@ def read_mot_boxes(
             that is not an integer >= 1, a non-integer id, a frame or id beyond 2**53 in size
             (not read exactly), ``w`` or ``h`` <= 0, a coordinate or size beyond
             :data:`MAX_PIXELS`, or (unless ``duplicates="first"``) the same ``(frame, id)``
-            twice. The message names file and line.
-        ValueError: ``duplicates`` is neither ``"error"`` nor ``"first"``.
+            twice; with ``min_score``, no score field, scores all -1 (MOT's "none") or every
+            box below it. The message names file and line.
+        ValueError: ``duplicates`` is neither ``"error"`` nor ``"first"``, ``first_frame``
+            neither 0 nor 1, or ``min_score`` not finite.
     """
     if duplicates not in ("error", "first"):
         raise ValueError(f"duplicates must be 'error' or 'first', got {duplicates!r}")
-    lines = _split_lines(path, _read_text(path))
-    data = _parse_table(path, lines, 1, _BOX_COLUMNS, False)
+    lines, data = _read_box_table(path, min_score, first_frame)
     if not allow_empty:
         _require_rows(path, data)
     data = _check_repeats(path, lines, 1, data, 1, "id", drop=duplicates == "first")

@@ -245,6 +245,8 @@ OPTIONS = [
     *(Option("associate", f, "float", lo, hi, h, open_low=ol, open_high=oh)
       for f, lo, hi, h, ol, oh in SPATIAL),
     Option("evaluate", "--offset", "int", -100_000, 100_000, "|N| <= 100000"),
+    Option("associate", "--min-score", "float", -1e6, 1e6, "in [-1e6, 1e6]"),
+    *(Option(c, "--first-frame", "int", 0, 1, "{0,1}") for c in ("associate", "evaluate")),
     Option("noise", "--seed", "int", *SEED, "0..2**32-1"),
     Option("noise", "--jitter", "float", 0, 1, "in [0, 1]"),
     Option("noise", "--miss", "float", 0, 1, "in [0, 1]"),

@@ -1,12 +1,13 @@
 """Options and helpers shared by the ``xvmatch`` commands (every ``cli_*`` module uses them).
 
-Each option is defined here once: the box inputs (``--top``, ``--hor``, ``--duplicates``), the
-spatial-distribution parameters (``--rho --lam --tau --dtheta --fov``, read back by
+Each option is defined here once: the box inputs (``--top``, ``--hor``, ``--duplicates``; how
+box files are read, ``--min-score`` and ``--first-frame``, lives in
+:mod:`xvmatch.commands._box_reading` and is re-exported here), the spatial-distribution parameters (``--rho --lam --tau --dtheta --fov``, read back by
 :func:`spatial_params`), the image inputs (``--top-images``, ``--hor-images``, checked together
 by :func:`check_images_together`), and the horizontal ``--image-size``'s type and help. With them
 come the sub-command parser (:func:`add_command_parser`), the progress bar
-(:func:`progress_bar`), the box reader that prints the reader's warnings
-(:func:`read_boxes`) and :class:`UsageError`. Output paths are checked by
+(:func:`progress_bar`), the box readers that print the reader's notes and warnings
+(:func:`read_boxes`, :func:`read_detections`) and :class:`UsageError`. Output paths are checked by
 :mod:`xvmatch.core.output_paths`; :func:`image_inputs` lists the images as its inputs.
 
 Nothing here imports :mod:`xvmatch.cli` (the root imports the command modules, never the
@@ -19,23 +20,34 @@ import argparse
 import sys
 from collections.abc import Callable, Iterable, Mapping
 
+from xvmatch.commands._box_reading import (
+    BoxReading,
+    add_box_reading_options,
+    box_reading,
+    read_boxes,
+    read_detections,
+)
 from xvmatch.commands._types import float_in, image_size
 from xvmatch.core.output_paths import Input
 
 __all__ = [
     "HOR_IMAGE_SIZE",
     "IMAGE_SIZE_HELP",
+    "BoxReading",
     "UsageError",
     "add_box_inputs",
+    "add_box_reading_options",
     "add_command_parser",
     "add_image_options",
     "add_spatial_options",
+    "box_reading",
     "check_camera_id",
     "check_images_together",
     "frame_progress",
     "image_inputs",
     "progress_bar",
     "read_boxes",
+    "read_detections",
     "spatial_params",
 ]
 
@@ -57,9 +69,10 @@ def add_command_parser(subparsers, name: str, help_text: str, example: str,
     )
 
 
-def add_box_inputs(parser: argparse.ArgumentParser) -> None:
+def add_box_inputs(parser: argparse.ArgumentParser, reading: bool = False) -> None:
     """``--top``, ``--hor`` (MOT box files) and ``--duplicates`` (associate, evaluate,
-    offset)."""
+    offset); with ``reading``, :func:`add_box_reading_options` too (the command then reads
+    its files with :func:`box_reading`)."""
     parser.add_argument("--top", required=True, help="top-view boxes (MOT format)")
     parser.add_argument("--hor", required=True, help="horizontal-view boxes (MOT format)")
     parser.add_argument(
@@ -69,21 +82,8 @@ def add_box_inputs(parser: argparse.ArgumentParser) -> None:
         help="a repeated (frame, id) in a box file: keep the first box with a warning "
         "(default; the real CVMHAT files have a few) or stop with an error",
     )
-
-
-def read_boxes(path: str, duplicates: str):
-    """``{frame: FrameBoxes}`` of a MOT box file; the reader's warnings are printed on stderr
-    as ``xvmatch: warning: ...`` lines."""
-    import warnings
-
-    from xvmatch.formats.mot_boxes import read_mot_boxes
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        frames = read_mot_boxes(path, duplicates=duplicates)
-    for w in caught:
-        print(f"xvmatch: warning: {w.message}", file=sys.stderr)
-    return frames
+    if reading:
+        add_box_reading_options(parser)
 
 
 def check_camera_id(camera_id: int | None, top: Mapping, path: str) -> None:

@@ -28,6 +28,7 @@ from xvmatch.commands._options import (
     add_box_inputs,
     add_command_parser,
     add_spatial_options,
+    box_reading,
     check_camera_id,
     frame_progress,
     image_inputs,
@@ -54,7 +55,7 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         "matcher (--model) from boxes, images and cameras.",
         EXAMPLE,
     )
-    add_box_inputs(p)
+    add_box_inputs(p, reading=True)
     p.add_argument("--out", required=True, help="prediction CSV to write (atomically)")
     p.add_argument(
         "--camera-id",
@@ -120,8 +121,8 @@ def _cmd_associate(args: argparse.Namespace) -> int:
 
     _keep_heap_memory()
     params = spatial_params(args)
-    top = read_boxes(args.top, args.duplicates)
-    hor = read_boxes(args.hor, args.duplicates)
+    top = read_boxes(args.top, args.duplicates, box_reading(args))
+    hor = read_boxes(args.hor, args.duplicates, box_reading(args))
     search = args.search or ("exhaustive" if args.mode == "frame" else "follow")
     if args.mode == "frame" and search != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")

@@ -2,15 +2,27 @@
 accuracy), or tracks with ``--tracks`` (:func:`xvmatch.commands.track.evaluate_tracks_command`), or
 a multi-camera association with ``--multicam``
 (:func:`xvmatch.commands.multicam.evaluate_multicam_command`), or each camera's tracks with global
-ids with ``--pred NAME=FILE ... --gt NAME=FILE ...`` (the same scores)."""
+ids with ``--pred NAME=FILE ... --gt NAME=FILE ...`` (the same scores).
+
+Several prediction CSVs (``--pred A=a.csv B=b.csv``, or ``--pred`` repeated) are scored side by
+side against the same ``--top`` and ``--hor``: one table, one row per method, each row re-timed by
+its own recorded offset (``PRED.offset.json``) unless ``--offset`` is given."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
-from xvmatch.commands._options import UsageError, add_box_inputs, add_command_parser, read_boxes
+from xvmatch.commands._options import (
+    UsageError,
+    add_box_inputs,
+    add_box_reading_options,
+    add_command_parser,
+    box_reading,
+    read_boxes,
+)
 from xvmatch.commands._types import frame_offset
 
 __all__ = ["EXAMPLE", "add_evaluate_parser"]
@@ -27,9 +39,12 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
         EXAMPLE,
     )
     add_box_inputs(p)
+    add_box_reading_options(p, min_score=False)  # the boxes are the ground truth
     scored = p.add_mutually_exclusive_group(required=True)
-    scored.add_argument("--pred", nargs="+", metavar="FILE",
-                        help="prediction CSV (frame,top_id,hor_id); or, with --gt, each "
+    scored.add_argument("--pred", nargs="+", action="extend", metavar="FILE",
+                        help="prediction CSV (frame,top_id,hor_id); several (NAME=FILE or "
+                        "FILE, or --pred repeated) are scored side by side, one table row "
+                        "each, named NAME or FILE; or, with --gt, each "
                         "camera's boxes as NAME=FILE (MOT format, the id a global person id, "
                         "a tracker's output as it is), scored as --multicam is")
     scored.add_argument("--tracks", metavar="DIR",
@@ -68,11 +83,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from xvmatch.commands.multicam import evaluate_multicam_command
 
         return evaluate_multicam_command(args)
-    if args.pred is not None:
-        if len(args.pred) != 1:
-            raise UsageError(f"--pred: give one prediction CSV (got {len(args.pred)} files); "
-                             "each camera's boxes as NAME=FILE need --gt NAME=FILE ...")
-        args.pred = args.pred[0]
     if args.top is None or args.hor is None:
         raise UsageError("give --top and --hor (or --multicam DIR --gt NAME=FILE ..., or "
                          "--pred NAME=FILE ... --gt NAME=FILE ...)")
@@ -88,36 +98,59 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         summarize,
     )
 
-    top = read_boxes(args.top, args.duplicates)
-    hor = read_boxes(args.hor, args.duplicates)
-    pred = read_predictions(args.pred)
-    offset = _recorded_offset(args)
-    check_common_frames(top, hor, offset, (args.top, args.hor), "nothing to score")
-    if offset:
-        top = shift_frames(top, offset)
-    try:
-        counts = count_sequence(pred, top, hor)
-    except ValueError as exc:
-        raise UsageError(f"{args.pred}: {exc}") from None
-    scores = summarize(counts)
+    methods = _methods(args.pred, args.name)
+    top = read_boxes(args.top, args.duplicates, box_reading(args))
+    hor = read_boxes(args.hor, args.duplicates, box_reading(args))
+    rows = []
+    for name, path in methods:
+        pred = read_predictions(path)
+        offset = _recorded_offset(path, args.offset)
+        what = "nothing to score" if len(methods) == 1 else f"--pred {name}: nothing to score"
+        check_common_frames(hor=hor, top=top, offset=offset, names=(args.top, args.hor),
+                            what=what)
+        try:
+            counts = count_sequence(pred, shift_frames(top, offset) if offset else top, hor)
+        except ValueError as exc:
+            raise UsageError(f"{path}: {exc}") from None
+        rows.append((name, summarize(counts)))
     if args.json:
-        print(json.dumps(scores_to_dict(scores), indent=2))
+        doc = ({name: scores_to_dict(s) for name, s in rows} if len(rows) > 1
+               else scores_to_dict(rows[0][1]))
+        print(json.dumps(doc, indent=2))
     else:
-        print(format_table([(args.name or args.pred, scores)]))
+        print(format_table(rows))
     return 0
 
 
-def _recorded_offset(args: argparse.Namespace) -> int:
-    """``--offset`` when given, else the offset ``associate`` recorded beside the predictions
-    (``PRED.offset.json``, said in a note), else 0."""
-    import os
+def _methods(values: list[str], label: str | None) -> list[tuple[str, str]]:
+    """``(row name, CSV path)`` of each ``--pred``: ``NAME=FILE`` (NAME without a path
+    separator) or a plain ``FILE``, named by ``--name`` when alone, else by its path."""
+    methods: list[tuple[str, str]] = []
+    for text in values:
+        name, sep, path = text.partition("=")
+        if not (sep and name and path and "/" not in name and os.sep not in name):
+            name, path = text, text
+        if any(name == seen for seen, _ in methods):
+            raise UsageError(f"--pred {text}: the row name {name} is given twice; name each "
+                             "method once (NAME=FILE)")
+        methods.append((name, path))
+    if label is not None:
+        if len(methods) > 1:
+            raise UsageError(f"--name labels one prediction CSV ({len(methods)} given); name "
+                             "each as --pred NAME=FILE instead")
+        methods = [(label, methods[0][1])]
+    return methods
 
+
+def _recorded_offset(pred: str, given: int | None) -> int:
+    """``given`` (``--offset``) when not None, else the offset ``associate`` recorded beside
+    the predictions ``pred`` (``PRED.offset.json``, said in a note), else 0."""
     from xvmatch.commands._types import MAX_FRAME_OFFSET
     from xvmatch.formats.offset_record import predictions_offset_path, read_offset_record
 
-    record = predictions_offset_path(args.pred)
-    if args.offset is not None or not os.path.isfile(record):
-        return args.offset or 0
+    record = predictions_offset_path(pred)
+    if given is not None or not os.path.isfile(record):
+        return given or 0
     offset = read_offset_record(record, MAX_FRAME_OFFSET)
     print(f"xvmatch: note: applying the offset {offset} that associate recorded in {record} "
           "(--offset N to override)", file=sys.stderr)
