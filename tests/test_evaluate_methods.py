@@ -83,6 +83,7 @@ def test_json_names_each_method(methods, capsys) -> None:
 @pytest.mark.parametrize("extra, message", [
     (["--pred", "a=A", "a=B"], "--pred a=B: the row name a is given twice"),
     (["--pred", "a=A", "b=B", "--name", "n"], "--name labels one prediction CSV (2 given)"),
+    (["--tracks", "T", "--first-frame", "0"], "--first-frame 0 scores prediction CSVs only"),
 ])
 def test_bad_method_lists(methods, capsys, extra, message) -> None:
     _, top, late = methods

@@ -77,6 +77,9 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    if args.first_frame != 1 and (args.multicam or args.gt or args.tracks):
+        raise UsageError("--first-frame 0 scores prediction CSVs only; renumber the files "
+                         "from 1 to score --tracks or --multicam")
     if args.multicam is not None or args.gt is not None:
         if args.multicam is None and args.pred is None:
             raise UsageError("--gt: give --multicam DIR or --pred NAME=FILE ... with it")
