@@ -4,9 +4,13 @@
 (right) side by side at a common height, with a small gap between them. Each matched pair gets its
 own colour (golden-ratio hues, :func:`pair_colour`): both boxes are outlined in it (thickness 2)
 and a line joins the two box centres across the gap, optionally labelled ``cost 0.04`` with the
-pair's cost. Unmatched boxes are outlined in grey (:data:`UNMATCHED_COLOUR`, thickness 1) over a
-desaturated, dimmed interior. Ids, when given, are printed by each box, placed so that labels do
-not cover one another where there is room.
+pair's cost, only where the label covers no other label (a crowded frame shows fewer costs rather
+than a pile of them). Unmatched boxes are outlined in grey (:data:`UNMATCHED_COLOUR`, thickness 1)
+over a desaturated, dimmed interior. Ids, when given, are printed by each box, placed so that
+labels do not cover one another where there is room. With ground truth (``correct``, e.g. from
+:func:`pairs_correct`), right pairs are drawn in :data:`RIGHT_COLOUR` and wrong ones in
+:data:`WRONG_COLOUR` instead; the horizontal camera's wearer (``wearer``) is marked in the top
+view by a white outer outline and a ``camera`` label.
 
 :func:`write_match_picture` stores a picture as JPEG (quality 90: a few hundred kB for a real
 frame) or PNG (maximum compression) through the project's one atomic writer
@@ -31,10 +35,14 @@ from xvmatch.core.atomic_files import atomic_write_bytes
 __all__ = [
     "GAP_COLOUR",
     "JPEG_QUALITY",
+    "RIGHT_COLOUR",
     "UNMATCHED_COLOUR",
+    "WEARER_COLOUR",
+    "WRONG_COLOUR",
     "draw_matches",
     "frames_to_draw",
     "pair_colour",
+    "pairs_correct",
     "picture_path",
     "write_match_picture",
 ]
@@ -43,6 +51,12 @@ UNMATCHED_COLOUR: tuple[int, int, int] = (128, 128, 128)
 """BGR outline colour of an unmatched box."""
 GAP_COLOUR: tuple[int, int, int] = (255, 255, 255)
 """BGR colour of the gap between the two images (the lines of matched pairs cross it)."""
+RIGHT_COLOUR: tuple[int, int, int] = (60, 200, 60)
+"""BGR colour of a pair that the ground truth confirms (green)."""
+WRONG_COLOUR: tuple[int, int, int] = (40, 40, 230)
+"""BGR colour of a pair that the ground truth contradicts (red)."""
+WEARER_COLOUR: tuple[int, int, int] = (255, 255, 255)
+"""BGR colour of the outer outline and label marking the camera wearer in the top view."""
 
 _GAP = 16  # px between the two images
 _HEADER_COLOUR = (32, 32, 32)
@@ -189,10 +203,12 @@ def _overlap(a: tuple[int, int, int, int], placed: list[tuple[int, int, int, int
 
 def _place_label(text: str, candidates: list[tuple[int, int]], x_range: tuple[int, int],
                  y_range: tuple[int, int], scale: float,
-                 placed: list[tuple[int, int, int, int]]) -> tuple[int, int]:
+                 placed: list[tuple[int, int, int, int]], free_only: bool = False
+                 ) -> tuple[int, int] | None:
     """The first of ``candidates`` (baseline origins, in order of preference), kept inside
     ``x_range`` and ``y_range``, whose label covers none of the labels ``placed``; else the one
-    covering the fewest pixels of them. The chosen label's rectangle is added to ``placed``."""
+    covering the fewest pixels of them, or None with ``free_only`` (the label is not drawn).
+    The chosen label's rectangle is added to ``placed``."""
     (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)
     best = None
     for x, y in candidates:
@@ -204,6 +220,8 @@ def _place_label(text: str, candidates: list[tuple[int, int]], x_range: tuple[in
             best = (cover, (x, y), rect)
         if cover == 0:
             break
+    if free_only and best[0] > 0:
+        return None
     placed.append(best[2])
     return best[1]
 
@@ -227,6 +245,51 @@ def _check_costs(costs: np.ndarray | None, m: int, n: int) -> np.ndarray | None:
             f"costs must have shape (M, N) = ({m}, {n}) to match the boxes, got {cost.shape}"
         )
     return cost
+
+
+def pairs_correct(top_ids: Sequence | np.ndarray, hor_ids: Sequence | np.ndarray,
+                  pairs: np.ndarray) -> np.ndarray:
+    """Which pairs the ground truth confirms, as ``xvmatch evaluate`` reads it: the two boxes
+    carry the same id (the box files' ids are the people's true identities).
+
+    Args:
+        top_ids: (M,) the top boxes' true ids.
+        hor_ids: (N,) the horizontal boxes' true ids.
+        pairs: (K, 2) ``(top index, hor index)`` rows.
+
+    Returns:
+        (K,) bool, in the order of ``pairs``.
+    """
+    top, hor = np.asarray(top_ids).reshape(-1), np.asarray(hor_ids).reshape(-1)
+    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if p.size and (p[:, 0].max() >= len(top) or p[:, 1].max() >= len(hor) or p.min() < 0):
+        raise ValueError(f"pairs index past the {len(top)} top or {len(hor)} hor ids")
+    return top[p[:, 0]] == hor[p[:, 1]]
+
+
+def _pair_colours(pairs_given: np.ndarray, pairs: np.ndarray,
+                  correct: Sequence[bool] | np.ndarray | None) -> list[tuple[int, int, int]]:
+    """Each sorted pair's colour: :func:`pair_colour` without ground truth, else
+    :data:`RIGHT_COLOUR` or :data:`WRONG_COLOUR` from ``correct`` (given in the order of
+    ``pairs_given``, the caller's)."""
+    if correct is None:
+        return [pair_colour(k) for k in range(len(pairs))]
+    flags = np.asarray(correct).reshape(-1)
+    if (flags.size and flags.dtype != bool) or len(flags) != len(pairs):
+        raise ValueError(f"correct must give one bool per pair ({len(pairs)}), got "
+                         f"{np.shape(correct)} of {flags.dtype}")
+    given = np.asarray(pairs_given, dtype=np.int64).reshape(-1, 2)
+    truth = {(int(i), int(j)): bool(ok) for (i, j), ok in zip(given, flags, strict=True)}
+    return [RIGHT_COLOUR if truth[(int(i), int(j))] else WRONG_COLOUR for i, j in pairs]
+
+
+def _check_wearer(wearer: int | None, m: int) -> int | None:
+    """The wearer's top-box index, or None; refuses one out of range."""
+    if wearer is None:
+        return None
+    if isinstance(wearer, bool) or int(wearer) != wearer or not 0 <= wearer < m:
+        raise ValueError(f"wearer must be the index of a top box, 0..{m - 1}, got {wearer!r}")
+    return int(wearer)
 
 
 def _check_max_height(max_height: int) -> int:
@@ -318,17 +381,41 @@ def _cost_labels(
     canvas: np.ndarray, cost: np.ndarray, pairs: np.ndarray, ends: list[list[tuple[int, int]]],
     y_range: tuple[int, int], colours: list[tuple[int, int, int]], scale: float,
     placed: list[tuple[int, int, int, int]],
-) -> None:
-    """Print each matched pair's cost by the middle of its line, clear of earlier labels."""
+) -> list[tuple[str, tuple[int, int]]]:
+    """Print each matched pair's cost along its line (its middle first, then further towards
+    either end, above or below it), only where the label covers no earlier label: in a crowded
+    frame some costs are left out rather than piled up. Returns the ``(text, origin)`` of the
+    labels drawn."""
+    drawn = []
     for k, (i, j) in enumerate(pairs):
         text = _cost_text(float(cost[i, j]))
         tw = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0]
         (ax, ay), (bx, by) = ends[k]
-        mx, my = (ax + bx) // 2 - tw // 2, (ay + by) // 2
-        org = _place_label(text, [(mx, my - 5), (mx, my + 18), (mx, my - 24),
-                                  (mx, my + 36)], (0, canvas.shape[1]), y_range, scale,
-                           placed)
-        _put_text(canvas, text, org, colours[k], scale)
+        candidates = []
+        for t in (0.5, 0.4, 0.6, 0.3, 0.7, 0.2, 0.8):
+            mx, my = round(ax + t * (bx - ax)) - tw // 2, round(ay + t * (by - ay))
+            candidates += [(mx, my - 5), (mx, my + 18)]
+        org = _place_label(text, candidates, (0, canvas.shape[1]), y_range, scale, placed,
+                           free_only=True)
+        if org is not None:
+            _put_text(canvas, text, org, colours[k], scale)
+            drawn.append((text, org))
+    return drawn
+
+
+def _mark_wearer(canvas: np.ndarray, rect: np.ndarray, x_range: tuple[int, int],
+                 y_range: tuple[int, int], scale: float,
+                 placed: list[tuple[int, int, int, int]]) -> None:
+    """Mark the camera wearer's top box (canvas pixels ``rect``): a white outline 3 px outside
+    it over a dark halo, and a ``camera`` label in the best free place by it."""
+    x0, y0, x1, y1 = (int(v) for v in rect)
+    outer = (x0 - 3, y0 - 3), (x1 + 3, y1 + 3)
+    cv2.rectangle(canvas, *outer, _OUTLINE, 3, cv2.LINE_8)
+    cv2.rectangle(canvas, *outer, WEARER_COLOUR, 1, cv2.LINE_8)
+    text = "camera"
+    org = _place_label(text, _label_candidates(text, np.array([x0 - 3, y0 - 3, x1 + 3, y1 + 3]),
+                                               scale), x_range, y_range, scale, placed)
+    _put_text(canvas, text, org, WEARER_COLOUR, scale)
 
 
 def _side_by_side(
@@ -370,6 +457,8 @@ def draw_matches(
     costs: np.ndarray | None = None,
     title: str | None = None,
     max_height: int = 720,
+    correct: Sequence[bool] | np.ndarray | None = None,
+    wearer: int | None = None,
 ) -> np.ndarray:
     """One frame's association as a picture: top view left, horizontal view right, pairs joined.
 
@@ -393,9 +482,15 @@ def draw_matches(
             boxes' labels first).
         hor_ids: N ids printed by the hor boxes; ``None`` prints none.
         costs: (M, N) association costs; each matched pair's cost is printed by its line as
-            ``cost 0.04``; ``None`` prints none.
+            ``cost 0.04`` where the label covers no other label; ``None`` prints none.
         title: one line drawn in a dark header strip above the images; ``None`` for no strip.
         max_height: the largest height (px, >= 1) of the scaled images.
+        correct: (K,) bool, one per row of ``pairs`` (in the given order): whether the ground
+            truth confirms the pair (:func:`pairs_correct`); the pair is then drawn in
+            :data:`RIGHT_COLOUR` or :data:`WRONG_COLOUR` instead of its own colour. ``None``:
+            no ground truth.
+        wearer: index of the top box of the horizontal camera's wearer (``--camera-id``),
+            marked by a white outer outline and a ``camera`` label; ``None``: not known.
 
     Returns:
         (header + H, W1' + 16 + W2', 3) uint8 BGR picture, ``H <= max_height``; the inputs are
@@ -404,7 +499,8 @@ def draw_matches(
     Raises:
         ValueError: an image that is not non-empty (H, W, 3) uint8, boxes not (N, 4) finite with
             non-negative sizes, pairs not (K, 2) integer indices in range or not one-to-one, ids
-            of the wrong length, costs not (M, N), or ``max_height < 1``.
+            of the wrong length, costs not (M, N), ``correct`` not one bool per pair, ``wearer``
+            not a top box's index, or ``max_height < 1``.
 
     Example:
         >>> img = np.zeros((90, 160, 3), np.uint8)
@@ -421,8 +517,9 @@ def draw_matches(
     top_labels = _check_ids(top_ids, m, "top_ids")
     hor_labels = _check_ids(hor_ids, n, "hor_ids")
     cost = _check_costs(costs, m, n)
+    wearer_index = _check_wearer(wearer, m)
     height = min(_check_max_height(max_height), max(top_img.shape[0], hor_img.shape[0]))
-    colours = [pair_colour(k) for k in range(len(p))]
+    colours = _pair_colours(pairs, p, correct)
     panels, rects = _box_panels((top_img, hor_img), (top_b, hor_b), p, height, colours)
     header = 26 if title is not None else 0
     canvas, offsets, x_ranges = _side_by_side(panels, header)
@@ -430,6 +527,9 @@ def draw_matches(
     ends = _pair_lines(canvas, p, rects, offsets, colours)
     placed: list[tuple[int, int, int, int]] = []  # label rectangles drawn so far
     y_range = (header, canvas.shape[0])
+    if wearer_index is not None:  # first: its label gets the best place
+        rect = rects[0][wearer_index] + np.array([*offsets[0], *offsets[0]])
+        _mark_wearer(canvas, rect, x_ranges[0], y_range, scale, placed)
     _id_labels(canvas, (top_labels, hor_labels), p, rects, offsets, x_ranges, y_range, colours,
                scale, placed)
     if cost is not None:
