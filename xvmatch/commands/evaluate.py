@@ -70,7 +70,8 @@ def add_evaluate_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--offset", type=frame_offset, default=None, metavar="N",
                    help="score predictions made with 'associate --offset N' or tracks made "
                    "with 'track --offset N': the views are re-timed the same way (top frame = "
-                   "horizontal frame + N) before scoring; |N| <= 100000 (default 0; with "
+                   "horizontal frame + N) before scoring, every --pred alike; |N| <= 100000 "
+                   "(default: each prediction CSV's recorded PRED.offset.json, else 0; with "
                    "--tracks, the offset that track applied, from DIR/offset.json)")
     p.set_defaults(func=_cmd_evaluate)
     return p
