@@ -71,6 +71,7 @@ __all__ = [
     "generate_dataset",
     "person_crops",
     "read_scene",
+    "resolve_pair",
     "scene_name",
     "write_scene",
     "write_scene_inputs",
@@ -736,6 +737,39 @@ class SyntheticDataset:
 
     def __iter__(self) -> Iterator[PairRecord]:
         return self.pairs()
+
+
+def resolve_pair(spec: str, scene: str | None = None, frame: int | None = None
+                 ) -> tuple[Path, Path, int]:
+    """The (scene file, dataset root, frame) a pair's name designates, as ``xvmatch show``
+    reads it: a dataset folder (and ``scene``, default the first), a scene file
+    (``annotations/SCENE.json``), or an image (``images/top|ego/SCENE_FRAME.jpg``, whose frame
+    is the default).
+
+    Raises:
+        ValueError: a path that is none of these, or a scene the dataset does not hold.
+    """
+    path = Path(spec)
+    if path.is_dir():
+        if not (path / MANIFEST).is_file():
+            raise ValueError(f"{spec}: folder has no {MANIFEST}; is it an xvmatch synth output?")
+        names = SyntheticDataset(path).scene_names
+        name = scene or (names[0] if names else None)
+        if name not in names:
+            raise ValueError(f"{spec}: no scene {name!r} (have {', '.join(names[:5])}...)")
+        return path / "annotations" / f"{name}.json", path, frame or 1
+    if not path.is_file():
+        raise ValueError(f"{spec}: no such file or folder")
+    if path.suffix == ".json":
+        return path, path.resolve().parent.parent, frame or 1
+    stem = path.stem
+    if path.parent.name not in ("top", "ego") or "_" not in stem:
+        raise ValueError(f"{spec}: expected ROOT/images/top|ego/SCENE_FRAME.jpg")
+    name, _, number = stem.rpartition("_")
+    if not number.isdigit():
+        raise ValueError(f"{spec}: file name must end in _FRAME (digits), got {path.name!r}")
+    root = path.resolve().parent.parent.parent
+    return root / "annotations" / f"{name}.json", root, frame or int(number)
 
 
 def person_crops(

@@ -210,7 +210,6 @@ LONG_COMMANDS = {
                                            "(issue 66)",
     "xvmatch/commands/offset.py": "the offset estimate's options to move out of the CLI "
                                   "(issue 66)",
-    "xvmatch/commands/lab/synth.py": "the synth and show runs to move out of the CLI (issue 66)",
 }
 """Command modules known to be over :data:`MAX_COMMAND_LINES`, each with the change that brings it
 under (strict marks, as :data:`CROWDED`)."""

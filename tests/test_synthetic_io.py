@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from xvmatch.commands.lab.synth import add_show_parser, add_synth_parser
+from xvmatch.commands.lab.show import add_show_parser
+from xvmatch.commands.lab.synth import add_synth_parser
 from xvmatch.datasets.detector_noise import DetectorNoise
 from xvmatch.datasets.synthetic_io import (
     MANIFEST,

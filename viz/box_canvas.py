@@ -16,7 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CANVAS_COLOUR", "GRID_COLOUR", "TopPlan", "blank_view", "top_plan"]
+from xvmatch.viz.match_drawing import draw_matches
+
+__all__ = ["CANVAS_COLOUR", "GRID_COLOUR", "TopPlan", "blank_view", "draw_box_frame", "top_plan"]
 
 CANVAS_COLOUR: tuple[int, int, int] = (236, 236, 236)
 """BGR colour of a blank view (light grey: white boxes' interiors stay visible)."""
@@ -94,3 +96,44 @@ def top_plan(frames: Mapping, pad: float = 0.05, max_side: int = 2048) -> TopPla
         if at < size[1]:
             image[at, :] = GRID_COLOUR
     return TopPlan(image, (margin - x0, margin - y0), scale)
+
+
+def draw_box_frame(top: Mapping, hor: Mapping, frame: int, hor_size: tuple[int, int],
+                   pairs: list[tuple[int, int]] | None = None, *, labels: bool = True,
+                   source: str = "pairs") -> np.ndarray:
+    """One frame of two box files drawn as ``xvmatch show --top --hor`` does: the horizontal
+    boxes on a blank view of ``hor_size``, the top ones on the sequence's plan (:func:`top_plan`).
+
+    Args:
+        top, hor: each view's ``{frame: FrameBoxes}``; ``frame`` must have boxes in both.
+        frame: the frame to draw.
+        hor_size: ``(width, height)`` of the horizontal image.
+        pairs: ``(top_id, hor_id)`` pairs to draw (a prediction), or None: the ids found in both
+            views (ground truth).
+        labels: print each box's id by it.
+        source: the name of ``pairs``' file, for the error message.
+
+    Returns:
+        The ``(H, W, 3)`` uint8 BGR picture, titled with what it shows.
+
+    Raises:
+        ValueError: a pair naming an id without a box in the frame.
+    """
+    t_ids, h_ids = top[frame].ids.tolist(), hor[frame].ids.tolist()
+    if pairs is not None:
+        for a, b in pairs:
+            if a not in t_ids or b not in h_ids:
+                raise ValueError(f"{source}: frame {frame}: pair ({a}, {b}) names a box "
+                                 "that is not in the box files")
+        what = f"{len(pairs)} pairs of {source}"
+    else:
+        pairs = [(i, i) for i in t_ids if i in h_ids]
+        what = f"{len(pairs)} people with the same id in both views"
+    rows = [(t_ids.index(a), h_ids.index(b)) for a, b in pairs]
+    plan = top_plan(top)
+    return draw_matches(
+        plan.image, blank_view(hor_size), plan.place(top[frame].boxes), hor[frame].boxes,
+        np.array(rows, dtype=np.int64).reshape(-1, 2),
+        t_ids if labels else None, h_ids if labels else None,
+        title=f"frame {frame}: {what} (same colour: same person; grey: unmatched; top view as "
+        "a plan)")

@@ -72,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     from xvmatch.commands.lab.baseline import add_baseline_parser
     from xvmatch.commands.lab.export import add_export_parser
     from xvmatch.commands.lab.fit_geometry import add_fit_geometry_parser
-    from xvmatch.commands.lab.synth import add_show_parser, add_synth_parser
+    from xvmatch.commands.lab.show import add_show_parser
+    from xvmatch.commands.lab.synth import add_synth_parser
     from xvmatch.commands.lab.train import add_train_parser
     from xvmatch.commands.multicam import add_multicam_parser
     from xvmatch.commands.track import add_track_parser
