@@ -2,13 +2,14 @@
 
 Each option is defined here once: the box inputs (``--top``, ``--hor``, ``--duplicates``; how
 box files are read, ``--min-score`` and ``--first-frame``, lives in
-:mod:`xvmatch.commands._box_reading` and is re-exported here), the spatial-distribution parameters (``--rho --lam --tau --dtheta --fov``, read back by
-:func:`spatial_params`), the image inputs (``--top-images``, ``--hor-images``, checked together
-by :func:`check_images_together`), and the horizontal ``--image-size``'s type and help. With them
+:mod:`xvmatch.commands._box_reading` and is re-exported here), the spatial-distribution
+parameters (``--rho --lam --tau --dtheta --fov``, read back by :func:`spatial_params`), the
+image inputs (``--top-images``, ``--hor-images``, checked together by
+:func:`check_images_together`), and the horizontal ``--image-size``'s type and help. With them
 come the sub-command parser (:func:`add_command_parser`), the progress bar
 (:func:`progress_bar`), the box readers that print the reader's notes and warnings
-(:func:`read_boxes`, :func:`read_detections`) and :class:`UsageError`. Output paths are checked by
-:mod:`xvmatch.core.output_paths`; :func:`image_inputs` lists the images as its inputs.
+(:func:`read_boxes`, :func:`read_detections`) and :class:`UsageError`. Output paths are checked
+by :mod:`xvmatch.core.output_paths`; :func:`image_inputs` lists the images as its inputs.
 
 Nothing here imports :mod:`xvmatch.cli` (the root imports the command modules, never the
 reverse), and nothing heavy is imported until a command runs.
@@ -200,3 +201,9 @@ def frame_progress(total: int, desc: str, enabled: bool
         return progress_bar(total, desc, "frame", enabled, frames)
 
     return wrap
+
+
+def step_progress(enabled: bool) -> Callable[[Iterable, int, str], Iterable]:
+    """``progress(items, total, description)``: wraps the steps of a run in a
+    :func:`progress_bar` (the tracker's ``progress``)."""
+    return lambda items, total, desc: progress_bar(total, desc, "step", enabled, items)
