@@ -1,5 +1,6 @@
 """The runs of ``xvmatch synth`` that write one folder of their own: a scene of several static
-cameras (``--cameras N``, the input of ``xvmatch multicam``).
+cameras (``--cameras N``, the input of ``xvmatch multicam``) and a smooth video clip (``--video``,
+the input of ``xvmatch track`` and ``associate --mode video``).
 
 Each run takes one frozen options record and writes into a folder it claims (a marker listing
 the files it wrote, :mod:`xvmatch.core.folder_marker`): a later run into the same folder removes
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from xvmatch.core.folder_marker import files_under, record_own_files, remove_own_files
@@ -26,11 +27,35 @@ from xvmatch.datasets.multicam_scenes import (
 )
 from xvmatch.datasets.render.image_render import Difficulty
 from xvmatch.datasets.render.multicam_render import write_rendered_multicam_scene
+from xvmatch.datasets.render.person_textures import load_textures
+from xvmatch.datasets.synthetic_scenes import SynthConfig
+from xvmatch.datasets.tracking_video import tracking_frames, write_tracking_frames
 
-__all__ = ["SYNTH_CAMERAS", "CamerasSynthOptions", "synth_cameras"]
+__all__ = [
+    "SYNTH_CAMERAS",
+    "SYNTH_VIDEO",
+    "CamerasSynthOptions",
+    "VideoSynthOptions",
+    "synth_cameras",
+    "synth_difficulty",
+    "synth_video",
+]
 
 SYNTH_CAMERAS = "synth --cameras"
 """The command name in the marker of a ``synth --cameras`` folder (it may replace only its own)."""
+SYNTH_VIDEO = "synth --video"
+"""The command name in the marker of a ``synth --video`` folder."""
+
+
+def synth_difficulty(preset: str, texture: float = 0.0) -> Difficulty:
+    """The renderer's difficulty ``preset`` (``easy``, ``medium``, ``hard``) with photographic
+    textures of depth ``texture`` over the people (0: none). The textures are loaded here, so a
+    missing package is one error before rendering, not one in each worker."""
+    difficulty = Difficulty.preset(preset)
+    if texture:
+        load_textures()
+        difficulty = replace(difficulty, texture=texture)
+    return difficulty
 
 
 @dataclass(frozen=True)
@@ -83,3 +108,44 @@ def synth_cameras(options: CamerasSynthOptions,
         write_multicam_scene(root, scene)
     record_own_files(root, SYNTH_CAMERAS, files_under(root) - kept)
     return root, scene
+
+
+@dataclass(frozen=True)
+class VideoSynthOptions:
+    """One smooth video clip, as ``synth --video`` writes it.
+
+    Attributes:
+        out: the folder to write (new, empty, or an earlier ``synth --video`` output).
+        config: the scene's scenario, people, image sizes and frame rate.
+        n_frames: consecutive frames of the clip.
+        seed: the clip's seed (scene, outfits, world, per-frame noise).
+        difficulty: the renderer's difficulty (None: medium).
+    """
+
+    out: str | os.PathLike
+    config: SynthConfig
+    n_frames: int
+    seed: int
+    difficulty: Difficulty | None = None
+
+
+def synth_video(options: VideoSynthOptions,
+                progress: Callable[[int], None] | None = None) -> dict[str, Path]:
+    """Render and write the clip of ``options`` frame by frame
+    (:func:`~xvmatch.datasets.tracking_video.tracking_frames`: one walk, the worn camera's head
+    pose smoothed over a second, so boxes move a few pixels a frame) as a user's data:
+    ``top.txt``, ``hor.txt`` (MOT, ground-truth ids), ``top/``, ``hor/`` (PNG frames) and
+    ``cameras/``; ``progress`` is called with each frame written.
+
+    Returns:
+        The paths written, by name (``top``, ``hor``, ``top_images``, ``hor_images``,
+        ``cameras``), under the claimed output folder.
+    """
+    root = claim_folder(options.out, SYNTH_VIDEO)
+    remove_own_files(root, SYNTH_VIDEO)  # an earlier, longer clip: no stale frame
+    kept = files_under(root)
+    frames = tracking_frames(options.seed, options.n_frames, options.config,
+                             difficulty=options.difficulty)
+    paths = write_tracking_frames(frames, root, progress)
+    record_own_files(root, SYNTH_VIDEO, files_under(root) - kept)
+    return paths

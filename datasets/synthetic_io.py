@@ -58,6 +58,7 @@ from xvmatch.geometry.camera import Camera
 __all__ = [
     "GENERATOR",
     "MANIFEST",
+    "MOT_FOLDER",
     "SCHEMA_NAME",
     "SCHEMA_VERSION",
     "VIEWS",
@@ -84,7 +85,11 @@ SCHEMA_VERSION = 1
 MANIFEST = "dataset.json"
 GENERATOR = "xvmatch synth"
 """``"generator"`` of a manifest: marks a folder this module wrote (and may replace)."""
-_OWN_ENTRIES = frozenset({MANIFEST, "annotations", "images"})
+MOT_FOLDER = "mot"
+"""Folder of a dataset's scenes laid out as a user's data (``generate_dataset(mot_boxes=True)``,
+what ``xvmatch synth`` writes): ``mot/SCENE/top.txt``, ``hor.txt`` (MOT boxes, ground-truth ids)
+and ``cameras/`` (per-frame camera files), see :func:`write_scene_inputs`."""
+_OWN_ENTRIES = frozenset({MANIFEST, "annotations", "images", MOT_FOLDER})
 VIEWS: tuple[str, ...] = ("top", "ego")
 """View names: the top/overview view and the egocentric view."""
 
@@ -219,7 +224,15 @@ def _worker_init() -> None:
 
 
 def _write_scene_task(args: tuple) -> dict:
-    return write_scene(*args)
+    """Write one scene (``write_scene``'s arguments) and, when the last item is true, its
+    boxes and cameras as a user's data under :data:`MOT_FOLDER` (read back from its file)."""
+    *scene_args, mot_boxes = args
+    entry = write_scene(*scene_args)
+    if mot_boxes:
+        root = Path(scene_args[0])
+        write_scene_inputs(read_scene(root / entry["annotation"], root),
+                           root / MOT_FOLDER / entry["name"])
+    return entry
 
 
 def _is_own_dataset(root: Path) -> bool:
@@ -279,6 +292,7 @@ def generate_dataset(
     workers: int = 1,
     difficulty: Difficulty | None = None,
     progress: Callable[[int], None] | None = None,
+    mot_boxes: bool = False,
 ) -> Path:
     """Render a whole dataset into ``root``, atomically as a folder.
 
@@ -299,6 +313,8 @@ def generate_dataset(
             not depend on it.
         difficulty: rendering difficulty (``None``: medium).
         progress: called with the number of pairs written each time a scene is done.
+        mot_boxes: also write each scene as a user's data, ``MOT_FOLDER/SCENE/`` (``top.txt``,
+            ``hor.txt``, ``cameras/``: what ``xvmatch associate`` and ``evaluate`` read).
 
     Returns:
         The manifest path.
@@ -315,7 +331,7 @@ def generate_dataset(
     tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.synth-", dir=root.parent))
     try:
         _render_into(tmp, config, int(n_scenes), int(n_frames), int(seed), int(workers),
-                     difficulty, progress)
+                     difficulty, progress, bool(mot_boxes))
         _move_into_place(tmp, root)
     except BaseException:  # interrupted or failed: leave no half-written folder behind
         shutil.rmtree(tmp, ignore_errors=True)
@@ -332,9 +348,10 @@ def _render_into(
     workers: int,
     difficulty: Difficulty,
     progress: Callable[[int], None] | None,
+    mot_boxes: bool = False,
 ) -> None:
     """Render every scene into ``root`` and write the manifest last."""
-    tasks = [(root, config, i, n_frames, seed, difficulty) for i in range(n_scenes)]
+    tasks = [(root, config, i, n_frames, seed, difficulty, mot_boxes) for i in range(n_scenes)]
     entries: list[dict] = []
     if workers == 1:
         for task in tasks:

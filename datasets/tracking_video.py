@@ -17,7 +17,7 @@ are the ground truth (the same person has the same id in both views); they are f
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -26,12 +26,19 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
 from xvmatch.core.atomic_files import atomic_write_bytes
-from xvmatch.datasets.render.image_render import SceneRenderer
+from xvmatch.datasets.render.image_render import Difficulty, SceneRenderer
 from xvmatch.datasets.synthetic_scenes import SynthConfig, SyntheticScene, make_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.geometry.camera import Camera, FrameCameras, look_rotation
 
-__all__ = ["TrackingVideo", "render_tracking_video", "write_tracking_video"]
+__all__ = [
+    "TrackingFrame",
+    "TrackingVideo",
+    "render_tracking_video",
+    "tracking_frames",
+    "write_tracking_frames",
+    "write_tracking_video",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,6 +97,55 @@ def _fly(scene: SyntheticScene, speed: float, yaw_rate: float) -> SyntheticScene
     return replace(scene, top_cameras=cameras)
 
 
+@dataclass(frozen=True, eq=False)
+class TrackingFrame:
+    """One rendered frame of a tracking video (:func:`tracking_frames`).
+
+    Attributes:
+        frame: the 1-based frame number.
+        top, hor: each view's boxes (ground-truth ids).
+        top_image, hor_image: ``(H, W, 3)`` uint8 BGR images.
+        cameras: the calibrated cameras the frame was rendered with.
+    """
+
+    frame: int
+    top: FrameBoxes
+    hor: FrameBoxes
+    top_image: np.ndarray
+    hor_image: np.ndarray
+    cameras: FrameCameras
+
+
+def tracking_frames(
+    seed: int,
+    n_frames: int = 60,
+    config: SynthConfig | None = None,
+    min_visible: float = 0.3,
+    min_pixels: int = 100,
+    head_smoothing: float = 1.0,
+    flight: tuple[float, float] | None = None,
+    difficulty: Difficulty | None = None,
+) -> Iterator[TrackingFrame]:
+    """The frames of :func:`render_tracking_video` one at a time, rendered as they are asked
+    for (a long clip need not be held in memory); the arguments are its own, and
+    ``difficulty`` the renderer's (None: medium)."""
+    if int(n_frames) < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    config = config or SynthConfig(scenario="drone", n_people=(6, 12), fps=25.0)
+    rng = np.random.default_rng([int(seed), 17])
+    scene = _smooth_head(make_scene(config, int(n_frames), rng), head_smoothing)
+    if flight is not None:
+        scene = _fly(scene, *map(float, flight))
+    renderer = SceneRenderer(scene, rng, difficulty)
+    for f in range(1, int(n_frames) + 1):
+        pair = renderer.render(f)
+        t, e = pair.top.labels, pair.ego.labels
+        keep = (e.visible >= min_visible) & (e.visible_pixels >= min_pixels)
+        yield TrackingFrame(f, FrameBoxes(f, t.ids, t.boxes),
+                            FrameBoxes(f, e.ids[keep], e.boxes[keep]), pair.top.image,
+                            pair.ego.image, FrameCameras(pair.top.camera, pair.ego.camera))
+
+
 def render_tracking_video(
     seed: int,
     n_frames: int = 60,
@@ -118,27 +174,45 @@ def render_tracking_video(
     Returns:
         The :class:`TrackingVideo`.
     """
-    if int(n_frames) < 1:
-        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
     config = config or SynthConfig(scenario="drone", n_people=(6, 12), fps=25.0)
-    rng = np.random.default_rng([int(seed), 17])
-    scene = _smooth_head(make_scene(config, int(n_frames), rng), head_smoothing)
-    if flight is not None:
-        scene = _fly(scene, *map(float, flight))
-    renderer = SceneRenderer(scene, rng)
     top, hor, top_images, hor_images, cameras = {}, {}, {}, {}, {}
-    for f in range(1, int(n_frames) + 1):
-        pair = renderer.render(f)
-        t, e = pair.top.labels, pair.ego.labels
-        top[f] = FrameBoxes(f, t.ids, t.boxes)
-        keep = (e.visible >= min_visible) & (e.visible_pixels >= min_pixels)
-        hor[f] = FrameBoxes(f, e.ids[keep], e.boxes[keep])
-        top_images[f], hor_images[f] = pair.top.image, pair.ego.image
-        cameras[f] = FrameCameras(pair.top.camera, pair.ego.camera)
+    for fr in tracking_frames(seed, n_frames, config, min_visible, min_pixels, head_smoothing,
+                              flight):
+        f = fr.frame
+        top[f], hor[f], cameras[f] = fr.top, fr.hor, fr.cameras
+        top_images[f], hor_images[f] = fr.top_image, fr.hor_image
         if progress is not None:
             progress(f)
     return TrackingVideo(top, hor, top_images, hor_images, tuple(config.ego_size), config.fps,
                          cameras)
+
+
+def _video_paths(folder: Path) -> dict[str, Path]:
+    """The files and folders of a written tracking video, by name (the folder created)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    return {"top": folder / "top.txt", "hor": folder / "hor.txt",
+            "top_images": folder / "top", "hor_images": folder / "hor"}
+
+
+def _write_frame_images(out: dict[str, Path], frame: int, top_image: np.ndarray,
+                        hor_image: np.ndarray) -> None:
+    """Write one frame's images as ``top/FRAME.png`` and ``hor/FRAME.png`` (``%06d``)."""
+    import cv2
+
+    for view, image in (("top_images", top_image), ("hor_images", hor_image)):
+        out[view].mkdir(parents=True, exist_ok=True)
+        ok, data = cv2.imencode(".png", image)
+        if not ok:
+            raise ValueError(f"{out[view]}: cannot encode frame {frame} as PNG")
+        atomic_write_bytes(out[view] / f"{frame:06d}.png", data.tobytes(), fsync=False)
+
+
+def _write_frame_cameras(folder: Path, frame: int, cams: FrameCameras) -> None:
+    """Write one frame's camera file, ``FRAME.json`` (``%06d``; cameras ``top`` and ``ego``)."""
+    from xvmatch.formats.camera_io import save_cameras
+
+    folder.mkdir(parents=True, exist_ok=True)
+    save_cameras(folder / f"{frame:06d}.json", {"top": cams.top, "ego": cams.hor})
 
 
 def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dict[str, Path]:
@@ -147,25 +221,33 @@ def write_tracking_video(video: TrackingVideo, folder: str | os.PathLike) -> dic
     ``cameras/`` of per-frame camera files (``000001.json``: ``top`` and ``ego``, the form
     ``--cameras`` reads) into ``folder``; returns their paths by name (``top``, ``hor``,
     ``top_images``, ``hor_images``, and ``cameras`` when written)."""
-    import cv2
-
-    from xvmatch.formats.camera_io import save_cameras
-
-    folder = Path(folder)
-    out = {"top": folder / "top.txt", "hor": folder / "hor.txt",
-           "top_images": folder / "top", "hor_images": folder / "hor"}
+    out = _video_paths(Path(folder))
     write_mot_boxes(out["top"], video.top)
     write_mot_boxes(out["hor"], video.hor)
-    for view, images in (("top_images", video.top_images), ("hor_images", video.hor_images)):
-        out[view].mkdir(parents=True, exist_ok=True)
-        for f, image in images.items():
-            ok, data = cv2.imencode(".png", image)
-            if not ok:
-                raise ValueError(f"{out[view]}: cannot encode frame {f} as PNG")
-            atomic_write_bytes(out[view] / f"{f:06d}.png", data.tobytes(), fsync=False)
+    for f in video.top_images:
+        _write_frame_images(out, f, video.top_images[f], video.hor_images[f])
     if video.cameras:
-        out["cameras"] = folder / "cameras"
+        out["cameras"] = Path(folder) / "cameras"
         out["cameras"].mkdir(parents=True, exist_ok=True)
         for f, cams in video.cameras.items():
-            save_cameras(out["cameras"] / f"{f:06d}.json", {"top": cams.top, "ego": cams.hor})
+            _write_frame_cameras(out["cameras"], f, cams)
+    return out
+
+
+def write_tracking_frames(frames: Iterable[TrackingFrame], folder: str | os.PathLike,
+                          progress: Callable[[int], None] | None = None) -> dict[str, Path]:
+    """Write :func:`tracking_frames` as they come, in the layout of
+    :func:`write_tracking_video` (cameras included): each frame's images and cameras at once,
+    the box files at the end; ``progress`` is called with each frame number written."""
+    out = _video_paths(Path(folder))
+    out["cameras"] = Path(folder) / "cameras"
+    top, hor = {}, {}
+    for fr in frames:
+        top[fr.frame], hor[fr.frame] = fr.top, fr.hor
+        _write_frame_images(out, fr.frame, fr.top_image, fr.hor_image)
+        _write_frame_cameras(out["cameras"], fr.frame, fr.cameras)
+        if progress is not None:
+            progress(fr.frame)
+    write_mot_boxes(out["top"], top)
+    write_mot_boxes(out["hor"], hor)
     return out

@@ -3,19 +3,21 @@
 
 ``synth --cameras N`` writes one scene of N static cameras instead (the input of ``xvmatch
 multicam``, :func:`xvmatch.datasets.synth_runs.synth_cameras`): rendered or, with
-``--boxes-only``, from the box simulator, optionally with tracker-like noise.
+``--boxes-only``, from the box simulator, optionally with tracker-like noise. ``synth --video``
+writes one smooth clip as a user's data (:func:`xvmatch.datasets.synth_runs.synth_video`). Each
+mode ends by printing the commands that run on what it wrote.
 
-:func:`add_synth_parser` registers the sub-command on the ``subparsers`` of the main parser; its
-``func`` takes the parsed arguments and returns an exit code. Imports are lazy so that
-other commands never load OpenCV. Bad input raises ``ValueError`` with a one-line message, which
-the main entry point prints as ``xvmatch: error: ...``.
+Imports are lazy so that other commands never load OpenCV. Bad input raises ``ValueError`` with
+a one-line message, which the main entry point prints as ``xvmatch: error: ...``.
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
+from pathlib import Path
 
 from xvmatch.commands._options import add_command_parser, progress_bar
 from xvmatch.commands._types import float_in, image_size, int_in, seed_value, worker_count
@@ -24,8 +26,10 @@ from xvmatch.core.output_paths import Output, check_outputs
 __all__ = ["EXAMPLE", "add_synth_parser"]
 
 EXAMPLE = ("xvmatch synth --out data/synth --scenario drone --scenes 100 --frames 20 --seed 0 "
-           "--workers 2\n  xvmatch synth --cameras 4 --frames 100 --out data/cams4")
-
+           "--workers 2\n  xvmatch synth --video --frames 200 --out data/clip\n  "
+           "xvmatch synth --cameras 4 --frames 100 --out data/cams4")
+FPS = {"pairs": 10.0, "video": 25.0}
+"""Default ``--fps``: pairs and ``--cameras`` scenes at 10, a ``--video`` clip at 25 (a video's)."""
 
 MAX_PEOPLE = 60
 """Most people per scene: what the renderer places in a scene's area (``SynthConfig``)."""
@@ -66,6 +70,11 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    type=int_in(1, 100_000, "a bound on the run's time and disk: 100000 scenes "
                                "is ten times the largest training set"),
                    help="number of scenes, 1..100000 (default 10)")
+    p.add_argument("--video", action="store_true",
+                   help="write one smooth clip instead: --frames consecutive frames of one scene "
+                   "(people walking, the worn camera turning smoothly; what track and associate "
+                   "--mode video read) as top.txt, hor.txt (MOT, ground-truth ids), top/, hor/ "
+                   "(PNG frames), cameras/ (default --fps 25)")
     g = p.add_argument_group("several static cameras (one scene, the input of xvmatch multicam)")
     g.add_argument("--cameras", default=None, type=int_in(2, 8, "static cameras per scene"),
                    help="write one scene of N static calibrated cameras, 2..8: cameras.json, "
@@ -97,9 +106,9 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    help="photographic textures over the people, depth in [0, 1] (default 0: "
                    "none; image pairs only; needs pip install --no-deps scikit-image, whose "
                    "CC0 and public-domain images they are)")
-    p.add_argument("--fps", default=10.0,
+    p.add_argument("--fps", default=None,
                    type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
-                   help="frame rate of the walks, in [0.1, 1000] (default 10)")
+                   help="frame rate of the walks, in [0.1, 1000] (default 10; 25 with --video)")
     p.add_argument("--workers", type=worker_count, default=1,
                    help="rendering processes, 1..64 (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -108,41 +117,93 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    from xvmatch.datasets.render.image_render import Difficulty
-    from xvmatch.datasets.synthetic_io import generate_dataset
+    from xvmatch.datasets.synth_runs import synth_difficulty
+    from xvmatch.datasets.synthetic_io import MOT_FOLDER, generate_dataset, scene_name
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
+    if args.cameras is not None and args.video:
+        raise ValueError("--video and --cameras are two modes; give one")
     if args.cameras is not None:
         return _synth_cameras(args)
     for option, given in (("--boxes-only", args.boxes_only),
                           ("--tracker-noise", args.tracker_noise)):
         if given:
             raise ValueError(f"{option} needs --cameras N (a scene of several static cameras)")
+    if args.video:
+        return _synth_video(args)
     args.scenario = args.scenario or "drone"
     args.scenes = 10 if args.scenes is None else args.scenes
     check_outputs([Output("--out", args.out, folder=True)])
-    difficulty = Difficulty.preset(args.difficulty)
-    if args.texture:
-        from dataclasses import replace
-
-        from xvmatch.datasets.render.person_textures import load_textures
-
-        load_textures()  # a missing package is one line here, not an error in each worker
-        difficulty = replace(difficulty, texture=args.texture)
+    difficulty = synth_difficulty(args.difficulty, args.texture)
     config = SynthConfig(scenario=args.scenario, n_people=args.people or (3, 14),
-                         top_size=args.size, ego_size=args.size, fps=args.fps)
+                         top_size=args.size, ego_size=args.size, fps=args.fps or FPS["pairs"])
     total = args.scenes * args.frames
     start = time.perf_counter()
     with progress_bar(total, "synth", "pair", not args.quiet) as bar:
         manifest = generate_dataset(
             args.out, config, n_scenes=args.scenes, n_frames=args.frames, seed=args.seed,
-            workers=args.workers, difficulty=difficulty, progress=bar.update,
+            workers=args.workers, difficulty=difficulty, progress=bar.update, mot_boxes=True,
         )
     elapsed = time.perf_counter() - start
     if not args.quiet:
+        root, name = manifest.parent, scene_name(0)
         print(f"wrote {total} pairs ({args.scenes} scenes x {args.frames} frames, "
-              f"{args.scenario}) to {manifest.parent} in {elapsed:.1f} s "
-              f"({total / max(elapsed, 1e-9):.1f} pairs/s)", file=sys.stderr)
+              f"{args.scenario}) to {root} in {elapsed:.1f} s "
+              f"({total / max(elapsed, 1e-9):.1f} pairs/s); each scene also as MOT boxes and "
+              f"cameras in {root / MOT_FOLDER}/SCENE/. Match and score scene {name}:",
+              file=sys.stderr)
+        _print_commands(root / MOT_FOLDER / name, Path("pred.csv"), [
+            "--model", "default", "--top-images", root / "images" / "top" / f"{name}_*.jpg",
+            "--hor-images", root / "images" / "ego" / f"{name}_*.jpg",
+            "--cameras", root / MOT_FOLDER / name / "cameras"])
+    return 0
+
+
+def _print_commands(scene: Path, pred: Path, match: list, track: list | None = None) -> None:
+    """The commands that run on a written scene (``scene/top.txt``, ``hor.txt``): ``track``
+    with the options ``track`` (if given), ``associate`` with ``match``, and ``evaluate``; one a
+    line on stderr, as ``demo`` prints its own."""
+    from xvmatch.commands.demo import xvmatch_command
+
+    x, boxes = xvmatch_command(), shlex.join(["--top", str(scene / "top.txt"), "--hor",
+                                               str(scene / "hor.txt")])
+    lines = [] if track is None else [
+        f"{x} track {boxes} {shlex.join(map(str, track))}",
+        f"{x} evaluate --tracks {shlex.quote(str(track[-1]))} {boxes}"]
+    lines += [f"{x} associate {boxes} {shlex.join(map(str, match))} --out {shlex.quote(str(pred))}",
+              f"{x} evaluate --pred {shlex.quote(str(pred))} {boxes}"]
+    print("\n".join(f"  {line}" for line in lines), file=sys.stderr)
+
+
+def _synth_video(args: argparse.Namespace) -> int:
+    """``synth --video``: one clip of consecutive frames, written as a user's data (issue 69)."""
+    from xvmatch.datasets.synth_runs import VideoSynthOptions, synth_difficulty, synth_video
+    from xvmatch.datasets.synthetic_scenes import SynthConfig
+
+    for option, wrong in (("--scenes", args.scenes not in (None, 1)),
+                          ("--workers", args.workers != 1)):
+        if wrong:
+            raise ValueError(f"{option} does not apply to --video (one clip, rendered frame "
+                             "after frame; run again with another --seed for more)")
+    check_outputs([Output("--out", args.out, folder=True)])
+    scenario, fps = args.scenario or "drone", args.fps or FPS["video"]
+    config = SynthConfig(scenario=scenario, n_people=args.people or (3, 14),
+                         top_size=args.size, ego_size=args.size, fps=fps)
+    options = VideoSynthOptions(args.out, config, args.frames, args.seed,
+                                synth_difficulty(args.difficulty, args.texture))
+    start = time.perf_counter()
+    with progress_bar(args.frames, "synth", "frame", not args.quiet) as bar:
+        paths = synth_video(options, lambda _: bar.update(1))
+    if not args.quiet:
+        root = paths["top"].parent
+        print(f"wrote a {scenario} clip of {args.frames} frames at {fps:g} fps to {root} in "
+              f"{time.perf_counter() - start:.1f} s. Track, match and score it:",
+              file=sys.stderr)
+        size = "{}x{}".format(*args.size)
+        _print_commands(root, root / "pred.csv", [
+            "--model", "default", "--top-images", paths["top_images"], "--hor-images",
+            paths["hor_images"], "--cameras", paths["cameras"]],
+            ["--image-size", size, "--offset", "0", "--out", root / "tracks"])
     return 0
 
 
@@ -167,7 +228,7 @@ def _synth_cameras(args: argparse.Namespace) -> int:
     check_outputs([Output("--out", args.out, folder=True)])
     options = CamerasSynthOptions(
         args.out, MulticamConfig(n_cameras=args.cameras, n_people=args.people or (12, 12),
-                                 fps=args.fps),
+                                 fps=args.fps or FPS["pairs"]),
         args.frames, args.seed, width=width, difficulty=args.difficulty,
         boxes_only=args.boxes_only, tracker_noise=args.tracker_noise)
     start = time.perf_counter()
