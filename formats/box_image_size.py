@@ -40,6 +40,7 @@ __all__ = [
     "MARGIN",
     "MIN_EXTENT",
     "box_extent",
+    "box_line",
     "check_boxes_in_image",
     "consistent_with",
     "resolve_size",
@@ -89,8 +90,9 @@ def consistent_with(frames: Mapping, size: tuple[int, int] = CVMHAT_SIZE) -> boo
     return box_extent(frames)[0] > MIN_EXTENT * size[0]
 
 
-def _line_of(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:
-    """The 1-based line of ``path`` holding ``box`` of ``frame`` (the first such line)."""
+def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:
+    """The 1-based line of ``path`` holding ``box`` of ``frame`` (the first such line), None
+    when no line does: how a check of boxes already read names the line at fault."""
     try:
         lines = read_input_text(path, encoding="utf-8-sig").split("\n")
     except (InputFileError, OSError):
@@ -121,7 +123,7 @@ def check_boxes_in_image(frames: Mapping, size: tuple[int, int], path: str | os.
         if not bad.size:
             continue
         k = int(bad[0])
-        line = _line_of(path, int(frame), b[k])
+        line = box_line(path, int(frame), b[k])
         where = f"{os.fspath(path)}:{line}" if line is not None else os.fspath(path)
         who = f"box of id {int(rec.ids[k])}" if ids else "box"
         x, y, w, h = (_fmt(v) for v in b[k])

@@ -1,4 +1,5 @@
-"""Pictures: one frame's cross-view matches and the canvases of box-only results.
+"""Pictures: one frame's cross-view matches, the canvases of box-only results and multicam's
+bird's-eye view of the ground paths.
 
 May import core, geometry, cues and formats.
 """

@@ -80,11 +80,16 @@ frame (e.g. ``LearnedMatcher.descriptors`` on that camera's image of the frame).
 
 
 class MulticamInputError(ValueError):
-    """Input the association cannot use; ``camera`` names the camera (its box file)."""
+    """Input the association cannot use; ``camera`` names the camera (its box file), and
+    ``frame`` and ``box`` the box at fault (None when no box is), so a caller can name its line
+    (:func:`xvmatch.formats.box_image_size.box_line`)."""
 
-    def __init__(self, camera: str, message: str):
+    def __init__(self, camera: str, message: str, frame: int | None = None,
+                 box: np.ndarray | None = None):
         super().__init__(message)
         self.camera = camera
+        self.frame = frame
+        self.box = box
 
 
 @dataclass(frozen=True)
@@ -199,7 +204,8 @@ def camera_tracks(name: str, camera: GroundCamera, frames: Mapping[int, FrameBox
             f"to the horizon (farther than {max_range_m:g} m)"
         raise MulticamInputError(name, f"frame {fr[k]}, id {ids[k]}: the box's foot point "
                                        f"({uv[k, 0]:.1f}, {uv[k, 1]:.1f}) projects {where}; "
-                                       "check the camera's calibration or drop the box")
+                                       "check the camera's calibration or drop the box",
+                                 frame=int(fr[k]), box=boxes[k])
     uniq, t_idx = np.unique(ids, return_inverse=True)
     f_idx = np.searchsorted(frame_axis, fr)
     T, F = len(uniq), len(frame_axis)
