@@ -1,11 +1,11 @@
 """The learned box-only path on real CVMHAT boxes: ONNX runtime against the torch path, and
 against the handcrafted search, as whole command-line runs on one core, in one run.
 
-Four runs over the same sequences (default ``V1-S_55-G_1``, 1,200 frames), each a fresh
+Up to four runs over the same sequences (default ``V1-S_55-G_1``, 1,200 frames), each a fresh
 process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
 
 * ``handcrafted``: ``xvmatch associate`` (the exhaustive search of Sec. 3.2.4), as shipped
-  (``XVMATCH_KERNELS=auto``: calls of 256 hypotheses or more in the compiled kernels);
+  (``XVMATCH_KERNELS=auto``: the compiled kernels wherever numba is installed);
 * ``hand-numpy``: the same command with ``XVMATCH_KERNELS=numpy``: the search as it ran before
   the compiled kernels, the speed the issue's reference figure (265 frames/s) was measured on;
 * ``onnx``: ``xvmatch associate --model BUNDLE`` (the deployed runtime, no torch);
@@ -14,12 +14,17 @@ process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
   version 1 did) and the torch matcher (``models.matcher_file``) with the same weights,
   batched 64 frames, Hungarian with the same gamma, the same CSV written.
 
+``--runs`` picks some of them (``--runs handcrafted onnx``: the learned/handcrafted ratio alone,
+no torch needed) and ``--repeat N`` runs them N times, alternating their order from round to
+round (paired runs on a noisy machine); the figures are medians over the rounds, and the
+onnx/handcrafted ratio is the median of the rounds' own ratios.
+
 Prints frames per second (CPU time of the child processes, and wall time), the ratios, and the
 CVIDF1 of each on those frames (ids as in the files: the learned paths never see them).
 
 Usage:
     python benchmarks/learned_box_path.py [--sequences V1-S_55-G_1 ...] [--model default]
-        [--torch-model default]
+        [--torch-model default] [--runs handcrafted onnx] [--repeat 5]
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import resource  # noqa: E402
+import statistics  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
@@ -40,6 +46,8 @@ from pathlib import Path  # noqa: E402
 from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence  # noqa: E402
 from xvmatch.formats.mot_boxes import read_predictions  # noqa: E402
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize  # noqa: E402
+
+RUNS = ("handcrafted", "hand-numpy", "onnx", "torch")
 
 
 def _children_cpu() -> float:
@@ -96,6 +104,10 @@ def main() -> int:
     parser.add_argument("--model", default="default", help="bundle of the ONNX path")
     parser.add_argument("--torch-model", default="default",
                         help="matcher file of the torch path (the bundle's source)")
+    parser.add_argument("--runs", nargs="+", choices=RUNS, default=list(RUNS),
+                        help="which runs (default all four)")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="rounds of the runs, their order alternating (medians reported)")
     parser.add_argument("--torch-path", nargs=3, metavar=("TOP", "HOR", "OUT"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -105,8 +117,10 @@ def main() -> int:
     if not (args.data / "README.md").exists():
         print(f"CVMHAT data not found at {args.data}; nothing to measure (skipped).")
         return 0
+    if args.repeat < 1:
+        parser.error(f"--repeat must be >= 1, got {args.repeat}")
     exe = [sys.executable, "-m", "xvmatch", "associate", "--quiet"]
-    runs = {
+    commands = {
         "handcrafted": lambda t, h, o: [*exe, "--top", t, "--hor", h, "--out", o],
         "hand-numpy": lambda t, h, o: [*exe, "--top", t, "--hor", h, "--out", o],
         "onnx": lambda t, h, o: [*exe, "--top", t, "--hor", h, "--out", o, "--model",
@@ -114,34 +128,53 @@ def main() -> int:
         "torch": lambda t, h, o: [sys.executable, __file__, "--torch-model", args.torch_model,
                                   "--torch-path", t, h, o],
     }
+    labels = [r for r in RUNS if r in args.runs]
     seqs = {n: read_sequence(args.data, n) for n in args.sequences}
     n_frames = sum(len(set(t) | set(h)) for t, h in seqs.values())
-    rows = {}
+    rounds: list[dict[str, tuple[float, float, float]]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        for label, cmd in runs.items():
-            cpu0, wall0 = _children_cpu(), time.perf_counter()
-            counts = []
-            for n, (top, hor) in seqs.items():
-                out = f"{tmp}/{label}_{n}.csv"
-                env = {**os.environ,
-                       "XVMATCH_KERNELS": "numpy" if label == "hand-numpy" else "auto"}
-                subprocess.run(cmd(str(args.data / f"{n}_top.txt"),
-                                   str(args.data / f"{n}_hor.txt"), out), check=True, env=env)
-                counts += count_sequence(read_predictions(out), top, hor)
-            rows[label] = (_children_cpu() - cpu0, time.perf_counter() - wall0,
-                           summarize(counts).cvidf1)
+        for r in range(args.repeat):
+            rows = {}
+            for label in labels if r % 2 == 0 else labels[::-1]:
+                cpu0, wall0 = _children_cpu(), time.perf_counter()
+                counts = []
+                for n, (top, hor) in seqs.items():
+                    out = f"{tmp}/{label}_{n}.csv"
+                    env = {**os.environ,
+                           "XVMATCH_KERNELS": "numpy" if label == "hand-numpy" else "auto"}
+                    subprocess.run(commands[label](str(args.data / f"{n}_top.txt"),
+                                                   str(args.data / f"{n}_hor.txt"), out),
+                                   check=True, env=env)
+                    counts += count_sequence(read_predictions(out), top, hor)
+                rows[label] = (_children_cpu() - cpu0, time.perf_counter() - wall0,
+                               summarize(counts).cvidf1)
+            rounds.append(rows)
+    median = {label: tuple(statistics.median(rows[label][k] for rows in rounds)
+                           for k in range(3)) for label in labels}
     print(f"{', '.join(args.sequences)}: {n_frames} frames, whole command per sequence, one "
-          "thread")
+          f"thread; median of {args.repeat} round(s), order alternating")
     print(f"{'path':12s} {'fps (cpu)':>10s} {'fps (wall)':>11s} {'CVIDF1':>7s}")
-    for label, (cpu, wall, f1) in rows.items():
+    for label, (cpu, wall, f1) in median.items():
         print(f"{label:12s} {n_frames / cpu:10.1f} {n_frames / wall:11.1f} {f1:7.2f}")
-    cpu = {k: v[0] for k, v in rows.items()}
-    print(f"onnx / torch speed: {cpu['torch'] / cpu['onnx']:.2f}x (target >= 3); onnx / "
-          f"handcrafted: {cpu['handcrafted'] / cpu['onnx']:.2f} of its speed, of the numpy "
-          f"search's: {cpu['hand-numpy'] / cpu['onnx']:.2f} (target 200 / 265 = 0.75); CVIDF1 "
-          f"onnx - torch: {rows['onnx'][2] - rows['torch'][2]:+.2f} (target within 0.2)")
-    return 0
 
+    def ratio(num: str, den: str) -> float:
+        """Median over the rounds of the CPU time of ``num`` over that of ``den``."""
+        return statistics.median(rows[num][0] / rows[den][0] for rows in rounds)
+
+    parts = []
+    if {"onnx", "handcrafted"} <= set(labels):
+        parts.append(f"onnx / handcrafted: {ratio('handcrafted', 'onnx'):.2f} of its speed "
+                     "(target 1.0)")
+    if {"onnx", "hand-numpy"} <= set(labels):
+        parts.append(f"of the numpy search's: {ratio('hand-numpy', 'onnx'):.2f} (target 200 / "
+                     "265 = 0.75)")
+    if {"onnx", "torch"} <= set(labels):
+        parts.append(f"onnx / torch speed: {ratio('torch', 'onnx'):.2f}x (target >= 3); CVIDF1 "
+                     f"onnx - torch: {median['onnx'][2] - median['torch'][2]:+.2f} (target "
+                     "within 0.2)")
+    if parts:
+        print("; ".join(parts))
+    return 0
 
 if __name__ == "__main__":
     raise SystemExit(main())

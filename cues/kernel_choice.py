@@ -3,12 +3,14 @@
 The two give bit-identical results on every CPU (the kernels do only IEEE arithmetic and
 comparisons in the numpy forms' order; every transcendental function is numpy's, in both;
 ``tests/test_spatial_matching.py`` and ``tests/test_spatial_vectors.py`` pin it), so the choice
-only moves time. It is a rule on the work alone, never on elapsed time: ``auto`` runs a call of
-at least ``LARGE_BATCH`` hypotheses in the kernels (the exhaustive search's calls hold
-thousands), and smaller calls (the video mode's few dozen orientations per frame) in numpy,
-unless the run declared with :func:`planned` holds at least ``LONG_RUN`` frames: the kernels are
-about 3x faster there too, but importing numba and loading them costs a process about a second.
-``XVMATCH_KERNELS=auto|compiled|numpy`` or :func:`set_mode` forces one side (tests run both).
+only moves time. ``auto`` (the default) runs every call in the kernels wherever numba can be
+imported (a base requirement), and numpy where it cannot: the kernels are about 3x faster even
+on the video mode's few dozen orientations per frame, and every run of the search has calls of
+hundreds of hypotheses (the first frame's full circle), which load them anyway (importing numba
+and loading the cached machine code cost a process about a second, once). It is a rule on the
+installation alone, never on elapsed time or on the work, so every process and worker takes the
+same side. ``XVMATCH_KERNELS=auto|compiled|numpy`` or :func:`set_mode` forces one side (tests
+run both).
 """
 
 from __future__ import annotations
@@ -18,16 +20,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import ModuleType
 
-__all__ = ["LARGE_BATCH", "LONG_RUN", "MODES", "forced", "kernels", "mode", "planned", "set_mode"]
+__all__ = ["MODES", "forced", "kernels", "mode", "set_mode"]
 
 MODES = ("auto", "compiled", "numpy")
-LARGE_BATCH = 256
-"""Hypotheses in a call from which ``auto`` runs the compiled kernel."""
-LONG_RUN = 1000
-"""Frames of a planned run from which ``auto`` runs every call in the kernels (video mode on the
-CVMHAT dev pairs: numpy about 800-1300 frames/s, the kernels about 2600-3300 once loaded)."""
 
-_state: dict[str, str | int] = {"mode": "", "frames": 0}
+_state: dict[str, str] = {"mode": ""}
+_loaded: dict[str, ModuleType | None] = {}
+"""The kernels module once imported (``"module"``), or None when numba could not be."""
 
 
 def set_mode(value: str) -> None:
@@ -41,7 +40,7 @@ def mode() -> str:
     """The current choice (``$XVMATCH_KERNELS``, default ``auto``, until :func:`set_mode`)."""
     if not _state["mode"]:
         set_mode(os.environ.get("XVMATCH_KERNELS", "auto") or "auto")
-    return str(_state["mode"])
+    return _state["mode"]
 
 
 @contextmanager
@@ -55,24 +54,26 @@ def forced(value: str) -> Iterator[None]:
         set_mode(previous)
 
 
-@contextmanager
-def planned(frames: int) -> Iterator[None]:
-    """Run a block that will process ``frames`` frames (``auto`` then knows whether loading the
-    kernels pays for the small calls too)."""
-    previous = _state["frames"]
-    _state["frames"] = int(frames)
-    try:
-        yield
-    finally:
-        _state["frames"] = previous
+def _module(required: bool) -> ModuleType | None:
+    """The kernels module, imported once; None when numba is missing and not ``required``."""
+    if "module" not in _loaded:
+        try:
+            from xvmatch.cues import search_kernels
+        except ImportError:
+            if required:
+                raise
+            _loaded["module"] = None
+        else:
+            _loaded["module"] = search_kernels
+    module = _loaded["module"]
+    if module is None and required:
+        raise ImportError("XVMATCH_KERNELS=compiled needs numba (pip install numba)")
+    return module
 
 
-def kernels(batch: int) -> ModuleType | None:
-    """The compiled kernels module for a call over ``batch`` hypotheses, or None (use numpy)."""
+def kernels() -> ModuleType | None:
+    """The compiled kernels module for the next call, or None (use numpy)."""
     current = mode()
-    small = batch < LARGE_BATCH and int(_state["frames"]) < LONG_RUN
-    if current == "numpy" or (current == "auto" and small):
+    if current == "numpy":
         return None
-    from xvmatch.cues import search_kernels
-
-    return search_kernels
+    return _module(required=current == "compiled")

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "sorted_order"]
+__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "sorted_rows"]
 
 _BLOCK = 128  # NumPy's pairwise-summation block (PW_BLOCKSIZE)
 
@@ -251,9 +251,13 @@ def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, h
 
 
 @njit(cache=True)
-def sorted_order(x_all: np.ndarray, rows: np.ndarray, order_out: np.ndarray) -> None:
-    """Eq. 8's order of the hypotheses ``rows``: the first ``order_out.shape[1]`` person
-    indices of each row by x ascending, a stable sort (+inf last), as numpy's stable argsort."""
+def sorted_rows(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n_theta: int,
+                rows: np.ndarray, order_out: np.ndarray, x: np.ndarray, delta: np.ndarray,
+                dist_out: np.ndarray) -> None:
+    """Eq. 8's sorted rows of the hypotheses ``rows`` (``TopHypotheses.take``): the first
+    ``order_out.shape[1]`` person indices of each row by x ascending, a stable sort (+inf last),
+    as numpy's stable argsort, and x, delta and |OP| gathered in that order (the y of Eq. 5 is
+    numpy's cos of delta, in both forms)."""
     n_people = x_all.shape[1]
     width = order_out.shape[1]
     order = np.empty(n_people, dtype=np.int64)
@@ -265,5 +269,10 @@ def sorted_order(x_all: np.ndarray, rows: np.ndarray, order_out: np.ndarray) -> 
                 order[i + 1] = order[i]
                 i -= 1
             order[i + 1] = m
+        c = b // n_theta
         for k in range(width):
-            order_out[r, k] = order[k]
+            m = order[k]
+            order_out[r, k] = m
+            x[r, k] = x_all[b, m]
+            delta[r, k] = delta_all[b, m]
+            dist_out[r, k] = dist[c, m]

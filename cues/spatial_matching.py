@@ -11,6 +11,7 @@ each sorted set (steps right, down, diagonal), cleaned up to one-to-one as the p
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,6 +171,13 @@ def penalty_table(rho: float, size: int) -> np.ndarray:
         return float(rho) ** (n[:, None] / n[None, :])
 
 
+@functools.lru_cache(maxsize=64)
+def _penalties(rho: float, size: int) -> np.ndarray:
+    """:func:`penalty_table`, computed once per (rho, size) in a process (the search asks for
+    it on every call); read only by its callers, never written."""
+    return penalty_table(rho, size)
+
+
 @dataclass(frozen=True)
 class MatchResult:
     """Matching of the horizontal set against a batch of top sets.
@@ -214,8 +222,8 @@ def match_vector_sets(
             pairs=np.zeros((n_batch, n_rows, n_cols), dtype=bool),
             scale=np.ones(n_batch),
         )
-    coef = penalty_table(params.rho, max(n_rows, n_cols))
-    kernels = kernel_choice.kernels(n_batch)
+    coef = _penalties(float(params.rho), max(n_rows, n_cols))
+    kernels = kernel_choice.kernels()
     if kernels is None:
         return _match_numpy(top_x, top_y, count, hor, params, coef)
     cost = np.empty(n_batch)
@@ -296,8 +304,8 @@ def cost_lower_bound(
     count = np.asarray(count)
     if n_batch == 0 or n_people == 0 or n_cols == 0:
         return np.full(n_batch, np.inf)
-    coef = penalty_table(params.rho, max(n_people, n_cols))
-    kernels = kernel_choice.kernels(n_batch)
+    coef = _penalties(float(params.rho), max(n_people, n_cols))
+    kernels = kernel_choice.kernels()
     if kernels is None:
         return _lower_bound_numpy(top_x, count, hor_x, params, tight, coef)
     bound = np.empty(n_batch)

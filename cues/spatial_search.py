@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.cues import kernel_choice
 from xvmatch.cues.spatial_matching import (
     SpatialParams,
     cost_lower_bound,
@@ -495,43 +494,41 @@ def associate_sequence(
     step_index = 0
     checks = 0
     out: dict[int, list[tuple[int, int]]] = {}
-    # A long run pays for loading the compiled kernels even where its calls are small.
-    with kernel_choice.planned(len(order)):
-        for frame in progress(order) if progress else order:
-            t_rec, h_rec = top.get(frame), hor.get(frame)
-            if t_rec is None or h_rec is None or len(t_rec.ids) == 0 or len(h_rec.ids) == 0:
-                out[frame] = []
-                continue
-            step_index += 1
-            if voting and (checks < follow.init_frames or step_index % follow.check_every == 0):
-                # Exhaustive check: vote for the winning O; follow the most voted top-view id.
-                checks += 1
-                result = associate_frame(t_rec.boxes, h_rec.boxes, hor_width, params)
-                if result.camera >= 0:
-                    votes.append(int(t_rec.ids[result.camera]))
-                    leader = Counter(votes).most_common(1)[0][0]
-                    if leader != followed:
-                        followed, step_index = leader, 1
-                    if int(t_rec.ids[result.camera]) != followed:
-                        own = ids_to_index(t_rec.ids, followed)
-                        if own:
-                            result = associate_frame(
-                                t_rec.boxes, h_rec.boxes, hor_width, params, own, circle
-                            )
-            else:
-                candidates: list[int] | None = None
-                if camera_id is not None:
-                    candidates = ids_to_index(t_rec.ids, camera_id) or None
-                elif search == "follow" and followed is not None:
-                    candidates = ids_to_index(t_rec.ids, followed) or None
-                thetas = (circle if search == "exhaustive"
-                          else search_window(last_theta, step_index, params))
-                result = associate_frame(
-                    t_rec.boxes, h_rec.boxes, hor_width, params, candidates, thetas
-                )
+    for frame in progress(order) if progress else order:
+        t_rec, h_rec = top.get(frame), hor.get(frame)
+        if t_rec is None or h_rec is None or len(t_rec.ids) == 0 or len(h_rec.ids) == 0:
+            out[frame] = []
+            continue
+        step_index += 1
+        if voting and (checks < follow.init_frames or step_index % follow.check_every == 0):
+            # Exhaustive check: vote for the winning O; follow the most voted top-view id.
+            checks += 1
+            result = associate_frame(t_rec.boxes, h_rec.boxes, hor_width, params)
             if result.camera >= 0:
-                last_theta = result.theta
-                if not voting:
-                    followed = int(t_rec.ids[result.camera])
-            out[frame] = [(int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs]
+                votes.append(int(t_rec.ids[result.camera]))
+                leader = Counter(votes).most_common(1)[0][0]
+                if leader != followed:
+                    followed, step_index = leader, 1
+                if int(t_rec.ids[result.camera]) != followed:
+                    own = ids_to_index(t_rec.ids, followed)
+                    if own:
+                        result = associate_frame(
+                            t_rec.boxes, h_rec.boxes, hor_width, params, own, circle
+                        )
+        else:
+            candidates: list[int] | None = None
+            if camera_id is not None:
+                candidates = ids_to_index(t_rec.ids, camera_id) or None
+            elif search == "follow" and followed is not None:
+                candidates = ids_to_index(t_rec.ids, followed) or None
+            thetas = (circle if search == "exhaustive"
+                      else search_window(last_theta, step_index, params))
+            result = associate_frame(
+                t_rec.boxes, h_rec.boxes, hor_width, params, candidates, thetas
+            )
+        if result.camera >= 0:
+            last_theta = result.theta
+            if not voting:
+                followed = int(t_rec.ids[result.camera])
+        out[frame] = [(int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs]
     return out

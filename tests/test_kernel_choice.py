@@ -26,16 +26,34 @@ def test_forced_modes_give_the_same_association():
     assert found["numpy"].theta == found["compiled"].theta
 
 
-def test_auto_is_a_rule_on_the_batch_size_alone():
-    # The same call takes the same side in every process and worker, however long the process
-    # has run (no timing): small batches in numpy, large ones in the kernels.
+def test_auto_takes_the_kernels_wherever_numba_is_installed():
+    # A rule on the installation alone (issue 70): every call, however small, in every process
+    # and worker, runs the kernels when numba imports; no timing, no work size.
     with kernel_choice.forced("auto"):
-        assert kernel_choice.kernels(kernel_choice.LARGE_BATCH - 1) is None
-        assert kernel_choice.kernels(kernel_choice.LARGE_BATCH) is not None
+        assert kernel_choice.kernels() is not None
     with kernel_choice.forced("numpy"):
-        assert kernel_choice.kernels(10**6) is None
+        assert kernel_choice.kernels() is None
     with kernel_choice.forced("compiled"):
-        assert kernel_choice.kernels(1) is not None
+        assert kernel_choice.kernels() is not None
+
+
+def test_auto_falls_back_to_numpy_without_numba_and_compiled_says_why():
+    code = ("import sys; sys.modules['numba'] = None\n"
+            "from xvmatch.cues import kernel_choice\n"
+            "from xvmatch.cues.spatial_search import associate_frame\n"
+            "import numpy as np\n"
+            "print(kernel_choice.kernels() is None)\n"
+            "top = np.array([[100, 100, 20, 20], [300, 120, 20, 20], [200, 300, 20, 20]], float)\n"
+            "hor = np.array([[100, 300, 60, 200], [900, 320, 50, 170]], float)\n"
+            "print(associate_frame(top, hor, 2688.0).camera >= 0)\n"
+            "kernel_choice.set_mode('compiled')\n"
+            "try:\n"
+            "    kernel_choice.kernels()\n"
+            "except ImportError as e:\n"
+            "    print('numba' in str(e))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={"XVMATCH_KERNELS": "auto", "PATH": ""}).stdout.split()
+    assert out == ["True", "True", "True"]
 
 
 def test_bad_mode_is_a_clear_error():
@@ -45,45 +63,7 @@ def test_bad_mode_is_a_clear_error():
 
 def test_environment_variable_sets_the_mode():
     code = ("from xvmatch.cues import kernel_choice; print(kernel_choice.mode()); "
-            "print(kernel_choice.kernels(1) is None)")
+            "print(kernel_choice.kernels() is None)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={"XVMATCH_KERNELS": "compiled", "PATH": ""}).stdout.split()
     assert out == ["compiled", "False"]
-
-
-def test_a_planned_long_run_takes_the_kernels_for_small_calls_too():
-    with kernel_choice.forced("auto"):
-        with kernel_choice.planned(kernel_choice.LONG_RUN - 1):
-            assert kernel_choice.kernels(1) is None
-        with kernel_choice.planned(kernel_choice.LONG_RUN):
-            assert kernel_choice.kernels(1) is not None
-        assert kernel_choice.kernels(1) is None  # the plan ends with its block
-    with kernel_choice.forced("numpy"), kernel_choice.planned(10**6):
-        assert kernel_choice.kernels(10**6) is None
-
-
-@pytest.mark.parametrize("workers", [1, 2])
-def test_the_learned_path_declares_its_run_as_the_search_does(monkeypatch, workers):
-    # The learned box path's many small calls run in the kernels on a long run, in the main
-    # process and in every worker (issue 70: they ran in numpy, a third of its slowdown).
-    from xvmatch.inference.matching import learned_association
-
-    seen = []
-
-    def frame_features(*args):
-        seen.append(kernel_choice.kernels(1) is not None)
-        return [[None]]
-
-    if workers > 1:  # a worker runs _features_of_chunk itself: check its declaration directly
-        with kernel_choice.forced("auto"):
-            monkeypatch.setattr(learned_association, "_frame_features", frame_features)
-            learned_association._features_of_chunk([(TOP, HOR, None, None)], (2688.0, 1512.0),
-                                                   (), False, kernel_choice.LONG_RUN)
-        assert seen == [True]
-        return
-    inputs = [(TOP, HOR, None, None)] * kernel_choice.LONG_RUN
-    with kernel_choice.forced("auto"):
-        monkeypatch.setattr(learned_association, "_frame_features", frame_features)
-        list(learned_association._feature_stream(inputs, (2688.0, 1512.0), (), False, 1))
-        assert kernel_choice.kernels(1) is None  # declared for the run only
-    assert len(seen) == kernel_choice.LONG_RUN and all(seen)

@@ -38,7 +38,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from xvmatch.cues import kernel_choice
 from xvmatch.cues.matcher_inputs import (
     MatcherInputs,
     appearance_cost,
@@ -379,13 +378,10 @@ def _frame_features(
     return groups
 
 
-def _features_of_chunk(inputs, size, configs, mirror,
-                       frames: int) -> list[list[list[FrameFeatures]]]:
-    """:func:`_frame_features` of a worker's chunk, the run's ``frames`` declared to the kernel
-    choice (:func:`~xvmatch.cues.kernel_choice.planned`) as in the main process."""
-    with kernel_choice.planned(frames):
-        return [_frame_features(tb, hb, size, configs, cam, cams, mirror)
-                for tb, hb, cam, cams in inputs]
+def _features_of_chunk(inputs, size, configs, mirror) -> list[list[list[FrameFeatures]]]:
+    """:func:`_frame_features` of a worker's chunk."""
+    return [_frame_features(tb, hb, size, configs, cam, cams, mirror)
+            for tb, hb, cam, cams in inputs]
 
 
 def _feature_stream(
@@ -397,15 +393,10 @@ def _feature_stream(
     chunk: int = 32,
 ) -> Iterator[list[list[FrameFeatures]]]:
     """:func:`_frame_features` of each ``(top boxes, hor boxes, camera row, cameras)`` in
-    order, computed by ``workers`` processes (the spatial-distribution search dominates). The
-    run's length is declared to the kernel choice, as the handcrafted search does: a long run
-    pays for loading the compiled kernels, and its many small calls then run in them (the same
-    bits as numpy's, so the same features)."""
+    order, computed by ``workers`` processes (the spatial-distribution search dominates)."""
     if workers == 1 or len(inputs) <= chunk:
         for tb, hb, cam, cams in inputs:
-            with kernel_choice.planned(len(inputs)):
-                features = _frame_features(tb, hb, size, configs, cam, cams, mirror)
-            yield features
+            yield _frame_features(tb, hb, size, configs, cam, cams, mirror)
         return
     from xvmatch.core.worker_pool import worker_pool
 
@@ -419,8 +410,7 @@ def _feature_stream(
     with worker_pool(workers) as pool:
         ahead: deque = deque()
         for c in chunks:
-            ahead.append(pool.submit(_features_of_chunk, c, size, configs, mirror,
-                                     len(inputs)))
+            ahead.append(pool.submit(_features_of_chunk, c, size, configs, mirror))
             if len(ahead) >= 2 * workers:
                 yield from ahead.popleft().result()
         while ahead:
