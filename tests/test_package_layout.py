@@ -205,8 +205,6 @@ calls a library run (issue 66)."""
 LONG_COMMANDS = {
     "xvmatch/commands/_model.py": "the learned matcher's run to move out of the CLI (issue 66)",
     "xvmatch/commands/track.py": "the track run to move into inference.tracks (issue 66)",
-    "xvmatch/commands/associate_multi.py": "the multi-view run to move into inference.views "
-                                           "(issue 66)",
     "xvmatch/commands/offset.py": "the offset estimate's options to move out of the CLI "
                                   "(issue 66)",
 }

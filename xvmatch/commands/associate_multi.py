@@ -1,20 +1,14 @@
 """The ``xvmatch associate-multi`` command: one top view and several egocentric views at once.
 
 Reads a top-view box file and 1..3 horizontal (egocentric) box files as detections (their id
-columns are ignored, except to find each wearer with ``--camera-id``), builds the cost matrices
-of every view pair frame by frame
-(:func:`xvmatch.inference.views.multi_view_costs.multi_view_costs`: the learned matcher or the
-handcrafted search for top-ego, the appearance network for ego-ego), solves the joint
-cycle-consistent program of every frame
-(:func:`xvmatch.inference.views.multi_view_people.assign_people`), and writes
-``OUT/top.txt``, ``OUT/hor1.txt``, ...: the input rows, text unchanged but the id field, which holds
-a person id; the same id in two views of a frame is the same person (ids are unique over the whole
-output and do not carry over frames). With ``--tracks`` the ids carry over frames
-(:func:`xvmatch.inference.views.multi_ego_tracking.track_multi_view`: tracklets per view smooth the
-costs, every frame is solved with the cycle constraints, ids follow the tracklets). ``--offset N1 N2
-...|auto`` re-times each horizontal view against the top view (cameras not started together); rows
-keep their own frame numbers. Bad input raises ``ValueError`` with one line, printed by the main
-entry point as ``xvmatch: error: ...``.
+columns are ignored, except to find each wearer with ``--camera-id``), settles each view's image
+size and ``--offset`` (``auto``: estimated), and runs
+:func:`xvmatch.inference.views.multi_ego_run.run_multi_ego`: every frame's cost matrices of every
+view pair and the joint cycle-consistent program of every frame (with ``--tracks`` the ids carry
+over frames). Writes ``OUT/top.txt``, ``OUT/hor1.txt``, ...: the input rows, text unchanged but
+the id field, which holds a person id; the same id in two views of a frame is the same person.
+Bad input raises ``ValueError`` with one line, printed by the main entry point as
+``xvmatch: error: ...``.
 """
 
 from __future__ import annotations
@@ -159,26 +153,12 @@ def _offsets(args: argparse.Namespace, n_hor: int) -> list:
     return values
 
 
-def _aligned(views, offsets, images, cameras, camera_rows):
-    """Every view (and its images and cameras) re-timed so that top frame ``t + N_k`` and frame
-    ``t`` of horizontal view ``k`` share a number (:func:`xvmatch.formats.mot_boxes.
-    align_frames`); the rows keep their own frame numbers in the output."""
-    from xvmatch.formats.mot_boxes import align_frames
-    from xvmatch.inference.matching.learned_pipeline import retimed
+def _run_options(args: argparse.Namespace):
+    """``(out, options)`` after every check of the arguments and the output paths: the output
+    folder and the run's :class:`~xvmatch.inference.views.multi_ego_run.MultiEgoRunOptions`."""
+    from xvmatch.inference.views.multi_ego_run import MultiEgoRunOptions
+    from xvmatch.inference.views.multi_view_people import PeopleOptions
 
-    views, shifts = align_frames(views, offsets)
-    if images is not None:  # aligned frame f shows the source's frame f - shift
-        images = [retimed(x, -m) for x, m in zip(images, shifts, strict=True)]
-    if cameras is not None:
-        cameras = [retimed(x, -m) for x, m in zip(cameras, shifts[1:], strict=True)]
-    if camera_rows is not None:
-        camera_rows = [{f + shifts[0]: r for f, r in rows.items()} for rows in camera_rows]
-    return views, images, cameras, camera_rows, sorted(set().union(*views))
-
-
-def _checked_args(args: argparse.Namespace):
-    """``(out, paths, params)`` after every check of the arguments and the output paths: the
-    output folder, the box files (top first) and the spatial options."""
     n_hor = len(args.hor)
     if not 1 <= n_hor <= MAX_HOR:
         raise ValueError(f"--hor: give 1 to {MAX_HOR} horizontal box files, got {n_hor}")
@@ -203,156 +183,24 @@ def _checked_args(args: argparse.Namespace):
          Input("--model", None if args.model == "default" else args.model)],
     )
     check_own_folder(out, MULTI_COMMAND)
-    return out, paths, params
-
-
-def _open_images(args: argparse.Namespace, matcher, views, paths, given, sources: list):
-    """The images of every view (``sources``, top first, each added as it opens so that the
-    caller closes them), their sizes added to ``given``; the top boxes checked against theirs."""
-    from xvmatch.formats.box_image_size import check_boxes_in_image
-    from xvmatch.inference.matching.learned_pipeline import open_view_images
-
-    if matcher.bundle.manifest.appearance is None:
-        raise ValueError(f"{args.model}: a box-only matcher cannot use images; drop "
-                         "the images or use a bundle with an appearance network")
-    for v, path in enumerate([args.top_images, *args.hor_images]):
-        source = open_view_images(path, views[v],
-                                  [f for f in sorted(views[v]) if len(views[v][f])])
-        sources.append(source)
-        if v:
-            given[v - 1].append((tuple(source.size), f"the horizontal images {path}"))
-        else:
-            check_boxes_in_image(views[0], tuple(source.size), paths[0],
-                                 f"the images {path}", ids=False)
-    return sources
-
-
-def _open_cameras(args: argparse.Namespace, matcher, views, paths, given) -> list:
-    """``--cameras`` of every horizontal view, each ego camera the size ``given`` names (else
-    its size added to ``given``)."""
-    from xvmatch.formats.camera_frames import open_cameras
-
-    if not matcher.bundle.manifest.uses_cameras:
-        raise ValueError(f"{args.model}: this matcher takes no camera cues; drop "
-                         "--cameras")
-    cameras = []
-    for k, path in enumerate(args.cameras):
-        cams = open_cameras(path, sorted(views[k + 1]))
-        for where, pair in cams.all():
-            size = tuple(pair.hor.image_size)
-            if given[k] and tuple(given[k][0][0]) != size:
-                want = given[k][0][0]
-                raise ValueError(f"{where}: camera 'ego' is {size[0]}x{size[1]} but "
-                                 f"{paths[k + 1]}'s images are {want[0]}x{want[1]} "
-                                 f"(from {given[k][0][1]})")
-            if not given[k]:
-                given[k].append((size, f"the camera files {path}"))
-        cameras.append(cams)
-    return cameras
-
-
-def _sizes_and_offsets(args: argparse.Namespace, views, paths, given, offsets, camera_rows,
-                       params, max_offset):
-    """``(sizes, offsets)``: each horizontal view's image size (said when assumed) and its
-    offset against the top view (``--offset``, estimated where ``auto``)."""
-    from xvmatch.commands._image_size import note_if_assumed
-    from xvmatch.formats.box_image_size import resolve_size
-
-    n_hor = len(paths) - 1
-    resolved = [resolve_size(views[k + 1], paths[k + 1], given[k], ids=False)
-                for k in range(n_hor)]
-    for k, r in enumerate(resolved):
-        note_if_assumed(r, views[k + 1], paths[k + 1], args.quiet)
-    sizes = [r[0] for r in resolved]
-    for k, value in enumerate(offsets):
-        marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
-        offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], params,
-                                    max_offset, wearer, value,
-                                    f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
-                                    hor_path=paths[k + 1])
-    return sizes, offsets
-
-
-def _checked_cameras(args: argparse.Namespace, matcher, views, paths, sizes, cameras,
-                     refinement):
-    """The cameras after ``--camera-check`` (``views`` aligned): a view whose cameras fail is
-    matched without them (None)."""
-    if refinement is None or args.camera_check != "on":
-        return cameras
-    from xvmatch.inference.matching.camera_check import check_run_cameras
-
-    cameras = list(cameras)
-    for k in range(len(paths) - 1):
-        check = check_run_cameras(views[0], views[k + 1], sorted(views[k + 1]),
-                                  matcher, tuple(sizes[k]), cameras[k],
-                                  float(matcher.gamma), refinement.fit_loss,
-                                  workers=args.workers, moving=refinement.moving)
-        note_camera_check(check, args.quiet, f"--hor {paths[k + 1]}: ")
-        if not check.trusted:
-            cameras[k] = None
-    return cameras
-
-
-def _costs(args: argparse.Namespace, rows, paths, params, offsets, max_offset, camera_rows):
-    """``(views, frames, problems, refined, refinement)``: every frame's cost matrices of every
-    view pair (:func:`~xvmatch.inference.views.multi_view_costs.multi_view_costs`) on the views
-    re-timed by their offsets, and the cameras as refined for ``--write-cameras``."""
-    from xvmatch.inference.views.multi_view_costs import multi_view_costs
-
-    n_hor = len(paths) - 1
-    views = [r.frames for r in rows]
-    frames = sorted(set().union(*views))
-    matcher = images = cameras = None
-    given: list[list] = [[] for _ in range(n_hor)]  # per horizontal view: [(size, source)]
-    if args.image_size is not None:
-        given = [[(tuple(args.image_size), "--image-size")] for _ in range(n_hor)]
-    sources: list = []
-    try:
-        if args.model is not None:
-            from xvmatch.commands._model import open_models
-
-            matcher = open_models([args.model], args.threads)[0]
-        if args.top_images is not None:
-            images = _open_images(args, matcher, views, paths, given, sources)
-        if args.cameras is not None:
-            cameras = _open_cameras(args, matcher, views, paths, given)
-        sizes, offsets = _sizes_and_offsets(args, views, paths, given, offsets, camera_rows,
-                                            params, max_offset)
-        refinement = None
-        if cameras is not None and args.refine_top_camera == "auto":
-            from xvmatch.inference.matching.camera_refinement import refine_views_cameras
-
-            cameras, refinement = refine_views_cameras(
-                cameras, views[0], views[1:], [sorted(v) for v in views[1:]], offsets)
-            note_camera_refinement(refinement, args.quiet)
-        refined = cameras
-        if any(offsets):
-            views, images, cameras, camera_rows, frames = _aligned(views, offsets, images,
-                                                                   cameras, camera_rows)
-        cameras = _checked_cameras(args, matcher, views, paths, sizes, cameras, refinement)
-        checked: dict = {}
-        problems = multi_view_costs(
-            views, sizes, frames, matcher=matcher,
-            appearance=matcher if images is not None else None, images=images,
-            cameras=cameras, camera_rows=camera_rows, params=params, workers=args.workers,
-            progress=frame_progress(len(frames), "costs", not args.quiet),
-            appearance_check=args.appearance_check == "on", checked=checked,
-        )
-        for k, check in sorted(checked.items()):
-            if check.to_tell(args.quiet):
-                print(f"--hor {paths[k]}: {check.message()}", file=sys.stderr)
-    finally:
-        for source in sources:
-            source.close()
-    return views, frames, problems, refined, refinement
+    return out, MultiEgoRunOptions(
+        tuple(paths), args.model, args.top_images, tuple(args.hor_images or ()) or None,
+        tuple(args.cameras or ()) or None,
+        None if args.image_size is None else tuple(args.image_size),
+        args.refine_top_camera == "auto", args.camera_check == "on",
+        args.appearance_check == "on", params, args.workers,
+        PeopleOptions(solver=args.solver, time_limit=args.time_limit, tracks=args.tracks,
+                      clip_length=args.clip_length))
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
+    from xvmatch.commands._image_size import note_if_assumed
     from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
-    from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
+    from xvmatch.inference.views.multi_ego_run import multi_ego_sizes, open_multi_ego, run_multi_ego
 
     start = time.perf_counter()
-    out, paths, params = _checked_args(args)
+    out, options = _run_options(args)
+    paths, quiet = options.box_files, args.quiet
     n_hor = len(paths) - 1
     offsets = _offsets(args, n_hor)
     rows = [read_detection_rows(p) for p in paths]
@@ -361,22 +209,39 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                   if "auto" in offsets else None)
     camera_rows = ([_wearer_rows(rows[0], c) for c in args.camera_id]
                    if args.camera_id is not None else None)
-    views, frames, problems, refined, refinement = _costs(args, rows, paths, params, offsets,
-                                                          max_offset, camera_rows)
-    people = assign_people(views, problems, frames, PeopleOptions(
-        solver=args.solver, time_limit=args.time_limit, tracks=args.tracks,
-        clip_length=args.clip_length))
+    matcher = None
+    if args.model is not None:
+        from xvmatch.commands._model import open_models
+
+        matcher = open_models([args.model], args.threads)[0]
+    with open_multi_ego(views, matcher, options) as inputs:
+        resolved = multi_ego_sizes(inputs, options)
+        for k, r in enumerate(resolved):
+            note_if_assumed(r, views[k + 1], paths[k + 1], quiet)
+        sizes = [r[0] for r in resolved]
+        for k, value in enumerate(offsets):
+            marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
+            offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], options.params,
+                                        max_offset, wearer, value,
+                                        f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
+                                        hor_path=paths[k + 1])
+        run = run_multi_ego(
+            inputs, matcher, sizes, offsets, camera_rows, options,
+            progress=lambda n: frame_progress(n, "costs", not quiet),
+            on_refinement=lambda r: note_camera_refinement(r, quiet),
+            on_camera_check=lambda v, c: note_camera_check(c, quiet, f"--hor {paths[v]}: "),
+            on_appearance_check=lambda v, c: note_camera_check(c, quiet, f"--hor {paths[v]}: "))
     claim_folder(out, MULTI_COMMAND)
     names = ["top", *(f"hor{k}" for k in range(1, n_hor + 1))]
     written = [write_track_rows(out / f"{name}.txt", r, p)
-               for name, r, p in zip(names, rows, people.person, strict=True)]
-    write_cameras(model_args(args), refined, refinement)
-    if people.n_fallback:
-        print(f"xvmatch: warning: {people.n_fallback} of {len(frames)} frames spent the MIP's "
-              f"budget of work or time limit ({args.time_limit:g} s) or failed, and used the "
-              "best consistent answer found instead of the optimum", file=sys.stderr)
-    if not args.quiet:
-        print(f"wrote {sum(written)} boxes of {len(paths)} views, {people.n_people} people over "
-              f"{len(frames)} frames, to {out}/ ({time.perf_counter() - start:.1f} s)",
+               for name, r, p in zip(names, rows, run.people.person, strict=True)]
+    write_cameras(model_args(args), run.refined, run.refinement)
+    if run.people.n_fallback:
+        print(f"xvmatch: warning: {run.people.n_fallback} of {len(run.frames)} frames spent the "
+              f"MIP's budget of work or time limit ({args.time_limit:g} s) or failed, and used "
+              "the best consistent answer found instead of the optimum", file=sys.stderr)
+    if not quiet:
+        print(f"wrote {sum(written)} boxes of {len(paths)} views, {run.people.n_people} people "
+              f"over {len(run.frames)} frames, to {out}/ ({time.perf_counter() - start:.1f} s)",
               file=sys.stderr)
     return 0
