@@ -131,8 +131,10 @@ def _association(found: tuple[int, float, np.ndarray, float, np.ndarray], cand: 
     mask over the sorted vectors, scale, top person of each entry), in input box order."""
     index, cost, pairs_mask, scale, top_index = found
     rows, cols = np.nonzero(pairs_mask)
-    pairs = np.stack([top_index[rows], hor_order[cols]], axis=1)
-    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    first = top_index[rows]
+    order = np.argsort(first, kind="stable")
+    pairs = np.empty((rows.shape[0], 2), dtype=np.result_type(top_index, hor_order))
+    pairs[:, 0], pairs[:, 1] = first[order], hor_order[cols[order]]
     n_theta = thetas.shape[0]
     return FrameAssociation(pairs=pairs, camera=int(cand[index // n_theta]),
                             theta=float(np.mod(thetas[index % n_theta], 2.0 * math.pi)),
@@ -287,12 +289,13 @@ def _best_per_group(
                 best_cost[g] = c
                 best[g] = (i, c, result.pairs[r], float(result.scale[r]), vectors.index[r])
 
-    def limits(groups: np.ndarray) -> np.ndarray:
-        """What a hypothesis of each group must not exceed to matter."""
+    def limits() -> np.ndarray:
+        """``(n_groups,)``: what a hypothesis of each group must not exceed to matter (per
+        group, indexed by the callers: every group has rows, so its max is the rows' max)."""
         if keep is None or keep >= n_groups:
-            return best_cost[groups]
+            return best_cost
         kth = float(np.partition(best_cost, keep - 1)[keep - 1])
-        return np.minimum(best_cost[groups], kth)
+        return np.minimum(best_cost, kth)
 
     loose = cost_lower_bound(hypotheses.x, hypotheses.count, hor_x, params, tight=False)
     # Seed: each group's most promising hypothesis under the loose bound.
@@ -304,16 +307,16 @@ def _best_per_group(
     score(seed)
     done = np.zeros(n, dtype=bool)
     done[seed] = True
-    rest = np.flatnonzero(~done & (loose <= limits(group)))
+    rest = np.flatnonzero(~done & (loose <= limits()[group]))
     tight = cost_lower_bound(hypotheses.x[rest], hypotheses.count[rest], hor_x, params)
-    alive = tight <= limits(group[rest])
+    alive = tight <= limits()[group[rest]]
     rest, tight = rest[alive], tight[alive]
     order = np.argsort(tight, kind="stable")
     rest, tight = rest[order], tight[order]
     start, chunk = 0, first_chunk
-    while start < rest.shape[0] and tight[start] <= limits(group).max():
+    while start < rest.shape[0] and tight[start] <= limits().max():
         sel = slice(start, start + chunk)
-        idx = rest[sel][tight[sel] <= limits(group[rest[sel]])]
+        idx = rest[sel][tight[sel] <= limits()[group[rest[sel]]]]
         start += chunk
         chunk *= 2
         if idx.size:
