@@ -15,7 +15,7 @@ import textwrap
 import pytest
 
 from xvmatch.cli import main
-from xvmatch.commands.track import TRACKEVAL_MISSING
+from xvmatch.commands.evaluate_tracks import TRACKEVAL_MISSING
 from xvmatch.datasets.box_scene import simulate_box_scene
 from xvmatch.formats.mot_boxes import write_mot_boxes
 

@@ -533,7 +533,7 @@ def test_an_offset_record_in_range_is_applied(track_files, tracks, capsys) -> No
 
 
 def test_a_fifo_offset_record_is_refused_at_once(tracks) -> None:
-    from xvmatch.commands.track import tracked_offset
+    from xvmatch.commands.evaluate_tracks import tracked_offset
 
     (tracks / "offset.json").unlink()
     os.mkfifo(tracks / "offset.json")

@@ -1,5 +1,6 @@
 """The ``xvmatch evaluate`` command: score predicted pairs (CVIDP, CVIDR, CVIDF1, CVMA, Eq. 9
-accuracy), or tracks with ``--tracks`` (:func:`xvmatch.commands.track.evaluate_tracks_command`), or
+accuracy), or tracks with ``--tracks``
+(:func:`xvmatch.commands.evaluate_tracks.evaluate_tracks_command`), or
 a multi-camera association with ``--multicam``
 (:func:`xvmatch.commands.multicam.evaluate_multicam_command`), or each camera's tracks with global
 ids with ``--pred NAME=FILE ... --gt NAME=FILE ...`` (the same scores).
@@ -91,7 +92,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise UsageError("give --top and --hor (or --multicam DIR --gt NAME=FILE ..., or "
                          "--pred NAME=FILE ... --gt NAME=FILE ...)")
     if args.tracks is not None:
-        from xvmatch.commands.track import evaluate_tracks_command
+        from xvmatch.commands.evaluate_tracks import evaluate_tracks_command
 
         return evaluate_tracks_command(args)
     from xvmatch.formats.mot_boxes import check_common_frames, read_predictions, shift_frames
