@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -90,7 +91,8 @@ class MulticamRun:
 
 
 def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
-                 options: MulticamRunOptions, progress: Callable[[int], object] | None = None,
+                 options: MulticamRunOptions,
+                 progress: Callable[[int], AbstractContextManager] | None = None,
                  warn: Callable[[str], None] | None = None,
                  note: Callable[[str], None] | None = None) -> MulticamRun:
     """One global id per person across the cameras, and each person's ground path.
@@ -99,7 +101,8 @@ def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
         cameras: ``{name: GroundCamera}``, one for each camera of ``boxes``.
         boxes: each camera's boxes, at least two cameras.
         options: :class:`MulticamRunOptions`.
-        progress: called with 1 after each camera pair.
+        progress: ``progress(n_pairs)``: a context (a progress bar) whose ``update(1)`` is
+            called after each camera pair, entered for the association only.
         warn: told each camera's boxes left out above its horizon (``above_horizon="drop"``).
         note: told that a site bundle's adaptation is not used (None: said nowhere).
 
@@ -114,9 +117,12 @@ def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
         kept, above = _drop_above_horizon(boxes, cameras, options.box_files, warn)
     sources, embedders = _open_images(options, kept, cameras, note)
     try:
+        n_pairs = len(boxes) * (len(boxes) - 1) // 2
         try:
-            result = associate_cameras(cameras, kept, options.association, progress=progress,
-                                       appearance=embedders or None)
+            with progress(n_pairs) if progress is not None else nullcontext() as bar:
+                result = associate_cameras(cameras, kept, options.association,
+                                           progress=bar.update if bar is not None else None,
+                                           appearance=embedders or None)
         except MulticamInputError as exc:
             path = options.box_files.get(exc.camera, exc.camera)
             line = box_line(path, exc.frame, exc.box) if exc.box is not None else None

@@ -135,12 +135,11 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
             raise UsageError(f"--boxes {name}={path}: camera {name} is not in {args.cameras} "
                              f"(it has {', '.join(cameras)})")
     boxes = {name: read_boxes(path, args.duplicates) for name, path in files.items()}
-    n_pairs = len(files) * (len(files) - 1) // 2
-    with progress_bar(n_pairs, "camera pairs", "pair", not args.quiet) as bar:
-        run = run_multicam(cameras, boxes, options, progress=bar.update,
-                           warn=lambda m: print(f"xvmatch: warning: {m}", file=sys.stderr),
-                           note=None if args.quiet else
-                           lambda m: print(f"xvmatch: note: {m}", file=sys.stderr))
+    run = run_multicam(cameras, boxes, options,
+                       progress=lambda n: progress_bar(n, "camera pairs", "pair", not args.quiet),
+                       warn=lambda m: print(f"xvmatch: warning: {m}", file=sys.stderr),
+                       note=None if args.quiet else
+                       lambda m: print(f"xvmatch: note: {m}", file=sys.stderr))
     picture = draw_birdseye(run.result.ground, cameras)
     out = claim_folder(args.out, COMMAND)
     write_multicam_outputs(out, boxes, run.relabelled, run.result.ground, picture)
