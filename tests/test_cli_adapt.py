@@ -1,6 +1,7 @@
-"""``xvmatch adapt`` end to end on a short rendered video pair (64 frames): the site bundle it
-writes (the source's ONNX files byte-identical, ``adaptation.npz``, the manifest's record), its
-use by ``associate --model SITE/``, and one-line refusals that write nothing."""
+"""``xvmatch adapt`` end to end on a short rendered video pair (64 frames): the site bundle
+(the source's ONNX files byte-identical, ``adaptation.npz``, the manifest's record), its use by
+``associate --model SITE/``, and one-line refusals that write nothing (the video being too short
+to judge the site bundle's pairs on its held-out frames: issue 69)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,12 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
+from xvmatch.formats.frame_sources import open_frames
+from xvmatch.formats.mot_boxes import read_mot_boxes
+from xvmatch.inference.adaptation.adaptation_pairs import MiningConfig
 from xvmatch.inference.matching.bundle import DEFAULT_BUNDLE, load_bundle
+from xvmatch.inference.matching.learned_association import load_matcher_bundle
+from xvmatch.inference.matching.site_bundle import adapt_to_site, write_site_bundle
 
 
 @pytest.fixture(scope="module")
@@ -34,9 +40,27 @@ def _sha(path: Path) -> str:
 
 
 @pytest.mark.slow
-def test_adapt_writes_a_site_bundle(video, tmp_path) -> None:
+def test_adapt_writes_a_site_bundle(video, tmp_path, capsys) -> None:
+    """The command refuses this short video: its last 16 frames, held out, are too few to judge
+    the site bundle's pairs, and nothing is written. The bundle of a fit accepted on its
+    held-out AUC (the library run the command calls, the pairs' judgement off) is written with
+    the source's files unchanged, loads, and runs ``associate`` and ``track``."""
     site = tmp_path / "site"
-    assert main(_args(video, site)) == 0
+    assert main(_args(video, site)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and ("adaptation refused, nothing written: only 16 held-out frames"
+                              in err[0]), err
+    assert "give a longer video" in err[0] and not site.exists()
+    matcher = load_matcher_bundle("default")
+    boxes = {v: read_mot_boxes(video[v]) for v in ("top", "hor")}
+    with open_frames(video["top_images"]) as top_images, \
+            open_frames(video["hor_images"]) as hor_images:
+        run = adapt_to_site(boxes["top"], boxes["hor"], matcher, top_images, hor_images,
+                            hor_images.size, config=MiningConfig(burst=8), judge=False)
+    assert run.accepted and run.judgement is None
+    site.mkdir()
+    write_site_bundle(DEFAULT_BUNDLE, site, run, {k: video[k] for k in (
+        "top", "hor", "top_images", "hor_images")}, "test")
     for name in ("matcher.onnx", "appearance.onnx"):
         assert _sha(site / name) == _sha(DEFAULT_BUNDLE / name), name
     doc = json.loads((site / "manifest.json").read_text())

@@ -7,8 +7,11 @@ costs of the network on renders, and the fit (:func:`~xvmatch.inference.adaptati
 fit_site_adaptation`). :func:`write_site_bundle` writes the source bundle's files unchanged
 (byte-identical ONNX files, same sha256) plus ``adaptation.npz`` and a manifest with an
 ``adaptation`` record: what it was fitted on, the pair counts, the rank and the held-out
-figures. Every file is written into a temporary folder first and moved into place, the manifest
-last, so a crash never leaves a half-written bundle. Torch-free.
+figures. Before any of it, the bundle is judged by the pairs it makes on the last block of
+the video, which the fit never saw (:mod:`~xvmatch.inference.matching.site_judgement`): a run
+that cannot show a gain there is refused. Every file is written into a temporary folder first
+and moved into place, the manifest last, so a crash never leaves a half-written bundle.
+Torch-free.
 """
 
 from __future__ import annotations
@@ -43,10 +46,28 @@ from xvmatch.inference.adaptation.site_adaptation import (
     fit_site_adaptation,
 )
 from xvmatch.inference.matching.bundle import MANIFEST
-from xvmatch.inference.matching.learned_association import box_only_costs
+from xvmatch.inference.matching.learned_association import (
+    LearnedMatcher,
+    associate_sequence_learned,
+    box_only_costs,
+)
+from xvmatch.inference.matching.site_judgement import (
+    PairJudgement,
+    judge_pairs,
+    split_for_judgement,
+)
 
-__all__ = ["SiteRun", "adapt_to_site", "adaptation_record", "adapted_vectors", "json_figure",
-           "vector_pair_sets", "vectors_embedder", "write_site_bundle"]
+__all__ = [
+    "SiteRun",
+    "adapt_to_site",
+    "adaptation_record",
+    "adapted_vectors",
+    "json_figure",
+    "judge_site",
+    "vector_pair_sets",
+    "vectors_embedder",
+    "write_site_bundle",
+]
 
 Progress = Callable[[Iterable, int, str], Iterable]
 """``progress(items, total, what)``: wraps an iterator (e.g. a progress bar)."""
@@ -62,6 +83,8 @@ class SiteRun:
         counts: pairs of each kind.
         frames_scored: frames the box-only matcher scored.
         fits: the fit of each vector tried (:func:`adapted_vectors`), ``fit`` among them.
+        judgement: the site bundle's pairs against the source's on the held-out block (None:
+            not judged, the fit being refused, or ``judge`` off).
     """
 
     fit: AdaptationFit
@@ -69,6 +92,12 @@ class SiteRun:
     counts: dict[str, int]
     frames_scored: int
     fits: dict[str, AdaptationFit] = field(default_factory=dict)
+    judgement: PairJudgement | None = None
+
+    @property
+    def accepted(self) -> bool:
+        """The fit is accepted on its held-out AUC and, when judged, by its pairs."""
+        return self.fit.accepted and (self.judgement is None or self.judgement.accepted)
 
 
 def adapt_to_site(
@@ -83,6 +112,7 @@ def adapt_to_site(
     config: MiningConfig | None = None,
     progress: Progress | None = None,
     workers: int = 1,
+    judge: bool = True,
 ) -> SiteRun:
     """Mine pairs on a site's videos and fit its adaptation (see the module docstring).
 
@@ -97,6 +127,10 @@ def adapt_to_site(
         config: the mining settings.
         progress: wraps each stage's iterator.
         workers: processes for the geometry features.
+        judge: hold out the video's last block (:func:`~xvmatch.inference.matching.
+            site_judgement.split_for_judgement`), fit on the frames before it, and judge an
+            accepted fit by the pairs it makes there (:func:`judge_site`); False: fit on every
+            frame, judged by the held-out AUC alone (the benchmarks' ablation).
 
     Raises:
         ValueError: a matcher without an appearance network, or no frame with boxes in both
@@ -107,7 +141,8 @@ def adapt_to_site(
                          "to adapt; use a bundle with one (e.g. default)")
     config = config or MiningConfig()
     both = [f for f in sorted(set(top) & set(hor)) if len(top[f].ids) and len(hor[f].ids)]
-    bursts = plan_bursts(both, config.burst, config.max_frames)
+    fitted, judged = split_for_judgement(both, config.burst) if judge else (both, [])
+    bursts = plan_bursts(fitted, config.burst, config.max_frames)
     if not bursts:
         raise ValueError(f"no run of {config.burst} consecutive frames with boxes in both views: "
                          "adapt needs video (consecutive frames), not single frames")
@@ -131,7 +166,38 @@ def adapt_to_site(
     reference = reference_costs(matcher.descriptors)
     fits = {v: fit_site_adaptation(p, calibration="odds", reference=reference)
             for v, p in sets.items()}
-    return SiteRun(choose_fit(fits), mined, sets[vectors[0]].counts(), len(scored), fits)
+    fit = choose_fit(fits)
+    judgement = None
+    if judge and fit.accepted:
+        judgement = judge_site(top, hor, matcher, fit, judged, top_images, hor_images, hor_size,
+                               cameras, camera_id, progress, workers)
+    return SiteRun(fit, mined, sets[vectors[0]].counts(), len(scored), fits, judgement)
+
+
+def judge_site(top: Mapping, hor: Mapping, matcher, fit: AdaptationFit, frames: Sequence[int],
+               top_images, hor_images, hor_size: tuple[int, int], cameras=None,
+               camera_id: int | None = None, progress: Progress | None = None,
+               workers: int = 1) -> PairJudgement:
+    """The site bundle of ``fit`` judged by its pairs on the held-out ``frames``: each frame
+    matched with the images by ``matcher`` and by the site bundle, the appearance check on as
+    ``associate`` runs by default, and the two runs' pairs compared against the box-only
+    matcher's sure pairs and each view's tracklets (:func:`~xvmatch.inference.matching.
+    site_judgement.judge_pairs`). Labels are never read."""
+    site = LearnedMatcher(replace(matcher.bundle, adaptation=fit.adaptation))
+    frames = [int(f) for f in frames]
+
+    def stage(what: str):
+        return None if progress is None else (lambda items: progress(items, len(frames), what))
+
+    costs = box_only_costs(top, hor, frames, matcher, hor_size, cameras, camera_id,
+                           stage("held-out boxes"), workers)
+    pairs = {}
+    for name, model in (("source", matcher), ("site", site)):
+        pairs[name] = associate_sequence_learned(
+            top, hor, hor_size[0], model, camera_id=camera_id, hor_height=hor_size[1],
+            frames=frames, top_images=top_images, hor_images=hor_images, cameras=cameras,
+            appearance_check=True, workers=workers, progress=stage(f"held-out, {name}"))
+    return judge_pairs(top, hor, frames, costs, matcher.gamma, pairs["source"], pairs["site"])
 
 
 def vectors_embedder(matcher, vectors: Sequence[str]) -> Callable:
@@ -222,9 +288,23 @@ def adaptation_record(run: SiteRun, inputs: Mapping[str, str | os.PathLike], sha
                     "vectors": {v: {"accepted": f.accepted, "before": json_figure(f.auc_before),
                                     "after": json_figure(f.auc_after)}
                                 for v, f in run.fits.items()}},
+        **({"judged": _judgement_record(run.judgement)} if run.judgement is not None else {}),
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "xvmatch": version,
     }
+
+
+def _judgement_record(judgement: PairJudgement) -> dict:
+    """The manifest's record of the pairs' judgement on the held-out block."""
+    def figures(f) -> dict:
+        return {"sure_pairs": f.sure, "sure_kept": f.sure_kept, "steady": f.steady,
+                "flips": f.flips, "score": f.score}
+
+    return {"metric": "pairs on held-out frames: the box-only matcher's sure pairs kept and "
+                      "pairs steady along tracklets (+1), broken or flipped (-1)",
+            "frames": judgement.frames, "first": judgement.first, "last": judgement.last,
+            "source": figures(judgement.source), "site": figures(judgement.site),
+            "gain": judgement.gain, "error": round(judgement.error, 6)}
 
 
 def _source_files(manifest: Mapping) -> list[str]:
@@ -256,8 +336,8 @@ def write_site_bundle(source: str | os.PathLike, out: str | os.PathLike, run: Si
     Raises:
         ValueError: a refused run.
     """
-    if not run.fit.accepted:
-        raise ValueError(f"adaptation refused: {run.fit.reason}")
+    if not run.accepted:
+        raise ValueError("adaptation refused: " + (run.fit.reason or run.judgement.message()))
     from xvmatch.core.input_files import read_input_text
 
     source, out = Path(source), Path(out)

@@ -46,8 +46,10 @@ def add_adapt_parser(subparsers) -> argparse.ArgumentParser:
         "adapt",
         "Adapt the learned matcher's appearance cue to your cameras from your own unlabelled "
         "video pair (boxes and images of both views, no ids across views): writes a site "
-        "bundle for associate --model SITE/. Refused (nothing written) when the adaptation "
-        "does not beat the unadapted network on held-out frames.",
+        "bundle for associate --model SITE/. The video's last block is held out: the site bundle "
+        "must make better pairs there than the unadapted one (the box-only matcher's sure "
+        "pairs kept, fewer partners switched along tracklets), else it is refused and nothing "
+        "is written.",
         EXAMPLE,
     )
     add_box_inputs(p)
@@ -162,6 +164,9 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
     fit = run.fit
     if not fit.accepted:
         raise UsageError(refusal_message(run, args.model))
+    if not run.accepted:
+        raise UsageError(f"adaptation refused, nothing written: {run.judgement.message()}; "
+                         f"keep using --model {args.model}")
     out = claim_folder(args.out, ADAPT_COMMAND)
     roles = {"top": args.top, "hor": args.hor, "top_images": args.top_images,
              "hor_images": args.hor_images}
@@ -176,5 +181,6 @@ def _cmd_adapt(args: argparse.Namespace) -> int:
               + "".join(f" ({v}: {f.auc_before:.3f} -> {f.auc_after:.3f}"
                         f"{'' if f.accepted else ', refused'})"
                         for v, f in run.fits.items() if f is not fit)
+              + f"; {run.judgement.message()}"
               + f"; wrote {out}/ (use: xvmatch associate --model {out} ...)", file=sys.stderr)
     return 0
