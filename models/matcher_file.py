@@ -32,6 +32,7 @@ from xvmatch.core.atomic_files import atomic_write_bytes
 from xvmatch.core.record_fields import typed_field
 from xvmatch.cues.spatial_features import FEATURE_VERSION, FeatureConfig
 from xvmatch.models.appearance_net import (
+    WEIGHTS_FORMAT,
     AppearanceNet,
     AppearanceWeights,
     appearance_blob,
@@ -181,6 +182,14 @@ def load_matcher(path_or_default: str | os.PathLike = "default") -> LoadedMatche
     if record.get("format") == "xvmatch-geometry-model":
         raise _fail(where, "a geometry model of an earlier xvmatch (its features depend on the "
                     "image resolution); retrain it with xvmatch fit-geometry")
+    if record.get("format") == WEIGHTS_FORMAT:
+        raise _fail(where, "an appearance weights file (xvmatch train), not a matcher file; "
+                    "pair it with the shipped matcher into a bundle: xvmatch export "
+                    f"--appearance {where} --out BUNDLE/, then associate --model BUNDLE/")
+    if "pytorch-lightning_version" in record:
+        raise _fail(where, "a Lightning checkpoint of xvmatch train, not a matcher file; its "
+                    "run folder's appearance_weights.pt makes a bundle: xvmatch export "
+                    "--appearance RUN/appearance_weights.pt --out BUNDLE/")
     if record.get("format") != MATCHER_FORMAT:
         raise _fail(where, f"not a matcher file (expected format {MATCHER_FORMAT!r})")
     version = _field(record, "format_version", int, where)

@@ -280,6 +280,8 @@ class SaveAppearanceWeights(L.Callback):
             "epochs": int(trainer.current_epoch),
             "global_step": int(trainer.global_step),
             "train_data": list(getattr(dm, "train_folders", [])),
+            # the crops' margin, so that a bundle made of these weights crops as in training
+            "context": float(getattr(getattr(dm, "hparams", None), "context", 0.1)),
             "val_data": list(getattr(dm, "val_folders", [])),
             "module": {k: v for k, v in pl_module.hparams.items()
                        if isinstance(v, int | float | str | bool)},

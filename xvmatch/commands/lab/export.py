@@ -1,5 +1,8 @@
 """The ``xvmatch export`` command: a trained matcher file to a deployable bundle folder (ONNX
-networks and manifest.json), refused unless onnxruntime reproduces the torch costs. Imports are
+networks and manifest.json), refused unless onnxruntime reproduces the torch costs. With
+``--appearance RUN/appearance_weights.pt`` the network ``xvmatch train`` made takes the place of
+the matcher's own (the shipped matcher unless ``--model`` names another;
+:mod:`xvmatch.export.appearance_pairing`): the step from training to a bundle. Imports are
 lazy: only this command's run loads torch and onnx. Bad input raises ``ValueError`` with a
 one-line message, which the main entry point prints as ``xvmatch: error: ...``.
 """
@@ -14,7 +17,9 @@ from xvmatch.core.output_paths import Input, Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_export_parser"]
 
-EXAMPLE = "xvmatch export --model geometry.pt --out geometry_bundle/"
+EXAMPLE = ("xvmatch export --model geometry.pt --out geometry_bundle/\n"
+           "  xvmatch export --appearance runs/appearance_cpu/version_0/appearance_weights.pt "
+           "--out my_bundle/   # xvmatch train's network with the shipped matcher")
 
 
 def add_export_parser(subparsers) -> argparse.ArgumentParser:
@@ -26,9 +31,14 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
         "1e-4 and the same assignments on held-out synthetic frames."
     )
     p = add_command_parser(subparsers, "export", help_text, EXAMPLE)
-    p.add_argument("--model", required=True, metavar="MODEL",
+    p.add_argument("--model", default=None, metavar="MODEL",
                    help="matcher file (.pt from fit-geometry or the matcher training), or "
-                   "'default' (models/default_matcher.pt)")
+                   "'default' (models/default_matcher.pt); with --appearance, the matcher to "
+                   "pair it with (default: 'default')")
+    p.add_argument("--appearance", default=None, metavar="WEIGHTS",
+                   help="appearance weights file from xvmatch train (RUN/appearance_weights.pt): "
+                   "put it in place of the matcher's own appearance network, so that the "
+                   "bundle runs with associate --model BUNDLE")
     p.add_argument("--out", required=True, metavar="BUNDLE", help="bundle folder to write")
     p.add_argument("--parity-data", default=None, metavar="DIR",
                    help="synthetic dataset (xvmatch synth) for the parity check (default: "
@@ -57,16 +67,27 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
     if args.int8 != (args.calibration is not None):
         raise ValueError("--int8 and --calibration DATA go together")
+    if args.model is None and args.appearance is None:
+        raise ValueError("give --model MATCHER (a matcher file, or default), or --appearance "
+                         "RUN/appearance_weights.pt (a network from xvmatch train, paired "
+                         "with the shipped matcher)")
+    model = "default" if args.model is None else args.model
     check_outputs(
         [Output("--out", args.out, folder=True)],
-        [Input("--model", None if args.model == "default" else args.model),
+        [Input("--model", None if model == "default" else model),
+         Input("--appearance", args.appearance),
          Input("--parity-data", args.parity_data), Input("--calibration", args.calibration)],
     )
     try:
         check_replaceable(args.out)  # only a bundle of an earlier export is replaced
     except ExportError as exc:
         raise ValueError(f"--out {exc}") from None
-    manifest = export_bundle(args.model, args.out, parity_data=args.parity_data,
+    if args.appearance is not None:
+        from xvmatch.export.appearance_pairing import pair_appearance
+
+        say(f"pairing the appearance network of {args.appearance} with the matcher {model}")
+        model = pair_appearance(args.appearance, model)
+    manifest = export_bundle(model, args.out, parity_data=args.parity_data,
                              int8_calibration=args.calibration, progress=say)
     if not args.quiet:
         for setting, p in manifest["parity"].items():
@@ -96,4 +117,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
                 "dotprod)" if reason is None else
                 f"the runtime will not pick INT8 by itself: {reason}; --precision int8 runs it")
         say(f"wrote {args.out} (cues: {', '.join(manifest['cues']) or 'none, box-only'})")
+        if args.appearance is not None:
+            say("the matcher's fusion was trained with another appearance network: score the "
+                "bundle with xvmatch evaluate on your data before relying on it")
+        say(f"run it: xvmatch associate --model {args.out} --top TOP.txt --hor HOR.txt "
+            "--top-images TOP --hor-images HOR --out pred.csv")
     return 0

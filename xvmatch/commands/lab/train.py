@@ -8,7 +8,8 @@ shorthands for the appearance network of the configuration (:func:`backbone_args
 ``--ckpt_path`` is checked before anything runs and read as weights only: a FIFO, a truncated or
 crafted checkpoint, or ``--weights_only false`` is one line, exit 2
 (:func:`xvmatch.training.train_cli.check_checkpoint_options`). Imports are lazy: other commands
-never load torch or Lightning through it.
+never load torch or Lightning through it. A run that wrote an appearance weights file ends by
+printing the ``xvmatch export --appearance`` command that makes a bundle of it.
 """
 
 from __future__ import annotations
@@ -128,7 +129,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     extra = backbone_args(args.backbone, args.init)
     extra += [a for a in args.lightning_args if a != "--"]
     try:
-        cli_main(cli_args(str(config), extra, args.stage))
+        cli = cli_main(cli_args(str(config), extra, args.stage))
     except ImportError as exc:  # --init imagenet without its package: one line, no traceback
         raise ValueError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
     except SystemExit as exc:  # jsonargparse reports bad configurations by exiting
@@ -141,4 +142,21 @@ def _cmd_train(args: argparse.Namespace) -> int:
             print(f"xvmatch: error: training configuration {args.config} rejected (see above)",
                   file=sys.stderr)
         return code
+    _print_next_step(cli)
     return 0
+
+
+def _print_next_step(cli) -> None:
+    """After a run that wrote an appearance weights file, print the command that makes a
+    bundle of it (a weights file alone is not something ``associate`` runs)."""
+    from xvmatch.training.appearance_module import SaveAppearanceWeights
+
+    trainer = getattr(cli, "trainer", None)
+    for callback in getattr(trainer, "callbacks", None) or ():
+        written = getattr(callback, "written", None)
+        if isinstance(callback, SaveAppearanceWeights) and written is not None:
+            print("next, make a bundle of this network with the shipped matcher, which "
+                  "associate runs:\n"
+                  f"  xvmatch export --appearance {written} --out BUNDLE/\n"
+                  "  xvmatch associate --model BUNDLE/ --top TOP.txt --hor HOR.txt "
+                  "--top-images TOP --hor-images HOR --out pred.csv")
