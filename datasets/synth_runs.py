@@ -1,6 +1,7 @@
 """The runs of ``xvmatch synth`` that write one folder of their own: a scene of several static
-cameras (``--cameras N``, the input of ``xvmatch multicam``) and a smooth video clip (``--video``,
-the input of ``xvmatch track`` and ``associate --mode video``).
+cameras (``--cameras N``, the input of ``xvmatch multicam``), a smooth video clip (``--video``,
+the input of ``xvmatch track`` and ``associate --mode video``) and a scene of several egocentric
+cameras (``--egos K``, the input of ``xvmatch associate-multi``).
 
 Each run takes one frozen options record and writes into a folder it claims (a marker listing
 the files it wrote, :mod:`xvmatch.core.folder_marker`): a later run into the same folder removes
@@ -17,6 +18,12 @@ from pathlib import Path
 
 from xvmatch.core.folder_marker import files_under, record_own_files, remove_own_files
 from xvmatch.core.output_paths import claim_folder
+from xvmatch.datasets.multi_ego_scenes import (
+    MultiEgoInputs,
+    multi_ego_config,
+    render_multi_ego,
+    write_multi_ego_inputs,
+)
 from xvmatch.datasets.multicam_scenes import (
     MulticamConfig,
     MulticamScene,
@@ -33,11 +40,14 @@ from xvmatch.datasets.tracking_video import tracking_frames, write_tracking_fram
 
 __all__ = [
     "SYNTH_CAMERAS",
+    "SYNTH_EGOS",
     "SYNTH_VIDEO",
     "CamerasSynthOptions",
+    "EgosSynthOptions",
     "VideoSynthOptions",
     "synth_cameras",
     "synth_difficulty",
+    "synth_egos",
     "synth_video",
 ]
 
@@ -45,6 +55,8 @@ SYNTH_CAMERAS = "synth --cameras"
 """The command name in the marker of a ``synth --cameras`` folder (it may replace only its own)."""
 SYNTH_VIDEO = "synth --video"
 """The command name in the marker of a ``synth --video`` folder."""
+SYNTH_EGOS = "synth --egos"
+"""The command name in the marker of a ``synth --egos`` folder."""
 
 
 def synth_difficulty(preset: str, texture: float = 0.0) -> Difficulty:
@@ -149,3 +161,53 @@ def synth_video(options: VideoSynthOptions,
     paths = write_tracking_frames(frames, root, progress)
     record_own_files(root, SYNTH_VIDEO, files_under(root) - kept)
     return paths
+
+
+@dataclass(frozen=True)
+class EgosSynthOptions:
+    """One scene seen by the top camera and several head-worn cameras, as ``synth --egos K``
+    writes it.
+
+    Attributes:
+        out: the folder to write (new, empty, or an earlier ``synth --egos`` output).
+        n_ego: head-worn cameras, 1..3 (:data:`~xvmatch.datasets.multi_ego_scenes.MAX_EGO`).
+        n_frames: frames of the scene (held in memory while rendered).
+        seed: the scene's seed.
+        image_size: ``(width, height)`` of every view.
+        fps: frame rate of the walk.
+        people: ``(min, max)`` people, or None: 6 to 12 (at least ``n_ego + 3``).
+        difficulty: the renderer's difficulty (None: medium).
+    """
+
+    out: str | os.PathLike
+    n_ego: int
+    n_frames: int
+    seed: int
+    image_size: tuple[int, int] = (640, 360)
+    fps: float = 10.0
+    people: tuple[int, int] | None = None
+    difficulty: Difficulty | None = None
+
+
+def synth_egos(options: EgosSynthOptions) -> MultiEgoInputs:
+    """Render the drone scene of ``options`` in every view
+    (:func:`~xvmatch.datasets.multi_ego_scenes.render_multi_ego`) and write it as a user's data
+    (:func:`~xvmatch.datasets.multi_ego_scenes.write_multi_ego_inputs`): ``top.txt``,
+    ``hor1.txt`` ... (MOT, ground-truth ids), ``images/VIEW/`` and ``cameras/horK/``.
+
+    Returns:
+        The files written, per view.
+    """
+    changes = {"top_size": options.image_size, "ego_size": options.image_size,
+               "fps": options.fps}
+    if options.people is not None:
+        changes["n_people"] = options.people
+    config = multi_ego_config(options.n_ego, **changes)
+    root = claim_folder(options.out, SYNTH_EGOS)
+    remove_own_files(root, SYNTH_EGOS)
+    kept = files_under(root)
+    frames = render_multi_ego(options.seed, options.n_ego, options.n_frames, config,
+                              options.difficulty)
+    inputs = write_multi_ego_inputs(frames, root, options.seed)
+    record_own_files(root, SYNTH_EGOS, files_under(root) - kept)
+    return inputs

@@ -282,6 +282,7 @@ OPTIONS = [
            cheap=st.tuples(st.integers(8, 160), st.integers(8, 160)).map("{0[0]}x{0[1]}".format)),
     Option("synth", "--fps", "float", 0.1, 1000, "in [0.1, 1000]"),
     Option("synth", "--workers", "int", 1, 64, "1..64", cheap=st.sampled_from(["1", "2"])),
+    Option("synth", "--egos", "int", 2, 3, "2..3"),
     Option("synth", "--texture", "float", 0, 1, "in [0, 1]", cheap=st.sampled_from(["0", "0.5"])),
     # --cameras: one rendered 1-frame scene of 64x36 images per inside value.
     Option("synth", "--cameras", "int", 2, 8, "2..8"),

@@ -1,6 +1,7 @@
-"""``xvmatch synth --video`` (a smooth clip) and the MOT box files ``synth`` writes beside its
-JSON: what ``track``, ``associate`` and ``evaluate`` read, and the commands ``synth`` prints
-(issue 69, items 2 and 5)."""
+"""``xvmatch synth --video`` (a smooth clip), ``synth --egos K`` (several egocentric views) and
+the MOT box files ``synth`` writes beside its JSON: what ``track``, ``associate``,
+``associate-multi`` and ``evaluate`` read, and the commands ``synth`` prints (issue 69, items 2
+and 5)."""
 
 from __future__ import annotations
 
@@ -87,8 +88,7 @@ def test_frames_written_as_they_come_match_the_whole_video(tmp_path):
 
 
 def test_pairs_write_mot_files_that_round_trip(tmp_path, capsys):
-    """``synth``'s ``mot/SCENE/top.txt`` and ``hor.txt`` hold the scene's labelled boxes, and
-    the handcrafted ``associate`` and ``evaluate`` run on them from the command line."""
+    """``synth``'s ``mot/SCENE/top.txt`` and ``hor.txt`` hold the scene's labelled boxes."""
     out = tmp_path / "ds"
     assert main(["synth", "--out", str(out), "--scenes", "2", "--frames", "3", "--size",
                  "192x108", "--seed", "1"]) == 0
@@ -103,16 +103,24 @@ def test_pairs_write_mot_files_that_round_trip(tmp_path, capsys):
                 np.testing.assert_allclose(rows.boxes, want[f].boxes, atol=1e-3)
         assert len(list((out / MOT_FOLDER / name / "cameras").iterdir())) == 3
     assert "mot/s00000/top.txt" in capsys.readouterr().err
+    # a rerun replaces the dataset, mot/ included
+    assert main(["synth", "--out", str(out), "--scenes", "1", "--frames", "2", "--size",
+                 "192x108", "--quiet"]) == 0
+    assert sorted(p.name for p in (out / MOT_FOLDER).iterdir()) == ["s00000"]
+
+
+@pytest.mark.slow
+def test_handcrafted_associate_and_evaluate_run_on_mot_files(tmp_path, capsys):
+    """The box-only ``associate`` and ``evaluate`` read ``synth``'s MOT files as they are."""
+    out = tmp_path / "ds"
+    assert main(["synth", "--out", str(out), "--scenes", "1", "--frames", "3", "--size",
+                 "192x108", "--seed", "1", "--quiet"]) == 0
     scene = out / MOT_FOLDER / "s00000"
     boxes = ["--top", str(scene / "top.txt"), "--hor", str(scene / "hor.txt")]
     pred = tmp_path / "pred.csv"
     assert main(["associate", *boxes, "--image-size", "192x108", "--out", str(pred)]) == 0
     assert main(["evaluate", "--pred", str(pred), *boxes]) == 0
     assert "CVIDF1" in capsys.readouterr().out
-    # a rerun replaces the dataset, mot/ included
-    assert main(["synth", "--out", str(out), "--scenes", "1", "--frames", "2", "--size",
-                 "192x108", "--quiet"]) == 0
-    assert sorted(p.name for p in (out / MOT_FOLDER).iterdir()) == ["s00000"]
 
 
 @pytest.mark.slow
@@ -131,8 +139,40 @@ def test_printed_commands_run(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "pred.csv").is_file() and (tmp_path / "clip" / "tracks").is_dir()
 
 
+def test_egos_scene_is_seeded_and_complete(tmp_path):
+    """``synth --egos 2``: a top and two egocentric views, each a MOT file (ground-truth ids: a
+    person seen in two views has the same id), an image folder and, per egocentric view, a
+    camera folder; the same seed gives the same bytes."""
+    args = ["synth", "--egos", "2", "--frames", "2", "--size", "96x54", "--seed", "3",
+            "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    assert main([*args, "--out", str(tmp_path / "b")]) == 0
+    a = _files(tmp_path / "a")
+    assert a == _files(tmp_path / "b")
+    assert {"top.txt", "hor1.txt", "hor2.txt", "images/top/000002.jpg", "images/hor2/000001.jpg",
+            "cameras/hor1/000002.json", "cameras/hor2/000001.json"} <= set(a)
+    assert not any(name.startswith("cameras/top") for name in a)
+    top = read_mot_boxes(tmp_path / "a" / "top.txt")
+    for view in ("hor1.txt", "hor2.txt"):
+        hor = read_mot_boxes(tmp_path / "a" / view)
+        assert sorted(hor) == [1, 2]
+        assert set(hor[1].ids.tolist()) <= set(top[1].ids.tolist())
+
+
+@pytest.mark.slow
+def test_printed_associate_multi_runs(tmp_path, capsys):
+    assert main(["synth", "--egos", "2", "--frames", "1", "--size", "96x54", "--out",
+                 str(tmp_path / "me")]) == 0
+    (command,) = [shlex.split(line) for line in capsys.readouterr().err.splitlines()
+                  if line.startswith("  ")]
+    command = command[command.index("associate-multi"):]
+    assert main(command) == 0
+    assert (tmp_path / "me" / "multi" / "hor2.txt").is_file()
+
+
 @pytest.mark.parametrize("extra, message", [
-    (["--cameras", "3"], "--video and --cameras are two modes"),
+    (["--cameras", "3"], "--video and --cameras are different modes"),
+    (["--egos", "2"], "--video and --egos are different modes"),
     (["--scenes", "2"], "--scenes does not apply to --video"),
     (["--workers", "2"], "--workers does not apply to --video"),
     (["--boxes-only"], "--boxes-only needs --cameras"),
@@ -142,3 +182,15 @@ def test_video_refuses_what_does_not_apply(tmp_path, capsys, extra, message):
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "v").exists()
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--scenario", "overview"], "--scenario does not apply to --egos"),
+    (["--scenes", "2"], "--scenes does not apply to --egos"),
+    (["--people", "2:5"], "--egos 2 needs at least 3 people"),
+])
+def test_egos_refuses_what_does_not_apply(tmp_path, capsys, extra, message):
+    assert main(["synth", "--egos", "2", "--out", str(tmp_path / "e"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "e").exists()

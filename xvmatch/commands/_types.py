@@ -20,6 +20,7 @@ from collections.abc import Callable
 
 __all__ = [
     "MAX_FRAME_OFFSET",
+    "MAX_PEOPLE",
     "MAX_WORKERS",
     "box_id",
     "float_in",
@@ -29,6 +30,7 @@ __all__ = [
     "int_in",
     "non_negative_int",
     "offset_value",
+    "people_range",
     "positive_int",
     "seed_value",
     "thread_count",
@@ -189,3 +191,22 @@ def offset_value(text: str) -> int | str:
             f"expected an integer number of frames or 'auto', got {text!r}"
         ) from None
     return frame_offset(text)
+
+
+MAX_PEOPLE = 60
+"""Most people per scene: what the renderer places in a scene's area (``SynthConfig``)."""
+
+
+def people_range(text: str) -> tuple[int, int]:
+    """An argparse type for ``MIN:MAX`` people per rendered scene (``synth --people``),
+    ``1 <= MIN <= MAX <=`` :data:`MAX_PEOPLE`."""
+    try:
+        low, high = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MIN:MAX, e.g. 3:14; got {text!r}") from None
+    if not 1 <= low <= high <= MAX_PEOPLE:
+        raise argparse.ArgumentTypeError(
+            f"need 1 <= MIN <= MAX <= {MAX_PEOPLE} (the renderer places at most {MAX_PEOPLE} "
+            f"people in a scene), got {text!r}"
+        )
+    return low, high

@@ -1,26 +1,29 @@
-"""The ``xvmatch synth`` command: render a labelled dataset
-(:func:`xvmatch.datasets.synthetic_io.generate_dataset`).
-
-``synth --cameras N`` writes one scene of N static cameras instead (the input of ``xvmatch
-multicam``, :func:`xvmatch.datasets.synth_runs.synth_cameras`): rendered or, with
-``--boxes-only``, from the box simulator, optionally with tracker-like noise. ``synth --video``
-writes one smooth clip as a user's data (:func:`xvmatch.datasets.synth_runs.synth_video`). Each
-mode ends by printing the commands that run on what it wrote.
-
-Imports are lazy so that other commands never load OpenCV. Bad input raises ``ValueError`` with
-a one-line message, which the main entry point prints as ``xvmatch: error: ...``.
+"""The ``xvmatch synth`` command: a labelled dataset
+(:func:`xvmatch.datasets.synthetic_io.generate_dataset`), or one scene of the runs of
+:mod:`xvmatch.datasets.synth_runs`: ``--video`` (a smooth clip), ``--egos K`` (K egocentric
+views), ``--cameras N`` (N static cameras, rendered or box-only). Each mode ends by printing the
+commands that run on what it wrote. Imports are lazy so that other commands never load OpenCV;
+bad input raises ``ValueError`` with a one-line message (``xvmatch: error: ...``).
 """
 
 from __future__ import annotations
 
 import argparse
-import shlex
 import sys
 import time
 from pathlib import Path
 
 from xvmatch.commands._options import add_command_parser, progress_bar
-from xvmatch.commands._types import float_in, image_size, int_in, seed_value, worker_count
+from xvmatch.commands._types import (
+    MAX_PEOPLE,
+    float_in,
+    image_size,
+    int_in,
+    people_range,
+    seed_value,
+    worker_count,
+)
+from xvmatch.commands.lab._next_steps import print_commands, print_multi_commands
 from xvmatch.core.output_paths import Output, check_outputs
 
 __all__ = ["EXAMPLE", "add_synth_parser"]
@@ -31,25 +34,7 @@ EXAMPLE = ("xvmatch synth --out data/synth --scenario drone --scenes 100 --frame
 FPS = {"pairs": 10.0, "video": 25.0}
 """Default ``--fps``: pairs and ``--cameras`` scenes at 10, a ``--video`` clip at 25 (a video's)."""
 
-MAX_PEOPLE = 60
-"""Most people per scene: what the renderer places in a scene's area (``SynthConfig``)."""
-
-
-def _people_range(text: str) -> tuple[int, int]:
-    try:
-        low, high = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected MIN:MAX, e.g. 3:14; got {text!r}") from None
-    if not 1 <= low <= high <= MAX_PEOPLE:
-        raise argparse.ArgumentTypeError(
-            f"need 1 <= MIN <= MAX <= {MAX_PEOPLE} (the renderer places at most {MAX_PEOPLE} "
-            f"people in a scene), got {text!r}"
-        )
-    return low, high
-
-
-MAX_FRAMES = 10_000
-"""Most frames per scene (``synth --frames``)."""
+MAX_FRAMES = 10_000  # most frames per scene (--frames)
 
 
 def add_synth_parser(subparsers) -> argparse.ArgumentParser:
@@ -75,6 +60,12 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    "(people walking, the worn camera turning smoothly; what track and associate "
                    "--mode video read) as top.txt, hor.txt (MOT, ground-truth ids), top/, hor/ "
                    "(PNG frames), cameras/ (default --fps 25)")
+    p.add_argument("--egos", default=None, metavar="K",
+                   type=int_in(2, 3, "head-worn cameras besides the top one: associate-multi "
+                               "reads 1 to 3 horizontal views"),
+                   help="write one drone scene seen by the top camera and K head-worn cameras, "
+                   "2..3 (what associate-multi reads): top.txt, hor1.txt, ... (MOT, "
+                   "ground-truth ids), images/VIEW/, cameras/horK/ (default people 6:12)")
     g = p.add_argument_group("several static cameras (one scene, the input of xvmatch multicam)")
     g.add_argument("--cameras", default=None, type=int_in(2, 8, "static cameras per scene"),
                    help="write one scene of N static calibrated cameras, 2..8: cameras.json, "
@@ -92,7 +83,7 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
                    "(default 10)")
     p.add_argument("--seed", type=seed_value, default=0, help="random seed, 0..2**32-1 "
                    "(default 0); the output is identical for any --workers")
-    p.add_argument("--people", type=_people_range, default=None, metavar="MIN:MAX",
+    p.add_argument("--people", type=people_range, default=None, metavar="MIN:MAX",
                    help=f"people per scene, camera wearer included, 1 <= MIN <= MAX <= "
                    f"{MAX_PEOPLE} (default 3:14)")
     p.add_argument("--size", default=(640, 360), metavar="WxH",
@@ -116,13 +107,23 @@ def add_synth_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _refuse(mode: str, why: str, *checks: tuple[str, bool]) -> None:
+    """Refuse the first option of ``checks`` given where it does not apply (``mode``)."""
+    wrong = [option for option, given in checks if given]
+    if wrong:
+        raise ValueError(f"{wrong[0]} does not apply to {mode} ({why}; run again with another "
+                         "--seed for more)")
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     from xvmatch.datasets.synth_runs import synth_difficulty
     from xvmatch.datasets.synthetic_io import MOT_FOLDER, generate_dataset, scene_name
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
-    if args.cameras is not None and args.video:
-        raise ValueError("--video and --cameras are two modes; give one")
+    modes = [m for m, on in (("--video", args.video), ("--cameras", args.cameras is not None),
+                             ("--egos", args.egos is not None)) if on]
+    if len(modes) > 1:
+        raise ValueError(f"{' and '.join(modes)} are different modes; give one")
     if args.cameras is not None:
         return _synth_cameras(args)
     for option, given in (("--boxes-only", args.boxes_only),
@@ -131,6 +132,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
             raise ValueError(f"{option} needs --cameras N (a scene of several static cameras)")
     if args.video:
         return _synth_video(args)
+    if args.egos is not None:
+        return _synth_egos(args)
     args.scenario = args.scenario or "drone"
     args.scenes = 10 if args.scenes is None else args.scenes
     check_outputs([Output("--out", args.out, folder=True)])
@@ -152,27 +155,11 @@ def _cmd_synth(args: argparse.Namespace) -> int:
               f"({total / max(elapsed, 1e-9):.1f} pairs/s); each scene also as MOT boxes and "
               f"cameras in {root / MOT_FOLDER}/SCENE/. Match and score scene {name}:",
               file=sys.stderr)
-        _print_commands(root / MOT_FOLDER / name, Path("pred.csv"), [
-            "--model", "default", "--top-images", root / "images" / "top" / f"{name}_*.jpg",
-            "--hor-images", root / "images" / "ego" / f"{name}_*.jpg",
-            "--cameras", root / MOT_FOLDER / name / "cameras"])
+        print_commands(root / MOT_FOLDER / name, Path("pred.csv"),
+                       (root / "images" / "top" / f"{name}_*.jpg",
+                        root / "images" / "ego" / f"{name}_*.jpg"),
+                       root / MOT_FOLDER / name / "cameras")
     return 0
-
-
-def _print_commands(scene: Path, pred: Path, match: list, track: list | None = None) -> None:
-    """The commands that run on a written scene (``scene/top.txt``, ``hor.txt``): ``track``
-    with the options ``track`` (if given), ``associate`` with ``match``, and ``evaluate``; one a
-    line on stderr, as ``demo`` prints its own."""
-    from xvmatch.commands.demo import xvmatch_command
-
-    x, boxes = xvmatch_command(), shlex.join(["--top", str(scene / "top.txt"), "--hor",
-                                               str(scene / "hor.txt")])
-    lines = [] if track is None else [
-        f"{x} track {boxes} {shlex.join(map(str, track))}",
-        f"{x} evaluate --tracks {shlex.quote(str(track[-1]))} {boxes}"]
-    lines += [f"{x} associate {boxes} {shlex.join(map(str, match))} --out {shlex.quote(str(pred))}",
-              f"{x} evaluate --pred {shlex.quote(str(pred))} {boxes}"]
-    print("\n".join(f"  {line}" for line in lines), file=sys.stderr)
 
 
 def _synth_video(args: argparse.Namespace) -> int:
@@ -180,11 +167,8 @@ def _synth_video(args: argparse.Namespace) -> int:
     from xvmatch.datasets.synth_runs import VideoSynthOptions, synth_difficulty, synth_video
     from xvmatch.datasets.synthetic_scenes import SynthConfig
 
-    for option, wrong in (("--scenes", args.scenes not in (None, 1)),
-                          ("--workers", args.workers != 1)):
-        if wrong:
-            raise ValueError(f"{option} does not apply to --video (one clip, rendered frame "
-                             "after frame; run again with another --seed for more)")
+    _refuse("--video", "one clip, rendered frame after frame",
+            ("--scenes", args.scenes not in (None, 1)), ("--workers", args.workers != 1))
     check_outputs([Output("--out", args.out, folder=True)])
     scenario, fps = args.scenario or "drone", args.fps or FPS["video"]
     config = SynthConfig(scenario=scenario, n_people=args.people or (3, 14),
@@ -200,10 +184,33 @@ def _synth_video(args: argparse.Namespace) -> int:
               f"{time.perf_counter() - start:.1f} s. Track, match and score it:",
               file=sys.stderr)
         size = "{}x{}".format(*args.size)
-        _print_commands(root, root / "pred.csv", [
-            "--model", "default", "--top-images", paths["top_images"], "--hor-images",
-            paths["hor_images"], "--cameras", paths["cameras"]],
-            ["--image-size", size, "--offset", "0", "--out", root / "tracks"])
+        print_commands(root, root / "pred.csv", (paths["top_images"], paths["hor_images"]),
+                       paths["cameras"],
+                       ["--image-size", size, "--offset", "0", "--out", root / "tracks"])
+    return 0
+
+
+def _synth_egos(args: argparse.Namespace) -> int:
+    """``synth --egos K``: one scene of a top and K egocentric views (issue 69, item 5)."""
+    from xvmatch.datasets.synth_runs import EgosSynthOptions, synth_difficulty, synth_egos
+
+    _refuse("--egos", "one drone scene of head-worn cameras", ("--scenes", args.scenes not in
+            (None, 1)), ("--workers", args.workers != 1), ("--scenario", args.scenario not in
+                                                           (None, "drone")))
+    if args.people is not None and args.people[0] < args.egos + 1:
+        raise ValueError(f"--people {args.people[0]}:{args.people[1]}: --egos {args.egos} needs "
+                         f"at least {args.egos + 1} people (the wearers and one more)")
+    check_outputs([Output("--out", args.out, folder=True)])
+    start = time.perf_counter()
+    inputs = synth_egos(EgosSynthOptions(
+        args.out, args.egos, args.frames, args.seed, args.size, args.fps or FPS["pairs"],
+        args.people, synth_difficulty(args.difficulty, args.texture)))
+    if not args.quiet:
+        root = inputs.boxes[0].parent
+        print(f"wrote a scene of a top and {args.egos} egocentric views x {args.frames} frames "
+              f"to {root} in {time.perf_counter() - start:.1f} s. Match them all at once:",
+              file=sys.stderr)
+        print_multi_commands(inputs.boxes, inputs.images, inputs.cameras, root / "multi")
     return 0
 
 
@@ -214,11 +221,8 @@ def _synth_cameras(args: argparse.Namespace) -> int:
 
     if args.texture:
         raise ValueError("--texture applies to image pairs, not to --cameras")
-    for option, wrong in (("--scenario", args.scenario is not None),
-                          ("--scenes", args.scenes not in (None, 1))):
-        if wrong:
-            raise ValueError(f"{option} does not apply to --cameras (one scene of static "
-                             "cameras per run; run again with another --seed for more)")
+    _refuse("--cameras", "one scene of static cameras per run",
+            ("--scenario", args.scenario is not None), ("--scenes", args.scenes not in (None, 1)))
     width, height = args.size
     if height != round(width * 9 / 16):
         raise ValueError(f"--size {width}x{height}: with --cameras every camera is 16:9; give "
