@@ -208,8 +208,6 @@ MAX_COMMAND_LINES = 250
 calls a library run (issue 66)."""
 LONG_COMMANDS = {
     "xvmatch/commands/_model.py": "the learned matcher's run to move out of the CLI (issue 66)",
-    "xvmatch/commands/offset.py": "the offset estimate's options to move out of the CLI "
-                                  "(issue 66)",
 }
 """Command modules known to be over :data:`MAX_COMMAND_LINES`, each with the change that brings it
 under (strict marks, as :data:`CROWDED`)."""

@@ -3,7 +3,8 @@
 Also what ``xvmatch associate``, ``associate-multi`` and ``track`` share with it: their
 ``--offset N|auto`` and ``--max-offset`` options (:func:`add_offset_options`,
 :func:`resolve_offset`, :func:`wearer_marked`), the ``--max-offset`` bound
-(:func:`max_offset_of`) and the estimate's summary and refusal in words.
+(:func:`max_offset_of`). ``auto``'s decision and the estimate in words are the library's
+(:mod:`xvmatch.cues.auto_offset`); this module prints them.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from xvmatch.commands._options import (
     spatial_params,
 )
 from xvmatch.commands._types import box_id, int_in, offset_value, worker_count
+from xvmatch.cues.auto_offset import AutoOffsetOptions, auto_offset, estimate_lines, estimate_record
 from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
     CLIP_LENGTH,
@@ -31,11 +33,12 @@ from xvmatch.cues.offset_estimation import (
     OFFSET_STEP,
     OFFSET_TOLERANCE,
     clip_start_range,
+    estimate_offset,
 )
 
 __all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_options",
-           "add_offset_parser", "check_clip_start", "max_offset_of", "offset_summary",
-           "resolve_offset", "unsupported_reason", "wearer_marked"]
+           "add_offset_parser", "check_clip_start", "max_offset_of", "resolve_offset",
+           "wearer_marked"]
 
 EXAMPLE = "xvmatch offset --top seq_top.txt --hor seq_hor.txt"
 
@@ -146,69 +149,20 @@ def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
 def _offset_value(args: argparse.Namespace, top, hor, hor_width: float, params,
                   max_offset: int | None, camera_id: int | None, value: int | str | None,
                   label: str) -> int:
-    """:func:`resolve_offset` but the check of the frames in common."""
+    """:func:`resolve_offset` but the check of the frames in common: the number, or ``auto``'s
+    decision (:func:`~xvmatch.cues.auto_offset.auto_offset`) with its line printed."""
     value = args.offset if value is None else value
     if value != "auto":
         return int(value)
-    from xvmatch.cues.offset_estimation import MIN_AGREEING_CLIPS, clip_starts, estimate_offset
-
-    if top and hor:  # (a view with no frames: the estimate's own error)
-        starts = clip_starts((min(hor), max(hor)), (min(top), max(top)), CLIP_LENGTH,
-                             max_offset, CLIPS)
-        if len(starts) < MIN_AGREEING_CLIPS:
-            if not args.quiet:
-                print(f"note: {label}videos too short for --offset auto to check their sync "
-                      f"with --max-offset {max_offset} (one {CLIP_LENGTH}-frame clip fits, and "
-                      "one cannot back an offset); keeping the files' timing (pass --offset N, "
-                      "or a smaller --max-offset)", file=sys.stderr)
-            return 0
-    est = estimate_offset(top, hor, hor_width=hor_width, params=params, max_offset=max_offset,
-                          camera_id=camera_id, workers=args.workers)
-    if est.status == "unsupported":
-        print(f"warning: {label}offset {est.offset:+d} not applied ({offset_summary(est)}): "
-              f"{unsupported_reason(est, max_offset)}; keeping the files' timing; "
-              "pass --offset N if you know it", file=sys.stderr)
-    elif not args.quiet:
-        kept = (f" (within {OFFSET_TOLERANCE} frames of 0: keeping the files' timing)"
-                if est.offset and not est.applied else "")
-        print(f"{label}estimated offset {est.offset:+d} frames (top frame = horizontal frame "
-              f"{est.offset:+d}; {offset_summary(est)}){kept}", file=sys.stderr)
-    return int(est.applied)
-
-
-def offset_summary(est) -> str:
-    """How strongly the clips back an :class:`OffsetEstimate`, in words."""
-    import numpy as np
-
-    n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
-    text = f"{round(est.support * n)} of {n} clips agree"
-    return text + (f", evidence t = {est.evidence:.1f}" if est.offset and n > 1 else "")
-
-
-def unsupported_reason(est, max_offset: int, one_clip_asked: bool = False) -> str:
-    """Why an :class:`OffsetEstimate` was not applied, in words (``one_clip_asked``: the user
-    asked for a single clip with --clips 1 or --clip-start)."""
-    import numpy as np
-
-    from xvmatch.cues.offset_estimation import MIN_OFFSET_EVIDENCE, OFFSET_ALPHA
-
-    n = int(np.isfinite(est.clip_costs).any(axis=1).sum())
-    if n < 2 and one_clip_asked:
-        return ("one clip (--clips 1 or --clip-start) cannot back an offset: at least 2 clips "
-                "must agree; use --clips 3 or more, or pass --offset N if you trust it")
-    if n < 2:
-        return (f"only {n} clip fits videos this short for --max-offset {max_offset} and one "
-                "clip cannot back an offset; try a smaller --max-offset")
-    if est.evidence < MIN_OFFSET_EVIDENCE:
-        return (f"the clips do not prefer {est.offset:+d} to 0 (evidence t = "
-                f"{est.evidence:.1f} < {MIN_OFFSET_EVIDENCE})")
-    return (f"too few clips agree on {est.offset:+d} ({round(est.support * n)} of {n}: chance "
-            f"{est.chance:.2f} > {OFFSET_ALPHA})")
+    decided = auto_offset(top, hor, AutoOffsetOptions(
+        hor_width=hor_width, max_offset=max_offset, params=params, camera_id=camera_id,
+        workers=args.workers, label=label))
+    if decided.to_tell(args.quiet):
+        print(decided.message, file=sys.stderr)
+    return decided.offset
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:
-    from xvmatch.cues.offset_estimation import estimate_offset
-
     params = spatial_params(args)
     top = read_boxes(args.top, args.duplicates)
     hor = read_boxes(args.hor, args.duplicates)
@@ -225,46 +179,18 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     resolved = resolve_size(hor, args.hor, given)
     hor_width = resolved[0][0]
     note_if_assumed(resolved, hor, args.hor)
-    est = estimate_offset(
-        top,
-        hor,
-        hor_width=hor_width,
-        params=params,
-        clip_start=args.clip_start,
-        clip_length=args.clip_length,
-        max_offset=max_offset,
-        camera_id=args.camera_id,
-        n_clips=args.clips,
-        workers=args.workers,
-        step=args.step,
-    )
+    est = estimate_offset(top, hor, hor_width=hor_width, params=params,
+                          clip_start=args.clip_start, clip_length=args.clip_length,
+                          max_offset=max_offset, camera_id=args.camera_id, n_clips=args.clips,
+                          workers=args.workers, step=args.step)
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "offset": est.offset,
-                    "applied": est.applied,
-                    "status": est.status,
-                    "support": est.support,
-                    "evidence": est.evidence if est.evidence != float("inf") else None,
-                    "offsets": est.offsets.tolist(),
-                    "costs": [c if c != float("inf") else None for c in est.costs.tolist()],
-                }
-            )
-        )
+        print(json.dumps(estimate_record(est)))
     else:
-        print(f"offset {est.offset:+d} frames (top frame = horizontal frame {est.offset:+d}; "
-              f"{offset_summary(est)})")
-        if est.status == "unsupported":
-            one_clip = args.clip_start is not None or args.clips == 1
-            print(f"warning: {unsupported_reason(est, max_offset, one_clip)}: the estimate is "
-                  "unreliable (detector noise, too few people, or an offset beyond "
-                  "--max-offset); associate --offset auto keeps the files' timing",
-                  file=sys.stderr)
-        elif est.status == "within_tolerance" and est.offset:
-            print(f"note: {est.offset:+d} is within the estimate's precision ({OFFSET_TOLERANCE} "
-                  "frames) of 0: associate --offset auto keeps the files' timing; pass "
-                  f"--offset {est.offset} to apply it", file=sys.stderr)
+        one_clip = args.clip_start is not None or args.clips == 1
+        line, told = estimate_lines(est, max_offset, one_clip)
+        print(line)
+        if told is not None:
+            print(told, file=sys.stderr)
     return 0
 
 
