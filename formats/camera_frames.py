@@ -14,11 +14,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from xvmatch.core.folder_marker import record_own_files, remove_own_files
 from xvmatch.core.input_files import InputFileError, check_input_file
+from xvmatch.core.output_paths import claim_folder
 from xvmatch.formats.camera_io import CameraFileError, load_cameras, save_cameras
 from xvmatch.geometry.camera import FrameCameras
 
-__all__ = ["CameraFrames", "open_cameras", "save_camera_frames"]
+__all__ = ["CameraFrames", "ego_camera_size", "given_hor_sizes", "open_cameras",
+           "save_camera_frames", "write_camera_frames"]
 
 _TRAILING_NUMBER = re.compile(r"(\d+)$")
 
@@ -126,3 +129,59 @@ def save_camera_frames(cameras: CameraFrames, path: str | os.PathLike) -> list[P
         written.append(Path(path) / name)
         save_cameras(written[-1], {"top": cams.top, "ego": cams.hor})
     return written
+
+
+def write_camera_frames(cameras: CameraFrames, path: str | os.PathLike, owner: str,
+                        option: str) -> int | None:
+    """Write ``cameras`` in the form they were read in (:func:`save_camera_frames`): a camera
+    file, or a folder of per-frame files that ``owner`` claims (new, empty or its own,
+    :func:`~xvmatch.core.output_paths.claim_folder`; ``option`` names it in messages). A folder
+    it made before loses the camera files it wrote of frames ``cameras`` has not: they would be
+    read with the new ones; a file the user put there is kept.
+
+    Returns:
+        How many camera files the folder got, or None for a camera file.
+    """
+    if cameras.static is not None:
+        save_camera_frames(cameras, path)
+        return None
+    folder = claim_folder(path, owner, option)
+    written = [p.name for p in save_camera_frames(cameras, folder)]
+    remove_own_files(folder, owner, keep=written)
+    record_own_files(folder, owner, written)
+    return len(written)
+
+
+def ego_camera_size(cameras: str | os.PathLike) -> tuple[tuple[int, int], str]:
+    """The horizontal image size that the ego cameras of ``cameras`` (a camera file or folder)
+    give, and where it comes from (for :func:`~xvmatch.formats.box_image_size.resolve_size`);
+    one size for all of them, or an error asking for ``--image-size``.
+
+    Raises:
+        ValueError: the ego cameras have several image sizes (one line naming ``cameras``).
+    """
+    sizes = {tuple(c.hor.image_size) for _, c in open_cameras(cameras).all()}
+    if len(sizes) != 1:
+        raise ValueError(f"{cameras}: the ego cameras have several image sizes "
+                         f"({', '.join(f'{w}x{h}' for w, h in sorted(sizes))}); pass "
+                         "--image-size")
+    return sizes.pop(), f"the camera files {cameras}"
+
+
+def given_hor_sizes(image_size: tuple[int, int] | None, hor_images: str | None,
+                    cameras: str | None, box_frames: Sequence[int]
+                    ) -> list[tuple[tuple[int, int], str]]:
+    """The horizontal image sizes a run's inputs give, each with where it comes from (for
+    :func:`~xvmatch.formats.box_image_size.resolve_size`, which wants them to agree):
+    ``image_size`` (``--image-size``), the horizontal images (opened at ``box_frames``) or, with
+    none, the ego cameras of ``cameras`` (:func:`ego_camera_size`; with images, each camera file
+    is checked against them by :mod:`~xvmatch.inference.matching.learned_pipeline`)."""
+    given = [] if image_size is None else [(tuple(image_size), "--image-size")]
+    if hor_images:
+        from xvmatch.formats.frame_sources import open_frames  # OpenCV: only with images
+
+        with open_frames(hor_images, box_frames=box_frames) as source:
+            given.append((tuple(source.size), f"the horizontal images {hor_images}"))
+    elif cameras:
+        given.append(ego_camera_size(cameras))
+    return given

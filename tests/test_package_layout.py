@@ -207,7 +207,6 @@ MAX_COMMAND_LINES = 250
 """The most lines one command module may hold: a command parses, checks, builds its options and
 calls a library run (issue 66)."""
 LONG_COMMANDS = {
-    "xvmatch/commands/_model.py": "the learned matcher's run to move out of the CLI (issue 66)",
 }
 """Command modules known to be over :data:`MAX_COMMAND_LINES`, each with the change that brings it
 under (strict marks, as :data:`CROWDED`)."""

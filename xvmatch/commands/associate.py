@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from xvmatch.commands._cameras import add_top_view_arguments, check_top_view, oblique_pairs
 from xvmatch.commands._model import (
     DRAW_COMMAND,
     LEARNED_ONLY,
@@ -35,7 +36,6 @@ from xvmatch.commands._options import (
     read_boxes,
     spatial_params,
 )
-from xvmatch.commands._top_view import add_top_view_arguments, check_top_view, oblique_pairs
 from xvmatch.commands._types import box_id, worker_count
 from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset
 from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
