@@ -233,11 +233,15 @@ def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, coef: 
 
 @njit(cache=True)
 def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, half: float,
-                     delta: np.ndarray, inside: np.ndarray, count: np.ndarray) -> None:
-    """delta, whether in the view and |K| of every (candidate, theta) row b = c T + t, as
-    ``top_hypotheses`` defines them (x_top, Eq. 7, is numpy's tan of delta, in both forms)."""
+                     delta: np.ndarray, x: np.ndarray, count: np.ndarray, seen: np.ndarray,
+                     packed: np.ndarray) -> int:
+    """delta and |K| of every (candidate, theta) row b = c T + t, as ``top_hypotheses``
+    defines them, x = +inf outside the view, and the flat index and delta of each entry in
+    view packed into ``seen`` and ``packed`` (their x_top, Eq. 7, is numpy's tan of delta, in
+    both forms). Returns how many entries are in view."""
     n_cand, n_people = phi.shape
     n_theta = thetas.shape[0]
+    n_seen = 0
     for c in range(n_cand):
         for t in range(n_theta):
             b = c * n_theta + t
@@ -245,22 +249,30 @@ def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, h
             for m in range(n_people):
                 d = np.mod(phi[c, m] - thetas[t] + np.pi, 2.0 * np.pi) - np.pi
                 delta[b, m] = d
-                inside[b, m] = abs(d) < half and visible[c, m]
-                n += inside[b, m]
+                if abs(d) < half and visible[c, m]:
+                    seen[n_seen] = b * n_people + m
+                    packed[n_seen] = d
+                    n_seen += 1
+                    n += 1
+                else:
+                    x[b, m] = np.inf
             count[b] = n
+    return n_seen
 
 
 @njit(cache=True)
 def sorted_rows(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n_theta: int,
-                rows: np.ndarray, order_out: np.ndarray, x: np.ndarray, delta: np.ndarray,
-                dist_out: np.ndarray) -> None:
-    """Eq. 8's sorted rows of the hypotheses ``rows`` (``TopHypotheses.take``): the first
-    ``order_out.shape[1]`` person indices of each row by x ascending, a stable sort (+inf last),
-    as numpy's stable argsort, and x, delta and |OP| gathered in that order (the y of Eq. 5 is
-    numpy's cos of delta, in both forms)."""
+                rows: np.ndarray, x: np.ndarray, index: np.ndarray, delta: np.ndarray,
+                dist_out: np.ndarray, where: np.ndarray) -> None:
+    """Eq. 8's sorted rows of the hypotheses ``rows`` (``TopHypotheses.take``): x of each row
+    ascending over its first ``x.shape[1]`` entries, a stable sort (+inf last) as numpy's
+    stable argsort, the person of each entry (-1 past the row's count), and the delta and |OP|
+    of the valid entries packed row by row, with their flat index in ``where`` (the y of
+    Eq. 5 is numpy's cos of delta, in both forms)."""
     n_people = x_all.shape[1]
-    width = order_out.shape[1]
+    width = x.shape[1]
     order = np.empty(n_people, dtype=np.int64)
+    k_out = 0
     for r in range(rows.shape[0]):
         b = rows[r]
         for m in range(n_people):  # stable insertion sort of the row's indices by x
@@ -272,7 +284,12 @@ def sorted_rows(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n_th
         c = b // n_theta
         for k in range(width):
             m = order[k]
-            order_out[r, k] = m
             x[r, k] = x_all[b, m]
-            delta[r, k] = delta_all[b, m]
-            dist_out[r, k] = dist[c, m]
+            if np.isfinite(x_all[b, m]):  # the row's first count entries: its finite x
+                index[r, k] = m
+                delta[k_out] = delta_all[b, m]
+                dist_out[k_out] = dist[c, m]
+                where[k_out] = r * width + k
+                k_out += 1
+            else:
+                index[r, k] = -1

@@ -174,19 +174,22 @@ class TopHypotheses:
         if kernels is None:
             order = np.argsort(self.x[rows], axis=1, kind="stable")[:, :width]
             x = np.take_along_axis(self.x[rows], order, axis=1)
-            delta = np.take_along_axis(self.delta[rows], order, axis=1)
-            dist = np.take_along_axis(self.dist[rows // self.n_theta], order, axis=1)
-        else:  # the same gathers in one pass per row
+            valid = np.arange(width)[None, :] < count[:, None]
+            delta = np.take_along_axis(self.delta[rows], order, axis=1)[valid]
+            dist = np.take_along_axis(self.dist[rows // self.n_theta], order, axis=1)[valid]
+            where = np.flatnonzero(valid)
+            index = np.where(valid, order, -1)
+        else:  # the same values in one pass per row, the valid entries' delta and |OP| packed
             shape = (rows.shape[0], width)
-            x, delta, dist = np.empty(shape), np.empty(shape), np.empty(shape)
-            order = np.empty(shape, dtype=np.intp)
+            x, index = np.empty(shape), np.empty(shape, dtype=np.intp)
+            n_valid = int(count.sum())
+            delta, dist = np.empty(n_valid), np.empty(n_valid)
+            where = np.empty(n_valid, dtype=np.intp)
             kernels.sorted_rows(self.x, self.delta, self.dist, self.n_theta,
-                                rows.astype(np.int64), order, x, delta, dist)
-        valid = np.arange(width)[None, :] < count[:, None]
+                                rows.astype(np.int64), x, index, delta, dist, where)
         # numpy's cos in both forms, of the valid entries only (elementwise: the same bits).
         y = np.zeros((rows.shape[0], width))
-        y[valid] = dist[valid] * np.cos(delta[valid])
-        index = np.where(valid, order, -1)
+        y.flat[where] = dist * np.cos(delta)
         return TopVectors(x=x, y=y, index=index, count=count)
 
 
@@ -215,19 +218,22 @@ def top_hypotheses(
         delta = delta.reshape(-1, n_people)
         inside = (np.abs(delta) < half) & np.repeat(geometry.visible, thetas.shape[0], axis=0)
         count = inside.sum(axis=1)
-    else:
+        # numpy's tan in both forms (its SIMD tan is not libm's to the last bit on every
+        # CPU), of the entries in view only: an elementwise function, so the same bits as over
+        # the whole table, at about a quarter of the work (a 90-degree view of the circle).
+        seen = np.flatnonzero(inside)
+        x = np.full(delta.shape, np.inf)
+        x.flat[seen] = np.tan(delta.flat[seen]) * (-1.0 / np.tan(half))
+    else:  # the same table; the kernel packs the in-view entries' delta for numpy's tan
         n_rows = n_cand * thetas.shape[0]
-        delta = np.empty((n_rows, n_people))
-        inside = np.empty((n_rows, n_people), dtype=bool)
+        delta, x = np.empty((n_rows, n_people)), np.empty((n_rows, n_people))
         count = np.empty(n_rows, dtype=np.intp)
-        kernels.hypothesis_table(phi, np.ascontiguousarray(geometry.visible, dtype=bool),
-                                 thetas, half, delta, inside, count)
-    # numpy's tan in both forms (its SIMD tan is not libm's to the last bit on every CPU), of
-    # the entries in view only: an elementwise function, so the same bits as over the whole
-    # table, at about a quarter of the work (a 90-degree view of the full circle).
-    seen = np.flatnonzero(inside)
-    x = np.full(delta.shape, np.inf)
-    x.flat[seen] = np.tan(delta.flat[seen]) * (-1.0 / np.tan(half))
+        seen = np.empty(n_rows * n_people, dtype=np.intp)
+        packed = np.empty(n_rows * n_people)
+        n_seen = kernels.hypothesis_table(
+            phi, np.ascontiguousarray(geometry.visible, dtype=bool), thetas, half, delta, x,
+            count, seen, packed)
+        x.flat[seen[:n_seen]] = np.tan(packed[:n_seen]) * (-1.0 / np.tan(half))
     return TopHypotheses(x=x, count=count, delta=delta, dist=geometry.dist,
                          n_theta=thetas.shape[0])
 
