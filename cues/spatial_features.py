@@ -272,6 +272,17 @@ def _hypotheses(
     return found[: config.n_hypotheses]
 
 
+def _median(values: np.ndarray) -> float:
+    """``np.median`` of a short finite 1-D array, to the bit, without its general machinery
+    (three per frame: a tenth of the features' numpy time): the middle value, or the two
+    middle ones, each added to 0 as ``np.mean`` sums them (so -0.0 gives 0.0), over 2."""
+    ordered = np.sort(values)
+    k = ordered.shape[0] // 2
+    if ordered.shape[0] % 2:
+        return float(0.0 + ordered[k])
+    return float((0.0 + ordered[k - 1] + ordered[k]) / 2.0)
+
+
 def _wrap(angle: np.ndarray) -> np.ndarray:
     return np.mod(angle + np.pi, 2.0 * np.pi) - np.pi
 
@@ -318,7 +329,7 @@ def frame_features(
     cam = None if camera is None else int(np.flatnonzero(top_order == int(camera))[0])
 
     # Pose-free box geometry.
-    s_top = float(np.median(np.sqrt(top[:, 2] * top[:, 3]))) if m else 1.0
+    s_top = _median(np.sqrt(top[:, 2] * top[:, 3])) if m else 1.0
     centres = box_centres(top)
     log_counts = [math.log1p(m), math.log1p(n)]
     if m > 1:
@@ -355,8 +366,8 @@ def frame_features(
             hor[:, 1] / height,
             np.log(hor[:, 2] / hor[:, 3]),
             border.astype(float),
-            bottom - (np.median(bottom) if n else 0.0),
-            log_h - (np.median(log_h) if n else 0.0),
+            bottom - (_median(bottom) if n else 0.0),
+            log_h - (_median(log_h) if n else 0.0),
             np.full(n, log_counts[0]),
             np.full(n, log_counts[1]),
         ]

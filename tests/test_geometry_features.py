@@ -171,3 +171,17 @@ def test_collate_pads_with_masks(scene):
     assert not batch["pair"][1, :, 3:].any() and not batch["pair"][2].any()
     one = collate_frames([empty])
     assert one["pair"].shape[:4] == (1, 1, 1, 1)  # never an empty dimension
+
+
+def test_frame_median_is_numpys_to_the_bit():
+    # The features' median (three per frame) replaces np.median for speed (issue 70): the same
+    # bits on odd and even lengths, ties, signed zeros and huge values.
+    from xvmatch.cues.spatial_features import _median
+
+    rng = np.random.default_rng(7)
+    for n in range(1, 30):
+        for scale in (1e-3, 1.0, 1e300):
+            for values in (rng.normal(size=n) * scale, np.round(rng.normal(size=n), 1),
+                           rng.choice([0.0, -0.0, 1.0, -1.0], size=n)):
+                assert np.float64(_median(values)).tobytes() == \
+                    np.float64(np.median(values)).tobytes(), values
