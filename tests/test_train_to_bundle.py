@@ -70,6 +70,19 @@ def test_an_appearance_file_given_as_a_matcher_says_what_to_do(weights) -> None:
         load_matcher(weights)
 
 
+def test_associate_names_an_appearance_file_given_as_its_model(weights, tmp_path,
+                                                              capsys) -> None:
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    top.write_text("1,1,10,10,5,12\n1,2,30,12,5,12\n")
+    hor.write_text("1,1,40,20,20,60\n1,2,100,22,20,60\n")
+    assert main(["associate", "--top", str(top), "--hor", str(hor), "--image-size", "320x180",
+                 "--model", str(weights), "--out", str(tmp_path / "pred.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith(f"xvmatch: error: {weights}: an appearance weights file")
+    assert f"xvmatch export --appearance {weights} --out BUNDLE/" in err
+    assert not (tmp_path / "pred.csv").exists()
+
+
 def test_wrong_files_given_as_appearance_are_named(weights, tiny_models, tmp_path) -> None:
     with pytest.raises(ValueError, match=r"--appearance .*: a matcher file, not an appearance "
                        r"weights file; export it as it is: xvmatch export --model"):
