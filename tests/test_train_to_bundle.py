@@ -70,8 +70,9 @@ def test_an_appearance_file_given_as_a_matcher_says_what_to_do(weights) -> None:
         load_matcher(weights)
 
 
-def test_associate_names_an_appearance_file_given_as_its_model(weights, tmp_path,
-                                                              capsys) -> None:
+def test_associate_names_an_appearance_file_given_as_its_model(weights, tmp_path, capsys,
+                                                              monkeypatch) -> None:
+    monkeypatch.setenv("XVMATCH_CACHE", str(tmp_path / "cache"))  # a .pt model's export cache
     top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
     top.write_text("1,1,10,10,5,12\n1,2,30,12,5,12\n")
     hor.write_text("1,1,40,20,20,60\n1,2,100,22,20,60\n")
