@@ -17,7 +17,7 @@ methods, scored by the F1 of the cross-view pairs over all frames:
   view taken as 70 degrees (``strict=False``: a loose fit rather than none); a refused
   calibration (too few boxes) scores its frames as misses;
 * ``+ tracklet consensus``: those pairs made consistent over the clip with each view's own track
-  ids (:func:`~xvmatch.cues.ground_registration.tracklet_consensus`, video mode).
+  ids (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`, video mode).
 
 CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`).
 

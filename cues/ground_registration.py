@@ -38,7 +38,6 @@ __all__ = [
     "hor_ground_points",
     "pose_hypotheses",
     "register_sequence",
-    "tracklet_consensus",
 ]
 
 RADIUS = 1.5
@@ -209,41 +208,3 @@ def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose) -> np
     rows, cols = linear_sum_assignment(cost)
     ok = d[rows, cols] < RADIUS
     return np.column_stack([rows[ok], cols[ok]]).astype(np.int64)
-
-
-def tracklet_consensus(pairs: dict[int, list[tuple[int, int]]],
-                       present: dict[int, tuple[np.ndarray, np.ndarray]],
-                       min_share: float = 0.5) -> dict[int, list[tuple[int, int]]]:
-    """Per-frame pairs made consistent over time with each view's own track ids (video mode):
-    a (top track, horizontal track) pair holds in every frame where both are present when it
-    was found in at least ``min_share`` of those frames; a frame's conflicts go to the pairs
-    found most often (Hungarian on the shares).
-
-    Args:
-        pairs: ``{frame: [(top id, hor id), ...]}`` of the frame-by-frame association.
-        present: ``{frame: (top ids, hor ids)}`` of every evaluated frame.
-        min_share: the share of co-present frames a pair must have been found in.
-    """
-    found: dict[tuple[int, int], int] = {}
-    for f in present:
-        for pair in pairs.get(f, ()):
-            found[pair] = found.get(pair, 0) + 1
-    together = {p: 0 for p in found}  # frames where both tracks of a found pair are present
-    for _f, (tops, hors) in present.items():
-        t_set, h_set = set(tops.tolist()), set(hors.tolist())
-        for p in found:
-            if p[0] in t_set and p[1] in h_set:
-                together[p] += 1
-    share = {p: found[p] / together[p] for p in found if together[p]}
-    out: dict[int, list[tuple[int, int]]] = {}
-    for f, (tops, hors) in present.items():
-        t_list, h_list = tops.tolist(), hors.tolist()
-        s = np.array([[share.get((t, h), 0.0) for h in h_list] for t in t_list]).reshape(
-            len(t_list), len(h_list))
-        if not s.size:
-            out[f] = []
-            continue
-        rows, cols = linear_sum_assignment(-s)
-        out[f] = [(t_list[r], h_list[c]) for r, c in zip(rows, cols, strict=True)
-                  if s[r, c] >= min_share]
-    return out

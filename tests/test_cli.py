@@ -23,6 +23,7 @@ from xvmatch.formats.mot_boxes import (
     write_mot_boxes,
     write_predictions,
 )
+from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 WIDTH = 2688
@@ -55,8 +56,9 @@ def _error_line(capsys) -> str:
 @pytest.mark.parametrize(
     ("extra", "kwargs"),
     [
-        ([], {}),
-        (["--camera-id", "0"], {"camera_id": 0}),
+        (["--mode", "frame"], {}),
+        ([], {"search": "follow"}),  # auto: the files' ids are track ids, so video
+        (["--camera-id", "0"], {"camera_id": 0, "search": "follow"}),
         (["--mode", "video"], {"search": "follow"}),
         (["--mode", "video", "--search", "reduced"], {"search": "reduced"}),
     ],
@@ -68,7 +70,11 @@ def test_associate_writes_the_pairs_of_associate_sequence(files, tmp_path, capsy
     assert main(argv + extra) == 0
     assert capsys.readouterr().err == ""
     assert out.read_text().splitlines()[0] == PREDICTION_HEADER == "frame,top_id,hor_id"
-    expected = associate_sequence(read_mot_boxes(top), read_mot_boxes(hor), WIDTH, **kwargs)
+    top_boxes, hor_boxes = read_mot_boxes(top), read_mot_boxes(hor)
+    expected = associate_sequence(top_boxes, hor_boxes, WIDTH, **kwargs)
+    if "search" in kwargs:  # video: the pairs kept consistent along each view's tracks
+        expected = consistent_pairs(expected, top_boxes, hor_boxes,
+                                    sorted(set(top_boxes) | set(hor_boxes)))
     assert read_predictions(out) == {f: p for f, p in expected.items() if p}
     assert sum(len(p) for p in expected.values()) > 30  # not an empty prediction
 
@@ -97,9 +103,34 @@ def test_frame_mode_rejects_a_video_search(files, tmp_path, capsys):
     top, hor = files
     out = tmp_path / "pred.csv"
     argv = ["associate", "--top", str(top), "--hor", str(hor), "--out", str(out), "--quiet"]
-    assert main([*argv, "--search", "follow"]) == 2
+    assert main([*argv, "--mode", "frame", "--search", "follow"]) == 2
     assert "--mode video" in _error_line(capsys)
     assert not out.exists()
+
+
+def test_auto_mode_is_frame_without_track_ids(files, tmp_path, capsys):
+    # Ids that change every frame (detections numbered per frame, no tracker) are no video:
+    # auto solves each frame on its own, and a video search is refused with the reason.
+    top, hor = files
+    renumbered = tmp_path / "hor_rows.txt"
+    write_mot_boxes(renumbered, {f: FrameBoxes(f, np.arange(len(r.ids)) + 1000 * f, r.boxes)
+                                 for f, r in read_mot_boxes(hor).items()})
+    out = tmp_path / "pred.csv"
+    argv = ["associate", "--top", str(top), "--hor", str(renumbered), "--out", str(out)]
+    assert main([*argv, "--quiet", "--search", "follow"]) == 2
+    assert "auto found no track ids" in _error_line(capsys)
+    assert main(argv) == 0
+    assert "--mode video" not in capsys.readouterr().err
+    frame = tmp_path / "frame.csv"
+    assert main([*argv[:-1], str(frame), "--mode", "frame", "--quiet"]) == 0
+    assert out.read_text() == frame.read_text()
+
+
+def test_auto_mode_says_it_took_video(files, tmp_path, capsys):
+    top, hor = files
+    out = tmp_path / "pred.csv"
+    assert main(["associate", "--top", str(top), "--hor", str(hor), "--out", str(out)]) == 0
+    assert "note: --mode video: each view's ids persist" in capsys.readouterr().err
 
 
 def test_bad_spatial_parameter_is_one_line(files, tmp_path, capsys):
@@ -417,7 +448,8 @@ def test_associate_with_an_offset_re_times_the_top_view(tmp_path, capsys):
     write_mot_boxes(top, scene.top)
     shifted_hor = {f + 8: FrameBoxes(f + 8, r.ids, r.boxes) for f, r in scene.hor.items()}
     write_mot_boxes(hor, shifted_hor)
-    base = ["associate", "--top", str(top), "--hor", str(hor), "--camera-id", "0"]
+    base = ["associate", "--top", str(top), "--hor", str(hor), "--camera-id", "0",
+            "--mode", "frame"]
     scores = {}
     for tag, extra in [("none", []), ("given", ["--offset", "-8"]),
                        ("auto", ["--offset", "auto", "--max-offset", "10", "--workers", "2"])]:

@@ -95,6 +95,9 @@ def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> No
             main([*base, *extra, "--out", str(tmp_path / "x.csv")])
         assert stop.value.code == 2
         assert f"argument {extra[0]}: expected a number in" in capsys.readouterr().err
-    # Without the top image size, auto is today's nadir path, as before.
+    # Without the top image size, auto is today's nadir path, as before, with a note saying
+    # the top view's people stand upright and what to give.
     assert main([*base, "--out", str(tmp_path / "n.csv"), "--quiet"]) == 0
     assert "top view" not in capsys.readouterr().err
+    assert main([*base, "--out", str(tmp_path / "n.csv")]) == 0
+    assert "people stand upright" in capsys.readouterr().err

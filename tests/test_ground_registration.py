@@ -80,16 +80,3 @@ def test_no_people_no_hypotheses() -> None:
     assert poses.shape == (0, 3) and scores.shape == (0,)
     assert gr.associate_on_ground(np.ones((2, 2)), np.zeros((0, 2)),
                                   gr.FramePose(1, np.zeros(2), 0.0, 0.0)).shape == (0, 2)
-
-
-def test_tracklet_consensus_keeps_the_pairs_found_most_often() -> None:
-    present = {f: (np.array([1, 2, 3]), np.array([7, 8])) for f in range(1, 11)}
-    pairs = {f: [(1, 7), (2, 8)] for f in range(1, 11)}
-    pairs[4] = [(2, 7), (1, 8)]  # one frame swapped
-    pairs[5] = []  # one frame with nothing
-    pairs[6] = [(1, 7), (3, 8)]  # one frame's wrong partner
-    out = gr.tracklet_consensus(pairs, present)
-    assert all(sorted(out[f]) == [(1, 7), (2, 8)] for f in range(1, 11))
-    # A pair found in too few of its frames is dropped.
-    sparse = {1: [(1, 7)]}
-    assert gr.tracklet_consensus(sparse, present) == {f: [] for f in range(1, 11)}

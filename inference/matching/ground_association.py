@@ -9,7 +9,7 @@ view's boxes say it is oblique).
    from column), and its pose on the top map is registered frame by frame and chosen over time
    (:mod:`xvmatch.cues.ground_registration`); pairs by Hungarian on the ground distances.
 3. With each view's own track ids (video mode), the pairs are made consistent over the clip
-   (:func:`~xvmatch.cues.ground_registration.tracklet_consensus`).
+   (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`).
 
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
@@ -24,6 +24,7 @@ import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.formats.mot_boxes import stack_frames
+from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     PeopleCalibration,
@@ -135,10 +136,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
             pairs[f] = [(int(ti[a]), int(hi[b]))
                         for a, b in gr.associate_on_ground(p, q, by_frame[f])]
     if options.consensus:
-        present = {f: (np.asarray(top[f].ids) if f in top else np.zeros(0, np.int64),
-                       np.asarray(hor[f].ids) if f in hor else np.zeros(0, np.int64))
-                   for f in order}
-        pairs = gr.tracklet_consensus(pairs, present)
+        pairs = consistent_pairs(pairs, top, hor, order, keep_unsure=False)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib))
 

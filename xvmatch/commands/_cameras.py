@@ -16,6 +16,8 @@ import sys
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from xvmatch.commands._options import HOR_IMAGE_SIZE, UsageError, check_images_together
 from xvmatch.commands._types import float_in
 from xvmatch.core.output_paths import Output, check_own_folder
@@ -62,11 +64,31 @@ def check_top_view(args: argparse.Namespace) -> None:
                              "--cameras, or use --top-view nadir with them")
 
 
+def _note_upright(args: argparse.Namespace, top: dict) -> None:
+    """One note when the search is about to read an upright people's top view as the ground
+    (no size to calibrate it from its people, ``auto``): how to do better."""
+    from xvmatch.formats.mot_boxes import stack_frames
+    from xvmatch.geometry.people_calibration import STEEP_ASPECT
+
+    boxes = stack_frames(top)[2]
+    if args.quiet or args.model is not None or not len(boxes):
+        return
+    aspect = float(np.median(boxes[:, 3] / np.maximum(boxes[:, 2], 1e-9)))
+    if aspect >= STEEP_ASPECT:
+        print(f"xvmatch: note: the top view's people stand upright (boxes {aspect:.1f} times as "
+              "tall as wide): an oblique camera, which the search reads as a nadir one; give "
+              "--top-image-size WxH to calibrate it from its people", file=sys.stderr)
+
+
 def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
-                 hor_size: tuple[int, int]) -> dict | None:
+                  hor_size: tuple[int, int], video: bool) -> dict | None:
     """The pairs of the ground-map association when the top view is oblique (forced, or found
-    so by ``auto``), else None (today's path); prints the one line saying what was assumed."""
-    if args.top_view == "nadir" or args.cameras is not None or args.top_image_size is None:
+    so by ``auto``), else None (today's path); prints the one line saying what was assumed.
+    ``video``: the pairs are made consistent along each view's tracks."""
+    if args.top_view == "nadir" or args.cameras is not None:
+        return None
+    if args.top_image_size is None:
+        _note_upright(args, top)
         return None
     from xvmatch.formats.box_image_size import check_boxes_in_image
     from xvmatch.inference.matching.ground_association import (
@@ -77,7 +99,7 @@ def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
     check_boxes_in_image(top, args.top_image_size, args.top, "--top-image-size")
     options = GroundAssociationOptions(top_size=args.top_image_size, hor_size=hor_size,
                                        hor_hfov_deg=args.hor_hfov, fps=args.fps,
-                                       consensus=args.mode == "video", seed=0)
+                                       consensus=video, seed=0)
     run = run_top_view(top, hor, options, args.top_view, name=args.top)
     if run is None:
         if not args.quiet:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from xvmatch.commands._cameras import add_top_view_arguments, check_top_view, oblique_pairs
 from xvmatch.commands._model import (
@@ -66,10 +67,12 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--mode",
-        choices=("frame", "video"),
-        default="frame",
-        help="frame: each frame solved on its own (exhaustive search); video: uses previous "
-        "frames (damped orientation window, O followed by its top-view track id)",
+        choices=("auto", "frame", "video"),
+        default="auto",
+        help="frame: each frame solved on its own; video: each view's ids are track ids, and "
+        "the pairs are kept consistent along them (the search also follows O by its top-view "
+        "track id in a damped orientation window); auto: video when both views' ids persist "
+        "from frame to frame, else frame. Default auto",
     )
     p.add_argument(
         "--search",
@@ -123,9 +126,12 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     params = spatial_params(args)
     top = read_boxes(args.top, args.duplicates, box_reading(args))
     hor = read_boxes(args.hor, args.duplicates, box_reading(args))
-    search = args.search or ("exhaustive" if args.mode == "frame" else "follow")
-    if args.mode == "frame" and search != "exhaustive":
-        raise UsageError("--search reduced/follow uses previous frames: it needs --mode video")
+    video = _video_mode(args, top, hor)
+    search = args.search or ("follow" if video and args.model is None else "exhaustive")
+    if not video and search != "exhaustive":
+        raise UsageError("--search reduced/follow uses previous frames: it needs --mode video"
+                         + (" (auto found no track ids: ids that persist from frame to frame)"
+                            if args.mode == "auto" else ""))
     if args.model is None:
         given = [f"--{k.replace('_', '-')}" for k in LEARNED_ONLY
                  if getattr(args, k) not in (None, False)]
@@ -134,7 +140,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
                              "default (or a bundle)")
     check_camera_id(args.camera_id, top, args.top)
     check_top_view(args)
-    learned = model_args(args)
+    learned = replace(model_args(args), mode="frame")  # video: its pairs made consistent
     models = [m for m in args.model or () if m != "default"]
     from xvmatch.formats.offset_record import predictions_offset_path
 
@@ -160,11 +166,15 @@ def _cmd_associate(args: argparse.Namespace) -> int:
 
         top = shift_frames(top, offset)
     frames = sorted(set(top) | set(hor))
-    oblique = oblique_pairs(args, top, hor, hor_size[0])
+    oblique = oblique_pairs(args, top, hor, hor_size[0], video)
     if oblique is not None:
         pairs = oblique
         _write(args, pairs, frames, offset)
         return 0
+    if video and args.mode == "auto" and not args.quiet:
+        print("xvmatch: note: --mode video: each view's ids persist from frame to frame (track "
+              "ids), so pairs are kept consistent along them; --mode frame solves each frame on "
+              "its own", file=sys.stderr)
     progress = frame_progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
         pairs = associate_with_model(learned, top, hor, frames, progress, top_offset=offset,
@@ -180,12 +190,27 @@ def _cmd_associate(args: argparse.Namespace) -> int:
             frames=frames,
             progress=progress,
         )
-        if args.draw is not None:
-            both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
-            draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
-                          not args.no_labels)
+    if video:
+        from xvmatch.inference.linking.pair_consensus import consistent_pairs
+
+        pairs = consistent_pairs(pairs, top, hor, frames)
+    if args.model is None and args.draw is not None:
+        both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
+        draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
+                      not args.no_labels)
     _write(args, pairs, frames, offset)
     return 0
+
+
+def _video_mode(args: argparse.Namespace, top: dict, hor: dict) -> bool:
+    """``--mode``: video or frame; ``auto`` takes video where both views' ids are track ids
+    (:func:`~xvmatch.cues.box_motion.is_video`) and the search reads them (not the learned
+    matcher on a nadir top view, which solves frames on their own)."""
+    if args.mode != "auto":
+        return args.mode == "video"
+    from xvmatch.cues.box_motion import is_video
+
+    return is_video(top, hor)
 
 
 def _write(args: argparse.Namespace, pairs: dict, frames: list[int], offset: int) -> None:
