@@ -28,7 +28,7 @@ is good to a few per cent; directions (tilt, roll, horizon) do not depend on it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -514,18 +514,31 @@ def calibrate_from_people(
     inside = (w > 0) & (h > 0)
     aspect = float(np.median(h[inside] / w[inside]))
     if aspect < NADIR_ASPECT:
-        return _nadir(b, w[inside], size, n_frames, hfov_deg)
+        return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
     try:
         calib = _oblique(b, size, n_frames, hfov_deg, seed, name)
     except CalibrationError:
         if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
-            return _nadir(b, w[inside], size, n_frames, hfov_deg)
+            return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
         if strict:
             raise
         calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict=False)
     if calib.tilt_deg > NADIR_TILT_DEG:
-        return _nadir(b, w[inside], size, n_frames, hfov_deg)
-    return calib
+        return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
+    return _settled(calib)
+
+
+def _settled(calib: PeopleCalibration) -> PeopleCalibration:
+    """The estimate rounded far below what matters (a hundredth of a pixel, a millidegree, a
+    tenth of a millimetre), so that a last-bit difference of the fit between CPUs changes
+    neither the camera file nor any pair built on it."""
+    horizon = tuple(round(float(v), 2) if np.isfinite(v) else float(v) for v in calib.horizon)
+    return replace(calib, focal=round(calib.focal, 2), tilt_deg=round(calib.tilt_deg, 3),
+                   roll_deg=round(calib.roll_deg, 3),
+                   camera_height=round(calib.camera_height, 4), horizon=horizon,
+                   tilt_std_deg=round(calib.tilt_std_deg, 3),
+                   horizon_std_px=round(calib.horizon_std_px, 2),
+                   focal_rel_std=round(calib.focal_rel_std, 4))
 
 
 def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,

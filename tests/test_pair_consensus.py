@@ -23,7 +23,7 @@ def test_the_pairs_found_most_often_hold_in_every_frame() -> None:
 
 
 def test_tracks_without_a_stable_pair_keep_their_own() -> None:
-    # (1, 7) holds over the clip; track 3 and 8 are paired in one frame only and with nobody
+    # (1, 7) holds over the clip; tracks 3 and 8 are paired in one frame only and with nobody
     # else: that pair is kept where it was found, not dropped (nor spread to other frames).
     pairs = {f: [(1, 7)] for f in range(1, 11)}
     pairs[2] = [(1, 7), (3, 8)]
@@ -33,11 +33,25 @@ def test_tracks_without_a_stable_pair_keep_their_own() -> None:
     # A frame's pair that contradicts a stable one is replaced by it.
     pairs[3] = [(2, 7)]
     assert tracklet_consensus(pairs, PRESENT)[3] == [(1, 7)]
-    assert tracklet_consensus({1: [(1, 7)]}, PRESENT) == {1: [(1, 7)], **{
-        f: [] for f in range(2, 11)}}
-    # Without keep_unsure, a pair found in too few of its frames is dropped.
-    assert tracklet_consensus({1: [(1, 7)]}, PRESENT, keep_unsure=False) == {
+    # Without keep_free, a pair with no support over time is dropped.
+    assert tracklet_consensus({1: [(3, 8)]}, PRESENT, keep_free=False) == {
         f: [] for f in range(1, 11)}
+    assert tracklet_consensus({1: [(3, 8)]}, PRESENT)[1] == [(3, 8)]
+
+
+def test_a_trackers_id_switch_changes_the_partner_where_it_happens() -> None:
+    # Top track 1 is hor track 7's person for 60 frames, then (an id switch) hor track 8's;
+    # each frame's pairs are right but for one wrong frame in five. The consensus follows the
+    # switch and mends the wrong frames; one partner for the whole track cannot (no partner
+    # holds over the whole clip, so it keeps the frames' own pairs, wrong one frame in five).
+    present = {f: (np.array([1, 2]), np.array([7, 8])) for f in range(1, 121)}
+    truth = {f: [(1, 7), (2, 8)] if f <= 60 else [(1, 8), (2, 7)] for f in present}
+    pairs = {f: (p if f % 5 else [(a, 15 - b) for a, b in p]) for f, p in truth.items()}
+    out = tracklet_consensus(pairs, present)
+    wrong = sum(set(out[f]) != set(truth[f]) for f in present)
+    assert wrong <= 2, wrong
+    whole = tracklet_consensus(pairs, present, switch_cost=np.inf)
+    assert sum(set(whole[f]) != set(truth[f]) for f in present) >= 20
 
 
 def test_consistent_pairs_reads_the_ids_of_the_box_records() -> None:

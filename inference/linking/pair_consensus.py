@@ -18,68 +18,103 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
-__all__ = ["MIN_SHARE", "consistent_pairs", "tracklet_consensus"]
+__all__ = ["FREE_COST", "SWITCH_COST", "consistent_pairs", "tracklet_consensus"]
 
-MIN_SHARE = 0.5
-"""Share of the frames where both tracks are present in which a pair must have been found."""
+SWITCH_COST = 15.0
+"""Frames of disagreement a change of a track's partner must save (:func:`tracklet_consensus`)."""
+FREE_COST = 0.5
+"""Cost a frame of following the frame's own pair: a partner holds where it agrees with more than
+half of the frames."""
 
 Pairs = dict[int, list[tuple[int, int]]]
 
 
+def _partner_path(obs: np.ndarray, here: np.ndarray, switch_cost: float,
+                  free_cost: float) -> np.ndarray:
+    """Viterbi over one top track's frames: state 0 follows each frame's own pair at
+    ``free_cost`` a frame; state ``j >= 1`` holds candidate ``j`` as the partner, at 0 a frame
+    where that frame's pair (or, with the candidate absent, its lack of one) agrees and 1 where it
+    does not; changing state costs ``switch_cost``.
+
+    Args:
+        obs: ``(T,)`` index of the frame's partner among the candidates (1-based), 0 for none.
+        here: ``(T, S)`` bool, candidate ``j`` present in the frame (column 0 unused).
+
+    Returns:
+        ``(T,)`` the chosen state per frame.
+    """
+    n, states = here.shape
+    cols = np.arange(states)
+    cost = np.where(here, (obs[:, None] != cols[None, :]).astype(float),
+                    (obs[:, None] != 0).astype(float))
+    cost[:, 0] = free_cost
+    back = np.zeros((n, states), dtype=np.int64)
+    total = cost[0].copy()
+    for k in range(1, n):
+        best = int(np.argmin(total))
+        stay = total <= total[best] + switch_cost
+        back[k] = np.where(stay, cols, best)
+        total = np.where(stay, total, total[best] + switch_cost) + cost[k]
+    path = np.zeros(n, dtype=np.int64)
+    path[-1] = int(np.argmin(total))
+    for k in range(n - 1, 0, -1):
+        path[k - 1] = back[k, path[k]]
+    return path
+
+
 def tracklet_consensus(pairs: Mapping[int, Sequence[tuple[int, int]]],
                        present: Mapping[int, tuple[np.ndarray, np.ndarray]],
-                       min_share: float = MIN_SHARE, keep_unsure: bool = True) -> Pairs:
-    """Per-frame pairs made consistent over time (module docstring): the pairs of tracks found
-    in at least ``min_share`` of their co-present frames hold in all of them, a frame's conflicts
-    going to the pairs found most often (Hungarian on the shares); tracks in no such pair keep
-    their frame-by-frame pairs with ``keep_unsure``, else have none.
+                       switch_cost: float = SWITCH_COST, free_cost: float = FREE_COST,
+                       keep_free: bool = True) -> Pairs:
+    """Per-frame pairs made consistent over time (module docstring): each top-view track's
+    partner over its frames is a piecewise-constant choice among the horizontal tracks it was
+    paired with, or the frames' own pairs where no partner holds (:func:`_partner_path`); two
+    tracks claiming one partner in a frame go to the one the frame's own pair agrees with.
 
     Args:
         pairs: ``{frame: [(top id, hor id), ...]}`` of the frame-by-frame association.
         present: ``{frame: (top ids, hor ids)}`` of every frame to output.
-        min_share: the share of co-present frames a pair must have been found in.
-        keep_unsure: keep the frame-by-frame pairs of tracks in no pair over the clip.
-
+        switch_cost: frames of disagreement a change of partner must save (a tracker's id
+            switch, in either view, is such a change).
+        free_cost: cost a frame of following the frame's own pair; a partner holds over a
+            stretch where it agrees with more than ``1 - free_cost`` of the frames.
     Returns:
         ``{frame: [(top id, hor id), ...]}`` for every frame of ``present``.
     """
-    found: dict[tuple[int, int], int] = {}
-    for f in present:
-        for pair in pairs.get(f, ()):
-            found[pair] = found.get(pair, 0) + 1
-    together = dict.fromkeys(found, 0)  # frames where both tracks of a found pair are present
-    for tops, hors in present.values():
-        t_set, h_set = set(tops.tolist()), set(hors.tolist())
-        for p in found:
-            if p[0] in t_set and p[1] in h_set:
-                together[p] += 1
-    share = {p: found[p] / together[p] for p in found if together[p]}
-    sure_top = {t for (t, _h), s in share.items() if s >= min_share}
-    sure_hor = {h for (_t, h), s in share.items() if s >= min_share}
+    order = sorted(present)
+    own = {f: dict(pairs.get(f, ())) for f in order}
+    hors_at = {f: set(present[f][1].tolist()) for f in order}
+    claims: dict[int, list[tuple[float, int, int]]] = {f: [] for f in order}
+    for t in sorted({t for f in order for t in present[f][0].tolist()}):
+        frames = [f for f in order if t in set(present[f][0].tolist())]
+        cands = sorted({own[f][t] for f in frames if t in own[f]})
+        if not cands:
+            continue
+        slot = {h: j + 1 for j, h in enumerate(cands)}
+        obs = np.array([slot.get(own[f].get(t), 0) for f in frames])
+        here = np.array([[False] + [h in hors_at[f] for h in cands] for f in frames])
+        path = _partner_path(obs, here, switch_cost, free_cost)
+        for k, (f, state, seen) in enumerate(zip(frames, path, obs, strict=True)):
+            if state == 0 and seen and keep_free:  # no partner holds: the frame's own pair
+                claims[f].append((1.0, t, cands[seen - 1]))
+            elif state and here[k, state]:  # the partner, stronger where the frame agrees
+                claims[f].append((2.0 + (seen == state), t, cands[state - 1]))
     out: Pairs = {}
-    for f, (tops, hors) in present.items():
-        t_list, h_list = tops.tolist(), hors.tolist()
-        s = np.array([[share.get((t, h), 0.0) for h in h_list] for t in t_list]).reshape(
-            len(t_list), len(h_list))
-        kept: list[tuple[int, int]] = []
-        if s.size:
-            rows, cols = linear_sum_assignment(-s)
-            kept = [(t_list[r], h_list[c]) for r, c in zip(rows, cols, strict=True)
-                    if s[r, c] >= min_share]
-        if keep_unsure:
-            kept += [(t, h) for t, h in pairs.get(f, ())
-                     if t not in sure_top and h not in sure_hor]
-        out[f] = kept
+    for f in order:
+        kept: dict[int, tuple[float, int]] = {}
+        for score, t, h in sorted(claims[f], key=lambda c: (-c[0], c[1], c[2])):
+            if h not in kept:
+                kept[h] = (score, t)
+        out[f] = sorted(((t, h) for h, (_s, t) in kept.items()))
     return out
 
 
 def consistent_pairs(pairs: Mapping[int, Sequence[tuple[int, int]]], top: Mapping, hor: Mapping,
-                     frames: Sequence[int], keep_unsure: bool = True) -> Pairs:
+                     frames: Sequence[int], **costs: float) -> Pairs:
     """:func:`tracklet_consensus` of an association of ``frames``, the ids present read from
     the two views' ``{frame: FrameBoxes}``."""
     empty = np.zeros(0, dtype=np.int64)
     present = {f: (np.asarray(top[f].ids) if f in top else empty,
                    np.asarray(hor[f].ids) if f in hor else empty) for f in frames}
-    return tracklet_consensus(pairs, present, keep_unsure=keep_unsure)
+    return tracklet_consensus(pairs, present, **costs)

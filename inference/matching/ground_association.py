@@ -18,18 +18,18 @@ which read the top image as the ground) or oblique (this run).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.formats.mot_boxes import stack_frames
-from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     PeopleCalibration,
     calibrate_from_people,
 )
+from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
 __all__ = [
     "TOP_VIEWS",
@@ -83,13 +83,8 @@ def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
     raises :class:`~xvmatch.geometry.people_calibration.CalibrationError` only for too few
     boxes."""
     frames, ids, boxes = stack_frames(top)
-    calib = calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
-                                  strict=False)
-    # Rounded far below what matters (a millidegree, a hundredth of a pixel, a tenth of a
-    # millimetre), so that a last-bit difference of the fit between CPUs changes no pair.
-    return replace(calib, focal=round(calib.focal, 2), tilt_deg=round(calib.tilt_deg, 3),
-                   roll_deg=round(calib.roll_deg, 3),
-                   camera_height=round(calib.camera_height, 4))
+    return calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
+                                 strict=False)
 
 
 def _summary(calib: PeopleCalibration) -> str:
@@ -136,7 +131,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
             pairs[f] = [(int(ti[a]), int(hi[b]))
                         for a, b in gr.associate_on_ground(p, q, by_frame[f])]
     if options.consensus:
-        pairs = consistent_pairs(pairs, top, hor, order, keep_unsure=False)
+        pairs = consistent_pairs(pairs, top, hor, order, keep_free=False)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib))
 
