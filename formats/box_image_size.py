@@ -11,7 +11,7 @@ command that reads box files (``associate``, ``track``, ``offset``, ``associate-
 2. **Boxes only, no size given**: the CVMHAT default 2688x1512 is assumed, with one note on
    stderr, only when the horizontal boxes are consistent with it (:func:`consistent_with`): all
    inside it (rule 3) and the rightmost box edge beyond :data:`MIN_EXTENT` (60%) of 2688 pixels,
-   1612.8 (the note, :func:`xvmatch.commands._image_size.note_if_assumed`, printed once every check
+   1612.8 (the note, :func:`xvmatch.commands._box_reading.note_if_assumed`, printed once every check
    has passed, is left out with ``--quiet``).
    Boxes of a 1399-pixel-wide camera reach at most 1399 (plus the margin, 1538.9), so they are
    never taken for CVMHAT's. Otherwise the command stops with one line saying to pass
@@ -147,7 +147,7 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
 
     Returns:
         ``((W, H), source)``; with no size given, the CVMHAT default and :data:`ASSUMED`
-        (:func:`xvmatch.commands._image_size.note_if_assumed` says so).
+        (:func:`xvmatch.commands._box_reading.note_if_assumed` says so).
 
     Raises:
         ValueError: two given sizes that disagree, boxes only that are not consistent with the

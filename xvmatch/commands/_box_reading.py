@@ -7,18 +7,26 @@ A command adds the options with :func:`add_box_reading_options` (or
 by person id) or :func:`read_detections` (every row, for ``track`` and ``associate-multi``); the
 reader's notes and warnings come out as ``xvmatch: note: ...`` and ``xvmatch: warning: ...``
 lines. The reading itself is :func:`xvmatch.formats.mot_boxes.read_mot_boxes`'s.
+
+The horizontal image size rule's command-line side lives here too: the rule itself (which size
+the horizontal boxes belong to, and whether they fit it) is
+:mod:`xvmatch.formats.box_image_size`'s; :func:`note_if_assumed` prints the one-line note of an
+assumed CVMHAT size, :func:`settled_hor_size` the size a command settles from its inputs.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from xvmatch.commands._types import float_in
+from xvmatch.formats.box_image_size import ASSUMED, box_extent
 
-__all__ = ["BoxReading", "add_box_reading_options", "box_reading", "read_boxes",
-           "read_detections"]
+__all__ = ["BoxReading", "add_box_reading_options", "box_reading", "note_if_assumed",
+           "read_boxes", "read_detections", "settled_hor_size"]
 
 
 @dataclass(frozen=True)
@@ -98,3 +106,40 @@ def read_detections(path: str, reading: BoxReading = BoxReading()):
                                    first_frame=reading.first_frame)
     _print_reader_messages(caught)
     return rows
+
+def note_if_assumed(resolved: tuple[tuple[int, int], str], hor: Mapping,
+                    hor_path: str | os.PathLike, quiet: bool = False,
+                    option: str = "--image-size") -> None:
+    """Print the one-line note on stderr when
+    :func:`~xvmatch.formats.box_image_size.resolve_size` assumed the CVMHAT size (not with
+    ``quiet``). Commands call it once every check has passed, as the work starts, so
+    that a refused run prints its error line alone."""
+    if quiet or resolved[1] != ASSUMED:
+        return
+    right, bottom = box_extent(hor)
+    print(f"xvmatch: note: assuming {os.fspath(hor_path)}'s images are 2688x1512 (CVMHAT; its "
+          f"boxes reach x {float(right):g}, y {float(bottom):g}); pass {option} WxH if not",
+          file=sys.stderr)
+
+
+def settled_hor_size(hor: Mapping, hor_path: str, image_size: tuple[int, int] | None,
+                     images_size: tuple[int, int] | None = None, images: str | None = None,
+                     cameras: str | None = None, quiet: bool = False,
+                     ids: bool = True) -> tuple[tuple[int, int], str]:
+    """The horizontal image size of ``hor`` (read from ``hor_path``) and where it comes from:
+    ``image_size`` (``--image-size``), the size of the horizontal ``images`` (None without) or
+    else the ``cameras``' ego camera, which must agree
+    (:func:`~xvmatch.formats.box_image_size.resolve_size`); said when assumed."""
+    from xvmatch.formats.box_image_size import resolve_size
+
+    given = [] if image_size is None else [(image_size, "--image-size")]
+    if images_size is not None:
+        given.append((images_size, f"the horizontal images {images}"))
+    elif cameras is not None:  # with images, each camera is checked against them
+        from xvmatch.commands._model import ego_camera_size
+
+        given.append(ego_camera_size(cameras))
+    resolved = resolve_size(hor, hor_path, given, ids=ids)
+    note_if_assumed(resolved, hor, hor_path, quiet)
+    return resolved
+

@@ -13,6 +13,7 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, fields
 
+from xvmatch.commands._box_reading import note_if_assumed
 from xvmatch.commands._cameras import (
     add_camera_check,
     add_refine_top_camera,
@@ -23,7 +24,6 @@ from xvmatch.commands._cameras import (
     note_camera_refinement,
     write_cameras,
 )
-from xvmatch.commands._image_size import note_if_assumed
 from xvmatch.commands._options import UsageError, add_image_options, check_images_together
 from xvmatch.commands._types import float_in, int_in, thread_count
 from xvmatch.core.output_paths import check_own_folder

@@ -151,7 +151,7 @@ IMAGE_SIZE_HELP = (
     "reach beyond 60%% of its width, with a note; a box more than 10%% past the image's border "
     "is an error)")
 """The help of every ``--image-size`` of the horizontal view
-(:mod:`xvmatch.commands._image_size`)."""
+(:mod:`xvmatch.commands._box_reading`)."""
 
 TOP_IMAGES_HELP = (
     "images of the top view: one image, a folder of frames whose names end in the frame number "

@@ -157,7 +157,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     hor_size = horizontal_size(learned, hor)
     hor_width = hor_size[0][0]
     if args.model is None:
-        from xvmatch.commands._image_size import note_if_assumed
+        from xvmatch.commands._box_reading import note_if_assumed
 
         note_if_assumed(hor_size, hor, args.hor, args.quiet)
     offset = resolve_offset(args, top, hor, hor_width, params, max_offset, args.camera_id)

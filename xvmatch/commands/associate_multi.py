@@ -194,7 +194,7 @@ def _run_options(args: argparse.Namespace):
 
 
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
-    from xvmatch.commands._image_size import note_if_assumed
+    from xvmatch.commands._box_reading import note_if_assumed
     from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
     from xvmatch.inference.views.multi_ego_run import multi_ego_sizes, open_multi_ego, run_multi_ego
 

@@ -172,7 +172,7 @@ def _cmd_offset(args: argparse.Namespace) -> int:
         raise UsageError(f"--clip-length {args.clip_length}: need clip_length >= 1 (frames per "
                          "clip)")
     check_clip_start(args.clip_start, hor, args.clip_length)
-    from xvmatch.commands._image_size import note_if_assumed
+    from xvmatch.commands._box_reading import note_if_assumed
     from xvmatch.formats.box_image_size import resolve_size
 
     given = [] if args.image_size is None else [(args.image_size, "--image-size")]

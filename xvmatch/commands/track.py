@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.commands._image_size import settled_hor_size
+from xvmatch.commands._box_reading import settled_hor_size
 from xvmatch.commands._model import (
     add_camera_check,
     add_refine_top_camera,

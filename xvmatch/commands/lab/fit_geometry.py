@@ -134,7 +134,7 @@ def _fit(args: argparse.Namespace, folder):
 def _training_folder(folder, sites, size, scratch: str, quiet: bool) -> object:
     """The folder fit-geometry trains from. It trains at CVMHAT's 2688x1512, so the horizontal
     boxes of the pairs it reads (``sites``) must be of that size
-    (:mod:`xvmatch.commands._image_size`): with ``size`` (``--image-size``) each box must lie in
+    (:mod:`xvmatch.commands._box_reading`): with ``size`` (``--image-size``) each box must lie in
     it, and boxes of another size are scaled to 2688 pixels wide into ``scratch`` (the features
     are resolution-free); without it the boxes must be consistent with 2688x1512. Else one error
     line."""

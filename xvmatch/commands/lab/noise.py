@@ -63,7 +63,7 @@ def _cmd_noise(args: argparse.Namespace) -> int:
     frames = read_boxes(args.boxes, args.duplicates)
     size = args.image_size
     if args.view == "hor":  # false boxes land in this image: the associate rule's size
-        from xvmatch.commands._image_size import note_if_assumed
+        from xvmatch.commands._box_reading import note_if_assumed
         from xvmatch.formats.box_image_size import resolve_size
 
         resolved = resolve_size(frames, args.boxes, [] if size is None else

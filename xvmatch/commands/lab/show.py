@@ -70,7 +70,7 @@ def add_show_parser(subparsers) -> argparse.ArgumentParser:
 
 def _show_boxes(args: argparse.Namespace) -> int:
     """``show --top T --hor H``: one frame of box files, pairs from ``--pred`` or equal ids."""
-    from xvmatch.commands._image_size import note_if_assumed
+    from xvmatch.commands._box_reading import note_if_assumed
     from xvmatch.formats.box_image_size import resolve_size
     from xvmatch.formats.mot_boxes import read_predictions
     from xvmatch.viz.box_canvas import draw_box_frame
