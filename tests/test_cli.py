@@ -57,9 +57,10 @@ def _error_line(capsys) -> str:
     ("extra", "kwargs"),
     [
         (["--mode", "frame"], {}),
-        ([], {"search": "follow"}),  # auto: the files' ids are track ids, so video
-        (["--camera-id", "0"], {"camera_id": 0, "search": "follow"}),
-        (["--mode", "video"], {"search": "follow"}),
+        ([], {"video": True}),  # auto: the files' ids are track ids, so video
+        (["--camera-id", "0"], {"camera_id": 0, "video": True}),
+        (["--mode", "video"], {"video": True}),
+        (["--mode", "video", "--search", "follow"], {"search": "follow"}),
         (["--mode", "video", "--search", "reduced"], {"search": "reduced"}),
     ],
 )
@@ -71,8 +72,9 @@ def test_associate_writes_the_pairs_of_associate_sequence(files, tmp_path, capsy
     assert capsys.readouterr().err == ""
     assert out.read_text().splitlines()[0] == PREDICTION_HEADER == "frame,top_id,hor_id"
     top_boxes, hor_boxes = read_mot_boxes(top), read_mot_boxes(hor)
+    video = kwargs.pop("video", False) or "search" in kwargs
     expected = associate_sequence(top_boxes, hor_boxes, WIDTH, **kwargs)
-    if "search" in kwargs:  # video: the pairs kept consistent along each view's tracks
+    if video:  # the pairs kept consistent along each view's tracks
         expected = consistent_pairs(expected, top_boxes, hor_boxes,
                                     sorted(set(top_boxes) | set(hor_boxes)))
     assert read_predictions(out) == {f: p for f, p in expected.items() if p}

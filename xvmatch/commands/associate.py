@@ -70,16 +70,16 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         choices=("auto", "frame", "video"),
         default="auto",
         help="frame: each frame solved on its own; video: each view's ids are track ids, and "
-        "the pairs are kept consistent along them (the search also follows O by its top-view "
-        "track id in a damped orientation window); auto: video when both views' ids persist "
+        "the pairs are kept consistent along them; auto: video when both views' ids persist "
         "from frame to frame, else frame. Default auto",
     )
     p.add_argument(
         "--search",
         choices=("exhaustive", "reduced", "follow"),
         default=None,
-        help="video-mode search: reduced = orientation window only, follow = window + O "
-        "followed (default in video mode)",
+        help="the search: exhaustive (default: each frame's pairs are then independent votes "
+        "for the video's consensus), or in video mode reduced = orientation window only, follow "
+        "= window + O followed by its top-view track id",
     )
     p.add_argument(
         "--image-size",
@@ -127,7 +127,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     top = read_boxes(args.top, args.duplicates, box_reading(args))
     hor = read_boxes(args.hor, args.duplicates, box_reading(args))
     video = _video_mode(args, top, hor)
-    search = args.search or ("follow" if video and args.model is None else "exhaustive")
+    search = args.search or "exhaustive"
     if not video and search != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video"
                          + (" (auto found no track ids: ids that persist from frame to frame)"
