@@ -116,9 +116,8 @@ class PairJudgement:
                     f"({MIN_JUDGED} needed) to check the pairs the site bundle makes: give a "
                     "longer video")
         s, n = self.site, self.source
-        verdict = ("better" if self.accepted else
-                   "not shown better" if self.gain > 0 else "no better" if self.gain == 0
-                   else "worse")
+        worse = self.gain < 0 and -self.gain > MIN_SIGMAS * self.error
+        verdict = "better" if self.accepted else "worse" if worse else "not shown better"
         return (f"on the {self.frames} held-out frames ({self.first}-{self.last}, not used to "
                 f"fit), matching with the images kept {s.sure_kept} of the box-only matcher's "
                 f"{s.sure} sure pairs with the site bundle against {n.sure_kept} without, and "
