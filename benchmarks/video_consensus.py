@@ -6,8 +6,8 @@ gives each frame's pairs; the consensus (:mod:`xvmatch.inference.linking.pair_co
 reads each view's ids as track ids. Three kinds of ids, each view's ids scrambled:
 
 * ``tracks``: the files' own ids, whole tracks (ground truth);
-* ``switch 300`` / ``switch 600``: a tracker's ids, two tracks of a view swapping ids about every
-  300 (600) frames per track (seeded), in both views; scored on the true ids.
+* ``switch 150`` / ``switch 300``: a tracker's ids, two tracks of a view swapping ids about every
+  150 (300) frames per track (seeded), in both views; scored on the true ids.
 
 Columns: ``frame`` (each frame on its own), ``consensus`` (the default switch cost) and
 ``whole track`` (no change of partner along a track: one partner per track or none, the rule
@@ -32,12 +32,15 @@ from xvmatch.formats.mot_boxes import read_predictions
 from xvmatch.inference.linking.pair_consensus import tracklet_consensus
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
-KINDS = {"tracks": None, "switch 300": 300, "switch 600": 600}
+KINDS = {"tracks": None, "switch 150": 300, "switch 300": 600}
+"""Each kind of ids and its ``every``: a view swaps two tracks' ids with probability
+``n / every`` a frame (``n`` its people), so each track about every ``every / 2`` frames."""
 
 
 def tracker_ids(frames: dict, every: int | None, rng: np.random.Generator) -> dict:
     """``{(frame, true id): tracker id}``: ids scrambled, and with ``every``, two tracks present
-    swapping ids with probability ``2 / every`` per track and frame (an id switch)."""
+    swapping ids with probability ``n / every`` a frame (``n`` people present; each track
+    about every ``every / 2`` frames: an id switch)."""
     current: dict[int, int] = {}
     out = {}
     for f in sorted(frames):
