@@ -128,6 +128,22 @@ def test_auto_mode_is_frame_without_track_ids(files, tmp_path, capsys):
     assert out.read_text() == frame.read_text()
 
 
+def test_video_mode_keeps_the_learned_pairs_consistent_along_tracks(tmp_path):
+    # The learned matcher solves each frame; in video mode (auto, here) its pairs are then made
+    # consistent along each view's tracks, as the library's consensus makes them (a scene whose
+    # frames it does not all get right: the consensus changes some).
+    top, hor = write_box_scene(simulate_box_scene(n_frames=30, seed=2), tmp_path, "s2")
+    base = ["associate", "--top", str(top), "--hor", str(hor), "--model", "default", "--quiet"]
+    frame, video = tmp_path / "frame.csv", tmp_path / "video.csv"
+    assert main([*base, "--mode", "frame", "--out", str(frame)]) == 0
+    assert main([*base, "--out", str(video)]) == 0
+    top_boxes, hor_boxes = read_mot_boxes(top), read_mot_boxes(hor)
+    expected = consistent_pairs(read_predictions(frame), top_boxes, hor_boxes,
+                                sorted(set(top_boxes) | set(hor_boxes)))
+    assert read_predictions(video) == {f: p for f, p in expected.items() if p}
+    assert read_predictions(video) != read_predictions(frame)
+
+
 def test_auto_mode_says_it_took_video(files, tmp_path, capsys):
     top, hor = files
     out = tmp_path / "pred.csv"
