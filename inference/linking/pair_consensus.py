@@ -100,9 +100,13 @@ def tracklet_consensus(pairs: Mapping[int, Sequence[tuple[int, int]]],
     order = sorted(present)
     own = {f: dict(pairs.get(f, ())) for f in order}
     hors_at = {f: set(present[f][1].tolist()) for f in order}
+    frames_of: dict[int, list[int]] = {}
+    for f in order:
+        for t in present[f][0].tolist():
+            frames_of.setdefault(t, []).append(f)
     claims: dict[int, list[tuple[float, int, int]]] = {f: [] for f in order}
-    for t in sorted({t for f in order for t in present[f][0].tolist()}):
-        frames = [f for f in order if t in set(present[f][0].tolist())]
+    for t in sorted(frames_of):
+        frames = frames_of[t]
         cands = sorted({own[f][t] for f in frames if t in own[f]})
         if not cands:
             continue
