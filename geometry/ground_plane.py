@@ -147,25 +147,54 @@ class GroundCamera:
         return ground_to_image(self.G, xy)
 
     def ground_footprint(self, max_range: float = 60.0) -> np.ndarray:
-        """The part of the ground this camera sees, as a polygon ``(P, 2)`` in metres: the
-        image border sampled and projected, cut at the horizon and at ``max_range`` metres
-        from the camera's nearest visible ground point (for drawing fields of view)."""
+        """The part of the ground this camera sees, as a polygon ``(P, 2)`` in metres (for
+        drawing fields of view).
+
+        The image border, sampled, is first clipped in the image to the pixels below the
+        horizon (``w > 0``, see the module docstring): a pixel at or above the horizon meets the
+        ground behind the camera or nowhere, so projecting it would fold the polygon backwards
+        (the crossing strips issue 69, item 6 saw). The clipped border is projected, and points
+        farther than ``max_range`` metres from the camera's nearest visible ground point (the
+        bottom-centre pixel's, always in front) are pulled in along their direction from it:
+        the rays near the horizon end ``max_range`` in front of the camera, never behind.
+        """
         t = np.linspace(0.0, 1.0, 33)[:-1]
         W, Hh = float(self.width), float(self.height)
         border = np.concatenate([
             np.stack([t * W, np.zeros_like(t)], 1), np.stack([np.full_like(t, W), t * Hh], 1),
             np.stack([(1 - t) * W, np.full_like(t, Hh)], 1), np.stack([np.zeros_like(t),
                                                                      (1 - t) * Hh], 1)])
-        hom = np.concatenate([border, np.ones((len(border), 1))], 1) @ self.H.T
-        w = hom[:, 2]
-        near = (self.H @ np.array([W / 2, Hh, 1.0]))
+        near = self.H @ np.array([W / 2, Hh, 1.0])
         anchor = near[:2] / near[2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xy = hom[:, :2] / w[:, None]
-        # Beyond the horizon or too far: pull the point in along its direction from the anchor.
-        direction = np.where((w > 0)[:, None], xy - anchor, -hom[:, :2])
+        # w is linear in the pixel: clip the polygon to the half-plane w >= floor (one
+        # Sutherland-Hodgman pass); floor, a millionth of the bottom-centre pixel's w, puts the
+        # clipped edge about a million times farther than the nearest ground, beyond any range.
+        # The clipped edge is sampled (16 steps) so that its far arc is drawn round.
+        floor = 1e-6 * near[2]
+        w = np.concatenate([border, np.ones((len(border), 1))], 1) @ self.H[2]
+        start = int(np.argmax(w))  # begin inside, so that every exit precedes its entry
+        border, w = np.roll(border, -start, axis=0), np.roll(w, -start)
+        kept: list[np.ndarray] = []
+        exit_point = border[0]
+        for i in range(len(border)):
+            j = (i + 1) % len(border)
+            if w[i] >= floor:
+                kept.append(border[i])
+            if (w[i] >= floor) != (w[j] >= floor):
+                s = (floor - w[i]) / (w[j] - w[i])
+                crossing = border[i] + s * (border[j] - border[i])
+                if w[i] >= floor:
+                    exit_point = crossing
+                    kept.append(crossing)
+                else:
+                    kept.extend(exit_point + np.linspace(0.0, 1.0, 17)[1:, None]
+                                * (crossing - exit_point))
+        pixels = np.asarray(kept)
+        hom = np.concatenate([pixels, np.ones((len(pixels), 1))], 1) @ self.H.T
+        xy = hom[:, :2] / hom[:, 2:3]
+        direction = xy - anchor
         dist = np.linalg.norm(direction, axis=1)
-        far = (w <= 0) | (dist > max_range)
+        far = dist > max_range
         with np.errstate(divide="ignore", invalid="ignore"):
             clipped = anchor + direction / dist[:, None] * max_range
         return np.where(far[:, None], clipped, xy)
