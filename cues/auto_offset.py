@@ -7,7 +7,7 @@ lines, so that ``--quiet`` stays theirs.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,11 +65,13 @@ class AutoOffset:
 
 
 def auto_offset(top: Mapping[int, FrameLike], hor: Mapping[int, FrameLike],
-                options: AutoOffsetOptions) -> AutoOffset:
+                options: AutoOffsetOptions,
+                progress: Callable[[int, int], None] | None = None) -> AutoOffset:
     """The offset ``--offset auto`` applies: the estimate (:func:`estimate_offset` with the
     default clips) when the clips back it, else 0 with a warning. Videos too short for
     :data:`MIN_AGREEING_CLIPS` clips are not searched (one clip never backs an offset): 0, with
-    a note. A view with no frames is the estimate's own error (``ValueError``)."""
+    a note. A view with no frames is the estimate's own error (``ValueError``).
+    ``progress(done, total)``: the search's progress (:func:`estimate_offset`)."""
     label, max_offset = options.label, options.max_offset
     if top and hor:
         starts = clip_starts((min(hor), max(hor)), (min(top), max(top)), CLIP_LENGTH,
@@ -81,7 +83,7 @@ def auto_offset(top: Mapping[int, FrameLike], hor: Mapping[int, FrameLike],
                               "files' timing (pass --offset N, or a smaller --max-offset)")
     est = estimate_offset(top, hor, hor_width=options.hor_width, params=options.params,
                           max_offset=max_offset, camera_id=options.camera_id,
-                          workers=options.workers)
+                          workers=options.workers, progress=progress)
     if est.status == "unsupported":
         return AutoOffset(int(est.applied), f"warning: {label}offset {est.offset:+d} not "
                           f"applied ({offset_summary(est)}): "

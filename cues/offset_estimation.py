@@ -176,11 +176,14 @@ def clip_cost_curves(
     params: SpatialParams,
     camera_id: int | None = None,
     workers: int = 1,
+    progress: Callable[[int], None] | None = None,
 ) -> np.ndarray:
     """``(K, N)`` raw cost curves: the mean best Phi of each clip (horizontal frame numbers)
     at each offset (Eq. 12 averaged over the clip, Fig. 5); +inf where most frames found no
     top frame or no match. ``workers`` processes share the (clip, offset) grid; the curves
-    are the same for any number of workers, and Ctrl-C stops the workers at once."""
+    are the same for any number of workers, and Ctrl-C stops the workers at once.
+    ``progress(n)``: told each time ``n`` more (clip, offset) costs are known (a progress bar;
+    the costs do not depend on it)."""
     if int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     offsets = np.asarray(offsets, dtype=int).ravel()
@@ -191,6 +194,8 @@ def clip_cost_curves(
         for k, clip in enumerate(clips):
             curves[k] = _clip_curve(top, hor, clip, offsets.tolist(), hor_width, params,
                                     camera_id)
+            if progress is not None:
+                progress(offsets.size)
         return curves
 
     # About four tasks per worker, so that uneven tasks (crowded frames) still balance.
@@ -205,6 +210,8 @@ def clip_cost_curves(
         ]
         for (k, chunk, _), future in zip(tasks, futures, strict=True):
             curves[k, [index[o] for o in chunk]] = future.result()
+            if progress is not None:
+                progress(len(chunk))
     return curves
 
 
@@ -394,6 +401,7 @@ def estimate_offset(
     workers: int = 1,
     min_agree: int = MIN_AGREEING_CLIPS,
     step: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> OffsetEstimate:
     """Estimate the temporal offset between the two videos by sliding clips (Sec. 3.2.4, Fig. 5).
 
@@ -428,6 +436,10 @@ def estimate_offset(
     divided by the median of its coarse part. ``step`` = 1 tries every offset, as the paper
     does.
 
+    ``progress(done, total)``: told as the (clip, offset) costs are computed, ``total`` the
+    costs asked for so far (it grows when the fine pass is known), so that a long search can
+    show a progress bar; the estimate does not depend on it.
+
     Returns:
         :class:`OffsetEstimate` (see :func:`judge_offset`); ``costs`` is the mean normalised
         curve (raw when one clip is asked for).
@@ -456,7 +468,18 @@ def estimate_offset(
     # like a lone clip that fits a short video, it is reported but cannot be applied.
     single = clip_start is not None or n_clips == 1
     clips = [[f for f in range(start, start + clip_length) if f in hor] for start in starts]
-    return search_offsets(
-        lambda offsets: clip_cost_curves(top, hor, clips, offsets, hor_width, params, camera_id,
-                                         workers),
-        max_offset, step, single, tolerance, min_evidence, alpha, min_agree)
+    counts = [0, 0]  # costs computed, costs asked for
+
+    def curves_at(offsets: np.ndarray) -> np.ndarray:
+        told = None
+        if progress is not None:
+            counts[1] += len(clips) * int(np.size(offsets))
+
+            def told(n: int) -> None:
+                counts[0] += n
+                progress(counts[0], counts[1])
+        return clip_cost_curves(top, hor, clips, offsets, hor_width, params, camera_id,
+                                workers, told)
+
+    return search_offsets(curves_at, max_offset, step, single, tolerance, min_evidence, alpha,
+                          min_agree)

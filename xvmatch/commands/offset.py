@@ -1,10 +1,9 @@
 """The ``xvmatch offset`` command: the temporal offset between the two videos (Fig. 5).
 
-Also what ``xvmatch associate``, ``associate-multi`` and ``track`` share with it: their
-``--offset N|auto`` and ``--max-offset`` options (:func:`add_offset_options`,
-:func:`resolve_offset`, :func:`wearer_marked`), the ``--max-offset`` bound
-(:func:`max_offset_of`). ``auto``'s decision and the estimate in words are the library's
-(:mod:`xvmatch.cues.auto_offset`); this module prints them.
+Also what ``associate``, ``associate-multi`` and ``track`` share with it: ``--offset N|auto``
+and ``--max-offset`` (:func:`add_offset_options`, :func:`resolve_offset`, :func:`wearer_marked`,
+:func:`max_offset_of`). ``auto``'s decision and the estimate in words are the library's
+(:mod:`xvmatch.cues.auto_offset`); this module prints them, and the search's progress bar.
 """
 
 from __future__ import annotations
@@ -21,10 +20,12 @@ from xvmatch.commands._options import (
     add_command_parser,
     add_spatial_options,
     check_camera_id,
+    progress_bar,
     read_boxes,
     spatial_params,
 )
 from xvmatch.commands._types import box_id, int_in, offset_value, worker_count
+from xvmatch.core.progress import growing_total
 from xvmatch.cues.auto_offset import AutoOffsetOptions, auto_offset, estimate_lines, estimate_record
 from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
@@ -154,9 +155,10 @@ def _offset_value(args: argparse.Namespace, top, hor, hor_width: float, params,
     value = args.offset if value is None else value
     if value != "auto":
         return int(value)
-    decided = auto_offset(top, hor, AutoOffsetOptions(
-        hor_width=hor_width, max_offset=max_offset, params=params, camera_id=camera_id,
-        workers=args.workers, label=label))
+    with progress_bar(0, f"{label}offset search", "clip", not args.quiet) as bar:
+        decided = auto_offset(top, hor, AutoOffsetOptions(
+            hor_width=hor_width, max_offset=max_offset, params=params, camera_id=camera_id,
+            workers=args.workers, label=label), growing_total(bar))
     if decided.to_tell(args.quiet):
         print(decided.message, file=sys.stderr)
     return decided.offset
@@ -179,10 +181,11 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     resolved = resolve_size(hor, args.hor, given)
     hor_width = resolved[0][0]
     note_if_assumed(resolved, hor, args.hor)
-    est = estimate_offset(top, hor, hor_width=hor_width, params=params,
-                          clip_start=args.clip_start, clip_length=args.clip_length,
-                          max_offset=max_offset, camera_id=args.camera_id, n_clips=args.clips,
-                          workers=args.workers, step=args.step)
+    with progress_bar(0, "offset search", "clip", not args.quiet) as bar:
+        est = estimate_offset(top, hor, hor_width=hor_width, params=params, step=args.step,
+                              clip_start=args.clip_start, clip_length=args.clip_length,
+                              max_offset=max_offset, camera_id=args.camera_id, n_clips=args.clips,
+                              workers=args.workers, progress=growing_total(bar))
     if args.json:
         print(json.dumps(estimate_record(est)))
     else:
@@ -238,6 +241,7 @@ def add_offset_parser(subparsers) -> argparse.ArgumentParser:
         help=IMAGE_SIZE_HELP,
     )
     p.add_argument("--json", action="store_true", help="print JSON (offset and cost per offset)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes sharing the clips, 1..64 (default 1; the estimate is the "
                    "same for any K)")
