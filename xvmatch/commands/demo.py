@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.commands._options import add_command_parser
+from xvmatch.commands._options import add_command_parser, progress_bar
 from xvmatch.commands._types import int_in, seed_value, worker_count
 from xvmatch.core.output_paths import (
     Input,
@@ -61,6 +61,8 @@ def add_demo_parser(subparsers) -> argparse.ArgumentParser:
                    help="matcher bundle (default: the shipped one)")
     p.add_argument("--workers", type=worker_count, default=1,
                    help="render processes, 1..64 (default 1)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (it shows only on a terminal)")
     p.set_defaults(func=_cmd_demo)
     return p
 
@@ -80,10 +82,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _score_scenario(folder: Path, scenario: str, matcher, coster, rows: dict,
-                    want_picture: bool):
+                    want_picture: bool, progress=None):
     """Score every method on the dataset in ``folder`` (one row per method in ``rows``, one
     column per ``(scenario, setting)``); the match picture of the first overview trial with
-    images and cameras when ``want_picture`` (else None)."""
+    images and cameras when ``want_picture`` (else None). ``progress(n)``: told the pairs of
+    each scene whose trials are made."""
     from xvmatch.datasets.pair_trials import SETTINGS, TrialConfig, dataset_trials
     from xvmatch.datasets.synthetic_io import SyntheticDataset
     from xvmatch.evaluation.deployed_matcher_eval import matcher_costs, score_matcher
@@ -94,7 +97,7 @@ def _score_scenario(folder: Path, scenario: str, matcher, coster, rows: dict,
 
     config = BaselineConfig()
     picture = None
-    trials = dataset_trials(folder, TrialConfig(), SETTINGS, coster)
+    trials = dataset_trials(folder, TrialConfig(), SETTINGS, coster, progress=progress)
     for setting in SETTINGS:
         part = [t for t in trials if t.setting == setting]
         for m in config.methods():
@@ -174,15 +177,23 @@ def _run_demo(args: argparse.Namespace) -> int:
     coster = OnnxAppearanceCoster(matcher)
     rows: dict[str, dict[tuple[str, str], float]] = {}
     picture = None
-    for k, scenario in enumerate(("drone", "overview")):
-        folder = out / "data" / scenario
-        wanted = args.scenes * args.frames
-        if not ((folder / MANIFEST).is_file() and len(SyntheticDataset(folder)) == wanted
-                and SyntheticDataset(folder).seed == args.seed + k):
-            generate_dataset(folder, SynthConfig(scenario=scenario), n_scenes=args.scenes,
-                             n_frames=args.frames, seed=args.seed + k, workers=args.workers)
-        drawn = _score_scenario(folder, scenario, matcher, coster, rows, picture is None)
-        picture = picture if picture is not None else drawn
+    wanted = args.scenes * args.frames
+    # Each pair is counted twice: rendered (or found from an earlier demo), then matched.
+    with progress_bar(4 * wanted, "demo", "pair", not args.quiet) as bar:
+        for k, scenario in enumerate(("drone", "overview")):
+            folder = out / "data" / scenario
+            bar.set_postfix_str(f"rendering {scenario}")
+            if not ((folder / MANIFEST).is_file() and len(SyntheticDataset(folder)) == wanted
+                    and SyntheticDataset(folder).seed == args.seed + k):
+                generate_dataset(folder, SynthConfig(scenario=scenario), n_scenes=args.scenes,
+                                 n_frames=args.frames, seed=args.seed + k,
+                                 workers=args.workers, progress=bar.update)
+            bar.update((2 * k + 1) * wanted - bar.n)
+            bar.set_postfix_str(f"matching {scenario}")
+            drawn = _score_scenario(folder, scenario, matcher, coster, rows, picture is None,
+                                    bar.update)
+            bar.update((2 * k + 2) * wanted - bar.n)
+            picture = picture if picture is not None else drawn
     _print_table(rows, args.scenes * args.frames)
     picture_path = out / "match.png"
     if picture is not None:
