@@ -51,9 +51,9 @@ def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
         scores[consensus] = summarize(count_sequence(back, scene.top, scene.hor["hor1"],
                                                      frames=frames)).cvidf1
     assert run.summary.startswith("top view: oblique, tilt")
-    # Measured 61.2 frame by frame and 69.4 with the consensus along the tracks.
+    # Measured 61.2 frame by frame and 77.4 with the consensus along the tracks.
     assert scores[False] > 50.0
-    assert scores[True] > 65.0
+    assert scores[True] > 70.0
 
 
 @pytest.mark.slow

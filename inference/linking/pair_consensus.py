@@ -7,10 +7,10 @@ evidence (a tracker's id switch, in either view, is such a change), and a track 
 keeps its frames' own pairs. A matcher that is right in most frames is then right in all of them.
 
 Real CVMHAT development pairs, boxes only, mean CVIDF1 (``benchmarks/video_consensus.py``), each
-frame alone -> with the consensus: with the files' whole tracks, the search 87.3 -> 95.5 and the
-learned matcher 92.9 -> 97.3; with a tracker's ids swapping about every 300 frames per track,
-87.3 -> 92.9 and 92.9 -> 94.5, where one partner per whole track falls to 67.0 and 65.7 (it
-gains 2.0 on the learned matcher's whole tracks: 99.3). Within-view ids are read as track ids:
+frame alone -> with the consensus: with the files' whole tracks, the search 87.3 -> 96.1 and the
+learned matcher 92.9 -> 96.8; with a tracker's ids swapping about every 300 frames per track,
+87.3 -> 92.6 and 92.9 -> 94.0, where one partner per whole track falls to 78.8 and 79.6 (it
+gains 1.1 on the learned matcher's whole tracks: 97.9). Within-view ids are read as track ids:
 use only on a video whose ids persist (:func:`xvmatch.cues.box_motion.is_video`).
 """
 
@@ -35,8 +35,10 @@ def _partner_path(obs: np.ndarray, here: np.ndarray, switch_cost: float,
                   free_cost: float) -> np.ndarray:
     """Viterbi over one top track's frames: state 0 follows each frame's own pair at
     ``free_cost`` a frame; state ``j >= 1`` holds candidate ``j`` as the partner, at 0 a frame
-    where that frame's pair (or, with the candidate absent, its lack of one) agrees and 1 where it
-    does not; changing state costs ``switch_cost``.
+    where that frame's pair agrees and 1 where it does not, and ``free_cost`` where the candidate
+    is absent from the frame (its absence says nothing for or against it: a person out of the
+    handheld camera's view for a while stays that track's partner); changing state costs
+    ``switch_cost``.
 
     Args:
         obs: ``(T,)`` index of the frame's partner among the candidates (1-based), 0 for none.
@@ -47,8 +49,7 @@ def _partner_path(obs: np.ndarray, here: np.ndarray, switch_cost: float,
     """
     n, states = here.shape
     cols = np.arange(states)
-    cost = np.where(here, (obs[:, None] != cols[None, :]).astype(float),
-                    (obs[:, None] != 0).astype(float))
+    cost = np.where(here, (obs[:, None] != cols[None, :]).astype(float), free_cost)
     cost[:, 0] = free_cost
     back = np.zeros((n, states), dtype=np.int64)
     total = cost[0].copy()
