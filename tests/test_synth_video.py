@@ -160,14 +160,17 @@ def test_egos_scene_is_seeded_and_complete(tmp_path):
 
 
 @pytest.mark.slow
-def test_printed_associate_multi_runs(tmp_path, capsys):
+def test_printed_associate_multi_and_evaluate_run(tmp_path, capsys):
     assert main(["synth", "--egos", "2", "--frames", "1", "--size", "96x54", "--out",
                  str(tmp_path / "me")]) == 0
-    (command,) = [shlex.split(line) for line in capsys.readouterr().err.splitlines()
-                  if line.startswith("  ")]
-    command = command[command.index("associate-multi"):]
-    assert main(command) == 0
+    associate, evaluate = [shlex.split(line) for line in capsys.readouterr().err.splitlines()
+                           if line.startswith("  ")]
+    assert main(associate[associate.index("associate-multi"):]) == 0
     assert (tmp_path / "me" / "multi" / "hor2.txt").is_file()
+    # Its output scored against the scene's ids, every pair of views (issue 69, item 5).
+    capsys.readouterr()
+    assert main(evaluate[evaluate.index("evaluate"):]) == 0
+    assert "hor1 - hor2" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -45,10 +45,15 @@ def print_commands(scene: Path, pred: Path, images: tuple[Path, Path], cameras: 
 def print_multi_commands(boxes: Sequence[Path], images: Sequence[Path],
                          cameras: Sequence[Path], out: Path) -> None:
     """The ``associate-multi`` command that runs on a scene of one top and several egocentric
-    views (box files, image folders and camera folders, top first for the first two)."""
+    views (box files, image folders and camera folders, top first for the first two), and the
+    ``evaluate`` command that scores its output against the scene's ids, every pair of views."""
     def join(paths: Sequence[Path]) -> str:
         return shlex.join(map(str, paths))
 
+    names = [Path(b).stem for b in boxes]
+    pred = join([f"{n}={out / Path(b).name}" for n, b in zip(names, boxes, strict=True)])
+    gt = join([f"{n}={b}" for n, b in zip(names, boxes, strict=True)])
     _print([f"{_x()} associate-multi --model default --top {join(boxes[:1])} --hor "
             f"{join(boxes[1:])} --top-images {join(images[:1])} --hor-images {join(images[1:])} "
-            f"--cameras {join(cameras)} --out {join([out])}"])
+            f"--cameras {join(cameras)} --out {join([out])}",
+            f"{_x()} evaluate --pred {pred} --gt {gt}"])
