@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+from xvmatch.commands._cameras import add_top_view_arguments, check_top_view
 from xvmatch.commands._model import (
     add_camera_check,
     add_refine_top_camera,
@@ -41,13 +42,7 @@ from xvmatch.commands._options import (
 )
 from xvmatch.commands._types import box_id, float_in, int_in, thread_count, worker_count
 from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset, wearer_marked
-from xvmatch.core.output_paths import (
-    Input,
-    Output,
-    check_outputs,
-    check_own_folder,
-    claim_folder,
-)
+from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder, claim_folder
 
 __all__ = ["EXAMPLE", "add_multi_ego_parser"]
 
@@ -125,13 +120,9 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
                    "shown too weak to help (as associate; default on)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     add_spatial_options(p)
+    add_top_view_arguments(p)
     p.set_defaults(func=_cmd_associate_multi)
     return p
-
-
-def _per_view(values: list | None, n_hor: int, option: str) -> None:
-    if values is not None and len(values) != n_hor:
-        raise ValueError(f"{option}: give one per --hor file ({n_hor}), got {len(values)}")
 
 
 def _wearer_rows(top, camera_id: int) -> dict[int, int]:
@@ -163,7 +154,10 @@ def _run_options(args: argparse.Namespace):
     if not 1 <= n_hor <= MAX_HOR:
         raise ValueError(f"--hor: give 1 to {MAX_HOR} horizontal box files, got {n_hor}")
     for option in ("hor_images", "cameras", "camera_id"):
-        _per_view(getattr(args, option), n_hor, "--" + option.replace("_", "-"))
+        if (values := getattr(args, option)) is not None and len(values) != n_hor:
+            raise ValueError(f"--{option.replace('_', '-')}: give one per --hor file ({n_hor}), "
+                             f"got {len(values)}")
+    check_top_view(args)
     check_images_together(args.top_images, args.hor_images)
     if args.model is None and (args.top_images or args.cameras):
         raise ValueError("--top-images, --hor-images and --cameras feed a learned matcher: add "
@@ -196,6 +190,7 @@ def _run_options(args: argparse.Namespace):
 def _cmd_associate_multi(args: argparse.Namespace) -> int:
     from xvmatch.commands._box_reading import note_if_assumed
     from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
+    from xvmatch.inference.views import multi_ground
     from xvmatch.inference.views.multi_ego_run import multi_ego_sizes, open_multi_ego, run_multi_ego
 
     start = time.perf_counter()
@@ -219,13 +214,21 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         for k, r in enumerate(resolved):
             note_if_assumed(r, views[k + 1], paths[k + 1], quiet)
         sizes = [r[0] for r in resolved]
+        calib, note = multi_ground.oblique_top(  # calib None: the nadir path
+            views[0], "nadir" if args.cameras else args.top_view, args.top_image_size, paths[0],
+            offsets)
+        if note and not quiet:
+            print(f"xvmatch: note: {note}", file=sys.stderr)
         for k, value in enumerate(offsets):
             marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
             offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], options.params,
                                         max_offset, wearer, value,
                                         f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
                                         hor_path=paths[k + 1])
-        run = run_multi_ego(
+        ground = calib and multi_ground.run_multi_ground(
+            views, offsets, calib, multi_ground.MultiGroundOptions(
+                tuple(map(tuple, sizes)), args.hor_hfov, args.fps), options.people)
+        run = ground or run_multi_ego(
             inputs, matcher, sizes, offsets, camera_rows, options,
             progress=lambda n: frame_progress(n, "costs", not quiet),
             on_refinement=lambda r: note_camera_refinement(r, quiet),
