@@ -7,7 +7,8 @@ consecutive boxes overlap with IoU below 0.7, a tenth not at all). Removing that
 first leaves each person's own motion, a few hundredths of a box height per frame. Boxes are
 ``x, y, w, h`` in pixels; distances are in box heights (``sqrt`` of the two boxes' heights), so
 that one gate means the same at every image size and depth. Whether a view is a video at all
-(its ids persist from frame to frame) is :func:`is_video`.
+(its ids persist from frame to frame) is :func:`is_video`; whether its boxes move like a
+video's, whatever their ids, is :func:`frame_jump` (what ``track`` warns about).
 """
 
 from __future__ import annotations
@@ -16,12 +17,14 @@ from collections.abc import Mapping
 from itertools import pairwise
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from xvmatch.core.array_checks import as_boxes, as_points
 from xvmatch.cues.spatial_vectors import box_centres
 
-__all__ = ["MIN_VIDEO_FRAMES", "SHIFT_BLOCK", "VIDEO_RECURRENCE", "common_shift", "id_recurrence",
-           "is_video", "motion_link_costs"]
+__all__ = ["JUMP_BOXES", "JUMP_FRAME_PAIRS", "MIN_JUMPS", "MIN_VIDEO_FRAMES", "SHIFT_BLOCK",
+           "VIDEO_JUMP", "VIDEO_RECURRENCE", "common_shift", "frame_jump", "id_recurrence",
+           "is_video", "jump_warning", "jumps_like_frames", "motion_link_costs"]
 
 SHIFT_BLOCK = 256
 """Shift proposals scored at once by :func:`common_shift` (a dozen people: one block)."""
@@ -56,6 +59,79 @@ def is_video(*views: Mapping) -> bool:
     frame to the next (what ``--mode video`` and the pairs' consensus over tracklets read)."""
     return all(sum(1 for r in v.values() if len(r.ids)) >= MIN_VIDEO_FRAMES
                and id_recurrence(v) >= VIDEO_RECURRENCE for v in views)
+
+
+VIDEO_JUMP = 0.15
+"""Median frame-to-frame jump of a view's boxes (:func:`frame_jump`, box heights per frame)
+above which its frames look independent rather than a video's (issue 69, item 2). Measured:
+the 10 real CVMHAT head-worn views 0.009-0.035 every frame, 0.009-0.032 kept every 10th frame
+(frame numbers kept), their drone views 0.027-0.041 and 0.028-0.044; with ``xvmatch noise``'s
+5 % jitter, drawn anew each frame (two pairs, both views), 0.068-0.103 every frame; ``synth
+--video`` 0.021 (head-worn) and 0.000 (drone). ``synth``'s pairs (independent frames): the
+head-worn view 0.171-0.364 (seeds 1, 2, 4, 11, 12, drone and overview, 37 scenes of 20-30
+frames), the top view 0.000-0.201 (a drone over people standing nearly still)."""
+MIN_JUMPS = 20
+"""Fewest matched boxes :func:`frame_jump` needs for a median (NaN below)."""
+JUMP_FRAME_PAIRS = 200
+"""Consecutive frame pairs :func:`frame_jump` looks at, at most (evenly spread, so that the
+measure stays cheap on a long video)."""
+JUMP_BOXES = 300
+"""Frames with more boxes than this are left out of :func:`frame_jump` (the assignment is
+cubic in the boxes)."""
+
+
+def frame_jump(frames: Mapping) -> float:
+    """Median jump of a view's boxes from one frame with boxes to the next: the distance of
+    matched box centres in box heights (``sqrt`` of the two heights), divided by the gap in
+    frame numbers, NaN with fewer than :data:`MIN_JUMPS` matched boxes.
+
+    Boxes are matched by a minimum-cost assignment of those distances, not by their ids, so
+    that a detector's boxes (no ids, or row numbers) are measured as well as a tracker's; on
+    the real views it agrees with matching by ids (see :data:`VIDEO_JUMP`). Frames are taken
+    as numbered: a video kept every N-th frame and renumbered 1, 2, 3 looks N times faster.
+
+    Args:
+        frames: ``{frame: record}`` with ``boxes`` (``(N, 4)`` x, y, w, h in pixels).
+    """
+    held = [f for f in sorted(frames) if 0 < len(frames[f].boxes) <= JUMP_BOXES]
+    pairs = [(a, b) for a, b in pairwise(held)]
+    if len(pairs) > JUMP_FRAME_PAIRS:
+        pairs = [pairs[i] for i in np.linspace(0, len(pairs) - 1, JUMP_FRAME_PAIRS).astype(int)]
+    jumps = []
+    for a, b in pairs:
+        box_a = np.asarray(frames[a].boxes, dtype=float).reshape(-1, 4)
+        box_b = np.asarray(frames[b].boxes, dtype=float).reshape(-1, 4)
+        h_a, h_b = np.maximum(box_a[:, 3], 1.0), np.maximum(box_b[:, 3], 1.0)
+        d = (np.linalg.norm(box_centres(box_a)[:, None] - box_centres(box_b)[None], axis=-1)
+             / np.sqrt(h_a[:, None] * h_b[None, :]))
+        rows, cols = linear_sum_assignment(d)
+        jumps.append(d[rows, cols] / (b - a))
+    values = np.concatenate(jumps) if jumps else np.zeros(0)
+    return float(np.median(values)) if values.size >= MIN_JUMPS else float("nan")
+
+
+def jumps_like_frames(frames: Mapping) -> bool:
+    """Whether a view's boxes jump from frame to frame like independent pictures' rather than a
+    video's (:func:`frame_jump` above :data:`VIDEO_JUMP`; False when it cannot be measured)."""
+    return bool(frame_jump(frames) > VIDEO_JUMP)
+
+
+def jump_warning(view: str, frames: Mapping) -> str:
+    """The one-line warning of a tracker given a view (named ``view``) whose boxes jump like
+    independent pictures' (:func:`jumps_like_frames`), else ``""``.
+
+    Why: tracking links each box to the one it was a frame before; on pictures taken apart
+    (``synth``'s pairs, a demo's frames) those links are noise, and the tracks come out short
+    and wrong (``track`` scored 28.7-43.8 CVIDF1 on them, ``associate`` 85.8-98.2), with
+    nothing to say why.
+    """
+    jump = frame_jump(frames)
+    if not jump > VIDEO_JUMP:
+        return ""
+    return (f"warning: the {view} view's boxes jump {jump:.2f} box heights a frame (median; a "
+            f"video's move less than {VIDEO_JUMP:g}): these look like independent pictures, "
+            "not a video, and tracks over them will be short and wrong; match such frames one "
+            "by one with associate (or give a video, e.g. synth --video)")
 
 
 def common_shift(displacement: np.ndarray, scale: np.ndarray, valid: np.ndarray,

@@ -62,7 +62,7 @@ def test_a_bar_follows_a_growing_total(disable: bool) -> None:
 
 def test_offset_command_is_silent_but_for_its_line_off_a_terminal(pair, tmp_path,
                                                                   capsys) -> None:
-    top, hor, width = pair
+    top, hor, _width = pair
     write_mot_boxes(tmp_path / "top.txt", top)
     write_mot_boxes(tmp_path / "hor.txt", hor)
     argv = ["offset", "--top", str(tmp_path / "top.txt"), "--hor", str(tmp_path / "hor.txt"),

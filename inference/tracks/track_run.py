@@ -1,12 +1,14 @@
 """The track run: the boxes of a top and a horizontal view to one track id per person across the
 views, in one call with its options in one typed record (what ``xvmatch track`` does).
 
-:func:`run_tracking` opens the images (:func:`open_track_images`: both views or neither, every
-frame the boxes list, the top boxes inside the top images), opens the cameras for the frames
-with boxes in both views at the offset (a camera file, or per-frame files numbered by the
-horizontal frames, each camera the size of its view's images) and refines a fixed top camera on
-the boxes (:mod:`xvmatch.inference.matching.camera_refinement`), re-times both views (and their
-images and cameras) so that top frame ``t + offset`` and horizontal frame ``t`` are tracked as
+:func:`run_tracking` warns of a view whose boxes jump like independent pictures', not a video's
+(:func:`~xvmatch.cues.box_motion.jump_warning`), opens the images (:func:`open_track_images`:
+both views or neither, every frame the boxes list, the top boxes inside the top images),
+opens the cameras for the frames with boxes in both views at the offset (a camera file, or
+per-frame files numbered by the horizontal frames, each camera the size of its view's images)
+and refines a fixed top camera on the boxes
+(:mod:`xvmatch.inference.matching.camera_refinement`), re-times both views (and their images
+and cameras) so that top frame ``t + offset`` and horizontal frame ``t`` are tracked as
 one moment (the rows keep their own frame numbers), judges the cameras
 (:mod:`xvmatch.inference.matching.camera_check`: the cross-view weights come from the boxes
 alone when they fail), takes Eq. 17's ``w1`` at
@@ -28,6 +30,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from xvmatch.cues.box_motion import jump_warning
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.formats.box_image_size import check_boxes_in_image
 from xvmatch.formats.camera_frames import CameraFrames
@@ -380,7 +383,9 @@ def run_tracking(
         images: the images opened by :func:`open_track_images` (left open: the caller closes
             them); None: opened here from the options and closed at the end.
         progress: optional ``progress(iterable, total, description)`` wrapper.
-        note: told each line to say as the run goes (:data:`Note`); None: said nowhere.
+        note: told each line to say as the run goes (:data:`Note`), among them a warning for a
+            view whose boxes jump like independent pictures'
+            (:func:`~xvmatch.cues.box_motion.jump_warning`); None: said nowhere.
 
     Returns:
         The :class:`TrackRun`.
@@ -393,6 +398,9 @@ def run_tracking(
             return run_tracking(top, hor, options, hor_size, offset, camera_rows, opened,
                                 progress, note)
     note = note or _said_nowhere
+    for view, frames in (("top", top), ("horizontal", hor)):
+        if said := jump_warning(view, frames):
+            note(said, True)
     cameras, refinement = _open_cameras(top, hor, options, hor_size, offset, images, note)
     refined = cameras, refinement  # to write: also when the check leaves them out
     top, hor, track_images, cameras = _aligned(top, hor, images.images, cameras, offset)

@@ -38,9 +38,9 @@ from xvmatch.inference.views.multicam_localisation import LocalisationOptions, l
 
 __all__ = [
     "MANY_IDS_RATIO",
+    "SHORT_FRAMES",
     "MulticamRun",
     "MulticamRunOptions",
-    "SHORT_FRAMES",
     "fit_ground_cameras",
     "many_ids_note",
     "run_multicam",
