@@ -51,13 +51,12 @@ def add_box_reading_options(parser, min_score: bool = True) -> None:
         parser.add_argument(
             "--min-score", default=None, metavar="S",
             type=float_in(-1e6, 1e6, "a detector's confidence, as in the score column"),
-            help="drop the boxes whose detector score (MOT's 7th field, conf; or the column a "
-            "header line names conf or score) is below S, in [-1e6, 1e6], with a note of how "
-            "many; a file without scores is an error (default: keep every box)")
+            help="drop boxes whose detector score (MOT's 7th field, or a header's conf or "
+            "score column) is below S, in [-1e6, 1e6], with a note (default: keep all)")
     parser.add_argument(
         "--first-frame", type=int, choices=(0, 1), default=1, metavar="{0,1}",
-        help="the number of a box file's first frame: 1 (default, as MOTChallenge) or 0 for "
-        "files that count from 0 (read as frame + 1, with a note; outputs count from 1)")
+        help="the number of the box files' first frame: 1 (default, as MOTChallenge) or 0 "
+        "(read as frame + 1, with a note; outputs count from 1)")
 
 
 def box_reading(args: argparse.Namespace) -> BoxReading:

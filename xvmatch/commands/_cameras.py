@@ -31,26 +31,22 @@ __all__ = ["CAMERAS_COMMAND", "add_camera_check", "add_refine_top_camera",
            "note_camera_refinement", "oblique_pairs", "write_cameras"]
 
 
-def add_top_view_arguments(p: argparse.ArgumentParser) -> None:
-    """``--top-view``, ``--top-image-size``, ``--hor-hfov``, ``--fps``."""
+def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
+    """``--top-view``, ``--top-image-size``, ``--hor-hfov``, ``--fps`` (on a parser or a group)."""
     p.add_argument(
         "--top-view", choices=("auto", "nadir", "oblique"), default="auto",
-        help="the top camera: nadir (a drone looking straight down: its image is the ground), "
-        "oblique (a camera on a building or a drone at an angle: calibrated from its people, "
-        "the horizontal camera registered on its ground map frame by frame), or auto (the top "
-        "view's boxes decide; it needs --top-image-size, else nadir; with --cameras, the "
-        "cameras decide). Default auto")
+        help="nadir (looking straight down), oblique (at an angle; calibrated from its "
+        "people) or auto (default: the boxes or --cameras decide)")
     p.add_argument("--top-image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
-                   help="the top view's image size, 8..65536 a side, for --top-view auto / "
-                   "oblique")
+                   help="the top view's image size, 8..65536 a side; --top-view auto and "
+                   "oblique need it")
     p.add_argument("--hor-hfov", default=70.0, metavar="DEG",
                    type=float_in(20, 150, "a camera's horizontal field of view, degrees"),
-                   help="the horizontal camera's field of view for --top-view oblique, degrees "
-                   "in [20, 150] (default 70: a phone's, a drone's)")
+                   help="oblique: the horizontal camera's field of view, degrees in [20, 150] "
+                   "(default 70: a phone's, a drone's)")
     p.add_argument("--fps", default=30.0,
                    type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
-                   help="frames per second of the frame numbers, for --top-view oblique's "
-                   "registration over time, in [0.1, 1000] (default 30)")
+                   help="oblique: the frame rate, in [0.1, 1000] (default 30)")
 
 
 def check_top_view(args: argparse.Namespace) -> None:
@@ -122,11 +118,8 @@ def add_refine_top_camera(group) -> None:
     """Add ``--refine-top-camera`` (``associate``, ``track``, ``adapt``)."""
     group.add_argument(
         "--refine-top-camera", choices=("auto", "off"), default="auto",
-        help="with --cameras: turn the top camera to fit the video's head rays when the fit "
-        "is clear (10 or more frames with boxes in both views; a degree of calibration error "
-        "costs the matcher more than the cameras give; a top camera that moves, per-frame "
-        "files from a drone's telemetry, has its constant error turned away, in its own frame "
-        "or the world), and say so (default auto; off: use it as given)")
+        help="with --cameras: turn the top camera so both views' people line up, when clear, "
+        "saying so (default auto; off: as given)")
 
 
 CAMERAS_COMMAND = "xvmatch --write-cameras"
@@ -138,11 +131,9 @@ def add_write_cameras(group, several: bool = False) -> None:
     ``associate-multi``)."""
     group.add_argument(
         "--write-cameras", default=None, metavar="PATH", nargs="+" if several else None,
-        help=("with --cameras: also write them as refined (the top camera turned to fit the "
-              "head rays, else as given), in --cameras' form: a camera file, or a folder of "
-              "per-frame files under the same names (a new or empty folder, or one an earlier "
-              "--write-cameras made); give it as --cameras with --refine-top-camera off next "
-              "time") + ("; one per --cameras, in their order" if several else ""))
+        help=("with --cameras: also write them as refined, in --cameras' form (a file, or a "
+              "new, empty or earlier --write-cameras folder)")
+        + ("; one per --cameras, in their order" if several else ""))
 
 
 def _listed(value) -> list:
@@ -180,13 +171,8 @@ def add_camera_check(group) -> None:
     """Add ``--camera-check`` (``associate``, ``track``, ``adapt``, ``associate-multi``)."""
     group.add_argument(
         "--camera-check", choices=("on", "off"), default="on",
-        help="with --cameras: when even the refined top camera fits the video's head rays "
-        "poorly, or the top camera moves (only its constant error refined), judge the cameras "
-        "on the pairs the "
-        "box-only matcher is sure of over consecutive frames, and match without them when "
-        "they re-pair too many of those "
-        "(cameras calibrated far off); only on videos of 6 s or more where those pairs are "
-        "steady (default on; off: always use them)")
+        help="with --cameras that fit poorly: drop them if they contradict the pairs the boxes "
+        "alone are sure of (6 s+ videos; default on)")
 
 
 def note_camera_check(check, quiet: bool, prefix: str = "") -> None:

@@ -81,52 +81,49 @@ def model_args(args: argparse.Namespace) -> ModelArgs:
     return ModelArgs(**{f.name: given[f.name] for f in fields(ModelArgs) if f.name in given})
 
 
-def add_model_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the learned matcher's options (``associate``): ``--model``, ``--gamma``, ``--mirror``,
-    the images and cameras, ``--costs``, ``--threads``, ``--precision``, ``--appearance-check``."""
-    g = parser.add_argument_group("learned matcher (--model)")
-    g.add_argument("--model", action="append", default=None, metavar="BUNDLE",
-                   help="a matcher bundle folder (xvmatch export), 'default' for the shipped "
-                   "one, or a torch matcher file (.pt, exported once into the cache; needs the "
-                   "learn extra); replaces the handcrafted search (frame mode). Repeat it to "
-                   "average the costs of several models (an ensemble)")
+def add_model_arguments(parser: argparse.ArgumentParser, common=None, cameras=None,
+                        runtime=None, learned=None) -> None:
+    """Add the learned matcher's options (``associate``) in ``learned`` (default: a group
+    "learned matcher (--model)"), except those given a group of the caller's: ``common`` for
+    ``--model``, the images and ``--cameras``; ``cameras`` for the cameras' refinement, check
+    and writing; ``runtime`` for ``--costs``, ``--threads``, ``--precision``."""
+    g = learned or parser.add_argument_group("learned matcher (--model)")
+    common, cameras, runtime = common or g, cameras or g, runtime or g
+    common.add_argument("--model", action="append", default=None, metavar="BUNDLE",
+                        help="the learned matcher: 'default' (shipped), a bundle folder or a "
+                        ".pt file; repeat to average several (default: the handcrafted search)")
+    add_image_options(common, "top-view images (--model): a video, a folder of numbered "
+                      "frames, one image or a quoted glob", "horizontal-view images (as above)")
+    common.add_argument("--cameras", default=None, metavar="CAMERAS",
+                        help="calibrated cameras 'top' and 'ego' (--model): a camera file, or "
+                        "a folder of per-frame files named by frame number")
     g.add_argument("--gamma", type=_gamma, default=None,
                    help="non-association cost in (0, 1] (default: the model's own)")
     g.add_argument("--mirror", action="store_true",
-                   help="also score the scene mirrored left-right and average the costs "
-                   "(test-time augmentation: twice the search; a few tenths of CVIDF1 on CVMHAT)")
-    add_image_options(g)
-    g.add_argument("--cameras", default=None, metavar="CAMERAS",
-                   help="calibrated cameras 'top' and 'ego': a camera file (both fixed) or a "
-                   "folder of per-frame camera files named by frame number")
-    add_refine_top_camera(g)
-    add_write_cameras(g)
-    add_camera_check(g)
-    g.add_argument("--costs", default=None, metavar="JSON",
-                   help="also write each frame's ids and cost matrix (written atomically)")
-    g.add_argument("--threads", type=thread_count, default=1, metavar="K",
-                   help="onnxruntime threads, 1..64 (default 1)")
-    g.add_argument("--precision", choices=("fp32", "int8"), default=None,
-                   help="appearance network to run: int8 (needs a bundle exported with --int8; "
-                   "near-tie frames are scored again with fp32) or fp32 (default: int8 when "
-                   "the bundle has it, kept fp32's matches at export and the CPU has 8-bit "
-                   "dot-product instructions, VNNI; else fp32)")
+                   help="also score the scene mirrored and average (twice the time; a few "
+                   "tenths of CVIDF1)")
     g.add_argument("--appearance-check", choices=("on", "off"), default="on",
-                   help="with images of a video: judge the appearance cue on the pairs the "
-                   "box-only matcher is sure of over consecutive frames, and match from the "
-                   "boxes alone when the images are shown too weak to help; with no run of "
-                   "consecutive frames (single image pairs), judge each frame by the bundle's "
-                   "frame check (default on; off: always use the images)")
+                   help="with images: match from the boxes alone where the images are shown "
+                   "too weak to help (default on; off: always use the images)")
+    add_refine_top_camera(cameras)
+    add_write_cameras(cameras)
+    add_camera_check(cameras)
+    runtime.add_argument("--costs", default=None, metavar="JSON",
+                         help="also write each frame's ids and cost matrix (--model)")
+    runtime.add_argument("--threads", type=thread_count, default=1, metavar="K",
+                         help="onnxruntime threads, 1..64 (default 1)")
+    runtime.add_argument("--precision", choices=("fp32", "int8"), default=None,
+                         help="the appearance network: int8 (a bundle exported with --int8) "
+                         "or fp32 (default: int8 where the bundle and the CPU allow)")
 
 
-def add_draw_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--draw``, ``--draw-every`` and ``--no-labels`` (both methods of ``associate``)."""
-    g = parser.add_argument_group("pictures (both methods)")
-    g.add_argument("--draw", default=None, metavar="DIR",
-                   help="write a side-by-side picture of each frame's matches, "
-                   "DIR/frame_000212.jpg (JPEG), into DIR: a new or empty folder, or one an "
-                   "earlier --draw wrote. Without images the boxes are drawn on a blank canvas "
-                   "of the horizontal image size and the top view as a plan")
+def add_draw_arguments(parser: argparse.ArgumentParser, common=None, more=None) -> None:
+    """Add ``--draw`` (to ``common`` when given), ``--draw-every`` and ``--no-labels`` (to
+    ``more``, default a group "pictures"), both methods of ``associate``."""
+    g = more or parser.add_argument_group("pictures (both methods)")
+    (common or g).add_argument(
+        "--draw", default=None, metavar="DIR",
+        help="write a picture of each frame's pairs into DIR (new, empty or an earlier --draw's)")
     g.add_argument("--draw-every", default=1, metavar="K",
                    type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
                    help="with --draw: every K-th frame only, 1..100000 (default 1)")

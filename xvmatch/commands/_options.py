@@ -58,25 +58,32 @@ class UsageError(Exception):
 
 
 def add_command_parser(subparsers, name: str, help_text: str, example: str,
-                       description: str | None = None) -> argparse.ArgumentParser:
+                       description: str | None = None,
+                       usage: str | None = None) -> argparse.ArgumentParser:
     """Register the sub-command ``name`` on ``subparsers``: ``help_text`` in the command list
-    and as its description (unless ``description`` is given), ``example`` as its epilog."""
+    and as its description (unless ``description`` is given), ``example`` as its epilog;
+    ``usage``: a short usage line instead of argparse's list of every option (``associate``,
+    whose options are grouped with the common ones first)."""
     return subparsers.add_parser(
         name,
         help=help_text,
         description=help_text if description is None else description,
         epilog=f"example:\n  {example}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        usage=usage,
     )
 
 
-def add_box_inputs(parser: argparse.ArgumentParser, reading: bool = False) -> None:
+def add_box_inputs(parser: argparse.ArgumentParser, reading: bool = False,
+                   detector: argparse._ActionsContainer | None = None) -> None:
     """``--top``, ``--hor`` (MOT box files) and ``--duplicates`` (associate, evaluate,
     offset); with ``reading``, :func:`add_box_reading_options` too (the command then reads
-    its files with :func:`box_reading`)."""
+    its files with :func:`box_reading`). ``detector``: an argument group for ``--duplicates``
+    and the reading options, away from the common ones (``associate``); default the parser."""
     parser.add_argument("--top", required=True, help="top-view boxes (MOT format)")
     parser.add_argument("--hor", required=True, help="horizontal-view boxes (MOT format)")
-    parser.add_argument(
+    detector = parser if detector is None else detector
+    detector.add_argument(
         "--duplicates",
         choices=("first", "error"),
         default="first",
@@ -84,7 +91,7 @@ def add_box_inputs(parser: argparse.ArgumentParser, reading: bool = False) -> No
         "(default; the real CVMHAT files have a few) or stop with an error",
     )
     if reading:
-        add_box_reading_options(parser)
+        add_box_reading_options(detector)
 
 
 def check_camera_id(camera_id: int | None, top: Mapping, path: str) -> None:
@@ -96,10 +103,13 @@ def check_camera_id(camera_id: int | None, top: Mapping, path: str) -> None:
                          "the horizontal camera's wearer in the top-view file)")
 
 
-def add_spatial_options(parser: argparse.ArgumentParser) -> None:
+def add_spatial_options(parser: argparse.ArgumentParser,
+                        group: argparse._ActionsContainer | None = None) -> None:
     """The spatial-distribution parameters of the CVMHAT search (Eqs. 11-12), in a group:
-    ``--rho --lam --tau --dtheta --fov`` (:func:`spatial_params` reads them back)."""
-    g = parser.add_argument_group("spatial-distribution parameters (paper defaults)")
+    ``--rho --lam --tau --dtheta --fov`` (:func:`spatial_params` reads them back); ``group``:
+    the caller's group (``associate``'s handcrafted search), else one of their own."""
+    g = group if group is not None else parser.add_argument_group(
+        "spatial-distribution parameters (paper defaults)")
     # rho > 1 is checked with the other parameters by SpatialParams (one line, exit 2, before
     # any work): the parser bounds only its size.
     g.add_argument(

@@ -25,7 +25,6 @@ from xvmatch.commands._model import (
 )
 from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
-    IMAGE_SIZE_HELP,
     UsageError,
     add_box_inputs,
     add_command_parser,
@@ -47,7 +46,8 @@ EXAMPLE = "xvmatch associate --top seq_top.txt --hor seq_hor.txt --out pred.csv"
 
 
 def add_associate_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``xvmatch associate`` on ``subparsers`` and return its parser."""
+    """Register ``xvmatch associate`` on ``subparsers`` and return its parser: the options most
+    runs need first (the parser's own group), then one group per topic."""
     p = add_command_parser(
         subparsers,
         "associate",
@@ -55,49 +55,41 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         "boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned "
         "matcher (--model) from boxes, images and cameras.",
         EXAMPLE,
+        usage="%(prog)s --top TOP --hor HOR --out OUT [--model BUNDLE] [options]",
     )
-    add_box_inputs(p, reading=True)
-    p.add_argument("--out", required=True, help="prediction CSV to write (atomically)")
+    search = p.add_argument_group("the handcrafted search (without --model)")
+    learned = p.add_argument_group("learned matcher (--model)")
+    cameras = p.add_argument_group("calibrated cameras (--cameras)")
+    top_view = p.add_argument_group("an oblique top view (without --cameras)")
+    detector = p.add_argument_group("box files from a detector")
+    runtime = p.add_argument_group("output and run time")
+    add_box_inputs(p, reading=True, detector=detector)
+    p.add_argument("--out", required=True, help="prediction CSV to write: frame,top_id,hor_id")
+    add_model_arguments(p, common=p, cameras=cameras, runtime=runtime, learned=learned)
+    p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
+                   help="the horizontal images' size, 8..65536 a side (default: the images' or "
+                   "cameras'; else CVMHAT's 2688x1512, with a note)")
+    add_offset_options(p, "Pairs are written under the horizontal frame numbers, "
+                       "the offset in OUT.offset.json")
     p.add_argument(
-        "--camera-id",
-        type=box_id,
-        default=None,
-        help="top-view id of the horizontal camera's wearer (the 'O given' setting; any id a "
-        "box file holds, |id| <= 2**53); without it O is searched among all top-view people",
-    )
-    p.add_argument(
-        "--mode",
-        choices=("auto", "frame", "video"),
-        default="auto",
-        help="frame: each frame solved on its own; video: each view's ids are track ids, and "
-        "the pairs are kept consistent along them; auto: video when both views' ids persist "
-        "from frame to frame, else frame. Default auto",
-    )
-    p.add_argument(
-        "--search",
-        choices=("exhaustive", "reduced", "follow"),
-        default=None,
-        help="the search: exhaustive (default: each frame's pairs are then independent votes "
-        "for the video's consensus), or in video mode reduced = orientation window only, follow "
-        "= window + O followed by its top-view track id",
-    )
-    p.add_argument(
-        "--image-size",
-        type=HOR_IMAGE_SIZE,
-        default=None,
-        metavar="WxH",
-        help=IMAGE_SIZE_HELP + "; with --hor-images or --cameras it must agree with them",
-    )
-    add_top_view_arguments(p)
-    add_offset_options(p, "Pairs are written under the horizontal frame numbers, the offset "
-                       "applied in OUT.offset.json, which evaluate reads")
-    p.add_argument("--workers", type=worker_count, default=1, metavar="K",
-                   help="processes for --offset auto's estimate and for --model's features, "
-                   "1..64 (default 1; the same output for any K)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    add_spatial_options(p)
-    add_model_arguments(p)
-    add_draw_arguments(p)
+        "--mode", choices=("auto", "frame", "video"), default="auto",
+        help="video: pairs kept consistent along each view's track ids; frame: each frame "
+        "alone; auto (default): video when both views' ids persist")
+    add_draw_arguments(p, common=p, more=runtime)
+    search.add_argument(
+        "--camera-id", type=box_id, default=None, metavar="ID",
+        help="top-view id of the camera's wearer (either method; |id| <= 2**53; default: "
+        "searched among all top-view people)")
+    search.add_argument(
+        "--search", choices=("exhaustive", "reduced", "follow"), default=None,
+        help="exhaustive (default), or in video mode reduced (orientation window) or follow "
+        "(window + the wearer followed by its track id)")
+    add_spatial_options(p, group=search)
+    add_top_view_arguments(top_view)
+    runtime.add_argument("--workers", type=worker_count, default=1, metavar="K",
+                         help="processes for --offset auto and --model's features, 1..64 "
+                         "(default 1; the same output for any K)")
+    runtime.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=_cmd_associate)
     return p
 
