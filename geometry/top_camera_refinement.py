@@ -120,14 +120,22 @@ class TopCameraRefinement:
             rotvec = (self.reference.R.T @ top.R).T @ rotvec  # the rotation vector of A^T Q A
         return turned_camera(top, rotvec)
 
-    def describe(self) -> str:
-        """One line for the user."""
+    def fitted_on(self, usable: int | None = None) -> str:
+        """The frames it was fitted on, in words: ``30 of the 60 frames with people in both
+        views, evenly spread`` when only a sample of the ``usable`` ones was fitted."""
+        if usable is None or usable <= self.frames:
+            return f"{self.frames} frames with people in both views"
+        return f"{self.frames} of the {usable} frames with people in both views, evenly spread"
+
+    def describe(self, usable: int | None = None) -> str:
+        """One line for the user; ``usable``: the frames with people in both views, of which
+        the fit sampled :attr:`frames`."""
         what = {"fixed": "the top camera",
                 "camera": "the moving top camera in its own frame (a mount offset)",
                 "world": "the moving top camera in the world (a heading or level offset)"}
-        return (f"turned {what[self.frame]} {self.angle_deg:.2f} degrees to fit the head rays "
-                f"of {self.frames} frames (loss {self.loss_before:.3f} -> "
-                f"{self.loss_after:.3f})")
+        return (f"turned {what[self.frame]} {self.angle_deg:.2f} degrees so the people of both "
+                f"views line up, fitted on {self.fitted_on(usable)} (misfit "
+                f"{self.loss_before:.3f} -> {self.loss_after:.3f})")
 
 
 class _RayFrames:

@@ -151,7 +151,7 @@ def test_a_matcher_sure_of_changing_partners_does_not_judge_the_cue() -> None:
     assert not check.judged and check.trusted and math.isnan(check.auc)
     assert check.consistency < MIN_CONSISTENCY and check.worth_saying
     assert "change partners over time" in check.message()
-    assert "0.27 of its sure frames" in check.message()
+    assert "0.27 of those frames" in check.message()
     assert not check.to_tell(quiet=True)  # images kept: said only without --quiet
     # shorter than the window, the consistency is not measured and the pairs condemn the cue
     short = {f: c for f, c in _wandering(box, 20).items() if f < CONSISTENCY_WINDOW}
@@ -288,7 +288,7 @@ def test_associate_command_says_what_the_check_found(video, tmp_path, capsys) ->
     assert "appearance check" not in capsys.readouterr().err  # quiet, and the images passed
     costs = tmp_path / "costs.json"
     assert main([*args[:-1], "--out", str(tmp_path / "b.csv"), "--costs", str(costs)]) == 0
-    assert "appearance check: the appearance cue ranks this video's" in capsys.readouterr().err
+    assert "appearance check: the images tell the" in capsys.readouterr().err
     record = json.loads(costs.read_text())["appearance_check"]
     assert record["judged"] and record["images_used"] and record["auc"] > 0.8
     assert record["positives"] >= MIN_PAIRS and record["min_auc"] == MIN_AUC
@@ -323,7 +323,7 @@ def test_track_command_leaves_out_a_failed_cross_view_cue(video, tmp_path, capsy
     clean = ["--top-images", str(video["top_images"]), "--hor-images", str(video["hor_images"])]
     assert main([*base, *clean, "--out", str(tmp_path / "a")]) == 0
     err = capsys.readouterr().err
-    assert "box-only pseudo-matched tracklet pairs against" in err and "images used" in err
+    assert "tracklet pairs the boxes alone are sure of from" in err and "images used" in err
     assert main([*base, *clean, "--appearance-check", "off", "--quiet",
                  "--out", str(tmp_path / "b")]) == 0
     assert "appearance check" not in capsys.readouterr().err

@@ -79,8 +79,8 @@ def test_a_short_clip_or_an_unsteady_matcher_keeps_the_cameras() -> None:
     unsteady = check_cameras(top, hor, _wandering(box, 20), wrong, gamma=0.5)
     assert not unsteady.judged and unsteady.trusted
     assert unsteady.consistency < MIN_CONSISTENCY
-    assert "change partners over time (a tracklet keeps its most frequent partner in 0.27" in (
-        unsteady.message())
+    assert ("change partners over time (a person's track keeps its most frequent partner in "
+            "0.27") in unsteady.message()
     few = check_cameras(top, hor, box, wrong, gamma=0.5, min_pairs=10_000)
     assert not few.judged and few.trusted and "10000 needed to judge the cameras" in few.message()
     top, hor = _still(6)
@@ -131,7 +131,7 @@ def test_misleading_cameras_are_left_out_and_exact_ones_kept(drone) -> None:
     passed = check_run_cameras(video.top, video.hor, frames, model, video.hor_size, exact,
                                gamma, 1.0)  # doubted all the same: they pass
     assert passed.judged and passed.trusted and passed.share > 0.95, passed
-    assert "fits the head rays poorly (loss 1.000)" in passed.message()
+    assert "fits the people poorly (misfit 1.000)" in passed.message()
     options = LearnedRunOptions((model,), video.hor_size, refine_top_camera=True)
     none = run_learned_association(video.top, video.hor, frames, options)
     given = run_learned_association(video.top, video.hor, frames,
@@ -192,7 +192,7 @@ def test_associate_matches_without_cameras_that_fail(drone, tmp_path, capsys) ->
     assert main([*base, "--cameras", str(turned), "--out", str(tmp_path / "a.txt"), "--costs",
                  str(costs)]) == 0
     said = capsys.readouterr().err
-    assert "camera check: the top camera fits the head rays poorly (loss 0." in said
+    assert "camera check: the top camera fits the people poorly (misfit 0." in said
     assert "and the matcher with the cameras keeps" in said
     assert "matched without them" in said and OFF_HINT in said
     record = json.loads(costs.read_text())["camera_check"]
@@ -245,7 +245,7 @@ def test_adapt_mines_without_cameras_that_fail(tmp_path, capsys) -> None:
             "x".join(map(str, video.hor_size)), "--burst", "8", "--quiet"]
     code = main([*base, "--cameras", str(turned), "--out", str(tmp_path / "with")])
     said = capsys.readouterr().err
-    assert "camera check: the top camera fits the head rays poorly" in said
+    assert "camera check: the top camera fits the people poorly" in said
     assert "matched without them" in said
     assert main([*base, "--out", str(tmp_path / "none")]) == code
     if code != 0:  # refused: the same measured figures, nothing written

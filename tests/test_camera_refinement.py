@@ -113,7 +113,8 @@ def test_a_flying_top_camera_is_turned_back_frame_by_frame() -> None:
     used, what = refine_run_cameras(exact, _records(top_boxes), _records(hor_boxes), frames)
     assert used is exact and not what.turned and what.moving
     assert what.message.startswith("cameras: the top camera changes from frame to frame; it "
-                                   "fits the head rays of 24 frames about as well as given")
+                                   "lines up the people of both views about as well as given, "
+                                   "on 24 frames")
 
 
 @pytest.mark.slow

@@ -83,6 +83,8 @@ CONSISTENCY_WINDOW = 150
 tracklet: long enough for people to move and a geometric confusion to change partner."""
 MIN_SURE_FRAMES = 5
 """Fewest frames a tracklet must be in a sure pair to count in :func:`sure_pair_consistency`."""
+UNCHECKED_IMAGES = "the images were used without this check"
+"""How :meth:`AppearanceCheck.message` ends when the check could not judge the images."""
 TRACK_MIN_PAIRS = 20
 """The same for ``track``'s tracklet pairs: each is a pair the box-only matcher was sure of on
 several consecutive frames, so :data:`MIN_PAIRS` boxes (about 10 tracklets in 3 frames) stand
@@ -150,27 +152,28 @@ class AppearanceCheck:
         """One line for the user."""
         pairs = "tracklet pairs" if self.tracklets else "pairs"
         if not self.judged and self.unsteady:
-            return (f"appearance check: the box-only matcher's sure pairs change partners over "
-                    f"time (a tracklet keeps its most frequent partner in "
-                    f"{self.consistency:.2f} of its sure frames, {MIN_CONSISTENCY:g} needed), so "
-                    f"its {self.positives} pseudo-matched {pairs} cannot judge the images; they "
-                    f"were used as they are")
+            return (f"appearance check: the pairs the boxes alone are sure of change partners "
+                    f"over time (a person's track keeps its most frequent partner in "
+                    f"{self.consistency:.2f} of those frames, {MIN_CONSISTENCY:g} needed), too "
+                    f"unsteady to judge the images; {UNCHECKED_IMAGES}")
         if not self.judged:
-            head = (f"appearance check: {self.positives} {pairs} the box-only matcher is sure of "
-                    f"over consecutive frames, {self.min_pairs} needed to judge the images"
+            n = self.positives
+            head = (f"appearance check: the boxes alone are sure of only {n} "
+                    f"{pairs if n != 1 else pairs[:-1]} over consecutive frames, "
+                    f"{self.min_pairs} needed to judge the images (a longer video gives more)"
                     if self.bursts or not self.frames else "appearance check: no run of "
                     "consecutive frames to judge the images on")
             if self.frames:
                 return (f"{head}; judged frame by frame instead, matched {self.frames_dropped} "
                         f"of {self.frames} frames from the boxes alone")
-            return f"{head}; they were used as they are"
+            return f"{head}; {UNCHECKED_IMAGES}"
         fallback = ("the cross-view weights come from the boxes alone (the images still link "
                     "each view over time)" if self.tracklets else "matched from the boxes alone")
         verdict = ("images used" if self.trusted else
                    f"below {self.min_auc:g} by more than twice its standard error, so the images "
                    f"would drag the boxes down: {fallback}")
-        return (f"appearance check: the appearance cue ranks this video's {self.positives} "
-                f"box-only pseudo-matched {pairs} against {self.negatives} other pairs of their "
+        return (f"appearance check: the images tell the {self.positives} {pairs} the boxes "
+                f"alone are sure of from the {self.negatives} other pairs of their "
                 f"{'clips' if self.tracklets else 'frames'} with AUC {self.auc:.3f} +/- "
                 f"{self.error:.3f}; {verdict}")
 

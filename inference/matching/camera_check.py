@@ -124,24 +124,25 @@ class CameraCheck:
     def message(self) -> str:
         """One line for the user."""
         if not self.judged:
-            if self.positives < self.min_pairs:
-                why = (f"{self.positives} pairs the box-only matcher is sure of over consecutive "
-                       f"frames, {self.min_pairs} needed to judge the cameras")
+            n = self.positives
+            if n < self.min_pairs:
+                why = (f"the boxes alone are sure of only {n} pair{'s' if n != 1 else ''} over "
+                       f"consecutive frames, {self.min_pairs} needed to judge the cameras (a "
+                       "longer video gives more)")
             elif math.isnan(self.consistency):
                 why = (f"the video is too short ({CONSISTENCY_WINDOW} consecutive frames needed) "
-                       "to tell whether the box-only matcher's sure pairs are steady enough to "
-                       "judge the cameras")
+                       "to judge the cameras")
             else:
-                why = (f"the box-only matcher's sure pairs change partners over time (a "
-                       f"tracklet keeps its most frequent partner in {self.consistency:.2f} of "
-                       f"its sure frames, {MIN_CONSISTENCY:g} needed), so they cannot judge the "
-                       "cameras")
-            return f"camera check: {why}; they were used as they are"
+                why = (f"the pairs the boxes alone are sure of change partners over time (a "
+                       f"person's track keeps its most frequent partner in "
+                       f"{self.consistency:.2f} of those frames, {MIN_CONSISTENCY:g} needed), "
+                       "too unsteady to judge the cameras")
+            return f"camera check: {why}; the cameras were used without this check"
         fit = ("the top camera changes from frame to frame and " if self.moving
                else "" if math.isnan(self.fit_loss) else
-               f"the top camera fits the head rays poorly (loss {self.fit_loss:.3f}) and ")
-        head = (f"camera check: {fit}the matcher with the cameras keeps {self.kept} of this "
-                f"video's {self.positives} box-only pseudo-matched pairs ({self.share:.2f} +/- "
+               f"the top camera fits the people poorly (misfit {self.fit_loss:.3f}) and ")
+        head = (f"camera check: {fit}the matcher with the cameras keeps {self.kept} of the "
+                f"{self.positives} pairs the boxes alone are sure of ({self.share:.2f} +/- "
                 f"{self.error:.2f})")
         if self.trusted:
             return f"{head}; cameras used"

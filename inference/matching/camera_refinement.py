@@ -171,9 +171,10 @@ def refine_views_cameras(
                             [hors[k][f].boxes for k, f in samples])
     if fit.angle_deg == 0.0 or fit.loss_before - fit.loss_after < MIN_GAIN:
         return list(cameras), CameraRefinement(
-            False, fit, f"cameras: {changes + '; it' if moving else 'the top camera'} fits the "
-            f"head rays of {fit.frames} frames about as well as given (loss "
-            f"{fit.loss_before:.3f}, refined {fit.loss_after:.3f}); used as given",
+            False, fit, f"cameras: {changes + '; it' if moving else 'the top camera'} lines up "
+            f"the people of both views about as well as given, on "
+            f"{fit.fitted_on(len(samples))} (misfit {fit.loss_before:.3f} as given, "
+            f"{fit.loss_after:.3f} turned); used as given",
             moving=moving)
     return [_turned_top(c, fit, moving) for c in cameras], CameraRefinement(
-        True, fit, f"cameras: {fit.describe()}; {OFF_HINT}", moving=moving)
+        True, fit, f"cameras: {fit.describe(len(samples))}; {OFF_HINT}", moving=moving)
