@@ -6,6 +6,7 @@ minimum of the averaged curve, and whether enough clips back it before it is app
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -13,7 +14,13 @@ import numpy as np
 
 from xvmatch.core.worker_pool import worker_pool
 from xvmatch.cues.spatial_matching import SpatialParams
-from xvmatch.cues.spatial_search import FrameLike, associate_frame, ids_to_index
+from xvmatch.cues.spatial_search import (
+    FrameLike,
+    TopSearch,
+    best_cost,
+    ids_to_index,
+    top_search,
+)
 
 __all__ = [
     "AUTO_MAX_OFFSET",
@@ -121,15 +128,27 @@ def _clip_cost(
     hor_width: float,
     params: SpatialParams,
     camera_id: int | None,
+    searches: OrderedDict[int, TopSearch] | None = None,
 ) -> float:
-    """Mean best Phi of one clip at one offset; +inf unless most of its frames match."""
+    """Mean best Phi of one clip at one offset; +inf unless most of its frames match.
+    ``searches``: the top frames' hypotheses already built (:func:`top_search`), by top frame,
+    the most recently used last; the frames built here join it, and it keeps the last
+    2 * ``len(clip)`` (the next offsets of a clip read mostly the same top frames)."""
+    searches = OrderedDict() if searches is None else searches
     values = []
     for f in clip:
         t_rec = top.get(f + offset)
         if t_rec is None or len(t_rec.ids) == 0:
             continue
-        cand = (ids_to_index(t_rec.ids, camera_id) or None) if camera_id is not None else None
-        values.append(associate_frame(t_rec.boxes, hor[f].boxes, hor_width, params, cand).cost)
+        if f + offset in searches:
+            searches.move_to_end(f + offset)
+        else:
+            cand = ((ids_to_index(t_rec.ids, camera_id) or None) if camera_id is not None
+                    else None)
+            searches[f + offset] = top_search(t_rec.boxes, params, cand)
+            while len(searches) > 2 * len(clip):
+                searches.popitem(last=False)
+        values.append(best_cost(searches[f + offset], hor[f].boxes, hor_width, params))
     finite = [v for v in values if math.isfinite(v)]
     return float(np.mean(finite)) if finite and 2 * len(finite) >= len(clip) else math.inf
 
@@ -143,8 +162,12 @@ def _clip_curve(
     params: SpatialParams,
     camera_id: int | None,
 ) -> list[float]:
-    """:func:`_clip_cost` of one clip at each of ``offsets`` (one task of the process pool)."""
-    return [_clip_cost(top, hor, clip, o, hor_width, params, camera_id) for o in offsets]
+    """:func:`_clip_cost` of one clip at each of ``offsets`` (one task of the process pool),
+    each top frame's hypotheses built once while consecutive offsets read it (the same costs
+    as :func:`~xvmatch.cues.spatial_search.associate_frame`'s, at about half the time)."""
+    searches: OrderedDict[int, TopSearch] = OrderedDict()
+    return [_clip_cost(top, hor, clip, o, hor_width, params, camera_id, searches)
+            for o in offsets]
 
 
 def _curve_tasks(

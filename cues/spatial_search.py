@@ -33,12 +33,15 @@ __all__ = [
     "SEARCH_MODES",
     "FollowPolicy",
     "FrameAssociation",
+    "TopSearch",
     "associate_frame",
     "associate_sequence",
+    "best_cost",
     "best_per_candidate",
     "hypothesis_vectors",
     "rank_hypotheses",
     "search_window",
+    "top_search",
 ]
 
 SEARCH_MODES = ("exhaustive", "reduced", "follow")
@@ -204,6 +207,51 @@ def associate_frame(
     """
     ranked = rank_hypotheses(top_boxes, hor_boxes, hor_width, params, candidates, thetas, k=1)
     return ranked[0] if ranked else _EMPTY
+
+
+@dataclass(frozen=True)
+class TopSearch:
+    """One top frame's hypotheses, computed once to be matched with several horizontal frames
+    (:func:`best_cost`): the offset search pairs each top frame with up to a clip's length of
+    horizontal frames, and the hypotheses are most of a frame pair's work.
+
+    Attributes:
+        n_top: M, the top frame's boxes.
+        n_cand: candidate camera locations.
+        blocks: the hypotheses of each block of candidates with the index of its first
+            hypothesis (as :func:`rank_hypotheses` builds them); empty when nothing can match.
+    """
+
+    n_top: int
+    n_cand: int
+    blocks: tuple[tuple[int, TopHypotheses], ...]
+
+
+def top_search(top_boxes: np.ndarray, params: SpatialParams | None = None,
+               candidates: Iterable[int] | None = None) -> TopSearch:
+    """The :class:`TopSearch` of one top frame (``top_boxes``, ``params``, ``candidates`` as in
+    :func:`associate_frame`; the full circle of orientations)."""
+    params = params or SpatialParams()
+    top_boxes, _, cand, thetas = _prepare(top_boxes, np.zeros((0, 4)), candidates, None, params)
+    if cand.size == 0 or top_boxes.shape[0] < 2:
+        return TopSearch(top_boxes.shape[0], cand.size, ())
+    return TopSearch(top_boxes.shape[0], cand.size,
+                     tuple(_candidate_blocks(top_boxes, cand, thetas, params)))
+
+
+def best_cost(search: TopSearch, hor_boxes: np.ndarray, hor_width: float,
+              params: SpatialParams | None = None) -> float:
+    """The lowest Phi of a top frame (its :class:`TopSearch`) against one horizontal frame:
+    exactly ``associate_frame(top_boxes, hor_boxes, hor_width, params, candidates).cost``
+    (the same branch and bound on the same hypotheses), +inf when nothing can be matched."""
+    params = params or SpatialParams()
+    hor_boxes = np.asarray(hor_boxes, dtype=float).reshape(-1, 4)
+    if search.n_cand == 0 or hor_boxes.shape[0] == 0 or search.n_top < 2:
+        return math.inf
+    hor, _ = horizontal_vectors(hor_boxes, hor_width)
+    costs = [cost for _, hypotheses in search.blocks
+             for _, cost, *_ in _ranked(hypotheses, hor, params, 1)]
+    return min(costs, default=math.inf)
 
 
 def best_per_candidate(

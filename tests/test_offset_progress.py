@@ -73,3 +73,21 @@ def test_offset_command_is_silent_but_for_its_line_off_a_terminal(pair, tmp_path
     quiet = capsys.readouterr()
     assert first.out == quiet.out and first.out.startswith("offset ")
     assert "offset search" not in first.err  # stderr is not a terminal here: no bar
+
+
+def test_a_top_frames_hypotheses_built_once_give_associate_frames_cost(pair) -> None:
+    """The offset search builds each top frame's hypotheses once for the clip frames that read it
+    (``spatial_search.top_search`` and ``best_cost``): the same costs, bit for bit."""
+    from xvmatch.cues.spatial_search import associate_frame, best_cost, top_search
+
+    top, hor, width = pair
+    frames = sorted(set(hor) & set(top))[:12]
+    for t in frames[::3]:
+        for candidates in (None, [0]):
+            search = top_search(top[t].boxes, candidates=candidates)
+            for f in frames:
+                expected = associate_frame(top[t].boxes, hor[f].boxes, width,
+                                           candidates=candidates).cost
+                assert best_cost(search, hor[f].boxes, width) == expected
+    assert best_cost(top_search(top[frames[0]].boxes[:1]), hor[frames[0]].boxes, width) \
+        == float("inf")
