@@ -163,10 +163,6 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         pairs = oblique
         _write(args, pairs, frames, offset)
         return 0
-    if video and args.mode == "auto" and not args.quiet:
-        print("xvmatch: note: --mode video: each view's ids persist from frame to frame (track "
-              "ids), so pairs are kept consistent along them; --mode frame solves each frame on "
-              "its own", file=sys.stderr)
     progress = frame_progress(len(frames), "associate", not args.quiet)
     if args.model is not None:
         pairs = associate_with_model(learned, top, hor, frames, progress, top_offset=offset,
@@ -190,8 +186,13 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
         draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
                       not args.no_labels)
-    _write(args, pairs, frames, offset)
+    _write(args, pairs, frames, offset, _AUTO_VIDEO if video and args.mode == "auto" else None)
     return 0
+
+
+_AUTO_VIDEO = ("--mode video: each view's ids persist from frame to frame (track ids), so the "
+               "pairs were kept consistent along them; --mode frame solves each frame alone")
+"""The note of ``--mode auto`` taking video mode, said with the run's summary."""
 
 
 def _video_mode(args: argparse.Namespace, top: dict, hor: dict) -> bool:
@@ -205,10 +206,12 @@ def _video_mode(args: argparse.Namespace, top: dict, hor: dict) -> bool:
     return is_video(top, hor)
 
 
-def _write(args: argparse.Namespace, pairs: dict, frames: list[int], offset: int) -> None:
+def _write(args: argparse.Namespace, pairs: dict, frames: list[int], offset: int,
+           note: str | None = None) -> None:
     """The predictions and, when ``--offset`` was given, the offset applied beside them
     (``PRED.offset.json``, which ``evaluate`` reads); a record an earlier run left there for
-    these predictions is removed when this run applied none."""
+    these predictions is removed when this run applied none. ``note``: a line said with the
+    summary, once the run has succeeded."""
     import os
 
     from xvmatch.formats.mot_boxes import write_predictions
@@ -222,4 +225,6 @@ def _write(args: argparse.Namespace, pairs: dict, frames: list[int], offset: int
         os.unlink(record)
     n_pairs = sum(len(p) for p in pairs.values())
     if not args.quiet:
+        if note:
+            print(f"xvmatch: note: {note}", file=sys.stderr)
         print(f"wrote {n_pairs} pairs over {len(frames)} frames to {args.out}", file=sys.stderr)
