@@ -84,6 +84,7 @@ def scene():
     return simulate_box_scene(SceneConfig(n_people=(6, 8)), n_frames=120, seed=5)
 
 
+@pytest.mark.slow
 def test_auto_offset_finds_a_known_shift(scene) -> None:
     top = shift_frames(scene.top, -12)  # top frame = horizontal frame + 12
     decided = auto_offset(top, scene.hor, AutoOffsetOptions(

@@ -82,6 +82,7 @@ def _told(files: dict[str, Path], size: tuple[int, int]) -> list[tuple[str, bool
     return told
 
 
+@pytest.mark.slow
 def test_the_track_run_warns_of_pictures_only(pictures, video) -> None:
     warned = [(line, always) for line, always in _told(pictures, (320, 180))
               if "boxes jump" in line]

@@ -33,6 +33,7 @@ def scene():
     return make_oblique_scene(config, 100, np.random.default_rng(5))
 
 
+@pytest.mark.slow
 def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
     top, top_back = _scrambled(scene.top, 100)
     hor, hor_back = _scrambled(scene.hor["hor1"], 500)

@@ -58,6 +58,7 @@ def _f1(pred: set, truth: set) -> float:
     return 2 * len(pred & truth) / max(1, len(pred) + len(truth))
 
 
+@pytest.mark.slow
 def test_three_views_pair_at_least_as_well_as_per_view(scene, tmp_path) -> None:
     views, backs = scene
     paths = []
@@ -98,6 +99,7 @@ def test_three_views_pair_at_least_as_well_as_per_view(scene, tmp_path) -> None:
     assert min(f1["multi"].values()) > 0.45
 
 
+@pytest.mark.slow
 def test_oblique_top_decides_and_refuses(scene) -> None:
     views, _ = scene
     calib, note = oblique_top(views[0], "auto", SIZE, "top.txt", [0, 0])
@@ -113,6 +115,7 @@ def test_oblique_top_decides_and_refuses(scene) -> None:
         oblique_top(views[0], "sideways", SIZE, "top.txt")
 
 
+@pytest.mark.slow
 def test_problems_shapes_and_no_evidence_off_the_map(scene) -> None:
     views, _ = scene
     calib = top_calibration(views[0], SIZE)

@@ -39,6 +39,7 @@ def test_progress_counts_every_clip_cost_and_changes_nothing(pair) -> None:
     assert told[0][1] < told[-1][1]  # the fine pass grew the total
 
 
+@pytest.mark.slow
 def test_auto_offset_passes_progress_on(pair) -> None:
     top, hor, width = pair
     told: list[tuple[int, int]] = []

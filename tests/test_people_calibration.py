@@ -164,6 +164,7 @@ def oblique_boxes(tmp_path_factory) -> tuple[Camera, str]:
     return camera, str(path)
 
 
+@pytest.mark.slow
 def test_calibrate_command_writes_camera_and_picture(oblique_boxes, tmp_path, capsys) -> None:
     _camera, boxes = oblique_boxes
     out, png = tmp_path / "cam.json", tmp_path / "cam.png"

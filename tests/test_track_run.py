@@ -87,6 +87,7 @@ def test_the_weights_and_their_defaults() -> None:
     assert track_weights("handcrafted", w2=0.5) == TrackWeights(w2=0.5)
 
 
+@pytest.mark.slow
 def test_the_cameras_lines_are_told_as_they_come(clip) -> None:
     model = load_matcher_bundle("default")
     top, hor = read_detection_rows(clip["top"]), read_detection_rows(clip["hor"])
