@@ -129,6 +129,7 @@ def test_second_run_reuses_every_cell(report: Path, args, capsys) -> None:
     assert (report / "report.md").read_text() == text
 
 
+@pytest.mark.slow
 def test_other_options_in_the_report_folder_are_refused(report: Path, args, capsys) -> None:
     before = sorted(p.name for p in (report / "cells").iterdir())
     code, err = _ablate(capsys, *args, "--out", str(report), "--sweep", "calibration")
@@ -208,6 +209,7 @@ def test_the_report_folder_is_checked_before_the_data_is_read(tmp_path, capsys) 
     assert code == 2 and err.count("\n") == 1 and "--out" in err and "not an ablation" in err
 
 
+@pytest.mark.slow
 def test_the_report_folder_is_marked_as_ablate_s_own(report: Path) -> None:
     marker = json.loads((report / ".xvmatch-output.json").read_text())
     assert marker == {"written_by": "xvmatch ablate"}
