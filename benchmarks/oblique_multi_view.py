@@ -48,6 +48,7 @@ from dataclasses import replace
 from itertools import combinations
 
 import numpy as np
+from oblique_association import _scrambled
 
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
@@ -61,17 +62,6 @@ from xvmatch.inference.views.multi_ground import MultiGroundOptions, run_multi_g
 from xvmatch.inference.views.multi_view_people import PeopleOptions
 
 NAMES = ("per view", "per view, video mode", "three views", "three views, --tracks")
-
-
-def scrambled(frames: dict, rng: np.random.Generator) -> tuple[dict, dict]:
-    """The view's records with its ids replaced by a random permutation, and the way back."""
-    ids = sorted({int(i) for r in frames.values() for i in r.ids})
-    new = rng.permutation(len(ids)) + 100
-    forward = dict(zip(ids, new.tolist(), strict=True))
-    back = {v: k for k, v in forward.items()}
-    return ({f: FrameBoxes(f, np.array([forward[int(i)] for i in r.ids], dtype=np.int64),
-                           np.asarray(r.boxes, float).reshape(-1, 4))
-             for f, r in frames.items()}, back)
 
 
 def joined_pairs(per_view: list[dict], frames: list[int]) -> dict:
@@ -148,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         rng = np.random.default_rng([args.seed, s, 1])
         raw = [scene.top, *(scene.hor[f"hor{k}"] for k in (1, 2))]
         frames = [f for f in sorted(set().union(*raw)) if (f - 1) % args.step == 0]
-        views, backs = zip(*(scrambled({f: v[f] for f in frames if f in v}, rng) for v in raw),
+        views, backs = zip(*(_scrambled({f: v[f] for f in frames if f in v}, rng) for v in raw),
                            strict=True)
         views = list(views)
         truth = {(a, b): {f: {(int(i), int(j)) for i in views[a][f].ids
