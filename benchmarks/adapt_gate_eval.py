@@ -39,10 +39,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from site_adaptation_eval import _Images, _score, _scrambled, _shifted
+from site_adaptation_eval import _Images, _score, _shifted, _video
 
-from xvmatch.datasets.synthetic_scenes import SCENARIOS, SynthConfig
-from xvmatch.datasets.tracking_video import render_tracking_video
+from xvmatch.datasets.synthetic_scenes import SCENARIOS
 from xvmatch.inference.adaptation.adaptation_pairs import MiningConfig
 from xvmatch.inference.matching.learned_association import (
     LearnedMatcher,
@@ -55,13 +54,8 @@ from xvmatch.inference.matching.site_bundle import adapt_to_site
 def run_seed(seed: int, strength: float, args, matcher: LearnedMatcher) -> dict:
     """One video: adapt on its first part, score both bundles on the rest."""
     t0 = time.perf_counter()
-    video = render_tracking_video(seed, args.frames, SynthConfig(
-        scenario=args.scenario, n_people=tuple(args.people), fps=25.0))
-    rng = np.random.default_rng([seed, 31])
-    top, back_top = _scrambled(video.top, rng)
-    hor, back_hor = _scrambled(video.hor, rng)
+    video, top, hor, back_top, back_hor, cut = _video(seed, args)
     frames = sorted(top)
-    cut = frames[int(args.adapt_fraction * len(frames))]
     images = (_Images(_shifted(video.top_images, strength, 100 + seed)),
               _Images(_shifted(video.hor_images, strength, 200 + seed)))
     part = {f: top[f] for f in frames if f < cut}, {f: hor[f] for f in frames if f < cut}
