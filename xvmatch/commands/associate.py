@@ -197,8 +197,8 @@ _AUTO_VIDEO = ("--mode video: each view's ids persist from frame to frame (track
 
 def _video_mode(args: argparse.Namespace, top: dict, hor: dict) -> bool:
     """``--mode``: video or frame; ``auto`` takes video where both views' ids are track ids
-    (:func:`~xvmatch.cues.box_motion.is_video`) and the search reads them (not the learned
-    matcher on a nadir top view, which solves frames on their own)."""
+    (:func:`~xvmatch.cues.box_motion.is_video`): every path then keeps its pairs consistent
+    along them."""
     if args.mode != "auto":
         return args.mode == "video"
     from xvmatch.cues.box_motion import is_video
