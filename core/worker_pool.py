@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures import process as futures_process
@@ -20,10 +21,52 @@ from contextlib import contextmanager
 __all__ = ["stop_pool", "worker_pool"]
 
 
+_CAN_BLOCK = hasattr(signal, "pthread_sigmask")
+
+
+@contextmanager
+def _sigint_held() -> Iterator[None]:
+    """Ctrl-C held back for the block and delivered when it ends. A process started inside
+    inherits SIGINT blocked (fork and exec keep the thread's mask); and the parent is not
+    interrupted half-way through starting one (a signal caught by another of its threads
+    still raises in the main thread) and left with a worker it never recorded."""
+    caught: list[int] = []
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main else None
+    main = previous is not None  # None: a handler not set from Python, left alone
+    if main:
+        signal.signal(signal.SIGINT, lambda number, frame: caught.append(number))
+    if _CAN_BLOCK:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+            if caught:
+                signal.raise_signal(signal.SIGINT)  # to the handler now restored
+        if _CAN_BLOCK:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+class _Pool(ProcessPoolExecutor):
+    """A ``ProcessPoolExecutor`` whose workers are started with SIGINT blocked. A worker
+    otherwise takes a second or more (importing numpy, the task's modules) before its
+    initializer can ignore SIGINT, and a Ctrl-C in that window printed its traceback."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        # The executor starts its workers inside submit(), in the calling thread.
+        with _sigint_held():
+            return super().submit(fn, *args, **kwargs)
+
+
 def _start_worker(initializer: Callable[[], object] | None) -> None:
     """Worker initializer: leave Ctrl-C to the parent, which stops the workers itself, then run
-    the caller's own ``initializer`` (e.g. one thread per worker)."""
+    the caller's own ``initializer`` (e.g. one thread per worker). Ignoring SIGINT before
+    unblocking it drops a Ctrl-C that came while the worker was starting."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if _CAN_BLOCK:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     if initializer is not None:
         initializer()
 
@@ -76,8 +119,8 @@ def worker_pool(workers: int, start_method: str | None = "spawn",
     if int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     context = multiprocessing.get_context(start_method)
-    pool = ProcessPoolExecutor(max_workers=int(workers), mp_context=context,
-                               initializer=_start_worker, initargs=(initializer,))
+    pool = _Pool(max_workers=int(workers), mp_context=context,
+                 initializer=_start_worker, initargs=(initializer,))
     try:
         yield pool
         # Inside the try: a Ctrl-C during this wait must stop the pool too, or its manager

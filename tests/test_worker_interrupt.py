@@ -60,11 +60,13 @@ def _sigint_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def _interrupt(args: list[str], cwd: Path, times: int = 1, group: bool = True) -> tuple[int, str]:
-    """Run ``xvmatch ARGS``, Ctrl-C it (``times`` times) once two workers are busy; returns
-    the exit code and stderr, failing if it does not end within :data:`HANG` seconds. SIGINT
-    goes to the process group (a terminal's Ctrl-C) or, unless ``group``, to xvmatch alone
-    (``kill -INT``: the workers are then left to the parent to stop)."""
+def _interrupt(args: list[str], cwd: Path, times: int = 1, group: bool = True,
+               pause: float = 0.5) -> tuple[int, str]:
+    """Run ``xvmatch ARGS``, Ctrl-C it (``times`` times) ``pause`` seconds after its two workers
+    started (0.5: busy with their tasks; 0: still importing); returns the exit code and stderr,
+    failing if it does not end within :data:`HANG` seconds. SIGINT goes to the process group
+    (a terminal's Ctrl-C) or, unless ``group``, to xvmatch alone (``kill -INT``: the workers are
+    then left to the parent to stop)."""
     proc = subprocess.Popen([sys.executable, "-m", "xvmatch", *args], cwd=cwd,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, preexec_fn=_sigint_default)
@@ -74,7 +76,7 @@ def _interrupt(args: list[str], cwd: Path, times: int = 1, group: bool = True) -
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "the workers never started"
             time.sleep(0.02)
-        time.sleep(0.5)  # let the workers get into their tasks
+        time.sleep(pause)
         assert proc.poll() is None, "finished before the interrupt: make the scene longer"
         for k in range(times):
             (os.killpg if group else os.kill)(proc.pid, signal.SIGINT)
@@ -112,6 +114,20 @@ def test_associate_with_workers_stops_at_once_and_writes_nothing(long_scene, tmp
     assert code == 130, err
     assert "Traceback" not in err
     assert list(tmp_path.iterdir()) == []  # neither the output nor a temporary file
+
+
+@pytest.mark.parametrize("pause", [0.0, 0.05, 0.1])
+def test_ctrl_c_while_the_workers_start_prints_no_traceback(long_scene, tmp_path, pause):
+    # A worker imports for a second or more before it can ignore SIGINT: a Ctrl-C then printed
+    # its KeyboardInterrupt traceback (CI, on a loaded machine), or, landing in the parent half-way
+    # through starting one, left it reading a closed pipe (EOFError). A race: before the fix,
+    # a few tries in a dozen at these pauses showed it.
+    top, hor = long_scene
+    code, err = _interrupt(["offset", "--top", str(top), "--hor", str(hor), "--workers", "2"],
+                           tmp_path, pause=pause)
+    assert code == 130, err
+    assert err.strip().splitlines()[-1] == "xvmatch: interrupted"
+    assert "Traceback" not in err
 
 
 def test_a_second_ctrl_c_does_not_hang(long_scene, tmp_path):
