@@ -14,8 +14,11 @@ process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
   version 1 did) and the torch matcher (``models.matcher_file``) with the same weights,
   batched 64 frames, Hungarian with the same gamma, the same CSV written.
 
-``--runs`` picks some of them (``--runs handcrafted onnx``: the learned/handcrafted ratio alone,
-no torch needed) and ``--repeat N`` runs them N times, alternating their order from round to
+``--sequences all`` takes every pair of the CVMHAT dev split in ``--data`` (10 pairs, 7,800
+frames): ``--sequences all --runs handcrafted onnx`` prints the learned/handcrafted ratio over
+the dev pairs in one run. ``--runs`` picks some of them (``--runs handcrafted onnx``: the
+learned/handcrafted ratio alone, no torch needed; without torch installed the torch run is left
+out with a note) and ``--repeat N`` runs them N times, alternating their order from round to
 round (paired runs on a noisy machine); the figures are medians over the rounds, and the
 onnx/handcrafted ratio is the median of the rounds' own ratios.
 
@@ -23,7 +26,7 @@ Prints frames per second (CPU time of the child processes, and wall time), the r
 CVIDF1 of each on those frames (ids as in the files: the learned paths never see them).
 
 Usage:
-    python benchmarks/learned_box_path.py [--sequences V1-S_55-G_1 ...] [--model default]
+    python benchmarks/learned_box_path.py [--sequences V1-S_55-G_1 ... | all] [--model default]
         [--torch-model default] [--runs handcrafted onnx] [--repeat 5]
 """
 
@@ -43,7 +46,12 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from xvmatch.formats.cvmhat import IMAGE_SIZE, default_cvmhat_dir, read_sequence  # noqa: E402
+from xvmatch.formats.cvmhat import (  # noqa: E402
+    IMAGE_SIZE,
+    default_cvmhat_dir,
+    read_sequence,
+    sequence_names,
+)
 from xvmatch.formats.mot_boxes import read_predictions  # noqa: E402
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize  # noqa: E402
 
@@ -100,7 +108,8 @@ def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=default_cvmhat_dir(), help="CVMHAT boxes")
-    parser.add_argument("--sequences", nargs="+", default=["V1-S_55-G_1"])
+    parser.add_argument("--sequences", nargs="+", default=["V1-S_55-G_1"],
+                        help="sequence pairs of --data, or 'all' (every dev pair)")
     parser.add_argument("--model", default="default", help="bundle of the ONNX path")
     parser.add_argument("--torch-model", default="default",
                         help="matcher file of the torch path (the bundle's source)")
@@ -119,6 +128,20 @@ def main() -> int:
         return 0
     if args.repeat < 1:
         parser.error(f"--repeat must be >= 1, got {args.repeat}")
+    if args.sequences == ["all"]:
+        args.sequences = sequence_names(args.data)
+    missing = [n for n in args.sequences if not (args.data / f"{n}_top.txt").exists()
+               or not (args.data / f"{n}_hor.txt").exists()]
+    if missing or not args.sequences:
+        print(f"CVMHAT pair(s) {', '.join(missing) or '(none)'} not found in {args.data}; "
+              "nothing to measure (skipped).")
+        return 0
+    if "torch" in args.runs:
+        try:
+            import torch  # noqa: F401
+        except ImportError:
+            print("torch is not installed (the learn extra): the torch run is left out")
+            args.runs = [r for r in args.runs if r != "torch"]
     exe = [sys.executable, "-m", "xvmatch", "associate", "--quiet"]
     commands = {
         "handcrafted": lambda t, h, o: [*exe, "--top", t, "--hor", h, "--out", o],
@@ -151,7 +174,9 @@ def main() -> int:
             rounds.append(rows)
     median = {label: tuple(statistics.median(rows[label][k] for rows in rounds)
                            for k in range(3)) for label in labels}
-    print(f"{', '.join(args.sequences)}: {n_frames} frames, whole command per sequence, one "
+    names = ", ".join(args.sequences) if len(args.sequences) <= 3 else \
+        f"{len(args.sequences)} pairs ({args.sequences[0]} ... {args.sequences[-1]})"
+    print(f"{names}: {n_frames} frames, whole command per sequence, one "
           f"thread; median of {args.repeat} round(s), order alternating")
     print(f"{'path':12s} {'fps (cpu)':>10s} {'fps (wall)':>11s} {'CVIDF1':>7s}")
     for label, (cpu, wall, f1) in median.items():

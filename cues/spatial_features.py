@@ -287,6 +287,70 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return np.mod(angle + np.pi, 2.0 * np.pi) - np.pi
 
 
+def _hypothesis_features(
+    hyps: Sequence[FrameAssociation],
+    hyp_camera: np.ndarray,
+    centres: np.ndarray,
+    x_hor: np.ndarray,
+    y_hor: np.ndarray,
+    s_top: float,
+    n: int,
+    config: FeatureConfig,
+    camera_given: bool,
+    hyp_f: np.ndarray,
+    pair_f: np.ndarray,
+) -> None:
+    """The ``HYP_FEATURES`` into ``hyp_f`` ``(H, 7)`` and the ``PAIR_FEATURES`` into ``pair_f``
+    ``(H, M, N, 12)`` (float32, zeroed) of the hypotheses ``hyps`` (see :func:`frame_features`):
+    every hypothesis at once, (H, M) per top person and (H, M, N) per pair, each feature computed
+    in float64 and written into its slice."""
+    n_hyp, m = pair_f.shape[:2]
+    half_fov = 0.5 * math.radians(config.fov_deg)
+    bearing_hor = np.arctan(x_hor * math.tan(half_fov))  # (N,) right of the axis, radians
+    log_y_hor = np.log(y_hor)
+    thetas = np.array([h.theta for h in hyps])
+    scales = np.array([h.scale for h in hyps])
+    geometry = top_geometry(centres, hyp_camera, math.radians(config.tau_deg))
+    dist, visible = geometry.dist, geometry.visible
+    delta = _wrap(geometry.phi - thetas[:, None])  # signed angle from the optical axis
+    in_view = (np.abs(delta) < half_fov) & visible  # inside the field of view (Eqs. 5-7)
+    y_top = dist * np.cos(delta)  # Eq. 5 depth
+    bearing_top = -delta  # Eq. 7: x_top = -tan(delta) / tan(alpha / 2)
+    diff = _wrap(bearing_top[:, :, None] - bearing_hor[None, None, :]) / half_fov
+    diff = np.clip(diff, -_CLIP, _CLIP)
+    absdiff = np.abs(diff)
+    pair_f[..., 0] = diff
+    pair_f[..., 1] = absdiff
+    depth = np.maximum(y_top, 0.05 * dist) * scales[:, None]
+    ratio = np.log(np.maximum(depth, 1e-12))[:, :, None] - log_y_hor[None, None, :]
+    ratio = np.clip(ratio, -_CLIP, _CLIP)
+    pair_f[..., 2] = ratio
+    pair_f[..., 3] = np.abs(ratio)
+    sizes = [h.pairs.shape[0] for h in hyps]
+    if sum(sizes):  # matched by the hypothesis' DTW
+        pairs = np.concatenate([h.pairs for h in hyps])
+        pair_f[np.repeat(np.arange(n_hyp), sizes), pairs[:, 0], pairs[:, 1], 4] = 1.0
+    pair_f[..., 5] = in_view[:, :, None]
+    pair_f[..., 6] = visible[:, :, None]
+    pair_f[..., 7] = (np.arange(m)[None, :] == hyp_camera[:, None])[:, :, None]
+    pair_f[..., 8] = (np.abs(bearing_top) / math.pi)[:, :, None]
+    pair_f[..., 9] = absdiff - absdiff.min(axis=2, keepdims=True)
+    col_ref = np.where(visible[:, :, None], absdiff, np.inf).min(axis=1, keepdims=True)
+    pair_f[..., 10] = np.clip(absdiff - np.where(np.isfinite(col_ref), col_ref, 0.0), 0, _CLIP)
+    log_dist = np.clip(np.log(np.maximum(dist, _EPS) / s_top), -_CLIP, 2 * _CLIP)
+    pair_f[..., 11] = log_dist[:, :, None]
+    costs = np.array([max(h.cost, 1e-12) for h in hyps])
+    log_cost = np.log(costs)
+    hyp_f[:, 0] = np.clip(log_cost / 5.0, -_CLIP, _CLIP)
+    hyp_f[:, 1] = np.minimum(log_cost - log_cost[0], 10.0) / 5.0
+    hyp_f[:, 2] = np.arange(n_hyp) / config.n_hypotheses
+    hyp_f[:, 3] = np.array(sizes) / n
+    hyp_f[:, 4] = in_view.sum(axis=1) / n
+    hyp_f[:, 5] = np.clip(np.log(np.maximum(scales * s_top * REFERENCE_SIZE[1], 1e-12)),
+                          -10, 10) / 5.0
+    hyp_f[:, 6] = float(camera_given)
+
+
 def frame_features(
     top_boxes: np.ndarray,
     hor_boxes: np.ndarray,
@@ -375,70 +439,19 @@ def frame_features(
 
     hyps = _hypotheses(top, hor, width, config, cam) if m and n else []
     n_hyp = len(hyps)
-    half_fov = 0.5 * math.radians(config.fov_deg)
-    hyp_f = np.zeros((n_hyp, len(HYP_FEATURES)))
-    pair_f = np.zeros((n_hyp, m, n, len(PAIR_FEATURES)))
     hyp_camera = np.array([h.camera for h in hyps], dtype=np.int64)
+    # Written straight into the float32 arrays (a float64 value assigned to a float32 array
+    # rounds as astype does: the same bits as building them in float64 and casting).
+    hyp_f = np.zeros((n_hyp, len(HYP_FEATURES)), np.float32)
+    pair_f = np.zeros((n_hyp, m, n, len(PAIR_FEATURES)), np.float32)
     if n_hyp:
-        # Every hypothesis at once: (H, M) per top person, (H, M, N) per pair.
-        bearing_hor = np.arctan(x_hor * math.tan(half_fov))  # (N,) right of the axis, radians
-        log_y_hor = np.log(y_hor)
-        thetas = np.array([h.theta for h in hyps])
-        scales = np.array([h.scale for h in hyps])
-        geometry = top_geometry(centres, hyp_camera, math.radians(config.tau_deg))
-        dist, visible = geometry.dist, geometry.visible
-        delta = _wrap(geometry.phi - thetas[:, None])  # signed angle from the optical axis
-        in_view = (np.abs(delta) < half_fov) & visible  # inside the field of view (Eqs. 5-7)
-        y_top = dist * np.cos(delta)  # Eq. 5 depth
-        bearing_top = -delta  # Eq. 7: x_top = -tan(delta) / tan(alpha / 2)
-        diff = _wrap(bearing_top[:, :, None] - bearing_hor[None, None, :]) / half_fov
-        diff = np.clip(diff, -_CLIP, _CLIP)
-        depth = np.maximum(y_top, 0.05 * dist) * scales[:, None]
-        ratio = np.log(np.maximum(depth, 1e-12))[:, :, None] - log_y_hor[None, None, :]
-        ratio = np.clip(ratio, -_CLIP, _CLIP)
-        matched = np.zeros((n_hyp, m, n))
-        for h, hyp in enumerate(hyps):
-            if hyp.pairs.size:
-                matched[h, hyp.pairs[:, 0], hyp.pairs[:, 1]] = 1.0
-        absdiff = np.abs(diff)
-        row_gap = absdiff - absdiff.min(axis=2, keepdims=True)
-        col_ref = np.where(visible[:, :, None], absdiff, np.inf).min(axis=1, keepdims=True)
-        col_gap = np.clip(absdiff - np.where(np.isfinite(col_ref), col_ref, 0.0), 0, _CLIP)
-        is_cam = np.arange(m)[None, :] == hyp_camera[:, None]
-        per_top = np.stack([in_view, visible, is_cam, np.abs(bearing_top) / math.pi],
-                           axis=2).astype(float)
-        log_dist = np.clip(np.log(np.maximum(dist, _EPS) / s_top), -_CLIP, 2 * _CLIP)
-        pair_f = np.concatenate(
-            [
-                diff[..., None],
-                absdiff[..., None],
-                ratio[..., None],
-                np.abs(ratio)[..., None],
-                matched[..., None],
-                np.broadcast_to(per_top[:, :, None, :], (n_hyp, m, n, 4)),
-                row_gap[..., None],
-                col_gap[..., None],
-                np.broadcast_to(log_dist[:, :, None, None], (n_hyp, m, n, 1)),
-            ],
-            axis=3,
-        )
-        costs = np.array([max(h.cost, 1e-12) for h in hyps])
-        log_cost = np.log(costs)
-        hyp_f = np.column_stack([
-            np.clip(log_cost / 5.0, -_CLIP, _CLIP),
-            np.minimum(log_cost - log_cost[0], 10.0) / 5.0,
-            np.arange(n_hyp) / config.n_hypotheses,
-            np.array([h.pairs.shape[0] for h in hyps]) / n,
-            in_view.sum(axis=1) / n,
-            np.clip(np.log(np.maximum(scales * s_top * REFERENCE_SIZE[1], 1e-12)), -10, 10)
-            / 5.0,
-            np.full(n_hyp, float(camera is not None)),
-        ])
+        _hypothesis_features(hyps, hyp_camera, centres, x_hor, y_hor, s_top, n, config,
+                             camera is not None, hyp_f, pair_f)
     return FrameFeatures(
         top=top_f.astype(np.float32),
         hor=hor_f.astype(np.float32),
-        hyp=hyp_f.astype(np.float32),
-        pair=pair_f.astype(np.float32),
+        hyp=hyp_f,
+        pair=pair_f,
         top_order=top_order.astype(np.int64),
         hor_order=hor_order.astype(np.int64),
         hyp_camera=hyp_camera,

@@ -328,7 +328,8 @@ def _best_per_group(
         # with the groups' bests so far: a loop over groups, not over rows.
         groups, costs = group[idx[rows]], result.cost[rows]
         order = np.lexsort((idx[rows], costs, groups))
-        _, first = np.unique(groups[order], return_index=True)
+        ordered = groups[order]  # ascending: each group's first entry is its best row
+        first = np.flatnonzero(np.concatenate(([True], ordered[1:] != ordered[:-1])))
         for r in rows[order[first]]:
             i, c = int(idx[r]), float(result.cost[r])
             g = group[i]
@@ -347,9 +348,7 @@ def _best_per_group(
 
     loose = cost_lower_bound(hypotheses.x, hypotheses.count, hor_x, params, tight=False)
     # Seed: each group's most promising hypothesis under the loose bound.
-    order = np.lexsort((np.arange(n), loose))
-    _, first = np.unique(group[order], return_index=True)
-    seed = np.sort(order[first][np.isfinite(loose[order[first]])])
+    seed = _group_seeds(loose, hypotheses.n_theta)
     if seed.size == 0:
         return []
     score(seed)
@@ -374,6 +373,25 @@ def _best_per_group(
         found = sorted(found, key=lambda b: (b[1], b[0]))[:keep]
         found.sort(key=lambda b: b[0])
     return found
+
+
+def _group_seeds(loose: np.ndarray, n_theta: int) -> np.ndarray:
+    """Each group's (``n_theta`` consecutive rows) row of lowest ``loose``, the lowest index on
+    ties, ascending, where finite: the seeds of :func:`_best_per_group`.
+
+    The definition is a sort by (bound, index) and each group's first row in it; ``argmin`` per
+    group gives the same rows where no bound is NaN (a sort puts NaN last, ``argmin`` first),
+    at a tenth of the cost.
+    """
+    n = loose.shape[0]
+    n_groups = -(-n // n_theta)
+    if n == n_groups * n_theta and not np.isnan(loose).any():
+        seed = np.arange(n_groups) * n_theta + loose.reshape(n_groups, n_theta).argmin(axis=1)
+    else:
+        order = np.lexsort((np.arange(n), loose))
+        _, first = np.unique(order // n_theta, return_index=True)
+        seed = np.sort(order[first])
+    return seed[np.isfinite(loose[seed])]
 
 
 def hypothesis_vectors(
