@@ -27,13 +27,13 @@ GROUPS = {
                                                 "--fps"],
     "box files from a detector": ["--duplicates", "--min-score", "--first-frame"],
     "output and run time": ["--costs", "--threads", "--precision", "--draw-every",
-                            "--no-labels", "--workers", "--quiet"],
+                            "--no-labels", "--draw-truth", "--workers", "--quiet"],
 }
 """The groups after the first, in the order printed, with their options."""
 
-LONG_HELP = {"--offset", "--max-offset"}
-"""Options whose help is written in ``xvmatch/commands/offset.py`` (shared with ``offset``,
-``track`` and ``associate-multi``), longer than two lines."""
+LONG_HELP: set[str] = set()
+"""Options allowed more than two lines (none: ``--offset``'s, written in
+``xvmatch/commands/offset.py``, is given two lines by ``short_offset_help``)."""
 
 
 def _help(capsys, monkeypatch, command: str = "associate") -> str:

@@ -16,11 +16,12 @@ alone when they fail), takes Eq. 17's ``w1`` at
 cross-view weights and the refined cameras fit the video, computes the learned matcher's
 box-only evidence (``weights="learned"``) and tracks
 (:func:`~xvmatch.inference.tracks.tracking.track_pair`, CVMHAT Algorithm 1); the images are
-closed at the end, also on an error. A caller that needs the images' size before the run (to
-settle the horizontal image size and estimate the offset, as ``xvmatch track`` does) opens them
-first with :func:`open_track_images` and passes them in. Bad input raises ``ValueError`` with
-one line; the lines name the command-line options that supply each input (``--model``,
-``--cameras``).
+closed at the end, also on an error. :func:`track_pictures` gives what the pictures of a run
+show (``xvmatch track --draw``): each moment's pairs of boxes that share a track id. A caller
+that needs the images' size before the run (to settle the horizontal image size and estimate the
+offset, as ``xvmatch track`` does) opens them first with :func:`open_track_images` and passes
+them in. Bad input raises ``ValueError`` with one line; the lines name the command-line options
+that supply each input (``--model``, ``--cameras``).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from xvmatch.cues.box_motion import jump_warning
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.formats.box_image_size import check_boxes_in_image
 from xvmatch.formats.camera_frames import CameraFrames
-from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
+from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, shift_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
 from xvmatch.inference.matching.camera_check import CameraCheck, check_run_cameras
 from xvmatch.inference.matching.camera_refinement import CameraRefinement, refine_run_cameras
@@ -61,11 +62,13 @@ from xvmatch.inference.tracks.tracking import (
 __all__ = [
     "CROSS_VIEW_WEIGHTS",
     "OpenTrackImages",
+    "TrackPictures",
     "TrackRun",
     "TrackRunOptions",
     "cross_view_weights",
     "open_track_images",
     "run_tracking",
+    "track_pictures",
     "track_weights",
 ]
 
@@ -416,3 +419,57 @@ def run_tracking(
                         options.workers, progress, images=track_images, learned=learned,
                         appearance_check=options.appearance_check, checked=checked)
     return TrackRun(result, config, *refined, camera_checked, checked[0] if checked else None)
+
+
+@dataclass(frozen=True)
+class TrackPictures:
+    """What the pictures of a track run show, each moment under its horizontal frame number
+    (the arguments of :func:`xvmatch.viz.match_pictures.write_match_pictures`).
+
+    Attributes:
+        top: ``{frame: FrameBoxes}`` of the top view re-timed by the offset: frame ``f`` holds
+            top frame ``f + offset`` (``ids``: the rows).
+        hor: ``{frame: FrameBoxes}`` of the horizontal view (``ids``: the rows).
+        pairs: ``{frame: [(top row, horizontal row)]}``: the boxes of a moment that share a
+            track id (the first box of each view where a track has two).
+        frames: the frames with boxes in both views, ascending.
+        names: ``({top row: track id}, {horizontal row: track id})``, the labels; rows the
+            tracker dropped have none.
+        sources: ``{"top": images, "hor": images}`` re-timed as ``top``, or None without
+            images.
+    """
+
+    top: dict[int, FrameBoxes]
+    hor: Mapping[int, FrameBoxes]
+    pairs: dict[int, list[tuple[int, int]]]
+    frames: list[int]
+    names: tuple[dict[int, int], dict[int, int]]
+    sources: dict | None = None
+
+
+def track_pictures(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes],
+                   result: TrackResult, offset: int = 0,
+                   images: OpenTrackImages | None = None) -> TrackPictures:
+    """The :class:`TrackPictures` of a run's ``result`` on ``top`` and ``hor`` (each view in
+    its own timing, ``ids`` = rows, as given to :func:`run_tracking`) at ``offset``, on the
+    open ``images`` (None or none open: boxes only)."""
+    shown = shift_frames(top, offset)
+    pairs: dict[int, list[tuple[int, int]]] = {}
+    for f, record in hor.items():
+        if f not in shown:
+            continue
+        top_of: dict[int, int] = {}
+        for row in shown[f].ids.tolist():
+            if row in result.top_rows:
+                top_of.setdefault(result.top_rows[row], row)
+        pairs[f] = []
+        for row in record.ids.tolist():
+            track = result.hor_rows.get(row)
+            if track in top_of:
+                pairs[f].append((top_of.pop(track), row))
+    frames = sorted(f for f in pairs if len(shown[f]) and len(hor[f]))
+    sources = None
+    if images is not None and images.sources:
+        sources = {"top": retimed(images.sources[0], offset), "hor": images.sources[1]}
+    return TrackPictures(shown, hor, pairs, frames, (dict(result.top_rows),
+                                                     dict(result.hor_rows)), sources)

@@ -1,14 +1,15 @@
 """How the commands read box files: a header line skipped, ``--min-score`` (the detector's
 score column) and ``--first-frame`` (files counting from 0), once for every command.
 
-A command adds the options with :func:`add_box_reading_options` (or
-``add_box_inputs(parser, reading=True)`` of :mod:`xvmatch.commands._options`), builds one
+A command adds the options with :func:`add_box_reading_options` (or with the box files
+themselves, ``add_box_inputs(parser, reading=True)``), builds one
 :class:`BoxReading` with :func:`box_reading` and reads each file with :func:`read_boxes` (boxes
 by person id) or :func:`read_detections` (every row, for ``track`` and ``associate-multi``); the
 reader's notes and warnings come out as ``xvmatch: note: ...`` and ``xvmatch: warning: ...``
 lines. The reading itself is :func:`xvmatch.formats.mot_boxes.read_mot_boxes`'s.
 
-The horizontal image size rule's command-line side lives here too: the rule itself (which size
+It also checks ``--camera-id`` against the top boxes (:func:`check_camera_id`). The
+horizontal image size rule's command-line side lives here too: the rule itself (which size
 the horizontal boxes belong to, and whether they fit it) is
 :mod:`xvmatch.formats.box_image_size`'s; :func:`note_if_assumed` prints the one-line note of an
 assumed CVMHAT size, :func:`settled_hor_size` the size a command settles from its inputs.
@@ -25,8 +26,9 @@ from dataclasses import dataclass
 from xvmatch.commands._types import float_in
 from xvmatch.formats.box_image_size import ASSUMED, box_extent
 
-__all__ = ["BoxReading", "add_box_reading_options", "box_reading", "note_if_assumed",
-           "read_boxes", "read_detections", "settled_hor_size"]
+__all__ = ["BoxReading", "add_box_inputs", "add_box_reading_options", "box_reading",
+           "check_camera_id", "note_if_assumed", "read_boxes", "read_detections",
+           "settled_hor_size"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,37 @@ def add_box_reading_options(parser, min_score: bool = True) -> None:
         "--first-frame", type=int, choices=(0, 1), default=1, metavar="{0,1}",
         help="the number of the box files' first frame: 1 (default, as MOTChallenge) or 0 "
         "(read as frame + 1, with a note; outputs count from 1)")
+
+
+def add_box_inputs(parser: argparse.ArgumentParser, reading: bool = False,
+                   detector: argparse._ActionsContainer | None = None) -> None:
+    """``--top``, ``--hor`` (MOT box files) and ``--duplicates`` (associate, evaluate,
+    offset); with ``reading``, :func:`add_box_reading_options` too (the command then reads
+    its files with :func:`box_reading`). ``detector``: an argument group for ``--duplicates``
+    and the reading options, away from the common ones (``associate``); default the parser."""
+    parser.add_argument("--top", required=True, help="top-view boxes (MOT format)")
+    parser.add_argument("--hor", required=True, help="horizontal-view boxes (MOT format)")
+    detector = parser if detector is None else detector
+    detector.add_argument(
+        "--duplicates",
+        choices=("first", "error"),
+        default="first",
+        help="a repeated (frame, id) in a box file: keep the first box with a warning "
+        "(default; the real CVMHAT files have a few) or stop with an error",
+    )
+    if reading:
+        add_box_reading_options(detector)
+
+
+def check_camera_id(camera_id: int | None, top: Mapping, path: str) -> None:
+    """``--camera-id`` must name a person of the top view in at least one frame."""
+    from xvmatch.commands._options import UsageError  # defined there, which imports this
+
+    if camera_id is None:
+        return
+    if not any(camera_id in rec.ids for rec in top.values()):
+        raise UsageError(f"--camera-id {camera_id}: no box of {path} has this id (the id of "
+                         "the horizontal camera's wearer in the top-view file)")
 
 
 def box_reading(args: argparse.Namespace) -> BoxReading:

@@ -3,8 +3,8 @@ argument groups, one :class:`ModelArgs` record of the parsed options (:func:`mod
 place they are read, for ``associate``, ``adapt``, ``track``, ``associate-multi``), their
 translation into the library's run options (:func:`learned_run_options`), and the run with its
 notes and outputs (``associate_with_model``, ``open_models``). The cameras' options are in
-:mod:`xvmatch.commands._cameras` (re-exported here). The runs are imported lazily: only these
-code paths load onnxruntime."""
+:mod:`xvmatch.commands._cameras`, the pictures' in :mod:`xvmatch.commands._options` (both
+re-exported here). The runs are imported lazily: only these code paths load onnxruntime."""
 
 from __future__ import annotations
 
@@ -24,17 +24,24 @@ from xvmatch.commands._cameras import (
     note_camera_refinement,
     write_cameras,
 )
-from xvmatch.commands._options import UsageError, add_image_options, check_images_together
-from xvmatch.commands._types import float_in, int_in, thread_count
+from xvmatch.commands._options import (
+    DRAW_COMMAND,
+    UsageError,
+    add_draw_arguments,
+    add_image_options,
+    check_images_together,
+    draw_pictures,
+)
+from xvmatch.commands._types import float_in, thread_count
 from xvmatch.core.output_paths import check_own_folder
 from xvmatch.formats.camera_frames import ego_camera_size
 
 __all__ = [
     "DRAW_COMMAND", "LEARNED_ONLY", "ModelArgs", "add_camera_check", "add_draw_arguments",
-    "add_model_arguments", "add_refine_top_camera", "add_write_cameras", "associate_with_model",
-    "check_precision", "check_write_cameras", "draw_pictures", "ego_camera_size",
-    "horizontal_size", "learned_run_options", "model_args", "note_camera_check",
-    "note_camera_refinement", "open_models", "write_cameras",
+    "add_model_arguments", "add_refine_top_camera", "add_track_camera_arguments",
+    "add_write_cameras", "associate_with_model", "check_precision", "check_write_cameras",
+    "draw_pictures", "ego_camera_size", "horizontal_size", "learned_run_options", "model_args",
+    "note_camera_check", "note_camera_refinement", "open_models", "write_cameras",
 ]
 
 _gamma = float_in(0, 1, "the matcher's costs lie in [0, 1]", low_open=True)
@@ -71,6 +78,7 @@ class ModelArgs:
     draw: str | None = None
     draw_every: int = 1
     no_labels: bool = False
+    draw_truth: bool = False
     quiet: bool = False
 
 
@@ -117,30 +125,20 @@ def add_model_arguments(parser: argparse.ArgumentParser, common=None, cameras=No
                          "or fp32 (default: int8 where the bundle and the CPU allow)")
 
 
-def add_draw_arguments(parser: argparse.ArgumentParser, common=None, more=None) -> None:
-    """Add ``--draw`` (to ``common`` when given), ``--draw-every`` and ``--no-labels`` (to
-    ``more``, default a group "pictures"), both methods of ``associate``."""
-    g = more or parser.add_argument_group("pictures (both methods)")
-    (common or g).add_argument(
-        "--draw", default=None, metavar="DIR",
-        help="write a picture of each frame's pairs into DIR (new, empty or an earlier --draw's)")
-    g.add_argument("--draw-every", default=1, metavar="K",
-                   type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
-                   help="with --draw: every K-th frame only, 1..100000 (default 1)")
-    g.add_argument("--no-labels", action="store_true",
-                   help="with --draw: print no ids by the boxes (colours alone show the pairs)")
-
-
-DRAW_COMMAND = "xvmatch associate --draw"
-"""The owner of a ``--draw`` folder: pictures are written only into a new or empty folder or one
-an earlier ``--draw`` made (:func:`xvmatch.core.output_paths.claim_folder`)."""
-
-
-def draw_pictures(*args, **kwargs) -> None:
-    """:func:`~xvmatch.viz.match_pictures.write_match_pictures` into ``--draw``'s folder."""
-    from xvmatch.viz.match_pictures import write_match_pictures
-
-    write_match_pictures(*args, owner=DRAW_COMMAND, option="--draw", **kwargs)
+def add_track_camera_arguments(g) -> None:
+    """``track``'s ``--cameras`` with their refinement, writing and check, and the learned
+    cross-view weights' ``--appearance-check``, on the argument group ``g``."""
+    g.add_argument("--cameras", default=None, metavar="CAMERAS",
+                   help="calibrated cameras 'top' and 'ego' (a file, or a folder of files "
+                   "numbered by the horizontal frames) for the --model's cross-view weights, as "
+                   "'associate --cameras' (an oblique overview camera wants them)")
+    add_refine_top_camera(g)
+    add_write_cameras(g)
+    add_camera_check(g)
+    g.add_argument("--appearance-check", choices=("on", "off"), default="on",
+                   help="with --model's network and learned weights: leave the cross-view "
+                   "appearance out where the tracklet pairs the boxes alone are sure of show it "
+                   "too weak (default on; off: always use it; nothing to judge with --w1 1)")
 
 
 LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs",
@@ -237,7 +235,8 @@ def associate_with_model(opts: ModelArgs, top: Mapping, hor: Mapping, frames: It
             print(run.checked.message(), file=sys.stderr)
         if opts.draw is not None:
             draw_pictures(opts.draw, opts.draw_every, top, hor, run.pairs, sorted(run.costs),
-                          inputs.images or None, run.hor_size, not opts.no_labels)
+                          inputs.images or None, run.hor_size, not opts.no_labels,
+                          truth=opts.draw_truth, camera_id=opts.camera_id)
     if opts.costs is not None:
         from xvmatch.inference.matching.costs_record import write_costs_record
 

@@ -1,12 +1,13 @@
 """Options and helpers shared by the ``xvmatch`` commands (every ``cli_*`` module uses them).
 
-Each option is defined here once: the box inputs (``--top``, ``--hor``, ``--duplicates``; how
-box files are read, ``--min-score`` and ``--first-frame``, lives in
-:mod:`xvmatch.commands._box_reading` and is re-exported here), the spatial-distribution
+Each option is defined here once: the box inputs (``--top``, ``--hor``, ``--duplicates``, and
+how box files are read, ``--min-score`` and ``--first-frame``, live in
+:mod:`xvmatch.commands._box_reading` and are re-exported here), the spatial-distribution
 parameters (``--rho --lam --tau --dtheta --fov``, read back by :func:`spatial_params`), the
 image inputs (``--top-images``, ``--hor-images``, checked together by
-:func:`check_images_together`), and the horizontal ``--image-size``'s type and help. With them
-come the sub-command parser (:func:`add_command_parser`), the progress bar
+:func:`check_images_together`), the horizontal ``--image-size``'s type and help, and the
+pictures (``--draw`` and its companions: :func:`add_draw_arguments`, :func:`draw_pictures`).
+With them come the sub-command parser (:func:`add_command_parser`), the progress bar
 (:func:`progress_bar`), the box readers that print the reader's notes and warnings
 (:func:`read_boxes`, :func:`read_detections`) and :class:`UsageError`. Output paths are checked
 by :mod:`xvmatch.core.output_paths`; :func:`image_inputs` lists the images as its inputs.
@@ -23,15 +24,18 @@ from collections.abc import Callable, Iterable, Mapping
 
 from xvmatch.commands._box_reading import (
     BoxReading,
+    add_box_inputs,
     add_box_reading_options,
     box_reading,
+    check_camera_id,
     read_boxes,
     read_detections,
 )
-from xvmatch.commands._types import float_in, image_size
+from xvmatch.commands._types import float_in, image_size, int_in
 from xvmatch.core.output_paths import Input
 
 __all__ = [
+    "DRAW_COMMAND",
     "HOR_IMAGE_SIZE",
     "IMAGE_SIZE_HELP",
     "BoxReading",
@@ -39,16 +43,19 @@ __all__ = [
     "add_box_inputs",
     "add_box_reading_options",
     "add_command_parser",
+    "add_draw_arguments",
     "add_image_options",
     "add_spatial_options",
     "box_reading",
     "check_camera_id",
     "check_images_together",
+    "draw_pictures",
     "frame_progress",
     "image_inputs",
     "progress_bar",
     "read_boxes",
     "read_detections",
+    "short_offset_help",
     "spatial_params",
 ]
 
@@ -72,35 +79,6 @@ def add_command_parser(subparsers, name: str, help_text: str, example: str,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         usage=usage,
     )
-
-
-def add_box_inputs(parser: argparse.ArgumentParser, reading: bool = False,
-                   detector: argparse._ActionsContainer | None = None) -> None:
-    """``--top``, ``--hor`` (MOT box files) and ``--duplicates`` (associate, evaluate,
-    offset); with ``reading``, :func:`add_box_reading_options` too (the command then reads
-    its files with :func:`box_reading`). ``detector``: an argument group for ``--duplicates``
-    and the reading options, away from the common ones (``associate``); default the parser."""
-    parser.add_argument("--top", required=True, help="top-view boxes (MOT format)")
-    parser.add_argument("--hor", required=True, help="horizontal-view boxes (MOT format)")
-    detector = parser if detector is None else detector
-    detector.add_argument(
-        "--duplicates",
-        choices=("first", "error"),
-        default="first",
-        help="a repeated (frame, id) in a box file: keep the first box with a warning "
-        "(default; the real CVMHAT files have a few) or stop with an error",
-    )
-    if reading:
-        add_box_reading_options(detector)
-
-
-def check_camera_id(camera_id: int | None, top: Mapping, path: str) -> None:
-    """``--camera-id`` must name a person of the top view in at least one frame."""
-    if camera_id is None:
-        return
-    if not any(camera_id in rec.ids for rec in top.values()):
-        raise UsageError(f"--camera-id {camera_id}: no box of {path} has this id (the id of "
-                         "the horizontal camera's wearer in the top-view file)")
 
 
 def add_spatial_options(parser: argparse.ArgumentParser,
@@ -217,3 +195,54 @@ def step_progress(enabled: bool) -> Callable[[Iterable, int, str], Iterable]:
     """``progress(items, total, description)``: wraps the steps of a run in a
     :func:`progress_bar` (the tracker's ``progress``)."""
     return lambda items, total, desc: progress_bar(total, desc, "step", enabled, items)
+
+
+DRAW_COMMAND = "xvmatch associate --draw"
+"""The owner of ``associate``'s ``--draw`` folder: pictures are written only into a new or empty
+folder or one an earlier ``--draw`` of the same command made
+(:func:`xvmatch.core.output_paths.claim_folder`; ``track``'s has its own owner)."""
+
+
+def add_draw_arguments(parser: argparse.ArgumentParser, common=None, more=None,
+                       video: bool = False) -> None:
+    """Add ``--draw`` (to ``common`` when given), ``--draw-every``, ``--no-labels`` and
+    ``--draw-truth`` (to ``more``, default a group "pictures"); with ``video``,
+    ``--draw-video`` too (``track``)."""
+    g = more or parser.add_argument_group("pictures")
+    (common or g).add_argument(
+        "--draw", default=None, metavar="DIR",
+        help="write a picture of each frame's pairs into DIR (new, empty or an earlier --draw's)")
+    if video:
+        g.add_argument("--draw-video", default=None, metavar="FILE.mp4",
+                       help="write the same pictures as an mp4 video (mp4v, 10 frames a "
+                       "second), with or without --draw")
+    g.add_argument("--draw-every", default=1, metavar="K",
+                   type=int_in(1, 100_000, "a frame step: 100000 is over an hour at 25 fps"),
+                   help="with --draw: every K-th frame only, 1..100000 (default 1)")
+    g.add_argument("--no-labels", action="store_true",
+                   help="with --draw: print no ids by the boxes (colours alone show the pairs)")
+    g.add_argument("--draw-truth", action="store_true",
+                   help="with --draw: pairs green where the files' ids agree, red where not, "
+                   "--camera-id's wearer marked (pictures only: the pairs are the same)")
+
+
+def draw_pictures(folder, every: int, top: Mapping, hor: Mapping, *more,
+                  owner: str = DRAW_COMMAND, truth: bool = False, camera_id: int | None = None,
+                  row_ids: tuple | None = None, **kwargs) -> None:
+    """:func:`~xvmatch.viz.match_pictures.write_match_pictures` into ``--draw``'s folder (that
+    of ``owner``: ``DRAW_COMMAND`` or ``track``'s); with ``truth`` (``--draw-truth``), the
+    colours and wearer mark of :func:`~xvmatch.viz.match_pictures.truth_marks` (``row_ids``:
+    each view's true id per row, where the boxes' ids are rows)."""
+    from xvmatch.viz.match_pictures import truth_marks, write_match_pictures
+
+    if truth:
+        kwargs.update(truth_marks(top, hor, camera_id, *(row_ids or (None, None))))
+    write_match_pictures(folder, every, top, hor, *more, owner=owner, option="--draw", **kwargs)
+
+
+def short_offset_help(parser: argparse.ArgumentParser, record: str, default: str) -> None:
+    """``--offset``'s help in two or three lines: what N means, its range, where the offset
+    applied is recorded (``record``) and the ``default``; docs/offset.md has the rest."""
+    action = next(a for a in parser._actions if "--offset" in a.option_strings)
+    action.help = ("top frame = horizontal frame + N for unsynced videos, |N| <= 100000; auto: "
+                   f"N from the boxes (default {default}; applied N in {record}; docs/offset.md)")

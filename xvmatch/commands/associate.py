@@ -34,6 +34,7 @@ from xvmatch.commands._options import (
     frame_progress,
     image_inputs,
     read_boxes,
+    short_offset_help,
     spatial_params,
 )
 from xvmatch.commands._types import box_id, worker_count
@@ -71,6 +72,7 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
                    "cameras'; else CVMHAT's 2688x1512, with a note)")
     add_offset_options(p, "Pairs are written under the horizontal frame numbers, "
                        "the offset in OUT.offset.json")
+    short_offset_help(p, "OUT.offset.json", "0")
     p.add_argument(
         "--mode", choices=("auto", "frame", "video"), default="auto",
         help="video: pairs kept consistent along each view's track ids; frame: each frame "
@@ -185,7 +187,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     if args.model is None and args.draw is not None:
         both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
         draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
-                      not args.no_labels)
+                      not args.no_labels, truth=args.draw_truth, camera_id=args.camera_id)
     _write(args, pairs, frames, offset, _AUTO_VIDEO if video and args.mode == "auto" else None)
     return 0
 

@@ -1,10 +1,9 @@
 """The ``xvmatch track`` command: parses and checks the options, settles the horizontal image size
-and the offset, runs :func:`xvmatch.inference.tracks.track_run.run_tracking` (CVMHAT
-Algorithm 1; the module says what each option feeds) and writes ``OUT/top.txt`` and
-``OUT/hor.txt`` (the input rows, the id field holding the track id; rows dropped are absent) and
-``OUT/offset.json`` (the offset applied, which ``evaluate --tracks`` reads:
-:mod:`xvmatch.commands.evaluate_tracks`). Bad input raises ``ValueError`` with a one-line
-message, printed by the main entry point as ``xvmatch: error: ...`` with exit code 2.
+and the offset, runs :func:`xvmatch.inference.tracks.track_run.run_tracking` (CVMHAT Algorithm 1;
+the module says what each option feeds) and writes ``OUT/top.txt`` and ``OUT/hor.txt`` (the
+input rows, the id field holding the track id; rows dropped are absent), ``OUT/offset.json``
+(the offset applied, read by ``evaluate --tracks``) and with ``--draw`` or ``--draw-video`` the
+pictures of the pairs. Bad input raises ``ValueError`` with one line (exit code 2).
 """
 
 from __future__ import annotations
@@ -14,11 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-from xvmatch.commands._box_reading import settled_hor_size
+from xvmatch.commands._box_reading import box_reading, read_detections, settled_hor_size
 from xvmatch.commands._model import (
-    add_camera_check,
-    add_refine_top_camera,
-    add_write_cameras,
+    add_track_camera_arguments,
     check_write_cameras,
     model_args,
     open_models,
@@ -27,10 +24,14 @@ from xvmatch.commands._model import (
 from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
+    add_box_reading_options,
     add_command_parser,
+    add_draw_arguments,
     add_image_options,
     add_spatial_options,
+    draw_pictures,
     image_inputs,
+    short_offset_help,
     spatial_params,
     step_progress,
 )
@@ -45,7 +46,8 @@ OFFSET_FILE = "offset.json"
 videos kept the files' timing), so that ``evaluate --tracks`` re-times the same way."""
 
 TRACK_COMMAND = "xvmatch track"
-"""The marker name of the command's output folders (it writes only into a folder it made)."""
+"""The marker name of the command's output folders (it writes only into a folder it made); its
+``--draw`` folders are marked ``xvmatch track --draw``."""
 
 EXAMPLE = (
     "xvmatch track --top seq_top.txt --hor seq_hor.txt --out tracks/\n"
@@ -75,14 +77,14 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--hor", required=True,
                    help="horizontal-view detections (MOT format, ids ignored)")
     p.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder (created); top.txt, hor.txt and offset.json (the offset "
-                   "applied, which evaluate --tracks reads) are written atomically")
+                   help="output folder (created): top.txt, hor.txt and offset.json (the offset "
+                   "applied, read by evaluate --tracks), each written atomically")
     p.add_argument("--solver", choices=("mip", "spectral"), default="mip",
                    help="mip: Eqs. 1-4 with HiGHS (default); spectral: the spectral-clustering "
                    "baseline on the same weights")
     p.add_argument("--camera-id", type=box_id, default=None,
-                   help="id (in the top file's id column) of the horizontal camera's wearer: O "
-                   "given (|id| <= 2**53); without it O is searched among all top-view boxes")
+                   help="top-file id of the horizontal camera's wearer (O given), |id| <= 2**53 "
+                   "(default: O searched among all top-view boxes)")
     p.add_argument("--clip-length", type=CLIP_LENGTH_TYPE, default=10,
                    help="frames per clip, 1..1000 (default 10)")
     p.add_argument("--min-iou", type=MIN_IOU_TYPE, default=0.5,
@@ -97,21 +99,22 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="motion deviation scale of Eq. 15 per box height (resolution-free), in "
                    "(0, 1000] (default 1)")
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=30.0,
-                   help="wall-time guard per window for the MIP, in [0.01, 600] (default 30; "
-                   "its budget of work, the same on every CPU, is 64 added loops and 1000 "
-                   "HiGHS nodes per program); past either the best loop-free answer found is "
-                   "used and counted in a warning")
+                   help="wall-time guard per window for the MIP, in [0.01, 600] (default 30); "
+                   "past it or the budget of work (64 added loops, 1000 HiGHS nodes a program) "
+                   "the best loop-free answer found is used, with a warning")
     p.add_argument("--seed", type=seed_value, default=0,
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help=IMAGE_SIZE_HELP + "; with --hor-images it must agree with them")
-    add_offset_options(p, "Tracks are written in each video's own frame numbers; score them "
-                       "with 'xvmatch evaluate --tracks --offset N'", default="auto")
+    add_offset_options(p, "", default="auto")
+    short_offset_help(p, "OUT/offset.json", "auto")
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
                    help="processes for the frame association and --offset auto's estimate, "
                    "1..64 (default 1; the same output for any K)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    add_box_reading_options(p)
     _add_appearance_options(p)
+    add_draw_arguments(p, video=True)
     add_spatial_options(p)
     p.set_defaults(func=_cmd_track)
     return p
@@ -123,22 +126,13 @@ def _add_appearance_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("appearance (with the images of both views)")
     add_image_options(g)
     g.add_argument("--model", default=None, metavar="BUNDLE",
-                   help="a matcher bundle (xvmatch export), or 'default' for the shipped one: "
-                   "its box-only association gives the cross-view weights (--weights learned); "
-                   "with the images, its appearance network adds the cross-view term of Eq. 17 "
-                   "and the over-time one of Eq. 18")
+                   help="a matcher bundle (xvmatch export) or 'default' (shipped): its box-only "
+                   "costs give the cross-view weights (--weights learned); with the images, its "
+                   "appearance network adds the terms of Eqs. 17 and 18")
     g.add_argument("--weights", choices=("learned", "handcrafted"), default=None,
                    help="cross-view weights (Eq. 13): learned, from the --model's costs on the "
                    "boxes (default with --model), or handcrafted, from the spatial-distribution "
                    "search's pairs (default without)")
-    g.add_argument("--cameras", default=None, metavar="CAMERAS",
-                   help="calibrated cameras 'top' and 'ego' (a camera file, or a folder of "
-                   "per-frame files numbered by the horizontal frames) for the --model's "
-                   "cross-view weights: its camera cues and the rectified geometry, as "
-                   "'associate --cameras' (an oblique overview camera wants them)")
-    add_refine_top_camera(g)
-    add_write_cameras(g)
-    add_camera_check(g)
     g.add_argument("--w1", type=SHARE_TYPE, default=None,
                    help="share of the spatial term in a cross-view weight (Eq. 17), in [0, 1] "
                    "(default 0.3, or 1 when --cameras' top camera fits the video's head rays "
@@ -152,33 +146,32 @@ def _add_appearance_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--time-appearance", choices=("network", "colour"), default="network",
                    help="over-time appearance term of Eq. 18: the --model's network (default; "
                    "colour without --model) or colour histograms (Eq. 14, the paper's)")
-    g.add_argument("--appearance-check", choices=("on", "off"), default="on",
-                   help="with --model's network and learned weights: judge the cross-view "
-                   "appearance cue on the tracklet pairs the box-only matcher is sure of, and "
-                   "leave it out of the cross-view weights when it is shown too weak to help "
-                   "(default on; off: always use it; nothing to judge with --w1 1)")
+    add_track_camera_arguments(g)
 
 
 def _read_checked(args: argparse.Namespace):
     """``(top, hor, camera_rows, out)``: the boxes, wearer's rows and output folder, all checked."""
-    from xvmatch.formats.detection_rows import read_detection_rows
-
-    top = read_detection_rows(args.top)
-    hor = read_detection_rows(args.hor)
+    top = read_detections(args.top, box_reading(args))
+    hor = read_detections(args.hor, box_reading(args))
     camera_rows = None
     if args.camera_id is not None:
         camera_rows = top.rows_with_id(args.camera_id)
         if camera_rows.size == 0:
             raise ValueError(f"{args.top}: no box has the --camera-id {args.camera_id}")
     out = Path(args.out)
+    if args.draw_video is not None and not args.draw_video.lower().endswith(".mp4"):
+        raise ValueError(f"--draw-video {args.draw_video}: an mp4 file (FILE.mp4) is written")
     check_outputs(
         [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE)),
+         Output("--draw", args.draw, folder=True), Output("--draw-video", args.draw_video),
          *check_write_cameras(model_args(args))],
         [Input("--top", args.top), Input("--hor", args.hor),
          *image_inputs(args), Input("--cameras", args.cameras),
          Input("--model", None if args.model == "default" else args.model)],
     )
     check_own_folder(out, TRACK_COMMAND)
+    if args.draw is not None:
+        check_own_folder(args.draw, f"{TRACK_COMMAND} --draw", "--draw")
     return top, hor, camera_rows, out
 
 
@@ -188,11 +181,10 @@ def _run_options(args: argparse.Namespace, params, weights: str, model):
     from xvmatch.inference.tracks.track_run import TrackRunOptions, track_weights
     from xvmatch.inference.tracks.tracking import TrackConfig
 
-    config = TrackConfig(
-        clip_length=args.clip_length, min_iou=args.min_iou, max_gap=args.max_gap,
-        weights=track_weights(weights, args.c0, args.w1, args.w2, args.sigma),
-        solver=args.solver, time_limit=args.time_limit, seed=args.seed,
-        min_colour=args.min_colour, time_appearance=args.time_appearance)
+    given = ("clip_length", "min_iou", "max_gap", "solver", "time_limit", "seed", "min_colour",
+             "time_appearance")
+    config = TrackConfig(**{k: getattr(args, k) for k in given},
+                         weights=track_weights(weights, args.c0, args.w1, args.w2, args.sigma))
     return TrackRunOptions(
         config=config, params=params, weights=weights, model=model,
         model_name=str(args.model), top_images=args.top_images, hor_images=args.hor_images,
@@ -214,6 +206,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
         cross_view_weights,
         open_track_images,
         run_tracking,
+        track_pictures,
     )
 
     start = time.perf_counter()
@@ -233,6 +226,13 @@ def _cmd_track(args: argparse.Namespace) -> int:
                                 wearer)
         run = run_tracking(top.frames, hor.frames, options, resolved, offset, camera_rows, images,
                            step_progress(not args.quiet), _notes(args.quiet))
+        if args.draw is not None or args.draw_video is not None:
+            shown = track_pictures(top.frames, hor.frames, run.result, offset, images)
+            draw_pictures(args.draw, args.draw_every, shown.top, shown.hor, shown.pairs,
+                          shown.frames, shown.sources, resolved[0], not args.no_labels,
+                          owner=f"{TRACK_COMMAND} --draw", truth=args.draw_truth,
+                          camera_id=args.camera_id, row_ids=(top.file_ids, hor.file_ids),
+                          names=shown.names, video=args.draw_video)
     claim_folder(out, TRACK_COMMAND)
     result = run.result
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
