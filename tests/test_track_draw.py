@@ -162,3 +162,21 @@ def test_offset_help_is_three_lines_at_most(command, capsys, monkeypatch):
     lines = text.split("  --offset N|auto", 1)[1].split("  --max-offset", 1)[0].splitlines()
     assert len(lines) <= 3, lines
     assert "|N| <= 100000" in " ".join(" ".join(lines).split())
+
+
+def test_track_draws_each_moment_under_its_horizontal_frame_with_an_offset(scene, tmp_path):
+    # The horizontal file renumbered by 3 (top frame = horizontal frame - 3): the pictures are
+    # named by the horizontal frames and pair the boxes of the same moment (all right).
+    hor = tmp_path / "late_hor.txt"
+    hor.write_text("".join(f"{int(ln.split(',', 1)[0]) + 3},{ln.split(',', 1)[1]}\n"
+                           for ln in scene["hor"].read_text().splitlines()))
+    code = main(["track", "--top", str(scene["top"]), "--hor", str(hor), "--out",
+                 str(tmp_path / "tracks"), "--offset", "-3", "--image-size", "2688x1512",
+                 "--quiet", "--draw", str(tmp_path / "pictures"), "--draw-every", "5",
+                 "--draw-truth"])
+    assert code == 0
+    names = sorted(p.name for p in (tmp_path / "pictures").iterdir())
+    assert names == [MARKER, "frame_000004.jpg", "frame_000009.jpg"]
+    for name in names[1:]:
+        picture = cv2.imread(str(tmp_path / "pictures" / name))
+        assert _near(picture, RIGHT_COLOUR) > 200 and _near(picture, WRONG_COLOUR, 20) == 0
