@@ -26,8 +26,9 @@ GROUPS = {
     "an oblique top view (without --cameras)": ["--top-view", "--top-image-size", "--hor-hfov",
                                                 "--fps"],
     "box files from a detector": ["--duplicates", "--min-score", "--first-frame"],
-    "output and run time": ["--costs", "--threads", "--precision", "--draw-every",
-                            "--no-labels", "--draw-truth", "--workers", "--quiet"],
+    "output and run time": ["--costs", "--threads", "--precision", "--draw-video",
+                            "--draw-every", "--no-labels", "--draw-truth", "--workers",
+                            "--quiet"],
 }
 """The groups after the first, in the order printed, with their options."""
 

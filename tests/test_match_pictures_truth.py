@@ -2,7 +2,7 @@
 right pairs green and wrong ones red and marks the camera wearer when given the true ids
 (:func:`~xvmatch.viz.match_pictures.truth_marks`, ``--draw-truth``), draws exactly what it drew
 before when not, and writes the same pictures as an mp4 video (:class:`MatchVideo`);
-``associate --draw-truth`` wires it on the command line."""
+``associate --draw-truth`` and ``--draw-video`` wire them on the command line."""
 
 from __future__ import annotations
 
@@ -120,9 +120,22 @@ def test_associate_draw_truth_colours_by_the_files_ids(boxes, tmp_path, capsys, 
     code = main(["associate", "--top", str(top), "--hor", str(hor), "--out",
                  str(tmp_path / "p.csv"), "--image-size", "2688x1512", "--quiet", "--draw",
                  str(tmp_path / "draw"), "--draw-truth", "--camera-id", "0", "--mode", "frame",
-                 *model])
+                 "--draw-video", str(tmp_path / "pairs.mp4"), *model])
     assert code == 0, capsys.readouterr().err
     picture = cv2.imread(str(tmp_path / "draw" / "frame_000001.jpg"))
     assert _near(picture, RIGHT_COLOUR) > 100
     assert _near(picture, pair_colour(0), 10) == 0
     assert _near(picture, WEARER_COLOUR, 5) > 30
+    video = cv2.VideoCapture(str(tmp_path / "pairs.mp4"))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 2  # the two frames' pictures
+    video.release()
+
+
+def test_associate_draw_video_must_be_an_mp4_file(boxes, tmp_path, capsys):
+    top, hor = boxes
+    code = main(["associate", "--top", str(top), "--hor", str(hor), "--out",
+                 str(tmp_path / "p.csv"), "--draw-video", str(tmp_path / "pairs.avi")])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("xvmatch: error: --draw-video"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -77,6 +77,7 @@ class ModelArgs:
     costs: str | None = None
     draw: str | None = None
     draw_every: int = 1
+    draw_video: str | None = None
     no_labels: bool = False
     draw_truth: bool = False
     quiet: bool = False
@@ -181,7 +182,7 @@ def learned_run_options(opts: ModelArgs, models: list, names: list[str],
     """The :class:`~xvmatch.inference.matching.learned_pipeline.LearnedRunOptions` of
     ``associate``'s options, for ``models`` already opened (:func:`open_models`) from ``names``
     and the horizontal size :func:`horizontal_size` resolved. Costs are kept when ``--costs``
-    or ``--draw`` asks for them (the pictures are of the frames that have costs)."""
+    or the pictures ask for them (they are of the frames that have costs)."""
     from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions
 
     return LearnedRunOptions(
@@ -191,7 +192,7 @@ def learned_run_options(opts: ModelArgs, models: list, names: list[str],
         hor_boxes=opts.hor if isinstance(opts.hor, str) else "the horizontal-view boxes",
         camera_id=opts.camera_id, gamma=opts.gamma, mirror=bool(opts.mirror),
         workers=opts.workers, top_offset=top_offset,
-        keep_costs=opts.costs is not None or opts.draw is not None,
+        keep_costs=any(v is not None for v in (opts.costs, opts.draw, opts.draw_video)),
         appearance_check=opts.appearance_check == "on",
         refine_top_camera=opts.refine_top_camera == "auto",
         camera_check=opts.camera_check == "on")
@@ -233,10 +234,10 @@ def associate_with_model(opts: ModelArgs, top: Mapping, hor: Mapping, frames: It
                   "ties, scored again with FP32", file=sys.stderr)
         if run.checked is not None and run.checked.to_tell(opts.quiet):
             print(run.checked.message(), file=sys.stderr)
-        if opts.draw is not None:
+        if opts.draw is not None or opts.draw_video is not None:
             draw_pictures(opts.draw, opts.draw_every, top, hor, run.pairs, sorted(run.costs),
                           inputs.images or None, run.hor_size, not opts.no_labels,
-                          truth=opts.draw_truth, camera_id=opts.camera_id)
+                          truth=opts.draw_truth, camera_id=opts.camera_id, video=opts.draw_video)
     if opts.costs is not None:
         from xvmatch.inference.matching.costs_record import write_costs_record
 

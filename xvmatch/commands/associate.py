@@ -77,7 +77,7 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
         "--mode", choices=("auto", "frame", "video"), default="auto",
         help="video: pairs kept consistent along each view's track ids; frame: each frame "
         "alone; auto (default): video when both views' ids persist")
-    add_draw_arguments(p, common=p, more=runtime)
+    add_draw_arguments(p, common=p, more=runtime, video=True)
     search.add_argument(
         "--camera-id", type=box_id, default=None, metavar="ID",
         help="top-view id of the camera's wearer (either method; |id| <= 2**53; default: "
@@ -141,12 +141,15 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     check_outputs(
         [Output("--out", args.out), Output("--offset", predictions_offset_path(args.out)),
          Output("--costs", args.costs),
-         Output("--draw", args.draw, folder=True), *check_write_cameras(learned)],
+         Output("--draw", args.draw, folder=True), Output("--draw-video", args.draw_video),
+         *check_write_cameras(learned)],
         [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
          Input("--cameras", args.cameras), *(Input("--model", m) for m in models)],
     )
     if args.draw is not None:
         check_own_folder(args.draw, DRAW_COMMAND, "--draw")
+    if args.draw_video is not None and not args.draw_video.lower().endswith(".mp4"):
+        raise UsageError(f"--draw-video {args.draw_video}: an mp4 file (FILE.mp4) is written")
     max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
     hor_size = horizontal_size(learned, hor)
     hor_width = hor_size[0][0]
@@ -184,10 +187,11 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
         pairs = consistent_pairs(pairs, top, hor, frames)
-    if args.model is None and args.draw is not None:
+    if args.model is None and (args.draw is not None or args.draw_video is not None):
         both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
         draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
-                      not args.no_labels, truth=args.draw_truth, camera_id=args.camera_id)
+                      not args.no_labels, truth=args.draw_truth, camera_id=args.camera_id,
+                      video=args.draw_video)
     _write(args, pairs, frames, offset, _AUTO_VIDEO if video and args.mode == "auto" else None)
     return 0
 
