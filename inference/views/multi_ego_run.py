@@ -18,11 +18,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
 
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
 from xvmatch.formats.camera_frames import open_cameras
-from xvmatch.formats.mot_boxes import align_frames
+from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
 from xvmatch.inference.matching.camera_check import CameraCheck, check_run_cameras
 from xvmatch.inference.matching.camera_refinement import CameraRefinement, refine_views_cameras
@@ -31,8 +34,9 @@ from xvmatch.inference.matching.learned_pipeline import open_view_images, retime
 from xvmatch.inference.views.multi_view_costs import multi_view_costs
 from xvmatch.inference.views.multi_view_people import PeopleOptions, ViewPeople, assign_people
 
-__all__ = ["MultiEgoInputs", "MultiEgoRun", "MultiEgoRunOptions", "multi_ego_sizes",
-           "open_multi_ego", "run_multi_ego"]
+__all__ = ["MultiEgoInputs", "MultiEgoRun", "MultiEgoRunOptions", "check_view_inputs",
+           "multi_ego_sizes", "open_multi_ego", "pair_pictures", "per_view_offsets",
+           "run_multi_ego", "wearer_rows"]
 
 Views = list[Mapping[int, object]]
 """Per view, top first, ``{frame: record}`` with ``ids`` and ``boxes``."""
@@ -123,6 +127,47 @@ class MultiEgoRun:
     refinement: CameraRefinement | None
 
 
+def wearer_rows(top, camera_ids: Sequence[int] | None) -> list[dict[int, int]] | None:
+    """Per horizontal view, ``{frame: row within the frame's record}`` of the top box with its
+    ``--camera-id`` (``top``: a :class:`~xvmatch.formats.detection_rows.DetectionRows`); None
+    without ids."""
+    if camera_ids is None:
+        return None
+    out = []
+    for camera_id in camera_ids:
+        positions = top.positions_of_id(camera_id)
+        if not positions:
+            raise ValueError(f"{top.path}: no box has the --camera-id {camera_id}")
+        out.append(positions)
+    return out
+
+
+def check_view_inputs(paths: Sequence[str], per_view: Mapping[str, Sequence | None],
+                      most: int) -> None:
+    """The box files (top first) and the options given once per horizontal view, checked: 1 to
+    ``most`` horizontal files, no file named twice, each option of ``per_view`` (``{option:
+    values or None}``) one value per horizontal file."""
+    n_hor = len(paths) - 1
+    if not 1 <= n_hor <= most:
+        raise ValueError(f"--hor: give 1 to {most} horizontal box files, got {n_hor}")
+    for option, values in per_view.items():
+        if values is not None and len(values) != n_hor:
+            raise ValueError(f"{option}: give one per --hor file ({n_hor}), got {len(values)}")
+    if len(set(map(str, map(Path, paths)))) != len(paths):
+        raise ValueError("--top and --hor name the same file twice")
+
+
+def per_view_offsets(values: Sequence, n_hor: int) -> list:
+    """``--offset``: one value per horizontal view (a single one is for all)."""
+    values = list(values)
+    if len(values) == 1:
+        return values * n_hor
+    if len(values) != n_hor:
+        raise ValueError(f"--offset: give one per --hor file ({n_hor}) or one for all, got "
+                         f"{len(values)}")
+    return values
+
+
 def open_multi_ego(views: Views, matcher: LearnedMatcher | None,
                    options: MultiEgoRunOptions) -> MultiEgoInputs:
     """Open the images and the cameras of every view and check them (the top boxes inside the
@@ -205,6 +250,7 @@ def run_multi_ego(
     on_refinement: Callable[[CameraRefinement], None] | None = None,
     on_camera_check: Callable[[int, CameraCheck], None] | None = None,
     on_appearance_check: Callable[[int, AppearanceCheck], None] | None = None,
+    tracks: Sequence[Mapping[int, int]] | None = None,
 ) -> MultiEgoRun:
     """Person ids for every box of the opened views.
 
@@ -221,6 +267,8 @@ def run_multi_ego(
         on_refinement: told what became of the top camera.
         on_camera_check: told each view's camera check (``view`` counts from 1, top 0).
         on_appearance_check: told each view's appearance check, in the order of the views.
+        tracks: per view (top first) ``{row id: track id}`` for video mode
+            (:func:`~xvmatch.inference.views.multi_ego_video.video_people`), or None.
     """
     views, images, cameras = inputs.views, inputs.images, inputs.cameras
     frames = sorted(set().union(*views))
@@ -248,7 +296,12 @@ def run_multi_ego(
     for k, check in sorted(checked.items()):
         if on_appearance_check is not None:
             on_appearance_check(k, check)
-    people = assign_people(views, problems, frames, options.people)
+    if tracks is not None:
+        from xvmatch.inference.views.multi_ego_video import video_people
+
+        people = video_people(views, problems, frames, tracks, options.people)
+    else:
+        people = assign_people(views, problems, frames, options.people)
     return MultiEgoRun(people, frames, refined, refinement)
 
 
@@ -281,3 +334,26 @@ def _checked_cameras(matcher, views, sizes, cameras, refinement: CameraRefinemen
         if not check.trusted:
             cameras[k] = None
     return cameras
+
+
+def pair_pictures(inputs: MultiEgoInputs, people: ViewPeople, offsets: Sequence[int]) -> list:
+    """What :func:`~xvmatch.viz.match_pictures.write_match_pictures` draws of each (top,
+    horizontal view) pair (``associate-multi --draw``): per horizontal view, ``(top, hor, pairs,
+    frames, sources)``, the views re-timed by ``offsets`` as the run was, each record's ids the
+    boxes' person ids (so the labels name the people, the same number in every view) and the
+    pairs ``(id, id)`` of the people both views hold; ``sources`` the images or None."""
+    views, images = inputs.views, inputs.images
+    if any(offsets):
+        views, images = _aligned(views, offsets, images, None, None)[:2]
+    named = [{f: FrameBoxes(f, np.array([people.person[v].get(r, -1) for r in rec.ids.tolist()],
+                                        dtype=np.int64), rec.boxes) for f, rec in view.items()}
+             for v, view in enumerate(views)]
+    out = []
+    for k in range(1, len(views)):
+        top, hor = named[0], named[k]
+        frames = sorted(f for f in set(top) & set(hor) if len(top[f].ids) and len(hor[f].ids))
+        pairs = {f: [(p, p) for p in sorted(set(top[f].ids.tolist()) & set(hor[f].ids.tolist()))
+                     if p >= 0] for f in frames}
+        sources = None if images is None else {"top": images[0], "hor": images[k]}
+        out.append((top, hor, pairs, frames, sources))
+    return out

@@ -307,7 +307,8 @@ def view_chains(tracks: Sequence[Sequence[Tracklet]], min_iou: float = 0.5,
 
 
 def carry_ids(clusters: Sequence[np.ndarray], chains: Sequence[np.ndarray],
-              owner: dict[tuple[int, int], int], next_id: int) -> tuple[np.ndarray, int]:
+              owner: dict[tuple[int, int], int], next_id: int,
+              top_weight: float = 1.01) -> tuple[np.ndarray, int]:
     """Person ids of one frame's clusters, carried from earlier frames.
 
     Args:
@@ -317,6 +318,8 @@ def carry_ids(clusters: Sequence[np.ndarray], chains: Sequence[np.ndarray],
         owner: ``{(view, chain): person id}`` of the latest frame each chain was seen in;
             updated in place.
         next_id: the first unused person id.
+        top_weight: a top-view chain's vote (another view's is 1): 1.01 breaks ties; a weight
+            above the number of other views makes the top view's chains decide (video mode).
 
     Returns:
         ``(ids, next_id)``: the person id of each cluster and the next unused id. A cluster
@@ -329,7 +332,7 @@ def carry_ids(clusters: Sequence[np.ndarray], chains: Sequence[np.ndarray],
         for q, c in zip(cl.tolist(), ch.tolist(), strict=True):
             g = owner.get((v, int(c)))
             if g is not None:
-                votes[(g, q)] = votes.get((g, q), 0.0) + (1.01 if v == 0 else 1.0)
+                votes[(g, q)] = votes.get((g, q), 0.0) + (top_weight if v == 0 else 1.0)
     ids = np.zeros(m, dtype=np.int64)
     if votes:
         people = sorted({g for g, _ in votes})

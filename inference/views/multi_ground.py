@@ -68,6 +68,10 @@ HOR_HOR_COST = 0.01
 """Nats against a handheld-handheld pair without evidence: so small that it never stops a
 pair the top view closes, so that the program makes none that it does not."""
 
+VIDEO_KEEP_FREE = False
+"""In video mode, a top track that no partner holds keeps no pairs (as ``associate --top-view
+oblique --mode video``), rather than its frames' own."""
+
 _FAR = 3.0
 """Distances are capped at this many radii: a far pair's cost stays bounded."""
 
@@ -219,12 +223,20 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
 
 def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
                      calibration: PeopleCalibration, options: MultiGroundOptions,
-                     people: PeopleOptions) -> MultiEgoRun:
+                     people: PeopleOptions, tracks: Sequence[Mapping[int, int]] | None = None
+                     ) -> MultiEgoRun:
     """Person ids for every box of ``views`` (top first, each in its own file's timing):
     re-timed by ``offsets`` (top frame ``t + N_k`` shows the moment of handheld view ``k``'s
     frame ``t``), joined on the top view's ground map (:func:`ground_problems`) and solved as
-    the nadir path solves (:func:`~xvmatch.inference.views.multi_view_people.assign_people`)."""
+    the nadir path solves (:func:`~xvmatch.inference.views.multi_view_people.assign_people`);
+    with ``tracks`` (per view ``{row id: track id}``) in video mode
+    (:func:`~xvmatch.inference.views.multi_ego_video.video_people`, :data:`VIDEO_KEEP_FREE`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
     problems = ground_problems(aligned, frames, calibration, options)
+    if tracks is not None:
+        from xvmatch.inference.views.multi_ego_video import video_people
+
+        found = video_people(aligned, problems, frames, tracks, people, VIDEO_KEEP_FREE)
+        return MultiEgoRun(found, frames, None, None)
     return MultiEgoRun(assign_people(aligned, problems, frames, people), frames, None, None)

@@ -7,6 +7,8 @@ view a person id, the same id in two views of a frame being the same person. Fra
 :func:`~xvmatch.inference.views.multi_view_assignment.consistent_hungarian`) the ids are unique
 over the whole output and do not carry over frames; with tracks
 (:func:`~xvmatch.inference.views.multi_ego_tracking.track_multi_view`) they follow the tracklets.
+Video mode (``--mode``, each view's own track ids) builds on this answer
+(:func:`~xvmatch.inference.views.multi_ego_video.video_people`).
 """
 
 from __future__ import annotations
