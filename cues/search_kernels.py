@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "sorted_rows"]
+__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "pair_features", "sorted_rows"]
 
 _BLOCK = 128  # NumPy's pairwise-summation block (PW_BLOCKSIZE)
 
@@ -293,3 +293,57 @@ def sorted_rows(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n_th
                 k_out += 1
             else:
                 index[r, k] = -1
+
+
+@njit(cache=True)
+def _clip(value: float, low: float, high: float) -> float:
+    """numpy's ``clip`` of one float: max then min as its loop does (NaN passes through)."""
+    if value != value:
+        return value
+    value = value if value > low else low
+    return value if value < high else high
+
+
+@njit(cache=True)
+def pair_features(bearing_top: np.ndarray, log_depth: np.ndarray, visible: np.ndarray,
+                  per_top: np.ndarray, log_dist: np.ndarray, bearing_hor: np.ndarray,
+                  log_y_hor: np.ndarray, half_fov: float, clip: float, out: np.ndarray) -> None:
+    """The per-pair features of ``spatial_features._hypothesis_features`` into the float32
+    ``out`` ``(H, M, N, 12)`` (slice 4, matched, is left as it is): the wrapped bearing
+    difference over half the field of view and the log depth ratio, each clipped to +-``clip``,
+    and their absolute values; the four per-person flags ``per_top`` ``(H, M, 4)``; the row and
+    column gaps; ``log_dist`` ``(H, M)``. The same arithmetic in the same order as the numpy
+    form (numpy's mod, a true division, numpy's clip), each value rounded to float32 once."""
+    n_hyp, n_top = bearing_top.shape
+    n_hor = bearing_hor.shape[0]
+    absdiff = np.empty((n_top, n_hor))
+    col_ref = np.empty(n_hor)
+    for h in range(n_hyp):
+        for i in range(n_top):
+            row_min = np.inf
+            for j in range(n_hor):
+                angle = bearing_top[h, i] - bearing_hor[j]
+                diff = _clip((np.mod(angle + np.pi, 2.0 * np.pi) - np.pi) / half_fov,
+                             -clip, clip)
+                a = abs(diff)
+                absdiff[i, j] = a
+                row_min = min(row_min, a)
+                ratio = _clip(log_depth[h, i] - log_y_hor[j], -clip, clip)
+                out[h, i, j, 0] = diff
+                out[h, i, j, 1] = a
+                out[h, i, j, 2] = ratio
+                out[h, i, j, 3] = abs(ratio)
+                for k in range(4):
+                    out[h, i, j, 5 + k] = per_top[h, i, k]
+                out[h, i, j, 11] = log_dist[h, i]
+            for j in range(n_hor):
+                out[h, i, j, 9] = absdiff[i, j] - row_min
+        for j in range(n_hor):
+            ref = np.inf
+            for i in range(n_top):
+                if visible[h, i]:
+                    ref = min(ref, absdiff[i, j])
+            col_ref[j] = ref if np.isfinite(ref) else 0.0
+        for i in range(n_top):
+            for j in range(n_hor):
+                out[h, i, j, 10] = _clip(absdiff[i, j] - col_ref[j], 0.0, clip)

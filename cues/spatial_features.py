@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from xvmatch.core.array_checks import as_boxes
+from xvmatch.cues import kernel_choice
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.cues.spatial_search import (
     FrameAssociation,
@@ -303,7 +304,9 @@ def _hypothesis_features(
     """The ``HYP_FEATURES`` into ``hyp_f`` ``(H, 7)`` and the ``PAIR_FEATURES`` into ``pair_f``
     ``(H, M, N, 12)`` (float32, zeroed) of the hypotheses ``hyps`` (see :func:`frame_features`):
     every hypothesis at once, (H, M) per top person and (H, M, N) per pair, each feature computed
-    in float64 and written into its slice."""
+    in float64 and written into its slice. The (H, M, N) part runs in one compiled pass where
+    the kernels are loaded (:mod:`~xvmatch.cues.kernel_choice`): the same arithmetic on numpy's
+    log, cos and arctan, so the same bits (tested)."""
     n_hyp, m = pair_f.shape[:2]
     half_fov = 0.5 * math.radians(config.fov_deg)
     bearing_hor = np.arctan(x_hor * math.tan(half_fov))  # (N,) right of the axis, radians
@@ -316,29 +319,37 @@ def _hypothesis_features(
     in_view = (np.abs(delta) < half_fov) & visible  # inside the field of view (Eqs. 5-7)
     y_top = dist * np.cos(delta)  # Eq. 5 depth
     bearing_top = -delta  # Eq. 7: x_top = -tan(delta) / tan(alpha / 2)
-    diff = _wrap(bearing_top[:, :, None] - bearing_hor[None, None, :]) / half_fov
-    diff = np.clip(diff, -_CLIP, _CLIP)
-    absdiff = np.abs(diff)
-    pair_f[..., 0] = diff
-    pair_f[..., 1] = absdiff
     depth = np.maximum(y_top, 0.05 * dist) * scales[:, None]
-    ratio = np.log(np.maximum(depth, 1e-12))[:, :, None] - log_y_hor[None, None, :]
-    ratio = np.clip(ratio, -_CLIP, _CLIP)
-    pair_f[..., 2] = ratio
-    pair_f[..., 3] = np.abs(ratio)
+    log_depth = np.log(np.maximum(depth, 1e-12))
+    log_dist = np.clip(np.log(np.maximum(dist, _EPS) / s_top), -_CLIP, 2 * _CLIP)
+    is_cam = np.arange(m)[None, :] == hyp_camera[:, None]
+    kernels = kernel_choice.kernels()
+    if kernels is not None:  # the same values in one pass (numpy's log, cos, arctan above)
+        per_top = np.stack([in_view, visible, is_cam, np.abs(bearing_top) / math.pi], axis=2)
+        kernels.pair_features(bearing_top, log_depth, visible, per_top.astype(np.float64),
+                              log_dist, bearing_hor, log_y_hor, half_fov, _CLIP, pair_f)
+    else:
+        diff = _wrap(bearing_top[:, :, None] - bearing_hor[None, None, :]) / half_fov
+        diff = np.clip(diff, -_CLIP, _CLIP)
+        absdiff = np.abs(diff)
+        pair_f[..., 0] = diff
+        pair_f[..., 1] = absdiff
+        ratio = np.clip(log_depth[:, :, None] - log_y_hor[None, None, :], -_CLIP, _CLIP)
+        pair_f[..., 2] = ratio
+        pair_f[..., 3] = np.abs(ratio)
+        pair_f[..., 5] = in_view[:, :, None]
+        pair_f[..., 6] = visible[:, :, None]
+        pair_f[..., 7] = is_cam[:, :, None]
+        pair_f[..., 8] = (np.abs(bearing_top) / math.pi)[:, :, None]
+        pair_f[..., 9] = absdiff - absdiff.min(axis=2, keepdims=True)
+        col_ref = np.where(visible[:, :, None], absdiff, np.inf).min(axis=1, keepdims=True)
+        pair_f[..., 10] = np.clip(absdiff - np.where(np.isfinite(col_ref), col_ref, 0.0), 0,
+                                  _CLIP)
+        pair_f[..., 11] = log_dist[:, :, None]
     sizes = [h.pairs.shape[0] for h in hyps]
     if sum(sizes):  # matched by the hypothesis' DTW
         pairs = np.concatenate([h.pairs for h in hyps])
         pair_f[np.repeat(np.arange(n_hyp), sizes), pairs[:, 0], pairs[:, 1], 4] = 1.0
-    pair_f[..., 5] = in_view[:, :, None]
-    pair_f[..., 6] = visible[:, :, None]
-    pair_f[..., 7] = (np.arange(m)[None, :] == hyp_camera[:, None])[:, :, None]
-    pair_f[..., 8] = (np.abs(bearing_top) / math.pi)[:, :, None]
-    pair_f[..., 9] = absdiff - absdiff.min(axis=2, keepdims=True)
-    col_ref = np.where(visible[:, :, None], absdiff, np.inf).min(axis=1, keepdims=True)
-    pair_f[..., 10] = np.clip(absdiff - np.where(np.isfinite(col_ref), col_ref, 0.0), 0, _CLIP)
-    log_dist = np.clip(np.log(np.maximum(dist, _EPS) / s_top), -_CLIP, 2 * _CLIP)
-    pair_f[..., 11] = log_dist[:, :, None]
     costs = np.array([max(h.cost, 1e-12) for h in hyps])
     log_cost = np.log(costs)
     hyp_f[:, 0] = np.clip(log_cost / 5.0, -_CLIP, _CLIP)

@@ -35,6 +35,7 @@ import os
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,16 +51,15 @@ from xvmatch.cues.matcher_inputs import (
 )
 from xvmatch.cues.spatial_features import FeatureConfig, FrameFeatures
 from xvmatch.cues.spatial_search import FrameLike
-from xvmatch.formats.crops import box_crops
 from xvmatch.geometry.camera import FrameCameras
 from xvmatch.inference.linking.assignment import assign, assignment_is_stable
-from xvmatch.inference.matching.appearance_check import (
-    MIN_AUC,
-    SITE_MIN_AUC,
-    AppearanceCheck,
-    check_appearance,
-)
 from xvmatch.inference.matching.bundle import Bundle, load_bundle
+
+if TYPE_CHECKING:
+    from xvmatch.inference.matching.appearance_check import AppearanceCheck
+
+# The crops (OpenCV) and the appearance check (tracklets, pair mining) are imported where a run
+# with images uses them: a box-only run starts about a tenth of a second sooner without them.
 
 __all__ = [
     "EMBED_BATCH",
@@ -233,6 +233,8 @@ class LearnedMatcher:
         spec = self.bundle.manifest.appearance
         if spec is None:
             raise ValueError(f"{self.bundle.name}: this bundle has no appearance network")
+        from xvmatch.formats.crops import box_crops
+
         return box_crops(image, boxes, spec.crop_size, spec.context)
 
     def crop_cost(self, top: np.ndarray, hor: np.ndarray, reference: bool = False
@@ -654,6 +656,12 @@ class _SequenceScorer:
     def judge_held(self) -> tuple[AppearanceCheck, dict[int, bool]]:
         """The appearance check of the held frames, and whether each keeps its appearance cue
         (else it is matched from its boxes alone)."""
+        from xvmatch.inference.matching.appearance_check import (
+            MIN_AUC,
+            SITE_MIN_AUC,
+            check_appearance,
+        )
+
         held = self.held
         manifest = self.models[0].bundle.manifest
         # a site bundle's cue was fitted on pairs like those it is judged on: a higher bar

@@ -24,19 +24,25 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from xvmatch.formats.box_image_size import check_boxes_in_image
-from xvmatch.inference.matching.appearance_check import AppearanceCheck
-from xvmatch.inference.matching.camera_check import CameraCheck, check_run_cameras
-from xvmatch.inference.matching.camera_refinement import CameraRefinement, refine_run_cameras
 from xvmatch.inference.matching.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
     check_crowd_size,
     non_association_cost,
 )
+
+if TYPE_CHECKING:
+    from xvmatch.inference.matching.appearance_check import AppearanceCheck
+    from xvmatch.inference.matching.camera_check import CameraCheck
+    from xvmatch.inference.matching.camera_refinement import CameraRefinement
+
+# The camera check and refinement (and the pair mining they use) are imported by the runs with
+# cameras that use them: a box-only run starts sooner without them.
 
 __all__ = [
     "LearnedInputs",
@@ -295,9 +301,13 @@ class LearnedInputs:
                 wanted["top"] = (sizes["top"], "the images")
             self.cameras = open_matcher_cameras(options.cameras, named, both, wanted)
             if options.refine_top_camera:
+                from xvmatch.inference.matching.camera_refinement import refine_run_cameras
+
                 self.cameras, self.refinement = refine_run_cameras(self.cameras, top, hor, both)
             self.refined_cameras = self.cameras
             if options.camera_check:
+                from xvmatch.inference.matching.camera_check import check_run_cameras
+
                 self.camera_checked = check_run_cameras(
                     top, hor, both, list(options.models), tuple(options.hor_size),
                     self.cameras, self.gamma,
