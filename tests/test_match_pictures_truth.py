@@ -84,6 +84,25 @@ def test_without_truth_the_pictures_are_those_drawn_before(tmp_path):
             == (tmp_path / "expected.jpg").read_bytes())
 
 
+def test_a_track_keeps_its_colour_from_frame_to_frame(tmp_path):
+    # Frame 8 is frame 7 with its pairs listed the other way round; with the tracks, each pair
+    # is drawn in its track's colour (tracks 40 and 41), not by its place in the frame.
+    top, hor, pairs = _views()
+    top[8], hor[8] = FrameBoxes(8, top[7].ids, top[7].boxes), FrameBoxes(8, hor[7].ids,
+                                                                          hor[7].boxes)
+    pairs[8] = pairs[7][::-1]
+    tracks = ({1: 40, 2: 41, 3: 42}, {1: 40, 3: 41})
+    write_match_pictures(tmp_path / "draw", 1, top, hor, pairs, [7, 8], None, (960, 540),
+                         owner=OWNER, option="--draw", tracks=tracks)
+    first, second = (cv2.imread(str(tmp_path / "draw" / f"frame_00000{f}.jpg")) for f in (7, 8))
+    for picture in (first, second):
+        assert _near(picture, pair_colour(40)) > 100 and _near(picture, pair_colour(41)) > 100
+        assert _near(picture, pair_colour(0), 10) == 0
+    assert cv2.absdiff(first[30:], second[30:]).mean() < 1  # the same but the title
+    with pytest.raises(ValueError, match="keys must give one integer per pair"):
+        draw_matches(first, first, top[7].boxes, hor[7].boxes, [[0, 0]], keys=[0.5])
+
+
 def test_the_video_holds_every_picture_and_appears_only_when_complete(tmp_path):
     top, hor, pairs = _views()
     video = tmp_path / "out" / "pairs.mp4"

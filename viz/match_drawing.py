@@ -268,17 +268,26 @@ def pairs_correct(top_ids: Sequence | np.ndarray, hor_ids: Sequence | np.ndarray
 
 
 def _pair_colours(pairs_given: np.ndarray, pairs: np.ndarray,
-                  correct: Sequence[bool] | np.ndarray | None) -> list[tuple[int, int, int]]:
-    """Each sorted pair's colour: :func:`pair_colour` without ground truth, else
-    :data:`RIGHT_COLOUR` or :data:`WRONG_COLOUR` from ``correct`` (given in the order of
-    ``pairs_given``, the caller's)."""
+                  correct: Sequence[bool] | np.ndarray | None,
+                  keys: Sequence[int] | np.ndarray | None = None) -> list[tuple[int, int, int]]:
+    """Each sorted pair's colour: :func:`pair_colour` of its position (or of its key in
+    ``keys``) without ground truth, else :data:`RIGHT_COLOUR` or :data:`WRONG_COLOUR` from
+    ``correct``; ``correct`` and ``keys`` are given in the order of ``pairs_given``, the
+    caller's."""
+    given = np.asarray(pairs_given, dtype=np.int64).reshape(-1, 2)
+    if correct is None and keys is not None:
+        values = np.asarray(keys).reshape(-1)
+        if len(values) != len(pairs) or (values.size and values.dtype.kind not in "iu"):
+            raise ValueError(f"keys must give one integer per pair ({len(pairs)}), got "
+                             f"{np.shape(keys)} of {values.dtype}")
+        key_of = {(int(i), int(j)): int(k) for (i, j), k in zip(given, values, strict=True)}
+        return [pair_colour(key_of[(int(i), int(j))]) for i, j in pairs]
     if correct is None:
         return [pair_colour(k) for k in range(len(pairs))]
     flags = np.asarray(correct).reshape(-1)
     if (flags.size and flags.dtype != bool) or len(flags) != len(pairs):
         raise ValueError(f"correct must give one bool per pair ({len(pairs)}), got "
                          f"{np.shape(correct)} of {flags.dtype}")
-    given = np.asarray(pairs_given, dtype=np.int64).reshape(-1, 2)
     truth = {(int(i), int(j)): bool(ok) for (i, j), ok in zip(given, flags, strict=True)}
     return [RIGHT_COLOUR if truth[(int(i), int(j))] else WRONG_COLOUR for i, j in pairs]
 
@@ -459,6 +468,7 @@ def draw_matches(
     max_height: int = 720,
     correct: Sequence[bool] | np.ndarray | None = None,
     wearer: int | None = None,
+    keys: Sequence[int] | np.ndarray | None = None,
 ) -> np.ndarray:
     """One frame's association as a picture: top view left, horizontal view right, pairs joined.
 
@@ -491,6 +501,10 @@ def draw_matches(
             no ground truth.
         wearer: index of the top box of the horizontal camera's wearer (``--camera-id``),
             marked by a white outer outline and a ``camera`` label; ``None``: not known.
+        keys: (K,) int, one per row of ``pairs`` (in the given order): the pair is drawn in
+            :func:`pair_colour` ``(key)`` instead of by its position, so that a key kept from
+            frame to frame (a track id) keeps its colour; ignored with ``correct``. ``None``:
+            by position.
 
     Returns:
         (header + H, W1' + 16 + W2', 3) uint8 BGR picture, ``H <= max_height``; the inputs are
@@ -499,8 +513,8 @@ def draw_matches(
     Raises:
         ValueError: an image that is not non-empty (H, W, 3) uint8, boxes not (N, 4) finite with
             non-negative sizes, pairs not (K, 2) integer indices in range or not one-to-one, ids
-            of the wrong length, costs not (M, N), ``correct`` not one bool per pair, ``wearer``
-            not a top box's index, or ``max_height < 1``.
+            of the wrong length, costs not (M, N), ``correct`` not one bool per pair, ``keys``
+            not one integer per pair, ``wearer`` not a top box's index, or ``max_height < 1``.
 
     Example:
         >>> img = np.zeros((90, 160, 3), np.uint8)
@@ -519,7 +533,7 @@ def draw_matches(
     cost = _check_costs(costs, m, n)
     wearer_index = _check_wearer(wearer, m)
     height = min(_check_max_height(max_height), max(top_img.shape[0], hor_img.shape[0]))
-    colours = _pair_colours(pairs, p, correct)
+    colours = _pair_colours(pairs, p, correct, keys)
     panels, rects = _box_panels((top_img, hor_img), (top_b, hor_b), p, height, colours)
     header = 26 if title is not None else 0
     canvas, offsets, x_ranges = _side_by_side(panels, header)

@@ -115,7 +115,7 @@ class MatchVideo:
 def _pictures(every: int, top: Mapping, hor: Mapping, pairs: Mapping, frames: list[int],
               sources: dict | None, hor_size: tuple[int, int], labels: bool,
               truth: tuple[Mapping, Mapping] | None, wearer: Mapping | None,
-              names: tuple[Mapping, Mapping] | None) -> Iterator[tuple[int, np.ndarray]]:
+              tracks: tuple[Mapping, Mapping] | None) -> Iterator[tuple[int, np.ndarray]]:
     """``(frame, picture)`` of every ``every``-th of ``frames`` (the arguments of
     :func:`write_match_pictures`)."""
     plan = hor_canvas = None
@@ -136,10 +136,11 @@ def _pictures(every: int, top: Mapping, hor: Mapping, pairs: Mapping, frames: li
             images = (sources["top"].get(f), sources["hor"].get(f))
             boxes = (top[f].boxes, hor[f].boxes)
         shown = (top[f].ids, hor[f].ids)
-        if names is not None:
-            shown = tuple([view_names.get(i, "-") for i in ids]
-                          for view_names, ids in zip(names, shown, strict=True))
         marks = {}
+        if tracks is not None:
+            shown = tuple([view_tracks.get(i, "-") for i in ids]
+                          for view_tracks, ids in zip(tracks, shown, strict=True))
+            marks["keys"] = [tracks[0][a] for a, _ in pairs.get(f, [])]
         if truth is not None:
             marks["correct"] = pairs_correct(truth[0][f], truth[1][f], rows)
         if wearer is not None and f in wearer:
@@ -154,7 +155,7 @@ def write_match_pictures(folder: str | os.PathLike | None, every: int, top: Mapp
                          hor_size: tuple[int, int], labels: bool = True, *, owner: str,
                          option: str, truth: tuple[Mapping, Mapping] | None = None,
                          wearer: Mapping[int, int] | None = None,
-                         names: tuple[Mapping, Mapping] | None = None,
+                         tracks: tuple[Mapping, Mapping] | None = None,
                          video: str | os.PathLike | None = None,
                          fps: float = VIDEO_FPS) -> None:
     """The pictures of every ``every``-th of ``frames``, written into a temporary folder and
@@ -177,8 +178,10 @@ def write_match_pictures(folder: str | os.PathLike | None, every: int, top: Mapp
         truth: ``{frame: true ids of the boxes}`` of each view (:func:`truth_marks`): right
             pairs drawn green, wrong ones red; None: each pair its own colour.
         wearer: ``{frame: index of the camera wearer's top box}``, marked; None: not marked.
-        names: ``{box id: label}`` of each view, printed instead of the ids (``track``: the
-            track ids; a box without one is labelled ``-``); None: the ids.
+        tracks: ``{box id: track id}`` of each view (``track``): the track ids are printed
+            instead of the box ids (a box without one is labelled ``-``), and each pair is
+            drawn in its track's colour, the same in every frame (unless ``truth``); None: the
+            ids, and each pair its own colour.
         video: an ``.mp4`` file to write the same pictures into (:class:`MatchVideo`), or None.
         fps: the video's frames per second.
     """
@@ -188,7 +191,7 @@ def write_match_pictures(folder: str | os.PathLike | None, every: int, top: Mapp
     try:
         written = []
         for f, picture in _pictures(every, top, hor, pairs, frames, sources, hor_size, labels,
-                                    truth, wearer, names):
+                                    truth, wearer, tracks):
             if tmp is not None:
                 path = picture_path(tmp, f)
                 write_match_picture(path, picture)

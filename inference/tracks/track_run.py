@@ -433,8 +433,8 @@ class TrackPictures:
         pairs: ``{frame: [(top row, horizontal row)]}``: the boxes of a moment that share a
             track id (the first box of each view where a track has two).
         frames: the frames with boxes in both views, ascending.
-        names: ``({top row: track id}, {horizontal row: track id})``, the labels; rows the
-            tracker dropped have none.
+        tracks: ``({top row: track id}, {horizontal row: track id})``; rows the tracker
+            dropped have none.
         sources: ``{"top": images, "hor": images}`` re-timed as ``top``, or None without
             images.
     """
@@ -443,7 +443,7 @@ class TrackPictures:
     hor: Mapping[int, FrameBoxes]
     pairs: dict[int, list[tuple[int, int]]]
     frames: list[int]
-    names: tuple[dict[int, int], dict[int, int]]
+    tracks: tuple[dict[int, int], dict[int, int]]
     sources: dict | None = None
 
 

@@ -232,7 +232,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
                           shown.frames, shown.sources, resolved[0], not args.no_labels,
                           owner=f"{TRACK_COMMAND} --draw", truth=args.draw_truth,
                           camera_id=args.camera_id, row_ids=(top.file_ids, hor.file_ids),
-                          names=shown.names, video=args.draw_video)
+                          tracks=shown.tracks, video=args.draw_video)
     claim_folder(out, TRACK_COMMAND)
     result = run.result
     n_top = write_track_rows(out / "top.txt", top, result.top_rows)
