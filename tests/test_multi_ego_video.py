@@ -137,3 +137,86 @@ def test_video_track_ids_reads_the_mode():
     assert video_track_ids(views, twice, "auto", names) is None
     with pytest.raises(ValueError, match=r"--mode video: hor\.txt: frame 1 holds an id twice"):
         video_track_ids(views, twice, "video", names)
+
+
+def test_the_forced_program_read_off_is_its_optimum():
+    # random frames of 1 top + 2 or 3 horizontal views: where _direct answers, its people are
+    # those of the forced program solved by HiGHS; where a pair of horizontal boxes without a
+    # top person gains, it leaves the frame to the solver
+    from xvmatch.inference.views.multi_ego_video import _direct, _forced
+    from xvmatch.inference.views.multi_view_assignment import global_ids, solve_multi_view
+
+    rng = np.random.default_rng(7)
+    answered = 0
+    for trial in range(40):
+        n_views = 3 + trial % 2
+        sizes = tuple(int(x) for x in rng.integers(0, 5, n_views))
+        rows = [list(range(100 * v, 100 * v + sizes[v])) for v in range(n_views)]
+        costs = {}
+        for a in range(n_views):
+            for b in range(a + 1, n_views):
+                low = -1.0 if trial % 3 == 0 and a else 0.05
+                costs[(a, b)] = rng.uniform(low, 2.0, (sizes[a], sizes[b]))
+        problem = FrameProblem(sizes, costs, dict.fromkeys(costs, 0.0))
+        kept = {}
+        for k in range(1, n_views):
+            top, hor = rng.permutation(sizes[0]), rng.permutation(sizes[k])
+            m = int(rng.integers(0, min(sizes[0], sizes[k]) + 1))
+            kept[k] = [(rows[0][t], rows[k][h]) for t, h in zip(top[:m], hor[:m], strict=True)]
+        direct = _direct(problem, rows, kept)
+        forced = _forced(problem, rows, kept)
+        solved = solve_multi_view(forced.sizes, forced.costs, forced.gamma)
+        assert solved.status == "optimal"
+        if direct is None:
+            continue
+        answered += 1
+        for mine, theirs in zip(direct, solved.person, strict=True):
+            np.testing.assert_array_equal(mine, theirs)
+        assert all(np.array_equal(x, y) for x, y in zip(
+            global_ids(pairs_from_ids(direct), sizes), direct, strict=True))
+    assert 15 <= answered < 40
+
+
+@pytest.mark.slow
+def test_the_oblique_path_in_video_mode():
+    # benchmarks/oblique_multi_view.py's scene 1 (12 s, every 3rd frame), ids scrambled per view:
+    # video mode keeps every frame one set of people and pairs at least as well as each frame
+    import sys
+    from itertools import combinations
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from oblique_association import _scrambled
+    from oblique_multi_view import by_row, f1, people_pairs, row_tracks, score
+
+    from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+    from xvmatch.inference.matching.ground_association import top_calibration
+    from xvmatch.inference.views.multi_ground import MultiGroundOptions, run_multi_ground
+
+    config = ObliqueSceneConfig(n_hor=2)
+    scene = make_oblique_scene(config, 120, np.random.default_rng([0, 1]))
+    rng = np.random.default_rng([0, 1, 1])
+    raw = [scene.top, *(scene.hor[f"hor{k}"] for k in (1, 2))]
+    frames = [f for f in sorted(set().union(*raw)) if (f - 1) % 3 == 0]
+    views, backs = zip(*(_scrambled({f: v[f] for f in frames if f in v}, rng) for v in raw),
+                       strict=True)
+    views = list(views)
+    truth = {(a, b): {f: {(int(i), int(j)) for i in views[a][f].ids for j in views[b][f].ids
+                          if backs[a][int(i)] == backs[b][int(j)]}
+                      for f in frames if f in views[a] and f in views[b]}
+             for a, b in combinations(range(3), 2)}
+    calib = top_calibration(views[0], scene.top_cameras[0].image_size)
+    options = MultiGroundOptions(tuple(tuple(scene.hor_cameras[f"hor{k}"][0].image_size)
+                                       for k in (1, 2)), fps=config.fps)
+    got = {}
+    for name, tracks in (("frame", None), ("video", row_tracks(views))):
+        run = run_multi_ground([by_row(v) for v in views], [0, 0], calib, options,
+                               PeopleOptions(), tracks)
+        pairs = people_pairs(run.people.person, views, frames)
+        got[name] = f1(score(pairs, truth, lambda ab: True))
+        rows = [by_row(v) for v in views]
+        for f in frames:
+            ids = [np.array([run.people.person[v][r] for r in rows[v][f].ids.tolist()])
+                   if f in rows[v] else np.zeros(0, np.int64) for v in range(3)]
+            assert not cycle_violations(pairs_from_ids(ids), [i.size for i in ids])
+    assert got["video"] >= got["frame"] > 0.5

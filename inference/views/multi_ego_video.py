@@ -14,8 +14,9 @@ track over its partner). With one top view and several horizontal ones:
    top-horizontal pair forbidden): the cycle constraints then pair two horizontal people who
    share a top person, and never two of whom one has a top person and the other another or
    none; horizontal people the top view does not hold are paired on their own costs
-   (:func:`video_people`). So the answer is one set of people on every frame, as in frame mode,
-   and its top-horizontal pairs are those of the consensus;
+   (:func:`video_people`; read off without a solver where no such pair gains,
+   :func:`_direct`). So the answer is one set of people on every frame, as in frame mode, and
+   its top-horizontal pairs are those of the consensus;
 4. person ids carried from frame to frame along the tracks
    (:func:`~xvmatch.inference.views.multi_ego_tracking.carry_ids`): a person keeps the id of
    its top-view track (:data:`TOP_VOTE`), else the id whose boxes lay on the same tracks in
@@ -144,6 +145,37 @@ def _forced(problem: FrameProblem, rows: Sequence[list[int]],
     return FrameProblem(problem.sizes, costs, problem.gamma)
 
 
+def _direct(problem: FrameProblem, rows: Sequence[list[int]],
+            kept: Mapping[int, Sequence[tuple[int, int]]]) -> tuple[np.ndarray, ...] | None:
+    """The optimum of :func:`_forced`'s program read off without solving it, or None where it
+    needs solving: every kept pair made, two horizontal boxes one person when they share a top
+    person, every other box alone. That is the optimum when no two horizontal boxes without a
+    top person gain by a pair (cost >= gamma: boxes only, or the oblique path) and no pair
+    through a top person is forbidden. Clusters are numbered as
+    :func:`~xvmatch.inference.views.multi_view_assignment.global_ids` numbers them."""
+    cluster = [np.arange(problem.sizes[0], dtype=np.int64),
+               *(np.full(problem.sizes[k], -1, dtype=np.int64) for k in kept)]
+    for k, pairs in kept.items():
+        at_top = {r: i for i, r in enumerate(rows[0])}
+        at_hor = {r: j for j, r in enumerate(rows[k])}
+        for t, h in pairs:
+            cluster[k][at_hor[h]] = at_top[t]
+    for (a, b), c in problem.costs.items():
+        if a == 0:
+            continue
+        gain = np.asarray(c, dtype=float) - problem.gamma[(a, b)]
+        free_a, free_b = cluster[a] < 0, cluster[b] < 0
+        same = (cluster[a][:, None] == cluster[b][None, :]) & ~free_a[:, None]
+        if (gain[np.ix_(free_a, free_b)] < 0).any() or not np.isfinite(gain[same]).all():
+            return None
+    start = problem.sizes[0]
+    for v in range(1, len(cluster)):
+        free = np.flatnonzero(cluster[v] < 0)
+        cluster[v][free] = start + np.arange(free.size)
+        start += free.size
+    return tuple(cluster)
+
+
 def video_people(views: Sequence[Mapping], problems: Mapping[int, FrameProblem],
                  frames: Sequence[int], tracks: TrackIds, options, keep_free: bool = True):
     """Person ids for every box of ``views``, the top-horizontal pairs of each horizontal view
@@ -180,16 +212,20 @@ def video_people(views: Sequence[Mapping], problems: Mapping[int, FrameProblem],
     next_id, n_fallback = 1, first.n_fallback
     for f in frames:
         rows = [_rows(v.get(f)) for v in views]
-        problem = _forced(problems[f], rows, {k: kept[k][f] for k in kept})
-        if options.solver == "mip":
-            sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma,
-                                   options.time_limit)
-            n_fallback += sol.status == "fallback"
-        else:
-            sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
+        here = {k: kept[k][f] for k in kept}
+        clusters = _direct(problems[f], rows, here)
+        if clusters is None:
+            problem = _forced(problems[f], rows, here)
+            if options.solver == "mip":
+                sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma,
+                                       options.time_limit)
+                n_fallback += sol.status == "fallback"
+            else:
+                sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
+            clusters = sol.person
         chains = [np.array([tracks[v][r] for r in rows[v]], dtype=np.int64)
                   for v in range(n_views)]
-        ids, next_id = carry_ids(sol.person, chains, owner, next_id, TOP_VOTE)
+        ids, next_id = carry_ids(clusters, chains, owner, next_id, TOP_VOTE)
         for v in range(n_views):
-            person[v].update(zip(rows[v], ids[sol.person[v]].tolist(), strict=True))
+            person[v].update(zip(rows[v], ids[clusters[v]].tolist(), strict=True))
     return ViewPeople(person, next_id - 1, min(n_fallback, len(frames)))
