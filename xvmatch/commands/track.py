@@ -100,8 +100,8 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    "(0, 1000] (default 1)")
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=30.0,
                    help="wall-time guard per window for the MIP, in [0.01, 600] (default 30); "
-                   "past it or the budget of work (64 added loops, 1000 HiGHS nodes a program) "
-                   "the best loop-free answer found is used, with a warning")
+                   "past it or its budget (64 added loops and 1000 HiGHS nodes a program) the "
+                   "best loop-free answer found is used, with a warning")
     p.add_argument("--seed", type=seed_value, default=0,
                    help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
