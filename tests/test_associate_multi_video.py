@@ -142,3 +142,15 @@ def test_bad_options_are_refused(tmp_path, option, capsys):
         _run(paths, tmp_path / "out", option, bad)
     assert exc.value.code == 2
     assert option in capsys.readouterr().err
+
+
+def test_draw_names_each_picture_by_its_horizontal_frame(tmp_path):
+    # top frame = horizontal frame + offset: hor1 (offset 2) meets the top view on its frames
+    # 1-6, hor2 (offset -1) on its frames 2-8, as associate --draw names them
+    paths = _scene(tmp_path)
+    draw = tmp_path / "pictures"
+    assert _run(paths, tmp_path / "out", "--offset", "2", "-1", "--draw", str(draw),
+                "--quiet") == 0
+    names = [sorted(p.name for p in (draw / f"hor{k}").glob("frame_*")) for k in (1, 2)]
+    assert names == [[f"frame_{f:06d}.jpg" for f in range(1, 7)],
+                     [f"frame_{f:06d}.jpg" for f in range(2, 9)]]

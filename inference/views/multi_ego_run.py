@@ -25,7 +25,7 @@ import numpy as np
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
 from xvmatch.formats.camera_frames import open_cameras
-from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
+from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, shift_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
 from xvmatch.inference.matching.camera_check import CameraCheck, check_run_cameras
 from xvmatch.inference.matching.camera_refinement import CameraRefinement, refine_views_cameras
@@ -338,22 +338,22 @@ def _checked_cameras(matcher, views, sizes, cameras, refinement: CameraRefinemen
 
 def pair_pictures(inputs: MultiEgoInputs, people: ViewPeople, offsets: Sequence[int]) -> list:
     """What :func:`~xvmatch.viz.match_pictures.write_match_pictures` draws of each (top,
-    horizontal view) pair (``associate-multi --draw``): per horizontal view, ``(top, hor, pairs,
-    frames, sources)``, the views re-timed by ``offsets`` as the run was, each record's ids the
-    boxes' person ids (so the labels name the people, the same number in every view) and the
-    pairs ``(id, id)`` of the people both views hold; ``sources`` the images or None."""
+    horizontal view) pair (``associate-multi --draw``): per horizontal view ``k``, ``(top, hor,
+    pairs, frames, sources)`` on view ``k``'s own frame numbers (the top view re-timed by its
+    offset, as ``associate --draw`` draws), each record's ids the boxes' person ids (so the
+    labels name the people, one number in every view) and the pairs ``(id, id)`` of the people
+    both views hold; ``sources`` the images (the top ones re-timed) or None."""
     views, images = inputs.views, inputs.images
-    if any(offsets):
-        views, images = _aligned(views, offsets, images, None, None)[:2]
     named = [{f: FrameBoxes(f, np.array([people.person[v].get(r, -1) for r in rec.ids.tolist()],
                                         dtype=np.int64), rec.boxes) for f, rec in view.items()}
              for v, view in enumerate(views)]
     out = []
     for k in range(1, len(views)):
-        top, hor = named[0], named[k]
+        top, hor = shift_frames(named[0], offsets[k - 1]), named[k]
         frames = sorted(f for f in set(top) & set(hor) if len(top[f].ids) and len(hor[f].ids))
         pairs = {f: [(p, p) for p in sorted(set(top[f].ids.tolist()) & set(hor[f].ids.tolist()))
                      if p >= 0] for f in frames}
-        sources = None if images is None else {"top": images[0], "hor": images[k]}
+        sources = (None if images is None else
+                   {"top": retimed(images[0], int(offsets[k - 1])), "hor": images[k]})
         out.append((top, hor, pairs, frames, sources))
     return out
