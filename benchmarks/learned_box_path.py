@@ -77,9 +77,9 @@ def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
 
     def per_candidate(top, hor, width, params, candidates, keep=None):
         return [r for c in candidates
-                for r in rank_hypotheses(top, hor, width, params, candidates=[c], k=1)]
+                for r in rank_hypotheses(top, hor, width, params, candidates=[c], k=1)], None
 
-    features.best_per_candidate = per_candidate  # feature version 1's search
+    features._best_per_candidate = per_candidate  # feature version 1's search (no geometry)
     torch.set_num_threads(1)
     loaded = load_matcher(model)
     top = read_mot_boxes(top_file, duplicates="first")

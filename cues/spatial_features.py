@@ -41,11 +41,12 @@ from xvmatch.cues import kernel_choice
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.cues.spatial_search import (
     FrameAssociation,
-    best_per_candidate,
+    _best_per_candidate,
     rank_hypotheses,
 )
 from xvmatch.cues.spatial_vectors import (
     REFERENCE_SIZE,
+    TopGeometry,
     box_centres,
     horizontal_vectors,
     top_geometry,
@@ -250,8 +251,10 @@ def _hypotheses(
     hor_width: float,
     config: FeatureConfig,
     camera: int | None,
-) -> list[FrameAssociation]:
-    """Best hypotheses of a frame, lowest Phi first (ties: lower O index, then theta)."""
+) -> tuple[list[FrameAssociation], TopGeometry | None]:
+    """Best hypotheses of a frame, lowest Phi first (ties: lower O index, then theta), and the
+    search's :class:`TopGeometry` of every top box as O (a row per box) when it searched them
+    all at once (None otherwise)."""
     params = config.spatial_params()
     separation = math.radians(config.mode_separation_deg)
     if camera is None:
@@ -262,15 +265,18 @@ def _hypotheses(
     depth = 1 if modes == 1 else max(4 * modes, 2 * math.ceil(
         math.degrees(separation) / config.dtheta_deg) * modes)
     found: list[FrameAssociation] = []
+    geometry = None
     if depth == 1:  # one orientation per candidate: one batched search for all of them
-        found = best_per_candidate(top, hor, hor_width, params, candidates=candidates,
-                                   keep=config.n_hypotheses)
+        found, geometry = _best_per_candidate(top, hor, hor_width, params,
+                                              candidates=candidates, keep=config.n_hypotheses)
+        if camera is not None:
+            geometry = None  # rows of the given O only
     else:
         for c in candidates:
             ranked = rank_hypotheses(top, hor, hor_width, params, candidates=[c], k=depth)
             found += _modes(ranked, modes, separation)
     found.sort(key=lambda h: (h.cost, h.camera, h.theta))
-    return found[: config.n_hypotheses]
+    return found[: config.n_hypotheses], geometry
 
 
 def _median(values: np.ndarray) -> float:
@@ -291,7 +297,7 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 def _hypothesis_features(
     hyps: Sequence[FrameAssociation],
     hyp_camera: np.ndarray,
-    centres: np.ndarray,
+    geometry: TopGeometry,
     x_hor: np.ndarray,
     y_hor: np.ndarray,
     s_top: float,
@@ -302,7 +308,8 @@ def _hypothesis_features(
     pair_f: np.ndarray,
 ) -> None:
     """The ``HYP_FEATURES`` into ``hyp_f`` ``(H, 7)`` and the ``PAIR_FEATURES`` into ``pair_f``
-    ``(H, M, N, 12)`` (float32, zeroed) of the hypotheses ``hyps`` (see :func:`frame_features`):
+    ``(H, M, N, 12)`` (float32, zeroed) of the hypotheses ``hyps`` (see :func:`frame_features`;
+    ``geometry``: the :class:`TopGeometry` of each hypothesis' O, a row each):
     every hypothesis at once, (H, M) per top person and (H, M, N) per pair, each feature computed
     in float64 and written into its slice. The (H, M, N) part runs in one compiled pass where
     the kernels are loaded (:mod:`~xvmatch.cues.kernel_choice`): the same arithmetic on numpy's
@@ -313,7 +320,6 @@ def _hypothesis_features(
     log_y_hor = np.log(y_hor)
     thetas = np.array([h.theta for h in hyps])
     scales = np.array([h.scale for h in hyps])
-    geometry = top_geometry(centres, hyp_camera, math.radians(config.tau_deg))
     dist, visible = geometry.dist, geometry.visible
     delta = _wrap(geometry.phi - thetas[:, None])  # signed angle from the optical axis
     in_view = (np.abs(delta) < half_fov) & visible  # inside the field of view (Eqs. 5-7)
@@ -448,7 +454,7 @@ def frame_features(
         ]
     ).reshape(n, len(HOR_FEATURES))
 
-    hyps = _hypotheses(top, hor, width, config, cam) if m and n else []
+    hyps, searched = _hypotheses(top, hor, width, config, cam) if m and n else ([], None)
     n_hyp = len(hyps)
     hyp_camera = np.array([h.camera for h in hyps], dtype=np.int64)
     # Written straight into the float32 arrays (a float64 value assigned to a float32 array
@@ -456,7 +462,12 @@ def frame_features(
     hyp_f = np.zeros((n_hyp, len(HYP_FEATURES)), np.float32)
     pair_f = np.zeros((n_hyp, m, n, len(PAIR_FEATURES)), np.float32)
     if n_hyp:
-        _hypothesis_features(hyps, hyp_camera, centres, x_hor, y_hor, s_top, n, config,
+        if searched is None:
+            geometry = top_geometry(centres, hyp_camera, math.radians(config.tau_deg))
+        else:  # the search's rows of these O (each row depends on its O alone: the same bits)
+            geometry = TopGeometry(searched.phi[hyp_camera], searched.dist[hyp_camera],
+                                   searched.visible[hyp_camera])
+        _hypothesis_features(hyps, hyp_camera, geometry, x_hor, y_hor, s_top, n, config,
                              camera is not None, hyp_f, pair_f)
     return FrameFeatures(
         top=top_f.astype(np.float32),

@@ -22,6 +22,7 @@ from xvmatch.cues.spatial_matching import (
     match_vector_sets,
 )
 from xvmatch.cues.spatial_vectors import (
+    TopGeometry,
     TopHypotheses,
     box_centres,
     horizontal_vectors,
@@ -116,14 +117,18 @@ frame, tens of people, is one block)."""
 
 
 def _candidate_blocks(
-    top_boxes: np.ndarray, cand: np.ndarray, thetas: np.ndarray, params: SpatialParams
+    top_boxes: np.ndarray, cand: np.ndarray, thetas: np.ndarray, params: SpatialParams,
+    geometries: list[TopGeometry] | None = None,
 ) -> Iterator[tuple[int, TopHypotheses]]:
     """The hypotheses of consecutive blocks of candidates, with the index of each block's first
-    hypothesis among all (candidate-major: b = c T + t)."""
+    hypothesis among all (candidate-major: b = c T + t); each block's geometry is appended to
+    ``geometries`` when given."""
     centres = box_centres(top_boxes)
     step = max(1, HYPOTHESIS_BLOCK // max(1, thetas.shape[0] * centres.shape[0]))
     for lo in range(0, cand.shape[0], step):
         geometry = top_geometry(centres, cand[lo:lo + step], math.radians(params.tau_deg))
+        if geometries is not None:
+            geometries.append(geometry)
         yield lo * thetas.shape[0], top_hypotheses(geometry, thetas,
                                                    math.radians(params.fov_deg))
 
@@ -280,20 +285,40 @@ def best_per_candidate(
         One :class:`FrameAssociation` per candidate with a finite cost, in candidate order;
         with ``keep``, only the ``keep`` lowest (cost, then candidate order), which are exact.
     """
+    return _best_per_candidate(top_boxes, hor_boxes, hor_width, params, candidates, thetas,
+                               keep)[0]
+
+
+def _best_per_candidate(
+    top_boxes: np.ndarray,
+    hor_boxes: np.ndarray,
+    hor_width: float,
+    params: SpatialParams | None = None,
+    candidates: Iterable[int] | None = None,
+    thetas: np.ndarray | None = None,
+    keep: int | None = None,
+) -> tuple[list[FrameAssociation], TopGeometry | None]:
+    """:func:`best_per_candidate`, and the :class:`TopGeometry` of its candidates (a row per
+    candidate, in the given order; None when nothing was searched), which the learned matcher's
+    features read again (:mod:`xvmatch.cues.spatial_features`)."""
     params = params or SpatialParams()
     top_boxes, hor_boxes, cand, thetas = _prepare(
         top_boxes, hor_boxes, candidates, thetas, params
     )
     if cand.size == 0 or hor_boxes.shape[0] == 0 or top_boxes.shape[0] < 2:
-        return []
+        return [], None
     hor, hor_order = horizontal_vectors(hor_boxes, hor_width)
     found = []
-    for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params):
+    geometries: list[TopGeometry] = []
+    for start, hypotheses in _candidate_blocks(top_boxes, cand, thetas, params, geometries):
         found += [(start + i, *rest) for i, *rest in _best_per_group(hypotheses, hor, params,
                                                                       keep)]
     if keep is not None:  # each block's keep best are exact, so the keep best of all are too
         found = sorted(sorted(found, key=lambda b: (b[1], b[0]))[:keep], key=lambda b: b[0])
-    return [_association(f, cand, thetas, hor_order) for f in found]
+    geometry = geometries[0] if len(geometries) == 1 else TopGeometry(
+        *(np.concatenate([getattr(g, k) for g in geometries]) for k in ("phi", "dist",
+                                                                         "visible")))
+    return [_association(f, cand, thetas, hor_order) for f in found], geometry
 
 
 def _best_per_group(

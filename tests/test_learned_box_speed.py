@@ -51,7 +51,7 @@ def _pair_features_in_float64(top, hor, size, config, camera):
     vectors, rows = horizontal_vectors(hor, width)
     x_hor, y_hor = np.empty(n), np.empty(n)
     x_hor[rows], y_hor[rows] = vectors[:, 0], vectors[:, 1]
-    hyps = _hypotheses(top, hor, width, config, camera)
+    hyps, _ = _hypotheses(top, hor, width, config, camera)
     n_hyp = len(hyps)
     half_fov = 0.5 * math.radians(config.fov_deg)
     hyp_camera = np.array([h.camera for h in hyps], dtype=np.int64)
@@ -119,3 +119,28 @@ def test_features_written_in_float32_are_the_float64_ones_cast(kernels, camera):
             assert feats.pair.shape[0] > 0
             assert feats.pair.tobytes() == pair.tobytes()
             assert feats.hyp.tobytes() == hyp.tobytes()
+
+
+def test_the_searchs_geometry_is_top_geometrys_in_blocks_too(monkeypatch):
+    # The features read the search's geometry of each hypothesis' O instead of computing it
+    # again: each row depends on its O alone, so it is top_geometry's to the bit, whatever the
+    # blocks of candidates the search ran in.
+    from xvmatch.cues import spatial_search
+
+    rng = np.random.default_rng(5)
+    top = np.column_stack([rng.uniform(0, 800, (14, 2)), np.full((14, 2), 20.0)])
+    hor = np.column_stack([rng.uniform(0, 2400, 5), np.full(5, 400.0), np.full(5, 60.0),
+                           rng.uniform(150, 400, 5)])
+    expected = top_geometry(box_centres(top), np.arange(14), math.radians(2.0))
+    size = (2688.0, 1512.0)
+    whole = frame_features(top, hor, size)
+    for block in (None, 3 * 360 * 14):  # one block; blocks of 3 candidates
+        if block is not None:
+            monkeypatch.setattr(spatial_search, "HYPOTHESIS_BLOCK", block)
+        found, geometry = spatial_search._best_per_candidate(top, hor, size[0], keep=8)
+        assert found and len(found) == 8
+        for name in ("phi", "dist", "visible"):
+            assert getattr(geometry, name).tobytes() == getattr(expected, name).tobytes()
+        again = frame_features(top, hor, size)
+        assert again.pair.tobytes() == whole.pair.tobytes()
+        assert again.hyp.tobytes() == whole.hyp.tobytes()
