@@ -341,6 +341,7 @@ def _best_per_group(
     n_groups = int(group[-1]) + 1 if n else 0
     hor_x = hor[:, 0]
     best_cost = np.full(n_groups, np.inf)
+    best_index = np.full(n_groups, n)  # each group's best hypothesis so far (n: none)
     best: list[tuple[int, float, np.ndarray, float, np.ndarray] | None] = [None] * n_groups
 
     def score(idx: np.ndarray) -> None:
@@ -350,18 +351,21 @@ def _best_per_group(
         if rows.size == 0:
             return
         # The batch's best row of each group (lowest cost, then lowest index), then a merge
-        # with the groups' bests so far: a loop over groups, not over rows.
+        # with the groups' bests so far (lower cost, or the same and a lower index): in numpy
+        # over the batch's groups, a loop over the groups it improves only.
         groups, costs = group[idx[rows]], result.cost[rows]
         order = np.lexsort((idx[rows], costs, groups))
         ordered = groups[order]  # ascending: each group's first entry is its best row
         first = np.flatnonzero(np.concatenate(([True], ordered[1:] != ordered[:-1])))
-        for r in rows[order[first]]:
-            i, c = int(idx[r]), float(result.cost[r])
-            g = group[i]
-            held = best[g]
-            if c < best_cost[g] or (c == best_cost[g] and held is not None and i < held[0]):
-                best_cost[g] = c
-                best[g] = (i, c, result.pairs[r], float(result.scale[r]), vectors.index[r])
+        win = rows[order[first]]
+        g, c, i = group[idx[win]], result.cost[win], idx[win]
+        held = best_cost[g]
+        better = (c < held) | ((c == held) & (i < best_index[g]))
+        for k in np.flatnonzero(better):
+            r, gk = win[k], g[k]
+            best_cost[gk], best_index[gk] = c[k], i[k]
+            best[gk] = (int(i[k]), float(c[k]), result.pairs[r], float(result.scale[r]),
+                        vectors.index[r])
 
     def limits() -> np.ndarray:
         """``(n_groups,)``: what a hypothesis of each group must not exceed to matter (per
