@@ -20,6 +20,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from xvmatch.inference.linking.piecewise_labels import label_path
+
 __all__ = ["FREE_COST", "SWITCH_COST", "consistent_pairs", "tracklet_consensus"]
 
 SWITCH_COST = 15.0
@@ -29,40 +31,6 @@ FREE_COST = 0.5
 half of the frames."""
 
 Pairs = dict[int, list[tuple[int, int]]]
-
-
-def _partner_path(obs: np.ndarray, here: np.ndarray, switch_cost: float,
-                  free_cost: float) -> np.ndarray:
-    """Viterbi over one top track's frames: state 0 follows each frame's own pair at
-    ``free_cost`` a frame; state ``j >= 1`` holds candidate ``j`` as the partner, at 0 a frame
-    where that frame's pair agrees and 1 where it does not, and ``free_cost`` where the candidate
-    is absent from the frame (its absence says nothing for or against it: a person out of the
-    handheld camera's view for a while stays that track's partner); changing state costs
-    ``switch_cost``.
-
-    Args:
-        obs: ``(T,)`` index of the frame's partner among the candidates (1-based), 0 for none.
-        here: ``(T, S)`` bool, candidate ``j`` present in the frame (column 0 unused).
-
-    Returns:
-        ``(T,)`` the chosen state per frame.
-    """
-    n, states = here.shape
-    cols = np.arange(states)
-    cost = np.where(here, (obs[:, None] != cols[None, :]).astype(float), free_cost)
-    cost[:, 0] = free_cost
-    back = np.zeros((n, states), dtype=np.int64)
-    total = cost[0].copy()
-    for k in range(1, n):
-        best = int(np.argmin(total))
-        stay = total <= total[best] + switch_cost
-        back[k] = np.where(stay, cols, best)
-        total = np.where(stay, total, total[best] + switch_cost) + cost[k]
-    path = np.zeros(n, dtype=np.int64)
-    path[-1] = int(np.argmin(total))
-    for k in range(n - 1, 0, -1):
-        path[k - 1] = back[k, path[k]]
-    return path
 
 
 def _stretch_support(path: np.ndarray, obs: np.ndarray, here: np.ndarray) -> np.ndarray:
@@ -85,8 +53,9 @@ def tracklet_consensus(pairs: Mapping[int, Sequence[tuple[int, int]]],
                        keep_free: bool = True) -> Pairs:
     """Per-frame pairs made consistent over time (module docstring): each top-view track's
     partner over its frames is a piecewise-constant choice among the horizontal tracks it was
-    paired with, or the frames' own pairs where no partner holds (:func:`_partner_path`); two
-    tracks claiming one partner in a frame go to the one the frame's own pair agrees with.
+    paired with, or the frames' own pairs where no partner holds
+    (:func:`~xvmatch.inference.linking.piecewise_labels.label_path`); two tracks claiming one
+    partner in a frame go to the one the frame's own pair agrees with.
 
     Args:
         pairs: ``{frame: [(top id, hor id), ...]}`` of the frame-by-frame association.
@@ -114,7 +83,7 @@ def tracklet_consensus(pairs: Mapping[int, Sequence[tuple[int, int]]],
         slot = {h: j + 1 for j, h in enumerate(cands)}
         obs = np.array([slot.get(own[f].get(t), 0) for f in frames])
         here = np.array([[False] + [h in hors_at[f] for h in cands] for f in frames])
-        path = _partner_path(obs, here, switch_cost, free_cost)
+        path = label_path(obs, here, switch_cost, free_cost)
         support = _stretch_support(path, obs, here)
         for k, (f, state, seen) in enumerate(zip(frames, path, obs, strict=True)):
             if state == 0 and seen and keep_free:  # no partner holds: the frame's own pair
