@@ -26,10 +26,14 @@ per-camera track ids (ids are never compared across cameras):
    floor no camera pair shares, or where a track was cut) are chained, one assignment of segment
    ends to segment starts, gated by the distance from the constant-velocity prediction.
 
-By default (``split_frames=20``) the unit of steps 2-3 is a piece of 20 frames of a track, not
-the whole track; each track's pieces are joined again by majority afterwards
+With ``split="fixed"`` and ``split_frames=20`` the unit of steps 2-3 is a piece of 20 frames
+of a track, not the whole track; each track's pieces are joined again by majority afterwards
 (:func:`_rejoin_pieces`), so that a person back in a camera's view under a new track id, or a
-tracker's id switch, costs a piece, not the person's whole path (``docs/multicam.md``).
+tracker's id switch, costs a piece, not the person's whole path (``docs/multicam.md``). By
+default (``split="evidence"``) that fixed split is only a probe: each track is cut only where
+the other cameras' links show its id switched, and the tracks so cut are grouped by the votes
+of their pieces' links; where many tracks are cut (a tracker's output) the fixed pieces are
+the answer (:mod:`xvmatch.inference.views.multicam_evidence`).
 
 **Appearance** (optional, issue 32 item 5): with an embedder per camera (``appearance``: e.g.
 the deployed bundle's appearance network on that camera's images), each trajectory (piece) that
@@ -116,6 +120,17 @@ class MulticamOptions:
             someone else (a tracker's id switch): a track may then carry several global ids,
             one after the other, never two at once. 0 keeps each track whole, as the paper
             does (one trajectory joins at most one of every other camera).
+        split: ``"evidence"`` (default): the pieces of ``split_frames`` are a probe; each
+            track is cut only where the probe's global ids along it change for good and the
+            pieces so cut are associated whole
+            (:func:`~xvmatch.inference.views.multicam_evidence.associate_on_evidence`);
+            ``"fixed"``: the pieces of ``split_frames`` are the answer's units. Either way
+            ``split_frames=0`` keeps tracks whole.
+        evidence_switch_frames: with ``split="evidence"``, the frames of disagreement a
+            change of a track's partner in another camera must save to count as a switch.
+        evidence_max_cut_share: with ``split="evidence"``, the most tracks cut, as a share of
+            all tracks, for the tracks cut on evidence to be the answer; above it (a
+            tracker's output) the fixed pieces are.
         appearance_weight: weight of the appearance cost ``|a - b| / 2`` (in [0, 1]) added to
             the reprojection distance (in box heights) of a candidate pair, when both cameras
             have an embedder (``associate_cameras(appearance=...)``); 0 turns it off.
@@ -138,6 +153,9 @@ class MulticamOptions:
     split_frames: int = 20
     appearance_weight: float = 4.0
     appearance_boxes: int = 3
+    split: str = "evidence"
+    evidence_switch_frames: float = 30.0
+    evidence_max_cut_share: float = 0.02
 
     def __post_init__(self) -> None:
         if self.method not in ("ours", "dtw"):
@@ -147,6 +165,12 @@ class MulticamOptions:
                 raise ValueError(f"MulticamOptions.{name} must be >= 1")
         if int(self.split_frames) < 0:
             raise ValueError("MulticamOptions.split_frames must be >= 0")
+        if self.split not in ("evidence", "fixed"):
+            raise ValueError(f"split must be 'evidence' or 'fixed', got {self.split!r}")
+        if not self.evidence_switch_frames >= 0:
+            raise ValueError("MulticamOptions.evidence_switch_frames must be >= 0")
+        if not 0 <= self.evidence_max_cut_share <= 1:
+            raise ValueError("MulticamOptions.evidence_max_cut_share must be in [0, 1]")
         if not self.appearance_weight >= 0:
             raise ValueError("MulticamOptions.appearance_weight must be >= 0")
         if int(self.appearance_boxes) < 1:
@@ -667,9 +691,13 @@ class MulticamResult:
         links: the accepted pairs ``(camera_a, track_a, camera_b, track_b)``.
         frames: the common frame axis.
         piece_ids: ``{camera: {(track_id, piece): global_id}}``; the piece of a box at frame
-            ``f`` is ``position of f in frames // split_frames`` (always 0 without splitting).
-        split_frames: the ``MulticamOptions.split_frames`` used (0: whole tracks, and
-            ``global_ids`` alone says everything).
+            ``f`` is ``position of f in frames // split_frames`` (always 0 without splitting),
+            or its piece of ``piece_starts``.
+        split_frames: the ``MulticamOptions.split_frames`` of fixed pieces (0: whole tracks or
+            ``piece_starts``; with neither, ``global_ids`` alone says everything).
+        piece_starts: ``{camera: {track_id: (P,) first frames of its pieces}}`` of tracks cut
+            on evidence (empty otherwise): the piece of a box at frame ``f`` is the last one
+            starting at or before ``f``.
     """
 
     global_ids: dict[str, dict[int, int]]
@@ -678,6 +706,7 @@ class MulticamResult:
     frames: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
     piece_ids: dict[str, dict[tuple[int, int], int]] = field(default_factory=dict)
     split_frames: int = 0
+    piece_starts: dict[str, dict[int, np.ndarray]] = field(default_factory=dict)
 
 
 def _split_pieces(whole: list[CameraTracks], split_frames: int
@@ -819,7 +848,18 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
                           [boxes[n] for n in names], [appearance.get(n) for n in names],
                           opts.appearance_boxes)
     links = _camera_links(tracks, numbers, cams, opts, app, progress)
-    group_list, kept = _merged_groups(tracks, links, parents, numbers, opts.split_frames)
+    starts = {}
+    if opts.split == "evidence" and opts.split_frames:
+        from xvmatch.inference.views.multicam_evidence import evidence_groups
+
+        ev = evidence_groups(whole, tracks, parents, numbers, links, opts)
+        if ev is not None:
+            tracks, parents, numbers, group_list, kept = ev.tracks, ev.parents, ev.numbers, \
+                ev.groups, ev.links
+            starts = {n: {int(whole[c].ids[r]): s for r, s in ev.starts[c].items()}
+                      for c, n in enumerate(names)}
+    if not starts:
+        group_list, kept = _merged_groups(tracks, links, parents, numbers, opts.split_frames)
     segments = [_fuse(m, tracks, opts.smooth_window) for m in group_list]
     gids = _chain_ids(group_list, segments, tracks, frame_axis, opts)
     global_ids: dict[str, dict[int, int]] = {n: {} for n in names}
@@ -838,15 +878,22 @@ def associate_cameras(cameras: Mapping[str, GroundCamera],
               names[lk.cam_b], int(whole[lk.cam_b].ids[parents[lk.cam_b][lk.track_b]]))
              for lk in kept if lk.cam_a != lk.cam_b]
     return MulticamResult(global_ids, _fused_paths(ground, frame_axis), pairs, frame_axis,
-                          piece_ids, int(opts.split_frames))
+                          piece_ids, 0 if starts else int(opts.split_frames), starts)
 
 
 def relabel(boxes: Mapping[str, Mapping[int, FrameBoxes]], result: MulticamResult
             ) -> dict[str, dict[int, FrameBoxes]]:
     """Each camera's boxes, in their order, with the track id replaced by its global id (the
-    global id of the track's piece holding the frame, with ``split_frames``)."""
+    global id of the track's piece holding the frame, with ``split_frames`` or
+    ``piece_starts``)."""
     out: dict[str, dict[int, FrameBoxes]] = {}
     for name, frames in boxes.items():
+        if result.piece_starts:
+            table, starts = result.piece_ids[name], result.piece_starts[name]
+            out[name] = {f: FrameBoxes(f, np.array(
+                [table[(int(t), int(np.searchsorted(starts[int(t)], f, side="right")) - 1)]
+                 for t in rec.ids], np.int64), rec.boxes) for f, rec in frames.items()}
+            continue
         if result.split_frames:
             table = result.piece_ids[name]
             pos = {int(f): i // result.split_frames for i, f in enumerate(result.frames)}

@@ -41,6 +41,8 @@ __all__ = [
     "SHORT_FRAMES",
     "MulticamRun",
     "MulticamRunOptions",
+    "association_options",
+    "check_box_cameras",
     "fit_ground_cameras",
     "many_ids_note",
     "run_multicam",
@@ -83,6 +85,31 @@ class MulticamRunOptions:
         if self.localise not in ("foot", "two-best", "all"):
             raise ValueError(f"localise must be 'foot', 'two-best' or 'all', got "
                              f"{self.localise!r}")
+
+
+def association_options(method: str = "ours", split_frames: int | str | None = None,
+                        appearance_weight: float | None = None) -> MulticamOptions:
+    """The association's options of the command line's ``--method``, ``--split-frames``
+    (``"auto"``: split on evidence, probing with pieces of 20 frames; ``L``: fixed pieces of
+    ``L`` frames, 0 whole tracks; None: ``"auto"`` with ``ours``, 0 with ``dtw``, the paper's
+    M1) and ``--appearance-weight`` (None: the default)."""
+    if split_frames is None:
+        split_frames = 0 if method == "dtw" else "auto"
+    options = MulticamOptions(method=method, split="evidence") if split_frames == "auto" else \
+        MulticamOptions(method=method, split_frames=int(split_frames), split="fixed")
+    if appearance_weight is not None:
+        options = replace(options, appearance_weight=appearance_weight)
+    return options
+
+
+def check_box_cameras(files: Mapping[str, str], cameras: Mapping[str, GroundCamera],
+                      cameras_file: str) -> None:
+    """Every camera of the box files ``{camera: path}`` is one of ``cameras`` (read from
+    ``cameras_file``); else ``ValueError`` naming ``--boxes NAME=FILE``."""
+    for name, path in files.items():
+        if name not in cameras:
+            raise ValueError(f"--boxes {name}={path}: camera {name} is not in {cameras_file} "
+                             f"(it has {', '.join(cameras)})")
 
 
 @dataclass(frozen=True)

@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from dataclasses import replace
 
+from xvmatch.commands._box_reading import add_box_reading_options, box_reading
 from xvmatch.commands._options import UsageError, add_command_parser, progress_bar, read_boxes
 from xvmatch.commands._types import float_in, image_size, int_in
 from xvmatch.core.output_paths import Input, Output, check_outputs, claim_folder, plain_name
@@ -27,6 +27,7 @@ COMMAND = "xvmatch multicam"
 """The marker name of the command's output folders."""
 
 _CAMERA_SIZE = image_size(8, 65536, "pixels of a camera image")
+_PIECE = int_in(0, 100000, "frames of a track piece, or auto")
 _DEFAULT_WEIGHT = 4.0  # MulticamOptions().appearance_weight, without importing numpy here
 
 
@@ -69,11 +70,13 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("ours", "dtw"), default="ours",
                    help="ours: the trajectory-correspondence paper's features, reprojection "
                    "conflicts, fusion and linkage; dtw: its DTW baseline (M1)")
-    p.add_argument("--split-frames", type=int_in(0, 100000, "frames of a track piece"),
-                   default=None, metavar="L",
-                   help="associate each track in pieces of L frames, rejoined unless the other "
-                   "cameras disagree (a tracker's id switch); 0: whole tracks, as the paper "
-                   "(default 20 with --method ours, 0 with dtw: the paper's M1)")
+    p.add_argument("--split-frames", type=lambda t: t if t == "auto" else _PIECE(t),
+                   default=None, metavar="auto|L",
+                   help="auto: cut a track only where the other cameras show its id switched, "
+                   "or in pieces of 20 frames where many do (a tracker's output); L: every "
+                   "track in pieces of L frames, rejoined unless the other cameras disagree; "
+                   "0: whole tracks, as the paper (default auto with --method ours, 0 with "
+                   "dtw: the paper's M1)")
     p.add_argument("--localise", choices=("foot", "two-best", "all"), default="foot",
                    help="ground.csv from: foot, the fused foot points (default); two-best, "
                    "the VRL paper's two most visible views (principal axes along the "
@@ -90,6 +93,7 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--duplicates", choices=("first", "error"), default="first",
                    help="a repeated (frame, id) in a box file: keep the first box with a "
                    "warning (default) or stop")
+    add_box_reading_options(p)
     p.add_argument("--above-horizon", choices=("error", "drop"), default="error",
                    help="a box whose foot point lies at or above its camera's horizon (no "
                    "person stands there: a false detection or a wrong calibration): stop with "
@@ -124,17 +128,15 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         raise UsageError("give --boxes NAME=FILE ... and --cameras (or --fit-homography)")
     from xvmatch.formats.camera_io import load_ground_cameras
     from xvmatch.formats.multicam_files import write_multicam_outputs
-    from xvmatch.inference.views.multicam_run import run_multicam
+    from xvmatch.inference.views.multicam_run import check_box_cameras, run_multicam
     from xvmatch.viz.birdseye import draw_birdseye
 
     options = _run_options(args)
     files = options.box_files
     cameras = load_ground_cameras(args.cameras)
-    for name, path in files.items():
-        if name not in cameras:
-            raise UsageError(f"--boxes {name}={path}: camera {name} is not in {args.cameras} "
-                             f"(it has {', '.join(cameras)})")
-    boxes = {name: read_boxes(path, args.duplicates) for name, path in files.items()}
+    check_box_cameras(files, cameras, args.cameras)
+    reading = box_reading(args)
+    boxes = {name: read_boxes(path, args.duplicates, reading) for name, path in files.items()}
     run = run_multicam(cameras, boxes, options,
                        progress=lambda n: progress_bar(n, "camera pairs", "pair", not args.quiet),
                        warn=lambda m: print(f"xvmatch: warning: {m}", file=sys.stderr),
@@ -152,8 +154,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
 def _run_options(args: argparse.Namespace):
     """The run's options, after every check of the options and of the input and output paths."""
     from xvmatch.core.output_paths import check_own_folder
-    from xvmatch.inference.views.multicam import MulticamOptions
-    from xvmatch.inference.views.multicam_run import MulticamRunOptions
+    from xvmatch.inference.views.multicam_run import MulticamRunOptions, association_options
 
     files = named_paths(args.boxes, "--boxes")
     if len(files) < 2:
@@ -173,10 +174,7 @@ def _run_options(args: argparse.Namespace):
                    *(Input("--boxes", f) for f in files.values()),
                    *(Input("--images", f) for f in images.values())])
     check_own_folder(args.out, COMMAND)
-    split = {"dtw": 0}.get(args.method, 20) if args.split_frames is None else args.split_frames
-    association = MulticamOptions(method=args.method, split_frames=split)  # dtw: the paper's M1
-    if args.appearance_weight is not None:
-        association = replace(association, appearance_weight=args.appearance_weight)
+    association = association_options(args.method, args.split_frames, args.appearance_weight)
     return MulticamRunOptions(association, files, args.cameras, args.above_horizon,
                               args.localise, images, args.model or "default")
 
