@@ -145,14 +145,15 @@ def wearer_rows(top, camera_ids: Sequence[int] | None) -> list[dict[int, int]] |
 def check_view_inputs(paths: Sequence[str], per_view: Mapping[str, Sequence | None],
                       most: int) -> None:
     """The box files (top first) and the options given once per horizontal view, checked: 1 to
-    ``most`` horizontal files, no file named twice, each option of ``per_view`` (``{option:
-    values or None}``) one value per horizontal file."""
+    ``most`` horizontal files, no file named twice, each option of ``per_view`` (``{dest:
+    values or None}``, ``hor_images`` for ``--hor-images``) one value per horizontal file."""
     n_hor = len(paths) - 1
     if not 1 <= n_hor <= most:
         raise ValueError(f"--hor: give 1 to {most} horizontal box files, got {n_hor}")
     for option, values in per_view.items():
         if values is not None and len(values) != n_hor:
-            raise ValueError(f"{option}: give one per --hor file ({n_hor}), got {len(values)}")
+            flag = "--" + option.replace("_", "-")
+            raise ValueError(f"{flag}: give one per --hor file ({n_hor}), got {len(values)}")
     if len(set(map(str, map(Path, paths)))) != len(paths):
         raise ValueError("--top and --hor name the same file twice")
 

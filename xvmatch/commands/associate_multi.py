@@ -141,8 +141,8 @@ def _run_options(args: argparse.Namespace):
     from xvmatch.inference.views.multi_view_people import PeopleOptions
 
     n_hor, paths = len(args.hor), [args.top, *args.hor]
-    check_view_inputs(paths, {"--hor-images": args.hor_images, "--cameras": args.cameras,
-                              "--camera-id": args.camera_id}, MAX_HOR)
+    check_view_inputs(paths, {k: getattr(args, k) for k in ("hor_images", "cameras",
+                                                              "camera_id")}, MAX_HOR)
     check_top_view(args)
     check_images_together(args.top_images, args.hor_images)
     if args.model is None and (args.top_images or args.cameras):
