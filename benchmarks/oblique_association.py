@@ -81,8 +81,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=12.0)
     p.add_argument("--step", type=int, default=3, help="every N-th frame (10 fps scenes)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
+                   help="the top camera drifts at LO-HI m/s (a drone; default static)")
+    p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
+                   metavar=("LO", "HI"), help="and turns at LO-HI degrees/s")
     args = p.parse_args(argv)
-    config = ObliqueSceneConfig()
+    config = ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
+                                top_yaw_rate=tuple(args.top_yaw_rate))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus")
     totals = {name: np.zeros(3) for name in names}
