@@ -21,7 +21,8 @@ homography (:func:`load_ground_cameras` only, for ``xvmatch multicam``).
 Unknown keys are rejected so that a typo (``"k"`` for ``"K"``) cannot go unnoticed.
 A file ``xvmatch calibrate`` wrote also has ``"estimated": {name: record}`` (:data:`ESTIMATED`):
 its cameras are each in their own view's ground frame, so the commands that need cameras in one
-world refuse it by name; :func:`load_estimated` reads it.
+world refuse it by name; :func:`load_estimated` reads it. Records whose ``world`` is
+:data:`REGISTERED` (``xvmatch multicam`` without ``--cameras``) are in one world and read as any.
 
 Every camera is checked for physical sense as it is read
 (:func:`~xvmatch.geometry.camera.check_camera_sense`: focal lengths > 0, a proper rotation, a
@@ -53,8 +54,8 @@ from xvmatch.core.json_text import parse_json
 from xvmatch.geometry.camera import Camera, CameraSenseError, check_camera_sense
 from xvmatch.geometry.ground_plane import GroundCamera, check_ground_view
 
-__all__ = ["ESTIMATED", "FORMAT_VERSION", "TOP_CAMERA", "CameraFileError", "load_cameras",
-           "load_estimated", "load_ground_cameras", "save_cameras"]
+__all__ = ["ESTIMATED", "FORMAT_VERSION", "REGISTERED", "TOP_CAMERA", "CameraFileError",
+           "load_cameras", "load_estimated", "load_ground_cameras", "save_cameras"]
 
 FORMAT_VERSION = 1
 TOP_CAMERA = "top"
@@ -67,6 +68,11 @@ ESTIMATED = "estimated"
 """Top-level field of a file ``xvmatch calibrate`` wrote: ``{camera name: how it was
 estimated}``. Its cameras were each calibrated from the people in their own view, in that
 view's own ground frame (above the origin, looking along +x): they are not in one world."""
+REGISTERED = "registered from people"
+"""The ``world`` of every ``estimated`` record of a file ``xvmatch multicam`` wrote without a
+calibration: its cameras were calibrated from their people *and* registered to one another,
+so they are in one world (that of the camera named ``reference``) and every command reads
+them."""
 
 
 class CameraFileError(ValueError):
@@ -288,6 +294,8 @@ def _check_estimated(record: Any, cameras: Mapping[str, Any], into: dict | None)
     if unknown:
         raise CameraFileError(f"{ESTIMATED}: names camera(s) not in the file: "
                               f"{', '.join(map(str, unknown))}")
+    if into is None and all(v.get("world") == REGISTERED for v in record.values()):
+        return  # registered into one world (xvmatch multicam without --cameras)
     if into is None:
         raise CameraFileError(
             f"{ESTIMATED}: these cameras were calibrated one view at a time from the people in "

@@ -2,8 +2,8 @@
 accuracy), or tracks with ``--tracks``
 (:func:`xvmatch.commands.evaluate_tracks.evaluate_tracks_command`), or
 a multi-camera association with ``--multicam``
-(:func:`xvmatch.commands.multicam.evaluate_multicam_command`), or each camera's tracks with global
-ids with ``--pred NAME=FILE ... --gt NAME=FILE ...`` (the same scores).
+(:func:`xvmatch.commands.evaluate_tracks.evaluate_multicam_command`), or each camera's tracks
+with global ids with ``--pred NAME=FILE ... --gt NAME=FILE ...`` (the same scores).
 
 Several prediction CSVs (``--pred A=a.csv B=b.csv``, or ``--pred`` repeated) are scored side by
 side against the same ``--top`` and ``--hor``: one table, one row per method, each row re-timed by
@@ -85,7 +85,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.multicam is not None or args.gt is not None:
         if args.multicam is None and args.pred is None:
             raise UsageError("--gt: give --multicam DIR or --pred NAME=FILE ... with it")
-        from xvmatch.commands.multicam import evaluate_multicam_command
+        from xvmatch.commands.evaluate_tracks import evaluate_multicam_command
 
         return evaluate_multicam_command(args)
     if args.top is None or args.hor is None:

@@ -1,4 +1,5 @@
-"""``xvmatch evaluate --tracks DIR``: the tracking scores of the folder ``xvmatch track`` wrote.
+"""``xvmatch evaluate --tracks DIR``: the tracking scores of the folder ``xvmatch track`` wrote;
+and ``evaluate --multicam DIR`` / ``--gt NAME=FILE``: those of several cameras' global ids.
 
 Reads ``DIR/top.txt`` and ``DIR/hor.txt`` and the offset ``track`` applied (``DIR/offset.json``,
 or ``--offset N``), re-times the tracks and the ground truth the same way, and prints the
@@ -11,13 +12,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
-from xvmatch.commands._options import read_boxes
+from xvmatch.commands._options import UsageError, read_boxes
+from xvmatch.commands.multicam import named_paths
 from xvmatch.commands.track import OFFSET_FILE
 
-__all__ = ["TRACKEVAL_MISSING", "evaluate_tracks_command", "tracked_offset"]
+__all__ = ["TRACKEVAL_MISSING", "evaluate_multicam_command", "evaluate_tracks_command",
+           "tracked_offset"]
 
 TRACKEVAL_MISSING = ("xvmatch: note: per-view IDF1, MOTA, MOTP and HOTA need the TrackEval "
                      "package: pip install --no-deps trackeval")
@@ -95,4 +99,51 @@ def evaluate_tracks_command(args: argparse.Namespace) -> int:
         print(json.dumps(track_scores_to_dict(scores), indent=2))
     else:
         print(format_track_table([(name, scores)]))
+    return 0
+
+
+def evaluate_multicam_command(args: argparse.Namespace) -> int:
+    """``xvmatch evaluate --multicam OUT --gt NAME=FILE ... [--ground-gt FILE]``, or with
+    ``--pred NAME=FILE ...`` (one MOT box file per camera, ids global) instead of ``--multicam``:
+    trajectory P/R, box pairs, global IDF1, CVIDP/CVIDR/CVIDF1/CVMA over every camera pair and,
+    with TrackEval, MOTA/IDF1/HOTA per camera."""
+    import json
+    from pathlib import Path
+
+    from xvmatch.formats.multicam_files import multicam_box_files, read_ground_csv
+    from xvmatch.metrics.multicam_cross_view import (
+        cross_view_scores,
+        format_cross_view,
+        view_tracking_scores,
+    )
+    from xvmatch.metrics.multicam_metrics import format_multicam, multicam_scores
+
+    gt_files = named_paths(args.gt, "--gt")
+    if len(gt_files) < 2:
+        raise UsageError("--gt: give the ground truth of at least two cameras, NAME=FILE")
+    folder = None if args.multicam is None else os.fspath(Path(args.multicam))
+    if args.multicam is None:
+        pred_files = named_paths(args.pred, "--pred")
+        if set(pred_files) != set(gt_files):
+            raise UsageError(f"--pred names the cameras {', '.join(pred_files)} but --gt "
+                             f"{', '.join(gt_files)}; give both for the same cameras")
+        pred_files = {name: pred_files[name] for name in gt_files}
+    else:
+        pred_files = multicam_box_files(args.multicam, gt_files)
+    pred = {name: read_boxes(path, args.duplicates) for name, path in pred_files.items()}
+    gt = {name: read_boxes(path, args.duplicates) for name, path in gt_files.items()}
+    ground_pred = ground_gt = None
+    if args.ground_gt is not None:
+        if folder is None:
+            raise UsageError("--ground-gt: needs --multicam DIR (its ground.csv); with --pred "
+                             "there are no predicted ground positions")
+        ground_gt = read_ground_csv(args.ground_gt)
+        ground_pred = read_ground_csv(os.path.join(folder, "ground.csv"))
+    scores = {**multicam_scores(pred, gt, ground_pred, ground_gt),
+              "cross_view": cross_view_scores(pred, gt), "views": view_tracking_scores(pred, gt)}
+    if args.json:
+        print(json.dumps(scores, indent=2))
+    else:
+        print(format_multicam(scores, args.name or folder or "multicam tracks"))
+        print(format_cross_view(scores["cross_view"], scores["views"]))
     return 0

@@ -19,7 +19,7 @@ from xvmatch.commands._options import UsageError, add_command_parser, progress_b
 from xvmatch.commands._types import float_in, image_size, int_in
 from xvmatch.core.output_paths import Input, Output, check_outputs, claim_folder, plain_name
 
-__all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "evaluate_multicam_command", "named_paths"]
+__all__ = ["COMMAND", "EXAMPLE", "add_multicam_parser", "named_paths"]
 
 EXAMPLE = ("xvmatch multicam --boxes cam1=cam1.txt cam2=cam2.txt cam3=cam3.txt "
            "--cameras cameras.json --out multicam_out/")
@@ -54,9 +54,10 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
         "Several static cameras: one global id per person across all cameras (trajectory "
         "association on the ground plane) and each person's ground path.",
         EXAMPLE,
-        description="Associate people across 2 or more static, calibrated, partly overlapping "
-        "cameras from each camera's boxes and track ids (ids are never compared across "
-        "cameras). Writes OUT/NAME.txt (the input rows, the id replaced by a global id), "
+        description="Associate people across 2 or more static, partly overlapping cameras "
+        "(calibrated, or calibrated here from their people) from each camera's boxes and "
+        "track ids (ids are never compared across cameras). Writes OUT/NAME.txt (the input "
+        "rows, the id replaced by a global id), "
         "OUT/tracks.csv (camera,track_id,first_frame,last_frame,global_id), OUT/ground.csv "
         "(frame,global_id,X,Y in metres) and OUT/birdseye.png. Lens distortion must be "
         "removed beforehand. With --fit-homography, fits H cameras from point pairs instead.",
@@ -66,7 +67,9 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
                    "of --cameras")
     p.add_argument("--cameras", metavar="FILE",
                    help="camera JSON (version 1): per camera K, R, c, width, height or H, "
-                   "width, height (H maps pixels to the ground in metres)")
+                   "width, height (H maps pixels to the ground in metres); without it the "
+                   "cameras are calibrated and registered from their people (give "
+                   "--image-size) and written to OUT/cameras.json")
     p.add_argument("--method", choices=("ours", "dtw"), default="ours",
                    help="ours: the trajectory-correspondence paper's features, reprojection "
                    "conflicts, fusion and linkage; dtw: its DTW baseline (M1)")
@@ -89,7 +92,8 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
                    "ground metres; 4 or more points per camera) and write the cameras file "
                    "to --out; give each camera's --image-size")
     p.add_argument("--image-size", nargs="+", metavar="NAME=WxH", default=None,
-                   help="with --fit-homography: each camera's image size")
+                   help="each camera's image size: without --cameras, or with "
+                   "--fit-homography")
     p.add_argument("--duplicates", choices=("first", "error"), default="first",
                    help="a repeated (frame, id) in a box file: keep the first box with a "
                    "warning (default) or stop")
@@ -97,8 +101,8 @@ def add_multicam_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--above-horizon", choices=("error", "drop"), default="error",
                    help="a box whose foot point lies at or above its camera's horizon (no "
                    "person stands there: a false detection or a wrong calibration): stop with "
-                   "its file and line (default), or leave it out of the association with a "
-                   "warning (it keeps a global id of its own)")
+                   "its file and line (default; drop without --cameras), or leave it out of "
+                   "the association with a warning (it keeps a global id of its own)")
     p.add_argument("--images", nargs="+", metavar="NAME=PATH", default=None,
                    help="optional: a camera's images (a folder of numbered frames, a quoted "
                    "glob pattern or a video; its size the camera's), for any of the cameras "
@@ -124,19 +128,34 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         raise UsageError("--out is required")
     if args.fit_homography is not None:
         return _fit_homographies(args)
-    if args.boxes is None or args.cameras is None:
-        raise UsageError("give --boxes NAME=FILE ... and --cameras (or --fit-homography)")
-    from xvmatch.formats.camera_io import load_ground_cameras
+    if args.boxes is None:
+        raise UsageError("give --boxes NAME=FILE ... (or --fit-homography)")
+    from xvmatch.formats.camera_io import load_ground_cameras, save_cameras
     from xvmatch.formats.multicam_files import write_multicam_outputs
     from xvmatch.inference.views.multicam_run import check_box_cameras, run_multicam
     from xvmatch.viz.birdseye import draw_birdseye
 
     options = _run_options(args)
     files = options.box_files
-    cameras = load_ground_cameras(args.cameras)
-    check_box_cameras(files, cameras, args.cameras)
+    sizes = _sizes(args) if args.cameras is None else {}
+    if args.cameras is not None:
+        cameras = load_ground_cameras(args.cameras)
+        check_box_cameras(files, cameras, args.cameras)
+    elif [n for n in files if n not in sizes]:
+        raise UsageError("without --cameras each camera is calibrated from its people: give "
+                         "--image-size NAME=WxH for " + ", ".join(n for n in files
+                                                                  if n not in sizes))
     reading = box_reading(args)
     boxes = {name: read_boxes(path, args.duplicates, reading) for name, path in files.items()}
+    estimated = None
+    if args.cameras is None:
+        from xvmatch.inference.views.multicam_from_people import estimate_cameras
+
+        estimated = estimate_cameras(boxes, {n: sizes[n] for n in files})
+        cameras = estimated.cameras
+        if not args.quiet:
+            print(f"xvmatch: note: {estimated.summary()}; wrote them to cameras.json",
+                  file=sys.stderr)
     run = run_multicam(cameras, boxes, options,
                        progress=lambda n: progress_bar(n, "camera pairs", "pair", not args.quiet),
                        warn=lambda m: print(f"xvmatch: warning: {m}", file=sys.stderr),
@@ -145,6 +164,8 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
     picture = draw_birdseye(run.result.ground, cameras)
     out = claim_folder(args.out, COMMAND)
     write_multicam_outputs(out, boxes, run.relabelled, run.result.ground, picture)
+    if estimated is not None:
+        save_cameras(out / "cameras.json", estimated.cameras, estimated.records())
     if not args.quiet:
         n_people = len(run.result.ground)
         print(f"{n_people} global ids over {len(files)} cameras; wrote {os.fspath(out)}/")
@@ -168,15 +189,28 @@ def _run_options(args: argparse.Namespace):
         raise UsageError("--model and --appearance-weight need --images")
     if images and args.method != "ours":
         raise UsageError("--images needs --method ours (dtw has no appearance term)")
-    outputs = (*(f"{n}.txt" for n in files), "tracks.csv", "ground.csv", "birdseye.png")
+    outputs = (*(f"{n}.txt" for n in files), "tracks.csv", "ground.csv", "birdseye.png",
+               *(("cameras.json",) if args.cameras is None else ()))
     check_outputs([Output("--out", args.out, folder=True, files=outputs)],
                   [Input("--cameras", args.cameras),
                    *(Input("--boxes", f) for f in files.values()),
                    *(Input("--images", f) for f in images.values())])
     check_own_folder(args.out, COMMAND)
     association = association_options(args.method, args.split_frames, args.appearance_weight)
-    return MulticamRunOptions(association, files, args.cameras, args.above_horizon,
+    above = "drop" if args.cameras is None else args.above_horizon  # estimated: a horizon off
+    return MulticamRunOptions(association, files, args.cameras or "", above,
                               args.localise, images, args.model or "default")
+
+
+def _sizes(args: argparse.Namespace) -> dict[str, tuple[int, int]]:
+    """``--image-size NAME=WxH ...`` as ``{name: (width, height)}``."""
+    sizes = {}
+    for name, text in named_paths(args.image_size, "--image-size").items():
+        try:
+            sizes[name] = _CAMERA_SIZE(text)
+        except argparse.ArgumentTypeError as exc:
+            raise UsageError(f"--image-size {name}={text}: {exc}") from None
+    return sizes
 
 
 def _fit_homographies(args: argparse.Namespace) -> int:
@@ -186,62 +220,9 @@ def _fit_homographies(args: argparse.Namespace) -> int:
     from xvmatch.inference.views.multicam_run import fit_ground_cameras
 
     check_outputs([Output("--out", args.out)], [Input("--fit-homography", args.fit_homography)])
-    sizes = {}
-    for name, text in named_paths(args.image_size, "--image-size").items():
-        try:
-            sizes[name] = _CAMERA_SIZE(text)
-        except argparse.ArgumentTypeError as exc:
-            raise UsageError(f"--image-size {name}={text}: {exc}") from None
     points = read_point_pairs(args.fit_homography)
-    cams = fit_ground_cameras(points, sizes, args.fit_homography)
+    cams = fit_ground_cameras(points, _sizes(args), args.fit_homography)
     save_cameras(args.out, cams)
     if not args.quiet:
         print(f"fitted {len(cams)} camera(s); wrote {args.out}")
-    return 0
-
-
-def evaluate_multicam_command(args: argparse.Namespace) -> int:
-    """``xvmatch evaluate --multicam OUT --gt NAME=FILE ... [--ground-gt FILE]``, or with
-    ``--pred NAME=FILE ...`` (one MOT box file per camera, ids global) instead of ``--multicam``:
-    trajectory P/R, box pairs, global IDF1, CVIDP/CVIDR/CVIDF1/CVMA over every camera pair and,
-    with TrackEval, MOTA/IDF1/HOTA per camera."""
-    import json
-    from pathlib import Path
-
-    from xvmatch.formats.multicam_files import multicam_box_files, read_ground_csv
-    from xvmatch.metrics.multicam_cross_view import (
-        cross_view_scores,
-        format_cross_view,
-        view_tracking_scores,
-    )
-    from xvmatch.metrics.multicam_metrics import format_multicam, multicam_scores
-
-    gt_files = named_paths(args.gt, "--gt")
-    if len(gt_files) < 2:
-        raise UsageError("--gt: give the ground truth of at least two cameras, NAME=FILE")
-    folder = None if args.multicam is None else os.fspath(Path(args.multicam))
-    if args.multicam is None:
-        pred_files = named_paths(args.pred, "--pred")
-        if set(pred_files) != set(gt_files):
-            raise UsageError(f"--pred names the cameras {', '.join(pred_files)} but --gt "
-                             f"{', '.join(gt_files)}; give both for the same cameras")
-        pred_files = {name: pred_files[name] for name in gt_files}
-    else:
-        pred_files = multicam_box_files(args.multicam, gt_files)
-    pred = {name: read_boxes(path, args.duplicates) for name, path in pred_files.items()}
-    gt = {name: read_boxes(path, args.duplicates) for name, path in gt_files.items()}
-    ground_pred = ground_gt = None
-    if args.ground_gt is not None:
-        if folder is None:
-            raise UsageError("--ground-gt: needs --multicam DIR (its ground.csv); with --pred "
-                             "there are no predicted ground positions")
-        ground_gt = read_ground_csv(args.ground_gt)
-        ground_pred = read_ground_csv(os.path.join(folder, "ground.csv"))
-    scores = {**multicam_scores(pred, gt, ground_pred, ground_gt),
-              "cross_view": cross_view_scores(pred, gt), "views": view_tracking_scores(pred, gt)}
-    if args.json:
-        print(json.dumps(scores, indent=2))
-    else:
-        print(format_multicam(scores, args.name or folder or "multicam tracks"))
-        print(format_cross_view(scores["cross_view"], scores["views"]))
     return 0

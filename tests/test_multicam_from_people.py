@@ -1,0 +1,184 @@
+"""Cameras put in one ground frame from their people alone (issue 68, item 2):
+:mod:`xvmatch.inference.views.multicam_from_people`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from xvmatch.datasets.multicam_scenes import MulticamConfig, simulate_multicam_scene
+from xvmatch.formats.camera_io import load_ground_cameras, save_cameras
+from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.geometry.ground_plane import GroundCamera, foot_points
+from xvmatch.inference.views.multicam import MulticamOptions, associate_cameras, relabel
+from xvmatch.inference.views.multicam_from_people import (
+    GroundSimilarity,
+    RegistrationError,
+    estimate_cameras,
+    fit_plane_homography,
+    fit_similarity,
+    map_points,
+    register_pair,
+)
+from xvmatch.metrics.multicam_metrics import multicam_scores
+
+similarities = st.builds(GroundSimilarity, st.floats(0.5, 2.0), st.floats(-3.1, 3.1),
+                         st.tuples(st.floats(-50, 50), st.floats(-50, 50)))
+
+
+@settings(max_examples=40, deadline=None)
+@given(sim=similarities, seed=st.integers(0, 2**16))
+def test_fit_similarity_recovers_a_similarity(sim, seed):
+    src = np.random.default_rng(seed).uniform(-10, 10, (12, 2))
+    fitted = fit_similarity(src, sim.apply(src))
+    np.testing.assert_allclose(fitted.apply(src), sim.apply(src), atol=1e-6)
+    assert fitted.scale == pytest.approx(sim.scale)
+
+
+@settings(max_examples=40, deadline=None)
+@given(a=similarities, b=similarities)
+def test_similarities_compose_and_invert(a, b):
+    xy = np.array([[1.0, 2.0], [-3.0, 0.5], [7.0, -4.0]])
+    np.testing.assert_allclose(a.then(b).apply(xy), b.apply(a.apply(xy)), atol=1e-6)
+    np.testing.assert_allclose(a.inverse().apply(a.apply(xy)), xy, atol=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**16))
+def test_fit_plane_homography_recovers_a_homography(seed):
+    rng = np.random.default_rng(seed)
+    H = np.eye(3) + np.diag([0.2, 0.2, 0.0]) * rng.uniform(-1, 1, 3)
+    H[:2, 2] = rng.uniform(-20, 20, 2)
+    H[2, :2] = rng.uniform(-0.01, 0.01, 2)  # a gentle perspective: points stay in front
+    src = rng.uniform(-15, 15, (30, 2))
+    np.testing.assert_allclose(map_points(fit_plane_homography(src, map_points(H, src)), src),
+                               map_points(H, src), atol=1e-6)
+
+
+def _walks(n_people: int, n_frames: int, seed: int) -> np.ndarray:
+    """``(F, N, 2)`` people walking about a 12 m square."""
+    rng = np.random.default_rng(seed)
+    start = rng.uniform(-6, 6, (n_people, 2))
+    steps = rng.normal(0.0, 0.15, (n_frames, n_people, 2)) + rng.uniform(-0.1, 0.1,
+                                                                          (1, n_people, 2))
+    return start + np.cumsum(steps, axis=0)
+
+
+def test_register_pair_lays_one_map_on_the_other_whoever_else_is_seen():
+    world = _walks(7, 80, seed=3)
+    truth = GroundSimilarity(1.1, 2.0, (30.0, -12.0))  # the source map -> the target map
+    rng = np.random.default_rng(0)
+    # The source sees people 0-4, the target 2-6 (a shuffled order: ids mean nothing across).
+    src = truth.inverse().apply(world[:, :5]) + rng.normal(0, 0.05, (80, 5, 2))
+    dst = world[:, rng.permutation(np.arange(2, 7))] + rng.normal(0, 0.05, (80, 5, 2))
+    src[20:30, 1] = np.nan  # a person missed for a while
+    reg = register_pair(src, dst, "a", "b")
+    assert reg is not None and reg.trusted, reg
+    probe = np.array([[0.0, 0.0], [5.0, -3.0]])
+    np.testing.assert_allclose(map_points(reg.homography, truth.inverse().apply(probe)), probe,
+                               atol=0.3)
+    assert reg.matches >= 3 * 80 - 10  # the three people both see, nearly every frame
+
+
+def test_register_pair_without_people_seen_together_proposes_nothing():
+    world = _walks(6, 40, seed=1)
+    src, dst = world[:, :3].copy(), world[:, 3:].copy()
+    src[20:], dst[:20] = np.nan, np.nan  # never in both cameras in the same frame
+    assert register_pair(src, dst) is None
+
+
+def _scene(n_cameras: int, frames: int, people: int, seed: int = 1):
+    return simulate_multicam_scene(MulticamConfig(n_cameras=n_cameras,
+                                                  n_people=(people, people)), frames, seed)
+
+
+def _sizes(scene) -> dict:
+    return {n: (c.width, c.height) for n, c in scene.cameras.items()}
+
+
+def test_two_cameras_from_their_people_put_each_person_in_one_place(tmp_path):
+    scene = _scene(2, 60, 6)
+    est = estimate_cameras(scene.boxes, _sizes(scene))
+    assert set(est.cameras) == {"cam1", "cam2"} and len(est.links) == 1
+    assert "cameras calibrated and registered from their people" in est.summary()
+    # The true people's foot points from both cameras land together (the frame is the
+    # reference camera's map: compared between cameras, not with the true ground).
+    gaps = []
+    for f in sorted(set(scene.gt["cam1"]) & set(scene.gt["cam2"])):
+        a, b = scene.gt["cam1"][f], scene.gt["cam2"][f]
+        for k, i in enumerate(a.ids.tolist()):
+            j = np.nonzero(b.ids == i)[0]
+            if len(j):
+                pa = est.cameras["cam1"].to_ground(foot_points(a.boxes[k:k + 1]))[0]
+                pb = est.cameras["cam2"].to_ground(foot_points(b.boxes[j[:1]]))[0]
+                gaps.append(float(np.hypot(*(pa - pb)[0])))
+    assert len(gaps) > 50 and np.median(gaps) < 0.5
+    # Written as a camera file marked estimated, and read back by multicam's reader.
+    save_cameras(tmp_path / "cameras.json", est.cameras, est.records())
+    back = load_ground_cameras(tmp_path / "cameras.json")
+    for name, cam in est.cameras.items():
+        np.testing.assert_allclose(back[name].H, cam.H, rtol=1e-9, atol=1e-12)
+
+
+def test_a_camera_that_sees_nobody_the_others_see_is_refused_by_name():
+    scene = _scene(2, 60, 6)
+    # cam2's boxes replaced by cam1's shifted by 20 frames: people, but never cam1's at once.
+    late = {f + 200: FrameBoxes(f + 200, r.ids, r.boxes) for f, r in scene.boxes["cam1"].items()}
+    boxes = {"cam1": scene.boxes["cam1"], "cam2": late}
+    sizes = {"cam1": _sizes(scene)["cam1"], "cam2": _sizes(scene)["cam1"]}
+    with pytest.raises(RegistrationError, match=r"camera\(s\) cam2 .*give --cameras"):
+        estimate_cameras(boxes, sizes)
+
+
+@pytest.mark.slow
+def test_multicam_on_estimated_cameras_scores_as_on_the_true_ones():
+    scene = _scene(3, 80, 8)
+    est = estimate_cameras(scene.boxes, _sizes(scene))
+    scores = {}
+    for label, cams in (("true", {n: GroundCamera.from_camera(c)
+                                  for n, c in scene.cameras.items()}),
+                        ("estimated", est.cameras)):
+        res = associate_cameras(cams, scene.boxes, MulticamOptions())
+        scores[label] = multicam_scores(relabel(scene.boxes, res), scene.gt)["box_pairs"]["F1"]
+    assert scores["estimated"] >= scores["true"] - 0.02, scores
+
+
+def _cli_scene(tmp_path, n_cameras: int, frames: int, people: int, seed: int):
+    from xvmatch.datasets.multicam_scenes import write_multicam_scene
+
+    scene = _scene(n_cameras, frames, people, seed)
+    write_multicam_scene(tmp_path / "scene", scene)
+    boxes = [f"{n}={tmp_path / 'scene' / 'boxes' / f'{n}.txt'}" for n in scene.cameras]
+    sizes = [f"{n}={w}x{h}" for n, (w, h) in _sizes(scene).items()]
+    return scene, boxes, sizes
+
+
+def test_multicam_without_cameras_asks_for_each_camera_image_size(tmp_path, capsys):
+    from xvmatch.cli import main
+
+    _scene_, boxes, sizes = _cli_scene(tmp_path, 2, 20, 4, 1)
+    assert main(["multicam", "--boxes", *boxes, "--image-size", sizes[0],
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "without --cameras" in err and "--image-size NAME=WxH for cam2" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_multicam_without_cameras_writes_the_cameras_it_found_and_reads_them_back(tmp_path,
+                                                                                 capsys):
+    from xvmatch.cli import main
+
+    scene, boxes, sizes = _cli_scene(tmp_path, 2, 60, 6, 1)
+    out = tmp_path / "out"
+    assert main(["multicam", "--boxes", *boxes, "--image-size", *sizes, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "2 cameras calibrated and registered from their people" in err
+    cams = load_ground_cameras(out / "cameras.json")  # one world: read as any camera file
+    assert set(cams) == {"cam1", "cam2"}
+    again = tmp_path / "again"
+    assert main(["multicam", "--boxes", *boxes, "--cameras", str(out / "cameras.json"),
+                 "--out", str(again)]) == 0
+    for name in scene.cameras:  # the same global ids from the written cameras
+        assert (again / f"{name}.txt").read_text() == (out / f"{name}.txt").read_text()
