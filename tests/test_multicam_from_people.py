@@ -158,7 +158,7 @@ def _cli_scene(tmp_path, n_cameras: int, frames: int, people: int, seed: int):
 def test_multicam_without_cameras_asks_for_each_camera_image_size(tmp_path, capsys):
     from xvmatch.cli import main
 
-    _scene_, boxes, sizes = _cli_scene(tmp_path, 2, 20, 4, 1)
+    _, boxes, sizes = _cli_scene(tmp_path, 2, 20, 4, 1)
     assert main(["multicam", "--boxes", *boxes, "--image-size", sizes[0],
                  "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
