@@ -198,12 +198,17 @@ class PeopleCalibration:
             "focal_from": self.focal_from,
             "camera_height_m": round(self.camera_height, 3),
             "person_height_m": self.person_height,
-            "tilt_std_deg": round(self.tilt_std_deg, 3),
-            "horizon_std_px": round(self.horizon_std_px, 2),
-            "focal_rel_std": round(self.focal_rel_std, 4),
+            "tilt_std_deg": _measured(self.tilt_std_deg, 3),
+            "horizon_std_px": _measured(self.horizon_std_px, 2),
+            "focal_rel_std": _measured(self.focal_rel_std, 4),
             "boxes": self.n_boxes,
             "frames": self.n_frames,
         }
+
+
+def _measured(value: float, digits: int) -> float | None:
+    """``value`` rounded, or None where it was not measured (NaN: no resampling)."""
+    return None if np.isnan(value) else round(value, digits)
 
 
 def horizon_line(camera: Camera) -> tuple[float, float]:
@@ -473,6 +478,7 @@ def calibrate_from_people(
     seed: int = 0,
     name: str = "the view",
     strict: bool = True,
+    spread: bool = True,
 ) -> PeopleCalibration:
     """Estimate a static camera from its boxes over a clip (module docstring).
 
@@ -489,6 +495,9 @@ def calibrate_from_people(
         strict: refuse a fit the clip does not pin down (the ``calibrate`` command); False
             returns it anyway, its spread saying how loose it is (an association that must
             place the view somehow is better served by a loose fit than by none).
+        spread: measure the fit's spread over resamples of the clip (16 more fits, most of
+            the time); False leaves the ``*_std`` fields NaN, the fit itself unchanged (a
+            caller that does not read them, with ``strict=False``).
 
     Raises:
         CalibrationError: too few usable boxes, foot rows in too narrow a band, or a tilt or
@@ -516,13 +525,14 @@ def calibrate_from_people(
     if aspect < NADIR_ASPECT:
         return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
     try:
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name)
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread)
     except CalibrationError:
         if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
             return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
         if strict:
             raise
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict=False)
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict=False,
+                         measure=spread)
     if calib.tilt_deg > NADIR_TILT_DEG:
         return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
     return _settled(calib)
@@ -542,8 +552,10 @@ def _settled(calib: PeopleCalibration) -> PeopleCalibration:
 
 
 def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
-             seed: int, name: str, strict: bool = True) -> PeopleCalibration:
-    """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`)."""
+             seed: int, name: str, strict: bool = True, measure: bool = True
+             ) -> PeopleCalibration:
+    """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`);
+    ``measure``: its spread over resamples (else NaN, and the fit is not judged loose)."""
     give = "give its camera with --cameras (or a longer clip with more people)"
     lo, hi = np.percentile(b.v, [10, 90])
     if strict and hi - lo < MIN_ROW_SPREAD * size[1]:
@@ -557,11 +569,12 @@ def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | 
     hfovs = (hfov_deg,) if hfov_deg else _START_HFOVS
     fixed = prior_f if hfov_deg else None
     params = _fit(b, size, prior_f, [_start(b, size, hf) for hf in hfovs], fixed)
-    spread = _resample_spread(b, size, prior_f, params, fixed, seed)
+    spread = (_resample_spread(b, size, prior_f, params, fixed, seed) if measure
+              else np.full(3, np.nan))
     cam = _camera_of(params, size)
     hor = horizon_line(cam)
-    focal_from = "given" if hfov_deg else ("people" if spread[2] < 0.5 * _PRIOR_LOG_STD
-                                            else "prior")
+    focal_from = "given" if hfov_deg else ("prior" if spread[2] >= 0.5 * _PRIOR_LOG_STD
+                                            else "people")
     calib = PeopleCalibration(
         kind="oblique", width=size[0], height=size[1], focal=float(np.exp(params[2])),
         tilt_deg=float(np.degrees(params[0])), roll_deg=float(np.degrees(params[1])),

@@ -110,6 +110,19 @@ def test_given_field_of_view_is_kept_and_same_seed_same_answer() -> None:
     _check(camera, a, tilt_tol=1.0)
 
 
+def test_without_the_spread_the_fit_is_the_same_and_its_record_says_unmeasured() -> None:
+    _camera, frames = _scene(30.0, 10.0, 70.0)
+    numbers, ids, boxes = stack_frames(frames)
+    full = calibrate_from_people(numbers, boxes, SIZE, ids=ids, hfov_deg=70.0, strict=False)
+    fast = calibrate_from_people(numbers, boxes, SIZE, ids=ids, hfov_deg=70.0, strict=False,
+                                 spread=False)
+    assert (fast.focal, fast.tilt_deg, fast.roll_deg, fast.camera_height) == (
+        full.focal, full.tilt_deg, full.roll_deg, full.camera_height)
+    record = fast.to_record()
+    assert record["tilt_std_deg"] is None and record["focal_rel_std"] is None
+    assert full.to_record()["tilt_std_deg"] is not None
+
+
 @pytest.mark.slow
 def test_nadir_camera_is_recognised() -> None:
     cfg = SceneConfig(n_people=(6, 10), fps=FPS)

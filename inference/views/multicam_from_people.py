@@ -74,13 +74,13 @@ _SCALES = (0.67, 1.5)
 one's where the people are (each map's metres come from a person's height: a factor 1.5 off is a
 wrong one, squeezing many people onto few)."""
 
-_PROPOSALS = 300
+_PROPOSALS = 120
 """Track pairs tried per camera pair, those seen together longest first."""
 
-_REFINED = 8
+_REFINED = 6
 """Distinct proposals refined per camera pair, the best-scored first."""
 
-_FRAMES = 150
+_FRAMES = 100
 """Frames scored per proposal, spread evenly over the clip."""
 
 _MIN_HOMOGRAPHY = 60
@@ -288,7 +288,7 @@ def fit_plane_homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
                          -b[:, 0] * a[:, 1], -b[:, 0]]),
         np.column_stack([zero, zero, zero, a[:, 0], a[:, 1], one, -b[:, 1] * a[:, 0],
                          -b[:, 1] * a[:, 1], -b[:, 1]])])
-    h = np.linalg.svd(rows)[2][-1].reshape(3, 3)
+    h = np.linalg.svd(rows, full_matrices=False)[2][-1].reshape(3, 3)
     H = np.linalg.inv(Td) @ h @ Ts
     return H / H[2, 2]
 
@@ -306,13 +306,33 @@ def _similarity_matrix(sim: GroundSimilarity) -> np.ndarray:
     return np.array([[c, -s, sim.shift[0]], [s, c, sim.shift[1]], [0.0, 0.0, 1.0]])
 
 
-def _refine(sim: GroundSimilarity, src: np.ndarray, dst: np.ndarray
+def _packed(paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame's people first: ``(F, K, 2)`` points (NaN-padded) and ``(F, K)`` their track
+    index (-1 pad), K the most people of a frame. A camera's tracks over a clip are many more
+    than its people at a time; the frame-by-frame comparisons need only these."""
+    seen = ~np.isnan(paths[..., 0])
+    k = max(1, int(seen.sum(axis=1).max(initial=0)))
+    order = np.argsort(~seen, axis=1, kind="stable")[:, :k]
+    track = np.where(np.take_along_axis(seen, order, axis=1), order, -1)
+    return np.take_along_axis(paths, order[..., None], axis=1), track
+
+
+def _pair_ids(found: tuple, tracks: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The (source track, target track) of each match ``(frame, a, b)`` as one integer."""
+    f, a, b = found
+    ta, tb = tracks
+    return ta[f, a] * (int(tb.max(initial=0)) + 1) + tb[f, b]
+
+
+def _refine(sim: GroundSimilarity, src: np.ndarray, dst: np.ndarray,
+            tracks: tuple[np.ndarray, np.ndarray]
             ) -> tuple[GroundSimilarity, np.ndarray, tuple, float]:
     """The similarity refitted on the people mutually nearest within each of :data:`_RADII`
     in turn, then a plane homography refitted the same way (the two maps are each the ground
     seen through an estimated camera: a homography apart, not only a similarity) where its
     matches are many and spread, kept only if it explains more; the similarity, the
-    homography, the matches ``(frame, a, b)`` and their median distance at the end."""
+    homography, the matches ``(frame, a, b)`` and their median distance at the end; ``src``
+    and ``dst`` packed (:func:`_packed`), ``tracks`` their track indices."""
     for radius in _RADII[:2]:
         f, a, b = _mutual(sim.apply(src), dst, radius)
         if len(f) < 3:
@@ -320,7 +340,7 @@ def _refine(sim: GroundSimilarity, src: np.ndarray, dst: np.ndarray
         sim = fit_similarity(src[f, a], dst[f, b])
         residual = float(np.median(np.hypot(*(sim.apply(src[f, a]) - dst[f, b]).T)))
     H, found = _similarity_matrix(sim), (f, a, b)
-    if len(f) < _MIN_HOMOGRAPHY or len(np.unique(a * dst.shape[1] + b)) < 3:
+    if len(f) < _MIN_HOMOGRAPHY or len(np.unique(_pair_ids(found, tracks))) < 3:
         return sim, H, found, residual
     for radius in _RADII[1:]:
         f, a, b = _mutual(map_points(H, src), dst, radius)
@@ -356,8 +376,10 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
             proposals.append(sim)
     if not proposals:
         return None
-    rows = np.linspace(0, len(src) - 1, min(len(src), _FRAMES)).round().astype(int)
-    rows = np.unique(rows)
+    centre = np.nanmean(src.reshape(-1, 2), axis=0)  # where the source's people are
+    both = seen_a.any(axis=1) & seen_b.any(axis=1)  # frames with people in both
+    (src, ta), (dst, tb) = _packed(src[both]), _packed(dst[both])
+    rows = np.unique(np.linspace(0, len(src) - 1, min(len(src), _FRAMES)).round().astype(int))
     scores = np.concatenate([
         _explained(np.stack([s.apply(src[rows]) for s in proposals[k:k + 16]]), dst[rows])
         for k in range(0, len(proposals), 16)])
@@ -365,18 +387,17 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
     # The best few distinct proposals refined, each free to bend into a homography (two maps
     # from estimated cameras are a homography apart), then judged by what they explain beyond
     # one person: a lens misread bends the right proposal more than a wrong one.
-    centre = np.nanmean(src.reshape(-1, 2), axis=0)  # where the source's people are
     tried: list[tuple[tuple[int, int], np.ndarray, tuple]] = []
     for k in np.argsort(-scores, kind="stable"):
         lands = proposals[k].apply(centre)
         if any(np.hypot(*(map_points(H, centre) - lands)) < 2.0 for _, H, _ in tried):
             continue
-        sim, H, (f, a, b), residual = _refine(proposals[k], src, dst)
-        per_pair = np.unique(a * dst.shape[1] + b, return_counts=True)[1]
-        beyond = int(len(f) - per_pair.max(initial=0))  # all but the pair matched most
+        sim, H, found, residual = _refine(proposals[k], src, dst, (ta, tb))
+        per_pair = np.unique(_pair_ids(found, (ta, tb)), return_counts=True)[1]
+        beyond = int(len(found[0]) - per_pair.max(initial=0))  # all but the pair matched most
         if not _SCALES[0] <= _local_scale(H, centre) <= _SCALES[1]:
             beyond = 0
-        tried.append(((beyond, len(f)), H, (sim, residual)))
+        tried.append(((beyond, len(found[0])), H, (sim, residual)))
         if len(tried) == _REFINED:
             break
     order = sorted(range(len(tried)), key=lambda i: (-tried[i][0][0], -tried[i][0][1], i))
@@ -391,14 +412,15 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
 def _calibration(frames: Mapping[int, FrameBoxes], size: tuple[int, int], seed: int,
                  name: str) -> PeopleCalibration:
     """The camera from the people of :data:`_CALIBRATION_FRAMES` frames spread over the clip,
-    or of every frame where those are too few."""
+    or of every frame where those are too few; its confidence is not resampled (nothing here
+    reads it: the registration judges the cameras)."""
     clip = sorted(frames)
     step = -(-len(clip) // _CALIBRATION_FRAMES)
     for chosen in ([clip[::step], clip] if step > 1 else [clip]):
         f, ids, b = stack_frames({k: frames[k] for k in chosen})
         try:
             return calibrate_from_people(f, b, size, ids=ids, seed=seed, name=name,
-                                         strict=False)
+                                         strict=False, spread=False)
         except CalibrationError as exc:
             error = exc
     raise RegistrationError(str(error)) from None
