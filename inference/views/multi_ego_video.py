@@ -197,11 +197,7 @@ def video_people(views: Sequence[Mapping], problems: Mapping[int, FrameProblem],
         frame is counted: the command says "N of M frames").
     """
     from xvmatch.inference.views.multi_ego_tracking import carry_ids
-    from xvmatch.inference.views.multi_view_assignment import (
-        consistent_hungarian,
-        solve_multi_view,
-    )
-    from xvmatch.inference.views.multi_view_people import ViewPeople, assign_people
+    from xvmatch.inference.views.multi_view_people import ViewPeople, assign_people, solve_frame
 
     first = assign_people(views, problems, frames, options)
     n_views = len(views)
@@ -215,13 +211,8 @@ def video_people(views: Sequence[Mapping], problems: Mapping[int, FrameProblem],
         here = {k: kept[k][f] for k in kept}
         clusters = _direct(problems[f], rows, here)
         if clusters is None:
-            problem = _forced(problems[f], rows, here)
-            if options.solver == "mip":
-                sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma,
-                                       options.time_limit)
-                n_fallback += sol.status == "fallback"
-            else:
-                sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
+            sol, fell_back = solve_frame(_forced(problems[f], rows, here), options)
+            n_fallback += fell_back
             clusters = sol.person
         chains = [np.array([tracks[v][r] for r in rows[v]], dtype=np.int64)
                   for v in range(n_views)]

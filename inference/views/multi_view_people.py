@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-__all__ = ["PeopleOptions", "ViewPeople", "assign_people"]
+__all__ = ["PeopleOptions", "ViewPeople", "assign_people", "solve_frame"]
 
 
 @dataclass(frozen=True)
@@ -60,24 +60,28 @@ def assign_people(views: Sequence[Mapping], problems: Mapping, frames: Sequence[
     return _frame_by_frame(views, problems, frames, options)
 
 
-def _frame_by_frame(views: Sequence[Mapping], problems: Mapping, frames: Sequence[int],
-                    options: PeopleOptions) -> ViewPeople:
-    """:func:`assign_people` without tracks: each frame's program, ids counted on over frames."""
+def solve_frame(problem, options: PeopleOptions):
+    """One frame's cycle-consistent program with ``options``' solver: the solution, and
+    whether it fell back on the best consistent answer found (the MIP's budget spent)."""
     from xvmatch.inference.views.multi_view_assignment import (
         consistent_hungarian,
         solve_multi_view,
     )
 
+    if options.solver == "mip":
+        sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma, options.time_limit)
+        return sol, sol.status == "fallback"
+    return consistent_hungarian(problem.sizes, problem.costs, problem.gamma), False
+
+
+def _frame_by_frame(views: Sequence[Mapping], problems: Mapping, frames: Sequence[int],
+                    options: PeopleOptions) -> ViewPeople:
+    """:func:`assign_people` without tracks: each frame's program, ids counted on over frames."""
     person: list[dict[int, int]] = [{} for _ in views]
     next_id, n_fallback = 1, 0
     for f in frames:
-        problem = problems[f]
-        if options.solver == "mip":
-            sol = solve_multi_view(problem.sizes, problem.costs, problem.gamma,
-                                   options.time_limit)
-            n_fallback += sol.status == "fallback"
-        else:
-            sol = consistent_hungarian(problem.sizes, problem.costs, problem.gamma)
+        sol, fell_back = solve_frame(problems[f], options)
+        n_fallback += fell_back
         for v, ids in enumerate(sol.person):
             rec = views[v].get(f)
             for row, pid in zip(rec.ids.tolist() if rec is not None else [], ids.tolist(),
