@@ -346,8 +346,10 @@ def test_associate_multi_judges_each_egocentric_view(video, tmp_path, capsys) ->
     import cv2
 
     grey = _grey_copy(video, tmp_path)
+    # --mode frame: each frame's pairs are what the images change (video mode would keep
+    # them consistent along the tracks, which the boxes alone already get right here).
     base = ["associate-multi", "--model", "default", "--top", str(video["top"]), "--hor",
-            str(video["hor"]), "--quiet"]
+            str(video["hor"]), "--quiet", "--mode", "frame"]
     size = "x".join(map(str, cv2.imread(str(grey["hor_images"] / "000001.png")).shape[1::-1]))
     assert main([*base, "--image-size", size, "--out", str(tmp_path / "boxes")]) == 0
     assert main([*base, "--top-images", str(grey["top_images"]), "--hor-images",

@@ -220,8 +220,9 @@ def _fit_homographies(args: argparse.Namespace) -> int:
     from xvmatch.inference.views.multicam_run import fit_ground_cameras
 
     check_outputs([Output("--out", args.out)], [Input("--fit-homography", args.fit_homography)])
+    sizes = _sizes(args)  # its names checked before anything is read
     points = read_point_pairs(args.fit_homography)
-    cams = fit_ground_cameras(points, _sizes(args), args.fit_homography)
+    cams = fit_ground_cameras(points, sizes, args.fit_homography)
     save_cameras(args.out, cams)
     if not args.quiet:
         print(f"fitted {len(cams)} camera(s); wrote {args.out}")
