@@ -36,12 +36,14 @@ from xvmatch.core.input_files import InputFileError, read_input_text
 
 __all__ = [
     "ASSUMED",
+    "COMMON_SIZES",
     "CVMHAT_SIZE",
     "MARGIN",
     "MIN_EXTENT",
     "box_extent",
     "box_line",
     "check_boxes_in_image",
+    "common_size_holding",
     "consistent_with",
     "resolve_size",
 ]
@@ -52,6 +54,10 @@ MARGIN = 0.10
 """How far past a border a box may go, as a share of that side of the image."""
 MIN_EXTENT = 0.6
 """Boxes are taken for CVMHAT's only if their rightmost edge is beyond this share of 2688."""
+COMMON_SIZES = ((640, 360), (640, 480), (1280, 720), (1920, 1080), (2560, 1440), (2688, 1512),
+                (2720, 1530), (3840, 2160), (4096, 2160), (5472, 3078), (7680, 4320))
+"""Video frame sizes of cameras and drones, smallest first: the candidates
+:func:`common_size_holding` chooses from."""
 ASSUMED = "the CVMHAT default"
 """The source :func:`resolve_size` gives for an assumed CVMHAT size."""
 
@@ -88,6 +94,20 @@ def consistent_with(frames: Mapping, size: tuple[int, int] = CVMHAT_SIZE) -> boo
         if len(b) and _outside(b, size).any():
             return False
     return box_extent(frames)[0] > MIN_EXTENT * size[0]
+
+
+def common_size_holding(frames: Mapping) -> tuple[int, int] | None:
+    """The smallest of :data:`COMMON_SIZES` that holds every box of ``{frame: FrameBoxes}``
+    (each edge at most 2% past its border), None when none does or there are no boxes: a
+    guess of an image size from boxes alone, for a view whose size matters only through its
+    centre and aspect (the top view's calibration from its people), said to the user."""
+    right, bottom = box_extent(frames)
+    if right <= 0 or bottom <= 0:
+        return None
+    for width, height in COMMON_SIZES:
+        if right <= 1.02 * width and bottom <= 1.02 * height:
+            return width, height
+    return None
 
 
 def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:

@@ -14,7 +14,13 @@ import pytest
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene
-from xvmatch.formats.box_image_size import CVMHAT_SIZE, MIN_EXTENT, consistent_with
+from xvmatch.formats.box_image_size import (
+    COMMON_SIZES,
+    CVMHAT_SIZE,
+    MIN_EXTENT,
+    common_size_holding,
+    consistent_with,
+)
 from xvmatch.formats.mot_boxes import (
     FrameBoxes,
     read_mot_boxes,
@@ -145,6 +151,22 @@ def test_the_rule_separates_a_small_camera_from_cvmhat():
     assert not consistent_with(edge)
     wide = {1: FrameBoxes(1, [1], [[2600, 1400, 80, 110]])}
     assert consistent_with(wide)
+
+
+@pytest.mark.parametrize(("box", "size"), [
+    ([100, 100, 40, 90], (640, 360)),
+    ([1700, 900, 60, 170], (1920, 1080)),  # a drone's 1080p frame: reaches 1760 x 1070
+    ([1900, 1000, 30, 95], (1920, 1080)),  # 2% past the border still holds
+    ([3500, 1900, 100, 140], (3840, 2160)),
+    ([9000, 100, 10, 10], None),  # wider than every common size
+])
+def test_the_common_size_holding_boxes_is_the_smallest_that_does(box, size):
+    """A size guessed from boxes alone: the smallest common video size holding every box."""
+    frames = {1: FrameBoxes(1, [1, 2], [[5, 5, 10, 20], box])}
+    assert common_size_holding(frames) == size
+    assert common_size_holding({}) is None
+    areas = [w * h for w, h in COMMON_SIZES]
+    assert areas == sorted(areas)
 
 
 @pytest.mark.parametrize(("box", "ok"), [
