@@ -145,6 +145,24 @@ def test_multicam_on_estimated_cameras_scores_as_on_the_true_ones():
     assert scores["estimated"] >= scores["true"] - 0.02, scores
 
 
+def test_run_multicam_without_cameras_estimates_them_and_returns_the_estimate():
+    from xvmatch.inference.views.multicam_run import MulticamRunOptions, run_multicam
+
+    scene = _scene(2, 60, 6)
+    options = MulticamRunOptions(above_horizon="drop", image_sizes=_sizes(scene))
+    run = run_multicam(None, scene.boxes, options)
+    est = estimate_cameras(scene.boxes, _sizes(scene))
+    assert run.estimated is not None and run.estimated.summary() == est.summary()
+    assert run.cameras is run.estimated.cameras
+    given = run_multicam(est.cameras, scene.boxes, options)  # the same as given those cameras
+    assert given.estimated is None
+    assert {n: {f: r.ids.tolist() for f, r in fr.items()} for n, fr in run.relabelled.items()} \
+        == {n: {f: r.ids.tolist() for f, r in fr.items()} for n, fr in given.relabelled.items()}
+    with pytest.raises(ValueError, match="--image-size NAME=WxH for cam2"):
+        run_multicam(None, scene.boxes,
+                     MulticamRunOptions(image_sizes={"cam1": _sizes(scene)["cam1"]}))
+
+
 def _cli_scene(tmp_path, n_cameras: int, frames: int, people: int, seed: int):
     from xvmatch.datasets.multicam_scenes import write_multicam_scene
 

@@ -1,8 +1,10 @@
 """The multicam run: several static cameras' boxes to one global id per person and each person's
 ground path, in one call with its options in one typed record.
 
-:func:`run_multicam` checks the boxes against their cameras (a box entirely outside its image, a
-foot point above the horizon: the file and its line), leaves out the boxes above the horizon when
+:func:`run_multicam` estimates the cameras from their people when none are given
+(:func:`~xvmatch.inference.views.multicam_from_people.estimate_cameras`), checks the boxes
+against their cameras (a box entirely outside its image, a foot point above the horizon: the
+file and its line), leaves out the boxes above the horizon when
 asked (each keeps a global id of its own), opens the images of the cameras that have them and
 embeds their boxes with a bundle's appearance network, runs
 :func:`~xvmatch.inference.views.multicam.associate_cameras`, relabels the boxes and localises the
@@ -34,6 +36,7 @@ from xvmatch.inference.views.multicam import (
     associate_cameras,
     relabel,
 )
+from xvmatch.inference.views.multicam_from_people import EstimatedCameras, estimate_cameras
 from xvmatch.inference.views.multicam_localisation import LocalisationOptions, localise
 
 __all__ = [
@@ -68,6 +71,9 @@ class MulticamRunOptions:
         images: ``{camera: images}`` (a folder, a glob or a video, the camera's size) of the
             cameras whose boxes are also compared by appearance; empty: geometry only.
         model: the bundle whose appearance network embeds the boxes of ``images``.
+        image_sizes: ``{camera: (width, height)}`` of each camera's images, needed when the
+            run estimates the cameras from their people (:func:`run_multicam` without
+            cameras).
     """
 
     association: MulticamOptions = field(default_factory=MulticamOptions)
@@ -77,6 +83,7 @@ class MulticamRunOptions:
     localise: str = "foot"
     images: Mapping[str, str] = field(default_factory=dict)
     model: str = "default"
+    image_sizes: Mapping[str, tuple[int, int]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.above_horizon not in ("error", "drop"):
@@ -119,13 +126,18 @@ class MulticamRun:
     Attributes:
         result: the association (global ids, each person's ground path in ``result.ground``).
         relabelled: every input box in its place, the track id replaced by its global id.
+        cameras: the cameras the association ran on (given, or estimated).
+        estimated: the cameras' estimate from their people (its ``summary()`` and
+            ``records()``), None when they were given.
     """
 
     result: MulticamResult
     relabelled: dict[str, dict[int, FrameBoxes]]
+    cameras: Mapping[str, GroundCamera] = field(default_factory=dict)
+    estimated: EstimatedCameras | None = None
 
 
-def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
+def run_multicam(cameras: Mapping[str, GroundCamera] | None, boxes: Boxes,
                  options: MulticamRunOptions,
                  progress: Callable[[int], AbstractContextManager] | None = None,
                  warn: Callable[[str], None] | None = None,
@@ -133,7 +145,10 @@ def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
     """One global id per person across the cameras, and each person's ground path.
 
     Args:
-        cameras: ``{name: GroundCamera}``, one for each camera of ``boxes``.
+        cameras: ``{name: GroundCamera}``, one for each camera of ``boxes``; None: each
+            camera calibrated from its people and the cameras registered to one another
+            (:func:`~xvmatch.inference.views.multicam_from_people.estimate_cameras`, each
+            camera's size from ``options.image_sizes``), the estimate in the answer.
         boxes: each camera's boxes, at least two cameras.
         options: :class:`MulticamRunOptions`.
         progress: ``progress(n_pairs)``: a context (a progress bar) whose ``update(1)`` is
@@ -145,8 +160,19 @@ def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
 
     Raises:
         ValueError: a box outside its image or above its horizon (the file and its line),
-            images of another size than their camera or lacking a frame, a box-only bundle.
+            images of another size than their camera or lacking a frame, a box-only bundle;
+            without cameras, a camera without an image size, or cameras that cannot be
+            estimated from their people
+            (:class:`~xvmatch.inference.views.multicam_from_people.RegistrationError`).
     """
+    estimated = None
+    if cameras is None:
+        missing = [n for n in boxes if n not in options.image_sizes]
+        if missing:
+            raise ValueError("without cameras each camera is calibrated from its people: give "
+                             "--image-size NAME=WxH for " + ", ".join(missing))
+        estimated = estimate_cameras(boxes, {n: options.image_sizes[n] for n in boxes})
+        cameras = estimated.cameras
     for name, frames in boxes.items():
         _check_inside(options.box_files.get(name, name), frames, cameras[name])
     kept, above = boxes, {}
@@ -176,7 +202,7 @@ def run_multicam(cameras: Mapping[str, GroundCamera], boxes: Boxes,
         result = replace(result, ground=ground)
     if note is not None and (line := many_ids_note(result.ground, boxes)):
         note(line)
-    return MulticamRun(result, relabelled)
+    return MulticamRun(result, relabelled, cameras, estimated)
 
 
 MANY_IDS_RATIO = 2.0
@@ -293,7 +319,8 @@ def _open_images(options: MulticamRunOptions, boxes: Boxes,
             if tuple(source.size) != (cam.width, cam.height):
                 raise ValueError(f"--images {name}={path}: the images are "
                                  f"{source.size[0]}x{source.size[1]} but camera {name} is "
-                                 f"{cam.width}x{cam.height} in {options.cameras_file}")
+                                 f"{cam.width}x{cam.height} in "
+                                 f"{options.cameras_file or '--image-size'}")
             embedders[name] = _embedder(source, matcher)
     except BaseException:
         for source in sources:

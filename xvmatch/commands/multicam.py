@@ -137,35 +137,30 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
 
     options = _run_options(args)
     files = options.box_files
-    sizes = _sizes(args) if args.cameras is None else {}
     if args.cameras is not None:
         cameras = load_ground_cameras(args.cameras)
         check_box_cameras(files, cameras, args.cameras)
-    elif [n for n in files if n not in sizes]:
-        raise UsageError("without --cameras each camera is calibrated from its people: give "
-                         "--image-size NAME=WxH for " + ", ".join(n for n in files
-                                                                  if n not in sizes))
+    else:
+        cameras = None  # estimated by the run from the people
+        if [n for n in files if n not in options.image_sizes]:
+            raise UsageError("without --cameras each camera is calibrated from its people: give "
+                             "--image-size NAME=WxH for " + ", ".join(
+                                 n for n in files if n not in options.image_sizes))
     reading = box_reading(args)
     boxes = {name: read_boxes(path, args.duplicates, reading) for name, path in files.items()}
-    estimated = None
-    if args.cameras is None:
-        from xvmatch.inference.views.multicam_from_people import estimate_cameras
-
-        estimated = estimate_cameras(boxes, {n: sizes[n] for n in files})
-        cameras = estimated.cameras
-        if not args.quiet:
-            print(f"xvmatch: note: {estimated.summary()}; wrote them to cameras.json",
-                  file=sys.stderr)
     run = run_multicam(cameras, boxes, options,
                        progress=lambda n: progress_bar(n, "camera pairs", "pair", not args.quiet),
                        warn=lambda m: print(f"xvmatch: warning: {m}", file=sys.stderr),
                        note=None if args.quiet else
                        lambda m: print(f"xvmatch: note: {m}", file=sys.stderr))
-    picture = draw_birdseye(run.result.ground, cameras)
+    if run.estimated is not None and not args.quiet:
+        print(f"xvmatch: note: {run.estimated.summary()}; wrote them to cameras.json",
+              file=sys.stderr)
+    picture = draw_birdseye(run.result.ground, run.cameras)
     out = claim_folder(args.out, COMMAND)
     write_multicam_outputs(out, boxes, run.relabelled, run.result.ground, picture)
-    if estimated is not None:
-        save_cameras(out / "cameras.json", estimated.cameras, estimated.records())
+    if run.estimated is not None:
+        save_cameras(out / "cameras.json", run.estimated.cameras, run.estimated.records())
     if not args.quiet:
         n_people = len(run.result.ground)
         print(f"{n_people} global ids over {len(files)} cameras; wrote {os.fspath(out)}/")
@@ -198,8 +193,9 @@ def _run_options(args: argparse.Namespace):
     check_own_folder(args.out, COMMAND)
     association = association_options(args.method, args.split_frames, args.appearance_weight)
     above = "drop" if args.cameras is None else args.above_horizon  # estimated: a horizon off
+    sizes = {n: s for n, s in _sizes(args).items() if n in files} if args.cameras is None else {}
     return MulticamRunOptions(association, files, args.cameras or "", above,
-                              args.localise, images, args.model or "default")
+                              args.localise, images, args.model or "default", sizes)
 
 
 def _sizes(args: argparse.Namespace) -> dict[str, tuple[int, int]]:
