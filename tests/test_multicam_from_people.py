@@ -200,3 +200,32 @@ def test_multicam_without_cameras_writes_the_cameras_it_found_and_reads_them_bac
                  "--out", str(again)]) == 0
     for name in scene.cameras:  # the same global ids from the written cameras
         assert (again / f"{name}.txt").read_text() == (out / f"{name}.txt").read_text()
+
+
+def test_multicam_without_cameras_claims_no_write_when_the_run_or_the_write_fails(
+        tmp_path, capsys, monkeypatch):
+    from xvmatch.cli import main
+    from xvmatch.formats import multicam_files
+
+    _, boxes, sizes = _cli_scene(tmp_path, 2, 60, 6, 1)
+    # The cameras are estimated, the writing fails: no note that they were written.
+    def fail(*_args, **_kw):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(multicam_files, "write_multicam_outputs", fail)
+    assert main(["multicam", "--boxes", *boxes, "--image-size", *sizes,
+                 "--out", str(tmp_path / "out")]) == 2
+    said = capsys.readouterr()
+    assert "disk full" in said.err and "wrote" not in said.err + said.out
+    monkeypatch.undo()
+    # cam2 never sees cam1's people at once: the estimate refuses, nothing is said written.
+    late = tmp_path / "late.txt"
+    rows = (tmp_path / "scene" / "boxes" / "cam1.txt").read_text().splitlines()
+    late.write_text("".join(f"{int(r.split(',')[0]) + 200},{r.split(',', 1)[1]}\n"
+                            for r in rows))
+    assert main(["multicam", "--boxes", boxes[0], f"cam2={late}", "--image-size",
+                 sizes[0], sizes[0].replace("cam1", "cam2"), "--out",
+                 str(tmp_path / "out2")]) == 2
+    said = capsys.readouterr()
+    assert "cannot put camera(s) cam2" in said.err and "wrote" not in said.err + said.out
+    assert not (tmp_path / "out2").exists()

@@ -153,15 +153,15 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
                        warn=lambda m: print(f"xvmatch: warning: {m}", file=sys.stderr),
                        note=None if args.quiet else
                        lambda m: print(f"xvmatch: note: {m}", file=sys.stderr))
-    if run.estimated is not None and not args.quiet:
-        print(f"xvmatch: note: {run.estimated.summary()}; wrote them to cameras.json",
-              file=sys.stderr)
     picture = draw_birdseye(run.result.ground, run.cameras)
     out = claim_folder(args.out, COMMAND)
     write_multicam_outputs(out, boxes, run.relabelled, run.result.ground, picture)
     if run.estimated is not None:
         save_cameras(out / "cameras.json", run.estimated.cameras, run.estimated.records())
-    if not args.quiet:
+    if not args.quiet:  # said once written: a run or a write that fails claims nothing
+        if run.estimated is not None:
+            print(f"xvmatch: note: {run.estimated.summary()}; wrote them to "
+                  f"{os.fspath(out / 'cameras.json')}", file=sys.stderr)
         n_people = len(run.result.ground)
         print(f"{n_people} global ids over {len(files)} cameras; wrote {os.fspath(out)}/")
     return 0
