@@ -38,10 +38,9 @@ def test_fit_similarity_recovers_a_similarity(sim, seed):
 
 
 @settings(max_examples=40, deadline=None)
-@given(a=similarities, b=similarities)
-def test_similarities_compose_and_invert(a, b):
+@given(a=similarities)
+def test_a_similarity_inverts(a):
     xy = np.array([[1.0, 2.0], [-3.0, 0.5], [7.0, -4.0]])
-    np.testing.assert_allclose(a.then(b).apply(xy), b.apply(a.apply(xy)), atol=1e-6)
     np.testing.assert_allclose(a.inverse().apply(a.apply(xy)), xy, atol=1e-6)
 
 

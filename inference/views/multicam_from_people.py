@@ -113,12 +113,6 @@ class GroundSimilarity:
         rot = np.array([[c, -s], [s, c]])
         return self.scale * np.asarray(xy, float) @ rot.T + np.asarray(self.shift)
 
-    def then(self, outer: GroundSimilarity) -> GroundSimilarity:
-        """``outer`` after this one."""
-        shift = outer.apply(np.asarray(self.shift))
-        return GroundSimilarity(self.scale * outer.scale, _wrap(self.angle + outer.angle),
-                                (float(shift[0]), float(shift[1])))
-
     def inverse(self) -> GroundSimilarity:
         back = GroundSimilarity(1.0 / self.scale, -self.angle, (0.0, 0.0))
         shift = -back.apply(np.asarray(self.shift))
