@@ -38,8 +38,8 @@ def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
         help="nadir (looking straight down), oblique (at an angle; calibrated from its "
         "people) or auto (default: the boxes or --cameras decide)")
     p.add_argument("--top-image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
-                   help="the top view's image size, 8..65536 a side; --top-view auto and "
-                   "oblique need it")
+                   help="the top view's image size, 8..65536 a side; oblique needs it, auto "
+                   "takes the smallest common video size holding the top boxes")
     p.add_argument("--hor-hfov", default=70.0, metavar="DEG",
                    type=float_in(20, 150, "a camera's horizontal field of view, degrees"),
                    help="oblique: the horizontal camera's field of view, degrees in [20, 150] "
@@ -60,20 +60,30 @@ def check_top_view(args: argparse.Namespace) -> None:
                              "--cameras, or use --top-view nadir with them")
 
 
-def _note_upright(args: argparse.Namespace, top: dict) -> None:
-    """One note when the search is about to read an upright people's top view as the ground
-    (no size to calibrate it from its people, ``auto``): how to do better."""
+def _guessed_top_size(args: argparse.Namespace, top: dict) -> tuple[int, int] | None:
+    """The top view's size when ``--top-image-size`` is not given: where its people stand
+    upright (an oblique camera, which the nadir search would misread), the smallest common video
+    size holding its boxes, said in one line; None (today's nadir path) for squat boxes, or
+    boxes no common size holds (a note saying what to give)."""
+    from xvmatch.formats.box_image_size import common_size_holding
     from xvmatch.formats.mot_boxes import stack_frames
     from xvmatch.geometry.people_calibration import STEEP_ASPECT
 
     boxes = stack_frames(top)[2]
-    if args.quiet or args.model is not None or not len(boxes):
-        return
+    if not len(boxes):
+        return None
     aspect = float(np.median(boxes[:, 3] / np.maximum(boxes[:, 2], 1e-9)))
-    if aspect >= STEEP_ASPECT:
+    if aspect < STEEP_ASPECT:
+        return None
+    size = common_size_holding(top)
+    if not args.quiet:
+        said = (f"took {size[0]}x{size[1]}, the smallest common video size holding its boxes, as"
+                " its size; give --top-image-size WxH if not" if size is not None else
+                "no common video size holds its boxes: give --top-image-size WxH to calibrate "
+                "it from its people")
         print(f"xvmatch: note: the top view's people stand upright (boxes {aspect:.1f} times as "
-              "tall as wide): an oblique camera, which the search reads as a nadir one; give "
-              "--top-image-size WxH to calibrate it from its people", file=sys.stderr)
+              f"tall as wide): an oblique camera; {said}", file=sys.stderr)
+    return size
 
 
 def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
@@ -83,8 +93,8 @@ def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
     ``video``: the pairs are made consistent along each view's tracks."""
     if args.top_view == "nadir" or args.cameras is not None:
         return None
-    if args.top_image_size is None:
-        _note_upright(args, top)
+    top_size = args.top_image_size or _guessed_top_size(args, top)
+    if top_size is None:
         return None
     from xvmatch.formats.box_image_size import check_boxes_in_image
     from xvmatch.inference.matching.ground_association import (
@@ -92,8 +102,9 @@ def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
         run_top_view,
     )
 
-    check_boxes_in_image(top, args.top_image_size, args.top, "--top-image-size")
-    options = GroundAssociationOptions(top_size=args.top_image_size, hor_size=hor_size,
+    source = "--top-image-size" if args.top_image_size else "the top boxes' extent"
+    check_boxes_in_image(top, top_size, args.top, source)
+    options = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
                                        hor_hfov_deg=args.hor_hfov, fps=args.fps,
                                        consensus=video, seed=0)
     run = run_top_view(top, hor, options, args.top_view, name=args.top)
