@@ -45,6 +45,7 @@ __all__ = [
     "check_boxes_in_image",
     "common_size_holding",
     "consistent_with",
+    "median_aspect",
     "resolve_size",
 ]
 
@@ -108,6 +109,17 @@ def common_size_holding(frames: Mapping) -> tuple[int, int] | None:
         if right <= 1.02 * width and bottom <= 1.02 * height:
             return width, height
     return None
+
+
+def median_aspect(frames: Mapping) -> float | None:
+    """The median box height over width of ``{frame: FrameBoxes}``, None without boxes: people
+    standing upright in an oblique view are about 2.5 times as tall as wide, from above (a nadir
+    view) about as tall as wide."""
+    boxes = [np.asarray(rec.boxes, dtype=float).reshape(-1, 4) for rec in frames.values()]
+    b = np.concatenate(boxes) if boxes else np.zeros((0, 4))
+    if not len(b):
+        return None
+    return float(np.median(b[:, 3] / np.maximum(b[:, 2], 1e-9)))
 
 
 def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:

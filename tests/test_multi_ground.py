@@ -105,8 +105,15 @@ def test_oblique_top_decides_and_refuses(scene) -> None:
     calib, note = oblique_top(views[0], "auto", SIZE, "top.txt", [0, 0])
     assert calib is not None and calib.kind == "oblique" and note.startswith("top view: oblique")
     assert oblique_top(views[0], "nadir", SIZE, "top.txt") == (None, None)
+    # Without its size, the upright people's top view takes the smallest common video size
+    # holding its boxes, and says so; a forced kind without a size is the command's refusal.
     calib, note = oblique_top(views[0], "auto", None, "top.txt")
-    assert calib is None and "--top-image-size" in note
+    assert calib is not None and calib.kind == "oblique"
+    assert "its size taken as" in note and "--top-image-size" in note
+    assert oblique_top(views[0], "oblique", None, "top.txt") == (None, None)
+    far = {1: FrameBoxes(1, [1], [[9000.0, 10.0, 20.0, 50.0]])}
+    calib, note = oblique_top(far, "auto", None, "top.txt")
+    assert calib is None and "no common video size holds" in note
     with pytest.raises(ValueError, match="--offset auto"):
         oblique_top(views[0], "oblique", SIZE, "top.txt", ["auto", 0])
     with pytest.raises(ValueError, match=r"top\.txt.*--top-image-size"):

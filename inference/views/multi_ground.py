@@ -34,8 +34,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
-from xvmatch.formats.box_image_size import check_boxes_in_image
-from xvmatch.formats.mot_boxes import align_frames, stack_frames
+from xvmatch.formats.box_image_size import (
+    check_boxes_in_image,
+    common_size_holding,
+    median_aspect,
+)
+from xvmatch.formats.mot_boxes import align_frames
 from xvmatch.geometry.people_calibration import PRIOR_HFOV_DEG, STEEP_ASPECT, PeopleCalibration
 from xvmatch.inference.matching.ground_association import TOP_VIEWS, top_calibration
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
@@ -101,8 +105,10 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
     Args:
         top: the top view's ``{frame: record}``.
         top_view: ``auto``, ``nadir`` or ``oblique`` (``nadir`` also where cameras are given).
-        top_size: the top view's image size (``--top-image-size``); None: the nadir path, with
-            a note when the top view's people stand upright.
+        top_size: the top view's image size (``--top-image-size``); None: where the top view's
+            people stand upright (``auto``), the smallest common video size holding its boxes
+            (:func:`~xvmatch.formats.box_image_size.common_size_holding`), said in the note;
+            else the nadir path.
         name: the top box file (messages).
         offsets: each handheld view's ``--offset``; ``auto`` estimates it with the nadir
             search, so the oblique path refuses it.
@@ -116,8 +122,19 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         raise ValueError(f"top_view must be one of {TOP_VIEWS}, got {top_view!r}")
     if top_view == "nadir":
         return None, None
+    guessed = ""
     if top_size is None:
-        return None, _upright_note(top)
+        aspect = median_aspect(top)
+        if aspect is None or aspect < STEEP_ASPECT or top_view != "auto":
+            return None, None
+        top_size = common_size_holding(top)
+        if top_size is None:
+            return None, (f"the top view's people stand upright (boxes {aspect:.1f} times as tall "
+                          "as wide): an oblique camera, read here as a nadir one; no common video "
+                          "size holds its boxes: give --top-image-size WxH to calibrate it from "
+                          "its people")
+        guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, the smallest common video "
+                   "size holding its boxes (give --top-image-size WxH if not)")
     check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False)
     calib = top_calibration(top, tuple(top_size), seed, name)
     if calib.kind == "nadir" and top_view == "auto":
@@ -129,21 +146,8 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
     return calib, (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- {calib.tilt_std_deg:.0f} "
                    f"degrees, about {calib.camera_height:.0f} m up (from its people); each "
                    "handheld view registered on its ground map frame by frame and the views "
-                   "joined there (boxes only: --model, its images and --camera-id not used)")
-
-
-def _upright_note(top: Mapping) -> str | None:
-    """The note for a top view whose people stand upright, read as a nadir one for want of its
-    image size, or None."""
-    boxes = stack_frames(top)[2]
-    if not len(boxes):
-        return None
-    aspect = float(np.median(boxes[:, 3] / np.maximum(boxes[:, 2], 1e-9)))
-    if aspect < STEEP_ASPECT:
-        return None
-    return (f"the top view's people stand upright (boxes {aspect:.1f} times as tall as wide): "
-            "an oblique camera, read here as a nadir one; give --top-image-size WxH to "
-            "calibrate it from its people")
+                   "joined there (boxes only: --model, its images and --camera-id not used)"
+                   f"{guessed}")
 
 
 def _boxes(record) -> np.ndarray:
