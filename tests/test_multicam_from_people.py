@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -14,6 +16,7 @@ from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera, foot_points
 from xvmatch.inference.views.multicam import MulticamOptions, associate_cameras, relabel
 from xvmatch.inference.views.multicam_from_people import (
+    MAX_RESIDUAL,
     GroundSimilarity,
     RegistrationError,
     estimate_cameras,
@@ -79,6 +82,29 @@ def test_register_pair_lays_one_map_on_the_other_whoever_else_is_seen():
     np.testing.assert_allclose(map_points(reg.homography, truth.inverse().apply(probe)), probe,
                                atol=0.3)
     assert reg.matches >= 3 * 80 - 10  # the three people both see, nearly every frame
+
+
+def test_registration_decisions_near_their_bounds_do_not_hang_on_the_last_bits():
+    # Two maps exactly 1.5 apart in scale, the bound a registration may have: every proposal's
+    # scale is 1.5 up to the last bits of the fit (which differ between CPUs), the maps
+    # perturbed by 1e-12 relative around it. Each is registered the same way, at the bound.
+    world = _walks(5, 60, seed=2)
+    truth = GroundSimilarity(1.5, 0.7, (4.0, -2.0))  # the source map -> the target map
+    src = truth.inverse().apply(world)
+    dst = world[:, ::-1].copy()
+    decisions = set()
+    for eps in (0.0, 1e-12, -1e-12, 3e-12, -3e-12):
+        reg = register_pair(src, dst * (1.0 + eps), "a", "b")
+        decisions.add(None if reg is None else (reg.matches, reg.beyond, reg.margin,
+                                                reg.residual, reg.trusted))
+    assert len(decisions) == 1 and None not in decisions, decisions
+    base = register_pair(src, dst, "a", "b")
+    assert base.trusted
+    # The trust's own bounds: a residual or a margin 1e-12 relative off its bound is at it.
+    for field, bound in (("residual", MAX_RESIDUAL), ("margin", 1.2)):
+        for eps in (1e-12, -1e-12):
+            near = dataclasses.replace(base, **{field: bound * (1.0 + eps)})
+            assert near.trusted, (field, eps)
 
 
 def test_register_pair_without_people_seen_together_proposes_nothing():

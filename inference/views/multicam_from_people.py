@@ -91,7 +91,9 @@ _CALIBRATION_FRAMES = 48
 boxes; a few dozen frames of a static camera tell it as well as a thousand)."""
 
 _DIGITS = 9
-"""Scores are rounded to this many decimals: the same choice on every CPU."""
+"""Every value compared with a bound or with another to decide (scores, distances, scales,
+spreads, residuals) is rounded to this many decimals first (:func:`_settled`): exp, arctan2 and
+BLAS differ in their last bits from one CPU to another, the decisions must not."""
 
 
 class RegistrationError(ValueError):
@@ -145,8 +147,8 @@ class CameraRegistration:
 
     @property
     def trusted(self) -> bool:
-        return (self.beyond >= MIN_MATCHES and self.margin >= 1.2
-                and self.residual <= MAX_RESIDUAL)
+        return (self.beyond >= MIN_MATCHES and _settled(self.margin) >= 1.2
+                and _settled(self.residual) <= MAX_RESIDUAL)
 
 
 @dataclass(frozen=True)
@@ -193,6 +195,12 @@ class EstimatedCameras:
                 rec["margin"] = round(link.margin, 3)
             out[name] = rec
         return out
+
+
+def _settled(value: float) -> float:
+    """``value`` rounded to :data:`_DIGITS` decimals, so that comparing it decides the same on
+    every CPU."""
+    return round(float(value), _DIGITS)
 
 
 def _wrap(angle: float) -> float:
@@ -246,7 +254,7 @@ def _mutual(mapped: np.ndarray, dst: np.ndarray, radius: float
     """``(frame, a, b)`` of the people mutually nearest within ``radius`` in the same frame,
     ``mapped`` ``(F, A, 2)`` and ``dst`` ``(F, B, 2)``."""
     d = np.sqrt(((mapped[:, :, None, :] - dst[:, None, :, :]) ** 2).sum(-1))
-    d = np.where(np.isnan(d), np.inf, d)
+    d = np.round(np.where(np.isnan(d), np.inf, d), _DIGITS)  # nearest and within: settled
     a_best = d.argmin(axis=2)  # (F, A)
     b_best = d.argmin(axis=1)  # (F, B)
     fa = np.nonzero(np.isfinite(d.min(axis=2)))
@@ -292,7 +300,7 @@ def _local_scale(H: np.ndarray, xy: np.ndarray) -> float:
     determinant there)."""
     step = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]) + xy
     p = map_points(H, step)
-    return float(np.sqrt(abs(np.linalg.det(np.stack([p[1] - p[0], p[2] - p[0]])))))
+    return _settled(np.sqrt(abs(np.linalg.det(np.stack([p[1] - p[0], p[2] - p[0]])))))
 
 
 def _similarity_matrix(sim: GroundSimilarity) -> np.ndarray:
@@ -332,7 +340,7 @@ def _refine(sim: GroundSimilarity, src: np.ndarray, dst: np.ndarray,
         if len(f) < 3:
             return sim, _similarity_matrix(sim), (f, a, b), float("inf")
         sim = fit_similarity(src[f, a], dst[f, b])
-        residual = float(np.median(np.hypot(*(sim.apply(src[f, a]) - dst[f, b]).T)))
+        residual = _settled(np.median(np.hypot(*(sim.apply(src[f, a]) - dst[f, b]).T)))
     H, found = _similarity_matrix(sim), (f, a, b)
     if len(f) < _MIN_HOMOGRAPHY or len(np.unique(_pair_ids(found, tracks))) < 3:
         return sim, H, found, residual
@@ -345,7 +353,7 @@ def _refine(sim: GroundSimilarity, src: np.ndarray, dst: np.ndarray,
         if len(f2) < 1.05 * len(found[0]) + 5:  # bending must explain clearly more
             break
         H, found = trial, (f2, a2, b2)
-        residual = float(np.median(np.hypot(*(map_points(H, src[f2, a2]) - dst[f2, b2]).T)))
+        residual = _settled(np.median(np.hypot(*(map_points(H, src[f2, a2]) - dst[f2, b2]).T)))
     return sim, H, found, residual
 
 
@@ -362,11 +370,11 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
     for a, b in zip(a_idx[order], b_idx[order], strict=True):
         both = seen_a[:, a] & seen_b[:, b]
         p, q = src[both, a], dst[both, b]
-        if min(np.sqrt(((p - p.mean(0)) ** 2).sum(1).mean()),
-               np.sqrt(((q - q.mean(0)) ** 2).sum(1).mean())) < _MIN_SPREAD:
+        if _settled(min(np.sqrt(((p - p.mean(0)) ** 2).sum(1).mean()),
+                        np.sqrt(((q - q.mean(0)) ** 2).sum(1).mean()))) < _MIN_SPREAD:
             continue
         sim = fit_similarity(p, q)
-        if _SCALES[0] <= sim.scale <= _SCALES[1]:
+        if _SCALES[0] <= _settled(sim.scale) <= _SCALES[1]:
             proposals.append(sim)
     if not proposals:
         return None
@@ -384,7 +392,7 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
     tried: list[tuple[tuple[int, int], np.ndarray, tuple]] = []
     for k in np.argsort(-scores, kind="stable"):
         lands = proposals[k].apply(centre)
-        if any(np.hypot(*(map_points(H, centre) - lands)) < 2.0 for _, H, _ in tried):
+        if any(_settled(np.hypot(*(map_points(H, centre) - lands))) < 2.0 for _, H, _ in tried):
             continue
         sim, H, found, residual = _refine(proposals[k], src, dst, (ta, tb))
         per_pair = np.unique(_pair_ids(found, (ta, tb)), return_counts=True)[1]
@@ -397,7 +405,8 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
     order = sorted(range(len(tried)), key=lambda i: (-tried[i][0][0], -tried[i][0][1], i))
     (beyond, matches), H, (sim, residual) = tried[order[0]]
     rival = next((tried[i][0][0] for i in order[1:]
-                  if np.hypot(*(map_points(tried[i][1], centre) - map_points(H, centre))) > 2.0),
+                  if _settled(np.hypot(*(map_points(tried[i][1], centre)
+                                         - map_points(H, centre)))) > 2.0),
                  0)
     margin = (beyond + 1.0) / (rival + 1.0)
     return CameraRegistration(source, target, sim, H, matches, beyond, residual, margin)
