@@ -59,6 +59,24 @@ def test_fit_plane_homography_recovers_a_homography(seed):
                                map_points(H, src), atol=1e-6)
 
 
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**16))
+def test_the_fast_distances_and_scores_are_the_plain_formulas(seed):
+    from xvmatch.inference.views.multicam_from_people import _explained, _squared_distances
+
+    rng = np.random.default_rng(seed)
+    src = rng.uniform(-5, 5, (3, 6, 4, 2))  # (K, F, A, 2) mapped by three proposals
+    dst = rng.uniform(-5, 5, (6, 5, 2))
+    src[rng.random(src.shape[:3]) < 0.3] = np.nan  # people absent
+    dst[rng.random(dst.shape[:2]) < 0.3] = np.nan
+    p, q = src[:, :, :, None, :], dst[None, :, None, :, :]
+    plain = ((p - q) ** 2).sum(-1)
+    np.testing.assert_array_equal(_squared_distances(p, q), plain)  # bit for bit, NaN too
+    near = np.exp(-0.5 * np.where(np.isnan(plain), np.inf, plain) / 0.5**2)
+    want = near.max(axis=3).sum(axis=(1, 2)) + near.max(axis=2).sum(axis=(1, 2))
+    np.testing.assert_array_equal(np.round(_explained(src, dst), 9), np.round(want, 9))
+
+
 def _walks(n_people: int, n_frames: int, seed: int) -> np.ndarray:
     """``(F, N, 2)`` people walking about a 12 m square."""
     rng = np.random.default_rng(seed)

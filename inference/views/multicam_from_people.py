@@ -212,7 +212,12 @@ def fit_similarity(src: np.ndarray, dst: np.ndarray) -> GroundSimilarity:
     (Umeyama 1991, Eqs. 40-42), N >= 2 distinct points."""
     src, dst = np.asarray(src, float), np.asarray(dst, float)
     mu_s, mu_d = src.mean(0), dst.mean(0)
-    a, b = src - mu_s, dst - mu_d
+    return _similarity_of_centred(mu_s, mu_d, src - mu_s, dst - mu_d)
+
+
+def _similarity_of_centred(mu_s: np.ndarray, mu_d: np.ndarray, a: np.ndarray, b: np.ndarray
+                           ) -> GroundSimilarity:
+    """:func:`fit_similarity` of points ``mu_s + a`` and ``mu_d + b`` (``a``, ``b`` centred)."""
     var = float((a**2).sum()) / len(a)
     cov = b.T @ a / len(a)
     # In 2-D the optimal rotation has a closed form: the angle of the covariance's "complex"
@@ -240,29 +245,61 @@ def _paths(frames: Mapping[int, FrameBoxes], calib: PeopleCalibration, grid: np.
     return out
 
 
+def _squared_distances(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``|p - q|^2`` of broadcast points ``(..., 2)`` (NaN where either is), as
+    ``((p - q) ** 2).sum(-1)`` computes it, without its ``(..., 2)`` temporaries."""
+    dx = p[..., 0] - q[..., 0]
+    dy = p[..., 1] - q[..., 1]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return dx
+
+
 def _explained(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Per proposal ``(K,)``: the people of either map within reach of one of the other's in
-    the same frame (soft counts), ``src`` ``(K, F, A, 2)`` already mapped, ``dst`` ``(F, B, 2)``."""
-    d2 = ((src[:, :, :, None, :] - dst[None, :, None, :, :]) ** 2).sum(-1)  # (K, F, A, B)
-    d2 = np.where(np.isnan(d2), np.inf, d2)
-    near = np.exp(-0.5 * d2 / _SIGMA**2)
-    return near.max(axis=3).sum(axis=(1, 2)) + near.max(axis=2).sum(axis=(1, 2))
+    the same frame (soft counts), ``src`` ``(K, F, A, 2)`` already mapped, ``dst`` ``(F, B, 2)``.
+    The nearest one's closeness is each person's (the closeness falls with the distance: the
+    exponential of the nearest, not the nearest of the exponentials)."""
+    d2 = _squared_distances(src[:, :, :, None, :], dst[None, :, None, :, :])  # (K, F, A, B)
+    d2[np.isnan(d2)] = np.inf
+    a_near = np.exp(-0.5 * d2.min(axis=3) / _SIGMA**2)
+    b_near = np.exp(-0.5 * d2.min(axis=2) / _SIGMA**2)
+    return a_near.sum(axis=(1, 2)) + b_near.sum(axis=(1, 2))
 
 
 def _mutual(mapped: np.ndarray, dst: np.ndarray, radius: float
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(frame, a, b)`` of the people mutually nearest within ``radius`` in the same frame,
     ``mapped`` ``(F, A, 2)`` and ``dst`` ``(F, B, 2)``."""
-    d = np.sqrt(((mapped[:, :, None, :] - dst[:, None, :, :]) ** 2).sum(-1))
-    d = np.round(np.where(np.isnan(d), np.inf, d), _DIGITS)  # nearest and within: settled
+    return _within(_mutual_nearest(mapped, dst), radius)
+
+
+def _within(nearest: tuple, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(frame, a, b)`` of the mutually nearest people ``(frame, a, b, distance)``
+    (:func:`_mutual_nearest`) within ``radius`` of each other."""
+    f, a, b, dist = nearest
+    keep = dist < radius
+    return f[keep], a[keep], b[keep]
+
+
+def _mutual_nearest(mapped: np.ndarray, dst: np.ndarray) -> tuple:
+    """``(frame, a, b, distance)`` of the people mutually nearest in the same frame, ``mapped``
+    ``(F, A, 2)`` and ``dst`` ``(F, B, 2)``, the distances settled."""
+    d = _squared_distances(mapped[:, :, None, :], dst[:, None, :, :])
+    np.sqrt(d, out=d)
+    d[np.isnan(d)] = np.inf
+    # Nearest and within: settled (np.round's own steps, in place).
+    np.multiply(d, 10.0**_DIGITS, out=d)
+    np.rint(d, out=d)
+    np.divide(d, 10.0**_DIGITS, out=d)
     a_best = d.argmin(axis=2)  # (F, A)
     b_best = d.argmin(axis=1)  # (F, B)
-    fa = np.nonzero(np.isfinite(d.min(axis=2)))
+    fa = np.nonzero(np.isfinite(np.take_along_axis(d, a_best[..., None], axis=2)[..., 0]))
     mutual = b_best[fa[0], a_best[fa]] == fa[1]
     f, a = fa[0][mutual], fa[1][mutual]
     b = a_best[f, a]
-    keep = d[f, a, b] < radius
-    return f[keep], a[keep], b[keep]
+    return f, a, b, d[f, a, b]
 
 
 def map_points(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -344,15 +381,19 @@ def _refine(sim: GroundSimilarity, src: np.ndarray, dst: np.ndarray,
     H, found = _similarity_matrix(sim), (f, a, b)
     if len(f) < _MIN_HOMOGRAPHY or len(np.unique(_pair_ids(found, tracks))) < 3:
         return sim, H, found, residual
+    nearest = None  # the people mutually nearest under H, once known
     for radius in _RADII[1:]:
-        f, a, b = _mutual(map_points(H, src), dst, radius)
+        if nearest is None:
+            nearest = _mutual_nearest(map_points(H, src), dst)
+        f, a, b = _within(nearest, radius)
         if len(f) < _MIN_HOMOGRAPHY:
             break
         trial = np.round(fit_plane_homography(src[f, a], dst[f, b]), _DIGITS)
-        f2, a2, b2 = _mutual(map_points(trial, src), dst, radius)
+        trial_nearest = _mutual_nearest(map_points(trial, src), dst)
+        f2, a2, b2 = _within(trial_nearest, radius)
         if len(f2) < 1.05 * len(found[0]) + 5:  # bending must explain clearly more
             break
-        H, found = trial, (f2, a2, b2)
+        H, found, nearest = trial, (f2, a2, b2), trial_nearest
         residual = _settled(np.median(np.hypot(*(map_points(H, src[f2, a2]) - dst[f2, b2]).T)))
     return sim, H, found, residual
 
@@ -370,10 +411,12 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
     for a, b in zip(a_idx[order], b_idx[order], strict=True):
         both = seen_a[:, a] & seen_b[:, b]
         p, q = src[both, a], dst[both, b]
-        if _settled(min(np.sqrt(((p - p.mean(0)) ** 2).sum(1).mean()),
-                        np.sqrt(((q - q.mean(0)) ** 2).sum(1).mean()))) < _MIN_SPREAD:
+        mu_p, mu_q = p.mean(0), q.mean(0)
+        p, q = p - mu_p, q - mu_q  # centred once, for the spreads and the fit
+        if _settled(np.sqrt((p**2).sum(1).mean())) < _MIN_SPREAD or \
+                _settled(np.sqrt((q**2).sum(1).mean())) < _MIN_SPREAD:
             continue
-        sim = fit_similarity(p, q)
+        sim = _similarity_of_centred(mu_p, mu_q, p, q)
         if _SCALES[0] <= _settled(sim.scale) <= _SCALES[1]:
             proposals.append(sim)
     if not proposals:
