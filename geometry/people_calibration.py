@@ -307,20 +307,20 @@ def _heights(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> np.ndarray
     cx, cy = 0.5 * size[0], 0.5 * size[1]
     R = look_rotation(0.0, tilt, roll)
     camera_z = R[:, 2]  # world z axis in camera coordinates
+    rows = (b.v - cy) / f  # the foot rows' rays (the same for both foot columns)
+    ones = np.ones_like(b.u)
 
     def ground(u: np.ndarray) -> np.ndarray:
         """The foot pixel's ground point relative to the camera centre (NaN above the
         horizon)."""
-        d = np.column_stack([(u - cx) / f, (b.v - cy) / f, np.ones_like(u)]) @ R
+        d = np.column_stack([(u - cx) / f, rows, ones]) @ R
         with np.errstate(divide="ignore", invalid="ignore"):
             s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
         return s[:, None] * d
 
-    def image(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cam = points @ R.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
-            return cx + f * cam[..., 0] / z, cy + f * cam[..., 1] / z
+    def depth(cam: np.ndarray) -> np.ndarray:
+        """Camera coordinates' depth, NaN behind the camera."""
+        return np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
 
     radius = np.full_like(person, 0.5 * BODY_WIDTH)
 
@@ -334,15 +334,25 @@ def _heights(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> np.ndarray
         return rim + along, along
 
     foot, _ = axis(b.u)
-    u_head, _ = image(foot + person[:, None] * camera_z @ R)
+    head = (foot + person[:, None] * camera_z @ R) @ R.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u_head = cx + f * head[:, 0] / depth(head)
     foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the middle of the lean
     side = np.column_stack([-along[:, 1], along[:, 0], along[:, 2]])
     up = np.zeros_like(foot)
     up[:, 2] = person
-    rim = np.stack([side, -side, along, -along], axis=1)  # the body's outline, seen and in depth
-    corners = np.concatenate([foot[:, None] + rim, (foot + up)[:, None] + rim], axis=1)
-    _, v = image(corners)
-    return v.max(axis=1) - v.min(axis=1)
+    # The body's outline (seen and in depth) at the feet and at the head, corner by corner: one
+    # product with R for all, each row's top and bottom a maximum and minimum over 8 rows.
+    corners = np.empty((8, *foot.shape))
+    for k, base in enumerate((foot, foot + up)):
+        np.add(base, side, out=corners[4 * k])
+        np.subtract(base, side, out=corners[4 * k + 1])
+        np.add(base, along, out=corners[4 * k + 2])
+        np.subtract(base, along, out=corners[4 * k + 3])
+    cam = corners.reshape(-1, 3) @ R.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = (cy + f * cam[:, 1] / depth(cam)).reshape(8, -1)
+    return v.max(axis=0) - v.min(axis=0)
 
 
 def _residuals(params: np.ndarray, b: _Boxes, size: tuple[int, int],
