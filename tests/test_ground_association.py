@@ -108,3 +108,23 @@ def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> No
     assert main([*base, "--top-image-size", "1280x720", "--out", str(tmp_path / "g.csv"),
                  "--quiet"]) == 0
     assert (tmp_path / "n.csv").read_text() == (tmp_path / "g.csv").read_text()
+
+
+@pytest.mark.parametrize("true_scale", [0.7, 1.0, 1.3])
+def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) -> None:
+    """People on a top map whose metres are ``1 / true_scale`` of the horizontal map's: the
+    registration keeps the scale that undoes it, and 1 where it is 1."""
+    from xvmatch.inference.matching.ground_association import _registered
+
+    rng = np.random.default_rng(3)
+    order, tops, hors = [], [], []
+    for f in range(1, 31, 3):
+        people = np.column_stack([rng.uniform(2, 14, 8), rng.uniform(-6, 6, 8)])
+        seen = np.abs(np.degrees(np.arctan2(people[:, 1], people[:, 0]))) < 30
+        order.append(f)
+        tops.append(people / true_scale)
+        hors.append(people[seen])
+    options = GroundAssociationOptions((1920, 1080), (1920, 1080), hor_hfov_deg=70.0, fps=10.0)
+    scale, poses = _registered(order, tops, hors, options)
+    assert scale == true_scale
+    assert len(poses) == len(order)
