@@ -167,35 +167,34 @@ def test_workers_give_the_same_pairs_and_costs(model):
         associate_sequence_learned(top, hor, WIDTH, model, workers=0)
 
 
-def _args(**kw) -> model_command.ModelArgs:
-    base = {"image_size": (2688, 1512), "camera_id": None, "mode": "frame", "gamma": None,
-            "mirror": False, "workers": 1, "threads": 1, "top_images": None,
-            "hor_images": None, "cameras": None, "costs": None, "draw": None, "draw_every": 1}
-    return model_command.model_args(argparse.Namespace(**{**base, **kw}))
-
-
 @pytest.mark.slow
-def test_associate_with_model_cli_helper(model, tiny_models, scene, tmp_path, monkeypatch):
-    frames = sorted(scene.top)
-    args = _args(model=[str(tiny_models["boxes_bundle"])])
-    pred = model_command.associate_with_model(args, scene.top, scene.hor, frames, None)
+def test_association_run_with_learned_matchers(model, tiny_models, scene, tmp_path,
+                                               monkeypatch):
+    from xvmatch.inference.matching.association_run import (
+        AssociationHooks,
+        AssociationOptions,
+        LearnedChoice,
+        run_association,
+    )
+
+    def pairs(names, mirror=False):
+        options = AssociationOptions(hor_size=((WIDTH, 1512), "--image-size"), top_view="nadir",
+                                     learned=LearnedChoice(tuple(names), mirror=mirror))
+        run = run_association(scene.top, scene.hor, options,
+                              AssociationHooks(export=model_command.export_torch_file))
+        return {f: p for f, p in run.pairs.items() if f in scene.top}
+
+    bundle = str(tiny_models["boxes_bundle"])
+    pred = pairs([bundle])
     assert pred == associate_sequence_learned(scene.top, scene.hor, WIDTH, model)
-    mirrored = model_command.associate_with_model(_args(model=args.model, mirror=True), scene.top,
-                                                    scene.hor, frames, None)
-    assert mirrored == associate_sequence_learned(scene.top, scene.hor, WIDTH, model,
-                                                  mirror=True)
+    assert pairs([bundle], mirror=True) == associate_sequence_learned(
+        scene.top, scene.hor, WIDTH, model, mirror=True)
     # A torch matcher file is exported once into the cache and gives the same pairs.
     monkeypatch.setenv("XVMATCH_CACHE", str(tmp_path / "cache"))
-    from_file = model_command.associate_with_model(_args(model=[str(tiny_models["boxes"])]),
-                                                     scene.top, scene.hor, frames, None)
-    assert from_file == pred
+    assert pairs([str(tiny_models["boxes"])]) == pred
     assert len(list((tmp_path / "cache" / "bundles").iterdir())) == 1
-    with pytest.raises(ValueError, match="--mode frame"):
-        model_command.associate_with_model(_args(model=args.model, mode="video"), scene.top,
-                                             scene.hor, frames, None)
     with pytest.raises(ValueError, match="no such bundle folder"):
-        model_command.associate_with_model(_args(model=["nope"]), scene.top, scene.hor, frames,
-                                             None)
+        pairs(["nope"])
 
 
 def test_fit_geometry_parser(tmp_path):

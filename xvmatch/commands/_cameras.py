@@ -1,11 +1,11 @@
 """The cameras on the command line. ``--top-view`` of ``xvmatch associate``: a nadir top camera
 (today's search and learned matcher read its image as the ground) or an oblique one, calibrated
 from its people, with the horizontal camera registered on its ground map
-(:mod:`xvmatch.inference.matching.ground_association`); ``auto`` lets the top view's boxes
-decide. With calibrated cameras (``--cameras``): the top camera's refinement, the cameras' check
-and ``--write-cameras`` (``associate``, ``track``, ``adapt``, ``associate-multi``, read through
-:class:`~xvmatch.commands._model.ModelArgs`). And the horizontal camera's image size a learned
-run's options give (:func:`horizontal_size`).
+(:func:`~xvmatch.inference.matching.association_run.oblique_pairs`); ``auto`` lets the top
+view's boxes decide. With calibrated cameras (``--cameras``): the top camera's refinement, the
+cameras' check and ``--write-cameras`` (``associate``, ``track``, ``adapt``,
+``associate-multi``, read through :class:`~xvmatch.commands._model.ModelArgs`). And the
+horizontal camera's image size a learned run's options give (:func:`horizontal_size`).
 """
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ import os
 import sys
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
-
-import numpy as np
 
 from xvmatch.commands._options import HOR_IMAGE_SIZE, UsageError, check_images_together
 from xvmatch.commands._types import float_in
@@ -28,7 +26,7 @@ if TYPE_CHECKING:
 __all__ = ["CAMERAS_COMMAND", "add_camera_check", "add_refine_top_camera",
            "add_top_view_arguments", "add_write_cameras", "check_top_view",
            "check_write_cameras", "horizontal_size", "note_camera_check",
-           "note_camera_refinement", "oblique_pairs", "write_cameras"]
+           "note_camera_refinement", "write_cameras"]
 
 
 def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
@@ -58,71 +56,6 @@ def check_top_view(args: argparse.Namespace) -> None:
         if args.cameras is not None:
             raise UsageError("--top-view oblique estimates the cameras from the people: drop "
                              "--cameras, or use --top-view nadir with them")
-
-
-def _guessed_top_size(args: argparse.Namespace, top: dict) -> tuple[int, int] | None:
-    """The top view's size when ``--top-image-size`` is not given: where its people stand
-    upright (an oblique camera, which the nadir search would misread), the smallest common video
-    size holding its boxes, said in one line; None (today's nadir path) for squat boxes, or
-    boxes no common size holds (a note saying what to give)."""
-    from xvmatch.formats.box_image_size import common_size_holding
-    from xvmatch.formats.mot_boxes import stack_frames
-    from xvmatch.geometry.people_calibration import STEEP_ASPECT
-
-    boxes = stack_frames(top)[2]
-    if not len(boxes):
-        return None
-    aspect = float(np.median(boxes[:, 3] / np.maximum(boxes[:, 2], 1e-9)))
-    if aspect < STEEP_ASPECT:
-        return None
-    size = common_size_holding(top)
-    if not args.quiet:
-        said = (f"took {size[0]}x{size[1]}, the smallest common video size holding its boxes, as"
-                " its size; give --top-image-size WxH if not" if size is not None else
-                "no common video size holds its boxes: give --top-image-size WxH to calibrate "
-                "it from its people")
-        print(f"xvmatch: note: the top view's people stand upright (boxes {aspect:.1f} times as "
-              f"tall as wide): an oblique camera; {said}", file=sys.stderr)
-    return size
-
-
-def oblique_pairs(args: argparse.Namespace, top: dict, hor: dict,
-                  hor_size: tuple[int, int], video: bool) -> dict | None:
-    """The pairs of the ground-map association when the top view is oblique (forced, or found
-    so by ``auto``), else None (today's path); prints the one line saying what was assumed.
-    ``video``: the pairs are made consistent along each view's tracks."""
-    if args.top_view == "nadir" or args.cameras is not None:
-        return None
-    top_size = args.top_image_size or _guessed_top_size(args, top)
-    if top_size is None:
-        return None
-    from xvmatch.formats.box_image_size import check_boxes_in_image
-    from xvmatch.inference.matching.ground_association import (
-        GroundAssociationOptions,
-        run_top_view,
-    )
-
-    source = "--top-image-size" if args.top_image_size else "the top boxes' extent"
-    check_boxes_in_image(top, top_size, args.top, source)
-    options = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
-                                       hor_hfov_deg=args.hor_hfov, fps=args.fps,
-                                       consensus=video, seed=0)
-    run = run_top_view(top, hor, options, args.top_view, name=args.top)
-    if run is None:
-        if not args.quiet:
-            print("xvmatch: note: top view: looking straight down (its boxes are as wide as "
-                  "tall); associating as over a nadir drone", file=sys.stderr)
-        return None
-    if not args.quiet:
-        unused = [name for name, given in (("--model", args.model is not None),
-                                           ("--camera-id", args.camera_id is not None),
-                                           ("--search", args.search is not None)) if given]
-        ignored = f" ({', '.join(unused)}: not used on this path)" if unused else ""
-        mode = ("pairs made consistent over the clip with each view's track ids" if
-                options.consensus else "each frame on its own (--mode video: consistent over "
-                "the clip)")
-        print(f"xvmatch: note: {run.summary}; {mode}{ignored}", file=sys.stderr)
-    return run.pairs
 
 
 def add_refine_top_camera(group) -> None:

@@ -1,8 +1,8 @@
 """The learned matcher on the command line (``xvmatch associate --model BUNDLE|default``): its
 argument groups, one :class:`ModelArgs` record of the parsed options (:func:`model_args`, the one
-place they are read, for ``associate``, ``adapt``, ``track``, ``associate-multi``), their
-translation into the library's run options (:func:`learned_run_options`), and the run with its
-notes and outputs (``associate_with_model``, ``open_models``). The cameras' options are in
+place they are read, for ``associate``, ``adapt``, ``track``, ``associate-multi``), and the
+matchers opened (:func:`open_models`, a torch matcher file exported first:
+:func:`export_torch_file`). The cameras' options are in
 :mod:`xvmatch.commands._cameras`, the pictures' in :mod:`xvmatch.commands._options` (both
 re-exported here). The runs are imported lazily: only these code paths load onnxruntime."""
 
@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass, fields
 
-from xvmatch.commands._box_reading import note_if_assumed
 from xvmatch.commands._cameras import (
     add_camera_check,
     add_refine_top_camera,
@@ -29,18 +28,16 @@ from xvmatch.commands._options import (
     UsageError,
     add_draw_arguments,
     add_image_options,
-    check_images_together,
     draw_pictures,
 )
 from xvmatch.commands._types import float_in, thread_count
-from xvmatch.core.output_paths import check_own_folder
 from xvmatch.formats.camera_frames import ego_camera_size
 
 __all__ = [
     "DRAW_COMMAND", "LEARNED_ONLY", "ModelArgs", "add_camera_check", "add_draw_arguments",
     "add_model_arguments", "add_refine_top_camera", "add_track_camera_arguments",
-    "add_write_cameras", "associate_with_model", "check_precision", "check_write_cameras",
-    "draw_pictures", "ego_camera_size", "horizontal_size", "learned_run_options", "model_args",
+    "add_write_cameras", "check_precision", "check_write_cameras", "draw_pictures",
+    "ego_camera_size", "export_torch_file", "horizontal_size", "model_args",
     "note_camera_check", "note_camera_refinement", "open_models", "write_cameras",
 ]
 
@@ -147,7 +144,7 @@ LEARNED_ONLY = ("gamma", "mirror", "top_images", "hor_images", "cameras", "costs
 """Options of ``associate`` that need ``--model``."""
 
 
-def _export_torch_file(path: str, folder) -> None:
+def export_torch_file(path: str, folder) -> None:
     """Export a torch matcher file's bundle into its cache ``folder``, once (the learn extra)."""
     try:
         from xvmatch.export.onnx_export import export_bundle
@@ -164,7 +161,7 @@ def open_models(names: Iterable[str], threads: int = 1, precision: str | None = 
     ``recheck``: ``associate`` re-checks INT8's near-tie frames in FP32)."""
     from xvmatch.inference.matching.run_inputs import open_matchers
 
-    return open_matchers(names, threads, precision, recheck, export=_export_torch_file)
+    return open_matchers(names, threads, precision, recheck, export=export_torch_file)
 
 
 def check_precision(precision: str | None, images: bool, models: Iterable = (),
@@ -175,73 +172,3 @@ def check_precision(precision: str | None, images: bool, models: Iterable = (),
 
     if (problem := precision_problem(precision, images, models, names)) is not None:
         raise UsageError(problem)
-
-
-def learned_run_options(opts: ModelArgs, models: list, names: list[str],
-                        hor_size: tuple[tuple[int, int], str], top_offset: int = 0):
-    """The :class:`~xvmatch.inference.matching.learned_pipeline.LearnedRunOptions` of
-    ``associate``'s options, for ``models`` already opened (:func:`open_models`) from ``names``
-    and the horizontal size :func:`horizontal_size` resolved. Costs are kept when ``--costs``
-    or the pictures ask for them (they are of the frames that have costs)."""
-    from xvmatch.inference.matching.learned_pipeline import LearnedRunOptions
-
-    return LearnedRunOptions(
-        models=tuple(models), hor_size=tuple(hor_size[0]), hor_size_source=hor_size[1],
-        names=tuple(names), top_images=opts.top_images, hor_images=opts.hor_images,
-        cameras=opts.cameras, top_boxes=opts.top,
-        hor_boxes=opts.hor if isinstance(opts.hor, str) else "the horizontal-view boxes",
-        camera_id=opts.camera_id, gamma=opts.gamma, mirror=bool(opts.mirror),
-        workers=opts.workers, top_offset=top_offset,
-        keep_costs=any(v is not None for v in (opts.costs, opts.draw, opts.draw_video)),
-        appearance_check=opts.appearance_check == "on",
-        refine_top_camera=opts.refine_top_camera == "auto",
-        camera_check=opts.camera_check == "on")
-
-
-def associate_with_model(opts: ModelArgs, top: Mapping, hor: Mapping, frames: Iterable[int],
-                         progress: Callable[[Iterable[int]], Iterable[int]] | None,
-                         top_offset: int = 0, hor_size: tuple[tuple[int, int], str] | None = None
-                         ) -> dict[int, list[tuple[int, int]]]:
-    """Associate with ``opts.model`` (bundles, ``default`` or torch files); ``{frame: [(top,
-    hor)]}``: checks the options, opens the models, runs
-    :mod:`~xvmatch.inference.matching.learned_pipeline` with :func:`learned_run_options`, prints
-    its notes, and writes ``--costs``, ``--draw`` and ``--write-cameras`` at the end. ``top`` is
-    already re-timed by ``top_offset`` (``--offset``), the top images are re-timed the same way;
-    ``hor_size``: :func:`horizontal_size`, when the caller has it already."""
-    from xvmatch.inference.matching.learned_pipeline import open_learned_inputs
-
-    if opts.mode != "frame":
-        raise ValueError("--model solves each frame on its own: use --mode frame")
-    check_images_together(opts.top_images, opts.hor_images)
-    if opts.draw is not None:
-        check_own_folder(opts.draw, DRAW_COMMAND, "--draw")
-    names = [opts.model] if isinstance(opts.model, str) else list(opts.model)
-    precision, images = opts.precision, opts.top_images is not None
-    check_precision(precision, images)
-    models = open_models(names, opts.threads, precision, recheck=True)
-    check_precision(precision, images, models, names)
-    hor_size = hor_size or horizontal_size(opts, hor)
-    options = learned_run_options(opts, models, names, hor_size, top_offset)
-    quiet = bool(opts.quiet)
-    with open_learned_inputs(top, hor, frames, options) as inputs:
-        note_if_assumed(hor_size, hor, opts.hor or "the horizontal boxes", quiet)
-        note_camera_refinement(inputs.refinement, quiet)
-        note_camera_check(inputs.camera_checked, quiet)
-        run = inputs.associate(progress)
-        if run.rechecked and not opts.quiet:
-            both = sum(1 for f in frames if len(top.get(f, ())) and len(hor.get(f, ())))
-            print(f"INT8 appearance network: {len(run.rechecked)} of {both} frames were near "
-                  "ties, scored again with FP32", file=sys.stderr)
-        if run.checked is not None and run.checked.to_tell(opts.quiet):
-            print(run.checked.message(), file=sys.stderr)
-        if opts.draw is not None or opts.draw_video is not None:
-            draw_pictures(opts.draw, opts.draw_every, top, hor, run.pairs, sorted(run.costs),
-                          inputs.images or None, run.hor_size, not opts.no_labels,
-                          truth=opts.draw_truth, camera_id=opts.camera_id, video=opts.draw_video)
-    if opts.costs is not None:
-        from xvmatch.inference.matching.costs_record import write_costs_record
-
-        write_costs_record(opts.costs, top, hor, run.costs, run.gamma, run.checked,
-                           run.camera_checked, inputs.refinement)
-    write_cameras(opts, inputs.refined_cameras, inputs.refinement)
-    return run.pairs

@@ -2,26 +2,30 @@
 
 From boxes with the CVMHAT spatial-distribution search (Sec. 3.2), or with a learned matcher
 (``--model``, :mod:`xvmatch.commands._model`) from boxes, images and cameras; ``--offset auto``
-re-times the views first (:mod:`xvmatch.commands.offset`).
+re-times the views first. The command reads and checks, builds one
+:class:`~xvmatch.inference.matching.association_run.AssociationOptions`, calls
+:func:`~xvmatch.inference.matching.association_run.run_association` (its notes on stderr as it
+goes, its pictures drawn) and writes the pairs, the costs and the cameras.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 
-from xvmatch.commands._cameras import add_top_view_arguments, check_top_view, oblique_pairs
+from xvmatch.commands._cameras import add_top_view_arguments, check_top_view
 from xvmatch.commands._model import (
     DRAW_COMMAND,
     LEARNED_ONLY,
+    ModelArgs,
     add_draw_arguments,
     add_model_arguments,
-    associate_with_model,
     check_write_cameras,
     draw_pictures,
+    export_torch_file,
     horizontal_size,
     model_args,
+    write_cameras,
 )
 from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
@@ -38,8 +42,15 @@ from xvmatch.commands._options import (
     spatial_params,
 )
 from xvmatch.commands._types import box_id, worker_count
-from xvmatch.commands.offset import add_offset_options, max_offset_of, resolve_offset
+from xvmatch.commands.offset import add_offset_options, max_offset_of, offset_progress
 from xvmatch.core.output_paths import Input, Output, check_outputs, check_own_folder
+from xvmatch.inference.matching.association_run import (
+    AssociationHooks,
+    AssociationOptions,
+    AssociationPictures,
+    AssociationRun,
+    LearnedChoice,
+)
 
 __all__ = ["EXAMPLE", "add_associate_parser"]
 
@@ -114,15 +125,16 @@ def _keep_heap_memory() -> None:
 
 
 def _cmd_associate(args: argparse.Namespace) -> int:
-    from xvmatch.cues.spatial_search import associate_sequence
+    from xvmatch.cues.box_motion import is_video
+    from xvmatch.inference.matching.association_run import run_association
 
     _keep_heap_memory()
     params = spatial_params(args)
     top = read_boxes(args.top, args.duplicates, box_reading(args))
     hor = read_boxes(args.hor, args.duplicates, box_reading(args))
-    video = _video_mode(args, top, hor)
-    search = args.search or "exhaustive"
-    if not video and search != "exhaustive":
+    # --mode auto: video where both views' ids are track ids (every path keeps pairs along them)
+    video = args.mode == "video" or (args.mode == "auto" and is_video(top, hor))
+    if not video and (args.search or "exhaustive") != "exhaustive":
         raise UsageError("--search reduced/follow uses previous frames: it needs --mode video"
                          + (" (auto found no track ids: ids that persist from frame to frame)"
                             if args.mode == "auto" else ""))
@@ -134,10 +146,21 @@ def _cmd_associate(args: argparse.Namespace) -> int:
                              "default (or a bundle)")
     check_camera_id(args.camera_id, top, args.top)
     check_top_view(args)
-    learned = replace(model_args(args), mode="frame")  # video: its pairs made consistent
-    models = [m for m in args.model or () if m != "default"]
+    learned = model_args(args)
+    _check_outputs(args, learned)
+    max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
+    hor_size = horizontal_size(learned, hor)
+    options = _run_options(args, params, hor_size, max_offset, video)
+    run = run_association(top, hor, options, _hooks(args, hor, hor_size))
+    _write(args, learned, hor, run)
+    return 0
+
+
+def _check_outputs(args: argparse.Namespace, learned: ModelArgs) -> None:
+    """Refuse outputs that would overwrite an input or a folder not ``associate``'s own."""
     from xvmatch.formats.offset_record import predictions_offset_path
 
+    models = [m for m in args.model or () if m != "default"]
     check_outputs(
         [Output("--out", args.out), Output("--offset", predictions_offset_path(args.out)),
          Output("--costs", args.costs),
@@ -150,87 +173,74 @@ def _cmd_associate(args: argparse.Namespace) -> int:
         check_own_folder(args.draw, DRAW_COMMAND, "--draw")
     if args.draw_video is not None and not args.draw_video.lower().endswith(".mp4"):
         raise UsageError(f"--draw-video {args.draw_video}: an mp4 file (FILE.mp4) is written")
-    max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
-    hor_size = horizontal_size(learned, hor)
-    hor_width = hor_size[0][0]
-    if args.model is None:
-        from xvmatch.commands._box_reading import note_if_assumed
 
-        note_if_assumed(hor_size, hor, args.hor, args.quiet)
-    offset = resolve_offset(args, top, hor, hor_width, params, max_offset, args.camera_id)
-    if offset:
-        from xvmatch.formats.mot_boxes import shift_frames
 
-        top = shift_frames(top, offset)
-    frames = sorted(set(top) | set(hor))
-    oblique = oblique_pairs(args, top, hor, hor_size[0], video)
-    if oblique is not None:
-        pairs = oblique
-        _write(args, pairs, frames, offset)
-        return 0
-    progress = frame_progress(len(frames), "associate", not args.quiet)
+def _run_options(args: argparse.Namespace, params, hor_size, max_offset: int | None,
+                 video: bool) -> AssociationOptions:
+    """The run's :class:`~xvmatch.inference.matching.association_run.AssociationOptions`."""
+    learned = None
     if args.model is not None:
-        pairs = associate_with_model(learned, top, hor, frames, progress, top_offset=offset,
-                                     hor_size=hor_size)
-    else:
-        pairs = associate_sequence(
-            top,
-            hor,
-            hor_width=hor_width,
-            params=params,
-            search=search,
-            camera_id=args.camera_id,
-            frames=frames,
-            progress=progress,
-        )
-    if video:
-        from xvmatch.inference.linking.pair_consensus import consistent_pairs
-
-        pairs = consistent_pairs(pairs, top, hor, frames)
-    if args.model is None and (args.draw is not None or args.draw_video is not None):
-        both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
-        draw_pictures(args.draw, args.draw_every, top, hor, pairs, both, None, hor_size[0],
-                      not args.no_labels, truth=args.draw_truth, camera_id=args.camera_id,
-                      video=args.draw_video)
-    _write(args, pairs, frames, offset, _AUTO_VIDEO if video and args.mode == "auto" else None)
-    return 0
+        learned = LearnedChoice(
+            names=tuple(args.model), threads=args.threads, precision=args.precision,
+            top_images=args.top_images, hor_images=args.hor_images, cameras=args.cameras,
+            gamma=args.gamma, mirror=bool(args.mirror),
+            keep_costs=any(v is not None for v in (args.costs, args.draw, args.draw_video)),
+            appearance_check=args.appearance_check == "on",
+            refine_top_camera=args.refine_top_camera == "auto",
+            camera_check=args.camera_check == "on")
+    return AssociationOptions(
+        hor_size=hor_size, params=params, offset=args.offset, max_offset=max_offset,
+        video=video, video_by_auto=video and args.mode == "auto", search=args.search,
+        camera_id=args.camera_id, workers=args.workers, top_boxes=args.top, hor_boxes=args.hor,
+        top_view=args.top_view, top_image_size=args.top_image_size, hor_hfov=args.hor_hfov,
+        fps=args.fps, learned=learned)
 
 
-_AUTO_VIDEO = ("--mode video: each view's ids persist from frame to frame (track ids), so the "
-               "pairs were kept consistent along them; --mode frame solves each frame alone")
-"""The note of ``--mode auto`` taking video mode, said with the run's summary."""
+def _hooks(args: argparse.Namespace, hor: dict, hor_size) -> AssociationHooks:
+    """Where the run's notes (stderr), progress bars and pictures (``--draw``) go."""
+    from xvmatch.commands._box_reading import note_if_assumed
+
+    def pictures(shown: AssociationPictures) -> None:
+        draw_pictures(args.draw, args.draw_every, shown.top, shown.hor, shown.pairs,
+                      shown.frames, shown.images, shown.hor_size, not args.no_labels,
+                      truth=args.draw_truth, camera_id=args.camera_id, video=args.draw_video)
+
+    return AssociationHooks(
+        note=lambda line, always: print(line, file=sys.stderr) if always or not args.quiet
+        else None,
+        size_assumed=lambda: note_if_assumed(hor_size, hor, args.hor, args.quiet),
+        frames=lambda n: frame_progress(n, "associate", not args.quiet),
+        clips=lambda: offset_progress("", not args.quiet),
+        pictures=pictures if args.draw is not None or args.draw_video is not None else None,
+        export=export_torch_file)
 
 
-def _video_mode(args: argparse.Namespace, top: dict, hor: dict) -> bool:
-    """``--mode``: video or frame; ``auto`` takes video where both views' ids are track ids
-    (:func:`~xvmatch.cues.box_motion.is_video`): every path then keeps its pairs consistent
-    along them."""
-    if args.mode != "auto":
-        return args.mode == "video"
-    from xvmatch.cues.box_motion import is_video
-
-    return is_video(top, hor)
-
-
-def _write(args: argparse.Namespace, pairs: dict, frames: list[int], offset: int,
-           note: str | None = None) -> None:
-    """The predictions and, when ``--offset`` was given, the offset applied beside them
-    (``PRED.offset.json``, which ``evaluate`` reads); a record an earlier run left there for
-    these predictions is removed when this run applied none. ``note``: a line said with the
-    summary, once the run has succeeded."""
+def _write(args: argparse.Namespace, learned: ModelArgs, hor: dict,
+           run: AssociationRun) -> None:
+    """The learned run's ``--costs`` and ``--write-cameras``, then the predictions and, when
+    ``--offset`` was given, the offset applied beside them (``PRED.offset.json``, which
+    ``evaluate`` reads; a record an earlier run left there is removed when this run applied
+    none); the run's note said with the summary."""
     import os
 
     from xvmatch.formats.mot_boxes import write_predictions
     from xvmatch.formats.offset_record import predictions_offset_path, write_offset_record
 
-    write_predictions(args.out, pairs)
+    if (lr := run.learned) is not None:
+        if args.costs is not None:
+            from xvmatch.inference.matching.costs_record import write_costs_record
+
+            write_costs_record(args.costs, run.top, hor, lr.costs, lr.gamma, lr.checked,
+                               lr.camera_checked, lr.refinement)
+        write_cameras(learned, run.refined_cameras, lr.refinement)
+    write_predictions(args.out, run.pairs)
     record = predictions_offset_path(args.out)
     if args.offset != 0:
-        write_offset_record(record, offset)
+        write_offset_record(record, run.offset)
     elif os.path.isfile(record):
         os.unlink(record)
-    n_pairs = sum(len(p) for p in pairs.values())
     if not args.quiet:
-        if note:
-            print(f"xvmatch: note: {note}", file=sys.stderr)
-        print(f"wrote {n_pairs} pairs over {len(frames)} frames to {args.out}", file=sys.stderr)
+        if run.note:
+            print(f"xvmatch: note: {run.note}", file=sys.stderr)
+        print(f"wrote {sum(len(p) for p in run.pairs.values())} pairs over {len(run.frames)} "
+              f"frames to {args.out}", file=sys.stderr)

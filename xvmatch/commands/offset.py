@@ -2,8 +2,10 @@
 
 Also what ``associate``, ``associate-multi`` and ``track`` share with it: ``--offset N|auto``
 and ``--max-offset`` (:func:`add_offset_options`, :func:`resolve_offset`, :func:`wearer_marked`,
-:func:`max_offset_of`). ``auto``'s decision and the estimate in words are the library's
-(:mod:`xvmatch.cues.auto_offset`); this module prints them, and the search's progress bar.
+:func:`max_offset_of`, :func:`offset_progress`). ``auto``'s decision and the estimate in words
+are the library's (:mod:`xvmatch.cues.auto_offset`,
+:func:`~xvmatch.inference.matching.association_run.offset_to_apply`); this module prints them,
+and the search's progress bar.
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
@@ -26,7 +30,7 @@ from xvmatch.commands._options import (
 )
 from xvmatch.commands._types import box_id, int_in, offset_value, worker_count
 from xvmatch.core.progress import growing_total
-from xvmatch.cues.auto_offset import AutoOffsetOptions, auto_offset, estimate_lines, estimate_record
+from xvmatch.cues.auto_offset import AutoOffsetOptions, estimate_lines, estimate_record
 from xvmatch.cues.offset_estimation import (
     AUTO_MAX_OFFSET,
     CLIP_LENGTH,
@@ -38,8 +42,8 @@ from xvmatch.cues.offset_estimation import (
 )
 
 __all__ = ["EXAMPLE", "MAX_OFFSET_LIMIT", "MAX_OFFSET_TYPE", "add_offset_options",
-           "add_offset_parser", "check_clip_start", "max_offset_of", "resolve_offset",
-           "wearer_marked"]
+           "add_offset_parser", "check_clip_start", "max_offset_of", "offset_progress",
+           "resolve_offset", "wearer_marked"]
 
 EXAMPLE = "xvmatch offset --top seq_top.txt --hor seq_hor.txt"
 
@@ -122,46 +126,34 @@ def wearer_marked(top, positions: dict[int, int] | None):
     return {f: with_wearer_tag(r, positions.get(f)) for f, r in top.items()}, -1
 
 
+@contextmanager
+def offset_progress(label: str, enabled: bool) -> Iterator[Callable[[int, int], None]]:
+    """The offset search's ``progress(done, total)`` on a progress bar (``label``: which pair
+    of views), a context manager that closes the bar."""
+    with progress_bar(0, f"{label}offset search", "clip", enabled) as bar:
+        yield growing_total(bar)
+
+
 def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
                    max_offset: int | None, camera_id: int | None = None,
                    value: int | str | None = None, label: str = "",
                    hor_path: str | None = None) -> int:
-    """The offset to apply: ``value`` (default ``--offset``) when a number, or with ``auto``
-    the estimate when the clips back it (0 otherwise, with a warning on stderr); the estimate
-    is reported unless ``--quiet``, after ``label`` (which pair of views). Videos too short
-    for two clips are not searched (one clip never backs an offset): 0, with a note.
-    ``max_offset``: :func:`max_offset_of`, checked before any work.
+    """The offset to apply (``track``, ``associate-multi``): ``value`` (default ``--offset``)
+    when a number, or with ``auto`` the estimate when the clips back it (0 otherwise, with a
+    warning on stderr), reported unless ``--quiet`` after ``label`` (which pair of views);
+    ``max_offset``: :func:`max_offset_of`, checked before any work. Views that share no frame
+    at the offset are refused, naming both files
+    (:func:`~xvmatch.inference.matching.association_run.offset_to_apply`)."""
+    from xvmatch.inference.matching.association_run import offset_to_apply
 
-    Every command that pairs views (associate, track, associate-multi) comes here, so here
-    views that share no frame at the offset found are refused
-    (:func:`~xvmatch.formats.mot_boxes.check_common_frames`): an empty result is no answer.
-
-    Raises:
-        ValueError: the views share no frame with boxes, naming both files and the offset.
-    """
-    from xvmatch.formats.mot_boxes import check_common_frames
-
-    offset = _offset_value(args, top, hor, hor_width, params, max_offset, camera_id, value,
-                           label)
-    check_common_frames(top, hor, offset, (args.top, hor_path or args.hor), "nothing to match")
-    return offset
-
-
-def _offset_value(args: argparse.Namespace, top, hor, hor_width: float, params,
-                  max_offset: int | None, camera_id: int | None, value: int | str | None,
-                  label: str) -> int:
-    """:func:`resolve_offset` but the check of the frames in common: the number, or ``auto``'s
-    decision (:func:`~xvmatch.cues.auto_offset.auto_offset`) with its line printed."""
     value = args.offset if value is None else value
-    if value != "auto":
-        return int(value)
-    with progress_bar(0, f"{label}offset search", "clip", not args.quiet) as bar:
-        decided = auto_offset(top, hor, AutoOffsetOptions(
-            hor_width=hor_width, max_offset=max_offset, params=params, camera_id=camera_id,
-            workers=args.workers, label=label), growing_total(bar))
-    if decided.to_tell(args.quiet):
-        print(decided.message, file=sys.stderr)
-    return decided.offset
+    auto = None if value != "auto" else AutoOffsetOptions(
+        hor_width=hor_width, max_offset=max_offset, params=params, camera_id=camera_id,
+        workers=args.workers, label=label)
+    return offset_to_apply(
+        top, hor, value, auto, (args.top, hor_path or args.hor),
+        lambda: offset_progress(label, not args.quiet),
+        lambda line, always: print(line, file=sys.stderr) if always or not args.quiet else None)
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:
