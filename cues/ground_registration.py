@@ -14,7 +14,8 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
 * **time**: one hypothesis per frame is chosen by dynamic programming over the frames (Viterbi),
   each step paying for a jump in position or heading faster than a walker turns and walks, so
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
-  decided by its neighbours;
+  decided by its neighbours; the whole clip is registered with the top map at a few scales and
+  the best kept (:func:`register_with_scale`);
 * **association**: under the chosen pose, Hungarian on the ground distances with a
   non-association distance (:data:`RADIUS`).
 
@@ -32,12 +33,15 @@ from scipy.optimize import linear_sum_assignment
 
 __all__ = [
     "KEEP",
+    "MAP_SCALES",
     "RADIUS",
+    "SCALE_MARGIN",
     "FramePose",
     "associate_on_ground",
     "hor_ground_points",
     "pose_hypotheses",
     "register_sequence",
+    "register_with_scale",
 ]
 
 RADIUS = 1.5
@@ -55,6 +59,13 @@ a horizontal person explained: low, as occlusion and partial overlap hide many."
 
 _DIGITS = 9
 """Scores are rounded to this many decimals: the same choices on every CPU."""
+
+MAP_SCALES = (0.7, 0.85, 1.0, 1.15, 1.3)
+"""Scales of the top view's ground map tried against the horizontal view's
+(:func:`register_with_scale`)."""
+
+SCALE_MARGIN = 1.05
+"""How many times the people explained at scale 1 another scale must explain to replace it."""
 
 _STEP_M = 1.0
 """Metres per second a handheld camera's position may drift between frames at no cost."""
@@ -193,6 +204,34 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
             out.append(FramePose(frames[k], p[:2].copy(), float(p[2]),
                                  float(scores[choice[k]])))
     return out
+
+
+def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
+                        hfov_deg: float, fps: float) -> tuple[float, list[FramePose]]:
+    """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
+    scaled by each of :data:`MAP_SCALES`, and the scale kept: the two maps' metres come from
+    two estimates (the top camera's height from its people, each distance from a box height)
+    that can disagree by a third, so another scale replaces 1 where its chosen poses explain
+    :data:`SCALE_MARGIN` times as many people over the clip (a small lead is noise).
+
+    Args:
+        frames: the frame numbers, in order.
+        tops: per frame, the top view's people ``(N, 2)`` on its ground map (finite rows).
+        hors: per frame, the horizontal view's people ``(M, 2)`` on its own map.
+        hfov_deg: the horizontal camera's field of view.
+        fps: frames per second of the frame numbers.
+    Returns:
+        ``(scale, poses)``: the poses lie on the top map multiplied by ``scale``.
+    """
+    runs: dict[float, tuple[float, list[FramePose]]] = {}
+    for scale in MAP_SCALES:
+        cands = [pose_hypotheses(scale * p, q, hfov_deg) for p, q in zip(tops, hors, strict=True)]
+        poses = register_sequence(frames, cands, fps)
+        runs[scale] = (round(sum(p.score for p in poses), 6), poses)
+    best = max(MAP_SCALES, key=lambda s: (runs[s][0], -abs(s - 1.0)))
+    if runs[best][0] <= round(SCALE_MARGIN * runs[1.0][0], 6):
+        best = 1.0
+    return best, runs[best][1]
 
 
 def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose) -> np.ndarray:

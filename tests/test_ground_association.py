@@ -114,7 +114,7 @@ def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> No
 def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) -> None:
     """People on a top map whose metres are ``1 / true_scale`` of the horizontal map's: the
     registration keeps the scale that undoes it, and 1 where it is 1."""
-    from xvmatch.inference.matching.ground_association import _registered
+    from xvmatch.cues.ground_registration import register_with_scale
 
     rng = np.random.default_rng(3)
     order, tops, hors = [], [], []
@@ -124,7 +124,6 @@ def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) 
         order.append(f)
         tops.append(people / true_scale)
         hors.append(people[seen])
-    options = GroundAssociationOptions((1920, 1080), (1920, 1080), hor_hfov_deg=70.0, fps=10.0)
-    scale, poses = _registered(order, tops, hors, options)
+    scale, poses = register_with_scale(order, tops, hors, 70.0, 10.0)
     assert scale == true_scale
     assert len(poses) == len(order)

@@ -7,10 +7,9 @@ view's boxes say it is oblique).
    none), which puts the top view's people on a metric ground map.
 2. The horizontal view's people go on its own ground map (distance from box height, bearing
    from column), and its pose on the top map is registered frame by frame and chosen over time
-   (:mod:`xvmatch.cues.ground_registration`), on the top map scaled by each of
-   :data:`MAP_SCALES` in turn, the clip keeping the scale whose poses explain the most people
-   (the two maps' metres are two estimates that can disagree by a third); pairs by Hungarian on
-   the ground distances.
+   (:func:`xvmatch.cues.ground_registration.register_with_scale`: the top map tried at a few
+   scales, as the two maps' metres are two estimates that can disagree by a third); pairs by
+   Hungarian on the ground distances.
 3. With each view's own track ids (video mode), the pairs are made consistent over the clip
    (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`).
 
@@ -35,8 +34,6 @@ from xvmatch.geometry.people_calibration import (
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
 __all__ = [
-    "MAP_SCALES",
-    "SCALE_MARGIN",
     "TOP_VIEWS",
     "GroundAssociation",
     "GroundAssociationOptions",
@@ -47,10 +44,6 @@ __all__ = [
 
 TOP_VIEWS = ("auto", "nadir", "oblique")
 """``--top-view``: let the top view's boxes decide, or force a nadir or an oblique camera."""
-MAP_SCALES = (0.7, 0.85, 1.0, 1.15, 1.3)
-"""Scales of the top view's ground map tried against the horizontal view's (:func:`_registered`)."""
-SCALE_MARGIN = 1.05
-"""How many times the people explained at scale 1 another scale must explain to replace it."""
 
 
 @dataclass(frozen=True)
@@ -78,7 +71,8 @@ class GroundAssociationOptions:
 class GroundAssociation:
     """The run's result: ``pairs`` ``{frame: [(top id, hor id), ...]}``, the top camera's
     calibration, the horizontal camera's pose per frame (on the top map scaled by ``scale``,
-    one of :data:`MAP_SCALES`), and one line saying what was assumed."""
+    :func:`~xvmatch.cues.ground_registration.register_with_scale`), and one line saying what
+    was assumed."""
 
     pairs: dict[int, list[tuple[int, int]]]
     calibration: PeopleCalibration
@@ -131,7 +125,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         ok = np.isfinite(ground).all(axis=1)
         tops.append((ground[ok], t_ids[ok]))
         hors.append((gr.hor_ground_points(hb, options.hor_size, options.hor_hfov_deg), h_ids))
-    scale, poses = _registered(order, [p for p, _ in tops], [q for q, _ in hors], options)
+    scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
+                                          options.hor_hfov_deg, options.fps)
     by_frame = {p.frame: p for p in poses}
     pairs: dict[int, list[tuple[int, int]]] = {}
     for f, (p, ti), (q, hi) in zip(order, tops, hors, strict=True):
@@ -142,25 +137,6 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         pairs = consistent_pairs(pairs, top, hor, order, keep_free=False)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib), scale=scale)
-
-
-def _registered(order: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
-                options: GroundAssociationOptions) -> tuple[float, list[gr.FramePose]]:
-    """The horizontal camera's pose per frame on the top map scaled by each of
-    :data:`MAP_SCALES`, and the scale kept: the two maps' metres come from two estimates (the
-    top camera's height from its people, each distance from a box height) that can disagree by
-    a third, so another scale replaces 1 where its chosen poses explain :data:`SCALE_MARGIN`
-    times as many people over the clip (a small lead is noise)."""
-    runs: dict[float, tuple[float, list[gr.FramePose]]] = {}
-    for scale in MAP_SCALES:
-        cands = [gr.pose_hypotheses(scale * p, q, options.hor_hfov_deg)
-                 for p, q in zip(tops, hors, strict=True)]
-        poses = gr.register_sequence(order, cands, options.fps)
-        runs[scale] = (round(sum(p.score for p in poses), 6), poses)
-    best = max(MAP_SCALES, key=lambda s: (runs[s][0], -abs(s - 1.0)))
-    if runs[best][0] <= round(SCALE_MARGIN * runs[1.0][0], 6):
-        best = 1.0
-    return best, runs[best][1]
 
 
 def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,

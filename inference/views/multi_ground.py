@@ -167,19 +167,19 @@ def _top_ground(record, calib: PeopleCalibration) -> np.ndarray:
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
                 options: MultiGroundOptions) -> dict[int, np.ndarray]:
     """``{frame: (M, 2)}`` handheld view ``k``'s people on the top map, on the frames where
-    its pose was registered (both views have boxes there)."""
+    its pose was registered (both views have boxes there; the top map at the scale that fits
+    this view best, :func:`~xvmatch.cues.ground_registration.register_with_scale`)."""
     hor = views[k]
     order = sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hor_hfov_deg
     local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov) for f in order}
-    cands = []
-    for f in order:
-        p = tops[f]
-        cands.append(gr.pose_hypotheses(p[np.isfinite(p).all(axis=1)], local[f], hfov))
+    finite = [tops[f][np.isfinite(tops[f]).all(axis=1)] for f in order]
+    scale, poses = gr.register_with_scale(order, finite, [local[f] for f in order], hfov,
+                                          options.fps)
     out = {}
-    for pose in gr.register_sequence(order, cands, options.fps):
+    for pose in poses:  # back from the scaled top map to the top map
         c, s = np.cos(pose.heading), np.sin(pose.heading)
-        out[pose.frame] = pose.centre + local[pose.frame] @ np.array([[c, -s], [s, c]]).T
+        out[pose.frame] = (pose.centre + local[pose.frame] @ np.array([[c, -s], [s, c]]).T) / scale
     return out
 
 
