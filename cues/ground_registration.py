@@ -134,7 +134,9 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
     centres = centres.reshape(-1, 2)
     h_idx = np.repeat(np.arange(len(headings)), len(top) * len(hor))  # heading of each row
     mapped = centres[:, None, :] + turned[h_idx]  # (P, M, 2)
-    d2 = ((mapped[:, :, None, :] - top[None, None, :, :]) ** 2).sum(-1)  # (P, M, N)
+    dx = mapped[:, :, None, 0] - top[None, None, :, 0]  # (P, M, N), one coordinate at a time:
+    dy = mapped[:, :, None, 1] - top[None, None, :, 1]  # no (P, M, N, 2) temporary
+    d2 = dx * dx + dy * dy
     explained = np.exp(-0.5 * d2.min(axis=2) / (0.5 * RADIUS) ** 2).sum(axis=1)
     # Top people in the horizontal camera's view (bearing within the half field of view, as far
     # as its people reach) that no horizontal person explains.
@@ -149,15 +151,35 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
     score = np.round(explained - _UNSEEN_WEIGHT * unseen.sum(axis=1), _DIGITS)
     poses = np.column_stack([centres, heading])
-    order = np.argsort(-score, kind="stable")
-    keep: list[int] = []
-    for k in order:  # distinct hypotheses: 1 m or 10 degrees apart
-        if all(np.hypot(*(poses[k, :2] - poses[q, :2])) > 1.0
-               or abs(_wrap(poses[k, 2] - poses[q, 2])) > np.radians(10.0) for q in keep):
-            keep.append(int(k))
-            if len(keep) == KEEP:
-                break
+    keep = _distinct(poses, np.argsort(-score, kind="stable"))
     return poses[keep], score[keep]
+
+
+def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 256) -> list[int]:
+    """The first :data:`KEEP` of ``order`` (indices into ``poses`` ``(P, 3)``) each 1 m or 10
+    degrees away from every one kept before it (greedy, in order); a block of candidates at a
+    time, its distances to the kept ones and to each other computed at once."""
+    keep: list[int] = []
+    limit = np.radians(10.0)
+    for start in range(0, len(order), block):
+        cand = order[start:start + block]
+        xy, th = poses[cand, :2], poses[cand, 2]
+        apart = ((np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+                  > 1.0) | (np.abs(_wrap(th[:, None] - th[None, :])) > limit))
+        if keep:
+            kx, kt = poses[keep, :2], poses[keep, 2]
+            free = (((np.hypot(xy[:, None, 0] - kx[None, :, 0], xy[:, None, 1] - kx[None, :, 1])
+                      > 1.0) | (np.abs(_wrap(th[:, None] - kt[None, :])) > limit)).all(axis=1))
+        else:
+            free = np.ones(len(cand), bool)
+        taken: list[int] = []
+        for i in np.flatnonzero(free):
+            if apart[i, taken].all():
+                taken.append(int(i))
+                keep.append(int(cand[i]))
+                if len(keep) == KEEP:
+                    return keep
+    return keep
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:

@@ -127,3 +127,24 @@ def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) 
     scale, poses = register_with_scale(order, tops, hors, 70.0, 10.0)
     assert scale == true_scale
     assert len(poses) == len(order)
+
+
+def test_distinct_pose_hypotheses_are_the_plain_greedy_choice() -> None:
+    """The block-wise choice of distinct hypotheses keeps exactly what a plain greedy pass (each
+    candidate 1 m or 10 degrees from every one kept before it) keeps, ties and wraps included."""
+    from xvmatch.cues.ground_registration import KEEP, _distinct, _wrap
+
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        n = int(rng.integers(1, 900))
+        poses = np.column_stack([np.round(rng.uniform(-4, 4, (n, 2)), 1),
+                                 rng.choice(np.radians(np.arange(0, 360, 5)), n)])
+        order = rng.permutation(n)
+        plain: list[int] = []
+        for k in order:
+            if all(np.hypot(*(poses[k, :2] - poses[q, :2])) > 1.0
+                   or abs(_wrap(poses[k, 2] - poses[q, 2])) > np.radians(10.0) for q in plain):
+                plain.append(int(k))
+                if len(plain) == KEEP:
+                    break
+        assert _distinct(poses, order, block=int(rng.integers(1, 300))) == plain, trial
