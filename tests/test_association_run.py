@@ -3,6 +3,8 @@ pipeline in one call, its options in one typed record, its notes and pictures to
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from xvmatch.inference.matching.association_run import (
     AssociationHooks,
     AssociationOptions,
     guessed_top_size,
+    oblique_pairs,
     offset_to_apply,
     run_association,
 )
@@ -103,3 +106,16 @@ def test_search_modes_that_read_previous_frames_need_video() -> None:
     with pytest.raises(ValueError, match="needs video"):
         AssociationOptions(hor_size=SIZE, search="follow")
     AssociationOptions(hor_size=SIZE, search="exhaustive")
+
+
+def test_a_guessed_top_view_too_few_to_calibrate_takes_the_nadir_path(scene) -> None:
+    """Upright people too few to calibrate from: with a guessed size the nadir path, said in one
+    line; with the size given, the calibration's error."""
+    upright = {1: FrameBoxes(1, np.array([1, 2]), np.array([[100.0, 100, 40, 120],
+                                                             [500, 200, 30, 100]]))}
+    notes: list = []
+    options = AssociationOptions(hor_size=SIZE)
+    assert oblique_pairs(upright, upright, options, lambda line, always: notes.append(line)) is None
+    assert "cannot be calibrated from its people" in notes[-1]
+    with pytest.raises(ValueError, match="the calibration needs"):
+        oblique_pairs(upright, upright, replace(options, top_image_size=(640, 360)))

@@ -114,6 +114,11 @@ def test_oblique_top_decides_and_refuses(scene) -> None:
     far = {1: FrameBoxes(1, [1], [[9000.0, 10.0, 20.0, 50.0]])}
     calib, note = oblique_top(far, "auto", None, "top.txt")
     assert calib is None and "no common video size holds" in note
+    few = {1: FrameBoxes(1, [1, 2], [[100.0, 100.0, 20.0, 50.0], [300.0, 120.0, 20.0, 50.0]])}
+    calib, note = oblique_top(few, "auto", None, "top.txt")  # too few: the nadir path, said
+    assert calib is None and "cannot be calibrated from its people" in note
+    with pytest.raises(ValueError, match="the calibration needs"):  # a size given: an error
+        oblique_top(few, "auto", (640, 360), "top.txt")
     with pytest.raises(ValueError, match="--offset auto"):
         oblique_top(views[0], "oblique", SIZE, "top.txt", ["auto", 0])
     with pytest.raises(ValueError, match=r"top\.txt.*--top-image-size"):

@@ -23,8 +23,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from xvmatch.cues.auto_offset import AutoOffsetOptions, auto_offset
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.formats.mot_boxes import FrameBoxes, check_common_frames, shift_frames
@@ -241,15 +239,11 @@ def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | N
     camera, which the nadir search would misread), the smallest common video size holding its
     boxes, said in one line; None (the nadir path) for squat boxes, or boxes no common size
     holds (a note saying what to give)."""
-    from xvmatch.formats.box_image_size import common_size_holding
-    from xvmatch.formats.mot_boxes import stack_frames
+    from xvmatch.formats.box_image_size import common_size_holding, median_aspect
     from xvmatch.geometry.people_calibration import STEEP_ASPECT
 
-    boxes = stack_frames(top)[2]
-    if not len(boxes):
-        return None
-    aspect = float(np.median(boxes[:, 3] / np.maximum(boxes[:, 2], 1e-9)))
-    if aspect < STEEP_ASPECT:
+    aspect = median_aspect(top)
+    if aspect is None or aspect < STEEP_ASPECT:
         return None
     size = common_size_holding(top)
     said = (f"took {size[0]}x{size[1]}, the smallest common video size holding its boxes, as"
@@ -265,13 +259,17 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
                   note: Note = _no_note) -> Pairs | None:
     """The pairs of the ground-map association when the top view is oblique (forced, or found
     so by ``auto``), else None (the nadir path); tells ``note`` the one line saying what was
-    assumed. In video mode the pairs are made consistent along each view's tracks."""
+    assumed. In video mode the pairs are made consistent along each view's tracks. Without
+    ``--top-image-size`` the size is guessed from the boxes (not where the learned matcher
+    reads the top images), and a top view too sparse to calibrate takes the nadir path."""
     if options.top_view == "nadir" or options.cameras is not None:
         return None
-    top_size = options.top_image_size or guessed_top_size(top, note)
+    images = options.learned is not None and options.learned.top_images is not None
+    top_size = options.top_image_size or (None if images else guessed_top_size(top, note))
     if top_size is None:
         return None
     from xvmatch.formats.box_image_size import check_boxes_in_image
+    from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import (
         GroundAssociationOptions,
         run_top_view,
@@ -282,7 +280,14 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     ground = GroundAssociationOptions(top_size=top_size, hor_size=options.hor_size[0],
                                       hor_hfov_deg=options.hor_hfov, fps=options.fps,
                                       consensus=options.video, seed=0)
-    run = run_top_view(top, hor, ground, options.top_view, name=options.top_boxes)
+    try:
+        run = run_top_view(top, hor, ground, options.top_view, name=options.top_boxes)
+    except CalibrationError as error:
+        if options.top_image_size:
+            raise
+        note("xvmatch: note: the top view cannot be calibrated from its people "
+             f"({str(error).split(';')[0]}); associating as over a nadir drone", False)
+        return None
     if run is None:
         note("xvmatch: note: top view: looking straight down (its boxes are as wide as "
              "tall); associating as over a nadir drone", False)

@@ -40,7 +40,12 @@ from xvmatch.formats.box_image_size import (
     median_aspect,
 )
 from xvmatch.formats.mot_boxes import align_frames
-from xvmatch.geometry.people_calibration import PRIOR_HFOV_DEG, STEEP_ASPECT, PeopleCalibration
+from xvmatch.geometry.people_calibration import (
+    PRIOR_HFOV_DEG,
+    STEEP_ASPECT,
+    CalibrationError,
+    PeopleCalibration,
+)
 from xvmatch.inference.matching.ground_association import TOP_VIEWS, top_calibration
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
 from xvmatch.inference.views.multi_view_assignment import view_pairs
@@ -136,7 +141,13 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, the smallest common video "
                    "size holding its boxes (give --top-image-size WxH if not)")
     check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False)
-    calib = top_calibration(top, tuple(top_size), seed, name)
+    try:
+        calib = top_calibration(top, tuple(top_size), seed, name)
+    except CalibrationError as error:
+        if not guessed:
+            raise
+        return None, ("the top view cannot be calibrated from its people "
+                      f"({str(error).split(';')[0]}); associating as over a nadir drone")
     if calib.kind == "nadir" and top_view == "auto":
         return None, ("top view: looking straight down (its boxes are as wide as tall); "
                       "associating as over a nadir drone")
