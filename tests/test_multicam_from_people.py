@@ -125,6 +125,32 @@ def test_registration_decisions_near_their_bounds_do_not_hang_on_the_last_bits()
             assert near.trusted, (field, eps)
 
 
+def test_the_joint_refinement_pins_a_camera_its_tree_link_placed_off():
+    from xvmatch.inference.views.multicam_from_people import _refine_jointly
+
+    world = _walks(8, 80, seed=4)  # every camera sees everyone: each pair matches them all
+    rng = np.random.default_rng(1)
+    own = {"r": np.eye(3), "a": _similarity_matrix(1.1, 0.5, (3.0, -2.0)),
+           "b": _similarity_matrix(0.9, -1.2, (-4.0, 1.0))}  # each map -> the reference's
+    paths = {n: map_points(np.linalg.inv(G), world) + rng.normal(0, 0.02, world.shape)
+             for n, G in own.items()}
+    bent = np.array([[1.03, 0.01, 0.2], [-0.02, 0.98, -0.1], [0.004, -0.003, 1.0]])
+    placed = {"r": np.eye(3), "a": own["a"], "b": own["b"] @ bent}  # b's link bent it
+
+    def error(cams):
+        return np.median(np.hypot(*(map_points(cams["b"], paths["b"]) - world).reshape(-1, 2).T))
+
+    assert error(placed) > 0.2
+    refined = _refine_jointly(paths, placed, "r")
+    assert error(refined) < 0.05, error(refined)
+    np.testing.assert_allclose(refined["r"], np.eye(3))  # the reference's map is the frame
+
+
+def _similarity_matrix(scale: float, angle: float, shift: tuple[float, float]) -> np.ndarray:
+    c, s = scale * np.cos(angle), scale * np.sin(angle)
+    return np.array([[c, -s, shift[0]], [s, c, shift[1]], [0.0, 0.0, 1.0]])
+
+
 def test_register_pair_without_people_seen_together_proposes_nothing():
     world = _walks(6, 40, seed=1)
     src, dst = world[:, :3].copy(), world[:, 3:].copy()

@@ -14,6 +14,9 @@
 3. **One frame for all**: the most trusted registrations (most people-frames explained) form a
    spanning tree from the camera with the most boxes; a camera the tree cannot reach is refused
    by name, with how much it shares with the others.
+4. **Refined jointly**: every camera's homography to that frame refitted at once on the people
+   that every pair of cameras matches, not only the tree's pairs (:func:`_refine_jointly`): the
+   tree places a camera by one link, extrapolated beyond what that pair sees.
 
 The cameras come back as full pinhole cameras in that frame, so today's association, ground
 paths and bird's-eye view run on them unchanged. The estimate is as good as the people are
@@ -472,6 +475,132 @@ def _calibration(frames: Mapping[int, FrameBoxes], size: tuple[int, int], seed: 
     raise RegistrationError(str(error)) from None
 
 
+def _pair_matches(paths: Mapping[str, np.ndarray], placed: Mapping[str, np.ndarray], a: str,
+                  b: str, radius: float) -> tuple[np.ndarray, np.ndarray, int, float] | None:
+    """The people cameras ``a`` and ``b`` both see, mutually nearest within ``radius`` in the
+    same frame once their maps are laid by ``placed`` (``{camera: homography to the reference
+    map}``): their points on each camera's own map ``(M, 2)`` and ``(M, 2)``, how many are
+    beyond the pair of tracks matched most, and their median distance (settled); None when
+    none."""
+    pa, pb = paths[a], paths[b]
+    both = ~np.isnan(pa[..., 0]).all(axis=1) & ~np.isnan(pb[..., 0]).all(axis=1)
+    (pa, ta), (pb, tb) = _packed(pa[both]), _packed(pb[both])
+    f, i, j = _mutual(map_points(placed[a], pa), map_points(placed[b], pb), radius)
+    if len(f) == 0:
+        return None
+    per_pair = np.unique(_pair_ids((f, i, j), (ta, tb)), return_counts=True)[1]
+    beyond = len(f) - int(per_pair.max(initial=0))
+    gaps = np.hypot(*(map_points(placed[a], pa[f, i]) - map_points(placed[b], pb[f, j])).T)
+    return pa[f, i], pb[f, j], beyond, _settled(np.median(gaps))
+
+
+def _map_jacobian(H: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points ``(M, 2)`` through ``H`` and the derivatives ``(M, 8)`` of their x and of their y
+    by ``H``'s first eight entries (``H[2, 2]`` held)."""
+    x, y = xy[:, 0], xy[:, 1]
+    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+    u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
+    v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    ju = np.column_stack([x, y, one, zero, zero, zero, -u * x, -u * y]) / w[:, None]
+    jv = np.column_stack([zero, zero, zero, x, y, one, -v * x, -v * y]) / w[:, None]
+    return np.column_stack([u, v]), ju, jv
+
+
+_JOINT_RADII = (1.0, 0.75)
+"""Metres: the joint refinement's rounds, each on the people mutually nearest within the radius
+under the cameras of the round before."""
+
+_JOINT_SCALE = 0.3
+"""Metres: the soft-L1 scale of the joint refinement's distances."""
+
+_JOINT_STEPS = 10
+"""Levenberg-Marquardt steps per round of the joint refinement, at most."""
+
+_JOINT_CONVERGED = 1e-4
+"""A step that lowers the joint refinement's cost by less than this share ends its round (6-7
+steps on the 7-camera scene)."""
+
+Pairs = list[tuple[str, str, np.ndarray, np.ndarray]]
+
+
+def _joint_cost(pairs: Pairs, placed: Mapping[str, np.ndarray]) -> float:
+    """The soft-L1 cost (in units of :data:`_JOINT_SCALE` squared) of the matched people's
+    distances, ``pairs`` ``(a, b, points on a's map, points on b's map)``."""
+    total = 0.0
+    for a, b, p, q in pairs:
+        d2 = ((map_points(placed[a], p) - map_points(placed[b], q)) ** 2).sum(1)
+        total += float((np.sqrt(1.0 + d2 / _JOINT_SCALE**2) - 1.0).sum())
+    return total
+
+
+def _joint_step(pairs: Pairs, placed: Mapping[str, np.ndarray], names: list[str]
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The Gauss-Newton system ``(A, g)`` of the soft-L1 cost (its reweighted least squares)
+    in the first eight entries of each homography of ``names`` (the others held)."""
+    index = {n: k for k, n in enumerate(names)}
+    A, g = np.zeros((8 * len(names),) * 2), np.zeros(8 * len(names))
+    for a, b, p, q in pairs:
+        ma, ua, va = _map_jacobian(placed[a], p)
+        mb, ub, vb = _map_jacobian(placed[b], q)
+        r = ma - mb
+        w = 1.0 / np.sqrt(1.0 + (r**2).sum(1) / _JOINT_SCALE**2)  # soft-L1's weights
+        blocks = [(index[n], ju, jv, sign) for n, ju, jv, sign in
+                  ((a, ua, va, 1.0), (b, ub, vb, -1.0)) if n in index]
+        for k1, u1, v1, s1 in blocks:
+            rows = slice(8 * k1, 8 * k1 + 8)
+            g[rows] += s1 * (u1.T @ (w * r[:, 0]) + v1.T @ (w * r[:, 1]))
+            for k2, u2, v2, s2 in blocks:
+                A[rows, 8 * k2:8 * k2 + 8] += s1 * s2 * ((u1 * w[:, None]).T @ u2
+                                                         + (v1 * w[:, None]).T @ v2)
+    return A, g
+
+
+def _refine_jointly(paths: Mapping[str, np.ndarray], placed: Mapping[str, np.ndarray],
+                    reference: str) -> dict[str, np.ndarray]:
+    """Every camera's homography to the reference map (``placed``) refitted at once on the
+    people that every pair of cameras matches, not only the spanning tree's: a pair counts
+    when it matches :data:`MIN_MATCHES` people-frames beyond one person within
+    :data:`MAX_RESIDUAL` (median) under the cameras so far; Levenberg-Marquardt on the
+    soft-L1 cost of their distances, in rounds of :data:`_JOINT_RADII`. A tree places each
+    camera by one link, extrapolated beyond what that pair sees; the other pairs pin it
+    there."""
+    names = [n for n in placed if n != reference]
+    current = {n: np.asarray(H, float) / H[2, 2] for n, H in placed.items()}
+    keys = list(current)
+    for radius in _JOINT_RADII:
+        pairs: Pairs = []
+        for i, a in enumerate(keys):
+            for b in keys[i + 1:]:
+                found = _pair_matches(paths, current, a, b, radius)
+                if found is not None and found[2] >= MIN_MATCHES and found[3] <= MAX_RESIDUAL:
+                    pairs.append((a, b, found[0], found[1]))
+        if not pairs or not names:
+            break
+        cost, damping = _joint_cost(pairs, current), 1e-3
+        for _ in range(_JOINT_STEPS):
+            A, g = _joint_step(pairs, current, names)
+            d = np.sqrt(np.maximum(np.diag(A), 1e-12))  # Jacobi scaling: metres and 1/metres
+            while damping < 1e6:
+                step = -np.linalg.solve(A / np.outer(d, d) + damping * np.eye(len(d)),
+                                        g / d) / d
+                trial = dict(current)
+                for k, n in enumerate(names):  # settled: the next choices alike on every CPU
+                    trial[n] = np.round(current[n] + np.append(step[8 * k:8 * k + 8], 0.0)
+                                        .reshape(3, 3), _DIGITS)
+                trial_cost = _joint_cost(pairs, trial)
+                if _settled(trial_cost) < _settled(cost):
+                    gain = _settled((cost - trial_cost) / cost)
+                    current, cost, damping = trial, trial_cost, max(damping / 10, 1e-9)
+                    break
+                damping *= 10
+            else:
+                break
+            if gain < _JOINT_CONVERGED:
+                break
+    return current
+
+
 def estimate_cameras(boxes: Mapping[str, Mapping[int, FrameBoxes]],
                      sizes: Mapping[str, tuple[int, int]], seed: int = 0
                      ) -> EstimatedCameras:
@@ -529,6 +658,7 @@ def estimate_cameras(boxes: Mapping[str, Mapping[int, FrameBoxes]],
                                      reg.matches, reg.beyond, reg.residual, reg.margin)
         placed[new] = placed[reg.target] @ reg.homography
         tree.append(reg)
+    placed = _refine_jointly(paths, placed, reference)
     cameras = {}
     for n in names:
         own = calibrations[n].camera
