@@ -20,12 +20,15 @@ evidence however many are cut (no fixed pieces where many are: the evidence spli
 their own), ours with whole tracks
 (``--split-frames 0``, as the paper) and ``--method dtw`` (paper 004's M1) scored with
 ``metrics/multicam_metrics.py`` (Eqs. 13-14 P and R averaged over overlapping camera pairs,
-box-pair F1, global IDF1, ground error of the fused foot points), and the localisation of paper
+box-pair F1, global IDF1, ground error of the fused foot points); ``ours, no calibration``: the
+default run without the cameras (issue 68, item 2: each calibrated from its people, registered
+to the others; a refused estimate scores 0); and the localisation of paper
 003 (two most visible views against all views, principal axes along the vertical against image
 columns), with our association's ids and with the true ids (to separate localisation from
 association errors). Then the speed case, 7 cameras x 400 frames x 20 people, timed as the
 whole ``xvmatch multicam`` command (a fresh process of the base install when ``--xvmatch`` is
-given, else this interpreter), both methods in the same run.
+given, else this interpreter), both methods and ours without the calibration file in the same
+run.
 
 Usage:
     python benchmarks/multicam_eval.py [--seeds 1 2 3] [--cameras 2 4 7] [--out DIR]
@@ -74,6 +77,7 @@ from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.ground_plane import GroundCamera
 from xvmatch.inference.views.multicam import MulticamOptions, associate_cameras, relabel
 from xvmatch.inference.views.multicam_localisation import LocalisationOptions, localise
+from xvmatch.inference.views.multicam_run import MulticamRunOptions, run_multicam
 from xvmatch.metrics.multicam_metrics import match_to_truth, multicam_scores
 
 CONDITIONS = {
@@ -90,6 +94,10 @@ METHODS = {
     "ours, whole tracks": MulticamOptions(split_frames=0),
     "dtw": MulticamOptions(method="dtw", split_frames=0),
 }
+NO_CALIBRATION = "ours, no calibration"
+"""The default run without the cameras: each calibrated from its people and registered to the
+others (``xvmatch multicam`` without ``--cameras``); its ground is in the estimate's own frame,
+so no ground error is given, and a refused estimate scores 0."""
 LOCALISERS = {
     "two best views, vertical axes": LocalisationOptions("two_best", "vertical"),
     "all views, vertical axes": LocalisationOptions("all", "vertical"),
@@ -177,6 +185,7 @@ def evaluate(n_cameras: int, seed: int, frames: int, people: int, condition: str
                        "seconds": seconds, "pairs": s["overlapping_pairs"]}
         if method == "ours":
             ours_rl, ours_res = rl, res
+    row[NO_CALIBRATION] = _without_cameras(scene)
     if not localisation:
         return row
     loc = {"foot points, fused (association)": row["ours"]["ground_median"]}
@@ -192,6 +201,23 @@ def evaluate(n_cameras: int, seed: int, frames: int, people: int, condition: str
     return row
 
 
+def _without_cameras(scene) -> dict:
+    """The scores of ``xvmatch multicam``'s run without a calibration file on ``scene``."""
+    sizes = {n: (c.width, c.height) for n, c in scene.cameras.items()}
+    start = time.perf_counter()
+    try:
+        run = run_multicam(None, scene.boxes, MulticamRunOptions(
+            image_sizes=sizes, above_horizon="drop"), warn=lambda _line: None)
+    except ValueError:
+        return {"P": 0.0, "R": 0.0, "box_F1": 0.0, "IDF1": 0.0, "ground_median": float("nan"),
+                "seconds": time.perf_counter() - start, "pairs": 0, "refused": 1}
+    seconds = time.perf_counter() - start
+    s = multicam_scores(run.relabelled, scene.gt)
+    return {"P": s["P"], "R": s["R"], "box_F1": s["box_pairs"]["F1"],
+            "IDF1": s["idf1"]["IDF1"], "ground_median": float("nan"), "seconds": seconds,
+            "pairs": s["overlapping_pairs"], "refused": 0}
+
+
 def _median_error(est: dict, truth: dict) -> float:
     errors = []
     for g, (fr, xy) in est.items():
@@ -203,15 +229,19 @@ def _median_error(est: dict, truth: dict) -> float:
 
 def speed_case(xvmatch: str | None, seed: int = 1) -> dict:
     """Wall time of the whole ``xvmatch multicam`` command, 7 cameras x 400 frames x 20
-    people, both methods, on files written here."""
+    people, both methods and ours without the calibration file (``--image-size NAME=WxH``
+    instead), on files written here."""
     scene = _scene(7, seed, 400, 20, "gt")
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         paths = write_multicam_scene(Path(tmp) / "scene", scene)
         boxes = [f"{n}={paths['boxes'] / (n + '.txt')}" for n in scene.cameras]
-        for method in ("ours", "dtw"):
-            args = ["multicam", "--boxes", *boxes, "--cameras", str(paths["cameras"]),
-                    "--method", method, "--out", str(Path(tmp) / f"out_{method}"), "--quiet"]
+        sizes = [f"{n}={c.width}x{c.height}" for n, c in scene.cameras.items()]
+        for method in ("ours", "dtw", NO_CALIBRATION):
+            given = (["--image-size", *sizes] if method == NO_CALIBRATION else
+                     ["--cameras", str(paths["cameras"]), "--method", method])
+            args = ["multicam", "--boxes", *boxes, *given,
+                    "--out", str(Path(tmp) / f"out_{len(out)}"), "--quiet"]
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             start = time.perf_counter()
             subprocess.run([xvmatch or sys.executable, *([] if xvmatch else
@@ -242,7 +272,7 @@ def report(rows: list[dict], speed: dict) -> str:
                   key=lambda k: (k[0], list(CONDITIONS).index(k[1])))
     for cams, cond in keys:
         sel = [r for r in rows if r["cameras"] == cams and r["condition"] == cond]
-        for method in METHODS:
+        for method in (*METHODS, NO_CALIBRATION):
             lines.append(
                 f"| {cams} | {cond} | {method} | {_mean(sel, method, 'P'):.3f} | "
                 f"{_mean(sel, method, 'R'):.3f} | {_mean(sel, method, 'box_F1'):.3f} | "
