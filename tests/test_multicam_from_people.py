@@ -298,3 +298,18 @@ def test_multicam_without_cameras_claims_no_write_when_the_run_or_the_write_fail
     said = capsys.readouterr()
     assert "cannot put camera(s) cam2" in said.err and "wrote" not in said.err + said.out
     assert not (tmp_path / "out2").exists()
+
+
+def test_short_tracks_take_no_part_in_the_estimate_unless_they_are_most_boxes() -> None:
+    """A tracker's false boxes (tracks of a few boxes) are left out of the estimate; a short clip
+    whose tracks are all short keeps them."""
+    from xvmatch.inference.views.multicam_from_people import _long_tracks
+
+    box = [10.0, 20.0, 30.0, 80.0]
+    frames = {f: FrameBoxes(f, [1, 2] + ([90 + f // 3] if f < 9 else []),
+                            [box] * (3 if f < 9 else 2)) for f in range(1, 31)}
+    kept = _long_tracks(frames)
+    assert sorted({int(i) for r in kept.values() for i in r.ids}) == [1, 2]
+    assert all(np.asarray(r.boxes).shape == (len(r.ids), 4) for r in kept.values())
+    short = {f: frames[f] for f in range(1, 9)}
+    assert _long_tracks(short) is short

@@ -89,6 +89,11 @@ _FRAMES = 100
 _MIN_HOMOGRAPHY = 60
 """People-frames needed before the registration may bend from a similarity to a homography."""
 
+_MIN_TRACK_BOXES = 10
+"""Tracks with fewer boxes take no part in the estimate (a tracker's false boxes and fragments
+mislead the calibration and the registration), unless that would leave less than half of a
+camera's boxes (a short clip)."""
+
 _CALIBRATION_FRAMES = 48
 """Frames, spread over the clip, each camera is calibrated on (the fit's cost grows with its
 boxes; a few dozen frames of a static camera tell it as well as a thousand)."""
@@ -458,6 +463,22 @@ def register_pair(src: np.ndarray, dst: np.ndarray, source: str = "A", target: s
     return CameraRegistration(source, target, sim, H, matches, beyond, residual, margin)
 
 
+def _long_tracks(frames: Mapping[int, FrameBoxes]) -> Mapping[int, FrameBoxes]:
+    """``frames`` without the tracks of fewer than :data:`_MIN_TRACK_BOXES` boxes, or as given
+    when those hold half of its boxes or more."""
+    ids = stack_frames(frames)[1]
+    tracks, inverse, counts = np.unique(ids, return_inverse=True, return_counts=True)
+    keep = counts[inverse] >= _MIN_TRACK_BOXES
+    if keep.all() or 2 * int(keep.sum()) < len(ids):
+        return frames
+    out = {}
+    for frame, rec in frames.items():
+        ids_here = np.asarray(rec.ids)
+        kept = np.isin(ids_here, tracks[counts >= _MIN_TRACK_BOXES])
+        out[frame] = FrameBoxes(frame, ids_here[kept], np.asarray(rec.boxes)[kept])
+    return out
+
+
 def _calibration(frames: Mapping[int, FrameBoxes], size: tuple[int, int], seed: int,
                  name: str) -> PeopleCalibration:
     """The camera from the people of :data:`_CALIBRATION_FRAMES` frames spread over the clip,
@@ -617,6 +638,7 @@ def estimate_cameras(boxes: Mapping[str, Mapping[int, FrameBoxes]],
             people with the others to be registered; the message names it.
     """
     names = list(boxes)
+    boxes = {n: _long_tracks(boxes[n]) for n in names}
     calibrations: dict[str, PeopleCalibration] = {}
     for name in names:
         calibrations[name] = _calibration(boxes[name], sizes[name], seed, f"camera {name}")
