@@ -148,3 +148,19 @@ def test_distinct_pose_hypotheses_are_the_plain_greedy_choice() -> None:
                 if len(plain) == KEEP:
                     break
         assert _distinct(poses, order, block=int(rng.integers(1, 300))) == plain, trial
+
+
+def test_auto_offset_is_refused_with_an_oblique_top_view(scene, tmp_path, capsys) -> None:
+    """``--offset auto`` estimates with the nadir search: with an oblique top view it would be a
+    silent guess, so the run refuses it in one line (a given offset is fine)."""
+    from xvmatch.cli import main
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    paths = write_oblique_scene(scene, tmp_path, "s")
+    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+            "--image-size", "x".join(map(str, scene.hor_cameras["hor1"][0].image_size)),
+            "--top-image-size", "1920x1080", "--out", str(tmp_path / "p.csv")]
+    assert main([*base, "--offset", "auto"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--offset auto" in lines[0] and "oblique" in lines[0]
+    assert main([*base, "--offset", "0", "--quiet"]) == 0

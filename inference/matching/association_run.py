@@ -39,6 +39,7 @@ __all__ = [
     "LearnedChoice",
     "guessed_top_size",
     "oblique_pairs",
+    "oblique_top",
     "offset_to_apply",
     "run_association",
 ]
@@ -255,6 +256,25 @@ def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | N
     return size
 
 
+def oblique_top(top: Mapping, options: AssociationOptions) -> object | None:
+    """The top camera calibrated from its people when the ground-map path would take it (its
+    size given or guessed, the calibration oblique), else None; says nothing."""
+    if options.top_view == "nadir" or options.cameras is not None:
+        return None
+    images = options.learned is not None and options.learned.top_images is not None
+    top_size = options.top_image_size or (None if images else guessed_top_size(top))
+    if top_size is None:
+        return None
+    from xvmatch.geometry.people_calibration import CalibrationError
+    from xvmatch.inference.matching.ground_association import top_calibration
+
+    try:
+        calib = top_calibration(top, top_size, 0, options.top_boxes)
+    except CalibrationError:
+        return None
+    return calib if calib.kind == "oblique" or options.top_view == "oblique" else None
+
+
 def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
                   note: Note = _no_note) -> Pairs | None:
     """The pairs of the ground-map association when the top view is oblique (forced, or found
@@ -373,6 +393,9 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     if learned is None:
         hooks.size_assumed()
     auto = None
+    if options.offset == "auto" and oblique_top(top, options) is not None:
+        raise ValueError("--offset auto estimates the offset with the nadir search; with an "
+                         "oblique top view give it as a frame number (or 0)")
     if options.offset == "auto":
         auto = AutoOffsetOptions(hor_width=options.hor_size[0][0], max_offset=options.max_offset,
                                  params=options.params, camera_id=options.camera_id,
