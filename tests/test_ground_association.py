@@ -152,7 +152,7 @@ def test_distinct_pose_hypotheses_are_the_plain_greedy_choice() -> None:
 
 def test_auto_offset_is_refused_with_an_oblique_top_view(scene, tmp_path, capsys) -> None:
     """``--offset auto`` estimates with the nadir search: with an oblique top view it would be a
-    silent guess, so the run refuses it in one line (a given offset is fine)."""
+    silent guess, so the run refuses it in one line; a given offset runs, and draws."""
     from xvmatch.cli import main
     from xvmatch.datasets.oblique_scenes import write_oblique_scene
 
@@ -163,4 +163,7 @@ def test_auto_offset_is_refused_with_an_oblique_top_view(scene, tmp_path, capsys
     assert main([*base, "--offset", "auto"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "--offset auto" in lines[0] and "oblique" in lines[0]
-    assert main([*base, "--offset", "0", "--quiet"]) == 0
+    # A given offset runs; --draw draws the ground-map path's pairs too.
+    assert main([*base, "--offset", "0", "--quiet", "--draw", str(tmp_path / "d"),
+                 "--draw-every", "25"]) == 0
+    assert len(list((tmp_path / "d").glob("*.jpg"))) >= 3

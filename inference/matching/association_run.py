@@ -406,10 +406,10 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
         top = shift_frames(top, offset)
     frames = sorted(set(top) | set(hor))
     oblique = oblique_pairs(top, hor, options, hooks.note)
-    if oblique is not None:
-        return AssociationRun(oblique, frames, offset, top)
     run = refined = None
-    if learned is not None:
+    if oblique is not None:
+        pairs = oblique
+    elif learned is not None:
         pairs, run, refined = _learned_pairs(top, hor, frames, options, offset, hooks)
     else:
         from xvmatch.cues.spatial_search import associate_sequence
@@ -418,12 +418,14 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
                                    params=options.params, search=options.search or "exhaustive",
                                    camera_id=options.camera_id, frames=frames,
                                    progress=hooks.frames(len(frames)) if hooks.frames else None)
-    if options.video:
+    if options.video and oblique is None:  # the ground-map path keeps its own consensus
         from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
         pairs = consistent_pairs(pairs, top, hor, frames)
-    if learned is None and hooks.pictures is not None:
+    if (learned is None or oblique is not None) and hooks.pictures is not None:
         both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
         hooks.pictures(AssociationPictures(top, hor, pairs, both, None, options.hor_size[0]))
+    if oblique is not None:
+        return AssociationRun(pairs, frames, offset, top)
     return AssociationRun(pairs, frames, offset, top, AUTO_VIDEO if options.video_by_auto else None,
                           run, refined)
