@@ -5,8 +5,11 @@ The search scores hundreds of hypotheses per frame out of thousands, each two sm
 the batched numpy forms spent most of their time in per-cell array calls and in arrays of the
 whole (candidate, theta, person) grid. These kernels follow the numpy definitions step by step
 (:func:`~xvmatch.cues.spatial_matching.monotonic_path` with its tie order,
-:func:`~xvmatch.cues.spatial_matching.one_to_one`, sums in NumPy's pairwise order), so costs,
-pairs and scales are bit-identical to them on every CPU (tested). They do only IEEE arithmetic
+:func:`~xvmatch.cues.spatial_matching.one_to_one`, sums in NumPy's pairwise order over the
+padded grid the numpy form sums, adding only its nonzero terms where they lie in it), so costs,
+pairs and scales are bit-identical to them on every CPU (tested). ``score_groups`` runs one
+batch of the learned features' search (sort, match and the merge of each candidate's best) in
+one call. They do only IEEE arithmetic
 and comparisons, never a transcendental function: tan, cos and rho^(L / kappa) come from numpy
 in both forms (numpy's SIMD tan and pow differ from libm's in the last bit on AVX-512 CPUs), and
 numba does not contract multiply-adds without ``fastmath``. Imported on first
@@ -15,10 +18,20 @@ use only: ``import numba`` and loading the cached machine code take about a seco
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-__all__ = ["hypothesis_table", "lower_bounds", "match_batch", "pair_features", "sorted_rows"]
+__all__ = [
+    "hypothesis_table",
+    "lower_bounds",
+    "match_batch",
+    "packed_depths",
+    "pair_features",
+    "score_groups",
+    "sorted_rows",
+]
 
 _BLOCK = 128  # NumPy's pairwise-summation block (PW_BLOCKSIZE)
 
@@ -121,20 +134,124 @@ def _path_one_to_one(cost: np.ndarray, rows: int, cols: int, acc: np.ndarray,
 
 
 @njit(cache=True)
+def _sparse_sum(pos: np.ndarray, val: np.ndarray, n_entries: int, n_total: int,
+                stack: np.ndarray, results: np.ndarray) -> float:
+    """``_pairwise_sum`` of a length-``n_total`` array that is +0.0 except ``val[e]`` at
+    ``pos[e]`` (``e < n_entries``, positions strictly ascending, no value -0.0), adding only
+    those: NumPy's pairwise order (blocks of at most 128, 8 interleaved partial sums in a
+    block of 8 or more) puts each entry in the same block, lane and place as in the whole
+    array, and adding +0.0 changes no partial sum that is not -0.0, so the result has the same
+    bits. A block or half without entries sums to +0.0, as its zeros do. ``stack`` ``(64, 4)``
+    int64 and ``results`` ``(64,)`` are scratch (the halving depth of any array is below 64)."""
+    top, n_results = 0, 0
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, n_total, 0, 0
+    lo = 0  # the first entry at or after the current range's start
+    while top >= 0:
+        start, n, stage = stack[top, 0], stack[top, 1], stack[top, 2]
+        if stage == 0:  # first visit: the entries of [start, start + n) begin at lo
+            stack[top, 3] = lo
+        first = stack[top, 3]
+        hi = first
+        while hi < n_entries and pos[hi] < start + n:
+            hi += 1
+        if first == hi or n <= _BLOCK:
+            total = 0.0
+            if first < hi and n < 8:  # sequential from 0.0, as NumPy below 8
+                for e in range(first, hi):
+                    total += val[e]
+            elif first < hi:  # lanes k: positions start + k (mod 8) below the last multiple
+                full = start + n - n % 8
+                r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = 0.0
+                e = first
+                while e < hi and pos[e] < full:
+                    k = (pos[e] - start) % 8
+                    if k == 0:
+                        r0 += val[e]
+                    elif k == 1:
+                        r1 += val[e]
+                    elif k == 2:
+                        r2 += val[e]
+                    elif k == 3:
+                        r3 += val[e]
+                    elif k == 4:
+                        r4 += val[e]
+                    elif k == 5:
+                        r5 += val[e]
+                    elif k == 6:
+                        r6 += val[e]
+                    else:
+                        r7 += val[e]
+                    e += 1
+                total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+                while e < hi:
+                    total += val[e]
+                    e += 1
+            results[n_results] = total
+            n_results += 1
+            lo = hi
+            top -= 1
+            continue
+        half = n // 2
+        half -= half % 8
+        if stage == 0:  # left half first
+            stack[top, 2] = 1
+            top += 1
+            stack[top, 0], stack[top, 1], stack[top, 2] = start, half, 0
+        elif stage == 1:  # then the right half (lo is past the left half's entries)
+            stack[top, 2] = 2
+            top += 1
+            stack[top, 0], stack[top, 1], stack[top, 2] = start + half, n - half, 0
+        else:  # left + right
+            n_results -= 1
+            results[n_results - 1] = results[n_results - 1] + results[n_results]
+            lo = hi
+            top -= 1
+    return results[0]
+
+
+@njit(cache=True)
+def _kept_sum(pos: np.ndarray, val: np.ndarray, n_entries: int, n_total: int,
+              stack: np.ndarray, results: np.ndarray, dense: np.ndarray) -> float:
+    """The sum NumPy gives of the length-``n_total`` array holding ``val[e]`` at ``pos[e]``
+    and +0.0 elsewhere: :func:`_sparse_sum` when its conditions hold (the kept pairs of a
+    monotone path come with ascending positions and no -0.0; checked), else the whole array
+    through ``_pairwise_sum`` (``dense`` is scratch of at least ``n_total``)."""
+    sparse = True
+    for e in range(n_entries):
+        negative_zero = val[e] == 0.0 and math.copysign(1.0, val[e]) < 0.0
+        if negative_zero or (e > 0 and pos[e] <= pos[e - 1]):
+            sparse = False
+            break
+    if sparse:
+        return _sparse_sum(pos, val, n_entries, n_total, stack, results)
+    dense[:n_total] = 0.0
+    for e in range(n_entries):
+        dense[pos[e]] = val[e]
+    return _pairwise_sum(dense[:n_total])
+
+
+@njit(cache=True)
 def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: np.ndarray,
                 hor_y: np.ndarray, coef: np.ndarray, lam: float, scale_threshold: float,
                 cost_out: np.ndarray, pairs_out: np.ndarray, scale_out: np.ndarray) -> None:
     """Eqs. 11-12 for every hypothesis b: Phi into ``cost_out[b]``, the kept pairs into
     ``pairs_out[b]`` and mu into ``scale_out[b]`` (see ``match_vector_sets``); ``coef[L, k]``
-    is rho^(L / k) (``penalty_table``)."""
+    is rho^(L / k) (``penalty_table``). The numpy form sums each hypothesis' terms over the
+    whole padded ``(rows, columns)`` grid, zeros elsewhere; the kernel adds the kept pairs'
+    terms alone in that grid's order (:func:`_kept_sum`: the same bits)."""
     n_batch, n_rows = top_x.shape
     n_cols = hor_x.shape[0]
+    n_total = n_rows * n_cols
     dx = np.zeros((n_rows, n_cols))
     dis = np.zeros((n_rows, n_cols))
     acc = np.empty((n_rows + 1, n_cols + 1))
     best_col = np.empty(n_rows, dtype=np.int64)
     winner = np.empty(n_cols, dtype=np.int64)
-    terms = np.zeros(n_rows * n_cols)
+    pos = np.empty(n_cols, dtype=np.int64)  # at most one kept pair per column
+    val = np.empty(n_cols)
+    stack = np.empty((64, 4), dtype=np.int64)
+    results = np.empty(64)
+    dense = np.empty(n_total)
     for b in range(n_batch):
         rows = count[b]
         pairs_out[b] = False
@@ -146,15 +263,15 @@ def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: 
         ok, mean_ratio = False, 1.0
         if rows > 0:
             _path_one_to_one(dx, rows, n_cols, acc, best_col, winner)
-            terms[:] = 0.0
             n_x = 0
             for j in range(n_cols):
                 i = winner[j]
                 if i >= 0 and dx[i, j] < scale_threshold:
-                    terms[i * n_cols + j] = top_y[b, i] / hor_y[j]
+                    pos[n_x] = i * n_cols + j
+                    val[n_x] = top_y[b, i] / hor_y[j]
                     n_x += 1
             if n_x > 0:
-                ratio = _pairwise_sum(terms) / n_x
+                ratio = _kept_sum(pos, val, n_x, n_total, stack, results, dense) / n_x
                 if np.isfinite(ratio) and ratio > 0:
                     ok, mean_ratio = True, ratio
         # Eq. 11 with mu = 1 / mean ratio, then the matching and Phi (Eq. 12).
@@ -164,21 +281,121 @@ def match_batch(top_x: np.ndarray, top_y: np.ndarray, count: np.ndarray, hor_x: 
                 for j in range(n_cols):
                     dis[i, j] = lam * dx[i, j] + abs(top_y[b, i] / mean_ratio - hor_y[j])
             _path_one_to_one(dis, rows, n_cols, acc, best_col, winner)
-            terms[:] = 0.0
             kappa = 0
             for j in range(n_cols):
                 i = winner[j]
                 if i >= 0:
                     pairs_out[b, i, j] = True
-                    terms[i * n_cols + j] = dis[i, j]
+                    pos[kappa] = i * n_cols + j
+                    val[kappa] = dis[i, j]
                     kappa += 1
             if ok and kappa > 0:
                 longest = max(rows, n_cols)
-                cost = coef[longest, kappa] * _pairwise_sum(terms) / kappa
+                total = _kept_sum(pos, val, kappa, n_total, stack, results, dense)
+                cost = coef[longest, kappa] * total / kappa
                 if np.isnan(cost):
                     cost = np.inf
         cost_out[b] = cost
         scale_out[b] = 1.0 / mean_ratio
+
+
+@njit(cache=True)
+def packed_depths(x_all: np.ndarray, delta_all: np.ndarray, dist: np.ndarray, n_theta: int,
+                  row_start: np.ndarray, delta: np.ndarray, dist_out: np.ndarray) -> int:
+    """The delta and |OP| of every hypothesis' entries in view (finite x), packed row by row
+    in person order, each row's first at ``row_start[b]`` (``row_start[B]``: their number,
+    returned): the y of Eq. 5 is then numpy's cos of delta times |OP|, elementwise as
+    ``TopHypotheses.take`` takes it."""
+    n_rows, n_people = x_all.shape
+    k = 0
+    for b in range(n_rows):
+        row_start[b] = k
+        c = b // n_theta
+        for m in range(n_people):
+            if np.isfinite(x_all[b, m]):
+                delta[k] = delta_all[b, m]
+                dist_out[k] = dist[c, m]
+                k += 1
+    row_start[n_rows] = k
+    return k
+
+
+@njit(cache=True)
+def score_groups(x_all: np.ndarray, count_all: np.ndarray, row_start: np.ndarray,
+                 y_packed: np.ndarray, rows: np.ndarray, n_theta: int, width: int,
+                 hor_x: np.ndarray, hor_y: np.ndarray, coef: np.ndarray, lam: float,
+                 scale_threshold: float, best_cost: np.ndarray, best_index: np.ndarray,
+                 group_row: np.ndarray, cost_out: np.ndarray, scale_out: np.ndarray,
+                 kept_out: np.ndarray, improved: np.ndarray) -> int:
+    """One batch of ``spatial_search._best_per_group``: the hypotheses ``rows`` (ascending)
+    sorted as ``TopHypotheses.take`` sorts them (their y from ``y_packed``:
+    :func:`packed_depths`) and matched by :func:`match_batch` padded to ``width`` rows (Phi, mu into
+    ``cost_out``, ``scale_out``; the top person kept with each column into ``kept_out``, -1
+    for none), then merged into each group's best so far (``best_cost``, ``best_index``: lower
+    cost, or equal and a lower index, as the numpy form). The rows that hold a group's new best
+    go to ``improved`` (ascending), their number returned; ``group_row`` is scratch of one -1
+    per group, left so."""
+    n_people = x_all.shape[1]
+    n_cols = hor_x.shape[0]
+    n_sel = rows.shape[0]
+    top_x = np.empty((n_sel, width))
+    top_y = np.zeros((n_sel, width))
+    person = np.empty((n_sel, width), dtype=np.int64)
+    count = np.empty(n_sel, dtype=np.int64)
+    order = np.empty(n_people, dtype=np.int64)
+    rank = np.empty(n_people, dtype=np.int64)
+    for r in range(n_sel):
+        b = rows[r]
+        p = 0
+        for m in range(n_people):  # stable insertion sort by x (+inf last), as sorted_rows
+            value, i = x_all[b, m], m - 1
+            while i >= 0 and x_all[b, order[i]] > value:
+                order[i + 1] = order[i]
+                i -= 1
+            order[i + 1] = m
+            if np.isfinite(value):  # its place among the row's packed entries
+                rank[m] = p
+                p += 1
+        n = count_all[b]
+        count[r] = n
+        for k in range(n):
+            m = order[k]
+            top_x[r, k] = x_all[b, m]
+            top_y[r, k] = y_packed[row_start[b] + rank[m]]
+            person[r, k] = m
+    pairs = np.empty((n_sel, width, n_cols), dtype=np.bool_)
+    if width == 0:
+        cost_out[:] = np.inf
+        scale_out[:] = 1.0
+        pairs[:] = False
+    else:
+        match_batch(top_x, top_y, count, hor_x, hor_y, coef, lam, scale_threshold, cost_out,
+                    pairs, scale_out)
+    for r in range(n_sel):
+        for j in range(n_cols):
+            kept_out[r, j] = -1
+            for k in range(count[r]):
+                if pairs[r, k, j]:
+                    kept_out[r, j] = person[r, k]
+    # Each group's best: the lowest (cost, index) of its best so far and this batch's rows.
+    for r in range(rows.shape[0]):
+        cost = cost_out[r]
+        if not np.isfinite(cost):
+            continue
+        index = rows[r]
+        g = index // n_theta
+        if cost < best_cost[g] or (cost == best_cost[g] and index < best_index[g]):
+            best_cost[g] = cost
+            best_index[g] = index
+            group_row[g] = r
+    n_improved = 0
+    for r in range(rows.shape[0]):
+        g = rows[r] // n_theta
+        if np.isfinite(cost_out[r]) and group_row[g] == r:
+            improved[n_improved] = r
+            n_improved += 1
+            group_row[g] = -1
+    return n_improved
 
 
 @njit(cache=True)

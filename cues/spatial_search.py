@@ -16,8 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from xvmatch.cues import kernel_choice
 from xvmatch.cues.spatial_matching import (
     SpatialParams,
+    _penalties,
     cost_lower_bound,
     match_vector_sets,
 )
@@ -133,15 +135,23 @@ def _candidate_blocks(
                                                    math.radians(params.fov_deg))
 
 
-def _association(found: tuple[int, float, np.ndarray, float, np.ndarray], cand: np.ndarray,
-                 thetas: np.ndarray, hor_order: np.ndarray) -> FrameAssociation:
+def _association(found: tuple, cand: np.ndarray, thetas: np.ndarray,
+                 hor_order: np.ndarray) -> FrameAssociation:
     """The :class:`FrameAssociation` of one scored hypothesis (index b = c T + t, cost, pairs
-    mask over the sorted vectors, scale, top person of each entry), in input box order."""
-    index, cost, pairs_mask, scale, top_index = found
-    rows, cols = np.nonzero(pairs_mask)
-    first = top_index[rows]
+    mask over the sorted vectors, scale, top person of each entry; or, from the compiled
+    :func:`_best_per_group`, index, cost, the top person kept with each sorted horizontal
+    column or -1, scale), in input box order. Each person is kept at most once, so the pairs
+    sorted by person are the same from either form."""
+    if len(found) == 4:
+        index, cost, kept, scale = found
+        cols = np.flatnonzero(kept >= 0)
+        first = kept[cols].astype(np.intp)
+    else:
+        index, cost, pairs_mask, scale, top_index = found
+        rows, cols = np.nonzero(pairs_mask)
+        first = top_index[rows]
     order = np.argsort(first, kind="stable")
-    pairs = np.empty((rows.shape[0], 2), dtype=np.result_type(top_index, hor_order))
+    pairs = np.empty((cols.shape[0], 2), dtype=np.result_type(first, hor_order))
     pairs[:, 0], pairs[:, 1] = first[order], hor_order[cols[order]]
     n_theta = thetas.shape[0]
     return FrameAssociation(pairs=pairs, camera=int(cand[index // n_theta]),
@@ -327,14 +337,22 @@ def _best_per_group(
     params: SpatialParams,
     keep: int | None = None,
     first_chunk: int = 256,
-) -> list[tuple[int, float, np.ndarray, float, np.ndarray]]:
+) -> list[tuple]:
     """The lowest-Phi hypothesis of each candidate (group of ``n_theta`` consecutive rows),
     exactly, by best-first branch and bound against each group's own best cost (and the
     ``keep``-th lowest group best, when only the ``keep`` best groups are wanted).
 
+    Where the kernels are loaded (:mod:`~xvmatch.cues.kernel_choice`), each batch is sorted,
+    matched and merged in one compiled call (:class:`_CompiledBatches`) on the y of Eq. 5
+    taken once per block (numpy's cos of every entry in view, elementwise as
+    :meth:`~xvmatch.cues.spatial_vectors.TopHypotheses.take` takes it): the same batches, the
+    same arithmetic, so the same bits as the numpy form (tested).
+
     Returns:
         Per group with a finite cost, in group order (only the ``keep`` lowest with ``keep``):
-        (hypothesis index, cost, pairs mask, scale, top person of each entry).
+        (hypothesis index, cost, pairs mask, scale, top person of each entry) in numpy, and
+        (hypothesis index, cost, top person kept with each sorted horizontal column or -1,
+        scale) from the kernels; :func:`_association` reads either.
     """
     n = hypotheses.x.shape[0]
     group = np.arange(n) // hypotheses.n_theta
@@ -342,30 +360,35 @@ def _best_per_group(
     hor_x = hor[:, 0]
     best_cost = np.full(n_groups, np.inf)
     best_index = np.full(n_groups, n)  # each group's best hypothesis so far (n: none)
-    best: list[tuple[int, float, np.ndarray, float, np.ndarray] | None] = [None] * n_groups
-
-    def score(idx: np.ndarray) -> None:
-        vectors = hypotheses.take(idx)
-        result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
-        rows = np.flatnonzero(np.isfinite(result.cost))
-        if rows.size == 0:
-            return
-        # The batch's best row of each group (lowest cost, then lowest index), then a merge
-        # with the groups' bests so far (lower cost, or the same and a lower index): in numpy
-        # over the batch's groups, a loop over the groups it improves only.
-        groups, costs = group[idx[rows]], result.cost[rows]
-        order = np.lexsort((idx[rows], costs, groups))
-        ordered = groups[order]  # ascending: each group's first entry is its best row
-        first = np.flatnonzero(np.concatenate(([True], ordered[1:] != ordered[:-1])))
-        win = rows[order[first]]
-        g, c, i = group[idx[win]], result.cost[win], idx[win]
-        held = best_cost[g]
-        better = (c < held) | ((c == held) & (i < best_index[g]))
-        for k in np.flatnonzero(better):
-            r, gk = win[k], g[k]
-            best_cost[gk], best_index[gk] = c[k], i[k]
-            best[gk] = (int(i[k]), float(c[k]), result.pairs[r], float(result.scale[r]),
-                        vectors.index[r])
+    best: list[tuple | None] = [None] * n_groups
+    kernels = kernel_choice.kernels()
+    if kernels is not None:
+        compiled = _CompiledBatches(kernels, hypotheses, hor, params, best_cost, best_index,
+                                    best)
+        score = compiled.score
+    else:
+        def score(idx: np.ndarray) -> None:
+            vectors = hypotheses.take(idx)
+            result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
+            rows = np.flatnonzero(np.isfinite(result.cost))
+            if rows.size == 0:
+                return
+            # The batch's best row of each group (lowest cost, then lowest index), then a
+            # merge with the groups' bests so far (lower cost, or the same and a lower index):
+            # in numpy over the batch's groups, a loop over the groups it improves only.
+            groups, costs = group[idx[rows]], result.cost[rows]
+            order = np.lexsort((idx[rows], costs, groups))
+            ordered = groups[order]  # ascending: each group's first entry is its best row
+            first = np.flatnonzero(np.concatenate(([True], ordered[1:] != ordered[:-1])))
+            win = rows[order[first]]
+            g, c, i = group[idx[win]], result.cost[win], idx[win]
+            held = best_cost[g]
+            better = (c < held) | ((c == held) & (i < best_index[g]))
+            for k in np.flatnonzero(better):
+                r, gk = win[k], g[k]
+                best_cost[gk], best_index[gk] = c[k], i[k]
+                best[gk] = (int(i[k]), float(c[k]), result.pairs[r], float(result.scale[r]),
+                            vectors.index[r])
 
     def limits() -> np.ndarray:
         """``(n_groups,)``: what a hypothesis of each group must not exceed to matter (per
@@ -402,6 +425,54 @@ def _best_per_group(
         found = sorted(found, key=lambda b: (b[1], b[0]))[:keep]
         found.sort(key=lambda b: b[0])
     return found
+
+
+class _CompiledBatches:
+    """The compiled form of :func:`_best_per_group`'s batches (``search_kernels.score_groups``)
+    on one block of hypotheses: the y of Eq. 5 of every entry in view, taken once; each
+    batch's new group bests stored in ``best`` as (index, cost, the top person kept with each
+    sorted horizontal column or -1, scale)."""
+
+    def __init__(self, kernels, hypotheses: TopHypotheses, hor: np.ndarray,
+                 params: SpatialParams, best_cost: np.ndarray, best_index: np.ndarray,
+                 best: list) -> None:
+        x = np.ascontiguousarray(hypotheses.x, dtype=np.float64)
+        n_rows = x.shape[0]
+        row_start = np.empty(n_rows + 1, dtype=np.int64)
+        n_seen = int(hypotheses.count.sum())
+        delta, dist = np.empty(n_seen), np.empty(n_seen)
+        kernels.packed_depths(x, np.ascontiguousarray(hypotheses.delta, dtype=np.float64),
+                              np.ascontiguousarray(hypotheses.dist, dtype=np.float64),
+                              hypotheses.n_theta, row_start, delta, dist)
+        # numpy's cos in both forms, of the entries in view (elementwise: the same bits)
+        self.y = dist * np.cos(delta)
+        self.kernels, self.x, self.row_start = kernels, x, row_start
+        self.count = np.ascontiguousarray(hypotheses.count, dtype=np.int64)
+        self.n_theta = hypotheses.n_theta
+        self.hor_x = np.ascontiguousarray(hor[:, 0], dtype=np.float64)
+        self.hor_y = np.ascontiguousarray(hor[:, 1], dtype=np.float64)
+        self.params, self.best_cost, self.best_index, self.best = (params, best_cost,
+                                                                    best_index, best)
+        self.group_row = np.full(best_cost.shape[0], -1, dtype=np.int64)
+
+    def score(self, idx: np.ndarray) -> None:
+        """Score the hypotheses ``idx`` (ascending) as one batch and merge the group bests."""
+        rows = np.ascontiguousarray(idx, dtype=np.int64)
+        n_cols = self.hor_x.shape[0]
+        width = int(self.count[rows].max()) if rows.size else 0
+        # the batch's table of rho^(L / kappa), as match_vector_sets takes it
+        coef = _penalties(float(self.params.rho), max(width, n_cols))
+        cost, scale = np.empty(rows.shape[0]), np.empty(rows.shape[0])
+        kept = np.empty((rows.shape[0], n_cols), dtype=np.int64)
+        improved = np.empty(rows.shape[0], dtype=np.int64)
+        n_improved = self.kernels.score_groups(
+            self.x, self.count, self.row_start, self.y, rows, self.n_theta, width, self.hor_x,
+            self.hor_y, coef, float(self.params.lam), float(self.params.scale_threshold),
+            self.best_cost, self.best_index, self.group_row, cost, scale, kept, improved)
+        for r in improved[:n_improved]:
+            index = int(rows[r])
+            self.best[index // self.n_theta] = (index, float(cost[r]), kept[r],
+                                                float(scale[r]))
 
 
 def _group_seeds(loose: np.ndarray, n_theta: int) -> np.ndarray:

@@ -144,3 +144,102 @@ def test_the_searchs_geometry_is_top_geometrys_in_blocks_too(monkeypatch):
         again = frame_features(top, hor, size)
         assert again.pair.tobytes() == whole.pair.tobytes()
         assert again.hyp.tobytes() == whole.hyp.tobytes()
+
+
+def _sparse_cases(rng, n_cases):
+    """Arrays of +0.0 with a few entries (ascending positions), of lengths around NumPy's
+    pairwise blocks (8, 128 and the halvings above), with ties, infinities and -0.0 (which
+    the sparse sum must leave to the whole array's sum)."""
+    for case in range(n_cases):
+        n_total = int(rng.choice([rng.integers(1, 9), rng.integers(1, 130), rng.integers(1, 70),
+                                  rng.integers(120, 600), rng.integers(1, 3000)]))
+        m = int(rng.integers(1, min(n_total, 40) + 1))
+        pos = np.sort(rng.choice(n_total, m, replace=False)).astype(np.int64)
+        val = rng.random(m) * 10.0 ** rng.uniform(-6, 6, m)
+        if case % 4 == 1:
+            val = np.round(rng.random(m), 1)  # ties and exact zeros
+        if case % 9 == 2:
+            val = val * rng.choice([-1.0, 1.0], m)
+        if case % 13 == 3:
+            val[rng.integers(0, m)] = -0.0
+        if case % 17 == 4:
+            val[rng.integers(0, m)] = np.inf
+        yield pos, val, n_total
+
+
+def test_kept_pairs_sum_is_numpys_sum_of_the_whole_grid():
+    # match_batch adds only the kept pairs' terms (at most one per column) where the numpy form
+    # sums the whole padded (rows, columns) grid, zeros elsewhere: the same bits.
+    kernels = pytest.importorskip("xvmatch.cues.search_kernels")
+    rng = np.random.default_rng(70)
+    stack, results = np.empty((64, 4), np.int64), np.empty(64)
+    for pos, val, n_total in _sparse_cases(rng, 4000):
+        dense = np.zeros(n_total)
+        dense[pos] = val
+        got = kernels._kept_sum(pos, val, pos.shape[0], n_total, stack, results,
+                                np.empty(n_total))
+        assert np.float64(got).tobytes() == np.add.reduce(dense).tobytes()
+        assert np.float64(got).tobytes() == np.float64(kernels._pairwise_sum(dense)).tobytes()
+    # positions out of order: the whole grid is summed instead
+    pos, val = np.array([5, 2], np.int64), np.array([0.1, 0.7])
+    dense = np.zeros(9)
+    dense[pos] = val
+    got = kernels._kept_sum(pos, val, 2, 9, stack, results, np.empty(9))
+    assert np.float64(got).tobytes() == np.add.reduce(dense).tobytes()
+
+
+def _scenes_for_the_compiled_search():
+    """Frames of simulated scenes, a crowded one (batches past 128 grid cells), and frames on
+    a coarse grid (equal costs: the merge's tie rule)."""
+    out = []
+    for seed, people in ((1, (5, 8)), (2, (9, 14)), (3, (24, 30))):
+        scene = simulate_box_scene(SceneConfig(n_people=people), n_frames=3, seed=seed)
+        out += [(scene.top[f].boxes, scene.hor[f].boxes) for f in sorted(scene.top)[:3]
+                if len(scene.top[f].boxes) > 1 and len(scene.hor[f].boxes)]
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        top = np.column_stack([np.round(rng.uniform(0, 400, (9, 2)), -2), np.full((9, 2), 20.0)])
+        hor = np.column_stack([np.round(rng.uniform(0, 2400, 4), -2), np.full(4, 400.0),
+                               np.full(4, 60.0), np.full(4, 300.0)])
+        out.append((top, hor))
+    return out
+
+
+@pytest.mark.parametrize("keep", [None, 8, 2])
+@pytest.mark.parametrize("block", [None, 3 * 360 * 30])
+def test_compiled_best_per_candidate_is_the_numpy_form(keep, block, monkeypatch):
+    # The kernels score, merge and keep each batch in one call (the y of Eq. 5 taken once per
+    # block): the same hypotheses, costs, scales and pairs as the numpy form, to the bit, also
+    # in blocks of candidates.
+    pytest.importorskip("numba")
+    from xvmatch.cues import spatial_search
+
+    if block is not None:
+        monkeypatch.setattr(spatial_search, "HYPOTHESIS_BLOCK", block)
+    for top, hor in _scenes_for_the_compiled_search():
+        found = {}
+        for mode in ("numpy", "compiled"):
+            with kernel_choice.forced(mode):
+                found[mode] = spatial_search.best_per_candidate(top, hor, 2688.0, keep=keep)
+        assert found["compiled"], "nothing matched: the case tests nothing"
+        assert len(found["numpy"]) == len(found["compiled"])
+        for a, b in zip(found["numpy"], found["compiled"], strict=True):
+            assert (a.camera, a.theta) == (b.camera, b.theta)
+            assert np.float64(a.cost).tobytes() == np.float64(b.cost).tobytes()
+            assert np.float64(a.scale).tobytes() == np.float64(b.scale).tobytes()
+            assert a.pairs.dtype == b.pairs.dtype
+            np.testing.assert_array_equal(a.pairs, b.pairs)
+
+
+def test_compiled_features_are_the_numpy_ones_on_a_crowd():
+    pytest.importorskip("numba")
+    scene = simulate_box_scene(SceneConfig(n_people=(24, 30)), n_frames=2, seed=4)
+    for frame in sorted(scene.top)[:2]:
+        feats = {}
+        for mode in ("numpy", "compiled"):
+            with kernel_choice.forced(mode):
+                feats[mode] = frame_features(scene.top[frame].boxes, scene.hor[frame].boxes,
+                                             (2688.0, 1512.0))
+        for name in ("top", "hor", "hyp", "pair", "hyp_camera"):
+            assert getattr(feats["numpy"], name).tobytes() == \
+                getattr(feats["compiled"], name).tobytes()
