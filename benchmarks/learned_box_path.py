@@ -14,6 +14,13 @@ process with one thread (``OMP_NUM_THREADS=1``, onnxruntime ``--threads 1``):
   version 1 did) and the torch matcher (``models.matcher_file``) with the same weights,
   batched 64 frames, Hungarian with the same gamma, the same CSV written.
 
+``--batch-rows`` measures nothing of the runs: it checks, on the first of ``--sequences``,
+whether onnxruntime gives a frame's costs the same bits when only the number of frames in its
+call changes (each frame alone at its batch's padded shape; its batch in two halves; its batch
+with one frame more; the batches of one padded shape stacked into one call), and times the
+batches as ``associate`` runs them against the stacked calls (issue 70's third round,
+``docs/notes/learned_box_speed.md``).
+
 ``--sequences all`` takes every pair of the CVMHAT dev split in ``--data`` (10 pairs, 7,800
 frames): ``--sequences all --runs handcrafted onnx`` prints the learned/handcrafted ratio over
 the dev pairs in one run. ``--runs`` picks some of them (``--runs handcrafted onnx``: the
@@ -27,7 +34,7 @@ CVIDF1 of each on those frames (ids as in the files: the learned paths never see
 
 Usage:
     python benchmarks/learned_box_path.py [--sequences V1-S_55-G_1 ... | all] [--model default]
-        [--torch-model default] [--runs handcrafted onnx] [--repeat 5]
+        [--torch-model default] [--runs handcrafted onnx] [--repeat 5] [--batch-rows]
 """
 
 from __future__ import annotations
@@ -105,6 +112,68 @@ def torch_path(top_file: str, hor_file: str, out: str, model: str) -> None:
     write_predictions(out, pairs)
 
 
+def batch_rows(data: Path, name: str, model: str) -> None:
+    """The ``--batch-rows`` check (see the module docstring) on one pair, in this process."""
+    import numpy as np
+
+    from xvmatch.cues.matcher_inputs import collate_inputs
+    from xvmatch.inference.matching.learned_association import (
+        _batches,
+        _frame_features,
+        _has_both,
+        load_matcher_bundle,
+    )
+
+    matcher = load_matcher_bundle(model, 1)
+    top, hor = read_sequence(data, name)
+    frames = [f for f in sorted(set(top) | set(hor)) if _has_both(top, hor, f)]
+    inputs = [matcher.inputs(_frame_features(top[f].boxes, hor[f].boxes, IMAGE_SIZE,
+                                             [matcher.feature_config], None, None, False)[0][0],
+                             (len(top[f].ids), len(hor[f].ids))) for f in frames]
+    batches = []  # as associate batches them: 64 pending frames, then the cell bound
+    for start in range(0, len(inputs), 64):
+        pending = inputs[start : start + 64]
+        batches += [collate_inputs(pending[part]) for part in _batches(pending, 64)]
+    run = matcher.bundle.costs
+
+    def differing(got, want) -> int:
+        """Frames (rows) of ``want`` whose costs differ from ``got``'s in any bit."""
+        rows = got.view(np.uint32) != want.view(np.uint32)
+        return int(rows.reshape(want.shape[0], -1).any(axis=1).sum())
+
+    cpu = time.process_time()
+    costs = [run(b) for b in batches]
+    as_run = time.process_time() - cpu
+    alone = sum(differing(run({k: v[i : i + 1] for k, v in b.items()}), c[i : i + 1])
+                for b, c in zip(batches, costs, strict=True) for i in range(c.shape[0]))
+    halves = sum(differing(np.concatenate([run({k: v[:h] for k, v in b.items()}),
+                                           run({k: v[h:] for k, v in b.items()})]), c)
+                 for b, c in zip(batches, costs, strict=True)
+                 if (h := c.shape[0] // 2) > 0)
+    one_more = sum(differing(run({k: np.concatenate([v, v[:1]]) for k, v in b.items()})[:-1], c)
+                   for b, c in zip(batches, costs, strict=True))
+    shapes: dict[tuple, list] = {}
+    for b, c in zip(batches, costs, strict=True):
+        shapes.setdefault(tuple(b[k].shape[1] for k in ("hyp", "top", "hor")), []).append((b, c))
+    stacked = [{k: np.concatenate([b[k] for b, _ in group]) for k in group[0][0]}
+               for group in shapes.values()]
+    cpu = time.process_time()
+    stacked_costs = [run(s) for s in stacked]
+    as_stacked = time.process_time() - cpu
+    in_stacks = sum(differing(s, np.concatenate([c for _, c in group]))
+                    for s, group in zip(stacked_costs, shapes.values(), strict=True))
+    print(f"{name}: {len(frames)} frames through {model}'s matcher as associate batches them, "
+          f"{len(batches)} calls ({len(shapes)} padded shapes); frames whose costs differ in "
+          "some bit from that run's:")
+    print(f"  each frame alone, at its batch's padded shape: {alone} of {len(frames)}")
+    print(f"  its batch split into two calls (halves): {halves} of {len(frames)}")
+    print(f"  its batch with a copy of its first frame appended: {one_more} of {len(frames)}")
+    print(f"  the batches of one padded shape stacked ({len(stacked)} calls): {in_stacks} of "
+          f"{len(frames)}")
+    print(f"  CPU of the {len(batches)} calls {as_run:.2f} s, of the {len(stacked)} stacked "
+          f"calls {as_stacked:.2f} s")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=default_cvmhat_dir(), help="CVMHAT boxes")
@@ -117,6 +186,9 @@ def main() -> int:
                         help="which runs (default all four)")
     parser.add_argument("--repeat", type=int, default=1,
                         help="rounds of the runs, their order alternating (medians reported)")
+    parser.add_argument("--batch-rows", action="store_true",
+                        help="check onnxruntime's bits against the batch's row count instead "
+                        "(first sequence; see above)")
     parser.add_argument("--torch-path", nargs=3, metavar=("TOP", "HOR", "OUT"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -130,6 +202,10 @@ def main() -> int:
         parser.error(f"--repeat must be >= 1, got {args.repeat}")
     if args.sequences == ["all"]:
         args.sequences = sequence_names(args.data)
+    if args.batch_rows and args.sequences:
+        if (args.data / f"{args.sequences[0]}_top.txt").exists():
+            batch_rows(args.data, args.sequences[0], args.model)
+            return 0
     missing = [n for n in args.sequences if not (args.data / f"{n}_top.txt").exists()
                or not (args.data / f"{n}_hor.txt").exists()]
     if missing or not args.sequences:
