@@ -21,6 +21,7 @@ from xvmatch.cues import kernel_choice
 __all__ = [
     "MatchResult",
     "SpatialParams",
+    "cached_penalty_table",
     "cost_lower_bound",
     "match_vector_sets",
     "monotonic_path",
@@ -172,7 +173,7 @@ def penalty_table(rho: float, size: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=64)
-def _penalties(rho: float, size: int) -> np.ndarray:
+def cached_penalty_table(rho: float, size: int) -> np.ndarray:
     """:func:`penalty_table`, computed once per (rho, size) in a process (the search asks for
     it on every call); read only by its callers, never written."""
     return penalty_table(rho, size)
@@ -222,7 +223,7 @@ def match_vector_sets(
             pairs=np.zeros((n_batch, n_rows, n_cols), dtype=bool),
             scale=np.ones(n_batch),
         )
-    coef = _penalties(float(params.rho), max(n_rows, n_cols))
+    coef = cached_penalty_table(float(params.rho), max(n_rows, n_cols))
     kernels = kernel_choice.kernels()
     if kernels is None:
         return _match_numpy(top_x, top_y, count, hor, params, coef)
@@ -304,7 +305,7 @@ def cost_lower_bound(
     count = np.asarray(count)
     if n_batch == 0 or n_people == 0 or n_cols == 0:
         return np.full(n_batch, np.inf)
-    coef = _penalties(float(params.rho), max(n_people, n_cols))
+    coef = cached_penalty_table(float(params.rho), max(n_people, n_cols))
     kernels = kernel_choice.kernels()
     if kernels is None:
         return _lower_bound_numpy(top_x, count, hor_x, params, tight, coef)

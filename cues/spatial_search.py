@@ -19,7 +19,7 @@ import numpy as np
 from xvmatch.cues import kernel_choice
 from xvmatch.cues.spatial_matching import (
     SpatialParams,
-    _penalties,
+    cached_penalty_table,
     cost_lower_bound,
     match_vector_sets,
 )
@@ -461,7 +461,7 @@ class _CompiledBatches:
         n_cols = self.hor_x.shape[0]
         width = int(self.count[rows].max()) if rows.size else 0
         # the batch's table of rho^(L / kappa), as match_vector_sets takes it
-        coef = _penalties(float(self.params.rho), max(width, n_cols))
+        coef = cached_penalty_table(float(self.params.rho), max(width, n_cols))
         cost, scale = np.empty(rows.shape[0]), np.empty(rows.shape[0])
         kept = np.empty((rows.shape[0], n_cols), dtype=np.int64)
         improved = np.empty(rows.shape[0], dtype=np.int64)
