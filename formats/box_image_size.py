@@ -47,6 +47,7 @@ __all__ = [
     "consistent_with",
     "median_aspect",
     "resolve_size",
+    "upright_size_guess",
 ]
 
 CVMHAT_SIZE = (2688, 1512)
@@ -120,6 +121,19 @@ def median_aspect(frames: Mapping) -> float | None:
     if not len(b):
         return None
     return float(np.median(b[:, 3] / np.maximum(b[:, 2], 1e-9)))
+
+
+def upright_size_guess(frames: Mapping) -> tuple[float, tuple[int, int] | None] | None:
+    """For a view whose size is not given: None where its people do not stand upright (median
+    height over width below :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`, or no
+    boxes: a view looking down, read as the ground); else that median and the size guessed for
+    it, :func:`common_size_holding` (None: no common size holds the boxes)."""
+    from xvmatch.geometry.people_calibration import STEEP_ASPECT  # scipy: not at start-up
+
+    aspect = median_aspect(frames)
+    if aspect is None or aspect < STEEP_ASPECT:
+        return None
+    return aspect, common_size_holding(frames)
 
 
 def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:

@@ -240,13 +240,11 @@ def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | N
     camera, which the nadir search would misread), the smallest common video size holding its
     boxes, said in one line; None (the nadir path) for squat boxes, or boxes no common size
     holds (a note saying what to give)."""
-    from xvmatch.formats.box_image_size import common_size_holding, median_aspect
-    from xvmatch.geometry.people_calibration import STEEP_ASPECT
+    from xvmatch.formats.box_image_size import upright_size_guess
 
-    aspect = median_aspect(top)
-    if aspect is None or aspect < STEEP_ASPECT:
+    if (guess := upright_size_guess(top)) is None:
         return None
-    size = common_size_holding(top)
+    aspect, size = guess
     said = (f"took {size[0]}x{size[1]}, the smallest common video size holding its boxes, as"
             " its size; give --top-image-size WxH if not" if size is not None else
             "no common video size holds its boxes: give --top-image-size WxH to calibrate "
@@ -256,14 +254,21 @@ def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | N
     return size
 
 
-def oblique_top(top: Mapping, options: AssociationOptions) -> object | None:
-    """The top camera calibrated from its people when the ground-map path would take it (its
-    size given or guessed, the calibration oblique), else None; says nothing."""
+def _top_size(top: Mapping, options: AssociationOptions,
+              note: Note = _no_note) -> tuple[int, int] | None:
+    """The top view's size for the ground-map path: ``--top-image-size``, else guessed from
+    its boxes (:func:`guessed_top_size`, its line told to ``note``); None where that path is
+    not taken (``nadir``, calibrated cameras, the learned matcher's top images, no guess)."""
     if options.top_view == "nadir" or options.cameras is not None:
         return None
     images = options.learned is not None and options.learned.top_images is not None
-    top_size = options.top_image_size or (None if images else guessed_top_size(top))
-    if top_size is None:
+    return options.top_image_size or (None if images else guessed_top_size(top, note))
+
+
+def oblique_top(top: Mapping, options: AssociationOptions) -> object | None:
+    """The top camera calibrated from its people when the ground-map path would take it (its
+    size given or guessed, the calibration oblique), else None; says nothing."""
+    if (top_size := _top_size(top, options)) is None:
         return None
     from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import top_calibration
@@ -282,11 +287,7 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     assumed. In video mode the pairs are made consistent along each view's tracks. Without
     ``--top-image-size`` the size is guessed from the boxes (not where the learned matcher
     reads the top images), and a top view too sparse to calibrate takes the nadir path."""
-    if options.top_view == "nadir" or options.cameras is not None:
-        return None
-    images = options.learned is not None and options.learned.top_images is not None
-    top_size = options.top_image_size or (None if images else guessed_top_size(top, note))
-    if top_size is None:
+    if (top_size := _top_size(top, options, note)) is None:
         return None
     from xvmatch.formats.box_image_size import check_boxes_in_image
     from xvmatch.geometry.people_calibration import CalibrationError

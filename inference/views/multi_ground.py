@@ -34,15 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
-from xvmatch.formats.box_image_size import (
-    check_boxes_in_image,
-    common_size_holding,
-    median_aspect,
-)
+from xvmatch.formats.box_image_size import check_boxes_in_image, upright_size_guess
 from xvmatch.formats.mot_boxes import align_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
-    STEEP_ASPECT,
     CalibrationError,
     PeopleCalibration,
 )
@@ -129,10 +124,10 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         return None, None
     guessed = ""
     if top_size is None:
-        aspect = median_aspect(top)
-        if aspect is None or aspect < STEEP_ASPECT or top_view != "auto":
+        guess = upright_size_guess(top) if top_view == "auto" else None
+        if guess is None:
             return None, None
-        top_size = common_size_holding(top)
+        aspect, top_size = guess
         if top_size is None:
             return None, (f"the top view's people stand upright (boxes {aspect:.1f} times as tall "
                           "as wide): an oblique camera, read here as a nadir one; no common video "
