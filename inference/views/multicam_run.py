@@ -17,7 +17,7 @@ command-line options that supply each input (``--images``, ``--model``).
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 
@@ -46,6 +46,7 @@ __all__ = [
     "MulticamRunOptions",
     "association_options",
     "check_box_cameras",
+    "check_image_sizes",
     "fit_ground_cameras",
     "many_ids_note",
     "run_multicam",
@@ -137,6 +138,15 @@ class MulticamRun:
     estimated: EstimatedCameras | None = None
 
 
+def check_image_sizes(names: Iterable[str], options: MulticamRunOptions) -> None:
+    """Without cameras each camera is calibrated from its people and needs its image size:
+    raise ``ValueError`` naming the cameras of ``names`` that have none in ``options``."""
+    missing = [n for n in names if n not in options.image_sizes]
+    if missing:
+        raise ValueError("without --cameras each camera is calibrated from its people: give "
+                         "--image-size NAME=WxH for " + ", ".join(missing))
+
+
 def run_multicam(cameras: Mapping[str, GroundCamera] | None, boxes: Boxes,
                  options: MulticamRunOptions,
                  progress: Callable[[int], AbstractContextManager] | None = None,
@@ -167,10 +177,7 @@ def run_multicam(cameras: Mapping[str, GroundCamera] | None, boxes: Boxes,
     """
     estimated = None
     if cameras is None:
-        missing = [n for n in boxes if n not in options.image_sizes]
-        if missing:
-            raise ValueError("without cameras each camera is calibrated from its people: give "
-                             "--image-size NAME=WxH for " + ", ".join(missing))
+        check_image_sizes(boxes, options)
         estimated = estimate_cameras(boxes, {n: options.image_sizes[n] for n in boxes})
         cameras = estimated.cameras
     for name, frames in boxes.items():

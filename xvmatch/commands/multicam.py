@@ -132,7 +132,11 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         raise UsageError("give --boxes NAME=FILE ... (or --fit-homography)")
     from xvmatch.formats.camera_io import load_ground_cameras, save_cameras
     from xvmatch.formats.multicam_files import write_multicam_outputs
-    from xvmatch.inference.views.multicam_run import check_box_cameras, run_multicam
+    from xvmatch.inference.views.multicam_run import (
+        check_box_cameras,
+        check_image_sizes,
+        run_multicam,
+    )
     from xvmatch.viz.birdseye import draw_birdseye
 
     options = _run_options(args)
@@ -142,10 +146,7 @@ def _cmd_multicam(args: argparse.Namespace) -> int:
         check_box_cameras(files, cameras, args.cameras)
     else:
         cameras = None  # estimated by the run from the people
-        if [n for n in files if n not in options.image_sizes]:
-            raise UsageError("without --cameras each camera is calibrated from its people: give "
-                             "--image-size NAME=WxH for " + ", ".join(
-                                 n for n in files if n not in options.image_sizes))
+        check_image_sizes(files, options)  # before the boxes are read
     reading = box_reading(args)
     boxes = {name: read_boxes(path, args.duplicates, reading) for name, path in files.items()}
     run = run_multicam(cameras, boxes, options,
