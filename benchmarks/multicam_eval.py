@@ -180,9 +180,7 @@ def evaluate(n_cameras: int, seed: int, frames: int, people: int, condition: str
         seconds = time.perf_counter() - start
         rl = relabel(scene.boxes, res)
         s = multicam_scores(rl, scene.gt, res.ground, truth)
-        row[method] = {"P": s["P"], "R": s["R"], "box_F1": s["box_pairs"]["F1"],
-                       "IDF1": s["idf1"]["IDF1"], "ground_median": s["ground"]["median"],
-                       "seconds": seconds, "pairs": s["overlapping_pairs"]}
+        row[method] = _row(s, seconds, s["ground"]["median"])
         if method == "ours":
             ours_rl, ours_res = rl, res
     row[NO_CALIBRATION] = _without_cameras(scene)
@@ -212,10 +210,14 @@ def _without_cameras(scene) -> dict:
         return {"P": 0.0, "R": 0.0, "box_F1": 0.0, "IDF1": 0.0, "ground_median": float("nan"),
                 "seconds": time.perf_counter() - start, "pairs": 0, "refused": 1}
     seconds = time.perf_counter() - start
-    s = multicam_scores(run.relabelled, scene.gt)
-    return {"P": s["P"], "R": s["R"], "box_F1": s["box_pairs"]["F1"],
-            "IDF1": s["idf1"]["IDF1"], "ground_median": float("nan"), "seconds": seconds,
-            "pairs": s["overlapping_pairs"], "refused": 0}
+    return {**_row(multicam_scores(run.relabelled, scene.gt), seconds, float("nan")),
+            "refused": 0}
+
+
+def _row(s: dict, seconds: float, ground_median: float) -> dict:
+    """One method's cells of a scene's row from its :func:`multicam_scores`."""
+    return {"P": s["P"], "R": s["R"], "box_F1": s["box_pairs"]["F1"], "IDF1": s["idf1"]["IDF1"],
+            "ground_median": ground_median, "seconds": seconds, "pairs": s["overlapping_pairs"]}
 
 
 def _median_error(est: dict, truth: dict) -> float:
