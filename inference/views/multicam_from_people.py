@@ -471,10 +471,11 @@ def _long_tracks(frames: Mapping[int, FrameBoxes]) -> Mapping[int, FrameBoxes]:
     keep = counts[inverse] >= _MIN_TRACK_BOXES
     if keep.all() or 2 * int(keep.sum()) < len(ids):
         return frames
+    long_tracks = tracks[counts >= _MIN_TRACK_BOXES]
     out = {}
     for frame, rec in frames.items():
         ids_here = np.asarray(rec.ids)
-        kept = np.isin(ids_here, tracks[counts >= _MIN_TRACK_BOXES])
+        kept = np.isin(ids_here, long_tracks)
         out[frame] = FrameBoxes(frame, ids_here[kept], np.asarray(rec.boxes)[kept])
     return out
 
