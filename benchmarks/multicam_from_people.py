@@ -24,6 +24,7 @@ from xvmatch.datasets.multicam_scenes import (
     simulate_multicam_scene,
 )
 from xvmatch.geometry.ground_plane import GroundCamera
+from xvmatch.inference.views import multicam_from_people
 from xvmatch.inference.views.multicam import MulticamOptions
 from xvmatch.inference.views.multicam_from_people import RegistrationError, estimate_cameras
 from xvmatch.inference.views.multicam_run import MulticamRunOptions, run_multicam
@@ -46,7 +47,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--people", type=int, default=12)
     p.add_argument("--conditions", nargs="+", default=["gt", "tracker"],
                    choices=sorted(CONDITIONS))
+    p.add_argument("--keep-short-tracks", action="store_true",
+                   help="let every track take part in the estimate (before short tracks were "
+                   "left out)")
     args = p.parse_args(argv)
+    if args.keep_short_tracks:
+        multicam_from_people._MIN_TRACK_BOXES = 0
     methods = {"default": MulticamOptions(), "whole tracks": MulticamOptions(split_frames=0)}
     print("| condition | seed | cameras | estimate (s) | " + " | ".join(
         f"{m} P/R/F1" for m in methods) + " |")

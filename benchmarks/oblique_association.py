@@ -22,6 +22,10 @@ methods, scored by the F1 of the cross-view pairs over all frames:
 CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`).
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12
+
+``--guess-top-size``: the from-people rows without the top image size, as ``associate`` guesses
+it from the boxes; ``--no-scale-search``: the registration at the top map's own scale only (as
+before :func:`~xvmatch.cues.ground_registration.register_with_scale`).
 """
 
 from __future__ import annotations
@@ -33,8 +37,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.formats.box_image_size import common_size_holding
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibration
 from xvmatch.inference.matching.ground_association import (
@@ -85,7 +91,14 @@ def main(argv: list[str] | None = None) -> int:
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
                    metavar=("LO", "HI"), help="and turns at LO-HI degrees/s")
+    p.add_argument("--guess-top-size", action="store_true",
+                   help="the from-people rows take the top size guessed from the boxes "
+                   "(associate without --top-image-size), not the true one")
+    p.add_argument("--no-scale-search", action="store_true",
+                   help="register at the top map's own scale only (before the scale search)")
     args = p.parse_args(argv)
+    if args.no_scale_search:
+        gr.MAP_SCALES = (1.0,)
     config = ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
                                 top_yaw_rate=tuple(args.top_yaw_rate))
     names = ("search", "search, video mode", "registered, true cameras",
@@ -113,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
         known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False)
         true = run_ground_association(top, hor, known, frames,
                                       _true_calibration(scene.top_cameras[0], top_size)).pairs
+        if args.guess_top_size:
+            top_size = common_size_holding(top) or top_size
         options = GroundAssociationOptions(top_size, hor_size, fps=fps, consensus=False)
         try:
             calib = top_calibration(top, top_size)
