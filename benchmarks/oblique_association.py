@@ -26,6 +26,21 @@ CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`
 ``--guess-top-size``: the from-people rows without the top image size, as ``associate`` guesses
 it from the boxes; ``--no-scale-search``: the registration at the top map's own scale only (as
 before :func:`~xvmatch.cues.ground_registration.register_with_scale`).
+
+``--hor-hfov LO HI``: the renders' handheld field of view, drawn per scene in LO-HI degrees
+(default 60 80, :class:`~xvmatch.datasets.oblique_scenes.ObliqueSceneConfig`); e.g. 90 120 for an
+action camera, 45 55 for a narrow one. The from-people rows still assume 70 degrees.
+
+    .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120
+
+``--choose-lens``: two more rows, both with the tracklet consensus: ``registered, from people,
+true lens`` (the handheld field of view known, the top camera from its people) and
+``registered, from people, lens chosen`` (the field of view chosen from the people,
+:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, then the same run); each scene's line gives the
+true and the chosen lens with each candidate's pairing score, and the summary the seconds the
+choice took.
+
+    .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120 --choose-lens
 """
 
 from __future__ import annotations
@@ -38,6 +53,7 @@ from dataclasses import replace
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
+from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.box_image_size import common_size_holding
@@ -73,6 +89,21 @@ def _true_calibration(camera, size: tuple[int, int]) -> PeopleCalibration:
                              focal_rel_std=0.0, n_boxes=0, n_frames=0)
 
 
+def _lens(top: dict, hor: dict, options: GroundAssociationOptions, frames: list[int],
+          calib: PeopleCalibration) -> LensChoice:
+    """The handheld field of view chosen from the people, on the per-frame top ground points
+    and handheld boxes as :func:`run_ground_association` builds them."""
+    tops, boxes = [], []
+    for f in frames:
+        t, h = top.get(f), hor.get(f)
+        tb = np.zeros((0, 4)) if t is None else np.asarray(t.boxes, float).reshape(-1, 4)
+        feet = np.column_stack([tb[:, 0] + 0.5 * tb[:, 2], tb[:, 1] + tb[:, 3]])
+        ground = calib.ground_points(feet) if len(tb) else np.zeros((0, 2))
+        tops.append(ground[np.isfinite(ground).all(axis=1)])
+        boxes.append(np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4))
+    return choose_hor_hfov(frames, tops, boxes, options.hor_size, options.fps)
+
+
 def _score(pred: dict, truth: dict) -> np.ndarray:
     tp = fp = fn = 0
     for f, pairs in truth.items():
@@ -96,13 +127,24 @@ def main(argv: list[str] | None = None) -> int:
                    "(associate without --top-image-size), not the true one")
     p.add_argument("--no-scale-search", action="store_true",
                    help="register at the top map's own scale only (before the scale search)")
+    p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
+                   help="the handheld camera's horizontal field of view in the renders, LO-HI "
+                   "degrees (default 60 80)")
+    p.add_argument("--choose-lens", action="store_true",
+                   help="add the rows with the true and the chosen handheld lens (from people, "
+                   "tracklet consensus)")
     args = p.parse_args(argv)
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
     config = ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
-                                top_yaw_rate=tuple(args.top_yaw_rate))
+                                top_yaw_rate=tuple(args.top_yaw_rate),
+                                hor_hfov=tuple(args.hor_hfov))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus")
+    if args.choose_lens:
+        names += ("registered, from people, true lens, tracklet consensus",
+                  "registered, from people, lens chosen, tracklet consensus")
+    choice_s = voted_s = 0.0
     totals = {name: np.zeros(3) for name in names}
     counts: dict[str, list] = {name: [] for name in names}
     refused = 0
@@ -133,13 +175,31 @@ def main(argv: list[str] | None = None) -> int:
             calib = top_calibration(top, top_size)
         except CalibrationError:
             refused += 1
-            people = voted = {}
+            people = voted = true_lens = chosen = {}
+            lens, lens_scores = float("nan"), ""
         else:
             people = run_ground_association(top, hor, options, frames, calib).pairs
+            t1 = time.perf_counter()
             voted = run_ground_association(top, hor, replace(options, consensus=True), frames,
                                            calib).pairs
+            voted_s += time.perf_counter() - t1
+            if args.choose_lens:
+                voting = replace(options, consensus=True)
+                true_lens = run_ground_association(
+                    top, hor, replace(voting, hor_hfov_deg=true_hfov), frames, calib).pairs
+                t1 = time.perf_counter()
+                choice = _lens(top, hor, options, frames, calib)
+                choice_s += time.perf_counter() - t1
+                lens = choice.hfov_deg
+                lens_scores = " ".join(f"{h:.0f}:{v:.1f}" for h, v in choice.scores.items())
+                # The same run as the consensus row's when the prior is kept.
+                chosen = voted if lens == options.hor_hfov_deg else run_ground_association(
+                    top, hor, replace(voting, hor_hfov_deg=lens), frames, calib).pairs
+        preds = (search, follow, true, people, voted)
+        if args.choose_lens:
+            preds += (true_lens, chosen)
         line = []
-        for name, pred in zip(names, (search, follow, true, people, voted), strict=True):
+        for name, pred in zip(names, preds, strict=True):
             s = _score(pred, truth)
             totals[name] += s
             back = {f: [(top_back[a], hor_back[b]) for a, b in pred.get(f, [])] for f in frames}
@@ -149,9 +209,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"scene {k:2d} top pitch {pitch:4.1f} overlap top "
               f"{scene.overlap_target['top']:.2f} hor {scene.overlap_target['hor1']:.2f}: "
               f"pair F1 search {line[0]} (video {line[1]}), registered (true) {line[2]}, "
-              f"(from people) {line[3]}, (+ consensus) {line[4]}", flush=True)
+              f"(from people) {line[3]}, (+ consensus) {line[4]}"
+              + (f"; lens {true_hfov:.0f}, chosen {lens:.0f} ({lens_scores}): (true lens) "
+                 f"{line[5]}, (lens chosen) {line[6]}" if args.choose_lens else ""), flush=True)
     print(f"\n{args.scenes} scenes, every {args.step}th frame of {args.seconds:g} s, "
-          f"{time.perf_counter() - t0:.0f} s; top calibration refused in {refused}")
+          f"{time.perf_counter() - t0:.0f} s; top calibration refused in {refused}"
+          + (f"; the lens choice took {choice_s:.0f} s (the consensus run at 70 degrees "
+             f"{voted_s:.0f} s)" if args.choose_lens else ""))
     print("| method | CVIDF1 | pair F1 | TP | FP | FN |\n|---|---|---|---|---|---|")
     for name, (tp, fp, fn) in totals.items():
         cvidf1 = summarize(counts[name]).cvidf1

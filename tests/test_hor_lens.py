@@ -1,0 +1,106 @@
+"""The handheld camera's field of view chosen from its people (cues/hor_lens.py): on a small
+synthetic clip seen through a known lens, the registration that explains the most people picks
+a wide lens for an action camera and keeps the prior for a phone's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from xvmatch.cues.hor_lens import (
+    HFOV_CANDIDATES,
+    LensChoice,
+    _pick,
+    _subsample,
+    choose_hor_hfov,
+)
+
+SIZE = (1280, 720)
+
+
+def _clip(hfov_deg: float, seed: int = 0, n_frames: int = 6
+          ) -> tuple[list[int], list[np.ndarray], list[np.ndarray]]:
+    """People walking on a ground map, seen from above (their positions, a little noise) and by a
+    handheld camera of ``hfov_deg`` walking among them (their boxes: height from distance, column
+    from bearing, as :func:`~xvmatch.cues.ground_registration.hor_ground_points` reads them)."""
+    rng = np.random.default_rng(seed)
+    people = np.column_stack([rng.uniform(2.0, 20.0, 10), rng.uniform(-10.0, 10.0, 10)])
+    walk = rng.normal(0.0, 0.4, (10, 2))
+    f = 0.5 * SIZE[0] / np.tan(np.radians(hfov_deg) / 2.0)
+    frames, tops, boxes = [], [], []
+    for k in range(n_frames):
+        t = 0.3 * k
+        where = people + t * walk
+        centre, heading = np.array([0.3 * t, 0.0]), 0.05 * t
+        tops.append(where + rng.normal(0.0, 0.1, where.shape))
+        c, s = np.cos(heading), np.sin(heading)
+        rel = where - centre
+        ahead, left = rel[:, 0] * c + rel[:, 1] * s, -rel[:, 0] * s + rel[:, 1] * c
+        seen = (ahead > 1.0) & (np.abs(np.arctan2(left, ahead)) < np.radians(hfov_deg) / 2 - 0.02)
+        height = f * 1.72 / ahead[seen]
+        column = 0.5 * SIZE[0] - f * left[seen] / ahead[seen]
+        boxes.append(np.column_stack([column - 0.2 * height, np.full(seen.sum(), 100.0),
+                                      0.4 * height, height]))
+        frames.append(1 + 3 * k)
+    return frames, tops, boxes
+
+
+@pytest.fixture(scope="module")
+def wide() -> LensChoice:
+    frames, tops, boxes = _clip(110.0)
+    return choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0)
+
+
+def test_an_action_camera_gets_a_wide_lens(wide: LensChoice) -> None:
+    assert wide.hfov_deg >= 90.0
+    assert set(wide.scores) == set(HFOV_CANDIDATES)
+    assert wide.scores[wide.hfov_deg] > wide.scores[70.0]
+
+
+def test_a_phone_keeps_the_prior() -> None:
+    frames, tops, boxes = _clip(70.0, seed=1)
+    choice = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0)
+    assert choice.hfov_deg == 70.0
+
+
+def test_same_input_same_choice(wide: LensChoice) -> None:
+    frames, tops, boxes = _clip(110.0)
+    again = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0)
+    assert again == wide
+
+
+def test_a_small_lead_keeps_the_prior() -> None:
+    frames, tops, boxes = _clip(110.0)
+    choice = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, margin=100.0, max_frames=2)
+    assert choice.hfov_deg == 70.0
+
+
+def test_another_lens_only_with_a_clear_lead() -> None:
+    scores = {70.0: 50.0, 90.0: 60.0, 110.0: 65.0}
+    assert _pick(scores, 70.0, 1.3) == 70.0  # 65 is not above 1.3 x 50
+    scores[110.0] = 65.5
+    assert _pick(scores, 70.0, 1.3) == 110.0
+    assert _pick({50.0: 80.0, 70.0: 50.0, 90.0: 80.0}, 70.0, 1.3) == 50.0  # a tie: narrower
+
+
+def test_no_people_keeps_the_prior() -> None:
+    empty = [np.zeros((0, 2))] * 3
+    choice = choose_hor_hfov([1, 2, 3], empty, [np.zeros((0, 4))] * 3, SIZE, fps=10.0)
+    assert choice.hfov_deg == 70.0
+
+
+def test_frames_subsampled_evenly() -> None:
+    assert _subsample(5, 20) == [0, 1, 2, 3, 4]
+    picked = _subsample(40, 20)
+    assert len(picked) == 20 and picked[0] == 0 and picked[-1] == 39
+    frames, tops, boxes = _clip(70.0, n_frames=6)
+    assert choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, max_frames=3).frames == [
+        frames[0], frames[2], frames[5]]
+
+
+def test_bad_input() -> None:
+    with pytest.raises(ValueError, match="one entry per frame"):
+        choose_hor_hfov([1, 2], [np.zeros((0, 2))], [np.zeros((0, 4))] * 2, SIZE, fps=10.0)
+    with pytest.raises(ValueError, match="max_frames must be at least 1"):
+        choose_hor_hfov([1], [np.zeros((0, 2))], [np.zeros((0, 4))], SIZE, fps=10.0,
+                        max_frames=0)
