@@ -25,7 +25,9 @@ CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`
 
 ``--guess-top-size``: the from-people rows without the top image size, as ``associate`` guesses
 it from the boxes; ``--no-scale-search``: the registration at the top map's own scale only (as
-before :func:`~xvmatch.cues.ground_registration.register_with_scale`).
+before :func:`~xvmatch.cues.ground_registration.register_with_scale`); ``--no-top-motion``: the
+tracklet-consensus row without the top map's own motion taken out of the registration (as before
+:func:`~xvmatch.cues.ground_registration.map_motion`).
 
 ``--hor-hfov LO HI``: the renders' handheld field of view, drawn per scene in LO-HI degrees
 (default 60 80, :class:`~xvmatch.datasets.oblique_scenes.ObliqueSceneConfig`); e.g. 90 120 for an
@@ -127,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
                    "(associate without --top-image-size), not the true one")
     p.add_argument("--no-scale-search", action="store_true",
                    help="register at the top map's own scale only (before the scale search)")
+    p.add_argument("--no-top-motion", action="store_true",
+                   help="leave the top map's own motion in the registration's jumps (before "
+                   "map_motion)")
     p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
                    help="the handheld camera's horizontal field of view in the renders, LO-HI "
                    "degrees (default 60 80)")
@@ -136,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
+    if args.no_top_motion:
+        gr.map_motion = lambda frames, tops, ids, fps: [None] * len(tops)
     config = ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
                                 top_yaw_rate=tuple(args.top_yaw_rate),
                                 hor_hfov=tuple(args.hor_hfov))

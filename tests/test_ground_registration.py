@@ -80,3 +80,69 @@ def test_no_people_no_hypotheses() -> None:
     assert poses.shape == (0, 3) and scores.shape == (0,)
     assert gr.associate_on_ground(np.ones((2, 2)), np.zeros((0, 2)),
                                   gr.FramePose(1, np.zeros(2), 0.0, 0.0)).shape == (0, 2)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), angle=st.floats(-np.pi, np.pi),
+       shift=st.tuples(st.floats(-30, 30), st.floats(-30, 30)))
+def test_map_motion_recovers_how_the_top_map_moved(seed: int, angle: float,
+                                                    shift: tuple[float, float]) -> None:
+    """People standing still while the top map moves rigidly (a drifting, turning drone), seen
+    under other row orders in the two frames, one of them walking 3 m away: the motion taking
+    the second frame's map onto the first's is recovered."""
+    rng = np.random.default_rng(seed)
+    before = rng.uniform(-15, 15, (7, 2))
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, -s], [s, c]])
+    walked = before.copy()
+    walked[0] += [3.0, 0.0]
+    now = (walked - np.asarray(shift)) @ rot  # before = rot @ now + shift for those standing
+    order = rng.permutation(7)
+    ids_before, ids_now = np.arange(7) + 10, (np.arange(7) + 10)[order]
+    motion = gr.map_motion([1, 2], [before, now[order]], [ids_before, ids_now], 10.0)
+    assert motion[0] is None
+    assert motion[1][:2] == pytest.approx(np.asarray(shift), abs=1e-6)
+    assert abs(gr._wrap(motion[1][2] - angle)) < 1e-6
+
+
+def test_map_motion_needs_three_people_seen_twice() -> None:
+    pts = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 5.0]])
+    motion = gr.map_motion([1, 2, 3], [pts, pts + 1, pts],
+                           [np.array([1, 2, 3]), np.array([1, 2, 9]), np.array([1, 2, 9])], 10.0)
+    assert motion[1] is None
+    assert motion[2] == pytest.approx([1.0, 1.0, 0.0])  # frame 2's map onto frame 1's
+
+
+def test_map_motion_is_the_steady_rate_around_each_step() -> None:
+    """A drone drifting 0.2 m a step, and on one step the crowd walking 0.6 m together: each
+    step is given the mean rate of the steps within the window (all of them here), and a step
+    twice as long twice the motion."""
+    pts = np.array([[0.0, 0.0], [6.0, 1.0], [2.0, 7.0], [-4.0, 3.0]])
+    frames = [1, 2, 3, 4, 5, 6, 8]
+    shifts = [0.2, 0.2, 0.8, 0.2, 0.2, 0.4]  # frame k's map onto k-1's; the last step is 2 frames
+    tops = [pts]
+    for d in shifts:
+        tops.append(tops[-1] - [d, 0.0])
+    motion = gr.map_motion(frames, tops, [np.arange(4)] * len(frames), 10.0)
+    steady = 2.0 / 7  # the mean rate per frame: 2 m over 7 frames' time
+    assert motion[0] is None
+    for k in range(1, 6):
+        assert motion[k] == pytest.approx([steady, 0.0, 0.0])
+    assert motion[6] == pytest.approx([2 * steady, 0.0, 0.0])
+
+
+def test_the_top_maps_motion_is_taken_out_of_the_jumps() -> None:
+    """The top map turns by 40 degrees between two frames (a drone turning): the camera's true
+    pose moves on the map, a decoy stays put. Without the map's motion the decoy is the smooth
+    choice; with it the true pose is."""
+    true1 = np.array([10.0, 0.0, 0.5])
+    motion = np.array([2.0, -1.0, np.radians(40.0)])
+    c, s = np.cos(motion[2]), np.sin(motion[2])
+    rot = np.array([[c, -s], [s, c]])
+    true2 = np.array([*(rot.T @ (true1[:2] - motion[:2])), true1[2] - motion[2]])
+    cands = [(np.array([true1]), np.array([5.0])),
+             (np.array([true2, true1]), np.array([4.0, 4.5]))]
+    still = gr.register_sequence([1, 2], cands, fps=10.0)
+    moved = gr.register_sequence([1, 2], cands, fps=10.0, motions=[None, motion])
+    assert np.allclose(still[1].centre, true1[:2])
+    assert np.allclose(moved[1].centre, true2[:2]) and moved[1].heading == pytest.approx(true2[2])

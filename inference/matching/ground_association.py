@@ -10,8 +10,10 @@ view's boxes say it is oblique).
    (:func:`xvmatch.cues.ground_registration.register_with_scale`: the top map tried at a few
    scales, as the two maps' metres are two estimates that can disagree by a third); pairs by
    Hungarian on the ground distances.
-3. With each view's own track ids (video mode), the pairs are made consistent over the clip
-   (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`).
+3. With each view's own track ids (video mode), the top map's own motion (a drifting, turning
+   drone) is taken out of the registration's jumps
+   (:func:`~xvmatch.cues.ground_registration.map_motion`), and the pairs are made consistent
+   over the clip (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`).
 
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
@@ -55,7 +57,8 @@ class GroundAssociationOptions:
         hor_size: the horizontal view's image size.
         hor_hfov_deg: the horizontal camera's field of view (70: a phone's, a drone's).
         fps: frames per second of the frame numbers (the registration's pace over time).
-        consensus: make the pairs consistent over the clip with each view's track ids.
+        consensus: video mode: each view's track ids are used, to make the pairs consistent
+            over the clip and to take the top map's own motion out of the registration.
         seed: seed of the calibration's resampling.
     """
 
@@ -126,7 +129,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         tops.append((ground[ok], t_ids[ok]))
         hors.append((gr.hor_ground_points(hb, options.hor_size, options.hor_hfov_deg), h_ids))
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
-                                          options.hor_hfov_deg, options.fps)
+                                          options.hor_hfov_deg, options.fps,
+                                          [i for _, i in tops] if options.consensus else None)
     by_frame = {p.frame: p for p in poses}
     pairs: dict[int, list[tuple[int, int]]] = {}
     for f, (p, ti), (q, hi) in zip(order, tops, hors, strict=True):

@@ -171,17 +171,23 @@ def _top_ground(record, calib: PeopleCalibration) -> np.ndarray:
 
 
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
-                options: MultiGroundOptions) -> dict[int, np.ndarray]:
+                options: MultiGroundOptions, top_tracks: Mapping[int, int] | None = None
+                ) -> dict[int, np.ndarray]:
     """``{frame: (M, 2)}`` handheld view ``k``'s people on the top map, on the frames where
     its pose was registered (both views have boxes there; the top map at the scale that fits
-    this view best, :func:`~xvmatch.cues.ground_registration.register_with_scale`)."""
+    this view best, :func:`~xvmatch.cues.ground_registration.register_with_scale`; with the top
+    view's ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken
+    out of the registration's jumps)."""
     hor = views[k]
     order = sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hor_hfov_deg
     local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov) for f in order}
-    finite = [tops[f][np.isfinite(tops[f]).all(axis=1)] for f in order]
-    scale, poses = gr.register_with_scale(order, finite, [local[f] for f in order], hfov,
-                                          options.fps)
+    ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
+    ids = None if top_tracks is None else [
+        np.array([top_tracks[int(r)] for r in views[0][f].ids], dtype=np.int64)[ok[f]]
+        for f in order]
+    scale, poses = gr.register_with_scale(order, [tops[f][ok[f]] for f in order],
+                                          [local[f] for f in order], hfov, options.fps, ids)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         c, s = np.cos(pose.heading), np.sin(pose.heading)
@@ -204,8 +210,8 @@ def _cost(a: np.ndarray | None, b: np.ndarray | None, n: tuple[int, int],
 
 
 def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
-                    calibration: PeopleCalibration, options: MultiGroundOptions
-                    ) -> dict[int, FrameProblem]:
+                    calibration: PeopleCalibration, options: MultiGroundOptions,
+                    top_tracks: Mapping[int, int] | None = None) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame of ``frames`` (module docstring).
 
     Args:
@@ -214,13 +220,15 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
         frames: the frames to build.
         calibration: the top camera's, from its people (:func:`oblique_top`).
         options: the handheld views' image sizes and field of view, the frame rate.
+        top_tracks: the top view's ``{row id: track id}`` (video mode): the top map's motion
+            is then taken out of each registration (:func:`_registered`).
     """
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
     tops = {f: _top_ground(views[0].get(f), calibration) for f in frames}
     placed = [{f: p for f, p in tops.items() if len(p)},
-              *(_registered(views, k, tops, options) for k in range(1, len(views)))]
+              *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
     problems = {}
     for f in frames:
         sizes = tuple(len(_boxes(v.get(f))) for v in views)
@@ -243,7 +251,8 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     (:func:`~xvmatch.inference.views.multi_ego_video.video_people`, :data:`VIDEO_KEEP_FREE`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
-    problems = ground_problems(aligned, frames, calibration, options)
+    problems = ground_problems(aligned, frames, calibration, options,
+                               None if tracks is None else tracks[0])
     if tracks is not None:
         from xvmatch.inference.views.multi_ego_video import video_people
 
