@@ -173,6 +173,7 @@ class Option:
         cheap: values inside the range that keep the command small, where some inside values
             would start long work (None: any inside value is cheap with the base arguments).
         extra: arguments the option needs to take effect.
+        auto: ``auto`` is also a value (``--hor-hfov``).
     """
 
     command: str
@@ -185,10 +186,11 @@ class Option:
     open_high: bool = False
     cheap: st.SearchStrategy[str] | None = None
     extra: tuple[str, ...] = ()
+    auto: bool = False
 
     def inside(self, text: str) -> bool:
         """Whether ``text`` is a value of the documented range."""
-        if self.kind == "offset" and text.strip().lower() == "auto":
+        if (self.kind == "offset" or self.auto) and text.strip().lower() == "auto":
             return True
         if self.kind in ("int", "offset"):
             values = [_int(text)]
@@ -230,7 +232,7 @@ OPTIONS = [
     Option("associate", "--camera-id", "int", *ID, "|id| <= 2**53"),
     Option("associate", "--image-size", "size", 8, 65536, "8..65536 a side"),
     Option("associate", "--top-image-size", "size", 8, 65536, "8..65536 a side"),
-    Option("associate", "--hor-hfov", "float", 20, 150, "in [20, 150]"),
+    Option("associate", "--hor-hfov", "float", 20, 150, "in [20, 150]", auto=True),
     Option("associate", "--fps", "float", 0.1, 1000, "in [0.1, 1000]"),
     Option("associate", "--offset", "offset", -100_000, 100_000, "|N| <= 100000"),
     Option("associate", "--max-offset", "int", 0, 10_000, "0..10000", extra=("--offset", "auto")),

@@ -108,7 +108,9 @@ class AssociationOptions:
         top_boxes, hor_boxes: the box files, as messages name them.
         top_view: ``auto``, ``nadir`` or ``oblique``.
         top_image_size: the top view's image size, or None (``auto`` may guess it).
-        hor_hfov: the horizontal camera's field of view, degrees (the oblique path).
+        hor_hfov: the horizontal camera's field of view, degrees, or ``"auto"``: chosen from
+            the people (the oblique path;
+            :func:`~xvmatch.inference.matching.ground_association.choose_lens`).
         fps: the frame rate (the oblique path).
         learned: the learned matchers, or None: the handcrafted search.
     """
@@ -126,7 +128,7 @@ class AssociationOptions:
     hor_boxes: str = "the horizontal-view boxes"
     top_view: str = "auto"
     top_image_size: tuple[int, int] | None = None
-    hor_hfov: float = 70.0
+    hor_hfov: float | str = 70.0
     fps: float = 30.0
     learned: LearnedChoice | None = None
 
@@ -284,9 +286,10 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
                   note: Note = _no_note) -> Pairs | None:
     """The pairs of the ground-map association when the top view is oblique (forced, or found
     so by ``auto``), else None (the nadir path); tells ``note`` the one line saying what was
-    assumed. In video mode the pairs are made consistent along each view's tracks. Without
-    ``--top-image-size`` the size is guessed from the boxes (not where the learned matcher
-    reads the top images), and a top view too sparse to calibrate takes the nadir path."""
+    assumed (and, with ``hor_hfov`` ``auto``, one saying the lens chosen). In video mode the
+    pairs are made consistent along each view's tracks. Without ``--top-image-size`` the size
+    is guessed from the boxes (not where the learned matcher reads the top images), and a top
+    view too sparse to calibrate takes the nadir path."""
     if (top_size := _top_size(top, options, note)) is None:
         return None
     from xvmatch.formats.box_image_size import check_boxes_in_image
@@ -321,6 +324,10 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
             ground.consensus else "each frame on its own (--mode video: consistent over "
             "the clip)")
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
+    if run.lens is not None:
+        from xvmatch.inference.matching.ground_association import lens_note
+
+        note(f"xvmatch: note: {lens_note(run.lens)}", False)
     return run.pairs
 
 

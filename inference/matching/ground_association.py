@@ -17,16 +17,23 @@ view's boxes say it is oblique).
 
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
+
+With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``) the handheld camera's field of view is chosen
+from the clip's people before the registration (:func:`choose_lens`,
+:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`): an opt-in for a lens not known, possibly wide,
+not the default (on ordinary 60-80 degree lenses it can cost a few points where nothing
+registers).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
+from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.mot_boxes import stack_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
@@ -36,9 +43,13 @@ from xvmatch.geometry.people_calibration import (
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
 __all__ = [
+    "AUTO_HFOV",
+    "MIN_PAIRING",
     "TOP_VIEWS",
     "GroundAssociation",
     "GroundAssociationOptions",
+    "choose_lens",
+    "lens_note",
     "run_ground_association",
     "run_top_view",
     "top_calibration",
@@ -46,6 +57,15 @@ __all__ = [
 
 TOP_VIEWS = ("auto", "nadir", "oblique")
 """``--top-view``: let the top view's boxes decide, or force a nadir or an oblique camera."""
+
+AUTO_HFOV = "auto"
+"""``--hor-hfov auto``: the handheld field of view chosen from the people (:func:`choose_lens`)."""
+
+MIN_PAIRING = 1.0
+"""The least clip pairing score (:func:`~xvmatch.cues.hor_lens.pairing_score`, about one person
+paired closely on one frame) a lens other than the prior needs to be kept: where no candidate's
+registration pairs anybody, a score above the prior's nothing is no evidence, and 70 degrees
+stays."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +75,8 @@ class GroundAssociationOptions:
     Attributes:
         top_size: the top view's image size (width, height).
         hor_size: the horizontal view's image size.
-        hor_hfov_deg: the horizontal camera's field of view (70: a phone's, a drone's).
+        hor_hfov_deg: the horizontal camera's field of view, degrees (70: a phone's, a
+            drone's), or :data:`AUTO_HFOV`: chosen from the people (:func:`choose_lens`).
         fps: frames per second of the frame numbers (the registration's pace over time).
         consensus: video mode: each view's track ids are used, to make the pairs consistent
             over the clip and to take the top map's own motion out of the registration.
@@ -64,10 +85,15 @@ class GroundAssociationOptions:
 
     top_size: tuple[int, int]
     hor_size: tuple[int, int]
-    hor_hfov_deg: float = PRIOR_HFOV_DEG
+    hor_hfov_deg: float | str = PRIOR_HFOV_DEG
     fps: float = 30.0
     consensus: bool = True
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.hor_hfov_deg, str) and self.hor_hfov_deg != AUTO_HFOV:
+            raise ValueError(f"hor_hfov_deg must be degrees or {AUTO_HFOV!r}, got "
+                             f"{self.hor_hfov_deg!r}")
 
 
 @dataclass(frozen=True)
@@ -75,13 +101,15 @@ class GroundAssociation:
     """The run's result: ``pairs`` ``{frame: [(top id, hor id), ...]}``, the top camera's
     calibration, the horizontal camera's pose per frame (on the top map scaled by ``scale``,
     :func:`~xvmatch.cues.ground_registration.register_with_scale`), and one line saying what
-    was assumed."""
+    was assumed; with ``--hor-hfov auto``, the lens chosen (``lens``, its line
+    :func:`lens_note`), else None."""
 
     pairs: dict[int, list[tuple[int, int]]]
     calibration: PeopleCalibration
     poses: list[gr.FramePose]
     summary: str
     scale: float = 1.0
+    lens: LensChoice | None = None
 
 
 def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
@@ -102,6 +130,29 @@ def _summary(calib: PeopleCalibration) -> str:
             "registered on its ground map frame by frame")
 
 
+def choose_lens(frames: list[int], tops: list[np.ndarray], hor_boxes: list[np.ndarray],
+                hor_size: tuple[int, int], fps: float) -> LensChoice:
+    """``--hor-hfov auto``: the handheld field of view chosen from the people
+    (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, same arguments), the prior kept where the
+    chosen lens's registration pairs next to nobody (:data:`MIN_PAIRING`)."""
+    choice = choose_hor_hfov(frames, tops, hor_boxes, hor_size, fps)
+    if choice.hfov_deg != PRIOR_HFOV_DEG and choice.scores[choice.hfov_deg] < MIN_PAIRING:
+        return replace(choice, hfov_deg=PRIOR_HFOV_DEG)
+    return choice
+
+
+def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
+    """The line saying which lens ``--hor-hfov auto`` chose (``view``: whose)."""
+    if max(choice.scores.values(), default=0.0) < MIN_PAIRING:
+        return (f"{view}: {choice.hfov_deg:.0f} degrees, the prior (no lens tried registered "
+                "its people; give --hor-hfov DEG if known)")
+    if choice.hfov_deg == PRIOR_HFOV_DEG:
+        return (f"{view}: {choice.hfov_deg:.0f} degrees, the prior (no other lens paired clearly "
+                "more of its people; give --hor-hfov DEG if known)")
+    return (f"{view}: {choice.hfov_deg:.0f} degrees, chosen from its people (give --hor-hfov "
+            "DEG if known)")
+
+
 def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
                            frames: list[int] | None = None,
                            calibration: PeopleCalibration | None = None) -> GroundAssociation:
@@ -110,13 +161,14 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
 
     Args:
         top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (``FrameBoxes``).
-        options: image sizes, the horizontal field of view, the frame rate.
+        options: image sizes, the horizontal field of view (or ``auto``: chosen first,
+            :func:`choose_lens`), the frame rate.
         frames: the frames to associate.
         calibration: the top camera's, when already estimated (:func:`top_calibration`).
     """
     calib = calibration or top_calibration(top, options.top_size, options.seed)
     order = sorted(set(frames) if frames is not None else set(top) & set(hor))
-    tops, hors = [], []
+    tops, boxes = [], []
     for f in order:
         t, h = top.get(f), hor.get(f)
         tb = np.zeros((0, 4)) if t is None else np.asarray(t.boxes, float).reshape(-1, 4)
@@ -127,9 +179,16 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         ground = calib.ground_points(feet) if len(tb) else np.zeros((0, 2))
         ok = np.isfinite(ground).all(axis=1)
         tops.append((ground[ok], t_ids[ok]))
-        hors.append((gr.hor_ground_points(hb, options.hor_size, options.hor_hfov_deg), h_ids))
+        boxes.append((hb, h_ids))
+    lens = None
+    hfov = options.hor_hfov_deg
+    if hfov == AUTO_HFOV:
+        lens = choose_lens(order, [p for p, _ in tops], [b for b, _ in boxes], options.hor_size,
+                           options.fps)
+        hfov = lens.hfov_deg
+    hors = [(gr.hor_ground_points(hb, options.hor_size, hfov), h_ids) for hb, h_ids in boxes]
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
-                                          options.hor_hfov_deg, options.fps,
+                                          hfov, options.fps,
                                           [i for _, i in tops] if options.consensus else None)
     by_frame = {p.frame: p for p in poses}
     pairs: dict[int, list[tuple[int, int]]] = {}
@@ -140,7 +199,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     if options.consensus:
         pairs = consistent_pairs(pairs, top, hor, order, keep_free=False)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
-                             summary=_summary(calib), scale=scale)
+                             summary=_summary(calib), scale=scale, lens=lens)
 
 
 def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,

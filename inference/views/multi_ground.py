@@ -24,16 +24,22 @@ closer than the threshold is worth matching alone (scaled on the registration's 
 non-association distance, :data:`~xvmatch.cues.ground_registration.RADIUS`). A view not
 registered on a frame gives its pairs no evidence for a match (a positive cost): it is left
 unmatched there.
+
+With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``) each handheld view's field of view is chosen
+from its people before its registration
+(:func:`~xvmatch.inference.matching.ground_association.choose_lens`), one lens per view
+(:func:`choose_lenses`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
+from xvmatch.cues.hor_lens import LensChoice
 from xvmatch.formats.box_image_size import check_boxes_in_image, upright_size_guess
 from xvmatch.formats.mot_boxes import align_frames
 from xvmatch.geometry.people_calibration import (
@@ -41,14 +47,20 @@ from xvmatch.geometry.people_calibration import (
     CalibrationError,
     PeopleCalibration,
 )
-from xvmatch.inference.matching.ground_association import TOP_VIEWS, top_calibration
+from xvmatch.inference.matching.ground_association import (
+    AUTO_HFOV,
+    MIN_PAIRING,
+    TOP_VIEWS,
+    choose_lens,
+    top_calibration,
+)
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
 from xvmatch.inference.views.multi_view_assignment import view_pairs
 from xvmatch.inference.views.multi_view_costs import FrameProblem, LogisticCalibration
 from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
 
-__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "ground_problems", "oblique_top",
-           "run_multi_ground"]
+__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "choose_lenses", "ground_problems",
+           "lenses_note", "oblique_top", "run_multi_ground"]
 
 TOP_HOR = LogisticCalibration(threshold=2.0 * gr.RADIUS, slope=1.0)
 """Top-handheld pairs: minus the evidence (nats) of a ground distance ``d`` (metres), none at
@@ -86,13 +98,33 @@ class MultiGroundOptions:
 
     Attributes:
         hor_sizes: each handheld view's image size (width, height).
-        hor_hfov_deg: the handheld cameras' field of view (70: a phone's, a drone's).
+        hor_hfov_deg: the handheld cameras' field of view, degrees (70: a phone's, a
+            drone's): one for all, one per handheld view (a tuple), or
+            :data:`~xvmatch.inference.matching.ground_association.AUTO_HFOV`: each chosen
+            from its people (:func:`choose_lenses`).
         fps: frames per second of the frame numbers (the registration's pace over time).
     """
 
     hor_sizes: tuple[tuple[int, int], ...]
-    hor_hfov_deg: float = PRIOR_HFOV_DEG
+    hor_hfov_deg: float | str | tuple[float, ...] = PRIOR_HFOV_DEG
     fps: float = 30.0
+
+    def __post_init__(self) -> None:
+        hfov = self.hor_hfov_deg
+        if isinstance(hfov, str) and hfov != AUTO_HFOV:
+            raise ValueError(f"MultiGroundOptions.hor_hfov_deg must be degrees or "
+                             f"{AUTO_HFOV!r}, got {hfov!r}")
+        if isinstance(hfov, tuple) and len(hfov) != len(self.hor_sizes):
+            raise ValueError(f"MultiGroundOptions.hor_hfov_deg: one per handheld view "
+                             f"({len(self.hor_sizes)}), got {len(hfov)}")
+
+    def hfov(self, k: int) -> float:
+        """Handheld view ``k``'s field of view (1-based; not ``auto``)."""
+        hfov = self.hor_hfov_deg
+        if hfov == AUTO_HFOV:
+            raise ValueError("MultiGroundOptions.hor_hfov_deg auto: choose the lenses first "
+                             "(choose_lenses)")
+        return float(hfov[k - 1] if isinstance(hfov, tuple) else hfov)
 
 
 def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, name: str,
@@ -170,6 +202,47 @@ def _top_ground(record, calib: PeopleCalibration) -> np.ndarray:
     return calib.ground_points(np.column_stack([b[:, 0] + 0.5 * b[:, 2], b[:, 1] + b[:, 3]]))
 
 
+def _paired_frames(hor: Mapping, tops: Mapping[int, np.ndarray]) -> list[int]:
+    """The frames where both the top view (on its map) and handheld view ``hor`` have people."""
+    return sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
+
+
+def _top_grounds(views: Sequence[Mapping], frames: Sequence[int],
+                 calibration: PeopleCalibration) -> dict[int, np.ndarray]:
+    """``{frame: (N, 2)}`` the top view's people on its ground map (:func:`_top_ground`)."""
+    return {f: _top_ground(views[0].get(f), calibration) for f in frames}
+
+
+def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
+                  calibration: PeopleCalibration, options: MultiGroundOptions
+                  ) -> tuple[LensChoice, ...]:
+    """``--hor-hfov auto``: each handheld view's field of view chosen from its people
+    (:func:`~xvmatch.inference.matching.ground_association.choose_lens`, on the frames where it
+    and the top view both have people), in the order of the views (top first, in one
+    timing)."""
+    tops = _top_grounds(views, frames, calibration)
+    choices = []
+    for k in range(1, len(views)):
+        order = _paired_frames(views[k], tops)
+        finite = [tops[f][np.isfinite(tops[f]).all(axis=1)] for f in order]
+        choices.append(choose_lens(order, finite, [_boxes(views[k][f]) for f in order],
+                                   tuple(options.hor_sizes[k - 1]), options.fps))
+    return tuple(choices)
+
+
+def lenses_note(choices: Sequence[LensChoice]) -> str:
+    """The line saying which lens ``--hor-hfov auto`` chose for each handheld view."""
+    said = []
+    for k, choice in enumerate(choices, 1):
+        why = ("" if choice.hfov_deg != PRIOR_HFOV_DEG else
+               " (the prior: no lens registered its people)"
+               if max(choice.scores.values(), default=0.0) < MIN_PAIRING else
+               " (the prior: no other lens paired clearly more)")
+        said.append(f"hor{k} {choice.hfov_deg:.0f}{why}")
+    return (f"handheld lenses, degrees, chosen from their people: {', '.join(said)} (give "
+            "--hor-hfov DEG if known)")
+
+
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
                 options: MultiGroundOptions, top_tracks: Mapping[int, int] | None = None
                 ) -> dict[int, np.ndarray]:
@@ -179,8 +252,8 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     view's ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken
     out of the registration's jumps)."""
     hor = views[k]
-    order = sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
-    size, hfov = tuple(options.hor_sizes[k - 1]), options.hor_hfov_deg
+    order = _paired_frames(hor, tops)
+    size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
     local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov) for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
     ids = None if top_tracks is None else [
@@ -219,14 +292,18 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
             timing.
         frames: the frames to build.
         calibration: the top camera's, from its people (:func:`oblique_top`).
-        options: the handheld views' image sizes and field of view, the frame rate.
+        options: the handheld views' image sizes and fields of view (``auto``: chosen here,
+            :func:`choose_lenses`, unsaid), the frame rate.
         top_tracks: the top view's ``{row id: track id}`` (video mode): the top map's motion
             is then taken out of each registration (:func:`_registered`).
     """
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
-    tops = {f: _top_ground(views[0].get(f), calibration) for f in frames}
+    if options.hor_hfov_deg == AUTO_HFOV:
+        lenses = choose_lenses(views, frames, calibration, options)
+        options = replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses))
+    tops = _top_grounds(views, frames, calibration)
     placed = [{f: p for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
     problems = {}
@@ -241,16 +318,23 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
 
 def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
                      calibration: PeopleCalibration, options: MultiGroundOptions,
-                     people: PeopleOptions, tracks: Sequence[Mapping[int, int]] | None = None
-                     ) -> MultiEgoRun:
+                     people: PeopleOptions, tracks: Sequence[Mapping[int, int]] | None = None,
+                     note: Callable[[str], object] | None = None) -> MultiEgoRun:
     """Person ids for every box of ``views`` (top first, each in its own file's timing):
     re-timed by ``offsets`` (top frame ``t + N_k`` shows the moment of handheld view ``k``'s
     frame ``t``), joined on the top view's ground map (:func:`ground_problems`) and solved as
     the nadir path solves (:func:`~xvmatch.inference.views.multi_view_people.assign_people`);
     with ``tracks`` (per view ``{row id: track id}``) in video mode
-    (:func:`~xvmatch.inference.views.multi_ego_video.video_people`, :data:`VIDEO_KEEP_FREE`)."""
+    (:func:`~xvmatch.inference.views.multi_ego_video.video_people`, :data:`VIDEO_KEEP_FREE`).
+    With ``options.hor_hfov_deg`` ``auto`` the lenses are chosen first (:func:`choose_lenses`)
+    and told to ``note`` in one line (:func:`lenses_note`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
+    if options.hor_hfov_deg == AUTO_HFOV:
+        lenses = choose_lenses(aligned, frames, calibration, options)
+        options = replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses))
+        if note is not None:
+            note(lenses_note(lenses))
     problems = ground_problems(aligned, frames, calibration, options,
                                None if tracks is None else tracks[0])
     if tracks is not None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 from xvmatch.commands._options import HOR_IMAGE_SIZE, UsageError, check_images_together
@@ -26,7 +26,22 @@ if TYPE_CHECKING:
 __all__ = ["CAMERAS_COMMAND", "add_camera_check", "add_refine_top_camera",
            "add_top_view_arguments", "add_write_cameras", "check_top_view",
            "check_write_cameras", "horizontal_size", "note_camera_check",
-           "note_camera_refinement", "write_cameras"]
+           "note_camera_refinement", "note_printer", "write_cameras"]
+
+
+_HFOV_DEG = float_in(20, 150, "a camera's horizontal field of view, degrees")
+
+
+def _hor_hfov(text: str) -> float | str:
+    """``--hor-hfov``: degrees in [20, 150], or ``auto`` (chosen from the people on the oblique
+    path, :func:`~xvmatch.inference.matching.ground_association.choose_lens`)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return _HFOV_DEG(text)
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(
+            str(error).replace(", got ", " or auto, got ", 1)) from None
 
 
 def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
@@ -38,10 +53,9 @@ def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
     p.add_argument("--top-image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help="the top view's image size, 8..65536 a side; oblique needs it, auto "
                    "takes the smallest common video size holding the top boxes")
-    p.add_argument("--hor-hfov", default=70.0, metavar="DEG",
-                   type=float_in(20, 150, "a camera's horizontal field of view, degrees"),
+    p.add_argument("--hor-hfov", default=70.0, metavar="DEG", type=_hor_hfov,
                    help="oblique: the horizontal camera's field of view, degrees in [20, 150] "
-                   "(default 70: a phone's, a drone's)")
+                   "(default 70), or auto: chosen from its people (a wide lens not known)")
     p.add_argument("--fps", default=30.0,
                    type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
                    help="oblique: the frame rate, in [0.1, 1000] (default 30)")
@@ -124,6 +138,16 @@ def note_camera_check(check, quiet: bool, prefix: str = "") -> None:
     ``quiet`` only when the cameras were left out."""
     if check is not None and check.to_tell(quiet):
         print(f"{prefix}{check.message()}", file=sys.stderr)
+
+
+def note_printer(quiet: bool) -> Callable[[str], None]:
+    """``say(line)``: prints ``xvmatch: note: line`` on stderr unless quiet (a run's notes,
+    e.g. the lenses ``--hor-hfov auto`` chose)."""
+    def say(line: str) -> None:
+        if not quiet:
+            print(f"xvmatch: note: {line}", file=sys.stderr)
+
+    return say
 
 
 def note_camera_refinement(refinement, quiet: bool) -> None:

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from xvmatch.commands._box_reading import add_box_reading_options
-from xvmatch.commands._cameras import add_top_view_arguments, check_top_view
+from xvmatch.commands._cameras import add_top_view_arguments, check_top_view, note_printer
 from xvmatch.commands._model import (
     add_camera_check,
     add_refine_top_camera,
@@ -182,8 +182,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     out, options = _run_options(args)
-    paths, quiet = options.box_files, args.quiet
-    n_hor = len(paths) - 1
+    paths, quiet, n_hor = options.box_files, args.quiet, len(options.box_files) - 1
+    say = note_printer(quiet)
     offsets = mer.per_view_offsets(args.offset, n_hor)
     rows = [read_detections(p, box_reading(args)) for p in paths]
     views = [r.frames for r in rows]
@@ -204,8 +204,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         calib, note = multi_ground.oblique_top(  # calib None: the nadir path
             views[0], "nadir" if args.cameras else args.top_view, args.top_image_size, paths[0],
             offsets)
-        if note and not quiet:
-            print(f"xvmatch: note: {note}", file=sys.stderr)
+        if note:
+            say(note)
         for k, value in enumerate(offsets):
             marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
             offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], options.params,
@@ -214,7 +214,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                         hor_path=paths[k + 1])
         ground = calib and multi_ground.run_multi_ground(
             views, offsets, calib, multi_ground.MultiGroundOptions(
-                tuple(map(tuple, sizes)), args.hor_hfov, args.fps), options.people, tracks)
+                tuple(map(tuple, sizes)), args.hor_hfov, args.fps), options.people, tracks, say)
         run = ground or mer.run_multi_ego(
             inputs, matcher, sizes, offsets, camera_rows, options,
             progress=lambda n: frame_progress(n, "costs", not quiet),
