@@ -114,24 +114,39 @@ def _score(pred: dict, truth: dict) -> np.ndarray:
     return np.array([tp, fp, fn])
 
 
+def add_drone_arguments(p: argparse.ArgumentParser) -> None:
+    """``--top-drift``, ``--top-yaw-rate`` (a moving drone) and ``--no-top-motion``."""
+    p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
+                   help="the top camera drifts at LO-HI m/s (a drone; default static)")
+    p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
+                   metavar=("LO", "HI"), help="and turns at LO-HI degrees/s")
+    p.add_argument("--no-top-motion", action="store_true",
+                   help="leave the top map's own motion in the registration's jumps (before "
+                   "map_motion)")
+
+
+def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
+    """The scenes' settings with the drone's motion of :func:`add_drone_arguments`; with
+    ``--no-top-motion`` the registration leaves the top map's motion in (as before
+    :func:`~xvmatch.cues.ground_registration.map_motion`)."""
+    if args.no_top_motion:
+        gr.map_motion = lambda frames, tops, ids, fps: [None] * len(tops)
+    return ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
+                              top_yaw_rate=tuple(args.top_yaw_rate), **settings)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", type=int, default=12)
     p.add_argument("--seconds", type=float, default=12.0)
     p.add_argument("--step", type=int, default=3, help="every N-th frame (10 fps scenes)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
-                   help="the top camera drifts at LO-HI m/s (a drone; default static)")
-    p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
-                   metavar=("LO", "HI"), help="and turns at LO-HI degrees/s")
+    add_drone_arguments(p)
     p.add_argument("--guess-top-size", action="store_true",
                    help="the from-people rows take the top size guessed from the boxes "
                    "(associate without --top-image-size), not the true one")
     p.add_argument("--no-scale-search", action="store_true",
                    help="register at the top map's own scale only (before the scale search)")
-    p.add_argument("--no-top-motion", action="store_true",
-                   help="leave the top map's own motion in the registration's jumps (before "
-                   "map_motion)")
     p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
                    help="the handheld camera's horizontal field of view in the renders, LO-HI "
                    "degrees (default 60 80)")
@@ -141,11 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
-    if args.no_top_motion:
-        gr.map_motion = lambda frames, tops, ids, fps: [None] * len(tops)
-    config = ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
-                                top_yaw_rate=tuple(args.top_yaw_rate),
-                                hor_hfov=tuple(args.hor_hfov))
+    config = drone_config(args, hor_hfov=tuple(args.hor_hfov))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus")
     if args.choose_lens:

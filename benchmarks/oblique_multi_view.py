@@ -71,10 +71,9 @@ from dataclasses import replace
 from itertools import combinations
 
 import numpy as np
-from oblique_association import _scrambled
+from oblique_association import _scrambled, add_drone_arguments, drone_config
 
-from xvmatch.cues import ground_registration as gr
-from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.datasets.oblique_scenes import make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.people_calibration import CalibrationError
 from xvmatch.inference.matching.ground_association import (
@@ -191,18 +190,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--switch-every", type=float, default=0.0, metavar="N",
                    help="a tracker's id switches: each track's id changes on a sampled frame "
                    "with probability 1/N, in each view (default 0: whole tracks)")
-    p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
-                   help="the top camera drifts at LO-HI m/s (a drone; default static)")
-    p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
-                   metavar=("LO", "HI"), help="and turns at LO-HI degrees/s")
-    p.add_argument("--no-top-motion", action="store_true",
-                   help="leave the top map's own motion in the registration's jumps (before "
-                   "map_motion)")
+    add_drone_arguments(p)
     args = p.parse_args(argv)
-    if args.no_top_motion:
-        gr.map_motion = lambda frames, tops, ids, fps: [None] * len(tops)
-    config = ObliqueSceneConfig(n_hor=2, top_drift_speed=tuple(args.top_drift),
-                                top_yaw_rate=tuple(args.top_yaw_rate))
+    config = drone_config(args, n_hor=2)
     kinds = {"all": lambda ab: True, "top-hor": lambda ab: ab[0] == 0,
              "hor-hor": lambda ab: ab[0] > 0}
     totals = {(n, k): np.zeros(3) for n in NAMES for k in kinds}
