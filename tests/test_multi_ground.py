@@ -127,6 +127,20 @@ def test_oblique_top_decides_and_refuses(scene) -> None:
         oblique_top(views[0], "sideways", SIZE, "top.txt")
 
 
+def test_oblique_top_follows_the_top_views_tracks_in_video_mode(scene) -> None:
+    """associate-multi reads its boxes by row (each row its own id); in video mode the top
+    view's tracks give each followed person a height of their own in the calibration, as
+    associate's calibration from the same file, and in frame mode every box stands alone."""
+    views, _ = scene
+    rows = {f: FrameBoxes(f, 1000 * f + np.arange(len(r.ids)), r.boxes)
+            for f, r in views[0].items()}
+    tracks = {1000 * f + n: int(i) for f, r in views[0].items() for n, i in enumerate(r.ids)}
+    video, _ = oblique_top(rows, "oblique", SIZE, "top.txt", top_tracks=tracks)
+    frame, _ = oblique_top(rows, "oblique", SIZE, "top.txt")
+    assert video == top_calibration(views[0], SIZE)
+    assert frame == top_calibration(rows, SIZE) and frame != video
+
+
 @pytest.mark.slow
 def test_problems_shapes_and_no_evidence_off_the_map(scene) -> None:
     views, _ = scene

@@ -41,7 +41,7 @@ import numpy as np
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice
 from xvmatch.formats.box_image_size import check_boxes_in_image, upright_size_guess
-from xvmatch.formats.mot_boxes import align_frames
+from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     CalibrationError,
@@ -128,7 +128,8 @@ class MultiGroundOptions:
 
 
 def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, name: str,
-                offsets: Sequence[int | str] = (), seed: int = 0
+                offsets: Sequence[int | str] = (), seed: int = 0,
+                top_tracks: Mapping[int, int] | None = None
                 ) -> tuple[PeopleCalibration | None, str | None]:
     """``associate-multi --top-view``: the top camera calibrated from its people when it is
     oblique (forced, or found so by ``auto``), else None (the nadir path), and the line to say
@@ -145,6 +146,10 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         offsets: each handheld view's ``--offset``; ``auto`` estimates it with the nadir
             search, so the oblique path refuses it.
         seed: seed of the calibration's resampling.
+        top_tracks: the top view's ``{row id: track id}`` in video mode, where ``top``'s ids
+            are its rows: each followed person then gets a height of their own in the
+            calibration (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`),
+            as ``associate``'s does; None (frame mode): every box on its own.
 
     Raises:
         ValueError: a top box outside ``top_size``, ``auto`` offsets with an oblique top view,
@@ -168,6 +173,9 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, the smallest common video "
                    "size holding its boxes (give --top-image-size WxH if not)")
     check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False)
+    if top_tracks is not None:
+        top = {f: FrameBoxes(f, np.array([top_tracks[int(r)] for r in rec.ids], dtype=np.int64),
+                             rec.boxes) for f, rec in top.items()}
     try:
         calib = top_calibration(top, tuple(top_size), seed, name)
     except CalibrationError as error:

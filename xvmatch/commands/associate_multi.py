@@ -203,7 +203,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         sizes = [r[0] for r in resolved]
         calib, note = multi_ground.oblique_top(  # calib None: the nadir path
             views[0], "nadir" if args.cameras else args.top_view, args.top_image_size, paths[0],
-            offsets)
+            offsets, top_tracks=None if tracks is None else tracks[0])
         if note:
             say(note)
         for k, value in enumerate(offsets):
