@@ -18,7 +18,8 @@ score: that counts a horizontal person near *any* top person, so a map squeezed 
 lens lands many people near a few and scores higher (on the rendered scenes it favoured the
 widest lens tried even for 60-80 degree cameras). As with the map scale
 (:data:`~xvmatch.cues.ground_registration.SCALE_MARGIN`), another lens replaces the prior only
-where it pairs :data:`LENS_MARGIN` times as much. That margin is wide: even this score leans
+where it pairs :data:`LENS_MARGIN` times as much, and only where it pairs somebody
+(:data:`MIN_PAIRING`). That margin is wide: even this score leans
 towards wider lenses (on the rendered scenes, 90 or 110 degrees pair 1.1-1.3 times as well as
 70 on many 45-55 and 60-80 degree cameras, more where no lens registers, and the wider lens then
 often fails), while an action camera's lead is mostly 1.15-1.7, over 1.3 in about half the
@@ -40,6 +41,7 @@ __all__ = [
     "HFOV_CANDIDATES",
     "LENS_MARGIN",
     "MAX_FRAMES",
+    "MIN_PAIRING",
     "LensChoice",
     "choose_hor_hfov",
     "pairing_score",
@@ -54,6 +56,11 @@ LENS_MARGIN = 1.3
 """How many times the prior lens's pairing score another lens must exceed to replace it (module
 docstring: wide, as wider lenses often pair up to 1.3 times as well on cameras that are not
 wide)."""
+
+MIN_PAIRING = 1.0
+"""The least clip pairing score (:func:`pairing_score`, about one person paired closely on one
+frame) a lens other than the prior needs to be chosen: where no candidate's registration pairs
+anybody (a near-nadir top view), a score above the prior's nothing is no evidence."""
 
 MAX_FRAMES = 20
 """Frames registered per candidate lens at most (evenly spread over the clip)."""
@@ -79,6 +86,11 @@ class LensChoice:
     scores: dict[float, float]
     scales: dict[float, float]
     frames: list[int]
+
+    @property
+    def registered(self) -> bool:
+        """Whether any candidate's registration paired somebody (:data:`MIN_PAIRING`)."""
+        return max(self.scores.values(), default=0.0) >= MIN_PAIRING
 
 
 def _subsample(n: int, max_frames: int) -> list[int]:
@@ -166,6 +178,7 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
 def _pick(scores: dict[float, float], prior: float, margin: float) -> float:
     """The lens chosen from the candidates' rounded pairing scores (``prior`` among them): the
     best (a tie: the nearest the prior, then the narrower), unless it does not exceed ``margin``
-    times the prior's score."""
+    times the prior's score or pairs next to nobody (:data:`MIN_PAIRING`)."""
     best = max(scores, key=lambda h: (scores[h], -abs(h - prior), -h))
-    return best if scores[best] > round(margin * scores[prior], _DIGITS) else prior
+    return (best if scores[best] > round(margin * scores[prior], _DIGITS)
+            and scores[best] >= MIN_PAIRING else prior)

@@ -1,5 +1,5 @@
 """``--hor-hfov auto``: the handheld camera's field of view chosen from its people before the
-ground-map registration (:func:`~xvmatch.inference.matching.ground_association.choose_lens`),
+ground-map registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`),
 an opt-in. On a short rendered clip from an action camera (105-115 degrees) the typed run and the
 command line pick a wide lens and then run exactly as with that lens given; a number, or no
 option, runs as before; a bad value is one line naming the option."""
@@ -13,12 +13,10 @@ import numpy as np
 import pytest
 
 from xvmatch.commands._cameras import _hor_hfov
-from xvmatch.cues.hor_lens import LensChoice
+from xvmatch.cues.hor_lens import LENS_MARGIN, MIN_PAIRING, LensChoice, _pick, choose_hor_hfov
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.inference.matching.ground_association import (
-    MIN_PAIRING,
     GroundAssociationOptions,
-    choose_lens,
     lens_note,
     run_ground_association,
     top_calibration,
@@ -64,19 +62,14 @@ def test_bad_value_from_the_command_line(tmp_path, capsys) -> None:
         GroundAssociationOptions((1920, 1080), (1920, 1080), hor_hfov_deg="wide")
 
 
-def test_a_chooser_that_pairs_nobody_keeps_the_prior(monkeypatch) -> None:
-    import xvmatch.inference.matching.ground_association as ga
-
-    def weak(*args, **kwargs) -> LensChoice:
-        return LensChoice(110.0, {70.0: 0.0, 90.0: 0.0, 110.0: 0.5 * MIN_PAIRING}, {}, [1])
-
-    monkeypatch.setattr(ga, "choose_hor_hfov", weak)
-    choice = choose_lens([1], [np.zeros((0, 2))], [np.zeros((0, 4))], (1920, 1080), 10.0)
+def test_a_chooser_that_pairs_nobody_keeps_the_prior() -> None:
+    weak = {70.0: 0.0, 90.0: 0.0, 110.0: 0.5 * MIN_PAIRING}  # 110 leads, pairing next to nobody
+    choice = LensChoice(_pick(weak, 70.0, LENS_MARGIN), weak, {}, [1])
     assert choice.hfov_deg == 70.0
     assert lens_note(choice).startswith("handheld lens: 70 degrees, the prior (no lens tried "
                                         "registered its people")
-    empty = choose_lens([1, 2], [np.zeros((0, 2))] * 2, [np.zeros((0, 4))] * 2, (1920, 1080),
-                        10.0)
+    empty = choose_hor_hfov([1, 2], [np.zeros((0, 2))] * 2, [np.zeros((0, 4))] * 2,
+                            (1920, 1080), 10.0)
     assert empty.hfov_deg == 70.0
 
 

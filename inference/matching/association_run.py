@@ -110,7 +110,7 @@ class AssociationOptions:
         top_image_size: the top view's image size, or None (``auto`` may guess it).
         hor_hfov: the horizontal camera's field of view, degrees, or ``"auto"``: chosen from
             the people (the oblique path;
-            :func:`~xvmatch.inference.matching.ground_association.choose_lens`).
+            :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`).
         fps: the frame rate (the oblique path).
         learned: the learned matchers, or None: the handcrafted search.
     """

@@ -19,16 +19,15 @@ view's boxes say it is oblique).
 which read the top image as the ground) or oblique (this run).
 
 With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``) the handheld camera's field of view is chosen
-from the clip's people before the registration (:func:`choose_lens`,
-:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`): an opt-in for a lens not known, possibly wide,
-not the default (on ordinary 60-80 degree lenses it can cost a few points where nothing
-registers).
+from the clip's people before the registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`):
+an opt-in for a lens not known, possibly wide, not the default (on ordinary 60-80 degree lenses
+it can cost a few points where nothing registers).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,11 +43,9 @@ from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
 __all__ = [
     "AUTO_HFOV",
-    "MIN_PAIRING",
     "TOP_VIEWS",
     "GroundAssociation",
     "GroundAssociationOptions",
-    "choose_lens",
     "lens_note",
     "run_ground_association",
     "run_top_view",
@@ -59,14 +56,8 @@ TOP_VIEWS = ("auto", "nadir", "oblique")
 """``--top-view``: let the top view's boxes decide, or force a nadir or an oblique camera."""
 
 AUTO_HFOV = "auto"
-"""``--hor-hfov auto``: the handheld field of view chosen from the people (:func:`choose_lens`)."""
-
-MIN_PAIRING = 1.0
-"""The least clip pairing score (:func:`~xvmatch.cues.hor_lens.pairing_score`, about one person
-paired closely on one frame) a lens other than the prior needs to be kept: where no candidate's
-registration pairs anybody, a score above the prior's nothing is no evidence, and 70 degrees
-stays."""
-
+"""``--hor-hfov auto``: the handheld field of view chosen from the people
+(:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
 
 @dataclass(frozen=True)
 class GroundAssociationOptions:
@@ -76,7 +67,8 @@ class GroundAssociationOptions:
         top_size: the top view's image size (width, height).
         hor_size: the horizontal view's image size.
         hor_hfov_deg: the horizontal camera's field of view, degrees (70: a phone's, a
-            drone's), or :data:`AUTO_HFOV`: chosen from the people (:func:`choose_lens`).
+            drone's), or :data:`AUTO_HFOV`: chosen from the people
+            (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`).
         fps: frames per second of the frame numbers (the registration's pace over time).
         consensus: video mode: each view's track ids are used, to make the pairs consistent
             over the clip and to take the top map's own motion out of the registration.
@@ -130,20 +122,9 @@ def _summary(calib: PeopleCalibration) -> str:
             "registered on its ground map frame by frame")
 
 
-def choose_lens(frames: list[int], tops: list[np.ndarray], hor_boxes: list[np.ndarray],
-                hor_size: tuple[int, int], fps: float) -> LensChoice:
-    """``--hor-hfov auto``: the handheld field of view chosen from the people
-    (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, same arguments), the prior kept where the
-    chosen lens's registration pairs next to nobody (:data:`MIN_PAIRING`)."""
-    choice = choose_hor_hfov(frames, tops, hor_boxes, hor_size, fps)
-    if choice.hfov_deg != PRIOR_HFOV_DEG and choice.scores[choice.hfov_deg] < MIN_PAIRING:
-        return replace(choice, hfov_deg=PRIOR_HFOV_DEG)
-    return choice
-
-
 def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
     """The line saying which lens ``--hor-hfov auto`` chose (``view``: whose)."""
-    if max(choice.scores.values(), default=0.0) < MIN_PAIRING:
+    if not choice.registered:
         return (f"{view}: {choice.hfov_deg:.0f} degrees, the prior (no lens tried registered "
                 "its people; give --hor-hfov DEG if known)")
     if choice.hfov_deg == PRIOR_HFOV_DEG:
@@ -162,7 +143,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     Args:
         top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (``FrameBoxes``).
         options: image sizes, the horizontal field of view (or ``auto``: chosen first,
-            :func:`choose_lens`), the frame rate.
+            :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`), the frame rate.
         frames: the frames to associate.
         calibration: the top camera's, when already estimated (:func:`top_calibration`).
     """
@@ -183,8 +164,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     lens = None
     hfov = options.hor_hfov_deg
     if hfov == AUTO_HFOV:
-        lens = choose_lens(order, [p for p, _ in tops], [b for b, _ in boxes], options.hor_size,
-                           options.fps)
+        lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
+                               options.hor_size, options.fps)
         hfov = lens.hfov_deg
     hors = [(gr.hor_ground_points(hb, options.hor_size, hfov), h_ids) for hb, h_ids in boxes]
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],

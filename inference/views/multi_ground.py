@@ -27,7 +27,7 @@ unmatched there.
 
 With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``) each handheld view's field of view is chosen
 from its people before its registration
-(:func:`~xvmatch.inference.matching.ground_association.choose_lens`), one lens per view
+(:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`), one lens per view
 (:func:`choose_lenses`).
 """
 
@@ -39,7 +39,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
-from xvmatch.cues.hor_lens import LensChoice
+from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.box_image_size import check_boxes_in_image, upright_size_guess
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
 from xvmatch.geometry.people_calibration import (
@@ -49,9 +49,7 @@ from xvmatch.geometry.people_calibration import (
 )
 from xvmatch.inference.matching.ground_association import (
     AUTO_HFOV,
-    MIN_PAIRING,
     TOP_VIEWS,
-    choose_lens,
     top_calibration,
 )
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
@@ -225,7 +223,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
                   calibration: PeopleCalibration, options: MultiGroundOptions
                   ) -> tuple[LensChoice, ...]:
     """``--hor-hfov auto``: each handheld view's field of view chosen from its people
-    (:func:`~xvmatch.inference.matching.ground_association.choose_lens`, on the frames where it
+    (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, on the frames where it
     and the top view both have people), in the order of the views (top first, in one
     timing)."""
     tops = _top_grounds(views, frames, calibration)
@@ -233,9 +231,20 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
     for k in range(1, len(views)):
         order = _paired_frames(views[k], tops)
         finite = [tops[f][np.isfinite(tops[f]).all(axis=1)] for f in order]
-        choices.append(choose_lens(order, finite, [_boxes(views[k][f]) for f in order],
-                                   tuple(options.hor_sizes[k - 1]), options.fps))
+        choices.append(choose_hor_hfov(order, finite, [_boxes(views[k][f]) for f in order],
+                                       tuple(options.hor_sizes[k - 1]), options.fps))
     return tuple(choices)
+
+
+def _with_lenses(views: Sequence[Mapping], frames: Sequence[int],
+                 calibration: PeopleCalibration, options: MultiGroundOptions
+                 ) -> tuple[MultiGroundOptions, tuple[LensChoice, ...]]:
+    """``options`` with ``auto`` replaced by each handheld view's chosen lens
+    (:func:`choose_lenses`) and the choices; as they are, and none, otherwise."""
+    if options.hor_hfov_deg != AUTO_HFOV:
+        return options, ()
+    lenses = choose_lenses(views, frames, calibration, options)
+    return replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses)), lenses
 
 
 def lenses_note(choices: Sequence[LensChoice]) -> str:
@@ -244,7 +253,7 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
     for k, choice in enumerate(choices, 1):
         why = ("" if choice.hfov_deg != PRIOR_HFOV_DEG else
                " (the prior: no lens registered its people)"
-               if max(choice.scores.values(), default=0.0) < MIN_PAIRING else
+               if not choice.registered else
                " (the prior: no other lens paired clearly more)")
         said.append(f"hor{k} {choice.hfov_deg:.0f}{why}")
     return (f"handheld lenses, degrees, chosen from their people: {', '.join(said)} (give "
@@ -308,9 +317,7 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
-    if options.hor_hfov_deg == AUTO_HFOV:
-        lenses = choose_lenses(views, frames, calibration, options)
-        options = replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses))
+    options = _with_lenses(views, frames, calibration, options)[0]
     tops = _top_grounds(views, frames, calibration)
     placed = [{f: p for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
@@ -338,11 +345,9 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     and told to ``note`` in one line (:func:`lenses_note`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
-    if options.hor_hfov_deg == AUTO_HFOV:
-        lenses = choose_lenses(aligned, frames, calibration, options)
-        options = replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses))
-        if note is not None:
-            note(lenses_note(lenses))
+    options, lenses = _with_lenses(aligned, frames, calibration, options)
+    if lenses and note is not None:
+        note(lenses_note(lenses))
     problems = ground_problems(aligned, frames, calibration, options,
                                None if tracks is None else tracks[0])
     if tracks is not None:

@@ -34,7 +34,7 @@ _HFOV_DEG = float_in(20, 150, "a camera's horizontal field of view, degrees")
 
 def _hor_hfov(text: str) -> float | str:
     """``--hor-hfov``: degrees in [20, 150], or ``auto`` (chosen from the people on the oblique
-    path, :func:`~xvmatch.inference.matching.ground_association.choose_lens`)."""
+    path, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
     if text.strip().lower() == "auto":
         return "auto"
     try:
