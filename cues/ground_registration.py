@@ -40,6 +40,7 @@ __all__ = [
     "associate_on_ground",
     "hor_ground_points",
     "map_motion",
+    "on_top_map",
     "pose_hypotheses",
     "register_sequence",
     "register_with_scale",
@@ -338,14 +339,20 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
     return best, runs[best][1]
 
 
+def on_top_map(hor: np.ndarray, pose: FramePose) -> np.ndarray:
+    """The horizontal view's people ``(M, 2)`` (its own ground map) placed on the top map
+    under the pose: turned by its heading, moved to its centre."""
+    rot = _rotations(np.array([pose.heading]))[0]
+    return pose.centre + np.asarray(hor, float).reshape(-1, 2) @ rot.T
+
+
 def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose) -> np.ndarray:
     """Pairs ``(P, 2)`` (top index, horizontal index) under the pose: Hungarian on the ground
     distances, pairs farther than :data:`RADIUS` left unmatched."""
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
         return np.zeros((0, 2), dtype=np.int64)
-    rot = _rotations(np.array([pose.heading]))[0]
-    mapped = pose.centre + hor @ rot.T
+    mapped = on_top_map(hor, pose)
     d = np.hypot(*(top[:, None, :] - mapped[None, :, :]).transpose(2, 0, 1))
     cost = np.where(d < RADIUS, d, 2 * RADIUS)
     rows, cols = linear_sum_assignment(cost)

@@ -123,8 +123,7 @@ def pairing_score(tops: list[np.ndarray], hors: list[np.ndarray], frames: list[i
         pairs = gr.associate_on_ground(top, hor, pose)
         if not len(pairs):
             continue
-        c, s = np.cos(pose.heading), np.sin(pose.heading)
-        mapped = pose.centre + hor[pairs[:, 1]] @ np.array([[c, -s], [s, c]]).T
+        mapped = gr.on_top_map(hor[pairs[:, 1]], pose)
         d2 = ((top[pairs[:, 0]] - mapped) ** 2).sum(axis=1)
         total += float(np.exp(-0.5 * d2 / (0.5 * gr.RADIUS) ** 2).sum())
     return total
