@@ -14,8 +14,9 @@ methods, scored by the F1 of the cross-view pairs over all frames:
   field of view known (the ceiling of its frame-by-frame part);
 * ``registered, from people``: the same with the top camera calibrated from its boxes
   (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`) and the handheld field of
-  view taken as 70 degrees (``strict=False``: a loose fit rather than none); a refused
-  calibration (too few boxes) scores its frames as misses;
+  view taken as 70 degrees (``strict=False``: a loose fit rather than none), frame by frame
+  without the view's ids (each box its own person, as ``associate --mode frame`` calibrates); a
+  refused calibration (too few boxes) scores its frames as misses;
 * ``+ tracklet consensus``: those pairs made consistent over the clip with each view's own track
   ids (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`, video mode).
 
@@ -189,14 +190,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.guess_top_size:
             top_size = common_size_holding(top) or top_size
         options = GroundAssociationOptions(top_size, hor_size, fps=fps, consensus=False)
-        try:
+        try:  # frame by frame the calibration reads no ids; the consensus rows, the tracks
             calib = top_calibration(top, top_size)
+            frame_calib = top_calibration(top, top_size, tracks=False)
         except CalibrationError:
             refused += 1
             people = voted = true_lens = chosen = {}
             lens, lens_scores = float("nan"), ""
         else:
-            people = run_ground_association(top, hor, options, frames, calib).pairs
+            people = run_ground_association(top, hor, options, frames, frame_calib).pairs
             t1 = time.perf_counter()
             voted = run_ground_association(top, hor, replace(options, consensus=True), frames,
                                            calib).pairs

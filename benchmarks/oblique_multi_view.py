@@ -3,7 +3,8 @@ join against ``associate --top-view oblique`` run per handheld view, on rendered
 (:mod:`xvmatch.datasets.oblique_scenes`, two handheld cameras), ids scrambled per view.
 
 Per scene, every ``--step``-th frame of a ``--seconds`` clip, the top camera calibrated from
-its people once (as both commands do), then:
+its people (as both commands do: in video mode with the top view's track ids, in frame mode with
+its boxes linked by IoU, the ids unread), then:
 
 * ``per view``: each handheld view associated with the top view on its own
   (:func:`~xvmatch.inference.matching.ground_association.run_ground_association`, each frame on
@@ -214,8 +215,9 @@ def main(argv: list[str] | None = None) -> int:
                  for a, b in combinations(range(3), 2)}
         top_size = scene.top_cameras[0].image_size
         hor_sizes = tuple(tuple(scene.hor_cameras[f"hor{k}"][0].image_size) for k in (1, 2))
-        try:
-            calib = top_calibration(views[0], top_size)
+        try:  # in frame mode the calibration follows people by their boxes, not the ids
+            calibs = {True: top_calibration(views[0], top_size),
+                      False: top_calibration(views[0], top_size, tracks=False)}
         except CalibrationError:
             refused += 1
             continue
@@ -224,14 +226,14 @@ def main(argv: list[str] | None = None) -> int:
             per_view = [untracked(run_ground_association(
                 tracked[0], tracked[k], GroundAssociationOptions(
                     top_size, hor_sizes[k - 1], fps=config.fps, consensus=video),
-                calibration=calib).pairs, args.switch_every) for k in (1, 2)]
+                calibration=calibs[video]).pairs, args.switch_every) for k in (1, 2)]
             preds[name] = joined_pairs(per_view, frames)
         options = MultiGroundOptions(hor_sizes, fps=config.fps)
         for name, tracks, video in (("three views", False, False),
                                     ("three views, --tracks", True, False),
                                     ("three views, video mode", False, True),
                                     ("three views, --tracks, video mode", True, True)):
-            run = run_multi_ground([by_row(v) for v in views], [0, 0], calib, options,
+            run = run_multi_ground([by_row(v) for v in views], [0, 0], calibs[video], options,
                                    replace(PeopleOptions(), tracks=tracks),
                                    row_tracks(tracked) if video else None)
             preds[name] = people_pairs(run.people.person, views, frames)
@@ -240,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
             for kind, which in kinds.items():
                 totals[(name, kind)] += score(preds[name], truth, which)
             line.append(f"{f1(score(preds[name], truth, kinds['all'])):.3f}")
-        print(f"scene {s:2d} tilt {calib.tilt_deg:4.1f}: pair F1 " + ", ".join(
+        print(f"scene {s:2d} tilt {calibs[True].tilt_deg:4.1f}: pair F1 " + ", ".join(
             f"{n} {v}" for n, v in zip(NAMES, line, strict=True)), flush=True)
     print(f"\n{args.scenes} scenes (two handheld views), every {args.step}th frame of "
           f"{args.seconds:g} s, {time.perf_counter() - t0:.0f} s; top calibration refused in "

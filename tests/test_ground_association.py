@@ -68,6 +68,25 @@ def test_same_input_same_pairs(scene) -> None:
 
 
 @pytest.mark.slow
+def test_frame_mode_does_not_read_the_views_track_ids(scene) -> None:
+    """Within-view track ids are for video mode only: frame by frame, the top view's ids
+    renumbered on every frame (no id persists) give the same calibration and pairs."""
+    options = GroundAssociationOptions(scene.top_cameras[0].image_size,
+                                       scene.hor_cameras["hor1"][0].image_size, fps=10.0,
+                                       consensus=False)
+    frames = list(range(1, 60, 3))
+    per_frame = {f: FrameBoxes(f, 1000 * f + np.asarray(r.ids, np.int64), r.boxes)
+                 for f, r in scene.top.items()}
+    a = run_ground_association(scene.top, scene.hor["hor1"], options, frames)
+    b = run_ground_association(per_frame, scene.hor["hor1"], options, frames)
+    assert a.calibration == b.calibration
+    assert a.pairs == {f: [(t % 1000, h) for t, h in p] for f, p in b.pairs.items()}
+    assert a.calibration == top_calibration(scene.top, options.top_size, tracks=False)
+    # The test would pass vacuously were the file's tracks the same as the boxes' own links.
+    assert a.calibration != top_calibration(scene.top, options.top_size)
+
+
+@pytest.mark.slow
 def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> None:
     from xvmatch.cli import main
     from xvmatch.datasets.oblique_scenes import write_oblique_scene

@@ -12,7 +12,12 @@ from hypothesis import strategies as st
 from xvmatch.datasets.box_scene import SceneConfig, simulate_box_scene
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
-from xvmatch.inference.linking.tracklets import Tracklet, clip_tracklets, split_clips
+from xvmatch.inference.linking.tracklets import (
+    Tracklet,
+    box_track_ids,
+    clip_tracklets,
+    split_clips,
+)
 from xvmatch.inference.tracks.track_costs import (
     TrackWeights,
     combine_cross_view,
@@ -101,6 +106,22 @@ def test_clip_tracklets_links_by_iou_over_short_gaps():
     # A one-frame miss is bridged when the gap is allowed (IoU of x=2 and x=4 boxes: 8/12).
     tracklets = clip_tracklets(frames, np.arange(1, 6), clip=0, max_gap=1)
     assert sorted(t.rows.tolist() for t in tracklets) == [[0, 3, 4, 6], [1, 2, 5]]
+
+
+def test_box_track_ids_follow_people_by_their_boxes_not_their_ids():
+    def rec(f, ids, xs):
+        return FrameBoxes(f, np.array(ids), np.array([[x, 0, 10, 20] for x in xs], float))
+
+    # Two people 4 px a frame apart (IoU 0.43: linked at 0.3, not at the paper's 0.5), their
+    # ids new on every frame and the same on frame 21 for both (the ids are not read).
+    # A gap counts the frames with boxes (every 10th frame of a video), not frame numbers.
+    frames = {1: rec(1, [7, 8], [0, 100]), 11: rec(11, [1, 2], [104, 4]),
+              21: rec(21, [5, 5], [8, 108]), 31: rec(31, [3], [200]), 41: rec(41, [0], [10])}
+    assert box_track_ids(frames).tolist() == [0, 1, 1, 0, 0, 1, 2, 0]
+    # The frame of 31 a missed one: linked over one frame with boxes, not over none.
+    assert box_track_ids(frames, max_gap=0).tolist() == [0, 1, 1, 0, 0, 1, 2, 3]
+    assert box_track_ids(frames, min_iou=0.5).tolist() == [0, 1, 2, 3, 4, 5, 6, 4]
+    assert box_track_ids({}).tolist() == []
 
 
 # --- edge weights ----------------------------------------------------------------------------

@@ -25,7 +25,19 @@ from xvmatch.cues.color_histogram import histogram_intersection
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.box_overlap import box_iou
 
-__all__ = ["Tracklet", "clip_tracklets", "motion_assignment", "split_clips", "view_tracklets"]
+__all__ = [
+    "BOX_TRACK_IOU",
+    "Tracklet",
+    "box_track_ids",
+    "clip_tracklets",
+    "motion_assignment",
+    "split_clips",
+    "view_tracklets",
+]
+
+BOX_TRACK_IOU = 0.3
+"""Least IoU of a link of :func:`box_track_ids`: below the paper's 0.5, as the boxes may be a
+few frames apart (every 10th frame of a 30 fps video: a walker moves about half a box width)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,3 +194,23 @@ def view_tracklets(
     with a ``motion`` gate (:func:`clip_tracklets`)."""
     return [clip_tracklets(frames, c, k, min_iou, max_gap, motion=motion)
             for k, c in enumerate(clips)]
+
+
+def box_track_ids(frames: Mapping[int, FrameBoxes], min_iou: float = BOX_TRACK_IOU,
+                  max_gap: int = 3) -> np.ndarray:
+    """A track number for every box of ``frames``, in :func:`~xvmatch.formats.mot_boxes.
+    stack_frames` order, from the boxes alone (the records' ids are not read): the view's boxes
+    linked by IoU over the whole clip (:func:`clip_tracklets`, one clip), ``max_gap`` counted
+    in the frames that have boxes (a file of every 10th frame links its neighbours). For what
+    needs a person followed over time where the file's ids may not be used (frame mode)."""
+    order = sorted(f for f in frames if len(frames[f].ids))
+    rows, n = {}, 0
+    for rank, f in enumerate(order):
+        k = len(frames[f].ids)
+        rows[rank] = FrameBoxes(rank, np.arange(n, n + k, dtype=np.int64), frames[f].boxes)
+        n += k
+    ids = np.zeros(n, np.int64)
+    for t, tracklet in enumerate(clip_tracklets(rows, np.arange(len(order)), 0, min_iou,
+                                                max_gap)):
+        ids[tracklet.rows] = t
+    return ids

@@ -276,7 +276,7 @@ def oblique_top(top: Mapping, options: AssociationOptions) -> object | None:
     from xvmatch.inference.matching.ground_association import top_calibration
 
     try:
-        calib = top_calibration(top, top_size, 0, options.top_boxes)
+        calib = top_calibration(top, top_size, 0, options.top_boxes, options.video)
     except CalibrationError:
         return None
     return calib if calib.kind == "oblique" or options.top_view == "oblique" else None

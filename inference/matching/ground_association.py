@@ -34,12 +34,14 @@ import numpy as np
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.mot_boxes import stack_frames
+from xvmatch.geometry.ground_plane import foot_points
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     PeopleCalibration,
     calibrate_from_people,
 )
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
+from xvmatch.inference.linking.tracklets import box_track_ids
 
 __all__ = [
     "AUTO_HFOV",
@@ -50,6 +52,7 @@ __all__ = [
     "run_ground_association",
     "run_top_view",
     "top_calibration",
+    "top_ground_points",
 ]
 
 TOP_VIEWS = ("auto", "nadir", "oblique")
@@ -105,13 +108,24 @@ class GroundAssociation:
 
 
 def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
-                    name: str = "the top view") -> PeopleCalibration:
+                    name: str = "the top view", tracks: bool = True) -> PeopleCalibration:
     """The top camera from its people, loose rather than refused (see the module docstring);
     raises :class:`~xvmatch.geometry.people_calibration.CalibrationError` only for too few
-    boxes."""
+    boxes. Each person followed gives a height of their own: ``tracks``, by the view's own
+    track ids (video mode); False (frame mode), by its boxes linked by IoU
+    (:func:`~xvmatch.inference.linking.tracklets.box_track_ids`), the ids unread."""
     frames, ids, boxes = stack_frames(top)
-    return calibrate_from_people(frames, boxes, top_size, ids=ids, seed=seed, name=name,
-                                 strict=False)
+    return calibrate_from_people(frames, boxes, top_size,
+                                 ids=ids if tracks else box_track_ids(top), seed=seed,
+                                 name=name, strict=False)
+
+
+def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration) -> np.ndarray:
+    """The top view's people ``(N, 2)`` on its ground map (metres), from their boxes'
+    ``(N, 4)`` foot points through the calibration; NaN where a foot has no ground (above the
+    horizon)."""
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    return calib.ground_points(foot_points(boxes)) if len(boxes) else np.zeros((0, 2))
 
 
 def _summary(calib: PeopleCalibration) -> str:
@@ -147,7 +161,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         frames: the frames to associate.
         calibration: the top camera's, when already estimated (:func:`top_calibration`).
     """
-    calib = calibration or top_calibration(top, options.top_size, options.seed)
+    calib = calibration or top_calibration(top, options.top_size, options.seed,
+                                           tracks=options.consensus)
     order = sorted(set(frames) if frames is not None else set(top) & set(hor))
     tops, boxes = [], []
     for f in order:
@@ -156,8 +171,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         hb = np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4)
         t_ids = np.zeros(0, np.int64) if t is None else np.asarray(t.ids)
         h_ids = np.zeros(0, np.int64) if h is None else np.asarray(h.ids)
-        feet = np.column_stack([tb[:, 0] + 0.5 * tb[:, 2], tb[:, 1] + tb[:, 3]])
-        ground = calib.ground_points(feet) if len(tb) else np.zeros((0, 2))
+        ground = top_ground_points(tb, calib)
         ok = np.isfinite(ground).all(axis=1)
         tops.append((ground[ok], t_ids[ok]))
         boxes.append((hb, h_ids))
@@ -190,7 +204,7 @@ def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
     it)."""
     if top_view not in ("auto", "oblique"):
         raise ValueError(f"top_view must be auto or oblique here, got {top_view!r}")
-    calib = top_calibration(top, options.top_size, options.seed, name)
+    calib = top_calibration(top, options.top_size, options.seed, name, options.consensus)
     if calib.kind == "nadir" and top_view == "auto":
         return None
     return run_ground_association(top, hor, options, calibration=calib)

@@ -51,6 +51,7 @@ from xvmatch.inference.matching.ground_association import (
     AUTO_HFOV,
     TOP_VIEWS,
     top_calibration,
+    top_ground_points,
 )
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
 from xvmatch.inference.views.multi_view_assignment import view_pairs
@@ -147,7 +148,8 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         top_tracks: the top view's ``{row id: track id}`` in video mode, where ``top``'s ids
             are its rows: each followed person then gets a height of their own in the
             calibration (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`),
-            as ``associate``'s does; None (frame mode): every box on its own.
+            as ``associate``'s does; None (frame mode): followed by its boxes linked by IoU
+            (:func:`~xvmatch.inference.linking.tracklets.box_track_ids`), the ids unread.
 
     Raises:
         ValueError: a top box outside ``top_size``, ``auto`` offsets with an oblique top view,
@@ -175,7 +177,7 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         top = {f: FrameBoxes(f, np.array([top_tracks[int(r)] for r in rec.ids], dtype=np.int64),
                              rec.boxes) for f, rec in top.items()}
     try:
-        calib = top_calibration(top, tuple(top_size), seed, name)
+        calib = top_calibration(top, tuple(top_size), seed, name, top_tracks is not None)
     except CalibrationError as error:
         if not guessed:
             raise
@@ -199,15 +201,6 @@ def _boxes(record) -> np.ndarray:
             else np.asarray(record.boxes, float).reshape(-1, 4))
 
 
-def _top_ground(record, calib: PeopleCalibration) -> np.ndarray:
-    """The top view's people on its ground map ``(N, 2)``, NaN where a foot point has no
-    ground (above the horizon)."""
-    b = _boxes(record)
-    if not len(b):
-        return np.zeros((0, 2))
-    return calib.ground_points(np.column_stack([b[:, 0] + 0.5 * b[:, 2], b[:, 1] + b[:, 3]]))
-
-
 def _paired_frames(hor: Mapping, tops: Mapping[int, np.ndarray]) -> list[int]:
     """The frames where both the top view (on its map) and handheld view ``hor`` have people."""
     return sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
@@ -215,18 +208,19 @@ def _paired_frames(hor: Mapping, tops: Mapping[int, np.ndarray]) -> list[int]:
 
 def _top_grounds(views: Sequence[Mapping], frames: Sequence[int],
                  calibration: PeopleCalibration) -> dict[int, np.ndarray]:
-    """``{frame: (N, 2)}`` the top view's people on its ground map (:func:`_top_ground`)."""
-    return {f: _top_ground(views[0].get(f), calibration) for f in frames}
+    """``{frame: (N, 2)}`` the top view's people on its ground map
+    (:func:`~xvmatch.inference.matching.ground_association.top_ground_points`)."""
+    return {f: top_ground_points(_boxes(views[0].get(f)), calibration) for f in frames}
 
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
-                  calibration: PeopleCalibration, options: MultiGroundOptions
-                  ) -> tuple[LensChoice, ...]:
+                  calibration: PeopleCalibration, options: MultiGroundOptions,
+                  tops: Mapping[int, np.ndarray] | None = None) -> tuple[LensChoice, ...]:
     """``--hor-hfov auto``: each handheld view's field of view chosen from its people
     (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, on the frames where it
     and the top view both have people), in the order of the views (top first, in one
-    timing)."""
-    tops = _top_grounds(views, frames, calibration)
+    timing); ``tops``: the top view's people on its map (:func:`_top_grounds`), when built."""
+    tops = _top_grounds(views, frames, calibration) if tops is None else tops
     choices = []
     for k in range(1, len(views)):
         order = _paired_frames(views[k], tops)
@@ -237,13 +231,14 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
 
 
 def _with_lenses(views: Sequence[Mapping], frames: Sequence[int],
-                 calibration: PeopleCalibration, options: MultiGroundOptions
+                 calibration: PeopleCalibration, options: MultiGroundOptions,
+                 tops: Mapping[int, np.ndarray] | None = None
                  ) -> tuple[MultiGroundOptions, tuple[LensChoice, ...]]:
     """``options`` with ``auto`` replaced by each handheld view's chosen lens
     (:func:`choose_lenses`) and the choices; as they are, and none, otherwise."""
     if options.hor_hfov_deg != AUTO_HFOV:
         return options, ()
-    lenses = choose_lenses(views, frames, calibration, options)
+    lenses = choose_lenses(views, frames, calibration, options, tops)
     return replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses)), lenses
 
 
@@ -280,8 +275,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
                                           [local[f] for f in order], hfov, options.fps, ids)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
-        c, s = np.cos(pose.heading), np.sin(pose.heading)
-        out[pose.frame] = (pose.centre + local[pose.frame] @ np.array([[c, -s], [s, c]]).T) / scale
+        out[pose.frame] = gr.on_top_map(local[pose.frame], pose) / scale
     return out
 
 
@@ -317,8 +311,8 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
-    options = _with_lenses(views, frames, calibration, options)[0]
     tops = _top_grounds(views, frames, calibration)
+    options = _with_lenses(views, frames, calibration, options, tops)[0]
     placed = [{f: p for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
     problems = {}
