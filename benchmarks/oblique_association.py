@@ -20,7 +20,9 @@ methods, scored by the F1 of the cross-view pairs over all frames:
 * ``+ tracklet consensus``: those pairs made consistent over the clip with each view's own track
   ids (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`, video mode).
 
-CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`).
+CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`); a second
+table gives it per scenario: per top pitch band (:data:`PITCH_BANDS`) and per overlap band
+(:data:`OVERLAP_BANDS`) of each view's share of people the other view sees.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12
 
@@ -66,6 +68,7 @@ from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
     run_ground_association,
     top_calibration,
+    top_ground_points,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
@@ -99,9 +102,7 @@ def _lens(top: dict, hor: dict, options: GroundAssociationOptions, frames: list[
     tops, boxes = [], []
     for f in frames:
         t, h = top.get(f), hor.get(f)
-        tb = np.zeros((0, 4)) if t is None else np.asarray(t.boxes, float).reshape(-1, 4)
-        feet = np.column_stack([tb[:, 0] + 0.5 * tb[:, 2], tb[:, 1] + tb[:, 3]])
-        ground = calib.ground_points(feet) if len(tb) else np.zeros((0, 2))
+        ground = top_ground_points(np.zeros((0, 4)) if t is None else t.boxes, calib)
         tops.append(ground[np.isfinite(ground).all(axis=1)])
         boxes.append(np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4))
     return choose_hor_hfov(frames, tops, boxes, options.hor_size, options.fps)
@@ -113,6 +114,33 @@ def _score(pred: dict, truth: dict) -> np.ndarray:
         got = set(pred.get(f, []))
         tp, fp, fn = tp + len(got & pairs), fp + len(got - pairs), fn + len(pairs - got)
     return np.array([tp, fp, fn])
+
+
+PITCH_BANDS = ((20.0, 40.0), (40.0, 60.0), (60.0, 90.1))
+"""Top camera pitch bands of the breakdown (degrees): a low oblique drone or building camera,
+a steeper one, a near-nadir one."""
+
+OVERLAP_BANDS = ((0.0, 0.5), (0.5, 0.8), (0.8, 1.01))
+"""Bands of a view's share of people the other view sees (the scene's target fractions)."""
+
+
+def _breakdown(scenes: list[tuple[float, float, float, dict]], names: tuple[str, ...]) -> None:
+    """CVIDF1 of each method per top pitch band and per overlap band (each view's share of
+    people seen by the other), pooled over the scenes in the band."""
+    bands = [("top pitch", 0, PITCH_BANDS), ("top view's people seen by the handheld", 1,
+                                             OVERLAP_BANDS),
+             ("handheld view's people seen by the top", 2, OVERLAP_BANDS)]
+    print("\n| by | band | scenes | " + " | ".join(names) + " |\n|---|---|---|"
+          + "---|" * len(names))
+    for title, column, edges in bands:
+        for lo, hi in edges:
+            sel = [sc for sc in scenes if lo <= sc[column] < hi]
+            if not sel:
+                continue
+            cells = [f"{summarize([c for sc in sel for c in sc[3][n]]).cvidf1:.1f}"
+                     for n in names]
+            band = f"{lo:g}-{min(hi, 90.0 if column == 0 else 1.0):g}"
+            print(f"| {title} | {band} | {len(sel)} | " + " | ".join(cells) + " |")
 
 
 def add_drone_arguments(p: argparse.ArgumentParser) -> None:
@@ -167,6 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     totals = {name: np.zeros(3) for name in names}
     counts: dict[str, list] = {name: [] for name in names}
     refused = 0
+    per_scene: list[tuple[float, float, float, dict]] = []
     t0 = time.perf_counter()
     for k in range(args.scenes):
         scene = make_oblique_scene(config, int(args.seconds * config.fps),
@@ -219,13 +248,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.choose_lens:
             preds += (true_lens, chosen)
         line = []
+        pitch = float(np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2])))
+        per_scene.append((pitch, scene.overlap_target["top"], scene.overlap_target["hor1"], {}))
         for name, pred in zip(names, preds, strict=True):
             s = _score(pred, truth)
             totals[name] += s
             back = {f: [(top_back[a], hor_back[b]) for a, b in pred.get(f, [])] for f in frames}
-            counts[name] += count_sequence(back, scene.top, scene.hor["hor1"], frames=frames)
+            per_scene[-1][3][name] = count_sequence(back, scene.top, scene.hor["hor1"],
+                                                    frames=frames)
+            counts[name] += per_scene[-1][3][name]
             line.append(f"{2 * s[0] / max(1, 2 * s[0] + s[1] + s[2]):.3f}")
-        pitch = float(np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2])))
         print(f"scene {k:2d} top pitch {pitch:4.1f} overlap top "
               f"{scene.overlap_target['top']:.2f} hor {scene.overlap_target['hor1']:.2f}: "
               f"pair F1 search {line[0]} (video {line[1]}), registered (true) {line[2]}, "
@@ -241,6 +273,7 @@ def main(argv: list[str] | None = None) -> int:
         cvidf1 = summarize(counts[name]).cvidf1
         print(f"| {name} | {cvidf1:.1f} | {2 * tp / max(1, 2 * tp + fp + fn):.3f} | {tp:.0f} | "
               f"{fp:.0f} | {fn:.0f} |")
+    _breakdown(per_scene, names)
     return 0
 
 
