@@ -17,10 +17,17 @@ the whole pinhole model to a clip's boxes:
   are cut by occlusion) and a weak prior on the focal length (:data:`PRIOR_HFOV_DEG`), which
   decides it only where the boxes cannot (a level camera, whose heights do not depend on it);
 * **confidence**: the spread of the fit over resamples of the clip's time blocks (seeded).
+  The strict calibration (``xvmatch calibrate``) also refuses a tilt that rests on the unknown
+  lens (refitted at each end of :data:`LENS_RANGE_DEG`: the heights rarely tell the focal
+  length, and the tilt moves with it by about 3 degrees per 10 of field of view at 30 degrees
+  down) and a view whose people are seen from too steeply above for their heights to tell the
+  tilt (:data:`MIN_UPRIGHT_ASPECT`).
 
 A nadir camera (a drone looking straight down) shows no such line: its boxes are the heads and
 shoulders seen from above, as wide as tall. It is recognised by the boxes' shape
-(:data:`NADIR_ASPECT`) and reported as such; its ground map is the image itself, up to scale.
+(:data:`NADIR_ASPECT`; the strict calibration asks the same of the boxes in the image's middle,
+:data:`MIDDLE_NADIR_ASPECT`) and reported as such; its ground map is the image itself, up to
+scale.
 
 The scale of everything (camera height, ground metres) rests on the people's mean height, so it
 is good to a few per cent; directions (tilt, roll, horizon) do not depend on it.
@@ -37,8 +44,13 @@ from xvmatch.geometry.camera import Camera, look_rotation
 
 __all__ = [
     "BODY_WIDTH",
+    "LENS_RANGE_DEG",
+    "MIDDLE_NADIR_ASPECT",
     "MIN_BLOCKS",
     "MIN_BOXES",
+    "MIN_ROW_SPREAD",
+    "MIN_TRACKED_ROW_SPREAD",
+    "MIN_UPRIGHT_ASPECT",
     "NADIR_ASPECT",
     "NADIR_TILT_DEG",
     "PERSON_HEIGHT",
@@ -61,6 +73,13 @@ PRIOR_HFOV_DEG = 70.0
 """Horizontal field of view (degrees) the focal length is drawn towards where the boxes cannot
 tell it: a phone's main camera, a drone's, a surveillance camera's (60-80)."""
 
+LENS_RANGE_DEG = (55.0, 85.0)
+"""The fields of view the prior stands for (phones' main cameras, drones', most surveillance
+cameras; the renders' too). Where the boxes do not tell the focal length (most
+clips: the heights hardly depend on it), the strict calibration refits the tilt with each end
+of this range held and refuses when either moves it more than :data:`MAX_TILT_STD_DEG`: the
+tilt then rests on the lens, which only the caller knows (``--hfov``)."""
+
 _PRIOR_LOG_STD = 0.4
 """Spread of that prior on ``log f`` (a factor 1.5)."""
 
@@ -76,6 +95,27 @@ STEEP_ASPECT = 1.6
 as looking down too: upright people seen from less than about 60 degrees below the horizontal
 are taller than that."""
 
+MIDDLE_NADIR_ASPECT = 1.2
+"""The strict calibration calls a view nadir (:data:`NADIR_ASPECT`) only where the boxes in
+the image's middle columns are this squat too: straight down, a person under the camera is a
+head and shoulders (the real CVMHAT drone views: 0.94-1.0, renders 0.6-1.15). An oblique view
+through a wide lens has squat boxes at its sides only, where its people lean."""
+
+MIN_UPRIGHT_ASPECT = 2.0
+"""The strict calibration refuses a view whose boxes in the image's middle columns have a
+median height over width below this: those people are seen from more than about 70 degrees
+below the horizontal (for people 1.72 m tall and 0.45 m across; wider boxes, arms out, read
+steeper and are refused sooner), their box heights are then mostly their bodies' width (which
+differs from person to person), and on renders the fit reads such a camera 3 to 9 degrees too
+shallow in most clips, the lens given or not (measured on 40 renders 55-90 degrees down)."""
+
+_MIDDLE = 0.2
+"""The middle columns: foot columns within this fraction of the image width of its centre."""
+
+_LENS_COST_RISE = 2e-4
+"""A lens held at an end of :data:`LENS_RANGE_DEG` that raises the fit's mean cost per box
+by more than this (about a 2 % rms height error) is ruled out by the boxes."""
+
 NADIR_TILT_DEG = 80.0
 """A fitted tilt steeper than this is reported as a nadir camera: the image is then the ground
 up to a similarity, within a few per cent."""
@@ -90,6 +130,13 @@ spread over resamples of them."""
 MIN_ROW_SPREAD = 0.15
 """The usable foot rows must spread over this fraction of the image height (between their 10th
 and 90th percentiles): people at one distance cannot tell where the horizon is."""
+
+MIN_TRACKED_ROW_SPREAD = 0.05
+"""The same where the people were followed (video mode, the strict calibration): each one's
+box grows and shrinks as they walk nearer and away, which tells the horizon over a narrower
+band; the spread over resamples (:data:`MAX_TILT_STD_DEG`, :data:`MAX_HORIZON_STD`) judges
+the rest. Measured on renders: rows over 5-15 % of the image height, tilt within 3 degrees
+given the lens in 17 of 18 (the other refused by that spread)."""
 
 MAX_TILT_STD_DEG = 3.0
 """A calibration whose tilt varies more than this over resamples of the clip is refused."""
@@ -233,19 +280,20 @@ def _to_ground(camera: Camera, pixels: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Boxes:
-    """The usable boxes of a clip: foot column ``u``, foot row ``v``, height ``h`` (pixels),
-    and the time block of each (for resampling)."""
+    """The usable boxes of a clip: foot column ``u``, foot row ``v``, height ``h`` and width
+    ``w`` (pixels), and the time block of each (for resampling)."""
 
     u: np.ndarray
     v: np.ndarray
     h: np.ndarray
+    w: np.ndarray
     block: np.ndarray
     track: np.ndarray
     n_tracks: int
 
     def take(self, index: np.ndarray) -> _Boxes:
-        return _Boxes(self.u[index], self.v[index], self.h[index], self.block[index],
-                      self.track[index], self.n_tracks)
+        return _Boxes(self.u[index], self.v[index], self.h[index], self.w[index],
+                      self.block[index], self.track[index], self.n_tracks)
 
 
 def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
@@ -282,12 +330,21 @@ def _usable(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
         long = counts >= _MIN_TRACK_BOXES
         number = np.cumsum(long) * long  # 1.. for long tracks, 0 for short ones
         track, n_tracks = number[inverse], int(long.sum()) + 1
-    out = _Boxes(u=x[ok] + 0.5 * w[ok], v=y[ok] + h[ok], h=h[ok], block=block, track=track,
-                 n_tracks=n_tracks)
+    out = _Boxes(u=x[ok] + 0.5 * w[ok], v=y[ok] + h[ok], h=h[ok], w=w[ok], block=block,
+                 track=track, n_tracks=n_tracks)
     if n_tracks > 1 and np.mean(track > 0) >= 0.5:
         # Enough people were followed: the others' boxes, of mixed heights, only blur the fit.
         out = out.take(np.flatnonzero(track > 0))
     return out
+
+
+def _middle_aspect(b: _Boxes, size: tuple[int, int]) -> float:
+    """Median height over width of the usable boxes in the image's middle columns (all of
+    them where fewer than 10 are there): how steeply the people under the image centre are
+    seen, without the lean of those at the sides."""
+    middle = np.abs(b.u - 0.5 * size[0]) < _MIDDLE * size[0]
+    pick = middle if middle.sum() >= 10 else np.ones_like(middle)
+    return float(np.median(b.h[pick] / b.w[pick]))
 
 
 def _heights(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> np.ndarray:
@@ -367,6 +424,14 @@ def _residuals(params: np.ndarray, b: _Boxes, size: tuple[int, int],
     prior = np.sqrt(_PRIOR_WEIGHT) * _SOFT_SCALE * (params[2] - np.log(prior_f)) / _PRIOR_LOG_STD
     heights = _SOFT_SCALE * (params[4:] - PERSON_HEIGHT) / _HEIGHT_STD
     return np.concatenate([r, [prior], heights])
+
+
+def _data_cost(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> float:
+    """The fit's soft-L1 cost without the focal length's prior (that of the boxes and of the
+    people's heights)."""
+    r = _residuals(params, b, size, float(np.exp(params[2])))
+    z = (r / _SOFT_SCALE) ** 2
+    return float(np.sum(_SOFT_SCALE ** 2 * (np.sqrt(1.0 + z) - 1.0)))
 
 
 def _sparsity(b: _Boxes) -> np.ndarray:
@@ -512,7 +577,9 @@ def calibrate_from_people(
     Raises:
         CalibrationError: too few usable boxes, foot rows in too narrow a band, or a tilt or
             horizon that the clip does not pin down (:data:`MAX_TILT_STD_DEG`,
-            :data:`MAX_HORIZON_STD`); the message says what to give instead.
+            :data:`MAX_HORIZON_STD`); with ``strict``, also people seen from too steeply above
+            (:data:`MIN_UPRIGHT_ASPECT`) and, without ``hfov_deg``, a tilt that rests on the
+            lens (:data:`LENS_RANGE_DEG`). The message says what to give instead.
     """
     frames = np.asarray(frames, dtype=np.int64).reshape(-1)
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
@@ -532,15 +599,24 @@ def calibrate_from_people(
             f"confidence; {give}")
     inside = (w > 0) & (h > 0)
     aspect = float(np.median(h[inside] / w[inside]))
-    if aspect < NADIR_ASPECT:
+    middle = _middle_aspect(b, size)
+    if aspect < NADIR_ASPECT and (not strict or middle < MIDDLE_NADIR_ASPECT):
         return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
+    if strict and middle < MIN_UPRIGHT_ASPECT:
+        raise CalibrationError(
+            f"{name}: its people are seen from steeply above (the median height over width of "
+            f"the boxes in the image's middle is {middle:.2f}, upright people read from "
+            f"{MIN_UPRIGHT_ASPECT:g}): their boxes' heights are then mostly their width and do "
+            f"not tell the tilt within {MAX_TILT_STD_DEG:g} degrees, nor whether it looks straight "
+            "down; give its camera with --cameras")
     try:
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread)
+        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread,
+                         lens=strict)
     except CalibrationError:
-        if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
-            return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
         if strict:
             raise
+        if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
+            return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
         calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict=False,
                          measure=spread)
     if calib.tilt_deg > NADIR_TILT_DEG:
@@ -562,13 +638,17 @@ def _settled(calib: PeopleCalibration) -> PeopleCalibration:
 
 
 def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
-             seed: int, name: str, strict: bool = True, measure: bool = True
-             ) -> PeopleCalibration:
+             seed: int, name: str, strict: bool = True, measure: bool = True,
+             lens: bool = False) -> PeopleCalibration:
     """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`);
-    ``measure``: its spread over resamples (else NaN, and the fit is not judged loose)."""
+    ``measure``: its spread over resamples (else NaN, and the fit is not judged loose);
+    ``lens`` (the strict calibration): without ``hfov_deg``, refuse a tilt that rests on the
+    lens (:data:`LENS_RANGE_DEG`); followed people may stay within a narrower band of rows
+    (:data:`MIN_TRACKED_ROW_SPREAD`)."""
     give = "give its camera with --cameras (or a longer clip with more people)"
     lo, hi = np.percentile(b.v, [10, 90])
-    if strict and hi - lo < MIN_ROW_SPREAD * size[1]:
+    min_rows = MIN_TRACKED_ROW_SPREAD if lens and b.n_tracks > 1 else MIN_ROW_SPREAD
+    if strict and hi - lo < min_rows * size[1]:
         raise CalibrationError(
             f"{name}: the people's feet stay within {hi - lo:.0f} rows "
             f"({100 * (hi - lo) / size[1]:.0f} % of the image height), too few distances to find "
@@ -599,7 +679,31 @@ def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | 
             f"{name}: the boxes do not pin the camera down (tilt {calib.tilt_deg:.1f} +- "
             f"{calib.tilt_std_deg:.1f} degrees, horizon +- {calib.horizon_std_px:.0f} px over the "
             f"clip); give --hfov if you know the field of view, or {give}")
+    if lens and not hfov_deg:
+        tilts = _lens_tilts(b, size, prior_f, params)
+        if tilts and max(abs(t - calib.tilt_deg) for t in tilts) > MAX_TILT_STD_DEG:
+            ends = " to ".join(f"{t:.1f}" for t in sorted(tilts))
+            raise CalibrationError(
+                f"{name}: the boxes do not tell the field of view and the tilt rests on it "
+                f"({calib.tilt_deg:.1f} degrees with a {calib.hfov_deg:.0f}-degree lens, {ends} "
+                f"with {LENS_RANGE_DEG[0]:g}-{LENS_RANGE_DEG[1]:g}); give --hfov (the lens's "
+                "horizontal field of view in degrees), or its camera with --cameras")
     return calib
+
+
+def _lens_tilts(b: _Boxes, size: tuple[int, int], prior_f: float, params: np.ndarray
+                ) -> list[float]:
+    """The tilt (degrees) refitted with the focal length held at each end of
+    :data:`LENS_RANGE_DEG`, started from the fit ``params``; an end whose fit is worse by
+    :data:`_LENS_COST_RISE` a box is ruled out by the boxes and left out."""
+    base = _data_cost(params, b, size)
+    out = []
+    for hfov in LENS_RANGE_DEG:
+        f = 0.5 * size[0] / np.tan(np.radians(hfov) / 2.0)
+        p = _fit(b, size, prior_f, [params], f)
+        if (_data_cost(p, b, size) - base) / len(b.h) <= _LENS_COST_RISE:
+            out.append(float(np.degrees(p[0])))
+    return out
 
 
 def _resample_spread(b: _Boxes, size: tuple[int, int], prior_f: float, params: np.ndarray,
