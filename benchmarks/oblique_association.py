@@ -42,8 +42,8 @@ action camera, 45 55 for a narrow one. The from-people rows still assume 70 degr
 true lens`` (the handheld field of view known, the top camera from its people) and
 ``registered, from people, lens chosen`` (the field of view chosen from the people,
 :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, then the same run); each scene's line gives the
-true and the chosen lens with each candidate's pairing score, and the summary the seconds the
-choice took.
+true and the chosen lens with each candidate's pairing score and chance score (``lens:in/chance``),
+and the summary the seconds the choice took.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120 --choose-lens
 """
@@ -240,7 +240,8 @@ def main(argv: list[str] | None = None) -> int:
                 choice = _lens(top, hor, options, frames, calib)
                 choice_s += time.perf_counter() - t1
                 lens = choice.hfov_deg
-                lens_scores = " ".join(f"{h:.0f}:{v:.1f}" for h, v in choice.scores.items())
+                lens_scores = " ".join(f"{h:.0f}:{v:.1f}/{choice.chance[h]:.1f}"
+                                       for h, v in choice.scores.items())
                 # The same run as the consensus row's when the prior is kept.
                 chosen = voted if lens == options.hor_hfov_deg else run_ground_association(
                     top, hor, replace(voting, hor_hfov_deg=lens), frames, calib).pairs

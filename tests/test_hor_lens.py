@@ -47,7 +47,7 @@ def _clip(hfov_deg: float, seed: int = 0, n_frames: int = 6
 
 @pytest.fixture(scope="module")
 def wide() -> LensChoice:
-    frames, tops, boxes = _clip(110.0)
+    frames, tops, boxes = _clip(110.0, n_frames=20)
     return choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0)
 
 
@@ -64,23 +64,41 @@ def test_a_phone_keeps_the_prior() -> None:
 
 
 def test_same_input_same_choice(wide: LensChoice) -> None:
-    frames, tops, boxes = _clip(110.0)
+    frames, tops, boxes = _clip(110.0, n_frames=20)
     again = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0)
     assert again == wide
 
 
 def test_a_small_lead_keeps_the_prior() -> None:
-    frames, tops, boxes = _clip(110.0)
-    choice = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, margin=100.0, max_frames=2)
-    assert choice.hfov_deg == 70.0
+    frames, tops, boxes = _clip(110.0, seed=1, n_frames=20)
+    choice = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, margin=100.0)
+    assert choice.scores[70.0] > choice.chance[70.0] and choice.hfov_deg == 70.0
+
+
+def test_lenses_are_compared_above_chance(wide: LensChoice) -> None:
+    """A wide lens squeezes the handheld map, which then pairs more people by chance: each
+    lens is also scored against its mirrored map's pairing."""
+    assert set(wide.chance) == set(wide.scores)
+    assert all(v > 0.0 for v in wide.chance.values())  # a crowd pairs somebody by chance
+    above = {h: wide.scores[h] - wide.chance[h] for h in wide.scores}
+    # Above chance, the 70-degree reading of a 110-degree camera pairs nobody.
+    assert above[70.0] < 0.0 < above[110.0]
 
 
 def test_another_lens_only_with_a_clear_lead() -> None:
+    no_chance = dict.fromkeys((50.0, 70.0, 90.0, 110.0), 0.0)
     scores = {70.0: 50.0, 90.0: 60.0, 110.0: 65.0}
-    assert _pick(scores, 70.0, 1.3) == 70.0  # 65 is not above 1.3 x 50
+    assert _pick(scores, no_chance, 70.0, 1.3) == 70.0  # 65 is not above 1.3 x 50
     scores[110.0] = 65.5
-    assert _pick(scores, 70.0, 1.3) == 110.0
-    assert _pick({50.0: 80.0, 70.0: 50.0, 90.0: 80.0}, 70.0, 1.3) == 50.0  # a tie: narrower
+    assert _pick(scores, no_chance, 70.0, 1.3) == 110.0
+    assert _pick({50.0: 80.0, 70.0: 50.0, 90.0: 80.0}, no_chance, 70.0, 1.3) == 50.0  # a tie
+    # A lead that chance explains (the wide lens pairs more in all, not above chance) ...
+    assert _pick({70.0: 50.0, 110.0: 70.0}, {70.0: 30.0, 110.0: 55.0}, 70.0, 1.3) == 70.0
+    # ... and one it does not (30 above chance against 20, and 70 against 50 in all).
+    assert _pick({70.0: 50.0, 110.0: 70.0}, {70.0: 30.0, 110.0: 40.0}, 70.0, 1.3) == 110.0
+    # The prior pairs nothing above chance: the other lens must pair somebody above it.
+    assert _pick({70.0: 20.0, 110.0: 30.0}, {70.0: 22.0, 110.0: 27.0}, 70.0, 1.3) == 110.0
+    assert _pick({70.0: 20.0, 110.0: 30.0}, {70.0: 22.0, 110.0: 29.5}, 70.0, 1.3) == 70.0
 
 
 def test_no_people_keeps_the_prior() -> None:
