@@ -111,10 +111,14 @@ def test_auto_from_the_command_line(scene, tmp_path, capsys) -> None:
     assert main([*base, "--hor-hfov", chosen, "--out", str(tmp_path / "g.csv")]) == 0
     assert "handheld lens" not in capsys.readouterr().err
     assert (tmp_path / "a.csv").read_text() == (tmp_path / "g.csv").read_text()
-    # Without auto nothing changes: the default is 70 degrees, no lens chosen or said.
+    # auto is the default; a lens given is used as it is, nothing chosen or said.
     assert main([*base, "--out", str(tmp_path / "d.csv")]) == 0
+    assert [line for line in capsys.readouterr().err.splitlines()
+            if "handheld lens" in line] == lines
+    assert (tmp_path / "d.csv").read_text() == (tmp_path / "a.csv").read_text()
+    assert main([*base, "--hor-hfov", "70", "--out", str(tmp_path / "p.csv")]) == 0
     assert "handheld lens" not in capsys.readouterr().err
-    assert (tmp_path / "d.csv").read_text() != (tmp_path / "a.csv").read_text()
+    assert (tmp_path / "p.csv").read_text() != (tmp_path / "a.csv").read_text()
 
 
 @pytest.fixture(scope="module")

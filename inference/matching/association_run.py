@@ -108,8 +108,8 @@ class AssociationOptions:
         top_boxes, hor_boxes: the box files, as messages name them.
         top_view: ``auto``, ``nadir`` or ``oblique``.
         top_image_size: the top view's image size, or None (``auto`` may guess it).
-        hor_hfov: the horizontal camera's field of view, degrees, or ``"auto"``: chosen from
-            the people (the oblique path;
+        hor_hfov: the horizontal camera's field of view, degrees, or ``"auto"`` (the
+            default, as ``--hor-hfov``): chosen from the people (the oblique path;
             :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`).
         fps: the frame rate (the oblique path).
         learned: the learned matchers, or None: the handcrafted search.
@@ -128,7 +128,7 @@ class AssociationOptions:
     hor_boxes: str = "the horizontal-view boxes"
     top_view: str = "auto"
     top_image_size: tuple[int, int] | None = None
-    hor_hfov: float | str = 70.0
+    hor_hfov: float | str = "auto"
     fps: float = 30.0
     learned: LearnedChoice | None = None
 

@@ -53,9 +53,9 @@ def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
     p.add_argument("--top-image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help="the top view's image size, 8..65536 a side; oblique needs it, auto "
                    "takes the smallest common video size holding the top boxes")
-    p.add_argument("--hor-hfov", default=70.0, metavar="DEG", type=_hor_hfov,
-                   help="oblique: the horizontal camera's field of view, degrees in [20, 150] "
-                   "(default 70), or auto: chosen from its people (a wide lens not known)")
+    p.add_argument("--hor-hfov", default="auto", metavar="DEG", type=_hor_hfov,
+                   help="oblique: the horizontal camera's field of view, degrees in [20, 150], "
+                   "or auto (default: 70 unless its people pair clearly better at 90 or 110)")
     p.add_argument("--fps", default=30.0,
                    type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
                    help="oblique: the frame rate, in [0.1, 1000] (default 30)")
