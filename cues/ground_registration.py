@@ -220,9 +220,9 @@ def _step_motion(before: np.ndarray, now: np.ndarray) -> np.ndarray:
 
 def map_motion(frames: list[int], tops: list[np.ndarray], ids: list[np.ndarray], fps: float
                ) -> list[np.ndarray | None]:
-    """Per frame, how its top map lies on the previous frame's: ``(3,)`` (tx, ty, angle) taking
-    frame k's map onto frame k-1's, or None (the first frame, or fewer than
-    :data:`_MOTION_MIN_SHARED` people shared).
+    """Per frame (``frames`` ascending), how its top map lies on the previous frame's: ``(3,)``
+    (tx, ty, angle) taking frame k's map onto frame k-1's, or None (the first frame, or fewer
+    than :data:`_MOTION_MIN_SHARED` people shared).
 
     A drone that drifts and turns moves its whole ground map; the same people (the top view's own
     track ids, video mode) in two consecutive frames tell how, up to their own walking
@@ -239,10 +239,14 @@ def map_motion(frames: list[int], tops: list[np.ndarray], ids: list[np.ndarray],
         steps.append(None if len(both) < _MOTION_MIN_SHARED else _step_motion(
             np.asarray(tops[k - 1])[[b for _, b in both]],
             np.asarray(tops[k])[[a for a, _ in both]]))
+    # The frames within the window, found by bisection (a little wider), then tested exactly:
+    # linear in the clip's length rather than quadratic.
+    lows = np.searchsorted(times, times - 2 * MOTION_WINDOW_S, side="left")
+    highs = np.searchsorted(times, times + 2 * MOTION_WINDOW_S, side="right")
     out: list[np.ndarray | None] = [None]
     for k in range(1, len(tops)):
-        near = [j for j, m in enumerate(steps)
-                if m is not None and abs(times[j] - times[k]) <= MOTION_WINDOW_S]
+        near = [j for j in range(lows[k], highs[k])
+                if steps[j] is not None and abs(times[j] - times[k]) <= MOTION_WINDOW_S]
         elapsed = sum(times[j] - times[j - 1] for j in near)
         out.append(None if steps[k] is None or elapsed <= 0 else np.round(
             np.sum([steps[j] for j in near], axis=0) * ((times[k] - times[k - 1]) / elapsed),
