@@ -100,8 +100,7 @@ class LensChoice:
     def registered(self) -> bool:
         """Whether any candidate's registration paired somebody above chance
         (:data:`MIN_PAIRING`)."""
-        return max((v - self.chance.get(h, 0.0) for h, v in self.scores.items()),
-                   default=0.0) >= MIN_PAIRING
+        return max(_above(self.scores, self.chance).values(), default=0.0) >= MIN_PAIRING
 
 
 def _subsample(n: int, max_frames: int) -> list[int]:
@@ -200,6 +199,12 @@ def chance_score(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarra
     return pairing_score([scale * t for t in tops], mirrored, frames, poses)
 
 
+def _above(scores: dict[float, float], chance: dict[float, float]) -> dict[float, float]:
+    """Each lens's pairing score above chance (:func:`chance_score`; none recorded: 0), rounded
+    as the scores are."""
+    return {h: round(v - chance.get(h, 0.0), _DIGITS) for h, v in scores.items()}
+
+
 def _pick(scores: dict[float, float], chance: dict[float, float], prior: float,
           margin: float) -> float:
     """The lens chosen from the candidates' rounded pairing scores and chance scores
@@ -207,7 +212,7 @@ def _pick(scores: dict[float, float], chance: dict[float, float], prior: float,
     prior, then the narrower), where it pairs more than ``margin`` times what the prior pairs,
     both in all and above chance (where the prior pairs anything above chance), and somebody
     above chance (:data:`MIN_PAIRING`); else the prior."""
-    above = {h: round(scores[h] - chance.get(h, 0.0), _DIGITS) for h in scores}
+    above = _above(scores, chance)
     best = max(above, key=lambda h: (above[h], -abs(h - prior), -h))
     return (best if scores[best] > round(margin * scores[prior], _DIGITS)
             and above[best] > round(margin * max(above[prior], 0.0), _DIGITS)

@@ -18,10 +18,10 @@ view's boxes say it is oblique).
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
 
-With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``) the handheld camera's field of view is chosen
-from the clip's people before the registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`):
-an opt-in for a lens not known, possibly wide, not the default (on ordinary 60-80 degree lenses
-it can cost a few points where nothing registers).
+With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``, the commands' default; these options keep
+70 degrees unless told) the handheld camera's field of view is chosen from the clip's people
+before the registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`: 70 unless a wider lens
+pairs clearly more people, in all and above chance).
 """
 
 from __future__ import annotations
