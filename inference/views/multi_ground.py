@@ -295,7 +295,8 @@ def _cost(a: np.ndarray | None, b: np.ndarray | None, n: tuple[int, int],
 
 def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                     calibration: PeopleCalibration, options: MultiGroundOptions,
-                    top_tracks: Mapping[int, int] | None = None) -> dict[int, FrameProblem]:
+                    top_tracks: Mapping[int, int] | None = None,
+                    tops: Mapping[int, np.ndarray] | None = None) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame of ``frames`` (module docstring).
 
     Args:
@@ -307,11 +308,13 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
             :func:`choose_lenses`, unsaid), the frame rate.
         top_tracks: the top view's ``{row id: track id}`` (video mode): the top map's motion
             is then taken out of each registration (:func:`_registered`).
+        tops: the top view's people on its map for ``frames`` (:func:`_top_grounds`), when
+            already built.
     """
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
-    tops = _top_grounds(views, frames, calibration)
+    tops = _top_grounds(views, frames, calibration) if tops is None else tops
     options = _with_lenses(views, frames, calibration, options, tops)[0]
     placed = [{f: p for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
@@ -339,11 +342,12 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     and told to ``note`` in one line (:func:`lenses_note`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
-    options, lenses = _with_lenses(aligned, frames, calibration, options)
+    tops = _top_grounds(aligned, frames, calibration)  # built once: the lenses, the problems
+    options, lenses = _with_lenses(aligned, frames, calibration, options, tops)
     if lenses and note is not None:
         note(lenses_note(lenses))
     problems = ground_problems(aligned, frames, calibration, options,
-                               None if tracks is None else tracks[0])
+                               None if tracks is None else tracks[0], tops)
     if tracks is not None:
         from xvmatch.inference.views.multi_ego_video import video_people
 
