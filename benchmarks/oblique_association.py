@@ -32,6 +32,16 @@ before :func:`~xvmatch.cues.ground_registration.register_with_scale`); ``--no-to
 tracklet-consensus row without the top map's own motion taken out of the registration (as before
 :func:`~xvmatch.cues.ground_registration.map_motion`).
 
+``--top-pitch LO HI`` and ``--overlap LO HI``: the renders' top pitch (default 20-90 degrees)
+and each view's share of people the other sees (default 0.3-1), e.g. a scenario like the
+issue's hidden set (a low oblique drone, about half of each view's people in the other):
+
+    .venv/bin/python benchmarks/oblique_association.py --top-pitch 20 45 --overlap 0.35 0.65
+
+``--top-pitch-rate LO HI``: a drone whose gimbal tilts at LO-HI degrees/s where it stands (the
+drawn pitch is the clip's middle one). The top camera is still calibrated once for the clip;
+the ``true cameras`` row and each scene's printed pitch take the first frame's camera.
+
 ``--hor-hfov LO HI``: the renders' handheld field of view, drawn per scene in LO-HI degrees
 (default 60 80, :class:`~xvmatch.datasets.oblique_scenes.ObliqueSceneConfig`); e.g. 90 120 for an
 action camera, 45 55 for a narrow one. The from-people rows still assume 70 degrees.
@@ -144,11 +154,15 @@ def _breakdown(scenes: list[tuple[float, float, float, dict]], names: tuple[str,
 
 
 def add_drone_arguments(p: argparse.ArgumentParser) -> None:
-    """``--top-drift``, ``--top-yaw-rate`` (a moving drone) and ``--no-top-motion``."""
+    """``--top-drift``, ``--top-yaw-rate``, ``--top-pitch-rate`` (a moving drone) and
+    ``--no-top-motion``."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
                    metavar=("LO", "HI"), help="and turns at LO-HI degrees/s")
+    p.add_argument("--top-pitch-rate", type=float, nargs=2, default=(0.0, 0.0),
+                   metavar=("LO", "HI"), help="and tilts up or down at LO-HI degrees/s (a "
+                   "gimbal; the drawn pitch is the clip's middle one)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
@@ -161,7 +175,8 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
     if args.no_top_motion:
         gr.map_motion = lambda frames, tops, ids, fps: [None] * len(tops)
     return ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
-                              top_yaw_rate=tuple(args.top_yaw_rate), **settings)
+                              top_yaw_rate=tuple(args.top_yaw_rate),
+                              top_pitch_rate=tuple(args.top_pitch_rate), **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -179,13 +194,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
                    help="the handheld camera's horizontal field of view in the renders, LO-HI "
                    "degrees (default 60 80)")
+    p.add_argument("--top-pitch", type=float, nargs=2, default=(20.0, 90.0),
+                   metavar=("LO", "HI"), help="the top camera's pitch in the renders, LO-HI "
+                   "degrees below the horizon (default 20 90)")
+    p.add_argument("--overlap", type=float, nargs=2, default=(0.3, 1.0), metavar=("LO", "HI"),
+                   help="each view's share of people the other sees, drawn in LO-HI (default "
+                   "0.3 1)")
     p.add_argument("--choose-lens", action="store_true",
                    help="add the rows with the true and the chosen handheld lens (from people, "
                    "tracklet consensus)")
     args = p.parse_args(argv)
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
-    config = drone_config(args, hor_hfov=tuple(args.hor_hfov))
+    config = drone_config(args, hor_hfov=tuple(args.hor_hfov), top_pitch=tuple(args.top_pitch),
+                          overlap=tuple(args.overlap))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus")
     if args.choose_lens:

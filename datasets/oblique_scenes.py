@@ -8,7 +8,8 @@ are seen by
   a low building camera or oblique drone, the horizon in or above the image; 90: a nadir
   drone), ``top_height`` metres up and ``height / tan(pitch)`` away horizontally, so that its
   optical axis meets the ground near the centre of the shared area. It is static by default;
-  ``top_drift_speed`` and ``top_yaw_rate`` make it drift and yaw slowly (a drone);
+  ``top_drift_speed`` and ``top_yaw_rate`` make it drift and yaw slowly (a drone), and
+  ``top_pitch_rate`` tilts it steadily up or down about its drawn pitch (a drone's gimbal);
 * one or more HORIZONTAL cameras (``"hor1"``, ``"hor2"``, ...) held at 1.4-1.7 m,
   ``hor_reach`` in front of a walker (their holder) who never appears in their own view. The
   holder walks slowly; the camera looks at the shared group (a smoothed gaze at its centroid),
@@ -132,6 +133,9 @@ class ObliqueSceneConfig:
         top_drift_speed: horizontal drift speed of the top camera (m/s), direction uniform;
             (0, 0) keeps it static.
         top_yaw_rate: yaw rate of the top camera (degrees per second), sign uniform.
+        top_pitch_rate: pitch rate of the top camera (degrees per second), sign uniform; the
+            drawn pitch is the clip's middle one, the camera's position does not change (a
+            gimbal tilting). (0, 0), the default, keeps the pitch and every draw as before.
         hor_sizes: image sizes a handheld camera's is drawn from (uniformly).
         hor_hfov: horizontal field of view of a handheld camera.
         hor_height: height of a handheld camera (at most its holder's height - 0.1).
@@ -169,6 +173,7 @@ class ObliqueSceneConfig:
     top_hfov: tuple[float, float] = (55.0, 85.0)
     top_drift_speed: tuple[float, float] = (0.0, 0.0)
     top_yaw_rate: tuple[float, float] = (0.0, 0.0)
+    top_pitch_rate: tuple[float, float] = (0.0, 0.0)
     hor_sizes: tuple[tuple[int, int], ...] = ((3640, 2048), (1920, 1080))
     hor_hfov: tuple[float, float] = (60.0, 80.0)
     hor_height: tuple[float, float] = (1.4, 1.7)
@@ -206,6 +211,7 @@ class ObliqueSceneConfig:
         pair("top_hfov", 1.0, 170.0)
         pair("top_drift_speed", 0.0)
         pair("top_yaw_rate", 0.0)
+        pair("top_pitch_rate", 0.0, 30.0)
         pair("hor_hfov", 1.0, 170.0)
         pair("hor_height", 0.5)
         pair("hor_extra_distance", 0.0)
@@ -442,13 +448,16 @@ def _group_side(n: int, drawn: float, min_sep: float) -> float:
 
 
 def _top_camera(yaw: float, pitch: float, height: float, aim: np.ndarray, hfov: float,
-                size: tuple[int, int], shift: np.ndarray, dyaw: float) -> Camera:
-    """The top camera looking at ground point ``aim``, moved by ``shift`` and yawed by ``dyaw``."""
+                size: tuple[int, int], shift: np.ndarray, dyaw: float,
+                dpitch: float = 0.0) -> Camera:
+    """The top camera looking at ground point ``aim``, moved by ``shift``, yawed by ``dyaw``
+    and pitched by ``dpitch`` where it stands (kept within 5-90 degrees down)."""
     look = np.array([np.cos(yaw), np.sin(yaw)])
     distance = height / np.tan(pitch) if pitch < np.pi / 2 else 0.0
     c = np.array([*(aim - distance * look + shift), height])
+    tilt = float(np.clip(pitch + dpitch, np.radians(5.0), np.pi / 2))
     return Camera(K=intrinsics_from_fov(size[0], size[1], hfov),
-                  R=look_rotation(yaw + dyaw, pitch), c=c, width=size[0], height=size[1])
+                  R=look_rotation(yaw + dyaw, tilt), c=c, width=size[0], height=size[1])
 
 
 def _check_frames(n_frames: int) -> list[int]:
@@ -592,6 +601,14 @@ def _place_top_camera(
         1.0 if rng.random() < 0.5 else -1.0)
     side = float(rng.uniform(*config.area))
     aim = rng.uniform(-0.2, 0.2, size=2) * side
+    pitch_rate = 0.0
+    if config.top_pitch_rate[1] > 0:
+        # From a child generator: the scene's own draws stay those of the same scene with a
+        # static camera (a comparison on the same people), and of scenes drawn before.
+        gimbal = rng.spawn(1)[0]
+        pitch_rate = float(np.radians(gimbal.uniform(*config.top_pitch_rate))) * (
+            1.0 if gimbal.random() < 0.5 else -1.0)
+    middle = 0.5 * (times[0] + times[-1]) if len(times) else 0.0
     shift = drift * times[:, None] * np.array([np.cos(drift_dir), np.sin(drift_dir)])
     checks = _check_frames(n_frames)
     min_side = _group_side(n_shared, 0.0, config.min_separation)
@@ -599,7 +616,7 @@ def _place_top_camera(
 
     def top_at(f: int) -> Camera:
         return _top_camera(yaw, pitch, height, aim, hfov, config.top_size, shift[f],
-                           yaw_rate * times[f])
+                           yaw_rate * times[f], pitch_rate * (times[f] - middle))
 
     for _ in range(200):
         if _inside([top_at(f) for f in checks], _square_points(np.zeros(2), side),

@@ -83,6 +83,25 @@ def test_layout_names_and_holders(two_hor):
                for c in still)
 
 
+def _pitch(camera: Camera) -> float:
+    return float(np.degrees(np.arcsin(-camera.R[2, 2])))
+
+
+def test_tilting_gimbal_turns_about_the_middle_pitch():
+    """``top_pitch_rate``: the top camera stands still and tilts steadily, the drawn pitch in
+    the clip's middle."""
+    tilting = _scene(ObliqueSceneConfig(top_pitch=(40.0, 50.0), top_pitch_rate=(1.0, 2.0)),
+                     5, 61)
+    cams = tilting.top_cameras
+    pitches = np.array([_pitch(c) for c in cams])
+    rates = np.diff(pitches) * tilting.config.fps
+    assert np.allclose(rates, rates[0], atol=1e-6) and 1.0 - 1e-6 <= abs(rates[0]) <= 2.0 + 1e-6
+    assert 40.0 - 1e-6 <= pitches[30] <= 50.0 + 1e-6
+    assert all(np.array_equal(c.c, cams[0].c) for c in cams)  # it tilts where it stands
+    with pytest.raises(ValueError, match="top_pitch_rate"):
+        ObliqueSceneConfig(top_pitch_rate=(2.0, 1.0))
+
+
 def test_boxes_inside_the_image(clips, two_hor):
     for scene in [*clips, two_hor]:
         for records, cams in _views(scene):
