@@ -17,7 +17,12 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
   decided by its neighbours; the whole clip is registered with the top map at a few scales and
   the best kept (:func:`register_with_scale`);
 * **association**: under the chosen pose, Hungarian on the ground distances with a
-  non-association distance (:data:`RADIUS`).
+  non-association distance (:data:`RADIUS`), stretched along each horizontal person's ray by
+  :data:`RANGE_SPREAD` of their distance: a distance read from a box height errs along the ray
+  (a person 10 % taller is put 10 % nearer), a bearing hardly. The registration keeps the round
+  :data:`RADIUS` (stretched, it let wrong poses explain far people too: on the renders'
+  scenes of seed 0 it lost 6 CVIDF1 points; in the association alone it gained 2-3 on seeds 0
+  and 1).
 
 This generalises the CVMHAT search over the camera location O and orientation theta (Sec. 3 of
 the CVMHAT paper) to a camera that is not among the top view's people and a top view that is not
@@ -35,6 +40,7 @@ __all__ = [
     "KEEP",
     "MAP_SCALES",
     "RADIUS",
+    "RANGE_SPREAD",
     "SCALE_MARGIN",
     "FramePose",
     "associate_on_ground",
@@ -48,6 +54,12 @@ __all__ = [
 
 RADIUS = 1.5
 """Metres: a horizontal person mapped farther than this from every top person explains none."""
+
+RANGE_SPREAD = 0.1
+"""Relative spread of a horizontal person's distance read from their box height (people are
+1.5-1.95 m tall, boxes cut by occlusion): along the camera's ray a mapped person may lie this
+part of their distance away from their top-view partner (never less than :data:`RADIUS` / 2),
+across it :data:`RADIUS` / 2 (the bearing, from the box's column, is sharp)."""
 
 KEEP = 24
 """Pose hypotheses kept per frame for the choice over time."""
@@ -115,6 +127,35 @@ def _rotations(headings: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (H, 2, 2)
 
 
+_SIGMA = 0.5 * RADIUS
+"""Metres: the spread of a mapped person across their ray (and along it, at least)."""
+
+_GATE = RADIUS / _SIGMA
+"""A mapped person and a top person farther apart than this many spreads explain nothing."""
+
+
+def _range_spread(hor: np.ndarray) -> np.ndarray:
+    """``(M,)`` spread along the ray of each horizontal person ``(M, 2)`` (its own map):
+    :data:`RANGE_SPREAD` of their distance, at least :data:`_SIGMA`."""
+    return np.maximum(_SIGMA, RANGE_SPREAD * np.hypot(hor[:, 0], hor[:, 1]))
+
+
+def _ray_offsets(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray,
+                 spread: np.ndarray) -> np.ndarray:
+    """Squared offsets ``(..., M, N)`` of top people ``(N, 2)`` from mapped horizontal people
+    ``(..., M, 2)``, in spreads: along each one's ray (``rays`` ``(..., M, 2)``, from the
+    camera to them on the top map) over ``spread`` ``(M,)``, across it over :data:`_SIGMA`
+    (a distance from a box height errs along the ray, a bearing hardly). One coordinate at a
+    time: no ``(..., M, N, 2)`` temporary."""
+    unit = rays / np.maximum(np.hypot(rays[..., 0], rays[..., 1]), 1e-9)[..., None]
+    ux, uy = unit[..., 0, None], unit[..., 1, None]
+    dx = top[:, 0] - mapped[..., 0, None]
+    dy = top[:, 1] - mapped[..., 1, None]
+    along = (dx * ux + dy * uy) / spread[:, None]
+    across = (dy * ux - dx * uy) / _SIGMA
+    return along * along + across * across
+
+
 def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
                     ) -> tuple[np.ndarray, np.ndarray]:
     """The best poses ``(K, 3)`` (x, y, heading) of the horizontal camera on the top map for
@@ -139,7 +180,7 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
     dx = mapped[:, :, None, 0] - top[None, None, :, 0]  # (P, M, N), one coordinate at a time:
     dy = mapped[:, :, None, 1] - top[None, None, :, 1]  # no (P, M, N, 2) temporary
     d2 = dx * dx + dy * dy
-    explained = np.exp(-0.5 * d2.min(axis=2) / (0.5 * RADIUS) ** 2).sum(axis=1)
+    explained = np.exp(-0.5 * d2.min(axis=2) / _SIGMA**2).sum(axis=1)
     # Top people in the horizontal camera's view (bearing within the half field of view, as far
     # as its people reach) that no horizontal person explains.
     rel = top[None, :, :] - centres[:, None, :]  # (P, N, 2)
@@ -352,13 +393,16 @@ def on_top_map(hor: np.ndarray, pose: FramePose) -> np.ndarray:
 
 def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose) -> np.ndarray:
     """Pairs ``(P, 2)`` (top index, horizontal index) under the pose: Hungarian on the ground
-    distances, pairs farther than :data:`RADIUS` left unmatched."""
+    offsets in spreads (:data:`RADIUS` / 2 across each horizontal person's ray, :data:`RANGE_SPREAD`
+    of their distance along it, at least :data:`RADIUS` / 2), pairs farther than two spreads
+    left unmatched (:data:`RADIUS` for people near the camera)."""
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
         return np.zeros((0, 2), dtype=np.int64)
     mapped = on_top_map(hor, pose)
-    d = np.hypot(*(top[:, None, :] - mapped[None, :, :]).transpose(2, 0, 1))
-    cost = np.where(d < RADIUS, d, 2 * RADIUS)
+    rays = mapped - pose.centre
+    d = np.sqrt(_ray_offsets(top, mapped, rays, _range_spread(hor))).T  # (N, M), in spreads
+    cost = np.where(d < _GATE, d, 2 * _GATE)
     rows, cols = linear_sum_assignment(cost)
-    ok = d[rows, cols] < RADIUS
+    ok = d[rows, cols] < _GATE
     return np.column_stack([rows[ok], cols[ok]]).astype(np.int64)

@@ -146,3 +146,21 @@ def test_the_top_maps_motion_is_taken_out_of_the_jumps() -> None:
     moved = gr.register_sequence([1, 2], cands, fps=10.0, motions=[None, motion])
     assert np.allclose(still[1].centre, true1[:2])
     assert np.allclose(moved[1].centre, true2[:2]) and moved[1].heading == pytest.approx(true2[2])
+
+
+def test_a_far_person_pairs_along_their_ray_not_across_it() -> None:
+    """A distance from a box height errs along the camera's ray: 30 m away, a person mapped
+    2.5 m short of their top-view partner still pairs, one 2.5 m to the side does not; near
+    the camera the round :data:`RADIUS` holds both ways."""
+    pose = gr.FramePose(1, np.array([0.0, 0.0]), 0.0, 0.0)  # at the origin, looking along +x
+    top = np.array([[30.0, 0.0]])
+    assert gr.associate_on_ground(top, np.array([[27.5, 0.0]]), pose).tolist() == [[0, 0]]
+    assert gr.associate_on_ground(top, np.array([[30.0, 2.5]]), pose).tolist() == []
+    near = np.array([[5.0, 0.0]])
+    assert gr.associate_on_ground(near, np.array([[3.6, 0.0]]), pose).tolist() == [[0, 0]]
+    assert gr.associate_on_ground(near, np.array([[3.4, 0.0]]), pose).tolist() == []
+    assert gr.associate_on_ground(near, np.array([[5.0, 1.6]]), pose).tolist() == []
+    # Two people along one ray: each goes to the partner nearest along it.
+    tops = np.array([[20.0, 0.0], [24.0, 0.3]])
+    hors = np.array([[22.9, 0.2], [19.5, 0.1]])
+    assert sorted(gr.associate_on_ground(tops, hors, pose).tolist()) == [[0, 1], [1, 0]]
