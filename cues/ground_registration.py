@@ -48,6 +48,7 @@ __all__ = [
     "map_motion",
     "on_top_map",
     "pose_hypotheses",
+    "ray_distances",
     "register_sequence",
     "register_with_scale",
 ]
@@ -130,30 +131,23 @@ def _rotations(headings: np.ndarray) -> np.ndarray:
 _SIGMA = 0.5 * RADIUS
 """Metres: the spread of a mapped person across their ray (and along it, at least)."""
 
-_GATE = RADIUS / _SIGMA
-"""A mapped person and a top person farther apart than this many spreads explain nothing."""
 
-
-def _range_spread(hor: np.ndarray) -> np.ndarray:
-    """``(M,)`` spread along the ray of each horizontal person ``(M, 2)`` (its own map):
-    :data:`RANGE_SPREAD` of their distance, at least :data:`_SIGMA`."""
-    return np.maximum(_SIGMA, RANGE_SPREAD * np.hypot(hor[:, 0], hor[:, 1]))
-
-
-def _ray_offsets(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray,
-                 spread: np.ndarray) -> np.ndarray:
-    """Squared offsets ``(..., M, N)`` of top people ``(N, 2)`` from mapped horizontal people
-    ``(..., M, 2)``, in spreads: along each one's ray (``rays`` ``(..., M, 2)``, from the
-    camera to them on the top map) over ``spread`` ``(M,)``, across it over :data:`_SIGMA`
-    (a distance from a box height errs along the ray, a bearing hardly). One coordinate at a
-    time: no ``(..., M, N, 2)`` temporary."""
-    unit = rays / np.maximum(np.hypot(rays[..., 0], rays[..., 1]), 1e-9)[..., None]
-    ux, uy = unit[..., 0, None], unit[..., 1, None]
-    dx = top[:, 0] - mapped[..., 0, None]
-    dy = top[:, 1] - mapped[..., 1, None]
-    along = (dx * ux + dy * uy) / spread[:, None]
-    across = (dy * ux - dx * uy) / _SIGMA
-    return along * along + across * across
+def ray_distances(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """``(N, M)`` distances (metres) of top people ``(N, 2)`` from horizontal people mapped on
+    the top map ``(M, 2)``, with the offset along each one's ray from the camera (``rays``
+    ``(M, 2)``, on the top map) shrunk by its spread: :data:`RANGE_SPREAD` of the distance, at
+    least :data:`RADIUS` / 2, over :data:`RADIUS` / 2 (a distance read from a box height errs
+    along the ray, a bearing hardly). Near the camera, the plain distance."""
+    top = np.asarray(top, float).reshape(-1, 2)
+    mapped, rays = np.asarray(mapped, float).reshape(-1, 2), np.asarray(rays, float).reshape(-1, 2)
+    length = np.hypot(rays[:, 0], rays[:, 1])
+    unit = rays / np.maximum(length, 1e-9)[:, None]
+    shrink = _SIGMA / np.maximum(_SIGMA, RANGE_SPREAD * length)
+    dx = top[:, None, 0] - mapped[None, :, 0]
+    dy = top[:, None, 1] - mapped[None, :, 1]
+    along = (dx * unit[:, 0] + dy * unit[:, 1]) * shrink
+    across = dy * unit[:, 0] - dx * unit[:, 1]
+    return np.hypot(along, across)
 
 
 def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
@@ -393,16 +387,14 @@ def on_top_map(hor: np.ndarray, pose: FramePose) -> np.ndarray:
 
 def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose) -> np.ndarray:
     """Pairs ``(P, 2)`` (top index, horizontal index) under the pose: Hungarian on the ground
-    offsets in spreads (:data:`RADIUS` / 2 across each horizontal person's ray, :data:`RANGE_SPREAD`
-    of their distance along it, at least :data:`RADIUS` / 2), pairs farther than two spreads
-    left unmatched (:data:`RADIUS` for people near the camera)."""
+    distances along each horizontal person's ray shrunk by its spread (:func:`ray_distances`),
+    pairs farther than :data:`RADIUS` left unmatched."""
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
         return np.zeros((0, 2), dtype=np.int64)
     mapped = on_top_map(hor, pose)
-    rays = mapped - pose.centre
-    d = np.sqrt(_ray_offsets(top, mapped, rays, _range_spread(hor))).T  # (N, M), in spreads
-    cost = np.where(d < _GATE, d, 2 * _GATE)
+    d = ray_distances(top, mapped, mapped - pose.centre)
+    cost = np.where(d < RADIUS, d, 2 * RADIUS)
     rows, cols = linear_sum_assignment(cost)
-    ok = d[rows, cols] < _GATE
+    ok = d[rows, cols] < RADIUS
     return np.column_stack([rows[ok], cols[ok]]).astype(np.int64)

@@ -164,3 +164,25 @@ def test_a_far_person_pairs_along_their_ray_not_across_it() -> None:
     tops = np.array([[20.0, 0.0], [24.0, 0.3]])
     hors = np.array([[22.9, 0.2], [19.5, 0.1]])
     assert sorted(gr.associate_on_ground(tops, hors, pose).tolist()) == [[0, 1], [1, 0]]
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), angle=st.floats(-np.pi, np.pi))
+def test_ray_distances_shrink_only_along_far_rays(seed: int, angle: float) -> None:
+    """Never more than the plain distance; the plain one within 7.5 m of the camera (the
+    spread's floor) and across a ray; unchanged by turning and moving the whole map."""
+    rng = np.random.default_rng(seed)
+    top, camera = rng.uniform(-40, 40, (5, 2)), rng.uniform(-40, 40, 2)
+    mapped = rng.uniform(-40, 40, (4, 2))
+    rays = mapped - camera
+    d = gr.ray_distances(top, mapped, rays)
+    plain = np.hypot(*(top[:, None, :] - mapped[None]).transpose(2, 0, 1))
+    assert d.shape == (5, 4) and (d <= plain + 1e-9).all()
+    near = np.hypot(*rays.T) <= 0.5 * gr.RADIUS / gr.RANGE_SPREAD
+    np.testing.assert_allclose(d[:, near], plain[:, near], atol=1e-9)
+    across = mapped + 3.0 * np.column_stack([-rays[:, 1], rays[:, 0]]) / np.hypot(*rays.T)[:, None]
+    np.testing.assert_allclose(np.diag(gr.ray_distances(across, mapped, rays)), 3.0, atol=1e-9)
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    shift = rng.uniform(-5, 5, 2)
+    moved = gr.ray_distances(top @ turn.T + shift, mapped @ turn.T + shift, rays @ turn.T)
+    np.testing.assert_allclose(moved, d, atol=1e-8)
