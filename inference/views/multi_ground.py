@@ -11,7 +11,9 @@ that is not a nadir drone (issue 67): the run behind ``associate-multi --top-vie
 3. Every frame becomes one joint program of
    :mod:`xvmatch.inference.views.multi_view_assignment` (:class:`~xvmatch.inference.views.
    multi_view_costs.FrameProblem`, gamma 0): a top-handheld cost from the ground distance
-   between a top person and a registered handheld person; handheld-handheld pairs get no
+   between a top person and a registered handheld person (its part along the handheld
+   camera's ray shrunk, :func:`~xvmatch.cues.ground_registration.ray_distances`, as
+   ``associate`` pairs); handheld-handheld pairs get no
    evidence by default (:data:`HOR_HOR`: the handheld maps, from box heights, were too loose to
    pair two of them on the renders; a calibration there pairs by ground distance the people the
    top view does not see). The program's cycle consistency keeps the pairs one set of people: two
@@ -257,12 +259,13 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
 
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
                 options: MultiGroundOptions, top_tracks: Mapping[int, int] | None = None
-                ) -> dict[int, np.ndarray]:
-    """``{frame: (M, 2)}`` handheld view ``k``'s people on the top map, on the frames where
-    its pose was registered (both views have boxes there; the top map at the scale that fits
-    this view best, :func:`~xvmatch.cues.ground_registration.register_with_scale`; with the top
-    view's ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken
-    out of the registration's jumps)."""
+                ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """``{frame: ((M, 2), (M, 2))}`` handheld view ``k``'s people on the top map and the rays
+    from its camera to them there, on the frames where its pose was registered (both views
+    have boxes there; the top map at the scale that fits this view best,
+    :func:`~xvmatch.cues.ground_registration.register_with_scale`; with the top view's
+    ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken out
+    of the registration's jumps)."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -275,21 +278,29 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
                                           [local[f] for f in order], hfov, options.fps, ids)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
-        out[pose.frame] = gr.on_top_map(local[pose.frame], pose) / scale
+        placed = gr.on_top_map(local[pose.frame], pose)
+        out[pose.frame] = (placed / scale, (placed - pose.centre) / scale)
     return out
 
 
-def _cost(a: np.ndarray | None, b: np.ndarray | None, n: tuple[int, int],
+def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
           calibration: LogisticCalibration | None) -> np.ndarray:
-    """``(n_a, n_b)`` costs of two sets of ground points (None: not on the map this frame, and
-    NaN rows: no ground), a positive cost where there is no distance; without a calibration
-    :data:`HOR_HOR_COST` everywhere."""
+    """``(n_a, n_b)`` costs of two views' people on the top map, each ``(points, rays)`` (None:
+    not on the map this frame; NaN rows: no ground), a positive cost where there is no
+    distance; without a calibration :data:`HOR_HOR_COST` everywhere. A top view (its rays
+    None) and a handheld view are as far apart as
+    :func:`~xvmatch.cues.ground_registration.ray_distances` says (the handheld distance errs
+    along its ray), two handheld views by the plain distance."""
     if calibration is None:
         return np.full(n, HOR_HOR_COST)
     none = calibration.cost(np.full(n, _FAR * gr.RADIUS))
     if a is None or b is None or not n[0] * n[1]:
         return none
-    d = np.hypot(*(a[:, None, :] - b[None, :, :]).transpose(2, 0, 1))
+    (pa, ra), (pb, rb) = a, b
+    if ra is None and rb is not None:
+        d = gr.ray_distances(pa, pb, rb)
+    else:
+        d = np.hypot(*(pa[:, None, :] - pb[None, :, :]).transpose(2, 0, 1))
     return np.where(np.isfinite(d), calibration.cost(np.minimum(d, _FAR * gr.RADIUS)), none)
 
 
@@ -316,7 +327,7 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
     tops = _top_grounds(views, frames, calibration) if tops is None else tops
     options = _with_lenses(views, frames, calibration, options, tops)[0]
-    placed = [{f: p for f, p in tops.items() if len(p)},
+    placed = [{f: (p, None) for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
     problems = {}
     for f in frames:
