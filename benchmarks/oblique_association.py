@@ -48,6 +48,11 @@ action camera, 45 55 for a narrow one. The from-people rows still assume 70 degr
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120
 
+``--distance-errors``: how far the handheld distances read from box heights through the true
+lens err from the true ones (median and robust spread, relative), with the bearings' error and
+the true distances (why :func:`~xvmatch.cues.ground_registration.ray_distances` stretches the
+gate along the ray).
+
 ``--choose-lens``: two more rows, both with the tracklet consensus: ``registered, from people,
 true lens`` (the handheld field of view known, the top camera from its people) and
 ``registered, from people, lens chosen`` (the field of view chosen from the people,
@@ -116,6 +121,30 @@ def _lens(top: dict, hor: dict, options: GroundAssociationOptions, frames: list[
         tops.append(ground[np.isfinite(ground).all(axis=1)])
         boxes.append(np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4))
     return choose_hor_hfov(frames, tops, boxes, options.hor_size, options.fps)
+
+
+def _distance_errors(scene, frames: list[int], hfov: float) -> np.ndarray:
+    """``(B, 3)`` per handheld box of ``frames``: its distance read from its height through the
+    true lens (:func:`~xvmatch.cues.ground_registration.hor_ground_points`) over the true
+    distance, minus 1; its bearing's error (degrees); the true distance (metres)."""
+    out = []
+    for f in frames:
+        rec, cam = scene.hor["hor1"][f], scene.hor_cameras["hor1"][f - 1]
+        est = gr.hor_ground_points(rec.boxes, cam.image_size, hfov)
+        rel = scene.people.positions[f - 1][np.asarray(rec.ids)] - cam.c[:2]
+        yaw = np.arctan2(cam.R[2, 1], cam.R[2, 0])
+        c, s = np.cos(yaw), np.sin(yaw)
+        true = np.column_stack([rel[:, 0] * c + rel[:, 1] * s, -rel[:, 0] * s + rel[:, 1] * c])
+        dist = np.hypot(*true.T)
+        bearing = np.degrees(np.arctan2(est[:, 1], est[:, 0]) - np.arctan2(true[:, 1], true[:, 0]))
+        out.append(np.column_stack([np.hypot(*est.T) / dist - 1.0, bearing, dist]))
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def _robust_spread(values: np.ndarray) -> float:
+    """1.4826 times the median absolute deviation: a standard deviation that outliers do not
+    move."""
+    return float(1.4826 * np.median(np.abs(values - np.median(values))))
 
 
 def _score(pred: dict, truth: dict) -> np.ndarray:
@@ -200,6 +229,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overlap", type=float, nargs=2, default=(0.3, 1.0), metavar=("LO", "HI"),
                    help="each view's share of people the other sees, drawn in LO-HI (default "
                    "0.3 1)")
+    p.add_argument("--distance-errors", action="store_true",
+                   help="also print how far the handheld distances read from box heights (the "
+                   "true lens) err from the true ones, and their bearings")
     p.add_argument("--choose-lens", action="store_true",
                    help="add the rows with the true and the chosen handheld lens (from people, "
                    "tracklet consensus)")
@@ -218,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     counts: dict[str, list] = {name: [] for name in names}
     refused = 0
     per_scene: list[tuple[float, float, float, dict]] = []
+    errors: list[np.ndarray] = []
     t0 = time.perf_counter()
     for k in range(args.scenes):
         scene = make_oblique_scene(config, int(args.seconds * config.fps),
@@ -232,6 +265,8 @@ def main(argv: list[str] | None = None) -> int:
         hor_size = hor_cam.image_size
         true_hfov = float(np.degrees(2 * np.arctan(0.5 * hor_size[0] / hor_cam.K[0, 0])))
         fps = config.fps
+        if args.distance_errors:
+            errors.append(_distance_errors(scene, frames, true_hfov))
         search = associate_sequence(top, hor, float(hor_size[0]), frames=frames)
         follow = associate_sequence(top, hor, float(hor_size[0]), frames=frames, search="follow")
         top_size = scene.top_cameras[0].image_size
@@ -297,6 +332,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {cvidf1:.1f} | {2 * tp / max(1, 2 * tp + fp + fn):.3f} | {tp:.0f} | "
               f"{fp:.0f} | {fn:.0f} |")
     _breakdown(per_scene, names)
+    if errors:
+        e = np.concatenate(errors)
+        lo, mid, hi = np.percentile(e[:, 2], [10, 50, 90])
+        print(f"\nhandheld distances from box heights (true lens), {len(e)} boxes: error median "
+              f"{100 * np.median(e[:, 0]):.1f} %, robust spread {100 * _robust_spread(e[:, 0]):.1f}"
+              f" %; bearing error robust spread {_robust_spread(e[:, 1]):.2f} degrees; true "
+              f"distances {lo:.1f} / {mid:.1f} / {hi:.1f} m (10th / 50th / 90th percentile)")
     return 0
 
 
