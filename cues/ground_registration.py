@@ -141,7 +141,8 @@ def ray_distances(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray) -> np.n
     top = np.asarray(top, float).reshape(-1, 2)
     mapped, rays = np.asarray(mapped, float).reshape(-1, 2), np.asarray(rays, float).reshape(-1, 2)
     length = np.hypot(rays[:, 0], rays[:, 1])
-    unit = rays / np.maximum(length, 1e-9)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a ray of no length: any direction
+        unit = np.where(length[:, None] > 1e-9, rays / length[:, None], [1.0, 0.0])
     shrink = _SIGMA / np.maximum(_SIGMA, RANGE_SPREAD * length)
     dx = top[:, None, 0] - mapped[None, :, 0]
     dy = top[:, None, 1] - mapped[None, :, 1]

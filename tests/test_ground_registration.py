@@ -186,3 +186,5 @@ def test_ray_distances_shrink_only_along_far_rays(seed: int, angle: float) -> No
     shift = rng.uniform(-5, 5, 2)
     moved = gr.ray_distances(top @ turn.T + shift, mapped @ turn.T + shift, rays @ turn.T)
     np.testing.assert_allclose(moved, d, atol=1e-8)
+    still = gr.ray_distances(top, mapped, np.zeros_like(rays))  # at the camera: plain
+    np.testing.assert_allclose(still, plain, atol=1e-9)
