@@ -19,6 +19,10 @@ methods, scored by the F1 of the cross-view pairs over all frames:
   refused calibration (too few boxes) scores its frames as misses;
 * ``+ tracklet consensus``: those pairs made consistent over the clip with each view's own track
   ids (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`, video mode).
+* ``associate, as it routes``: what ``associate --mode video`` (boxes only) answers: the row
+  above where the top view's calibration is oblique, the search made consistent over the clip
+  (:func:`~xvmatch.inference.linking.pair_consensus.consistent_pairs`) where it looks straight
+  down or cannot be calibrated (the rows above run the ground path on those scenes too).
 
 CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`); a second
 table gives it per scenario: per top pitch band (:data:`PITCH_BANDS`) and per overlap band
@@ -42,6 +46,12 @@ issue's hidden set (a low oblique drone, about half of each view's people in the
 drawn pitch is the clip's middle one). The top camera is still calibrated once for the clip;
 the ``true cameras`` row and each scene's printed pitch take the first frame's camera.
 
+``--hor-size assumed|guess``: the from-people rows without the handheld image size, as
+``associate`` without ``--image-size`` takes it where the boxes fit CVMHAT's 2688x1512 (the
+renders' 1920x1080 views; a 3640x2048 view's boxes do not, and ``associate`` asks for the
+size): ``assumed``, that size (before), or ``guess``, the smallest common video size holding
+the boxes (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`, now).
+
 ``--hor-hfov LO HI``: the renders' handheld field of view, drawn per scene in LO-HI degrees
 (default 60 80, :class:`~xvmatch.datasets.oblique_scenes.ObliqueSceneConfig`); e.g. 90 120 for an
 action camera, 45 55 for a narrow one. The from-people rows still assume 70 degrees.
@@ -61,6 +71,19 @@ true and the chosen lens with each candidate's pairing score and chance score (`
 and the summary the seconds the choice took.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120 --choose-lens
+
+The methods are given the whole clip's boxes (10 a second) and associate its sampled frames, so
+the from-people rows calibrate the top camera from every frame. ``--renumber``: they are given
+the sampled frames alone, numbered 1, 2, 3 (a file of every ``--step``-th frame with its own
+numbering, as the issue's hidden set gives 3 a second; the rows told the frame rate are told
+the renders' rate over the step), and
+``--fps auto|N``: the from-people rows take the frame rate ``auto`` (``associate``'s default: 30
+unless the top view's walkers say otherwise,
+:func:`~xvmatch.inference.matching.ground_association.top_frame_rate`; each scene's line then
+gives the rate taken) or ``N`` rather than the true one (``--fps 30 --renumber``: the file read
+at a video's rate).
+
+    .venv/bin/python benchmarks/oblique_association.py --scenes 12 --renumber --fps auto
 """
 
 from __future__ import annotations
@@ -76,13 +99,22 @@ from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
-from xvmatch.formats.box_image_size import common_size_holding
+from xvmatch.formats.box_image_size import (
+    ASSUMED,
+    CVMHAT_SIZE,
+    common_size_holding,
+    consistent_with,
+    ground_path_hor_size,
+)
 from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibration
+from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.inference.matching.ground_association import (
+    AUTO_FPS,
     GroundAssociationOptions,
     run_ground_association,
     top_calibration,
+    top_frame_rate,
     top_ground_points,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
@@ -120,7 +152,8 @@ def _lens(top: dict, hor: dict, options: GroundAssociationOptions, frames: list[
         ground = top_ground_points(np.zeros((0, 4)) if t is None else t.boxes, calib)
         tops.append(ground[np.isfinite(ground).all(axis=1)])
         boxes.append(np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4))
-    return choose_hor_hfov(frames, tops, boxes, options.hor_size, options.fps)
+    fps = top_frame_rate(top, calib).fps if options.fps == AUTO_FPS else options.fps
+    return choose_hor_hfov(frames, tops, boxes, options.hor_size, fps)
 
 
 def _distance_errors(scene, frames: list[int], hfov: float) -> np.ndarray:
@@ -235,13 +268,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--choose-lens", action="store_true",
                    help="add the rows with the true and the chosen handheld lens (from people, "
                    "tracklet consensus)")
+    p.add_argument("--hor-size", choices=("true", "assumed", "guess"), default="true",
+                   help="the from-people rows' handheld image size: true (default), or as "
+                   "associate takes it without --image-size: assumed (CVMHAT's 2688x1512, "
+                   "before) or guess (the smallest common size holding the boxes, now)")
+    p.add_argument("--renumber", action="store_true",
+                   help="number the sampled frames 1, 2, 3 (a file of every --step-th frame "
+                   "with its own numbering)")
+    p.add_argument("--fps", default="true",
+                   help="the from-people rows' frame rate: true (default: the renders', over "
+                   "the step with --renumber), auto (associate's default) or frames a second")
     args = p.parse_args(argv)
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
     config = drone_config(args, hor_hfov=tuple(args.hor_hfov), top_pitch=tuple(args.top_pitch),
                           overlap=tuple(args.overlap))
     names = ("search", "search, video mode", "registered, true cameras",
-             "registered, from people", "registered, from people, tracklet consensus")
+             "registered, from people", "registered, from people, tracklet consensus",
+             "associate, as it routes")
     if args.choose_lens:
         names += ("registered, from people, true lens, tracklet consensus",
                   "registered, from people, lens chosen, tracklet consensus")
@@ -267,6 +311,13 @@ def main(argv: list[str] | None = None) -> int:
         fps = config.fps
         if args.distance_errors:
             errors.append(_distance_errors(scene, frames, true_hfov))
+        sampled = frames
+        if args.renumber:  # the methods see frames 1, 2, 3; their pairs go back to `sampled`
+            top, hor = ({k: FrameBoxes(k, v[f].ids, v[f].boxes) for k, f in
+                         enumerate(sampled, 1)} for v in (top, hor))
+            frames, fps = list(range(1, len(sampled) + 1)), config.fps / args.step
+        people_fps = fps if args.fps == "true" else (
+            AUTO_FPS if args.fps == AUTO_FPS else float(args.fps))
         search = associate_sequence(top, hor, float(hor_size[0]), frames=frames)
         follow = associate_sequence(top, hor, float(hor_size[0]), frames=frames, search="follow")
         top_size = scene.top_cameras[0].image_size
@@ -275,19 +326,26 @@ def main(argv: list[str] | None = None) -> int:
                                       _true_calibration(scene.top_cameras[0], top_size)).pairs
         if args.guess_top_size:
             top_size = common_size_holding(top) or top_size
-        options = GroundAssociationOptions(top_size, hor_size, fps=fps, consensus=False)
+        people_hor = hor_size
+        if args.hor_size != "true" and consistent_with(hor):  # else associate asks for the size
+            people_hor = (CVMHAT_SIZE if args.hor_size == "assumed" else
+                          ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED) or CVMHAT_SIZE)
+        options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False)
         try:  # frame by frame the calibration reads no ids; the consensus rows, the tracks
             calib = top_calibration(top, top_size)
             frame_calib = top_calibration(top, top_size, tracks=False)
         except CalibrationError:
             refused += 1
+            calib = None
             people = voted = true_lens = chosen = {}
-            lens, lens_scores = float("nan"), ""
+            lens, lens_scores, rate = float("nan"), "", None
         else:
             people = run_ground_association(top, hor, options, frames, frame_calib).pairs
             t1 = time.perf_counter()
-            voted = run_ground_association(top, hor, replace(options, consensus=True), frames,
-                                           calib).pairs
+            voted_run = run_ground_association(top, hor, replace(options, consensus=True),
+                                               frames, calib)
+            voted = voted_run.pairs
+            rate = voted_run.frame_rate
             voted_s += time.perf_counter() - t1
             if args.choose_lens:
                 voting = replace(options, consensus=True)
@@ -302,9 +360,14 @@ def main(argv: list[str] | None = None) -> int:
                 # The same run as the consensus row's when the prior is kept.
                 chosen = voted if lens == options.hor_hfov_deg else run_ground_association(
                     top, hor, replace(voting, hor_hfov_deg=lens), frames, calib).pairs
-        preds = (search, follow, true, people, voted)
+        routed = voted if calib is not None and calib.kind == "oblique" else consistent_pairs(
+            search, top, hor, frames)
+        preds = (search, follow, true, people, voted, routed)
         if args.choose_lens:
             preds += (true_lens, chosen)
+        if args.renumber:
+            preds = tuple({sampled[f - 1]: v for f, v in pred.items()} for pred in preds)
+        frames = sampled
         line = []
         pitch = float(np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2])))
         per_scene.append((pitch, scene.overlap_target["top"], scene.overlap_target["hor1"], {}))
@@ -319,9 +382,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"scene {k:2d} top pitch {pitch:4.1f} overlap top "
               f"{scene.overlap_target['top']:.2f} hor {scene.overlap_target['hor1']:.2f}: "
               f"pair F1 search {line[0]} (video {line[1]}), registered (true) {line[2]}, "
-              f"(from people) {line[3]}, (+ consensus) {line[4]}"
+              f"(from people) {line[3]}, (+ consensus) {line[4]}, (as associate routes: "
+              f"{'ground' if calib is not None and calib.kind == 'oblique' else 'search'}) "
+              f"{line[5]}"
               + (f"; lens {true_hfov:.0f}, chosen {lens:.0f} ({lens_scores}): (true lens) "
-                 f"{line[5]}, (lens chosen) {line[6]}" if args.choose_lens else ""), flush=True)
+                 f"{line[6]}, (lens chosen) {line[7]}" if args.choose_lens else "")
+              + (f"; frame rate {rate.fps:g}{' (walkers)' if rate.estimated else ''}, true "
+                 f"{fps:.3g}" if args.fps == AUTO_FPS and rate is not None else ""), flush=True)
     print(f"\n{args.scenes} scenes, every {args.step}th frame of {args.seconds:g} s, "
           f"{time.perf_counter() - t0:.0f} s; top calibration refused in {refused}"
           + (f"; the lens choice took {choice_s:.0f} s (the consensus run at 70 degrees "

@@ -102,6 +102,17 @@ class LensChoice:
         (:data:`MIN_PAIRING`)."""
         return max(_above(self.scores, self.chance).values(), default=0.0) >= MIN_PAIRING
 
+    @property
+    def why_prior(self) -> str | None:
+        """Why the prior (:data:`~xvmatch.geometry.people_calibration.PRIOR_HFOV_DEG`) was
+        kept, in a few words the commands' notes share; None where the lens was chosen from
+        the people."""
+        if not self.registered:
+            return "no lens tried registered its people"
+        if self.hfov_deg == PRIOR_HFOV_DEG:
+            return "no other lens paired clearly more of its people"
+        return None
+
 
 def _subsample(n: int, max_frames: int) -> list[int]:
     """Indices of at most ``max_frames`` of ``n`` frames, evenly spread, first and last kept."""

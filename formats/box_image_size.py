@@ -45,6 +45,7 @@ __all__ = [
     "check_boxes_in_image",
     "common_size_holding",
     "consistent_with",
+    "ground_path_hor_size",
     "median_aspect",
     "resolve_size",
     "upright_size_guess",
@@ -110,6 +111,19 @@ def common_size_holding(frames: Mapping) -> tuple[int, int] | None:
         if right <= 1.02 * width and bottom <= 1.02 * height:
             return width, height
     return None
+
+
+def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str
+                         ) -> tuple[int, int] | None:
+    """The horizontal view's size for the ground-map path where :func:`resolve_size` assumed
+    the CVMHAT default for boxes alone (``source`` :data:`ASSUMED`): the smallest common video
+    size holding its boxes (:func:`common_size_holding`), as that path reads distances and
+    bearings from the image's width and centre, and 2688x1512 belongs to CVMHAT's head-mounted
+    camera under a nadir drone. None where the size was given, or no other size is found."""
+    if source != ASSUMED:
+        return None
+    guess = common_size_holding(hor)
+    return None if guess is None or tuple(guess) == tuple(size) else guess
 
 
 def median_aspect(frames: Mapping) -> float | None:

@@ -233,7 +233,7 @@ OPTIONS = [
     Option("associate", "--image-size", "size", 8, 65536, "8..65536 a side"),
     Option("associate", "--top-image-size", "size", 8, 65536, "8..65536 a side"),
     Option("associate", "--hor-hfov", "float", 20, 150, "in [20, 150]", auto=True),
-    Option("associate", "--fps", "float", 0.1, 1000, "in [0.1, 1000]"),
+    Option("associate", "--fps", "float", 0.1, 1000, "in [0.1, 1000]", auto=True),
     Option("associate", "--offset", "offset", -100_000, 100_000, "|N| <= 100000"),
     Option("associate", "--max-offset", "int", 0, 10_000, "0..10000", extra=("--offset", "auto")),
     Option("associate", "--workers", "int", 1, 64, "1..64"),

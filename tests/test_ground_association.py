@@ -129,6 +129,29 @@ def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> No
     assert (tmp_path / "n.csv").read_text() == (tmp_path / "g.csv").read_text()
 
 
+@pytest.mark.slow
+def test_a_phones_size_is_guessed_on_the_ground_path(tmp_path, capsys) -> None:
+    """A 1920x1080 handheld view whose boxes fit CVMHAT's 2688x1512: boxes alone, ``associate``
+    assumes that size, and the ground path takes 1920x1080 instead, saying so, as if given."""
+    from xvmatch.cli import main
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0))
+    scene = make_oblique_scene(config, 100, np.random.default_rng(1))
+    assert scene.hor_cameras["hor1"][0].image_size == (1920, 1080)
+    paths = write_oblique_scene(scene, tmp_path, "s")
+    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+            "--top-image-size", "1920x1080", "--fps", "10", "--hor-hfov", "70"]
+    assert main([*base, "--out", str(tmp_path / "guess.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "images are 2688x1512 (CVMHAT" in err
+    assert (f"note: {paths['hor1']}: its images taken as 1920x1080 on this path, the smallest "
+            "common video size holding its boxes") in err
+    assert main([*base, "--image-size", "1920x1080", "--out", str(tmp_path / "given.csv")]) == 0
+    assert "its images taken as" not in capsys.readouterr().err
+    assert (tmp_path / "guess.csv").read_text() == (tmp_path / "given.csv").read_text()
+
+
 @pytest.mark.parametrize("true_scale", [0.7, 1.0, 1.3])
 def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) -> None:
     """People on a top map whose metres are ``1 / true_scale`` of the horizontal map's: the

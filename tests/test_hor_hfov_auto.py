@@ -154,8 +154,8 @@ def test_multi_auto_chooses_one_lens_per_view(two_wide) -> None:
     nobody = LensChoice(70.0, dict.fromkeys((70.0, 90.0, 110.0), 0.0), {}, [1])
     assert lenses_note([prior, nobody]) == (
         "handheld lenses, degrees, chosen from their people: hor1 70 (the prior: no other lens "
-        "paired clearly more), hor2 70 (the prior: no lens registered its people) (give "
-        "--hor-hfov DEG if known)")
+        "paired clearly more of its people), hor2 70 (the prior: no lens tried registered its "
+        "people) (give --hor-hfov DEG if known)")
     with pytest.raises(ValueError, match="one per handheld view"):
         MultiGroundOptions(sizes, (110.0,), 10.0)
     with pytest.raises(ValueError, match="degrees or 'auto'"):

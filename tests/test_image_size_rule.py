@@ -15,11 +15,13 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene
 from xvmatch.formats.box_image_size import (
+    ASSUMED,
     COMMON_SIZES,
     CVMHAT_SIZE,
     MIN_EXTENT,
     common_size_holding,
     consistent_with,
+    ground_path_hor_size,
 )
 from xvmatch.formats.mot_boxes import (
     FrameBoxes,
@@ -167,6 +169,18 @@ def test_the_common_size_holding_boxes_is_the_smallest_that_does(box, size):
     assert common_size_holding({}) is None
     areas = [w * h for w, h in COMMON_SIZES]
     assert areas == sorted(areas)
+
+
+def test_the_ground_path_guesses_only_a_size_it_assumed():
+    """The ground-map path replaces an assumed CVMHAT size by the smallest common size holding
+    the boxes; a size given, or boxes that need the CVMHAT size, stay."""
+    phone = {1: FrameBoxes(1, [1, 2], [[5, 5, 10, 20], [1700, 600, 60, 170]])}
+    assert consistent_with(phone)  # boxes alone would be read as CVMHAT's
+    assert ground_path_hor_size(phone, CVMHAT_SIZE, ASSUMED) == (1920, 1080)
+    assert ground_path_hor_size(phone, CVMHAT_SIZE, "--image-size") is None
+    wide = {1: FrameBoxes(1, [1], [[2640, 600, 40, 170]])}
+    assert ground_path_hor_size(wide, CVMHAT_SIZE, ASSUMED) is None  # CVMHAT's own: kept
+    assert ground_path_hor_size({}, CVMHAT_SIZE, ASSUMED) is None
 
 
 @pytest.mark.parametrize(("box", "ok"), [

@@ -13,6 +13,7 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
+from xvmatch.inference.matching.frame_rate import frame_rate_note
 from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
     run_ground_association,
@@ -159,3 +160,30 @@ def test_problems_shapes_and_no_evidence_off_the_map(scene) -> None:
     assert all((c > 0).all() for pr in none.values() for c in pr.costs.values())
     with pytest.raises(ValueError, match="hor_sizes"):
         ground_problems(views, frames, calib, MultiGroundOptions((SIZE,)))
+
+
+@pytest.mark.slow
+def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene) -> None:
+    """associate-multi's ``--fps auto``: the top view's people followed by its tracks (its ids
+    are its rows) give the rate :func:`top_frame_rate` reads from the file's own ids, said in
+    one note, and the run is the one told that rate."""
+    from xvmatch.inference.matching.ground_association import top_frame_rate
+    from xvmatch.inference.views.multi_ground import run_multi_ground
+    from xvmatch.inference.views.multi_view_people import PeopleOptions
+
+    views, _ = scene
+    rows = [{f: FrameBoxes(f, 1000 * f + np.arange(len(r.ids)), r.boxes) for f, r in v.items()}
+            for v in views]
+    tracks = [{1000 * f + n: int(i) for f, r in v.items() for n, i in enumerate(r.ids)}
+              for v in views]
+    calib = top_calibration(views[0], SIZE)
+    said: list[str] = []
+    auto = run_multi_ground(rows, [0, 0], calib, MultiGroundOptions((SIZE, SIZE), 70.0, "auto"),
+                            PeopleOptions(), tracks, said.append)
+    rate = top_frame_rate(views[0], calib)
+    assert [s for s in said if s.startswith("frame numbers")] == [frame_rate_note(rate)]
+    told = run_multi_ground(rows, [0, 0], calib, MultiGroundOptions((SIZE, SIZE), 70.0, rate.fps),
+                            PeopleOptions(), tracks, said.append)
+    assert auto == told
+    with pytest.raises(ValueError, match="fps must be frames a second or 'auto'"):
+        MultiGroundOptions((SIZE, SIZE), 70.0, "fast")

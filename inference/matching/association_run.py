@@ -111,7 +111,8 @@ class AssociationOptions:
         hor_hfov: the horizontal camera's field of view, degrees, or ``"auto"`` (the
             default, as ``--hor-hfov``): chosen from the people (the oblique path;
             :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`).
-        fps: the frame rate (the oblique path).
+        fps: the frame rate of the frame numbers (the oblique path), or ``"auto"`` (the
+            default, as ``--fps``): 30 unless the top view's walkers say otherwise.
         learned: the learned matchers, or None: the handcrafted search.
     """
 
@@ -129,7 +130,7 @@ class AssociationOptions:
     top_view: str = "auto"
     top_image_size: tuple[int, int] | None = None
     hor_hfov: float | str = "auto"
-    fps: float = 30.0
+    fps: float | str = "auto"
     learned: LearnedChoice | None = None
 
     def __post_init__(self) -> None:
@@ -289,10 +290,12 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     assumed (and, with ``hor_hfov`` ``auto``, one saying the lens chosen). In video mode the
     pairs are made consistent along each view's tracks. Without ``--top-image-size`` the size
     is guessed from the boxes (not where the learned matcher reads the top images), and a top
-    view too sparse to calibrate takes the nadir path."""
+    view too sparse to calibrate takes the nadir path; a horizontal size assumed to be CVMHAT's
+    is guessed from its boxes too (:func:`~xvmatch.formats.box_image_size.
+    ground_path_hor_size`), with a note."""
     if (top_size := _top_size(top, options, note)) is None:
         return None
-    from xvmatch.formats.box_image_size import check_boxes_in_image
+    from xvmatch.formats.box_image_size import check_boxes_in_image, ground_path_hor_size
     from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import (
         GroundAssociationOptions,
@@ -301,7 +304,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
 
     source = "--top-image-size" if options.top_image_size else "the top boxes' extent"
     check_boxes_in_image(top, top_size, options.top_boxes, source)
-    ground = GroundAssociationOptions(top_size=top_size, hor_size=options.hor_size[0],
+    hor_size = ground_path_hor_size(hor, *options.hor_size) or options.hor_size[0]
+    ground = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
                                       hor_hfov_deg=options.hor_hfov, fps=options.fps,
                                       consensus=options.video, seed=0)
     try:
@@ -324,10 +328,18 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
             ground.consensus else "each frame on its own (--mode video: consistent over "
             "the clip)")
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
+    if hor_size != options.hor_size[0]:
+        note(f"xvmatch: note: {options.hor_boxes}: its images taken as {hor_size[0]}x"
+             f"{hor_size[1]} on this path, the smallest common video size holding its boxes, "
+             "not CVMHAT's (give --image-size WxH if not)", False)
     if run.lens is not None:
         from xvmatch.inference.matching.ground_association import lens_note
 
         note(f"xvmatch: note: {lens_note(run.lens)}", False)
+    if run.frame_rate is not None:
+        from xvmatch.inference.matching.frame_rate import frame_rate_note
+
+        note(f"xvmatch: note: {frame_rate_note(run.frame_rate)}", False)
     return run.pairs
 
 

@@ -21,7 +21,10 @@ which read the top image as the ground) or oblique (this run).
 With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``, the commands' default; these options keep
 70 degrees unless told) the handheld camera's field of view is chosen from the clip's people
 before the registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`: 70 unless a wider lens
-pairs clearly more people, in all and above chance).
+pairs clearly more people, in all and above chance). With ``fps="auto"`` (``--fps auto``, the
+commands' default) the frame numbers' rate is 30 a second unless the top view's walkers say
+otherwise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`: a file of
+every 10th frame numbered 1, 2, 3).
 """
 
 from __future__ import annotations
@@ -42,9 +45,12 @@ from xvmatch.geometry.people_calibration import (
 )
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.inference.linking.tracklets import box_track_ids
+from xvmatch.inference.matching.frame_rate import FrameRate, frame_rate_from_walkers
 
 __all__ = [
+    "AUTO_FPS",
     "AUTO_HFOV",
+    "PRIOR_FPS",
     "TOP_VIEWS",
     "GroundAssociation",
     "GroundAssociationOptions",
@@ -52,6 +58,7 @@ __all__ = [
     "run_ground_association",
     "run_top_view",
     "top_calibration",
+    "top_frame_rate",
     "top_ground_points",
 ]
 
@@ -61,6 +68,13 @@ TOP_VIEWS = ("auto", "nadir", "oblique")
 AUTO_HFOV = "auto"
 """``--hor-hfov auto``: the handheld field of view chosen from the people
 (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
+
+AUTO_FPS = "auto"
+"""``--fps auto``: 30 a second unless the top view's walkers say otherwise
+(:func:`top_frame_rate`)."""
+
+PRIOR_FPS = 30.0
+"""The frame rate ``auto`` assumes unless the walkers say otherwise: a video's own numbering."""
 
 @dataclass(frozen=True)
 class GroundAssociationOptions:
@@ -72,7 +86,8 @@ class GroundAssociationOptions:
         hor_hfov_deg: the horizontal camera's field of view, degrees (70: a phone's, a
             drone's), or :data:`AUTO_HFOV`: chosen from the people
             (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`).
-        fps: frames per second of the frame numbers (the registration's pace over time).
+        fps: frames per second of the frame numbers (the registration's pace over time), or
+            :data:`AUTO_FPS`: from the top view's walkers (:func:`top_frame_rate`).
         consensus: video mode: each view's track ids are used, to make the pairs consistent
             over the clip and to take the top map's own motion out of the registration.
         seed: seed of the calibration's resampling.
@@ -81,7 +96,7 @@ class GroundAssociationOptions:
     top_size: tuple[int, int]
     hor_size: tuple[int, int]
     hor_hfov_deg: float | str = PRIOR_HFOV_DEG
-    fps: float = 30.0
+    fps: float | str = PRIOR_FPS
     consensus: bool = True
     seed: int = 0
 
@@ -89,6 +104,8 @@ class GroundAssociationOptions:
         if isinstance(self.hor_hfov_deg, str) and self.hor_hfov_deg != AUTO_HFOV:
             raise ValueError(f"hor_hfov_deg must be degrees or {AUTO_HFOV!r}, got "
                              f"{self.hor_hfov_deg!r}")
+        if isinstance(self.fps, str) and self.fps != AUTO_FPS:
+            raise ValueError(f"fps must be frames a second or {AUTO_FPS!r}, got {self.fps!r}")
 
 
 @dataclass(frozen=True)
@@ -97,7 +114,8 @@ class GroundAssociation:
     calibration, the horizontal camera's pose per frame (on the top map scaled by ``scale``,
     :func:`~xvmatch.cues.ground_registration.register_with_scale`), and one line saying what
     was assumed; with ``--hor-hfov auto``, the lens chosen (``lens``, its line
-    :func:`lens_note`), else None."""
+    :func:`lens_note`), else None; with ``fps`` ``auto``, the frame rate taken
+    (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`), else None."""
 
     pairs: dict[int, list[tuple[int, int]]]
     calibration: PeopleCalibration
@@ -105,6 +123,7 @@ class GroundAssociation:
     summary: str
     scale: float = 1.0
     lens: LensChoice | None = None
+    frame_rate: FrameRate | None = None
 
 
 def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
@@ -118,6 +137,16 @@ def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
     return calibrate_from_people(frames, boxes, top_size,
                                  ids=ids if tracks else box_track_ids(top), seed=seed,
                                  name=name, strict=False)
+
+
+def top_frame_rate(top: Mapping, calib: PeopleCalibration, tracks: bool = True,
+                   prior: float = PRIOR_FPS) -> FrameRate:
+    """The frame rate of the top view's frame numbers from how fast its people walk on its
+    ground map (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`), each
+    followed by the view's track ids (``tracks``, video mode) or by its boxes linked by IoU."""
+    frames, ids, boxes = stack_frames(top)
+    return frame_rate_from_walkers(frames, ids if tracks else box_track_ids(top),
+                                   top_ground_points(boxes, calib), prior)
 
 
 def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration) -> np.ndarray:
@@ -138,14 +167,11 @@ def _summary(calib: PeopleCalibration) -> str:
 
 def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
     """The line saying which lens ``--hor-hfov auto`` chose (``view``: whose)."""
-    if not choice.registered:
-        return (f"{view}: {choice.hfov_deg:.0f} degrees, the prior (no lens tried registered "
-                "its people; give --hor-hfov DEG if known)")
-    if choice.hfov_deg == PRIOR_HFOV_DEG:
-        return (f"{view}: {choice.hfov_deg:.0f} degrees, the prior (no other lens paired clearly "
-                "more of its people; give --hor-hfov DEG if known)")
-    return (f"{view}: {choice.hfov_deg:.0f} degrees, chosen from its people (give --hor-hfov "
-            "DEG if known)")
+    if choice.why_prior is None:
+        return (f"{view}: {choice.hfov_deg:.0f} degrees, chosen from its people (give "
+                "--hor-hfov DEG if known)")
+    return (f"{view}: {choice.hfov_deg:.0f} degrees, the prior ({choice.why_prior}; give "
+            "--hor-hfov DEG if known)")
 
 
 def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
@@ -175,15 +201,18 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         ok = np.isfinite(ground).all(axis=1)
         tops.append((ground[ok], t_ids[ok]))
         boxes.append((hb, h_ids))
+    rate = (top_frame_rate(top, calib, options.consensus) if options.fps == AUTO_FPS
+            else None)
+    fps = float(options.fps) if rate is None else rate.fps
     lens = None
     hfov = options.hor_hfov_deg
     if hfov == AUTO_HFOV:
         lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
-                               options.hor_size, options.fps)
+                               options.hor_size, fps)
         hfov = lens.hfov_deg
     hors = [(gr.hor_ground_points(hb, options.hor_size, hfov), h_ids) for hb, h_ids in boxes]
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
-                                          hfov, options.fps,
+                                          hfov, fps,
                                           [i for _, i in tops] if options.consensus else None)
     by_frame = {p.frame: p for p in poses}
     pairs: dict[int, list[tuple[int, int]]] = {}
@@ -194,7 +223,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     if options.consensus:
         pairs = consistent_pairs(pairs, top, hor, order, keep_free=False)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
-                             summary=_summary(calib), scale=scale, lens=lens)
+                             summary=_summary(calib), scale=scale, lens=lens,
+                             frame_rate=rate)
 
 
 def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,

@@ -42,17 +42,25 @@ import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
-from xvmatch.formats.box_image_size import check_boxes_in_image, upright_size_guess
+from xvmatch.formats.box_image_size import (
+    check_boxes_in_image,
+    ground_path_hor_size,
+    upright_size_guess,
+)
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     CalibrationError,
     PeopleCalibration,
 )
+from xvmatch.inference.matching.frame_rate import frame_rate_note
 from xvmatch.inference.matching.ground_association import (
+    AUTO_FPS,
     AUTO_HFOV,
+    PRIOR_FPS,
     TOP_VIEWS,
     top_calibration,
+    top_frame_rate,
     top_ground_points,
 )
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
@@ -60,8 +68,8 @@ from xvmatch.inference.views.multi_view_assignment import view_pairs
 from xvmatch.inference.views.multi_view_costs import FrameProblem, LogisticCalibration
 from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
 
-__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "choose_lenses", "ground_problems",
-           "lenses_note", "oblique_top", "run_multi_ground"]
+__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "choose_lenses", "ground_options",
+           "ground_problems", "lenses_note", "oblique_top", "run_multi_ground"]
 
 TOP_HOR = LogisticCalibration(threshold=2.0 * gr.RADIUS, slope=1.0)
 """Top-handheld pairs: minus the evidence (nats) of a ground distance ``d`` (metres), none at
@@ -103,14 +111,20 @@ class MultiGroundOptions:
             drone's): one for all, one per handheld view (a tuple), or
             :data:`~xvmatch.inference.matching.ground_association.AUTO_HFOV`: each chosen
             from its people (:func:`choose_lenses`).
-        fps: frames per second of the frame numbers (the registration's pace over time).
+        fps: frames per second of the frame numbers (the registration's pace over time), or
+            :data:`~xvmatch.inference.matching.ground_association.AUTO_FPS`: from the top
+            view's walkers (:func:`~xvmatch.inference.matching.ground_association.
+            top_frame_rate`).
     """
 
     hor_sizes: tuple[tuple[int, int], ...]
     hor_hfov_deg: float | str | tuple[float, ...] = PRIOR_HFOV_DEG
-    fps: float = 30.0
+    fps: float | str = PRIOR_FPS
 
     def __post_init__(self) -> None:
+        if isinstance(self.fps, str) and self.fps != AUTO_FPS:
+            raise ValueError(f"MultiGroundOptions.fps must be frames a second or "
+                             f"{AUTO_FPS!r}, got {self.fps!r}")
         hfov = self.hor_hfov_deg
         if isinstance(hfov, str) and hfov != AUTO_HFOV:
             raise ValueError(f"MultiGroundOptions.hor_hfov_deg must be degrees or "
@@ -175,9 +189,7 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, the smallest common video "
                    "size holding its boxes (give --top-image-size WxH if not)")
     check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False)
-    if top_tracks is not None:
-        top = {f: FrameBoxes(f, np.array([top_tracks[int(r)] for r in rec.ids], dtype=np.int64),
-                             rec.boxes) for f, rec in top.items()}
+    top = _tracked(top, top_tracks)
     try:
         calib = top_calibration(top, tuple(top_size), seed, name, top_tracks is not None)
     except CalibrationError as error:
@@ -196,6 +208,34 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
                    "handheld view registered on its ground map frame by frame and the views "
                    "joined there (boxes only: --model, its images and --camera-id not used)"
                    f"{guessed}")
+
+
+def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int, int], str]],
+                   paths: Sequence[str], hfov: float | str, fps: float | str,
+                   note: Callable[[str], object]) -> MultiGroundOptions:
+    """``associate-multi``'s options of this path: each handheld view's image size as resolved
+    (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone,
+    where the smallest common video size holding its boxes serves
+    (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to ``note``
+    (``paths``: the box files, top first); ``--hor-hfov`` and ``--fps``."""
+    sizes = []
+    for k, (size, source) in enumerate(resolved, 1):
+        guess = ground_path_hor_size(views[k], size, source)
+        if guess is not None:
+            note(f"{paths[k]}: its images taken as {guess[0]}x{guess[1]} on this path, the "
+                 "smallest common video size holding its boxes, not CVMHAT's (give --image-size "
+                 "WxH if not)")
+        sizes.append(tuple(guess or size))
+    return MultiGroundOptions(tuple(sizes), hfov, fps)
+
+
+def _tracked(top: Mapping, top_tracks: Mapping[int, int] | None) -> Mapping:
+    """The top view with its track ids for ids (``top_tracks``: ``{row id: track id}``, video
+    mode, where its ids are its rows); as it is without them."""
+    if top_tracks is None:
+        return top
+    return {f: FrameBoxes(f, np.array([top_tracks[int(r)] for r in rec.ids], dtype=np.int64),
+                          rec.boxes) for f, rec in top.items()}
 
 
 def _boxes(record) -> np.ndarray:
@@ -246,13 +286,9 @@ def _with_lenses(views: Sequence[Mapping], frames: Sequence[int],
 
 def lenses_note(choices: Sequence[LensChoice]) -> str:
     """The line saying which lens ``--hor-hfov auto`` chose for each handheld view."""
-    said = []
-    for k, choice in enumerate(choices, 1):
-        why = ("" if choice.hfov_deg != PRIOR_HFOV_DEG else
-               " (the prior: no lens registered its people)"
-               if not choice.registered else
-               " (the prior: no other lens paired clearly more)")
-        said.append(f"hor{k} {choice.hfov_deg:.0f}{why}")
+    said = [f"hor{k} {choice.hfov_deg:.0f}"
+            + ("" if choice.why_prior is None else f" (the prior: {choice.why_prior})")
+            for k, choice in enumerate(choices, 1)]
     return (f"handheld lenses, degrees, chosen from their people: {', '.join(said)} (give "
             "--hor-hfov DEG if known)")
 
@@ -350,9 +386,17 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     with ``tracks`` (per view ``{row id: track id}``) in video mode
     (:func:`~xvmatch.inference.views.multi_ego_video.video_people`, :data:`VIDEO_KEEP_FREE`).
     With ``options.hor_hfov_deg`` ``auto`` the lenses are chosen first (:func:`choose_lenses`)
-    and told to ``note`` in one line (:func:`lenses_note`)."""
+    and told to ``note`` in one line (:func:`lenses_note`); with ``options.fps`` ``auto``, the
+    frame rate likewise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
+    if options.fps == AUTO_FPS:
+        top_tracks = None if tracks is None else tracks[0]
+        rate = top_frame_rate(_tracked(aligned[0], top_tracks), calibration,
+                              top_tracks is not None)
+        options = replace(options, fps=rate.fps)
+        if note is not None:
+            note(frame_rate_note(rate))
     tops = _top_grounds(aligned, frames, calibration)  # built once: the lenses, the problems
     options, lenses = _with_lenses(aligned, frames, calibration, options, tops)
     if lenses and note is not None:

@@ -32,16 +32,27 @@ __all__ = ["CAMERAS_COMMAND", "add_camera_check", "add_refine_top_camera",
 _HFOV_DEG = float_in(20, 150, "a camera's horizontal field of view, degrees")
 
 
-def _hor_hfov(text: str) -> float | str:
-    """``--hor-hfov``: degrees in [20, 150], or ``auto`` (chosen from the people on the oblique
-    path, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
-    if text.strip().lower() == "auto":
-        return "auto"
-    try:
-        return _HFOV_DEG(text)
-    except argparse.ArgumentTypeError as error:
-        raise argparse.ArgumentTypeError(
-            str(error).replace(", got ", " or auto, got ", 1)) from None
+def _or_auto(convert: Callable[[str], float]) -> Callable[[str], float | str]:
+    """An argparse type taking ``auto`` as well as the numbers ``convert`` takes."""
+    def parse(text: str) -> float | str:
+        if text.strip().lower() == "auto":
+            return "auto"
+        try:
+            return convert(text)
+        except argparse.ArgumentTypeError as error:
+            raise argparse.ArgumentTypeError(
+                str(error).replace(", got ", " or auto, got ", 1)) from None
+
+    return parse
+
+
+_hor_hfov = _or_auto(_HFOV_DEG)
+"""``--hor-hfov``: degrees in [20, 150], or ``auto`` (chosen from the people on the oblique
+path, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
+
+_fps = _or_auto(float_in(0.1, 1000, "a camera's frame rate, frames per second"))
+"""``--fps``: frames a second, or ``auto`` (30 unless the top view's walkers say otherwise,
+:func:`~xvmatch.inference.matching.ground_association.top_frame_rate`)."""
 
 
 def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
@@ -56,9 +67,9 @@ def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
     p.add_argument("--hor-hfov", default="auto", metavar="DEG", type=_hor_hfov,
                    help="oblique: the horizontal camera's field of view, degrees in [20, 150], "
                    "or auto (default: 70 unless its people pair clearly better at 90 or 110)")
-    p.add_argument("--fps", default=30.0,
-                   type=float_in(0.1, 1000, "a camera's frame rate, frames per second"),
-                   help="oblique: the frame rate, in [0.1, 1000] (default 30)")
+    p.add_argument("--fps", default="auto", type=_fps,
+                   help="oblique: the frame numbers' rate, in [0.1, 1000], or auto (default: 30 "
+                   "unless the top view's walkers say otherwise)")
 
 
 def check_top_view(args: argparse.Namespace) -> None:

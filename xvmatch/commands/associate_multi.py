@@ -213,8 +213,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                         f"--hor {paths[k + 1]}: " if n_hor > 1 else "",
                                         hor_path=paths[k + 1])
         ground = calib and multi_ground.run_multi_ground(
-            views, offsets, calib, multi_ground.MultiGroundOptions(
-                tuple(map(tuple, sizes)), args.hor_hfov, args.fps), options.people, tracks, say)
+            views, offsets, calib, multi_ground.ground_options(
+                views, resolved, paths, args.hor_hfov, args.fps, say), options.people, tracks, say)
         run = ground or mer.run_multi_ego(
             inputs, matcher, sizes, offsets, camera_rows, options,
             progress=lambda n: frame_progress(n, "costs", not quiet),
