@@ -187,3 +187,20 @@ def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene) -> None:
     assert auto == told
     with pytest.raises(ValueError, match="fps must be frames a second or 'auto'"):
         MultiGroundOptions((SIZE, SIZE), 70.0, "fast")
+
+
+def test_ground_options_guess_only_a_size_assumed() -> None:
+    """associate-multi's ground path takes a handheld size assumed to be CVMHAT's from its boxes
+    (the smallest common video size holding them), saying so; a size given stays."""
+    from xvmatch.formats.box_image_size import ASSUMED, CVMHAT_SIZE
+    from xvmatch.inference.views.multi_ground import ground_options
+
+    phone = {1: FrameBoxes(1, np.array([1]), np.array([[1700.0, 600.0, 60.0, 170.0]]))}
+    views = [{}, phone, phone]
+    said: list[str] = []
+    options = ground_options(views, [(CVMHAT_SIZE, ASSUMED), ((1920, 1080), "--image-size")],
+                             ["top.txt", "hor1.txt", "hor2.txt"], "auto", "auto", said.append)
+    assert options.hor_sizes == ((1920, 1080), (1920, 1080))
+    assert (options.hor_hfov_deg, options.fps) == ("auto", "auto")
+    assert said == ["hor1.txt: its images taken as 1920x1080 on this path, the smallest common "
+                    "video size holding its boxes, not CVMHAT's (give --image-size WxH if not)"]
