@@ -167,6 +167,10 @@ _N_RESAMPLES = 16
 _BLOCK_FRAMES = 10
 _MAX_FIT_BOXES = 4000
 _START_HFOVS = (45.0, 65.0, 90.0, 120.0)
+_START_TILTS = (30.0, 50.0, 70.0)
+"""Tilts (degrees) the fit also starts from, at the prior lens and 10 m up: the level line's
+start points almost straight down where that line is nearly flat (a low drone whose people's
+feet keep to a few rows), and the fit stayed there, a nadir call for upright people."""
 
 
 class CalibrationError(ValueError):
@@ -658,7 +662,10 @@ def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | 
     prior_f = 0.5 * size[0] / np.tan(np.radians(hfov_deg or PRIOR_HFOV_DEG) / 2.0)
     hfovs = (hfov_deg,) if hfov_deg else _START_HFOVS
     fixed = prior_f if hfov_deg else None
-    params = _fit(b, size, prior_f, [_start(b, size, hf) for hf in hfovs], fixed)
+    starts = [_start(b, size, hf) for hf in hfovs] + [
+        np.concatenate([[np.radians(t), 0.0, np.log(prior_f), np.log(10.0)],
+                        np.full(b.n_tracks, PERSON_HEIGHT)]) for t in _START_TILTS]
+    params = _fit(b, size, prior_f, starts, fixed)
     spread = (_resample_spread(b, size, prior_f, params, fixed, seed) if measure
               else np.full(3, np.nan))
     cam = _camera_of(params, size)
