@@ -31,6 +31,7 @@ __all__ = [
     "MIN_FPS",
     "MIN_WALKERS",
     "PRIOR_FACTOR",
+    "PRIOR_FPS",
     "FrameRate",
     "frame_rate_from_walkers",
     "frame_rate_note",
@@ -49,6 +50,9 @@ MIN_WALKERS = 3
 
 MIN_FPS, MAX_FPS = 0.2, 240.0
 """Frame rates an estimate may give; outside them it is refused (people who do not walk)."""
+
+PRIOR_FPS = 30.0
+"""The frame rate assumed unless the walkers say otherwise: a video's own numbering."""
 
 PRIOR_FACTOR = 2.0
 """How far the walkers' frame rate must lie from the prior (either way, as a factor) to replace
@@ -88,12 +92,11 @@ def _paces(frames: np.ndarray, ids: np.ndarray, points: np.ndarray, span: float)
     twice that); only people with :data:`_SPANS` or more such steps."""
     order = np.lexsort((frames, ids))
     f, i, p = frames[order].astype(float), ids[order], points[order]
-    starts = np.searchsorted(i, i, side="left")
     ends = np.searchsorted(i, i, side="right")
     # Within each person's rows (frames ascending), the first row at least `span` later.
     key = np.unique(i, return_inverse=True)[1] * (np.ptp(f) + 4 * span + 1) + (f - f.min())
     later = np.minimum(np.searchsorted(key, key + span, side="left"), len(f) - 1)
-    ok = (later < ends) & (later >= starts) & (f[later] - f >= span) & (f[later] - f <= 2 * span)
+    ok = (later < ends) & (f[later] - f >= span) & (f[later] - f <= 2 * span)
     step = np.hypot(*(p[later] - p).T) / np.maximum(f[later] - f, 1e-9)
     first = np.unique(i[ok], return_index=True)[1]
     return np.array([np.median(mine) for mine in np.split(step[ok], first[1:])
@@ -101,7 +104,7 @@ def _paces(frames: np.ndarray, ids: np.ndarray, points: np.ndarray, span: float)
 
 
 def frame_rate_from_walkers(frames: np.ndarray, ids: np.ndarray, points: np.ndarray,
-                            prior: float = 30.0) -> FrameRate:
+                            prior: float = PRIOR_FPS) -> FrameRate:
     """The frame rate of ``frames`` from the people's walking (module docstring); the
     ``prior`` where they cannot tell one or where theirs is within :data:`PRIOR_FACTOR` of it,
     and at most that factor above it.

@@ -45,7 +45,11 @@ from xvmatch.geometry.people_calibration import (
 )
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.inference.linking.tracklets import box_track_ids
-from xvmatch.inference.matching.frame_rate import FrameRate, frame_rate_from_walkers
+from xvmatch.inference.matching.frame_rate import (
+    PRIOR_FPS,
+    FrameRate,
+    frame_rate_from_walkers,
+)
 
 __all__ = [
     "AUTO_FPS",
@@ -72,9 +76,6 @@ AUTO_HFOV = "auto"
 AUTO_FPS = "auto"
 """``--fps auto``: 30 a second unless the top view's walkers say otherwise
 (:func:`top_frame_rate`)."""
-
-PRIOR_FPS = 30.0
-"""The frame rate ``auto`` assumes unless the walkers say otherwise: a video's own numbering."""
 
 @dataclass(frozen=True)
 class GroundAssociationOptions:
