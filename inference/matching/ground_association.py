@@ -141,13 +141,22 @@ def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
 
 
 def top_frame_rate(top: Mapping, calib: PeopleCalibration, tracks: bool = True,
-                   prior: float = PRIOR_FPS) -> FrameRate:
+                   prior: float = PRIOR_FPS,
+                   table: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> FrameRate:
     """The frame rate of the top view's frame numbers from how fast its people walk on its
     ground map (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`), each
-    followed by the view's track ids (``tracks``, video mode) or by its boxes linked by IoU."""
+    followed by the view's track ids (``tracks``, video mode) or by its boxes linked by IoU;
+    ``table``: the view already mapped (:func:`_top_table`)."""
+    frames, ids, ground = _top_table(top, calib) if table is None else table
+    return frame_rate_from_walkers(frames, ids if tracks else box_track_ids(top), ground, prior)
+
+
+def _top_table(top: Mapping, calib: PeopleCalibration
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every top-view person of the clip in one table, frames ascending: frame numbers
+    ``(N,)``, ids ``(N,)`` and ground-map points ``(N, 2)`` (:func:`top_ground_points`)."""
     frames, ids, boxes = stack_frames(top)
-    return frame_rate_from_walkers(frames, ids if tracks else box_track_ids(top),
-                                   top_ground_points(boxes, calib), prior)
+    return frames, ids, top_ground_points(boxes, calib)
 
 
 def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration) -> np.ndarray:
@@ -191,19 +200,20 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     calib = calibration or top_calibration(top, options.top_size, options.seed,
                                            tracks=options.consensus)
     order = sorted(set(frames) if frames is not None else set(top) & set(hor))
+    table = _top_table(top, calib)  # the top view mapped once, for the frames and the rate
+    starts = np.searchsorted(table[0], order, side="left")
+    ends = np.searchsorted(table[0], order, side="right")
     tops, boxes = [], []
-    for f in order:
-        t, h = top.get(f), hor.get(f)
-        tb = np.zeros((0, 4)) if t is None else np.asarray(t.boxes, float).reshape(-1, 4)
+    for f, a, b in zip(order, starts, ends, strict=True):
+        h = hor.get(f)
         hb = np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4)
-        t_ids = np.zeros(0, np.int64) if t is None else np.asarray(t.ids)
         h_ids = np.zeros(0, np.int64) if h is None else np.asarray(h.ids)
-        ground = top_ground_points(tb, calib)
+        ground, t_ids = table[2][a:b], table[1][a:b]
         ok = np.isfinite(ground).all(axis=1)
         tops.append((ground[ok], t_ids[ok]))
         boxes.append((hb, h_ids))
-    rate = (top_frame_rate(top, calib, options.consensus) if options.fps == AUTO_FPS
-            else None)
+    rate = (top_frame_rate(top, calib, options.consensus, table=table)
+            if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
     lens = None
     hfov = options.hor_hfov_deg
