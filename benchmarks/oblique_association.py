@@ -47,10 +47,11 @@ drawn pitch is the clip's middle one). The top camera is still calibrated once f
 the ``true cameras`` row and each scene's printed pitch take the first frame's camera.
 
 ``--hor-size assumed|guess``: the from-people rows without the handheld image size, as
-``associate`` without ``--image-size`` takes it where the boxes fit CVMHAT's 2688x1512 (the
-renders' 1920x1080 views; a 3640x2048 view's boxes do not, and ``associate`` asks for the
-size): ``assumed``, that size (before), or ``guess``, the smallest common video size holding
-the boxes (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`, now).
+``associate`` without ``--image-size`` takes it: ``assumed``, CVMHAT's 2688x1512 where the
+boxes fit it (the renders' 1920x1080 views; a 3640x2048 view's boxes do not, and ``associate``
+asked for the size: the true size is used), as before the twenty-eighth session; ``guess``,
+the smallest common video size holding the boxes, for every view (a 3640x2048 view's boxes
+give 3840x2160; :func:`~xvmatch.formats.box_image_size.ground_path_hor_size`, now).
 
 ``--hor-hfov LO HI``: the renders' handheld field of view, drawn per scene in LO-HI degrees
 (default 60 80, :class:`~xvmatch.datasets.oblique_scenes.ObliqueSceneConfig`); e.g. 90 120 for an
@@ -102,6 +103,7 @@ from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_sce
 from xvmatch.formats.box_image_size import (
     ASSUMED,
     CVMHAT_SIZE,
+    UNKNOWN,
     common_size_holding,
     consistent_with,
     ground_path_hor_size,
@@ -327,9 +329,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.guess_top_size:
             top_size = common_size_holding(top) or top_size
         people_hor = hor_size
-        if args.hor_size != "true" and consistent_with(hor):  # else associate asks for the size
+        if args.hor_size != "true" and consistent_with(hor):
             people_hor = (CVMHAT_SIZE if args.hor_size == "assumed" else
                           ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED) or CVMHAT_SIZE)
+        elif args.hor_size == "guess":  # boxes that do not fit CVMHAT's ("assumed": refused)
+            people_hor = ground_path_hor_size(hor, hor_size, UNKNOWN) or hor_size
         options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False)
         try:  # frame by frame the calibration reads no ids; the consensus rows, the tracks
             calib = top_calibration(top, top_size)

@@ -15,7 +15,9 @@ command that reads box files (``associate``, ``track``, ``offset``, ``associate-
    has passed, is left out with ``--quiet``).
    Boxes of a 1399-pixel-wide camera reach at most 1399 (plus the margin, 1538.9), so they are
    never taken for CVMHAT's. Otherwise the command stops with one line saying to pass
-   ``--image-size``.
+   ``--image-size``; ``associate`` and ``associate-multi`` first see whether the top view is
+   oblique, whose ground-map path guesses the size from the boxes, with a note
+   (:func:`ground_path_hor_size`; a nadir top view still stops).
 3. **Boxes inside the image**: a box is an error (naming the file and line) when it lies
    entirely outside the image, or goes past a border by more than :data:`MARGIN` (10%) of that
    side: ``x < -0.1 W``, ``y < -0.1 H``, ``x + w > 1.1 W`` or ``y + h > 1.1 H``. Detectors
@@ -40,14 +42,17 @@ __all__ = [
     "CVMHAT_SIZE",
     "MARGIN",
     "MIN_EXTENT",
+    "UNKNOWN",
     "box_extent",
     "box_line",
     "check_boxes_in_image",
     "common_size_holding",
     "consistent_with",
     "ground_path_hor_size",
+    "hor_size_note",
     "median_aspect",
     "resolve_size",
+    "unknown_size_error",
     "upright_size_guess",
 ]
 
@@ -63,6 +68,10 @@ COMMON_SIZES = ((640, 360), (640, 480), (1280, 720), (1920, 1080), (2560, 1440),
 :func:`common_size_holding` chooses from."""
 ASSUMED = "the CVMHAT default"
 """The source :func:`resolve_size` gives for an assumed CVMHAT size."""
+UNKNOWN = "not known"
+"""The source :func:`resolve_size` gives, with ``defer``, for boxes alone that do not fit the
+CVMHAT size: a path that needs the size refuses them (:func:`unknown_size_error`), the
+ground-map path takes :func:`ground_path_hor_size`'s guess."""
 
 
 def _fmt(value: float) -> str:
@@ -115,15 +124,27 @@ def common_size_holding(frames: Mapping) -> tuple[int, int] | None:
 
 def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str
                          ) -> tuple[int, int] | None:
-    """The horizontal view's size for the ground-map path where :func:`resolve_size` assumed
-    the CVMHAT default for boxes alone (``source`` :data:`ASSUMED`): the smallest common video
-    size holding its boxes (:func:`common_size_holding`), as that path reads distances and
+    """The horizontal view's size for the ground-map path where no size was given
+    (:func:`resolve_size`'s ``source`` :data:`ASSUMED` or :data:`UNKNOWN`): the smallest common
+    video size holding its boxes (:func:`common_size_holding`), as that path reads distances and
     bearings from the image's width and centre, and 2688x1512 belongs to CVMHAT's head-mounted
-    camera under a nadir drone. None where the size was given, or no other size is found."""
-    if source != ASSUMED:
+    camera under a nadir drone. None where the size was given, or (assumed) no other size is
+    found."""
+    if source not in (ASSUMED, UNKNOWN):
         return None
     guess = common_size_holding(hor)
+    if source == UNKNOWN:
+        return guess or tuple(size)
     return None if guess is None or tuple(guess) == tuple(size) else guess
+
+
+def hor_size_note(path: str | os.PathLike, guess: tuple[int, int], source: str) -> str:
+    """The note saying a horizontal view's size was guessed on the ground-map path
+    (:func:`ground_path_hor_size`), ``source`` as :func:`resolve_size` gave it."""
+    instead = ", not CVMHAT's" if source == ASSUMED else ""
+    return (f"{os.fspath(path)}: its images taken as {guess[0]}x{guess[1]} on this path, the "
+            f"smallest common video size holding its boxes{instead} (give --image-size WxH if "
+            "not)")
 
 
 def median_aspect(frames: Mapping) -> float | None:
@@ -194,7 +215,8 @@ def check_boxes_in_image(frames: Mapping, size: tuple[int, int], path: str | os.
 
 
 def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tuple, str]],
-                 ids: bool = True, option: str = "--image-size") -> tuple[tuple[int, int], str]:
+                 ids: bool = True, option: str = "--image-size", defer: bool = False
+                 ) -> tuple[tuple[int, int], str]:
     """The horizontal image size of a box file and where it comes from, by rules 1-3.
 
     Args:
@@ -204,10 +226,15 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
             images, the cameras), in order of precedence; sources are named in messages.
         ids: whether the records' ids are the file's ids (else row numbers).
         option: the option that gives the size, named in the refusal.
+        defer: boxes alone that do not fit the CVMHAT size are not refused here but returned
+            with the smallest common size holding them and :data:`UNKNOWN`, for a command whose
+            path is chosen later (``associate``: the ground-map path guesses it, the nadir
+            path refuses with :func:`unknown_size_error`).
 
     Returns:
         ``((W, H), source)``; with no size given, the CVMHAT default and :data:`ASSUMED`
-        (:func:`xvmatch.commands._box_reading.note_if_assumed` says so).
+        (:func:`xvmatch.commands._box_reading.note_if_assumed` says so), or with ``defer``
+        a guess and :data:`UNKNOWN`.
 
     Raises:
         ValueError: two given sizes that disagree, boxes only that are not consistent with the
@@ -221,11 +248,20 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
                                  f"({other[0]}x{other[1]}): give the horizontal image size once")
         check_boxes_in_image(hor, size, hor_path, source, ids)
         return size, source
+    if consistent_with(hor):
+        return CVMHAT_SIZE, ASSUMED
+    if defer and (guess := common_size_holding(hor)) is not None:
+        return guess, UNKNOWN
+    raise unknown_size_error(hor, hor_path, option)
+
+
+def unknown_size_error(hor: Mapping, hor_path: str | os.PathLike,
+                       option: str = "--image-size") -> ValueError:
+    """The one-line refusal of boxes alone that do not fit the CVMHAT size, on a path that
+    needs the horizontal image size (``option`` gives it)."""
     right, bottom = box_extent(hor)
-    if not consistent_with(hor):
-        raise ValueError(
-            f"{os.fspath(hor_path)}: the horizontal image size is unknown: pass {option} WxH "
-            f"(the camera's image size in pixels) or the images (the boxes reach x {_fmt(right)},"
-            f" y {_fmt(bottom)}, not the CVMHAT 2688x1512 it would otherwise assume)")
-    return CVMHAT_SIZE, ASSUMED
+    return ValueError(
+        f"{os.fspath(hor_path)}: the horizontal image size is unknown: pass {option} WxH "
+        f"(the camera's image size in pixels) or the images (the boxes reach x {_fmt(right)},"
+        f" y {_fmt(bottom)}, not the CVMHAT 2688x1512 it would otherwise assume)")
 

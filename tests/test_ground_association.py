@@ -152,6 +152,40 @@ def test_a_phones_size_is_guessed_on_the_ground_path(tmp_path, capsys) -> None:
     assert (tmp_path / "guess.csv").read_text() == (tmp_path / "given.csv").read_text()
 
 
+@pytest.mark.slow
+def test_boxes_past_cvmhats_size_take_the_ground_path_with_a_guessed_size(tmp_path,
+                                                                          capsys) -> None:
+    """A 3640x2048 handheld view, boxes alone: they do not fit CVMHAT's 2688x1512, so the nadir
+    search refuses them in one line asking for ``--image-size``, while the ground-map path (an
+    oblique top view) takes 3840x2160, the smallest common size holding them, saying so, and
+    pairs as with that size given."""
+    from xvmatch.cli import main
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0))
+    scene = make_oblique_scene(config, 60, np.random.default_rng(2))
+    assert scene.hor_cameras["hor1"][0].image_size == (3640, 2048)
+    paths = write_oblique_scene(scene, tmp_path, "s")
+    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+            "--fps", "10", "--hor-hfov", "70"]
+    guess, given = tmp_path / "guess.csv", tmp_path / "given.csv"
+    assert main([*base, "--top-image-size", "1920x1080", "--out", str(guess)]) == 0
+    err = capsys.readouterr().err
+    assert (f"note: {paths['hor1']}: its images taken as 3840x2160 on this path, the smallest "
+            "common video size holding its boxes (give --image-size WxH if not)") in err
+    assert "2688x1512 (CVMHAT" not in err
+    assert main([*base, "--top-image-size", "1920x1080", "--image-size", "3840x2160",
+                 "--quiet", "--out", str(given)]) == 0
+    assert guess.read_text() == given.read_text()
+    refused = tmp_path / "nadir.csv"
+    assert main([*base, "--top-view", "nadir", "--out", str(refused)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"xvmatch: error: {paths['hor1']}: the "
+                                                   "horizontal image size is unknown: pass "
+                                                   "--image-size WxH")
+    assert not refused.exists()
+
+
 @pytest.mark.parametrize("true_scale", [0.7, 1.0, 1.3])
 def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) -> None:
     """People on a top map whose metres are ``1 / true_scale`` of the horizontal map's: the

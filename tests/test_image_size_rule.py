@@ -19,9 +19,12 @@ from xvmatch.formats.box_image_size import (
     COMMON_SIZES,
     CVMHAT_SIZE,
     MIN_EXTENT,
+    UNKNOWN,
     common_size_holding,
     consistent_with,
     ground_path_hor_size,
+    hor_size_note,
+    resolve_size,
 )
 from xvmatch.formats.mot_boxes import (
     FrameBoxes,
@@ -181,6 +184,26 @@ def test_the_ground_path_guesses_only_a_size_it_assumed():
     wide = {1: FrameBoxes(1, [1], [[2640, 600, 40, 170]])}
     assert ground_path_hor_size(wide, CVMHAT_SIZE, ASSUMED) is None  # CVMHAT's own: kept
     assert ground_path_hor_size({}, CVMHAT_SIZE, ASSUMED) is None
+
+
+def test_boxes_past_cvmhats_size_are_left_to_the_path_only_when_asked():
+    """Boxes alone that do not fit 2688x1512 (a 3640x2048 camera's): refused in one line naming
+    the file, unless the caller defers (``associate``, whose ground-map path guesses the size);
+    boxes no common size holds are refused either way."""
+    big = {1: FrameBoxes(1, [1, 2], [[5, 5, 10, 20], [3500, 1500, 120, 500]])}
+    with pytest.raises(ValueError, match=r"^h\.txt: the horizontal image size is unknown: pass "
+                       r"--image-size WxH .* reach x 3620, y 2000,"):
+        resolve_size(big, "h.txt", [])
+    assert resolve_size(big, "h.txt", [], defer=True) == ((3840, 2160), UNKNOWN)
+    assert ground_path_hor_size(big, (3840, 2160), UNKNOWN) == (3840, 2160)
+    assert resolve_size(big, "h.txt", [((3640, 2048), "--image-size")], defer=True) == \
+        ((3640, 2048), "--image-size")
+    huge = {1: FrameBoxes(1, [1], [[9000, 100, 10, 10]])}
+    with pytest.raises(ValueError, match="size is unknown"):
+        resolve_size(huge, "h.txt", [], defer=True)
+    assert hor_size_note("h.txt", (3840, 2160), UNKNOWN) == (
+        "h.txt: its images taken as 3840x2160 on this path, the smallest common video size "
+        "holding its boxes (give --image-size WxH if not)")
 
 
 @pytest.mark.parametrize(("box", "ok"), [

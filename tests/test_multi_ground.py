@@ -204,3 +204,23 @@ def test_ground_options_guess_only_a_size_assumed() -> None:
     assert (options.hor_hfov_deg, options.fps) == ("auto", "auto")
     assert said == ["hor1.txt: its images taken as 1920x1080 on this path, the smallest common "
                     "video size holding its boxes, not CVMHAT's (give --image-size WxH if not)"]
+
+
+def test_a_size_not_known_is_guessed_on_the_ground_path_only() -> None:
+    """associate-multi: a handheld view whose boxes do not fit CVMHAT's size (no size given)
+    takes the guess on the ground-map path, saying so; the nadir path refuses it, naming it."""
+    from xvmatch.formats.box_image_size import UNKNOWN
+    from xvmatch.inference.views.multi_ego_run import path_sizes
+    from xvmatch.inference.views.multi_ground import ground_options
+
+    big = {1: FrameBoxes(1, np.array([1]), np.array([[3500.0, 1500.0, 120.0, 500.0]]))}
+    views, paths = [{}, big], ["top.txt", "hor1.txt"]
+    resolved = [((3840, 2160), UNKNOWN)]
+    assert path_sizes(resolved, views, paths, ground=True) == [(3840, 2160)]
+    with pytest.raises(ValueError, match=r"^hor1\.txt: the horizontal image size is unknown"):
+        path_sizes(resolved, views, paths, ground=False)
+    said: list[str] = []
+    options = ground_options(views, resolved, paths, "auto", "auto", said.append)
+    assert options.hor_sizes == ((3840, 2160),)
+    assert said == ["hor1.txt: its images taken as 3840x2160 on this path, the smallest common "
+                    "video size holding its boxes (give --image-size WxH if not)"]

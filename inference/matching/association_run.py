@@ -291,11 +291,15 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     pairs are made consistent along each view's tracks. Without ``--top-image-size`` the size
     is guessed from the boxes (not where the learned matcher reads the top images), and a top
     view too sparse to calibrate takes the nadir path; a horizontal size assumed to be CVMHAT's
-    is guessed from its boxes too (:func:`~xvmatch.formats.box_image_size.
-    ground_path_hor_size`), with a note."""
+    (or not known: boxes that do not fit it) is guessed from its boxes too
+    (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note."""
     if (top_size := _top_size(top, options, note)) is None:
         return None
-    from xvmatch.formats.box_image_size import check_boxes_in_image, ground_path_hor_size
+    from xvmatch.formats.box_image_size import (
+        check_boxes_in_image,
+        ground_path_hor_size,
+        hor_size_note,
+    )
     from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import (
         GroundAssociationOptions,
@@ -304,7 +308,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
 
     source = "--top-image-size" if options.top_image_size else "the top boxes' extent"
     check_boxes_in_image(top, top_size, options.top_boxes, source)
-    hor_size = ground_path_hor_size(hor, *options.hor_size) or options.hor_size[0]
+    guessed = ground_path_hor_size(hor, *options.hor_size)
+    hor_size = guessed or options.hor_size[0]
     ground = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
                                       hor_hfov_deg=options.hor_hfov, fps=options.fps,
                                       consensus=options.video, seed=0)
@@ -328,10 +333,9 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
             ground.consensus else "each frame on its own (--mode video: consistent over "
             "the clip)")
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
-    if hor_size != options.hor_size[0]:
-        note(f"xvmatch: note: {options.hor_boxes}: its images taken as {hor_size[0]}x"
-             f"{hor_size[1]} on this path, the smallest common video size holding its boxes, "
-             "not CVMHAT's (give --image-size WxH if not)", False)
+    if guessed is not None:
+        note(f"xvmatch: note: {hor_size_note(options.hor_boxes, guessed, options.hor_size[1])}",
+             False)
     if run.lens is not None:
         from xvmatch.inference.matching.ground_association import lens_note
 
@@ -392,6 +396,16 @@ def _learned_pairs(top: Mapping, hor: Mapping, frames: list[int], options: Assoc
     return run.pairs, run, inputs.refined_cameras
 
 
+def _need_hor_size(hor: Mapping, options: AssociationOptions) -> None:
+    """Refuse, on a path that reads the horizontal image size (the nadir search, the learned
+    matcher), boxes alone whose size is not known (:data:`~xvmatch.formats.box_image_size.
+    UNKNOWN`: they do not fit CVMHAT's and only the ground-map path guesses one)."""
+    from xvmatch.formats.box_image_size import UNKNOWN, unknown_size_error
+
+    if options.hor_size[1] == UNKNOWN:
+        raise unknown_size_error(hor, options.hor_boxes)
+
+
 def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes],
                     options: AssociationOptions,
                     hooks: AssociationHooks | None = None) -> AssociationRun:
@@ -417,6 +431,7 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
         raise ValueError("--offset auto estimates the offset with the nadir search; with an "
                          "oblique top view give it as a frame number (or 0)")
     if options.offset == "auto":
+        _need_hor_size(hor, options)
         auto = AutoOffsetOptions(hor_width=options.hor_size[0][0], max_offset=options.max_offset,
                                  params=options.params, camera_id=options.camera_id,
                                  workers=options.workers)
@@ -427,6 +442,8 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     frames = sorted(set(top) | set(hor))
     oblique = oblique_pairs(top, hor, options, hooks.note)
     run = refined = None
+    if oblique is None:
+        _need_hor_size(hor, options)
     if oblique is not None:
         pairs = oblique
     elif learned is not None:

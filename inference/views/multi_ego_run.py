@@ -23,7 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from xvmatch.cues.spatial_matching import SpatialParams
-from xvmatch.formats.box_image_size import check_boxes_in_image, resolve_size
+from xvmatch.formats.box_image_size import (
+    UNKNOWN,
+    check_boxes_in_image,
+    resolve_size,
+    unknown_size_error,
+)
 from xvmatch.formats.camera_frames import open_cameras
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, shift_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
@@ -193,10 +198,23 @@ def open_multi_ego(views: Views, matcher: LearnedMatcher | None,
 def multi_ego_sizes(inputs: MultiEgoInputs, options: MultiEgoRunOptions
                     ) -> list[tuple[tuple[int, int], str]]:
     """Each horizontal view's image size and where it comes from
-    (:func:`~xvmatch.formats.box_image_size.resolve_size`: given, else read from its boxes)."""
+    (:func:`~xvmatch.formats.box_image_size.resolve_size`: given, else read from its boxes;
+    boxes that do not fit the CVMHAT size are left to :func:`path_sizes`)."""
     views, paths = inputs.views, options.box_files
-    return [resolve_size(views[k + 1], paths[k + 1], inputs.given[k], ids=False)
+    return [resolve_size(views[k + 1], paths[k + 1], inputs.given[k], ids=False, defer=True)
             for k in range(len(views) - 1)]
+
+
+def path_sizes(resolved: Sequence[tuple[tuple[int, int], str]], views: Views,
+               paths: Sequence[str], ground: bool) -> list[tuple[int, int]]:
+    """Each horizontal view's size for the path taken (``resolved`` by
+    :func:`multi_ego_sizes`): a size not known (boxes alone that do not fit CVMHAT's) is
+    refused unless the path is the ``ground``-map one, which guesses it."""
+    if not ground:
+        for k, (_, source) in enumerate(resolved):
+            if source == UNKNOWN:
+                raise unknown_size_error(views[k + 1], paths[k + 1])
+    return [tuple(size) for size, _ in resolved]
 
 
 def _open_images(options: MultiEgoRunOptions, matcher, views: Views, given, sources: list):

@@ -45,6 +45,7 @@ from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.box_image_size import (
     check_boxes_in_image,
     ground_path_hor_size,
+    hor_size_note,
     upright_size_guess,
 )
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
@@ -214,17 +215,15 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
                    paths: Sequence[str], hfov: float | str, fps: float | str,
                    note: Callable[[str], object]) -> MultiGroundOptions:
     """``associate-multi``'s options of this path: each handheld view's image size as resolved
-    (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone,
-    where the smallest common video size holding its boxes serves
-    (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to ``note``
-    (``paths``: the box files, top first); ``--hor-hfov`` and ``--fps``."""
+    (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone (or
+    none known: boxes that do not fit it), where the smallest common video size holding its
+    boxes serves (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
+    ``note`` (``paths``: the box files, top first); ``--hor-hfov`` and ``--fps``."""
     sizes = []
     for k, (size, source) in enumerate(resolved, 1):
         guess = ground_path_hor_size(views[k], size, source)
         if guess is not None:
-            note(f"{paths[k]}: its images taken as {guess[0]}x{guess[1]} on this path, the "
-                 "smallest common video size holding its boxes, not CVMHAT's (give --image-size "
-                 "WxH if not)")
+            note(hor_size_note(paths[k], guess, source))
         sizes.append(tuple(guess or size))
     return MultiGroundOptions(tuple(sizes), hfov, fps)
 

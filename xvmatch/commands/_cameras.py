@@ -192,12 +192,14 @@ def write_cameras(opts: ModelArgs, cameras, refinement) -> None:
               + "".join(f"; {c}" for c in counts), file=sys.stderr)
 
 
-def horizontal_size(opts: ModelArgs, hor: Mapping) -> tuple[tuple[int, int], str]:
+def horizontal_size(opts: ModelArgs, hor: Mapping, defer: bool = False
+                    ) -> tuple[tuple[int, int], str]:
     """The horizontal image size and where it comes from: ``--image-size``, the
     ``--hor-images`` and the ``--cameras`` file's ego camera must agree when given
     (:func:`~xvmatch.formats.camera_frames.given_hor_sizes`); with none, CVMHAT's
     2688x1512 when the boxes are consistent with it (a note on stderr), else an error asking
-    for ``--image-size``. Every horizontal box must lie in it."""
+    for ``--image-size`` (with ``defer``: a guess the run's path accepts or refuses,
+    ``resolve_size``'s ``defer``). Every horizontal box must lie in it."""
     from xvmatch.formats.box_image_size import resolve_size
     from xvmatch.formats.camera_frames import given_hor_sizes
 
@@ -205,4 +207,5 @@ def horizontal_size(opts: ModelArgs, hor: Mapping) -> tuple[tuple[int, int], str
     learned = opts.model is not None
     given = given_hor_sizes(opts.image_size, opts.hor_images if learned else None,
                             opts.cameras if learned else None, sorted(hor))
-    return resolve_size(hor, "the horizontal boxes" if opts.hor is None else opts.hor, given)
+    return resolve_size(hor, "the horizontal boxes" if opts.hor is None else opts.hor, given,
+                        defer=defer)

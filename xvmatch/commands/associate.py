@@ -149,7 +149,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     learned = model_args(args)
     _check_outputs(args, learned)
     max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
-    hor_size = horizontal_size(learned, hor)
+    hor_size = horizontal_size(learned, hor, defer=True)  # the ground-map path may guess it
     options = _run_options(args, params, hor_size, max_offset, video)
     run = run_association(top, hor, options, _hooks(args, hor, hor_size))
     _write(args, learned, hor, run)

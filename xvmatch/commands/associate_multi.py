@@ -200,10 +200,10 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         resolved = mer.multi_ego_sizes(inputs, options)
         for k, r in enumerate(resolved):
             note_if_assumed(r, views[k + 1], paths[k + 1], quiet)
-        sizes = [r[0] for r in resolved]
         calib, note = multi_ground.oblique_top(  # calib None: the nadir path
             views[0], "nadir" if args.cameras else args.top_view, args.top_image_size, paths[0],
             offsets, top_tracks=None if tracks is None else tracks[0])
+        sizes = mer.path_sizes(resolved, views, paths, ground=calib is not None)
         if note:
             say(note)
         for k, value in enumerate(offsets):
