@@ -42,6 +42,10 @@ issue's hidden set (a low oblique drone, about half of each view's people in the
 
     .venv/bin/python benchmarks/oblique_association.py --top-pitch 20 45 --overlap 0.35 0.65
 
+``--top-height LO HI``: the top camera's height (default 4-60 m; raised where the people do not
+fit its image). By default most top views are far: their people's boxes are 20-100 px tall at
+1920x1080; ``--top-height 4 12`` gives 60-270 px, the hidden set's 60-280 (a close, low drone).
+
 ``--top-pitch-rate LO HI``: a drone whose gimbal tilts at LO-HI degrees/s where it stands (the
 drawn pitch is the clip's middle one). The top camera is still calibrated once for the clip;
 the ``true cameras`` row and each scene's printed pitch take the first frame's camera.
@@ -261,6 +265,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--top-pitch", type=float, nargs=2, default=(20.0, 90.0),
                    metavar=("LO", "HI"), help="the top camera's pitch in the renders, LO-HI "
                    "degrees below the horizon (default 20 90)")
+    p.add_argument("--top-height", type=float, nargs=2, default=(4.0, 60.0),
+                   metavar=("LO", "HI"), help="the top camera's height in the renders, LO-HI "
+                   "metres (default 4 60; raised where the people do not fit its image)")
     p.add_argument("--overlap", type=float, nargs=2, default=(0.3, 1.0), metavar=("LO", "HI"),
                    help="each view's share of people the other sees, drawn in LO-HI (default "
                    "0.3 1)")
@@ -284,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
     config = drone_config(args, hor_hfov=tuple(args.hor_hfov), top_pitch=tuple(args.top_pitch),
-                          overlap=tuple(args.overlap))
+                          overlap=tuple(args.overlap), top_height=tuple(args.top_height))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus",
              "associate, as it routes")
