@@ -34,7 +34,9 @@ table gives it per scenario: per top pitch band (:data:`PITCH_BANDS`) and per ov
 it from the boxes; ``--no-scale-search``: the registration at the top map's own scale only (as
 before :func:`~xvmatch.cues.ground_registration.register_with_scale`); ``--no-top-motion``: the
 tracklet-consensus row without the top map's own motion taken out of the registration (as before
-:func:`~xvmatch.cues.ground_registration.map_motion`).
+:func:`~xvmatch.cues.ground_registration.map_motion`); ``--no-top-sizes``: every handheld
+person read at 1.72 m, not at the height the top view reads for the partner it is compared
+with (as before :func:`~xvmatch.inference.matching.ground_association.top_sizes`).
 
 ``--top-pitch LO HI`` and ``--overlap LO HI``: the renders' top pitch (default 20-90 degrees)
 and each view's share of people the other sees (default 0.3-1), e.g. a scenario like the
@@ -257,6 +259,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--guess-top-size", action="store_true",
                    help="the from-people rows take the top size guessed from the boxes "
                    "(associate without --top-image-size), not the true one")
+    p.add_argument("--no-top-sizes", action="store_true",
+                   help="read every handheld person at 1.72 m, not at their top-view partner's "
+                   "height (before)")
     p.add_argument("--no-scale-search", action="store_true",
                    help="register at the top map's own scale only (before the scale search)")
     p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
@@ -330,7 +335,8 @@ def main(argv: list[str] | None = None) -> int:
         search = associate_sequence(top, hor, float(hor_size[0]), frames=frames)
         follow = associate_sequence(top, hor, float(hor_size[0]), frames=frames, search="follow")
         top_size = scene.top_cameras[0].image_size
-        known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False)
+        known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False,
+                                         top_sizes=not args.no_top_sizes)
         true = run_ground_association(top, hor, known, frames,
                                       _true_calibration(scene.top_cameras[0], top_size)).pairs
         if args.guess_top_size:
@@ -341,7 +347,8 @@ def main(argv: list[str] | None = None) -> int:
                           ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED) or CVMHAT_SIZE)
         elif args.hor_size == "guess":  # boxes that do not fit CVMHAT's ("assumed": refused)
             people_hor = ground_path_hor_size(hor, hor_size, UNKNOWN) or hor_size
-        options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False)
+        options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False,
+                                           top_sizes=not args.no_top_sizes)
         try:  # frame by frame the calibration reads no ids; the consensus rows, the tracks
             calib = top_calibration(top, top_size)
             frame_calib = top_calibration(top, top_size, tracks=False)

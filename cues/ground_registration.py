@@ -16,6 +16,12 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
   decided by its neighbours; the whole clip is registered with the top map at a few scales and
   the best kept (:func:`register_with_scale`);
+* **people's heights**: a horizontal person's distance is read from their box as if they
+  were of the crowd's height; where the top view tells each of its people's height (an oblique
+  top camera: a box's height over a person of the crowd's height there), a horizontal person
+  is put against top person ``i`` at ``i``'s height (``sizes``), where they would stand were
+  they ``i``. People are 1.5-1.95 m tall: at 20 m, one 1.9 m tall read as 1.72 is put 2 m
+  too far, more than the pairing's radius;
 * **association**: under the chosen pose, Hungarian on the ground distances with a
   non-association distance (:data:`RADIUS`), stretched along each horizontal person's ray by
   :data:`RANGE_SPREAD` of their distance: a distance read from a box height errs along the ray
@@ -132,12 +138,15 @@ _SIGMA = 0.5 * RADIUS
 """Metres: the spread of a mapped person across their ray (and along it, at least)."""
 
 
-def ray_distances(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray) -> np.ndarray:
+def ray_distances(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray,
+                  sizes: np.ndarray | None = None) -> np.ndarray:
     """``(N, M)`` distances (metres) of top people ``(N, 2)`` from horizontal people mapped on
     the top map ``(M, 2)``, with the offset along each one's ray from the camera (``rays``
     ``(M, 2)``, on the top map) shrunk by its spread: :data:`RANGE_SPREAD` of the distance, at
     least :data:`RADIUS` / 2, over :data:`RADIUS` / 2 (a distance read from a box height errs
-    along the ray, a bearing hardly). Near the camera, the plain distance."""
+    along the ray, a bearing hardly). Near the camera, the plain distance. ``sizes`` ``(N,)``:
+    each top person's height over the crowd's, a horizontal person compared with them read at
+    their height (their ray that many times as long)."""
     top = np.asarray(top, float).reshape(-1, 2)
     mapped, rays = np.asarray(mapped, float).reshape(-1, 2), np.asarray(rays, float).reshape(-1, 2)
     length = np.hypot(rays[:, 0], rays[:, 1])
@@ -146,13 +155,17 @@ def ray_distances(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray) -> np.n
     shrink = _SIGMA / np.maximum(_SIGMA, RANGE_SPREAD * length)
     dx = top[:, None, 0] - mapped[None, :, 0]
     dy = top[:, None, 1] - mapped[None, :, 1]
+    if sizes is not None:
+        grow = np.asarray(sizes, float).reshape(-1)[:, None] - 1.0
+        dx = dx - grow * rays[None, :, 0]
+        dy = dy - grow * rays[None, :, 1]
     along = (dx * unit[:, 0] + dy * unit[:, 1]) * shrink
     across = dy * unit[:, 0] - dx * unit[:, 1]
     return np.hypot(along, across)
 
 
-def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
+                    sizes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The best poses ``(K, 3)`` (x, y, heading) of the horizontal camera on the top map for
     one frame, and their scores ``(K,)``, best first (module docstring).
 
@@ -160,6 +173,10 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
         top: ``(N, 2)`` top-view people on its ground map.
         hor: ``(M, 2)`` horizontal-view people on the camera's ground map (x forward).
         hfov_deg: the horizontal camera's field of view.
+        sizes: ``(N,)`` each top person's height over the crowd's, or None (all alike): a
+            horizontal person is put against top person ``i`` at ``sizes[i]`` times their
+            distance (read from their box as if of the crowd's height), where they would stand
+            were they ``i``.
     """
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
@@ -167,13 +184,18 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float
     headings = np.arange(_HEADINGS) * (2 * np.pi / _HEADINGS)
     rot = _rotations(headings)  # (H, 2, 2)
     turned = np.einsum("hab,mb->hma", rot, hor)  # (H, M, 2)
-    # c = top_i - turned_j for every (heading, i, j).
-    centres = top[None, :, None, :] - turned[:, None, :, :]  # (H, N, M, 2)
-    centres = centres.reshape(-1, 2)
+    size = np.ones(len(top)) if sizes is None else np.asarray(sizes, float).reshape(-1)
+    # c = top_i - size_i turned_j for every (heading, i, j): j read at i's height, on i.
+    centres = top[None, :, None, :] - size[None, :, None, None] * turned[:, None, :, :]
+    centres = centres.reshape(-1, 2)  # (P, 2), P = H N M
     h_idx = np.repeat(np.arange(len(headings)), len(top) * len(hor))  # heading of each row
-    mapped = centres[:, None, :] + turned[h_idx]  # (P, M, 2)
-    dx = mapped[:, :, None, 0] - top[None, None, :, 0]  # (P, M, N), one coordinate at a time:
-    dy = mapped[:, :, None, 1] - top[None, None, :, 1]  # no (P, M, N, 2) temporary
+    seen = turned[h_idx]  # (P, M, 2)
+    # (P, M, N): horizontal person j put against top person i at i's height; one coordinate
+    # at a time, no (P, M, N, 2) temporary.
+    dx = (centres[:, None, None, 0] + seen[:, :, None, 0] * size[None, None, :]
+          - top[None, None, :, 0])
+    dy = (centres[:, None, None, 1] + seen[:, :, None, 1] * size[None, None, :]
+          - top[None, None, :, 1])
     d2 = dx * dx + dy * dy
     explained = np.exp(-0.5 * d2.min(axis=2) / _SIGMA**2).sum(axis=1)
     # Top people in the horizontal camera's view (bearing within the half field of view, as far
@@ -346,7 +368,8 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
 
 
 def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
-                        hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None
+                        hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
+                        top_sizes: list[np.ndarray] | None = None
                         ) -> tuple[float, list[FramePose]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES`, and the scale kept: the two maps' metres come from
@@ -363,13 +386,16 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
         top_ids: per frame, the top view's own track ids of ``tops`` (video mode only): the top
             map's motion from frame to frame is then taken out of the jumps
             (:func:`map_motion`).
+        top_sizes: per frame, each top person's height over the crowd's (``tops``' rows;
+            :func:`pose_hypotheses`), or None.
     Returns:
         ``(scale, poses)``: the poses lie on the top map multiplied by ``scale``.
     """
     runs: dict[float, tuple[float, list[FramePose]]] = {}
     motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
     for scale in MAP_SCALES:
-        cands = [pose_hypotheses(scale * p, q, hfov_deg) for p, q in zip(tops, hors, strict=True)]
+        cands = [pose_hypotheses(scale * p, q, hfov_deg, z)
+                 for p, q, z in zip(tops, hors, top_sizes or [None] * len(tops), strict=True)]
         poses = register_sequence(frames, cands, fps, None if motion is None else [
             None if m is None else np.array([scale * m[0], scale * m[1], m[2]]) for m in motion])
         runs[scale] = (round(sum(p.score for p in poses), 6), poses)
@@ -386,15 +412,17 @@ def on_top_map(hor: np.ndarray, pose: FramePose) -> np.ndarray:
     return pose.centre + np.asarray(hor, float).reshape(-1, 2) @ rot.T
 
 
-def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose) -> np.ndarray:
+def associate_on_ground(top: np.ndarray, hor: np.ndarray, pose: FramePose,
+                        sizes: np.ndarray | None = None) -> np.ndarray:
     """Pairs ``(P, 2)`` (top index, horizontal index) under the pose: Hungarian on the ground
-    distances along each horizontal person's ray shrunk by its spread (:func:`ray_distances`),
-    pairs farther than :data:`RADIUS` left unmatched."""
+    distances along each horizontal person's ray shrunk by its spread (:func:`ray_distances`,
+    each read at the top person's ``sizes`` when given), pairs farther than :data:`RADIUS`
+    left unmatched."""
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
         return np.zeros((0, 2), dtype=np.int64)
     mapped = on_top_map(hor, pose)
-    d = ray_distances(top, mapped, mapped - pose.centre)
+    d = ray_distances(top, mapped, mapped - pose.centre, sizes)
     cost = np.where(d < RADIUS, d, 2 * RADIUS)
     rows, cols = linear_sum_assignment(cost)
     ok = d[rows, cols] < RADIUS

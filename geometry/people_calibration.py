@@ -48,6 +48,7 @@ __all__ = [
     "MIDDLE_NADIR_ASPECT",
     "MIN_BLOCKS",
     "MIN_BOXES",
+    "MIN_HEIGHT_SHARE",
     "MIN_ROW_SPREAD",
     "MIN_TRACKED_ROW_SPREAD",
     "MIN_UPRIGHT_ASPECT",
@@ -64,6 +65,15 @@ __all__ = [
 
 PERSON_HEIGHT = 1.72
 """Mean standing height of the people (m), the middle of 1.5-1.95 m: the calibration's scale."""
+
+MIN_HEIGHT_SHARE = 0.5
+"""A box tells its person's height (:meth:`PeopleCalibration.person_heights`) where at least
+this share of its pixel height grows with it: seen steeply from above, a box's height is mostly
+the body's width and the ground in front of the feet."""
+
+_HEIGHT_READ = (1.5, 1.95)
+"""Heights (m) between which :meth:`PeopleCalibration.person_heights` reads a box's person's
+height off the model (nearly straight in the height there)."""
 
 BODY_WIDTH = 0.45
 """Diameter (m) of the upright cylinder a person is modelled as: shoulders across, feet and
@@ -236,6 +246,37 @@ class PeopleCalibration:
         NaN for a pixel at or above the horizon."""
         return _to_ground(self.camera, np.asarray(pixels, dtype=float))
 
+    def person_heights(self, frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """``(N,)`` each box's person's height in metres, read through this camera: the height
+        at which the fit's model of a person standing at the box's foot point (:func:`_heights`)
+        gives the box's height; NaN for a box that cannot tell (cut by the border, behind
+        someone, too small, a nadir view, a foot at the horizon, or seen so steeply from above
+        that under :data:`MIN_HEIGHT_SHARE` of its height comes from the person's height).
+        ``frames`` ``(N,)``: each box's frame (who stands behind whom)."""
+        frames = np.asarray(frames, dtype=np.int64).reshape(-1)
+        boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+        out = np.full(len(boxes), np.nan)
+        size = (self.width, self.height)
+        ok = _readable(frames, boxes, size)
+        if self.kind != "oblique" or not ok.any():
+            return out
+        x, y, w, h = boxes[ok].T
+        n = len(h)
+        b = _Boxes(u=x + 0.5 * w, v=y + h, h=h, w=w, block=np.zeros(n, np.int64),
+                   track=np.arange(n), n_tracks=n)
+        camera = [np.radians(self.tilt_deg), np.radians(self.roll_deg), np.log(self.focal),
+                  np.log(self.camera_height)]
+        low, high = _HEIGHT_READ
+        at = {m: _heights(np.concatenate([camera, np.full(n, m)]), b, size)
+              for m in (low, self.person_height, high)}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            per_metre = (at[high] - at[low]) / (high - low)
+            metres = low + (h - at[low]) / per_metre
+            share = per_metre * self.person_height / at[self.person_height]
+        metres[~(np.isfinite(metres) & (share >= MIN_HEIGHT_SHARE))] = np.nan
+        out[ok] = metres
+        return out
+
     def to_record(self) -> dict:
         """JSON-ready record of how the camera was estimated (the camera file's ``estimated``)."""
         return {
@@ -317,15 +358,23 @@ def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return out
 
 
+def _readable(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Boxes ``(N, 4)`` whose height is the person's: not cut by the image border, not behind
+    someone, tall enough to read."""
+    x, y, w, h = boxes.T
+    width, height = size
+    return ((x > _BORDER) & (y > _BORDER) & (x + w < width - _BORDER)
+            & (y + h < height - _BORDER) & (h >= _MIN_HEIGHT_PX) & (w > 0)
+            & ~_behind_someone(frames, boxes))
+
+
 def _usable(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
             size: tuple[int, int]) -> _Boxes:
     """Boxes ``(N, 4)`` x, y, w, h not cut by the image border, not behind someone and tall
     enough to read, each with its track (index 0: boxes of tracks too short to have a height of
     their own; left out when most boxes have a track)."""
     x, y, w, h = boxes.T
-    width, height = size
-    ok = ((x > _BORDER) & (y > _BORDER) & (x + w < width - _BORDER) & (y + h < height - _BORDER)
-          & (h >= _MIN_HEIGHT_PX) & (w > 0)) & ~_behind_someone(frames, boxes)
+    ok = _readable(frames, boxes, size)
     block = np.unique(frames[ok] // _BLOCK_FRAMES, return_inverse=True)[1]
     track = np.zeros(int(ok.sum()), dtype=np.int64)
     n_tracks = 1

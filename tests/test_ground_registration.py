@@ -188,3 +188,46 @@ def test_ray_distances_shrink_only_along_far_rays(seed: int, angle: float) -> No
     np.testing.assert_allclose(moved, d, atol=1e-8)
     still = gr.ray_distances(top, mapped, np.zeros_like(rays))  # at the camera: plain
     np.testing.assert_allclose(still, plain, atol=1e-9)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), step=st.integers(0, 71))
+def test_people_read_at_their_partners_height_land_on_them(seed: int, step: int) -> None:
+    """Far people 1.5-1.95 m tall, their distances read as if 1.72 m: read at their top-view
+    partner's height (``sizes``) the true pose (a heading the hypotheses try, every 5 degrees)
+    explains every one of them exactly and wins; with all sizes 1 the hypotheses are those
+    without sizes, bit for bit."""
+    heading = np.radians(5.0 * step)
+    rng = np.random.default_rng(seed)
+    top = rng.uniform(-6, 6, (7, 2))
+    heights = rng.uniform(1.5, 1.95, len(top))
+    centre = -25.0 * np.array([np.cos(heading), np.sin(heading)])
+    local = _view(top, centre, heading)
+    seen = _in_view(local)
+    if seen.sum() < 3:
+        return
+    sizes = heights / 1.72
+    hor = local[seen] / sizes[seen, None]  # each distance read through 1.72 m
+    poses, scores = gr.pose_hypotheses(top, hor, 70.0, sizes)
+    assert np.hypot(*(poses[0][:2] - centre)) < 1e-6
+    assert abs(gr._wrap(poses[0][2] - heading)) < 1e-6
+    assert scores[0] == pytest.approx(seen.sum())
+    pose = gr.FramePose(1, poses[0][:2], float(poses[0][2]), 0.0)
+    pairs = gr.associate_on_ground(top, hor, pose, sizes)
+    assert sorted(map(tuple, pairs.tolist())) == [
+        (int(i), k) for k, i in enumerate(np.flatnonzero(seen))]
+    for a, b in zip(gr.pose_hypotheses(top, hor, 70.0, np.ones(len(top))),
+                    gr.pose_hypotheses(top, hor, 70.0), strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_ray_distances_read_at_the_top_persons_height() -> None:
+    """A person 1.9 m tall, 20 m away, read as 1.72 m: mapped 20 * 1.72 / 1.9 m away, at
+    their size of 1.9 / 1.72 they are where their partner stands; the size only moves along
+    the ray."""
+    top = np.array([[20.0, 0.0], [20.0, 3.0]])
+    mapped = np.array([[20.0 * 1.72 / 1.9, 0.0]])
+    sizes = np.array([1.9 / 1.72, 1.0])
+    d = gr.ray_distances(top, mapped, mapped, sizes)
+    assert d[0, 0] == pytest.approx(0.0, abs=1e-12)
+    assert d[1, 0] == pytest.approx(gr.ray_distances(top[1:], mapped, mapped)[0, 0])

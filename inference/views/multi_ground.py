@@ -12,8 +12,10 @@ that is not a nadir drone (issue 67): the run behind ``associate-multi --top-vie
    :mod:`xvmatch.inference.views.multi_view_assignment` (:class:`~xvmatch.inference.views.
    multi_view_costs.FrameProblem`, gamma 0): a top-handheld cost from the ground distance
    between a top person and a registered handheld person (its part along the handheld
-   camera's ray shrunk, :func:`~xvmatch.cues.ground_registration.ray_distances`, as
-   ``associate`` pairs); handheld-handheld pairs get no
+   camera's ray shrunk, :func:`~xvmatch.cues.ground_registration.ray_distances`, the handheld
+   person read at the top person's height, as ``associate`` pairs and registers,
+   :func:`~xvmatch.inference.matching.ground_association.top_sizes`); handheld-handheld pairs
+   get no
    evidence by default (:data:`HOR_HOR`: the handheld maps, from box heights, were too loose to
    pair two of them on the renders; a calibration there pairs by ground distance the people the
    top view does not see). The program's cycle consistency keeps the pairs one set of people: two
@@ -48,12 +50,13 @@ from xvmatch.formats.box_image_size import (
     hor_size_note,
     upright_size_guess,
 )
-from xvmatch.formats.mot_boxes import FrameBoxes, align_frames
+from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, stack_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     CalibrationError,
     PeopleCalibration,
 )
+from xvmatch.inference.linking.tracklets import box_track_ids
 from xvmatch.inference.matching.frame_rate import frame_rate_note
 from xvmatch.inference.matching.ground_association import (
     AUTO_FPS,
@@ -63,6 +66,7 @@ from xvmatch.inference.matching.ground_association import (
     top_calibration,
     top_frame_rate,
     top_ground_points,
+    top_sizes,
 )
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
 from xvmatch.inference.views.multi_view_assignment import view_pairs
@@ -293,14 +297,16 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
 
 
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
-                options: MultiGroundOptions, top_tracks: Mapping[int, int] | None = None
+                options: MultiGroundOptions, top_tracks: Mapping[int, int] | None = None,
+                sizes: Mapping[int, np.ndarray] | None = None
                 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """``{frame: ((M, 2), (M, 2))}`` handheld view ``k``'s people on the top map and the rays
     from its camera to them there, on the frames where its pose was registered (both views
     have boxes there; the top map at the scale that fits this view best,
     :func:`~xvmatch.cues.ground_registration.register_with_scale`; with the top view's
     ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken out
-    of the registration's jumps)."""
+    of the registration's jumps; ``sizes``: ``{frame: (N,)}`` each top person's height over
+    the crowd's, :func:`_top_sizes`)."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -309,8 +315,9 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     ids = None if top_tracks is None else [
         np.array([top_tracks[int(r)] for r in views[0][f].ids], dtype=np.int64)[ok[f]]
         for f in order]
-    scale, poses = gr.register_with_scale(order, [tops[f][ok[f]] for f in order],
-                                          [local[f] for f in order], hfov, options.fps, ids)
+    scale, poses = gr.register_with_scale(
+        order, [tops[f][ok[f]] for f in order], [local[f] for f in order], hfov, options.fps,
+        ids, None if sizes is None else [sizes[f][ok[f]] for f in order])
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
@@ -319,13 +326,15 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
 
 
 def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
-          calibration: LogisticCalibration | None) -> np.ndarray:
+          calibration: LogisticCalibration | None, sizes: np.ndarray | None = None
+          ) -> np.ndarray:
     """``(n_a, n_b)`` costs of two views' people on the top map, each ``(points, rays)`` (None:
     not on the map this frame; NaN rows: no ground), a positive cost where there is no
     distance; without a calibration :data:`HOR_HOR_COST` everywhere. A top view (its rays
     None) and a handheld view are as far apart as
     :func:`~xvmatch.cues.ground_registration.ray_distances` says (the handheld distance errs
-    along its ray), two handheld views by the plain distance."""
+    along its ray; each handheld person read at the top person's height, ``sizes`` ``(n_a,)``),
+    two handheld views by the plain distance."""
     if calibration is None:
         return np.full(n, HOR_HOR_COST)
     none = calibration.cost(np.full(n, _FAR * gr.RADIUS))
@@ -333,7 +342,7 @@ def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
         return none
     (pa, ra), (pb, rb) = a, b
     if ra is None and rb is not None:
-        d = gr.ray_distances(pa, pb, rb)
+        d = gr.ray_distances(pa, pb, rb, sizes)
     else:
         d = np.hypot(*(pa[:, None, :] - pb[None, :, :]).transpose(2, 0, 1))
     return np.where(np.isfinite(d), calibration.cost(np.minimum(d, _FAR * gr.RADIUS)), none)
@@ -362,16 +371,31 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
     tops = _top_grounds(views, frames, calibration) if tops is None else tops
     options = _with_lenses(views, frames, calibration, options, tops)[0]
+    heights = _top_sizes(views[0], calibration, top_tracks)
     placed = [{f: (p, None) for f, p in tops.items() if len(p)},
-              *(_registered(views, k, tops, options, top_tracks) for k in range(1, len(views)))]
+              *(_registered(views, k, tops, options, top_tracks, heights)
+                for k in range(1, len(views)))]
     problems = {}
     for f in frames:
         sizes = tuple(len(_boxes(v.get(f))) for v in views)
         costs = {(a, b): _cost(placed[a].get(f), placed[b].get(f), (sizes[a], sizes[b]),
-                               TOP_HOR if a == 0 else HOR_HOR)
+                               TOP_HOR if a == 0 else HOR_HOR, heights.get(f) if a == 0 else None)
                  for a, b in view_pairs(len(views))}
         problems[f] = FrameProblem(sizes, costs, dict.fromkeys(costs, 0.0))
     return problems
+
+
+def _top_sizes(top: Mapping, calibration: PeopleCalibration,
+               top_tracks: Mapping[int, int] | None) -> dict[int, np.ndarray]:
+    """``{frame: (N,)}`` each top-view box's person's height over the crowd's, in its record's
+    order (:func:`~xvmatch.inference.matching.ground_association.top_sizes`), each person
+    followed by the top view's track ids (``top_tracks``, video mode) or its boxes linked by
+    IoU."""
+    frames, ids, _ = stack_frames(top)
+    tracks = (np.array([top_tracks[int(r)] for r in ids], dtype=np.int64)
+              if top_tracks is not None else box_track_ids(top))
+    read = top_sizes(top, tracks, calibration)
+    return {int(f): read[frames == f] for f in np.unique(frames)}
 
 
 def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
