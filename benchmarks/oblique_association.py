@@ -36,7 +36,9 @@ before :func:`~xvmatch.cues.ground_registration.register_with_scale`); ``--no-to
 tracklet-consensus row without the top map's own motion taken out of the registration (as before
 :func:`~xvmatch.cues.ground_registration.map_motion`); ``--no-top-sizes``: every handheld
 person read at 1.72 m, not at the height the top view reads for the partner it is compared
-with (as before :func:`~xvmatch.inference.matching.ground_association.top_sizes`).
+with (as before :func:`~xvmatch.inference.matching.ground_association.top_sizes`);
+``--box-noise SIGMA``: each box edge of both views moved by a normal draw of SIGMA times the
+box's height (the renders' boxes are exact; annotations and detectors are not).
 
 ``--top-pitch LO HI`` and ``--overlap LO HI``: the renders' top pitch (default 20-90 degrees)
 and each view's share of people the other sees (default 0.3-1), e.g. a scenario like the
@@ -137,6 +139,21 @@ def _scrambled(frames: dict, rng: np.random.Generator) -> tuple[dict, dict]:
     return ({f: FrameBoxes(f, np.array([forward[int(i)] for i in r.ids], dtype=np.int64),
                            np.asarray(r.boxes, float).reshape(-1, 4))
              for f, r in frames.items()}, back)
+
+
+def _jittered(frames: dict, sigma: float, rng: np.random.Generator) -> dict:
+    """The view's boxes with each edge moved by a normal draw of ``sigma`` times the box's
+    height (an annotator's or a detector's looseness), at least 2 px wide and tall."""
+    out = {}
+    for f in sorted(frames):
+        rec = frames[f]
+        b = np.asarray(rec.boxes, float).reshape(-1, 4)
+        x0, y0, x1, y1 = (b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3])
+        step = sigma * b[:, 3:4] * rng.standard_normal((len(b), 4))
+        x0, y0, x1, y1 = x0 + step[:, 0], y0 + step[:, 1], x1 + step[:, 2], y1 + step[:, 3]
+        w, h = np.maximum(x1 - x0, 2.0), np.maximum(y1 - y0, 2.0)
+        out[f] = FrameBoxes(f, rec.ids, np.column_stack([x0, y0, w, h]))
+    return out
 
 
 def _true_calibration(camera, size: tuple[int, int]) -> PeopleCalibration:
@@ -259,6 +276,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--guess-top-size", action="store_true",
                    help="the from-people rows take the top size guessed from the boxes "
                    "(associate without --top-image-size), not the true one")
+    p.add_argument("--box-noise", type=float, default=0.0, metavar="SIGMA",
+                   help="move each box edge, in both views, by a normal draw of SIGMA times "
+                   "the box's height (default 0: the renders' exact boxes)")
     p.add_argument("--no-top-sizes", action="store_true",
                    help="read every handheld person at 1.72 m, not at their top-view partner's "
                    "height (before)")
@@ -316,6 +336,9 @@ def main(argv: list[str] | None = None) -> int:
         rng = np.random.default_rng([args.seed, k, 1])
         top, top_back = _scrambled(scene.top, rng)
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)
+        if args.box_noise > 0:  # from a generator of its own: the scenes' draws stay
+            noise = np.random.default_rng([args.seed, k, 2])
+            top, hor = (_jittered(v, args.box_noise, noise) for v in (top, hor))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         truth = {f: {(int(a), int(b)) for a in top[f].ids for b in hor[f].ids
                      if top_back[int(a)] == hor_back[int(b)]} for f in frames}

@@ -28,6 +28,23 @@ def _scrambled(frames: dict, offset: int) -> tuple[dict, dict]:
             for f, r in frames.items()}, back
 
 
+def _prepared(scene) -> tuple[dict, dict, list[int], GroundAssociationOptions, tuple]:
+    """The scene's two views with ids scrambled per view, every 3rd frame, the run's options
+    (the true image sizes, 10 frames a second) and the ways back to the scene's ids."""
+    top, top_back = _scrambled(scene.top, 100)
+    hor, hor_back = _scrambled(scene.hor["hor1"], 500)
+    frames = [f for f in sorted(set(top) & set(hor)) if f % 3 == 1]
+    options = GroundAssociationOptions(scene.top_cameras[0].image_size,
+                                       scene.hor_cameras["hor1"][0].image_size, fps=10.0)
+    return top, hor, frames, options, (top_back, hor_back)
+
+
+def _cvidf1(scene, run, frames: list[int], backs: tuple) -> float:
+    """CVIDF1 of a run's pairs on ``frames``, its ids taken back to the scene's."""
+    back = {f: [(backs[0][a], backs[1][b]) for a, b in p] for f, p in run.pairs.items()}
+    return summarize(count_sequence(back, scene.top, scene.hor["hor1"], frames=frames)).cvidf1
+
+
 @pytest.fixture(scope="module")
 def scene():
     config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0))
@@ -36,11 +53,7 @@ def scene():
 
 @pytest.mark.slow
 def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
-    top, top_back = _scrambled(scene.top, 100)
-    hor, hor_back = _scrambled(scene.hor["hor1"], 500)
-    frames = [f for f in sorted(set(top) & set(hor)) if f % 3 == 1]
-    options = GroundAssociationOptions(scene.top_cameras[0].image_size,
-                                       scene.hor_cameras["hor1"][0].image_size, fps=10.0)
+    top, hor, frames, options, backs = _prepared(scene)
     calib = top_calibration(top, options.top_size)
     assert calib.kind == "oblique"
     true_tilt = np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2]))
@@ -49,9 +62,7 @@ def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
     for consensus in (False, True):
         run = run_ground_association(top, hor, replace(options, consensus=consensus), frames,
                                      calib)
-        back = {f: [(top_back[a], hor_back[b]) for a, b in p] for f, p in run.pairs.items()}
-        scores[consensus] = summarize(count_sequence(back, scene.top, scene.hor["hor1"],
-                                                     frames=frames)).cvidf1
+        scores[consensus] = _cvidf1(scene, run, frames, backs)
     assert run.summary.startswith("top view: oblique, tilt")
     # Measured 95.7 frame by frame and 100.0 with the consensus along the tracks (71.3 and
     # 94.9 with everyone read at 1.72 m).
@@ -96,18 +107,12 @@ def test_people_read_at_their_height_register_a_close_drone() -> None:
     config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), overlap=(0.35, 0.65),
                                 top_height=(4.0, 12.0))
     scene = make_oblique_scene(config, 60, np.random.default_rng(1))
-    top, top_back = _scrambled(scene.top, 100)
-    hor, hor_back = _scrambled(scene.hor["hor1"], 500)
-    frames = [f for f in sorted(set(top) & set(hor)) if f % 3 == 1]
-    options = GroundAssociationOptions(scene.top_cameras[0].image_size,
-                                       scene.hor_cameras["hor1"][0].image_size, fps=10.0)
+    top, hor, frames, options, backs = _prepared(scene)
     calib = top_calibration(top, options.top_size)
     scores = {}
     for sizes in (False, True):
         run = run_ground_association(top, hor, replace(options, top_sizes=sizes), frames, calib)
-        back = {f: [(top_back[a], hor_back[b]) for a, b in p] for f, p in run.pairs.items()}
-        scores[sizes] = summarize(count_sequence(back, scene.top, scene.hor["hor1"],
-                                                 frames=frames)).cvidf1
+        scores[sizes] = _cvidf1(scene, run, frames, backs)
     assert scores[True] > 95.0 > 50.0 > scores[False]
 
 
