@@ -20,8 +20,8 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
   were of the crowd's height; where the top view tells each of its people's height (an oblique
   top camera: a box's height over a person of the crowd's height there), a horizontal person
   is put against top person ``i`` at ``i``'s height (``sizes``), where they would stand were
-  they ``i``. People are 1.5-1.95 m tall: at 20 m, one 1.9 m tall read as 1.72 is put 2 m
-  too far, more than the pairing's radius;
+  they ``i``. People are 1.5-1.95 m tall: at 20 m, one 1.9 m tall read as 1.72 is put 1.9 m
+  too near, more than the pairing's radius;
 * **association**: under the chosen pose, Hungarian on the ground distances with a
   non-association distance (:data:`RADIUS`), stretched along each horizontal person's ray by
   :data:`RANGE_SPREAD` of their distance: a distance read from a box height errs along the ray

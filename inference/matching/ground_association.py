@@ -155,7 +155,8 @@ def top_frame_rate(top: Mapping, calib: PeopleCalibration, tracks: bool = True,
     """The frame rate of the top view's frame numbers from how fast its people walk on its
     ground map (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`), each
     followed by the view's track ids (``tracks``, video mode) or by its boxes linked by IoU;
-    ``table``: the view already mapped (:func:`_top_table`)."""
+    ``table``: the view already mapped (:func:`_top_table`; with the tracks to follow for
+    ids, ``tracks`` True)."""
     frames, ids, ground = _top_table(top, calib) if table is None else table
     return frame_rate_from_walkers(frames, ids if tracks else box_track_ids(top), ground, prior)
 
@@ -255,7 +256,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         tops.append((ground[ok], t_ids[ok]))
         sizes.append(read[a:b][ok])
         boxes.append((hb, h_ids))
-    rate = (top_frame_rate(top, calib, options.consensus, table=table)
+    rate = (top_frame_rate(top, calib, table=(table[0], tracks, table[2]))  # followed once
             if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
     lens = None
