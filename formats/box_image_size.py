@@ -130,11 +130,11 @@ def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str
     bearings from the image's width and centre, and 2688x1512 belongs to CVMHAT's head-mounted
     camera under a nadir drone. None where the size was given, or (assumed) no other size is
     found."""
-    if source not in (ASSUMED, UNKNOWN):
+    if source == UNKNOWN:  # resolve_size already took the smallest common size holding them
+        return tuple(size)
+    if source != ASSUMED:
         return None
     guess = common_size_holding(hor)
-    if source == UNKNOWN:
-        return guess or tuple(size)
     return None if guess is None or tuple(guess) == tuple(size) else guess
 
 

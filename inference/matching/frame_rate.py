@@ -89,9 +89,9 @@ class FrameRate:
 def _paces(frames: np.ndarray, ids: np.ndarray, points: np.ndarray, span: float) -> np.ndarray:
     """Each person's median pace, metres per frame number, over steps about ``span`` frame
     numbers long (from each box to the person's first box at least ``span`` later, at most
-    twice that); only people with :data:`_SPANS` or more such steps."""
-    order = np.lexsort((frames, ids))
-    f, i, p = frames[order].astype(float), ids[order], points[order]
+    twice that); only people with :data:`_SPANS` or more such steps. The rows come sorted by
+    person, then frame."""
+    f, i, p = frames.astype(float), ids, points
     ends = np.searchsorted(i, i, side="right")
     # Within each person's rows (frames ascending), the first row at least `span` later.
     key = np.unique(i, return_inverse=True)[1] * (np.ptp(f) + 4 * span + 1) + (f - f.min())
@@ -124,8 +124,9 @@ def frame_rate_from_walkers(frames: np.ndarray, ids: np.ndarray, points: np.ndar
     kept = FrameRate(float(prior), False, float(prior))
     if len(frames) < 2:
         return kept
-    order = np.lexsort((frames, ids))
-    gaps = np.diff(frames[order])[np.diff(ids[order]) == 0]
+    order = np.lexsort((frames, ids))  # by person, then frame: once, for every round
+    frames, ids, points = frames[order], ids[order], points[order]
+    gaps = np.diff(frames)[np.diff(ids) == 0]
     gaps = gaps[gaps > 0]
     if not len(gaps):
         return kept

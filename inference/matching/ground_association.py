@@ -155,9 +155,13 @@ def top_frame_rate(top: Mapping, calib: PeopleCalibration, tracks: bool = True,
     """The frame rate of the top view's frame numbers from how fast its people walk on its
     ground map (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`), each
     followed by the view's track ids (``tracks``, video mode) or by its boxes linked by IoU;
-    ``table``: the view already mapped (:func:`_top_table`; with the tracks to follow for
-    ids, ``tracks`` True)."""
-    frames, ids, ground = _top_table(top, calib) if table is None else table
+    ``table``: the view already stacked and mapped, ``(frames, ids, ground points)`` in
+    :func:`~xvmatch.formats.mot_boxes.stack_frames` order (with the tracks to follow for ids,
+    ``tracks`` True)."""
+    if table is None:
+        frames, ids, boxes = stack_frames(top)
+        table = (frames, ids, top_ground_points(boxes, calib))
+    frames, ids, ground = table
     return frame_rate_from_walkers(frames, ids if tracks else box_track_ids(top), ground, prior)
 
 
@@ -167,18 +171,19 @@ SIZE_RANGE = (0.85, 1.15)
 beyond, and its person is read as no taller or shorter than these."""
 
 
-def top_sizes(top: Mapping, tracks: np.ndarray, calib: PeopleCalibration) -> np.ndarray:
-    """``(N,)`` each top-view box's person's height over the crowd's, in
-    :func:`~xvmatch.formats.mot_boxes.stack_frames` order: each box's height read through the
+def top_sizes(frames: np.ndarray, boxes: np.ndarray, tracks: np.ndarray,
+              calib: PeopleCalibration) -> np.ndarray:
+    """``(N,)`` each top-view box's person's height over the crowd's, the boxes ``(N, 4)`` and
+    their frames ``(N,)`` as :func:`~xvmatch.formats.mot_boxes.stack_frames` gives them (who
+    stands behind whom is read per frame): each box's height read through the
     calibration (:meth:`~xvmatch.geometry.people_calibration.PeopleCalibration.person_heights`),
     the median along its track (``tracks`` ``(N,)``, the boxes' track numbers) over the median of
     every box read, within :data:`SIZE_RANGE`, rounded to 4 decimals; 1 for a track none of
     whose boxes tells (a nadir view, people seen steeply from above, boxes cut or hidden). A
     horizontal person read at their partner's height lands where the partner stands
     (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`)."""
-    frames, _, boxes = stack_frames(top)
     tracks = np.asarray(tracks).reshape(-1)
-    sizes = np.ones(len(boxes))
+    sizes = np.ones(len(tracks))
     read = calib.person_heights(frames, boxes)
     if not np.isfinite(read).any():
         return sizes
@@ -190,14 +195,6 @@ def top_sizes(top: Mapping, tracks: np.ndarray, calib: PeopleCalibration) -> np.
         if len(values):
             sizes[rows] = np.clip(np.median(values) / crowd, *SIZE_RANGE)
     return np.round(sizes, 4)
-
-
-def _top_table(top: Mapping, calib: PeopleCalibration
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every top-view person of the clip in one table, frames ascending: frame numbers
-    ``(N,)``, ids ``(N,)`` and ground-map points ``(N, 2)`` (:func:`top_ground_points`)."""
-    frames, ids, boxes = stack_frames(top)
-    return frames, ids, top_ground_points(boxes, calib)
 
 
 def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration) -> np.ndarray:
@@ -241,22 +238,25 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     calib = calibration or top_calibration(top, options.top_size, options.seed,
                                            tracks=options.consensus)
     order = sorted(set(frames) if frames is not None else set(top) & set(hor))
-    table = _top_table(top, calib)  # the top view mapped once, for the frames and the rate
-    starts = np.searchsorted(table[0], order, side="left")
-    ends = np.searchsorted(table[0], order, side="right")
-    tracks = table[1] if options.consensus else box_track_ids(top)  # frame mode: by IoU
-    read = top_sizes(top, tracks, calib) if options.top_sizes else np.ones(len(table[0]))
+    # The top view stacked and mapped once, for the frames, the sizes and the rate.
+    top_frames, top_ids, top_boxes = stack_frames(top)
+    top_ground = top_ground_points(top_boxes, calib)
+    starts = np.searchsorted(top_frames, order, side="left")
+    ends = np.searchsorted(top_frames, order, side="right")
+    tracks = top_ids if options.consensus else box_track_ids(top)  # frame mode: by IoU
+    read = (top_sizes(top_frames, top_boxes, tracks, calib) if options.top_sizes
+            else np.ones(len(top_frames)))
     tops, boxes, sizes = [], [], []
     for f, a, b in zip(order, starts, ends, strict=True):
         h = hor.get(f)
         hb = np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4)
         h_ids = np.zeros(0, np.int64) if h is None else np.asarray(h.ids)
-        ground, t_ids = table[2][a:b], table[1][a:b]
+        ground, t_ids = top_ground[a:b], top_ids[a:b]
         ok = np.isfinite(ground).all(axis=1)
         tops.append((ground[ok], t_ids[ok]))
         sizes.append(read[a:b][ok])
         boxes.append((hb, h_ids))
-    rate = (top_frame_rate(top, calib, table=(table[0], tracks, table[2]))  # followed once
+    rate = (top_frame_rate(top, calib, table=(top_frames, tracks, top_ground))  # followed once
             if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
     lens = None

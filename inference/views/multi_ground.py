@@ -391,10 +391,9 @@ def _top_sizes(top: Mapping, calibration: PeopleCalibration,
     order (:func:`~xvmatch.inference.matching.ground_association.top_sizes`), each person
     followed by the top view's track ids (``top_tracks``, video mode) or its boxes linked by
     IoU."""
-    frames, ids, _ = stack_frames(top)
-    tracks = (np.array([top_tracks[int(r)] for r in ids], dtype=np.int64)
-              if top_tracks is not None else box_track_ids(top))
-    read = top_sizes(top, tracks, calibration)
+    frames, ids, boxes = stack_frames(_tracked(top, top_tracks))
+    read = top_sizes(frames, boxes, ids if top_tracks is not None else box_track_ids(top),
+                     calibration)
     return {int(f): read[frames == f] for f in np.unique(frames)}
 
 
