@@ -50,6 +50,10 @@ issue's hidden set (a low oblique drone, about half of each view's people in the
 fit its image). By default most top views are far: their people's boxes are 20-100 px tall at
 1920x1080; ``--top-height 4 12`` gives 60-270 px, the hidden set's 60-280 (a close, low drone).
 
+``--edge-people LO HI``: LO-HI more people per camera walking across its image's bottom edge
+(a close drone's near edge, a handheld camera's passers-by), their boxes cut by it; the renders
+otherwise keep everyone inside both images.
+
 ``--top-pitch-rate LO HI``: a drone whose gimbal tilts at LO-HI degrees/s where it stands (the
 drawn pitch is the clip's middle one). The top camera is still calibrated once for the clip;
 the ``true cameras`` row and each scene's printed pitch take the first frame's camera.
@@ -296,6 +300,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overlap", type=float, nargs=2, default=(0.3, 1.0), metavar=("LO", "HI"),
                    help="each view's share of people the other sees, drawn in LO-HI (default "
                    "0.3 1)")
+    p.add_argument("--edge-people", type=int, nargs=2, default=(0, 0), metavar=("LO", "HI"),
+                   help="LO-HI more people per camera walking across its image's bottom edge, "
+                   "their boxes cut by it (default 0 0)")
     p.add_argument("--distance-errors", action="store_true",
                    help="also print how far the handheld distances read from box heights (the "
                    "true lens) err from the true ones, and their bearings")
@@ -316,7 +323,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
     config = drone_config(args, hor_hfov=tuple(args.hor_hfov), top_pitch=tuple(args.top_pitch),
-                          overlap=tuple(args.overlap), top_height=tuple(args.top_height))
+                          overlap=tuple(args.overlap), top_height=tuple(args.top_height),
+                          edge_people=tuple(args.edge_people))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus",
              "associate, as it routes")

@@ -105,6 +105,8 @@ _AZIMUTHS = 6
 _GAZE_SMOOTHING = 1.0
 # Time constant (s) of the pitch / roll wobble of a handheld camera.
 _WOBBLE_TIME = 1.0
+# Side (m) of an edge group's square (enlarged for big groups), across a bottom image edge.
+_EDGE_SIDE = 3.0
 
 
 @dataclass(frozen=True)
@@ -154,6 +156,11 @@ class ObliqueSceneConfig:
             absent from its view.
         min_visible_fraction: a person whose visible area is below this fraction of the full box
             is dropped.
+        edge_people: people drawn per camera (top and each handheld) who walk in a square
+            across its image's bottom edge, where their boxes are cut by it: a close drone's
+            near edge, a handheld camera's passers-by. Extra people, not counted in
+            :attr:`ObliqueScene.overlap_target`. (0, 0), the default, keeps every draw as
+            before.
     """
 
     n_people: tuple[int, int] = (3, 12)
@@ -189,6 +196,7 @@ class ObliqueSceneConfig:
     pan_duration: tuple[float, float] = (1.5, 3.0)
     near_clip: float = 0.3
     min_visible_fraction: float = 0.3
+    edge_people: tuple[int, int] = (0, 0)
 
     def __post_init__(self) -> None:
         def pair(name: str, low: float, high: float = np.inf) -> None:
@@ -219,6 +227,7 @@ class ObliqueSceneConfig:
         pair("hor_pitch", -45.0, 45.0)
         pair("pan_angle", 0.0, 180.0)
         pair("pan_duration", 1e-3)
+        pair("edge_people", 0, 20)
         if not 1 <= int(self.n_hor) <= 8:
             raise ValueError(f"ObliqueSceneConfig.n_hor must be in 1..8, got {self.n_hor}")
         if not self.hor_sizes:
@@ -261,7 +270,8 @@ class ObliqueScene:
         top: ``{frame: FrameBoxes}`` of the top view, frames 1..F (possibly empty records).
         hor: ``{view: {frame: FrameBoxes}}`` of the handheld views.
         groups: ``{name: person indices}``: ``"holders"`` (``holders[k - 1]`` holds ``horK``),
-            ``"shared"``, ``"top_only"`` and ``"horK_only"``.
+            ``"shared"``, ``"top_only"`` and ``"horK_only"``; with
+            :attr:`ObliqueSceneConfig.edge_people`, ``"top_edge"`` and ``"horK_edge"`` too.
         overlap: the fractions drawn, ``{"top": p, "hor1": p1, ...}``.
         overlap_target: the fractions the placed groups aim at (``overlap`` unless a group was
             rounded or left out): shared / (shared + top-only) for the top view, shared /
@@ -861,6 +871,30 @@ def _group_indices(
     return groups
 
 
+def _edge_groups(
+    config: ObliqueSceneConfig,
+    n_frames: int,
+    cameras: dict[str, Sequence[Camera]],
+    rng: np.random.Generator,
+) -> list[tuple[str, PeopleState, _Region]]:
+    """Per camera ``{name: F cameras}``, the walks of its edge group
+    (:attr:`ObliqueSceneConfig.edge_people`) in a square centred where the ray through its
+    middle frame's bottom-edge centre meets the ground; none for a camera whose bottom edge
+    looks above the horizon or a group drawn empty."""
+    groups = []
+    for name, cams in cameras.items():
+        n = int(rng.integers(config.edge_people[0], config.edge_people[1] + 1))
+        cam = cams[(n_frames - 1) // 2]
+        ray = cam.ray_directions(np.array([[0.5 * cam.width, cam.height - 1.0]]))[0]
+        if n == 0 or ray[2] >= -1e-6:
+            continue
+        centre = cam.c[:2] + ray[:2] * (cam.c[2] / -ray[2])
+        region = _Region(centre, _group_side(n, _EDGE_SIDE, config.min_separation))
+        groups.append((f"{name}_edge", _walk(config, n_frames, n, region, config.walk_speed,
+                                             rng), region))
+    return groups
+
+
 def make_oblique_scene(
     config: ObliqueSceneConfig, n_frames: int, rng: np.random.Generator
 ) -> ObliqueScene:
@@ -906,6 +940,18 @@ def make_oblique_scene(
         hor_cameras[name] = cams
         hor_angles.append(angles)
         headings[:, k] = angles[:, 0]  # a holder faces where they film
+    if config.edge_people[1] > 0:
+        # From a child generator drawn last: every other draw stays that of the same scene
+        # without edge people (a comparison on the same crowd).
+        edges = _edge_groups(config, n_frames, {"top": top_cameras, **hor_cameras},
+                             rng.spawn(1)[0])
+        for name, walk, region in edges:
+            start = positions.shape[1]
+            positions = np.concatenate([positions, walk.positions + region.centre], axis=1)
+            heights = np.concatenate([heights, walk.heights])
+            widths = np.concatenate([widths, walk.widths])
+            headings = np.concatenate([headings, walk.headings], axis=1)
+            groups[name] = np.arange(start, positions.shape[1], dtype=np.int64)
     people = PeopleState(
         positions=positions, heights=heights, widths=widths, headings=headings,
         ids=np.arange(positions.shape[1], dtype=np.int64), wearer=0,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -100,6 +102,26 @@ def test_tilting_gimbal_turns_about_the_middle_pitch():
     assert all(np.array_equal(c.c, cams[0].c) for c in cams)  # it tilts where it stands
     with pytest.raises(ValueError, match="top_pitch_rate"):
         ObliqueSceneConfig(top_pitch_rate=(2.0, 1.0))
+
+
+def test_edge_people_are_cut_by_each_images_bottom_edge():
+    """``edge_people``: more people walk across each camera's bottom edge, whose boxes it cuts
+    (the renders otherwise keep everyone inside both images); everyone else is the same scene's,
+    bit for bit."""
+    config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), top_height=(4.0, 12.0))
+    plain = _scene(config, 3, 60)
+    edged = _scene(dataclasses.replace(config, edge_people=(2, 3)), 3, 60)
+    n = plain.people.n_people
+    np.testing.assert_array_equal(edged.people.positions[:, :n], plain.people.positions)
+    assert {"top_edge", "hor1_edge"} <= set(edged.groups)
+    assert all(2 <= len(edged.groups[g]) <= 3 for g in ("top_edge", "hor1_edge"))
+    assert edged.overlap_target == plain.overlap_target
+    for scene, want in ((plain, False), (edged, True)):
+        for records, cams in _views(scene):
+            rows = np.concatenate([r.boxes[:, 1] + r.boxes[:, 3] for r in records.values()])
+            assert (rows >= cams[0].height - 1.0).any() == want
+    with pytest.raises(ValueError, match="edge_people"):
+        ObliqueSceneConfig(edge_people=(3, 2))
 
 
 def test_boxes_inside_the_image(clips, two_hor):
