@@ -42,14 +42,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from xvmatch.geometry.people_calibration import BODY_WIDTH, PERSON_HEIGHT, cut_at_bottom
+
 __all__ = [
     "KEEP",
     "MAP_SCALES",
     "RADIUS",
     "RANGE_SPREAD",
     "SCALE_MARGIN",
+    "WIDTH_RATIO",
     "FramePose",
     "associate_on_ground",
+    "box_width_ratio",
     "hor_ground_points",
     "map_motion",
     "on_top_map",
@@ -67,6 +71,13 @@ RANGE_SPREAD = 0.1
 1.5-1.95 m tall, boxes cut by occlusion): along the camera's ray a mapped person may lie this
 part of their distance away from their top-view partner (never less than :data:`RADIUS` / 2),
 across it :data:`RADIUS` / 2 (the bearing, from the box's column, is sharp)."""
+
+WIDTH_RATIO = round(BODY_WIDTH / PERSON_HEIGHT, 4)
+"""A person's box width over height when the view's boxes cannot tell
+(:func:`box_width_ratio`): the calibration's body, 0.45 m wide, 1.72 m tall."""
+
+_MIN_RATIO_BOXES = 20
+"""Boxes not cut by a border :func:`box_width_ratio` needs to read a view's ratio."""
 
 KEEP = 24
 """Pose hypotheses kept per frame for the choice over time."""
@@ -117,16 +128,41 @@ class FramePose:
 
 
 def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: float,
-                      person_height: float = 1.72) -> np.ndarray:
+                      person_height: float = PERSON_HEIGHT,
+                      width_ratio: float = WIDTH_RATIO) -> np.ndarray:
     """Horizontal-view people on the camera's own ground map ``(M, 2)``: x forward, y left.
 
-    Distance from box height (a person of ``person_height`` seen by a level camera,
-    ``d = f H / h``), bearing from the box's centre column."""
+    Depth from box height (a person of ``person_height`` seen by a level camera,
+    ``d = f H / h``: the distance along the optical axis, not along the ray, which is
+    ``1 / cos`` of the bearing longer, 22 % at a 70 degree lens's edge), bearing from the box's
+    centre column. A box cut by the image's bottom edge
+    (a passer-by, feet out of sight) shows only part of its height: its distance is read from
+    its width (``width_ratio`` times ``person_height`` wide, :func:`box_width_ratio`), no
+    farther than its height allows nor than where a level camera at ``person_height`` would
+    still see the feet."""
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
     f = 0.5 * image_size[0] / np.tan(np.radians(hfov_deg) / 2.0)
     distance = f * person_height / np.maximum(boxes[:, 3], 1.0)
-    bearing = -np.arctan2(boxes[:, 0] + 0.5 * boxes[:, 2] - 0.5 * image_size[0], f)
-    return distance[:, None] * np.column_stack([np.cos(bearing), np.sin(bearing)])
+    cut = cut_at_bottom(boxes, image_size[1])
+    if cut.any():
+        by_width = f * width_ratio * person_height / np.maximum(boxes[cut, 2], 1.0)
+        feet_seen = f * person_height / (0.5 * image_size[1])
+        distance[cut] = np.minimum(np.minimum(by_width, feet_seen), distance[cut])
+    across = -(boxes[:, 0] + 0.5 * boxes[:, 2] - 0.5 * image_size[0]) / f
+    return distance[:, None] * np.column_stack([np.ones(len(boxes)), across])
+
+
+def box_width_ratio(boxes: np.ndarray, image_size: tuple[int, int]) -> float:
+    """A view's people's width over height: the median over its boxes ``(N, 4)`` that the image
+    borders do not cut (:data:`WIDTH_RATIO` with fewer than :data:`_MIN_RATIO_BOXES`), rounded
+    to 4 decimals; how :func:`hor_ground_points` reads a cut box's distance from its width."""
+    boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    x, y, w, h = boxes.T
+    whole = ((x > 2.0) & (y > 2.0) & (x + w < image_size[0] - 2.0)
+             & ~cut_at_bottom(boxes, image_size[1]) & (h >= 8.0))
+    if whole.sum() < _MIN_RATIO_BOXES:
+        return WIDTH_RATIO
+    return round(float(np.median(w[whole] / h[whole])), 4)
 
 
 def _rotations(headings: np.ndarray) -> np.ndarray:

@@ -60,6 +60,7 @@ __all__ = [
     "CalibrationError",
     "PeopleCalibration",
     "calibrate_from_people",
+    "cut_at_bottom",
     "horizon_line",
 ]
 
@@ -246,6 +247,22 @@ class PeopleCalibration:
         NaN for a pixel at or above the horizon."""
         return _to_ground(self.camera, np.asarray(pixels, dtype=float))
 
+    def standing_points(self, boxes: np.ndarray, sizes: np.ndarray | None = None) -> np.ndarray:
+        """Where the people of boxes ``(N, 4)`` stand, ``(N, 2)`` in the view's own frame
+        (metres): each box's foot point on the ground; for a box cut by the image's bottom edge
+        (:func:`cut_at_bottom`: its feet out of sight, its bottom row the border's), where the
+        ray through its top centre meets the plane of its person's height (``sizes`` ``(N,)``,
+        each over :attr:`person_height`; 1 without); NaN where neither ray meets its plane."""
+        boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+        x, y, w, h = boxes.T
+        points = _to_ground(self.camera, np.column_stack([x + 0.5 * w, y + h]))
+        cut = cut_at_bottom(boxes, self.height) & (self.kind == "oblique")
+        if cut.any():
+            size = np.ones(len(boxes)) if sizes is None else np.asarray(sizes, float).reshape(-1)
+            points[cut] = _to_ground(self.camera, np.column_stack([x + 0.5 * w, y])[cut],
+                                     self.person_height * size[cut])
+        return points
+
     def person_heights(self, frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         """``(N,)`` each box's person's height in metres, read through this camera: the height
         at which the fit's model of a person standing at the box's foot point (:func:`_heights`)
@@ -315,11 +332,21 @@ def horizon_line(camera: Camera) -> tuple[float, float]:
     return float(rows[0]), float(rows[1])
 
 
-def _to_ground(camera: Camera, pixels: np.ndarray) -> np.ndarray:
-    """Rays through ``pixels`` met with the ground z = 0; NaN where they do not point down."""
+def cut_at_bottom(boxes: np.ndarray, image_height: float) -> np.ndarray:
+    """``(N,)`` boxes ``(N, 4)`` cut by the image's bottom edge (their bottom row within
+    :data:`_BORDER` pixels of it): the person's feet are out of sight."""
+    boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    return boxes[:, 1] + boxes[:, 3] >= image_height - _BORDER
+
+
+def _to_ground(camera: Camera, pixels: np.ndarray,
+               at: float | np.ndarray = 0.0) -> np.ndarray:
+    """Rays through ``pixels`` met with the plane ``at`` metres up (the ground by default; a
+    scalar or one per pixel), as ground positions; NaN where they do not point down to it."""
     d = camera.ray_directions(pixels)
+    drop = np.asarray(at, dtype=float) - camera.c[2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(d[:, 2] < -1e-9, -camera.c[2] / d[:, 2], np.nan)
+        s = np.where((d[:, 2] < -1e-9) & (drop < 0), drop / d[:, 2], np.nan)
     return camera.c[:2] + s[:, None] * d[:, :2]
 
 

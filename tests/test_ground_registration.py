@@ -72,7 +72,30 @@ def test_hor_ground_points_level_camera() -> None:
     q = gr.hor_ground_points(boxes, (1000, 600), 90.0)
     assert q[0] == pytest.approx([10.0, 0.0])
     assert q[1, 1] < 0  # right of the image is to the camera's right (negative y)
-    assert np.hypot(*q[1]) == pytest.approx(10.0)
+    # As tall in the image, as deep: 10 m ahead, 8 m to the right (400 px at f = 500).
+    assert q[1] == pytest.approx([10.0, -8.0])
+
+
+def test_a_passer_by_cut_by_the_bottom_edge_is_read_from_their_width() -> None:
+    """A person 2.5 m from a level camera 1.6 m up, feet out of sight, only their upper 60 %
+    in the image: read from their height as if whole they would be put at 4.2 m; read from
+    their width (the view's own width over height, from its whole boxes) at 2.5 m."""
+    f, size = 500.0, (1000, 600)
+    ratio = 0.45 / 1.72
+    whole = np.array([[400.0 + 30 * k, 280.0, f * 0.45 / d, f * 1.72 / d]
+                      for k, d in enumerate(np.linspace(8.0, 20.0, 24))])
+    assert gr.box_width_ratio(whole, size) == pytest.approx(ratio, abs=1e-3)
+    assert gr.box_width_ratio(whole[:5], size) == gr.WIDTH_RATIO  # too few to read
+    w, h = f * 0.45 / 2.5, f * 1.72 / 2.5
+    cut = np.array([[500.0 - w / 2, 600.0 - 0.6 * h, w, 0.6 * h]])
+    q = gr.hor_ground_points(cut, size, 90.0, width_ratio=gr.box_width_ratio(whole, size))
+    assert q[0] == pytest.approx([2.5, 0.0], abs=0.05)
+    lifted = cut + np.array([0.0, -3.0, 0.0, 0.0])  # the same box inside the image: its height
+    assert gr.hor_ground_points(lifted, size, 90.0)[0, 0] == pytest.approx(2.5 / 0.6, rel=1e-6)
+    # Cut at a side too (narrow): no farther than where a level camera 1.72 m up sees feet.
+    cornered = cut * np.array([1.0, 1.0, 0.2, 1.0])
+    assert gr.hor_ground_points(cornered, size, 90.0)[0, 0] == pytest.approx(
+        f * 1.72 / 300.0, rel=1e-6)
 
 
 def test_no_people_no_hypotheses() -> None:

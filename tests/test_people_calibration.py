@@ -20,10 +20,13 @@ from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_sce
 from xvmatch.formats.camera_io import CameraFileError, load_cameras, load_estimated
 from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, stack_frames, write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
+from xvmatch.geometry.ground_plane import foot_points
 from xvmatch.geometry.people_calibration import (
     LENS_RANGE_DEG,
     CalibrationError,
+    PeopleCalibration,
     calibrate_from_people,
+    cut_at_bottom,
     horizon_line,
 )
 
@@ -96,6 +99,30 @@ def test_each_persons_height_read_through_the_camera() -> None:
     np.testing.assert_allclose(ours / np.median(ours), true / np.median(true), atol=0.03)
     nadir = dataclasses.replace(calib, kind="nadir")
     assert np.isnan(nadir.person_heights(numbers, boxes)).all()
+
+
+def test_a_person_cut_by_the_bottom_edge_stands_under_their_head() -> None:
+    """A close drone's near edge cuts people's feet off: their box's bottom row is the
+    border's, so its foot point puts them metres too far; the ray through the box's top met at
+    their height puts them where they stand (the body's radius off)."""
+    calib = PeopleCalibration(kind="oblique", width=SIZE[0], height=SIZE[1],
+                              focal=SIZE[0] / 2 / np.tan(np.radians(35.0)), tilt_deg=30.0,
+                              roll_deg=0.0, camera_height=8.0, horizon=(0.0, 0.0),
+                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
+                              focal_rel_std=0.0, n_boxes=100, n_frames=10)
+    edge = calib.ground_points(np.array([[SIZE[0] / 2, SIZE[1] - 1.0]]))[0]
+    where = np.array([[edge[0] - 0.8, edge[1]], [edge[0] + 6.0, edge[1] + 1.0]])
+    heights = np.array([1.9, 1.6])
+    index, boxes = project_view(where, heights, np.full(2, 0.45), calib.camera)
+    assert list(index) == [0, 1] and cut_at_bottom(boxes, SIZE[1]).tolist() == [True, False]
+    sizes = heights / calib.person_height
+    placed = calib.standing_points(boxes, sizes)
+    assert np.hypot(*(placed - where).T).max() < 0.35
+    feet = calib.ground_points(foot_points(boxes))
+    assert np.hypot(*(feet[0] - where[0])) > 0.7
+    np.testing.assert_array_equal(placed[1], feet[1])
+    crowd = calib.standing_points(boxes)  # of the crowd's height without sizes: nearer
+    assert 0.35 < np.hypot(*(crowd[0] - where[0])) < 1.5
 
 
 @pytest.mark.parametrize(("pitch", "height", "hfov", "roll"), [

@@ -40,7 +40,6 @@ import numpy as np
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.mot_boxes import stack_frames
-from xvmatch.geometry.ground_plane import foot_points
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     PeopleCalibration,
@@ -197,12 +196,15 @@ def top_sizes(frames: np.ndarray, boxes: np.ndarray, tracks: np.ndarray,
     return np.round(sizes, 4)
 
 
-def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration) -> np.ndarray:
+def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration,
+                      sizes: np.ndarray | None = None) -> np.ndarray:
     """The top view's people ``(N, 2)`` on its ground map (metres), from their boxes'
-    ``(N, 4)`` foot points through the calibration; NaN where a foot has no ground (above the
-    horizon)."""
+    ``(N, 4)`` foot points through the calibration, or, for a box cut by the image's bottom
+    edge, from its top at its person's height (``sizes`` ``(N,)``, :func:`top_sizes`;
+    :meth:`~xvmatch.geometry.people_calibration.PeopleCalibration.standing_points`); NaN where
+    a foot has no ground (above the horizon)."""
     boxes = np.asarray(boxes, float).reshape(-1, 4)
-    return calib.ground_points(foot_points(boxes)) if len(boxes) else np.zeros((0, 2))
+    return calib.standing_points(boxes, sizes) if len(boxes) else np.zeros((0, 2))
 
 
 def _summary(calib: PeopleCalibration) -> str:
@@ -240,12 +242,12 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     order = sorted(set(frames) if frames is not None else set(top) & set(hor))
     # The top view stacked and mapped once, for the frames, the sizes and the rate.
     top_frames, top_ids, top_boxes = stack_frames(top)
-    top_ground = top_ground_points(top_boxes, calib)
     starts = np.searchsorted(top_frames, order, side="left")
     ends = np.searchsorted(top_frames, order, side="right")
     tracks = top_ids if options.consensus else box_track_ids(top)  # frame mode: by IoU
     read = (top_sizes(top_frames, top_boxes, tracks, calib) if options.top_sizes
             else np.ones(len(top_frames)))
+    top_ground = top_ground_points(top_boxes, calib, read)
     tops, boxes, sizes = [], [], []
     for f, a, b in zip(order, starts, ends, strict=True):
         h = hor.get(f)
@@ -265,7 +267,10 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
                                options.hor_size, fps)
         hfov = lens.hfov_deg
-    hors = [(gr.hor_ground_points(hb, options.hor_size, hfov), h_ids) for hb, h_ids in boxes]
+    ratio = gr.box_width_ratio(np.concatenate([np.zeros((0, 4)), *(b for b, _ in boxes)]),
+                               options.hor_size)
+    hors = [(gr.hor_ground_points(hb, options.hor_size, hfov, width_ratio=ratio), h_ids)
+            for hb, h_ids in boxes]
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
                                           hfov, fps,
                                           [i for _, i in tops] if options.consensus else None,

@@ -310,7 +310,10 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
-    local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov) for f in order}
+    ratio = gr.box_width_ratio(np.concatenate([np.zeros((0, 4)), *map(_boxes, hor.values())]),
+                               size)
+    local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov, width_ratio=ratio)
+             for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
     ids = None if top_tracks is None else [
         np.array([top_tracks[int(r)] for r in views[0][f].ids], dtype=np.int64)[ok[f]]
