@@ -42,7 +42,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.geometry.people_calibration import BODY_WIDTH, PERSON_HEIGHT, cut_at_bottom
+from xvmatch.geometry.people_calibration import (
+    BODY_WIDTH,
+    PERSON_HEIGHT,
+    cut_at_bottom,
+    whole_boxes,
+)
 
 __all__ = [
     "KEEP",
@@ -134,12 +139,11 @@ def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: 
 
     Depth from box height (a person of ``person_height`` seen by a level camera,
     ``d = f H / h``: the distance along the optical axis, not along the ray, which is
-    ``1 / cos`` of the bearing longer, 22 % at a 70 degree lens's edge), bearing from the box's
-    centre column. A box cut by the image's bottom edge
-    (a passer-by, feet out of sight) shows only part of its height: its distance is read from
-    its width (``width_ratio`` times ``person_height`` wide, :func:`box_width_ratio`), no
-    farther than its height allows nor than where a level camera at ``person_height`` would
-    still see the feet."""
+    ``1 / cos`` of the bearing longer, 22 % at a 70 degree lens's edge), the offset across from
+    the box's centre column. A box cut by the image's bottom edge (a passer-by, feet out of
+    sight) shows only part of its height: its depth is read from its width (``width_ratio``
+    times ``person_height`` wide, :func:`box_width_ratio`), no farther than its height allows
+    nor than where a level camera at ``person_height`` would still see the feet."""
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
     f = 0.5 * image_size[0] / np.tan(np.radians(hfov_deg) / 2.0)
     distance = f * person_height / np.maximum(boxes[:, 3], 1.0)
@@ -153,16 +157,15 @@ def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: 
 
 
 def box_width_ratio(boxes: np.ndarray, image_size: tuple[int, int]) -> float:
-    """A view's people's width over height: the median over its boxes ``(N, 4)`` that the image
-    borders do not cut (:data:`WIDTH_RATIO` with fewer than :data:`_MIN_RATIO_BOXES`), rounded
-    to 4 decimals; how :func:`hor_ground_points` reads a cut box's distance from its width."""
+    """A view's people's width over height: the median over its boxes ``(N, 4)`` that no image
+    border cuts (:func:`~xvmatch.geometry.people_calibration.whole_boxes`; :data:`WIDTH_RATIO`
+    with fewer than :data:`_MIN_RATIO_BOXES`), rounded to 4 decimals; how
+    :func:`hor_ground_points` reads a cut box's depth from its width."""
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
-    x, y, w, h = boxes.T
-    whole = ((x > 2.0) & (y > 2.0) & (x + w < image_size[0] - 2.0)
-             & ~cut_at_bottom(boxes, image_size[1]) & (h >= 8.0))
+    whole = whole_boxes(boxes, image_size)
     if whole.sum() < _MIN_RATIO_BOXES:
         return WIDTH_RATIO
-    return round(float(np.median(w[whole] / h[whole])), 4)
+    return round(float(np.median(boxes[whole, 2] / boxes[whole, 3])), 4)
 
 
 def _rotations(headings: np.ndarray) -> np.ndarray:

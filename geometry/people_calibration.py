@@ -62,6 +62,7 @@ __all__ = [
     "calibrate_from_people",
     "cut_at_bottom",
     "horizon_line",
+    "whole_boxes",
 ]
 
 PERSON_HEIGHT = 1.72
@@ -385,14 +386,19 @@ def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return out
 
 
-def _readable(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Boxes ``(N, 4)`` whose height is the person's: not cut by the image border, not behind
-    someone, tall enough to read."""
-    x, y, w, h = boxes.T
+def whole_boxes(boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``(N,)`` boxes ``(N, 4)`` that no image border cuts (none within :data:`_BORDER` pixels
+    of one) and tall enough to read, in an image of ``size`` (width, height)."""
+    x, y, w, h = np.asarray(boxes, dtype=float).reshape(-1, 4).T
     width, height = size
     return ((x > _BORDER) & (y > _BORDER) & (x + w < width - _BORDER)
-            & (y + h < height - _BORDER) & (h >= _MIN_HEIGHT_PX) & (w > 0)
-            & ~_behind_someone(frames, boxes))
+            & (y + h < height - _BORDER) & (h >= _MIN_HEIGHT_PX) & (w > 0))
+
+
+def _readable(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Boxes ``(N, 4)`` whose height is the person's: whole (:func:`whole_boxes`), not behind
+    someone."""
+    return whole_boxes(boxes, size) & ~_behind_someone(frames, boxes)
 
 
 def _usable(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
