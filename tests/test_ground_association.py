@@ -120,6 +120,24 @@ def test_people_read_at_their_height_register_a_close_drone() -> None:
     assert scores[True] > 95.0 > 50.0 > scores[False]
 
 
+def test_a_small_crowd_walking_together_is_not_read_as_a_moving_drone() -> None:
+    """A static close drone, five people in its view, walking: their common step reads as the
+    top map's motion (0.1 m a step), which, taken out of the registration's jumps, tipped this
+    clip to a wrong pose in video mode (0 of 39 pairs right, 91 % frame by frame). The
+    registration also runs with the map left still and keeps the better-explained clip.
+    Ids scrambled per view; measured 100.0 CVIDF1."""
+    config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), overlap=(0.35, 0.65),
+                                top_height=(4.0, 12.0))
+    scene = make_oblique_scene(config, 120, np.random.default_rng([1, 10]))
+    top, hor, frames, options, backs = _prepared(scene)
+    # Every 3rd frame numbered 1, 2, 3 (a file of sampled frames), 10/3 a second.
+    top, hor = ({k: FrameBoxes(k, v[f].ids, v[f].boxes) for k, f in enumerate(frames, 1)}
+                for v in (top, hor))
+    run = run_ground_association(top, hor, replace(options, fps=10.0 / 3.0))
+    run = replace(run, pairs={frames[k - 1]: p for k, p in run.pairs.items()})
+    assert _cvidf1(scene, run, frames, backs) > 95.0
+
+
 @pytest.mark.slow
 def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> None:
     from xvmatch.cli import main
