@@ -37,6 +37,7 @@ a nadir image.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -156,12 +157,14 @@ def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: 
     return distance[:, None] * np.column_stack([np.ones(len(boxes)), across])
 
 
-def box_width_ratio(boxes: np.ndarray, image_size: tuple[int, int]) -> float:
-    """A view's people's width over height: the median over its boxes ``(N, 4)`` that no image
-    border cuts (:func:`~xvmatch.geometry.people_calibration.whole_boxes`; :data:`WIDTH_RATIO`
-    with fewer than :data:`_MIN_RATIO_BOXES`), rounded to 4 decimals; how
-    :func:`hor_ground_points` reads a cut box's depth from its width."""
-    boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
+def box_width_ratio(frames: Iterable[np.ndarray], image_size: tuple[int, int]) -> float:
+    """A view's people's width over height: the median over its boxes (``frames``, each
+    frame's ``(N, 4)``) that no image border cuts
+    (:func:`~xvmatch.geometry.people_calibration.whole_boxes`; :data:`WIDTH_RATIO` with fewer
+    than :data:`_MIN_RATIO_BOXES`), rounded to 4 decimals; how :func:`hor_ground_points` reads
+    a cut box's depth from its width."""
+    boxes = np.concatenate([np.zeros((0, 4)),
+                            *(np.asarray(b, dtype=float).reshape(-1, 4) for b in frames)])
     whole = whole_boxes(boxes, image_size)
     if whole.sum() < _MIN_RATIO_BOXES:
         return WIDTH_RATIO

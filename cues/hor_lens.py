@@ -186,7 +186,7 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
     scores: dict[float, float] = {}
     scales: dict[float, float] = {}
     chance: dict[float, float] = {}
-    ratio = gr.box_width_ratio(np.concatenate([np.zeros((0, 4)), *sub_boxes]), hor_size)
+    ratio = gr.box_width_ratio(sub_boxes, hor_size)
     for hfov in lenses:
         hors = [gr.hor_ground_points(b, hor_size, hfov, width_ratio=ratio) for b in sub_boxes]
         scale, poses = gr.register_with_scale(sub, sub_tops, hors, hfov, fps)

@@ -84,11 +84,11 @@ def test_a_passer_by_cut_by_the_bottom_edge_is_read_from_their_width() -> None:
     ratio = 0.45 / 1.72
     whole = np.array([[400.0 + 30 * k, 280.0, f * 0.45 / d, f * 1.72 / d]
                       for k, d in enumerate(np.linspace(8.0, 20.0, 24))])
-    assert gr.box_width_ratio(whole, size) == pytest.approx(ratio, abs=1e-3)
-    assert gr.box_width_ratio(whole[:5], size) == gr.WIDTH_RATIO  # too few to read
+    assert gr.box_width_ratio([whole], size) == pytest.approx(ratio, abs=1e-3)
+    assert gr.box_width_ratio([whole[:5]], size) == gr.WIDTH_RATIO  # too few to read
     w, h = f * 0.45 / 2.5, f * 1.72 / 2.5
     cut = np.array([[500.0 - w / 2, 600.0 - 0.6 * h, w, 0.6 * h]])
-    q = gr.hor_ground_points(cut, size, 90.0, width_ratio=gr.box_width_ratio(whole, size))
+    q = gr.hor_ground_points(cut, size, 90.0, width_ratio=gr.box_width_ratio([whole], size))
     assert q[0] == pytest.approx([2.5, 0.0], abs=0.05)
     lifted = cut + np.array([0.0, -3.0, 0.0, 0.0])  # the same box inside the image: its height
     assert gr.hor_ground_points(lifted, size, 90.0)[0, 0] == pytest.approx(2.5 / 0.6, rel=1e-6)

@@ -267,8 +267,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
                                options.hor_size, fps)
         hfov = lens.hfov_deg
-    ratio = gr.box_width_ratio(np.concatenate([np.zeros((0, 4)), *(b for b, _ in boxes)]),
-                               options.hor_size)
+    ratio = gr.box_width_ratio((b for b, _ in boxes), options.hor_size)
     hors = [(gr.hor_ground_points(hb, options.hor_size, hfov, width_ratio=ratio), h_ids)
             for hb, h_ids in boxes]
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],

@@ -310,8 +310,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
-    ratio = gr.box_width_ratio(np.concatenate([np.zeros((0, 4)), *map(_boxes, hor.values())]),
-                               size)
+    ratio = gr.box_width_ratio(map(_boxes, hor.values()), size)
     local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov, width_ratio=ratio)
              for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
