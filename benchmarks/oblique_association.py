@@ -245,8 +245,9 @@ def _breakdown(scenes: list[tuple[float, float, float, dict]], names: tuple[str,
 
 
 def add_drone_arguments(p: argparse.ArgumentParser) -> None:
-    """``--top-drift``, ``--top-yaw-rate``, ``--top-pitch-rate`` (a moving drone) and
-    ``--no-top-motion``."""
+    """The drone's place (``--top-pitch``, ``--top-height``), its motion (``--top-drift``,
+    ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
+    images' bottom edges (``--edge-people``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -254,20 +255,31 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--top-pitch-rate", type=float, nargs=2, default=(0.0, 0.0),
                    metavar=("LO", "HI"), help="and tilts up or down at LO-HI degrees/s (a "
                    "gimbal; the drawn pitch is the clip's middle one)")
+    p.add_argument("--top-pitch", type=float, nargs=2, default=(20.0, 90.0),
+                   metavar=("LO", "HI"), help="the top camera's pitch in the renders, LO-HI "
+                   "degrees below the horizon (default 20 90)")
+    p.add_argument("--top-height", type=float, nargs=2, default=(4.0, 60.0),
+                   metavar=("LO", "HI"), help="the top camera's height in the renders, LO-HI "
+                   "metres (default 4 60; raised where the people do not fit its image)")
+    p.add_argument("--edge-people", type=int, nargs=2, default=(0, 0), metavar=("LO", "HI"),
+                   help="LO-HI more people per camera walking across its image's bottom edge, "
+                   "their boxes cut by it (default 0 0)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
 
 
 def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
-    """The scenes' settings with the drone's motion of :func:`add_drone_arguments`; with
+    """The scenes' settings with the drone and the edge people of :func:`add_drone_arguments`; with
     ``--no-top-motion`` the registration leaves the top map's motion in (as before
     :func:`~xvmatch.cues.ground_registration.map_motion`)."""
     if args.no_top_motion:
         gr.map_motion = lambda frames, tops, ids, fps: [None] * len(tops)
     return ObliqueSceneConfig(top_drift_speed=tuple(args.top_drift),
                               top_yaw_rate=tuple(args.top_yaw_rate),
-                              top_pitch_rate=tuple(args.top_pitch_rate), **settings)
+                              top_pitch_rate=tuple(args.top_pitch_rate),
+                              top_pitch=tuple(args.top_pitch), top_height=tuple(args.top_height),
+                              edge_people=tuple(args.edge_people), **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -291,18 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
                    help="the handheld camera's horizontal field of view in the renders, LO-HI "
                    "degrees (default 60 80)")
-    p.add_argument("--top-pitch", type=float, nargs=2, default=(20.0, 90.0),
-                   metavar=("LO", "HI"), help="the top camera's pitch in the renders, LO-HI "
-                   "degrees below the horizon (default 20 90)")
-    p.add_argument("--top-height", type=float, nargs=2, default=(4.0, 60.0),
-                   metavar=("LO", "HI"), help="the top camera's height in the renders, LO-HI "
-                   "metres (default 4 60; raised where the people do not fit its image)")
     p.add_argument("--overlap", type=float, nargs=2, default=(0.3, 1.0), metavar=("LO", "HI"),
                    help="each view's share of people the other sees, drawn in LO-HI (default "
                    "0.3 1)")
-    p.add_argument("--edge-people", type=int, nargs=2, default=(0, 0), metavar=("LO", "HI"),
-                   help="LO-HI more people per camera walking across its image's bottom edge, "
-                   "their boxes cut by it (default 0 0)")
     p.add_argument("--distance-errors", action="store_true",
                    help="also print how far the handheld distances read from box heights (the "
                    "true lens) err from the true ones, and their bearings")
@@ -322,9 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.no_scale_search:
         gr.MAP_SCALES = (1.0,)
-    config = drone_config(args, hor_hfov=tuple(args.hor_hfov), top_pitch=tuple(args.top_pitch),
-                          overlap=tuple(args.overlap), top_height=tuple(args.top_height),
-                          edge_people=tuple(args.edge_people))
+    config = drone_config(args, hor_hfov=tuple(args.hor_hfov), overlap=tuple(args.overlap))
     names = ("search", "search, video mode", "registered, true cameras",
              "registered, from people", "registered, from people, tracklet consensus",
              "associate, as it routes")
