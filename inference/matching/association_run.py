@@ -441,12 +441,12 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
         top = shift_frames(top, offset)
     frames = sorted(set(top) | set(hor))
     oblique = oblique_pairs(top, hor, options, hooks.note)
+    if oblique is not None:  # the ground-map path keeps its own consensus
+        _pictures(top, hor, oblique, frames, options, hooks)
+        return AssociationRun(oblique, frames, offset, top)
+    _need_hor_size(hor, options)
     run = refined = None
-    if oblique is None:
-        _need_hor_size(hor, options)
-    if oblique is not None:
-        pairs = oblique
-    elif learned is not None:
+    if learned is not None:
         pairs, run, refined = _learned_pairs(top, hor, frames, options, offset, hooks)
     else:
         from xvmatch.cues.spatial_search import associate_sequence
@@ -455,14 +455,20 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
                                    params=options.params, search=options.search or "exhaustive",
                                    camera_id=options.camera_id, frames=frames,
                                    progress=hooks.frames(len(frames)) if hooks.frames else None)
-    if options.video and oblique is None:  # the ground-map path keeps its own consensus
+    if options.video:
         from xvmatch.inference.linking.pair_consensus import consistent_pairs
 
         pairs = consistent_pairs(pairs, top, hor, frames)
-    if (learned is None or oblique is not None) and hooks.pictures is not None:
-        both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
-        hooks.pictures(AssociationPictures(top, hor, pairs, both, None, options.hor_size[0]))
-    if oblique is not None:
-        return AssociationRun(pairs, frames, offset, top)
+    if learned is None:
+        _pictures(top, hor, pairs, frames, options, hooks)
     return AssociationRun(pairs, frames, offset, top, AUTO_VIDEO if options.video_by_auto else None,
                           run, refined)
+
+
+def _pictures(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes], pairs: Pairs,
+              frames: list[int], options: AssociationOptions, hooks: AssociationHooks) -> None:
+    """The run's pairs drawn on the frames where both views have boxes (``--draw``), for a
+    path whose pictures have no costs (the search, the ground maps)."""
+    if hooks.pictures is not None:
+        both = [f for f in frames if len(top.get(f, ())) and len(hor.get(f, ()))]
+        hooks.pictures(AssociationPictures(top, hor, pairs, both, None, options.hor_size[0]))
