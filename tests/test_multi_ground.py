@@ -23,6 +23,7 @@ from xvmatch.inference.views.multi_ground import (
     MultiGroundOptions,
     ground_problems,
     oblique_top,
+    top_map,
 )
 
 SIZE = (1920, 1080)
@@ -224,3 +225,38 @@ def test_a_size_not_known_is_guessed_on_the_ground_path_only() -> None:
     assert options.hor_sizes == ((3840, 2160),)
     assert said == ["hor1.txt: its images taken as 3840x2160 on this path, the smallest common "
                     "video size holding its boxes (give --image-size WxH if not)"]
+
+
+def test_a_tall_person_cut_by_the_drones_near_edge_stands_where_associate_puts_them() -> None:
+    """associate-multi's top map (:func:`top_map`): a tall person walking out of a close drone's
+    bottom edge is placed, once cut, where the ray through their box's top meets the plane of
+    their own height, read from their whole boxes along their track (video mode) or their boxes
+    linked by IoU (frame mode), as associate places them; at the crowd's height they were put
+    too near (the old map)."""
+    from xvmatch.datasets.oblique_scenes import project_view
+    from xvmatch.geometry.people_calibration import PeopleCalibration, cut_at_bottom
+
+    calib = PeopleCalibration(kind="oblique", width=SIZE[0], height=SIZE[1],
+                              focal=SIZE[0] / 2 / np.tan(np.radians(35.0)), tilt_deg=30.0,
+                              roll_deg=0.0, camera_height=8.0, horizon=(0.0, 0.0),
+                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
+                              focal_rel_std=0.0, n_boxes=100, n_frames=10)
+    edge = calib.ground_points(np.array([[SIZE[0] / 2, SIZE[1] - 1.0]]))[0]
+    heights = np.array([1.9, calib.person_height, calib.person_height])
+    top, tracks, truth = {}, {}, {}
+    for f in range(1, 9):  # the tall one walks out of the image's bottom edge
+        where = np.array([[edge[0] + 2.2 - 0.4 * f, edge[1]], [edge[0] + 6.0, edge[1] + 3.0],
+                          [edge[0] + 8.0, edge[1] - 3.0]])
+        index, boxes = project_view(where, heights, np.full(3, 0.45), calib.camera)
+        assert list(index) == [0, 1, 2]
+        top[f] = FrameBoxes(f, 10 * f + np.arange(3), boxes)
+        tracks.update({10 * f + k: k for k in range(3)})
+        truth[f] = where[0]
+    assert cut_at_bottom(top[8].boxes, SIZE[1]).tolist() == [True, False, False]
+    assert not cut_at_bottom(top[1].boxes, SIZE[1]).any()
+    for top_tracks in (tracks, None):
+        placed = top_map([top], range(1, 9), calib, top_tracks)
+        assert placed.sizes[8][0] == pytest.approx(1.9 / calib.person_height, abs=0.01)
+        assert np.hypot(*(placed.points[8][0] - truth[8])) < 0.35
+    crowd = calib.standing_points(top[8].boxes)[0]  # everyone at the crowd's height
+    assert np.hypot(*(crowd - truth[8])) > 0.35

@@ -73,8 +73,9 @@ from xvmatch.inference.views.multi_view_assignment import view_pairs
 from xvmatch.inference.views.multi_view_costs import FrameProblem, LogisticCalibration
 from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
 
-__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "choose_lenses", "ground_options",
-           "ground_problems", "lenses_note", "oblique_top", "run_multi_ground"]
+__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "TopMap", "choose_lenses",
+           "ground_options", "ground_problems", "lenses_note", "oblique_top", "run_multi_ground",
+           "top_map"]
 
 TOP_HOR = LogisticCalibration(threshold=2.0 * gr.RADIUS, slope=1.0)
 """Top-handheld pairs: minus the evidence (nats) of a ground distance ``d`` (metres), none at
@@ -251,11 +252,39 @@ def _paired_frames(hor: Mapping, tops: Mapping[int, np.ndarray]) -> list[int]:
     return sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
 
 
-def _top_grounds(views: Sequence[Mapping], frames: Sequence[int],
-                 calibration: PeopleCalibration) -> dict[int, np.ndarray]:
-    """``{frame: (N, 2)}`` the top view's people on its ground map
-    (:func:`~xvmatch.inference.matching.ground_association.top_ground_points`)."""
-    return {f: top_ground_points(_boxes(views[0].get(f)), calibration) for f in frames}
+@dataclass(frozen=True)
+class TopMap:
+    """The top view's people on its ground map, in each frame's record order.
+
+    Attributes:
+        points: ``{frame: (N, 2)}`` where they stand (NaN rows: no ground there).
+        sizes: ``{frame: (N,)}`` each one's height over the crowd's
+            (:func:`~xvmatch.inference.matching.ground_association.top_sizes`).
+        walkers: the whole view stacked, ``(frames, track ids, ground points)`` in
+            :func:`~xvmatch.formats.mot_boxes.stack_frames` order (its frame rate's walkers,
+            :func:`~xvmatch.inference.matching.ground_association.top_frame_rate`).
+    """
+
+    points: dict[int, np.ndarray]
+    sizes: dict[int, np.ndarray]
+    walkers: tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: PeopleCalibration,
+            top_tracks: Mapping[int, int] | None = None) -> TopMap:
+    """The top view's (``views[0]``) people of ``frames`` on its ground map, as ``associate``
+    places them (:func:`~xvmatch.inference.matching.ground_association.top_ground_points`): a
+    box cut by the image's bottom edge at its person's own height, each followed by the top
+    view's ``top_tracks`` (video mode) or by its boxes linked by IoU (followed once)."""
+    stacked, ids, boxes = stack_frames(_tracked(views[0], top_tracks))
+    tracks = ids if top_tracks is not None else box_track_ids(views[0])
+    read = top_sizes(stacked, boxes, tracks, calibration)
+    ground = top_ground_points(boxes, calibration, read)
+    keys, starts, counts = np.unique(stacked, return_index=True, return_counts=True)
+    at = {int(f): slice(a, a + n) for f, a, n in zip(keys, starts, counts, strict=True)}
+    empty = np.zeros((0, 2))
+    return TopMap({f: ground[at[f]] if f in at else empty for f in frames},
+                  {f: read[rows] for f, rows in at.items()}, (stacked, tracks, ground))
 
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
@@ -264,8 +293,8 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
     """``--hor-hfov auto``: each handheld view's field of view chosen from its people
     (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, on the frames where it
     and the top view both have people), in the order of the views (top first, in one
-    timing); ``tops``: the top view's people on its map (:func:`_top_grounds`), when built."""
-    tops = _top_grounds(views, frames, calibration) if tops is None else tops
+    timing); ``tops``: the top view's people on its map (:attr:`TopMap.points`), when built."""
+    tops = top_map(views, frames, calibration).points if tops is None else tops
     choices = []
     for k in range(1, len(views)):
         order = _paired_frames(views[k], tops)
@@ -306,7 +335,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     :func:`~xvmatch.cues.ground_registration.register_with_scale`; with the top view's
     ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken out
     of the registration's jumps; ``sizes``: ``{frame: (N,)}`` each top person's height over
-    the crowd's, :func:`_top_sizes`)."""
+    the crowd's, :attr:`TopMap.sizes`)."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -353,7 +382,7 @@ def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
 def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                     calibration: PeopleCalibration, options: MultiGroundOptions,
                     top_tracks: Mapping[int, int] | None = None,
-                    tops: Mapping[int, np.ndarray] | None = None) -> dict[int, FrameProblem]:
+                    tops: TopMap | None = None) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame of ``frames`` (module docstring).
 
     Args:
@@ -365,15 +394,15 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
             :func:`choose_lenses`, unsaid), the frame rate.
         top_tracks: the top view's ``{row id: track id}`` (video mode): the top map's motion
             is then taken out of each registration (:func:`_registered`).
-        tops: the top view's people on its map for ``frames`` (:func:`_top_grounds`), when
-            already built.
+        tops: the top view's people on its map for ``frames`` (:func:`top_map`, with the same
+            ``top_tracks``), when already built.
     """
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
-    tops = _top_grounds(views, frames, calibration) if tops is None else tops
+    top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
+    tops, heights = top.points, top.sizes
     options = _with_lenses(views, frames, calibration, options, tops)[0]
-    heights = _top_sizes(views[0], calibration, top_tracks)
     placed = [{f: (p, None) for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks, heights)
                 for k in range(1, len(views)))]
@@ -385,18 +414,6 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                  for a, b in view_pairs(len(views))}
         problems[f] = FrameProblem(sizes, costs, dict.fromkeys(costs, 0.0))
     return problems
-
-
-def _top_sizes(top: Mapping, calibration: PeopleCalibration,
-               top_tracks: Mapping[int, int] | None) -> dict[int, np.ndarray]:
-    """``{frame: (N,)}`` each top-view box's person's height over the crowd's, in its record's
-    order (:func:`~xvmatch.inference.matching.ground_association.top_sizes`), each person
-    followed by the top view's track ids (``top_tracks``, video mode) or its boxes linked by
-    IoU."""
-    frames, ids, boxes = stack_frames(_tracked(top, top_tracks))
-    read = top_sizes(frames, boxes, ids if top_tracks is not None else box_track_ids(top),
-                     calibration)
-    return {int(f): read[frames == f] for f in np.unique(frames)}
 
 
 def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
@@ -414,19 +431,17 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     frame rate likewise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`)."""
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
+    top_tracks = None if tracks is None else tracks[0]
+    top = top_map(aligned, frames, calibration, top_tracks)  # once: the rate, lenses, problems
     if options.fps == AUTO_FPS:
-        top_tracks = None if tracks is None else tracks[0]
-        rate = top_frame_rate(_tracked(aligned[0], top_tracks), calibration,
-                              top_tracks is not None)
+        rate = top_frame_rate(aligned[0], calibration, table=top.walkers)
         options = replace(options, fps=rate.fps)
         if note is not None:
             note(frame_rate_note(rate))
-    tops = _top_grounds(aligned, frames, calibration)  # built once: the lenses, the problems
-    options, lenses = _with_lenses(aligned, frames, calibration, options, tops)
+    options, lenses = _with_lenses(aligned, frames, calibration, options, top.points)
     if lenses and note is not None:
         note(lenses_note(lenses))
-    problems = ground_problems(aligned, frames, calibration, options,
-                               None if tracks is None else tracks[0], tops)
+    problems = ground_problems(aligned, frames, calibration, options, top_tracks, top)
     if tracks is not None:
         from xvmatch.inference.views.multi_ego_video import video_people
 
