@@ -247,7 +247,8 @@ def _breakdown(scenes: list[tuple[float, float, float, dict]], names: tuple[str,
 def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     """The drone's place (``--top-pitch``, ``--top-height``), its motion (``--top-drift``,
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
-    images' bottom edges (``--edge-people``)."""
+    images' bottom edges (``--edge-people``), the handheld cameras' holders' pace
+    (``--holder-speed``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -264,6 +265,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--edge-people", type=int, nargs=2, default=(0, 0), metavar=("LO", "HI"),
                    help="LO-HI more people per camera walking across its image's bottom edge, "
                    "their boxes cut by it (default 0 0)")
+    p.add_argument("--holder-speed", type=float, nargs=2, default=(0.1, 0.5),
+                   metavar=("LO", "HI"), help="each handheld camera's holder walks at LO-HI "
+                   "m/s, turning within a 2 m square (default 0.1 0.5)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
@@ -279,7 +283,8 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               top_yaw_rate=tuple(args.top_yaw_rate),
                               top_pitch_rate=tuple(args.top_pitch_rate),
                               top_pitch=tuple(args.top_pitch), top_height=tuple(args.top_height),
-                              edge_people=tuple(args.edge_people), **settings)
+                              edge_people=tuple(args.edge_people),
+                              holder_speed=tuple(args.holder_speed), **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
