@@ -248,7 +248,7 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     """The drone's place (``--top-pitch``, ``--top-height``), its motion (``--top-drift``,
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace
-    (``--holder-speed``)."""
+    and pans (``--holder-speed``, ``--pan-rate``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -268,6 +268,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--holder-speed", type=float, nargs=2, default=(0.1, 0.5),
                    metavar=("LO", "HI"), help="each handheld camera's holder walks at LO-HI "
                    "m/s, turning within a 2 m square (default 0.1 0.5)")
+    p.add_argument("--pan-rate", type=float, default=0.05, metavar="R",
+                   help="pans a second of each handheld camera (a turn away and back; default "
+                   "0.05)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
@@ -284,7 +287,8 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               top_pitch_rate=tuple(args.top_pitch_rate),
                               top_pitch=tuple(args.top_pitch), top_height=tuple(args.top_height),
                               edge_people=tuple(args.edge_people),
-                              holder_speed=tuple(args.holder_speed), **settings)
+                              holder_speed=tuple(args.holder_speed), pan_rate=args.pan_rate,
+                              **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
