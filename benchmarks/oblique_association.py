@@ -78,10 +78,11 @@ gate along the ray).
 
 ``--choose-lens``: two more rows, both with the tracklet consensus: ``registered, from people,
 true lens`` (the handheld field of view known, the top camera from its people) and
-``registered, from people, lens chosen`` (the field of view chosen from the people,
-:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, then the same run); each scene's line gives the
-true and the chosen lens with each candidate's pairing score and chance score (``lens:in/chance``),
-and the summary the seconds the choice took.
+``registered, from people, lens chosen`` (``--hor-hfov auto``, as ``associate`` runs it: the
+field of view chosen from the people, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, then the
+same run); each scene's line gives the true and the chosen lens with each candidate's pairing
+score and chance score (``lens:in/chance``), and the summary the seconds the choice and its run
+took.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120 --choose-lens
 
@@ -109,7 +110,6 @@ from dataclasses import replace
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
-from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.box_image_size import (
@@ -125,11 +125,10 @@ from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibrat
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.inference.matching.ground_association import (
     AUTO_FPS,
+    AUTO_HFOV,
     GroundAssociationOptions,
     run_ground_association,
     top_calibration,
-    top_frame_rate,
-    top_ground_points,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
@@ -169,20 +168,6 @@ def _true_calibration(camera, size: tuple[int, int]) -> PeopleCalibration:
                              camera_height=float(camera.c[2]), horizon=(0.0, 0.0),
                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
                              focal_rel_std=0.0, n_boxes=0, n_frames=0)
-
-
-def _lens(top: dict, hor: dict, options: GroundAssociationOptions, frames: list[int],
-          calib: PeopleCalibration) -> LensChoice:
-    """The handheld field of view chosen from the people, on the per-frame top ground points
-    and handheld boxes as :func:`run_ground_association` builds them."""
-    tops, boxes = [], []
-    for f in frames:
-        t, h = top.get(f), hor.get(f)
-        ground = top_ground_points(np.zeros((0, 4)) if t is None else t.boxes, calib)
-        tops.append(ground[np.isfinite(ground).all(axis=1)])
-        boxes.append(np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4))
-    fps = top_frame_rate(top, calib).fps if options.fps == AUTO_FPS else options.fps
-    return choose_hor_hfov(frames, tops, boxes, options.hor_size, fps)
 
 
 def _distance_errors(scene, frames: list[int], hfov: float) -> np.ndarray:
@@ -248,7 +233,7 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     """The drone's place (``--top-pitch``, ``--top-height``), its motion (``--top-drift``,
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace
-    and pans (``--holder-speed``, ``--pan-rate``)."""
+    and pans (``--holder-speed``, ``--pan-rate``), people's heights (``--person-height``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -271,6 +256,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pan-rate", type=float, default=0.05, metavar="R",
                    help="pans a second of each handheld camera (a turn away and back; default "
                    "0.05)")
+    p.add_argument("--person-height", type=float, nargs=2, default=(1.5, 1.95),
+                   metavar=("LO", "HI"), help="people's heights in the renders, LO-HI metres "
+                   "(default 1.5 1.95; lower: children, people sitting)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
@@ -288,7 +276,7 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               top_pitch=tuple(args.top_pitch), top_height=tuple(args.top_height),
                               edge_people=tuple(args.edge_people),
                               holder_speed=tuple(args.holder_speed), pan_rate=args.pan_rate,
-                              **settings)
+                              height_range=tuple(args.person_height), **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -410,15 +398,14 @@ def main(argv: list[str] | None = None) -> int:
                 voting = replace(options, consensus=True)
                 true_lens = run_ground_association(
                     top, hor, replace(voting, hor_hfov_deg=true_hfov), frames, calib).pairs
-                t1 = time.perf_counter()
-                choice = _lens(top, hor, options, frames, calib)
+                t1 = time.perf_counter()  # as associate runs: the lens chosen, then the run
+                chosen_run = run_ground_association(
+                    top, hor, replace(voting, hor_hfov_deg=AUTO_HFOV), frames, calib)
                 choice_s += time.perf_counter() - t1
+                chosen, choice = chosen_run.pairs, chosen_run.lens
                 lens = choice.hfov_deg
                 lens_scores = " ".join(f"{h:.0f}:{v:.1f}/{choice.chance[h]:.1f}"
                                        for h, v in choice.scores.items())
-                # The same run as the consensus row's when the prior is kept.
-                chosen = voted if lens == options.hor_hfov_deg else run_ground_association(
-                    top, hor, replace(voting, hor_hfov_deg=lens), frames, calib).pairs
         routed = voted if calib is not None and calib.kind == "oblique" else consistent_pairs(
             search, top, hor, frames)
         preds = (search, follow, true, people, voted, routed)
@@ -450,7 +437,8 @@ def main(argv: list[str] | None = None) -> int:
                  f"{fps:.3g}" if args.fps == AUTO_FPS and rate is not None else ""), flush=True)
     print(f"\n{args.scenes} scenes, every {args.step}th frame of {args.seconds:g} s, "
           f"{time.perf_counter() - t0:.0f} s; top calibration refused in {refused}"
-          + (f"; the lens choice took {choice_s:.0f} s (the consensus run at 70 degrees "
+          + (f"; the lens choice and its run took {choice_s:.0f} s (the consensus run at 70 "
+             "degrees "
              f"{voted_s:.0f} s)" if args.choose_lens else ""))
     print("| method | CVIDF1 | pair F1 | TP | FP | FN |\n|---|---|---|---|---|---|")
     for name, (tp, fp, fn) in totals.items():

@@ -122,7 +122,7 @@ def _subsample(n: int, max_frames: int) -> list[int]:
 
 
 def pairing_score(tops: list[np.ndarray], hors: list[np.ndarray], frames: list[int],
-                  poses: list[gr.FramePose]) -> float:
+                  poses: list[gr.FramePose], sizes: list[np.ndarray] | None = None) -> float:
     """How well the poses pair the two views' people, one to one: per frame with a pose, the
     Hungarian pairs under it (:func:`~xvmatch.cues.ground_registration.associate_on_ground`),
     each counted ``exp(-d^2 / (2 (RADIUS / 2)^2))`` for its ground distance ``d`` (metres), as
@@ -134,14 +134,16 @@ def pairing_score(tops: list[np.ndarray], hors: list[np.ndarray], frames: list[i
         hors: per frame, the horizontal view's people ``(M, 2)`` on its own map.
         frames: the frame numbers of ``tops`` and ``hors``.
         poses: the registration's poses (frames without one count nothing).
+        sizes: per frame, each top person's height over the crowd's ``(N,)``, at which a
+            horizontal person is read against them (None: all 1).
     """
     by_frame = {p.frame: p for p in poses}
     total = 0.0
-    for f, top, hor in zip(frames, tops, hors, strict=True):
+    for k, (f, top, hor) in enumerate(zip(frames, tops, hors, strict=True)):
         pose = by_frame.get(f)
         if pose is None:
             continue
-        pairs = gr.associate_on_ground(top, hor, pose)
+        pairs = gr.associate_on_ground(top, hor, pose, None if sizes is None else sizes[k])
         if not len(pairs):
             continue
         mapped = gr.on_top_map(hor[pairs[:, 1]], pose)
@@ -154,7 +156,8 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
                     hor_size: tuple[int, int], fps: float,
                     candidates: tuple[float, ...] = HFOV_CANDIDATES,
                     prior_deg: float = PRIOR_HFOV_DEG, margin: float = LENS_MARGIN,
-                    max_frames: int = MAX_FRAMES) -> LensChoice:
+                    max_frames: int = MAX_FRAMES,
+                    sizes: list[np.ndarray] | None = None) -> LensChoice:
     """The horizontal camera's field of view that best registers its people on the top map
     (module docstring).
 
@@ -170,12 +173,19 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
         prior_deg: the field of view kept unless another pairs ``margin`` times as much.
         margin: see :data:`LENS_MARGIN`.
         max_frames: frames registered per candidate at most (:data:`MAX_FRAMES`).
+        sizes: per frame, each top person's height over the crowd's ``(N,)``
+            (:func:`~xvmatch.inference.matching.ground_association.top_sizes`): each
+            registration reads a handheld person at their top partner's height, as the run
+            after the choice does (None: everyone at the crowd's).
     Returns:
         The choice; the prior when no frame has people in both views.
     """
     if not len(frames) == len(tops) == len(hor_boxes):
         raise ValueError(f"frames, tops and hor_boxes must have one entry per frame, got "
                          f"{len(frames)}, {len(tops)} and {len(hor_boxes)}")
+    if sizes is not None and len(sizes) != len(frames):
+        raise ValueError(f"sizes must have one entry per frame, got {len(sizes)} for "
+                         f"{len(frames)} frames")
     if max_frames < 1:
         raise ValueError(f"max_frames must be at least 1, got {max_frames}")
     lenses = sorted({float(c) for c in candidates} | {float(prior_deg)})
@@ -183,32 +193,37 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
     sub = [frames[k] for k in keep]
     sub_tops = [np.asarray(tops[k], float).reshape(-1, 2) for k in keep]
     sub_boxes = [np.asarray(hor_boxes[k], float).reshape(-1, 4) for k in keep]
+    sub_sizes = None if sizes is None else [np.asarray(sizes[k], float).reshape(-1)
+                                            for k in keep]
     scores: dict[float, float] = {}
     scales: dict[float, float] = {}
     chance: dict[float, float] = {}
     ratio = gr.box_width_ratio(sub_boxes, hor_size)
     for hfov in lenses:
         hors = [gr.hor_ground_points(b, hor_size, hfov, width_ratio=ratio) for b in sub_boxes]
-        scale, poses = gr.register_with_scale(sub, sub_tops, hors, hfov, fps)
-        scores[hfov] = round(pairing_score([scale * t for t in sub_tops], hors, sub, poses),
-                             _DIGITS)
-        chance[hfov] = round(chance_score(sub, sub_tops, hors, hfov, fps), _DIGITS)
+        scale, poses = gr.register_with_scale(sub, sub_tops, hors, hfov, fps,
+                                              top_sizes=sub_sizes)
+        scores[hfov] = round(pairing_score([scale * t for t in sub_tops], hors, sub, poses,
+                                           sub_sizes), _DIGITS)
+        chance[hfov] = round(chance_score(sub, sub_tops, hors, hfov, fps, sub_sizes), _DIGITS)
         scales[hfov] = scale
     return LensChoice(hfov_deg=_pick(scores, chance, float(prior_deg), margin), scores=scores,
                       scales=scales, frames=sub, chance=chance)
 
 
 def chance_score(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
-                 hfov_deg: float, fps: float) -> float:
+                 hfov_deg: float, fps: float, sizes: list[np.ndarray] | None = None) -> float:
     """The pairing score (:func:`pairing_score`) of the same registration with the horizontal
     view's ground maps mirrored (left and right swapped): what a lens pairs by chance. The
     mirrored crowd keeps its distances, its spread and the squeeze of the lens, but not its
     arrangement, so it matches the top map no better than chance, whether people walk or
     stand. A wide lens squeezes the handheld map and pairs more people by chance alone; the
-    choice compares the lenses on what they pair above that."""
+    choice compares the lenses on what they pair above that (``sizes``: as
+    :func:`pairing_score`'s)."""
     mirrored = [np.asarray(h, float).reshape(-1, 2) * np.array([1.0, -1.0]) for h in hors]
-    scale, poses = gr.register_with_scale(frames, tops, mirrored, hfov_deg, fps)
-    return pairing_score([scale * t for t in tops], mirrored, frames, poses)
+    scale, poses = gr.register_with_scale(frames, tops, mirrored, hfov_deg, fps,
+                                          top_sizes=sizes)
+    return pairing_score([scale * t for t in tops], mirrored, frames, poses, sizes)
 
 
 def _above(scores: dict[float, float], chance: dict[float, float]) -> dict[float, float]:

@@ -18,11 +18,13 @@ from xvmatch.cues.hor_lens import (
 SIZE = (1280, 720)
 
 
-def _clip(hfov_deg: float, seed: int = 0, n_frames: int = 6
+def _clip(hfov_deg: float, seed: int = 0, n_frames: int = 6, heights: np.ndarray | None = None
           ) -> tuple[list[int], list[np.ndarray], list[np.ndarray]]:
     """People walking on a ground map, seen from above (their positions, a little noise) and by a
     handheld camera of ``hfov_deg`` walking among them (their boxes: height from distance, column
-    from bearing, as :func:`~xvmatch.cues.ground_registration.hor_ground_points` reads them)."""
+    from bearing, as :func:`~xvmatch.cues.ground_registration.hor_ground_points` reads them;
+    the ten people 1.72 m tall, or ``heights``)."""
+    heights = np.full(10, 1.72) if heights is None else heights
     rng = np.random.default_rng(seed)
     people = np.column_stack([rng.uniform(2.0, 20.0, 10), rng.uniform(-10.0, 10.0, 10)])
     walk = rng.normal(0.0, 0.4, (10, 2))
@@ -37,7 +39,7 @@ def _clip(hfov_deg: float, seed: int = 0, n_frames: int = 6
         rel = where - centre
         ahead, left = rel[:, 0] * c + rel[:, 1] * s, -rel[:, 0] * s + rel[:, 1] * c
         seen = (ahead > 1.0) & (np.abs(np.arctan2(left, ahead)) < np.radians(hfov_deg) / 2 - 0.02)
-        height = f * 1.72 / ahead[seen]
+        height = f * heights[seen] / ahead[seen]
         column = 0.5 * SIZE[0] - f * left[seen] / ahead[seen]
         boxes.append(np.column_stack([column - 0.2 * height, np.full(seen.sum(), 100.0),
                                       0.4 * height, height]))
@@ -55,6 +57,24 @@ def test_an_action_camera_gets_a_wide_lens(wide: LensChoice) -> None:
     assert wide.hfov_deg >= 90.0
     assert set(wide.scores) == set(HFOV_CANDIDATES)
     assert wide.scores[wide.hfov_deg] > wide.scores[70.0]
+
+
+def test_people_read_at_their_own_height_tell_the_lens() -> None:
+    """People 1.5-1.95 m tall, each one's height over the crowd's known from the top view
+    (``sizes``): read at 1.72 m the handheld map blurs and a 110-degree camera is taken for a
+    90-degree one; read at their own height the choice finds 110, above chance by more."""
+    heights = np.random.default_rng(0).uniform(1.5, 1.95, 10)
+    frames, tops, boxes = _clip(110.0, seed=2, n_frames=20, heights=heights)
+    plain = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0)
+    sized = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0,
+                            sizes=[heights / 1.72] * len(frames))
+    assert sized.hfov_deg == 110.0 and plain.hfov_deg != 110.0
+    assert (sized.scores[110.0] - sized.chance[110.0]
+            > plain.scores[110.0] - plain.chance[110.0])
+    ones = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, sizes=[np.ones(10)] * 20)
+    assert ones == plain  # everyone at the crowd's height: as without sizes
+    with pytest.raises(ValueError, match="sizes must have one entry per frame"):
+        choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, sizes=[np.ones(10)])
 
 
 def test_a_phone_keeps_the_prior() -> None:

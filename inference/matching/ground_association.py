@@ -265,7 +265,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     hfov = options.hor_hfov_deg
     if hfov == AUTO_HFOV:
         lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
-                               options.hor_size, fps)
+                               options.hor_size, fps, sizes=sizes)
         hfov = lens.hfov_deg
     ratio = gr.box_width_ratio((b for b, _ in boxes), options.hor_size)
     hors = [(gr.hor_ground_points(hb, options.hor_size, hfov, width_ratio=ratio), h_ids)

@@ -289,24 +289,27 @@ def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: People
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
                   calibration: PeopleCalibration, options: MultiGroundOptions,
-                  tops: Mapping[int, np.ndarray] | None = None) -> tuple[LensChoice, ...]:
+                  tops: TopMap | None = None) -> tuple[LensChoice, ...]:
     """``--hor-hfov auto``: each handheld view's field of view chosen from its people
     (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, on the frames where it
-    and the top view both have people), in the order of the views (top first, in one
-    timing); ``tops``: the top view's people on its map (:attr:`TopMap.points`), when built."""
-    tops = top_map(views, frames, calibration).points if tops is None else tops
+    and the top view both have people, each read at its top partner's height), in the order
+    of the views (top first, in one timing); ``tops``: the top view's people on its map
+    (:func:`top_map`), when built."""
+    top = top_map(views, frames, calibration) if tops is None else tops
     choices = []
     for k in range(1, len(views)):
-        order = _paired_frames(views[k], tops)
-        finite = [tops[f][np.isfinite(tops[f]).all(axis=1)] for f in order]
-        choices.append(choose_hor_hfov(order, finite, [_boxes(views[k][f]) for f in order],
-                                       tuple(options.hor_sizes[k - 1]), options.fps))
+        order = _paired_frames(views[k], top.points)
+        ok = [np.isfinite(top.points[f]).all(axis=1) for f in order]
+        choices.append(choose_hor_hfov(
+            order, [top.points[f][o] for f, o in zip(order, ok, strict=True)],
+            [_boxes(views[k][f]) for f in order], tuple(options.hor_sizes[k - 1]), options.fps,
+            sizes=[top.sizes[f][o] for f, o in zip(order, ok, strict=True)]))
     return tuple(choices)
 
 
 def _with_lenses(views: Sequence[Mapping], frames: Sequence[int],
                  calibration: PeopleCalibration, options: MultiGroundOptions,
-                 tops: Mapping[int, np.ndarray] | None = None
+                 tops: TopMap | None = None
                  ) -> tuple[MultiGroundOptions, tuple[LensChoice, ...]]:
     """``options`` with ``auto`` replaced by each handheld view's chosen lens
     (:func:`choose_lenses`) and the choices; as they are, and none, otherwise."""
@@ -401,8 +404,8 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
     top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
+    options = _with_lenses(views, frames, calibration, options, top)[0]
     tops, heights = top.points, top.sizes
-    options = _with_lenses(views, frames, calibration, options, tops)[0]
     placed = [{f: (p, None) for f, p in tops.items() if len(p)},
               *(_registered(views, k, tops, options, top_tracks, heights)
                 for k in range(1, len(views)))]
@@ -438,7 +441,7 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
         options = replace(options, fps=rate.fps)
         if note is not None:
             note(frame_rate_note(rate))
-    options, lenses = _with_lenses(aligned, frames, calibration, options, top.points)
+    options, lenses = _with_lenses(aligned, frames, calibration, options, top)
     if lenses and note is not None:
         note(lenses_note(lenses))
     problems = ground_problems(aligned, frames, calibration, options, top_tracks, top)
