@@ -29,7 +29,10 @@ docs/notes/oblique_top_camera.md): without the chance check the choice lost up t
 ordinary lenses, picking a wide lens where no lens registered; scored above chance alone (no
 margin in all) it lost 7 on one set of ordinary lenses, as a prior that pairs little above
 chance is beaten by any noise; both together kept the prior on the ordinary lenses tried and
-won back most of a wide lens.
+won back most of a wide lens. Each handheld person is read at their top partner's height
+(``sizes``, as the run after the choice reads them): under a close drone, read at 1.72 m, no
+lens registered well and a 90-120 degree camera kept 70 on half the scenes (+ consensus CVIDF1
+79.4 against 95.1 with the heights, 100.0 with the true lens).
 """
 
 from __future__ import annotations
