@@ -120,3 +120,19 @@ def scene_files(tmp_path_factory) -> tuple[Path, Path]:
 
     folder = tmp_path_factory.mktemp("scene")
     return write_box_scene(simulate_box_scene(n_frames=3, seed=1), folder, "s")
+
+
+@pytest.fixture
+def close_drone():
+    """A 1920x1080 camera 8 m up, 30 degrees down, 70 degrees wide, calibrated as if exactly
+    (:class:`~xvmatch.geometry.people_calibration.PeopleCalibration`): a close drone whose
+    bottom edge cuts the people walking under it."""
+    import numpy as np
+
+    from xvmatch.geometry.people_calibration import PeopleCalibration
+
+    return PeopleCalibration(kind="oblique", width=1920, height=1080,
+                             focal=1920 / 2 / np.tan(np.radians(35.0)), tilt_deg=30.0,
+                             roll_deg=0.0, camera_height=8.0, horizon=(0.0, 0.0),
+                             focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
+                             focal_rel_std=0.0, n_boxes=100, n_frames=10)

@@ -227,20 +227,17 @@ def test_a_size_not_known_is_guessed_on_the_ground_path_only() -> None:
                     "video size holding its boxes (give --image-size WxH if not)"]
 
 
-def test_a_tall_person_cut_by_the_drones_near_edge_stands_where_associate_puts_them() -> None:
+def test_a_tall_person_cut_by_the_drones_near_edge_stands_where_associate_puts_them(
+        close_drone) -> None:
     """associate-multi's top map (:func:`top_map`): a tall person walking out of a close drone's
     bottom edge is placed, once cut, where the ray through their box's top meets the plane of
     their own height, read from their whole boxes along their track (video mode) or their boxes
     linked by IoU (frame mode), as associate places them; at the crowd's height they were put
     too near (the old map)."""
     from xvmatch.datasets.oblique_scenes import project_view
-    from xvmatch.geometry.people_calibration import PeopleCalibration, cut_at_bottom
+    from xvmatch.geometry.people_calibration import cut_at_bottom
 
-    calib = PeopleCalibration(kind="oblique", width=SIZE[0], height=SIZE[1],
-                              focal=SIZE[0] / 2 / np.tan(np.radians(35.0)), tilt_deg=30.0,
-                              roll_deg=0.0, camera_height=8.0, horizon=(0.0, 0.0),
-                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
-                              focal_rel_std=0.0, n_boxes=100, n_frames=10)
+    calib = close_drone
     edge = calib.ground_points(np.array([[SIZE[0] / 2, SIZE[1] - 1.0]]))[0]
     heights = np.array([1.9, calib.person_height, calib.person_height])
     top, tracks, truth = {}, {}, {}

@@ -24,7 +24,6 @@ from xvmatch.geometry.ground_plane import foot_points
 from xvmatch.geometry.people_calibration import (
     LENS_RANGE_DEG,
     CalibrationError,
-    PeopleCalibration,
     calibrate_from_people,
     cut_at_bottom,
     horizon_line,
@@ -101,15 +100,11 @@ def test_each_persons_height_read_through_the_camera() -> None:
     assert np.isnan(nadir.person_heights(numbers, boxes)).all()
 
 
-def test_a_person_cut_by_the_bottom_edge_stands_under_their_head() -> None:
+def test_a_person_cut_by_the_bottom_edge_stands_under_their_head(close_drone) -> None:
     """A close drone's near edge cuts people's feet off: their box's bottom row is the
     border's, so its foot point puts them metres too far; the ray through the box's top met at
     their height puts them where they stand (the body's radius off)."""
-    calib = PeopleCalibration(kind="oblique", width=SIZE[0], height=SIZE[1],
-                              focal=SIZE[0] / 2 / np.tan(np.radians(35.0)), tilt_deg=30.0,
-                              roll_deg=0.0, camera_height=8.0, horizon=(0.0, 0.0),
-                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
-                              focal_rel_std=0.0, n_boxes=100, n_frames=10)
+    calib = close_drone
     edge = calib.ground_points(np.array([[SIZE[0] / 2, SIZE[1] - 1.0]]))[0]
     where = np.array([[edge[0] - 0.8, edge[1]], [edge[0] + 6.0, edge[1] + 1.0]])
     heights = np.array([1.9, 1.6])
