@@ -75,17 +75,28 @@ def test_a_chooser_that_pairs_nobody_keeps_the_prior() -> None:
 
 
 @pytest.mark.slow
-def test_auto_picks_a_wide_lens_and_runs_with_it(scene) -> None:
+@pytest.mark.parametrize("video", [True, False], ids=["video", "frame"])
+def test_auto_picks_a_wide_lens_and_runs_with_it(scene, video) -> None:
     frames = list(range(1, 31, 3))
     calib = top_calibration(scene.top, scene.top_cameras[0].image_size)
-    auto = run_ground_association(scene.top, scene.hor["hor1"], _options(scene, "auto"),
-                                  frames, calib)
+    options = replace(_options(scene, "auto"), consensus=video)
+    auto = run_ground_association(scene.top, scene.hor["hor1"], options, frames, calib)
     assert auto.lens is not None and auto.lens.hfov_deg >= 90.0
-    assert auto.lens.scores[auto.lens.hfov_deg] > 1.3 * auto.lens.scores[70.0]
+    assert auto.lens.along_tracks is video
+    if video:  # every candidate's whole run, the most pairs kept along the tracks
+        assert set(auto.lens.scores) == {70.0, 90.0, 110.0} and auto.lens.frames == frames
+        assert auto.lens.scores[auto.lens.hfov_deg] == max(auto.lens.scores.values())
+        assert auto.lens.scores[auto.lens.hfov_deg] > auto.lens.scores[70.0]
+        assert auto.lens.scores[auto.lens.hfov_deg] == sum(map(len, auto.pairs.values()))
+        assert auto.lens.people[auto.lens.hfov_deg] == len(
+            {t for pairs in auto.pairs.values() for t, _ in pairs}) >= 2
+    else:  # frame by frame: 1.3 times the prior's pairing
+        assert auto.lens.scores[auto.lens.hfov_deg] > 1.3 * auto.lens.scores[70.0]
     assert lens_note(auto.lens) == (f"handheld lens: {auto.lens.hfov_deg:.0f} degrees, chosen "
                                     "from its people (give --hor-hfov DEG if known)")
     given = run_ground_association(scene.top, scene.hor["hor1"],
-                                   _options(scene, auto.lens.hfov_deg), frames, calib)
+                                   replace(options, hor_hfov_deg=auto.lens.hfov_deg), frames,
+                                   calib)
     assert given.lens is None
     assert (auto.pairs, auto.scale) == (given.pairs, given.scale)
     assert [(p.frame, *p.centre, p.heading) for p in auto.poses] == [
@@ -172,7 +183,13 @@ def test_multi_auto_from_the_command_line(two_wide, tmp_path, capsys) -> None:
     base = ["associate-multi", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
             str(paths["hor2"]), "--top-image-size", "1920x1080", "--image-size", "1920x1080",
             "--fps", "10"]
+    said = "xvmatch: note: handheld lenses, degrees, chosen from their people: hor1 {}, hor2 {} " \
+        "(give --hor-hfov DEG if known)"
+    # Video mode (both views' ids persist): each lens's run kept the most pairs along the tracks.
     assert main([*base, "--hor-hfov", "auto", "--out", str(tmp_path / "a")]) == 0
     lines = [line for line in capsys.readouterr().err.splitlines() if "handheld lens" in line]
-    assert lines == ["xvmatch: note: handheld lenses, degrees, chosen from their people: hor1 "
-                     "110, hor2 110 (give --hor-hfov DEG if known)"]
+    assert lines in ([said.format(a, b)] for a in ("90", "110") for b in ("90", "110"))
+    assert main([*base, "--hor-hfov", "auto", "--mode", "frame", "--out",
+                 str(tmp_path / "f")]) == 0  # frame by frame: 1.3 times the prior's pairing
+    lines = [line for line in capsys.readouterr().err.splitlines() if "handheld lens" in line]
+    assert lines == [said.format(110, 110)]

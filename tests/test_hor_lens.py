@@ -9,10 +9,12 @@ import pytest
 
 from xvmatch.cues.hor_lens import (
     HFOV_CANDIDATES,
+    MIN_PEOPLE,
     LensChoice,
     _pick,
     _subsample,
     choose_hor_hfov,
+    pick_along_tracks,
 )
 
 SIZE = (1280, 720)
@@ -143,3 +145,29 @@ def test_bad_input() -> None:
     with pytest.raises(ValueError, match="max_frames must be at least 1"):
         choose_hor_hfov([1], [np.zeros((0, 2))], [np.zeros((0, 4))], SIZE, fps=10.0,
                         max_frames=0)
+
+
+def test_video_mode_keeps_the_lens_whose_pairs_hold_along_the_tracks() -> None:
+    assert pick_along_tracks({70.0: 40, 90.0: 78, 110.0: 78}) == 90.0  # a tie: nearer the prior
+    assert pick_along_tracks({70.0: 76, 90.0: 77, 110.0: 77}) == 90.0  # no margin: counts
+    assert pick_along_tracks({70.0: 152, 90.0: 0, 110.0: 152}) == 70.0
+    assert pick_along_tracks({70.0: 0, 90.0: 71, 110.0: 179}) == 110.0
+    assert pick_along_tracks({60.0: 5, 70.0: 0, 80.0: 5}, prior=70.0) == 60.0  # the narrower
+    assert pick_along_tracks(dict.fromkeys(HFOV_CANDIDATES, 0)) == 70.0
+    # One person held along the tracks says nothing of the lens: a pose puts anyone anywhere.
+    one = {70.0: 0, 90.0: 39, 110.0: 0}
+    assert pick_along_tracks(one) == 90.0
+    assert pick_along_tracks(one, {70.0: 0, 90.0: 1, 110.0: 0}) == 70.0
+    assert pick_along_tracks(one, {70.0: 0, 90.0: MIN_PEOPLE, 110.0: 0}) == 90.0
+    assert pick_along_tracks({70.0: 30, 90.0: 39, 110.0: 60},
+                             {70.0: 1, 90.0: 2, 110.0: 1}) == 90.0  # the prior needs none
+    with pytest.raises(ValueError, match="people must have the candidates of kept"):
+        pick_along_tracks(one, {70.0: 0, 90.0: 1})
+    with pytest.raises(ValueError, match=r"the prior lens 70\.0 must be among"):
+        pick_along_tracks({90.0: 3, 110.0: 4})
+    none = LensChoice(70.0, dict.fromkeys(HFOV_CANDIDATES, 0.0), {}, [1], along_tracks=True)
+    kept = LensChoice(70.0, {70.0: 9.0, 90.0: 9.0, 110.0: 3.0}, {}, [1], along_tracks=True)
+    wide = LensChoice(110.0, {70.0: 0.0, 90.0: 3.0, 110.0: 9.0}, {}, [1], along_tracks=True)
+    assert not none.registered and none.why_prior == "no lens tried kept a pair along the tracks"
+    assert kept.registered and kept.why_prior == "no other lens kept more pairs along the tracks"
+    assert wide.registered and wide.why_prior is None

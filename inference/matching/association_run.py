@@ -109,7 +109,8 @@ class AssociationOptions:
         top_view: ``auto``, ``nadir`` or ``oblique``.
         top_image_size: the top view's image size, or None (``auto`` may guess it).
         hor_hfov: the horizontal camera's field of view, degrees, or ``"auto"`` (the
-            default, as ``--hor-hfov``): chosen from the people (the oblique path;
+            default, as ``--hor-hfov``): chosen from the people (the oblique path; in video
+            mode :func:`~xvmatch.cues.hor_lens.pick_along_tracks`, frame by frame
             :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`).
         fps: the frame rate of the frame numbers (the oblique path), or ``"auto"`` (the
             default, as ``--fps``): 30 unless the top view's walkers say otherwise.

@@ -22,12 +22,16 @@ view's boxes say it is oblique).
 which read the top image as the ground) or oblique (this run).
 
 With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``, the commands' default; these options keep
-70 degrees unless told) the handheld camera's field of view is chosen from the clip's people
-before the registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`: 70 unless a wider lens
-pairs clearly more people, in all and above chance). With ``fps="auto"`` (``--fps auto``, the
-commands' default) the frame numbers' rate is 30 a second unless the top view's walkers say
-otherwise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`: a file of
-every 10th frame numbered 1, 2, 3).
+70 degrees unless told) the handheld camera's field of view is chosen from the clip's people:
+in video mode the whole run is made with each candidate lens and the one whose pairs hold
+along the tracks most is kept (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`); frame by
+frame, before the registration (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`: 70 unless a
+wider lens pairs clearly more people, in all and above chance).
+
+With ``fps="auto"`` (``--fps auto``, the commands' default) the frame numbers' rate is 30 a
+second unless the top view's walkers say otherwise
+(:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`: a file of every 10th
+frame numbered 1, 2, 3).
 """
 
 from __future__ import annotations
@@ -38,7 +42,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
-from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
+from xvmatch.cues.hor_lens import (
+    HFOV_CANDIDATES,
+    LensChoice,
+    choose_hor_hfov,
+    pick_along_tracks,
+)
 from xvmatch.formats.mot_boxes import stack_frames
 from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
@@ -61,7 +70,10 @@ __all__ = [
     "TOP_VIEWS",
     "GroundAssociation",
     "GroundAssociationOptions",
+    "Registered",
+    "choose_along_tracks",
     "lens_note",
+    "register_and_pair",
     "run_ground_association",
     "run_top_view",
     "top_calibration",
@@ -232,7 +244,9 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
 
     Args:
         top, hor: ``{frame: record}`` with ``ids`` and ``boxes`` (``FrameBoxes``).
-        options: image sizes, the horizontal field of view (or ``auto``: chosen first,
+        options: image sizes, the horizontal field of view (or ``auto``: in video mode the
+            candidate whose whole run keeps the most pairs along the tracks,
+            :func:`~xvmatch.cues.hor_lens.pick_along_tracks`; frame by frame chosen first,
             :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`), the frame rate.
         frames: the frames to associate.
         calibration: the top camera's, when already estimated (:func:`top_calibration`).
@@ -261,18 +275,73 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     rate = (top_frame_rate(top, calib, table=(top_frames, tracks, top_ground))  # followed once
             if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
+
     lens = None
     hfov = options.hor_hfov_deg
-    if hfov == AUTO_HFOV:
-        lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
-                               options.hor_size, fps, sizes=sizes)
-        hfov = lens.hfov_deg
-    ratio = gr.box_width_ratio((b for b, _ in boxes), options.hor_size)
-    hors = [(gr.hor_ground_points(hb, options.hor_size, hfov, width_ratio=ratio), h_ids)
+    if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
+        lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
+                                                          options.hor_size, (top, hor))
+    else:
+        if hfov == AUTO_HFOV:
+            lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
+                                   options.hor_size, fps, sizes=sizes)
+            hfov = lens.hfov_deg
+        scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps,
+                                                options.hor_size,
+                                                (top, hor) if options.consensus else None)
+    return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
+                             summary=_summary(calib), scale=scale, lens=lens,
+                             frame_rate=rate)
+
+
+Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
+"""A registration's top map scale, its poses and the pairs under them."""
+
+
+def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
+                        hor_size: tuple[int, int], views: tuple[Mapping, Mapping]
+                        ) -> tuple[LensChoice, Registered]:
+    """Video mode's ``--hor-hfov auto``: the whole run (:func:`register_and_pair`, the pairs
+    made consistent along the tracks) with each candidate lens
+    (:data:`~xvmatch.cues.hor_lens.HFOV_CANDIDATES`), the one keeping the most pairs chosen
+    (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`). Arguments as
+    :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
+    runs = {h: register_and_pair(order, tops, boxes, sizes, h, fps, hor_size, views)
+            for h in HFOV_CANDIDATES}
+    kept = {h: sum(map(len, r[2].values())) for h, r in runs.items()}
+    people = {h: len({t for pairs in r[2].values() for t, _ in pairs}) for h, r in runs.items()}
+    hfov = pick_along_tracks(kept, people)
+    return LensChoice(hfov, {h: float(n) for h, n in kept.items()},
+                      {h: r[0] for h, r in runs.items()}, list(order), along_tracks=True,
+                      people=people), runs[hfov]
+
+
+def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
+                      fps: float, hor_size: tuple[int, int],
+                      views: tuple[Mapping, Mapping] | None) -> Registered:
+    """The handheld view registered on the top map with a lens of ``hfov`` degrees and each
+    frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
+    their ids the tracks: video mode) the top map's motion taken out and the pairs made
+    consistent along the tracks.
+
+    Args:
+        order: the frames.
+        tops: per frame, the top view's people on its map ``(N, 2)`` and their ids.
+        boxes: per frame, the horizontal view's boxes ``(M, 4)`` and their ids.
+        sizes: per frame, each top person's height over the crowd's ``(N,)``.
+        hfov: the horizontal camera's field of view, degrees.
+        fps: frames per second of the frame numbers.
+        hor_size: the horizontal view's image size.
+        views: see above; None: frame by frame.
+    Returns:
+        The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
+    """
+    ratio = gr.box_width_ratio((b for b, _ in boxes), hor_size)
+    hors = [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio), h_ids)
             for hb, h_ids in boxes]
     scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
                                           hfov, fps,
-                                          [i for _, i in tops] if options.consensus else None,
+                                          [i for _, i in tops] if views is not None else None,
                                           sizes)
     by_frame = {p.frame: p for p in poses}
     pairs: dict[int, list[tuple[int, int]]] = {}
@@ -280,11 +349,9 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         if f in by_frame:
             pairs[f] = [(int(ti[a]), int(hi[b]))
                         for a, b in gr.associate_on_ground(scale * p, q, by_frame[f], z)]
-    if options.consensus:
-        pairs = consistent_pairs(pairs, top, hor, order, keep_free=False)
-    return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
-                             summary=_summary(calib), scale=scale, lens=lens,
-                             frame_rate=rate)
+    if views is not None:
+        pairs = consistent_pairs(pairs, *views, order, keep_free=False)
+    return scale, poses, pairs
 
 
 def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,

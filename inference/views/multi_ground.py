@@ -30,9 +30,9 @@ registered on a frame gives its pairs no evidence for a match (a positive cost):
 unmatched there.
 
 With ``hor_hfov_deg="auto"`` (``--hor-hfov auto``) each handheld view's field of view is chosen
-from its people before its registration
-(:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`), one lens per view
-(:func:`choose_lenses`).
+from its people before its registration, one lens per view (:func:`choose_lenses`): in video
+mode the lens whose run with the top view keeps the most pairs along the tracks, as
+``associate`` chooses; frame by frame, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ from xvmatch.inference.matching.ground_association import (
     AUTO_HFOV,
     PRIOR_FPS,
     TOP_VIEWS,
+    choose_along_tracks,
     top_calibration,
     top_frame_rate,
     top_ground_points,
@@ -289,33 +290,49 @@ def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: People
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
                   calibration: PeopleCalibration, options: MultiGroundOptions,
-                  tops: TopMap | None = None) -> tuple[LensChoice, ...]:
-    """``--hor-hfov auto``: each handheld view's field of view chosen from its people
-    (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, on the frames where it
-    and the top view both have people, each read at its top partner's height), in the order
-    of the views (top first, in one timing); ``tops``: the top view's people on its map
-    (:func:`top_map`), when built."""
-    top = top_map(views, frames, calibration) if tops is None else tops
+                  tops: TopMap | None = None,
+                  tracks: Sequence[Mapping[int, int]] | None = None) -> tuple[LensChoice, ...]:
+    """``--hor-hfov auto``: each handheld view's field of view chosen from its people, on the
+    frames where it and the top view both have people, each read at its top partner's height,
+    in the order of the views (top first, in one timing; ``tops``: the top view's people on its
+    map, :func:`top_map`, when built). With ``tracks`` (per view ``{row id: track id}``, video
+    mode) as ``associate`` chooses in video mode, the lens whose run with the top view keeps
+    the most pairs along the tracks
+    (:func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`); without,
+    as it chooses frame by frame (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
+    top_tracks = None if tracks is None else tracks[0]
+    top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
     choices = []
     for k in range(1, len(views)):
         order = _paired_frames(views[k], top.points)
         ok = [np.isfinite(top.points[f]).all(axis=1) for f in order]
-        choices.append(choose_hor_hfov(
-            order, [top.points[f][o] for f, o in zip(order, ok, strict=True)],
-            [_boxes(views[k][f]) for f in order], tuple(options.hor_sizes[k - 1]), options.fps,
-            sizes=[top.sizes[f][o] for f, o in zip(order, ok, strict=True)]))
+        points = [top.points[f][o] for f, o in zip(order, ok, strict=True)]
+        sizes = [top.sizes[f][o] for f, o in zip(order, ok, strict=True)]
+        size = tuple(options.hor_sizes[k - 1])
+        if tracks is None:
+            choices.append(choose_hor_hfov(order, points, [_boxes(views[k][f]) for f in order],
+                                           size, options.fps, sizes=sizes))
+            continue
+        pair = (_tracked(views[0], tracks[0]), _tracked(views[k], tracks[k]))
+        tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
+                    for f, p, o in zip(order, points, ok, strict=True)]
+        boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
+        choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, size,
+                                           pair)[0])
     return tuple(choices)
 
 
 def _with_lenses(views: Sequence[Mapping], frames: Sequence[int],
                  calibration: PeopleCalibration, options: MultiGroundOptions,
-                 tops: TopMap | None = None
+                 tops: TopMap | None = None,
+                 tracks: Sequence[Mapping[int, int]] | None = None
                  ) -> tuple[MultiGroundOptions, tuple[LensChoice, ...]]:
     """``options`` with ``auto`` replaced by each handheld view's chosen lens
-    (:func:`choose_lenses`) and the choices; as they are, and none, otherwise."""
+    (:func:`choose_lenses`, ``tracks`` in video mode) and the choices; as they are, and none,
+    otherwise."""
     if options.hor_hfov_deg != AUTO_HFOV:
         return options, ()
-    lenses = choose_lenses(views, frames, calibration, options, tops)
+    lenses = choose_lenses(views, frames, calibration, options, tops, tracks)
     return replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses)), lenses
 
 
@@ -441,7 +458,7 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
         options = replace(options, fps=rate.fps)
         if note is not None:
             note(frame_rate_note(rate))
-    options, lenses = _with_lenses(aligned, frames, calibration, options, top)
+    options, lenses = _with_lenses(aligned, frames, calibration, options, top, tracks)
     if lenses and note is not None:
         note(lenses_note(lenses))
     problems = ground_problems(aligned, frames, calibration, options, top_tracks, top)
