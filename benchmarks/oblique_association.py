@@ -79,9 +79,12 @@ gate along the ray).
 ``--choose-lens``: two more rows, both with the tracklet consensus: ``registered, from people,
 true lens`` (the handheld field of view known, the top camera from its people) and
 ``registered, from people, lens chosen`` (``--hor-hfov auto``, as ``associate`` runs it: the
-field of view chosen from the people, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`, then the
-same run); each scene's line gives the true and the chosen lens with each candidate's pairing
-score and chance score (``lens:in/chance``), and the summary the seconds the choice and its run
+field of view chosen from the people: as this row runs in video mode, the candidate whose
+whole run keeps the most pairs along the tracks,
+:func:`~xvmatch.cues.hor_lens.pick_along_tracks`); each scene's line gives the true and the
+chosen lens with the pairs each candidate kept (``lens:kept/Np``: pair-frames, and the
+top-view people they join; frame by frame the choice would give each candidate's pairing score
+and chance score, ``lens:in/chance``), and the summary the seconds the choice and its run
 took.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120 --choose-lens
@@ -404,8 +407,9 @@ def main(argv: list[str] | None = None) -> int:
                 choice_s += time.perf_counter() - t1
                 chosen, choice = chosen_run.pairs, chosen_run.lens
                 lens = choice.hfov_deg
-                lens_scores = " ".join(f"{h:.0f}:{v:.1f}/{choice.chance[h]:.1f}"
-                                       for h, v in choice.scores.items())
+                lens_scores = " ".join(  # video mode: pairs kept along the tracks
+                    f"{h:.0f}:{v:.0f}/{choice.people[h]}p" if h not in choice.chance else
+                    f"{h:.0f}:{v:.1f}/{choice.chance[h]:.1f}" for h, v in choice.scores.items())
         routed = voted if calib is not None and calib.kind == "oblique" else consistent_pairs(
             search, top, hor, frames)
         preds = (search, follow, true, people, voted, routed)

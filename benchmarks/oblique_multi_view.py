@@ -210,9 +210,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--choose-lens", action="store_true",
                    help="each handheld lens chosen from its people (--hor-hfov auto, the "
                    "commands' default) instead of 70 degrees")
+    p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
+                   help="the handheld cameras' horizontal field of view in the renders, LO-HI "
+                   "degrees (default 60 80)")
     add_drone_arguments(p)
     args = p.parse_args(argv)
-    config = drone_config(args, n_hor=2)
+    config = drone_config(args, n_hor=2, hor_hfov=tuple(args.hor_hfov))
     lens = AUTO_HFOV if args.choose_lens else PRIOR_HFOV_DEG
     kinds = {"all": lambda ab: True, "top-hor": lambda ab: ab[0] == 0,
              "hor-hor": lambda ab: ab[0] > 0}
