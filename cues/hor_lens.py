@@ -262,11 +262,11 @@ def pick_along_tracks(kept: dict[float, int], people: dict[float, int] | None = 
     prior, then the narrower); the prior where none keeps any. Another lens than the prior
     only where its pairs join :data:`MIN_PEOPLE` top-view people (``people``: how many each
     run's pairs join; None: not checked): a pose can put any one person on any other, so one
-    pair held says nothing of the lens. A wrong lens stretches the
-    handheld map along the camera's axis, so its poses drift from frame to frame and its pairs
-    change partner along a track, which the consensus drops. On 72 rendered clips (lenses of
-    60-80 and 90-120 degrees, a close and a far drone) its pick paired as well as the best of
-    the three candidates on every clip (docs/notes/oblique_top_camera.md)."""
+    pair held says nothing of the lens. A wrong lens stretches the handheld map along the
+    camera's axis, so its poses drift from frame to frame and its pairs change partner along a
+    track, which the consensus drops. On 72 rendered clips (lenses of 60-80 and 90-120
+    degrees, a close and a far drone) its pick paired as well as the best of the three
+    candidates on every clip (docs/notes/oblique_top_camera.md)."""
     if prior not in kept:
         raise ValueError(f"the prior lens {prior} must be among the candidates {sorted(kept)}")
     if people is not None and set(people) != set(kept):
