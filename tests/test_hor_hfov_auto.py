@@ -189,7 +189,4 @@ def test_multi_auto_from_the_command_line(two_wide, tmp_path, capsys) -> None:
     assert main([*base, "--hor-hfov", "auto", "--out", str(tmp_path / "a")]) == 0
     lines = [line for line in capsys.readouterr().err.splitlines() if "handheld lens" in line]
     assert lines in ([said.format(a, b)] for a in ("90", "110") for b in ("90", "110"))
-    assert main([*base, "--hor-hfov", "auto", "--mode", "frame", "--out",
-                 str(tmp_path / "f")]) == 0  # frame by frame: 1.3 times the prior's pairing
-    lines = [line for line in capsys.readouterr().err.splitlines() if "handheld lens" in line]
-    assert lines == [said.format(110, 110)]
+    # (frame by frame, without tracks, 110 each: test_multi_auto_chooses_one_lens_per_view)
