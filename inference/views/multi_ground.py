@@ -302,6 +302,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
     as it chooses frame by frame (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
     top_tracks = None if tracks is None else tracks[0]
     top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
+    tracked_top = None if tracks is None else _tracked(views[0], tracks[0])  # once, all views
     choices = []
     for k in range(1, len(views)):
         order = _paired_frames(views[k], top.points)
@@ -313,7 +314,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
             choices.append(choose_hor_hfov(order, points, [_boxes(views[k][f]) for f in order],
                                            size, options.fps, sizes=sizes))
             continue
-        pair = (_tracked(views[0], tracks[0]), _tracked(views[k], tracks[k]))
+        pair = (tracked_top, _tracked(views[k], tracks[k]))
         tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
                     for f, p, o in zip(order, points, ok, strict=True)]
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
