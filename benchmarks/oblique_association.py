@@ -38,7 +38,8 @@ tracklet-consensus row without the top map's own motion taken out of the registr
 person read at 1.72 m, not at the height the top view reads for the partner it is compared
 with (as before :func:`~xvmatch.inference.matching.ground_association.top_sizes`);
 ``--box-noise SIGMA``: each box edge of both views moved by a normal draw of SIGMA times the
-box's height (the renders' boxes are exact; annotations and detectors are not).
+box's height, then clipped to the image (the renders' boxes are exact; annotations and
+detectors are not, and both clip to the image).
 
 ``--top-pitch LO HI`` and ``--overlap LO HI``: the renders' top pitch (default 20-90 degrees)
 and each view's share of people the other sees (default 0.3-1), e.g. a scenario like the
@@ -123,7 +124,7 @@ from xvmatch.formats.box_image_size import (
     consistent_with,
     ground_path_hor_size,
 )
-from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibration
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.inference.matching.ground_association import (
@@ -132,6 +133,7 @@ from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
     run_ground_association,
     top_calibration,
+    top_ground_points,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
@@ -147,16 +149,20 @@ def _scrambled(frames: dict, rng: np.random.Generator) -> tuple[dict, dict]:
              for f, r in frames.items()}, back)
 
 
-def _jittered(frames: dict, sigma: float, rng: np.random.Generator) -> dict:
+def _jittered(frames: dict, sigma: float, rng: np.random.Generator,
+              size: tuple[int, int]) -> dict:
     """The view's boxes with each edge moved by a normal draw of ``sigma`` times the box's
-    height (an annotator's or a detector's looseness), at least 2 px wide and tall."""
+    height (an annotator's or a detector's looseness), then clipped to the ``size`` image as
+    annotation tools and detectors clip them, at least 2 px wide and tall."""
     out = {}
     for f in sorted(frames):
         rec = frames[f]
         b = np.asarray(rec.boxes, float).reshape(-1, 4)
         x0, y0, x1, y1 = (b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3])
         step = sigma * b[:, 3:4] * rng.standard_normal((len(b), 4))
-        x0, y0, x1, y1 = x0 + step[:, 0], y0 + step[:, 1], x1 + step[:, 2], y1 + step[:, 3]
+        x0, x1 = (np.clip(v + step[:, k], 0.0, size[0]) for k, v in ((0, x0), (2, x1)))
+        y0, y1 = (np.clip(v + step[:, k], 0.0, size[1]) for k, v in ((1, y0), (3, y1)))
+        x0, y0 = np.minimum(x0, size[0] - 2.0), np.minimum(y0, size[1] - 2.0)
         w, h = np.maximum(x1 - x0, 2.0), np.maximum(y1 - y0, 2.0)
         out[f] = FrameBoxes(f, rec.ids, np.column_stack([x0, y0, w, h]))
     return out
@@ -171,6 +177,18 @@ def _true_calibration(camera, size: tuple[int, int]) -> PeopleCalibration:
                              camera_height=float(camera.c[2]), horizon=(0.0, 0.0),
                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
                              focal_rel_std=0.0, n_boxes=0, n_frames=0)
+
+
+def _true_ground_points(top: dict, cameras: list, size: tuple[int, int]) -> np.ndarray:
+    """The top view's people on the ground map of each frame's own true camera (``cameras``,
+    one per frame of ``top`` in order; a drone that tilts or moves has one per frame), in
+    :func:`~xvmatch.formats.mot_boxes.stack_frames` order: what the "true cameras" row maps."""
+    frames, _, boxes = stack_frames(top)
+    out = np.full((len(boxes), 2), np.nan)
+    for f, camera in zip(sorted(top), cameras, strict=True):
+        rows = frames == f
+        out[rows] = top_ground_points(boxes[rows], _true_calibration(camera, size))
+    return out
 
 
 def _distance_errors(scene, frames: list[int], hfov: float) -> np.ndarray:
@@ -294,7 +312,8 @@ def main(argv: list[str] | None = None) -> int:
                    "(associate without --top-image-size), not the true one")
     p.add_argument("--box-noise", type=float, default=0.0, metavar="SIGMA",
                    help="move each box edge, in both views, by a normal draw of SIGMA times "
-                   "the box's height (default 0: the renders' exact boxes)")
+                   "the box's height, clipped to the image (default 0: the renders' exact "
+                   "boxes)")
     p.add_argument("--no-top-sizes", action="store_true",
                    help="read every handheld person at 1.72 m, not at their top-view partner's "
                    "height (before)")
@@ -347,7 +366,8 @@ def main(argv: list[str] | None = None) -> int:
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)
         if args.box_noise > 0:  # from a generator of its own: the scenes' draws stay
             noise = np.random.default_rng([args.seed, k, 2])
-            top, hor = (_jittered(v, args.box_noise, noise) for v in (top, hor))
+            top, hor = (_jittered(v, args.box_noise, noise, c.image_size) for v, c in
+                        ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         truth = {f: {(int(a), int(b)) for a in top[f].ids for b in hor[f].ids
                      if top_back[int(a)] == hor_back[int(b)]} for f in frames}
@@ -369,16 +389,21 @@ def main(argv: list[str] | None = None) -> int:
         top_size = scene.top_cameras[0].image_size
         known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False,
                                          top_sizes=not args.no_top_sizes)
-        true = run_ground_association(top, hor, known, frames,
-                                      _true_calibration(scene.top_cameras[0], top_size)).pairs
+        original = dict(zip(frames, sampled, strict=True))  # the methods' frame -> the scene's
+        true = run_ground_association(
+            top, hor, known, frames, _true_calibration(scene.top_cameras[0], top_size),
+            _true_ground_points(top, [scene.top_cameras[original.get(f, f) - 1]
+                                      for f in sorted(top)], top_size)).pairs
         if args.guess_top_size:
             top_size = common_size_holding(top) or top_size
         people_hor = hor_size
         if args.hor_size != "true" and consistent_with(hor):
             people_hor = (CVMHAT_SIZE if args.hor_size == "assumed" else
                           ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED) or CVMHAT_SIZE)
-        elif args.hor_size == "guess":  # boxes that do not fit CVMHAT's ("assumed": refused)
-            people_hor = ground_path_hor_size(hor, hor_size, UNKNOWN) or hor_size
+        elif args.hor_size == "guess":  # boxes that do not fit CVMHAT's ("assumed": refused):
+            # as resolve_size(defer=True) settles them for the command, not the true size
+            people_hor = ground_path_hor_size(hor, common_size_holding(hor) or hor_size,
+                                              UNKNOWN) or hor_size
         options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False,
                                            top_sizes=not args.no_top_sizes)
         try:  # frame by frame the calibration reads no ids; the consensus rows, the tracks

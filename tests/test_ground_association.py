@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
-from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
     run_ground_association,
     top_calibration,
+    top_ground_points,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
@@ -68,6 +69,27 @@ def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
     # 94.9 with everyone read at 1.72 m).
     assert scores[False] > 80.0
     assert scores[True] > 90.0
+
+
+def test_top_points_given_replace_the_calibrations_map(scene) -> None:
+    """``top_points`` (the top view mapped otherwise, e.g. a benchmark's true camera of each
+    frame) are the run's top map: the calibration's own map given pairs as without it, and a
+    wrong number of rows is refused."""
+    top, hor, _, options, _ = _prepared(scene)
+    frames = list(range(1, 31, 3))
+    options = replace(options, consensus=False)
+    calib = top_calibration(top, options.top_size)
+    _, _, boxes = stack_frames(top)
+    own = top_ground_points(boxes, calib)
+    plain = run_ground_association(top, hor, options, frames, calib)
+    assert sum(map(len, plain.pairs.values())) > 0
+    # Sizes are read as the run reads them; the map of every box is the calibration's.
+    read = run_ground_association(top, hor, replace(options, top_sizes=False), frames, calib)
+    given = run_ground_association(top, hor, replace(options, top_sizes=False), frames, calib,
+                                   top_points=own)
+    assert given.pairs == read.pairs
+    with pytest.raises(ValueError, match=r"top_points must be \(\d+, 2\)"):
+        run_ground_association(top, hor, options, frames, calib, top_points=own[:-1])
 
 
 @pytest.mark.slow

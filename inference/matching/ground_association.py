@@ -238,7 +238,8 @@ def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
 
 def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
                            frames: list[int] | None = None,
-                           calibration: PeopleCalibration | None = None) -> GroundAssociation:
+                           calibration: PeopleCalibration | None = None,
+                           top_points: np.ndarray | None = None) -> GroundAssociation:
     """Associate every frame of ``frames`` (default: those with boxes in both views) through the
     ground maps (module docstring).
 
@@ -250,6 +251,10 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
             :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`), the frame rate.
         frames: the frames to associate.
         calibration: the top camera's, when already estimated (:func:`top_calibration`).
+        top_points: the top view's people on its ground map ``(N, 2)``, in
+            :func:`~xvmatch.formats.mot_boxes.stack_frames` order, where they are mapped
+            otherwise than through ``calibration`` (a benchmark's true camera of each frame);
+            ``calibration`` still reads their heights (:func:`top_sizes`).
     """
     calib = calibration or top_calibration(top, options.top_size, options.seed,
                                            tracks=options.consensus)
@@ -261,7 +266,13 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     tracks = top_ids if options.consensus else box_track_ids(top)  # frame mode: by IoU
     read = (top_sizes(top_frames, top_boxes, tracks, calib) if options.top_sizes
             else np.ones(len(top_frames)))
-    top_ground = top_ground_points(top_boxes, calib, read)
+    if top_points is None:
+        top_ground = top_ground_points(top_boxes, calib, read)
+    else:
+        top_ground = np.asarray(top_points, float)
+        if top_ground.shape != (len(top_boxes), 2):
+            raise ValueError(f"top_points must be ({len(top_boxes)}, 2), one row per top-view "
+                             f"box, got {top_ground.shape}")
     tops, boxes, sizes = [], [], []
     for f, a, b in zip(order, starts, ends, strict=True):
         h = hor.get(f)
