@@ -354,7 +354,7 @@ def _to_ground(camera: Camera, pixels: np.ndarray,
 @dataclass(frozen=True)
 class _Boxes:
     """The usable boxes of a clip: foot column ``u``, foot row ``v``, height ``h`` and width
-    ``w`` (pixels), and the time block of each (for resampling)."""
+    ``w`` (pixels), the time block of each (for resampling) and, where known, its frame."""
 
     u: np.ndarray
     v: np.ndarray
@@ -363,10 +363,12 @@ class _Boxes:
     block: np.ndarray
     track: np.ndarray
     n_tracks: int
+    frame: np.ndarray | None = None
 
     def take(self, index: np.ndarray) -> _Boxes:
         return _Boxes(self.u[index], self.v[index], self.h[index], self.w[index],
-                      self.block[index], self.track[index], self.n_tracks)
+                      self.block[index], self.track[index], self.n_tracks,
+                      None if self.frame is None else self.frame[index])
 
 
 def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
@@ -417,7 +419,7 @@ def _usable(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
         number = np.cumsum(long) * long  # 1.. for long tracks, 0 for short ones
         track, n_tracks = number[inverse], int(long.sum()) + 1
     out = _Boxes(u=x[ok] + 0.5 * w[ok], v=y[ok] + h[ok], h=h[ok], w=w[ok], block=block,
-                 track=track, n_tracks=n_tracks)
+                 track=track, n_tracks=n_tracks, frame=frames[ok])
     if n_tracks > 1 and np.mean(track > 0) >= 0.5:
         # Enough people were followed: the others' boxes, of mixed heights, only blur the fit.
         out = out.take(np.flatnonzero(track > 0))

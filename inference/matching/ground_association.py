@@ -54,6 +54,7 @@ from xvmatch.geometry.people_calibration import (
     PeopleCalibration,
     calibrate_from_people,
 )
+from xvmatch.geometry.tilting_camera import WINDOW_S, TiltTrack, fit_tilt_track
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
 from xvmatch.inference.linking.tracklets import box_track_ids
 from xvmatch.inference.matching.frame_rate import (
@@ -76,6 +77,8 @@ __all__ = [
     "register_and_pair",
     "run_ground_association",
     "run_top_view",
+    "tilt_note",
+    "tilting_top",
     "top_calibration",
     "top_frame_rate",
     "top_ground_points",
@@ -136,7 +139,9 @@ class GroundAssociation:
     :func:`~xvmatch.cues.ground_registration.register_with_scale`), and one line saying what
     was assumed; with ``--hor-hfov auto``, the lens chosen (``lens``, its line
     :func:`lens_note`), else None; with ``fps`` ``auto``, the frame rate taken
-    (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`), else None."""
+    (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`), else None; ``tilt``:
+    the top camera's tilt per window where it reads as tilting
+    (:mod:`~xvmatch.geometry.tilting_camera`; each frame mapped through its own), else None."""
 
     pairs: dict[int, list[tuple[int, int]]]
     calibration: PeopleCalibration
@@ -145,6 +150,7 @@ class GroundAssociation:
     scale: float = 1.0
     lens: LensChoice | None = None
     frame_rate: FrameRate | None = None
+    tilt: TiltTrack | None = None
 
 
 def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
@@ -182,8 +188,21 @@ SIZE_RANGE = (0.85, 1.15)
 beyond, and its person is read as no taller or shorter than these."""
 
 
+def _per_frame(frames: np.ndarray, calib: PeopleCalibration, tilt: TiltTrack | None):
+    """``(calibration, rows)`` for each of ``frames``' distinct frames, through its own tilt
+    (``tilt``), or once for all rows (None)."""
+    if tilt is None:
+        yield calib, np.arange(len(frames))
+        return
+    order = np.argsort(frames, kind="stable")
+    starts = np.flatnonzero(np.r_[True, frames[order][1:] != frames[order][:-1]])
+    calibs = tilt.calibrations(calib, frames)
+    for rows in np.split(order, starts[1:]):
+        yield calibs[int(frames[rows[0]])], rows
+
+
 def top_sizes(frames: np.ndarray, boxes: np.ndarray, tracks: np.ndarray,
-              calib: PeopleCalibration) -> np.ndarray:
+              calib: PeopleCalibration, tilt: TiltTrack | None = None) -> np.ndarray:
     """``(N,)`` each top-view box's person's height over the crowd's, the boxes ``(N, 4)`` and
     their frames ``(N,)`` as :func:`~xvmatch.formats.mot_boxes.stack_frames` gives them (who
     stands behind whom is read per frame): each box's height read through the
@@ -192,10 +211,15 @@ def top_sizes(frames: np.ndarray, boxes: np.ndarray, tracks: np.ndarray,
     every box read, within :data:`SIZE_RANGE`, rounded to 4 decimals; 1 for a track none of
     whose boxes tells (a nadir view, people seen steeply from above, boxes cut or hidden). A
     horizontal person read at their partner's height lands where the partner stands
-    (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`)."""
+    (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`). ``tilt``: each frame read
+    through its own tilt (a tilting camera)."""
     tracks = np.asarray(tracks).reshape(-1)
     sizes = np.ones(len(tracks))
-    read = calib.person_heights(frames, boxes)
+    frames = np.asarray(frames).reshape(-1)
+    boxes = np.asarray(boxes, float).reshape(-1, 4)
+    read = np.full(len(tracks), np.nan)
+    for c, rows in _per_frame(frames, calib, tilt):
+        read[rows] = c.person_heights(frames[rows], boxes[rows])
     if not np.isfinite(read).any():
         return sizes
     crowd = float(np.nanmedian(read))
@@ -209,19 +233,52 @@ def top_sizes(frames: np.ndarray, boxes: np.ndarray, tracks: np.ndarray,
 
 
 def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration,
-                      sizes: np.ndarray | None = None) -> np.ndarray:
+                      sizes: np.ndarray | None = None, frames: np.ndarray | None = None,
+                      tilt: TiltTrack | None = None) -> np.ndarray:
     """The top view's people ``(N, 2)`` on its ground map (metres), from their boxes'
     ``(N, 4)`` foot points through the calibration, or, for a box cut by the image's bottom
     edge, from its top at its person's height (``sizes`` ``(N,)``, :func:`top_sizes`;
     :meth:`~xvmatch.geometry.people_calibration.PeopleCalibration.standing_points`); NaN where
-    a foot has no ground (above the horizon)."""
+    a foot has no ground (above the horizon). ``tilt`` (with each box's ``frames``): each
+    frame mapped through its own tilt (a tilting camera)."""
     boxes = np.asarray(boxes, float).reshape(-1, 4)
-    return calib.standing_points(boxes, sizes) if len(boxes) else np.zeros((0, 2))
+    if tilt is None or not len(boxes):
+        return calib.standing_points(boxes, sizes) if len(boxes) else np.zeros((0, 2))
+    frames = np.asarray(frames).reshape(-1)
+    out = np.full((len(boxes), 2), np.nan)
+    for c, rows in _per_frame(frames, calib, tilt):
+        out[rows] = c.standing_points(boxes[rows], None if sizes is None else sizes[rows])
+    return out
 
 
-def _summary(calib: PeopleCalibration) -> str:
+def tilting_top(frames: np.ndarray, tracks: np.ndarray, boxes: np.ndarray,
+                calib: PeopleCalibration, fps: float) -> TiltTrack | None:
+    """The top camera's tilt per window (:func:`~xvmatch.geometry.tilting_camera.fit_tilt_track`,
+    the view stacked: each box's frame, track and box) where an oblique camera reads as
+    tilting over the clip; None for a nadir or a steady camera, whose one fit ``calib``
+    stands."""
+    if calib.kind != "oblique":
+        return None
+    track = fit_tilt_track(frames, tracks, boxes, (calib.width, calib.height), fps)
+    return track if track is not None and track.tilting else None
+
+
+def tilt_note(tilt: TiltTrack) -> str:
+    """The line saying the top camera was read as tilting."""
+    return (f"top view: tilting from {tilt.tilts_deg[0]:.0f} to {tilt.tilts_deg[-1]:.0f} "
+            f"degrees over the clip (a tilt per {WINDOW_S:g} s, from its people); each frame "
+            "mapped through its own")
+
+
+def _summary(calib: PeopleCalibration, tilt: TiltTrack | None = None) -> str:
     if calib.kind == "nadir":
         return "top view: looking straight down (its boxes are as wide as tall)"
+    if tilt is not None:
+        return (f"top view: oblique, tilting from {tilt.tilts_deg[0]:.0f} to "
+                f"{tilt.tilts_deg[-1]:.0f} degrees over the clip, about "
+                f"{tilt.camera_height:.0f} m up (from its people, a tilt per "
+                f"{WINDOW_S:g} s); the horizontal camera registered on its ground map frame by "
+                "frame")
     return (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- {calib.tilt_std_deg:.0f} degrees, "
             f"about {calib.camera_height:.0f} m up (from its people); the horizontal camera "
             "registered on its ground map frame by frame")
@@ -273,6 +330,15 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         if top_ground.shape != (len(top_boxes), 2):
             raise ValueError(f"top_points must be ({len(top_boxes)}, 2), one row per top-view "
                              f"box, got {top_ground.shape}")
+    rate = (top_frame_rate(top, calib, table=(top_frames, tracks, top_ground))  # followed once
+            if options.fps == AUTO_FPS else None)
+    fps = float(options.fps) if rate is None else rate.fps
+    tilt = None if top_points is not None else tilting_top(top_frames, tracks, top_boxes,
+                                                             calib, fps)
+    if tilt is not None:  # a gimbal tilting over the clip: each frame through its own tilt
+        if options.top_sizes:
+            read = top_sizes(top_frames, top_boxes, tracks, calib, tilt)
+        top_ground = top_ground_points(top_boxes, calib, read, top_frames, tilt)
     tops, boxes, sizes = [], [], []
     for f, a, b in zip(order, starts, ends, strict=True):
         h = hor.get(f)
@@ -283,9 +349,6 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         tops.append((ground[ok], t_ids[ok]))
         sizes.append(read[a:b][ok])
         boxes.append((hb, h_ids))
-    rate = (top_frame_rate(top, calib, table=(top_frames, tracks, top_ground))  # followed once
-            if options.fps == AUTO_FPS else None)
-    fps = float(options.fps) if rate is None else rate.fps
 
     lens = None
     hfov = options.hor_hfov_deg
@@ -301,8 +364,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
                                                 options.hor_size,
                                                 (top, hor) if options.consensus else None)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
-                             summary=_summary(calib), scale=scale, lens=lens,
-                             frame_rate=rate)
+                             summary=_summary(calib, tilt), scale=scale, lens=lens,
+                             frame_rate=rate, tilt=tilt)
 
 
 Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]

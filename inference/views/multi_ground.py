@@ -56,6 +56,7 @@ from xvmatch.geometry.people_calibration import (
     CalibrationError,
     PeopleCalibration,
 )
+from xvmatch.geometry.tilting_camera import TiltTrack
 from xvmatch.inference.linking.tracklets import box_track_ids
 from xvmatch.inference.matching.frame_rate import frame_rate_note
 from xvmatch.inference.matching.ground_association import (
@@ -64,6 +65,8 @@ from xvmatch.inference.matching.ground_association import (
     PRIOR_FPS,
     TOP_VIEWS,
     choose_along_tracks,
+    tilt_note,
+    tilting_top,
     top_calibration,
     top_frame_rate,
     top_ground_points,
@@ -264,28 +267,34 @@ class TopMap:
         walkers: the whole view stacked, ``(frames, track ids, ground points)`` in
             :func:`~xvmatch.formats.mot_boxes.stack_frames` order (its frame rate's walkers,
             :func:`~xvmatch.inference.matching.ground_association.top_frame_rate`).
+        tilt: the top camera's tilt per window where it reads as tilting (each frame mapped
+            through its own), else None.
     """
 
     points: dict[int, np.ndarray]
     sizes: dict[int, np.ndarray]
     walkers: tuple[np.ndarray, np.ndarray, np.ndarray]
+    tilt: TiltTrack | None = None
 
 
 def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: PeopleCalibration,
-            top_tracks: Mapping[int, int] | None = None) -> TopMap:
+            top_tracks: Mapping[int, int] | None = None, fps: float | None = None) -> TopMap:
     """The top view's (``views[0]``) people of ``frames`` on its ground map, as ``associate``
     places them (:func:`~xvmatch.inference.matching.ground_association.top_ground_points`): a
     box cut by the image's bottom edge at its person's own height, each followed by the top
-    view's ``top_tracks`` (video mode) or by its boxes linked by IoU (followed once)."""
+    view's ``top_tracks`` (video mode) or by its boxes linked by IoU (followed once); with the
+    frame rate ``fps``, a camera tilting over the clip is read as such and each frame mapped
+    through its own tilt (:func:`~xvmatch.inference.matching.ground_association.tilting_top`)."""
     stacked, ids, boxes = stack_frames(_tracked(views[0], top_tracks))
     tracks = ids if top_tracks is not None else box_track_ids(views[0])
-    read = top_sizes(stacked, boxes, tracks, calibration)
-    ground = top_ground_points(boxes, calibration, read)
+    tilt = None if fps is None else tilting_top(stacked, tracks, boxes, calibration, fps)
+    read = top_sizes(stacked, boxes, tracks, calibration, tilt)
+    ground = top_ground_points(boxes, calibration, read, stacked, tilt)
     keys, starts, counts = np.unique(stacked, return_index=True, return_counts=True)
     at = {int(f): slice(a, a + n) for f, a, n in zip(keys, starts, counts, strict=True)}
     empty = np.zeros((0, 2))
     return TopMap({f: ground[at[f]] if f in at else empty for f in frames},
-                  {f: read[rows] for f, rows in at.items()}, (stacked, tracks, ground))
+                  {f: read[rows] for f, rows in at.items()}, (stacked, tracks, ground), tilt)
 
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
@@ -453,12 +462,15 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
     frames = sorted(set().union(*aligned))
     top_tracks = None if tracks is None else tracks[0]
-    top = top_map(aligned, frames, calibration, top_tracks)  # once: the rate, lenses, problems
-    if options.fps == AUTO_FPS:
-        rate = top_frame_rate(aligned[0], calibration, table=top.walkers)
+    if options.fps == AUTO_FPS:  # the rate from the clip's one fit, then the map at that rate
+        first = top_map(aligned, frames, calibration, top_tracks)
+        rate = top_frame_rate(aligned[0], calibration, table=first.walkers)
         options = replace(options, fps=rate.fps)
         if note is not None:
             note(frame_rate_note(rate))
+    top = top_map(aligned, frames, calibration, top_tracks, options.fps)  # lenses, problems
+    if top.tilt is not None and note is not None:
+        note(tilt_note(top.tilt))
     options, lenses = _with_lenses(aligned, frames, calibration, options, top, tracks)
     if lenses and note is not None:
         note(lenses_note(lenses))
