@@ -10,6 +10,7 @@ import pytest
 from xvmatch.cues.hor_lens import (
     HFOV_CANDIDATES,
     MIN_PEOPLE,
+    NEAR_TIE,
     LensChoice,
     _pick,
     _subsample,
@@ -161,6 +162,13 @@ def test_video_mode_keeps_the_lens_whose_pairs_hold_along_the_tracks() -> None:
     assert pick_along_tracks(one, {70.0: 0, 90.0: MIN_PEOPLE, 110.0: 0}) == 90.0
     assert pick_along_tracks({70.0: 30, 90.0: 39, 110.0: 60},
                              {70.0: 1, 90.0: 2, 110.0: 1}) == 90.0  # the prior needs none
+    # A near tie (within NEAR_TIE) joining no more people keeps the prior; more people win.
+    assert pick_along_tracks({70.0: 110, 90.0: 110, 110.0: 117},
+                             {70.0: 3, 90.0: 3, 110.0: 3}) == 70.0
+    assert pick_along_tracks({70.0: 181, 90.0: 182, 110.0: 146},
+                             {70.0: 5, 90.0: 6, 110.0: 4}) == 90.0
+    assert pick_along_tracks({70.0: 100, 90.0: 100 * NEAR_TIE + 1, 110.0: 0},
+                             {70.0: 3, 90.0: 3, 110.0: 0}) == 90.0  # beyond the near tie
     with pytest.raises(ValueError, match="people must have the candidates of kept"):
         pick_along_tracks(one, {70.0: 0, 90.0: 1})
     with pytest.raises(ValueError, match=r"the prior lens 70\.0 must be among"):
