@@ -4,7 +4,10 @@ view's boxes say it is oblique).
 
 1. The top camera is calibrated from its people
    (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`, a loose fit rather than
-   none), which puts the top view's people on a metric ground map.
+   none), which puts the top view's people on a metric ground map; a camera whose tilt changes
+   over the clip (a gimbal) is read with a tilt per window
+   (:func:`~xvmatch.geometry.tilting_camera.fit_tilt_track`, :func:`tilting_top`), each frame
+   mapped through its own.
 2. The horizontal view's people go on its own ground map (distance from box height, bearing
    from column), and its pose on the top map is registered frame by frame and chosen over time
    (:func:`xvmatch.cues.ground_registration.register_with_scale`: the top map tried at a few
@@ -36,7 +39,7 @@ frame numbered 1, 2, 3).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -188,7 +191,8 @@ SIZE_RANGE = (0.85, 1.15)
 beyond, and its person is read as no taller or shorter than these."""
 
 
-def _per_frame(frames: np.ndarray, calib: PeopleCalibration, tilt: TiltTrack | None):
+def _per_frame(frames: np.ndarray, calib: PeopleCalibration, tilt: TiltTrack | None
+               ) -> Iterator[tuple[PeopleCalibration, np.ndarray]]:
     """``(calibration, rows)`` for each of ``frames``' distinct frames, through its own tilt
     (``tilt``), or once for all rows (None)."""
     if tilt is None:
