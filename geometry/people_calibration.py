@@ -5,7 +5,7 @@ For a level camera a person's box height is linear in its foot row,
 ``h = (H_person / h_camera) * (y_foot - y_horizon)``: the rows where heights vanish are the
 horizon, the slope is the person's height over the camera's. A tilted camera bends that line
 (the head is nearer the camera than the foot); the bend tells the focal length. This module fits
-the whole pinhole model to a clip's boxes:
+the whole pinhole model (:mod:`~xvmatch.geometry.people_model`) to a clip's boxes:
 
 * **model**: ``K`` with square pixels and the principal point at the image centre, ``R`` =
   ``look_rotation(0, tilt, roll)``, centre ``(0, 0, h_camera)``; each box's foot pixel (bottom
@@ -38,9 +38,28 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from xvmatch.geometry.camera import Camera, look_rotation
+from xvmatch.geometry.camera import Camera
+from xvmatch.geometry.people_model import (
+    BLOCK_FRAMES,
+    BODY_WIDTH,
+    BORDER,
+    MAX_FIT_BOXES,
+    PERSON_HEIGHT,
+    PRIOR_HFOV_DEG,
+    PRIOR_LOG_STD,
+    UsableBoxes,
+    data_cost,
+    fit_model,
+    model_camera,
+    model_starts,
+    pinhole,
+    predicted_heights,
+    prior_focal,
+    readable_boxes,
+    usable_boxes,
+    whole_boxes,
+)
 
 __all__ = [
     "BODY_WIDTH",
@@ -65,9 +84,6 @@ __all__ = [
     "whole_boxes",
 ]
 
-PERSON_HEIGHT = 1.72
-"""Mean standing height of the people (m), the middle of 1.5-1.95 m: the calibration's scale."""
-
 MIN_HEIGHT_SHARE = 0.5
 """A box tells its person's height (:meth:`PeopleCalibration.person_heights`) where at least
 this share of its pixel height grows with it: seen steeply from above, a box's height is mostly
@@ -77,26 +93,12 @@ _HEIGHT_READ = (1.5, 1.95)
 """Heights (m) between which :meth:`PeopleCalibration.person_heights` reads a box's person's
 height off the model (nearly straight in the height there)."""
 
-BODY_WIDTH = 0.45
-"""Diameter (m) of the upright cylinder a person is modelled as: shoulders across, feet and
-stride in depth."""
-
-PRIOR_HFOV_DEG = 70.0
-"""Horizontal field of view (degrees) the focal length is drawn towards where the boxes cannot
-tell it: a phone's main camera, a drone's, a surveillance camera's (60-80)."""
-
 LENS_RANGE_DEG = (55.0, 85.0)
 """The fields of view the prior stands for (phones' main cameras, drones', most surveillance
 cameras; the renders' too). Where the boxes do not tell the focal length (most
 clips: the heights hardly depend on it), the strict calibration refits the tilt with each end
 of this range held and refuses when either moves it more than :data:`MAX_TILT_STD_DEG`: the
 tilt then rests on the lens, which only the caller knows (``--hfov``)."""
-
-_PRIOR_LOG_STD = 0.4
-"""Spread of that prior on ``log f`` (a factor 1.5)."""
-
-_PRIOR_WEIGHT = 1.0
-"""The prior counts as much as this many boxes fitted exactly."""
 
 NADIR_ASPECT = 1.0
 """A view whose median box height over width is below this looks (nearly) straight down: from
@@ -157,32 +159,7 @@ MAX_HORIZON_STD = 0.03
 """Nor one whose horizon row varies more than this fraction of the image height, where the
 horizon is within an image height of the image (farther off, the tilt says it all)."""
 
-_BORDER = 2.0
-"""A box within this many pixels of the image border is cut by it: its height says nothing."""
-
-_MIN_HEIGHT_PX = 8.0
-"""Boxes lower than this (pixels) are too coarse to read a height from."""
-
-_BAD_RESIDUAL = 3.0
-"""Residual of a box whose foot the model puts at or above the horizon (log units: e^3)."""
-
-_SOFT_SCALE = 0.08
-"""Soft-L1 scale of the height residuals: people's heights differ by about 8 %."""
-
-_MIN_TRACK_BOXES = 10
-"""A track with this many usable boxes gets a height of its own (in video mode)."""
-
-_HEIGHT_STD = 0.3
-"""Spread of people's heights about :data:`PERSON_HEIGHT` (m), the prior on a track's height."""
-
 _N_RESAMPLES = 16
-_BLOCK_FRAMES = 10
-_MAX_FIT_BOXES = 4000
-_START_HFOVS = (45.0, 65.0, 90.0, 120.0)
-_START_TILTS = (30.0, 50.0, 70.0)
-"""Tilts (degrees) the fit also starts from, at the prior lens and 10 m up: the level line's
-start points almost straight down where that line is nearly flat (a low drone whose people's
-feet keep to a few rows), and the fit stayed there, a nadir call for upright people."""
 
 
 class CalibrationError(ValueError):
@@ -228,7 +205,7 @@ class PeopleCalibration:
     _camera: Camera = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        cam = _pinhole(self.focal, np.radians(self.tilt_deg), np.radians(self.roll_deg),
+        cam = pinhole(self.focal, np.radians(self.tilt_deg), np.radians(self.roll_deg),
                        self.camera_height, (self.width, self.height))
         object.__setattr__(self, "_camera", cam)
 
@@ -266,26 +243,27 @@ class PeopleCalibration:
 
     def person_heights(self, frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         """``(N,)`` each box's person's height in metres, read through this camera: the height
-        at which the fit's model of a person standing at the box's foot point (:func:`_heights`)
-        gives the box's height; NaN for a box that cannot tell (cut by the border, behind
-        someone, too small, a nadir view, a foot at the horizon, or seen so steeply from above
-        that under :data:`MIN_HEIGHT_SHARE` of its height comes from the person's height).
+        at which the fit's model of a person standing at the box's foot point
+        (:func:`~xvmatch.geometry.people_model.predicted_heights`) gives the box's height; NaN
+        for a box that cannot tell (cut by the border, behind someone, too small, a nadir view,
+        a foot at the horizon, or seen so steeply from above that under
+        :data:`MIN_HEIGHT_SHARE` of its height comes from the person's height).
         ``frames`` ``(N,)``: each box's frame (who stands behind whom)."""
         frames = np.asarray(frames, dtype=np.int64).reshape(-1)
         boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
         out = np.full(len(boxes), np.nan)
         size = (self.width, self.height)
-        ok = _readable(frames, boxes, size)
+        ok = readable_boxes(frames, boxes, size)
         if self.kind != "oblique" or not ok.any():
             return out
         x, y, w, h = boxes[ok].T
         n = len(h)
-        b = _Boxes(u=x + 0.5 * w, v=y + h, h=h, w=w, block=np.zeros(n, np.int64),
-                   track=np.arange(n), n_tracks=n)
+        b = UsableBoxes(u=x + 0.5 * w, v=y + h, h=h, w=w, block=np.zeros(n, np.int64),
+                        track=np.arange(n), n_tracks=n)
         camera = [np.radians(self.tilt_deg), np.radians(self.roll_deg), np.log(self.focal),
                   np.log(self.camera_height)]
         low, high = _HEIGHT_READ
-        at = {m: _heights(np.concatenate([camera, np.full(n, m)]), b, size)
+        at = {m: predicted_heights(np.concatenate([camera, np.full(n, m)]), b, size)
               for m in (low, self.person_height, high)}
         with np.errstate(divide="ignore", invalid="ignore"):
             per_metre = (at[high] - at[low]) / (high - low)
@@ -335,9 +313,10 @@ def horizon_line(camera: Camera) -> tuple[float, float]:
 
 def cut_at_bottom(boxes: np.ndarray, image_height: float) -> np.ndarray:
     """``(N,)`` boxes ``(N, 4)`` cut by the image's bottom edge (their bottom row within
-    :data:`_BORDER` pixels of it): the person's feet are out of sight."""
+    :data:`~xvmatch.geometry.people_model.BORDER` pixels of it): the person's feet are out of
+    sight."""
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
-    return boxes[:, 1] + boxes[:, 3] >= image_height - _BORDER
+    return boxes[:, 1] + boxes[:, 3] >= image_height - BORDER
 
 
 def _to_ground(camera: Camera, pixels: np.ndarray,
@@ -351,82 +330,7 @@ def _to_ground(camera: Camera, pixels: np.ndarray,
     return camera.c[:2] + s[:, None] * d[:, :2]
 
 
-@dataclass(frozen=True)
-class _Boxes:
-    """The usable boxes of a clip: foot column ``u``, foot row ``v``, height ``h`` and width
-    ``w`` (pixels), the time block of each (for resampling) and, where known, its frame."""
-
-    u: np.ndarray
-    v: np.ndarray
-    h: np.ndarray
-    w: np.ndarray
-    block: np.ndarray
-    track: np.ndarray
-    n_tracks: int
-    frame: np.ndarray | None = None
-
-    def take(self, index: np.ndarray) -> _Boxes:
-        return _Boxes(self.u[index], self.v[index], self.h[index], self.w[index],
-                      self.block[index], self.track[index], self.n_tracks,
-                      None if self.frame is None else self.frame[index])
-
-
-def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """Boxes that touch the box of someone nearer (whose feet are lower in the image) in the
-    same frame: a box of the visible part of a hidden person starts or ends too soon."""
-    out = np.zeros(len(boxes), dtype=bool)
-    order = np.argsort(frames, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(frames[order]) != 0])
-    for rows in np.split(order, starts[1:]):
-        if len(rows) < 2:
-            continue
-        x, y, w, h = boxes[rows].T
-        touch = ((x[:, None] <= x[None] + w[None]) & (x[None] <= x[:, None] + w[:, None])
-                 & (y[:, None] <= y[None] + h[None]) & (y[None] <= y[:, None] + h[:, None]))
-        nearer = (y + h)[None] > (y + h)[:, None]
-        out[rows] = (touch & nearer).any(axis=1)
-    return out
-
-
-def whole_boxes(boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """``(N,)`` boxes ``(N, 4)`` that no image border cuts (none within :data:`_BORDER` pixels
-    of one) and tall enough to read, in an image of ``size`` (width, height)."""
-    x, y, w, h = np.asarray(boxes, dtype=float).reshape(-1, 4).T
-    width, height = size
-    return ((x > _BORDER) & (y > _BORDER) & (x + w < width - _BORDER)
-            & (y + h < height - _BORDER) & (h >= _MIN_HEIGHT_PX) & (w > 0))
-
-
-def _readable(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Boxes ``(N, 4)`` whose height is the person's: whole (:func:`whole_boxes`), not behind
-    someone."""
-    return whole_boxes(boxes, size) & ~_behind_someone(frames, boxes)
-
-
-def _usable(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
-            size: tuple[int, int]) -> _Boxes:
-    """Boxes ``(N, 4)`` x, y, w, h not cut by the image border, not behind someone and tall
-    enough to read, each with its track (index 0: boxes of tracks too short to have a height of
-    their own; left out when most boxes have a track)."""
-    x, y, w, h = boxes.T
-    ok = _readable(frames, boxes, size)
-    block = np.unique(frames[ok] // _BLOCK_FRAMES, return_inverse=True)[1]
-    track = np.zeros(int(ok.sum()), dtype=np.int64)
-    n_tracks = 1
-    if ids is not None:
-        _keys, inverse, counts = np.unique(ids[ok], return_inverse=True, return_counts=True)
-        long = counts >= _MIN_TRACK_BOXES
-        number = np.cumsum(long) * long  # 1.. for long tracks, 0 for short ones
-        track, n_tracks = number[inverse], int(long.sum()) + 1
-    out = _Boxes(u=x[ok] + 0.5 * w[ok], v=y[ok] + h[ok], h=h[ok], w=w[ok], block=block,
-                 track=track, n_tracks=n_tracks, frame=frames[ok])
-    if n_tracks > 1 and np.mean(track > 0) >= 0.5:
-        # Enough people were followed: the others' boxes, of mixed heights, only blur the fit.
-        out = out.take(np.flatnonzero(track > 0))
-    return out
-
-
-def _middle_aspect(b: _Boxes, size: tuple[int, int]) -> float:
+def _middle_aspect(b: UsableBoxes, size: tuple[int, int]) -> float:
     """Median height over width of the usable boxes in the image's middle columns (all of
     them where fewer than 10 are there): how steeply the people under the image centre are
     seen, without the lean of those at the sides."""
@@ -435,194 +339,11 @@ def _middle_aspect(b: _Boxes, size: tuple[int, int]) -> float:
     return float(np.median(b.h[pick] / b.w[pick]))
 
 
-def _heights(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> np.ndarray:
-    """Box heights the model predicts: ``params`` = ``(tilt, roll, log f, log h_camera,
-    height of track 0, 1, ...)``; NaN where the foot is at or above the horizon.
-
-    A person is an upright cylinder :data:`BODY_WIDTH` across, stood where the ray through the
-    box's bottom meets the ground (the near edge of the feet: the axis is a radius farther); the
-    predicted height is that of the image's bounding box of its outline at the feet and at the
-    head (a camera from above sees the top of the head and the ground in front of the feet
-    inside the box). Off the image centre a tilted camera sees people lean (their verticals meet
-    below the image): the box's centre column is then halfway between the foot's and the
-    head's, and the leaning body's width adds to the box's height."""
-    tilt, roll, log_f, log_hc = params[:4]
-    person = params[4:][b.track]
-    f, hc = np.exp(log_f), np.exp(log_hc)
-    cx, cy = 0.5 * size[0], 0.5 * size[1]
-    R = look_rotation(0.0, tilt, roll)
-    camera_z = R[:, 2]  # world z axis in camera coordinates
-    rows = (b.v - cy) / f  # the foot rows' rays (the same for both foot columns)
-    ones = np.ones_like(b.u)
-
-    def ground(u: np.ndarray) -> np.ndarray:
-        """The foot pixel's ground point relative to the camera centre (NaN above the
-        horizon)."""
-        d = np.column_stack([(u - cx) / f, rows, ones]) @ R
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
-        return s[:, None] * d
-
-    def depth(cam: np.ndarray) -> np.ndarray:
-        """Camera coordinates' depth, NaN behind the camera."""
-        return np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
-
-    radius = np.full_like(person, 0.5 * BODY_WIDTH)
-
-    def axis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The body's axis at the ground and the radius along the ray: the box's bottom row
-        sees the near edge of the feet, the axis is a radius farther."""
-        rim = ground(u)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            along = np.column_stack([rim[:, 0], rim[:, 1], np.zeros_like(u)]) * (
-                radius / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
-        return rim + along, along
-
-    foot, _ = axis(b.u)
-    head = (foot + person[:, None] * camera_z @ R) @ R.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u_head = cx + f * head[:, 0] / depth(head)
-    foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the middle of the lean
-    side = np.column_stack([-along[:, 1], along[:, 0], along[:, 2]])
-    up = np.zeros_like(foot)
-    up[:, 2] = person
-    # The body's outline (seen and in depth) at the feet and at the head, corner by corner: one
-    # product with R for all, each row's top and bottom a maximum and minimum over 8 rows.
-    corners = np.empty((8, *foot.shape))
-    for k, base in enumerate((foot, foot + up)):
-        np.add(base, side, out=corners[4 * k])
-        np.subtract(base, side, out=corners[4 * k + 1])
-        np.add(base, along, out=corners[4 * k + 2])
-        np.subtract(base, along, out=corners[4 * k + 3])
-    cam = corners.reshape(-1, 3) @ R.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = (cy + f * cam[:, 1] / depth(cam)).reshape(8, -1)
-    return v.max(axis=0) - v.min(axis=0)
-
-
-def _residuals(params: np.ndarray, b: _Boxes, size: tuple[int, int],
-               prior_f: float) -> np.ndarray:
-    """Log height errors of the boxes, then the priors: the focal length's, each track's
-    height's (people are :data:`PERSON_HEIGHT` +- :data:`_HEIGHT_STD` tall), which also sets
-    the scale."""
-    pred = _heights(params, b, size)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.log(pred / b.h)
-    r = np.where(np.isfinite(r), r, _BAD_RESIDUAL)
-    prior = np.sqrt(_PRIOR_WEIGHT) * _SOFT_SCALE * (params[2] - np.log(prior_f)) / _PRIOR_LOG_STD
-    heights = _SOFT_SCALE * (params[4:] - PERSON_HEIGHT) / _HEIGHT_STD
-    return np.concatenate([r, [prior], heights])
-
-
-def _data_cost(params: np.ndarray, b: _Boxes, size: tuple[int, int]) -> float:
-    """The fit's soft-L1 cost without the focal length's prior (that of the boxes and of the
-    people's heights)."""
-    r = _residuals(params, b, size, float(np.exp(params[2])))
-    z = (r / _SOFT_SCALE) ** 2
-    return float(np.sum(_SOFT_SCALE ** 2 * (np.sqrt(1.0 + z) - 1.0)))
-
-
-def _sparsity(b: _Boxes) -> np.ndarray:
-    """Which parameters each residual depends on: a box on the camera's four and its track's
-    height, the priors on one each."""
-    n, k = len(b.h), b.n_tracks
-    out = np.zeros((n + 1 + k, 4 + k), dtype=bool)
-    out[:n, :4] = True
-    out[np.arange(n), 4 + b.track] = True
-    out[n, 2] = True
-    out[n + 1 + np.arange(k), 4 + np.arange(k)] = True
-    return out
-
-
-def _level_line(b: _Boxes, size: tuple[int, int]) -> tuple[float, float, float]:
-    """Robust fit of ``h = a (v - v0 - s (u - cx))``: slope ``a``, horizon row ``v0`` at the
-    centre column and its slope ``s`` (the level-camera line, the fit's start)."""
-    cx = 0.5 * size[0]
-    A = np.column_stack([b.v, b.u - cx, np.ones_like(b.v)])
-
-    def resid(p: np.ndarray) -> np.ndarray:
-        return (A @ p - b.h) / np.maximum(b.h, 1.0)
-
-    p0 = np.linalg.lstsq(A, b.h, rcond=None)[0]
-    p = least_squares(resid, p0, loss="soft_l1", f_scale=_SOFT_SCALE).x
-    a = p[0]
-    if not a > 0:
-        return 0.0, np.nan, 0.0
-    return float(a), float(-p[2] / a), float(-p[1] / a)
-
-
-def _start(b: _Boxes, size: tuple[int, int], hfov: float) -> np.ndarray:
-    """Parameters (see :func:`_heights`) from the level line at a given hfov, every track
-    :data:`PERSON_HEIGHT` tall."""
-    a, v0, slope = _level_line(b, size)
-    f = 0.5 * size[0] / np.tan(np.radians(hfov) / 2.0)
-    heights = np.full(b.n_tracks, PERSON_HEIGHT)
-    if not np.isfinite(v0):
-        return np.concatenate([[np.radians(30.0), 0.0, np.log(f), np.log(10.0)], heights])
-    # Keep every foot below the start's horizon: the model needs their rays to meet the ground.
-    v0 = min(v0, float(np.min(b.v - slope * (b.u - 0.5 * size[0]))) - 1.0)
-    tilt = float(np.arctan2(0.5 * size[1] - v0, f))
-    roll = float(-np.arctan(slope))
-    hc = max(PERSON_HEIGHT / max(a, 1e-3) * np.cos(tilt), PERSON_HEIGHT * 1.05)
-    return np.concatenate([[tilt, roll, np.log(f), np.log(hc)], heights])
-
-
-_CAMERA_BOUNDS = (np.array([np.radians(-45.0), np.radians(-30.0), -np.inf, np.log(0.5)]),
-                  np.array([np.radians(89.0), np.radians(30.0), np.inf, np.log(1e3)]))
-_HEIGHT_BOUNDS = (1.0, 2.4)
-
-
-def _fit(b: _Boxes, size: tuple[int, int], prior_f: float, starts: list[np.ndarray],
-         fixed_f: float | None) -> np.ndarray:
-    """Least squares from each start (``fixed_f``: the focal length held); the parameters of
-    the lowest cost."""
-    k = b.n_tracks
-    lower = np.concatenate([_CAMERA_BOUNDS[0], np.full(k, _HEIGHT_BOUNDS[0])])
-    upper = np.concatenate([_CAMERA_BOUNDS[1], np.full(k, _HEIGHT_BOUNDS[1])])
-    free = np.ones(4 + k, dtype=bool)
-    if fixed_f is not None:
-        free[2] = False
-    sparsity = _sparsity(b)[:, free]
-    best, best_cost = None, np.inf
-    for x0 in starts:
-        full = np.clip(x0, lower + 1e-6, upper - 1e-6)
-        if fixed_f is not None:
-            full[2] = np.log(fixed_f)
-
-        def fun(p: np.ndarray, full: np.ndarray = full) -> np.ndarray:
-            x = full.copy()
-            x[free] = p
-            return _residuals(x, b, size, prior_f)
-
-        res = least_squares(fun, full[free], loss="soft_l1", f_scale=_SOFT_SCALE,
-                            bounds=(lower[free], upper[free]), jac_sparsity=sparsity)
-        if res.cost < best_cost:
-            x = full.copy()
-            x[free] = res.x
-            best, best_cost = x, res.cost
-    return best
-
-
-def _pinhole(focal: float, tilt: float, roll: float, height: float,
-             size: tuple[int, int]) -> Camera:
-    """The model's camera: square pixels, the principal point at the image centre, above the
-    origin looking along +x (``tilt``, ``roll`` in radians)."""
-    K = np.array([[focal, 0.0, 0.5 * size[0]], [0.0, focal, 0.5 * size[1]], [0.0, 0.0, 1.0]])
-    return Camera(K=K, R=look_rotation(0.0, tilt, roll), c=np.array([0.0, 0.0, height]),
-                  width=size[0], height=size[1])
-
-
-def _camera_of(params: np.ndarray, size: tuple[int, int]) -> Camera:
-    """The camera of the fit's parameters (:func:`_heights`)."""
-    tilt, roll, log_f, log_hc = params[:4]
-    return _pinhole(np.exp(log_f), tilt, roll, np.exp(log_hc), size)
-
-
-def _nadir(b: _Boxes, widths: np.ndarray, size: tuple[int, int], n_frames: int,
+def _nadir(b: UsableBoxes, widths: np.ndarray, size: tuple[int, int], n_frames: int,
            hfov: float | None) -> PeopleCalibration:
     """A camera straight down: focal from the given or prior hfov, height from the boxes'
     width (a head and shoulders about 0.5 m across)."""
-    f = 0.5 * size[0] / np.tan(np.radians(hfov if hfov else PRIOR_HFOV_DEG) / 2.0)
+    f = prior_focal(size, hfov)
     hc = PERSON_HEIGHT + f * 0.5 / float(np.median(widths))
     return PeopleCalibration(
         kind="nadir", width=size[0], height=size[1], focal=float(f), tilt_deg=90.0,
@@ -673,7 +394,7 @@ def calibrate_from_people(
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
     size = (int(image_size[0]), int(image_size[1]))
     give = "give its camera with --cameras (or a longer clip with more people)"
-    b = _usable(frames, None if ids is None else np.asarray(ids).reshape(-1), boxes, size)
+    b = usable_boxes(frames, None if ids is None else np.asarray(ids).reshape(-1), boxes, size)
     _x, _y, w, h = boxes.T
     n_frames = int(np.unique(frames).size)
     if len(b.h) < MIN_BOXES:
@@ -683,7 +404,7 @@ def calibrate_from_people(
     if int(b.block.max()) + 1 < MIN_BLOCKS:
         raise CalibrationError(
             f"{name}: its usable boxes span {int(b.block.max()) + 1} stretch(es) of "
-            f"{_BLOCK_FRAMES} frames, the calibration needs {MIN_BLOCKS} to measure its "
+            f"{BLOCK_FRAMES} frames, the calibration needs {MIN_BLOCKS} to measure its "
             f"confidence; {give}")
     inside = (w > 0) & (h > 0)
     aspect = float(np.median(h[inside] / w[inside]))
@@ -725,7 +446,7 @@ def _settled(calib: PeopleCalibration) -> PeopleCalibration:
                    focal_rel_std=round(calib.focal_rel_std, 4))
 
 
-def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
+def _oblique(b: UsableBoxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
              seed: int, name: str, strict: bool = True, measure: bool = True,
              lens: bool = False) -> PeopleCalibration:
     """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`);
@@ -741,20 +462,18 @@ def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | 
             f"{name}: the people's feet stay within {hi - lo:.0f} rows "
             f"({100 * (hi - lo) / size[1]:.0f} % of the image height), too few distances to find "
             f"the horizon; {give}")
-    if len(b.h) > _MAX_FIT_BOXES:  # evenly spread over the clip: same answer, bounded time
-        b = b.take(np.linspace(0, len(b.h) - 1, _MAX_FIT_BOXES).round().astype(np.int64))
-    prior_f = 0.5 * size[0] / np.tan(np.radians(hfov_deg or PRIOR_HFOV_DEG) / 2.0)
-    hfovs = (hfov_deg,) if hfov_deg else _START_HFOVS
+    if len(b.h) > MAX_FIT_BOXES:  # evenly spread over the clip: same answer, bounded time
+        b = b.take(np.linspace(0, len(b.h) - 1, MAX_FIT_BOXES).round().astype(np.int64))
+    prior_f = prior_focal(size, hfov_deg)
     fixed = prior_f if hfov_deg else None
-    starts = [_start(b, size, hf) for hf in hfovs] + [
-        np.concatenate([[np.radians(t), 0.0, np.log(prior_f), np.log(10.0)],
-                        np.full(b.n_tracks, PERSON_HEIGHT)]) for t in _START_TILTS]
-    params = _fit(b, size, prior_f, starts, fixed)
+    starts = (model_starts(b, size, prior_f, (hfov_deg,)) if hfov_deg
+              else model_starts(b, size, prior_f))
+    params = fit_model(b, size, prior_f, starts, fixed)
     spread = (_resample_spread(b, size, prior_f, params, fixed, seed) if measure
               else np.full(3, np.nan))
-    cam = _camera_of(params, size)
+    cam = model_camera(params, size)
     hor = horizon_line(cam)
-    focal_from = "given" if hfov_deg else ("prior" if spread[2] >= 0.5 * _PRIOR_LOG_STD
+    focal_from = "given" if hfov_deg else ("prior" if spread[2] >= 0.5 * PRIOR_LOG_STD
                                             else "people")
     calib = PeopleCalibration(
         kind="oblique", width=size[0], height=size[1], focal=float(np.exp(params[2])),
@@ -782,22 +501,22 @@ def _oblique(b: _Boxes, size: tuple[int, int], n_frames: int, hfov_deg: float | 
     return calib
 
 
-def _lens_tilts(b: _Boxes, size: tuple[int, int], prior_f: float, params: np.ndarray
+def _lens_tilts(b: UsableBoxes, size: tuple[int, int], prior_f: float, params: np.ndarray
                 ) -> list[float]:
     """The tilt (degrees) refitted with the focal length held at each end of
     :data:`LENS_RANGE_DEG`, started from the fit ``params``; an end whose fit is worse by
     :data:`_LENS_COST_RISE` a box is ruled out by the boxes and left out."""
-    base = _data_cost(params, b, size)
+    base = data_cost(params, b, size)
     out = []
     for hfov in LENS_RANGE_DEG:
         f = 0.5 * size[0] / np.tan(np.radians(hfov) / 2.0)
-        p = _fit(b, size, prior_f, [params], f)
-        if (_data_cost(p, b, size) - base) / len(b.h) <= _LENS_COST_RISE:
+        p = fit_model(b, size, prior_f, [params], f)
+        if (data_cost(p, b, size) - base) / len(b.h) <= _LENS_COST_RISE:
             out.append(float(np.degrees(p[0])))
     return out
 
 
-def _resample_spread(b: _Boxes, size: tuple[int, int], prior_f: float, params: np.ndarray,
+def _resample_spread(b: UsableBoxes, size: tuple[int, int], prior_f: float, params: np.ndarray,
                      fixed_f: float | None, seed: int) -> np.ndarray:
     """Standard deviations of (tilt degrees, horizon row at the centre, log f) over fits to
     resamples of the clip's time blocks, each started from the whole clip's fit."""
@@ -808,7 +527,7 @@ def _resample_spread(b: _Boxes, size: tuple[int, int], prior_f: float, params: n
         picks = rng.integers(0, n_blocks, n_blocks)
         counts = np.bincount(picks, minlength=n_blocks)
         index = np.repeat(np.arange(len(b.h)), counts[b.block])
-        p = _fit(b.take(index), size, prior_f, [params], fixed_f)
-        cam = _camera_of(p, size)
+        p = fit_model(b.take(index), size, prior_f, [params], fixed_f)
+        cam = model_camera(p, size)
         out.append([np.degrees(p[0]), float(np.mean(horizon_line(cam))), p[2]])
     return np.std(np.array(out), axis=0)

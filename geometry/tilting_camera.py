@@ -17,12 +17,20 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from xvmatch.geometry import people_calibration as pc
-from xvmatch.geometry.people_calibration import PeopleCalibration
+from xvmatch.geometry.people_calibration import MIN_BOXES, PeopleCalibration
+from xvmatch.geometry.people_model import (
+    MAX_FIT_BOXES,
+    PERSON_HEIGHT,
+    UsableBoxes,
+    fit_model,
+    model_starts,
+    prior_focal,
+    usable_boxes,
+)
 
-__all__ = ["MIN_TILT_CHANGE_DEG", "TILT_STEP_DEG", "WINDOW_S", "TiltTrack", "fit_tilt_track"]
+__all__ = ["MIN_TILT_CHANGE_DEG", "STEADY_DEG", "TILT_STEP_DEG", "WINDOW_S", "TiltTrack",
+           "fit_tilt_track"]
 
 WINDOW_S = 3.0
 """Seconds of clip per tilt (a gimbal moves slowly; each window needs enough boxes to read)."""
@@ -33,6 +41,10 @@ TILT_STEP_DEG = 10.0
 MIN_TILT_CHANGE_DEG = 3.0
 """The least spread of the windows' tilts (degrees, the calibration's own tolerance) for the
 camera to be read as tilting; below it the clip's one fit is kept."""
+
+STEADY_DEG = 1.0
+"""A camera whose windows' tilts, fitted with the clip's one lens, roll and height held, spread
+no more than this (degrees) is steady without the whole fit (:func:`fit_tilt_track`)."""
 
 
 @dataclass(frozen=True)
@@ -73,8 +85,9 @@ class TiltTrack:
 
 
 def fit_tilt_track(frames: np.ndarray, ids: np.ndarray, boxes: np.ndarray,
-                   image_size: tuple[int, int], fps: float) -> TiltTrack | None:
-    """The model of :mod:`~xvmatch.geometry.people_calibration` with a tilt per window of
+                   image_size: tuple[int, int], fps: float,
+                   start: PeopleCalibration | None = None) -> TiltTrack | None:
+    """The model of :mod:`~xvmatch.geometry.people_model` with a tilt per window of
     :data:`WINDOW_S` seconds (module docstring); None where the clip spans fewer than two
     windows or has too few usable boxes.
 
@@ -84,72 +97,42 @@ def fit_tilt_track(frames: np.ndarray, ids: np.ndarray, boxes: np.ndarray,
         boxes: ``(N, 4)`` x, y, w, h, pixels.
         image_size: the view's (width, height).
         fps: frames per second of the frame numbers (the windows are seconds).
+        start: the clip's one fit (an oblique camera), when made: each window's tilt is first
+            fitted with its lens, roll and height held, and where those tilts spread no more
+            than :data:`STEADY_DEG` the camera is steady and that track is returned (not
+            tilting) without the whole fit, a tenth of its time.
     """
     frames = np.asarray(frames, np.int64).reshape(-1)
     boxes = np.asarray(boxes, float).reshape(-1, 4)
     size = (int(image_size[0]), int(image_size[1]))
-    b = pc._usable(frames, np.asarray(ids).reshape(-1), boxes, size)
-    if len(b.h) < pc.MIN_BOXES:
+    b = usable_boxes(frames, np.asarray(ids).reshape(-1), boxes, size)
+    if len(b.h) < MIN_BOXES:
         return None
-    if len(b.h) > pc._MAX_FIT_BOXES:  # evenly spread over the clip, as the one fit
-        b = b.take(np.linspace(0, len(b.h) - 1, pc._MAX_FIT_BOXES).round().astype(np.int64))
+    if len(b.h) > MAX_FIT_BOXES:  # evenly spread over the clip, as the one fit
+        b = b.take(np.linspace(0, len(b.h) - 1, MAX_FIT_BOXES).round().astype(np.int64))
     span = max(1, round(WINDOW_S * fps))
-    window = np.unique((b.frame - b.frame.min()) // span, return_inverse=True)[1]
-    n = int(window.max()) + 1
-    if n < 2:
+    b = b.windowed(np.unique((b.frame - b.frame.min()) // span, return_inverse=True)[1])
+    if b.n_windows < 2:
         return None
-    parts = [np.flatnonzero(window == k) for k in range(n)]
-    subsets = [b.take(rows) for rows in parts]
-    prior_f = 0.5 * size[0] / np.tan(np.radians(pc.PRIOR_HFOV_DEG) / 2.0)
-
-    def residuals(p: np.ndarray) -> np.ndarray:
-        out = np.empty(len(b.h))
-        for k, (rows, sub) in enumerate(zip(parts, subsets, strict=True)):
-            pred = pc._heights(np.concatenate([[p[k]], p[n:]]), sub, size)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                r = np.log(pred / sub.h)
-            out[rows] = np.where(np.isfinite(r), r, pc._BAD_RESIDUAL)
-        prior = pc._SOFT_SCALE * (p[n + 1] - np.log(prior_f)) / pc._PRIOR_LOG_STD
-        heights = pc._SOFT_SCALE * (p[n + 3:] - pc.PERSON_HEIGHT) / pc._HEIGHT_STD
-        steps = pc._SOFT_SCALE * np.diff(p[:n]) / np.radians(TILT_STEP_DEG)
-        return np.concatenate([out, [prior], heights, steps])
-
-    low, high = pc._CAMERA_BOUNDS
-    lower = np.concatenate([np.full(n, low[0]), low[1:], np.full(b.n_tracks,
-                                                                 pc._HEIGHT_BOUNDS[0])])
-    upper = np.concatenate([np.full(n, high[0]), high[1:], np.full(b.n_tracks,
-                                                                   pc._HEIGHT_BOUNDS[1])])
-    starts = [pc._start(b, size, hfov) for hfov in pc._START_HFOVS] + [
-        np.concatenate([[np.radians(t), 0.0, np.log(prior_f), np.log(10.0)],
-                        np.full(b.n_tracks, pc.PERSON_HEIGHT)]) for t in pc._START_TILTS]
-    sparsity = _sparsity(window, b.track, n, b.n_tracks)
-    best, best_cost = None, np.inf
-    for x0 in starts:
-        x = np.clip(np.concatenate([np.full(n, x0[0]), x0[1:]]), lower + 1e-6, upper - 1e-6)
-        res = least_squares(residuals, x, loss="soft_l1", f_scale=pc._SOFT_SCALE,
-                            bounds=(lower, upper), jac_sparsity=sparsity)
-        if res.cost < best_cost:
-            best, best_cost = res.x, res.cost
-    middles = tuple(float(np.mean(sub.frame)) for sub in subsets)
-    return TiltTrack(frames=middles, tilts_deg=tuple(round(float(np.degrees(t)), 3)
-                                                     for t in best[:n]),
-                     focal=float(np.exp(best[n + 1])), roll_deg=float(np.degrees(best[n])),
-                     camera_height=float(np.exp(best[n + 2])))
+    prior_f = prior_focal(size)
+    if start is not None:
+        one = np.concatenate([np.radians([start.tilt_deg, start.roll_deg]),
+                              np.log([start.focal, start.camera_height]),
+                              np.full(b.n_tracks, PERSON_HEIGHT)])
+        held = _track(b, fit_model(b, size, prior_f, [one], hold=(1, 2, 3),
+                                   tilt_step_deg=TILT_STEP_DEG))
+        if held.change_deg <= STEADY_DEG:
+            return held
+    return _track(b, fit_model(b, size, prior_f, model_starts(b, size, prior_f),
+                               tilt_step_deg=TILT_STEP_DEG))
 
 
-def _sparsity(window: np.ndarray, track: np.ndarray, n: int, n_tracks: int) -> np.ndarray:
-    """Which parameters (``n`` tilts, roll, log f, log height, each track's height) each
-    residual depends on: a box on its window's tilt, the shared three and its track's height;
-    the focal length's prior, each height's prior and each step between windows on theirs."""
-    rows = len(window)
-    out = np.zeros((rows + 1 + n_tracks + n - 1, n + 3 + n_tracks), dtype=bool)
-    every = np.arange(rows)
-    out[every, window] = True
-    out[:rows, n:n + 3] = True
-    out[every, n + 3 + track] = True
-    out[rows, n + 1] = True
-    out[rows + 1 + np.arange(n_tracks), n + 3 + np.arange(n_tracks)] = True
-    steps = rows + 1 + n_tracks + np.arange(n - 1)
-    out[steps, np.arange(n - 1)] = True
-    out[steps, np.arange(1, n)] = True
-    return out
+def _track(b: UsableBoxes, params: np.ndarray) -> TiltTrack:
+    """The fit's parameters (:mod:`~xvmatch.geometry.people_model`) as a track, each window's
+    middle frame its boxes' mean."""
+    n = b.n_windows
+    middles = np.bincount(b.window, b.frame, n) / np.bincount(b.window, minlength=n)
+    return TiltTrack(frames=tuple(float(m) for m in middles),
+                     tilts_deg=tuple(round(float(np.degrees(t)), 3) for t in params[:n]),
+                     focal=float(np.exp(params[n + 1])), roll_deg=float(np.degrees(params[n])),
+                     camera_height=float(np.exp(params[n + 2])))

@@ -1,0 +1,427 @@
+"""The model of people's box heights that calibrates a camera from them, and its fit.
+
+A pinhole camera (square pixels, the principal point at the image centre) ``camera_height``
+metres over one ground plane, looking along +x, tilted down by ``tilt`` and rolled by ``roll``
+(:func:`~xvmatch.geometry.camera.look_rotation`); each person an upright cylinder
+:data:`BODY_WIDTH` across, stood where the ray through the box's bottom meets the ground, and
+:data:`PERSON_HEIGHT` tall unless followed long enough to have a height of their own. The
+residual of a box is ``log(predicted height / box height)``, fitted with a soft-L1 loss (people
+differ in height, boxes are cut by occlusion) and weak priors on the focal length
+(:data:`PRIOR_HFOV_DEG`) and the people's heights.
+
+The tilt is one for the clip (:mod:`~xvmatch.geometry.people_calibration`, a static camera) or
+one per window of frames (:mod:`~xvmatch.geometry.tilting_camera`, a gimbal that tilts), the
+neighbouring windows' tilts then held together by a soft cost per step: one model, one call for
+all windows. Parameters: ``(tilt of window 0, 1, ..., roll, log f, log camera height, height of
+track 0, 1, ...)`` (radians, pixels, metres).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from xvmatch.geometry.camera import Camera, look_rotation
+
+__all__ = [
+    "BLOCK_FRAMES",
+    "BODY_WIDTH",
+    "BORDER",
+    "MAX_FIT_BOXES",
+    "PERSON_HEIGHT",
+    "PRIOR_HFOV_DEG",
+    "PRIOR_LOG_STD",
+    "SOFT_SCALE",
+    "UsableBoxes",
+    "data_cost",
+    "fit_model",
+    "model_camera",
+    "model_starts",
+    "pinhole",
+    "predicted_heights",
+    "prior_focal",
+    "readable_boxes",
+    "usable_boxes",
+    "whole_boxes",
+]
+
+PERSON_HEIGHT = 1.72
+"""Mean standing height of the people (m), the middle of 1.5-1.95 m: the calibration's scale."""
+
+BODY_WIDTH = 0.45
+"""Diameter (m) of the upright cylinder a person is modelled as: shoulders across, feet and
+stride in depth."""
+
+PRIOR_HFOV_DEG = 70.0
+"""Horizontal field of view (degrees) the focal length is drawn towards where the boxes cannot
+tell it: a phone's main camera, a drone's, a surveillance camera's (60-80)."""
+
+PRIOR_LOG_STD = 0.4
+"""Spread of that prior on ``log f`` (a factor 1.5)."""
+
+_PRIOR_WEIGHT = 1.0
+"""The prior counts as much as this many boxes fitted exactly."""
+
+BORDER = 2.0
+"""A box within this many pixels of the image border is cut by it: its height says nothing."""
+
+_MIN_HEIGHT_PX = 8.0
+"""Boxes lower than this (pixels) are too coarse to read a height from."""
+
+_BAD_RESIDUAL = 3.0
+"""Residual of a box whose foot the model puts at or above the horizon (log units: e^3)."""
+
+SOFT_SCALE = 0.08
+"""Soft-L1 scale of the height residuals: people's heights differ by about 8 %."""
+
+_MIN_TRACK_BOXES = 10
+"""A track with this many usable boxes gets a height of its own (in video mode)."""
+
+_HEIGHT_STD = 0.3
+"""Spread of people's heights about :data:`PERSON_HEIGHT` (m), the prior on a track's height."""
+
+BLOCK_FRAMES = 10
+"""Frames per time block of the usable boxes (the calibration's resampling unit)."""
+
+MAX_FIT_BOXES = 4000
+"""Most boxes a fit reads (evenly spread over the clip: same answer, bounded time)."""
+
+_START_HFOVS = (45.0, 65.0, 90.0, 120.0)
+"""Fields of view (degrees) the fit starts from, each with the level line's camera."""
+
+_START_TILTS = (30.0, 50.0, 70.0)
+"""Tilts (degrees) the fit also starts from, at the prior lens and 10 m up: the level line's
+start points almost straight down where that line is nearly flat (a low drone whose people's
+feet keep to a few rows), and the fit stayed there, a nadir call for upright people."""
+
+_CAMERA_BOUNDS = (np.array([np.radians(-45.0), np.radians(-30.0), -np.inf, np.log(0.5)]),
+                  np.array([np.radians(89.0), np.radians(30.0), np.inf, np.log(1e3)]))
+_HEIGHT_BOUNDS = (1.0, 2.4)
+
+
+@dataclass(frozen=True)
+class UsableBoxes:
+    """The usable boxes of a clip: foot column ``u``, foot row ``v``, height ``h`` and width
+    ``w`` (pixels), the time block of each (for resampling), its track (0: too short to have a
+    height of its own), where known its frame, and its window of the tilt (all 0: one tilt)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    h: np.ndarray
+    w: np.ndarray
+    block: np.ndarray
+    track: np.ndarray
+    n_tracks: int
+    frame: np.ndarray | None = None
+    window: np.ndarray | None = None
+    n_windows: int = 1
+
+    def take(self, index: np.ndarray) -> UsableBoxes:
+        """The boxes at ``index`` (repeats allowed), with the same tracks and windows."""
+        return replace(self, u=self.u[index], v=self.v[index], h=self.h[index],
+                       w=self.w[index], block=self.block[index], track=self.track[index],
+                       frame=None if self.frame is None else self.frame[index],
+                       window=None if self.window is None else self.window[index])
+
+    def windowed(self, window: np.ndarray) -> UsableBoxes:
+        """The same boxes with a tilt per window: ``window`` ``(N,)`` each box's, 0, 1, ..."""
+        window = np.asarray(window, np.int64).reshape(-1)
+        return replace(self, window=window, n_windows=int(window.max()) + 1)
+
+
+def _behind_someone(frames: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Boxes that touch the box of someone nearer (whose feet are lower in the image) in the
+    same frame: a box of the visible part of a hidden person starts or ends too soon."""
+    out = np.zeros(len(boxes), dtype=bool)
+    order = np.argsort(frames, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(frames[order]) != 0])
+    for rows in np.split(order, starts[1:]):
+        if len(rows) < 2:
+            continue
+        x, y, w, h = boxes[rows].T
+        touch = ((x[:, None] <= x[None] + w[None]) & (x[None] <= x[:, None] + w[:, None])
+                 & (y[:, None] <= y[None] + h[None]) & (y[None] <= y[:, None] + h[:, None]))
+        nearer = (y + h)[None] > (y + h)[:, None]
+        out[rows] = (touch & nearer).any(axis=1)
+    return out
+
+
+def whole_boxes(boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``(N,)`` boxes ``(N, 4)`` that no image border cuts (none within :data:`BORDER` pixels
+    of one) and tall enough to read, in an image of ``size`` (width, height)."""
+    x, y, w, h = np.asarray(boxes, dtype=float).reshape(-1, 4).T
+    width, height = size
+    return ((x > BORDER) & (y > BORDER) & (x + w < width - BORDER)
+            & (y + h < height - BORDER) & (h >= _MIN_HEIGHT_PX) & (w > 0))
+
+
+def readable_boxes(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Boxes ``(N, 4)`` whose height is the person's: whole (:func:`whole_boxes`), not behind
+    someone (in the same of ``frames`` ``(N,)``)."""
+    return whole_boxes(boxes, size) & ~_behind_someone(frames, boxes)
+
+
+def usable_boxes(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
+                 size: tuple[int, int]) -> UsableBoxes:
+    """Boxes ``(N, 4)`` x, y, w, h not cut by the image border, not behind someone and tall
+    enough to read, each with its track (index 0: boxes of tracks too short to have a height of
+    their own; left out when most boxes have a track)."""
+    x, y, w, h = boxes.T
+    ok = readable_boxes(frames, boxes, size)
+    block = np.unique(frames[ok] // BLOCK_FRAMES, return_inverse=True)[1]
+    track = np.zeros(int(ok.sum()), dtype=np.int64)
+    n_tracks = 1
+    if ids is not None:
+        _keys, inverse, counts = np.unique(ids[ok], return_inverse=True, return_counts=True)
+        long = counts >= _MIN_TRACK_BOXES
+        number = np.cumsum(long) * long  # 1.. for long tracks, 0 for short ones
+        track, n_tracks = number[inverse], int(long.sum()) + 1
+    out = UsableBoxes(u=x[ok] + 0.5 * w[ok], v=y[ok] + h[ok], h=h[ok], w=w[ok], block=block,
+                      track=track, n_tracks=n_tracks, frame=frames[ok])
+    if n_tracks > 1 and np.mean(track > 0) >= 0.5:
+        # Enough people were followed: the others' boxes, of mixed heights, only blur the fit.
+        out = out.take(np.flatnonzero(track > 0))
+    return out
+
+
+def _rotations(params: np.ndarray, b: UsableBoxes
+               ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray],
+                          Callable[[np.ndarray], np.ndarray]]:
+    """Each box's world z axis in camera coordinates ``(3,)`` or ``(N, 3)``, and the maps of
+    rows of vectors (``(..., N, 3)`` with a tilt per window) from camera to world coordinates
+    and back: one rotation for a clip of one tilt (one product), one per box's window else."""
+    n = b.n_windows
+    roll = params[n]
+    if n == 1:
+        R = look_rotation(0.0, params[0], roll)
+        return R[:, 2], lambda x: x @ R, lambda x: x @ R.T
+    per_box = np.stack([look_rotation(0.0, t, roll) for t in params[:n]])[b.window]
+    count = len(per_box)
+
+    def to_world(x: np.ndarray) -> np.ndarray:
+        return np.einsum("kni,nij->knj", x.reshape(-1, count, 3), per_box).reshape(x.shape)
+
+    def to_camera(x: np.ndarray) -> np.ndarray:
+        return np.einsum("knj,nij->kni", x.reshape(-1, count, 3), per_box).reshape(x.shape)
+
+    return per_box[:, :, 2], to_world, to_camera
+
+
+def predicted_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
+    """Box heights the model predicts (``params``: module docstring); NaN where the foot is at
+    or above the horizon.
+
+    A person is an upright cylinder :data:`BODY_WIDTH` across, stood where the ray through the
+    box's bottom meets the ground (the near edge of the feet: the axis is a radius farther); the
+    predicted height is that of the image's bounding box of its outline at the feet and at the
+    head (a camera from above sees the top of the head and the ground in front of the feet
+    inside the box). Off the image centre a tilted camera sees people lean (their verticals meet
+    below the image): the box's centre column is then halfway between the foot's and the
+    head's, and the leaning body's width adds to the box's height."""
+    n = b.n_windows
+    log_f, log_hc = params[n + 1:n + 3]
+    person = params[n + 3:][b.track]
+    f, hc = np.exp(log_f), np.exp(log_hc)
+    cx, cy = 0.5 * size[0], 0.5 * size[1]
+    camera_z, to_world, to_camera = _rotations(params, b)
+    rows = (b.v - cy) / f  # the foot rows' rays (the same for both foot columns)
+    ones = np.ones_like(b.u)
+
+    def ground(u: np.ndarray) -> np.ndarray:
+        """The foot pixel's ground point relative to the camera centre (NaN above the
+        horizon)."""
+        d = to_world(np.column_stack([(u - cx) / f, rows, ones]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
+        return s[:, None] * d
+
+    def depth(cam: np.ndarray) -> np.ndarray:
+        """Camera coordinates' depth, NaN behind the camera."""
+        return np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
+
+    radius = np.full_like(person, 0.5 * BODY_WIDTH)
+
+    def axis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The body's axis at the ground and the radius along the ray: the box's bottom row
+        sees the near edge of the feet, the axis is a radius farther."""
+        rim = ground(u)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            along = np.column_stack([rim[:, 0], rim[:, 1], np.zeros_like(u)]) * (
+                radius / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
+        return rim + along, along
+
+    foot, _ = axis(b.u)
+    head = to_camera(foot + to_world(person[:, None] * camera_z))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u_head = cx + f * head[:, 0] / depth(head)
+    foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the middle of the lean
+    side = np.column_stack([-along[:, 1], along[:, 0], along[:, 2]])
+    up = np.zeros_like(foot)
+    up[:, 2] = person
+    # The body's outline (seen and in depth) at the feet and at the head, corner by corner: one
+    # product for all, each row's top and bottom a maximum and minimum over 8 rows.
+    corners = np.empty((8, *foot.shape))
+    for k, base in enumerate((foot, foot + up)):
+        np.add(base, side, out=corners[4 * k])
+        np.subtract(base, side, out=corners[4 * k + 1])
+        np.add(base, along, out=corners[4 * k + 2])
+        np.subtract(base, along, out=corners[4 * k + 3])
+    cam = to_camera(corners.reshape(-1, 3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = (cy + f * cam[:, 1] / depth(cam)).reshape(8, -1)
+    return v.max(axis=0) - v.min(axis=0)
+
+
+def _residuals(params: np.ndarray, b: UsableBoxes, size: tuple[int, int], prior_f: float,
+               tilt_step: float) -> np.ndarray:
+    """Log height errors of the boxes, then the priors: the focal length's, each track's
+    height's (people are :data:`PERSON_HEIGHT` +- :data:`_HEIGHT_STD` tall), which also sets
+    the scale; with a tilt per window, each step between windows' tilts over ``tilt_step``
+    (radians)."""
+    n = b.n_windows
+    pred = predicted_heights(params, b, size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.log(pred / b.h)
+    r = np.where(np.isfinite(r), r, _BAD_RESIDUAL)
+    prior = np.sqrt(_PRIOR_WEIGHT) * SOFT_SCALE * (params[n + 1] - np.log(prior_f)) / PRIOR_LOG_STD
+    heights = SOFT_SCALE * (params[n + 3:] - PERSON_HEIGHT) / _HEIGHT_STD
+    steps = SOFT_SCALE * np.diff(params[:n]) / tilt_step
+    return np.concatenate([r, [prior], heights, steps])
+
+
+def data_cost(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> float:
+    """The fit's soft-L1 cost without the focal length's prior (that of the boxes and of the
+    people's heights), for one tilt."""
+    r = _residuals(params, b, size, float(np.exp(params[2])), 1.0)
+    z = (r / SOFT_SCALE) ** 2
+    return float(np.sum(SOFT_SCALE ** 2 * (np.sqrt(1.0 + z) - 1.0)))
+
+
+def _sparsity(b: UsableBoxes) -> np.ndarray:
+    """Which parameters each residual depends on: a box on its window's tilt, the roll, focal
+    length and height and its track's height; the priors on one each, a step on its two
+    windows' tilts."""
+    rows, n, k = len(b.h), b.n_windows, b.n_tracks
+    window = np.zeros(rows, np.int64) if b.window is None else b.window
+    every = np.arange(rows)
+    out = np.zeros((rows + 1 + k + n - 1, n + 3 + k), dtype=bool)
+    out[every, window] = True
+    out[:rows, n:n + 3] = True
+    out[every, n + 3 + b.track] = True
+    out[rows, n + 1] = True
+    out[rows + 1 + np.arange(k), n + 3 + np.arange(k)] = True
+    steps = rows + 1 + k + np.arange(n - 1)
+    out[steps, np.arange(n - 1)] = True
+    out[steps, np.arange(1, n)] = True
+    return out
+
+
+def _level_line(b: UsableBoxes, size: tuple[int, int]) -> tuple[float, float, float]:
+    """Robust fit of ``h = a (v - v0 - s (u - cx))``: slope ``a``, horizon row ``v0`` at the
+    centre column and its slope ``s`` (the level-camera line, the fit's start)."""
+    cx = 0.5 * size[0]
+    A = np.column_stack([b.v, b.u - cx, np.ones_like(b.v)])
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        return (A @ p - b.h) / np.maximum(b.h, 1.0)
+
+    p0 = np.linalg.lstsq(A, b.h, rcond=None)[0]
+    p = least_squares(resid, p0, loss="soft_l1", f_scale=SOFT_SCALE).x
+    a = p[0]
+    if not a > 0:
+        return 0.0, np.nan, 0.0
+    return float(a), float(-p[2] / a), float(-p[1] / a)
+
+
+def _start(b: UsableBoxes, size: tuple[int, int], hfov: float) -> np.ndarray:
+    """Parameters of one tilt from the level line at a given hfov, every track
+    :data:`PERSON_HEIGHT` tall."""
+    a, v0, slope = _level_line(b, size)
+    f = 0.5 * size[0] / np.tan(np.radians(hfov) / 2.0)
+    heights = np.full(b.n_tracks, PERSON_HEIGHT)
+    if not np.isfinite(v0):
+        return np.concatenate([[np.radians(30.0), 0.0, np.log(f), np.log(10.0)], heights])
+    # Keep every foot below the start's horizon: the model needs their rays to meet the ground.
+    v0 = min(v0, float(np.min(b.v - slope * (b.u - 0.5 * size[0]))) - 1.0)
+    tilt = float(np.arctan2(0.5 * size[1] - v0, f))
+    roll = float(-np.arctan(slope))
+    hc = max(PERSON_HEIGHT / max(a, 1e-3) * np.cos(tilt), PERSON_HEIGHT * 1.05)
+    return np.concatenate([[tilt, roll, np.log(f), np.log(hc)], heights])
+
+
+def prior_focal(size: tuple[int, int], hfov_deg: float | None = None) -> float:
+    """The focal length (pixels) of ``hfov_deg``, or of the prior's :data:`PRIOR_HFOV_DEG`."""
+    return float(0.5 * size[0] / np.tan(np.radians(hfov_deg or PRIOR_HFOV_DEG) / 2.0))
+
+
+def model_starts(b: UsableBoxes, size: tuple[int, int], prior_f: float,
+                 hfovs: Sequence[float] = _START_HFOVS) -> list[np.ndarray]:
+    """The fit's starts (parameters of one tilt): the level line's camera at each of
+    ``hfovs``, then each of :data:`_START_TILTS` at the focal length ``prior_f``, 10 m up."""
+    return [_start(b, size, hfov) for hfov in hfovs] + [
+        np.concatenate([[np.radians(t), 0.0, np.log(prior_f), np.log(10.0)],
+                        np.full(b.n_tracks, PERSON_HEIGHT)]) for t in _START_TILTS]
+
+
+def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
+              starts: Sequence[np.ndarray], fixed_f: float | None = None,
+              hold: Sequence[int] = (), tilt_step_deg: float = 10.0) -> np.ndarray:
+    """Least squares from each start (parameters of one tilt, each window's tilt starting at
+    it); the parameters (module docstring) of the lowest cost.
+
+    Args:
+        b: the boxes (with ``b.n_windows`` tilts).
+        size: the image's (width, height).
+        prior_f: the focal length the prior draws towards (pixels).
+        starts: the starts, ``(tilt, roll, log f, log height, track heights...)``.
+        fixed_f: the focal length held (pixels), or None: fitted.
+        hold: which of roll (1), log f (2) and log height (3) are held at each start's value.
+        tilt_step_deg: the scale of the cost on a tilt's step between windows (degrees).
+    """
+    n, k = b.n_windows, b.n_tracks
+    lower = np.concatenate([np.full(n, _CAMERA_BOUNDS[0][0]), _CAMERA_BOUNDS[0][1:],
+                            np.full(k, _HEIGHT_BOUNDS[0])])
+    upper = np.concatenate([np.full(n, _CAMERA_BOUNDS[1][0]), _CAMERA_BOUNDS[1][1:],
+                            np.full(k, _HEIGHT_BOUNDS[1])])
+    free = np.ones(n + 3 + k, dtype=bool)
+    free[[n - 1 + i for i in hold]] = False
+    if fixed_f is not None:
+        free[n + 1] = False
+    sparsity = _sparsity(b)[:, free]
+    step = np.radians(tilt_step_deg)
+    best, best_cost = None, np.inf
+    for x0 in starts:
+        full = np.clip(np.concatenate([np.full(n, x0[0]), x0[1:]]), lower + 1e-6, upper - 1e-6)
+        if fixed_f is not None:
+            full[n + 1] = np.log(fixed_f)
+
+        def fun(p: np.ndarray, full: np.ndarray = full) -> np.ndarray:
+            x = full.copy()
+            x[free] = p
+            return _residuals(x, b, size, prior_f, step)
+
+        res = least_squares(fun, full[free], loss="soft_l1", f_scale=SOFT_SCALE,
+                            bounds=(lower[free], upper[free]), jac_sparsity=sparsity)
+        if res.cost < best_cost:
+            x = full.copy()
+            x[free] = res.x
+            best, best_cost = x, res.cost
+    return best
+
+
+def pinhole(focal: float, tilt: float, roll: float, height: float,
+            size: tuple[int, int]) -> Camera:
+    """The model's camera: square pixels, the principal point at the image centre, above the
+    origin looking along +x (``tilt``, ``roll`` in radians)."""
+    K = np.array([[focal, 0.0, 0.5 * size[0]], [0.0, focal, 0.5 * size[1]], [0.0, 0.0, 1.0]])
+    return Camera(K=K, R=look_rotation(0.0, tilt, roll), c=np.array([0.0, 0.0, height]),
+                  width=size[0], height=size[1])
+
+
+def model_camera(params: np.ndarray, size: tuple[int, int]) -> Camera:
+    """The camera of one tilt's parameters (module docstring)."""
+    tilt, roll, log_f, log_hc = params[:4]
+    return pinhole(np.exp(log_f), tilt, roll, np.exp(log_hc), size)
