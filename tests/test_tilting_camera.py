@@ -11,6 +11,7 @@ from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_sce
 from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.geometry.tilting_camera import (
     MIN_TILT_CHANGE_DEG,
+    STEADY_DEG,
     TiltTrack,
     fit_tilt_track,
 )
@@ -63,6 +64,23 @@ def test_a_tilting_gimbal_reads_as_tilting_and_a_static_one_does_not(tilting) ->
     assert still.change_deg < 0.2 * MIN_TILT_CHANGE_DEG
 
 
+def test_a_steady_camera_is_told_from_the_one_fit(tilting) -> None:
+    """Given the clip's one fit, a static camera's windows are fitted with its lens, roll and
+    height held (kept exactly) and returned as steady; a tilting one still gets the whole fit,
+    the same as without the one fit."""
+    static, top_s, _, _ = _clip((0.0, 0.0), 0)
+    size = static.top_cameras[0].image_size
+    calib = top_calibration(top_s, size)
+    held = fit_tilt_track(*stack_frames(top_s), size, FPS, calib)
+    assert held is not None and not held.tilting and held.change_deg <= STEADY_DEG
+    np.testing.assert_allclose([held.focal, held.roll_deg, held.camera_height],
+                               [calib.focal, calib.roll_deg, calib.camera_height], rtol=1e-12)
+    scene, top, _, _ = tilting
+    size = scene.top_cameras[0].image_size
+    whole = fit_tilt_track(*stack_frames(top), size, FPS)
+    assert fit_tilt_track(*stack_frames(top), size, FPS, top_calibration(top, size)) == whole
+
+
 def test_too_short_a_clip_has_no_track(tilting) -> None:
     scene, top, _, _ = tilting
     short = {f: r for f, r in top.items() if f <= 9}  # 9 frames at 3.3 a second: one window
@@ -93,3 +111,30 @@ def test_the_run_maps_each_frame_of_a_tilting_clip_through_its_own_tilt(tilting)
     right = sum(a == b - 1000 for a, b in pairs)
     # Measured 1.000 pair F1 (the clip's one fit: 0.000).
     assert pairs and right / len(pairs) > 0.9
+
+
+@pytest.mark.slow
+def test_calibrate_refuses_a_camera_whose_tilt_changes(tmp_path, capsys) -> None:
+    """A tilting clip the one fit would pin down wrongly (48 degrees where the truth went from
+    about 20 to 40) is refused in one line, nothing written; its static twin is written."""
+    from xvmatch.cli import main
+    from xvmatch.formats.mot_boxes import write_mot_boxes
+
+    for rate, code in (((1.0, 2.0), 2), ((0.0, 0.0), 0)):
+        scene, top, _, _ = _clip(rate, 1)
+        boxes, out = tmp_path / f"top{rate[0]:g}.txt", tmp_path / f"cam{rate[0]:g}.json"
+        write_mot_boxes(boxes, top)
+        size = "x".join(map(str, scene.top_cameras[0].image_size))
+        assert main(["calibrate", "--boxes", str(boxes), "--image-size", size, "--hfov", "70",
+                     "--out", str(out)]) == code
+        err = capsys.readouterr().err.strip().splitlines()
+        if code:
+            assert len(err) == 1 and "the camera's tilt changes over the clip" in err[0], err
+            assert not out.exists()
+        else:
+            assert out.exists()
+    with pytest.raises(SystemExit) as stop:  # the rate is checked as associate's
+        main(["calibrate", "--boxes", str(boxes), "--image-size", size, "--fps", "0",
+              "--out", str(out)])
+    assert stop.value.code == 2
+    assert "argument --fps: expected a number in [0.1, 1000]" in capsys.readouterr().err

@@ -50,7 +50,7 @@ _hor_hfov = _or_auto(_HFOV_DEG)
 """``--hor-hfov``: degrees in [20, 150], or ``auto`` (chosen from the people on the oblique
 path, :func:`~xvmatch.cues.hor_lens.choose_hor_hfov`)."""
 
-_fps = _or_auto(float_in(0.1, 1000, "a camera's frame rate, frames per second"))
+FRAME_RATE = _or_auto(float_in(0.1, 1000, "a camera's frame rate, frames per second"))
 """``--fps``: frames a second, or ``auto`` (30 unless the top view's walkers say otherwise,
 :func:`~xvmatch.inference.matching.ground_association.top_frame_rate`)."""
 
@@ -67,7 +67,7 @@ def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
     p.add_argument("--hor-hfov", default="auto", metavar="DEG", type=_hor_hfov,
                    help="oblique: the horizontal camera's field of view, degrees in [20, 150], "
                    "or auto (default: 70 unless its people pair clearly better at 90 or 110)")
-    p.add_argument("--fps", default="auto", type=_fps,
+    p.add_argument("--fps", default="auto", type=FRAME_RATE,
                    help="oblique: the frame numbers' rate, in [0.1, 1000], or auto (default: 30 "
                    "unless the top view's walkers say otherwise)")
 

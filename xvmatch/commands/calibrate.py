@@ -11,6 +11,7 @@ import os
 
 import numpy as np
 
+from xvmatch.commands._cameras import FRAME_RATE
 from xvmatch.commands._options import add_command_parser, read_boxes
 from xvmatch.commands._types import image_size
 from xvmatch.core.output_paths import Input, Output, check_outputs, plain_name
@@ -30,7 +31,9 @@ tells the camera. A clip of 10 s or more with 5 or more people walking at differ
 enough for a static camera; the view's own track ids (the box file's ids) let each person keep
 their own height. A camera looking straight down (a nadir drone) is recognised by its boxes'
 shape and written as such. Where the boxes cannot tell (too few people, all at one distance),
-the command says so and writes nothing. The camera file holds the camera in the view's own
+the command says so and writes nothing; so it does where the camera's tilt changes over the
+clip (a drone's gimbal: a tilt per 3 s window read from the people, --fps the frame numbers'
+rate), since a camera file holds one camera. The camera file holds the camera in the view's own
 ground frame (above the origin, looking along +x) and an "estimated" record of how it was found
 (docs/formats.md); the picture (--draw) shows the horizon, a 2 m ground grid and the height of a
 1.72 m person at each box's foot over one frame (--image, or a grey canvas)."""
@@ -55,6 +58,9 @@ def add_calibrate_parser(sub) -> None:
                    "view's image size")
     p.add_argument("--frame", type=int, default=None,
                    help="the frame whose boxes are drawn (default: the one with most boxes)")
+    p.add_argument("--fps", default="auto", type=FRAME_RATE,
+                   help="the frame numbers' rate, in [0.1, 1000], or auto (default: 30 unless "
+                   "the view's walkers say otherwise): the windows in which the tilt is read")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the resampling that measures the confidence (default 0)")
     p.add_argument("--duplicates", choices=("first", "error"), default="first",
@@ -114,6 +120,26 @@ def _summary(name: str, calib, out: str) -> str:
             f"{calib.n_frames} frames -> {out}")
 
 
+def _refuse_tilting(frames: dict, stacked: tuple, calib, fps: float | str, name: str) -> None:
+    """CalibrationError where an oblique camera's tilt changes over the clip
+    (:func:`~xvmatch.inference.matching.ground_association.tilting_top`)."""
+    from xvmatch.geometry.people_calibration import CalibrationError
+    from xvmatch.geometry.tilting_camera import WINDOW_S
+    from xvmatch.inference.matching.ground_association import tilting_top, top_frame_rate
+
+    if calib.kind != "oblique":
+        return
+    rate = top_frame_rate(frames, calib).fps if fps == "auto" else float(fps)
+    tilt = tilting_top(*stacked, calib, rate)
+    if tilt is not None:
+        raise CalibrationError(
+            f"{name}: the camera's tilt changes over the clip (from {tilt.tilts_deg[0]:.0f} to "
+            f"{tilt.tilts_deg[-1]:.0f} degrees, a tilt per {WINDOW_S:g} s of its people at "
+            f"{rate:g} frames a second) and a camera file holds one camera; give a clip over "
+            "which it holds still (or --fps if the rate is not that), or its cameras with "
+            "--cameras")
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from xvmatch.core.atomic_files import atomic_write_bytes
     from xvmatch.formats.box_image_size import check_boxes_in_image
@@ -132,6 +158,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     numbers, ids, boxes = stack_frames(frames)
     calib = calibrate_from_people(numbers, boxes, size, ids=ids, hfov_deg=args.hfov,
                                   seed=args.seed, name=os.fspath(args.boxes))
+    _refuse_tilting(frames, (numbers, ids, boxes), calib, args.fps, os.fspath(args.boxes))
     save_cameras(args.out, {args.name: calib.camera}, estimated={args.name: calib.to_record()})
     if args.draw is not None:
         import cv2
