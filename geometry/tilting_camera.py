@@ -9,7 +9,10 @@ per window of :data:`WINDOW_S` seconds, neighbouring windows' tilts held togethe
 :data:`TILT_STEP_DEG` degrees a window (soft, so a steady tilt passes and a static camera keeps
 one tilt). Where the windows' tilts spread over more than :data:`MIN_TILT_CHANGE_DEG` the
 association maps each frame through its own tilt (interpolated between the windows' middles);
-otherwise it keeps the one fit, unchanged.
+otherwise it keeps the one fit, unchanged. Given that one fit, a steady camera is told first and
+cheaply: the windows' tilts fitted with its lens, roll and height held spread no more than
+:data:`STEADY_DEG` (on renders a static camera's spread at most 1.3 degrees, a tilting one's
+that the whole fit reads as tilting at least 2.4).
 """
 
 from __future__ import annotations
@@ -100,7 +103,7 @@ def fit_tilt_track(frames: np.ndarray, ids: np.ndarray, boxes: np.ndarray,
         start: the clip's one fit (an oblique camera), when made: each window's tilt is first
             fitted with its lens, roll and height held, and where those tilts spread no more
             than :data:`STEADY_DEG` the camera is steady and that track is returned (not
-            tilting) without the whole fit, a tenth of its time.
+            tilting) without the whole fit (0.05-0.1 s a clip where it takes 1-2.5 s).
     """
     frames = np.asarray(frames, np.int64).reshape(-1)
     boxes = np.asarray(boxes, float).reshape(-1, 4)

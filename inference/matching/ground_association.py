@@ -260,7 +260,7 @@ def tilting_top(frames: np.ndarray, tracks: np.ndarray, boxes: np.ndarray,
     """The top camera's tilt per window (:func:`~xvmatch.geometry.tilting_camera.fit_tilt_track`,
     the view stacked: each box's frame, track and box) where an oblique camera reads as
     tilting over the clip; None for a nadir or a steady camera, whose one fit ``calib``
-    stands (and starts the windows' fit: a steady camera is told at a tenth of its cost)."""
+    stands (and starts the windows' fit: a steady camera is told at a twentieth of its cost)."""
     if calib.kind != "oblique":
         return None
     track = fit_tilt_track(frames, tracks, boxes, (calib.width, calib.height), fps, calib)
