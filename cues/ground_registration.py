@@ -223,64 +223,79 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
         return np.zeros((0, 3)), np.zeros(0)
+    n, m = len(top), len(hor)
     headings = np.arange(_HEADINGS) * (2 * np.pi / _HEADINGS)
-    rot = _rotations(headings)  # (H, 2, 2)
-    turned = np.einsum("hab,mb->hma", rot, hor)  # (H, M, 2)
-    size = np.ones(len(top)) if sizes is None else np.asarray(sizes, float).reshape(-1)
+    turned = np.einsum("hab,mb->hma", _rotations(headings), hor)  # (H, M, 2)
+    size = np.ones(n) if sizes is None else np.asarray(sizes, float).reshape(-1)
     # c = top_i - size_i turned_j for every (heading, i, j): j read at i's height, on i.
-    centres = top[None, :, None, :] - size[None, :, None, None] * turned[:, None, :, :]
-    centres = centres.reshape(-1, 2)  # (P, 2), P = H N M
-    h_idx = np.repeat(np.arange(len(headings)), len(top) * len(hor))  # heading of each row
-    seen = turned[h_idx]  # (P, M, 2)
-    # (P, M, N): horizontal person j put against top person i at i's height; one coordinate
-    # at a time, no (P, M, N, 2) temporary.
-    dx = (centres[:, None, None, 0] + seen[:, :, None, 0] * size[None, None, :]
-          - top[None, None, :, 0])
-    dy = (centres[:, None, None, 1] + seen[:, :, None, 1] * size[None, None, :]
-          - top[None, None, :, 1])
-    d2 = dx * dx + dy * dy
-    explained = np.exp(-0.5 * d2.min(axis=2) / _SIGMA**2).sum(axis=1)
+    centres = (top[None, :, None, :] - size[None, :, None, None] * turned[:, None, :, :]
+               ).reshape(-1, 2)  # (P, 2), P = H N M, in (heading, i, j) order
+    # Horizontal person k of pose p put against top person i at i's height:
+    # centre_p + size_i turned_hk - top_i, a (N, P) slab per k, so that every operation runs
+    # along the P poses (contiguous) and one slab stays in cache; the nearest top person of
+    # each (pose, k) and the nearest horizontal person of each (pose, i) are kept.
+    cx = centres[:, 0].reshape(_HEADINGS, n * m)
+    cy = centres[:, 1].reshape(_HEADINGS, n * m)
+    grown = turned[:, :, None, :] * size[None, None, :, None]  # (H, M, N, 2)
+    near_hor = np.empty((m, len(centres)))
+    near_top = np.full((n, len(centres)), np.inf)
+    dx, dy = np.empty((n, _HEADINGS, n * m)), np.empty((n, _HEADINGS, n * m))
+    for k in range(m):
+        np.add(cx, grown[:, k, :, 0].T[:, :, None], out=dx)
+        dx -= top[:, 0, None, None]
+        np.add(cy, grown[:, k, :, 1].T[:, :, None], out=dy)
+        dy -= top[:, 1, None, None]
+        dx *= dx
+        dy *= dy
+        dx += dy  # squared distances (N, H, N M)
+        d2 = dx.reshape(n, -1)
+        np.minimum(near_top, d2, out=near_top)
+        d2.min(axis=0, out=near_hor[k])
+    explained = np.exp(-0.5 * np.ascontiguousarray(near_hor.T) / _SIGMA**2).sum(axis=1)
     # Top people in the horizontal camera's view (bearing within the half field of view, as far
-    # as its people reach) that no horizontal person explains.
-    rel = top[None, :, :] - centres[:, None, :]  # (P, N, 2)
-    heading = headings[h_idx]
-    forward = rel[..., 0] * np.cos(heading)[:, None] + rel[..., 1] * np.sin(heading)[:, None]
-    side = -rel[..., 0] * np.sin(heading)[:, None] + rel[..., 1] * np.cos(heading)[:, None]
+    # as its people reach) that no horizontal person explains; (N, P), the exact tests only
+    # where the cheap ones leave a top person possibly unseen.
+    heading = np.repeat(headings, n * m)
+    cos, sin = np.cos(heading), np.sin(heading)
+    rel_x, rel_y = top[:, 0, None] - centres[:, 0], top[:, 1, None] - centres[:, 1]
+    forward = rel_x * cos + rel_y * sin
+    side = -rel_x * sin + rel_y * cos
     reach = 1.2 * float(np.max(np.hypot(hor[:, 0], hor[:, 1])))
-    in_view = ((forward > 0.5) & (np.abs(np.arctan2(side, forward)) < np.radians(hfov_deg) / 2)
-               & (np.hypot(forward, side) < reach))
-    unseen = in_view & (d2.min(axis=1) > RADIUS**2)
+    unseen = (forward > 0.5) & (near_top > RADIUS**2)
+    ahead, across = forward[unseen], side[unseen]
+    unseen[unseen] = ((np.abs(np.arctan2(across, ahead)) < np.radians(hfov_deg) / 2)
+                      & (np.hypot(ahead, across) < reach))
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
-    score = np.round(explained - _UNSEEN_WEIGHT * unseen.sum(axis=1), _DIGITS)
+    score = np.round(explained - _UNSEEN_WEIGHT * unseen.sum(axis=0), _DIGITS)
     poses = np.column_stack([centres, heading])
     keep = _distinct(poses, np.argsort(-score, kind="stable"))
     return poses[keep], score[keep]
 
 
-def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 256) -> list[int]:
+def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512) -> list[int]:
     """The first :data:`KEEP` of ``order`` (indices into ``poses`` ``(P, 3)``) each 1 m or 10
-    degrees away from every one kept before it (greedy, in order); a block of candidates at a
-    time, its distances to the kept ones and to each other computed at once."""
+    degrees away from every one kept before it (greedy, in order): a block of candidates at a
+    time, those near an earlier block's kept ones struck out at once, then the first left kept
+    and those near it struck out, until :data:`KEEP`."""
     keep: list[int] = []
     limit = np.radians(10.0)
     for start in range(0, len(order), block):
         cand = order[start:start + block]
         xy, th = poses[cand, :2], poses[cand, 2]
-        apart = ((np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
-                  > 1.0) | (np.abs(_wrap(th[:, None] - th[None, :])) > limit))
         if keep:
             kx, kt = poses[keep, :2], poses[keep, 2]
             free = (((np.hypot(xy[:, None, 0] - kx[None, :, 0], xy[:, None, 1] - kx[None, :, 1])
                       > 1.0) | (np.abs(_wrap(th[:, None] - kt[None, :])) > limit)).all(axis=1))
         else:
             free = np.ones(len(cand), bool)
-        taken: list[int] = []
-        for i in np.flatnonzero(free):
-            if apart[i, taken].all():
-                taken.append(int(i))
-                keep.append(int(cand[i]))
-                if len(keep) == KEEP:
-                    return keep
+        while free.any():
+            i = int(np.argmax(free))
+            keep.append(int(cand[i]))
+            if len(keep) == KEEP:
+                return keep
+            free[i] = False
+            free &= ((np.hypot(xy[:, 0] - xy[i, 0], xy[:, 1] - xy[i, 1]) > 1.0)
+                     | (np.abs(_wrap(th - th[i])) > limit))
     return keep
 
 

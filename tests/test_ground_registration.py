@@ -244,6 +244,57 @@ def test_people_read_at_their_partners_height_land_on_them(seed: int, step: int)
         assert np.array_equal(a, b)
 
 
+def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.ndarray,
+                 hfov: float) -> float:
+    """One pose's score as the module docstring defines it, person by person: each horizontal
+    person explained by their nearest top person (read at that person's height), less 0.3 for
+    each top person in the camera's view within its people's reach whom nobody is near."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    turned = hor @ np.array([[c, -s], [s, c]]).T
+    near = np.array([[np.hypot(*(pose[:2] + size * t - p))
+                      for p, size in zip(top, sizes, strict=True)] for t in turned])  # (M, N)
+    explained = float(np.exp(-0.5 * (near.min(axis=1) / (0.5 * gr.RADIUS)) ** 2).sum())
+    local = _view(top, pose[:2], pose[2])
+    reach = 1.2 * np.hypot(hor[:, 0], hor[:, 1]).max()
+    in_view = ((local[:, 0] > 0.5) & (np.abs(np.arctan2(local[:, 1], local[:, 0]))
+                                      < np.radians(hfov) / 2)
+               & (np.hypot(local[:, 0], local[:, 1]) < reach))
+    return explained - 0.3 * float((in_view & (near.min(axis=0) > gr.RADIUS)).sum())
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 4), m=st.integers(1, 3),
+       hfov=st.floats(40.0, 120.0))
+def test_hypotheses_are_the_best_distinct_poses_scored_as_defined(seed: int, n: int, m: int,
+                                                                  hfov: float) -> None:
+    """Against every candidate pose (a heading every 5 degrees, each horizontal person on each
+    top person) scored person by person: the kept poses' scores are theirs, best first, each
+    1 m or 10 degrees from the others, and no candidate scoring above the last kept (any, where
+    fewer than :data:`KEEP` are) is apart from all of them."""
+    rng = np.random.default_rng(seed)
+    top = rng.uniform(-8, 8, (n, 2))
+    hor = np.column_stack([rng.uniform(2, 15, m), rng.uniform(-4, 4, m)])
+    sizes = rng.uniform(0.9, 1.1, n)
+    poses, scores = gr.pose_hypotheses(top, hor, hfov, sizes)
+    plain = [_plain_score(top, hor, sizes, p, hfov) for p in poses]
+    np.testing.assert_allclose(scores, plain, atol=2e-9)
+    assert len(poses) <= gr.KEEP and np.all(np.diff(scores) <= 0)
+
+    def apart(a: np.ndarray, b: np.ndarray, slack: float) -> bool:  # within rounding
+        return bool(np.hypot(*(a[:2] - b[:2])) > 1.0 + slack
+                    or abs(gr._wrap(a[2] - b[2])) > np.radians(10.0) + slack)
+
+    assert all(apart(a, b, -1e-9) for k, a in enumerate(poses) for b in poses[:k])
+    for h in np.arange(72) * (2 * np.pi / 72):
+        turned = hor @ np.array([[np.cos(h), -np.sin(h)], [np.sin(h), np.cos(h)]]).T
+        for p, size in zip(top, sizes, strict=True):
+            for t in turned:
+                pose = np.array([*(p - size * t), h])
+                if (len(poses) < gr.KEEP
+                        or _plain_score(top, hor, sizes, pose, hfov) > scores[-1] + 1e-6):
+                    assert not all(apart(pose, q, 1e-9) for q in poses)
+
+
 def test_ray_distances_read_at_the_top_persons_height() -> None:
     """A person 1.9 m tall, 20 m away, read as 1.72 m: mapped 20 * 1.72 / 1.9 m away, at
     their size of 1.9 / 1.72 they are where their partner stands; the size only moves along
