@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from itertools import pairwise
 from pathlib import Path
 
 from xvmatch.commands._options import add_command_parser
@@ -124,10 +125,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = Path(args.config)
     if not config.is_file():
         raise ValueError(f"{args.config}: no such configuration file; see configs/ for examples")
-    from xvmatch.training.train_cli import cli_args, cli_main
+    from xvmatch.training.train_cli import check_ckpt_path, cli_args, cli_main
 
     extra = backbone_args(args.backbone, args.init)
     extra += [a for a in args.lightning_args if a != "--"]
+    for path in _ckpt_paths(extra):  # refused before Lightning loads (about 10 s); the
+        check_ckpt_path(path)  # configuration file's own is checked once parsed
     try:
         cli = cli_main(cli_args(str(config), extra, args.stage))
     except ImportError as exc:  # --init imagenet without its package: one line, no traceback
@@ -144,6 +147,14 @@ def _cmd_train(args: argparse.Namespace) -> int:
         return code
     _print_next_step(cli)
     return 0
+
+
+def _ckpt_paths(argv: list[str]) -> list[str]:
+    """The ``--ckpt_path`` values of LightningCLI arguments (``--ckpt_path X`` or
+    ``--ckpt_path=X``)."""
+    found = [a.split("=", 1)[1] for a in argv if a.startswith("--ckpt_path=")]
+    found += [b for a, b in pairwise(argv) if a == "--ckpt_path"]
+    return [p for p in found if p and p.lower() != "null"]
 
 
 def _print_next_step(cli) -> None:
