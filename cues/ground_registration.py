@@ -14,8 +14,10 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
 * **time**: one hypothesis per frame is chosen by dynamic programming over the frames (Viterbi),
   each step paying for a jump in position or heading faster than a walker turns and walks, so
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
-  decided by its neighbours; the whole clip is registered with the top map at a few scales and
-  the best kept (:func:`register_with_scale`);
+  decided by its neighbours; the whole clip is registered with the top map at a few scales
+  (:func:`register_scales`) and the best kept (:func:`register_with_scale`; in video mode the
+  one whose pairs hold along the tracks,
+  :func:`xvmatch.inference.matching.ground_association.register_and_pair`);
 * **people's heights**: a horizontal person's distance is read from their box as if they
   were of the crowd's height; where the top view tells each of its people's height (an oblique
   top camera: a box's height over a person of the crowd's height there), a horizontal person
@@ -62,9 +64,11 @@ __all__ = [
     "box_width_ratio",
     "hor_ground_points",
     "map_motion",
+    "margin_scale",
     "on_top_map",
     "pose_hypotheses",
     "ray_distances",
+    "register_scales",
     "register_sequence",
     "register_with_scale",
 ]
@@ -424,15 +428,43 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
     return out
 
 
+def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
+                    hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
+                    top_sizes: list[np.ndarray] | None = None
+                    ) -> dict[float, tuple[float, list[FramePose]]]:
+    """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
+    scaled by each of :data:`MAP_SCALES`: ``{scale: (total score, poses)}``, the poses on the
+    top map multiplied by ``scale``. Arguments as :func:`register_with_scale`'s."""
+    runs: dict[float, tuple[float, list[FramePose]]] = {}
+    motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
+    moved = motion is not None and any(m is not None for m in motion)
+    for scale in MAP_SCALES:
+        cands = [pose_hypotheses(scale * p, q, hfov_deg, z)
+                 for p, q, z in zip(tops, hors, top_sizes or [None] * len(tops), strict=True)]
+        # With the map's motion out, and (where any was read) with it left in: a static
+        # camera's small crowd walking together reads as motion; the better-explained kept.
+        for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
+                          for m in motion], None] if moved else [None]):
+            poses = register_sequence(frames, cands, fps, motions)
+            run = (round(sum(p.score for p in poses), 6), poses)
+            if scale not in runs or run[0] > runs[scale][0]:
+                runs[scale] = run
+    return runs
+
+
 def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                         hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
                         top_sizes: list[np.ndarray] | None = None
                         ) -> tuple[float, list[FramePose]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
-    scaled by each of :data:`MAP_SCALES`, and the scale kept: the two maps' metres come from
-    two estimates (the top camera's height from its people, each distance from a box height)
-    that can disagree by a third, so another scale replaces 1 where its chosen poses explain
-    :data:`SCALE_MARGIN` times as many people over the clip (a small lead is noise).
+    scaled by each of :data:`MAP_SCALES` (:func:`register_scales`), and the scale kept: the two
+    maps' metres come from two estimates (the top camera's height from its people, each
+    distance from a box height) that can disagree by a third, so another scale replaces 1
+    where its chosen poses explain :data:`SCALE_MARGIN` times as many people over the clip (a
+    small lead is noise). The totals tell the scale weakly (a pose fitted frame by frame
+    absorbs a scale error; on the renders the best other scale's total is within 0.97-1.13 of
+    scale 1's on most clips): video mode chooses along the tracks instead
+    (:func:`xvmatch.inference.matching.ground_association.register_and_pair`).
 
     Args:
         frames: the frame numbers, in order.
@@ -451,24 +483,16 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
     Returns:
         ``(scale, poses)``: the poses lie on the top map multiplied by ``scale``.
     """
-    runs: dict[float, tuple[float, list[FramePose]]] = {}
-    motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
-    moved = motion is not None and any(m is not None for m in motion)
-    for scale in MAP_SCALES:
-        cands = [pose_hypotheses(scale * p, q, hfov_deg, z)
-                 for p, q, z in zip(tops, hors, top_sizes or [None] * len(tops), strict=True)]
-        # With the map's motion out, and (where any was read) with it left in: a static
-        # camera's small crowd walking together reads as motion; the better-explained kept.
-        for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
-                          for m in motion], None] if moved else [None]):
-            poses = register_sequence(frames, cands, fps, motions)
-            run = (round(sum(p.score for p in poses), 6), poses)
-            if scale not in runs or run[0] > runs[scale][0]:
-                runs[scale] = run
-    best = max(MAP_SCALES, key=lambda s: (runs[s][0], -abs(s - 1.0)))
-    if runs[best][0] <= round(SCALE_MARGIN * runs[1.0][0], 6):
-        best = 1.0
+    runs = register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes)
+    best = margin_scale(runs)
     return best, runs[best][1]
+
+
+def margin_scale(runs: dict[float, tuple[float, list[FramePose]]]) -> float:
+    """The map scale :func:`register_with_scale` keeps of :func:`register_scales`' runs: the
+    best total's, where it leads scale 1's by :data:`SCALE_MARGIN`, else 1."""
+    best = max(MAP_SCALES, key=lambda s: (runs[s][0], -abs(s - 1.0)))
+    return best if runs[best][0] > round(SCALE_MARGIN * runs[1.0][0], 6) else 1.0
 
 
 def on_top_map(hor: np.ndarray, pose: FramePose) -> np.ndarray:

@@ -268,9 +268,11 @@ def chance_score(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarra
 
 def pick_along_tracks(kept: dict[float, int], people: dict[float, int] | None = None,
                       prior: float = PRIOR_HFOV_DEG) -> float:
-    """Video mode's lens: the candidate whose whole run (registration, pairs, consensus along
-    both views' tracks) keeps the most pairs, counted over the frames (a tie: the nearest the
-    prior, then the narrower); the prior where none keeps any. Another lens than the prior
+    """Video mode's lens (and, with ``prior`` 1, the top map's scale of a lens's run,
+    :func:`~xvmatch.inference.matching.ground_association.register_and_pair`): the candidate
+    whose whole run (registration, pairs, consensus along both views' tracks) keeps the most
+    pairs, counted over the frames (a tie: the nearest the prior, then the smaller); the prior
+    where none keeps any. Another lens than the prior
     only where its pairs join :data:`MIN_PEOPLE` top-view people (``people``: how many each
     run's pairs join; None: not checked): a pose can put any one person on any other, so one
     pair held says nothing of the lens; nor where it keeps at most :data:`NEAR_TIE` times the

@@ -93,6 +93,24 @@ def test_top_points_given_replace_the_calibrations_map(scene) -> None:
 
 
 @pytest.mark.slow
+def test_a_top_map_off_in_scale_pairs_as_the_right_one_in_video_mode(scene) -> None:
+    """The top camera's height read 30 % off (its map shrunk or stretched by 1.3): video mode
+    keeps the map scale whose run keeps the most pairs along the tracks, which puts the map
+    back (0.7 and 1.3 among the scales tried) and pairs as on the right map."""
+    top, hor, frames, options, _ = _prepared(scene)
+    frames = frames[:20]
+    options = replace(options, consensus=True, top_sizes=False, hor_hfov_deg=70.0)
+    calib = top_calibration(top, options.top_size)
+    own = top_ground_points(stack_frames(top)[2], calib)
+    right = run_ground_association(top, hor, options, frames, calib, top_points=own)
+    assert right.scale == 1.0 and sum(map(len, right.pairs.values())) > 50
+    for off in (1.3, 0.7):
+        run = run_ground_association(top, hor, options, frames, calib, top_points=own / off)
+        assert run.scale == off
+        assert run.pairs == right.pairs
+
+
+@pytest.mark.slow
 def test_same_input_same_pairs(scene) -> None:
     options = GroundAssociationOptions(scene.top_cameras[0].image_size,
                                        scene.hor_cameras["hor1"][0].image_size, fps=10.0)

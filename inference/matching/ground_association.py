@@ -18,8 +18,11 @@ view's boxes say it is oblique).
    heights (+-13 %, 2 m at 15 m).
 3. With each view's own track ids (video mode), the top map's own motion (a drifting, turning
    drone) is taken out of the registration's jumps
-   (:func:`~xvmatch.cues.ground_registration.map_motion`), and the pairs are made consistent
-   over the clip (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`).
+   (:func:`~xvmatch.cues.ground_registration.map_motion`), the pairs are made consistent
+   over the clip (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`), and
+   the map scale kept is the one whose run keeps the most pairs along the tracks
+   (:func:`register_and_pair`; the registration's score totals tell it weakly: on a shallow
+   tilting render, 0 of 40 pairs right at the scale they kept, 105 of 105 at 1.3).
 
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
@@ -379,19 +382,25 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
                         hor_size: tuple[int, int], views: tuple[Mapping, Mapping]
                         ) -> tuple[LensChoice, Registered]:
-    """Video mode's ``--hor-hfov auto``: the whole run (:func:`register_and_pair`, the pairs
-    made consistent along the tracks) with each candidate lens
-    (:data:`~xvmatch.cues.hor_lens.HFOV_CANDIDATES`), the one keeping the most pairs chosen
-    (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`). Arguments as
-    :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
-    runs = {h: register_and_pair(order, tops, boxes, sizes, h, fps, hor_size, views)
+    """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
+    tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
+    keeps it) with each candidate lens (:data:`~xvmatch.cues.hor_lens.HFOV_CANDIDATES`), the
+    one keeping the most pairs chosen (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`); then
+    the chosen lens's run as :func:`register_and_pair` makes it (its map scale chosen along the
+    tracks too: the lens is chosen first, as a scale chosen per lens lets a wrong lens's run
+    keep more pairs on a small crowd). Arguments as :func:`register_and_pair`'s; returns the
+    choice and the chosen lens's run."""
+    runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
             for h in HFOV_CANDIDATES}
-    kept = {h: sum(map(len, r[2].values())) for h, r in runs.items()}
-    people = {h: len({t for pairs in r[2].values() for t, _ in pairs}) for h, r in runs.items()}
+    scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
+    pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
+             for h, s in scales.items()}
+    kept = {h: sum(map(len, p.values())) for h, p in pairs.items()}
+    people = {h: len({t for frame in p.values() for t, _ in frame}) for h, p in pairs.items()}
     hfov = pick_along_tracks(kept, people)
-    return LensChoice(hfov, {h: float(n) for h, n in kept.items()},
-                      {h: r[0] for h, r in runs.items()}, list(order), along_tracks=True,
-                      people=people), runs[hfov]
+    choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
+                        along_tracks=True, people=people)
+    return choice, _along_tracks(order, tops, *runs[hfov], sizes, views)
 
 
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
@@ -399,8 +408,11 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
                       views: tuple[Mapping, Mapping] | None) -> Registered:
     """The handheld view registered on the top map with a lens of ``hfov`` degrees and each
     frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
-    their ids the tracks: video mode) the top map's motion taken out and the pairs made
-    consistent along the tracks.
+    their ids the tracks: video mode) the top map's motion taken out, the pairs made
+    consistent along the tracks, and the map scale the one whose run keeps the most pairs
+    there (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`, scale 1 the prior: the clip's
+    score totals tell the scale weakly, :func:`~xvmatch.cues.ground_registration.margin_scale`);
+    frame by frame the scale those totals keep.
 
     Args:
         order: the frames.
@@ -414,22 +426,58 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
+    hors, runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views)
+    if views is not None:
+        return _along_tracks(order, tops, hors, runs, sizes, views)
+    scale = gr.margin_scale(runs)
+    return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
+
+
+def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
+                hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None
+                ) -> tuple[list, dict[float, tuple[float, list[gr.FramePose]]]]:
+    """The handheld view's people on its own map (with their ids) and its registration at
+    each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
+    motion taken out in video mode)."""
     ratio = gr.box_width_ratio((b for b, _ in boxes), hor_size)
     hors = [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio), h_ids)
             for hb, h_ids in boxes]
-    scale, poses = gr.register_with_scale(order, [p for p, _ in tops], [q for q, _ in hors],
-                                          hfov, fps,
-                                          [i for _, i in tops] if views is not None else None,
-                                          sizes)
+    return hors, gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
+                                    fps, [i for _, i in tops] if views is not None else None,
+                                    sizes)
+
+
+def _along_tracks(order: list[int], tops: list, hors: list,
+                  runs: dict[float, tuple[float, list[gr.FramePose]]], sizes: list,
+                  views: tuple[Mapping, Mapping]) -> Registered:
+    """The map scale whose run keeps the most pairs along the tracks (scale 1 the prior,
+    :func:`~xvmatch.cues.hor_lens.pick_along_tracks`), its poses and pairs."""
+    pairs = {s: _consistent(order, tops, hors, sizes, s, poses, views)
+             for s, (_, poses) in runs.items()}
+    kept = {s: sum(map(len, p.values())) for s, p in pairs.items()}
+    people = {s: len({t for frame in p.values() for t, _ in frame}) for s, p in pairs.items()}
+    scale = pick_along_tracks(kept, people, prior=1.0)
+    return scale, runs[scale][1], pairs[scale]
+
+
+def _consistent(order: list[int], tops: list, hors: list, sizes: list, scale: float,
+                poses: list[gr.FramePose], views: tuple[Mapping, Mapping]
+                ) -> dict[int, list[tuple[int, int]]]:
+    """The pairs under the poses (:func:`_pairs_under`) made consistent along both views'
+    tracks."""
+    return consistent_pairs(_pairs_under(order, tops, hors, sizes, scale, poses), *views, order,
+                            keep_free=False)
+
+
+def _pairs_under(order: list[int], tops: list, hors: list, sizes: list, scale: float,
+                 poses: list[gr.FramePose]) -> dict[int, list[tuple[int, int]]]:
+    """Each frame's pairs (top id, horizontal id) under its pose on the top map multiplied by
+    ``scale`` (:func:`~xvmatch.cues.ground_registration.associate_on_ground`)."""
     by_frame = {p.frame: p for p in poses}
-    pairs: dict[int, list[tuple[int, int]]] = {}
-    for f, (p, ti), (q, hi), z in zip(order, tops, hors, sizes, strict=True):
-        if f in by_frame:
-            pairs[f] = [(int(ti[a]), int(hi[b]))
-                        for a, b in gr.associate_on_ground(scale * p, q, by_frame[f], z)]
-    if views is not None:
-        pairs = consistent_pairs(pairs, *views, order, keep_free=False)
-    return scale, poses, pairs
+    return {f: [(int(ti[a]), int(hi[b]))
+                for a, b in gr.associate_on_ground(scale * p, q, by_frame[f], z)]
+            for f, (p, ti), (q, hi), z in zip(order, tops, hors, sizes, strict=True)
+            if f in by_frame}
 
 
 def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
