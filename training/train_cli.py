@@ -24,14 +24,34 @@ import os
 import warnings
 from collections.abc import Mapping, Sequence
 
-__all__ = ["CHECKPOINT_NAMES", "STAGES", "check_checkpoint_options", "check_ckpt_path",
-           "cli_args", "cli_main"]
+__all__ = ["CHECKPOINT_NAMES", "STAGES", "check_checkpoint_options", "check_ckpt_file",
+           "check_ckpt_path", "cli_args", "cli_main"]
 
 STAGES: tuple[str, ...] = ("fit", "validate", "test")
 """LightningCLI subcommands ``xvmatch train`` can run (``fit`` by default)."""
 CHECKPOINT_NAMES: tuple[str, ...] = ("best", "last", "hpc", "registry")
 """``--ckpt_path`` values Lightning resolves itself to a checkpoint of the run's own callback
 (``registry`` also as ``registry:NAME``), when no file of that name exists."""
+
+
+def check_ckpt_file(path: str, what: str = "--ckpt_path") -> bool:
+    """The checks of :func:`check_ckpt_path` that read nothing (no torch, no Lightning): a
+    regular local file, not a FIFO, a device, a folder, missing or a URL. False for one of
+    Lightning's own names (:data:`CHECKPOINT_NAMES`), which it resolves itself.
+
+    Raises:
+        ValueError: one line naming ``what`` and the path.
+    """
+    from xvmatch.core.input_files import check_input_file
+
+    name = os.fspath(path)
+    if name.split(":")[0] in CHECKPOINT_NAMES and not os.path.lexists(name):
+        return False
+    if "://" in name:
+        raise ValueError(f"{what} {name}: only a local checkpoint file is read (weights only); "
+                         "download it first")
+    check_input_file(name, what)
+    return True
 
 
 def check_ckpt_path(path: str, what: str = "--ckpt_path") -> None:
@@ -43,15 +63,9 @@ def check_ckpt_path(path: str, what: str = "--ckpt_path") -> None:
     Raises:
         ValueError: one line naming ``what`` and the path.
     """
-    from xvmatch.core.input_files import check_input_file
-
     name = os.fspath(path)
-    if name.split(":")[0] in CHECKPOINT_NAMES and not os.path.lexists(name):
+    if not check_ckpt_file(name, what):
         return
-    if "://" in name:
-        raise ValueError(f"{what} {name}: only a local checkpoint file is read (weights only); "
-                         "download it first")
-    check_input_file(name, what)
     import torch
 
     try:

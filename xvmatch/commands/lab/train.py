@@ -125,12 +125,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = Path(args.config)
     if not config.is_file():
         raise ValueError(f"{args.config}: no such configuration file; see configs/ for examples")
-    from xvmatch.training.train_cli import check_ckpt_path, cli_args, cli_main
+    from xvmatch.training.train_cli import check_ckpt_file, cli_args, cli_main
 
     extra = backbone_args(args.backbone, args.init)
     extra += [a for a in args.lightning_args if a != "--"]
-    for path in _ckpt_paths(extra):  # refused before Lightning loads (about 10 s); the
-        check_ckpt_path(path)  # configuration file's own is checked once parsed
+    for path in _ckpt_paths(extra):  # not a file: refused before Lightning loads (about 10 s);
+        check_ckpt_file(path)  # its contents are read once, when the configuration is parsed
     try:
         cli = cli_main(cli_args(str(config), extra, args.stage))
     except ImportError as exc:  # --init imagenet without its package: one line, no traceback
