@@ -395,8 +395,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
     pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
              for h, s in scales.items()}
-    kept = {h: sum(map(len, p.values())) for h, p in pairs.items()}
-    people = {h: len({t for frame in p.values() for t, _ in frame}) for h, p in pairs.items()}
+    kept, people = _kept(pairs)
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
@@ -454,10 +453,16 @@ def _along_tracks(order: list[int], tops: list, hors: list,
     :func:`~xvmatch.cues.hor_lens.pick_along_tracks`), its poses and pairs."""
     pairs = {s: _consistent(order, tops, hors, sizes, s, poses, views)
              for s, (_, poses) in runs.items()}
-    kept = {s: sum(map(len, p.values())) for s, p in pairs.items()}
-    people = {s: len({t for frame in p.values() for t, _ in frame}) for s, p in pairs.items()}
-    scale = pick_along_tracks(kept, people, prior=1.0)
+    scale = pick_along_tracks(*_kept(pairs), prior=1.0)
     return scale, runs[scale][1], pairs[scale]
+
+
+def _kept(runs: Mapping[float, Mapping[int, list[tuple[int, int]]]]
+          ) -> tuple[dict[float, int], dict[float, int]]:
+    """Per candidate run (a lens, a map scale), the pairs it kept over the frames and the
+    top-view people they join (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`' counts)."""
+    return ({c: sum(map(len, p.values())) for c, p in runs.items()},
+            {c: len({t for frame in p.values() for t, _ in frame}) for c, p in runs.items()})
 
 
 def _consistent(order: list[int], tops: list, hors: list, sizes: list, scale: float,
