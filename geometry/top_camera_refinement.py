@@ -78,6 +78,7 @@ _FINE = 2  # of those, the best taken on to the fine scales
 _MISS = 10.0  # metres: a pair behind a camera (Eq. 7) or padding, beyond any scale
 _GRID_SCALE = 0.5  # metres per degree of the grid's step: the scale a grid is ranked at
 _PRIOR = 0.002  # loss per squared degree of turn: of two fits alike, the smaller turn
+_CHUNK = 1 << 20  # (turn, frame, top, horizontal) entries the grid's losses hold at once
 
 
 @dataclass(frozen=True)
@@ -171,71 +172,126 @@ class _RayFrames:
             self.hor_axis[k] = cam.R[2]
             self.sizes.append((len(tb), len(hb)))
         self.margin = margin
+        # the parts of Eqs. 6-7 that the turn of the top camera leaves alone
+        self.hor_cross_b = np.cross(self.hor_dirs, self.baseline[:, None, :])   # n_j x c1c2
+        self.hor_b = np.einsum("fnk,fk->fn", self.hor_dirs, self.baseline)
+        self.hor_depth = np.einsum("fnk,fk->fn", self.hor_dirs, self.hor_axis)
+        self.b_hor = np.einsum("fk,fk->f", self.baseline, self.hor_axis)
+        # a turn keeps a top ray's angle to the top camera's own axis
+        self.top_depth = np.einsum("fmk,fk->fm", self.top_dirs,
+                                   np.broadcast_to(self.top_axis, (f, 3)))
+        self.b_sq = np.einsum("fk,fk->f", self.baseline, self.baseline)
+        self.pair_mask = self.top_mask[:, :, None] & self.hor_mask[:, None, :]
+        self.rows_fewer = np.array([m <= n for m, n in self.sizes])     # pair every top head
+        self.unpaired = float(sum(n - min(m, n) for m, n in self.sizes))  # 1 per head left
+
+    def _turned(self, rotvecs_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The top directions turned by each of ``rotvecs_deg`` ``(G, 3)``: ``(G, F, M, 3)``,
+        and the top camera's turned optical axis, ``(G, F, 3)`` (``(G, 1, 3)`` when fixed)."""
+        q = Rotation.from_rotvec(np.radians(rotvecs_deg)).as_matrix()       # (G, 3, 3)
+        if self.turns is not None:  # each frame's turn A_f^T Q A_f
+            q = np.einsum("fji,gjk,fkl->gfil", self.turns, q, self.turns)   # (G, F, 3, 3)
+            axis = np.einsum("gfij,fj->gfi", q, self.top_axis)
+        else:
+            q = q[:, None]                                                   # (G, 1, 3, 3)
+            axis = np.einsum("gfij,j->gfi", q, self.top_axis)
+        return self.top_dirs[None] @ np.swapaxes(q, -1, -2), axis
+
+    def _pairs(self, nt: np.ndarray, axis_top: np.ndarray) -> np.ndarray:
+        """``(G, F, M, N)`` Eq. 6 distances of the turned top rays ``nt`` with the horizontal
+        ones, :data:`_MISS` where Eq. 7 fails: :func:`~xvmatch.geometry.ray_priors.ray_distances`
+        and :func:`~xvmatch.geometry.ray_priors.cheirality_mask` batched, each product of Eq. 6
+        rewritten on unit directions (``|c1c2 . (n_i x n_j)| = |n_i . (n_j x c1c2)|``,
+        ``||n_i x n_j||^2 = 1 - cos^2``) so that no ``(M, N, 3)`` array is made."""
+        nh = self.hor_dirs
+        cos = nt @ np.swapaxes(nh, -1, -2)[None]                             # (G, F, M, N)
+        triple = nt @ np.swapaxes(self.hor_cross_b, -1, -2)[None]
+        sin_sq = 1.0 - cos ** 2
+        sin = np.sqrt(np.maximum(sin_sq, 0.0))
+        dist = np.abs(triple) / np.maximum(sin, 1e-9)
+        bt = np.einsum("gfmk,fk->gfm", nt, self.baseline)[..., None]
+        bh = self.hor_b[None, :, None, :]
+        den = np.maximum(sin_sq, 1e-9)
+        along_top = (bt - cos * bh) / den          # the closest points, along the top ray
+        along_hor = (cos * bt - bh) / den          # and along the horizontal one
+        # their midpoint (Eq. 7), its depth in each camera; a point's depth along an axis is
+        # linear in it, so each ray's depth is taken once: (u . a) and (v . a)
+        hor_top = np.einsum("fnk,gfk->gfn", nh, axis_top)[:, :, None, :]
+        b_top = np.einsum("fk,gfk->gf", self.baseline, axis_top)[..., None, None]
+        depth_top = 0.5 * (along_top * self.top_depth[None, :, :, None] + along_hor * hor_top
+                           + b_top)
+        top_hor = np.einsum("gfmk,fk->gfm", nt, self.hor_axis)[..., None]
+        depth_hor = 0.5 * (along_top * top_hor + along_hor * self.hor_depth[None, :, None, :]
+                           - self.b_hor[None, :, None, None])
+        ok = (depth_top > self.margin) & (depth_hor > self.margin) & (sin >= 1e-9)
+        ok &= self.top_mask[None, :, :, None] & self.hor_mask[None, :, None, :]
+        return np.where(ok, dist, _MISS)
 
     def distances(self, rotvec_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(F, M, N)`` Eq. 6 distances of every frame's head rays with the top ones turned by
-        ``rotvec_deg``, :data:`_MISS` where Eq. 7 fails (the batched form of
-        :func:`~xvmatch.geometry.ray_priors.ray_distances` and
-        :func:`~xvmatch.geometry.ray_priors.cheirality_mask`, for the search's inner loop), and
-        the turned top directions ``(F, M, 3)``."""
-        q = Rotation.from_rotvec(np.radians(rotvec_deg)).as_matrix()
-        if self.turns is not None:  # each frame's turn A_f^T Q A_f
-            q = np.einsum("fji,jk,fkl->fil", self.turns, q, self.turns)
-            nt = np.einsum("fmk,fjk->fmj", self.top_dirs, q)       # (F, M, 3)
-        else:
-            nt = self.top_dirs @ q.T                               # (F, M, 3)
-        nh = self.hor_dirs                                         # (F, N, 3)
-        b = self.baseline[:, None, None, :]
-        u, v = nt[:, :, None, :], nh[:, None, :, :]  # n_i x n_j of Eq. 6, written out (fast)
-        cross = np.stack([u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1],
-                          u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-                          u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]], -1)  # (F, M, N, 3)
-        sin = np.linalg.norm(cross, axis=-1)
-        dist = np.abs(np.sum(cross * b, axis=-1)) / np.maximum(sin, 1e-9)
-        cos = np.einsum("fmk,fnk->fmn", nt, nh)
-        bt = np.einsum("fmk,fk->fm", nt, self.baseline)[:, :, None]
-        bh = np.einsum("fnk,fk->fn", nh, self.baseline)[:, None, :]
-        den = np.maximum(1.0 - cos ** 2, 1e-9)
-        along_top = (bt - cos * bh) / den          # the closest points, along the top ray
-        along_hor = (cos * bt - bh) / den          # and along the horizontal one
-        # their midpoint q (Eq. 7), its depth in each camera: q - c_top, q - c_hor
-        half = 0.5 * (along_top[..., None] * u + along_hor[..., None] * v)
-        if self.turns is not None:
-            axis_top = np.einsum("fij,fj->fi", q, self.top_axis)
-            depth_top = (np.einsum("fmnk,fk->fmn", half, axis_top)
-                         + 0.5 * np.einsum("fk,fk->f", self.baseline, axis_top)[:, None, None])
-        else:
-            axis_top = q @ self.top_axis
-            depth_top = half @ axis_top + 0.5 * (self.baseline @ axis_top)[:, None, None]
-        depth_hor = (np.einsum("fmnk,fk->fmn", half, self.hor_axis)
-                     - 0.5 * np.einsum("fk,fk->f", self.baseline, self.hor_axis)[:, None, None])
-        ok = (depth_top > self.margin) & (depth_hor > self.margin) & (sin >= 1e-9)
-        ok &= self.top_mask[:, :, None] & self.hor_mask[:, None, :]
-        return np.where(ok, dist, _MISS), nt
+        ``rotvec_deg``, :data:`_MISS` where Eq. 7 fails, and the turned top directions
+        ``(F, M, 3)``."""
+        nt, axis = self._turned(np.asarray(rotvec_deg, float)[None])
+        return self._pairs(nt, axis)[0], nt[0]
+
+    def losses(self, rotvecs_deg: np.ndarray, scale: float) -> np.ndarray:
+        """``(G,)`` :meth:`loss` of each of ``rotvecs_deg`` ``(G, 3)``, a few at a time."""
+        rotvecs_deg = np.asarray(rotvecs_deg, float).reshape(-1, 3)
+        f, m, n = self.top_dirs.shape[0], self.top_dirs.shape[1], self.hor_dirs.shape[1]
+        chunk = max(1, _CHUNK // (f * m * n))
+        return np.concatenate([self._losses(rotvecs_deg[i:i + chunk], scale)
+                               for i in range(0, len(rotvecs_deg), chunk)])
 
     def loss(self, rotvec_deg: np.ndarray, scale: float) -> float:
         """Mean robust loss of the one-to-one head-ray pairs and the wearer term."""
-        dist, nt = self.distances(rotvec_deg)
+        return float(self._losses(np.asarray(rotvec_deg, float)[None], scale)[0])
+
+    def _assigned(self, rho: np.ndarray) -> np.ndarray:
+        """``(G,)`` sums over the frames of the one-to-one pairs' ``rho`` (``(G, F, M, N)``) at
+        their least, plus 1 per horizontal head left unpaired. Where the smaller view's heads
+        each have their least ``rho`` with a different head of the other, those least values
+        are the optimum (no assignment does better than each head's best); the Hungarian
+        method solves the rest."""
+        pairs = np.where(self.pair_mask[None], rho, np.inf)
+        best_col = pairs.argmin(axis=3)                                   # (G, F, M)
+        best_row = pairs.argmin(axis=2)                                   # (G, F, N)
+        col_hit = np.where(self.top_mask[None], best_col, -1 - np.arange(best_col.shape[2]))
+        row_hit = np.where(self.hor_mask[None], best_row, -1 - np.arange(best_row.shape[2]))
+        col_sorted, row_sorted = np.sort(col_hit, axis=2), np.sort(row_hit, axis=2)
+        clash = np.where(self.rows_fewer[None],
+                         (col_sorted[..., 1:] == col_sorted[..., :-1]).any(axis=2),
+                         (row_sorted[..., 1:] == row_sorted[..., :-1]).any(axis=2))
+        least = np.where(self.rows_fewer[None],
+                         np.where(self.top_mask[None], pairs.min(axis=3), 0.0).sum(axis=2),
+                         np.where(self.hor_mask[None], pairs.min(axis=2), 0.0).sum(axis=2))
+        for g, k in zip(*np.nonzero(clash), strict=True):
+            m, n = self.sizes[k]
+            r, c = linear_sum_assignment(rho[g, k, :m, :n])
+            least[g, k] = rho[g, k, r, c].sum()
+        return least.sum(axis=1) + self.unpaired
+
+    def _losses(self, rotvecs_deg: np.ndarray, scale: float) -> np.ndarray:
+        nt, axis = self._turned(rotvecs_deg)
+        dist = self._pairs(nt, axis)
         rho = dist ** 2 / (dist ** 2 + scale ** 2)
-        total = 0.0
-        for k, (m, n) in enumerate(self.sizes):
-            r, c = linear_sum_assignment(rho[k, :m, :n])
-            total += float(rho[k, r, c].sum()) + (n - len(r))      # unpaired heads: 1 each
+        total = self._assigned(rho)
         # the wearer: one top head ray passes through the egocentric camera or up to
         # WEARER_HEAD metres above it (worn at the eyes or on the chest); the closest point of
-        # that vertical segment to each ray (its squared distance is convex in the height)
-        up = np.array([0.0, 0.0, 1.0])
-        along_b = np.einsum("fk,fmk->fm", self.baseline, nt)
-        p_b = self.baseline[:, None, :] - along_b[..., None] * nt     # (F, M, 3), off the ray
-        p_up = up - nt[..., 2:3] * nt                                  # (F, M, 3)
-        height = -np.sum(p_b * p_up, axis=-1) / np.maximum(np.sum(p_up ** 2, axis=-1), 1e-12)
-        height = np.clip(height, 0.0, WEARER_HEAD)
-        perp = np.linalg.norm(p_b + height[..., None] * p_up, axis=-1)
-        along = along_b + height * nt[..., 2]
-        perp = np.where((along > 0) & self.top_mask, perp, _MISS).min(axis=1)
-        total += float(np.sum(perp ** 2 / (perp ** 2 + scale ** 2)))
+        # that vertical segment to each ray (its squared distance is convex in the height).
+        # With p_b = b - (b . n) n and p_up = z - n_z n off the unit ray n:
+        along_b = np.einsum("fk,gfmk->gfm", self.baseline, nt)
+        nz = nt[..., 2]
+        b_up = self.baseline[None, :, None, 2] - along_b * nz             # p_b . p_up
+        up_sq = 1.0 - nz ** 2                                             # |p_up|^2
+        height = np.clip(-b_up / np.maximum(up_sq, 1e-12), 0.0, WEARER_HEAD)
+        perp_sq = (self.b_sq[None, :, None] - along_b ** 2 + 2.0 * height * b_up
+                   + height ** 2 * up_sq)
+        perp = np.sqrt(np.maximum(perp_sq, 0.0))
+        along = along_b + height * nz
+        perp = np.where((along > 0) & self.top_mask[None], perp, _MISS).min(axis=2)
+        total += np.sum(perp ** 2 / (perp ** 2 + scale ** 2), axis=1)
         count = sum(n for _, n in self.sizes) + len(self.sizes)
-        return total / count + _PRIOR * float(np.sum(np.square(rotvec_deg)))
+        return total / count + _PRIOR * np.sum(np.square(rotvecs_deg), axis=1)
 
 
 def _grid(half_width: float, step: float) -> np.ndarray:
@@ -248,7 +304,7 @@ def _grid_starts(rays: _RayFrames, grid: np.ndarray, step: float) -> list[np.nda
     """The :data:`_STARTS` points of ``grid`` with the lowest loss at the scale
     ``_GRID_SCALE * step``: a coarser grid's points lie further from the best turn, so their
     rays miss by more."""
-    grid_loss = np.array([rays.loss(g, _GRID_SCALE * step) for g in grid])
+    grid_loss = rays.losses(grid, _GRID_SCALE * step)
     return [grid[i] for i in np.argsort(grid_loss, kind="stable")[:_STARTS]]
 
 

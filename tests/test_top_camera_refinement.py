@@ -248,3 +248,49 @@ def test_the_batched_rays_of_a_flying_camera_are_eqs_6_and_7() -> None:
         want = np.where(ok, ray_distances(rt, rh), _MISS)
         np.testing.assert_allclose(batched[k, :len(tb), :len(hb)], want, rtol=1e-9, atol=1e-9)
     assert fit.turn(tops[0]).R.tolist() == _turned(tops[0], rotvec).R.tolist()
+
+
+def _rays(seed: int = 5):
+    """The search's frames of a scene whose top view sees only two people every other frame."""
+    from xvmatch.geometry.ray_priors import METRIC_MARGIN
+    from xvmatch.geometry.top_camera_refinement import _RayFrames
+
+    top, hors, top_boxes, hor_boxes = _scene(seed, frames=12)
+    top_boxes = [b[:2] if k % 2 else b for k, b in enumerate(top_boxes)]
+    return _RayFrames(top, hors, top_boxes, hor_boxes, METRIC_MARGIN)
+
+
+@settings(max_examples=30, deadline=None, phases=[Phase.generate])
+@given(st.integers(0, 2**32 - 1), st.sampled_from([(0.1, 0.5, 0.9), (0.2, 0.2, 0.7), None]))
+def test_the_least_pairing_is_the_hungarian_ones(seed: int, levels) -> None:
+    # Each frame's least one-to-one sum (every head of the smaller view paired) is the
+    # Hungarian method's, ties included (few levels), the unpaired heads priced 1 each.
+    from scipy.optimize import linear_sum_assignment
+
+    rays = _rays()
+    rng = np.random.default_rng(seed)
+    shape = (3, *rays.top_mask.shape, rays.hor_mask.shape[1])
+    rho = rng.uniform(0, 1, shape) if levels is None else rng.choice(levels, shape)
+    want = np.zeros(3)
+    for g in range(3):
+        for k, (m, n) in enumerate(rays.sizes):
+            r, c = linear_sum_assignment(rho[g, k, :m, :n])
+            want[g] += rho[g, k, r, c].sum() + n - len(r)
+    np.testing.assert_allclose(rays._assigned(rho), want, rtol=1e-12)
+    assert {m <= n for m, n in rays.sizes} == {True, False}  # both kinds of frame
+
+
+def test_the_grids_losses_are_the_searchs() -> None:
+    # The grid's batched losses, taken a few turns at a time, are the search's one by one.
+    from xvmatch.geometry import top_camera_refinement as refinement
+
+    rays = _rays()
+    turns = np.random.default_rng(0).normal(0, 3, (7, 3))
+    one_by_one = [rays.loss(x, 0.5) for x in turns]
+    assert rays.losses(turns, 0.5).tolist() == one_by_one
+    small = refinement._CHUNK
+    try:
+        refinement._CHUNK = 1
+        assert rays.losses(turns, 0.5).tolist() == one_by_one
+    finally:
+        refinement._CHUNK = small
