@@ -257,3 +257,33 @@ def test_a_tall_person_cut_by_the_drones_near_edge_stands_where_associate_puts_t
         assert np.hypot(*(placed.points[8][0] - truth[8])) < 0.35
     crowd = calib.standing_points(top[8].boxes)[0]  # everyone at the crowd's height
     assert np.hypot(*(crowd - truth[8])) > 0.35
+
+
+
+@pytest.mark.slow
+def test_a_top_map_off_in_scale_pairs_as_the_right_one_in_video_mode(scene):
+    """The top map shrunk or stretched by 1.3 (its camera's height read 30 % off): in video
+    mode each handheld view keeps the map scale whose run keeps the most pairs along both
+    views' tracks, as ``associate`` does, and the three views pair as on the right map."""
+    from xvmatch.inference.views.multi_ego_video import video_people
+    from xvmatch.inference.views.multi_ground import VIDEO_KEEP_FREE, TopMap
+    from xvmatch.inference.views.multi_view_people import PeopleOptions
+
+    views, _ = scene
+    rows = [{f: FrameBoxes(f, 1000 * f + np.arange(len(r.ids)), r.boxes) for f, r in v.items()}
+            for v in views]
+    tracks = [{1000 * f + n: int(i) for f, r in v.items() for n, i in enumerate(r.ids)}
+              for v in views]
+    frames = sorted(set().union(*rows))
+    calib = top_calibration(views[0], SIZE)
+    tops = top_map(rows, frames, calib, tracks[0])
+    options = MultiGroundOptions((SIZE, SIZE), 70.0, 3.33)
+
+    def people(top: TopMap):
+        problems = ground_problems(rows, frames, calib, options, tracks, top)
+        return video_people(rows, problems, frames, tracks, PeopleOptions(), VIDEO_KEEP_FREE)
+
+    right = people(tops)
+    for off in (1.3, 0.7):
+        assert people(TopMap({f: p / off for f, p in tops.points.items()}, tops.sizes,
+                             tops.walkers)) == right

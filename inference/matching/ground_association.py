@@ -83,6 +83,7 @@ __all__ = [
     "register_and_pair",
     "run_ground_association",
     "run_top_view",
+    "scale_along_tracks",
     "tilt_note",
     "tilting_top",
     "top_calibration",
@@ -399,7 +400,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
-    return choice, _along_tracks(order, tops, *runs[hfov], sizes, views)
+    return choice, scale_along_tracks(order, tops, *runs[hfov], sizes, views)
 
 
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
@@ -427,7 +428,7 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     """
     hors, runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views)
     if views is not None:
-        return _along_tracks(order, tops, hors, runs, sizes, views)
+        return scale_along_tracks(order, tops, hors, runs, sizes, views)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
 
@@ -446,7 +447,7 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
                                     sizes)
 
 
-def _along_tracks(order: list[int], tops: list, hors: list,
+def scale_along_tracks(order: list[int], tops: list, hors: list,
                   runs: dict[float, tuple[float, list[gr.FramePose]]], sizes: list,
                   views: tuple[Mapping, Mapping]) -> Registered:
     """The map scale whose run keeps the most pairs along the tracks (scale 1 the prior,

@@ -65,6 +65,7 @@ from xvmatch.inference.matching.ground_association import (
     PRIOR_FPS,
     TOP_VIEWS,
     choose_along_tracks,
+    scale_along_tracks,
     tilt_note,
     tilting_top,
     top_calibration,
@@ -356,16 +357,19 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
 
 
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
-                options: MultiGroundOptions, top_tracks: Mapping[int, int] | None = None,
+                options: MultiGroundOptions,
+                tracks: Sequence[Mapping[int, int]] | None = None,
                 sizes: Mapping[int, np.ndarray] | None = None
                 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """``{frame: ((M, 2), (M, 2))}`` handheld view ``k``'s people on the top map and the rays
     from its camera to them there, on the frames where its pose was registered (both views
-    have boxes there; the top map at the scale that fits this view best,
-    :func:`~xvmatch.cues.ground_registration.register_with_scale`; with the top view's
-    ``top_tracks``, ``{row id: track id}`` in video mode, the top map's own motion taken out
-    of the registration's jumps; ``sizes``: ``{frame: (N,)}`` each top person's height over
-    the crowd's, :attr:`TopMap.sizes`)."""
+    have boxes there). Frame by frame the top map at the scale whose poses explain the most
+    people (:func:`~xvmatch.cues.ground_registration.register_with_scale`); with ``tracks``
+    (per view ``{row id: track id}``, video mode) the top map's own motion taken out of the
+    registration's jumps and the scale the one whose run with the top view keeps the most
+    pairs along both views' tracks, as ``associate`` chooses it
+    (:func:`~xvmatch.inference.matching.ground_association.scale_along_tracks`). ``sizes``:
+    ``{frame: (N,)}`` each top person's height over the crowd's, :attr:`TopMap.sizes`."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -373,12 +377,20 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov, width_ratio=ratio)
              for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
-    ids = None if top_tracks is None else [
-        np.array([top_tracks[int(r)] for r in views[0][f].ids], dtype=np.int64)[ok[f]]
-        for f in order]
-    scale, poses = gr.register_with_scale(
-        order, [tops[f][ok[f]] for f in order], [local[f] for f in order], hfov, options.fps,
-        ids, None if sizes is None else [sizes[f][ok[f]] for f in order])
+    points = [tops[f][ok[f]] for f in order]
+    heights = None if sizes is None else [sizes[f][ok[f]] for f in order]
+    if tracks is None:
+        scale, poses = gr.register_with_scale(order, points, [local[f] for f in order], hfov,
+                                              options.fps, None, heights)
+    else:
+        pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
+        ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
+        runs = gr.register_scales(order, points, [local[f] for f in order], hfov, options.fps,
+                                  ids, heights)
+        scale, poses, _ = scale_along_tracks(
+            order, list(zip(points, ids, strict=True)),
+            [(local[f], np.asarray(pair[1][f].ids)) for f in order], runs,
+            heights if heights is not None else [None] * len(order), pair)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
@@ -411,7 +423,7 @@ def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
 
 def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                     calibration: PeopleCalibration, options: MultiGroundOptions,
-                    top_tracks: Mapping[int, int] | None = None,
+                    tracks: Sequence[Mapping[int, int]] | None = None,
                     tops: TopMap | None = None) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame of ``frames`` (module docstring).
 
@@ -422,19 +434,21 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
         calibration: the top camera's, from its people (:func:`oblique_top`).
         options: the handheld views' image sizes and fields of view (``auto``: chosen here,
             :func:`choose_lenses`, unsaid), the frame rate.
-        top_tracks: the top view's ``{row id: track id}`` (video mode): the top map's motion
-            is then taken out of each registration (:func:`_registered`).
-        tops: the top view's people on its map for ``frames`` (:func:`top_map`, with the same
-            ``top_tracks``), when already built.
+        tracks: per view ``{row id: track id}`` (video mode): the top map's motion is then
+            taken out of each registration and its map scale chosen along the tracks
+            (:func:`_registered`).
+        tops: the top view's people on its map for ``frames`` (:func:`top_map`, with the top
+            view's ``tracks``), when already built.
     """
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
                          f"({len(views) - 1}), got {len(options.hor_sizes)}")
+    top_tracks = None if tracks is None else tracks[0]
     top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
     options = _with_lenses(views, frames, calibration, options, top)[0]
     tops, heights = top.points, top.sizes
     placed = [{f: (p, None) for f, p in tops.items() if len(p)},
-              *(_registered(views, k, tops, options, top_tracks, heights)
+              *(_registered(views, k, tops, options, tracks, heights)
                 for k in range(1, len(views)))]
     problems = {}
     for f in frames:
@@ -474,7 +488,7 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     options, lenses = _with_lenses(aligned, frames, calibration, options, top, tracks)
     if lenses and note is not None:
         note(lenses_note(lenses))
-    problems = ground_problems(aligned, frames, calibration, options, top_tracks, top)
+    problems = ground_problems(aligned, frames, calibration, options, tracks, top)
     if tracks is not None:
         from xvmatch.inference.views.multi_ego_video import video_people
 
