@@ -9,8 +9,12 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
 * **hypotheses**: every (top person i, horizontal person j, heading) triple puts j on i, which
   fixes ``c``; a hypothesis scores the horizontal people that land within :data:`RADIUS` of a
   top person (soft), minus the top people it puts inside the horizontal camera's field of view
-  that nobody there explains (people seen in one view only are expected, so this weighs less);
-  the :data:`KEEP` best distinct ones are kept;
+  that nobody there explains (people seen in one view only are expected, so this weighs less)
+  and, where the top camera is known (:class:`TopSight`), as much for each horizontal person
+  nobody explains that it puts where the top camera would see them: with few people shared,
+  a wrong pose (two people swapped: a half turn about their midpoint) explains as many as the
+  right one, and only where it puts the others tells them apart; the :data:`KEEP` best
+  distinct ones are kept;
 * **time**: one hypothesis per frame is chosen by dynamic programming over the frames (Viterbi),
   each step paying for a jump in position or heading faster than a walker turns and walks, so
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
@@ -45,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.people_calibration import (
     BODY_WIDTH,
     PERSON_HEIGHT,
@@ -60,6 +65,7 @@ __all__ = [
     "SCALE_MARGIN",
     "WIDTH_RATIO",
     "FramePose",
+    "TopSight",
     "associate_on_ground",
     "box_width_ratio",
     "hor_ground_points",
@@ -101,6 +107,10 @@ a horizontal person explained: low, as occlusion and partial overlap hide many."
 
 _DIGITS = 9
 """Scores are rounded to this many decimals: the same choices on every CPU."""
+
+_EDGE = 0.03
+"""Part of the top image's width and height along its borders where a person standing is
+taken as possibly cut off or unannotated (:class:`TopSight`)."""
 
 MAP_SCALES = (0.7, 0.85, 1.0, 1.15, 1.3)
 """Scales of the top view's ground map tried against the horizontal view's
@@ -175,6 +185,46 @@ def box_width_ratio(frames: Iterable[np.ndarray], image_size: tuple[int, int]) -
     return round(float(np.median(boxes[whole, 2] / boxes[whole, 3])), 4)
 
 
+@dataclass(frozen=True)
+class TopSight:
+    """Where the top camera sees people standing on its ground map: a point is seen when it
+    projects inside the top image (off its borders by :data:`_EDGE`) no farther from the map's
+    origin (the camera's foot) than its people were seen.
+
+    Attributes:
+        ground: ``(3, 3)`` the map-to-image homography (``K [r1, r2, -R c]``).
+        width, height: the top image's size, pixels.
+        reach: metres from the map's origin out to which its people were seen.
+    """
+
+    ground: np.ndarray
+    width: int
+    height: int
+    reach: float
+
+    @classmethod
+    def of(cls, camera: Camera, reach: float) -> TopSight:
+        """The sight of a top camera in its own ground frame (above the map's origin)."""
+        ground = camera.K @ np.column_stack([camera.R[:, 0], camera.R[:, 1],
+                                             -camera.R @ camera.c])
+        return cls(ground, int(camera.width), int(camera.height), float(reach))
+
+    def scaled(self, scale: float) -> TopSight:
+        """The same sight on the map multiplied by ``scale``."""
+        return TopSight(self.ground @ np.diag([1.0 / scale, 1.0 / scale, 1.0]), self.width,
+                        self.height, self.reach * scale)
+
+    def sees(self, points: np.ndarray) -> np.ndarray:
+        """``(...)`` whether people standing at ``points`` ``(..., 2)`` are in sight (the
+        pixel's bounds times its ``w > 0``: no division)."""
+        x, y = points[..., 0], points[..., 1]
+        g = self.ground
+        u, v, w = (g[r, 0] * x + g[r, 1] * y + g[r, 2] for r in range(3))
+        mx, my = _EDGE * self.width, _EDGE * self.height
+        return ((w > 0) & (u > mx * w) & (u < (self.width - mx) * w) & (v > my * w)
+                & (v < (self.height - my) * w) & (x * x + y * y < self.reach ** 2))
+
+
 def _rotations(headings: np.ndarray) -> np.ndarray:
     c, s = np.cos(headings), np.sin(headings)
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (H, 2, 2)
@@ -211,7 +261,8 @@ def ray_distances(top: np.ndarray, mapped: np.ndarray, rays: np.ndarray,
 
 
 def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
-                    sizes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    sizes: np.ndarray | None = None, sight: TopSight | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """The best poses ``(K, 3)`` (x, y, heading) of the horizontal camera on the top map for
     one frame, and their scores ``(K,)``, best first (module docstring).
 
@@ -223,6 +274,9 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
             horizontal person is put against top person ``i`` at ``sizes[i]`` times their
             distance (read from their box as if of the crowd's height), where they would stand
             were they ``i``.
+        sight: where the top camera sees people (:class:`TopSight`), or None: a pose that puts
+            a horizontal person nobody explains in the top camera's sight pays as for a top
+            person unseen.
     """
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
@@ -269,8 +323,12 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     ahead, across = forward[unseen], side[unseen]
     unseen[unseen] = ((np.abs(np.arctan2(across, ahead)) < np.radians(hfov_deg) / 2)
                       & (np.hypot(ahead, across) < reach))
+    missed = unseen.sum(axis=0)
+    if sight is not None:  # horizontal people alone where the top camera would see them
+        where = centres[None] + np.repeat(turned.transpose(1, 0, 2), n * m, axis=1)  # (M, P, 2)
+        missed = missed + ((near_hor > RADIUS**2) & sight.sees(where)).sum(axis=0)
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
-    score = np.round(explained - _UNSEEN_WEIGHT * unseen.sum(axis=0), _DIGITS)
+    score = np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
     poses = np.column_stack([centres, heading])
     keep = _distinct(poses, np.argsort(-score, kind="stable"))
     return poses[keep], score[keep]
@@ -430,7 +488,8 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
 
 def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                     hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
-                    top_sizes: list[np.ndarray] | None = None
+                    top_sizes: list[np.ndarray] | None = None,
+                    sights: list[TopSight] | None = None
                     ) -> dict[float, tuple[float, list[FramePose]]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES`: ``{scale: (total score, poses)}``, the poses on the
@@ -439,8 +498,9 @@ def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nda
     motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
     moved = motion is not None and any(m is not None for m in motion)
     for scale in MAP_SCALES:
-        cands = [pose_hypotheses(scale * p, q, hfov_deg, z)
-                 for p, q, z in zip(tops, hors, top_sizes or [None] * len(tops), strict=True)]
+        cands = [pose_hypotheses(scale * p, q, hfov_deg, z, None if v is None else v.scaled(scale))
+                 for p, q, z, v in zip(tops, hors, top_sizes or [None] * len(tops),
+                                       sights or [None] * len(tops), strict=True)]
         # With the map's motion out, and (where any was read) with it left in: a static
         # camera's small crowd walking together reads as motion; the better-explained kept.
         for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
@@ -454,7 +514,8 @@ def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nda
 
 def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                         hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
-                        top_sizes: list[np.ndarray] | None = None
+                        top_sizes: list[np.ndarray] | None = None,
+                        sights: list[TopSight] | None = None
                         ) -> tuple[float, list[FramePose]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES` (:func:`register_scales`), and the scale kept: the two
@@ -480,10 +541,12 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
             tipped a clip to a wrong pose).
         top_sizes: per frame, each top person's height over the crowd's (``tops``' rows;
             :func:`pose_hypotheses`), or None.
+        sights: per frame, where the top camera sees people on its map (:class:`TopSight`,
+            :func:`pose_hypotheses`), or None.
     Returns:
         ``(scale, poses)``: the poses lie on the top map multiplied by ``scale``.
     """
-    runs = register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes)
+    runs = register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes, sights)
     best = margin_scale(runs)
     return best, runs[best][1]
 

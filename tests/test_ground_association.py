@@ -337,3 +337,26 @@ def test_auto_offset_is_refused_with_an_oblique_top_view(scene, tmp_path, capsys
     assert main([*base, "--offset", "0", "--quiet", "--draw", str(tmp_path / "d"),
                  "--draw-every", "25"]) == 0
     assert len(list((tmp_path / "d").glob("*.jpg"))) >= 3
+
+
+def test_the_top_cameras_sight_is_where_its_people_stand(scene) -> None:
+    """The top camera's sight on its map (the calibration's camera above the map's origin):
+    a person is in sight exactly where their foot pixel lies inside the image off its
+    borders, the farthest of the clip (the reach) excepted."""
+    from xvmatch.inference.matching.ground_association import top_sights
+
+    top, _, frames, options, _ = _prepared(scene)
+    calib = top_calibration(top, options.top_size)
+    _, _, boxes = stack_frames(top)
+    ground = top_ground_points(boxes, calib)
+    sight = top_sights(frames, ground, calib)
+    assert len(sight) == len(frames) and all(s is sight[0] for s in sight)
+    x, y, w, h = boxes.T
+    u, v = x + w / 2, y + h
+    width, height = options.top_size
+    inside = ((u > 0.03 * width) & (u < 0.97 * width) & (v > 0.03 * height)
+              & (v < 0.97 * height) & np.isfinite(ground).all(axis=1))
+    seen = sight[0].sees(np.nan_to_num(ground, nan=1e9))
+    far = np.hypot(*ground.T) >= sight[0].reach
+    assert inside.sum() > 100 and far.sum() == 1
+    assert np.array_equal(seen, inside & ~far)

@@ -245,10 +245,13 @@ def test_people_read_at_their_partners_height_land_on_them(seed: int, step: int)
 
 
 def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.ndarray,
-                 hfov: float) -> float:
+                 hfov: float, sight: tuple | None = None) -> float:
     """One pose's score as the module docstring defines it, person by person: each horizontal
     person explained by their nearest top person (read at that person's height), less 0.3 for
-    each top person in the camera's view within its people's reach whom nobody is near."""
+    each top person in the camera's view within its people's reach whom nobody is near; with
+    ``sight`` (the top camera, its reach), less 0.3 for each horizontal person nobody explains
+    standing where the top camera would see them (projected inside its image, 3 % off its
+    borders, within the reach of the map's origin)."""
     c, s = np.cos(pose[2]), np.sin(pose[2])
     turned = hor @ np.array([[c, -s], [s, c]]).T
     near = np.array([[np.hypot(*(pose[:2] + size * t - p))
@@ -259,24 +262,44 @@ def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.n
     in_view = ((local[:, 0] > 0.5) & (np.abs(np.arctan2(local[:, 1], local[:, 0]))
                                       < np.radians(hfov) / 2)
                & (np.hypot(local[:, 0], local[:, 1]) < reach))
-    return explained - 0.3 * float((in_view & (near.min(axis=0) > gr.RADIUS)).sum())
+    lone = 0
+    if sight is not None:
+        camera, reach_top = sight
+        for t, d in zip(turned, near.min(axis=1), strict=True):
+            at = pose[:2] + t
+            uv, depth = camera.project(np.array([at[0], at[1], 0.0]))
+            inside = (depth > 0 and 0.03 * camera.width < uv[0] < 0.97 * camera.width
+                      and 0.03 * camera.height < uv[1] < 0.97 * camera.height)
+            lone += int(d > gr.RADIUS and inside and np.hypot(*at) < reach_top)
+    return explained - 0.3 * float((in_view & (near.min(axis=0) > gr.RADIUS)).sum() + lone)
+
+
+def _top_camera(tilt_deg: float = 35.0, height: float = 8.0):
+    """An oblique top camera above the map's origin looking along +x, 1920x1080, 70 degrees."""
+    from xvmatch.geometry.people_model import pinhole
+
+    return pinhole(960.0 / np.tan(np.radians(35.0)), np.radians(tilt_deg), 0.0, height,
+                   (1920, 1080))
 
 
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 10_000), n=st.integers(1, 4), m=st.integers(1, 3),
-       hfov=st.floats(40.0, 120.0))
+       hfov=st.floats(40.0, 120.0), with_sight=st.booleans())
 def test_hypotheses_are_the_best_distinct_poses_scored_as_defined(seed: int, n: int, m: int,
-                                                                  hfov: float) -> None:
+                                                                  hfov: float,
+                                                                  with_sight: bool) -> None:
     """Against every candidate pose (a heading every 5 degrees, each horizontal person on each
     top person) scored person by person: the kept poses' scores are theirs, best first, each
     1 m or 10 degrees from the others, and no candidate scoring above the last kept (any, where
-    fewer than :data:`KEEP` are) is apart from all of them."""
+    fewer than :data:`KEEP` are) is apart from all of them; with the top camera's sight too."""
     rng = np.random.default_rng(seed)
     top = rng.uniform(-8, 8, (n, 2))
     hor = np.column_stack([rng.uniform(2, 15, m), rng.uniform(-4, 4, m)])
     sizes = rng.uniform(0.9, 1.1, n)
-    poses, scores = gr.pose_hypotheses(top, hor, hfov, sizes)
-    plain = [_plain_score(top, hor, sizes, p, hfov) for p in poses]
+    plain_sight = (_top_camera(), 14.0) if with_sight else None
+    sight = gr.TopSight.of(*plain_sight) if with_sight else None
+    poses, scores = gr.pose_hypotheses(top, hor, hfov, sizes, sight)
+    plain = [_plain_score(top, hor, sizes, p, hfov, plain_sight) for p in poses]
     np.testing.assert_allclose(scores, plain, atol=2e-9)
     assert len(poses) <= gr.KEEP and np.all(np.diff(scores) <= 0)
 
@@ -291,7 +314,8 @@ def test_hypotheses_are_the_best_distinct_poses_scored_as_defined(seed: int, n: 
             for t in turned:
                 pose = np.array([*(p - size * t), h])
                 if (len(poses) < gr.KEEP
-                        or _plain_score(top, hor, sizes, pose, hfov) > scores[-1] + 1e-6):
+                        or _plain_score(top, hor, sizes, pose, hfov, plain_sight)
+                        > scores[-1] + 1e-6):
                     assert not all(apart(pose, q, 1e-9) for q in poses)
 
 
@@ -305,3 +329,47 @@ def test_ray_distances_read_at_the_top_persons_height() -> None:
     d = gr.ray_distances(top, mapped, mapped, sizes)
     assert d[0, 0] == pytest.approx(0.0, abs=1e-12)
     assert d[1, 0] == pytest.approx(gr.ray_distances(top[1:], mapped, mapped)[0, 0])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), tilt=st.floats(15.0, 85.0), height=st.floats(3.0, 60.0),
+       scale=st.sampled_from(gr.MAP_SCALES))
+def test_the_top_cameras_sight_is_its_image_within_its_reach(seed: int, tilt: float,
+                                                            height: float, scale: float) -> None:
+    """A point is in sight where it projects inside the top image, 3 % off its borders, within
+    the reach; on the map multiplied by a scale, its point multiplied by it is."""
+    camera = _top_camera(tilt, height)
+    points = np.random.default_rng(seed).uniform(-20, 80, (400, 2))
+    reach = 60.0
+    uv, depth = camera.project(np.column_stack([points, np.zeros(len(points))]))
+    want = ((depth > 0) & (uv[:, 0] > 0.03 * 1920) & (uv[:, 0] < 0.97 * 1920)
+            & (uv[:, 1] > 0.03 * 1080) & (uv[:, 1] < 0.97 * 1080)
+            & (np.hypot(points[:, 0], points[:, 1]) < reach))
+    sight = gr.TopSight.of(camera, reach)
+    assert np.array_equal(sight.sees(points), want)
+    assert np.array_equal(sight.scaled(scale).sees(scale * points), want)
+
+
+def test_where_a_pose_puts_the_people_the_top_view_misses_tells_a_swap() -> None:
+    """Two people seen by both views and a third only by the handheld camera: the pose with
+    the two swapped (a half turn about their midpoint) explains as many, and ties with the
+    right one; it puts the third where the top camera would see them, the right one does not,
+    so with the top camera's sight the right pose comes first."""
+    both = np.array([[15.0, -2.0], [15.0, 2.0]])
+    third = np.array([[11.0, -10.0]])  # beside the top camera's view: only the handheld's
+    centre, heading = np.array([14.0, -16.0]), np.pi / 2
+    hor = _view(np.vstack([both, third]), centre, heading)
+    assert _in_view(hor).all()
+    sight = gr.TopSight.of(_top_camera(), 30.0)
+    assert not sight.sees(third).any() and sight.sees(2 * both.mean(axis=0) - third).all()
+    swapped = np.array([*(2 * both.mean(axis=0) - centre), heading - np.pi])
+    poses, scores = gr.pose_hypotheses(both, hor, 70.0)
+    assert scores[0] == scores[1]
+    assert {int(np.hypot(*(p[:2] - centre)) < 0.5) + 2 * int(
+        np.hypot(*(p[:2] - swapped[:2])) < 0.5) for p in poses[:2]} == {1, 2}
+    poses, scores = gr.pose_hypotheses(both, hor, 70.0, sight=sight)
+    assert np.hypot(*(poses[0][:2] - centre)) < 0.5
+    assert abs(gr._wrap(poses[0][2] - heading)) < np.radians(3.0)
+    at_swap = [s for p, s in zip(poses, scores, strict=True)
+               if np.hypot(*(p[:2] - swapped[:2])) < 0.5]
+    assert len(at_swap) == 1 and scores[0] - at_swap[0] == pytest.approx(0.3, abs=1e-6)

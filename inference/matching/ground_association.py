@@ -15,7 +15,9 @@ view's boxes say it is oblique).
    Hungarian on the ground distances. Each top person's height is read from their boxes
    through the calibration (:func:`top_sizes`), and a horizontal person compared with them is
    read at that height: a distance from a box height otherwise errs by the spread of people's
-   heights (+-13 %, 2 m at 15 m).
+   heights (+-13 %, 2 m at 15 m). A pose that puts a horizontal person nobody explains where
+   the top camera would see them pays for it (:func:`top_sights`; on a small shared crowd a
+   pose with two people swapped explains as many).
 3. With each view's own track ids (video mode), the top map's own motion (a drifting, turning
    drone) is taken out of the registration's jumps
    (:func:`~xvmatch.cues.ground_registration.map_motion`), the pairs are made consistent
@@ -42,7 +44,7 @@ frame numbered 1, 2, 3).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -259,6 +261,19 @@ def top_ground_points(boxes: np.ndarray, calib: PeopleCalibration,
     return out
 
 
+def top_sights(order: Sequence[int], ground: np.ndarray, calib: PeopleCalibration,
+               tilt: TiltTrack | None = None) -> list[gr.TopSight]:
+    """Per frame of ``order``, where the top camera sees people on its map
+    (:class:`~xvmatch.cues.ground_registration.TopSight`): out as far as any of its people
+    ``ground`` ``(N, 2)`` stand over the clip; through each frame's own tilt (``tilt``)."""
+    finite = np.isfinite(ground).all(axis=1)
+    reach = float(np.hypot(*ground[finite].T).max()) if finite.any() else 0.0
+    if tilt is None:
+        return [gr.TopSight.of(calib.camera, reach)] * len(order)
+    calibs = tilt.calibrations(calib, np.asarray(order))
+    return [gr.TopSight.of(calibs[int(f)].camera, reach) for f in order]
+
+
 def tilting_top(frames: np.ndarray, tracks: np.ndarray, boxes: np.ndarray,
                 calib: PeopleCalibration, fps: float) -> TiltTrack | None:
     """The top camera's tilt per window (:func:`~xvmatch.geometry.tilting_camera.fit_tilt_track`,
@@ -347,6 +362,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         if options.top_sizes:
             read = top_sizes(top_frames, top_boxes, tracks, calib, tilt)
         top_ground = top_ground_points(top_boxes, calib, read, top_frames, tilt)
+    sights = None if top_points is not None else top_sights(order, top_ground, calib, tilt)
     tops, boxes, sizes = [], [], []
     for f, a, b in zip(order, starts, ends, strict=True):
         h = hor.get(f)
@@ -362,7 +378,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     hfov = options.hor_hfov_deg
     if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
         lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
-                                                          options.hor_size, (top, hor))
+                                                          options.hor_size, (top, hor), sights)
     else:
         if hfov == AUTO_HFOV:
             lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
@@ -370,7 +386,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
             hfov = lens.hfov_deg
         scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps,
                                                 options.hor_size,
-                                                (top, hor) if options.consensus else None)
+                                                (top, hor) if options.consensus else None, sights)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib, tilt), scale=scale, lens=lens,
                              frame_rate=rate, tilt=tilt)
@@ -381,7 +397,8 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 
 
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
-                        hor_size: tuple[int, int], views: tuple[Mapping, Mapping]
+                        hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
+                        sights: list[gr.TopSight] | None = None
                         ) -> tuple[LensChoice, Registered]:
     """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
     tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
@@ -389,8 +406,11 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     one keeping the most pairs chosen (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`); then
     the chosen lens's run as :func:`register_and_pair` makes it (its map scale chosen along the
     tracks too: the lens is chosen first, as a scale chosen per lens lets a wrong lens's run
-    keep more pairs on a small crowd). Arguments as :func:`register_and_pair`'s; returns the
-    choice and the chosen lens's run."""
+    keep more pairs on a small crowd). The lens is chosen on runs without the top camera's
+    ``sights`` (the chosen lens's run is then made with them): they steady a wrong lens's
+    poses on a small crowd too (a render with half of each view's people shared: with them,
+    110 degrees kept 156 pair-frames, all wrong, the right 70 degrees 79).
+    Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
     runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
             for h in HFOV_CANDIDATES}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
@@ -400,12 +420,15 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
+    if sights is not None:
+        runs[hfov] = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
     return choice, scale_along_tracks(order, tops, *runs[hfov], sizes, views)
 
 
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
                       fps: float, hor_size: tuple[int, int],
-                      views: tuple[Mapping, Mapping] | None) -> Registered:
+                      views: tuple[Mapping, Mapping] | None,
+                      sights: list[gr.TopSight] | None = None) -> Registered:
     """The handheld view registered on the top map with a lens of ``hfov`` degrees and each
     frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
     their ids the tracks: video mode) the top map's motion taken out, the pairs made
@@ -423,10 +446,12 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
         fps: frames per second of the frame numbers.
         hor_size: the horizontal view's image size.
         views: see above; None: frame by frame.
+        sights: per frame, where the top camera sees people on its map
+            (:class:`~xvmatch.cues.ground_registration.TopSight`, :func:`top_sights`), or None.
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
-    hors, runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views)
+    hors, runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
     if views is not None:
         return scale_along_tracks(order, tops, hors, runs, sizes, views)
     scale = gr.margin_scale(runs)
@@ -434,7 +459,8 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
 
 
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
-                hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None
+                hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None,
+                sights: list[gr.TopSight] | None = None
                 ) -> tuple[list, dict[float, tuple[float, list[gr.FramePose]]]]:
     """The handheld view's people on its own map (with their ids) and its registration at
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
@@ -444,7 +470,7 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
             for hb, h_ids in boxes]
     return hors, gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
                                     fps, [i for _, i in tops] if views is not None else None,
-                                    sizes)
+                                    sizes, sights)
 
 
 def scale_along_tracks(order: list[int], tops: list, hors: list,

@@ -71,6 +71,7 @@ from xvmatch.inference.matching.ground_association import (
     top_calibration,
     top_frame_rate,
     top_ground_points,
+    top_sights,
     top_sizes,
 )
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
@@ -270,12 +271,15 @@ class TopMap:
             :func:`~xvmatch.inference.matching.ground_association.top_frame_rate`).
         tilt: the top camera's tilt per window where it reads as tilting (each frame mapped
             through its own), else None.
+        sights: ``{frame: TopSight}`` where the top camera sees people on its map
+            (:func:`~xvmatch.inference.matching.ground_association.top_sights`), or None.
     """
 
     points: dict[int, np.ndarray]
     sizes: dict[int, np.ndarray]
     walkers: tuple[np.ndarray, np.ndarray, np.ndarray]
     tilt: TiltTrack | None = None
+    sights: dict[int, gr.TopSight] | None = None
 
 
 def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: PeopleCalibration,
@@ -294,8 +298,10 @@ def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: People
     keys, starts, counts = np.unique(stacked, return_index=True, return_counts=True)
     at = {int(f): slice(a, a + n) for f, a, n in zip(keys, starts, counts, strict=True)}
     empty = np.zeros((0, 2))
+    sights = dict(zip(frames, top_sights(frames, ground, calibration, tilt), strict=True))
     return TopMap({f: ground[at[f]] if f in at else empty for f in frames},
-                  {f: read[rows] for f, rows in at.items()}, (stacked, tracks, ground), tilt)
+                  {f: read[rows] for f, rows in at.items()}, (stacked, tracks, ground), tilt,
+                  sights)
 
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
@@ -359,7 +365,8 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
                 options: MultiGroundOptions,
                 tracks: Sequence[Mapping[int, int]] | None = None,
-                sizes: Mapping[int, np.ndarray] | None = None
+                sizes: Mapping[int, np.ndarray] | None = None,
+                sights: Mapping[int, gr.TopSight] | None = None
                 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """``{frame: ((M, 2), (M, 2))}`` handheld view ``k``'s people on the top map and the rays
     from its camera to them there, on the frames where its pose was registered (both views
@@ -369,7 +376,8 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     registration's jumps and the scale the one whose run with the top view keeps the most
     pairs along both views' tracks, as ``associate`` chooses it
     (:func:`~xvmatch.inference.matching.ground_association.scale_along_tracks`). ``sizes``:
-    ``{frame: (N,)}`` each top person's height over the crowd's, :attr:`TopMap.sizes`."""
+    ``{frame: (N,)}`` each top person's height over the crowd's, :attr:`TopMap.sizes`;
+    ``sights``: :attr:`TopMap.sights`."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -379,14 +387,15 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
     points = [tops[f][ok[f]] for f in order]
     heights = None if sizes is None else [sizes[f][ok[f]] for f in order]
+    seen = None if sights is None else [sights[f] for f in order]
     if tracks is None:
         scale, poses = gr.register_with_scale(order, points, [local[f] for f in order], hfov,
-                                              options.fps, None, heights)
+                                              options.fps, None, heights, seen)
     else:
         pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
         ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
         runs = gr.register_scales(order, points, [local[f] for f in order], hfov, options.fps,
-                                  ids, heights)
+                                  ids, heights, seen)
         scale, poses, _ = scale_along_tracks(
             order, list(zip(points, ids, strict=True)),
             [(local[f], np.asarray(pair[1][f].ids)) for f in order], runs,
@@ -448,7 +457,7 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
     options = _with_lenses(views, frames, calibration, options, top)[0]
     tops, heights = top.points, top.sizes
     placed = [{f: (p, None) for f, p in tops.items() if len(p)},
-              *(_registered(views, k, tops, options, tracks, heights)
+              *(_registered(views, k, tops, options, tracks, heights, top.sights)
                 for k in range(1, len(views)))]
     problems = {}
     for f in frames:
