@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from xvmatch.cues import kernel_choice
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.people_calibration import (
     BODY_WIDTH,
@@ -214,15 +215,20 @@ class TopSight:
         return TopSight(self.ground @ np.diag([1.0 / scale, 1.0 / scale, 1.0]), self.width,
                         self.height, self.reach * scale)
 
+    def bounds(self) -> np.ndarray:
+        """``(5,)`` the pixel bounds (u from, to; v from, to) and the squared reach."""
+        mx, my = _EDGE * self.width, _EDGE * self.height
+        return np.array([mx, self.width - mx, my, self.height - my, self.reach ** 2])
+
     def sees(self, points: np.ndarray) -> np.ndarray:
         """``(...)`` whether people standing at ``points`` ``(..., 2)`` are in sight (the
         pixel's bounds times its ``w > 0``: no division)."""
         x, y = points[..., 0], points[..., 1]
         g = self.ground
         u, v, w = (g[r, 0] * x + g[r, 1] * y + g[r, 2] for r in range(3))
-        mx, my = _EDGE * self.width, _EDGE * self.height
-        return ((w > 0) & (u > mx * w) & (u < (self.width - mx) * w) & (v > my * w)
-                & (v < (self.height - my) * w) & (x * x + y * y < self.reach ** 2))
+        u0, u1, v0, v1, far = self.bounds()
+        return ((w > 0) & (u > u0 * w) & (u < u1 * w) & (v > v0 * w) & (v < v1 * w)
+                & (x * x + y * y < far))
 
 
 def _rotations(headings: np.ndarray) -> np.ndarray:
@@ -289,15 +295,52 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     centres = (top[None, :, None, :] - size[None, :, None, None] * turned[:, None, :, :]
                ).reshape(-1, 2)  # (P, 2), P = H N M, in (heading, i, j) order
     # Horizontal person k of pose p put against top person i at i's height:
-    # centre_p + size_i turned_hk - top_i, a (N, P) slab per k, so that every operation runs
-    # along the P poses (contiguous) and one slab stays in cache; the nearest top person of
-    # each (pose, k) and the nearest horizontal person of each (pose, i) are kept.
-    cx = centres[:, 0].reshape(_HEADINGS, n * m)
-    cy = centres[:, 1].reshape(_HEADINGS, n * m)
+    # centre_p + size_i turned_hk - top_i; the nearest top person of each (pose, k) and the
+    # nearest horizontal person of each (pose, i) are kept (pose_terms).
+    cx = np.ascontiguousarray(centres[:, 0].reshape(_HEADINGS, n * m))
+    cy = np.ascontiguousarray(centres[:, 1].reshape(_HEADINGS, n * m))
     grown = turned[:, :, None, :] * size[None, None, :, None]  # (H, M, N, 2)
-    near_hor = np.empty((m, len(centres)))
-    near_top = np.full((n, len(centres)), np.inf)
-    dx, dy = np.empty((n, _HEADINGS, n * m)), np.empty((n, _HEADINGS, n * m))
+    # The horizontal camera's view: a bearing within the half field of view (|across| <
+    # ahead tan(half), no arctan), as far as its people reach.
+    tan_half = float(np.tan(np.radians(hfov_deg) / 2)) if hfov_deg < 180 else np.inf
+    reach = 1.2 * float(np.max(np.hypot(hor[:, 0], hor[:, 1])))
+    near_hor, missed = pose_terms(cx, cy, grown, turned, top, (np.cos(headings),
+                                  np.sin(headings), tan_half, reach * reach), sight)
+    explained = np.exp(-0.5 * near_hor / _SIGMA**2).sum(axis=1)
+    heading = np.repeat(headings, n * m)
+    # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
+    score = np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
+    poses = np.column_stack([centres, heading])
+    keep = _distinct(poses, np.argsort(-score, kind="stable"))
+    return poses[keep], score[keep]
+
+
+def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
+               top: np.ndarray, view: tuple[np.ndarray, np.ndarray, float, float],
+               sight: TopSight | None) -> tuple[np.ndarray, np.ndarray]:
+    """The terms of :func:`pose_hypotheses`' scores for every pose ``p = h Q + q`` (``cx``,
+    ``cy`` ``(H, Q)`` its centre, facing heading ``h``): ``(P, M)`` each horizontal person's
+    least squared distance to a top person (``grown`` ``(H, M, N, 2)``: horizontal people
+    turned, at each top person's height) and ``(P,)`` the people it leaves unexplained where
+    they would be seen: top people (``top`` ``(N, 2)``) in the horizontal camera's view
+    (``view``: the headings' cos and sin, tan of the half field of view, the squared reach),
+    and horizontal people (``turned`` ``(H, M, 2)``) in the top camera's ``sight``.
+
+    The compiled kernel where numba is loaded (:mod:`~xvmatch.cues.kernel_choice`: one pass,
+    no ``(N, P)`` array), else numpy, horizontal person by horizontal person as an ``(N, P)``
+    slab along the poses; the same arithmetic and comparisons, so the same bits either way."""
+    cos_h, sin_h, tan_half, reach2 = view
+    kernels = kernel_choice.kernels()
+    if kernels is not None:
+        ground = np.zeros((3, 3)) if sight is None else np.ascontiguousarray(sight.ground, float)
+        bounds = np.zeros(0) if sight is None else sight.bounds()
+        return kernels.pose_terms(cx, cy, np.ascontiguousarray(grown),
+                                  np.ascontiguousarray(turned), top, cos_h, sin_h, tan_half,
+                                  reach2, RADIUS**2, ground, bounds)
+    n, m = len(top), grown.shape[1]
+    near_hor = np.empty((m, cx.size))
+    near_top = np.full((n, cx.size), np.inf)
+    dx, dy = np.empty((n, *cx.shape)), np.empty((n, *cx.shape))
     for k in range(m):
         np.add(cx, grown[:, k, :, 0].T[:, :, None], out=dx)
         dx -= top[:, 0, None, None]
@@ -309,29 +352,17 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
         d2 = dx.reshape(n, -1)
         np.minimum(near_top, d2, out=near_top)
         d2.min(axis=0, out=near_hor[k])
-    explained = np.exp(-0.5 * np.ascontiguousarray(near_hor.T) / _SIGMA**2).sum(axis=1)
-    # Top people in the horizontal camera's view (bearing within the half field of view, as far
-    # as its people reach) that no horizontal person explains; (N, P), the exact tests only
-    # where the cheap ones leave a top person possibly unseen.
-    heading = np.repeat(headings, n * m)
-    cos, sin = np.cos(heading), np.sin(heading)
-    rel_x, rel_y = top[:, 0, None] - centres[:, 0], top[:, 1, None] - centres[:, 1]
-    forward = rel_x * cos + rel_y * sin
-    side = -rel_x * sin + rel_y * cos
-    reach = 1.2 * float(np.max(np.hypot(hor[:, 0], hor[:, 1])))
-    unseen = (forward > 0.5) & (near_top > RADIUS**2)
-    ahead, across = forward[unseen], side[unseen]
-    unseen[unseen] = ((np.abs(np.arctan2(across, ahead)) < np.radians(hfov_deg) / 2)
-                      & (np.hypot(ahead, across) < reach))
-    missed = unseen.sum(axis=0)
+    cos, sin = np.repeat(cos_h, cx.shape[1]), np.repeat(sin_h, cx.shape[1])
+    rel_x, rel_y = top[:, 0, None] - cx.reshape(-1), top[:, 1, None] - cy.reshape(-1)
+    ahead = rel_x * cos + rel_y * sin
+    across = -rel_x * sin + rel_y * cos
+    missed = ((near_top > RADIUS**2) & (ahead > 0.5) & (np.abs(across) < ahead * tan_half)
+              & (ahead * ahead + across * across < reach2)).sum(axis=0)
     if sight is not None:  # horizontal people alone where the top camera would see them
-        where = centres[None] + np.repeat(turned.transpose(1, 0, 2), n * m, axis=1)  # (M, P, 2)
+        where = (np.stack([cx.reshape(-1), cy.reshape(-1)], -1)[None]
+                 + np.repeat(turned.transpose(1, 0, 2), cx.shape[1], axis=1))  # (M, P, 2)
         missed = missed + ((near_hor > RADIUS**2) & sight.sees(where)).sum(axis=0)
-    # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
-    score = np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
-    poses = np.column_stack([centres, heading])
-    keep = _distinct(poses, np.argsort(-score, kind="stable"))
-    return poses[keep], score[keep]
+    return np.ascontiguousarray(near_hor.T), missed
 
 
 def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512) -> list[int]:

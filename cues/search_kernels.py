@@ -1,5 +1,6 @@
 """Compiled (numba) kernels of the (O, theta) search of CVMHAT Sec. 3.2: the hypothesis vectors
-(Eqs. 5-8), the lower bound of Phi, and the vector-set matching (Eqs. 11-12).
+(Eqs. 5-8), the lower bound of Phi, and the vector-set matching (Eqs. 11-12); and the oblique
+registration's per-pose terms (``pose_terms``), the same kind of per-hypothesis loop.
 
 The search scores hundreds of hypotheses per frame out of thousands, each two small DTWs, and
 the batched numpy forms spent most of their time in per-cell array calls and in arrays of the
@@ -29,6 +30,7 @@ __all__ = [
     "match_batch",
     "packed_depths",
     "pair_features",
+    "pose_terms",
     "score_groups",
     "sorted_rows",
 ]
@@ -564,3 +566,60 @@ def pair_features(bearing_top: np.ndarray, log_depth: np.ndarray, visible: np.nd
         for i in range(n_top):
             for j in range(n_hor):
                 out[h, i, j, 10] = _clip(absdiff[i, j] - col_ref[j], 0.0, clip)
+
+
+
+@njit(cache=True)
+def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
+               top: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray, tan_half: float,
+               reach2: float, far2: float, ground: np.ndarray, bounds: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The oblique registration's per-pose terms (:func:`~xvmatch.cues.ground_registration.
+    pose_terms`, its numpy form, step by step): pose ``p = h Q + q`` at (``cx``, ``cy``
+    ``(H, Q)``) facing heading ``h``; returns ``(P, M)`` each horizontal person's least squared
+    distance to a top person and ``(P,)`` the people it leaves unexplained in a view: top
+    people in the horizontal camera's, and (``bounds`` not empty) horizontal people in the top
+    camera's sight (``ground`` its homography, ``bounds`` its pixel bounds and squared
+    reach)."""
+    n_head, n_q = cx.shape
+    m, n = grown.shape[1], top.shape[0]
+    near_hor = np.empty((n_head * n_q, m))
+    missed = np.zeros(n_head * n_q, dtype=np.int64)
+    near_top = np.empty(n)
+    sight = bounds.shape[0] > 0
+    gx, gy = grown[..., 0].copy(), grown[..., 1].copy()  # (H, M, N), unit stride along N
+    tx, ty = top[:, 0].copy(), top[:, 1].copy()
+    d = np.empty(n)
+    for h in range(n_head):
+        c, s = cos_h[h], sin_h[h]
+        for q in range(n_q):
+            p = h * n_q + q
+            x, y = cx[h, q], cy[h, q]
+            near_top[:] = np.inf
+            for k in range(m):
+                for i in range(n):
+                    dx = (x + gx[h, k, i]) - tx[i]
+                    dy = (y + gy[h, k, i]) - ty[i]
+                    d[i] = dx * dx + dy * dy
+                best = np.inf
+                for i in range(n):
+                    best = min(best, d[i])
+                    near_top[i] = min(near_top[i], d[i])
+                near_hor[p, k] = best
+                if sight and best > far2:
+                    px, py = x + turned[h, k, 0], y + turned[h, k, 1]
+                    u = (ground[0, 0] * px + ground[0, 1] * py) + ground[0, 2]
+                    v = (ground[1, 0] * px + ground[1, 1] * py) + ground[1, 2]
+                    w = (ground[2, 0] * px + ground[2, 1] * py) + ground[2, 2]
+                    if (w > 0 and u > bounds[0] * w and u < bounds[1] * w and v > bounds[2] * w
+                            and v < bounds[3] * w and px * px + py * py < bounds[4]):
+                        missed[p] += 1
+            for i in range(n):
+                if near_top[i] > far2:
+                    rx, ry = top[i, 0] - x, top[i, 1] - y
+                    ahead = rx * c + ry * s
+                    across = -rx * s + ry * c
+                    if (ahead > 0.5 and abs(across) < ahead * tan_half
+                            and ahead * ahead + across * across < reach2):
+                        missed[p] += 1
+    return near_hor, missed

@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.cues import ground_registration as gr
+from xvmatch.cues import kernel_choice
 
 
 def _view(top: np.ndarray, centre: np.ndarray, heading: float) -> np.ndarray:
@@ -317,6 +318,26 @@ def test_hypotheses_are_the_best_distinct_poses_scored_as_defined(seed: int, n: 
                         or _plain_score(top, hor, sizes, pose, hfov, plain_sight)
                         > scores[-1] + 1e-6):
                     assert not all(apart(pose, q, 1e-9) for q in poses)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 14), m=st.integers(1, 13),
+       hfov=st.floats(40.0, 170.0), with_sight=st.booleans(), with_sizes=st.booleans())
+def test_the_compiled_pose_terms_are_numpys_bit_for_bit(seed: int, n: int, m: int, hfov: float,
+                                                         with_sight: bool,
+                                                         with_sizes: bool) -> None:
+    """The numba kernel of the pose terms and their numpy form give the same poses and scores,
+    bit for bit (the same arithmetic and comparisons), with and without sizes and the sight."""
+    rng = np.random.default_rng(seed)
+    top = rng.uniform(-15, 15, (n, 2))
+    hor = np.column_stack([rng.uniform(1, 25, m), rng.uniform(-8, 8, m)])
+    sizes = rng.uniform(0.9, 1.1, n) if with_sizes else None
+    sight = gr.TopSight.of(_top_camera(), 14.0) if with_sight else None
+    with kernel_choice.forced("compiled"):
+        compiled = gr.pose_hypotheses(top, hor, hfov, sizes, sight)
+    with kernel_choice.forced("numpy"):
+        plain = gr.pose_hypotheses(top, hor, hfov, sizes, sight)
+    assert np.array_equal(compiled[0], plain[0]) and np.array_equal(compiled[1], plain[1])
 
 
 def test_ray_distances_read_at_the_top_persons_height() -> None:
