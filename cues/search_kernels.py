@@ -568,7 +568,6 @@ def pair_features(bearing_top: np.ndarray, log_depth: np.ndarray, visible: np.nd
                 out[h, i, j, 10] = _clip(absdiff[i, j] - col_ref[j], 0.0, clip)
 
 
-
 @njit(cache=True)
 def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
                top: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray, tan_half: float,
@@ -616,7 +615,7 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
                         missed[p] += 1
             for i in range(n):
                 if near_top[i] > far2:
-                    rx, ry = top[i, 0] - x, top[i, 1] - y
+                    rx, ry = tx[i] - x, ty[i] - y
                     ahead = rx * c + ry * s
                     across = -rx * s + ry * c
                     if (ahead > 0.5 and abs(across) < ahead * tan_half
