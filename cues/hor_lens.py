@@ -30,6 +30,14 @@ the tracks most (:func:`pick_along_tracks`): a wrong lens's pairs change partner
 and the consensus drops them, a test of the arrangement over the whole clip that needs no
 chance score and no margin; it costs about three runs (the chosen one is the run).
 
+The three candidates are guesses, 20 degrees apart; the pairs the chosen run keeps measure the
+lens (:func:`implied_hfov`): a wrong focal length stretches the handheld map along the camera's
+axis only, so the top map's distances between paired people, against the handheld map's ahead
+and across, give the stretch, and the lens, without any pose. Where that lens differs from the
+run's by :data:`MIN_REMEASURE_DEG` or more (and is not a candidate), the whole run is made with
+it too and kept where its pairs hold along the tracks more often (a fourth run; a tie keeps
+the candidate: where every lens keeps the same pairs, the pairs are no measure of it).
+
 Measured on rendered scenes (``benchmarks/oblique_association.py --choose-lens``,
 docs/notes/oblique_top_camera.md): without the chance check the choice lost up to 4 CVIDF1 on
 ordinary lenses, picking a wide lens where no lens registered; scored above chance alone (no
@@ -45,6 +53,7 @@ the 20-frame choice; 100.0, 99.3 and 97.9 with the true lens), the ordinary lens
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,12 +65,16 @@ __all__ = [
     "HFOV_CANDIDATES",
     "LENS_MARGIN",
     "MAX_FRAMES",
+    "MEASURED_RANGE",
+    "MIN_MEASURED_PEOPLE",
     "MIN_PAIRING",
     "MIN_PEOPLE",
+    "MIN_REMEASURE_DEG",
     "NEAR_TIE",
     "LensChoice",
     "chance_score",
     "choose_hor_hfov",
+    "implied_hfov",
     "pairing_score",
     "pick_along_tracks",
 ]
@@ -99,6 +112,19 @@ against the prior's 110 of the same three, all right; in the three other near ti
 against 0.986, 1.000 against 0.990 and 0.985), it joined more people (6 against 5, 8 against
 7, 10 against 8)."""
 
+MEASURED_RANGE = (45.0, 130.0)
+"""The fields of view, degrees, a lens measured from a run's pairs (:func:`implied_hfov`) is
+held to: wider than an action camera's pinhole reading nothing is sure (pairs that imply more
+are wrong pairs or a fisheye)."""
+
+MIN_MEASURED_PEOPLE = 3
+"""Top-view people a run's pairs must join for the lens they imply (:func:`implied_hfov`) to
+be tried: two people give one distance, which a depth stretch and a scale share."""
+
+MIN_REMEASURE_DEG = 3.0
+"""Degrees the lens a run's pairs imply must differ from the run's own for another run to be
+made at it (:func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`)."""
+
 MAX_FRAMES = 20
 """Frames registered per candidate lens at most (evenly spread over the clip)."""
 
@@ -122,6 +148,9 @@ class LensChoice:
         along_tracks: chosen by :func:`pick_along_tracks` (video mode): ``scores`` are the
             pairs each lens's whole run kept along the tracks, ``chance`` is empty.
         people: along the tracks, ``{candidate hfov: the top-view people its pairs join}``.
+        measured_from: where ``hfov_deg`` is the lens a candidate's pairs imply
+            (:func:`implied_hfov`), that candidate (``scores``, ``scales`` and ``people``
+            then hold the measured lens's run too, as made); None: a candidate.
     """
 
     hfov_deg: float
@@ -131,6 +160,7 @@ class LensChoice:
     chance: dict[float, float] = field(default_factory=dict)
     along_tracks: bool = False
     people: dict[float, int] = field(default_factory=dict)
+    measured_from: float | None = None
 
     @property
     def registered(self) -> bool:
@@ -152,6 +182,53 @@ class LensChoice:
             return ("no other lens kept more pairs along the tracks" if self.along_tracks else
                     "no other lens paired clearly more of its people")
         return None
+
+
+def implied_hfov(hfov_deg: float, tops: list[np.ndarray], hors: list[np.ndarray]
+                 ) -> float | None:
+    """The horizontal field of view, whole degrees within :data:`MEASURED_RANGE`, that a run's
+    pairs imply; None where they cannot tell (fewer than three distances, or a degenerate fit).
+
+    A lens of the wrong focal length stretches the handheld map along the camera's axis only:
+    a person's distance ahead is ``f H / h`` while the offset across is ``H (u - c) / h``, free
+    of ``f``. So between two paired people, the top map's squared distance is
+    ``s^2 (k^2 da^2 + dc^2)`` for the handheld map's ``da`` (ahead) and ``dc`` (across), ``s``
+    the maps' scale and ``k`` the true over the used focal length: linear in ``s^2 k^2`` and
+    ``s^2``, fitted by least squares over every pair of pairs of every frame (no pose needed).
+    The two-by-two normal equations are solved by hand and the answer rounded: the same lens
+    on every CPU.
+
+    Args:
+        hfov_deg: the field of view the handheld map was read with, degrees.
+        tops: per frame, the paired people on the top map ``(P, 2)``.
+        hors: per frame, the same people, row for row, on the handheld map ``(P, 2)`` (x ahead,
+            y across; read at their top partner's height where the run reads them so).
+    """
+    rows = []
+    for top, hor in zip(tops, hors, strict=True):
+        top = np.asarray(top, float).reshape(-1, 2)
+        hor = np.asarray(hor, float).reshape(-1, 2)
+        if len(top) != len(hor):
+            raise ValueError(f"each frame's tops and hors must pair row for row, got "
+                             f"{len(top)} and {len(hor)}")
+        i, j = np.triu_indices(len(top), 1)
+        d_top = ((top[i] - top[j]) ** 2).sum(axis=1)
+        rows.append(np.column_stack([(hor[i] - hor[j]) ** 2, d_top]))
+    table = np.vstack(rows) if rows else np.zeros((0, 3))
+    if len(table) < 3:
+        return None
+    a, c, y = table.T
+    # The normal equations of y = alpha a + beta c, by Cramer's rule.
+    aa, ac, cc, ay, cy = (float(np.sum(v)) for v in (a * a, a * c, c * c, a * y, c * y))
+    det = aa * cc - ac * ac
+    if not det > 1e-9 * aa * cc:
+        return None
+    alpha, beta = (ay * cc - cy * ac) / det, (aa * cy - ac * ay) / det
+    if not (alpha > 0 and beta > 0):
+        return None
+    k = math.sqrt(alpha / beta)  # the math module's: the same on every CPU
+    hfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov_deg) / 2) / k))
+    return float(min(max(round(hfov), MEASURED_RANGE[0]), MEASURED_RANGE[1]))
 
 
 def _subsample(n: int, max_frames: int) -> list[int]:

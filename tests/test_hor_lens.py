@@ -6,15 +6,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from xvmatch.cues.ground_registration import hor_ground_points
 from xvmatch.cues.hor_lens import (
     HFOV_CANDIDATES,
+    MEASURED_RANGE,
     MIN_PEOPLE,
     NEAR_TIE,
     LensChoice,
     _pick,
     _subsample,
     choose_hor_hfov,
+    implied_hfov,
     pick_along_tracks,
 )
 
@@ -179,3 +184,55 @@ def test_video_mode_keeps_the_lens_whose_pairs_hold_along_the_tracks() -> None:
     assert not none.registered and none.why_prior == "no lens tried kept a pair along the tracks"
     assert kept.registered and kept.why_prior == "no other lens kept more pairs along the tracks"
     assert wide.registered and wide.why_prior is None
+
+
+def _seen(true_hfov: float, used_hfov: float, rng: np.random.Generator, n: int, scale: float,
+          turn: float) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` people in front of a level camera of ``true_hfov``: on a top map (turned by
+    ``turn``, moved, ``scale`` times the metres) and on the handheld map read from their
+    boxes with a lens of ``used_hfov`` (:func:`hor_ground_points`)."""
+    ahead = rng.uniform(5.0, 30.0, n)
+    half = np.radians(true_hfov) / 2 - 0.05
+    left = ahead * np.tan(rng.uniform(-half, half, n))
+    f = 0.5 * SIZE[0] / np.tan(np.radians(true_hfov) / 2)
+    height = f * 1.72 / ahead
+    column = 0.5 * SIZE[0] - f * left / ahead
+    boxes = np.column_stack([column - 0.2 * height, np.full(n, 50.0), 0.4 * height, height])
+    c, s = np.cos(turn), np.sin(turn)
+    top = scale * np.column_stack([ahead, left]) @ np.array([[c, s], [-s, c]]) + [3.0, -7.0]
+    return top, hor_ground_points(boxes, SIZE, used_hfov)
+
+
+@settings(max_examples=60, deadline=None)
+@given(true_hfov=st.floats(50.0, 120.0), used=st.sampled_from(HFOV_CANDIDATES),
+       people=st.lists(st.integers(3, 9), min_size=1, max_size=4),
+       scale=st.floats(0.7, 1.4), turn=st.floats(-np.pi, np.pi), seed=st.integers(0, 2**16))
+def test_right_pairs_imply_the_true_lens_read_with_any_lens(
+        true_hfov: float, used: float, people: list[int], scale: float, turn: float,
+        seed: int) -> None:
+    """A wrong lens stretches the handheld map along its axis only, so the right pairs give
+    the true field of view back to the degree, whatever lens read them, at any map scale,
+    heading and place, over one frame or several."""
+    rng = np.random.default_rng(seed)
+    frames = [_seen(true_hfov, used, rng, n, scale, turn + k) for k, n in enumerate(people)]
+    implied = implied_hfov(used, [t for t, _ in frames], [h for _, h in frames])
+    assert implied is not None and implied == round(implied)
+    assert abs(implied - true_hfov) <= 0.5 + 1e-9
+
+
+def test_a_lens_is_implied_only_where_the_pairs_tell() -> None:
+    """Fewer than three distances, or people all straight ahead (no spread across: the depth
+    stretch and the scale cannot be told apart), imply nothing; a fit beyond the pinhole
+    lenses is held to :data:`MEASURED_RANGE`; frames must pair row for row."""
+    rng = np.random.default_rng(0)
+    top, hor = _seen(80.0, 70.0, rng, 3, 1.0, 0.3)
+    assert implied_hfov(70.0, [top[:2], top[1:]], [hor[:2], hor[1:]]) is None  # 2 distances
+    assert implied_hfov(70.0, [top], [hor]) == 80.0  # 3 distances
+    assert implied_hfov(70.0, [], []) is None
+    line = np.column_stack([[5.0, 9.0, 14.0, 20.0], np.zeros(4)])
+    assert implied_hfov(70.0, [line * 1.3], [line]) is None
+    wide, wide_hor = _seen(120.0, 70.0, rng, 6, 1.0, 0.0)
+    assert implied_hfov(70.0, [wide], [wide_hor * [3.0, 1.0]]) == MEASURED_RANGE[1]
+    assert implied_hfov(70.0, [wide], [wide_hor * [0.2, 1.0]]) == MEASURED_RANGE[0]
+    with pytest.raises(ValueError, match="pair row for row"):
+        implied_hfov(70.0, [top], [hor[:2]])

@@ -45,15 +45,18 @@ frame numbered 1, 2, 3).
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import (
     HFOV_CANDIDATES,
+    MIN_MEASURED_PEOPLE,
+    MIN_REMEASURE_DEG,
     LensChoice,
     choose_hor_hfov,
+    implied_hfov,
     pick_along_tracks,
 )
 from xvmatch.formats.mot_boxes import stack_frames
@@ -309,6 +312,10 @@ def _summary(calib: PeopleCalibration, tilt: TiltTrack | None = None) -> str:
 
 def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
     """The line saying which lens ``--hor-hfov auto`` chose (``view``: whose)."""
+    if choice.measured_from is not None:
+        return (f"{view}: {choice.hfov_deg:.0f} degrees, chosen from its people (measured "
+                f"from the pairs of a {choice.measured_from:.0f}-degree run; give --hor-hfov "
+                "DEG if known)")
     if choice.why_prior is None:
         return (f"{view}: {choice.hfov_deg:.0f} degrees, chosen from its people (give "
                 "--hor-hfov DEG if known)")
@@ -409,7 +416,11 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     keep more pairs on a small crowd). The lens is chosen on runs without the top camera's
     ``sights`` (the chosen lens's run is then made with them): they steady a wrong lens's
     poses on a small crowd too (a render with half of each view's people shared: with them,
-    110 degrees kept 156 pair-frames, all wrong, the right 70 degrees 79).
+    110 degrees kept 156 pair-frames, all wrong, the right 70 degrees 79). Then the lens the
+    chosen run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement, not
+    one of three guesses) is run too where it differs, and kept where its pairs hold along the
+    tracks more often (the choice's ``measured_from`` says so; on tilting close drones, whose
+    runs kept as many pairs at any lens, the lens measured was up to 54 degrees off).
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
     runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
             for h in HFOV_CANDIDATES}
@@ -422,7 +433,37 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                         along_tracks=True, people=people)
     if sights is not None:
         runs[hfov] = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
-    return choice, scale_along_tracks(order, tops, *runs[hfov], sizes, views)
+    run = scale_along_tracks(order, tops, *runs[hfov], sizes, views)
+    implied = _implied(order, tops, runs[hfov][0], sizes, hfov, run[2])
+    if (implied is None or implied in runs or abs(implied - hfov) < MIN_REMEASURE_DEG):
+        return choice, run  # nothing told, a candidate already run, or too near to matter
+    measured = register_and_pair(order, tops, boxes, sizes, implied, fps, hor_size, views, sights)
+    (kept, people), (before, _) = _kept({0: measured[2]}), _kept({0: run[2]})
+    if kept[0] <= before[0]:  # a tie tells nothing: the lens the pairs imply is not claimed
+        return choice, run
+    return replace(choice, hfov_deg=implied, measured_from=hfov,
+                   scores={**choice.scores, implied: float(kept[0])},
+                   scales={**choice.scales, implied: measured[0]},
+                   people={**choice.people, implied: people[0]}), measured
+
+
+def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
+             pairs: Mapping[int, list[tuple[int, int]]]) -> float | None:
+    """The lens a run's ``pairs`` imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`), each
+    handheld person read at their top partner's height as the run reads them; None where they
+    join fewer than :data:`~xvmatch.cues.hor_lens.MIN_MEASURED_PEOPLE` top-view people."""
+    if _kept({0: pairs})[1][0] < MIN_MEASURED_PEOPLE:
+        return None
+    paired_top, paired_hor = [], []
+    for f, (top, t_ids), (hor, h_ids), size in zip(order, tops, hors, sizes, strict=True):
+        if len(pairs.get(f, ())) < 2:
+            continue
+        at_top = {int(t): k for k, t in enumerate(t_ids)}
+        at_hor = {int(h): k for k, h in enumerate(h_ids)}
+        rows = np.array([at_top[t] for t, _ in pairs[f]])
+        paired_top.append(top[rows])
+        paired_hor.append(hor[[at_hor[h] for _, h in pairs[f]]] * size[rows, None])
+    return implied_hfov(hfov, paired_top, paired_hor)
 
 
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,

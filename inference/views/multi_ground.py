@@ -357,6 +357,8 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
     """The line saying which lens ``--hor-hfov auto`` chose for each handheld view."""
     said = [f"hor{k} {choice.hfov_deg:.0f}"
             + ("" if choice.why_prior is None else f" (the prior: {choice.why_prior})")
+            + ("" if choice.measured_from is None else
+               f" (measured from a {choice.measured_from:.0f}-degree run's pairs)")
             for k, choice in enumerate(choices, 1)]
     return (f"handheld lenses, degrees, chosen from their people: {', '.join(said)} (give "
             "--hor-hfov DEG if known)")
