@@ -435,16 +435,16 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         runs[hfov] = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
     run = scale_along_tracks(order, tops, *runs[hfov], sizes, views)
     implied = _implied(order, tops, runs[hfov][0], sizes, hfov, run[2])
-    if (implied is None or implied in runs or abs(implied - hfov) < MIN_REMEASURE_DEG):
+    if implied is None or implied in runs or abs(implied - hfov) < MIN_REMEASURE_DEG:
         return choice, run  # nothing told, a candidate already run, or too near to matter
     measured = register_and_pair(order, tops, boxes, sizes, implied, fps, hor_size, views, sights)
-    (kept, people), (before, _) = _kept({0: measured[2]}), _kept({0: run[2]})
-    if kept[0] <= before[0]:  # a tie tells nothing: the lens the pairs imply is not claimed
+    kept, people = _count(measured[2])
+    if kept <= _count(run[2])[0]:  # a tie tells nothing: the lens the pairs imply is not claimed
         return choice, run
     return replace(choice, hfov_deg=implied, measured_from=hfov,
-                   scores={**choice.scores, implied: float(kept[0])},
+                   scores={**choice.scores, implied: float(kept)},
                    scales={**choice.scales, implied: measured[0]},
-                   people={**choice.people, implied: people[0]}), measured
+                   people={**choice.people, implied: people}), measured
 
 
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
@@ -452,7 +452,7 @@ def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
     """The lens a run's ``pairs`` imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`), each
     handheld person read at their top partner's height as the run reads them; None where they
     join fewer than :data:`~xvmatch.cues.hor_lens.MIN_MEASURED_PEOPLE` top-view people."""
-    if _kept({0: pairs})[1][0] < MIN_MEASURED_PEOPLE:
+    if _count(pairs)[1] < MIN_MEASURED_PEOPLE:
         return None
     paired_top, paired_hor = [], []
     for f, (top, t_ids), (hor, h_ids), size in zip(order, tops, hors, sizes, strict=True):
@@ -529,8 +529,13 @@ def _kept(runs: Mapping[float, Mapping[int, list[tuple[int, int]]]]
           ) -> tuple[dict[float, int], dict[float, int]]:
     """Per candidate run (a lens, a map scale), the pairs it kept over the frames and the
     top-view people they join (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`' counts)."""
-    return ({c: sum(map(len, p.values())) for c, p in runs.items()},
-            {c: len({t for frame in p.values() for t, _ in frame}) for c, p in runs.items()})
+    counts = {c: _count(p) for c, p in runs.items()}
+    return {c: n for c, (n, _) in counts.items()}, {c: m for c, (_, m) in counts.items()}
+
+
+def _count(pairs: Mapping[int, list[tuple[int, int]]]) -> tuple[int, int]:
+    """One run's pairs kept over the frames and the top-view people they join."""
+    return sum(map(len, pairs.values())), len({t for frame in pairs.values() for t, _ in frame})
 
 
 def _consistent(order: list[int], tops: list, hors: list, sizes: list, scale: float,
