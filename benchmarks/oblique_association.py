@@ -84,9 +84,10 @@ field of view chosen from the people: as this row runs in video mode, the candid
 whole run keeps the most pairs along the tracks,
 :func:`~xvmatch.cues.hor_lens.pick_along_tracks`); each scene's line gives the true and the
 chosen lens with the pairs each candidate kept (``lens:kept/Np``: pair-frames, and the
-top-view people they join; frame by frame the choice would give each candidate's pairing score
-and chance score, ``lens:in/chance``), and the summary the seconds the choice and its run
-took.
+top-view people they join; then ``made lens:kept``, each lens's run as made with the top
+camera's sights, :func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`;
+frame by frame the choice would give each candidate's pairing score and chance score,
+``lens:in/chance``), and the summary the seconds the choice and its run took.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --hor-hfov 90 120 --choose-lens
 
@@ -435,6 +436,9 @@ def main(argv: list[str] | None = None) -> int:
                 lens_scores = " ".join(  # video mode: pairs kept along the tracks
                     f"{h:.0f}:{v:.0f}/{choice.people[h]}p" if h not in choice.chance else
                     f"{h:.0f}:{v:.1f}/{choice.chance[h]:.1f}" for h, v in choice.scores.items())
+                if choice.made:  # each lens's run as made, with the top camera's sights
+                    lens_scores += "; made " + " ".join(f"{h:.0f}:{v:.0f}"
+                                                        for h, v in choice.made.items())
         routed = voted if calib is not None and calib.kind == "oblique" else consistent_pairs(
             search, top, hor, frames)
         preds = (search, follow, true, people, voted, routed)

@@ -28,15 +28,20 @@ That is the choice frame by frame. In video mode (each view's track ids read) th
 make the whole run with each candidate lens instead and keep the one whose pairs hold along
 the tracks most (:func:`pick_along_tracks`): a wrong lens's pairs change partner along a track
 and the consensus drops them, a test of the arrangement over the whole clip that needs no
-chance score and no margin; it costs about three runs (the chosen one is the run).
+chance score and no margin. Those runs leave out where the top camera would see people (a term
+that steadies a wrong lens's poses on a small crowd too); each lens's run is then made with it,
+and another lens's replaces the chosen one's where it keeps more than :data:`NEAR_TIE` times
+its pairs.
 
-The three candidates are guesses, 20 degrees apart; the pairs the chosen run keeps measure the
-lens (:func:`implied_hfov`): a wrong focal length stretches the handheld map along the camera's
+The three candidates are guesses, 20 degrees apart; the pairs a run keeps measure the lens
+(:func:`implied_hfov`): a wrong focal length stretches the handheld map along the camera's
 axis only, so the top map's distances between paired people, against the handheld map's ahead
-and across, give the stretch, and the lens, without any pose. Where that lens differs from the
-run's by :data:`MIN_REMEASURE_DEG` or more (and is not a candidate), the whole run is made with
-it too and kept where its pairs hold along the tracks more often (a fourth run; a tie keeps
-the candidate: where every lens keeps the same pairs, the pairs are no measure of it).
+and across, give the stretch, and the lens, without any pose. Where the lens each run's pairs
+imply differs from the run's by :data:`MIN_REMEASURE_DEG` or more (and is not a candidate nor
+one measured already), the whole run is made with it too and kept where its pairs hold along
+the tracks more often (than the chosen lens's run, measured from it; more than a near tie,
+measured from another lens's; a tie keeps the candidate: where every lens keeps the same
+pairs, the pairs are no measure of it). All told six to nine runs.
 
 Measured on rendered scenes (``benchmarks/oblique_association.py --choose-lens``,
 docs/notes/oblique_top_camera.md): without the chance check the choice lost up to 4 CVIDF1 on
@@ -110,7 +115,10 @@ pair-frames replaces it only where its pairs also join more top-view people
 against the prior's 110 of the same three, all right; in the three other near ties (within
 10 %) among the clips measured with it, where the wider lens paired slightly better (0.989
 against 0.986, 1.000 against 0.990 and 0.985), it joined more people (6 against 5, 8 against
-7, 10 against 8)."""
+7, 10 against 8). Then another lens's run made with the top camera's sights, or a lens
+measured from another lens's pairs, replaces the chosen run only where it keeps more than this
+many times its pairs
+(:func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`)."""
 
 MEASURED_RANGE = (45.0, 130.0)
 """The fields of view, degrees, a lens measured from a run's pairs (:func:`implied_hfov`) is
@@ -151,6 +159,9 @@ class LensChoice:
         measured_from: where ``hfov_deg`` is the lens a candidate's pairs imply
             (:func:`implied_hfov`), that candidate (``scores``, ``scales`` and ``people``
             then hold the measured lens's run too, as made); None: a candidate.
+        made: along the tracks, ``{candidate hfov: the pair-frames of its run as made}``
+            (with the top camera's sights where given; ``scores`` are those of the runs the
+            lens is first chosen on, without them).
     """
 
     hfov_deg: float
@@ -161,6 +172,7 @@ class LensChoice:
     along_tracks: bool = False
     people: dict[float, int] = field(default_factory=dict)
     measured_from: float | None = None
+    made: dict[float, float] = field(default_factory=dict)
 
     @property
     def registered(self) -> bool:

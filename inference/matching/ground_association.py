@@ -53,7 +53,9 @@ from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import (
     HFOV_CANDIDATES,
     MIN_MEASURED_PEOPLE,
+    MIN_PEOPLE,
     MIN_REMEASURE_DEG,
+    NEAR_TIE,
     LensChoice,
     choose_hor_hfov,
     implied_hfov,
@@ -410,17 +412,21 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
     tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
     keeps it) with each candidate lens (:data:`~xvmatch.cues.hor_lens.HFOV_CANDIDATES`), the
-    one keeping the most pairs chosen (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`); then
-    the chosen lens's run as :func:`register_and_pair` makes it (its map scale chosen along the
-    tracks too: the lens is chosen first, as a scale chosen per lens lets a wrong lens's run
-    keep more pairs on a small crowd). The lens is chosen on runs without the top camera's
-    ``sights`` (the chosen lens's run is then made with them): they steady a wrong lens's
-    poses on a small crowd too (a render with half of each view's people shared: with them,
-    110 degrees kept 156 pair-frames, all wrong, the right 70 degrees 79). Then the lens the
-    chosen run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement, not
-    one of three guesses) is run too where it differs, and kept where its pairs hold along the
-    tracks more often (the choice's ``measured_from`` says so; on tilting close drones, whose
-    runs kept as many pairs at any lens, the lens measured was up to 54 degrees off).
+    one keeping the most pairs chosen (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`). The
+    lens is chosen on runs without the top camera's ``sights``: they steady a wrong lens's
+    poses on a small crowd too. Then each lens's run as :func:`register_and_pair` makes it
+    (with them; its map scale chosen along the tracks too: the lens is chosen first, as a scale
+    chosen per lens lets a wrong lens's run keep more pairs on a small crowd), another lens's
+    run replacing the chosen one's where it keeps more than
+    :data:`~xvmatch.cues.hor_lens.NEAR_TIE` times its pairs, where its run without them
+    joined :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people (a 65 degree lens: without the
+    sights 110 degrees kept 122 pair-frames, a third wrong, 70 kept 51, all right; with them,
+    130 and 190). Then the lens each run's pairs imply
+    (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement, not one of three guesses) is
+    run too where it differs, and kept where its pairs hold along the tracks more often (the
+    chosen lens's; another lens's, more than a near tie; the choice's ``measured_from`` says
+    so; a tie keeps the candidate: on tilting close drones, whose runs kept as many pairs at
+    any lens, the lens measured was up to 54 degrees off).
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
     runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
             for h in HFOV_CANDIDATES}
@@ -431,20 +437,37 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
-    if sights is not None:
-        runs[hfov] = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
-    run = scale_along_tracks(order, tops, *runs[hfov], sizes, views)
-    implied = _implied(order, tops, runs[hfov][0], sizes, hfov, run[2])
-    if implied is None or implied in runs or abs(implied - hfov) < MIN_REMEASURE_DEG:
-        return choice, run  # nothing told, a candidate already run, or too near to matter
-    measured = register_and_pair(order, tops, boxes, sizes, implied, fps, hor_size, views, sights)
-    kept, people = _count(measured[2])
-    if kept <= _count(run[2])[0]:  # a tie tells nothing: the lens the pairs imply is not claimed
+    if sights is not None:  # each lens's run as made, the chosen one's first
+        runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights)
+                for h in (hfov, *(h for h in runs if h != hfov))}
+    made = {h: scale_along_tracks(order, tops, *runs[h], sizes, views) for h in runs}
+    best, run = hfov, made[hfov]
+    for h, other in made.items():  # another lens's run needs more than a near tie, and
+        # pairs of two people or more without the sights (which steady any lens's poses)
+        if people[h] >= MIN_PEOPLE and _count(other[2])[0] > NEAR_TIE * _count(run[2])[0]:
+            best, run = h, other
+    measured_from, tried = None, set()
+    for source in made:  # then the lens each run's pairs imply, the chosen one's first
+        implied = _implied(order, tops, runs[source][0], sizes, source, made[source][2])
+        if (implied is None or implied in runs or abs(implied - source) < MIN_REMEASURE_DEG
+                or any(abs(implied - t) < MIN_REMEASURE_DEG for t in tried)):
+            continue  # nothing told, a candidate already run, or too near to matter
+        tried.add(implied)
+        measured = register_and_pair(order, tops, boxes, sizes, implied, fps, hor_size, views,
+                                     sights)
+        # a tie tells nothing; another lens's measurement needs more than a near tie
+        if _count(measured[2])[0] > _count(run[2])[0] * (1.0 if source == hfov else NEAR_TIE):
+            best, measured_from, run = implied, source, measured
+    choice = replace(choice, made={h: float(_count(m[2])[0]) for h, m in made.items()})
+    if best == hfov:
         return choice, run
-    return replace(choice, hfov_deg=implied, measured_from=hfov,
-                   scores={**choice.scores, implied: float(kept)},
-                   scales={**choice.scales, implied: measured[0]},
-                   people={**choice.people, implied: people}), measured
+    if measured_from is None:
+        return replace(choice, hfov_deg=best, scales={**choice.scales, best: run[0]}), run
+    kept, people = _count(run[2])
+    return replace(choice, hfov_deg=best, measured_from=measured_from,
+                   scores={**choice.scores, best: float(kept)},
+                   scales={**choice.scales, best: run[0]},
+                   people={**choice.people, best: people}), run
 
 
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
