@@ -441,11 +441,12 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights)
                 for h in (hfov, *(h for h in runs if h != hfov))}
     made = {h: scale_along_tracks(order, tops, *runs[h], sizes, views) for h in runs}
-    best, run = hfov, made[hfov]
+    made_kept = {h: _count(m[2])[0] for h, m in made.items()}
+    best, run, run_kept = hfov, made[hfov], made_kept[hfov]
     for h, other in made.items():  # another lens's run needs more than a near tie, and
         # pairs of two people or more without the sights (which steady any lens's poses)
-        if people[h] >= MIN_PEOPLE and _count(other[2])[0] > NEAR_TIE * _count(run[2])[0]:
-            best, run = h, other
+        if people[h] >= MIN_PEOPLE and made_kept[h] > NEAR_TIE * run_kept:
+            best, run, run_kept = h, other, made_kept[h]
     measured_from, tried = None, set()
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
         implied = _implied(order, tops, runs[source][0], sizes, source, made[source][2])
@@ -455,19 +456,18 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         tried.add(implied)
         measured = register_and_pair(order, tops, boxes, sizes, implied, fps, hor_size, views,
                                      sights)
+        kept_here = _count(measured[2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
-        if _count(measured[2])[0] > _count(run[2])[0] * (1.0 if source == hfov else NEAR_TIE):
-            best, measured_from, run = implied, source, measured
-    choice = replace(choice, made={h: float(_count(m[2])[0]) for h, m in made.items()})
-    if best == hfov:
-        return choice, run
-    if measured_from is None:
-        return replace(choice, hfov_deg=best, scales={**choice.scales, best: run[0]}), run
-    kept, people = _count(run[2])
-    return replace(choice, hfov_deg=best, measured_from=measured_from,
-                   scores={**choice.scores, best: float(kept)},
-                   scales={**choice.scales, best: run[0]},
-                   people={**choice.people, best: people}), run
+        if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
+            best, measured_from, run, run_kept = implied, source, measured, kept_here
+    choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
+    if best != hfov:
+        choice = replace(choice, hfov_deg=best, scales={**choice.scales, best: run[0]})
+    if measured_from is not None:
+        choice = replace(choice, measured_from=measured_from,
+                         scores={**choice.scores, best: float(run_kept)},
+                         people={**choice.people, best: _count(run[2])[1]})
+    return choice, run
 
 
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
