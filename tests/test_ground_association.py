@@ -16,6 +16,7 @@ from xvmatch.inference.matching.ground_association import (
     run_ground_association,
     top_calibration,
     top_ground_points,
+    top_sizes,
 )
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
@@ -358,3 +359,41 @@ def test_the_top_cameras_sight_is_where_its_people_stand(scene) -> None:
     far = np.hypot(*ground.T) >= sight[0].reach
     assert inside.sum() > 100 and far.sum() == 1
     assert np.array_equal(seen, inside & ~far)
+
+
+EVERYTHING = ObliqueSceneConfig(top_pitch=(20.0, 45.0), overlap=(0.35, 0.65),
+                                top_height=(4.0, 12.0), hor_hfov=(60.0, 110.0),
+                                holder_speed=(1.0, 1.5), pan_rate=0.3,
+                                top_drift_speed=(0.3, 1.0), top_yaw_rate=(0.0, 3.0),
+                                edge_people=(1, 3))
+"""The hidden set's kind: a low drone drifting and turning, a walking, panning holder, about half
+of each view's people in the other, people at the top image's edges."""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "hfov", "sighted"), [(10, 110.0, False), (4, 90.0, True)])
+def test_video_mode_keeps_the_run_with_or_without_the_sights_that_keeps_more(
+        seed: int, hfov: float, sighted: bool) -> None:
+    """A run made with the top camera's sights, or without them where that keeps more pairs
+    along the tracks (``fewer_sights``): seed 10 at 110 degrees keeps one pair-frame more
+    without them (every pair right), seed 4 at 90 fifteen more with them; the lens chosen
+    runs as given."""
+    clip = make_oblique_scene(EVERYTHING, 60, np.random.default_rng(seed))
+    top, hor, _, options, backs = _prepared(clip)
+    frames = list(range(1, 61, 3))
+    options = replace(options, hor_hfov_deg=hfov)
+    calib = top_calibration(top, options.top_size)
+    run = run_ground_association(top, hor, options, frames, calib)
+    assert run.tilt is None  # a steady gimbal: the calibration's map is the run's
+    top_frames, tracks, boxes = stack_frames(top)
+    plain = run_ground_association(top, hor, options, frames, calib, top_points=top_ground_points(
+        boxes, calib, top_sizes(top_frames, boxes, tracks, calib)))  # no sights given
+    kept, without = (sum(map(len, r.pairs.values())) for r in (run, plain))
+    if sighted:
+        assert kept > without and run.pairs != plain.pairs
+    else:
+        assert run.pairs == plain.pairs and _cvidf1(clip, run, frames, backs) > 0.9
+        auto = run_ground_association(top, hor, replace(options, hor_hfov_deg="auto"), frames,
+                                      calib)
+        assert auto.lens.hfov_deg == hfov and auto.lens.made[hfov] < kept
+        assert (auto.pairs, auto.scale) == (run.pairs, run.scale)

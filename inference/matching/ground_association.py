@@ -17,7 +17,8 @@ view's boxes say it is oblique).
    read at that height: a distance from a box height otherwise errs by the spread of people's
    heights (+-13 %, 2 m at 15 m). A pose that puts a horizontal person nobody explains where
    the top camera would see them pays for it (:func:`top_sights`; on a small shared crowd a
-   pose with two people swapped explains as many).
+   pose with two people swapped explains as many); in video mode the run without that price
+   is kept where it keeps more pairs along the tracks (:func:`fewer_sights`).
 3. With each view's own track ids (video mode), the top map's own motion (a drifting, turning
    drone) is taken out of the registration's jumps
    (:func:`~xvmatch.cues.ground_registration.map_motion`), the pairs are made consistent
@@ -86,6 +87,7 @@ __all__ = [
     "GroundAssociationOptions",
     "Registered",
     "choose_along_tracks",
+    "fewer_sights",
     "lens_note",
     "register_and_pair",
     "run_ground_association",
@@ -426,10 +428,12 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     run too where it differs, and kept where its pairs hold along the tracks more often (the
     chosen lens's; another lens's, more than a near tie; the choice's ``measured_from`` says
     so; a tie keeps the candidate: on tilting close drones, whose runs kept as many pairs at
-    any lens, the lens measured was up to 54 degrees off).
+    any lens, the lens measured was up to 54 degrees off). The lens chosen, its run is the one
+    :func:`register_and_pair` keeps (:func:`fewer_sights`): the same lens, given or chosen,
+    runs the same.
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
-    runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
-            for h in HFOV_CANDIDATES}
+    runs = plain = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
+                    for h in HFOV_CANDIDATES}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
     pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
              for h, s in scales.items()}
@@ -454,12 +458,16 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                 or any(abs(implied - t) < MIN_REMEASURE_DEG for t in tried)):
             continue  # nothing told, a candidate already run, or too near to matter
         tried.add(implied)
-        measured = register_and_pair(order, tops, boxes, sizes, implied, fps, hor_size, views,
-                                     sights)
+        measured = scale_along_tracks(order, tops, *_scale_runs(
+            order, tops, boxes, sizes, implied, fps, hor_size, views, sights), sizes, views)
         kept_here = _count(measured[2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
         if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
             best, measured_from, run, run_kept = implied, source, measured, kept_here
+    if sights is not None:  # the chosen lens's run as made, or without the sights
+        hors, without = plain.get(best) or _scale_runs(order, tops, boxes, sizes, best, fps,
+                                                       hor_size, views)
+        run = fewer_sights(run, order, tops, hors, sizes, without, views)
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
         choice = replace(choice, hfov_deg=best, scales={**choice.scales, best: run[0]})
@@ -498,7 +506,8 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     their ids the tracks: video mode) the top map's motion taken out, the pairs made
     consistent along the tracks, and the map scale the one whose run keeps the most pairs
     there (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`, scale 1 the prior: the clip's
-    score totals tell the scale weakly, :func:`~xvmatch.cues.ground_registration.margin_scale`);
+    score totals tell the scale weakly, :func:`~xvmatch.cues.ground_registration.margin_scale`)
+    and, with ``sights``, the run without them where it keeps more (:func:`fewer_sights`);
     frame by frame the scale those totals keep.
 
     Args:
@@ -517,9 +526,25 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     """
     hors, runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
     if views is not None:
-        return scale_along_tracks(order, tops, hors, runs, sizes, views)
+        made = scale_along_tracks(order, tops, hors, runs, sizes, views)
+        if sights is None:
+            return made
+        plain = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views)[1]
+        return fewer_sights(made, order, tops, hors, sizes, plain, views)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
+
+
+def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, sizes: list,
+                 plain: dict[float, tuple[float, list[gr.FramePose]]],
+                 views: tuple[Mapping, Mapping]) -> Registered:
+    """A run made with the top camera's sights (video mode), or the run without them
+    (``plain``: its registration at each map scale without them) where that keeps more pairs
+    along the tracks: the sights steady poses, but where the top camera's view of the holder
+    misleads them they cost the right ones (a 110-degree run: 69 pair-frames with them, all
+    wrong; 152 without, all right). Arguments as :func:`scale_along_tracks`'."""
+    other = scale_along_tracks(order, tops, hors, plain, sizes, views)
+    return other if _count(other[2])[0] > _count(made[2])[0] else made
 
 
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,

@@ -65,6 +65,7 @@ from xvmatch.inference.matching.ground_association import (
     PRIOR_FPS,
     TOP_VIEWS,
     choose_along_tracks,
+    fewer_sights,
     scale_along_tracks,
     tilt_note,
     tilting_top,
@@ -396,12 +397,16 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     else:
         pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
         ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
-        runs = gr.register_scales(order, points, [local[f] for f in order], hfov, options.fps,
-                                  ids, heights, seen)
-        scale, poses, _ = scale_along_tracks(
-            order, list(zip(points, ids, strict=True)),
-            [(local[f], np.asarray(pair[1][f].ids)) for f in order], runs,
-            heights if heights is not None else [None] * len(order), pair)
+        hors = [local[f] for f in order]
+        run = (order, list(zip(points, ids, strict=True)),
+               [(local[f], np.asarray(pair[1][f].ids)) for f in order])
+        z = heights if heights is not None else [None] * len(order)
+        made = scale_along_tracks(*run, gr.register_scales(order, points, hors, hfov, options.fps,
+                                                           ids, heights, seen), z, pair)
+        if seen is not None:  # as associate keeps it: without the sights where they cost pairs
+            made = fewer_sights(made, *run, z, gr.register_scales(
+                order, points, hors, hfov, options.fps, ids, heights), pair)
+        scale, poses, _ = made
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
