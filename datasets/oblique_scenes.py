@@ -29,7 +29,8 @@ dropped, the others keep the box of their visible part, inside the image.
 each walking in its own square (walks of separate :func:`simulate_walks` calls, translated):
 
 * the SHARED group, in a square centred on the world origin, fitted inside the top image (the
-  square shrinks, then the camera rises, until it is) and in front of every handheld camera,
+  square shrinks, then the camera rises, up to the highest of ``top_height``, then a drifting,
+  turning drone drifts and turns less, until it is) and in front of every handheld camera,
   whose holder stands far enough away that the square fills at most ~85% of its field of view;
 * the TOP-ONLY group, in a square inside the top image (every frame checked) and outside every
   handheld camera's field of view (its bearing from the holder more than ``hfov / 2 + 15``
@@ -130,7 +131,8 @@ class ObliqueSceneConfig:
         stop_probability: probability per second that a walker stops.
         top_size: top image (width, height), pixels.
         top_pitch: downward pitch of the top camera (90: nadir).
-        top_height: height of the top camera (raised where the shared square cannot fit).
+        top_height: height of the top camera (raised where the shared square cannot fit,
+            up to the range's top; a drone's drift and turn slowed past it).
         top_hfov: horizontal field of view of the top camera.
         top_drift_speed: horizontal drift speed of the top camera (m/s), direction uniform;
             (0, 0) keeps it static.
@@ -585,6 +587,13 @@ def _draw_group_sizes(
     return p_top, p_hor, n_shared, n_top - n_shared, n_hor_only
 
 
+_FIT_STEPS = 200
+"""Steps of fitting the shared square inside the top image (shrink it, raise, steady)."""
+
+_MIN_STEADY = 0.05
+"""The drone's drift and turn are slowed to no less than this share of the drawn ones."""
+
+
 def _place_top_camera(
     config: ObliqueSceneConfig, times: np.ndarray, n_shared: int, rng: np.random.Generator
 ) -> tuple[list[Camera], list[Camera], float]:
@@ -624,18 +633,28 @@ def _place_top_camera(
     min_side = _group_side(n_shared, 0.0, config.min_separation)
     side = max(side, min_side)
 
-    def top_at(f: int) -> Camera:
-        return _top_camera(yaw, pitch, height, aim, hfov, config.top_size, shift[f],
-                           yaw_rate * times[f], pitch_rate * (times[f] - middle))
+    steady = 1.0  # the share of the drawn drift and turn the drone keeps
 
-    for _ in range(200):
+    def top_at(f: int) -> Camera:
+        return _top_camera(yaw, pitch, height, aim, hfov, config.top_size, steady * shift[f],
+                           steady * yaw_rate * times[f], pitch_rate * (times[f] - middle))
+
+    for _ in range(_FIT_STEPS):
         if _inside([top_at(f) for f in checks], _square_points(np.zeros(2), side),
                    config.near_clip):
             break
         if side > min_side:
             side = max(min_side, 0.93 * side)
-        else:
+        elif height < config.top_height[1] or steady < _MIN_STEADY:
             height *= 1.05
+        else:  # past the highest drone asked for: it drifts and turns less (an operator keeps
+            # the people in view), rather than rising (a turn in place moves the square out of
+            # the image at any height: seed [2, 6] rose to 67 km, every box 0 px)
+            steady *= 0.8
+    else:
+        raise ValueError(f"no top camera of pitch {np.degrees(pitch):.0f} degrees and field of "
+                         f"view {hfov:.0f} holds a shared square of {side:.1f} m in "
+                         f"{_FIT_STEPS} steps; draw fewer shared people or a wider top_hfov")
     top_cameras = [top_at(f) for f in range(n_frames)]
     return top_cameras, [top_cameras[f] for f in checks], side
 

@@ -104,6 +104,32 @@ def test_tilting_gimbal_turns_about_the_middle_pitch():
         ObliqueSceneConfig(top_pitch_rate=(2.0, 1.0))
 
 
+def test_a_turning_drone_stays_low_and_keeps_the_people_in_view():
+    """A low drone that drifts and turns fast (36 degrees over the clip, about its own axis):
+    rising cannot keep the shared square in a turning image, so past the highest drone asked
+    for it drifts and turns less (seed [2, 6] rose to 67 km before, its boxes 0 px at one
+    point); a slow one drifts and turns as drawn."""
+    fast = ObliqueSceneConfig(top_pitch=(20.0, 45.0), top_height=(4.0, 12.0),
+                              top_drift_speed=(0.3, 1.0), top_yaw_rate=(0.0, 3.0),
+                              overlap=(0.35, 0.65), hor_hfov=(60.0, 110.0))
+    scene = make_oblique_scene(fast, 120, np.random.default_rng([2, 6]))
+    cams = scene.top_cameras
+    assert all(c.c[2] <= 12.0 * 1.05 + 1e-9 for c in cams)
+    heights = np.concatenate([r.boxes[:, 3] for r in scene.top.values()])
+    assert len(heights) > 100 and np.median(heights) > 60.0  # people, not points
+    drift = np.hypot(*(cams[-1].c[:2] - cams[0].c[:2]))
+    rising = make_oblique_scene(dataclasses.replace(fast, top_height=(4.0, 1e6)), 120,
+                                np.random.default_rng([2, 6]))  # the same draws, free to rise
+    assert rising.top_cameras[0].c[2] > 1000.0
+    drawn = np.hypot(*(rising.top_cameras[-1].c[:2] - rising.top_cameras[0].c[:2]))
+    assert 0.0 < drift < 0.5 * drawn  # it still drifts, slower
+    slow = make_oblique_scene(dataclasses.replace(fast, top_drift_speed=(0.3, 0.3),
+                                                  top_yaw_rate=(0.0, 0.0)), 120,
+                              np.random.default_rng([2, 6]))
+    drift = np.hypot(*(slow.top_cameras[-1].c[:2] - slow.top_cameras[0].c[:2]))
+    assert drift == pytest.approx(0.3 * 11.9)
+
+
 def test_edge_people_are_cut_by_each_images_bottom_edge():
     """``edge_people``: more people walk across each camera's bottom edge, whose boxes it cuts
     (the renders otherwise keep everyone inside both images); everyone else is the same scene's,
