@@ -102,6 +102,10 @@ KEEP = 24
 _HEADINGS = 72
 """Headings tried per (top, horizontal) pair: every 5 degrees."""
 
+_FIRST = 1024
+"""Best-scored candidate poses ordered before the distinct ones are picked (the rest only
+where these hold fewer than :data:`KEEP` distinct ones)."""
+
 _UNSEEN_WEIGHT = 0.3
 """Cost of a top person put in the horizontal camera's view that it does not see, against 1 for
 a horizontal person explained: low, as occlusion and partial overlap hide many."""
@@ -311,8 +315,24 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
     score = np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
     poses = np.column_stack([centres, heading])
-    keep = _distinct(poses, np.argsort(-score, kind="stable"))
+    order = _best_first(score, _FIRST)
+    keep = _distinct(poses, order)
+    if len(keep) < KEEP and len(order) < len(score):  # the prefix ran out: the whole order
+        keep = _distinct(poses, _best_first(score, len(score)))
     return poses[keep], score[keep]
+
+
+def _best_first(score: np.ndarray, count: int) -> np.ndarray:
+    """The first ``count`` indices of ``np.argsort(-score, kind="stable")`` (the highest
+    scores, a tie in index order), without sorting the rest: a partition, then the leaders
+    sorted."""
+    neg = -np.asarray(score, float)
+    if count >= len(neg):
+        return np.argsort(neg, kind="stable")
+    worst = neg[np.argpartition(neg, count - 1)[:count]].max()
+    better = np.flatnonzero(neg < worst)  # all of them lead; then the ties, in index order
+    lead = np.concatenate([better, np.flatnonzero(neg == worst)[:count - len(better)]])
+    return lead[np.argsort(neg[lead], kind="stable")]
 
 
 def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,

@@ -394,3 +394,15 @@ def test_where_a_pose_puts_the_people_the_top_view_misses_tells_a_swap() -> None
     at_swap = [s for p, s in zip(poses, scores, strict=True)
                if np.hypot(*(p[:2] - swapped[:2])) < 0.5]
     assert len(at_swap) == 1 and scores[0] - at_swap[0] == pytest.approx(0.3, abs=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 3000), count=st.integers(1, 3000),
+       levels=st.integers(1, 50))
+def test_the_best_first_prefix_is_the_stable_sorts(seed: int, n: int, count: int,
+                                                   levels: int) -> None:
+    """The pose hypotheses' leading candidates, partitioned then sorted, are exactly the
+    stable sort's first ``count`` (ties in index order, many ties where few score levels)."""
+    score = np.random.default_rng(seed).integers(0, levels, n) / 7.0
+    want = np.argsort(-score, kind="stable")[:count]
+    np.testing.assert_array_equal(gr._best_first(score, count), want)
