@@ -458,6 +458,9 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                 or any(abs(implied - t) < MIN_REMEASURE_DEG for t in tried)):
             continue  # nothing told, a candidate already run, or too near to matter
         tried.add(implied)
+        # as made, like the candidates' runs it is compared with (not register_and_pair,
+        # whose run without the sights would make the comparison uneven); the lens kept goes
+        # through fewer_sights below
         measured = scale_along_tracks(order, tops, *_scale_runs(
             order, tops, boxes, sizes, implied, fps, hor_size, views, sights), sizes, views)
         kept_here = _count(measured[2])[0]
