@@ -18,9 +18,11 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
 * **time**: one hypothesis per frame is chosen by dynamic programming over the frames (Viterbi),
   each step paying for a jump in position or heading faster than a walker turns and walks, so
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
-  decided by its neighbours; the whole clip is registered with the top map at a few scales
-  (:func:`register_scales`) and the best kept (:func:`register_with_scale`; in video mode the
-  one whose pairs hold along the tracks,
+  decided by its neighbours; each frame is also offered its neighbours' hypotheses, carried
+  onto its map and scored in it (:func:`carried`), so a pose that one frame's :data:`KEEP`
+  left out for near-duplicates of another stays on offer there; the whole clip is registered
+  with the top map at a few scales (:func:`register_scales`) and the best kept
+  (:func:`register_with_scale`; in video mode the one whose pairs hold along the tracks,
   :func:`xvmatch.inference.matching.ground_association.register_and_pair`);
 * **people's heights**: a horizontal person's distance is read from their box as if they
   were of the crowd's height; where the top view tells each of its people's height (an oblique
@@ -69,6 +71,7 @@ __all__ = [
     "TopSight",
     "associate_on_ground",
     "box_width_ratio",
+    "carried",
     "hor_ground_points",
     "map_motion",
     "margin_scale",
@@ -78,6 +81,7 @@ __all__ = [
     "register_scales",
     "register_sequence",
     "register_with_scale",
+    "score_poses",
 ]
 
 RADIUS = 1.5
@@ -98,6 +102,9 @@ _MIN_RATIO_BOXES = 20
 
 KEEP = 24
 """Pose hypotheses kept per frame for the choice over time."""
+
+CARRY = 8
+"""A neighbour's best hypotheses each frame is also offered (:func:`carried`)."""
 
 _HEADINGS = 72
 """Headings tried per (top, horizontal) pair: every 5 degrees."""
@@ -304,6 +311,22 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     cx = np.ascontiguousarray(centres[:, 0].reshape(_HEADINGS, n * m))
     cy = np.ascontiguousarray(centres[:, 1].reshape(_HEADINGS, n * m))
     grown = turned[:, :, None, :] * size[None, None, :, None]  # (H, M, N, 2)
+    score = _scores(cx, cy, grown, turned, top, hor, headings, hfov_deg, sight)
+    heading = np.repeat(headings, n * m)
+    poses = np.column_stack([centres, heading])
+    order = _best_first(score, _FIRST)
+    keep = _distinct(poses, order)
+    if len(keep) < KEEP and len(order) < len(score):  # the prefix ran out: the whole order
+        keep = _distinct(poses, _best_first(score, len(score)))
+    return poses[keep], score[keep]
+
+
+def _scores(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
+            top: np.ndarray, hor: np.ndarray, headings: np.ndarray, hfov_deg: float,
+            sight: TopSight | None) -> np.ndarray:
+    """``(P,)`` the scores of poses ``p = h Q + q`` (:func:`pose_terms`' arguments): the
+    horizontal people explained, less :data:`_UNSEEN_WEIGHT` per person left unexplained where
+    they would be seen."""
     # The horizontal camera's view: a bearing within the half field of view (|across| <
     # ahead tan(half), no arctan), as far as its people reach.
     tan_half = float(np.tan(np.radians(hfov_deg) / 2)) if hfov_deg < 180 else np.inf
@@ -311,15 +334,25 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     near_hor, missed = pose_terms(cx, cy, grown, turned, top, (np.cos(headings),
                                   np.sin(headings), tan_half, reach * reach), sight)
     explained = np.exp(-0.5 * near_hor / _SIGMA**2).sum(axis=1)
-    heading = np.repeat(headings, n * m)
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
-    score = np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
-    poses = np.column_stack([centres, heading])
-    order = _best_first(score, _FIRST)
-    keep = _distinct(poses, order)
-    if len(keep) < KEEP and len(order) < len(score):  # the prefix ran out: the whole order
-        keep = _distinct(poses, _best_first(score, len(score)))
-    return poses[keep], score[keep]
+    return np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
+
+
+def score_poses(poses: np.ndarray, top: np.ndarray, hor: np.ndarray, hfov_deg: float,
+                sizes: np.ndarray | None = None, sight: TopSight | None = None) -> np.ndarray:
+    """``(K,)`` the scores of given poses ``(K, 3)`` (x, y, heading) for one frame, as
+    :func:`pose_hypotheses` scores its own (arguments as its): a pose found in another frame
+    is scored in this one."""
+    poses = np.asarray(poses, float).reshape(-1, 3)
+    top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
+    if not len(poses) or not len(top) or not len(hor):
+        return np.zeros(len(poses))
+    size = np.ones(len(top)) if sizes is None else np.asarray(sizes, float).reshape(-1)
+    headings = np.ascontiguousarray(poses[:, 2])
+    turned = np.einsum("hab,mb->hma", _rotations(headings), hor)  # (K, M, 2)
+    grown = turned[:, :, None, :] * size[None, None, :, None]  # (K, M, N, 2)
+    return _scores(np.ascontiguousarray(poses[:, :1]), np.ascontiguousarray(poses[:, 1:2]),
+                   grown, turned, top, hor, headings, hfov_deg, sight)
 
 
 def _best_first(score: np.ndarray, count: int) -> np.ndarray:
@@ -385,31 +418,38 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
     return np.ascontiguousarray(near_hor.T), missed
 
 
-def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512) -> list[int]:
-    """The first :data:`KEEP` of ``order`` (indices into ``poses`` ``(P, 3)``) each 1 m or 10
+def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512, limit: int = KEEP
+              ) -> list[int]:
+    """The first ``limit`` of ``order`` (indices into ``poses`` ``(P, 3)``) each 1 m or 10
     degrees away from every one kept before it (greedy, in order): a block of candidates at a
     time, those near an earlier block's kept ones struck out at once, then the first left kept
-    and those near it struck out, until :data:`KEEP`."""
+    and those near it struck out, until ``limit``."""
     keep: list[int] = []
-    limit = np.radians(10.0)
+    apart = np.radians(10.0)
     for start in range(0, len(order), block):
         cand = order[start:start + block]
         xy, th = poses[cand, :2], poses[cand, 2]
         if keep:
-            kx, kt = poses[keep, :2], poses[keep, 2]
-            free = (((np.hypot(xy[:, None, 0] - kx[None, :, 0], xy[:, None, 1] - kx[None, :, 1])
-                      > 1.0) | (np.abs(_wrap(th[:, None] - kt[None, :])) > limit)).all(axis=1))
+            free = _apart(poses[cand], poses[keep]).all(axis=1)
         else:
             free = np.ones(len(cand), bool)
         while free.any():
             i = int(np.argmax(free))
             keep.append(int(cand[i]))
-            if len(keep) == KEEP:
+            if len(keep) == limit:
                 return keep
             free[i] = False
             free &= ((np.hypot(xy[:, 0] - xy[i, 0], xy[:, 1] - xy[i, 1]) > 1.0)
-                     | (np.abs(_wrap(th - th[i])) > limit))
+                     | (np.abs(_wrap(th - th[i])) > apart))
     return keep
+
+
+def _apart(poses: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """``(K, L)`` whether each of poses ``(K, 3)`` is more than 1 m or 10 degrees from each
+    of ``others`` ``(L, 3)``."""
+    return ((np.hypot(poses[:, None, 0] - others[None, :, 0], poses[:, None, 1]
+                      - others[None, :, 1]) > 1.0)
+            | (np.abs(_wrap(poses[:, None, 2] - others[None, :, 2])) > np.radians(10.0)))
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:
@@ -491,6 +531,46 @@ def _moved(poses: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
     return np.column_stack([poses[:, :2] @ rot.T + motion[:2], poses[:, 2] + motion[2]])
 
 
+def _moved_on(poses: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
+    """Poses ``(K, 3)`` on frame k-1's map carried onto frame k's (:func:`_moved` undone)."""
+    if motion is None:
+        return poses
+    rot = _rotations(np.array([motion[2]]))[0]
+    return np.column_stack([(poses[:, :2] - motion[:2]) @ rot, poses[:, 2] - motion[2]])
+
+
+def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarray],
+            hors: list[np.ndarray], hfov_deg: float, sizes: list, sights: list,
+            motions: list[np.ndarray | None] | None = None
+            ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each frame's hypotheses ``(poses, scores)``, then the :data:`CARRY` best of each
+    neighbour's carried onto its map (by the top map's ``motions``, :func:`map_motion`) and
+    scored in it (:func:`score_poses`), best first, those within 1 m and 10 degrees of one
+    kept before left out: a pose that leads on either side of a frame where it fell out of
+    the :data:`KEEP` best (near-duplicates of others kept in its place) stays on offer there,
+    so the choice over time does not hinge on which of near-equal poses one frame kept. All
+    24 carried, not 8: more clips found, but more lost (docs/notes/oblique_top_camera.md)."""
+    out = []
+    for k, (poses, scores) in enumerate(candidates):
+        near = []
+        if len(poses) and k > 0 and len(candidates[k - 1][0]):
+            near.append(_moved_on(candidates[k - 1][0][:CARRY],
+                                  None if motions is None else motions[k]))
+        if len(poses) and k + 1 < len(candidates) and len(candidates[k + 1][0]):
+            near.append(_moved(candidates[k + 1][0][:CARRY],
+                               None if motions is None else motions[k + 1]))
+        if not near:
+            out.append((poses, scores))
+            continue
+        extra = np.concatenate(near)
+        extra = extra[_apart(extra, poses).all(axis=1)]  # this frame's own stand for them
+        marks = score_poses(extra, tops[k], hors[k], hfov_deg, sizes[k], sights[k])
+        keep = _distinct(extra, np.argsort(-marks, kind="stable"), limit=len(extra))
+        out.append((np.concatenate([poses, extra[keep]]),
+                    np.concatenate([scores, marks[keep]])))
+    return out
+
+
 def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.ndarray]],
                       fps: float, motions: list[np.ndarray | None] | None = None
                       ) -> list[FramePose]:
@@ -548,15 +628,18 @@ def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nda
     runs: dict[float, tuple[float, list[FramePose]]] = {}
     motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
     moved = motion is not None and any(m is not None for m in motion)
+    sizes = top_sizes or [None] * len(tops)
     for scale in MAP_SCALES:
-        cands = [pose_hypotheses(scale * p, q, hfov_deg, z, None if v is None else v.scaled(scale))
-                 for p, q, z, v in zip(tops, hors, top_sizes or [None] * len(tops),
-                                       sights or [None] * len(tops), strict=True)]
+        scaled = [scale * np.asarray(p, float) for p in tops]
+        seen = [None if v is None else v.scaled(scale) for v in sights or [None] * len(tops)]
+        cands = [pose_hypotheses(p, q, hfov_deg, z, v)
+                 for p, q, z, v in zip(scaled, hors, sizes, seen, strict=True)]
         # With the map's motion out, and (where any was read) with it left in: a static
         # camera's small crowd walking together reads as motion; the better-explained kept.
         for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
                           for m in motion], None] if moved else [None]):
-            poses = register_sequence(frames, cands, fps, motions)
+            poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
+                                                      seen, motions), fps, motions)
             run = (round(sum(p.score for p in poses), 6), poses)
             if scale not in runs or run[0] > runs[scale][0]:
                 runs[scale] = run

@@ -283,6 +283,17 @@ def _top_camera(tilt_deg: float = 35.0, height: float = 8.0):
                    (1920, 1080))
 
 
+def _small_frame(rng: np.random.Generator, n: int, m: int, with_sight: bool) -> tuple:
+    """``n`` top people, ``m`` horizontal ones ahead, their sizes, and the top camera's sight
+    (as ``_plain_score`` takes it, and as a :class:`TopSight`) or None."""
+    top = rng.uniform(-8, 8, (n, 2))
+    hor = np.column_stack([rng.uniform(2, 15, m), rng.uniform(-4, 4, m)])
+    sizes = rng.uniform(0.9, 1.1, n)
+    plain_sight = (_top_camera(), 14.0) if with_sight else None
+    sight = gr.TopSight.of(*plain_sight) if with_sight else None
+    return top, hor, sizes, plain_sight, sight
+
+
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 10_000), n=st.integers(1, 4), m=st.integers(1, 3),
        hfov=st.floats(40.0, 120.0), with_sight=st.booleans())
@@ -294,11 +305,7 @@ def test_hypotheses_are_the_best_distinct_poses_scored_as_defined(seed: int, n: 
     1 m or 10 degrees from the others, and no candidate scoring above the last kept (any, where
     fewer than :data:`KEEP` are) is apart from all of them; with the top camera's sight too."""
     rng = np.random.default_rng(seed)
-    top = rng.uniform(-8, 8, (n, 2))
-    hor = np.column_stack([rng.uniform(2, 15, m), rng.uniform(-4, 4, m)])
-    sizes = rng.uniform(0.9, 1.1, n)
-    plain_sight = (_top_camera(), 14.0) if with_sight else None
-    sight = gr.TopSight.of(*plain_sight) if with_sight else None
+    top, hor, sizes, plain_sight, sight = _small_frame(rng, n, m, with_sight)
     poses, scores = gr.pose_hypotheses(top, hor, hfov, sizes, sight)
     plain = [_plain_score(top, hor, sizes, p, hfov, plain_sight) for p in poses]
     np.testing.assert_allclose(scores, plain, atol=2e-9)
@@ -406,3 +413,61 @@ def test_the_best_first_prefix_is_the_stable_sorts(seed: int, n: int, count: int
     score = np.random.default_rng(seed).integers(0, levels, n) / 7.0
     want = np.argsort(-score, kind="stable")[:count]
     np.testing.assert_array_equal(gr._best_first(score, count), want)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 6), m=st.integers(1, 4),
+       hfov=st.floats(40.0, 120.0), with_sight=st.booleans())
+def test_any_pose_is_scored_as_the_hypotheses_are(seed: int, n: int, m: int, hfov: float,
+                                                  with_sight: bool) -> None:
+    """A pose off the hypotheses' grid (another frame's, carried) is scored as the module
+    docstring defines it; the hypotheses' own poses rescored keep their scores bit for bit."""
+    rng = np.random.default_rng(seed)
+    top, hor, sizes, plain_sight, sight = _small_frame(rng, n, m, with_sight)
+    poses = np.column_stack([rng.uniform(-20, 20, (5, 2)), rng.uniform(-7, 7, 5)])
+    np.testing.assert_allclose(gr.score_poses(poses, top, hor, hfov, sizes, sight),
+                               [_plain_score(top, hor, sizes, p, hfov, plain_sight)
+                                for p in poses], atol=2e-9)
+    own, scores = gr.pose_hypotheses(top, hor, hfov, sizes, sight)
+    assert np.array_equal(gr.score_poses(own, top, hor, hfov, sizes, sight), scores)
+
+
+def test_a_pose_a_frame_dropped_is_carried_in_from_its_neighbours() -> None:
+    """A drifting, turning top map; the handheld camera stands still. Frame 1 lost the true
+    pose from its hypotheses (a near-duplicate kept in its place): its neighbours' carry it in
+    on frame 1's map, scored there, and the choice over time keeps it in all three frames."""
+    rng = np.random.default_rng(3)
+    world = rng.uniform(-6, 6, (7, 2))
+    pose = np.array([-14.0, 1.0, np.radians(10.0)])  # on the 5-degree grid in frame 0
+    local = _view(world, pose[:2], pose[2])
+    hor = local[_in_view(local)]
+    assert len(hor) >= 3
+
+    def on_map(k: int, xy: np.ndarray) -> np.ndarray:  # frame k's map: the world moved
+        a, t = 0.04 * k, np.array([0.3, -0.2]) * k
+        return xy @ gr._rotations(np.array([a]))[0].T + t
+
+    tops = [on_map(k, world) for k in range(3)]
+    truth = [np.array([*on_map(k, pose[None, :2])[0], pose[2] + 0.04 * k]) for k in range(3)]
+    # Frame k's map onto frame k-1's, R(angle) x + t: R(-0.04) x + t (k-1) - R(-0.04) t k.
+    back, step = gr._rotations(np.array([-0.04]))[0], np.array([0.3, -0.2])
+    motions = [None] + [np.array([*(step * (k - 1) - back @ (step * k)), -0.04])
+                        for k in (1, 2)]
+    for k in (1, 2):  # the motion takes frame k's people onto frame k-1's
+        np.testing.assert_allclose(gr._moved(np.column_stack([tops[k], np.zeros(7)]),
+                                             motions[k])[:, :2], tops[k - 1], atol=1e-9)
+    cands = [gr.pose_hypotheses(t, hor, 70.0) for t in tops]
+    for k in (0, 2):
+        assert np.hypot(*(cands[k][0][0, :2] - truth[k][:2])) < 0.5
+    poses, scores = cands[1]
+    lost = np.hypot(*(poses[:, :2] - truth[1][:2]).T) > 2.0
+    cands[1] = (poses[lost], scores[lost])
+    offered = gr.carried(cands, tops, [hor] * 3, 70.0, [None] * 3, [None] * 3, motions)
+    assert np.array_equal(offered[1][0][:lost.sum()], cands[1][0])  # its own, first
+    near = np.hypot(*(offered[1][0][:, :2] - truth[1][:2]).T) < 1e-6
+    assert near.any()
+    assert offered[1][1][near][0] == gr.score_poses(truth[1][None], tops[1], hor, 70.0)[0]
+    chosen = gr.register_sequence([0, 1, 2], offered, 3.0, motions)
+    assert all(np.hypot(*(p.centre - t[:2])) < 0.5 for p, t in zip(chosen, truth, strict=True))
+    without = gr.register_sequence([0, 1, 2], cands, 3.0, motions)
+    assert np.hypot(*(without[1].centre - truth[1][:2])) > 2.0
