@@ -527,16 +527,19 @@ def _moved(poses: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
     (:func:`map_motion`)."""
     if motion is None:
         return poses
-    rot = _rotations(np.array([motion[2]]))[0]
-    return np.column_stack([poses[:, :2] @ rot.T + motion[:2], poses[:, 2] + motion[2]])
+    c, s = np.cos(motion[2]), np.sin(motion[2])  # element by element: no BLAS, the same bits
+    x, y = poses[:, 0], poses[:, 1]              # on every CPU
+    return np.column_stack([c * x - s * y + motion[0], s * x + c * y + motion[1],
+                            poses[:, 2] + motion[2]])
 
 
 def _moved_on(poses: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
     """Poses ``(K, 3)`` on frame k-1's map carried onto frame k's (:func:`_moved` undone)."""
     if motion is None:
         return poses
-    rot = _rotations(np.array([motion[2]]))[0]
-    return np.column_stack([(poses[:, :2] - motion[:2]) @ rot, poses[:, 2] - motion[2]])
+    c, s = np.cos(motion[2]), np.sin(motion[2])
+    x, y = poses[:, 0] - motion[0], poses[:, 1] - motion[1]
+    return np.column_stack([c * x + s * y, c * y - s * x, poses[:, 2] - motion[2]])
 
 
 def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarray],
