@@ -425,22 +425,19 @@ def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512, limit: int
     time, those near an earlier block's kept ones struck out at once, then the first left kept
     and those near it struck out, until ``limit``."""
     keep: list[int] = []
-    apart = np.radians(10.0)
     for start in range(0, len(order), block):
         cand = order[start:start + block]
+        free = _apart(poses[cand], poses[keep]).all(axis=1) if keep else np.ones(len(cand), bool)
         xy, th = poses[cand, :2], poses[cand, 2]
-        if keep:
-            free = _apart(poses[cand], poses[keep]).all(axis=1)
-        else:
-            free = np.ones(len(cand), bool)
         while free.any():
             i = int(np.argmax(free))
             keep.append(int(cand[i]))
             if len(keep) == limit:
                 return keep
             free[i] = False
+            # _apart's test against one pose, written out: the hot loop, no broadcast
             free &= ((np.hypot(xy[:, 0] - xy[i, 0], xy[:, 1] - xy[i, 1]) > 1.0)
-                     | (np.abs(_wrap(th - th[i])) > apart))
+                     | (np.abs(_wrap(th - th[i])) > _APART_RAD))
     return keep
 
 
@@ -449,7 +446,11 @@ def _apart(poses: np.ndarray, others: np.ndarray) -> np.ndarray:
     of ``others`` ``(L, 3)``."""
     return ((np.hypot(poses[:, None, 0] - others[None, :, 0], poses[:, None, 1]
                       - others[None, :, 1]) > 1.0)
-            | (np.abs(_wrap(poses[:, None, 2] - others[None, :, 2])) > np.radians(10.0)))
+            | (np.abs(_wrap(poses[:, None, 2] - others[None, :, 2])) > _APART_RAD))
+
+
+_APART_RAD = float(np.radians(10.0))
+"""Two poses this far apart in heading (or 1 m in position) are distinct hypotheses."""
 
 
 def _wrap(angle: np.ndarray | float) -> np.ndarray | float:

@@ -90,6 +90,7 @@ __all__ = [
     "fewer_sights",
     "lens_note",
     "register_and_pair",
+    "run_along_tracks",
     "run_ground_association",
     "run_top_view",
     "scale_along_tracks",
@@ -451,7 +452,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         # pairs of two people or more without the sights (which steady any lens's poses)
         if people[h] >= MIN_PEOPLE and made_kept[h] > NEAR_TIE * run_kept:
             best, run, run_kept = h, other, made_kept[h]
-    measured_from, tried = None, set()
+    measured_from, tried, best_hors = None, set(), []
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
         implied = _implied(order, tops, runs[source][0], sizes, source, made[source][2])
         if (implied is None or implied in runs or abs(implied - source) < MIN_REMEASURE_DEG
@@ -461,15 +462,17 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         # as made, like the candidates' runs it is compared with (not register_and_pair,
         # whose run without the sights would make the comparison uneven); the lens kept goes
         # through fewer_sights below
-        measured = scale_along_tracks(order, tops, *_scale_runs(
-            order, tops, boxes, sizes, implied, fps, hor_size, views, sights), sizes, views)
+        hors = _hor_people(boxes, hor_size, implied)
+        measured = scale_along_tracks(order, tops, hors, _registrations(
+            order, tops, hors, sizes, implied, fps, True, sights), sizes, views)
         kept_here = _count(measured[2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
         if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
             best, measured_from, run, run_kept = implied, source, measured, kept_here
+            best_hors = hors
     if sights is not None:  # the chosen lens's run as made, or without the sights
-        hors, without = plain.get(best) or _scale_runs(order, tops, boxes, sizes, best, fps,
-                                                       hor_size, views)
+        hors, without = plain.get(best) or (best_hors, _registrations(
+            order, tops, best_hors, sizes, best, fps, True))
         run = fewer_sights(run, order, tops, hors, sizes, without, views)
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
@@ -527,15 +530,27 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
-    hors, runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights)
+    hors = _hor_people(boxes, hor_size, hfov)
     if views is not None:
-        made = scale_along_tracks(order, tops, hors, runs, sizes, views)
-        if sights is None:
-            return made
-        plain = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views)[1]
-        return fewer_sights(made, order, tops, hors, sizes, plain, views)
+        return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights)
+    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
+
+
+def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
+                     fps: float, views: tuple[Mapping, Mapping],
+                     sights: list[gr.TopSight] | None = None) -> Registered:
+    """Video mode's run of one lens on the handheld view's people (``hors``, on its map with
+    their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
+    with the ``sights``, or of the run without them where that keeps more
+    (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
+    made = scale_along_tracks(order, tops, hors, _registrations(
+        order, tops, hors, sizes, hfov, fps, True, sights), sizes, views)
+    if sights is None:
+        return made
+    return fewer_sights(made, order, tops, hors, sizes,
+                        _registrations(order, tops, hors, sizes, hfov, fps, True), views)
 
 
 def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, sizes: list,
@@ -557,12 +572,26 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
     """The handheld view's people on its own map (with their ids) and its registration at
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
     motion taken out in video mode)."""
+    hors = _hor_people(boxes, hor_size, hfov)
+    return hors, _registrations(order, tops, hors, sizes, hfov, fps, views is not None, sights)
+
+
+def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
+    """Per frame, the handheld view's people on its own map (a lens of ``hfov`` degrees) and
+    their ids, from its boxes and ids."""
     ratio = gr.box_width_ratio((b for b, _ in boxes), hor_size)
-    hors = [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio), h_ids)
+    return [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio), h_ids)
             for hb, h_ids in boxes]
-    return hors, gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
-                                    fps, [i for _, i in tops] if views is not None else None,
-                                    sizes, sights)
+
+
+def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
+                   fps: float, video: bool, sights: list[gr.TopSight] | None = None
+                   ) -> dict[float, tuple[float, list[gr.FramePose]]]:
+    """The handheld view's registration at each map scale
+    (:func:`~xvmatch.cues.ground_registration.register_scales`), the top map's motion taken
+    out in ``video`` mode (its ids the tracks)."""
+    return gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov, fps,
+                              [i for _, i in tops] if video else None, sizes, sights)
 
 
 def scale_along_tracks(order: list[int], tops: list, hors: list,

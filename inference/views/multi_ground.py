@@ -65,8 +65,7 @@ from xvmatch.inference.matching.ground_association import (
     PRIOR_FPS,
     TOP_VIEWS,
     choose_along_tracks,
-    fewer_sights,
-    scale_along_tracks,
+    run_along_tracks,
     tilt_note,
     tilting_top,
     top_calibration,
@@ -378,7 +377,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     (per view ``{row id: track id}``, video mode) the top map's own motion taken out of the
     registration's jumps and the scale the one whose run with the top view keeps the most
     pairs along both views' tracks, as ``associate`` chooses it
-    (:func:`~xvmatch.inference.matching.ground_association.scale_along_tracks`). ``sizes``:
+    (:func:`~xvmatch.inference.matching.ground_association.run_along_tracks`). ``sizes``:
     ``{frame: (N,)}`` each top person's height over the crowd's, :attr:`TopMap.sizes`;
     ``sights``: :attr:`TopMap.sights`."""
     hor = views[k]
@@ -397,16 +396,11 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     else:
         pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
         ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
-        hors = [local[f] for f in order]
-        run = (order, list(zip(points, ids, strict=True)),
-               [(local[f], np.asarray(pair[1][f].ids)) for f in order])
-        z = heights if heights is not None else [None] * len(order)
-        made = scale_along_tracks(*run, gr.register_scales(order, points, hors, hfov, options.fps,
-                                                           ids, heights, seen), z, pair)
-        if seen is not None:  # as associate keeps it: without the sights where they cost pairs
-            made = fewer_sights(made, *run, z, gr.register_scales(
-                order, points, hors, hfov, options.fps, ids, heights), pair)
-        scale, poses, _ = made
+        scale, poses, _ = run_along_tracks(  # as associate runs it
+            order, list(zip(points, ids, strict=True)),
+            [(local[f], np.asarray(pair[1][f].ids)) for f in order],
+            heights if heights is not None else [None] * len(order), hfov, options.fps, pair,
+            seen)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
