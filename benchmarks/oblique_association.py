@@ -254,8 +254,9 @@ def _breakdown(scenes: list[tuple[float, float, float, dict]], names: tuple[str,
 def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     """The drone's place (``--top-pitch``, ``--top-height``), its motion (``--top-drift``,
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
-    images' bottom edges (``--edge-people``), the handheld cameras' holders' pace
-    and pans (``--holder-speed``, ``--pan-rate``), people's heights (``--person-height``)."""
+    images' bottom edges (``--edge-people``), the handheld cameras' holders' pace, walk and
+    pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), people's heights
+    (``--person-height``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -274,7 +275,10 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
                    "their boxes cut by it (default 0 0)")
     p.add_argument("--holder-speed", type=float, nargs=2, default=(0.1, 0.5),
                    metavar=("LO", "HI"), help="each handheld camera's holder walks at LO-HI "
-                   "m/s, turning within a 2 m square (default 0.1 0.5)")
+                   "m/s, turning within their square (default 0.1 0.5)")
+    p.add_argument("--holder-area", type=float, nargs=2, default=(2.0, 2.0),
+                   metavar=("LO", "HI"), help="the side of each holder's square, LO-HI metres "
+                   "(default 2 2: turning on the spot; 10: walking past the scene)")
     p.add_argument("--pan-rate", type=float, default=0.05, metavar="R",
                    help="pans a second of each handheld camera (a turn away and back; default "
                    "0.05)")
@@ -297,7 +301,8 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               top_pitch_rate=tuple(args.top_pitch_rate),
                               top_pitch=tuple(args.top_pitch), top_height=tuple(args.top_height),
                               edge_people=tuple(args.edge_people),
-                              holder_speed=tuple(args.holder_speed), pan_rate=args.pan_rate,
+                              holder_speed=tuple(args.holder_speed),
+                              holder_area=tuple(args.holder_area), pan_rate=args.pan_rate,
                               height_range=tuple(args.person_height), **settings)
 
 

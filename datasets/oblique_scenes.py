@@ -95,7 +95,7 @@ _IMAGE_MARGIN = 0.03
 _SHARED_CONE = 0.85
 # Extra angle (degrees) beyond a handheld camera's half field of view for the top-only group.
 _OUTSIDE_CONE_DEG = 15.0
-# Side (m) of the square a holder walks in, and the gap (m) kept between two groups' squares.
+# Side (m) of the square a holder walks in (by default), and the gap (m) kept between squares.
 _HOLDER_AREA = 2.0
 _GROUP_GAP = 1.0
 # Candidate squares tried for a top-only or hor-only group before it is left out, and holder
@@ -146,7 +146,10 @@ class ObliqueSceneConfig:
         hor_reach: distance of the camera in front of its holder's body axis.
         hor_extra_distance: added to the holder's smallest distance from the shared square's
             centre (the one at which the square fits the camera's field of view).
-        holder_speed: walking speed of a holder (m/s), in a square of 2 m.
+        holder_speed: walking speed of a holder (m/s), in their square.
+        holder_area: side of the square a holder walks in (m), per holder: 2 m, the default,
+            turns on the spot; 10 m walks past the scene. A fixed side draws nothing, so the
+            default scenes are as before.
         hor_pitch: mean pitch of a handheld camera (positive looks down), per camera.
         hor_wobble: standard deviation of the smooth pitch and roll wobble about that mean.
         head_turn_std: standard deviation of the smooth head turn about the gaze at the group.
@@ -189,6 +192,7 @@ class ObliqueSceneConfig:
     hor_reach: float = 0.3
     hor_extra_distance: tuple[float, float] = (0.0, 4.0)
     holder_speed: tuple[float, float] = (0.1, 0.5)
+    holder_area: tuple[float, float] = (_HOLDER_AREA, _HOLDER_AREA)
     hor_pitch: tuple[float, float] = (-3.0, 5.0)
     hor_wobble: float = 1.0
     head_turn_std: float = 8.0
@@ -226,6 +230,7 @@ class ObliqueSceneConfig:
         pair("hor_height", 0.5)
         pair("hor_extra_distance", 0.0)
         pair("holder_speed", 0.0)
+        pair("holder_area", 1.0, 100.0)
         pair("hor_pitch", -45.0, 45.0)
         pair("pan_angle", 0.0, 180.0)
         pair("pan_duration", 1e-3)
@@ -698,6 +703,8 @@ def _place_holder(
         and their hor-only square (None where none fits or ``n_hor_only`` is 0).
     """
     n_hor = int(config.n_hor)
+    lo, hi = config.holder_area
+    walk = lo if lo == hi else float(rng.uniform(lo, hi))
     half = _SHARED_CONE * np.radians(hfov) / 2.0
     hside = _group_side(n_hor_only, float(rng.uniform(*config.group_area)),
                         config.min_separation)
@@ -708,9 +715,9 @@ def _place_holder(
     choice = None
     for i in range(_AZIMUTHS):
         distance = max(0.7 * shared.side / np.sin(half) + extra[i],
-                       shared.radius + _HOLDER_AREA + _GROUP_GAP)
+                       shared.radius + walk + _GROUP_GAP)
         holder = _Region(distance * np.array([np.cos(azimuths[i]), np.sin(azimuths[i])]),
-                         _HOLDER_AREA)
+                         walk)
         gaze = float(_wrap(azimuths[i] + np.pi))
         if not holder.clear_of(placed):
             continue
@@ -725,7 +732,7 @@ def _place_holder(
     if choice is None:  # every azimuth crowded: the first, uncleared
         distance = 0.7 * shared.side / np.sin(half) + extra[0]
         holder = _Region(distance * np.array([np.cos(azimuths[0]), np.sin(azimuths[0])]),
-                         _HOLDER_AREA)
+                         walk)
         choice = (holder, float(_wrap(azimuths[0] + np.pi)), None)
     return choice
 

@@ -130,6 +130,30 @@ def test_a_turning_drone_stays_low_and_keeps_the_people_in_view():
     assert drift == pytest.approx(0.3 * 11.9)
 
 
+def test_a_holder_given_a_wide_square_walks_past_the_scene():
+    """``holder_area``: a holder walking a 10 m square at 1.2-1.5 m/s covers metres over the
+    clip (2 m, the default, turns on the spot), stands farther from the shared group, and still
+    films it; a fixed side draws nothing, so the default scene is the same draw for draw."""
+    fast = dataclasses.replace(CONFIG, holder_speed=(1.2, 1.5))
+    near = _scene(fast, 2, 100)
+    far = _scene(dataclasses.replace(fast, holder_area=(10.0, 10.0)), 2, 100)
+    twin = _scene(dataclasses.replace(CONFIG, holder_area=(2.0, 2.0)), 3, 100)
+    np.testing.assert_array_equal(twin.people.positions, _scene(CONFIG, 3, 100).people.positions)
+
+    def reach(scene):  # the camera's farthest place from its first, and its distance to the
+        c = np.array([cam.c[:2] for cam in scene.hor_cameras["hor1"]])  # shared group
+        shared = scene.people.positions[:, scene.groups["shared"]].mean(axis=1)
+        return np.hypot(*(c - c[0]).T).max(), np.hypot(*(c - shared).T).mean()
+
+    (walked_near, away_near), (walked_far, away_far) = reach(near), reach(far)
+    assert walked_near < 3.0 < 5.0 < walked_far and away_far > away_near + 3.0
+    shared = set(far.groups["shared"].tolist())
+    seen = [set(r.ids.tolist()) & shared for r in far.hor["hor1"].values()]
+    assert np.mean([len(s) for s in seen]) >= 0.7 * len(shared)
+    with pytest.raises(ValueError, match="holder_area"):
+        ObliqueSceneConfig(holder_area=(0.5, 2.0))
+
+
 def test_edge_people_are_cut_by_each_images_bottom_edge():
     """``edge_people``: more people walk across each camera's bottom edge, whose boxes it cuts
     (the renders otherwise keep everyone inside both images); everyone else is the same scene's,
