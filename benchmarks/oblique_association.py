@@ -255,8 +255,8 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     """The drone's place (``--top-pitch``, ``--top-height``), its motion (``--top-drift``,
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace, walk and
-    pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), people's heights
-    (``--person-height``)."""
+    pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), their lenses' distortion
+    (``--hor-distortion``), people's heights (``--person-height``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -279,6 +279,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--holder-area", type=float, nargs=2, default=(2.0, 2.0),
                    metavar=("LO", "HI"), help="the side of each holder's square, LO-HI metres "
                    "(default 2 2: turning on the spot; 10: walking past the scene)")
+    p.add_argument("--hor-distortion", type=float, nargs=2, default=(0.0, 0.0),
+                   metavar=("LO", "HI"), help="each handheld lens's radial distortion k1, drawn "
+                   "in LO-HI (default 0 0: a pinhole; -0.25: an action camera's barrel)")
     p.add_argument("--pan-rate", type=float, default=0.05, metavar="R",
                    help="pans a second of each handheld camera (a turn away and back; default "
                    "0.05)")
@@ -303,6 +306,7 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               edge_people=tuple(args.edge_people),
                               holder_speed=tuple(args.holder_speed),
                               holder_area=tuple(args.holder_area), pan_rate=args.pan_rate,
+                              hor_distortion=tuple(args.hor_distortion),
                               height_range=tuple(args.person_height), **settings)
 
 

@@ -80,6 +80,7 @@ from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 __all__ = [
     "ObliqueScene",
     "ObliqueSceneConfig",
+    "distorted",
     "make_oblique_scene",
     "project_view",
     "write_oblique_scene",
@@ -150,6 +151,10 @@ class ObliqueSceneConfig:
         holder_area: side of the square a holder walks in (m), per holder: 2 m, the default,
             turns on the spot; 10 m walks past the scene. A fixed side draws nothing, so the
             default scenes are as before.
+        hor_distortion: radial distortion k1 of a handheld camera's lens (Brown's model on
+            the pinhole's normalised image coordinates), per camera: 0, the default, a
+            pinhole; negative, barrel (about -0.1 a phone's wide lens, -0.25 an action
+            camera's). A fixed value draws nothing, so the rest of the scene is as without.
         hor_pitch: mean pitch of a handheld camera (positive looks down), per camera.
         hor_wobble: standard deviation of the smooth pitch and roll wobble about that mean.
         head_turn_std: standard deviation of the smooth head turn about the gaze at the group.
@@ -193,6 +198,7 @@ class ObliqueSceneConfig:
     hor_extra_distance: tuple[float, float] = (0.0, 4.0)
     holder_speed: tuple[float, float] = (0.1, 0.5)
     holder_area: tuple[float, float] = (_HOLDER_AREA, _HOLDER_AREA)
+    hor_distortion: tuple[float, float] = (0.0, 0.0)
     hor_pitch: tuple[float, float] = (-3.0, 5.0)
     hor_wobble: float = 1.0
     head_turn_std: float = 8.0
@@ -232,6 +238,9 @@ class ObliqueSceneConfig:
         pair("holder_speed", 0.0)
         pair("holder_area", 1.0, 100.0)
         pair("hor_pitch", -45.0, 45.0)
+        if not -0.5 <= self.hor_distortion[0] <= self.hor_distortion[1] <= 0.5:
+            raise ValueError("ObliqueSceneConfig.hor_distortion must be (min, max) with -0.5 "
+                             f"<= min <= max <= 0.5, got {self.hor_distortion}")
         pair("pan_angle", 0.0, 180.0)
         pair("pan_duration", 1e-3)
         pair("edge_people", 0, 20)
@@ -314,6 +323,7 @@ def project_view(
     near_clip: float = 0.3,
     min_visible_fraction: float = 0.3,
     present: np.ndarray | None = None,
+    k1: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Boxes of upright people in one camera's image, with occlusion and truncation.
 
@@ -335,6 +345,7 @@ def project_view(
         min_visible_fraction: in [0, 1].
         present: ``(N,)`` bool, people that may be seen (e.g. not the camera's holder);
             ``None``: everyone.
+        k1: the lens's radial distortion (:func:`distorted`), 0: a pinhole.
 
     Returns:
         (index, boxes): ``(M,)`` int64 indices into N, ascending, and ``(M, 4)`` ``x, y, w, h``
@@ -351,6 +362,8 @@ def project_view(
                         np.broadcast_to(heights[:, None], (n, _CIRCLE_POINTS))], axis=1)
     points = np.concatenate([np.concatenate([xy, xy], axis=1), z[..., None]], axis=2)
     uv, depth = camera.project(points)  # (N, 2P, 2), (N, 2P)
+    if k1:
+        uv = distorted(uv, camera.K, k1)
     front = (depth > near_clip).all(axis=1)
     if present is not None:
         front &= np.asarray(present, dtype=bool).reshape(n)
@@ -372,13 +385,28 @@ def project_view(
     return idx[keep].astype(np.int64), boxes
 
 
+def distorted(uv: np.ndarray, K: np.ndarray, k1: float) -> np.ndarray:
+    """Pinhole pixels ``(..., 2)`` moved by radial distortion ``k1`` (Brown's model, one term:
+    the normalised radius r becomes r (1 + k1 r^2)); for barrel distortion (k1 < 0) the factor
+    stops at the radius where the image of a ray would turn back (r^2 = -1 / (3 k1)), so no
+    point far out of view folds into the image."""
+    f, c = np.array([K[0, 0], K[1, 1]]), K[:2, 2]
+    xy = (np.asarray(uv, float) - c) / f
+    r2 = np.sum(xy * xy, axis=-1, keepdims=True)
+    if k1 < 0:
+        r2 = np.minimum(r2, -1.0 / (3.0 * k1))
+    return c + f * xy * (1.0 + k1 * r2)
+
+
 def _project_frames(
     people: PeopleState,
     cameras: Sequence[Camera],
     config: ObliqueSceneConfig,
     hidden: int | None = None,
+    k1: float = 0.0,
 ) -> dict[int, FrameBoxes]:
-    """``{frame: FrameBoxes}`` of one view over all frames (``hidden``: its camera's holder)."""
+    """``{frame: FrameBoxes}`` of one view over all frames (``hidden``: its camera's holder;
+    ``k1``: its lens's distortion)."""
     present = np.ones(people.n_people, dtype=bool)
     if hidden is not None:
         present[hidden] = False
@@ -387,7 +415,7 @@ def _project_frames(
         idx, boxes = project_view(
             people.positions[f], people.heights, people.widths, cam,
             near_clip=config.near_clip, min_visible_fraction=config.min_visible_fraction,
-            present=present,
+            present=present, k1=k1,
         )
         records[f + 1] = FrameBoxes(f + 1, people.ids[idx], boxes)
     return records
@@ -985,9 +1013,11 @@ def make_oblique_scene(
         head_roll=hor_angles[0][:, 2],
     )
 
-    # The boxes.
+    # The boxes; each handheld lens's distortion drawn last (none drawn for a fixed value).
+    lo, hi = config.hor_distortion
+    k1 = np.full(n_hor, lo) if lo == hi else rng.uniform(lo, hi, size=n_hor)
     top = _project_frames(people, top_cameras, config)
-    hor = {name: _project_frames(people, hor_cameras[name], config, hidden=k)
+    hor = {name: _project_frames(people, hor_cameras[name], config, hidden=k, k1=float(k1[k]))
            for k, name in enumerate(hor_names)}
     overlap = {"top": p_top, **dict(zip(hor_names, p_hor, strict=True))}
     target_fraction = {"top": n_shared / (n_shared + n_top_only + holders_seen)}

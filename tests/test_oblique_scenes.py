@@ -9,6 +9,7 @@ import pytest
 
 from xvmatch.datasets.oblique_scenes import (
     ObliqueSceneConfig,
+    distorted,
     make_oblique_scene,
     project_view,
     write_oblique_scene,
@@ -152,6 +153,35 @@ def test_a_holder_given_a_wide_square_walks_past_the_scene():
     assert np.mean([len(s) for s in seen]) >= 0.7 * len(shared)
     with pytest.raises(ValueError, match="holder_area"):
         ObliqueSceneConfig(holder_area=(0.5, 2.0))
+
+
+def test_a_barrel_lens_pulls_the_handheld_boxes_toward_the_centre():
+    """``hor_distortion``: Brown's k1 on the handheld views only; a fixed value draws nothing
+    (the same people, the same top boxes); barrel (k1 < 0) moves a box's corners toward the
+    image centre, more the farther out, and a ray far out of view stays out."""
+    K = intrinsics_from_fov(1920, 1080, 100.0)
+    uv = np.array([[960.0, 540.0], [1400.0, 540.0], [1900.0, 1000.0], [60000.0, 540.0]])
+    out = distorted(uv, K, -0.25)
+    assert np.array_equal(out[0], uv[0])  # the centre stays
+    r_in, r_out = np.hypot(*(uv - uv[0]).T), np.hypot(*(out - uv[0]).T)
+    assert (r_out[1:] < r_in[1:]).all() and np.all(np.diff(r_out[1:]) > 0)
+    assert r_out[2] / r_in[2] < r_out[1] / r_in[1] and out[3, 0] > 1920  # out of view still
+    config = dataclasses.replace(CONFIG, hor_hfov=(100.0, 110.0))
+    pinhole = _scene(config, 5, 30)
+    barrel = _scene(dataclasses.replace(config, hor_distortion=(-0.25, -0.25)), 5, 30)
+    np.testing.assert_array_equal(barrel.people.positions, pinhole.people.positions)
+    assert all(np.array_equal(barrel.top[f].boxes, pinhole.top[f].boxes) for f in pinhole.top)
+    moved = 0
+    for f, rec in pinhole.hor["hor1"].items():
+        other = barrel.hor["hor1"][f]
+        shared = np.intersect1d(rec.ids, other.ids)
+        a = rec.boxes[np.isin(rec.ids, shared)]
+        b = other.boxes[np.isin(other.ids, shared)]
+        assert (b[:, 3] <= a[:, 3] + 1e-9).all()  # heights shrink toward the edges
+        moved += int((np.abs(a - b) > 1.0).any())
+    assert moved > 0
+    with pytest.raises(ValueError, match="hor_distortion"):
+        ObliqueSceneConfig(hor_distortion=(-0.8, 0.0))
 
 
 def test_edge_people_are_cut_by_each_images_bottom_edge():
