@@ -3,7 +3,12 @@
 Times :func:`xvmatch.cues.ground_registration.pose_hypotheses` on the same random frames in the
 same run, once with ``XVMATCH_KERNELS=numpy`` and once compiled (the default wherever numba
 imports), and checks that both give the same poses and scores bit for bit. Milliseconds a call
-from CPU time (robust to other load), the best of ``--repeats`` passes, and the ratio.
+from CPU time (robust to other load), the best of ``--repeats`` passes, and the ratio. Then the
+registration of those frames as a sequence with the top camera's sight and without it (video
+mode runs both for every lens): two calls of
+:func:`~xvmatch.cues.ground_registration.register_scales` against one of
+:func:`~xvmatch.cues.ground_registration.register_scales_twice`, which computes each frame's
+pose terms once for both, and whether they give the same runs.
 
 Usage:
     python benchmarks/pose_terms_speed.py [--frames 40] [--top 12] [--hor 10] [--repeats 3]
@@ -42,6 +47,33 @@ def timed(cases: list[tuple], sight: gr.TopSight | None, mode: str, repeats: int
     return best, out
 
 
+def twice_timed(cases: list[tuple], sight: gr.TopSight, repeats: int
+                ) -> tuple[float, float, bool]:
+    """CPU milliseconds a frame (best of ``repeats``) of the registration with and without
+    the ``sight`` by two calls and by one, and whether the runs are the same."""
+    order = list(range(len(cases)))
+    args = (order, [c[0] for c in cases], [c[1] for c in cases], 70.0, 3.0, None,
+            [c[2] for c in cases])
+    sights = [sight] * len(cases)
+
+    def run(call):
+        best, out = np.inf, None
+        for _ in range(repeats):
+            t = time.process_time()
+            out = call()
+            best = min(best, (time.process_time() - t) / len(cases) * 1e3)
+        return best, out
+
+    def flat(runs: dict) -> list:
+        return [(s, total, [(p.frame, p.centre.tolist(), p.heading, p.score) for p in poses])
+                for s, (total, poses) in sorted(runs.items())]
+
+    two, (made, plain) = run(lambda: (gr.register_scales(*args, sights),
+                                      gr.register_scales(*args, None)))
+    one, (made1, plain1) = run(lambda: gr.register_scales_twice(*args, sights))
+    return two, one, flat(made) == flat(made1) and flat(plain) == flat(plain1)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--frames", type=int, default=40)
@@ -63,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
         same = all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
                    for a, b in zip(expected, got, strict=True))
         print(f"| {name} | {slow:.1f} | {fast:.1f} | {slow / fast:.2f}x | {same} |")
+    two, one, same = twice_timed(cases, gr.TopSight.of(camera, 25.0), args.repeats)
+    print("\nregistered with the top camera's sight and without, ms a frame (compiled)\n")
+    print("| two calls | at once | ratio | the same runs |")
+    print("|---|---|---|---|")
+    print(f"| {two:.1f} | {one:.1f} | {two / one:.2f}x | {same} |")
     return 0
 
 

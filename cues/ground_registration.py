@@ -79,6 +79,7 @@ __all__ = [
     "pose_hypotheses",
     "ray_distances",
     "register_scales",
+    "register_scales_twice",
     "register_sequence",
     "register_with_scale",
     "score_poses",
@@ -295,9 +296,16 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
             a horizontal person nobody explains in the top camera's sight pays as for a top
             person unseen.
     """
+    return _hypotheses(top, hor, hfov_deg, sizes, sight, plain=False)[0]
+
+
+def _hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float, sizes: np.ndarray | None,
+                sight: TopSight | None, plain: bool) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`pose_hypotheses` with the ``sight``, then, with ``plain`` and a sight, without
+    it: the poses' terms are computed once for both (the sight only adds its count)."""
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
-        return np.zeros((0, 3)), np.zeros(0)
+        return [(np.zeros((0, 3)), np.zeros(0))] * (2 if plain and sight is not None else 1)
     n, m = len(top), len(hor)
     headings = np.arange(_HEADINGS) * (2 * np.pi / _HEADINGS)
     turned = np.einsum("hab,mb->hma", _rotations(headings), hor)  # (H, M, 2)
@@ -311,31 +319,34 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
     cx = np.ascontiguousarray(centres[:, 0].reshape(_HEADINGS, n * m))
     cy = np.ascontiguousarray(centres[:, 1].reshape(_HEADINGS, n * m))
     grown = turned[:, :, None, :] * size[None, None, :, None]  # (H, M, N, 2)
-    score = _scores(cx, cy, grown, turned, top, hor, headings, hfov_deg, sight)
-    heading = np.repeat(headings, n * m)
-    poses = np.column_stack([centres, heading])
-    order = _best_first(score, _FIRST)
-    keep = _distinct(poses, order)
-    if len(keep) < KEEP and len(order) < len(score):  # the prefix ran out: the whole order
-        keep = _distinct(poses, _best_first(score, len(score)))
-    return poses[keep], score[keep]
+    poses = np.column_stack([centres, np.repeat(headings, n * m)])
+    out = []
+    for score in _scores(cx, cy, grown, turned, top, hor, headings, hfov_deg, sight,
+                         plain and sight is not None):
+        order = _best_first(score, _FIRST)
+        keep = _distinct(poses, order)
+        if len(keep) < KEEP and len(order) < len(score):  # the prefix ran out: the whole order
+            keep = _distinct(poses, _best_first(score, len(score)))
+        out.append((poses[keep], score[keep]))
+    return out
 
 
 def _scores(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
             top: np.ndarray, hor: np.ndarray, headings: np.ndarray, hfov_deg: float,
-            sight: TopSight | None) -> np.ndarray:
+            sight: TopSight | None, plain: bool = False) -> list[np.ndarray]:
     """``(P,)`` the scores of poses ``p = h Q + q`` (:func:`pose_terms`' arguments): the
     horizontal people explained, less :data:`_UNSEEN_WEIGHT` per person left unexplained where
-    they would be seen."""
+    they would be seen; with ``plain``, then the scores were there no ``sight``."""
     # The horizontal camera's view: a bearing within the half field of view (|across| <
     # ahead tan(half), no arctan), as far as its people reach.
     tan_half = float(np.tan(np.radians(hfov_deg) / 2)) if hfov_deg < 180 else np.inf
     reach = 1.2 * float(np.max(np.hypot(hor[:, 0], hor[:, 1])))
-    near_hor, missed = pose_terms(cx, cy, grown, turned, top, (np.cos(headings),
-                                  np.sin(headings), tan_half, reach * reach), sight)
+    near_hor, missed, unseen = pose_terms(cx, cy, grown, turned, top, (
+        np.cos(headings), np.sin(headings), tan_half, reach * reach), sight)
     explained = np.exp(-0.5 * near_hor / _SIGMA**2).sum(axis=1)
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
-    return np.round(explained - _UNSEEN_WEIGHT * missed, _DIGITS)
+    return [np.round(explained - _UNSEEN_WEIGHT * count, _DIGITS)
+            for count in ([missed + unseen, missed] if plain else [missed + unseen])]
 
 
 def score_poses(poses: np.ndarray, top: np.ndarray, hor: np.ndarray, hfov_deg: float,
@@ -352,7 +363,7 @@ def score_poses(poses: np.ndarray, top: np.ndarray, hor: np.ndarray, hfov_deg: f
     turned = np.einsum("hab,mb->hma", _rotations(headings), hor)  # (K, M, 2)
     grown = turned[:, :, None, :] * size[None, None, :, None]  # (K, M, N, 2)
     return _scores(np.ascontiguousarray(poses[:, :1]), np.ascontiguousarray(poses[:, 1:2]),
-                   grown, turned, top, hor, headings, hfov_deg, sight)
+                   grown, turned, top, hor, headings, hfov_deg, sight)[0]
 
 
 def _best_first(score: np.ndarray, count: int) -> np.ndarray:
@@ -370,14 +381,15 @@ def _best_first(score: np.ndarray, count: int) -> np.ndarray:
 
 def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
                top: np.ndarray, view: tuple[np.ndarray, np.ndarray, float, float],
-               sight: TopSight | None) -> tuple[np.ndarray, np.ndarray]:
+               sight: TopSight | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The terms of :func:`pose_hypotheses`' scores for every pose ``p = h Q + q`` (``cx``,
     ``cy`` ``(H, Q)`` its centre, facing heading ``h``): ``(P, M)`` each horizontal person's
     least squared distance to a top person (``grown`` ``(H, M, N, 2)``: horizontal people
-    turned, at each top person's height) and ``(P,)`` the people it leaves unexplained where
-    they would be seen: top people (``top`` ``(N, 2)``) in the horizontal camera's view
-    (``view``: the headings' cos and sin, tan of the half field of view, the squared reach),
-    and horizontal people (``turned`` ``(H, M, 2)``) in the top camera's ``sight``.
+    turned, at each top person's height) and two ``(P,)`` counts of the people it leaves
+    unexplained where they would be seen: top people (``top`` ``(N, 2)``) in the horizontal
+    camera's view (``view``: the headings' cos and sin, tan of the half field of view, the
+    squared reach), and horizontal people (``turned`` ``(H, M, 2)``) in the top camera's
+    ``sight`` (zeros without one).
 
     The compiled kernel where numba is loaded (:mod:`~xvmatch.cues.kernel_choice`: one pass,
     no ``(N, P)`` array), else numpy, horizontal person by horizontal person as an ``(N, P)``
@@ -411,24 +423,34 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
     across = -rel_x * sin + rel_y * cos
     missed = ((near_top > RADIUS**2) & (ahead > 0.5) & (np.abs(across) < ahead * tan_half)
               & (ahead * ahead + across * across < reach2)).sum(axis=0)
+    unseen = np.zeros_like(missed)
     if sight is not None:  # horizontal people alone where the top camera would see them
         where = (np.stack([cx.reshape(-1), cy.reshape(-1)], -1)[None]
                  + np.repeat(turned.transpose(1, 0, 2), cx.shape[1], axis=1))  # (M, P, 2)
-        missed = missed + ((near_hor > RADIUS**2) & sight.sees(where)).sum(axis=0)
-    return np.ascontiguousarray(near_hor.T), missed
+        unseen = ((near_hor > RADIUS**2) & sight.sees(where)).sum(axis=0)
+    return np.ascontiguousarray(near_hor.T), missed, unseen
 
 
 def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512, limit: int = KEEP
               ) -> list[int]:
     """The first ``limit`` of ``order`` (indices into ``poses`` ``(P, 3)``) each 1 m or 10
-    degrees away from every one kept before it (greedy, in order): a block of candidates at a
-    time, those near an earlier block's kept ones struck out at once, then the first left kept
-    and those near it struck out, until ``limit``."""
+    degrees away from every one kept before it (greedy, in order). The compiled kernel where
+    numba is loaded (one pass, :mod:`~xvmatch.cues.kernel_choice`), else numpy: a block of
+    candidates at a time, those near an earlier block's kept ones struck out at once, then the
+    first left kept and those near it struck out, until ``limit``; the same comparisons either
+    way."""
+    order = np.asarray(order, np.int64)
+    kernels = kernel_choice.kernels()
+    if kernels is not None:
+        return kernels.distinct_poses(np.ascontiguousarray(poses[:, 0]),
+                                      np.ascontiguousarray(poses[:, 1]),
+                                      np.ascontiguousarray(poses[:, 2]), order, limit,
+                                      _APART_RAD).tolist()
     keep: list[int] = []
     for start in range(0, len(order), block):
         cand = order[start:start + block]
         free = _apart(poses[cand], poses[keep]).all(axis=1) if keep else np.ones(len(cand), bool)
-        xy, th = poses[cand, :2], poses[cand, 2]
+        x, y, th = poses[cand, 0], poses[cand, 1], poses[cand, 2]
         while free.any():
             i = int(np.argmax(free))
             keep.append(int(cand[i]))
@@ -436,16 +458,17 @@ def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512, limit: int
                 return keep
             free[i] = False
             # _apart's test against one pose, written out: the hot loop, no broadcast
-            free &= ((np.hypot(xy[:, 0] - xy[i, 0], xy[:, 1] - xy[i, 1]) > 1.0)
-                     | (np.abs(_wrap(th - th[i])) > _APART_RAD))
+            dx, dy = x - x[i], y - y[i]
+            free &= (dx * dx + dy * dy > 1.0) | (np.abs(_wrap(th - th[i])) > _APART_RAD)
     return keep
 
 
 def _apart(poses: np.ndarray, others: np.ndarray) -> np.ndarray:
     """``(K, L)`` whether each of poses ``(K, 3)`` is more than 1 m or 10 degrees from each
     of ``others`` ``(L, 3)``."""
-    return ((np.hypot(poses[:, None, 0] - others[None, :, 0], poses[:, None, 1]
-                      - others[None, :, 1]) > 1.0)
+    dx = poses[:, None, 0] - others[None, :, 0]
+    dy = poses[:, None, 1] - others[None, :, 1]
+    return ((dx * dx + dy * dy > 1.0)
             | (np.abs(_wrap(poses[:, None, 2] - others[None, :, 2])) > _APART_RAD))
 
 
@@ -629,24 +652,51 @@ def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nda
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES`: ``{scale: (total score, poses)}``, the poses on the
     top map multiplied by ``scale``. Arguments as :func:`register_with_scale`'s."""
-    runs: dict[float, tuple[float, list[FramePose]]] = {}
+    return _register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes, sights,
+                            plain=False)[0]
+
+
+def register_scales_twice(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
+                          hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None,
+                          top_sizes: list[np.ndarray] | None, sights: list[TopSight]
+                          ) -> tuple[dict[float, tuple[float, list[FramePose]]],
+                                     dict[float, tuple[float, list[FramePose]]]]:
+    """:func:`register_scales` with the top camera's ``sights`` and without them, as two calls
+    give them (bit for bit), each frame's pose terms computed once for both: video mode
+    compares the two runs of every lens."""
+    made, plain = _register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes,
+                                   sights, plain=True)
+    return made, plain
+
+
+def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
+                     hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None,
+                     top_sizes: list[np.ndarray] | None, sights: list[TopSight] | None,
+                     plain: bool) -> list[dict[float, tuple[float, list[FramePose]]]]:
+    """:func:`register_scales` with the ``sights``, then, with ``plain`` and sights, without
+    them."""
+    twice = plain and sights is not None
+    runs: list[dict[float, tuple[float, list[FramePose]]]] = [{} for _ in range(1 + twice)]
     motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
     moved = motion is not None and any(m is not None for m in motion)
     sizes = top_sizes or [None] * len(tops)
     for scale in MAP_SCALES:
         scaled = [scale * np.asarray(p, float) for p in tops]
         seen = [None if v is None else v.scaled(scale) for v in sights or [None] * len(tops)]
-        cands = [pose_hypotheses(p, q, hfov_deg, z, v)
-                 for p, q, z, v in zip(scaled, hors, sizes, seen, strict=True)]
-        # With the map's motion out, and (where any was read) with it left in: a static
-        # camera's small crowd walking together reads as motion; the better-explained kept.
-        for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
-                          for m in motion], None] if moved else [None]):
-            poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
-                                                      seen, motions), fps, motions)
-            run = (round(sum(p.score for p in poses), 6), poses)
-            if scale not in runs or run[0] > runs[scale][0]:
-                runs[scale] = run
+        each = [_hypotheses(p, q, hfov_deg, z, v, twice)
+                for p, q, z, v in zip(scaled, hors, sizes, seen, strict=True)]
+        for k, kept in enumerate(runs):
+            cands = [c[k] for c in each]
+            looks = seen if k == 0 else [None] * len(tops)
+            # With the map's motion out, and (where any was read) with it left in: a static
+            # camera's small crowd walking together reads as motion; the better-explained kept.
+            for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
+                              for m in motion], None] if moved else [None]):
+                poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
+                                                          looks, motions), fps, motions)
+                run = (round(sum(p.score for p in poses), 6), poses)
+                if scale not in kept or run[0] > kept[scale][0]:
+                    kept[scale] = run
     return runs
 
 

@@ -1,5 +1,5 @@
-"""Whether a step of the (O, theta) search, or the oblique registration's pose terms, runs its
-numpy form or its compiled numba kernel.
+"""Whether a step of the (O, theta) search, or the oblique registration's pose terms and its
+choice of distinct poses, runs its numpy form or its compiled numba kernel.
 
 The two give bit-identical results on every CPU (the kernels do only IEEE arithmetic and
 comparisons in the numpy forms' order; every transcendental function is numpy's, in both;

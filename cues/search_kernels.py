@@ -1,6 +1,7 @@
 """Compiled (numba) kernels of the (O, theta) search of CVMHAT Sec. 3.2: the hypothesis vectors
 (Eqs. 5-8), the lower bound of Phi, and the vector-set matching (Eqs. 11-12); and the oblique
-registration's per-pose terms (``pose_terms``), the same kind of per-hypothesis loop.
+registration's per-pose terms (``pose_terms``), the same kind of per-hypothesis loop, and its
+greedy choice of distinct poses (``distinct_poses``).
 
 The search scores hundreds of hypotheses per frame out of thousands, each two small DTWs, and
 the batched numpy forms spent most of their time in per-cell array calls and in arrays of the
@@ -25,6 +26,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
+    "distinct_poses",
     "hypothesis_table",
     "lower_bounds",
     "match_batch",
@@ -572,18 +574,19 @@ def pair_features(bearing_top: np.ndarray, log_depth: np.ndarray, visible: np.nd
 def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
                top: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray, tan_half: float,
                reach2: float, far2: float, ground: np.ndarray, bounds: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The oblique registration's per-pose terms (:func:`~xvmatch.cues.ground_registration.
     pose_terms`, its numpy form, step by step): pose ``p = h Q + q`` at (``cx``, ``cy``
     ``(H, Q)``) facing heading ``h``; returns ``(P, M)`` each horizontal person's least squared
-    distance to a top person and ``(P,)`` the people it leaves unexplained in a view: top
-    people in the horizontal camera's, and (``bounds`` not empty) horizontal people in the top
-    camera's sight (``ground`` its homography, ``bounds`` its pixel bounds and squared
-    reach)."""
+    distance to a top person and two ``(P,)`` counts of the people it leaves unexplained in a
+    view: top people in the horizontal camera's, and (``bounds`` not empty, else zeros)
+    horizontal people in the top camera's sight (``ground`` its homography, ``bounds`` its
+    pixel bounds and squared reach)."""
     n_head, n_q = cx.shape
     m, n = grown.shape[1], top.shape[0]
     near_hor = np.empty((n_head * n_q, m))
     missed = np.zeros(n_head * n_q, dtype=np.int64)
+    unseen = np.zeros(n_head * n_q, dtype=np.int64)
     near_top = np.empty(n)
     sight = bounds.shape[0] > 0
     gx, gy = grown[..., 0].copy(), grown[..., 1].copy()  # (H, M, N), unit stride along N
@@ -612,7 +615,7 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
                     w = (ground[2, 0] * px + ground[2, 1] * py) + ground[2, 2]
                     if (w > 0 and u > bounds[0] * w and u < bounds[1] * w and v > bounds[2] * w
                             and v < bounds[3] * w and px * px + py * py < bounds[4]):
-                        missed[p] += 1
+                        unseen[p] += 1
             for i in range(n):
                 if near_top[i] > far2:
                     rx, ry = tx[i] - x, ty[i] - y
@@ -621,4 +624,35 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
                     if (ahead > 0.5 and abs(across) < ahead * tan_half
                             and ahead * ahead + across * across < reach2):
                         missed[p] += 1
-    return near_hor, missed
+    return near_hor, missed, unseen
+
+
+@njit(cache=True)
+def distinct_poses(x: np.ndarray, y: np.ndarray, heading: np.ndarray, order: np.ndarray,
+                   limit: int, far_rad: float) -> np.ndarray:
+    """The first ``limit`` poses of ``order`` each more than 1 m or ``far_rad`` (wrapped)
+    from every one kept before it (:func:`~xvmatch.cues.ground_registration._distinct`, its
+    numpy form, greedy in order): squared distances against 1, the heading difference wrapped
+    as NumPy's ``(d + pi) % (2 pi) - pi`` (an exact fmod, then the divisor's sign: numba's
+    float ``%`` is Python's, the same rule)."""
+    keep = np.empty(min(limit, order.shape[0]), dtype=np.int64)
+    n = 0
+    two_pi = 2 * np.pi
+    for idx in order:
+        free = True
+        for j in range(n):
+            k = keep[j]
+            dx, dy = x[idx] - x[k], y[idx] - y[k]
+            if dx * dx + dy * dy > 1.0:
+                continue
+            mod = ((heading[idx] - heading[k]) + np.pi) % two_pi  # Python's rule, NumPy's
+            if abs(mod - np.pi) > far_rad:
+                continue
+            free = False
+            break
+        if free:
+            keep[n] = idx
+            n += 1
+            if n == keep.shape[0]:
+                break
+    return keep[:n]

@@ -471,3 +471,50 @@ def test_a_pose_a_frame_dropped_is_carried_in_from_its_neighbours() -> None:
     assert all(np.hypot(*(p.centre - t[:2])) < 0.5 for p, t in zip(chosen, truth, strict=True))
     without = gr.register_sequence([0, 1, 2], cands, 3.0, motions)
     assert np.hypot(*(without[1].centre - truth[1][:2])) > 2.0
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(0, 300), limit=st.integers(1, 40),
+       spread=st.sampled_from([0.5, 3.0, 20.0]))
+def test_the_compiled_distinct_poses_are_numpys(seed: int, n: int, limit: int,
+                                                spread: float) -> None:
+    """The numba kernel of the greedy choice of distinct poses keeps numpy's (its blocks, its
+    wrapped headings, headings past a full turn and exactly 1 m apart included), in order."""
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack([rng.uniform(-spread, spread, (n, 2)),
+                             rng.uniform(-3 * np.pi, 3 * np.pi, n)])
+    if n > 1:  # an exact tie of distance and of heading
+        poses[1] = poses[0] + np.array([1.0, 0.0, 2 * np.pi + np.radians(10.0)])
+    order = rng.permutation(n)
+    with kernel_choice.forced("compiled"):
+        compiled = gr._distinct(poses, order, block=64, limit=limit)
+    with kernel_choice.forced("numpy"):
+        plain = gr._distinct(poses, order, block=64, limit=limit)
+    assert compiled == plain and len(plain) <= limit
+    kept = poses[plain]
+    apart = gr._apart(kept, kept)
+    assert apart[~np.eye(len(kept), dtype=bool)].all()
+
+
+def test_registered_with_and_without_the_sights_at_once_as_one_by_one() -> None:
+    """``register_scales_twice`` gives the runs two calls of ``register_scales`` give, with
+    the top camera's sights and without, bit for bit (the pose terms computed once)."""
+    rng = np.random.default_rng(4)
+    world = rng.uniform(-6, 6, (6, 2))
+    frames = list(range(5))
+    tops = [world + 0.1 * k for k in frames]
+    hor = _view(world, np.array([-12.0, 0.5]), 0.1)
+    hor = hor[_in_view(hor)]
+    sight = gr.TopSight.of(_top_camera(), 14.0)
+    args = (frames, tops, [hor + rng.normal(0, 0.05, hor.shape) for _ in frames], 70.0, 3.0,
+            [np.arange(6)] * 5, [rng.uniform(0.9, 1.1, 6) for _ in frames])
+    made, plain = gr.register_scales_twice(*args, [sight] * 5)
+    for twice, once in ((made, gr.register_scales(*args, [sight] * 5)),
+                        (plain, gr.register_scales(*args, None))):
+        assert twice.keys() == once.keys()
+        for scale in once:
+            assert twice[scale][0] == once[scale][0]
+            assert [(p.frame, p.centre.tolist(), p.heading, p.score) for p in twice[scale][1]] \
+                == [(p.frame, p.centre.tolist(), p.heading, p.score) for p in once[scale][1]]
+    # the sight weighs here: some scale's total differs with it
+    assert any(made[s][0] != plain[s][0] for s in made)

@@ -433,8 +433,9 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     :func:`register_and_pair` keeps (:func:`fewer_sights`): the same lens, given or chosen,
     runs the same.
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
-    runs = plain = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views)
-                    for h in HFOV_CANDIDATES}
+    both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights)
+            for h in HFOV_CANDIDATES}  # each lens's runs with the sights and without
+    runs = plain = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
     pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
              for h, s in scales.items()}
@@ -443,8 +444,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
     if sights is not None:  # each lens's run as made, the chosen one's first
-        runs = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights)
-                for h in (hfov, *(h for h in runs if h != hfov))}
+        runs = {h: (both[h][0], both[h][1][0]) for h in (hfov, *(h for h in runs if h != hfov))}
     made = {h: scale_along_tracks(order, tops, *runs[h], sizes, views) for h in runs}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
     best, run, run_kept = hfov, made[hfov], made_kept[hfov]
@@ -545,12 +545,12 @@ def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov
     their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
     with the ``sights``, or of the run without them where that keeps more
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
-    made = scale_along_tracks(order, tops, hors, _registrations(
-        order, tops, hors, sizes, hfov, fps, True, sights), sizes, views)
     if sights is None:
-        return made
-    return fewer_sights(made, order, tops, hors, sizes,
-                        _registrations(order, tops, hors, sizes, hfov, fps, True), views)
+        return scale_along_tracks(order, tops, hors, _registrations(
+            order, tops, hors, sizes, hfov, fps, True), sizes, views)
+    made, plain = _registrations_twice(order, tops, hors, sizes, hfov, fps, True, sights)
+    return fewer_sights(scale_along_tracks(order, tops, hors, made, sizes, views), order, tops,
+                        hors, sizes, plain, views)
 
 
 def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, sizes: list,
@@ -568,12 +568,16 @@ def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, siz
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
                 hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None,
                 sights: list[gr.TopSight] | None = None
-                ) -> tuple[list, dict[float, tuple[float, list[gr.FramePose]]]]:
-    """The handheld view's people on its own map (with their ids) and its registration at
+                ) -> tuple[list, list[dict[float, tuple[float, list[gr.FramePose]]]]]:
+    """The handheld view's people on its own map (with their ids) and its registrations at
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
-    motion taken out in video mode)."""
+    motion taken out in video mode): with the ``sights`` and without them, or, without
+    sights, the one."""
     hors = _hor_people(boxes, hor_size, hfov)
-    return hors, _registrations(order, tops, hors, sizes, hfov, fps, views is not None, sights)
+    video = views is not None
+    if sights is None:
+        return hors, [_registrations(order, tops, hors, sizes, hfov, fps, video)]
+    return hors, list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights))
 
 
 def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
@@ -592,6 +596,16 @@ def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: 
     out in ``video`` mode (its ids the tracks)."""
     return gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov, fps,
                               [i for _, i in tops] if video else None, sizes, sights)
+
+
+def _registrations_twice(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
+                         fps: float, video: bool, sights: list[gr.TopSight]
+                         ) -> tuple[dict[float, tuple[float, list[gr.FramePose]]],
+                                    dict[float, tuple[float, list[gr.FramePose]]]]:
+    """:func:`_registrations` with the ``sights`` and without them, in one pass
+    (:func:`~xvmatch.cues.ground_registration.register_scales_twice`)."""
+    return gr.register_scales_twice(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
+                                    fps, [i for _, i in tops] if video else None, sizes, sights)
 
 
 def scale_along_tracks(order: list[int], tops: list, hors: list,
