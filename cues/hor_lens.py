@@ -33,7 +33,7 @@ that steadies a wrong lens's poses on a small crowd too); each lens's run is the
 and another lens's replaces the chosen one's where it keeps more than :data:`NEAR_TIE` times
 its pairs.
 
-The three candidates are guesses, 20 degrees apart; the pairs a run keeps measure the lens
+The four candidates are guesses, 10-20 degrees apart; the pairs a run keeps measure the lens
 (:func:`implied_hfov`): a wrong focal length stretches the handheld map along the camera's
 axis only, so the top map's distances between paired people, against the handheld map's ahead
 and across, give the stretch, and the lens, without any pose. Where the lens each run's pairs
@@ -41,7 +41,7 @@ imply differs from the run's by :data:`MIN_REMEASURE_DEG` or more (and is not a 
 one measured already), the whole run is made with it too and kept where its pairs hold along
 the tracks more often (than the chosen lens's run, measured from it; more than a near tie,
 measured from another lens's; a tie keeps the candidate: where every lens keeps the same
-pairs, the pairs are no measure of it). All told six to nine runs.
+pairs, the pairs are no measure of it). All told eight to eleven runs.
 
 Measured on rendered scenes (``benchmarks/oblique_association.py --choose-lens``,
 docs/notes/oblique_top_camera.md): without the chance check the choice lost up to 4 CVIDF1 on
@@ -84,10 +84,14 @@ __all__ = [
     "pick_along_tracks",
 ]
 
-HFOV_CANDIDATES = (70.0, 90.0, 110.0)
-"""Horizontal fields of view tried, degrees: a phone's, a wide and an action camera's (focal
-lengths about 1.4 times apart). No narrower one: 50 degrees never paired much better than 70 on
-45-55 degree cameras (the top map's scale search takes up most of that error)."""
+HFOV_CANDIDATES = (60.0, 70.0, 90.0, 110.0)
+"""Horizontal fields of view tried, degrees: a narrow and a phone's, a wide and an action
+camera's (focal lengths about 1.4 times apart from 70 up). 60 for people far off (a holder
+walking 15-50 m from them): there a lens 9 degrees wide of a 61-degree one stretched the
+handheld map by metres, and on renders video mode's choice with 60 gained clips without losing
+any (docs/notes/oblique_top_camera.md, forty-second session). No narrower one: 50 degrees
+never paired much better than 70 on 45-55 degree cameras (the top map's scale search takes up
+most of that error)."""
 
 LENS_MARGIN = 1.3
 """How many times the prior lens's pairing score another lens must exceed to replace it, in all
@@ -368,7 +372,7 @@ def pick_along_tracks(kept: dict[float, int], people: dict[float, int] | None = 
     prior's pairs and joins no more people. A wrong lens stretches the handheld map along the
     camera's axis, so its poses drift from frame to frame and its pairs change partner along a
     track, which the consensus drops. On 72 rendered clips (lenses of 60-80 and 90-120
-    degrees, a close and a far drone) its pick paired as well as the best of the three
+    degrees, a close and a far drone) its pick paired as well as the best of the then three
     candidates on every clip (docs/notes/oblique_top_camera.md)."""
     if prior not in kept:
         raise ValueError(f"the prior lens {prior} must be among the candidates {sorted(kept)}")

@@ -425,7 +425,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     joined :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people (a 65 degree lens: without the
     sights 110 degrees kept 122 pair-frames, a third wrong, 70 kept 51, all right; with them,
     130 and 190). Then the lens each run's pairs imply
-    (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement, not one of three guesses) is
+    (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement, not one of four guesses) is
     run too where it differs, and kept where its pairs hold along the tracks more often (the
     chosen lens's; another lens's, more than a near tie; the choice's ``measured_from`` says
     so; a tie keeps the candidate: on tilting close drones, whose runs kept as many pairs at
@@ -433,8 +433,11 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     :func:`register_and_pair` keeps (:func:`fewer_sights`): the same lens, given or chosen,
     runs the same.
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
+    # each lens's runs with the sights and without, the nearest the prior first: a run of
+    # another lens replaces the chosen one's only where it keeps more than a near tie of the
+    # best before it, so a tie keeps the lens nearer the prior
     both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights)
-            for h in HFOV_CANDIDATES}  # each lens's runs with the sights and without
+            for h in sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))}
     runs = plain = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
     pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
