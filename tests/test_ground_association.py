@@ -226,6 +226,24 @@ def test_associate_top_view_from_the_command_line(scene, tmp_path, capsys) -> No
 
 
 @pytest.mark.slow
+def test_a_nadir_top_view_says_what_its_path_assumes(tmp_path, capsys) -> None:
+    """A drone looking straight down goes to the nadir search, whose one line says that it
+    takes the wearer to be a top-view person and what to give where they are not."""
+    from xvmatch.cli import main
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    scene = make_oblique_scene(ObliqueSceneConfig(top_pitch=(90.0, 90.0),
+                                                  top_height=(30.0, 40.0)), 30,
+                               np.random.default_rng(0))
+    paths = write_oblique_scene(scene, tmp_path, "n")
+    assert main(["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+                 "--top-image-size", "1920x1080", "--fps", "10", "--out",
+                 str(tmp_path / "n.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "top view: looking straight down" in err
+    assert "wearer to be one of its people (if not: --top-view oblique)" in err
+
+
 def test_a_phones_size_is_guessed_on_the_ground_path(tmp_path, capsys) -> None:
     """A 1920x1080 handheld view whose boxes fit CVMHAT's 2688x1512: boxes alone, ``associate``
     assumes that size, and the ground path takes 1920x1080 instead, saying so, as if given."""

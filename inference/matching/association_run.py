@@ -324,7 +324,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
         return None
     if run is None:
         note("xvmatch: note: top view: looking straight down (its boxes are as wide as "
-             "tall); associating as over a nadir drone", False)
+             "tall); associating as over a nadir drone, which takes the handheld camera's "
+             "wearer to be one of its people (if not: --top-view oblique)", False)
         return None
     unused = [name for name, given in (("--model", options.learned is not None),
                                        ("--camera-id", options.camera_id is not None),
