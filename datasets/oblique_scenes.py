@@ -238,9 +238,7 @@ class ObliqueSceneConfig:
         pair("holder_speed", 0.0)
         pair("holder_area", 1.0, 100.0)
         pair("hor_pitch", -45.0, 45.0)
-        if not -0.5 <= self.hor_distortion[0] <= self.hor_distortion[1] <= 0.5:
-            raise ValueError("ObliqueSceneConfig.hor_distortion must be (min, max) with -0.5 "
-                             f"<= min <= max <= 0.5, got {self.hor_distortion}")
+        pair("hor_distortion", -0.5, 0.5)
         pair("pan_angle", 0.0, 180.0)
         pair("pan_duration", 1e-3)
         pair("edge_people", 0, 20)
