@@ -685,13 +685,14 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
         seen = [None if v is None else v.scaled(scale) for v in sights or [None] * len(tops)]
         each = [_hypotheses(p, q, hfov_deg, z, v, twice)
                 for p, q, z, v in zip(scaled, hors, sizes, seen, strict=True)]
+        # With the map's motion out, and (where any was read) with it left in: a static
+        # camera's small crowd walking together reads as motion; the better-explained kept.
+        variants = ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
+                      for m in motion], None] if moved else [None])
         for k, kept in enumerate(runs):
             cands = [c[k] for c in each]
             looks = seen if k == 0 else [None] * len(tops)
-            # With the map's motion out, and (where any was read) with it left in: a static
-            # camera's small crowd walking together reads as motion; the better-explained kept.
-            for motions in ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
-                              for m in motion], None] if moved else [None]):
+            for motions in variants:
                 poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
                                                           looks, motions), fps, motions)
                 run = (round(sum(p.score for p in poses), 6), poses)
