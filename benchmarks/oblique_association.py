@@ -256,7 +256,8 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace, walk and
     pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), their lenses' distortion
-    (``--hor-distortion``), people's heights (``--person-height``)."""
+    (``--hor-distortion``), people's heights (``--person-height``) and how far apart they stand
+    (``--area``, ``--group-area``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -285,6 +286,12 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pan-rate", type=float, default=0.05, metavar="R",
                    help="pans a second of each handheld camera (a turn away and back; default "
                    "0.05)")
+    p.add_argument("--area", type=float, nargs=2, default=(5.0, 10.0), metavar=("LO", "HI"),
+                   help="the side of the shared people's square, LO-HI metres (default 5 10; "
+                   "shrunk to fit the top image: a higher drone spreads them)")
+    p.add_argument("--group-area", type=float, nargs=2, default=(3.0, 6.0),
+                   metavar=("LO", "HI"), help="the side of each one-view group's square, LO-HI "
+                   "metres (default 3 6)")
     p.add_argument("--person-height", type=float, nargs=2, default=(1.5, 1.95),
                    metavar=("LO", "HI"), help="people's heights in the renders, LO-HI metres "
                    "(default 1.5 1.95; lower: children, people sitting)")
@@ -307,7 +314,8 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               holder_speed=tuple(args.holder_speed),
                               holder_area=tuple(args.holder_area), pan_rate=args.pan_rate,
                               hor_distortion=tuple(args.hor_distortion),
-                              height_range=tuple(args.person_height), **settings)
+                              height_range=tuple(args.person_height), area=tuple(args.area),
+                              group_area=tuple(args.group_area), **settings)
 
 
 def main(argv: list[str] | None = None) -> int:

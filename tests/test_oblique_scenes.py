@@ -360,3 +360,21 @@ def test_bad_input():
         ObliqueSceneConfig(n_hor=0)
     with pytest.raises(ValueError, match="n_frames"):
         make_oblique_scene(CONFIG, 0, np.random.default_rng(0))
+
+
+def test_the_benchmarks_render_options_default_to_the_configs_own() -> None:
+    """``benchmarks/oblique_association.py``'s render options (the drone's, the holders', the
+    people's squares), left out, draw the scenes of the config's defaults: figures measured
+    before an option was added are measured again without it."""
+    import argparse
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from oblique_association import add_drone_arguments, drone_config
+
+    parser = argparse.ArgumentParser()
+    add_drone_arguments(parser)
+    assert drone_config(parser.parse_args([])) == ObliqueSceneConfig()
+    spread = drone_config(parser.parse_args(["--area", "20", "40", "--group-area", "6", "12"]))
+    assert (spread.area, spread.group_area) == ((20.0, 40.0), (6.0, 12.0))
