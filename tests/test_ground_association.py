@@ -244,6 +244,7 @@ def test_a_nadir_top_view_says_what_its_path_assumes(tmp_path, capsys) -> None:
     assert "wearer to be one of its people (if not: --top-view oblique)" in err
 
 
+@pytest.mark.slow
 def test_a_phones_size_is_guessed_on_the_ground_path(tmp_path, capsys) -> None:
     """A 1920x1080 handheld view whose boxes fit CVMHAT's 2688x1512: boxes alone, ``associate``
     assumes that size, and the ground path takes 1920x1080 instead, saying so, as if given."""
