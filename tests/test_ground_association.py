@@ -393,12 +393,12 @@ of each view's people in the other, people at the top image's edges."""
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("seed", "hfov", "sighted"), [(22, 90.0, False), (25, 70.0, True)])
+@pytest.mark.parametrize(("seed", "hfov", "sighted"), [(47, 70.0, False), (27, 70.0, True)])
 def test_video_mode_keeps_the_run_with_or_without_the_sights_that_keeps_more(
         seed: int, hfov: float, sighted: bool) -> None:
     """A run made with the top camera's sights, or without them where that keeps more pairs
-    along the tracks (``fewer_sights``): seed 22 at 90 degrees keeps 91 pair-frames without
-    them, 82 with them (every pair right), seed 25 at 70 91 with them, 62 without; the lens
+    along the tracks (``fewer_sights``): seed 47 at 70 degrees keeps 81 pair-frames without
+    them, 65 with them (every pair right), seed 27 at 70 70 with them, 51 without; the lens
     chosen runs as given."""
     clip = make_oblique_scene(EVERYTHING, 60, np.random.default_rng(seed))
     top, hor, _, options, backs = _prepared(clip)
@@ -422,3 +422,16 @@ def test_video_mode_keeps_the_run_with_or_without_the_sights_that_keeps_more(
         given = run_ground_association(top, hor, replace(options, hor_hfov_deg=auto.lens.hfov_deg),
                                        frames, calib)
         assert (auto.pairs, auto.scale) == (given.pairs, given.scale)
+
+
+def test_far_people_are_excused_by_their_distance_only_under_an_oblique_top_view(
+        close_drone) -> None:
+    """The registration's tolerance for a far top person left unexplained (a part of their
+    distance, :func:`~xvmatch.cues.ground_registration.pose_hypotheses`' ``spread``) is the
+    spread of a distance read from a box under an oblique top view, none (the round radius)
+    under a nadir one, where it cost the real CVMHAT boxes a person's track."""
+    from xvmatch.cues import ground_registration as gr
+
+    assert ground_association.miss_spread(close_drone) == gr.RANGE_SPREAD
+    nadir = replace(close_drone, kind="nadir", tilt_deg=90.0)
+    assert ground_association.miss_spread(nadir) == 0.0

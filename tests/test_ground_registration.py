@@ -249,7 +249,8 @@ def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.n
                  hfov: float, sight: tuple | None = None) -> float:
     """One pose's score as the module docstring defines it, person by person: each horizontal
     person explained by their nearest top person (read at that person's height), less 0.3 for
-    each top person in the camera's view within its people's reach whom nobody is near; with
+    each top person in the camera's view within its people's reach whom nobody is near (within
+    the radius, nor a tenth of their distance from the camera); with
     ``sight`` (the top camera, its reach), less 0.3 for each horizontal person nobody explains
     standing where the top camera would see them (projected inside its image, 3 % off its
     borders, within the reach of the map's origin)."""
@@ -272,7 +273,8 @@ def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.n
             inside = (depth > 0 and 0.03 * camera.width < uv[0] < 0.97 * camera.width
                       and 0.03 * camera.height < uv[1] < 0.97 * camera.height)
             lone += int(d > gr.RADIUS and inside and np.hypot(*at) < reach_top)
-    return explained - 0.3 * float((in_view & (near.min(axis=0) > gr.RADIUS)).sum() + lone)
+    far = np.maximum(gr.RADIUS, gr.RANGE_SPREAD * np.hypot(local[:, 0], local[:, 1]))
+    return explained - 0.3 * float((in_view & (near.min(axis=0) > far)).sum() + lone)
 
 
 def _top_camera(tilt_deg: float = 35.0, height: float = 8.0):
@@ -401,6 +403,29 @@ def test_where_a_pose_puts_the_people_the_top_view_misses_tells_a_swap() -> None
     at_swap = [s for p, s in zip(poses, scores, strict=True)
                if np.hypot(*(p[:2] - swapped[:2])) < 0.5]
     assert len(at_swap) == 1 and scores[0] - at_swap[0] == pytest.approx(0.3, abs=1e-6)
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "numpy"])
+def test_a_far_top_person_is_charged_only_beyond_the_spread_of_their_distance(
+        kernels: str) -> None:
+    """A top person in the handheld camera's view costs a pose :data:`_UNSEEN_WEIGHT` where no
+    handheld person lands near: within the radius, or, farther off, within
+    :data:`RANGE_SPREAD` of their distance (30 m: 3 m), as a distance read from a box errs."""
+    pose = np.array([[0.0, 0.0, 0.0]])
+    reach = [40.0, 20.0]  # a handheld person far aside, explaining nobody: the view's reach
+
+    def cost(top_x: float, hor_x: float) -> float:
+        top, hor = np.array([[top_x, 0.0]]), np.array([[hor_x, 0.0], reach])
+        with kernel_choice.forced(kernels):
+            score = gr.score_poses(pose, top, hor, 70.0)[0]
+        explained = np.exp(-0.5 * ((top_x - hor_x) / (0.5 * gr.RADIUS)) ** 2)
+        return round(float(explained - score), 6)
+
+    assert cost(30.0, 27.5) == 0.0  # 2.5 m off at 30 m: within a tenth of it
+    assert cost(30.0, 32.9) == 0.0
+    assert cost(30.0, 26.5) == gr._UNSEEN_WEIGHT  # 3.5 m off: beyond it
+    assert cost(8.0, 6.0) == gr._UNSEEN_WEIGHT  # 2 m off at 8 m: beyond the radius
+    assert cost(8.0, 6.8) == 0.0
 
 
 @settings(max_examples=60, deadline=None)

@@ -110,8 +110,13 @@ def test_lenses_are_compared_above_chance(wide: LensChoice) -> None:
     assert set(wide.chance) == set(wide.scores)
     assert all(v > 0.0 for v in wide.chance.values())  # a crowd pairs somebody by chance
     above = {h: wide.scores[h] - wide.chance[h] for h in wide.scores}
-    # Above chance, the 70-degree reading of a 110-degree camera pairs nobody.
-    assert above[70.0] < 0.0 < above[110.0]
+    # Above chance, the 110-degree camera read as such pairs three times any other reading.
+    assert all(above[110.0] > 3.0 * above[h] for h in above if h != 110.0)
+    # With a person charged as missed at the round radius alone (a nadir top view's
+    # registration), the 70-degree reading pairs nobody above chance.
+    frames, tops, boxes = _clip(110.0, n_frames=20)
+    plain = choose_hor_hfov(frames, tops, boxes, SIZE, fps=10.0, spread=0.0)
+    assert plain.scores[70.0] - plain.chance[70.0] < 0.0 < plain.scores[110.0] - plain.chance[110.0]
 
 
 def test_another_lens_only_with_a_clear_lead() -> None:

@@ -89,6 +89,7 @@ __all__ = [
     "choose_along_tracks",
     "fewer_sights",
     "lens_note",
+    "miss_spread",
     "register_and_pair",
     "run_along_tracks",
     "run_ground_association",
@@ -328,6 +329,17 @@ def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
             "--hor-hfov DEG if known)")
 
 
+def miss_spread(calib: PeopleCalibration) -> float:
+    """How far off, in parts of their distance from the handheld camera, a top person still
+    counts as explained to the registration
+    (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`): the spread of a distance read
+    from a box (:data:`~xvmatch.cues.ground_registration.RANGE_SPREAD`) for an oblique top
+    view; 0 (the round radius alone) for a nadir one, forced through the ground maps
+    (``--top-view oblique``), where it cost the real CVMHAT boxes a person's track and a
+    rendered three-view nadir scene 0.94 -> 0.52 pair F1 (docs/notes/oblique_top_camera.md)."""
+    return gr.RANGE_SPREAD if calib.kind == "oblique" else 0.0
+
+
 def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
                            frames: list[int] | None = None,
                            calibration: PeopleCalibration | None = None,
@@ -351,6 +363,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     calib = calibration or top_calibration(top, options.top_size, options.seed,
                                            tracks=options.consensus)
     order = sorted(set(frames) if frames is not None else set(top) & set(hor))
+    spread = miss_spread(calib)
     # The top view stacked and mapped once, for the frames, the sizes and the rate.
     top_frames, top_ids, top_boxes = stack_frames(top)
     starts = np.searchsorted(top_frames, order, side="left")
@@ -390,15 +403,17 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     hfov = options.hor_hfov_deg
     if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
         lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
-                                                          options.hor_size, (top, hor), sights)
+                                                          options.hor_size, (top, hor), sights,
+                                                          spread)
     else:
         if hfov == AUTO_HFOV:
             lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
-                                   options.hor_size, fps, sizes=sizes)
+                                   options.hor_size, fps, sizes=sizes, spread=spread)
             hfov = lens.hfov_deg
         scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps,
                                                 options.hor_size,
-                                                (top, hor) if options.consensus else None, sights)
+                                                (top, hor) if options.consensus else None, sights,
+                                                spread)
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib, tilt), scale=scale, lens=lens,
                              frame_rate=rate, tilt=tilt)
@@ -410,8 +425,8 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
                         hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
-                        sights: list[gr.TopSight] | None = None
-                        ) -> tuple[LensChoice, Registered]:
+                        sights: list[gr.TopSight] | None = None,
+                        spread: float = gr.RANGE_SPREAD) -> tuple[LensChoice, Registered]:
     """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
     tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
     keeps it) with each candidate lens (:data:`~xvmatch.cues.hor_lens.HFOV_CANDIDATES`), the
@@ -436,7 +451,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     # each lens's runs with the sights and without, the nearest the prior first: a run of
     # another lens replaces the chosen one's only where it keeps more than a near tie of the
     # best before it, so a tie keeps the lens nearer the prior
-    both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights)
+    both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights, spread)
             for h in sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))}
     runs = plain = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
@@ -467,7 +482,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         # through fewer_sights below
         hors = _hor_people(boxes, hor_size, implied)
         measured = scale_along_tracks(order, tops, hors, _registrations(
-            order, tops, hors, sizes, implied, fps, True, sights), sizes, views)
+            order, tops, hors, sizes, implied, fps, True, sights, spread), sizes, views)
         kept_here = _count(measured[2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
         if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
@@ -475,7 +490,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
             best_hors = hors
     if sights is not None:  # the chosen lens's run as made, or without the sights
         hors, without = plain.get(best) or (best_hors, _registrations(
-            order, tops, best_hors, sizes, best, fps, True))
+            order, tops, best_hors, sizes, best, fps, True, spread=spread))
         run = fewer_sights(run, order, tops, hors, sizes, without, views)
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
@@ -509,7 +524,8 @@ def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
                       fps: float, hor_size: tuple[int, int],
                       views: tuple[Mapping, Mapping] | None,
-                      sights: list[gr.TopSight] | None = None) -> Registered:
+                      sights: list[gr.TopSight] | None = None,
+                      spread: float = gr.RANGE_SPREAD) -> Registered:
     """The handheld view registered on the top map with a lens of ``hfov`` degrees and each
     frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
     their ids the tracks: video mode) the top map's motion taken out, the pairs made
@@ -530,28 +546,32 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
         views: see above; None: frame by frame.
         sights: per frame, where the top camera sees people on its map
             (:class:`~xvmatch.cues.ground_registration.TopSight`, :func:`top_sights`), or None.
+        spread: how far off, in parts of their distance, a top person counts as explained
+            (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`; :func:`miss_spread`).
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
     hors = _hor_people(boxes, hor_size, hfov)
     if views is not None:
-        return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights)
-    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights)
+        return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights, spread)
+    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights, spread)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
 
 
 def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                      fps: float, views: tuple[Mapping, Mapping],
-                     sights: list[gr.TopSight] | None = None) -> Registered:
+                     sights: list[gr.TopSight] | None = None,
+                     spread: float = gr.RANGE_SPREAD) -> Registered:
     """Video mode's run of one lens on the handheld view's people (``hors``, on its map with
     their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
     with the ``sights``, or of the run without them where that keeps more
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
     if sights is None:
         return scale_along_tracks(order, tops, hors, _registrations(
-            order, tops, hors, sizes, hfov, fps, True), sizes, views)
-    made, plain = _registrations_twice(order, tops, hors, sizes, hfov, fps, True, sights)
+            order, tops, hors, sizes, hfov, fps, True, spread=spread), sizes, views)
+    made, plain = _registrations_twice(order, tops, hors, sizes, hfov, fps, True, sights,
+                                       spread)
     return fewer_sights(scale_along_tracks(order, tops, hors, made, sizes, views), order, tops,
                         hors, sizes, plain, views)
 
@@ -570,7 +590,7 @@ def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, siz
 
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
                 hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None,
-                sights: list[gr.TopSight] | None = None
+                sights: list[gr.TopSight] | None = None, spread: float = gr.RANGE_SPREAD
                 ) -> tuple[list, list[dict[float, tuple[float, list[gr.FramePose]]]]]:
     """The handheld view's people on its own map (with their ids) and its registrations at
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
@@ -579,8 +599,9 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
     hors = _hor_people(boxes, hor_size, hfov)
     video = views is not None
     if sights is None:
-        return hors, [_registrations(order, tops, hors, sizes, hfov, fps, video)]
-    return hors, list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights))
+        return hors, [_registrations(order, tops, hors, sizes, hfov, fps, video, spread=spread)]
+    return hors, list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights,
+                                           spread))
 
 
 def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
@@ -592,23 +613,26 @@ def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
 
 
 def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
-                   fps: float, video: bool, sights: list[gr.TopSight] | None = None
+                   fps: float, video: bool, sights: list[gr.TopSight] | None = None,
+                   spread: float = gr.RANGE_SPREAD
                    ) -> dict[float, tuple[float, list[gr.FramePose]]]:
     """The handheld view's registration at each map scale
     (:func:`~xvmatch.cues.ground_registration.register_scales`), the top map's motion taken
     out in ``video`` mode (its ids the tracks)."""
     return gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov, fps,
-                              [i for _, i in tops] if video else None, sizes, sights)
+                              [i for _, i in tops] if video else None, sizes, sights, spread)
 
 
 def _registrations_twice(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
-                         fps: float, video: bool, sights: list[gr.TopSight]
+                         fps: float, video: bool, sights: list[gr.TopSight],
+                         spread: float = gr.RANGE_SPREAD
                          ) -> tuple[dict[float, tuple[float, list[gr.FramePose]]],
                                     dict[float, tuple[float, list[gr.FramePose]]]]:
     """:func:`_registrations` with the ``sights`` and without them, in one pass
     (:func:`~xvmatch.cues.ground_registration.register_scales_twice`)."""
     return gr.register_scales_twice(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
-                                    fps, [i for _, i in tops] if video else None, sizes, sights)
+                                    fps, [i for _, i in tops] if video else None, sizes, sights,
+                                    spread)
 
 
 def scale_along_tracks(order: list[int], tops: list, hors: list,

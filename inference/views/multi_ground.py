@@ -65,6 +65,7 @@ from xvmatch.inference.matching.ground_association import (
     PRIOR_FPS,
     TOP_VIEWS,
     choose_along_tracks,
+    miss_spread,
     run_along_tracks,
     tilt_note,
     tilting_top,
@@ -273,6 +274,9 @@ class TopMap:
             through its own), else None.
         sights: ``{frame: TopSight}`` where the top camera sees people on its map
             (:func:`~xvmatch.inference.matching.ground_association.top_sights`), or None.
+        spread: how far off, in parts of their distance, a top person counts as explained to
+            the registration
+            (:func:`~xvmatch.inference.matching.ground_association.miss_spread`).
     """
 
     points: dict[int, np.ndarray]
@@ -280,6 +284,7 @@ class TopMap:
     walkers: tuple[np.ndarray, np.ndarray, np.ndarray]
     tilt: TiltTrack | None = None
     sights: dict[int, gr.TopSight] | None = None
+    spread: float = gr.RANGE_SPREAD
 
 
 def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: PeopleCalibration,
@@ -301,7 +306,7 @@ def top_map(views: Sequence[Mapping], frames: Sequence[int], calibration: People
     sights = dict(zip(frames, top_sights(frames, ground, calibration, tilt), strict=True))
     return TopMap({f: ground[at[f]] if f in at else empty for f in frames},
                   {f: read[rows] for f, rows in at.items()}, (stacked, tracks, ground), tilt,
-                  sights)
+                  sights, miss_spread(calibration))
 
 
 def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
@@ -328,14 +333,14 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         size = tuple(options.hor_sizes[k - 1])
         if tracks is None:
             choices.append(choose_hor_hfov(order, points, [_boxes(views[k][f]) for f in order],
-                                           size, options.fps, sizes=sizes))
+                                           size, options.fps, sizes=sizes, spread=top.spread))
             continue
         pair = (tracked_top, _tracked(views[k], tracks[k]))
         tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
                     for f, p, o in zip(order, points, ok, strict=True)]
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
         choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, size,
-                                           pair)[0])
+                                           pair, spread=top.spread)[0])
     return tuple(choices)
 
 
@@ -368,8 +373,8 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
                 options: MultiGroundOptions,
                 tracks: Sequence[Mapping[int, int]] | None = None,
                 sizes: Mapping[int, np.ndarray] | None = None,
-                sights: Mapping[int, gr.TopSight] | None = None
-                ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+                sights: Mapping[int, gr.TopSight] | None = None,
+                spread: float = gr.RANGE_SPREAD) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """``{frame: ((M, 2), (M, 2))}`` handheld view ``k``'s people on the top map and the rays
     from its camera to them there, on the frames where its pose was registered (both views
     have boxes there). Frame by frame the top map at the scale whose poses explain the most
@@ -379,7 +384,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     pairs along both views' tracks, as ``associate`` chooses it
     (:func:`~xvmatch.inference.matching.ground_association.run_along_tracks`). ``sizes``:
     ``{frame: (N,)}`` each top person's height over the crowd's, :attr:`TopMap.sizes`;
-    ``sights``: :attr:`TopMap.sights`."""
+    ``sights``: :attr:`TopMap.sights`; ``spread``: :attr:`TopMap.spread`."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -392,7 +397,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     seen = None if sights is None else [sights[f] for f in order]
     if tracks is None:
         scale, poses = gr.register_with_scale(order, points, [local[f] for f in order], hfov,
-                                              options.fps, None, heights, seen)
+                                              options.fps, None, heights, seen, spread)
     else:
         pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
         ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
@@ -400,7 +405,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
             order, list(zip(points, ids, strict=True)),
             [(local[f], np.asarray(pair[1][f].ids)) for f in order],
             heights if heights is not None else [None] * len(order), hfov, options.fps, pair,
-            seen)
+            seen, spread)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
@@ -458,7 +463,7 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
     options = _with_lenses(views, frames, calibration, options, top)[0]
     tops, heights = top.points, top.sizes
     placed = [{f: (p, None) for f, p in tops.items() if len(p)},
-              *(_registered(views, k, tops, options, tracks, heights, top.sights)
+              *(_registered(views, k, tops, options, tracks, heights, top.sights, top.spread)
                 for k in range(1, len(views)))]
     problems = {}
     for f in frames:
