@@ -18,9 +18,13 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
   within :data:`RANGE_SPREAD` of their distance from the camera (charged at the round radius,
   the true pose paid for every person 20-50 m off, whose distance from a box errs by metres:
   on crowds 20-65 m across it lost to wrong poses, + consensus CVIDF1 92.5 and 78.1 with the
-  true lens on two seeds of renders against 96.5 and 91.8 so; under a nadir top view the
-  commands keep the round radius, ``spread`` 0, where the spread cost the real CVMHAT boxes a
-  person's track); the :data:`KEEP` best distinct ones are kept;
+  true lens on two seeds of renders against 96.5 and 91.8 so), nor where they stand behind a
+  nearer horizontal person (their bearing within half a body's width of theirs,
+  :func:`shade`: annotators box people the camera sees, and a handheld camera among people
+  sees few of those behind them; the true pose was charged for 3-5 such a frame in a crowd
+  2-7 m away); under a nadir top view the commands keep the round radius and hide nobody
+  (``spread`` 0), as either cost the real CVMHAT boxes a person's track; the :data:`KEEP`
+  best distinct ones are kept;
 * **time**: one hypothesis per frame is chosen by dynamic programming over the frames (Viterbi),
   each step paying for a jump in position or heading faster than a walker turns and walks, so
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
@@ -89,6 +93,7 @@ __all__ = [
     "register_sequence",
     "register_with_scale",
     "score_poses",
+    "shade",
 ]
 
 RADIUS = 1.5
@@ -305,7 +310,9 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
             person unseen.
         spread: the part of a top person's distance from the camera within which a
             horizontal person landing keeps them from being charged as missed
-            (:data:`RANGE_SPREAD`; 0: the round :data:`RADIUS` alone, as for a nadir top view).
+            (:data:`RANGE_SPREAD`), and nobody charged who stands behind a nearer horizontal
+            person (:func:`shade`); 0: the round :data:`RADIUS` alone and nobody hidden, as
+            for a nadir top view.
     """
     return _hypotheses(top, hor, hfov_deg, sizes, sight, plain=False, spread=spread)[0]
 
@@ -355,7 +362,8 @@ def _scores(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarra
     tan_half = float(np.tan(np.radians(hfov_deg) / 2)) if hfov_deg < 180 else np.inf
     reach = 1.2 * float(np.max(np.hypot(hor[:, 0], hor[:, 1])))
     near_hor, missed, unseen = pose_terms(cx, cy, grown, turned, top, (
-        np.cos(headings), np.sin(headings), tan_half, reach * reach), sight, spread)
+        np.cos(headings), np.sin(headings), tan_half, reach * reach), sight, spread,
+        shade(hor) if spread > 0 else None)  # nobody hidden under a nadir top view
     explained = np.exp(-0.5 * near_hor / _SIGMA**2).sum(axis=1)
     # Rounded so that a last-bit difference of exp() between CPUs cannot reorder near-ties.
     return [np.round(explained - _UNSEEN_WEIGHT * count, _DIGITS)
@@ -393,10 +401,19 @@ def _best_first(score: np.ndarray, count: int) -> np.ndarray:
     return lead[np.argsort(neg[lead], kind="stable")]
 
 
+def shade(hor: np.ndarray) -> np.ndarray:
+    """``(3, M)`` where each horizontal person hides those behind them from the camera: their
+    depth along the optical axis, their bearing's tangent (across over depth) and its half
+    span, half a body's width over the depth (:data:`BODY_WIDTH`)."""
+    hor = np.asarray(hor, float).reshape(-1, 2)
+    return np.ascontiguousarray(np.stack([hor[:, 0], hor[:, 1] / hor[:, 0],
+                                          0.5 * BODY_WIDTH / hor[:, 0]]))
+
+
 def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
                top: np.ndarray, view: tuple[np.ndarray, np.ndarray, float, float],
-               sight: TopSight | None, spread: float = RANGE_SPREAD
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               sight: TopSight | None, spread: float = RANGE_SPREAD,
+               shadows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The terms of :func:`pose_hypotheses`' scores for every pose ``p = h Q + q`` (``cx``,
     ``cy`` ``(H, Q)`` its centre, facing heading ``h``): ``(P, M)`` each horizontal person's
     least squared distance to a top person (``grown`` ``(H, M, N, 2)``: horizontal people
@@ -405,20 +422,22 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
     camera's view (``view``: the headings' cos and sin, tan of the half field of view, the
     squared reach) with no horizontal person within :data:`RADIUS` nor, farther off, within
     ``spread`` of their distance from the camera (:data:`RANGE_SPREAD`; 0: the radius alone),
-    and horizontal people (``turned`` ``(H, M, 2)``) in the top camera's
+    and not behind a nearer horizontal person (``shadows``, :func:`shade`; None: nobody
+    hidden), and horizontal people (``turned`` ``(H, M, 2)``) in the top camera's
     ``sight`` (zeros without one).
 
     The compiled kernel where numba is loaded (:mod:`~xvmatch.cues.kernel_choice`: one pass,
     no ``(N, P)`` array), else numpy, horizontal person by horizontal person as an ``(N, P)``
     slab along the poses; the same arithmetic and comparisons, so the same bits either way."""
     cos_h, sin_h, tan_half, reach2 = view
+    shadows = np.zeros((3, 0)) if shadows is None else np.ascontiguousarray(shadows, float)
     kernels = kernel_choice.kernels()
     if kernels is not None:
         ground = np.zeros((3, 3)) if sight is None else np.ascontiguousarray(sight.ground, float)
         bounds = np.zeros(0) if sight is None else sight.bounds()
         return kernels.pose_terms(cx, cy, np.ascontiguousarray(grown),
                                   np.ascontiguousarray(turned), top, cos_h, sin_h, tan_half,
-                                  reach2, RADIUS**2, spread**2, ground, bounds)
+                                  reach2, RADIUS**2, spread**2, ground, bounds, shadows)
     n, m = len(top), grown.shape[1]
     near_hor = np.empty((m, cx.size))
     near_top = np.full((n, cx.size), np.inf)
@@ -439,8 +458,12 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
     ahead = rel_x * cos + rel_y * sin
     across = -rel_x * sin + rel_y * cos
     dist2 = ahead * ahead + across * across
-    missed = ((near_top > RADIUS**2) & (ahead > 0.5) & (np.abs(across) < ahead * tan_half)
-              & (dist2 < reach2) & (near_top > spread**2 * dist2)).sum(axis=0)
+    lone = ((near_top > RADIUS**2) & (ahead > 0.5) & (np.abs(across) < ahead * tan_half)
+            & (dist2 < reach2) & (near_top > spread**2 * dist2))
+    bearing = across / np.where(lone, ahead, 1.0)
+    for depth, tangent, half in shadows.T:  # behind a nearer horizontal person: hidden
+        lone &= ~((depth < ahead) & (np.abs(bearing - tangent) < half))
+    missed = lone.sum(axis=0)
     unseen = np.zeros_like(missed)
     if sight is not None:  # horizontal people alone where the top camera would see them
         where = (np.stack([cx.reshape(-1), cy.reshape(-1)], -1)[None]

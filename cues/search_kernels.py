@@ -574,15 +574,17 @@ def pair_features(bearing_top: np.ndarray, log_depth: np.ndarray, visible: np.nd
 def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.ndarray,
                top: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray, tan_half: float,
                reach2: float, far2: float, spread2: float, ground: np.ndarray,
-               bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               bounds: np.ndarray, shadows: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The oblique registration's per-pose terms (:func:`~xvmatch.cues.ground_registration.
     pose_terms`, its numpy form, step by step): pose ``p = h Q + q`` at (``cx``, ``cy``
     ``(H, Q)``) facing heading ``h``; returns ``(P, M)`` each horizontal person's least squared
     distance to a top person and two ``(P,)`` counts of the people it leaves unexplained in a
     view: top people in the horizontal camera's (nobody within ``far2``, squared, nor within
-    ``spread2`` times their squared distance from the camera), and (``bounds`` not empty, else
-    zeros) horizontal people in the top camera's sight (``ground`` its homography, ``bounds``
-    its pixel bounds and squared reach)."""
+    ``spread2`` times their squared distance from the camera, nor behind a nearer horizontal
+    person: ``shadows`` ``(3, M')``, each one's depth, bearing's tangent and its half span),
+    and (``bounds`` not empty, else zeros) horizontal people in the top camera's sight
+    (``ground`` its homography, ``bounds`` its pixel bounds and squared reach)."""
     n_head, n_q = cx.shape
     m, n = grown.shape[1], top.shape[0]
     near_hor = np.empty((n_head * n_q, m))
@@ -625,7 +627,15 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
                     dist2 = ahead * ahead + across * across
                     if (ahead > 0.5 and abs(across) < ahead * tan_half and dist2 < reach2
                             and near_top[i] > spread2 * dist2):
-                        missed[p] += 1
+                        bearing = across / ahead
+                        hidden = False
+                        for j in range(shadows.shape[1]):
+                            if (shadows[0, j] < ahead
+                                    and abs(bearing - shadows[1, j]) < shadows[2, j]):
+                                hidden = True
+                                break
+                        if not hidden:
+                            missed[p] += 1
     return near_hor, missed, unseen
 
 

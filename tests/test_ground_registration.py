@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues import kernel_choice
+from xvmatch.geometry.people_calibration import BODY_WIDTH
 
 
 def _view(top: np.ndarray, centre: np.ndarray, heading: float) -> np.ndarray:
@@ -250,7 +251,8 @@ def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.n
     """One pose's score as the module docstring defines it, person by person: each horizontal
     person explained by their nearest top person (read at that person's height), less 0.3 for
     each top person in the camera's view within its people's reach whom nobody is near (within
-    the radius, nor a tenth of their distance from the camera); with
+    the radius, nor a tenth of their distance from the camera) and no nearer horizontal person
+    hides (their bearing within half a body's width of theirs); with
     ``sight`` (the top camera, its reach), less 0.3 for each horizontal person nobody explains
     standing where the top camera would see them (projected inside its image, 3 % off its
     borders, within the reach of the map's origin)."""
@@ -274,7 +276,9 @@ def _plain_score(top: np.ndarray, hor: np.ndarray, sizes: np.ndarray, pose: np.n
                       and 0.03 * camera.height < uv[1] < 0.97 * camera.height)
             lone += int(d > gr.RADIUS and inside and np.hypot(*at) < reach_top)
     far = np.maximum(gr.RADIUS, gr.RANGE_SPREAD * np.hypot(local[:, 0], local[:, 1]))
-    return explained - 0.3 * float((in_view & (near.min(axis=0) > far)).sum() + lone)
+    hidden = np.array([any(h[0] < ahead and abs(across / ahead - h[1] / h[0])
+                           < 0.5 * BODY_WIDTH / h[0] for h in hor) for ahead, across in local])
+    return explained - 0.3 * float((in_view & ~hidden & (near.min(axis=0) > far)).sum() + lone)
 
 
 def _top_camera(tilt_deg: float = 35.0, height: float = 8.0):
@@ -415,17 +419,41 @@ def test_a_far_top_person_is_charged_only_beyond_the_spread_of_their_distance(
     reach = [40.0, 20.0]  # a handheld person far aside, explaining nobody: the view's reach
 
     def cost(top_x: float, hor_x: float) -> float:
-        top, hor = np.array([[top_x, 0.0]]), np.array([[hor_x, 0.0], reach])
+        # the handheld person 1 m aside: not in front of the top person (who is not hidden)
+        top, hor = np.array([[top_x, 0.0]]), np.array([[hor_x, 1.0], reach])
         with kernel_choice.forced(kernels):
             score = gr.score_poses(pose, top, hor, 70.0)[0]
-        explained = np.exp(-0.5 * ((top_x - hor_x) / (0.5 * gr.RADIUS)) ** 2)
+        explained = np.exp(-0.5 * (np.hypot(top_x - hor_x, 1.0) / (0.5 * gr.RADIUS)) ** 2)
         return round(float(explained - score), 6)
 
-    assert cost(30.0, 27.5) == 0.0  # 2.5 m off at 30 m: within a tenth of it
-    assert cost(30.0, 32.9) == 0.0
-    assert cost(30.0, 26.5) == gr._UNSEEN_WEIGHT  # 3.5 m off: beyond it
-    assert cost(8.0, 6.0) == gr._UNSEEN_WEIGHT  # 2 m off at 8 m: beyond the radius
-    assert cost(8.0, 6.8) == 0.0
+    assert cost(30.0, 27.5) == 0.0  # 2.7 m off at 30 m: within a tenth of it
+    assert cost(30.0, 32.5) == 0.0
+    assert cost(30.0, 26.5) == gr._UNSEEN_WEIGHT  # 3.6 m off: beyond it
+    assert cost(8.0, 6.0) == gr._UNSEEN_WEIGHT  # 2.2 m off at 8 m: beyond the radius
+    assert cost(8.0, 7.2) == 0.0
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "numpy"])
+def test_a_top_person_behind_a_nearer_handheld_person_is_hidden_not_missed(
+        kernels: str) -> None:
+    """A top person whose bearing from the camera lies within half a body's width of a nearer
+    handheld person's (:func:`shade`) may be hidden behind them: not charged as missed; beside
+    them, charged; under a nadir top view (``spread`` 0) charged either way."""
+    pose = np.array([[0.0, 0.0, 0.0]])
+    hor = np.array([[4.0, 0.0], [20.0, 6.0]])  # one near, straight ahead; one far aside
+
+    def cost(top_y: float, spread: float = gr.RANGE_SPREAD) -> float:
+        top = np.array([[12.0, top_y]])  # 12 m ahead, nobody mapped near
+        with kernel_choice.forced(kernels):
+            score = gr.score_poses(pose, top, hor, 70.0, spread=spread)[0]
+        mapped = hor - top[0]
+        explained = np.exp(-0.5 * (np.hypot(*mapped.T) / (0.5 * gr.RADIUS)) ** 2).sum()
+        return round(float(explained - score), 6)
+
+    half = 0.5 * BODY_WIDTH / 4.0  # the near person's half span, as a bearing's tangent
+    assert cost(12.0 * 0.9 * half) == 0.0  # behind them
+    assert cost(12.0 * 1.1 * half) == gr._UNSEEN_WEIGHT  # beside them
+    assert cost(12.0 * 0.9 * half, spread=0.0) == gr._UNSEEN_WEIGHT
 
 
 @settings(max_examples=60, deadline=None)

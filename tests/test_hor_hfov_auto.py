@@ -238,23 +238,24 @@ def test_multi_auto_from_the_command_line(two_wide, tmp_path, capsys) -> None:
 
 @pytest.mark.slow
 def test_another_lens_whose_run_as_made_keeps_clearly_more_replaces_the_choice() -> None:
-    """A clip (seed 40, a 105-degree lens) whose 60, 90 and 110 degree runs without the top
-    camera's sights keep as many pairs (60, the nearest the prior, chosen; 70's fewer): made
-    with them, 90's keeps more than a near tie of 60's, so 90 is the lens, with that run, as
-    if given."""
-    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(40))
+    """A clip (seed 7, a 110-degree lens) whose 90 and 110 degree runs without the top
+    camera's sights keep as many pairs (90, the nearer the prior, chosen; 60's and 70's
+    fewer): made with them, 110's keeps more than a near tie of 90's, so 110 is the lens, with
+    that run, as if given."""
+    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(7))
     frames = list(range(1, 31, 3))
     calib = top_calibration(clip.top, clip.top_cameras[0].image_size)
     options = replace(_options(clip, "auto"), consensus=True)
     auto = run_ground_association(clip.top, clip.hor["hor1"], options, frames, calib)
     choice = auto.lens
-    assert len({choice.scores[h] for h in (60.0, 90.0, 110.0)}) == 1  # as many; 70: fewer
-    assert choice.scores[70.0] < choice.scores[60.0]
-    assert (choice.hfov_deg, choice.measured_from) == (90.0, None)
-    assert choice.made[90.0] == sum(map(len, auto.pairs.values())) > NEAR_TIE * choice.made[60.0]
-    assert choice.scales[90.0] == auto.scale
-    assert lens_note(choice) == ("handheld lens: 90 degrees, chosen from its people (give "
+    assert choice.scores[90.0] == choice.scores[110.0]  # as many; 60 and 70: fewer
+    assert max(choice.scores[60.0], choice.scores[70.0]) < choice.scores[90.0]
+    assert (choice.hfov_deg, choice.measured_from) == (110.0, None)
+    assert (choice.made[110.0] == sum(map(len, auto.pairs.values()))
+            > NEAR_TIE * choice.made[90.0])
+    assert choice.scales[110.0] == auto.scale
+    assert lens_note(choice) == ("handheld lens: 110 degrees, chosen from its people (give "
                                  "--hor-hfov DEG if known)")
     given = run_ground_association(clip.top, clip.hor["hor1"],
-                                   replace(options, hor_hfov_deg=90.0), frames, calib)
+                                   replace(options, hor_hfov_deg=110.0), frames, calib)
     assert (given.pairs, given.scale, given.lens) == (auto.pairs, auto.scale, None)

@@ -331,12 +331,13 @@ def lens_note(choice: LensChoice, view: str = "handheld lens") -> str:
 
 def miss_spread(calib: PeopleCalibration) -> float:
     """How far off, in parts of their distance from the handheld camera, a top person still
-    counts as explained to the registration
-    (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`): the spread of a distance read
-    from a box (:data:`~xvmatch.cues.ground_registration.RANGE_SPREAD`) for an oblique top
-    view; 0 (the round radius alone) for a nadir one, forced through the ground maps
-    (``--top-view oblique``), where it cost the real CVMHAT boxes a person's track and a
-    rendered three-view nadir scene 0.94 -> 0.52 pair F1 (docs/notes/oblique_top_camera.md)."""
+    counts as explained to the registration, which then also hides those behind a nearer
+    handheld person (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`): the spread of
+    a distance read from a box (:data:`~xvmatch.cues.ground_registration.RANGE_SPREAD`) for an
+    oblique top view; 0 (the round radius alone, nobody hidden) for a nadir one, forced
+    through the ground maps (``--top-view oblique``), where either cost the real CVMHAT boxes
+    a person's track and the spread a rendered three-view nadir scene 0.94 -> 0.52 pair F1
+    (docs/notes/oblique_top_camera.md)."""
     return gr.RANGE_SPREAD if calib.kind == "oblique" else 0.0
 
 
