@@ -434,19 +434,21 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     one keeping the most pairs chosen (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`). The
     lens is chosen on runs without the top camera's ``sights``: they steady a wrong lens's
     poses on a small crowd too. Then each lens's run as :func:`register_and_pair` makes it
-    (with them; its map scale chosen along the tracks too: the lens is chosen first, as a scale
-    chosen per lens lets a wrong lens's run keep more pairs on a small crowd), another lens's
-    run replacing the chosen one's where it keeps more than
-    :data:`~xvmatch.cues.hor_lens.NEAR_TIE` times its pairs, where its run without them
-    joined :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people (a 65 degree lens: without the
-    sights 110 degrees kept 122 pair-frames, a third wrong, 70 kept 51, all right; with them,
-    130 and 190). Then the lens each run's pairs imply
-    (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement, not one of four guesses) is
-    run too where it differs, and kept where its pairs hold along the tracks more often (the
-    chosen lens's; another lens's, more than a near tie; the choice's ``measured_from`` says
-    so; a tie keeps the candidate: on tilting close drones, whose runs kept as many pairs at
-    any lens, the lens measured was up to 54 degrees off). The lens chosen, its run is the one
-    :func:`register_and_pair` keeps (:func:`fewer_sights`): the same lens, given or chosen,
+    (with them, or without them where that keeps more: :func:`fewer_sights`; its map scale
+    chosen along the tracks too: the lens is chosen first, as a scale chosen per lens lets a
+    wrong lens's run keep more pairs on a small crowd), another lens's run replacing the
+    chosen one's where it keeps more than :data:`~xvmatch.cues.hor_lens.NEAR_TIE` times its
+    pairs, where its run without them joined :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people
+    (a 65 degree lens: without the sights 110 degrees kept 122 pair-frames, a third wrong, 70
+    kept 51, all right; with them, 130 and 190). Each compared as it would run: with the
+    sights alone a 65 degree clip's 60-degree run kept nothing, so every other lens's wrong run
+    replaced the one that, without them, kept 200 pair-frames of nine people, right. Then the
+    lens each run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement,
+    not one of four guesses) is run too where it differs, and kept where its pairs hold along
+    the tracks more often (the chosen lens's; another lens's, more than a near tie; the
+    choice's ``measured_from`` says so; a tie keeps the candidate: on tilting close drones,
+    whose runs kept as many pairs at any lens, the lens measured was up to 54 degrees off).
+    The run kept is the one :func:`register_and_pair` makes: the same lens, given or chosen,
     runs the same.
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
     # each lens's runs with the sights and without, the nearest the prior first: a run of
@@ -454,7 +456,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     # best before it, so a tie keeps the lens nearer the prior
     both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights, spread)
             for h in sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))}
-    runs = plain = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
+    runs = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
     pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
              for h, s in scales.items()}
@@ -462,37 +464,29 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
-    if sights is not None:  # each lens's run as made, the chosen one's first
-        runs = {h: (both[h][0], both[h][1][0]) for h in (hfov, *(h for h in runs if h != hfov))}
-    made = {h: scale_along_tracks(order, tops, *runs[h], sizes, views) for h in runs}
+    # each lens's run as register_and_pair makes it (with the sights, or without them where
+    # that keeps more), the chosen one's first
+    made = {h: _made(order, tops, both[h], sizes, views)
+            for h in (hfov, *(h for h in both if h != hfov))}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
     best, run, run_kept = hfov, made[hfov], made_kept[hfov]
     for h, other in made.items():  # another lens's run needs more than a near tie, and
         # pairs of two people or more without the sights (which steady any lens's poses)
         if people[h] >= MIN_PEOPLE and made_kept[h] > NEAR_TIE * run_kept:
             best, run, run_kept = h, other, made_kept[h]
-    measured_from, tried, best_hors = None, set(), []
+    measured_from, tried = None, set()
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
-        implied = _implied(order, tops, runs[source][0], sizes, source, made[source][2])
-        if (implied is None or implied in runs or abs(implied - source) < MIN_REMEASURE_DEG
+        implied = _implied(order, tops, both[source][0], sizes, source, made[source][2])
+        if (implied is None or implied in both or abs(implied - source) < MIN_REMEASURE_DEG
                 or any(abs(implied - t) < MIN_REMEASURE_DEG for t in tried)):
             continue  # nothing told, a candidate already run, or too near to matter
         tried.add(implied)
-        # as made, like the candidates' runs it is compared with (not register_and_pair,
-        # whose run without the sights would make the comparison uneven); the lens kept goes
-        # through fewer_sights below
-        hors = _hor_people(boxes, hor_size, implied)
-        measured = scale_along_tracks(order, tops, hors, _registrations(
-            order, tops, hors, sizes, implied, fps, True, sights, spread), sizes, views)
+        measured = run_along_tracks(order, tops, _hor_people(boxes, hor_size, implied), sizes,
+                                    implied, fps, views, sights, spread)
         kept_here = _count(measured[2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
         if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
             best, measured_from, run, run_kept = implied, source, measured, kept_here
-            best_hors = hors
-    if sights is not None:  # the chosen lens's run as made, or without the sights
-        hors, without = plain.get(best) or (best_hors, _registrations(
-            order, tops, best_hors, sizes, best, fps, True, spread=spread))
-        run = fewer_sights(run, order, tops, hors, sizes, without, views)
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
         choice = replace(choice, hfov_deg=best, scales={**choice.scales, best: run[0]})
@@ -501,6 +495,18 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                          scores={**choice.scores, best: float(run_kept)},
                          people={**choice.people, best: _count(run[2])[1]})
     return choice, run
+
+
+def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: list,
+          views: tuple[Mapping, Mapping]) -> Registered:
+    """One lens's run along the tracks from its :func:`_scale_runs` (its people and its
+    registrations at each map scale, with the sights and without, or the one): as
+    :func:`run_along_tracks` makes it, without registering again."""
+    hors, by_scale = scale_runs
+    run = scale_along_tracks(order, tops, hors, by_scale[0], sizes, views)
+    if len(by_scale) == 1:
+        return run
+    return fewer_sights(run, order, tops, hors, sizes, by_scale[-1], views)
 
 
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
@@ -568,13 +574,10 @@ def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov
     their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
     with the ``sights``, or of the run without them where that keeps more
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
-    if sights is None:
-        return scale_along_tracks(order, tops, hors, _registrations(
-            order, tops, hors, sizes, hfov, fps, True, spread=spread), sizes, views)
-    made, plain = _registrations_twice(order, tops, hors, sizes, hfov, fps, True, sights,
-                                       spread)
-    return fewer_sights(scale_along_tracks(order, tops, hors, made, sizes, views), order, tops,
-                        hors, sizes, plain, views)
+    by_scale = ([_registrations(order, tops, hors, sizes, hfov, fps, True, spread=spread)]
+                if sights is None else list(_registrations_twice(
+                    order, tops, hors, sizes, hfov, fps, True, sights, spread)))
+    return _made(order, tops, (hors, by_scale), sizes, views)
 
 
 def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, sizes: list,
