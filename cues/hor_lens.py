@@ -41,7 +41,9 @@ imply differs from the run's by :data:`MIN_REMEASURE_DEG` or more (and is not a 
 one measured already), the whole run is made with it too and kept where its pairs hold along
 the tracks more often (than the chosen lens's run, measured from it; more than a near tie,
 measured from another lens's; a tie keeps the candidate: where every lens keeps the same
-pairs, the pairs are no measure of it). All told eight to eleven runs.
+pairs, the pairs are no measure of it). Candidates that tie with the chosen lens exactly
+measure it together: the middle of the lenses their pairs imply, kept where its run keeps as
+many pairs. All told eight to eleven runs.
 
 Measured on rendered scenes (``benchmarks/oblique_association.py --choose-lens``,
 docs/notes/oblique_top_camera.md): without the chance check the choice lost up to 4 CVIDF1 on

@@ -18,6 +18,7 @@ from xvmatch.cues.hor_lens import (
     LENS_MARGIN,
     MEASURED_RANGE,
     MIN_PAIRING,
+    MIN_REMEASURE_DEG,
     NEAR_TIE,
     LensChoice,
     _pick,
@@ -26,6 +27,7 @@ from xvmatch.cues.hor_lens import (
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
+    _tie_measured,
     lens_note,
     run_ground_association,
     top_calibration,
@@ -161,6 +163,47 @@ def test_each_lens_is_compared_by_the_run_it_would_make_given() -> None:
         clip.top, clip.hor["hor1"], replace(options, hor_hfov_deg=h), frames, calib
     ).pairs.values())) for h in HFOV_CANDIDATES}
     assert made == given
+
+
+def _run(pairs: dict[int, list[tuple[int, int]]]) -> tuple:
+    """A run as choose_along_tracks holds it: the map scale, the poses (none needed here),
+    the pairs kept along the tracks."""
+    return 1.0, [], pairs
+
+
+def test_lenses_tied_with_the_choice_measure_it_together() -> None:
+    """Three or more candidates whose runs keep as many pairs as the chosen lens's give the
+    middle of the lenses their pairs imply (the lower of two), kept where its run keeps as
+    many pairs."""
+    right = {1: [(1, 1), (2, 2)], 2: [(1, 1), (2, 2)]}
+    swapped = {1: [(1, 2), (2, 1)], 2: [(1, 2), (2, 1)]}
+    made: list[float] = []
+
+    def make(hfov: float) -> tuple:
+        made.append(hfov)
+        return _run(right)
+
+    chosen = _run(swapped)
+    implied = {70.0: 75.0, 60.0: 86.0, 90.0: 78.0}
+    measured = {75.0: _run(swapped), 86.0: _run(right)}
+    assert _tie_measured(70.0, chosen, implied, measured, make) == (78.0, 90.0, _run(right))
+    assert made == [78.0]  # not run before: made now
+    # the lower middle of four; a tied candidate's own lens keeps no source
+    four = {70.0: 75.0, 60.0: 86.0, 90.0: 78.0, 110.0: 90.0}
+    assert _tie_measured(70.0, chosen, four, measured, make)[:2] == (78.0, 90.0)
+    assert _tie_measured(70.0, chosen, {70.0: 75.0, 60.0: 90.0, 90.0: 90.0, 110.0: 95.0},
+                         {90.0: _run(right)}, make)[:2] == (90.0, None)
+    # the middle's run keeps fewer pairs, it is the chosen lens itself, or too near it, or
+    # fewer than three lenses told: the choice stands, and nothing more is run
+    made.clear()
+    fewer = {75.0: _run({1: [(1, 1)]}), 78.0: _run({1: [(1, 1)]})}
+    assert _tie_measured(70.0, chosen, {70.0: 75.0, 60.0: 78.0, 90.0: 86.0}, fewer,
+                         make) == (70.0, None, chosen)
+    near = 70.0 + MIN_REMEASURE_DEG / 2
+    for told in ({70.0: 70.0, 60.0: 70.0, 90.0: 70.0}, {70.0: near, 60.0: near, 90.0: near},
+                 {70.0: 75.0, 90.0: 86.0}, {70.0: None, 60.0: 80.0, 90.0: 86.0}):
+        assert _tie_measured(70.0, chosen, told, {}, make) == (70.0, None, chosen)
+    assert made == []
 
 
 @pytest.mark.slow

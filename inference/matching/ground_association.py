@@ -45,7 +45,7 @@ frame numbered 1, 2, 3).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -448,8 +448,10 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     the tracks more often (the chosen lens's; another lens's, more than a near tie; the
     choice's ``measured_from`` says so; a tie keeps the candidate: on tilting close drones,
     whose runs kept as many pairs at any lens, the lens measured was up to 54 degrees off).
-    The run kept is the one :func:`register_and_pair` makes: the same lens, given or chosen,
-    runs the same.
+    But where candidates' runs keep exactly as many pairs as the chosen lens's, and nothing
+    replaced it, the middle of the lenses their pairs imply is kept where its run keeps as many
+    (:func:`_tie_measured`: several measurements, not one). The run kept is the one
+    :func:`register_and_pair` makes: the same lens, given or chosen, runs the same.
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
     # each lens's runs with the sights and without, the nearest the prior first: a run of
     # another lens replaces the chosen one's only where it keeps more than a near tie of the
@@ -474,19 +476,25 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         # pairs of two people or more without the sights (which steady any lens's poses)
         if people[h] >= MIN_PEOPLE and made_kept[h] > NEAR_TIE * run_kept:
             best, run, run_kept = h, other, made_kept[h]
-    measured_from, tried = None, set()
+    measured_from, implied_by, measured = None, {}, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
-        implied = _implied(order, tops, both[source][0], sizes, source, made[source][2])
-        if (implied is None or implied in both or abs(implied - source) < MIN_REMEASURE_DEG
-                or any(abs(implied - t) < MIN_REMEASURE_DEG for t in tried)):
-            continue  # nothing told, a candidate already run, or too near to matter
-        tried.add(implied)
-        measured = run_along_tracks(order, tops, _hor_people(boxes, hor_size, implied), sizes,
-                                    implied, fps, views, sights, spread)
-        kept_here = _count(measured[2])[0]
+        implied = implied_by[source] = _implied(order, tops, both[source][0], sizes, source,
+                                                made[source][2])
+        if (implied is None or implied in measured or abs(implied - source) < MIN_REMEASURE_DEG
+                or any(abs(implied - t) < MIN_REMEASURE_DEG for t in measured if t not in made)):
+            continue  # nothing told, a lens already run, or too near to matter
+        measured[implied] = run_along_tracks(order, tops, _hor_people(boxes, hor_size, implied),
+                                             sizes, implied, fps, views, sights, spread)
+        kept_here = _count(measured[implied][2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
         if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
-            best, measured_from, run, run_kept = implied, source, measured, kept_here
+            best, measured_from, run, run_kept = implied, source, measured[implied], kept_here
+    if best == hfov:  # candidates tied with the chosen lens measure it together
+        best, measured_from, run = _tie_measured(
+            hfov, run, {h: implied_by[h] for h in made if made_kept[h] == run_kept},
+            measured, lambda h: run_along_tracks(order, tops, _hor_people(boxes, hor_size, h),
+                                                 sizes, h, fps, views, sights, spread))
+        run_kept = _count(run[2])[0]
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
         choice = replace(choice, hfov_deg=best, scales={**choice.scales, best: run[0]})
@@ -495,6 +503,37 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                          scores={**choice.scores, best: float(run_kept)},
                          people={**choice.people, best: _count(run[2])[1]})
     return choice, run
+
+
+MIN_TIE_TOLD = 3
+"""Tied candidates whose pairs must each imply a lens for the middle of those lenses to be
+tried (:func:`_tie_measured`): of two, one is as good as the other (renders of a 100-degree
+lens, 90 and 110 tied: the lower measured, 80 degrees, pair F1 0.69 against 110's 0.83)."""
+
+
+def _tie_measured(hfov: float, run: Registered, implied_by: Mapping[float, float | None],
+                  measured: dict[float, Registered], make: Callable[[float], Registered]
+                  ) -> tuple[float, float | None, Registered]:
+    """The lens, where it came from and its run, where candidate lenses' runs keep as many
+    pairs as the chosen lens ``hfov``'s (``run``): the middle (the lower of two) of the lenses
+    their pairs imply (``implied_by``, per tied candidate, ``hfov`` among them), run (from
+    ``measured``, the runs made so far by lens, or ``make``) and kept where it keeps as many
+    pairs: several runs' measurements, where the tie says the candidates are no measure
+    (renders of an 88-degree lens: every candidate's run kept 142 pair-frames of five people,
+    the chosen 60-degree one pairing 0.72 right; the middle lens measured, 97 degrees, kept as
+    many, all right). Where fewer than :data:`MIN_TIE_TOLD` lenses are told, or the middle is
+    ``hfov`` or within :data:`~xvmatch.cues.hor_lens.MIN_REMEASURE_DEG` of it, the chosen lens
+    and its run."""
+    told = sorted((lens, h) for h, lens in implied_by.items() if lens is not None)
+    if len(told) < MIN_TIE_TOLD:
+        return hfov, None, run
+    middle, source = told[(len(told) - 1) // 2]
+    if abs(middle - hfov) < MIN_REMEASURE_DEG:
+        return hfov, None, run
+    other = measured[middle] if middle in measured else make(middle)
+    if _count(other[2])[0] < _count(run[2])[0]:
+        return hfov, None, run
+    return middle, None if middle in implied_by else source, other  # a tied candidate's own
 
 
 def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: list,
