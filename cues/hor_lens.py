@@ -42,8 +42,8 @@ one measured already), the whole run is made with it too and kept where its pair
 the tracks more often (than the chosen lens's run, measured from it; more than a near tie,
 measured from another lens's; a tie keeps the candidate: where every lens keeps the same
 pairs, the pairs are no measure of it). Candidates that tie with the chosen lens exactly
-measure it together: the middle of the lenses their pairs imply, kept where its run keeps as
-many pairs. All told eight to eleven runs.
+measure it together: of the lenses their pairs imply, the one they fit best
+(:func:`implied_fit`), kept where its run keeps as many pairs. All told eight to eleven runs.
 
 Measured on rendered scenes (``benchmarks/oblique_association.py --choose-lens``,
 docs/notes/oblique_top_camera.md): without the chance check the choice lost up to 4 CVIDF1 on
@@ -81,6 +81,7 @@ __all__ = [
     "LensChoice",
     "chance_score",
     "choose_hor_hfov",
+    "implied_fit",
     "implied_hfov",
     "pairing_score",
     "pick_along_tracks",
@@ -205,7 +206,17 @@ class LensChoice:
 def implied_hfov(hfov_deg: float, tops: list[np.ndarray], hors: list[np.ndarray]
                  ) -> float | None:
     """The horizontal field of view, whole degrees within :data:`MEASURED_RANGE`, that a run's
-    pairs imply; None where they cannot tell (fewer than three distances, or a degenerate fit).
+    pairs imply; None where they cannot tell (:func:`implied_fit`, its lens)."""
+    fit = implied_fit(hfov_deg, tops, hors)
+    return None if fit is None else fit[0]
+
+
+def implied_fit(hfov_deg: float, tops: list[np.ndarray], hors: list[np.ndarray]
+                ) -> tuple[float, float] | None:
+    """The horizontal field of view, whole degrees within :data:`MEASURED_RANGE`, that a run's
+    pairs imply, and how far they stray from it: the median over the pairs of pairs of the
+    fit's residual over the top map's squared distance (4 decimals; a run that swaps people
+    strays more); None where they cannot tell (fewer than three distances, or a degenerate fit).
 
     A lens of the wrong focal length stretches the handheld map along the camera's axis only:
     a person's distance ahead is ``f H / h`` while the offset across is ``H (u - c) / h``, free
@@ -246,7 +257,9 @@ def implied_hfov(hfov_deg: float, tops: list[np.ndarray], hors: list[np.ndarray]
         return None
     k = math.sqrt(alpha / beta)  # the math module's: the same on every CPU
     hfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov_deg) / 2) / k))
-    return float(min(max(round(hfov), MEASURED_RANGE[0]), MEASURED_RANGE[1]))
+    stray = np.abs(y - alpha * a - beta * c) / np.maximum(y, 1e-12)
+    return (float(min(max(round(hfov), MEASURED_RANGE[0]), MEASURED_RANGE[1])),
+            round(float(np.median(stray)), 4))
 
 
 def _subsample(n: int, max_frames: int) -> list[int]:

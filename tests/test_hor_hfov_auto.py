@@ -173,7 +173,7 @@ def _run(pairs: dict[int, list[tuple[int, int]]]) -> tuple:
 
 def test_lenses_tied_with_the_choice_measure_it_together() -> None:
     """Three or more candidates whose runs keep as many pairs as the chosen lens's give the
-    middle of the lenses their pairs imply (the lower of two), kept where its run keeps as
+    lens their pairs imply that they fit best (the least stray), kept where its run keeps as
     many pairs."""
     right = {1: [(1, 1), (2, 2)], 2: [(1, 1), (2, 2)]}
     swapped = {1: [(1, 2), (2, 1)], 2: [(1, 2), (2, 1)]}
@@ -184,24 +184,24 @@ def test_lenses_tied_with_the_choice_measure_it_together() -> None:
         return _run(right)
 
     chosen = _run(swapped)
-    implied = {70.0: 75.0, 60.0: 86.0, 90.0: 78.0}
-    measured = {75.0: _run(swapped), 86.0: _run(right)}
-    assert _tie_measured(70.0, chosen, implied, measured, make) == (78.0, 90.0, _run(right))
+    fits = {70.0: (75.0, 0.159), 60.0: (75.0, 0.159), 90.0: (78.0, 0.094)}
+    measured = {75.0: _run(swapped)}
+    assert _tie_measured(70.0, chosen, fits, measured, make) == (78.0, 90.0, _run(right))
     assert made == [78.0]  # not run before: made now
-    # the lower middle of four; a tied candidate's own lens keeps no source
-    four = {70.0: 75.0, 60.0: 86.0, 90.0: 78.0, 110.0: 90.0}
-    assert _tie_measured(70.0, chosen, four, measured, make)[:2] == (78.0, 90.0)
-    assert _tie_measured(70.0, chosen, {70.0: 75.0, 60.0: 90.0, 90.0: 90.0, 110.0: 95.0},
-                         {90.0: _run(right)}, make)[:2] == (90.0, None)
-    # the middle's run keeps fewer pairs, it is the chosen lens itself, or too near it, or
-    # fewer than three lenses told: the choice stands, and nothing more is run
+    # a tied candidate's own lens keeps no source
+    assert _tie_measured(70.0, chosen, {70.0: (75.0, 0.2), 60.0: (90.0, 0.1),
+                                        90.0: (90.0, 0.05)}, {90.0: _run(right)},
+                         make)[:2] == (90.0, None)
+    # its run keeps fewer pairs, it is the chosen lens itself, or too near it, or fewer than
+    # three lenses told: the choice stands, and nothing more is run
     made.clear()
-    fewer = {75.0: _run({1: [(1, 1)]}), 78.0: _run({1: [(1, 1)]})}
-    assert _tie_measured(70.0, chosen, {70.0: 75.0, 60.0: 78.0, 90.0: 86.0}, fewer,
-                         make) == (70.0, None, chosen)
+    assert _tie_measured(70.0, chosen, fits, {78.0: _run({1: [(1, 1)]})}, make) == (
+        70.0, None, chosen)
     near = 70.0 + MIN_REMEASURE_DEG / 2
-    for told in ({70.0: 70.0, 60.0: 70.0, 90.0: 70.0}, {70.0: near, 60.0: near, 90.0: near},
-                 {70.0: 75.0, 90.0: 86.0}, {70.0: None, 60.0: 80.0, 90.0: 86.0}):
+    for told in ({70.0: (70.0, 0.0), 60.0: (80.0, 0.1), 90.0: (86.0, 0.2)},
+                 {70.0: (near, 0.0), 60.0: (80.0, 0.1), 90.0: (86.0, 0.2)},
+                 {70.0: (75.0, 0.2), 90.0: (78.0, 0.1)},
+                 {70.0: None, 60.0: (80.0, 0.1), 90.0: (86.0, 0.2)}):
         assert _tie_measured(70.0, chosen, told, {}, make) == (70.0, None, chosen)
     assert made == []
 

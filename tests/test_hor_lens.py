@@ -19,6 +19,7 @@ from xvmatch.cues.hor_lens import (
     _pick,
     _subsample,
     choose_hor_hfov,
+    implied_fit,
     implied_hfov,
     pick_along_tracks,
 )
@@ -223,6 +224,19 @@ def test_right_pairs_imply_the_true_lens_read_with_any_lens(
     implied = implied_hfov(used, [t for t, _ in frames], [h for _, h in frames])
     assert implied is not None and implied == round(implied)
     assert abs(implied - true_hfov) <= 0.5 + 1e-9
+
+
+def test_right_pairs_fit_their_lens_better_than_swapped_ones() -> None:
+    """The lens the right pairs imply comes with next to no stray (their distances fit it
+    exactly); two people swapped stray more, and the lens is that of implied_hfov."""
+    rng = np.random.default_rng(3)
+    frames = [_seen(85.0, 70.0, rng, 6, 1.0, 0.4 + k) for k in range(3)]
+    tops, hors = [t for t, _ in frames], [h for _, h in frames]
+    lens, stray = implied_fit(70.0, tops, hors)
+    assert (lens, stray) == (implied_hfov(70.0, tops, hors), 0.0)
+    swapped = [h[[1, 0, *range(2, len(h))]] for h in hors]
+    assert implied_fit(70.0, tops, swapped)[1] > 0.01
+    assert implied_fit(70.0, [], []) is None
 
 
 def test_a_lens_is_implied_only_where_the_pairs_tell() -> None:

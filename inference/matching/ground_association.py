@@ -59,7 +59,7 @@ from xvmatch.cues.hor_lens import (
     NEAR_TIE,
     LensChoice,
     choose_hor_hfov,
-    implied_hfov,
+    implied_fit,
     pick_along_tracks,
 )
 from xvmatch.formats.mot_boxes import stack_frames
@@ -443,14 +443,14 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     kept 51, all right; with them, 130 and 190). Each compared as it would run: with the
     sights alone a 65 degree clip's 60-degree run kept nothing, so every other lens's wrong run
     replaced the one that, without them, kept 200 pair-frames of nine people, right. Then the
-    lens each run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`: a measurement,
+    lens each run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_fit`: a measurement,
     not one of four guesses) is run too where it differs, and kept where its pairs hold along
     the tracks more often (the chosen lens's; another lens's, more than a near tie; the
     choice's ``measured_from`` says so; a tie keeps the candidate: on tilting close drones,
     whose runs kept as many pairs at any lens, the lens measured was up to 54 degrees off).
     But where candidates' runs keep exactly as many pairs as the chosen lens's, and nothing
-    replaced it, the middle of the lenses their pairs imply is kept where its run keeps as many
-    (:func:`_tie_measured`: several measurements, not one). The run kept is the one
+    replaced it, the lens their pairs imply that they fit best is kept where its run keeps as
+    many (:func:`_tie_measured`: several measurements, the best taken). The run kept is the one
     :func:`register_and_pair` makes: the same lens, given or chosen, runs the same.
     Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
     # each lens's runs with the sights and without, the nearest the prior first: a run of
@@ -478,8 +478,9 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
             best, run, run_kept = h, other, made_kept[h]
     measured_from, implied_by, measured = None, {}, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
-        implied = implied_by[source] = _implied(order, tops, both[source][0], sizes, source,
-                                                made[source][2])
+        fit = implied_by[source] = _implied(order, tops, both[source][0], sizes, source,
+                                            made[source][2])
+        implied = None if fit is None else fit[0]
         if (implied is None or implied in measured or abs(implied - source) < MIN_REMEASURE_DEG
                 or any(abs(implied - t) < MIN_REMEASURE_DEG for t in measured if t not in made)):
             continue  # nothing told, a lens already run, or too near to matter
@@ -506,34 +507,36 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
 
 
 MIN_TIE_TOLD = 3
-"""Tied candidates whose pairs must each imply a lens for the middle of those lenses to be
-tried (:func:`_tie_measured`): of two, one is as good as the other (renders of a 100-degree
-lens, 90 and 110 tied: the lower measured, 80 degrees, pair F1 0.69 against 110's 0.83)."""
+"""Tied candidates whose pairs must each imply a lens for the best fitting of those lenses to
+be tried (:func:`_tie_measured`; with the middle of two told, on renders of a 100-degree lens
+with 90 and 110 tied, the lower, 80 degrees, paired 0.69 against 110's 0.83)."""
 
 
-def _tie_measured(hfov: float, run: Registered, implied_by: Mapping[float, float | None],
+def _tie_measured(hfov: float, run: Registered,
+                  implied_by: Mapping[float, tuple[float, float] | None],
                   measured: dict[float, Registered], make: Callable[[float], Registered]
                   ) -> tuple[float, float | None, Registered]:
     """The lens, where it came from and its run, where candidate lenses' runs keep as many
-    pairs as the chosen lens ``hfov``'s (``run``): the middle (the lower of two) of the lenses
-    their pairs imply (``implied_by``, per tied candidate, ``hfov`` among them), run (from
-    ``measured``, the runs made so far by lens, or ``make``) and kept where it keeps as many
-    pairs: several runs' measurements, where the tie says the candidates are no measure
-    (renders of an 88-degree lens: every candidate's run kept 142 pair-frames of five people,
-    the chosen 60-degree one pairing 0.72 right; the middle lens measured, 97 degrees, kept as
-    many, all right). Where fewer than :data:`MIN_TIE_TOLD` lenses are told, or the middle is
-    ``hfov`` or within :data:`~xvmatch.cues.hor_lens.MIN_REMEASURE_DEG` of it, the chosen lens
-    and its run."""
-    told = sorted((lens, h) for h, lens in implied_by.items() if lens is not None)
+    pairs as the chosen lens ``hfov``'s (``run``): of the lenses their pairs imply
+    (``implied_by``, per tied candidate, ``hfov`` among them: each lens and how far its pairs
+    stray from it, :func:`~xvmatch.cues.hor_lens.implied_fit`), the one whose pairs stray
+    least, run (from ``measured``, the runs made so far by lens, or ``make``) and kept where
+    it keeps as many pairs: the tie says the candidates are no measure, and a run that swaps
+    people fits no lens well (renders of an 82-degree lens: the 60 and 70 degree runs swapped
+    two of four people and implied 75, straying 0.159; 90's implied 78, straying 0.094, and
+    78's run paired all four right; every run kept 133 pair-frames). Where fewer than
+    :data:`MIN_TIE_TOLD` lenses are told, or that lens is ``hfov`` or within
+    :data:`~xvmatch.cues.hor_lens.MIN_REMEASURE_DEG` of it, the chosen lens and its run."""
+    told = sorted((fit[1], fit[0], h) for h, fit in implied_by.items() if fit is not None)
     if len(told) < MIN_TIE_TOLD:
         return hfov, None, run
-    middle, source = told[(len(told) - 1) // 2]
-    if abs(middle - hfov) < MIN_REMEASURE_DEG:
+    _, lens, source = told[0]
+    if abs(lens - hfov) < MIN_REMEASURE_DEG:
         return hfov, None, run
-    other = measured[middle] if middle in measured else make(middle)
+    other = measured[lens] if lens in measured else make(lens)
     if _count(other[2])[0] < _count(run[2])[0]:
         return hfov, None, run
-    return middle, None if middle in implied_by else source, other  # a tied candidate's own
+    return lens, None if lens in implied_by else source, other  # a tied candidate's own
 
 
 def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: list,
@@ -549,8 +552,9 @@ def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: li
 
 
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
-             pairs: Mapping[int, list[tuple[int, int]]]) -> float | None:
-    """The lens a run's ``pairs`` imply (:func:`~xvmatch.cues.hor_lens.implied_hfov`), each
+             pairs: Mapping[int, list[tuple[int, int]]]) -> tuple[float, float] | None:
+    """The lens a run's ``pairs`` imply and how far they stray from it
+    (:func:`~xvmatch.cues.hor_lens.implied_fit`), each
     handheld person read at their top partner's height as the run reads them; None where they
     join fewer than :data:`~xvmatch.cues.hor_lens.MIN_MEASURED_PEOPLE` top-view people."""
     if _count(pairs)[1] < MIN_MEASURED_PEOPLE:
@@ -564,7 +568,7 @@ def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
         rows = np.array([at_top[t] for t, _ in pairs[f]])
         paired_top.append(top[rows])
         paired_hor.append(hor[[at_hor[h] for _, h in pairs[f]]] * size[rows, None])
-    return implied_hfov(hfov, paired_top, paired_hor)
+    return implied_fit(hfov, paired_top, paired_hor)
 
 
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
