@@ -460,9 +460,10 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
     dist2 = ahead * ahead + across * across
     lone = ((near_top > RADIUS**2) & (ahead > 0.5) & (np.abs(across) < ahead * tan_half)
             & (dist2 < reach2) & (near_top > spread**2 * dist2))
-    bearing = across / np.where(lone, ahead, 1.0)
-    for depth, tangent, half in shadows.T:  # behind a nearer horizontal person: hidden
-        lone &= ~((depth < ahead) & (np.abs(bearing - tangent) < half))
+    if shadows.shape[1]:  # behind a nearer horizontal person: hidden
+        bearing = across / np.where(lone, ahead, 1.0)
+        for depth, tangent, half in shadows.T:
+            lone &= ~((depth < ahead) & (np.abs(bearing - tangent) < half))
     missed = lone.sum(axis=0)
     unseen = np.zeros_like(missed)
     if sight is not None:  # horizontal people alone where the top camera would see them

@@ -476,6 +476,11 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         # pairs of two people or more without the sights (which steady any lens's poses)
         if people[h] >= MIN_PEOPLE and made_kept[h] > NEAR_TIE * run_kept:
             best, run, run_kept = h, other, made_kept[h]
+
+    def run_at(lens: float) -> Registered:  # a measured lens's run, as register_and_pair's
+        return run_along_tracks(order, tops, _hor_people(boxes, hor_size, lens), sizes, lens,
+                                fps, views, sights, spread)
+
     measured_from, implied_by, measured = None, {}, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
         fit = implied_by[source] = _implied(order, tops, both[source][0], sizes, source,
@@ -484,17 +489,15 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
         if (implied is None or implied in measured or abs(implied - source) < MIN_REMEASURE_DEG
                 or any(abs(implied - t) < MIN_REMEASURE_DEG for t in measured if t not in made)):
             continue  # nothing told, a lens already run, or too near to matter
-        measured[implied] = run_along_tracks(order, tops, _hor_people(boxes, hor_size, implied),
-                                             sizes, implied, fps, views, sights, spread)
+        measured[implied] = run_at(implied)
         kept_here = _count(measured[implied][2])[0]
         # a tie tells nothing; another lens's measurement needs more than a near tie
         if kept_here > run_kept * (1.0 if source == hfov else NEAR_TIE):
             best, measured_from, run, run_kept = implied, source, measured[implied], kept_here
     if best == hfov:  # candidates tied with the chosen lens measure it together
         best, measured_from, run = _tie_measured(
-            hfov, run, {h: implied_by[h] for h in made if made_kept[h] == run_kept},
-            measured, lambda h: run_along_tracks(order, tops, _hor_people(boxes, hor_size, h),
-                                                 sizes, h, fps, views, sights, spread))
+            hfov, run, {h: implied_by[h] for h in made if made_kept[h] == run_kept}, measured,
+            run_at)
         run_kept = _count(run[2])[0]
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
@@ -514,7 +517,7 @@ with 90 and 110 tied, the lower, 80 degrees, paired 0.69 against 110's 0.83)."""
 
 def _tie_measured(hfov: float, run: Registered,
                   implied_by: Mapping[float, tuple[float, float] | None],
-                  measured: dict[float, Registered], make: Callable[[float], Registered]
+                  measured: Mapping[float, Registered], make: Callable[[float], Registered]
                   ) -> tuple[float, float | None, Registered]:
     """The lens, where it came from and its run, where candidate lenses' runs keep as many
     pairs as the chosen lens ``hfov``'s (``run``): of the lenses their pairs imply
@@ -554,9 +557,9 @@ def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: li
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
              pairs: Mapping[int, list[tuple[int, int]]]) -> tuple[float, float] | None:
     """The lens a run's ``pairs`` imply and how far they stray from it
-    (:func:`~xvmatch.cues.hor_lens.implied_fit`), each
-    handheld person read at their top partner's height as the run reads them; None where they
-    join fewer than :data:`~xvmatch.cues.hor_lens.MIN_MEASURED_PEOPLE` top-view people."""
+    (:func:`~xvmatch.cues.hor_lens.implied_fit`), each handheld person read at their top
+    partner's height as the run reads them; None where they join fewer than
+    :data:`~xvmatch.cues.hor_lens.MIN_MEASURED_PEOPLE` top-view people."""
     if _count(pairs)[1] < MIN_MEASURED_PEOPLE:
         return None
     paired_top, paired_hor = [], []
