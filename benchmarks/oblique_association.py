@@ -63,8 +63,9 @@ the ``true cameras`` row and each scene's printed pitch take the first frame's c
 ``associate`` without ``--image-size`` takes it: ``assumed``, CVMHAT's 2688x1512 where the
 boxes fit it (the renders' 1920x1080 views; a 3640x2048 view's boxes do not, and ``associate``
 asked for the size: the true size is used), as before the twenty-eighth session; ``guess``,
-the smallest common video size holding the boxes, for every view (a 3640x2048 view's boxes
-give 3840x2160; :func:`~xvmatch.formats.box_image_size.ground_path_hor_size`, now).
+the size the boxes tell, for every view (where they are cut by the image's borders, else the
+smallest common video size holding them: a 3640x2048 view's boxes gave 3840x2160 before the
+forty-sixth session; :func:`~xvmatch.formats.box_image_size.ground_path_hor_size`, now).
 
 ``--hor-hfov LO HI``: the renders' handheld field of view, drawn per scene in LO-HI degrees
 (default 60 80, :class:`~xvmatch.datasets.oblique_scenes.ObliqueSceneConfig`); e.g. 90 120 for an
@@ -121,9 +122,9 @@ from xvmatch.formats.box_image_size import (
     ASSUMED,
     CVMHAT_SIZE,
     UNKNOWN,
-    common_size_holding,
     consistent_with,
     ground_path_hor_size,
+    guess_image_size,
 )
 from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibration
@@ -352,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hor-size", choices=("true", "assumed", "guess"), default="true",
                    help="the from-people rows' handheld image size: true (default), or as "
                    "associate takes it without --image-size: assumed (CVMHAT's 2688x1512, "
-                   "before) or guess (the smallest common size holding the boxes, now)")
+                   "before) or guess (the size the boxes tell, now)")
     p.add_argument("--renumber", action="store_true",
                    help="number the sampled frames 1, 2, 3 (a file of every --step-th frame "
                    "with its own numbering)")
@@ -413,14 +414,14 @@ def main(argv: list[str] | None = None) -> int:
             _true_ground_points(top, [scene.top_cameras[original.get(f, f) - 1]
                                       for f in sorted(top)], top_size)).pairs
         if args.guess_top_size:
-            top_size = common_size_holding(top) or top_size
+            top_size = guess_image_size(top) or top_size
         people_hor = hor_size
         if args.hor_size != "true" and consistent_with(hor):
             people_hor = (CVMHAT_SIZE if args.hor_size == "assumed" else
                           ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED) or CVMHAT_SIZE)
         elif args.hor_size == "guess":  # boxes that do not fit CVMHAT's ("assumed": refused):
             # as resolve_size(defer=True) settles them for the command, not the true size
-            people_hor = ground_path_hor_size(hor, common_size_holding(hor) or hor_size,
+            people_hor = ground_path_hor_size(hor, guess_image_size(hor) or hor_size,
                                               UNKNOWN) or hor_size
         options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False,
                                            top_sizes=not args.no_top_sizes)
@@ -484,7 +485,11 @@ def main(argv: list[str] | None = None) -> int:
               + (f"; lens {true_hfov:.0f}, chosen {lens:.0f} ({lens_scores}): (true lens) "
                  f"{line[6]}, (lens chosen) {line[7]}" if args.choose_lens else "")
               + (f"; frame rate {rate.fps:g}{' (walkers)' if rate.estimated else ''}, true "
-                 f"{fps:.3g}" if args.fps == AUTO_FPS and rate is not None else ""), flush=True)
+                 f"{fps:.3g}" if args.fps == AUTO_FPS and rate is not None else "")
+              + (f"; sizes taken: top {'x'.join(map(str, top_size))}, handheld "
+                 f"{'x'.join(map(str, people_hor))} (true "
+                 f"{'x'.join(map(str, hor_size))})" if args.guess_top_size
+                 or args.hor_size != "true" else ""), flush=True)
     print(f"\n{args.scenes} scenes, every {args.step}th frame of {args.seconds:g} s, "
           f"{time.perf_counter() - t0:.0f} s; top calibration refused in {refused}"
           + (f"; the lens choice and its run took {choice_s:.0f} s (the consensus run at 70 "

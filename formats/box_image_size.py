@@ -38,20 +38,27 @@ from xvmatch.core.input_files import InputFileError, read_input_text
 
 __all__ = [
     "ASSUMED",
+    "BORDER_TOL",
     "COMMON_SIZES",
     "CVMHAT_SIZE",
+    "FRAME_ASPECTS",
     "MARGIN",
+    "MIN_AT_BORDER",
     "MIN_EXTENT",
+    "SNAP",
     "UNKNOWN",
+    "border_size",
     "box_extent",
     "box_line",
     "check_boxes_in_image",
     "common_size_holding",
     "consistent_with",
     "ground_path_hor_size",
+    "guess_image_size",
     "hor_size_note",
     "median_aspect",
     "resolve_size",
+    "size_guess_how",
     "unknown_size_error",
     "upright_size_guess",
 ]
@@ -66,6 +73,18 @@ COMMON_SIZES = ((640, 360), (640, 480), (1280, 720), (1920, 1080), (2560, 1440),
                 (2720, 1530), (3840, 2160), (4096, 2160), (5472, 3078), (7680, 4320))
 """Video frame sizes of cameras and drones, smallest first: the candidates
 :func:`common_size_holding` chooses from."""
+BORDER_TOL = 1.0
+"""Pixels within which boxes cut by one image border end alike (annotations rounded to whole
+pixels, or clipped to the last pixel's index)."""
+MIN_AT_BORDER = 3
+"""Fewest people whose boxes end at the farthest edge for it to be read as the image's border
+(:func:`border_size`): people cut by it as they leave or pass the camera."""
+SNAP = 0.01
+"""How near (a share of each side) a size read at the borders is taken for a common size."""
+FRAME_ASPECTS = (16 / 9, 4 / 3, 256 / 135)
+"""Width over height of video frames, in the order :func:`border_size` tries them for the side
+no boxes are cut at (16:9, 4:3, 4096x2160), that side rounded to a multiple of 8 pixels
+(2048 * 16 / 9 = 3640.9 for a 3640x2048 phone: 3640)."""
 ASSUMED = "the CVMHAT default"
 """The source :func:`resolve_size` gives for an assumed CVMHAT size."""
 UNKNOWN = "not known"
@@ -122,29 +141,114 @@ def common_size_holding(frames: Mapping) -> tuple[int, int] | None:
     return None
 
 
+def _people(boxes: np.ndarray, ranks: np.ndarray) -> int:
+    """How many people the ``(x0, y0, x1, y1)`` boxes are, boxes of successive frames
+    (``ranks``, the frames' order in the clip) that overlap taken for one person's: one
+    person standing at the edge, or walking along it, is one however many boxes."""
+    parent = np.arange(len(boxes))
+
+    def root(k: int) -> int:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = int(parent[k])
+        return k
+
+    for r in np.unique(ranks):
+        now, nxt = np.flatnonzero(ranks == r), np.flatnonzero(ranks == r + 1)
+        if not len(nxt):
+            continue
+        a, c = boxes[now][:, None], boxes[nxt][None]
+        touch = ((np.minimum(a[..., 2], c[..., 2]) > np.maximum(a[..., 0], c[..., 0]))
+                 & (np.minimum(a[..., 3], c[..., 3]) > np.maximum(a[..., 1], c[..., 1])))
+        for i, j in zip(*np.nonzero(touch), strict=True):
+            parent[root(int(now[i]))] = root(int(nxt[j]))
+    return len({root(k) for k in range(len(boxes))})
+
+
+def _border(far: np.ndarray, boxes: np.ndarray, ranks: np.ndarray) -> float | None:
+    """The image border where boxes are cut: the farthest of the ``far`` edges, where the
+    boxes of at least :data:`MIN_AT_BORDER` people (:func:`_people`) end within
+    :data:`BORDER_TOL`; None where they do not."""
+    at = far >= float(far.max()) - BORDER_TOL
+    enough = at.sum() >= MIN_AT_BORDER and _people(boxes[at], ranks[at]) >= MIN_AT_BORDER
+    return float(far.max()) if enough else None
+
+
+def _to8(value: float) -> int:
+    """A frame side in pixels, rounded to a multiple of 8 as video frames' sides are."""
+    return int(8 * np.floor(value / 8.0 + 0.5))
+
+
+def _snapped(size: tuple[int, int]) -> tuple[int, int]:
+    """A size read at the borders, or the common video size within :data:`SNAP` of it on both
+    sides (hand annotations stop a few pixels short of the border: 2680x1504 is 2688x1512)."""
+    for common in COMMON_SIZES:
+        if all(abs(v - c) <= SNAP * c for v, c in zip(size, common, strict=True)):
+            return common
+    return size
+
+
+def border_size(frames: Mapping) -> tuple[int, int] | None:
+    """The image size where boxes of ``{frame: FrameBoxes}`` are cut by its borders, as
+    annotation tools and trackers clip them (a 3640x2048 phone's boxes end at x 3640 and
+    y 2048): the right and lowest edges where several boxes end alike (:func:`_border`), to a
+    multiple of 8 (:func:`_snapped`); with only one of them, the other side from the first of
+    :data:`FRAME_ASPECTS` that holds every box (2% past allowed, as
+    :func:`common_size_holding`). None where no border shows."""
+    boxes = [np.asarray(frames[f].boxes, dtype=float).reshape(-1, 4) for f in sorted(frames)]
+    if not sum(map(len, boxes)):
+        return None
+    ranks = np.concatenate([np.full(len(v), k) for k, v in enumerate(boxes)])
+    b = np.concatenate(boxes)
+    x1, y1 = b[:, 0] + b[:, 2], b[:, 1] + b[:, 3]
+    corners = np.column_stack([b[:, 0], b[:, 1], x1, y1])
+    right, bottom = _border(x1, corners, ranks), _border(y1, corners, ranks)
+    if right is not None and bottom is not None:
+        return _snapped((_to8(right), _to8(bottom)))
+    for aspect in FRAME_ASPECTS if right is not None or bottom is not None else ():
+        width = _to8(right if right is not None else bottom * aspect)
+        height = _to8(bottom if bottom is not None else right / aspect)
+        if float(x1.max()) <= 1.02 * width and float(y1.max()) <= 1.02 * height:
+            return _snapped((width, height))
+    return None
+
+
+def guess_image_size(frames: Mapping) -> tuple[int, int] | None:
+    """A view's image size from its boxes alone: where they are cut by its borders
+    (:func:`border_size`), else the smallest common video size holding them
+    (:func:`common_size_holding`); None where neither tells."""
+    return border_size(frames) or common_size_holding(frames)
+
+
+def size_guess_how(frames: Mapping, size: tuple[int, int]) -> str:
+    """How :func:`guess_image_size` came to ``size`` for these boxes, for a note."""
+    if border_size(frames) == tuple(size):
+        return "where its boxes are cut by the image's borders"
+    return "the smallest common video size holding its boxes"
+
+
 def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str
                          ) -> tuple[int, int] | None:
     """The horizontal view's size for the ground-map path where no size was given
-    (:func:`resolve_size`'s ``source`` :data:`ASSUMED` or :data:`UNKNOWN`): the smallest common
-    video size holding its boxes (:func:`common_size_holding`), as that path reads distances and
-    bearings from the image's width and centre, and 2688x1512 belongs to CVMHAT's head-mounted
-    camera under a nadir drone. None where the size was given, or (assumed) no other size is
-    found."""
-    if source == UNKNOWN:  # resolve_size already took the smallest common size holding them
+    (:func:`resolve_size`'s ``source`` :data:`ASSUMED` or :data:`UNKNOWN`): the size guessed
+    from its boxes (:func:`guess_image_size`), as that path reads distances and bearings from
+    the image's width and centre, and 2688x1512 belongs to CVMHAT's head-mounted camera under a
+    nadir drone. None where the size was given, or (assumed) no other size is found."""
+    if source == UNKNOWN:  # resolve_size already took the guess
         return tuple(size)
     if source != ASSUMED:
         return None
-    guess = common_size_holding(hor)
+    guess = guess_image_size(hor)
     return None if guess is None or tuple(guess) == tuple(size) else guess
 
 
-def hor_size_note(path: str | os.PathLike, guess: tuple[int, int], source: str) -> str:
-    """The note saying a horizontal view's size was guessed on the ground-map path
-    (:func:`ground_path_hor_size`), ``source`` as :func:`resolve_size` gave it."""
+def hor_size_note(path: str | os.PathLike, hor: Mapping, guess: tuple[int, int],
+                  source: str) -> str:
+    """The note saying a horizontal view's size was guessed from its boxes ``hor`` on the
+    ground-map path (:func:`ground_path_hor_size`), ``source`` as :func:`resolve_size` gave it."""
     instead = ", not CVMHAT's" if source == ASSUMED else ""
-    return (f"{os.fspath(path)}: its images taken as {guess[0]}x{guess[1]} on this path, the "
-            f"smallest common video size holding its boxes{instead} (give --image-size WxH if "
-            "not)")
+    return (f"{os.fspath(path)}: its images taken as {guess[0]}x{guess[1]} on this path, "
+            f"{size_guess_how(hor, guess)}{instead} (give --image-size WxH if not)")
 
 
 def median_aspect(frames: Mapping) -> float | None:
@@ -162,13 +266,13 @@ def upright_size_guess(frames: Mapping) -> tuple[float, tuple[int, int] | None] 
     """For a view whose size is not given: None where its people do not stand upright (median
     height over width below :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`, or no
     boxes: a view looking down, read as the ground); else that median and the size guessed for
-    it, :func:`common_size_holding` (None: no common size holds the boxes)."""
+    it, :func:`guess_image_size` (None: no size holds the boxes)."""
     from xvmatch.geometry.people_calibration import STEEP_ASPECT  # scipy: not at start-up
 
     aspect = median_aspect(frames)
     if aspect is None or aspect < STEEP_ASPECT:
         return None
-    return aspect, common_size_holding(frames)
+    return aspect, guess_image_size(frames)
 
 
 def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:
@@ -227,7 +331,8 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
         ids: whether the records' ids are the file's ids (else row numbers).
         option: the option that gives the size, named in the refusal.
         defer: boxes alone that do not fit the CVMHAT size are not refused here but returned
-            with the smallest common size holding them and :data:`UNKNOWN`, for a command whose
+            with the size guessed from them (:func:`guess_image_size`) and :data:`UNKNOWN`,
+            for a command whose
             path is chosen later (``associate``: the ground-map path guesses it, the nadir
             path refuses with :func:`unknown_size_error`).
 
@@ -250,7 +355,7 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
         return size, source
     if consistent_with(hor):
         return CVMHAT_SIZE, ASSUMED
-    if defer and (guess := common_size_holding(hor)) is not None:
+    if defer and (guess := guess_image_size(hor)) is not None:
         return guess, UNKNOWN
     raise unknown_size_error(hor, hor_path, option)
 

@@ -306,6 +306,31 @@ def test_boxes_past_cvmhats_size_take_the_ground_path_with_a_guessed_size(tmp_pa
     assert not refused.exists()
 
 
+@pytest.mark.slow
+def test_a_phones_size_is_read_where_its_boxes_are_cut(tmp_path, capsys) -> None:
+    """Passers-by cut by a 3640x2048 phone's bottom edge (and by the drone's): boxes alone,
+    each view's size is read at the edges where its boxes end (no common size: 3840x2160
+    before), said in its note, and the run pairs as with both sizes given."""
+    from xvmatch.cli import main
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0), edge_people=(3, 3))
+    scene = make_oblique_scene(config, 60, np.random.default_rng(3))
+    assert scene.hor_cameras["hor1"][0].image_size == (3640, 2048)
+    paths = write_oblique_scene(scene, tmp_path, "s")
+    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+            "--fps", "10", "--hor-hfov", "70"]
+    guess, given = tmp_path / "guess.csv", tmp_path / "given.csv"
+    assert main([*base, "--out", str(guess)]) == 0
+    err = capsys.readouterr().err
+    assert "took 1920x1080, where its boxes are cut by the image's borders" in err
+    assert (f"note: {paths['hor1']}: its images taken as 3640x2048 on this path, where its "
+            "boxes are cut by the image's borders (give --image-size WxH if not)") in err
+    assert main([*base, "--top-image-size", "1920x1080", "--image-size", "3640x2048",
+                 "--quiet", "--out", str(given)]) == 0
+    assert guess.read_text() == given.read_text()
+
+
 @pytest.mark.parametrize("true_scale", [0.7, 1.0, 1.3])
 def test_registration_keeps_the_scale_that_brings_the_maps_together(true_scale) -> None:
     """People on a top map whose metres are ``1 / true_scale`` of the horizontal map's: the

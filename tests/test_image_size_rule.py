@@ -10,7 +10,10 @@ are an error naming the line. Run through ``xvmatch.cli.main`` end to end.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import simulate_box_scene
@@ -20,9 +23,11 @@ from xvmatch.formats.box_image_size import (
     CVMHAT_SIZE,
     MIN_EXTENT,
     UNKNOWN,
+    border_size,
     common_size_holding,
     consistent_with,
     ground_path_hor_size,
+    guess_image_size,
     hor_size_note,
     resolve_size,
 )
@@ -201,9 +206,82 @@ def test_boxes_past_cvmhats_size_are_left_to_the_path_only_when_asked():
     huge = {1: FrameBoxes(1, [1], [[9000, 100, 10, 10]])}
     with pytest.raises(ValueError, match="size is unknown"):
         resolve_size(huge, "h.txt", [], defer=True)
-    assert hor_size_note("h.txt", (3840, 2160), UNKNOWN) == (
+    assert hor_size_note("h.txt", big, (3840, 2160), UNKNOWN) == (
         "h.txt: its images taken as 3840x2160 on this path, the smallest common video size "
         "holding its boxes (give --image-size WxH if not)")
+
+
+def _clipped(boxes: np.ndarray, size: tuple[int, int]) -> dict:
+    """``(x0, y0, x1, y1)`` rows clipped to a ``size`` image as annotation tools clip them, as
+    ``(x, y, w, h)`` boxes of one frame (one person each)."""
+    b = np.clip(boxes, 0.0, np.tile(np.asarray(size, float), 2))
+    return {1: FrameBoxes(1, np.arange(len(b)), np.column_stack([b[:, :2], b[:, 2:] - b[:, :2]]))}
+
+
+@settings(max_examples=60, deadline=None)
+@given(width=st.integers(80, 1000).map(lambda k: 8 * k),
+       aspect=st.sampled_from([16 / 9, 4 / 3, 2.0, 1.0]), seed=st.integers(0, 2**31 - 1))
+def test_boxes_cut_by_the_borders_tell_the_size(width, aspect, seed):
+    """People leaving a clip's frame, their boxes clipped by its right and bottom borders, give
+    the image size exactly, any size of whole 8-pixel blocks (a 3640x2048 phone is no common
+    video size) but one within 1% of a common size, which is that size; people who never reach
+    a border leave it to the common sizes."""
+    height = 8 * round(width / aspect / 8)
+    rng = np.random.default_rng(seed)
+    x0 = rng.uniform(0.0, 0.9 * width, 40)
+    y0 = rng.uniform(0.0, 0.5 * height, 40)
+    w, h = rng.uniform(0.05, 0.15, (2, 40)) * height
+    boxes = np.column_stack([x0, y0, x0 + w, y0 + 2.0 * h])
+    boxes[:3, 1] = [0.0, 0.25 * height, 0.5 * height]  # three people cut at the right
+    boxes[:3, 2] = width + rng.uniform(1.0, 50.0, 3)
+    boxes[3:6, 0] = [0.1 * width, 0.4 * width, 0.7 * width]  # three at the bottom
+    boxes[3:6, 3] = height + rng.uniform(1.0, 50.0, 3)
+    near = [c for c in COMMON_SIZES if abs(width - c[0]) <= 0.01 * c[0]
+            and abs(height - c[1]) <= 0.01 * c[1]]
+    assert border_size(_clipped(boxes, (width, height))) == (near[0] if near else (width, height))
+    inside = np.column_stack([x0, y0, x0 + w, y0 + h])[6:] * 0.5
+    assert border_size(_clipped(inside, (width, height))) is None
+
+
+@pytest.mark.parametrize(("cut", "size"), [
+    ("bottom", (3640, 2048)),  # 2048 * 16 / 9 = 3640.9, to a multiple of 8: 3640
+    ("right", (3640, 2048)),  # 3640 * 9 / 16 = 2047.5
+])
+def test_one_border_gives_the_other_side_from_the_frames_aspect(cut, size):
+    """A phone's passers-by cut only by its bottom edge (or people leaving by its right edge
+    only): the other side from 16:9, the first of the frame aspects holding every box."""
+    bottom = [[100.0, 200.0, 900.0, 2500.0], [1500.0, 900.0, 2100.0, 2600.0],
+              [2200.0, 1200.0, 2700.0, 2900.0], [3000.0, 300.0, 3300.0, 1100.0]]
+    right = [[3300.0, 200.0, 3900.0, 1500.0], [3500.0, 900.0, 3800.0, 1700.0],
+             [3100.0, 500.0, 3700.0, 2040.0], [300.0, 300.0, 500.0, 1100.0]]
+    boxes = np.array(bottom if cut == "bottom" else right)
+    assert border_size(_clipped(boxes, size)) == size
+    assert guess_image_size(_clipped(boxes, size)) == size
+
+
+def test_a_person_standing_at_the_far_edge_is_no_border():
+    """The boxes of one person at the farthest edge (standing still, boxes interpolated, walking
+    slowly far away or along that edge), however many, are not a border; boxes past the border (a
+    detector's, not clipped) show none: the smallest common size holding them is guessed."""
+    still = {f: FrameBoxes(f, [1, 2], [[3500.0, 1500.0, 120.0, 500.0], [10.0, 10.0, 40.0, 90.0]])
+             for f in range(1, 6)}
+    assert border_size(still) is None
+    slow = {f: FrameBoxes(f, [1], [[3500.0 + 0.1 * f, 1500.0 - 0.3 * f, 120.0, 500.0]])
+            for f in range(1, 6)}  # far away, walking towards the camera: edges within 1 px
+    assert border_size(slow) is None
+    along = {f: FrameBoxes(f, [1, 2], [[1155.0 + 0.1 * f, 200.0 + 15.0 * f, 28.4, 72.0],
+                                       [10.0, 10.0, 40.0, 90.0]])
+             for f in range(1, 9)}  # one person walking down a column of the image
+    assert border_size(along) is None
+    assert guess_image_size(still) == (3840, 2160)
+    past = {f: FrameBoxes(f, [1], [[3600.0, 1900.0, 60.0 + f, 200.0 + f]]) for f in range(1, 6)}
+    assert border_size(past) is None
+    cut = {f: FrameBoxes(f, [1], [[3500.0 + 10 * f, 1900.0 - 200 * f, 140.0 - 10 * f, 148.0]])
+           for f in range(1, 6)}  # people leaving by the right edge, one a frame
+    assert border_size(cut) == (3640, 2048)
+    assert hor_size_note("h.txt", cut, (3640, 2048), UNKNOWN) == (
+        "h.txt: its images taken as 3640x2048 on this path, where its boxes are cut by the "
+        "image's borders (give --image-size WxH if not)")
 
 
 @pytest.mark.parametrize(("box", "ok"), [
@@ -268,3 +346,12 @@ def test_noise_places_false_boxes_in_the_horizontal_image(boxes, tmp_path, capsy
     code, err = _run(capsys, "associate", "--top", str(top), "--hor", str(out), "--out",
                      str(tmp_path / "p.csv"), "--image-size", "1399x787", "--quiet")
     assert code == 0, err
+
+
+def test_borders_a_few_pixels_short_of_a_common_size_are_that_size():
+    """Hand annotations stopping short of the border (CVMHAT's: boxes cut at x 2682 and
+    y 1507 of its 2688x1512 frames) read as the common size within 1% of them."""
+    boxes = np.array([[2500.0, 300.0, 2682.0, 900.0], [2400.0, 800.0, 2682.0, 1300.0],
+                      [2600.0, 100.0, 2682.0, 500.0], [100.0, 900.0, 400.0, 1507.0],
+                      [900.0, 700.0, 1200.0, 1507.0], [1600.0, 1000.0, 1900.0, 1507.0]])
+    assert border_size(_clipped(boxes, (2682, 1507))) == CVMHAT_SIZE

@@ -241,16 +241,16 @@ def offset_to_apply(top: Mapping, hor: Mapping, value: int | str,
 
 def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | None:
     """The top view's size when none is given: where its people stand upright (an oblique
-    camera, which the nadir search would misread), the smallest common video size holding its
-    boxes, said in one line; None (the nadir path) for squat boxes, or boxes no common size
-    holds (a note saying what to give)."""
-    from xvmatch.formats.box_image_size import upright_size_guess
+    camera, which the nadir search would misread), the size its boxes tell
+    (:func:`~xvmatch.formats.box_image_size.guess_image_size`), said in one line; None (the
+    nadir path) for squat boxes, or boxes no size holds (a note saying what to give)."""
+    from xvmatch.formats.box_image_size import size_guess_how, upright_size_guess
 
     if (guess := upright_size_guess(top)) is None:
         return None
     aspect, size = guess
-    said = (f"took {size[0]}x{size[1]}, the smallest common video size holding its boxes, as"
-            " its size; give --top-image-size WxH if not" if size is not None else
+    said = (f"took {size[0]}x{size[1]}, {size_guess_how(top, size)}, as its size; give "
+            "--top-image-size WxH if not" if size is not None else
             "no common video size holds its boxes: give --top-image-size WxH to calibrate "
             "it from its people")
     note(f"xvmatch: note: the top view's people stand upright (boxes {aspect:.1f} times as "
@@ -336,8 +336,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
             "the clip)")
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
     if guessed is not None:
-        note(f"xvmatch: note: {hor_size_note(options.hor_boxes, guessed, options.hor_size[1])}",
-             False)
+        note("xvmatch: note: "
+             f"{hor_size_note(options.hor_boxes, hor, guessed, options.hor_size[1])}", False)
     if run.lens is not None:
         from xvmatch.inference.matching.ground_association import lens_note
 

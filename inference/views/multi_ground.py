@@ -48,6 +48,7 @@ from xvmatch.formats.box_image_size import (
     check_boxes_in_image,
     ground_path_hor_size,
     hor_size_note,
+    size_guess_how,
     upright_size_guess,
 )
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, stack_frames
@@ -167,8 +168,8 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         top: the top view's ``{frame: record}``.
         top_view: ``auto``, ``nadir`` or ``oblique`` (``nadir`` also where cameras are given).
         top_size: the top view's image size (``--top-image-size``); None: where the top view's
-            people stand upright (``auto``), the smallest common video size holding its boxes
-            (:func:`~xvmatch.formats.box_image_size.common_size_holding`), said in the note;
+            people stand upright (``auto``), the size its boxes tell
+            (:func:`~xvmatch.formats.box_image_size.guess_image_size`), said in the note;
             else the nadir path.
         name: the top box file (messages).
         offsets: each handheld view's ``--offset``; ``auto`` estimates it with the nadir
@@ -199,8 +200,8 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
                           "as wide): an oblique camera, read here as a nadir one; no common video "
                           "size holds its boxes: give --top-image-size WxH to calibrate it from "
                           "its people")
-        guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, the smallest common video "
-                   "size holding its boxes (give --top-image-size WxH if not)")
+        guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, "
+                   f"{size_guess_how(top, top_size)} (give --top-image-size WxH if not)")
     check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False)
     top = _tracked(top, top_tracks)
     try:
@@ -228,14 +229,14 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
                    note: Callable[[str], object]) -> MultiGroundOptions:
     """``associate-multi``'s options of this path: each handheld view's image size as resolved
     (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone (or
-    none known: boxes that do not fit it), where the smallest common video size holding its
-    boxes serves (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
+    none known: boxes that do not fit it), where the size its boxes tell serves
+    (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
     ``note`` (``paths``: the box files, top first); ``--hor-hfov`` and ``--fps``."""
     sizes = []
     for k, (size, source) in enumerate(resolved, 1):
         guess = ground_path_hor_size(views[k], size, source)
         if guess is not None:
-            note(hor_size_note(paths[k], guess, source))
+            note(hor_size_note(paths[k], views[k], guess, source))
         sizes.append(tuple(guess or size))
     return MultiGroundOptions(tuple(sizes), hfov, fps)
 

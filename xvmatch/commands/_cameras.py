@@ -63,7 +63,7 @@ def add_top_view_arguments(p: argparse._ActionsContainer) -> None:
         "people) or auto (default: the boxes or --cameras decide)")
     p.add_argument("--top-image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help="the top view's image size, 8..65536 a side; oblique needs it, auto "
-                   "takes the smallest common video size holding the top boxes")
+                   "reads it from the top boxes (their cut edges, else a common video size)")
     p.add_argument("--hor-hfov", default="auto", metavar="DEG", type=_hor_hfov,
                    help="oblique: the horizontal camera's field of view, degrees in [20, 150], "
                    "or auto (default: 70 unless its people pair clearly better at 90 or 110)")
