@@ -272,6 +272,21 @@ def test_a_phones_size_is_guessed_on_the_ground_path(tmp_path, capsys) -> None:
     assert (tmp_path / "guess.csv").read_text() == (tmp_path / "given.csv").read_text()
 
 
+def _phone_clip(tmp_path, edge_people: tuple[int, int], seed: int) -> tuple[dict, list[str]]:
+    """A 60-frame clip of a 3640x2048 phone under a drone at 25-45 degrees (``edge_people``
+    passing across each camera's bottom edge), its box files and ``associate``'s arguments
+    for them (frame rate and lens given)."""
+    from xvmatch.datasets.oblique_scenes import write_oblique_scene
+
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0),
+                                edge_people=edge_people)
+    scene = make_oblique_scene(config, 60, np.random.default_rng(seed))
+    assert scene.hor_cameras["hor1"][0].image_size == (3640, 2048)
+    paths = write_oblique_scene(scene, tmp_path, "s")
+    return paths, ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
+                   "--fps", "10", "--hor-hfov", "70"]
+
+
 @pytest.mark.slow
 def test_boxes_past_cvmhats_size_take_the_ground_path_with_a_guessed_size(tmp_path,
                                                                           capsys) -> None:
@@ -280,14 +295,8 @@ def test_boxes_past_cvmhats_size_take_the_ground_path_with_a_guessed_size(tmp_pa
     oblique top view) takes 3840x2160, the smallest common size holding them, saying so, and
     pairs as with that size given."""
     from xvmatch.cli import main
-    from xvmatch.datasets.oblique_scenes import write_oblique_scene
 
-    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0))
-    scene = make_oblique_scene(config, 60, np.random.default_rng(2))
-    assert scene.hor_cameras["hor1"][0].image_size == (3640, 2048)
-    paths = write_oblique_scene(scene, tmp_path, "s")
-    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
-            "--fps", "10", "--hor-hfov", "70"]
+    paths, base = _phone_clip(tmp_path, (0, 0), 2)
     guess, given = tmp_path / "guess.csv", tmp_path / "given.csv"
     assert main([*base, "--top-image-size", "1920x1080", "--out", str(guess)]) == 0
     err = capsys.readouterr().err
@@ -312,14 +321,8 @@ def test_a_phones_size_is_read_where_its_boxes_are_cut(tmp_path, capsys) -> None
     each view's size is read at the edges where its boxes end (no common size: 3840x2160
     before), said in its note, and the run pairs as with both sizes given."""
     from xvmatch.cli import main
-    from xvmatch.datasets.oblique_scenes import write_oblique_scene
 
-    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0), edge_people=(3, 3))
-    scene = make_oblique_scene(config, 60, np.random.default_rng(3))
-    assert scene.hor_cameras["hor1"][0].image_size == (3640, 2048)
-    paths = write_oblique_scene(scene, tmp_path, "s")
-    base = ["associate", "--top", str(paths["top"]), "--hor", str(paths["hor1"]),
-            "--fps", "10", "--hor-hfov", "70"]
+    paths, base = _phone_clip(tmp_path, (3, 3), 3)
     guess, given = tmp_path / "guess.csv", tmp_path / "given.csv"
     assert main([*base, "--out", str(guess)]) == 0
     err = capsys.readouterr().err
