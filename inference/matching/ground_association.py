@@ -25,7 +25,10 @@ view's boxes say it is oblique).
    over the clip (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`), and
    the map scale kept is the one whose run keeps the most pairs along the tracks
    (:func:`register_and_pair`; the registration's score totals tell it weakly: on a shallow
-   tilting render, 0 of 40 pairs right at the scale they kept, 105 of 105 at 1.3).
+   tilting render, 0 of 40 pairs right at the scale they kept, 105 of 105 at 1.3). The run
+   registered on the handheld boxes no border cuts, every box paired under its poses, replaces
+   it where it keeps more than a near tie (:func:`_whole_boxes_run`: a close passer-by cut by
+   the bottom edge can hold a wrong pose).
 
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
@@ -67,6 +70,7 @@ from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     PeopleCalibration,
     calibrate_from_people,
+    cut_at_bottom,
 )
 from xvmatch.geometry.tilting_camera import WINDOW_S, TiltTrack, fit_tilt_track
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
@@ -415,6 +419,11 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
                                                 options.hor_size,
                                                 (top, hor) if options.consensus else None, sights,
                                                 spread)
+    if options.consensus:  # the run on the boxes no border cuts, where it keeps clearly more
+        whole = _whole_boxes_run(order, tops, boxes, sizes, hfov if lens is None else
+                                 lens.hfov_deg, fps, options.hor_size, (top, hor), sights, spread)
+        if whole is not None and _count(whole[2])[0] > NEAR_TIE * _count(pairs)[0]:
+            scale, poses, pairs = whole
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
                              summary=_summary(calib, tilt), scale=scale, lens=lens,
                              frame_rate=rate, tilt=tilt)
@@ -610,6 +619,23 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights, spread)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
+
+
+def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
+                     fps: float, hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
+                     sights: list[gr.TopSight] | None, spread: float) -> Registered | None:
+    """Video mode's run registered on the handheld boxes no border cuts and paired with every
+    box under its poses (None where the bottom edge cuts none): a close passer-by's depth, read
+    from a cut box's width, can hold a wrong pose. Arguments as :func:`register_and_pair`'s."""
+    cut = [cut_at_bottom(b, hor_size[1]) for b, _ in boxes]
+    if not any(c.any() for c in cut):
+        return None
+    hors = _hor_people(boxes, hor_size, hfov)
+    whole = [(q[~c], i[~c]) for (q, i), c in zip(hors, cut, strict=True)]
+    by_scale = ([_registrations(order, tops, whole, sizes, hfov, fps, True, spread=spread)]
+                if sights is None else list(_registrations_twice(
+                    order, tops, whole, sizes, hfov, fps, True, sights, spread)))
+    return _made(order, tops, (hors, by_scale), sizes, views)
 
 
 def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
