@@ -632,9 +632,7 @@ def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfo
         return None
     hors = _hor_people(boxes, hor_size, hfov)
     whole = [(q[~c], i[~c]) for (q, i), c in zip(hors, cut, strict=True)]
-    by_scale = ([_registrations(order, tops, whole, sizes, hfov, fps, True, spread=spread)]
-                if sights is None else list(_registrations_twice(
-                    order, tops, whole, sizes, hfov, fps, True, sights, spread)))
+    by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread)
     return _made(order, tops, (hors, by_scale), sizes, views)
 
 
@@ -646,9 +644,7 @@ def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov
     their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
     with the ``sights``, or of the run without them where that keeps more
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
-    by_scale = ([_registrations(order, tops, hors, sizes, hfov, fps, True, spread=spread)]
-                if sights is None else list(_registrations_twice(
-                    order, tops, hors, sizes, hfov, fps, True, sights, spread)))
+    by_scale = _by_scale(order, tops, hors, sizes, hfov, fps, True, sights, spread)
     return _made(order, tops, (hors, by_scale), sizes, views)
 
 
@@ -673,11 +669,20 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
     motion taken out in video mode): with the ``sights`` and without them, or, without
     sights, the one."""
     hors = _hor_people(boxes, hor_size, hfov)
-    video = views is not None
+    return hors, _by_scale(order, tops, hors, sizes, hfov, fps, views is not None, sights,
+                           spread)
+
+
+def _by_scale(order: list[int], tops: list, hors: list, sizes: list, hfov: float, fps: float,
+              video: bool, sights: list[gr.TopSight] | None, spread: float
+              ) -> list[dict[float, tuple[float, list[gr.FramePose]]]]:
+    """The registrations at each map scale of the handheld people ``hors``: with the
+    ``sights`` and without them (:func:`_registrations_twice`), or, without sights, the one
+    (:func:`_registrations`)."""
     if sights is None:
-        return hors, [_registrations(order, tops, hors, sizes, hfov, fps, video, spread=spread)]
-    return hors, list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights,
-                                           spread))
+        return [_registrations(order, tops, hors, sizes, hfov, fps, video, spread=spread)]
+    return list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights,
+                                     spread))
 
 
 def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
