@@ -4,9 +4,10 @@
 search, which assumes the handheld camera stands at a top-view person; ``--top-view oblique``
 forces the ground-map path (the top camera calibrated from its people, the handheld camera
 registered on its map wherever it stands). Per sequence, boxes only, ``--mode video``, every
-``--step``-th frame (``--fps`` set to match), each view's ids scrambled by a seeded permutation
-(consistent over time, as track ids): CVIDF1, the pair-frames kept and the seconds of each
-path. Used to decide the routing (docs/notes/oblique_top_camera.md, thirty-seventh session).
+``--step``-th frame (``--fps 30``: the frames keep the videos' own numbers, 30 a second), each
+view's ids scrambled by a seeded permutation (consistent over time, as track ids): CVIDF1, the
+pair-frames kept and the seconds of each path. Used to decide the routing
+(docs/notes/oblique_top_camera.md, thirty-seventh session).
 
     .venv/bin/python benchmarks/nadir_routes.py [--step 5] [--sequences NAME ...] [--seed 0]
 """
@@ -66,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
             for route, extra in ROUTES.items():
                 t = time.perf_counter()
                 code = cli(["associate", "--top", str(tmp / "top.txt"), "--hor",
-                            str(tmp / "hor.txt"), "--mode", "video", "--fps", f"{30 / args.step:g}",
+                            str(tmp / "hor.txt"), "--mode", "video", "--fps", "30",
                             "--out", str(tmp / "pred.csv"), "--quiet", *extra])
                 seconds = time.perf_counter() - t
                 pred = read_predictions(tmp / "pred.csv") if code == 0 else {}

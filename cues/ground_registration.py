@@ -26,7 +26,8 @@ its holder walks and turns; it is *not* assumed to be a visible person. Per fram
   (``spread`` 0), as either cost the real CVMHAT boxes a person's track; the :data:`KEEP`
   best distinct ones are kept;
 * **time**: one hypothesis per frame is chosen by dynamic programming over the frames (Viterbi),
-  each step paying for a jump in position or heading faster than a walker turns and walks, so
+  each step paying for a jump in position or heading faster than a walker turns and walks
+  (:data:`_STEP_M`, :data:`_STEP_DEG`; twice that where the rate was read from the walkers), so
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
   decided by its neighbours; each frame is also offered its neighbours' hypotheses, carried
   onto its map and scored in it (:func:`carried`), so a pose that one frame's :data:`KEEP`
@@ -641,13 +642,18 @@ def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarr
 
 
 def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.ndarray]],
-                      fps: float, motions: list[np.ndarray | None] | None = None
-                      ) -> list[FramePose]:
+                      fps: float, motions: list[np.ndarray | None] | None = None,
+                      slack: float = 1.0) -> list[FramePose]:
     """One pose per frame from each frame's hypotheses (``(poses, scores)``), chosen by Viterbi
     over the frames with a cost on fast jumps (module docstring); frames without hypotheses
     split the sequence into runs, each chosen on its own. With ``motions``
     (:func:`map_motion`), a jump is measured after the top map's own motion is taken out (a
-    drifting drone), so only the handheld camera's own walk and turn pay."""
+    drifting drone), so only the handheld camera's own walk and turn pay. ``slack``: how many
+    times :data:`_STEP_M` and :data:`_STEP_DEG` a second go free (more where ``fps`` was read
+    from the walkers and may be too high,
+    :data:`~xvmatch.inference.matching.frame_rate.READ_RATE_SLACK`)."""
+    if not slack > 0:
+        raise ValueError(f"slack must be positive, got {slack}")
     totals: list[np.ndarray] = []
     back: list[np.ndarray] = []
     for k, (poses, scores) in enumerate(candidates):
@@ -660,8 +666,9 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
         here = _moved(poses, motions[k] if motions is not None else None)
         step = np.hypot(*(here[:, None, :2] - prev[None, :, :2]).transpose(2, 0, 1))
         turn = np.abs(_wrap(here[:, None, 2] - prev[None, :, 2]))
-        cost = _JUMP_COST * (np.maximum(step / (_STEP_M * gap) - 1.0, 0.0)
-                             + np.maximum(turn / (np.radians(_STEP_DEG) * gap) - 1.0, 0.0))
+        free = slack * gap
+        cost = _JUMP_COST * (np.maximum(step / (_STEP_M * free) - 1.0, 0.0)
+                             + np.maximum(turn / (np.radians(_STEP_DEG) * free) - 1.0, 0.0))
         via = np.round(totals[k - 1][None, :] - cost, _DIGITS)
         best = np.argmax(via, axis=1)
         totals.append(np.round(scores + via[np.arange(len(poses)), best], _DIGITS))
@@ -689,33 +696,33 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
 def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                     hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
                     top_sizes: list[np.ndarray] | None = None,
-                    sights: list[TopSight] | None = None, spread: float = RANGE_SPREAD
-                    ) -> dict[float, tuple[float, list[FramePose]]]:
+                    sights: list[TopSight] | None = None, spread: float = RANGE_SPREAD,
+                    slack: float = 1.0) -> dict[float, tuple[float, list[FramePose]]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES`: ``{scale: (total score, poses)}``, the poses on the
     top map multiplied by ``scale``. Arguments as :func:`register_with_scale`'s."""
     return _register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes, sights,
-                            plain=False, spread=spread)[0]
+                            plain=False, spread=spread, slack=slack)[0]
 
 
 def register_scales_twice(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                           hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None,
                           top_sizes: list[np.ndarray] | None, sights: list[TopSight],
-                          spread: float = RANGE_SPREAD
+                          spread: float = RANGE_SPREAD, slack: float = 1.0
                           ) -> tuple[dict[float, tuple[float, list[FramePose]]],
                                      dict[float, tuple[float, list[FramePose]]]]:
     """:func:`register_scales` with the top camera's ``sights`` and without them, as two calls
     give them (bit for bit), each frame's pose terms computed once for both: video mode
     compares the two runs of every lens."""
     made, plain = _register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes,
-                                   sights, plain=True, spread=spread)
+                                   sights, plain=True, spread=spread, slack=slack)
     return made, plain
 
 
 def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                      hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None,
                      top_sizes: list[np.ndarray] | None, sights: list[TopSight] | None,
-                     plain: bool, spread: float = RANGE_SPREAD
+                     plain: bool, spread: float = RANGE_SPREAD, slack: float = 1.0
                      ) -> list[dict[float, tuple[float, list[FramePose]]]]:
     """:func:`register_scales` with the ``sights``, then, with ``plain`` and sights, without
     them."""
@@ -738,7 +745,8 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
             looks = seen if k == 0 else [None] * len(tops)
             for motions in variants:
                 poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
-                                                          looks, motions, spread), fps, motions)
+                                                          looks, motions, spread), fps, motions,
+                                          slack)
                 run = (round(sum(p.score for p in poses), 6), poses)
                 if scale not in kept or run[0] > kept[scale][0]:
                     kept[scale] = run
@@ -748,8 +756,8 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
 def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                         hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
                         top_sizes: list[np.ndarray] | None = None,
-                        sights: list[TopSight] | None = None, spread: float = RANGE_SPREAD
-                        ) -> tuple[float, list[FramePose]]:
+                        sights: list[TopSight] | None = None, spread: float = RANGE_SPREAD,
+                        slack: float = 1.0) -> tuple[float, list[FramePose]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES` (:func:`register_scales`), and the scale kept: the two
     maps' metres come from two estimates (the top camera's height from its people, each
@@ -777,11 +785,12 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
         sights: per frame, where the top camera sees people on its map (:class:`TopSight`,
             :func:`pose_hypotheses`), or None.
         spread: see :func:`pose_hypotheses`.
+        slack: see :func:`register_sequence`.
     Returns:
         ``(scale, poses)``: the poses lie on the top map multiplied by ``scale``.
     """
     runs = register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes, sights,
-                           spread)
+                           spread, slack)
     best = margin_scale(runs)
     return best, runs[best][1]
 

@@ -306,7 +306,7 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
                     prior_deg: float = PRIOR_HFOV_DEG, margin: float = LENS_MARGIN,
                     max_frames: int = MAX_FRAMES,
                     sizes: list[np.ndarray] | None = None,
-                    spread: float = gr.RANGE_SPREAD) -> LensChoice:
+                    spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> LensChoice:
     """The horizontal camera's field of view that best registers its people on the top map
     (module docstring).
 
@@ -328,6 +328,8 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
             after the choice does (None: everyone at the crowd's).
         spread: as the registration's
             (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`).
+        slack: the registration's free walk and turn, as
+            :func:`~xvmatch.cues.ground_registration.register_sequence`'s.
     Returns:
         The choice; the prior when no frame has people in both views.
     """
@@ -353,11 +355,11 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
     for hfov in lenses:
         hors = [gr.hor_ground_points(b, hor_size, hfov, width_ratio=ratio) for b in sub_boxes]
         scale, poses = gr.register_with_scale(sub, sub_tops, hors, hfov, fps,
-                                              top_sizes=sub_sizes, spread=spread)
+                                              top_sizes=sub_sizes, spread=spread, slack=slack)
         scores[hfov] = round(pairing_score([scale * t for t in sub_tops], hors, sub, poses,
                                            sub_sizes), _DIGITS)
-        chance[hfov] = round(chance_score(sub, sub_tops, hors, hfov, fps, sub_sizes, spread),
-                             _DIGITS)
+        chance[hfov] = round(chance_score(sub, sub_tops, hors, hfov, fps, sub_sizes, spread,
+                                          slack), _DIGITS)
         scales[hfov] = scale
     return LensChoice(hfov_deg=_pick(scores, chance, float(prior_deg), margin), scores=scores,
                       scales=scales, frames=sub, chance=chance)
@@ -365,17 +367,17 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
 
 def chance_score(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                  hfov_deg: float, fps: float, sizes: list[np.ndarray] | None = None,
-                 spread: float = gr.RANGE_SPREAD) -> float:
+                 spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> float:
     """The pairing score (:func:`pairing_score`) of the same registration with the horizontal
     view's ground maps mirrored (left and right swapped): what a lens pairs by chance. The
     mirrored crowd keeps its distances, its spread and the squeeze of the lens, but not its
     arrangement, so it matches the top map no better than chance, whether people walk or
     stand. A wide lens squeezes the handheld map and pairs more people by chance alone; the
     choice compares the lenses on what they pair above that (``sizes``: as
-    :func:`pairing_score`'s; ``spread``: as the registration's)."""
+    :func:`pairing_score`'s; ``spread`` and ``slack``: as the registration's)."""
     mirrored = [np.asarray(h, float).reshape(-1, 2) * np.array([1.0, -1.0]) for h in hors]
     scale, poses = gr.register_with_scale(frames, tops, mirrored, hfov_deg, fps,
-                                          top_sizes=sizes, spread=spread)
+                                          top_sizes=sizes, spread=spread, slack=slack)
     return pairing_score([scale * t for t in tops], mirrored, frames, poses, sizes)
 
 

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from xvmatch.inference.matching.frame_rate import (
     BRISK_WALK_MPS,
     MIN_WALKERS,
+    READ_RATE_SLACK,
     frame_rate_from_walkers,
     frame_rate_note,
 )
@@ -41,6 +42,7 @@ def test_a_file_numbered_three_a_second_is_read_as_such() -> None:
     rate = frame_rate_from_walkers(*_walkers(3.0, standing=3))
     assert rate.estimated and rate.walkers == 9
     assert 2.0 <= rate.fps <= 4.0
+    assert rate.slack == READ_RATE_SLACK > 1.0  # a rate read: the registration walks looser
     # Read at 30 a second they would walk ten times too fast; the note says both.
     assert rate.prior_pace > 8 * BRISK_WALK_MPS
     note = frame_rate_note(rate)
@@ -52,6 +54,7 @@ def test_a_video_numbered_at_its_own_rate_keeps_the_prior() -> None:
     # Every 10th frame of a 30 fps video, numbered 1, 11, 21: within a factor 2 of the prior.
     rate = frame_rate_from_walkers(*_walkers(30.0, step=10))
     assert not rate.estimated and rate.fps == 30.0 and rate.walkers == 6
+    assert rate.slack == 1.0
     assert 1.0 <= rate.prior_pace <= 1.6
     assert "walkers then walk" in frame_rate_note(rate)
     # Every frame of it too: the pace is measured over a second, not over the jitter of one
@@ -94,8 +97,12 @@ def test_estimate_is_near_the_rate_and_blind_to_where_the_map_and_clip_lie(
 
 
 @pytest.mark.slow
-def test_fps_auto_reads_a_renumbered_render(tmp_path, capsys) -> None:
+def test_fps_auto_reads_a_renumbered_render(tmp_path, capsys, monkeypatch) -> None:
+    """``--fps auto`` says the rate it read from the top view's walkers, and the registration
+    runs at that rate with the looser walk a rate read gets (``READ_RATE_SLACK``); the same
+    rate given runs at the free walk (a rate given is trusted)."""
     from xvmatch.cli import main
+    from xvmatch.cues import ground_registration as gr
     from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
     from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 
@@ -111,13 +118,21 @@ def test_fps_auto_reads_a_renumbered_render(tmp_path, capsys) -> None:
     hor_size = "x".join(map(str, scene.hor_cameras["hor1"][0].image_size))
     base = ["associate", "--top", str(tmp_path / "top.txt"), "--hor", str(tmp_path / "hor.txt"),
             "--image-size", hor_size, "--top-image-size", "1920x1080", "--mode", "video"]
+    real, paces = gr.register_sequence, []
+
+    def spy(frames, candidates, fps, motions=None, slack=1.0):  # the real registration
+        paces.append((fps, slack))
+        return real(frames, candidates, fps, motions, slack)
+
+    monkeypatch.setattr(gr, "register_sequence", spy)
     assert main([*base, "--out", str(tmp_path / "auto.csv")]) == 0
     said = [line for line in capsys.readouterr().err.splitlines() if "frame numbers" in line]
     assert len(said) == 1 and "from the top view's walkers" in said[0]
     fps = float(said[0].split("read as ")[1].split()[0])
     assert 2.0 <= fps <= 8.0
-    # The same pairs as that rate given.
+    assert paces and set(paces) == {(fps, READ_RATE_SLACK)}
+    paces.clear()
     assert main([*base, "--fps", f"{fps:g}", "--out", str(tmp_path / "given.csv"),
                  "--quiet"]) == 0
     assert "frame numbers" not in capsys.readouterr().err
-    assert (tmp_path / "auto.csv").read_text() == (tmp_path / "given.csv").read_text()
+    assert paces and set(paces) == {(fps, 1.0)}

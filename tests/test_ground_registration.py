@@ -58,6 +58,24 @@ def test_time_decides_an_ambiguous_frame() -> None:
     assert all(np.allclose(p.centre, near[:2]) for p in poses)
 
 
+def test_slack_lets_a_brisk_walk_pass_free() -> None:
+    """A camera walking 1.6 m in a second: at the free 1 m/s it pays for the step and a pose
+    that stays wins; with ``slack`` 2 (a rate read from the walkers) the walk is free and the
+    better-explained pose moved to is kept. Twice the slack is half the rate, and a slack
+    that is not positive is refused."""
+    cands = [(np.array([[0.0, 0.0, 0.0]]), np.array([1.0])),
+             (np.array([[1.6, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.array([3.0, 2.0]))]
+
+    def second(**kw) -> float:
+        return float(gr.register_sequence([1, 2], cands, **kw)[1].centre[0])
+
+    assert second(fps=1.0) == 0.0
+    assert second(fps=1.0, slack=2.0) == 1.6
+    assert second(fps=0.5) == 1.6
+    with pytest.raises(ValueError, match="slack must be positive"):
+        gr.register_sequence([1, 2], cands, fps=1.0, slack=0.0)
+
+
 def test_frames_without_people_split_the_sequence() -> None:
     empty = (np.zeros((0, 3)), np.zeros(0))
     cands = [(np.array([[0.0, 0.0, 0.0]]), np.array([1.0])), empty,

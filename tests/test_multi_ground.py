@@ -13,7 +13,7 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
-from xvmatch.inference.matching.frame_rate import frame_rate_note
+from xvmatch.inference.matching.frame_rate import READ_RATE_SLACK, frame_rate_note
 from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
     run_ground_association,
@@ -164,13 +164,22 @@ def test_problems_shapes_and_no_evidence_off_the_map(scene) -> None:
 
 
 @pytest.mark.slow
-def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene) -> None:
+def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene, monkeypatch) -> None:
     """associate-multi's ``--fps auto``: the top view's people followed by its tracks (its ids
     are its rows) give the rate :func:`top_frame_rate` reads from the file's own ids, said in
-    one note, and the run is the one told that rate."""
+    one note, and the run is the one told that rate and the looser walk a rate read gets."""
+    from xvmatch.cues import ground_registration as gr
     from xvmatch.inference.matching.ground_association import top_frame_rate
     from xvmatch.inference.views.multi_ground import run_multi_ground
     from xvmatch.inference.views.multi_view_people import PeopleOptions
+
+    real, paces = gr.register_sequence, []
+
+    def spy(frames, candidates, fps, motions=None, slack=1.0):  # the real registration
+        paces.append((fps, slack))
+        return real(frames, candidates, fps, motions, slack)
+
+    monkeypatch.setattr(gr, "register_sequence", spy)
 
     views, _ = scene
     rows = [{f: FrameBoxes(f, 1000 * f + np.arange(len(r.ids)), r.boxes) for f, r in v.items()}
@@ -183,7 +192,9 @@ def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene) -> None:
                             PeopleOptions(), tracks, said.append)
     rate = top_frame_rate(views[0], calib)
     assert [s for s in said if s.startswith("frame numbers")] == [frame_rate_note(rate)]
-    told = run_multi_ground(rows, [0, 0], calib, MultiGroundOptions((SIZE, SIZE), 70.0, rate.fps),
+    assert rate.estimated and set(paces) == {(rate.fps, READ_RATE_SLACK)}
+    told = run_multi_ground(rows, [0, 0], calib,
+                            MultiGroundOptions((SIZE, SIZE), 70.0, rate.fps, rate.slack),
                             PeopleOptions(), tracks, said.append)
     assert auto == told
     with pytest.raises(ValueError, match="fps must be frames a second or 'auto'"):

@@ -32,6 +32,7 @@ __all__ = [
     "MIN_WALKERS",
     "PRIOR_FACTOR",
     "PRIOR_FPS",
+    "READ_RATE_SLACK",
     "FrameRate",
     "frame_rate_from_walkers",
     "frame_rate_note",
@@ -57,6 +58,16 @@ PRIOR_FPS = 30.0
 PRIOR_FACTOR = 2.0
 """How far the walkers' frame rate must lie from the prior (either way, as a factor) to replace
 it."""
+
+READ_RATE_SLACK = 2.0
+"""How many times its free walk and turn a second the registration allows where the rate was
+read from the walkers (:attr:`FrameRate.slack`;
+:func:`~xvmatch.cues.ground_registration.register_sequence`): small crowds that stroll and stop
+read it too high more often than too low (1.8-13 for a true 3.33 on renders), which shrinks the
+time between frames and charges a handheld camera's walk and pan as jumps. A rate read too low
+cost little, too high cost 4 CVIDF1 on those clips; twice the walk and turn gained 0.9 over 19
+sets of renders, but cost real CVMHAT's forced ground path 0.9 at its true rate (a square,
+94.0 -> 85.8), so only a rate read gets it (docs/notes/oblique_top_camera.md)."""
 
 _SPANS = 3
 """Rounds of the estimate: each measures the pace over the span the previous one implies."""
@@ -84,6 +95,12 @@ class FrameRate:
     prior: float
     walkers: int = 0
     prior_pace: float = float("nan")
+
+    @property
+    def slack(self) -> float:
+        """The registration's free walk and turn a second, as a factor: :data:`READ_RATE_SLACK`
+        for a rate read from the walkers, 1 for one given or assumed."""
+        return READ_RATE_SLACK if self.estimated else 1.0
 
 
 def _paces(frames: np.ndarray, ids: np.ndarray, points: np.ndarray, span: float) -> np.ndarray:

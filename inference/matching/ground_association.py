@@ -43,7 +43,9 @@ wider lens pairs clearly more people, in all and above chance).
 With ``fps="auto"`` (``--fps auto``, the commands' default) the frame numbers' rate is 30 a
 second unless the top view's walkers say otherwise
 (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`: a file of every 10th
-frame numbered 1, 2, 3).
+frame numbered 1, 2, 3); a rate read so is registered with twice the free walk and turn
+(:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`), as it reads too high more
+often than too low.
 """
 
 from __future__ import annotations
@@ -386,6 +388,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     rate = (top_frame_rate(top, calib, table=(top_frames, tracks, top_ground))  # followed once
             if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
+    slack = 1.0 if rate is None else rate.slack  # a rate read: a looser walk
     tilt = None if top_points is not None else tilting_top(top_frames, tracks, top_boxes,
                                                              calib, fps)
     if tilt is not None:  # a gimbal tilting over the clip: each frame through its own tilt
@@ -409,19 +412,21 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
         lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
                                                           options.hor_size, (top, hor), sights,
-                                                          spread)
+                                                          spread, slack)
     else:
         if hfov == AUTO_HFOV:
             lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
-                                   options.hor_size, fps, sizes=sizes, spread=spread)
+                                   options.hor_size, fps, sizes=sizes, spread=spread,
+                                   slack=slack)
             hfov = lens.hfov_deg
         scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps,
                                                 options.hor_size,
                                                 (top, hor) if options.consensus else None, sights,
-                                                spread)
+                                                spread, slack)
     if options.consensus:  # the run on the boxes no border cuts, where it keeps clearly more
         whole = _whole_boxes_run(order, tops, boxes, sizes, hfov if lens is None else
-                                 lens.hfov_deg, fps, options.hor_size, (top, hor), sights, spread)
+                                 lens.hfov_deg, fps, options.hor_size, (top, hor), sights, spread,
+                                 slack)
         if whole is not None and _count(whole[2])[0] > NEAR_TIE * _count(pairs)[0]:
             scale, poses, pairs = whole
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
@@ -436,7 +441,8 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
                         hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
                         sights: list[gr.TopSight] | None = None,
-                        spread: float = gr.RANGE_SPREAD) -> tuple[LensChoice, Registered]:
+                        spread: float = gr.RANGE_SPREAD, slack: float = 1.0
+                        ) -> tuple[LensChoice, Registered]:
     """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
     tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
     keeps it) with each candidate lens (:data:`~xvmatch.cues.hor_lens.HFOV_CANDIDATES`), the
@@ -465,7 +471,8 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     # each lens's runs with the sights and without, the nearest the prior first: a run of
     # another lens replaces the chosen one's only where it keeps more than a near tie of the
     # best before it, so a tie keeps the lens nearer the prior
-    both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights, spread)
+    both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights, spread,
+                           slack)
             for h in sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))}
     runs = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
     scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
@@ -488,7 +495,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
 
     def run_at(lens: float) -> Registered:  # a measured lens's run, as register_and_pair's
         return run_along_tracks(order, tops, _hor_people(boxes, hor_size, lens), sizes, lens,
-                                fps, views, sights, spread)
+                                fps, views, sights, spread, slack)
 
     measured_from, implied_by, measured = None, {}, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
@@ -587,7 +594,7 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
                       fps: float, hor_size: tuple[int, int],
                       views: tuple[Mapping, Mapping] | None,
                       sights: list[gr.TopSight] | None = None,
-                      spread: float = gr.RANGE_SPREAD) -> Registered:
+                      spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> Registered:
     """The handheld view registered on the top map with a lens of ``hfov`` degrees and each
     frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
     their ids the tracks: video mode) the top map's motion taken out, the pairs made
@@ -610,20 +617,25 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
             (:class:`~xvmatch.cues.ground_registration.TopSight`, :func:`top_sights`), or None.
         spread: how far off, in parts of their distance, a top person counts as explained
             (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`; :func:`miss_spread`).
+        slack: how many times the registration's free walk and turn a second
+            (:func:`~xvmatch.cues.ground_registration.register_sequence`; a rate read,
+            :attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`).
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
     hors = _hor_people(boxes, hor_size, hfov)
     if views is not None:
-        return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights, spread)
-    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights, spread)
+        return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights, spread,
+                                slack)
+    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights, spread, slack)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
 
 
 def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
                      fps: float, hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
-                     sights: list[gr.TopSight] | None, spread: float) -> Registered | None:
+                     sights: list[gr.TopSight] | None, spread: float, slack: float = 1.0
+                     ) -> Registered | None:
     """Video mode's run registered on the handheld boxes no border cuts and paired with every
     box under its poses (None where the bottom edge cuts none): a close passer-by's depth, read
     from a cut box's width, can hold a wrong pose. Arguments as :func:`register_and_pair`'s."""
@@ -632,19 +644,19 @@ def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfo
         return None
     hors = _hor_people(boxes, hor_size, hfov)
     whole = [(q[~c], i[~c]) for (q, i), c in zip(hors, cut, strict=True)]
-    by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread)
+    by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread, slack)
     return _made(order, tops, (hors, by_scale), sizes, views)
 
 
 def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                      fps: float, views: tuple[Mapping, Mapping],
                      sights: list[gr.TopSight] | None = None,
-                     spread: float = gr.RANGE_SPREAD) -> Registered:
+                     spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> Registered:
     """Video mode's run of one lens on the handheld view's people (``hors``, on its map with
     their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
     with the ``sights``, or of the run without them where that keeps more
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
-    by_scale = _by_scale(order, tops, hors, sizes, hfov, fps, True, sights, spread)
+    by_scale = _by_scale(order, tops, hors, sizes, hfov, fps, True, sights, spread, slack)
     return _made(order, tops, (hors, by_scale), sizes, views)
 
 
@@ -662,7 +674,8 @@ def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, siz
 
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
                 hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None,
-                sights: list[gr.TopSight] | None = None, spread: float = gr.RANGE_SPREAD
+                sights: list[gr.TopSight] | None = None, spread: float = gr.RANGE_SPREAD,
+                slack: float = 1.0
                 ) -> tuple[list, list[dict[float, tuple[float, list[gr.FramePose]]]]]:
     """The handheld view's people on its own map (with their ids) and its registrations at
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
@@ -670,19 +683,20 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
     sights, the one."""
     hors = _hor_people(boxes, hor_size, hfov)
     return hors, _by_scale(order, tops, hors, sizes, hfov, fps, views is not None, sights,
-                           spread)
+                           spread, slack)
 
 
 def _by_scale(order: list[int], tops: list, hors: list, sizes: list, hfov: float, fps: float,
-              video: bool, sights: list[gr.TopSight] | None, spread: float
-              ) -> list[dict[float, tuple[float, list[gr.FramePose]]]]:
+              video: bool, sights: list[gr.TopSight] | None, spread: float,
+              slack: float = 1.0) -> list[dict[float, tuple[float, list[gr.FramePose]]]]:
     """The registrations at each map scale of the handheld people ``hors``: with the
     ``sights`` and without them (:func:`_registrations_twice`), or, without sights, the one
     (:func:`_registrations`)."""
     if sights is None:
-        return [_registrations(order, tops, hors, sizes, hfov, fps, video, spread=spread)]
+        return [_registrations(order, tops, hors, sizes, hfov, fps, video, spread=spread,
+                               slack=slack)]
     return list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights,
-                                     spread))
+                                     spread, slack))
 
 
 def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
@@ -695,25 +709,26 @@ def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
 
 def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                    fps: float, video: bool, sights: list[gr.TopSight] | None = None,
-                   spread: float = gr.RANGE_SPREAD
+                   spread: float = gr.RANGE_SPREAD, slack: float = 1.0
                    ) -> dict[float, tuple[float, list[gr.FramePose]]]:
     """The handheld view's registration at each map scale
     (:func:`~xvmatch.cues.ground_registration.register_scales`), the top map's motion taken
     out in ``video`` mode (its ids the tracks)."""
     return gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov, fps,
-                              [i for _, i in tops] if video else None, sizes, sights, spread)
+                              [i for _, i in tops] if video else None, sizes, sights, spread,
+                              slack)
 
 
 def _registrations_twice(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                          fps: float, video: bool, sights: list[gr.TopSight],
-                         spread: float = gr.RANGE_SPREAD
+                         spread: float = gr.RANGE_SPREAD, slack: float = 1.0
                          ) -> tuple[dict[float, tuple[float, list[gr.FramePose]]],
                                     dict[float, tuple[float, list[gr.FramePose]]]]:
     """:func:`_registrations` with the ``sights`` and without them, in one pass
     (:func:`~xvmatch.cues.ground_registration.register_scales_twice`)."""
     return gr.register_scales_twice(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
                                     fps, [i for _, i in tops] if video else None, sizes, sights,
-                                    spread)
+                                    spread, slack)
 
 
 def scale_along_tracks(order: list[int], tops: list, hors: list,

@@ -129,11 +129,16 @@ class MultiGroundOptions:
             :data:`~xvmatch.inference.matching.ground_association.AUTO_FPS`: from the top
             view's walkers (:func:`~xvmatch.inference.matching.ground_association.
             top_frame_rate`).
+        slack: how many times the registration's free walk and turn a second
+            (:func:`~xvmatch.cues.ground_registration.register_sequence`): set with the rate
+            where it was read from the walkers
+            (:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`).
     """
 
     hor_sizes: tuple[tuple[int, int], ...]
     hor_hfov_deg: float | str | tuple[float, ...] = PRIOR_HFOV_DEG
     fps: float | str = PRIOR_FPS
+    slack: float = 1.0
 
     def __post_init__(self) -> None:
         if isinstance(self.fps, str) and self.fps != AUTO_FPS:
@@ -334,14 +339,15 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         size = tuple(options.hor_sizes[k - 1])
         if tracks is None:
             choices.append(choose_hor_hfov(order, points, [_boxes(views[k][f]) for f in order],
-                                           size, options.fps, sizes=sizes, spread=top.spread))
+                                           size, options.fps, sizes=sizes, spread=top.spread,
+                                           slack=options.slack))
             continue
         pair = (tracked_top, _tracked(views[k], tracks[k]))
         tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
                     for f, p, o in zip(order, points, ok, strict=True)]
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
         choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, size,
-                                           pair, spread=top.spread)[0])
+                                           pair, spread=top.spread, slack=options.slack)[0])
     return tuple(choices)
 
 
@@ -398,7 +404,8 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     seen = None if sights is None else [sights[f] for f in order]
     if tracks is None:
         scale, poses = gr.register_with_scale(order, points, [local[f] for f in order], hfov,
-                                              options.fps, None, heights, seen, spread)
+                                              options.fps, None, heights, seen, spread,
+                                              options.slack)
     else:
         pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
         ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
@@ -406,7 +413,7 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
             order, list(zip(points, ids, strict=True)),
             [(local[f], np.asarray(pair[1][f].ids)) for f in order],
             heights if heights is not None else [None] * len(order), hfov, options.fps, pair,
-            seen, spread)
+            seen, spread, options.slack)
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
@@ -495,7 +502,7 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     if options.fps == AUTO_FPS:  # the rate from the clip's one fit, then the map at that rate
         first = top_map(aligned, frames, calibration, top_tracks)
         rate = top_frame_rate(aligned[0], calibration, table=first.walkers)
-        options = replace(options, fps=rate.fps)
+        options = replace(options, fps=rate.fps, slack=rate.slack)
         if note is not None:
             note(frame_rate_note(rate))
     top = top_map(aligned, frames, calibration, top_tracks, options.fps)  # lenses, problems
