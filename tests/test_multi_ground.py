@@ -199,6 +199,8 @@ def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene, monkeypatch) 
     assert auto == told
     with pytest.raises(ValueError, match="fps must be frames a second or 'auto'"):
         MultiGroundOptions((SIZE, SIZE), 70.0, "fast")
+    with pytest.raises(ValueError, match="slack must be positive"):
+        MultiGroundOptions((SIZE, SIZE), 70.0, 3.0, 0.0)
 
 
 def test_ground_options_guess_only_a_size_assumed() -> None:

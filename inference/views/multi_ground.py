@@ -144,6 +144,8 @@ class MultiGroundOptions:
         if isinstance(self.fps, str) and self.fps != AUTO_FPS:
             raise ValueError(f"MultiGroundOptions.fps must be frames a second or "
                              f"{AUTO_FPS!r}, got {self.fps!r}")
+        if not self.slack > 0:
+            raise ValueError(f"MultiGroundOptions.slack must be positive, got {self.slack!r}")
         hfov = self.hor_hfov_deg
         if isinstance(hfov, str) and hfov != AUTO_HFOV:
             raise ValueError(f"MultiGroundOptions.hor_hfov_deg must be degrees or "
