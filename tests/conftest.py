@@ -136,3 +136,20 @@ def close_drone():
                              roll_deg=0.0, camera_height=8.0, horizon=(0.0, 0.0),
                              focal_from="given", tilt_std_deg=0.0, horizon_std_px=0.0,
                              focal_rel_std=0.0, n_boxes=100, n_frames=10)
+
+
+@pytest.fixture
+def registration_paces(monkeypatch) -> list[tuple[float, float]]:
+    """The ``(fps, slack)`` of every call of the ground registration's Viterbi
+    (:func:`~xvmatch.cues.ground_registration.register_sequence`) made during the test, the
+    real registration still run: which rate and free walk a command registered at."""
+    from xvmatch.cues import ground_registration as gr
+
+    real, paces = gr.register_sequence, []
+
+    def spy(frames, candidates, fps, motions=None, slack=1.0):
+        paces.append((fps, slack))
+        return real(frames, candidates, fps, motions, slack)
+
+    monkeypatch.setattr(gr, "register_sequence", spy)
+    return paces

@@ -97,12 +97,11 @@ def test_estimate_is_near_the_rate_and_blind_to_where_the_map_and_clip_lie(
 
 
 @pytest.mark.slow
-def test_fps_auto_reads_a_renumbered_render(tmp_path, capsys, monkeypatch) -> None:
+def test_fps_auto_reads_a_renumbered_render(tmp_path, capsys, registration_paces) -> None:
     """``--fps auto`` says the rate it read from the top view's walkers, and the registration
     runs at that rate with the looser walk a rate read gets (``READ_RATE_SLACK``); the same
     rate given runs at the free walk (a rate given is trusted)."""
     from xvmatch.cli import main
-    from xvmatch.cues import ground_registration as gr
     from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
     from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 
@@ -118,13 +117,7 @@ def test_fps_auto_reads_a_renumbered_render(tmp_path, capsys, monkeypatch) -> No
     hor_size = "x".join(map(str, scene.hor_cameras["hor1"][0].image_size))
     base = ["associate", "--top", str(tmp_path / "top.txt"), "--hor", str(tmp_path / "hor.txt"),
             "--image-size", hor_size, "--top-image-size", "1920x1080", "--mode", "video"]
-    real, paces = gr.register_sequence, []
-
-    def spy(frames, candidates, fps, motions=None, slack=1.0):  # the real registration
-        paces.append((fps, slack))
-        return real(frames, candidates, fps, motions, slack)
-
-    monkeypatch.setattr(gr, "register_sequence", spy)
+    paces = registration_paces
     assert main([*base, "--out", str(tmp_path / "auto.csv")]) == 0
     said = [line for line in capsys.readouterr().err.splitlines() if "frame numbers" in line]
     assert len(said) == 1 and "from the top view's walkers" in said[0]

@@ -164,22 +164,13 @@ def test_problems_shapes_and_no_evidence_off_the_map(scene) -> None:
 
 
 @pytest.mark.slow
-def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene, monkeypatch) -> None:
+def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene, registration_paces) -> None:
     """associate-multi's ``--fps auto``: the top view's people followed by its tracks (its ids
     are its rows) give the rate :func:`top_frame_rate` reads from the file's own ids, said in
     one note, and the run is the one told that rate and the looser walk a rate read gets."""
-    from xvmatch.cues import ground_registration as gr
     from xvmatch.inference.matching.ground_association import top_frame_rate
     from xvmatch.inference.views.multi_ground import run_multi_ground
     from xvmatch.inference.views.multi_view_people import PeopleOptions
-
-    real, paces = gr.register_sequence, []
-
-    def spy(frames, candidates, fps, motions=None, slack=1.0):  # the real registration
-        paces.append((fps, slack))
-        return real(frames, candidates, fps, motions, slack)
-
-    monkeypatch.setattr(gr, "register_sequence", spy)
 
     views, _ = scene
     rows = [{f: FrameBoxes(f, 1000 * f + np.arange(len(r.ids)), r.boxes) for f, r in v.items()}
@@ -192,7 +183,7 @@ def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene, monkeypatch) 
                             PeopleOptions(), tracks, said.append)
     rate = top_frame_rate(views[0], calib)
     assert [s for s in said if s.startswith("frame numbers")] == [frame_rate_note(rate)]
-    assert rate.estimated and set(paces) == {(rate.fps, READ_RATE_SLACK)}
+    assert rate.estimated and set(registration_paces) == {(rate.fps, READ_RATE_SLACK)}
     told = run_multi_ground(rows, [0, 0], calib,
                             MultiGroundOptions((SIZE, SIZE), 70.0, rate.fps, rate.slack),
                             PeopleOptions(), tracks, said.append)
