@@ -12,7 +12,9 @@ association maps each frame through its own tilt (interpolated between the windo
 otherwise it keeps the one fit, unchanged. Given that one fit, a steady camera is told first and
 cheaply: the windows' tilts fitted with its lens, roll and height held spread no more than
 :data:`STEADY_DEG` (on renders a static camera's spread at most 1.3 degrees, a tilting one's
-that the whole fit reads as tilting at least 2.4).
+that the whole fit reads as tilting at least 2.4). On a long clip the whole fit's seven starts
+are tried on :data:`START_BOXES` boxes; the best of them and the one fit are refined on all
+(a 96 s drifting drone's fit 52 s -> 4 s, the same track; ``benchmarks/tilt_fit_speed.py``).
 """
 
 from __future__ import annotations
@@ -48,6 +50,12 @@ camera to be read as tilting; below it the clip's one fit is kept."""
 STEADY_DEG = 1.0
 """A camera whose windows' tilts, fitted with the clip's one lens, roll and height held, spread
 no more than this (degrees) is steady without the whole fit (:func:`fit_tilt_track`)."""
+
+
+START_BOXES = 600
+"""Boxes (evenly spread over the clip) the whole fit's starts are tried on where a clip has
+more; the best of them, and the clip's one fit where given, are then refined on all (the best
+alone can stay in a dip of a few boxes: a window 9 degrees off on a 96 s render)."""
 
 
 @dataclass(frozen=True)
@@ -103,7 +111,9 @@ def fit_tilt_track(frames: np.ndarray, ids: np.ndarray, boxes: np.ndarray,
         start: the clip's one fit (an oblique camera), when made: each window's tilt is first
             fitted with its lens, roll and height held, and where those tilts spread no more
             than :data:`STEADY_DEG` the camera is steady and that track is returned (not
-            tilting) without the whole fit (0.05-0.1 s a clip where it takes 1-2.5 s).
+            tilting) without the whole fit (0.05-0.1 s a clip where it takes 1-2.5 s); on a
+            clip of more than :data:`START_BOXES` usable boxes it is also a start of the whole
+            fit.
     """
     frames = np.asarray(frames, np.int64).reshape(-1)
     boxes = np.asarray(boxes, float).reshape(-1, 4)
@@ -126,8 +136,13 @@ def fit_tilt_track(frames: np.ndarray, ids: np.ndarray, boxes: np.ndarray,
                                    tilt_step_deg=TILT_STEP_DEG))
         if held.change_deg <= STEADY_DEG:
             return held
-    return _track(b, fit_model(b, size, prior_f, model_starts(b, size, prior_f),
-                               tilt_step_deg=TILT_STEP_DEG))
+    starts = model_starts(b, size, prior_f)
+    if len(b.h) > START_BOXES:  # the starts tried on a few boxes; the best and the one fit
+        few = b.take(np.linspace(0, len(b.h) - 1, START_BOXES).round().astype(np.int64))
+        starts = [fit_model(few, size, prior_f, starts, tilt_step_deg=TILT_STEP_DEG)]
+        if start is not None:
+            starts.append(one)
+    return _track(b, fit_model(b, size, prior_f, starts, tilt_step_deg=TILT_STEP_DEG))
 
 
 def _track(b: UsableBoxes, params: np.ndarray) -> TiltTrack:
