@@ -34,8 +34,8 @@ from xvmatch.geometry.people_model import (
     usable_boxes,
 )
 
-__all__ = ["MIN_TILT_CHANGE_DEG", "STEADY_DEG", "TILT_STEP_DEG", "WINDOW_S", "TiltTrack",
-           "fit_tilt_track"]
+__all__ = ["MIN_TILT_CHANGE_DEG", "START_BOXES", "STEADY_DEG", "TILT_STEP_DEG", "WINDOW_S",
+           "TiltTrack", "fit_tilt_track"]
 
 WINDOW_S = 3.0
 """Seconds of clip per tilt (a gimbal moves slowly; each window needs enough boxes to read)."""
