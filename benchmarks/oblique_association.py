@@ -152,18 +152,21 @@ def _scrambled(frames: dict, rng: np.random.Generator) -> tuple[dict, dict]:
 
 
 def _jittered(frames: dict, sigma: float, rng: np.random.Generator,
-              size: tuple[int, int]) -> dict:
+              size: tuple[int, int], clip: bool = True) -> dict:
     """The view's boxes with each edge moved by a normal draw of ``sigma`` times the box's
     height (an annotator's or a detector's looseness), then clipped to the ``size`` image as
-    annotation tools and detectors clip them, at least 2 px wide and tall."""
+    annotation tools and detectors clip them (``clip``; else only a side already past the
+    border may stay past it), at least 2 px wide and tall."""
     out = {}
     for f in sorted(frames):
         rec = frames[f]
         b = np.asarray(rec.boxes, float).reshape(-1, 4)
         x0, y0, x1, y1 = (b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3])
         step = sigma * b[:, 3:4] * rng.standard_normal((len(b), 4))
-        x0, x1 = (np.clip(v + step[:, k], 0.0, size[0]) for k, v in ((0, x0), (2, x1)))
-        y0, y1 = (np.clip(v + step[:, k], 0.0, size[1]) for k, v in ((1, y0), (3, y1)))
+        lo = (np.minimum(x0, 0.0), np.minimum(y0, 0.0)) if not clip else (0.0, 0.0)
+        hi = (np.maximum(x1, size[0]), np.maximum(y1, size[1])) if not clip else size
+        x0, x1 = (np.clip(v + step[:, k], lo[0], hi[0]) for k, v in ((0, x0), (2, x1)))
+        y0, y1 = (np.clip(v + step[:, k], lo[1], hi[1]) for k, v in ((1, y0), (3, y1)))
         x0, y0 = np.minimum(x0, size[0] - 2.0), np.minimum(y0, size[1] - 2.0)
         w, h = np.maximum(x1 - x0, 2.0), np.maximum(y1 - y0, 2.0)
         out[f] = FrameBoxes(f, rec.ids, np.column_stack([x0, y0, w, h]))
@@ -296,6 +299,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--person-height", type=float, nargs=2, default=(1.5, 1.95),
                    metavar=("LO", "HI"), help="people's heights in the renders, LO-HI metres "
                    "(default 1.5 1.95; lower: children, people sitting)")
+    p.add_argument("--past-border", action="store_true",
+                   help="boxes cut by an image border run on past it to the person's full box "
+                   "(trackers' and amodal annotations' boxes; default: clipped to the image)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
@@ -316,7 +322,8 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               holder_area=tuple(args.holder_area), pan_rate=args.pan_rate,
                               hor_distortion=tuple(args.hor_distortion),
                               height_range=tuple(args.person_height), area=tuple(args.area),
-                              group_area=tuple(args.group_area), **settings)
+                              group_area=tuple(args.group_area),
+                              boxes_past_border=args.past_border, **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -385,7 +392,8 @@ def main(argv: list[str] | None = None) -> int:
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)
         if args.box_noise > 0:  # from a generator of its own: the scenes' draws stay
             noise = np.random.default_rng([args.seed, k, 2])
-            top, hor = (_jittered(v, args.box_noise, noise, c.image_size) for v, c in
+            top, hor = (_jittered(v, args.box_noise, noise, c.image_size, not args.past_border)
+                        for v, c in
                         ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         truth = {f: {(int(a), int(b)) for a in top[f].ids for b in hor[f].ids

@@ -23,7 +23,8 @@ than ``near_clip`` to the image plane (or behind it) is absent. Nearer people (s
 the body's mid-axis) hide the part of farther people that their clipped boxes cover
 (:func:`~xvmatch.datasets.box_scene._visible_parts`); a person whose visible area is below
 ``min_visible_fraction`` of the full, unclipped box (hidden or truncated by the image border) is
-dropped, the others keep the box of their visible part, inside the image.
+dropped, the others keep the box of their visible part, inside the image (or, with
+``boxes_past_border``, running on past a border that cuts it, as trackers give boxes).
 
 **Partial overlap: by placing part of the crowd outside one view.** The crowd is made of groups,
 each walking in its own square (walks of separate :func:`simulate_walks` calls, translated):
@@ -171,6 +172,10 @@ class ObliqueSceneConfig:
             near edge, a handheld camera's passers-by. Extra people, not counted in
             :attr:`ObliqueScene.overlap_target`. (0, 0), the default, keeps every draw as
             before.
+        boxes_past_border: a person's box cut by an image border runs on past it to their
+            full box's edge (trackers' boxes and amodal annotations, the MOTChallenge way);
+            False, the default, clips it to the image (annotation tools' boxes). Draws
+            nothing.
     """
 
     n_people: tuple[int, int] = (3, 12)
@@ -209,6 +214,7 @@ class ObliqueSceneConfig:
     near_clip: float = 0.3
     min_visible_fraction: float = 0.3
     edge_people: tuple[int, int] = (0, 0)
+    boxes_past_border: bool = False
 
     def __post_init__(self) -> None:
         def pair(name: str, low: float, high: float = np.inf) -> None:
@@ -322,6 +328,7 @@ def project_view(
     min_visible_fraction: float = 0.3,
     present: np.ndarray | None = None,
     k1: float = 0.0,
+    past_border: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Boxes of upright people in one camera's image, with occlusion and truncation.
 
@@ -332,7 +339,8 @@ def project_view(
     one another, nearest (depth of the body's mid-axis) in front
     (:func:`~xvmatch.datasets.box_scene._visible_parts`); a person whose visible area is below
     ``min_visible_fraction`` of the full, unclipped box is dropped, the others keep the bounding
-    box of their visible part.
+    box of their visible part; with ``past_border`` a box cut by an image border runs on past it
+    to the full box's edge there (as trackers and amodal annotations give them).
 
     Args:
         positions: ``(N, 2)`` ground positions, metres.
@@ -344,10 +352,11 @@ def project_view(
         present: ``(N,)`` bool, people that may be seen (e.g. not the camera's holder);
             ``None``: everyone.
         k1: the lens's radial distortion (:func:`distorted`), 0: a pinhole.
+        past_border: boxes cut by a border keep their full extent past it.
 
     Returns:
         (index, boxes): ``(M,)`` int64 indices into N, ascending, and ``(M, 4)`` ``x, y, w, h``
-        boxes in pixels, inside the image.
+        boxes in pixels, inside the image (past its border with ``past_border``).
     """
     positions = np.asarray(positions, dtype=float).reshape(-1, 2)
     n = positions.shape[0]
@@ -379,6 +388,9 @@ def project_view(
     area, part = _visible_parts(clipped[idx], camera.depth(mid))
     keep = (area > 0) & (area >= min_visible_fraction * full_area[idx])
     part = part[keep]
+    if past_border:  # a side the border cut (and no nearer person hides) to the full box's
+        whole, inside = full[idx[keep]], clipped[idx[keep]]
+        part = np.where((whole != inside) & (part == inside), whole, part)
     boxes = np.concatenate([part[:, :2], part[:, 2:] - part[:, :2]], axis=1)
     return idx[keep].astype(np.int64), boxes
 
@@ -413,7 +425,7 @@ def _project_frames(
         idx, boxes = project_view(
             people.positions[f], people.heights, people.widths, cam,
             near_clip=config.near_clip, min_visible_fraction=config.min_visible_fraction,
-            present=present, k1=k1,
+            present=present, k1=k1, past_border=config.boxes_past_border,
         )
         records[f + 1] = FrameBoxes(f + 1, people.ids[idx], boxes)
     return records

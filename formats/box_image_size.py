@@ -21,7 +21,14 @@ command that reads box files (``associate``, ``track``, ``offset``, ``associate-
 3. **Boxes inside the image**: a box is an error (naming the file and line) when it lies
    entirely outside the image, or goes past a border by more than :data:`MARGIN` (10%) of that
    side: ``x < -0.1 W``, ``y < -0.1 H``, ``x + w > 1.1 W`` or ``y + h > 1.1 H``. Detectors
-   produce boxes slightly past the border; a box further out belongs to another image size.
+   produce boxes slightly past the border; a box further out belongs to another image size,
+   unless the file's boxes run on past the borders (:func:`runs_past_borders`: trackers' boxes
+   and amodal annotations keep a person's whole box however much of it is out of view), where
+   only a box entirely outside is an error.
+
+Where no size is given, :func:`guess_image_size` reads it from the boxes: where they are cut
+by the borders, else (boxes running on past the borders) the smallest common size every box
+starts inside, else the smallest common size holding them all.
 
 The top view's size is used by no feature (top-view positions are relative to each other), so
 top-view boxes are checked only against the top images when they are given.
@@ -46,18 +53,21 @@ __all__ = [
     "MIN_AT_BORDER",
     "MIN_EXTENT",
     "SNAP",
+    "SPILL",
     "UNKNOWN",
     "border_size",
     "box_extent",
     "box_line",
     "check_boxes_in_image",
     "common_size_holding",
+    "common_size_started",
     "consistent_with",
     "ground_path_hor_size",
     "guess_image_size",
     "hor_size_note",
     "median_aspect",
     "resolve_size",
+    "runs_past_borders",
     "size_guess_how",
     "unknown_size_error",
     "upright_size_guess",
@@ -79,6 +89,11 @@ pixels, or clipped to the last pixel's index)."""
 MIN_AT_BORDER = 3
 """Fewest people whose boxes end at the farthest edge for it to be read as the image's border
 (:func:`border_size`): people cut by it as they leave or pass the camera."""
+SPILL = (0.1, 8.0, 0.25)
+"""How far before the image's left or top border a box must start to show boxes that run on
+past the borders (:func:`runs_past_borders`): a share of its own width or height and pixels,
+or (a small, far person) a larger share alone. Clipped boxes start at 0, hand annotations a
+few pixels either side of it (CVMHAT's -4, a 38 px wide person cut at the left edge)."""
 SNAP = 0.01
 """How near (a share of each side) a size read at the borders is taken for a common size."""
 FRAME_ASPECTS = (16 / 9, 4 / 3, 256 / 135)
@@ -97,24 +112,44 @@ def _fmt(value: float) -> str:
     return f"{float(value):g}"
 
 
+def _all_boxes(frames: Mapping) -> np.ndarray:
+    """Every ``(x, y, w, h)`` box of ``{frame: FrameBoxes}``, ``(K, 4)``."""
+    boxes = [np.asarray(rec.boxes, dtype=float).reshape(-1, 4) for rec in frames.values()]
+    return np.concatenate(boxes) if boxes else np.zeros((0, 4))
+
+
 def box_extent(frames: Mapping) -> tuple[float, float]:
     """The rightmost and lowest box edge, ``(max x + w, max y + h)`` in pixels, of
     ``{frame: FrameBoxes}``; ``(0, 0)`` without boxes."""
-    boxes = [np.asarray(rec.boxes, dtype=float).reshape(-1, 4) for rec in frames.values()]
-    b = np.concatenate(boxes) if boxes else np.zeros((0, 4))
+    b = _all_boxes(frames)
     if not len(b):
         return 0.0, 0.0
     return float((b[:, 0] + b[:, 2]).max()), float((b[:, 1] + b[:, 3]).max())
 
 
-def _outside(b: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Rows of ``(x, y, w, h)`` boxes that break rule 3 for a ``size = (W, H)`` image."""
+def _outside(b: np.ndarray, size: tuple[int, int], spill: bool = False) -> np.ndarray:
+    """Rows of ``(x, y, w, h)`` boxes that break rule 3 for a ``size = (W, H)`` image; with
+    ``spill`` (boxes that run on past the borders) only those entirely outside."""
     width, height = (float(v) for v in size)
     x, y, w, h = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
     entirely = (x >= width) | (y >= height) | (x + w <= 0) | (y + h <= 0)
+    if spill:
+        return entirely
     past = ((x < -MARGIN * width) | (y < -MARGIN * height) | (x + w > (1 + MARGIN) * width)
             | (y + h > (1 + MARGIN) * height))
     return entirely | past
+
+
+def runs_past_borders(frames: Mapping) -> bool:
+    """Whether the boxes of ``{frame: FrameBoxes}`` run on past the image's borders (trackers'
+    boxes, amodal annotations) rather than being clipped to it: a box starts before the left
+    or top border by more than :data:`SPILL` (a share of its own width or height and pixels,
+    or a larger share), which no image size explains (clipped boxes start at 0)."""
+    b = _all_boxes(frames)
+    share, pixels, small = SPILL
+    size = b[:, 2:]
+    reach = np.maximum(share * size, np.minimum(small * size, pixels))
+    return bool((b[:, :2] < -np.maximum(reach, BORDER_TOL)).any())
 
 
 def consistent_with(frames: Mapping, size: tuple[int, int] = CVMHAT_SIZE) -> bool:
@@ -213,15 +248,35 @@ def border_size(frames: Mapping) -> tuple[int, int] | None:
     return None
 
 
+def common_size_started(frames: Mapping) -> tuple[int, int] | None:
+    """The smallest of :data:`COMMON_SIZES` inside which every box of ``{frame: FrameBoxes}``
+    starts (``x < W`` and ``y < H``), None when none or no boxes: the size of boxes that run
+    on past the right and lowest borders (:func:`runs_past_borders`), where the boxes' extent
+    would tell a larger one (a passer-by's box 1.9 times the image's height past its foot)."""
+    b = _all_boxes(frames)
+    if not len(b):
+        return None
+    for width, height in COMMON_SIZES:
+        if b[:, 0].max() < width and b[:, 1].max() < height:
+            return width, height
+    return None
+
+
 def guess_image_size(frames: Mapping) -> tuple[int, int] | None:
-    """A view's image size from its boxes alone: where they are cut by its borders
+    """A view's image size from its boxes alone: for boxes that run on past the borders
+    (:func:`runs_past_borders`) the smallest common video size they all start inside
+    (:func:`common_size_started`); else where they are cut by its borders
     (:func:`border_size`), else the smallest common video size holding them
-    (:func:`common_size_holding`); None where neither tells."""
+    (:func:`common_size_holding`); None where none tells."""
+    if runs_past_borders(frames):
+        return common_size_started(frames)
     return border_size(frames) or common_size_holding(frames)
 
 
 def size_guess_how(frames: Mapping, size: tuple[int, int]) -> str:
     """How :func:`guess_image_size` came to ``size`` for these boxes, for a note."""
+    if runs_past_borders(frames):
+        return "the smallest common video size its boxes, run on past the borders, start inside"
     if border_size(frames) == tuple(size):
         return "where its boxes are cut by the image's borders"
     return "the smallest common video size holding its boxes"
@@ -255,8 +310,7 @@ def median_aspect(frames: Mapping) -> float | None:
     """The median box height over width of ``{frame: FrameBoxes}``, None without boxes: people
     standing upright in an oblique view are about 2.5 times as tall as wide, from above (a nadir
     view) about as tall as wide."""
-    boxes = [np.asarray(rec.boxes, dtype=float).reshape(-1, 4) for rec in frames.values()]
-    b = np.concatenate(boxes) if boxes else np.zeros((0, 4))
+    b = _all_boxes(frames)
     if not len(b):
         return None
     return float(np.median(b[:, 3] / np.maximum(b[:, 2], 1e-9)))
@@ -300,11 +354,12 @@ def check_boxes_in_image(frames: Mapping, size: tuple[int, int], path: str | os.
     """Raise ``ValueError`` naming ``path``'s line when a box of ``{frame: FrameBoxes}`` breaks
     rule 3 for a ``size = (W, H)`` image; ``source`` says where the size comes from (e.g.
     ``--image-size``), ``ids`` whether the records' ids are the file's (else row numbers)."""
+    spill = runs_past_borders(frames)
     for frame, rec in sorted(frames.items()):
         b = np.asarray(rec.boxes, dtype=float).reshape(-1, 4)
         if not len(b):
             continue
-        bad = np.flatnonzero(_outside(b, size))
+        bad = np.flatnonzero(_outside(b, size, spill))
         if not bad.size:
             continue
         k = int(bad[0])
@@ -312,10 +367,13 @@ def check_boxes_in_image(frames: Mapping, size: tuple[int, int], path: str | os.
         where = f"{os.fspath(path)}:{line}" if line is not None else os.fspath(path)
         who = f"box of id {int(rec.ids[k])}" if ids else "box"
         x, y, w, h = (_fmt(v) for v in b[k])
+        straddles = not _outside(b[k:k + 1], size, spill=True)[0]
+        hint = (" (if its boxes run on past the borders, as a tracker's may, clip them to the "
+                "image)" if straddles else "")
         raise ValueError(
             f"{where}: frame {frame}: {who} ({x}, {y}, {w}, {h}) lies outside the "
             f"{size[0]}x{size[1]} image (from {source}) or more than {MARGIN:.0%} past its "
-            "border; are these the boxes of these images, and is the image size right?")
+            f"border; are these the boxes of these images, and is the image size right?{hint}")
 
 
 def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tuple, str]],

@@ -25,11 +25,14 @@ from xvmatch.formats.box_image_size import (
     UNKNOWN,
     border_size,
     common_size_holding,
+    common_size_started,
     consistent_with,
     ground_path_hor_size,
     guess_image_size,
     hor_size_note,
     resolve_size,
+    runs_past_borders,
+    size_guess_how,
 )
 from xvmatch.formats.mot_boxes import (
     FrameBoxes,
@@ -355,3 +358,64 @@ def test_borders_a_few_pixels_short_of_a_common_size_are_that_size():
                       [2600.0, 100.0, 2682.0, 500.0], [100.0, 900.0, 400.0, 1507.0],
                       [900.0, 700.0, 1200.0, 1507.0], [1600.0, 1000.0, 1900.0, 1507.0]])
     assert border_size(_clipped(boxes, (2682, 1507))) == CVMHAT_SIZE
+
+
+def _spilled(size: tuple[int, int], seed: int) -> dict:
+    """A clip's boxes in a ``size`` image as trackers give them: people inside, one leaving by
+    the left border and three passers-by cut by the bottom one, whose boxes run on past them
+    (one 1.9 times the image's height past its foot)."""
+    width, height = size
+    rng = np.random.default_rng(seed)
+    x0 = rng.uniform(0.05, 0.9, 12) * width
+    y0 = rng.uniform(0.05, 0.6, 12) * height
+    boxes = np.column_stack([x0, y0, np.full(12, 0.04 * width), np.full(12, 0.2 * height)])
+    run_on = [[-0.03 * width, 0.3 * height, 0.05 * width, 0.25 * height],
+              [0.2 * width, 0.8 * height, 0.2 * width, 1.9 * height],
+              [0.5 * width, 0.7 * height, 0.1 * width, 0.5 * height],
+              [0.96 * width, 0.75 * height, 0.08 * width, 0.3 * height]]
+    return {k: FrameBoxes(k, [k], [box]) for k, box in enumerate([*boxes, *run_on], start=1)}
+
+
+@pytest.mark.parametrize("size", [(1280, 720), (1920, 1080), (3840, 2160)])
+def test_boxes_running_past_the_borders_start_inside_the_image(size):
+    """Boxes that run on past the borders (a tracker's; one starts well before the left
+    border, which no image size explains) tell the smallest common size they all start inside,
+    not the larger one holding them; clipped boxes, and hand annotations a few pixels before
+    the border (CVMHAT's -4 for a person 38 px wide), are read as before."""
+    spilled = _spilled(size, 0)
+    assert runs_past_borders(spilled)
+    assert common_size_holding(spilled) != size
+    assert common_size_started(spilled) == size
+    assert guess_image_size(spilled) == size
+    assert "start inside" in size_guess_how(spilled, size)
+    clipped = {f: FrameBoxes(f, r.ids, np.column_stack([
+        np.clip(r.boxes[:, :2], 0, size), np.clip(r.boxes[:, :2] + r.boxes[:, 2:], 0, size)
+        - np.clip(r.boxes[:, :2], 0, size)])) for f, r in spilled.items()}
+    assert not runs_past_borders(clipped)
+    sloppy = {1: FrameBoxes(1, [1, 2], [[-4.0, 536.0, 38.0, 153.0], [500.0, -3.0, 20.0, 60.0]])}
+    assert not runs_past_borders(sloppy)
+    far = {1: FrameBoxes(1, [1], [[-5.4, 441.4, 12.4, 31.7]])}  # a small, far person leaving
+    assert runs_past_borders(far)
+
+
+def test_boxes_running_past_the_borders_are_no_error_while_inside_it(tmp_path, capsys):
+    """Rule 3 for boxes that run on past the borders: a passer-by's box 1.9 times the image's
+    height past its foot is accepted with the right ``--image-size``, a box entirely outside is
+    still an error naming its line; in a clipped file the passer-by's box is an error."""
+    top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
+    top.write_text("1,1,10,10,20,40\n1,2,60,10,20,40\n")
+    spilled = _spilled((1920, 1080), 1)
+    write_mot_boxes(hor, spilled)
+    argv = ["associate", "--top", str(top), "--hor", str(hor), "--out", str(tmp_path / "p.csv"),
+            "--image-size", "1920x1080", "--quiet"]
+    code, err = _run(capsys, *argv)
+    assert code == 0, err
+    outside = dict(spilled)
+    outside[99] = FrameBoxes(99, [99], [[1930.0, 300.0, 60.0, 150.0]])
+    write_mot_boxes(hor, outside)
+    code, err = _run(capsys, *argv)
+    assert code == 2 and f"{hor}:" in err and "frame 99" in err, err
+    inside = {f: r for f, r in spilled.items() if r.boxes[0, 0] >= 0}  # nobody leaving by the left
+    write_mot_boxes(hor, inside)
+    code, err = _run(capsys, *argv)
+    assert code == 2 and "outside the 1920x1080 image" in err and "clip them" in err, err
