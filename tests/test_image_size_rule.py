@@ -398,6 +398,27 @@ def test_boxes_running_past_the_borders_start_inside_the_image(size):
     assert runs_past_borders(far)
 
 
+@settings(max_examples=60, deadline=None)
+@given(size=st.sampled_from(COMMON_SIZES), seed=st.integers(0, 2**31 - 1))
+def test_boxes_running_past_any_common_size_tell_it(size, seed):
+    """Any common size: boxes starting anywhere in it and running on past its borders by up to
+    twice their size (one leaving by the left, one starting in its last pixels, the corner)
+    show their convention and give the size; the same boxes clipped to it show none."""
+    width, height = size
+    rng = np.random.default_rng(seed)
+    x0, y0 = rng.uniform(0.0, width, 20), rng.uniform(0.0, height, 20)
+    w, h = rng.uniform(0.01, 0.1, 20) * width, rng.uniform(0.02, 0.3, 20) * height
+    w, h = w * rng.uniform(1.0, 3.0, 20), h * rng.uniform(1.0, 3.0, 20)
+    x0[0], y0[1] = -0.5 * w[0], rng.uniform(0.995, 1.0) * height - 1e-6
+    x0[1] = rng.uniform(0.995, 1.0) * width - 1e-6
+    boxes = np.column_stack([x0, y0, w, h])
+    spilled = {k: FrameBoxes(k, [k], [box]) for k, box in enumerate(boxes, start=1)}
+    assert runs_past_borders(spilled)
+    assert guess_image_size(spilled) == size
+    corners = np.column_stack([x0, y0, x0 + w, y0 + h])
+    assert not runs_past_borders(_clipped(corners, size))
+
+
 def test_boxes_running_past_the_borders_are_no_error_while_inside_it(tmp_path, capsys):
     """Rule 3 for boxes that run on past the borders: a passer-by's box 1.9 times the image's
     height past its foot is accepted with the right ``--image-size``, a box entirely outside is
