@@ -117,7 +117,7 @@ import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.spatial_search import associate_sequence
-from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.datasets.oblique_scenes import BOX_EXTENTS, ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.box_image_size import (
     ASSUMED,
     CVMHAT_SIZE,
@@ -299,9 +299,11 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--person-height", type=float, nargs=2, default=(1.5, 1.95),
                    metavar=("LO", "HI"), help="people's heights in the renders, LO-HI metres "
                    "(default 1.5 1.95; lower: children, people sitting)")
-    p.add_argument("--past-border", action="store_true",
-                   help="boxes cut by an image border run on past it to the person's full box "
-                   "(trackers' and amodal annotations' boxes; default: clipped to the image)")
+    p.add_argument("--box-extent", choices=BOX_EXTENTS, default="visible",
+                   help="what a person's box covers: visible (default: the visible part, "
+                   "clipped to the image), past_border (run on past a border that cuts it, as "
+                   "trackers' boxes) or amodal (the whole box, behind others and past the "
+                   "border)")
     p.add_argument("--no-top-motion", action="store_true",
                    help="leave the top map's own motion in the registration's jumps (before "
                    "map_motion)")
@@ -323,7 +325,7 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               hor_distortion=tuple(args.hor_distortion),
                               height_range=tuple(args.person_height), area=tuple(args.area),
                               group_area=tuple(args.group_area),
-                              boxes_past_border=args.past_border, **settings)
+                              box_extent=args.box_extent, **settings)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -392,8 +394,8 @@ def main(argv: list[str] | None = None) -> int:
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)
         if args.box_noise > 0:  # from a generator of its own: the scenes' draws stay
             noise = np.random.default_rng([args.seed, k, 2])
-            top, hor = (_jittered(v, args.box_noise, noise, c.image_size, not args.past_border)
-                        for v, c in
+            top, hor = (_jittered(v, args.box_noise, noise, c.image_size,
+                                  clip=args.box_extent == "visible") for v, c in
                         ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         truth = {f: {(int(a), int(b)) for a in top[f].ids for b in hor[f].ids

@@ -23,8 +23,9 @@ than ``near_clip`` to the image plane (or behind it) is absent. Nearer people (s
 the body's mid-axis) hide the part of farther people that their clipped boxes cover
 (:func:`~xvmatch.datasets.box_scene._visible_parts`); a person whose visible area is below
 ``min_visible_fraction`` of the full, unclipped box (hidden or truncated by the image border) is
-dropped, the others keep the box of their visible part, inside the image (or, with
-``boxes_past_border``, running on past a border that cuts it, as trackers give boxes).
+dropped, the others keep the box of their visible part, inside the image (``box_extent``:
+or running on past a border that cuts it, as trackers give boxes, or their whole box, behind
+nearer people and past the border, as amodal annotations give it).
 
 **Partial overlap: by placing part of the crowd outside one view.** The crowd is made of groups,
 each walking in its own square (walks of separate :func:`simulate_walks` calls, translated):
@@ -79,6 +80,7 @@ from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
 
 __all__ = [
+    "BOX_EXTENTS",
     "ObliqueScene",
     "ObliqueSceneConfig",
     "distorted",
@@ -86,6 +88,9 @@ __all__ = [
     "project_view",
     "write_oblique_scene",
 ]
+
+BOX_EXTENTS = ("visible", "past_border", "amodal")
+"""What a person's box may cover (:attr:`ObliqueSceneConfig.box_extent`)."""
 
 # Points sampled on each of a body cylinder's two circles (bottom and top) for its image box.
 _CIRCLE_POINTS = 32
@@ -172,10 +177,11 @@ class ObliqueSceneConfig:
             near edge, a handheld camera's passers-by. Extra people, not counted in
             :attr:`ObliqueScene.overlap_target`. (0, 0), the default, keeps every draw as
             before.
-        boxes_past_border: a person's box cut by an image border runs on past it to their
-            full box's edge (trackers' boxes and amodal annotations, the MOTChallenge way);
-            False, the default, clips it to the image (annotation tools' boxes). Draws
-            nothing.
+        box_extent: what a kept person's box covers (:data:`BOX_EXTENTS`): ``"visible"``,
+            the default, their visible part clipped to the image (annotation tools' boxes);
+            ``"past_border"``, that part run on past a border that cuts it to their whole
+            box's edge (trackers' boxes); ``"amodal"``, their whole box, behind nearer people
+            and past the border (the MOTChallenge annotations'). Draws nothing.
     """
 
     n_people: tuple[int, int] = (3, 12)
@@ -214,7 +220,7 @@ class ObliqueSceneConfig:
     near_clip: float = 0.3
     min_visible_fraction: float = 0.3
     edge_people: tuple[int, int] = (0, 0)
-    boxes_past_border: bool = False
+    box_extent: str = "visible"
 
     def __post_init__(self) -> None:
         def pair(name: str, low: float, high: float = np.inf) -> None:
@@ -248,6 +254,9 @@ class ObliqueSceneConfig:
         pair("pan_angle", 0.0, 180.0)
         pair("pan_duration", 1e-3)
         pair("edge_people", 0, 20)
+        if self.box_extent not in BOX_EXTENTS:
+            raise ValueError(f"ObliqueSceneConfig.box_extent must be one of {BOX_EXTENTS}, "
+                             f"got {self.box_extent!r}")
         if not 1 <= int(self.n_hor) <= 8:
             raise ValueError(f"ObliqueSceneConfig.n_hor must be in 1..8, got {self.n_hor}")
         if not self.hor_sizes:
@@ -328,7 +337,7 @@ def project_view(
     min_visible_fraction: float = 0.3,
     present: np.ndarray | None = None,
     k1: float = 0.0,
-    past_border: bool = False,
+    extent: str = "visible",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Boxes of upright people in one camera's image, with occlusion and truncation.
 
@@ -339,8 +348,8 @@ def project_view(
     one another, nearest (depth of the body's mid-axis) in front
     (:func:`~xvmatch.datasets.box_scene._visible_parts`); a person whose visible area is below
     ``min_visible_fraction`` of the full, unclipped box is dropped, the others keep the bounding
-    box of their visible part; with ``past_border`` a box cut by an image border runs on past it
-    to the full box's edge there (as trackers and amodal annotations give them).
+    box of their visible part, or as ``extent`` says (:attr:`ObliqueSceneConfig.box_extent`:
+    run on past a border that cuts it, as trackers give it; the whole box, amodal).
 
     Args:
         positions: ``(N, 2)`` ground positions, metres.
@@ -352,11 +361,12 @@ def project_view(
         present: ``(N,)`` bool, people that may be seen (e.g. not the camera's holder);
             ``None``: everyone.
         k1: the lens's radial distortion (:func:`distorted`), 0: a pinhole.
-        past_border: boxes cut by a border keep their full extent past it.
+        extent: ``"visible"``, ``"past_border"`` or ``"amodal"``.
 
     Returns:
         (index, boxes): ``(M,)`` int64 indices into N, ascending, and ``(M, 4)`` ``x, y, w, h``
-        boxes in pixels, inside the image (past its border with ``past_border``).
+        boxes in pixels, inside the image (but with ``extent`` ``"past_border"`` or
+        ``"amodal"``).
     """
     positions = np.asarray(positions, dtype=float).reshape(-1, 2)
     n = positions.shape[0]
@@ -388,9 +398,11 @@ def project_view(
     area, part = _visible_parts(clipped[idx], camera.depth(mid))
     keep = (area > 0) & (area >= min_visible_fraction * full_area[idx])
     part = part[keep]
-    if past_border:  # a side the border cut (and no nearer person hides) to the full box's
-        whole, inside = full[idx[keep]], clipped[idx[keep]]
+    whole, inside = full[idx[keep]], clipped[idx[keep]]
+    if extent == "past_border":  # a side the border cut (and no nearer person hides) runs on
         part = np.where((whole != inside) & (part == inside), whole, part)
+    elif extent == "amodal":
+        part = whole
     boxes = np.concatenate([part[:, :2], part[:, 2:] - part[:, :2]], axis=1)
     return idx[keep].astype(np.int64), boxes
 
@@ -425,7 +437,7 @@ def _project_frames(
         idx, boxes = project_view(
             people.positions[f], people.heights, people.widths, cam,
             near_clip=config.near_clip, min_visible_fraction=config.min_visible_fraction,
-            present=present, k1=k1, past_border=config.boxes_past_border,
+            present=present, k1=k1, extent=config.box_extent,
         )
         records[f + 1] = FrameBoxes(f + 1, people.ids[idx], boxes)
     return records

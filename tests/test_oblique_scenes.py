@@ -204,25 +204,33 @@ def test_edge_people_are_cut_by_each_images_bottom_edge():
         ObliqueSceneConfig(edge_people=(3, 2))
 
 
-def test_boxes_past_the_border_run_on_to_the_full_box():
-    """``boxes_past_border``: a box the image's border cuts runs on past it (trackers' and
-    amodal annotations' boxes); the same people in the same frames, every box the border does
-    not cut the same, and the part inside each cut box the clipped box."""
+def test_boxes_past_the_border_and_amodal_boxes():
+    """``box_extent``: ``past_border``, a box the image's border cuts runs on past it (trackers'
+    boxes): the same people in the same frames, every box the border does not cut the same, and
+    the part inside each cut box the clipped box; ``amodal``, every kept person's whole box
+    (behind nearer people too), the visible box inside it."""
     config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), top_height=(4.0, 12.0),
                                 edge_people=(2, 3))
     clipped = _scene(config, 3, 60)
-    spilled = _scene(dataclasses.replace(config, boxes_past_border=True), 3, 60)
-    for (plain, cams), (past, _) in zip(_views(clipped), _views(spilled), strict=True):
-        ran_on = 0
+    spilled = _scene(dataclasses.replace(config, box_extent="past_border"), 3, 60)
+    whole = _scene(dataclasses.replace(config, box_extent="amodal"), 3, 60)
+    for (plain, cams), (past, _), (full, _) in zip(_views(clipped), _views(spilled),
+                                                   _views(whole), strict=True):
+        ran_on = grown = 0
         for f, rec in plain.items():
             np.testing.assert_array_equal(past[f].ids, rec.ids)
-            a, b = rec.boxes, past[f].boxes
-            a1, b1 = a[:, :2] + a[:, 2:], b[:, :2] + b[:, 2:]
+            np.testing.assert_array_equal(full[f].ids, rec.ids)
+            a, b, c = rec.boxes, past[f].boxes, full[f].boxes
+            a1, b1, c1 = a[:, :2] + a[:, 2:], b[:, :2] + b[:, 2:], c[:, :2] + c[:, 2:]
             size = np.array([cams[f - 1].width, cams[f - 1].height], dtype=float)
             np.testing.assert_allclose(np.clip(b[:, :2], 0.0, size), a[:, :2])
             np.testing.assert_allclose(np.clip(b1, 0.0, size), a1)
             ran_on += int(((b[:, :2] < 0) | (b1 > size)).any(axis=1).sum())
-        assert ran_on > 0
+            assert (c[:, :2] <= b[:, :2] + 1e-9).all() and (c1 >= b1 - 1e-9).all()
+            grown += int(((c[:, :2] < b[:, :2] - 1e-6) | (c1 > b1 + 1e-6)).any(axis=1).sum())
+        assert ran_on > 0 and grown > 0  # amodal: the parts nearer people hide too
+    with pytest.raises(ValueError, match="box_extent"):
+        ObliqueSceneConfig(box_extent="whole")
 
 
 def test_boxes_inside_the_image(clips, two_hor):
