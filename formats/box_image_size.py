@@ -28,7 +28,7 @@ command that reads box files (``associate``, ``track``, ``offset``, ``associate-
 
 Where no size is given, :func:`guess_image_size` reads it from the boxes: where they are cut
 by the borders, else (boxes running on past the borders) the smallest common size every box
-starts inside, else the smallest common size holding them all.
+starts inside, or (others) the smallest common size holding them all.
 
 The top view's size is used by no feature (top-view positions are relative to each other), so
 top-view boxes are checked only against the top images when they are given.
@@ -263,22 +263,22 @@ def common_size_started(frames: Mapping) -> tuple[int, int] | None:
 
 
 def guess_image_size(frames: Mapping) -> tuple[int, int] | None:
-    """A view's image size from its boxes alone: for boxes that run on past the borders
-    (:func:`runs_past_borders`) the smallest common video size they all start inside
-    (:func:`common_size_started`); else where they are cut by its borders
-    (:func:`border_size`), else the smallest common video size holding them
+    """A view's image size from its boxes alone: where they are cut by its borders
+    (:func:`border_size`); else, for boxes that run on past the borders
+    (:func:`runs_past_borders`), the smallest common video size they all start inside
+    (:func:`common_size_started`), for others the smallest common video size holding them
     (:func:`common_size_holding`); None where none tells."""
-    if runs_past_borders(frames):
-        return common_size_started(frames)
-    return border_size(frames) or common_size_holding(frames)
+    if (border := border_size(frames)) is not None:
+        return border
+    return (common_size_started if runs_past_borders(frames) else common_size_holding)(frames)
 
 
 def size_guess_how(frames: Mapping, size: tuple[int, int]) -> str:
     """How :func:`guess_image_size` came to ``size`` for these boxes, for a note."""
-    if runs_past_borders(frames):
-        return "the smallest common video size its boxes, run on past the borders, start inside"
     if border_size(frames) == tuple(size):
         return "where its boxes are cut by the image's borders"
+    if runs_past_borders(frames):
+        return "the smallest common video size its boxes, run on past the borders, start inside"
     return "the smallest common video size holding its boxes"
 
 

@@ -396,6 +396,10 @@ def test_boxes_running_past_the_borders_start_inside_the_image(size):
     assert not runs_past_borders(sloppy)
     far = {1: FrameBoxes(1, [1], [[-5.4, 441.4, 12.4, 31.7]])}  # a small, far person leaving
     assert runs_past_borders(far)
+    cut = {f: FrameBoxes(f, [f], [[3500.0 + 10 * f, 1900.0 - 200 * f, 140.0 - 10 * f, 148.0]])
+           for f in range(1, 6)}  # people leaving by the right edge, clipped there
+    cut[6] = FrameBoxes(6, [6], [[-30.0, 500.0, 100.0, 300.0]])  # one box before the left
+    assert runs_past_borders(cut) and guess_image_size(cut) == (3640, 2048)  # borders first
 
 
 @settings(max_examples=60, deadline=None)
