@@ -125,6 +125,7 @@ from xvmatch.formats.box_image_size import (
     consistent_with,
     ground_path_hor_size,
     guess_image_size,
+    runs_past_borders,
 )
 from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.geometry.people_calibration import CalibrationError, PeopleCalibration
@@ -423,15 +424,16 @@ def main(argv: list[str] | None = None) -> int:
             top, hor, known, frames, _true_calibration(scene.top_cameras[0], top_size),
             _true_ground_points(top, [scene.top_cameras[original.get(f, f) - 1]
                                       for f in sorted(top)], top_size)).pairs
+        past = runs_past_borders(top, hor)  # as the commands read the run's two files
         if args.guess_top_size:
-            top_size = guess_image_size(top) or top_size
+            top_size = guess_image_size(top, past) or top_size
         people_hor = hor_size
         if args.hor_size != "true" and consistent_with(hor):
             people_hor = (CVMHAT_SIZE if args.hor_size == "assumed" else
-                          ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED) or CVMHAT_SIZE)
+                          ground_path_hor_size(hor, CVMHAT_SIZE, ASSUMED, past) or CVMHAT_SIZE)
         elif args.hor_size == "guess":  # boxes that do not fit CVMHAT's ("assumed": refused):
             # as resolve_size(defer=True) settles them for the command, not the true size
-            people_hor = ground_path_hor_size(hor, guess_image_size(hor) or hor_size,
+            people_hor = ground_path_hor_size(hor, guess_image_size(hor, past) or hor_size,
                                               UNKNOWN) or hor_size
         options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False,
                                            top_sizes=not args.no_top_sizes)

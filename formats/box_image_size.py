@@ -140,12 +140,13 @@ def _outside(b: np.ndarray, size: tuple[int, int], spill: bool = False) -> np.nd
     return entirely | past
 
 
-def runs_past_borders(frames: Mapping) -> bool:
+def runs_past_borders(*views: Mapping) -> bool:
     """Whether the boxes of ``{frame: FrameBoxes}`` run on past the image's borders (trackers'
     boxes, amodal annotations) rather than being clipped to it: a box starts before the left
     or top border by more than :data:`SPILL` (a share of its own width or height and pixels,
-    or a larger share), which no image size explains (clipped boxes start at 0)."""
-    b = _all_boxes(frames)
+    or a larger share), which no image size explains (clipped boxes start at 0). Several views
+    (a run's files, made by one tracker or tool): where any of them shows it."""
+    b = np.concatenate([_all_boxes(frames) for frames in views]) if views else np.zeros((0, 4))
     share, pixels, small = SPILL
     size = b[:, 2:]
     reach = np.maximum(share * size, np.minimum(small * size, pixels))
@@ -262,48 +263,52 @@ def common_size_started(frames: Mapping) -> tuple[int, int] | None:
     return None
 
 
-def guess_image_size(frames: Mapping) -> tuple[int, int] | None:
+def guess_image_size(frames: Mapping, past: bool | None = None) -> tuple[int, int] | None:
     """A view's image size from its boxes alone: where they are cut by its borders
-    (:func:`border_size`); else, for boxes that run on past the borders
-    (:func:`runs_past_borders`), the smallest common video size they all start inside
-    (:func:`common_size_started`), for others the smallest common video size holding them
-    (:func:`common_size_holding`); None where none tells."""
+    (:func:`border_size`); else, for boxes that run on past the borders (``past``; None: as
+    :func:`runs_past_borders` finds them), the smallest common video size they all start
+    inside (:func:`common_size_started`), for others the smallest common video size holding
+    them (:func:`common_size_holding`); None where none tells."""
     if (border := border_size(frames)) is not None:
         return border
-    return (common_size_started if runs_past_borders(frames) else common_size_holding)(frames)
+    past = runs_past_borders(frames) if past is None else past
+    return (common_size_started if past else common_size_holding)(frames)
 
 
-def size_guess_how(frames: Mapping, size: tuple[int, int]) -> str:
-    """How :func:`guess_image_size` came to ``size`` for these boxes, for a note."""
+def size_guess_how(frames: Mapping, size: tuple[int, int], past: bool | None = None) -> str:
+    """How :func:`guess_image_size` came to ``size`` for these boxes (``past`` as it took it),
+    for a note."""
     if border_size(frames) == tuple(size):
         return "where its boxes are cut by the image's borders"
-    if runs_past_borders(frames):
+    if runs_past_borders(frames) if past is None else past:
         return "the smallest common video size its boxes, run on past the borders, start inside"
     return "the smallest common video size holding its boxes"
 
 
-def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str
-                         ) -> tuple[int, int] | None:
+def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str,
+                         past: bool | None = None) -> tuple[int, int] | None:
     """The horizontal view's size for the ground-map path where no size was given
     (:func:`resolve_size`'s ``source`` :data:`ASSUMED` or :data:`UNKNOWN`): the size guessed
     from its boxes (:func:`guess_image_size`), as that path reads distances and bearings from
     the image's width and centre, and 2688x1512 belongs to CVMHAT's head-mounted camera under a
-    nadir drone. None where the size was given, or (assumed) no other size is found."""
+    nadir drone (``past`` as :func:`guess_image_size` takes it). None where the size was
+    given, or (assumed) no other size is found."""
     if source == UNKNOWN:  # resolve_size already took the guess
         return tuple(size)
     if source != ASSUMED:
         return None
-    guess = guess_image_size(hor)
+    guess = guess_image_size(hor, past)
     return None if guess is None or tuple(guess) == tuple(size) else guess
 
 
 def hor_size_note(path: str | os.PathLike, hor: Mapping, guess: tuple[int, int],
-                  source: str) -> str:
+                  source: str, past: bool | None = None) -> str:
     """The note saying a horizontal view's size was guessed from its boxes ``hor`` on the
-    ground-map path (:func:`ground_path_hor_size`), ``source`` as :func:`resolve_size` gave it."""
+    ground-map path (:func:`ground_path_hor_size`, ``past`` as it took it), ``source`` as
+    :func:`resolve_size` gave it."""
     instead = ", not CVMHAT's" if source == ASSUMED else ""
     return (f"{os.fspath(path)}: its images taken as {guess[0]}x{guess[1]} on this path, "
-            f"{size_guess_how(hor, guess)}{instead} (give --image-size WxH if not)")
+            f"{size_guess_how(hor, guess, past)}{instead} (give --image-size WxH if not)")
 
 
 def median_aspect(frames: Mapping) -> float | None:
@@ -316,17 +321,18 @@ def median_aspect(frames: Mapping) -> float | None:
     return float(np.median(b[:, 3] / np.maximum(b[:, 2], 1e-9)))
 
 
-def upright_size_guess(frames: Mapping) -> tuple[float, tuple[int, int] | None] | None:
+def upright_size_guess(frames: Mapping, past: bool | None = None
+                       ) -> tuple[float, tuple[int, int] | None] | None:
     """For a view whose size is not given: None where its people do not stand upright (median
     height over width below :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`, or no
     boxes: a view looking down, read as the ground); else that median and the size guessed for
-    it, :func:`guess_image_size` (None: no size holds the boxes)."""
+    it, :func:`guess_image_size` (``past`` as it takes it; None: no size holds the boxes)."""
     from xvmatch.geometry.people_calibration import STEEP_ASPECT  # scipy: not at start-up
 
     aspect = median_aspect(frames)
     if aspect is None or aspect < STEEP_ASPECT:
         return None
-    return aspect, guess_image_size(frames)
+    return aspect, guess_image_size(frames, past)
 
 
 def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None:
@@ -350,11 +356,13 @@ def box_line(path: str | os.PathLike, frame: int, box: np.ndarray) -> int | None
 
 
 def check_boxes_in_image(frames: Mapping, size: tuple[int, int], path: str | os.PathLike,
-                         source: str, ids: bool = True) -> None:
+                         source: str, ids: bool = True, past: bool | None = None) -> None:
     """Raise ``ValueError`` naming ``path``'s line when a box of ``{frame: FrameBoxes}`` breaks
     rule 3 for a ``size = (W, H)`` image; ``source`` says where the size comes from (e.g.
-    ``--image-size``), ``ids`` whether the records' ids are the file's (else row numbers)."""
-    spill = runs_past_borders(frames)
+    ``--image-size``), ``ids`` whether the records' ids are the file's (else row numbers),
+    ``past`` whether the boxes run on past the borders (None: as :func:`runs_past_borders`
+    finds them in ``frames``)."""
+    spill = runs_past_borders(frames) if past is None else past
     for frame, rec in sorted(frames.items()):
         b = np.asarray(rec.boxes, dtype=float).reshape(-1, 4)
         if not len(b):
@@ -377,8 +385,8 @@ def check_boxes_in_image(frames: Mapping, size: tuple[int, int], path: str | os.
 
 
 def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tuple, str]],
-                 ids: bool = True, option: str = "--image-size", defer: bool = False
-                 ) -> tuple[tuple[int, int], str]:
+                 ids: bool = True, option: str = "--image-size", defer: bool = False,
+                 past: bool | None = None) -> tuple[tuple[int, int], str]:
     """The horizontal image size of a box file and where it comes from, by rules 1-3.
 
     Args:
@@ -393,6 +401,9 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
             for a command whose
             path is chosen later (``associate``: the ground-map path guesses it, the nadir
             path refuses with :func:`unknown_size_error`).
+        past: whether the run's boxes run on past the borders (:func:`runs_past_borders` of
+            all its files, made by one tracker or tool), for rule 3 and the guess; None: as
+            ``hor``'s show.
 
     Returns:
         ``((W, H), source)``; with no size given, the CVMHAT default and :data:`ASSUMED`
@@ -409,11 +420,11 @@ def resolve_size(hor: Mapping, hor_path: str | os.PathLike, given: list[tuple[tu
             if other != size:
                 raise ValueError(f"{source} {size[0]}x{size[1]} disagrees with {where} "
                                  f"({other[0]}x{other[1]}): give the horizontal image size once")
-        check_boxes_in_image(hor, size, hor_path, source, ids)
+        check_boxes_in_image(hor, size, hor_path, source, ids, past)
         return size, source
     if consistent_with(hor):
         return CVMHAT_SIZE, ASSUMED
-    if defer and (guess := guess_image_size(hor)) is not None:
+    if defer and (guess := guess_image_size(hor, past)) is not None:
         return guess, UNKNOWN
     raise unknown_size_error(hor, hor_path, option)
 

@@ -119,3 +119,31 @@ def test_a_guessed_top_view_too_few_to_calibrate_takes_the_nadir_path(scene) -> 
     assert "cannot be calibrated from its people" in notes[-1]
     with pytest.raises(ValueError, match="the calibration needs"):
         oblique_pairs(upright, upright, replace(options, top_image_size=(640, 360)))
+
+
+@pytest.mark.slow
+def test_the_top_size_takes_the_runs_boxes_past_the_borders() -> None:
+    """Boxes that run on past the borders (a tracker's), shown by the handheld view only (its
+    people leave by the left; the drone's by its near, lowest edge): the top view's size is
+    the one its boxes start inside, as the run's files share their making, and its boxes past
+    the bottom are no error; alone its boxes would tell a larger image."""
+    from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+    from xvmatch.formats.box_image_size import runs_past_borders
+
+    config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), top_height=(4.0, 12.0),
+                                edge_people=(1, 3), box_extent="past_border")
+    scene = make_oblique_scene(config, 60, np.random.default_rng(1))
+    top, hor = scene.top, scene.hor["hor1"]
+    assert not runs_past_borders(top) and runs_past_borders(hor)
+    assert guessed_top_size(top) == (2560, 1440)
+    hor_size = (tuple(scene.hor_cameras["hor1"][0].image_size), "--image-size")
+    notes: list = []
+    options = AssociationOptions(hor_size=hor_size, hor_hfov=70.0, fps=10.0)
+    pairs = oblique_pairs(top, hor, options, lambda line, always: notes.append(line))
+    assert pairs is not None and sum(map(len, pairs.values())) > 0
+    assert any("took 1920x1080, the smallest common video size its boxes, run on past the "
+               "borders, start inside" in line for line in notes), notes
+    from xvmatch.inference.views.multi_ground import oblique_top  # associate-multi's too
+
+    calib, note = oblique_top(top, "auto", None, "top.txt", hors=[hor])
+    assert calib is not None and "its size taken as 1920x1080" in note

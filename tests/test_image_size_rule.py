@@ -444,3 +444,21 @@ def test_boxes_running_past_the_borders_are_no_error_while_inside_it(tmp_path, c
     write_mot_boxes(hor, inside)
     code, err = _run(capsys, *argv)
     assert code == 2 and "outside the 1920x1080 image" in err and "clip them" in err, err
+
+
+def test_a_runs_files_share_whether_their_boxes_run_past_the_borders():
+    """A handheld view whose boxes run past its lowest border only shows no sign of it (read
+    as a larger image's, the one holding them); told by the run's other file (``past``), its
+    size is the one its boxes start inside, said so, and its boxes past the border are no
+    error with the size given."""
+    spilled = _spilled((1920, 1080), 2)
+    lower = {f: r for f, r in spilled.items() if r.boxes[0, 0] >= 0}  # nobody leaving left
+    assert not runs_past_borders(lower) and runs_past_borders(spilled, lower)
+    assert resolve_size(lower, "h.txt", [], defer=True)[0] != (1920, 1080)
+    assert resolve_size(lower, "h.txt", [], defer=True, past=True) == ((1920, 1080), UNKNOWN)
+    assert "run on past the borders" in hor_size_note("h.txt", lower, (1920, 1080), UNKNOWN,
+                                                      past=True)
+    given = [((1920, 1080), "--image-size")]
+    with pytest.raises(ValueError, match="clip them"):
+        resolve_size(lower, "h.txt", given)
+    assert resolve_size(lower, "h.txt", given, past=True) == ((1920, 1080), "--image-size")

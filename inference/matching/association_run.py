@@ -239,17 +239,19 @@ def offset_to_apply(top: Mapping, hor: Mapping, value: int | str,
     return offset
 
 
-def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | None:
+def guessed_top_size(top: Mapping, note: Note = _no_note,
+                     past: bool | None = None) -> tuple[int, int] | None:
     """The top view's size when none is given: where its people stand upright (an oblique
     camera, which the nadir search would misread), the size its boxes tell
-    (:func:`~xvmatch.formats.box_image_size.guess_image_size`), said in one line; None (the
+    (:func:`~xvmatch.formats.box_image_size.guess_image_size`; ``past``: whether the run's
+    boxes run on past the borders, None: as the top view's show), said in one line; None (the
     nadir path) for squat boxes, or boxes no size holds (a note saying what to give)."""
     from xvmatch.formats.box_image_size import size_guess_how, upright_size_guess
 
-    if (guess := upright_size_guess(top)) is None:
+    if (guess := upright_size_guess(top, past)) is None:
         return None
     aspect, size = guess
-    said = (f"took {size[0]}x{size[1]}, {size_guess_how(top, size)}, as its size; give "
+    said = (f"took {size[0]}x{size[1]}, {size_guess_how(top, size, past)}, as its size; give "
             "--top-image-size WxH if not" if size is not None else
             "no common video size holds its boxes: give --top-image-size WxH to calibrate "
             "it from its people")
@@ -258,21 +260,26 @@ def guessed_top_size(top: Mapping, note: Note = _no_note) -> tuple[int, int] | N
     return size
 
 
-def _top_size(top: Mapping, options: AssociationOptions,
-              note: Note = _no_note) -> tuple[int, int] | None:
+def _top_size(top: Mapping, options: AssociationOptions, note: Note = _no_note,
+              past: bool | None = None) -> tuple[int, int] | None:
     """The top view's size for the ground-map path: ``--top-image-size``, else guessed from
     its boxes (:func:`guessed_top_size`, its line told to ``note``); None where that path is
     not taken (``nadir``, calibrated cameras, the learned matcher's top images, no guess)."""
     if options.top_view == "nadir" or options.cameras is not None:
         return None
     images = options.learned is not None and options.learned.top_images is not None
-    return options.top_image_size or (None if images else guessed_top_size(top, note))
+    return options.top_image_size or (None if images else guessed_top_size(top, note, past))
 
 
-def oblique_top(top: Mapping, options: AssociationOptions) -> object | None:
+def oblique_top(top: Mapping, options: AssociationOptions,
+                hor: Mapping | None = None) -> object | None:
     """The top camera calibrated from its people when the ground-map path would take it (its
-    size given or guessed, the calibration oblique), else None; says nothing."""
-    if (top_size := _top_size(top, options)) is None:
+    size given or guessed, as :func:`oblique_pairs` takes it with the handheld view ``hor``;
+    the calibration oblique), else None; says nothing."""
+    from xvmatch.formats.box_image_size import runs_past_borders
+
+    past = None if hor is None else runs_past_borders(top, hor)
+    if (top_size := _top_size(top, options, past=past)) is None:
         return None
     from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import top_calibration
@@ -294,13 +301,16 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     view too sparse to calibrate takes the nadir path; a horizontal size assumed to be CVMHAT's
     (or not known: boxes that do not fit it) is guessed from its boxes too
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note."""
-    if (top_size := _top_size(top, options, note)) is None:
-        return None
     from xvmatch.formats.box_image_size import (
         check_boxes_in_image,
         ground_path_hor_size,
         hor_size_note,
+        runs_past_borders,
     )
+
+    past = runs_past_borders(top, hor)  # the run's files, made by one tracker or tool
+    if (top_size := _top_size(top, options, note, past)) is None:
+        return None
     from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import (
         GroundAssociationOptions,
@@ -308,8 +318,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     )
 
     source = "--top-image-size" if options.top_image_size else "the top boxes' extent"
-    check_boxes_in_image(top, top_size, options.top_boxes, source)
-    guessed = ground_path_hor_size(hor, *options.hor_size)
+    check_boxes_in_image(top, top_size, options.top_boxes, source, past=past)
+    guessed = ground_path_hor_size(hor, *options.hor_size, past)
     hor_size = guessed or options.hor_size[0]
     ground = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
                                       hor_hfov_deg=options.hor_hfov, fps=options.fps,
@@ -337,7 +347,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
     if guessed is not None:
         note("xvmatch: note: "
-             f"{hor_size_note(options.hor_boxes, hor, guessed, options.hor_size[1])}", False)
+             f"{hor_size_note(options.hor_boxes, hor, guessed, options.hor_size[1], past)}",
+             False)
     if run.lens is not None:
         from xvmatch.inference.matching.ground_association import lens_note
 
@@ -429,7 +440,7 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     if learned is None:
         hooks.size_assumed()
     auto = None
-    if options.offset == "auto" and oblique_top(top, options) is not None:
+    if options.offset == "auto" and oblique_top(top, options, hor) is not None:
         raise ValueError("--offset auto estimates the offset with the nadir search; with an "
                          "oblique top view give it as a frame number (or 0)")
     if options.offset == "auto":

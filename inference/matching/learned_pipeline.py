@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from xvmatch.formats.box_image_size import check_boxes_in_image
+from xvmatch.formats.box_image_size import check_boxes_in_image, runs_past_borders
 from xvmatch.inference.matching.learned_association import (
     LearnedMatcher,
     associate_sequence_learned,
@@ -293,7 +293,8 @@ class LearnedInputs:
                                              ("hor", options.hor_images, hor, 0)):
                 self.images[view] = open_view_images(path, boxes, both, shift)
                 sizes[view] = tuple(self.images[view].size)
-            check_boxes_in_image(top, sizes["top"], options.top_boxes, "the images")
+            check_boxes_in_image(top, sizes["top"], options.top_boxes, "the images",
+                                 past=runs_past_borders(top, hor))
         if options.cameras is not None:
             wanted = {"hor": (tuple(options.hor_size),
                               "the images" if sizes else options.hor_size_source)}

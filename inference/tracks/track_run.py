@@ -33,7 +33,7 @@ import numpy as np
 
 from xvmatch.cues.box_motion import jump_warning
 from xvmatch.cues.spatial_matching import SpatialParams
-from xvmatch.formats.box_image_size import check_boxes_in_image
+from xvmatch.formats.box_image_size import check_boxes_in_image, runs_past_borders
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, shift_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
@@ -238,7 +238,8 @@ def open_track_images(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxe
             sources.append(open_view_images(path, frames,
                                             [f for f in sorted(frames) if len(frames[f])]))
         check_boxes_in_image(top, tuple(sources[0].size), options.top_boxes,
-                             f"the images {options.top_images}", ids=False)
+                             f"the images {options.top_images}", ids=False,
+                             past=runs_past_borders(top, hor))
     except BaseException:
         for source in sources:
             source.close()

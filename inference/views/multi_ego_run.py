@@ -27,6 +27,7 @@ from xvmatch.formats.box_image_size import (
     UNKNOWN,
     check_boxes_in_image,
     resolve_size,
+    runs_past_borders,
     unknown_size_error,
 )
 from xvmatch.formats.camera_frames import open_cameras
@@ -201,8 +202,9 @@ def multi_ego_sizes(inputs: MultiEgoInputs, options: MultiEgoRunOptions
     (:func:`~xvmatch.formats.box_image_size.resolve_size`: given, else read from its boxes;
     boxes that do not fit the CVMHAT size are left to :func:`path_sizes`)."""
     views, paths = inputs.views, options.box_files
-    return [resolve_size(views[k + 1], paths[k + 1], inputs.given[k], ids=False, defer=True)
-            for k in range(len(views) - 1)]
+    past = runs_past_borders(*views)  # the run's files, made by one tracker or tool
+    return [resolve_size(views[k + 1], paths[k + 1], inputs.given[k], ids=False, defer=True,
+                         past=past) for k in range(len(views) - 1)]
 
 
 def path_sizes(resolved: Sequence[tuple[tuple[int, int], str]], views: Views,
@@ -231,7 +233,7 @@ def _open_images(options: MultiEgoRunOptions, matcher, views: Views, given, sour
             given[v - 1].append((tuple(source.size), f"the horizontal images {path}"))
         else:
             check_boxes_in_image(views[0], tuple(source.size), options.box_files[0],
-                                 f"the images {path}", ids=False)
+                                 f"the images {path}", ids=False, past=runs_past_borders(*views))
     return sources
 
 

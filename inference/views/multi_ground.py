@@ -48,6 +48,7 @@ from xvmatch.formats.box_image_size import (
     check_boxes_in_image,
     ground_path_hor_size,
     hor_size_note,
+    runs_past_borders,
     size_guess_how,
     upright_size_guess,
 )
@@ -165,7 +166,7 @@ class MultiGroundOptions:
 
 def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, name: str,
                 offsets: Sequence[int | str] = (), seed: int = 0,
-                top_tracks: Mapping[int, int] | None = None
+                top_tracks: Mapping[int, int] | None = None, hors: Sequence[Mapping] = ()
                 ) -> tuple[PeopleCalibration | None, str | None]:
     """``associate-multi --top-view``: the top camera calibrated from its people when it is
     oblique (forced, or found so by ``auto``), else None (the nadir path), and the line to say
@@ -187,6 +188,9 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
             calibration (:func:`~xvmatch.geometry.people_calibration.calibrate_from_people`),
             as ``associate``'s does; None (frame mode): followed by its boxes linked by IoU
             (:func:`~xvmatch.inference.linking.tracklets.box_track_ids`), the ids unread.
+        hors: the handheld views' ``{frame: record}``: where any of the run's views runs on
+            past its image's borders (:func:`~xvmatch.formats.box_image_size.
+            runs_past_borders`), the top view's size is guessed and checked so too.
 
     Raises:
         ValueError: a top box outside ``top_size``, ``auto`` offsets with an oblique top view,
@@ -197,8 +201,9 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
     if top_view == "nadir":
         return None, None
     guessed = ""
+    past = runs_past_borders(top, *hors)
     if top_size is None:
-        guess = upright_size_guess(top) if top_view == "auto" else None
+        guess = upright_size_guess(top, past) if top_view == "auto" else None
         if guess is None:
             return None, None
         aspect, top_size = guess
@@ -208,8 +213,8 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
                           "size holds its boxes: give --top-image-size WxH to calibrate it from "
                           "its people")
         guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, "
-                   f"{size_guess_how(top, top_size)} (give --top-image-size WxH if not)")
-    check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False)
+                   f"{size_guess_how(top, top_size, past)} (give --top-image-size WxH if not)")
+    check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False, past=past)
     top = _tracked(top, top_tracks)
     try:
         calib = top_calibration(top, tuple(top_size), seed, name, top_tracks is not None)
@@ -240,10 +245,11 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
     ``note`` (``paths``: the box files, top first); ``--hor-hfov`` and ``--fps``."""
     sizes = []
+    past = runs_past_borders(*views)  # the run's files, made by one tracker or tool
     for k, (size, source) in enumerate(resolved, 1):
-        guess = ground_path_hor_size(views[k], size, source)
+        guess = ground_path_hor_size(views[k], size, source, past)
         if guess is not None:
-            note(hor_size_note(paths[k], views[k], guess, source))
+            note(hor_size_note(paths[k], views[k], guess, source, past))
         sizes.append(tuple(guess or size))
     return MultiGroundOptions(tuple(sizes), hfov, fps)
 

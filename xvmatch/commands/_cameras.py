@@ -192,14 +192,15 @@ def write_cameras(opts: ModelArgs, cameras, refinement) -> None:
               + "".join(f"; {c}" for c in counts), file=sys.stderr)
 
 
-def horizontal_size(opts: ModelArgs, hor: Mapping, defer: bool = False
-                    ) -> tuple[tuple[int, int], str]:
+def horizontal_size(opts: ModelArgs, hor: Mapping, defer: bool = False,
+                    past: bool | None = None) -> tuple[tuple[int, int], str]:
     """The horizontal image size and where it comes from: ``--image-size``, the
     ``--hor-images`` and the ``--cameras`` file's ego camera must agree when given
     (:func:`~xvmatch.formats.camera_frames.given_hor_sizes`); with none, CVMHAT's
     2688x1512 when the boxes are consistent with it (a note on stderr), else an error asking
     for ``--image-size`` (with ``defer``: a guess the run's path accepts or refuses,
-    ``resolve_size``'s ``defer``). Every horizontal box must lie in it."""
+    ``resolve_size``'s ``defer``). Every horizontal box must lie in it (``past``: the run's
+    boxes run on past the borders, ``resolve_size``'s)."""
     from xvmatch.formats.box_image_size import resolve_size
     from xvmatch.formats.camera_frames import given_hor_sizes
 
@@ -208,4 +209,4 @@ def horizontal_size(opts: ModelArgs, hor: Mapping, defer: bool = False
     given = given_hor_sizes(opts.image_size, opts.hor_images if learned else None,
                             opts.cameras if learned else None, sorted(hor))
     return resolve_size(hor, "the horizontal boxes" if opts.hor is None else opts.hor, given,
-                        defer=defer)
+                        defer=defer, past=past)

@@ -202,7 +202,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             note_if_assumed(r, views[k + 1], paths[k + 1], quiet)
         calib, note = multi_ground.oblique_top(  # calib None: the nadir path
             views[0], "nadir" if args.cameras else args.top_view, args.top_image_size, paths[0],
-            offsets, top_tracks=None if tracks is None else tracks[0])
+            offsets, top_tracks=None if tracks is None else tracks[0], hors=views[1:])
         sizes = mer.path_sizes(resolved, views, paths, ground=calib is not None)
         if note:
             say(note)
