@@ -200,7 +200,6 @@ def _notes(quiet: bool):
 
 
 def _cmd_track(args: argparse.Namespace) -> int:
-    from xvmatch.formats.box_image_size import runs_past_borders
     from xvmatch.formats.detection_rows import write_track_rows
     from xvmatch.formats.offset_record import write_offset_record
     from xvmatch.inference.tracks.track_run import (
@@ -220,8 +219,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
     options = _run_options(args, params, weights, model)
     with open_track_images(top.frames, hor.frames, options) as images:
         resolved = settled_hor_size(hor.frames, args.hor, args.image_size, images.hor_size,
-                                    args.hor_images, args.cameras, args.quiet, ids=False,
-                                    past=runs_past_borders(top.frames, hor.frames))
+                                    args.hor_images, args.cameras, args.quiet, False, top.frames)
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         offset = resolve_offset(args, marked, hor.frames, resolved[0][0], params, max_offset,
