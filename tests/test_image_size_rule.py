@@ -426,7 +426,8 @@ def test_boxes_running_past_any_common_size_tell_it(size, seed):
 def test_boxes_running_past_the_borders_are_no_error_while_inside_it(tmp_path, capsys):
     """Rule 3 for boxes that run on past the borders: a passer-by's box 1.9 times the image's
     height past its foot is accepted with the right ``--image-size``, a box entirely outside is
-    still an error naming its line; in a clipped file the passer-by's box is an error."""
+    still an error naming its line; in a clipped file the passer-by's box is an error, unless
+    the run's other file shows its boxes run on past the borders."""
     top, hor = tmp_path / "top.txt", tmp_path / "hor.txt"
     top.write_text("1,1,10,10,20,40\n1,2,60,10,20,40\n")
     spilled = _spilled((1920, 1080), 1)
@@ -444,6 +445,9 @@ def test_boxes_running_past_the_borders_are_no_error_while_inside_it(tmp_path, c
     write_mot_boxes(hor, inside)
     code, err = _run(capsys, *argv)
     assert code == 2 and "outside the 1920x1080 image" in err and "clip them" in err, err
+    top.write_text("1,1,-30,10,60,40\n1,2,60,10,20,40\n")  # the run's other file shows it
+    code, err = _run(capsys, *argv)
+    assert code == 0, err
 
 
 def test_a_runs_files_share_whether_their_boxes_run_past_the_borders():

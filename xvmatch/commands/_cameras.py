@@ -193,15 +193,15 @@ def write_cameras(opts: ModelArgs, cameras, refinement) -> None:
 
 
 def horizontal_size(opts: ModelArgs, hor: Mapping, defer: bool = False,
-                    past: bool | None = None) -> tuple[tuple[int, int], str]:
+                    top: Mapping | None = None) -> tuple[tuple[int, int], str]:
     """The horizontal image size and where it comes from: ``--image-size``, the
     ``--hor-images`` and the ``--cameras`` file's ego camera must agree when given
     (:func:`~xvmatch.formats.camera_frames.given_hor_sizes`); with none, CVMHAT's
     2688x1512 when the boxes are consistent with it (a note on stderr), else an error asking
     for ``--image-size`` (with ``defer``: a guess the run's path accepts or refuses,
-    ``resolve_size``'s ``defer``). Every horizontal box must lie in it (``past``: the run's
-    boxes run on past the borders, ``resolve_size``'s)."""
-    from xvmatch.formats.box_image_size import resolve_size
+    ``resolve_size``'s ``defer``). Every horizontal box must lie in it; with the run's ``top``
+    view, whether boxes run on past the borders is read from both files."""
+    from xvmatch.formats.box_image_size import resolve_size, runs_past_borders
     from xvmatch.formats.camera_frames import given_hor_sizes
 
     check_images_together(opts.top_images, opts.hor_images)
@@ -209,4 +209,4 @@ def horizontal_size(opts: ModelArgs, hor: Mapping, defer: bool = False,
     given = given_hor_sizes(opts.image_size, opts.hor_images if learned else None,
                             opts.cameras if learned else None, sorted(hor))
     return resolve_size(hor, "the horizontal boxes" if opts.hor is None else opts.hor, given,
-                        defer=defer, past=past)
+                        defer=defer, past=None if top is None else runs_past_borders(top, hor))

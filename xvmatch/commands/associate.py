@@ -126,7 +126,6 @@ def _keep_heap_memory() -> None:
 
 def _cmd_associate(args: argparse.Namespace) -> int:
     from xvmatch.cues.box_motion import is_video
-    from xvmatch.formats.box_image_size import runs_past_borders
     from xvmatch.inference.matching.association_run import run_association
 
     _keep_heap_memory()
@@ -150,8 +149,7 @@ def _cmd_associate(args: argparse.Namespace) -> int:
     learned = model_args(args)
     _check_outputs(args, learned)
     max_offset = max_offset_of(args, top, hor) if args.offset == "auto" else None
-    past = runs_past_borders(top, hor)  # the run's files, made by one tracker or tool
-    hor_size = horizontal_size(learned, hor, defer=True, past=past)  # the ground path may guess
+    hor_size = horizontal_size(learned, hor, defer=True, top=top)  # the ground path may guess
     options = _run_options(args, params, hor_size, max_offset, video)
     run = run_association(top, hor, options, _hooks(args, hor, hor_size))
     _write(args, learned, hor, run)
