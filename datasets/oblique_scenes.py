@@ -368,6 +368,8 @@ def project_view(
         boxes in pixels, inside the image (but with ``extent`` ``"past_border"`` or
         ``"amodal"``).
     """
+    if extent not in BOX_EXTENTS:
+        raise ValueError(f"project_view: extent must be one of {BOX_EXTENTS}, got {extent!r}")
     positions = np.asarray(positions, dtype=float).reshape(-1, 2)
     n = positions.shape[0]
     heights = np.asarray(heights, dtype=float).reshape(n)
@@ -398,11 +400,11 @@ def project_view(
     area, part = _visible_parts(clipped[idx], camera.depth(mid))
     keep = (area > 0) & (area >= min_visible_fraction * full_area[idx])
     part = part[keep]
-    whole, inside = full[idx[keep]], clipped[idx[keep]]
     if extent == "past_border":  # a side the border cut (and no nearer person hides) runs on
+        whole, inside = full[idx[keep]], clipped[idx[keep]]
         part = np.where((whole != inside) & (part == inside), whole, part)
     elif extent == "amodal":
-        part = whole
+        part = full[idx[keep]]
     boxes = np.concatenate([part[:, :2], part[:, 2:] - part[:, :2]], axis=1)
     return idx[keep].astype(np.int64), boxes
 

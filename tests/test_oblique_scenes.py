@@ -231,6 +231,8 @@ def test_boxes_past_the_border_and_amodal_boxes():
         assert ran_on > 0 and grown > 0  # amodal: the parts nearer people hide too
     with pytest.raises(ValueError, match="box_extent"):
         ObliqueSceneConfig(box_extent="whole")
+    with pytest.raises(ValueError, match="extent must be one of"):
+        project_view(np.zeros((1, 2)), [1.7], [0.4], clipped.top_cameras[0], extent="whole")
 
 
 def test_boxes_inside_the_image(clips, two_hor):

@@ -271,15 +271,13 @@ def _top_size(top: Mapping, options: AssociationOptions, note: Note = _no_note,
     return options.top_image_size or (None if images else guessed_top_size(top, note, past))
 
 
-def oblique_top(top: Mapping, options: AssociationOptions,
-                hor: Mapping | None = None) -> object | None:
+def oblique_top(top: Mapping, options: AssociationOptions, hor: Mapping) -> object | None:
     """The top camera calibrated from its people when the ground-map path would take it (its
     size given or guessed, as :func:`oblique_pairs` takes it with the handheld view ``hor``;
     the calibration oblique), else None; says nothing."""
     from xvmatch.formats.box_image_size import runs_past_borders
 
-    past = None if hor is None else runs_past_borders(top, hor)
-    if (top_size := _top_size(top, options, past=past)) is None:
+    if (top_size := _top_size(top, options, past=runs_past_borders(top, hor))) is None:
         return None
     from xvmatch.geometry.people_calibration import CalibrationError
     from xvmatch.inference.matching.ground_association import top_calibration
