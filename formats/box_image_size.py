@@ -55,6 +55,7 @@ __all__ = [
     "SNAP",
     "SPILL",
     "UNKNOWN",
+    "assumed_size_note",
     "border_size",
     "box_extent",
     "box_line",
@@ -299,6 +300,17 @@ def ground_path_hor_size(hor: Mapping, size: tuple[int, int], source: str,
         return None
     guess = guess_image_size(hor, past)
     return None if guess is None or tuple(guess) == tuple(size) else guess
+
+
+def assumed_size_note(path: str | os.PathLike, hor: Mapping,
+                      option: str = "--image-size") -> str:
+    """The note saying a horizontal view's images, read from ``path`` with boxes ``hor`` and no
+    size given, are taken as CVMHAT's (:func:`resolve_size`'s :data:`ASSUMED`), with how far
+    its boxes reach and the ``option`` that gives the size."""
+    right, bottom = box_extent(hor)
+    return (f"assuming {os.fspath(path)}'s images are {CVMHAT_SIZE[0]}x{CVMHAT_SIZE[1]} "
+            f"(CVMHAT; its boxes reach x {float(right):g}, y {float(bottom):g}); pass {option} "
+            "WxH if not")
 
 
 def hor_size_note(path: str | os.PathLike, hor: Mapping, guess: tuple[int, int],

@@ -147,3 +147,26 @@ def test_the_top_size_takes_the_runs_boxes_past_the_borders() -> None:
 
     calib, note = oblique_top(top, "auto", None, "top.txt", hors=[hor])
     assert calib is not None and "its size taken as 1920x1080" in note
+
+
+def test_the_assumed_size_is_said_only_on_the_path_that_reads_it() -> None:
+    """Boxes alone that fit CVMHAT's size: the nadir path says it assumes that size, once, as
+    its work starts; the ground-map path (an oblique drone) guesses the handheld's size from
+    its boxes instead and says only that, not first an assumption it then drops."""
+    from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+    from xvmatch.formats.box_image_size import ASSUMED, CVMHAT_SIZE
+
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0))
+    scene = make_oblique_scene(config, 40, np.random.default_rng(1))
+    top, hor = scene.top, scene.hor["hor1"]
+    options = AssociationOptions(hor_size=(CVMHAT_SIZE, ASSUMED), hor_hfov=70.0, fps=10.0,
+                                 top_image_size=(1920, 1080))
+    notes, hooks, _ = _said()
+    run_association(top, hor, options, hooks)
+    assert ("size", False) not in notes
+    assert sum("its images taken as 1920x1080 on this path" in line and "not CVMHAT's" in line
+               for line, _ in notes) == 1, notes
+    notes, hooks, _ = _said()
+    run_association(top, hor, replace(options, top_view="nadir"), hooks)
+    assert notes.count(("size", False)) == 1
+    assert not any("its images taken as" in line for line, _ in notes)

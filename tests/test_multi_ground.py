@@ -209,6 +209,14 @@ def test_ground_options_guess_only_a_size_assumed() -> None:
     assert (options.hor_hfov_deg, options.fps) == ("auto", "auto")
     assert said == ["hor1.txt: its images taken as 1920x1080 on this path, the smallest common "
                     "video size holding its boxes, not CVMHAT's (give --image-size WxH if not)"]
+    # Boxes that fit CVMHAT's own size (no smaller common size holds them): kept, said.
+    wide = {1: FrameBoxes(1, np.array([1]), np.array([[2500.0, 1200.0, 100.0, 300.0]]))}
+    said.clear()
+    options = ground_options([{}, wide], [(CVMHAT_SIZE, ASSUMED)], ["top.txt", "hor1.txt"],
+                             "auto", "auto", said.append)
+    assert options.hor_sizes == (CVMHAT_SIZE,)
+    assert said == ["assuming hor1.txt's images are 2688x1512 (CVMHAT; its boxes reach x 2600, "
+                    "y 1500); pass --image-size WxH if not"]
 
 
 def test_a_size_not_known_is_guessed_on_the_ground_path_only() -> None:

@@ -170,8 +170,9 @@ class AssociationHooks:
 
     Attributes:
         note: :data:`Note`.
-        size_assumed: said once the checks have passed, as the work starts (the note of a
-            horizontal size assumed).
+        size_assumed: said on the nadir path (the search, the learned matcher) once the checks
+            have passed, as its work starts (the note of a horizontal size assumed); the
+            ground-map path, which guesses the size from the boxes, says its own.
         frames: ``frames(n)`` wraps the iterator of the ``n`` frames associated (a progress bar).
         clips: ``clips()`` opens the offset search's ``progress(done, total)`` (a context
             manager).
@@ -298,8 +299,11 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     is guessed from the boxes (not where the learned matcher reads the top images), and a top
     view too sparse to calibrate takes the nadir path; a horizontal size assumed to be CVMHAT's
     (or not known: boxes that do not fit it) is guessed from its boxes too
-    (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note."""
+    (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note (the CVMHAT
+    size kept, where its boxes fit it, said too)."""
     from xvmatch.formats.box_image_size import (
+        ASSUMED,
+        assumed_size_note,
         check_boxes_in_image,
         ground_path_hor_size,
         hor_size_note,
@@ -347,6 +351,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
         note("xvmatch: note: "
              f"{hor_size_note(options.hor_boxes, hor, guessed, options.hor_size[1], past)}",
              False)
+    elif options.hor_size[1] == ASSUMED:  # boxes that fit CVMHAT's own size: kept
+        note(f"xvmatch: note: {assumed_size_note(options.hor_boxes, hor)}", False)
     if run.lens is not None:
         from xvmatch.inference.matching.ground_association import lens_note
 
@@ -435,14 +441,14 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     """
     hooks = hooks or AssociationHooks()
     learned = options.learned
-    if learned is None:
-        hooks.size_assumed()
     auto = None
     if options.offset == "auto" and oblique_top(top, options, hor) is not None:
         raise ValueError("--offset auto estimates the offset with the nadir search; with an "
                          "oblique top view give it as a frame number (or 0)")
     if options.offset == "auto":
         _need_hor_size(hor, options)
+        if learned is None:  # the nadir path (the search reads the size): said before it
+            hooks.size_assumed()
         auto = AutoOffsetOptions(hor_width=options.hor_size[0][0], max_offset=options.max_offset,
                                  params=options.params, camera_id=options.camera_id,
                                  workers=options.workers)
@@ -456,6 +462,8 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
         _pictures(top, hor, oblique, frames, options, hooks)
         return AssociationRun(oblique, frames, offset, top)
     _need_hor_size(hor, options)
+    if learned is None and options.offset != "auto":  # the learned run says it as it opens
+        hooks.size_assumed()
     run = refined = None
     if learned is not None:
         pairs, run, refined = _learned_pairs(top, hor, frames, options, offset, hooks)

@@ -45,6 +45,8 @@ import numpy as np
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.box_image_size import (
+    ASSUMED,
+    assumed_size_note,
     check_boxes_in_image,
     ground_path_hor_size,
     hor_size_note,
@@ -243,13 +245,16 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
     (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone (or
     none known: boxes that do not fit it), where the size its boxes tell serves
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
-    ``note`` (``paths``: the box files, top first); ``--hor-hfov`` and ``--fps``."""
+    ``note`` (``paths``: the box files, top first; the CVMHAT size kept, where the boxes fit
+    it, told too); ``--hor-hfov`` and ``--fps``."""
     sizes = []
     past = runs_past_borders(*views)  # the run's files, made by one tracker or tool
     for k, (size, source) in enumerate(resolved, 1):
         guess = ground_path_hor_size(views[k], size, source, past)
         if guess is not None:
             note(hor_size_note(paths[k], views[k], guess, source, past))
+        elif source == ASSUMED:  # boxes that fit CVMHAT's own size: kept
+            note(assumed_size_note(paths[k], views[k]))
         sizes.append(tuple(guess or size))
     return MultiGroundOptions(tuple(sizes), hfov, fps)
 

@@ -24,7 +24,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from xvmatch.commands._types import float_in
-from xvmatch.formats.box_image_size import ASSUMED, box_extent
+from xvmatch.formats.box_image_size import ASSUMED, assumed_size_note
 
 __all__ = ["BoxReading", "add_box_inputs", "add_box_reading_options", "box_reading",
            "check_camera_id", "note_if_assumed", "read_boxes", "read_detections",
@@ -148,10 +148,7 @@ def note_if_assumed(resolved: tuple[tuple[int, int], str], hor: Mapping,
     that a refused run prints its error line alone."""
     if quiet or resolved[1] != ASSUMED:
         return
-    right, bottom = box_extent(hor)
-    print(f"xvmatch: note: assuming {os.fspath(hor_path)}'s images are 2688x1512 (CVMHAT; its "
-          f"boxes reach x {float(right):g}, y {float(bottom):g}); pass {option} WxH if not",
-          file=sys.stderr)
+    print(f"xvmatch: note: {assumed_size_note(hor_path, hor, option)}", file=sys.stderr)
 
 
 def settled_hor_size(hor: Mapping, hor_path: str, image_size: tuple[int, int] | None,

@@ -198,14 +198,14 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
         matcher = open_models([args.model], args.threads)[0]
     with mer.open_multi_ego(views, matcher, options) as inputs:
         resolved = mer.multi_ego_sizes(inputs, options)
-        for k, r in enumerate(resolved):
-            note_if_assumed(r, views[k + 1], paths[k + 1], quiet)
         calib, note = multi_ground.oblique_top(  # calib None: the nadir path
             views[0], "nadir" if args.cameras else args.top_view, args.top_image_size, paths[0],
             offsets, top_tracks=None if tracks is None else tracks[0], hors=views[1:])
         sizes = mer.path_sizes(resolved, views, paths, ground=calib is not None)
         if note:
             say(note)
+        for k, r in enumerate(resolved if calib is None else ()):  # the ground path: its own
+            note_if_assumed(r, views[k + 1], paths[k + 1], quiet)
         for k, value in enumerate(offsets):
             marked, wearer = wearer_marked(views[0], camera_rows[k] if camera_rows else None)
             offsets[k] = resolve_offset(args, marked, views[k + 1], sizes[k][0], options.params,
