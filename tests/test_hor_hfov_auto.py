@@ -121,6 +121,23 @@ def test_auto_picks_a_wide_lens_and_runs_with_it(scene, video) -> None:
 
 
 @pytest.mark.slow
+def test_the_lens_candidates_run_side_by_side_give_the_same_run(scene) -> None:
+    """``workers``: the candidate lenses' whole runs in processes of their own choose the same
+    lens, scale, poses and pairs as one after another."""
+    frames = list(range(1, 31, 3))
+    calib = top_calibration(scene.top, scene.top_cameras[0].image_size)
+    options = _options(scene, "auto")
+    alone = run_ground_association(scene.top, scene.hor["hor1"], options, frames, calib)
+    side = run_ground_association(scene.top, scene.hor["hor1"], replace(options, workers=2),
+                                  frames, calib)
+    assert (side.lens, side.pairs, side.scale) == (alone.lens, alone.pairs, alone.scale)
+    assert [(p.frame, *p.centre, p.heading) for p in side.poses] == [
+        (p.frame, *p.centre, p.heading) for p in alone.poses]
+    with pytest.raises(ValueError, match="workers must be at least 1"):
+        replace(options, workers=0)
+
+
+@pytest.mark.slow
 def test_the_lens_the_pairs_imply_is_run_and_kept_where_it_keeps_more() -> None:
     """A clip (seed 13, a 113-degree lens) whose 110-degree run keeps the most pairs: they
     measure 121 degrees, whose run keeps more pairs along the tracks than 110's, so it is the

@@ -325,7 +325,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     hor_size = guessed or options.hor_size[0]
     ground = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
                                       hor_hfov_deg=options.hor_hfov, fps=options.fps,
-                                      consensus=options.video, seed=0)
+                                      consensus=options.video, seed=0,
+                                      workers=options.workers)
     try:
         run = run_top_view(top, hor, ground, options.top_view, name=options.top_boxes)
     except CalibrationError as error:

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -138,6 +139,8 @@ class GroundAssociationOptions:
         top_sizes: read each top person's height from their boxes (:func:`top_sizes`) and
             each horizontal person's distance at their partner's height; False: everyone
             of the crowd's height (before; a benchmark's comparison).
+        workers: processes that run the candidate lenses' whole runs side by side (``auto``
+            in video mode, :func:`choose_along_tracks`); the same result for any number.
     """
 
     top_size: tuple[int, int]
@@ -147,6 +150,7 @@ class GroundAssociationOptions:
     consensus: bool = True
     seed: int = 0
     top_sizes: bool = True
+    workers: int = 1
 
     def __post_init__(self) -> None:
         if isinstance(self.hor_hfov_deg, str) and self.hor_hfov_deg != AUTO_HFOV:
@@ -154,6 +158,8 @@ class GroundAssociationOptions:
                              f"{self.hor_hfov_deg!r}")
         if isinstance(self.fps, str) and self.fps != AUTO_FPS:
             raise ValueError(f"fps must be frames a second or {AUTO_FPS!r}, got {self.fps!r}")
+        if int(self.workers) < 1:
+            raise ValueError(f"workers must be at least 1, got {self.workers}")
 
 
 @dataclass(frozen=True)
@@ -412,7 +418,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
         lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
                                                           options.hor_size, (top, hor), sights,
-                                                          spread, slack)
+                                                          spread, slack, options.workers)
     else:
         if hfov == AUTO_HFOV:
             lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
@@ -441,7 +447,7 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
                         hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
                         sights: list[gr.TopSight] | None = None,
-                        spread: float = gr.RANGE_SPREAD, slack: float = 1.0
+                        spread: float = gr.RANGE_SPREAD, slack: float = 1.0, workers: int = 1
                         ) -> tuple[LensChoice, Registered]:
     """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
     tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
@@ -467,25 +473,25 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     replaced it, the lens their pairs imply that they fit best is kept where its run keeps as
     many (:func:`_tie_measured`: several measurements, the best taken). The run kept is the one
     :func:`register_and_pair` makes: the same lens, given or chosen, runs the same.
-    Arguments as :func:`register_and_pair`'s; returns the choice and the chosen lens's run."""
+    Arguments as :func:`register_and_pair`'s (``workers``: processes running the candidates'
+    runs side by side, :func:`_each_lens`); returns the choice and the chosen lens's run."""
     # each lens's runs with the sights and without, the nearest the prior first: a run of
     # another lens replaces the chosen one's only where it keeps more than a near tie of the
     # best before it, so a tie keeps the lens nearer the prior
-    both = {h: _scale_runs(order, tops, boxes, sizes, h, fps, hor_size, views, sights, spread,
-                           slack)
-            for h in sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))}
-    runs = {h: (hors, by_scale[-1]) for h, (hors, by_scale) in both.items()}
-    scales = {h: gr.margin_scale(by_scale) for h, (_, by_scale) in runs.items()}
-    pairs = {h: _consistent(order, tops, runs[h][0], sizes, s, runs[h][1][s][1], views)
-             for h, s in scales.items()}
+    lenses = sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))
+    each = dict(zip(lenses, _each_lens(partial(
+        _lens_runs, order, tops, boxes, sizes, fps=fps, hor_size=hor_size, views=views,
+        sights=sights, spread=spread, slack=slack), lenses, workers), strict=True))
+    both = {h: runs for h, (runs, _, _, _) in each.items()}
+    scales = {h: scale for h, (_, scale, _, _) in each.items()}
+    pairs = {h: at_scale for h, (_, _, at_scale, _) in each.items()}
     kept, people = _kept(pairs)
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
     # each lens's run as register_and_pair makes it (with the sights, or without them where
     # that keeps more), the chosen one's first
-    made = {h: _made(order, tops, both[h], sizes, views)
-            for h in (hfov, *(h for h in both if h != hfov))}
+    made = {h: each[h][3] for h in (hfov, *(h for h in both if h != hfov))}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
     best, run, run_kept = hfov, made[hfov], made_kept[hfov]
     for h, other in made.items():  # another lens's run needs more than a near tie, and
@@ -556,6 +562,34 @@ def _tie_measured(hfov: float, run: Registered,
     if _count(other[2])[0] < _count(run[2])[0]:
         return hfov, None, run
     return lens, None if lens in implied_by else source, other  # a tied candidate's own
+
+
+def _lens_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
+               hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
+               sights: list[gr.TopSight] | None, spread: float, slack: float
+               ) -> tuple[tuple[list, list], float, dict[int, list[tuple[int, int]]], Registered]:
+    """One candidate lens's part of :func:`choose_along_tracks`: its :func:`_scale_runs`, the
+    map scale of its run without the sights (the last) by the clip's score totals
+    (:func:`~xvmatch.cues.ground_registration.margin_scale`) and that run's pairs along the
+    tracks, and its run as :func:`register_and_pair` makes it (:func:`_made`)."""
+    runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights, spread,
+                       slack)
+    hors, plain = runs[0], runs[1][-1]
+    scale = gr.margin_scale(plain)
+    pairs = _consistent(order, tops, hors, sizes, scale, plain[scale][1], views)
+    return runs, scale, pairs, _made(order, tops, runs, sizes, views)
+
+
+def _each_lens(run: Callable[[float], object], lenses: list[float], workers: int) -> list:
+    """``run(lens)`` for each of ``lenses``, in order: in ``workers`` processes where more than
+    one (:func:`~xvmatch.core.worker_pool.worker_pool`; each lens's run is the same
+    arithmetic wherever it runs, so the result is the same for any number)."""
+    if workers <= 1 or len(lenses) < 2:
+        return [run(h) for h in lenses]
+    from xvmatch.core.worker_pool import worker_pool
+
+    with worker_pool(min(int(workers), len(lenses))) as pool:
+        return list(pool.map(run, lenses))
 
 
 def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: list,

@@ -100,8 +100,9 @@ def add_associate_parser(subparsers) -> argparse.ArgumentParser:
     add_spatial_options(p, group=search)
     add_top_view_arguments(top_view)
     runtime.add_argument("--workers", type=worker_count, default=1, metavar="K",
-                         help="processes for --offset auto and --model's features, 1..64 "
-                         "(default 1; the same output for any K)")
+                         help="processes for --offset auto, --model's features and an "
+                         "oblique top view's lens candidates, 1..64 (default 1; the same "
+                         "output for any K)")
     runtime.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(func=_cmd_associate)
     return p
