@@ -56,7 +56,7 @@ a nadir image.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,6 +84,7 @@ __all__ = [
     "box_width_ratio",
     "carried",
     "hor_ground_points",
+    "hor_horizon",
     "map_motion",
     "margin_scale",
     "on_top_map",
@@ -114,6 +115,9 @@ WIDTH_RATIO = round(BODY_WIDTH / PERSON_HEIGHT, 4)
 
 _MIN_RATIO_BOXES = 20
 """Boxes not cut by a border :func:`box_width_ratio` needs to read a view's ratio."""
+
+_MAX_PITCH_TAN = float(np.tan(np.radians(30.0)))
+"""The steepest handheld pitch's tangent :func:`hor_ground_points` takes from a horizon."""
 
 KEEP = 24
 """Pose hypotheses kept per frame for the choice over time."""
@@ -176,7 +180,8 @@ class FramePose:
 
 def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: float,
                       person_height: float = PERSON_HEIGHT,
-                      width_ratio: float = WIDTH_RATIO) -> np.ndarray:
+                      width_ratio: float = WIDTH_RATIO,
+                      horizon: float | None = None) -> np.ndarray:
     """Horizontal-view people on the camera's own ground map ``(M, 2)``: x forward, y left.
 
     Depth from box height (a person of ``person_height`` seen by a level camera,
@@ -185,7 +190,9 @@ def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: 
     the box's centre column. A box cut by the image's bottom edge (a passer-by, feet out of
     sight) shows only part of its height: its depth is read from its width (``width_ratio``
     times ``person_height`` wide, :func:`box_width_ratio`), no farther than its height allows
-    nor than where a level camera at ``person_height`` would still see the feet."""
+    nor than where a camera at ``person_height`` would still see the feet: a level one, or
+    one pitched as its ``horizon`` row (:func:`hor_horizon`) says: looking up, it sees no feet
+    for metres, and every passer-by there is cut."""
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
     f = 0.5 * image_size[0] / np.tan(np.radians(hfov_deg) / 2.0)
     distance = f * person_height / np.maximum(boxes[:, 3], 1.0)
@@ -193,6 +200,12 @@ def hor_ground_points(boxes: np.ndarray, image_size: tuple[int, int], hfov_deg: 
     if cut.any():
         by_width = f * width_ratio * person_height / np.maximum(boxes[cut, 2], 1.0)
         feet_seen = f * person_height / (0.5 * image_size[1])
+        if horizon is not None:  # the lowest row's dip (its tangent) through the pitch
+            low = 0.5 * image_size[1] / f
+            pitch = float(np.clip((0.5 * image_size[1] - horizon) / f, -_MAX_PITCH_TAN,
+                                  _MAX_PITCH_TAN))
+            dip = (low + pitch) / (1.0 - low * pitch)
+            feet_seen = person_height / dip if dip > 0 else np.inf
         distance[cut] = np.minimum(np.minimum(by_width, feet_seen), distance[cut])
     across = -(boxes[:, 0] + 0.5 * boxes[:, 2] - 0.5 * image_size[0]) / f
     return distance[:, None] * np.column_stack([np.ones(len(boxes)), across])
@@ -210,6 +223,18 @@ def box_width_ratio(frames: Iterable[np.ndarray], image_size: tuple[int, int]) -
     if whole.sum() < _MIN_RATIO_BOXES:
         return WIDTH_RATIO
     return round(float(np.median(boxes[whole, 2] / boxes[whole, 3])), 4)
+
+
+def hor_horizon(frames: Sequence[np.ndarray], image_size: tuple[int, int]) -> float | None:
+    """The horizon's row of a handheld view from its people (each frame's ``(N, 4)`` boxes;
+    :func:`~xvmatch.geometry.people_model.handheld_horizon`), to a tenth of a pixel; None
+    where they cannot tell it (:func:`hor_ground_points` then takes a level camera)."""
+    from xvmatch.geometry.people_model import handheld_horizon
+
+    boxes = [np.asarray(b, dtype=float).reshape(-1, 4) for b in frames]
+    index = np.repeat(np.arange(len(boxes)), [len(b) for b in boxes])
+    row = handheld_horizon(index, np.concatenate([np.zeros((0, 4)), *boxes]), image_size)
+    return None if row is None else round(row, 1)
 
 
 @dataclass(frozen=True)

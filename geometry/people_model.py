@@ -30,6 +30,7 @@ __all__ = [
     "BLOCK_FRAMES",
     "BODY_WIDTH",
     "BORDER",
+    "HANDHELD_HEIGHT_SHARE",
     "MAX_FIT_BOXES",
     "PERSON_HEIGHT",
     "PRIOR_HFOV_DEG",
@@ -38,6 +39,7 @@ __all__ = [
     "UsableBoxes",
     "data_cost",
     "fit_model",
+    "handheld_horizon",
     "model_camera",
     "model_starts",
     "pinhole",
@@ -100,6 +102,10 @@ feet keep to a few rows), and the fit stayed there, a nadir call for upright peo
 _CAMERA_BOUNDS = (np.array([np.radians(-45.0), np.radians(-30.0), -np.inf, np.log(0.5)]),
                   np.array([np.radians(89.0), np.radians(30.0), np.inf, np.log(1e3)]))
 _HEIGHT_BOUNDS = (1.0, 2.4)
+
+HANDHELD_HEIGHT_SHARE = (0.7, 1.3)
+"""A handheld camera's height over its people's (:func:`handheld_horizon`): from chest to
+above head height, 1.2-2.2 m for people of :data:`PERSON_HEIGHT`."""
 
 
 @dataclass(frozen=True)
@@ -348,6 +354,29 @@ def _level_line(b: UsableBoxes, size: tuple[int, int]) -> tuple[float, float, fl
     if not a > 0:
         return 0.0, np.nan, 0.0
     return float(a), float(-p[2] / a), float(-p[1] / a)
+
+
+def handheld_horizon(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int],
+                     min_boxes: int = 20) -> float | None:
+    """The horizon's row at the centre column of a handheld camera near level, at about head
+    height, from its people's boxes ``(N, 4)`` in ``frames`` ``(N,)``: a person ``h`` pixels
+    tall has the top of the head at ``v0 + b h``, ``b`` the camera's height over the person's
+    less one, held within :data:`HANDHELD_HEIGHT_SHARE` (the level line :func:`_level_line`
+    with its slope bounded: readable people all far off, as under a camera looking up, cannot
+    tip it); a robust fit. None with fewer than ``min_boxes`` readable boxes."""
+    b = usable_boxes(np.asarray(frames).reshape(-1), None,
+                     np.asarray(boxes, dtype=float).reshape(-1, 4), size)
+    if len(b.h) < min_boxes:
+        return None
+    top = b.v - b.h
+    lo, hi = (share - 1.0 for share in HANDHELD_HEIGHT_SHARE)
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        return (p[0] + p[1] * b.h - top) / np.maximum(b.h, 1.0)
+
+    fit = least_squares(resid, [float(np.median(top)), 0.0], bounds=([-np.inf, lo], [np.inf, hi]),
+                        loss="soft_l1", f_scale=SOFT_SCALE)
+    return float(fit.x[0])
 
 
 def _start(b: UsableBoxes, size: tuple[int, int], hfov: float) -> np.ndarray:

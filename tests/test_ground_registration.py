@@ -118,6 +118,51 @@ def test_a_passer_by_cut_by_the_bottom_edge_is_read_from_their_width() -> None:
         f * 1.72 / 300.0, rel=1e-6)
 
 
+def test_a_handheld_looking_up_sees_no_feet_near_it() -> None:
+    """A camera 1.6 m up looking 12 degrees up sees no feet nearer than about 8 m: a passer-by
+    7 m off, cut by its bottom edge, is read from their width at 7 m where its horizon row is
+    given, not capped where a level camera would see feet (4.9 m); looking down, the cap is
+    nearer."""
+    from xvmatch.geometry.people_model import pinhole
+
+    size, f = (1920, 1080), 960.0 / np.tan(np.radians(35.0))
+    cam = pinhole(f, np.radians(-12.0), 0.0, 1.6, size)
+    (head, side), _ = cam.project(np.array([[7.0, 0.0, 1.72], [7.0, 0.225, 1.72]]))
+    w = 2 * (head[0] - side[0])
+    cut = np.array([[head[0] - w / 2, head[1], w, size[1] - head[1]]])
+    ratio = 0.45 / 1.72
+    horizon = 0.5 * size[1] - f * np.tan(np.radians(-12.0))
+    level = gr.hor_ground_points(cut, size, 70.0, width_ratio=ratio)
+    assert level[0, 0] == pytest.approx(f * 1.72 / 540.0)
+    up = gr.hor_ground_points(cut, size, 70.0, width_ratio=ratio, horizon=horizon)
+    assert up[0, 0] == pytest.approx(7.0, rel=0.03)
+    down = gr.hor_ground_points(cut, size, 70.0, width_ratio=ratio, horizon=size[1] - horizon)
+    assert down[0, 0] < 0.7 * level[0, 0]
+    assert np.array_equal(gr.hor_ground_points(cut, size, 70.0, width_ratio=ratio,
+                                               horizon=None), level)
+
+
+def test_the_handheld_horizon_is_read_from_its_people() -> None:
+    """Heads near the camera's height: the horizon row from a clip's people within 1.5
+    degrees of the camera's pitch, for a renderer's handheld pitched 12 degrees up or down
+    and one at chest height (1.3 m); too few people: None."""
+    from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+    from xvmatch.geometry.people_model import handheld_horizon
+
+    for pitch, height in ((12.0, (1.4, 1.7)), (-12.0, (1.4, 1.7)), (4.0, (1.3, 1.3))):
+        config = ObliqueSceneConfig(top_pitch=(30.0, 40.0), hor_pitch=(pitch, pitch),
+                                    hor_height=height)
+        scene = make_oblique_scene(config, 90, np.random.default_rng(3))
+        cam = scene.hor_cameras["hor1"][0]
+        frames = sorted(scene.hor["hor1"])
+        boxes = [scene.hor["hor1"][k].boxes for k in frames]
+        row = gr.hor_horizon(boxes, cam.image_size)
+        read = np.degrees(np.arctan((0.5 * cam.height - row) / cam.K[0, 0]))
+        assert read == pytest.approx(pitch, abs=1.5)
+        index = np.repeat(frames, [len(b) for b in boxes])
+        assert handheld_horizon(index[:10], np.concatenate(boxes)[:10], cam.image_size) is None
+
+
 def test_no_people_no_hypotheses() -> None:
     poses, scores = gr.pose_hypotheses(np.zeros((0, 2)), np.ones((2, 2)), 70.0)
     assert poses.shape == (0, 3) and scores.shape == (0,)

@@ -735,10 +735,13 @@ def _by_scale(order: list[int], tops: list, hors: list, sizes: list, hfov: float
 
 def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
     """Per frame, the handheld view's people on its own map (a lens of ``hfov`` degrees) and
-    their ids, from its boxes and ids."""
-    ratio = gr.box_width_ratio((b for b, _ in boxes), hor_size)
-    return [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio), h_ids)
-            for hb, h_ids in boxes]
+    their ids, from its boxes and ids; people cut by its bottom edge read as far as its pitch,
+    from the horizon its people tell (:func:`~xvmatch.cues.ground_registration.hor_horizon`),
+    lets it see no feet."""
+    every = [b for b, _ in boxes]
+    ratio, horizon = gr.box_width_ratio(every, hor_size), gr.hor_horizon(every, hor_size)
+    return [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio, horizon=horizon),
+             h_ids) for hb, h_ids in boxes]
 
 
 def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: float,

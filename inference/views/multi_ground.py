@@ -408,9 +408,10 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
-    ratio = gr.box_width_ratio(map(_boxes, hor.values()), size)
-    local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov, width_ratio=ratio)
-             for f in order}
+    every = [_boxes(record) for record in hor.values()]
+    ratio, horizon = gr.box_width_ratio(every, size), gr.hor_horizon(every, size)
+    local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov, width_ratio=ratio,
+                                     horizon=horizon) for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
     points = [tops[f][ok[f]] for f in order]
     heights = None if sizes is None else [sizes[f][ok[f]] for f in order]
