@@ -99,6 +99,13 @@ def test_three_views_pair_at_least_as_well_as_per_view(scene, tmp_path) -> None:
     assert pooled["multi"] >= pooled["per view"]
     assert pooled["multi"] > 0.55
     assert min(f1["multi"].values()) > 0.45
+    # Each handheld view's candidate lenses run side by side: the same output.
+    side = tmp_path / "side"
+    assert main(["associate-multi", "--top", str(paths[0]), "--hor", str(paths[1]),
+                 str(paths[2]), "--out", str(side), "--top-image-size", "1920x1080",
+                 "--image-size", "1920x1080", "--fps", "3.33", "--quiet", "--workers", "2"]) == 0
+    for name in ("top", "hor1", "hor2"):
+        assert (side / f"{name}.txt").read_bytes() == (out / f"{name}.txt").read_bytes()
 
 
 @pytest.mark.slow

@@ -136,12 +136,16 @@ class MultiGroundOptions:
             (:func:`~xvmatch.cues.ground_registration.register_sequence`): set with the rate
             where it was read from the walkers
             (:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`).
+        workers: processes running a handheld view's candidate lenses side by side in video
+            mode (:func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`);
+            the same result for any number.
     """
 
     hor_sizes: tuple[tuple[int, int], ...]
     hor_hfov_deg: float | str | tuple[float, ...] = PRIOR_HFOV_DEG
     fps: float | str = PRIOR_FPS
     slack: float = 1.0
+    workers: int = 1
 
     def __post_init__(self) -> None:
         if isinstance(self.fps, str) and self.fps != AUTO_FPS:
@@ -240,13 +244,13 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
 
 def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int, int], str]],
                    paths: Sequence[str], hfov: float | str, fps: float | str,
-                   note: Callable[[str], object]) -> MultiGroundOptions:
+                   note: Callable[[str], object], workers: int = 1) -> MultiGroundOptions:
     """``associate-multi``'s options of this path: each handheld view's image size as resolved
     (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone (or
     none known: boxes that do not fit it), where the size its boxes tell serves
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
     ``note`` (``paths``: the box files, top first; the CVMHAT size kept, where the boxes fit
-    it, told too); ``--hor-hfov`` and ``--fps``."""
+    it, told too); ``--hor-hfov``, ``--fps`` and ``--workers``."""
     sizes = []
     past = runs_past_borders(*views)  # the run's files, made by one tracker or tool
     for k, (size, source) in enumerate(resolved, 1):
@@ -256,7 +260,7 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
         elif source == ASSUMED:  # boxes that fit CVMHAT's own size: kept
             note(assumed_size_note(paths[k], views[k]))
         sizes.append(tuple(guess or size))
-    return MultiGroundOptions(tuple(sizes), hfov, fps)
+    return MultiGroundOptions(tuple(sizes), hfov, fps, workers=workers)
 
 
 def _tracked(top: Mapping, top_tracks: Mapping[int, int] | None) -> Mapping:
@@ -360,7 +364,8 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
                     for f, p, o in zip(order, points, ok, strict=True)]
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
         choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, size,
-                                           pair, spread=top.spread, slack=options.slack)[0])
+                                           pair, spread=top.spread, slack=options.slack,
+                                           workers=options.workers)[0])
     return tuple(choices)
 
 

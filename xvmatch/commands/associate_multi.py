@@ -118,8 +118,9 @@ def add_multi_ego_parser(subparsers) -> argparse.ArgumentParser:
     add_offset_options(p, "Each view is associated at its moment, every row written under "
                        "its own file's frame number", several=True)
     p.add_argument("--workers", type=worker_count, default=1, metavar="K",
-                   help="processes for the learned matcher's features and --offset auto's "
-                   "estimates, 1..64 (default 1)")
+                   help="processes for the learned matcher's features, --offset auto's "
+                   "estimates and an oblique top view's lens candidates, 1..64 (default 1; the "
+                   "same output for any K)")
     p.add_argument("--threads", type=thread_count, default=1, metavar="K",
                    help="onnxruntime threads, 1..64 (default 1)")
     p.add_argument("--appearance-check", choices=("on", "off"), default="on",
@@ -156,8 +157,7 @@ def _run_options(args: argparse.Namespace):
          Output("--draw", args.draw, folder=True),
          *check_write_cameras(model_args(args))],
         [Input("--top", args.top), *(Input("--hor", h) for h in args.hor),
-         *image_inputs(args),
-         *(Input("--cameras", c) for c in args.cameras or ()),
+         *image_inputs(args), *(Input("--cameras", c) for c in args.cameras or ()),
          Input("--model", None if args.model == "default" else args.model)],
     )
     check_own_folder(out, MULTI_COMMAND)
@@ -165,8 +165,7 @@ def _run_options(args: argparse.Namespace):
         check_own_folder(args.draw, DRAW_OWNER, "--draw")
     return out, MultiEgoRunOptions(
         tuple(paths), args.model, args.top_images, tuple(args.hor_images or ()) or None,
-        tuple(args.cameras or ()) or None,
-        None if args.image_size is None else tuple(args.image_size),
+        tuple(args.cameras or ()) or None, args.image_size and tuple(args.image_size),
         args.refine_top_camera == "auto", args.camera_check == "on",
         args.appearance_check == "on", params, args.workers,
         PeopleOptions(solver=args.solver, time_limit=args.time_limit, tracks=args.tracks,
@@ -214,7 +213,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                         hor_path=paths[k + 1])
         ground = calib and multi_ground.run_multi_ground(
             views, offsets, calib, multi_ground.ground_options(
-                views, resolved, paths, args.hor_hfov, args.fps, say), options.people, tracks, say)
+                views, resolved, paths, args.hor_hfov, args.fps, say, args.workers),
+            options.people, tracks, say)
         run = ground or mer.run_multi_ego(
             inputs, matcher, sizes, offsets, camera_rows, options,
             progress=lambda n: frame_progress(n, "costs", not quiet),
