@@ -261,7 +261,8 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     ``--top-yaw-rate``, ``--top-pitch-rate``, ``--no-top-motion``) and the people cut by the
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace, walk and
     pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), their lenses' distortion
-    (``--hor-distortion``) and pitch (``--hor-pitch``, ``--hor-wobble``), people's heights
+    (``--hor-distortion``), pitch and height (``--hor-pitch``, ``--hor-wobble``,
+    ``--hor-height``), people's heights
     (``--person-height``) and how far apart they stand (``--area``, ``--group-area``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
@@ -291,6 +292,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hor-pitch", type=float, nargs=2, default=(-3.0, 5.0),
                    metavar=("LO", "HI"), help="each handheld camera's mean pitch, degrees, "
                    "drawn in LO-HI (positive looks down; default -3 5)")
+    p.add_argument("--hor-height", type=float, nargs=2, default=(1.4, 1.7),
+                   metavar=("LO", "HI"), help="each handheld camera's height, metres, drawn in "
+                   "LO-HI (default 1.4 1.7; at the chest: 1.2 1.4)")
     p.add_argument("--hor-wobble", type=float, default=1.0, metavar="DEG",
                    help="the handheld cameras' smooth pitch and roll wobble about that mean, "
                    "degrees (default 1; a walking hand: 3)")
@@ -331,6 +335,7 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               holder_area=tuple(args.holder_area), pan_rate=args.pan_rate,
                               hor_distortion=tuple(args.hor_distortion),
                               hor_pitch=tuple(args.hor_pitch), hor_wobble=args.hor_wobble,
+                              hor_height=tuple(args.hor_height),
                               height_range=tuple(args.person_height), area=tuple(args.area),
                               group_area=tuple(args.group_area),
                               box_extent=args.box_extent, **settings)
