@@ -262,8 +262,8 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace, walk and
     pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), their lenses' distortion
     (``--hor-distortion``), pitch and height (``--hor-pitch``, ``--hor-wobble``,
-    ``--hor-height``), people's heights
-    (``--person-height``) and how far apart they stand (``--area``, ``--group-area``)."""
+    ``--hor-height``), people's heights (``--person-height``) and how far apart they stand
+    (``--area``, ``--group-area``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),

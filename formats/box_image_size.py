@@ -64,6 +64,7 @@ __all__ = [
     "common_size_started",
     "consistent_with",
     "ground_path_hor_size",
+    "ground_path_size_note",
     "guess_image_size",
     "hor_size_note",
     "median_aspect",
@@ -321,6 +322,18 @@ def hor_size_note(path: str | os.PathLike, hor: Mapping, guess: tuple[int, int],
     instead = ", not CVMHAT's" if source == ASSUMED else ""
     return (f"{os.fspath(path)}: its images taken as {guess[0]}x{guess[1]} on this path, "
             f"{size_guess_how(hor, guess, past)}{instead} (give --image-size WxH if not)")
+
+
+def ground_path_size_note(path: str | os.PathLike, hor: Mapping,
+                          guess: tuple[int, int] | None, source: str,
+                          past: bool | None = None) -> str | None:
+    """What the ground-map path says of a horizontal view's size: the size it guessed from the
+    boxes ``hor`` (:func:`ground_path_hor_size`'s ``guess``, :func:`hor_size_note`), else the
+    CVMHAT size kept where ``source`` assumed it (boxes that fit it,
+    :func:`assumed_size_note`); None for a size given."""
+    if guess is not None:
+        return hor_size_note(path, hor, guess, source, past)
+    return assumed_size_note(path, hor) if source == ASSUMED else None
 
 
 def median_aspect(frames: Mapping) -> float | None:

@@ -28,6 +28,7 @@ from xvmatch.formats.box_image_size import (
     common_size_started,
     consistent_with,
     ground_path_hor_size,
+    ground_path_size_note,
     guess_image_size,
     hor_size_note,
     resolve_size,
@@ -192,6 +193,12 @@ def test_the_ground_path_guesses_only_a_size_it_assumed():
     wide = {1: FrameBoxes(1, [1], [[2640, 600, 40, 170]])}
     assert ground_path_hor_size(wide, CVMHAT_SIZE, ASSUMED) is None  # CVMHAT's own: kept
     assert ground_path_hor_size({}, CVMHAT_SIZE, ASSUMED) is None
+    # What the path says: the guess, the CVMHAT size kept, nothing for a size given.
+    assert ground_path_size_note("h.txt", phone, (1920, 1080), ASSUMED) == hor_size_note(
+        "h.txt", phone, (1920, 1080), ASSUMED)
+    assert ground_path_size_note("h.txt", wide, None, ASSUMED).startswith(
+        "assuming h.txt's images are 2688x1512 (CVMHAT; its boxes reach x 2680, y 770)")
+    assert ground_path_size_note("h.txt", phone, None, "--image-size") is None
 
 
 def test_boxes_past_cvmhats_size_are_left_to_the_path_only_when_asked():

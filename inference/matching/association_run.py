@@ -302,11 +302,9 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note (the CVMHAT
     size kept, where its boxes fit it, said too)."""
     from xvmatch.formats.box_image_size import (
-        ASSUMED,
-        assumed_size_note,
         check_boxes_in_image,
         ground_path_hor_size,
-        hor_size_note,
+        ground_path_size_note,
         runs_past_borders,
     )
 
@@ -348,12 +346,9 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
             ground.consensus else "each frame on its own (--mode video: consistent over "
             "the clip)")
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
-    if guessed is not None:
-        note("xvmatch: note: "
-             f"{hor_size_note(options.hor_boxes, hor, guessed, options.hor_size[1], past)}",
-             False)
-    elif options.hor_size[1] == ASSUMED:  # boxes that fit CVMHAT's own size: kept
-        note(f"xvmatch: note: {assumed_size_note(options.hor_boxes, hor)}", False)
+    said = ground_path_size_note(options.hor_boxes, hor, guessed, options.hor_size[1], past)
+    if said is not None:
+        note(f"xvmatch: note: {said}", False)
     if run.lens is not None:
         from xvmatch.inference.matching.ground_association import lens_note
 

@@ -45,11 +45,9 @@ import numpy as np
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
 from xvmatch.formats.box_image_size import (
-    ASSUMED,
-    assumed_size_note,
     check_boxes_in_image,
     ground_path_hor_size,
-    hor_size_note,
+    ground_path_size_note,
     runs_past_borders,
     size_guess_how,
     upright_size_guess,
@@ -255,10 +253,8 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
     past = runs_past_borders(*views)  # the run's files, made by one tracker or tool
     for k, (size, source) in enumerate(resolved, 1):
         guess = ground_path_hor_size(views[k], size, source, past)
-        if guess is not None:
-            note(hor_size_note(paths[k], views[k], guess, source, past))
-        elif source == ASSUMED:  # boxes that fit CVMHAT's own size: kept
-            note(assumed_size_note(paths[k], views[k]))
+        if (said := ground_path_size_note(paths[k], views[k], guess, source, past)) is not None:
+            note(said)
         sizes.append(tuple(guess or size))
     return MultiGroundOptions(tuple(sizes), hfov, fps, workers=workers)
 
