@@ -372,6 +372,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--choose-lens", action="store_true",
                    help="add the rows with the true and the chosen handheld lens (from people, "
                    "tracklet consensus)")
+    p.add_argument("--workers", type=int, default=1, metavar="K",
+                   help="with --choose-lens: processes running the candidate lenses side by "
+                   "side in the lens-chosen run, as associate --workers (default 1; the same "
+                   "pairs)")
     p.add_argument("--hor-size", choices=("true", "assumed", "guess"), default="true",
                    help="the from-people rows' handheld image size: true (default), or as "
                    "associate takes it without --image-size: assumed (CVMHAT's 2688x1512, "
@@ -471,7 +475,8 @@ def main(argv: list[str] | None = None) -> int:
                     top, hor, replace(voting, hor_hfov_deg=true_hfov), frames, calib).pairs
                 t1 = time.perf_counter()  # as associate runs: the lens chosen, then the run
                 chosen_run = run_ground_association(
-                    top, hor, replace(voting, hor_hfov_deg=AUTO_HFOV), frames, calib)
+                    top, hor, replace(voting, hor_hfov_deg=AUTO_HFOV, workers=args.workers),
+                    frames, calib)
                 choice_s += time.perf_counter() - t1
                 chosen, choice = chosen_run.pairs, chosen_run.lens
                 lens = choice.hfov_deg
