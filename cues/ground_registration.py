@@ -79,6 +79,7 @@ __all__ = [
     "SCALE_MARGIN",
     "WIDTH_RATIO",
     "FramePose",
+    "HandheldReading",
     "TopSight",
     "associate_on_ground",
     "box_width_ratio",
@@ -235,6 +236,35 @@ def hor_horizon(frames: Sequence[np.ndarray], image_size: tuple[int, int]) -> fl
     index = np.repeat(np.arange(len(boxes)), [len(b) for b in boxes])
     row = handheld_horizon(index, np.concatenate([np.zeros((0, 4)), *boxes]), image_size)
     return None if row is None else round(row, 1)
+
+
+@dataclass(frozen=True)
+class HandheldReading:
+    """What a handheld view's people tell of it, whatever its lens: their width over height
+    (:func:`box_width_ratio`) and its horizon's row (:func:`hor_horizon`), read once per
+    clip; how :func:`hor_ground_points` reads the boxes its bottom edge cuts.
+
+    Attributes:
+        image_size: the view's image size, pixels.
+        width_ratio: its people's width over height.
+        horizon: its horizon's row, or None (a level camera taken).
+    """
+
+    image_size: tuple[int, int]
+    width_ratio: float = WIDTH_RATIO
+    horizon: float | None = None
+
+    @classmethod
+    def of(cls, frames: Sequence[np.ndarray], image_size: tuple[int, int]) -> HandheldReading:
+        """The reading of a view from its boxes, each frame's ``(N, 4)``."""
+        size = (int(image_size[0]), int(image_size[1]))
+        return cls(size, box_width_ratio(frames, size), hor_horizon(frames, size))
+
+    def points(self, boxes: np.ndarray, hfov_deg: float) -> np.ndarray:
+        """One frame's people on the camera's own map (:func:`hor_ground_points`) with a lens
+        of ``hfov_deg`` degrees."""
+        return hor_ground_points(boxes, self.image_size, hfov_deg, width_ratio=self.width_ratio,
+                                 horizon=self.horizon)
 
 
 @dataclass(frozen=True)

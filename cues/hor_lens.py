@@ -351,10 +351,9 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
     scores: dict[float, float] = {}
     scales: dict[float, float] = {}
     chance: dict[float, float] = {}
-    ratio, horizon = gr.box_width_ratio(sub_boxes, hor_size), gr.hor_horizon(sub_boxes, hor_size)
+    reading = gr.HandheldReading.of(sub_boxes, hor_size)
     for hfov in lenses:
-        hors = [gr.hor_ground_points(b, hor_size, hfov, width_ratio=ratio, horizon=horizon)
-                for b in sub_boxes]
+        hors = [reading.points(b, hfov) for b in sub_boxes]
         scale, poses = gr.register_with_scale(sub, sub_tops, hors, hfov, fps,
                                               top_sizes=sub_sizes, spread=spread, slack=slack)
         scores[hfov] = round(pairing_score([scale * t for t in sub_tops], hors, sub, poses,

@@ -163,6 +163,27 @@ def test_the_handheld_horizon_is_read_from_its_people() -> None:
         assert handheld_horizon(index[:10], np.concatenate(boxes)[:10], cam.image_size) is None
 
 
+def test_a_handheld_reading_is_read_once_for_every_lens() -> None:
+    """A view's reading holds its people's width ratio and horizon (as the two functions read
+    them) and maps any frame at any lens as :func:`hor_ground_points` given both."""
+    from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+
+    config = ObliqueSceneConfig(top_pitch=(30.0, 40.0), hor_pitch=(-10.0, -10.0),
+                                edge_people=(2, 2))
+    scene = make_oblique_scene(config, 60, np.random.default_rng(5))
+    size = scene.hor_cameras["hor1"][0].image_size
+    boxes = [scene.hor["hor1"][k].boxes for k in sorted(scene.hor["hor1"])]
+    reading = gr.HandheldReading.of(boxes, size)
+    assert reading.image_size == size
+    assert reading.width_ratio == gr.box_width_ratio(boxes, size)
+    assert reading.horizon is not None and reading.horizon == gr.hor_horizon(boxes, size)
+    for hfov in (60.0, 95.0):
+        for frame in boxes:
+            assert np.array_equal(reading.points(frame, hfov), gr.hor_ground_points(
+                frame, size, hfov, width_ratio=reading.width_ratio, horizon=reading.horizon))
+    assert gr.HandheldReading(size).points(boxes[0], 70.0).shape == (len(boxes[0]), 2)
+
+
 def test_no_people_no_hypotheses() -> None:
     poses, scores = gr.pose_hypotheses(np.zeros((0, 2)), np.ones((2, 2)), 70.0)
     assert poses.shape == (0, 3) and scores.shape == (0,)

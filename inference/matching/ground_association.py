@@ -92,6 +92,7 @@ __all__ = [
     "TOP_VIEWS",
     "GroundAssociation",
     "GroundAssociationOptions",
+    "LensRuns",
     "Registered",
     "choose_along_tracks",
     "fewer_sights",
@@ -415,9 +416,10 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
 
     lens = None
     hfov = options.hor_hfov_deg
+    reading = gr.HandheldReading.of([b for b, _ in boxes], options.hor_size)
     if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
         lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
-                                                          options.hor_size, (top, hor), sights,
+                                                          reading, (top, hor), sights,
                                                           spread, slack, options.workers)
     else:
         if hfov == AUTO_HFOV:
@@ -426,12 +428,12 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
                                    slack=slack)
             hfov = lens.hfov_deg
         scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps,
-                                                options.hor_size,
+                                                reading,
                                                 (top, hor) if options.consensus else None, sights,
                                                 spread, slack)
     if options.consensus:  # the run on the boxes no border cuts, where it keeps clearly more
         whole = _whole_boxes_run(order, tops, boxes, sizes, hfov if lens is None else
-                                 lens.hfov_deg, fps, options.hor_size, (top, hor), sights, spread,
+                                 lens.hfov_deg, fps, reading, (top, hor), sights, spread,
                                  slack)
         if whole is not None and _count(whole[2])[0] > NEAR_TIE * _count(pairs)[0]:
             scale, poses, pairs = whole
@@ -445,7 +447,7 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 
 
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
-                        hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
+                        reading: gr.HandheldReading, views: tuple[Mapping, Mapping],
                         sights: list[gr.TopSight] | None = None,
                         spread: float = gr.RANGE_SPREAD, slack: float = 1.0, workers: int = 1
                         ) -> tuple[LensChoice, Registered]:
@@ -480,18 +482,18 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     # best before it, so a tie keeps the lens nearer the prior
     lenses = sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))
     each = dict(zip(lenses, _each_lens(partial(
-        _lens_runs, order, tops, boxes, sizes, fps=fps, hor_size=hor_size, views=views,
+        _lens_runs, order, tops, boxes, sizes, fps=fps, reading=reading, views=views,
         sights=sights, spread=spread, slack=slack), lenses, workers), strict=True))
-    both = {h: runs for h, (runs, _, _, _) in each.items()}
-    scales = {h: scale for h, (_, scale, _, _) in each.items()}
-    pairs = {h: at_scale for h, (_, _, at_scale, _) in each.items()}
+    both = {h: runs.scale_runs for h, runs in each.items()}
+    scales = {h: runs.scale for h, runs in each.items()}
+    pairs = {h: runs.pairs for h, runs in each.items()}
     kept, people = _kept(pairs)
     hfov = pick_along_tracks(kept, people)
     choice = LensChoice(hfov, {h: float(n) for h, n in kept.items()}, scales, list(order),
                         along_tracks=True, people=people)
     # each lens's run as register_and_pair makes it (with the sights, or without them where
     # that keeps more), the chosen one's first
-    made = {h: each[h][3] for h in (hfov, *(h for h in both if h != hfov))}
+    made = {h: each[h].made for h in (hfov, *(h for h in both if h != hfov))}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
     best, run, run_kept = hfov, made[hfov], made_kept[hfov]
     for h, other in made.items():  # another lens's run needs more than a near tie, and
@@ -500,7 +502,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
             best, run, run_kept = h, other, made_kept[h]
 
     def run_at(lens: float) -> Registered:  # a measured lens's run, as register_and_pair's
-        return run_along_tracks(order, tops, _hor_people(boxes, hor_size, lens), sizes, lens,
+        return run_along_tracks(order, tops, _hor_people(boxes, reading, lens), sizes, lens,
                                 fps, views, sights, spread, slack)
 
     measured_from, implied_by, measured = None, {}, dict(made)
@@ -564,20 +566,37 @@ def _tie_measured(hfov: float, run: Registered,
     return lens, None if lens in implied_by else source, other  # a tied candidate's own
 
 
+@dataclass(frozen=True)
+class LensRuns:
+    """One candidate lens's part of :func:`choose_along_tracks` (:func:`_lens_runs`).
+
+    Attributes:
+        scale_runs: its people on the handheld map and its registrations at each map scale,
+            with the sights and without (:func:`_scale_runs`).
+        scale: the map scale of its run without the sights by the clip's score totals.
+        pairs: that run's pairs along the tracks at that scale.
+        made: its run as :func:`register_and_pair` makes it (:func:`_made`).
+    """
+
+    scale_runs: tuple[list, list]
+    scale: float
+    pairs: dict[int, list[tuple[int, int]]]
+    made: Registered
+
+
 def _lens_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
-               hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
-               sights: list[gr.TopSight] | None, spread: float, slack: float
-               ) -> tuple[tuple[list, list], float, dict[int, list[tuple[int, int]]], Registered]:
+               reading: gr.HandheldReading, views: tuple[Mapping, Mapping],
+               sights: list[gr.TopSight] | None, spread: float, slack: float) -> LensRuns:
     """One candidate lens's part of :func:`choose_along_tracks`: its :func:`_scale_runs`, the
     map scale of its run without the sights (the last) by the clip's score totals
     (:func:`~xvmatch.cues.ground_registration.margin_scale`) and that run's pairs along the
     tracks, and its run as :func:`register_and_pair` makes it (:func:`_made`)."""
-    runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, hor_size, views, sights, spread,
+    runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, reading, views, sights, spread,
                        slack)
     hors, plain = runs[0], runs[1][-1]
     scale = gr.margin_scale(plain)
     pairs = _consistent(order, tops, hors, sizes, scale, plain[scale][1], views)
-    return runs, scale, pairs, _made(order, tops, runs, sizes, views)
+    return LensRuns(runs, scale, pairs, _made(order, tops, runs, sizes, views))
 
 
 def _each_lens(run: Callable[[float], object], lenses: list[float], workers: int) -> list:
@@ -625,7 +644,7 @@ def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
 
 
 def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
-                      fps: float, hor_size: tuple[int, int],
+                      fps: float, reading: gr.HandheldReading,
                       views: tuple[Mapping, Mapping] | None,
                       sights: list[gr.TopSight] | None = None,
                       spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> Registered:
@@ -645,7 +664,9 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
         sizes: per frame, each top person's height over the crowd's ``(N,)``.
         hfov: the horizontal camera's field of view, degrees.
         fps: frames per second of the frame numbers.
-        hor_size: the horizontal view's image size.
+        reading: what the horizontal view's people tell of it, whatever its lens
+            (:class:`~xvmatch.cues.ground_registration.HandheldReading`: its image size, their
+            width over height, its horizon).
         views: see above; None: frame by frame.
         sights: per frame, where the top camera sees people on its map
             (:class:`~xvmatch.cues.ground_registration.TopSight`, :func:`top_sights`), or None.
@@ -657,7 +678,7 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
-    hors = _hor_people(boxes, hor_size, hfov)
+    hors = _hor_people(boxes, reading, hfov)
     if views is not None:
         return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights, spread,
                                 slack)
@@ -667,16 +688,16 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
 
 
 def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
-                     fps: float, hor_size: tuple[int, int], views: tuple[Mapping, Mapping],
+                     fps: float, reading: gr.HandheldReading, views: tuple[Mapping, Mapping],
                      sights: list[gr.TopSight] | None, spread: float, slack: float = 1.0
                      ) -> Registered | None:
     """Video mode's run registered on the handheld boxes no border cuts and paired with every
     box under its poses (None where the bottom edge cuts none): a close passer-by's depth, read
     from a cut box's width, can hold a wrong pose. Arguments as :func:`register_and_pair`'s."""
-    cut = [cut_at_bottom(b, hor_size[1]) for b, _ in boxes]
+    cut = [cut_at_bottom(b, reading.image_size[1]) for b, _ in boxes]
     if not any(c.any() for c in cut):
         return None
-    hors = _hor_people(boxes, hor_size, hfov)
+    hors = _hor_people(boxes, reading, hfov)
     whole = [(q[~c], i[~c]) for (q, i), c in zip(hors, cut, strict=True)]
     by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread, slack)
     return _made(order, tops, (hors, by_scale), sizes, views)
@@ -707,7 +728,7 @@ def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, siz
 
 
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
-                hor_size: tuple[int, int], views: tuple[Mapping, Mapping] | None,
+                reading: gr.HandheldReading, views: tuple[Mapping, Mapping] | None,
                 sights: list[gr.TopSight] | None = None, spread: float = gr.RANGE_SPREAD,
                 slack: float = 1.0
                 ) -> tuple[list, list[dict[float, tuple[float, list[gr.FramePose]]]]]:
@@ -715,7 +736,7 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
     motion taken out in video mode): with the ``sights`` and without them, or, without
     sights, the one."""
-    hors = _hor_people(boxes, hor_size, hfov)
+    hors = _hor_people(boxes, reading, hfov)
     return hors, _by_scale(order, tops, hors, sizes, hfov, fps, views is not None, sights,
                            spread, slack)
 
@@ -733,15 +754,11 @@ def _by_scale(order: list[int], tops: list, hors: list, sizes: list, hfov: float
                                      spread, slack))
 
 
-def _hor_people(boxes: list, hor_size: tuple[int, int], hfov: float) -> list:
-    """Per frame, the handheld view's people on its own map (a lens of ``hfov`` degrees) and
-    their ids, from its boxes and ids; people cut by its bottom edge read as far as its pitch,
-    from the horizon its people tell (:func:`~xvmatch.cues.ground_registration.hor_horizon`),
-    lets it see no feet."""
-    every = [b for b, _ in boxes]
-    ratio, horizon = gr.box_width_ratio(every, hor_size), gr.hor_horizon(every, hor_size)
-    return [(gr.hor_ground_points(hb, hor_size, hfov, width_ratio=ratio, horizon=horizon),
-             h_ids) for hb, h_ids in boxes]
+def _hor_people(boxes: list, reading: gr.HandheldReading, hfov: float) -> list:
+    """Per frame, the handheld view's people on its own map (a lens of ``hfov`` degrees, the
+    view's ``reading``: people cut by its bottom edge read as far as its pitch lets it see no
+    feet) and their ids, from its boxes and ids."""
+    return [(reading.points(hb, hfov), h_ids) for hb, h_ids in boxes]
 
 
 def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: float,

@@ -359,7 +359,8 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
                     for f, p, o in zip(order, points, ok, strict=True)]
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
-        choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, size,
+        reading = gr.HandheldReading.of([b for b, _ in boxes], size)
+        choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, reading,
                                            pair, spread=top.spread, slack=options.slack,
                                            workers=options.workers)[0])
     return tuple(choices)
@@ -410,9 +411,8 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
     every = [_boxes(record) for record in hor.values()]
-    ratio, horizon = gr.box_width_ratio(every, size), gr.hor_horizon(every, size)
-    local = {f: gr.hor_ground_points(_boxes(hor[f]), size, hfov, width_ratio=ratio,
-                                     horizon=horizon) for f in order}
+    reading = gr.HandheldReading.of(every, size)
+    local = {f: reading.points(_boxes(hor[f]), hfov) for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
     points = [tops[f][ok[f]] for f in order]
     heights = None if sizes is None else [sizes[f][ok[f]] for f in order]
