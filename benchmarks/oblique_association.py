@@ -117,7 +117,12 @@ import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.spatial_search import associate_sequence
-from xvmatch.datasets.oblique_scenes import BOX_EXTENTS, ObliqueSceneConfig, make_oblique_scene
+from xvmatch.datasets.oblique_scenes import (
+    BOX_EXTENTS,
+    ObliqueSceneConfig,
+    make_oblique_scene,
+    pitch_drifted,
+)
 from xvmatch.formats.box_image_size import (
     ASSUMED,
     CVMHAT_SIZE,
@@ -351,6 +356,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--guess-top-size", action="store_true",
                    help="the from-people rows take the top size guessed from the boxes "
                    "(associate without --top-image-size), not the true one")
+    p.add_argument("--hor-drift", type=float, nargs=2, default=None, metavar=("DEG", "S"),
+                   help="each handheld camera's pitch drifts DEG degrees about its own, over S "
+                   "seconds, on the same scenes (a holder who reframes; e.g. 5 6)")
     p.add_argument("--box-noise", type=float, default=0.0, metavar="SIGMA",
                    help="move each box edge, in both views, by a normal draw of SIGMA times "
                    "the box's height, clipped to the image (default 0: the renders' exact "
@@ -406,6 +414,8 @@ def main(argv: list[str] | None = None) -> int:
     for k in range(args.scenes):
         scene = make_oblique_scene(config, int(args.seconds * config.fps),
                                    np.random.default_rng([args.seed, k]))
+        if args.hor_drift is not None:  # the same scene, its handheld pitch drifting
+            scene = pitch_drifted(scene, *args.hor_drift, np.random.default_rng([args.seed, k, 3]))
         rng = np.random.default_rng([args.seed, k, 1])
         top, top_back = _scrambled(scene.top, rng)
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)

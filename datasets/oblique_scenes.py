@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +85,7 @@ __all__ = [
     "ObliqueSceneConfig",
     "distorted",
     "make_oblique_scene",
+    "pitch_drifted",
     "project_view",
     "write_oblique_scene",
 ]
@@ -305,6 +306,7 @@ class ObliqueScene:
         overlap_target: the fractions the placed groups aim at (``overlap`` unless a group was
             rounded or left out): shared / (shared + top-only) for the top view, shared /
             (shared + horK-only) for view horK.
+        hor_distortion: ``{view: k1}``, each handheld lens's distortion drawn (0: a pinhole).
     """
 
     config: ObliqueSceneConfig
@@ -316,6 +318,7 @@ class ObliqueScene:
     groups: dict[str, np.ndarray]
     overlap: dict[str, float]
     overlap_target: dict[str, float]
+    hor_distortion: dict[str, float] = field(default_factory=dict)
 
     @property
     def n_frames(self) -> int:
@@ -1050,7 +1053,37 @@ def make_oblique_scene(
     return ObliqueScene(
         config=config, people=people, top_cameras=top_cameras, hor_cameras=hor_cameras,
         top=top, hor=hor, groups=groups, overlap=overlap, overlap_target=target_fraction,
+        hor_distortion={name: float(k1[k]) for k, name in enumerate(hor_names)},
     )
+
+
+def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
+                  rng: np.random.Generator) -> ObliqueScene:
+    """The same scene (its people, top view and holders' paths) with each handheld camera's
+    pitch drifting about its own (Ornstein-Uhlenbeck: ``std_deg`` degrees of spread,
+    ``time_s`` seconds of correlation), its boxes projected again: a holder who reframes,
+    looking down at the path and up again, measured against the very scene held steady
+    (a slower wobble drawn with the scene would place its groups anew)."""
+    if not (std_deg >= 0 and time_s > 0):
+        raise ValueError(f"pitch_drifted needs std_deg >= 0 and time_s > 0, got {std_deg}, "
+                         f"{time_s}")
+    decay = np.exp(-1.0 / (scene.config.fps * time_s))
+    spread = np.radians(std_deg)
+    cameras, boxes = {}, {}
+    for k, (name, cams) in enumerate(scene.hor_cameras.items()):
+        noise = rng.standard_normal(len(cams))
+        drift = np.empty(len(cams))
+        drift[0] = spread * noise[0]
+        for t in range(1, len(cams)):
+            drift[t] = decay * drift[t - 1] + spread * np.sqrt(1.0 - decay**2) * noise[t]
+        c, s = np.cos(drift), np.sin(drift)  # about each camera's own x axis (its pitch)
+        cameras[name] = [Camera(K=cam.K, R=np.array([[1.0, 0.0, 0.0], [0.0, ct, -st],
+                                                     [0.0, st, ct]]) @ cam.R, c=cam.c,
+                                width=cam.width, height=cam.height)
+                         for cam, ct, st in zip(cams, c, s, strict=True)]
+        boxes[name] = _project_frames(scene.people, cameras[name], scene.config, hidden=k,
+                                      k1=scene.hor_distortion.get(name, 0.0))
+    return replace(scene, hor_cameras=cameras, hor=boxes)
 
 
 def write_oblique_scene(

@@ -11,6 +11,7 @@ from xvmatch.datasets.oblique_scenes import (
     ObliqueSceneConfig,
     distorted,
     make_oblique_scene,
+    pitch_drifted,
     project_view,
     write_oblique_scene,
 )
@@ -103,6 +104,30 @@ def test_tilting_gimbal_turns_about_the_middle_pitch():
     assert all(np.array_equal(c.c, cams[0].c) for c in cams)  # it tilts where it stands
     with pytest.raises(ValueError, match="top_pitch_rate"):
         ObliqueSceneConfig(top_pitch_rate=(2.0, 1.0))
+
+
+def test_a_drifting_pitch_keeps_the_scene_and_moves_the_handheld_boxes():
+    """:func:`pitch_drifted`: the same people and top view, each handheld camera pitched about
+    its own by a slow drift (degrees of spread as asked, frame-to-frame steps far below a
+    fresh draw's), its boxes projected again; no drift, the very boxes."""
+    scene = _scene(ObliqueSceneConfig(top_pitch=(30.0, 40.0), n_hor=2), 4, 200)
+    drifted = pitch_drifted(scene, 5.0, 6.0, np.random.default_rng(0))
+    assert drifted.people is scene.people and drifted.top is scene.top
+    for name, cams in scene.hor_cameras.items():
+        moved = np.array([_pitch(b) - _pitch(a)
+                          for a, b in zip(cams, drifted.hor_cameras[name], strict=True)])
+        assert 1.0 < np.abs(moved).max() < 25.0
+        assert np.std(np.diff(moved)) < 1.5  # a fresh draw a frame: 7 degrees
+        assert all(np.array_equal(a.c, b.c)
+                   for a, b in zip(cams, drifted.hor_cameras[name], strict=True))
+    assert any(not np.array_equal(drifted.hor["hor1"][f].boxes, scene.hor["hor1"][f].boxes)
+               for f in scene.hor["hor1"])
+    still = pitch_drifted(scene, 0.0, 6.0, np.random.default_rng(0))
+    assert all(np.allclose(still.hor[v][f].boxes, scene.hor[v][f].boxes)
+               and np.array_equal(still.hor[v][f].ids, scene.hor[v][f].ids)
+               for v in scene.hor for f in scene.hor[v])
+    with pytest.raises(ValueError, match="time_s"):
+        pitch_drifted(scene, 5.0, 0.0, np.random.default_rng(0))
 
 
 def test_a_turning_drone_stays_low_and_keeps_the_people_in_view():
