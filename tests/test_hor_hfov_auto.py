@@ -110,7 +110,7 @@ def test_auto_picks_a_wide_lens_and_runs_with_it(scene, video) -> None:
         assert auto.lens.scores[lens] > 1.3 * auto.lens.scores[70.0]
     if auto.lens.measured_from is None:
         assert lens_note(auto.lens) == (f"handheld lens: {lens:.0f} degrees, chosen from its "
-                                        "people (give --hor-hfov DEG if known)")
+                                        "people (--hor-hfov DEG fixes it)")
     given = run_ground_association(scene.top, scene.hor["hor1"],
                                    replace(options, hor_hfov_deg=auto.lens.hfov_deg), frames,
                                    calib)
@@ -156,7 +156,7 @@ def test_the_lens_the_pairs_imply_is_run_and_kept_where_it_keeps_more() -> None:
     assert auto.scale == auto.lens.scales[lens]
     assert lens_note(auto.lens) == (
         f"handheld lens: {lens:.0f} degrees, chosen from its people (measured from the pairs "
-        "of a 110-degree run; give --hor-hfov DEG if known)")
+        "of a 110-degree run; --hor-hfov DEG fixes it)")
     given = run_ground_association(clip.top, clip.hor["hor1"],
                                    replace(options, hor_hfov_deg=lens), frames, calib)
     assert (given.pairs, given.scale, given.lens) == (auto.pairs, auto.scale, None)
@@ -272,7 +272,7 @@ def test_multi_auto_chooses_one_lens_per_view(two_wide) -> None:
     auto = run_multi_ground(views, [0, 0, 0], calib, MultiGroundOptions(sizes, "auto", 10.0),
                             PeopleOptions(), note=said.append)
     assert said == ["handheld lenses, degrees, chosen from their people: hor1 110, hor2 110 "
-                    "(give --hor-hfov DEG if known)"]
+                    "(--hor-hfov DEG fixes them)"]
     given = run_multi_ground(views, [0, 0, 0], calib, MultiGroundOptions(sizes, (110.0, 110.0),
                                                                          10.0), PeopleOptions())
     assert auto.people == given.people and auto.frames == given.frames
@@ -287,7 +287,7 @@ def test_multi_auto_chooses_one_lens_per_view(two_wide) -> None:
     assert measured.registered and measured.why_prior is None
     assert lenses_note([measured]) == (
         "handheld lenses, degrees, chosen from their people: hor1 104 (measured from a "
-        "110-degree run's pairs) (give --hor-hfov DEG if known)")
+        "110-degree run's pairs) (--hor-hfov DEG fixes them)")
     with pytest.raises(ValueError, match="one per handheld view"):
         MultiGroundOptions(sizes, (110.0,), 10.0)
     with pytest.raises(ValueError, match="degrees or 'auto'"):
@@ -305,7 +305,7 @@ def test_multi_auto_from_the_command_line(two_wide, tmp_path, capsys) -> None:
             str(paths["hor2"]), "--top-image-size", "1920x1080", "--image-size", "1920x1080",
             "--fps", "10"]
     said = "xvmatch: note: handheld lenses, degrees, chosen from their people: hor1 {}, hor2 {} " \
-        "(give --hor-hfov DEG if known)"
+        "(--hor-hfov DEG fixes them)"
     # Video mode (both views' ids persist): each lens's run kept the most pairs along the tracks.
     assert main([*base, "--hor-hfov", "auto", "--out", str(tmp_path / "a")]) == 0
     lines = [line for line in capsys.readouterr().err.splitlines() if "handheld lens" in line]
@@ -331,8 +331,8 @@ def test_another_lens_whose_run_as_made_keeps_clearly_more_replaces_the_choice()
     assert (choice.made[110.0] == sum(map(len, auto.pairs.values()))
             > NEAR_TIE * choice.made[90.0])
     assert choice.scales[110.0] == auto.scale
-    assert lens_note(choice) == ("handheld lens: 110 degrees, chosen from its people (give "
-                                 "--hor-hfov DEG if known)")
+    assert lens_note(choice) == ("handheld lens: 110 degrees, chosen from its people "
+                                 "(--hor-hfov DEG fixes it)")
     given = run_ground_association(clip.top, clip.hor["hor1"],
                                    replace(options, hor_hfov_deg=110.0), frames, calib)
     assert (given.pairs, given.scale, given.lens) == (auto.pairs, auto.scale, None)

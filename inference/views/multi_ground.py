@@ -387,8 +387,9 @@ def lenses_note(choices: Sequence[LensChoice]) -> str:
             + ("" if choice.measured_from is None else
                f" (measured from a {choice.measured_from:.0f}-degree run's pairs)")
             for k, choice in enumerate(choices, 1)]
-    return (f"handheld lenses, degrees, chosen from their people: {', '.join(said)} (give "
-            "--hor-hfov DEG if known)")
+    how = ("give --hor-hfov DEG if known" if any(c.why_prior is not None for c in choices)
+           else "--hor-hfov DEG fixes them")
+    return f"handheld lenses, degrees, chosen from their people: {', '.join(said)} ({how})"
 
 
 def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray],
