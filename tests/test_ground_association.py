@@ -67,6 +67,10 @@ def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
                                      calib)
         scores[consensus] = _cvidf1(scene, run, frames, backs)
     assert run.summary.startswith("top view: oblique, tilt")
+    spread = calib.tilt_std_deg  # said to a tenth under a degree, not "+- 0"
+    said = f"{spread:.1f}" if spread < 0.95 else f"{spread:.0f}"
+    assert f"tilt {calib.tilt_deg:.0f} +- {said} degrees" in run.summary
+    assert "+- 0 degrees" not in run.summary
     # Measured 95.7 frame by frame and 100.0 with the consensus along the tracks (71.3 and
     # 94.9 with everyone read at 1.72 m).
     assert scores[False] > 80.0

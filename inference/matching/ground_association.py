@@ -325,9 +325,11 @@ def _summary(calib: PeopleCalibration, tilt: TiltTrack | None = None) -> str:
                 f"{tilt.camera_height:.0f} m up (from its people, a tilt per "
                 f"{WINDOW_S:g} s); the horizontal camera registered on its ground map frame by "
                 "frame")
-    return (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- {calib.tilt_std_deg:.0f} degrees, "
-            f"about {calib.camera_height:.0f} m up (from its people); the horizontal camera "
-            "registered on its ground map frame by frame")
+    spread = calib.tilt_std_deg  # under a degree to a tenth: "+- 0" reads as no measure
+    return (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- "
+            f"{spread:.{1 if spread < 0.95 else 0}f} degrees, about "
+            f"{calib.camera_height:.0f} m up (from its people); the horizontal camera registered "
+            "on its ground map frame by frame")
 
 
 FIXES_LENS = "--hor-hfov DEG fixes it"
