@@ -99,6 +99,7 @@ __all__ = [
     "fewer_sights",
     "lens_note",
     "miss_spread",
+    "oblique_note",
     "register_and_pair",
     "run_along_tracks",
     "run_ground_association",
@@ -325,11 +326,17 @@ def _summary(calib: PeopleCalibration, tilt: TiltTrack | None = None) -> str:
                 f"{tilt.camera_height:.0f} m up (from its people, a tilt per "
                 f"{WINDOW_S:g} s); the horizontal camera registered on its ground map frame by "
                 "frame")
-    spread = calib.tilt_std_deg  # under a degree to a tenth: "+- 0" reads as no measure
+    return (f"{oblique_note(calib)}; the horizontal camera registered on its ground map frame "
+            "by frame")
+
+
+def oblique_note(calib: PeopleCalibration) -> str:
+    """What a top view calibrated from its people is: its tilt, the tilt's spread (to a tenth
+    under a degree: "+- 0" reads as no measure) and its height."""
+    spread = calib.tilt_std_deg
     return (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- "
-            f"{spread:.{1 if spread < 0.95 else 0}f} degrees, about "
-            f"{calib.camera_height:.0f} m up (from its people); the horizontal camera registered "
-            "on its ground map frame by frame")
+            f"{spread:.{1 if spread < 0.95 else 0}f} degrees, about {calib.camera_height:.0f} m "
+            "up (from its people)")
 
 
 FIXES_LENS = "--hor-hfov DEG fixes it"

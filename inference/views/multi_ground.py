@@ -68,6 +68,7 @@ from xvmatch.inference.matching.ground_association import (
     TOP_VIEWS,
     choose_along_tracks,
     miss_spread,
+    oblique_note,
     run_along_tracks,
     tilt_note,
     tilting_top,
@@ -233,11 +234,9 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
     if "auto" in offsets:
         raise ValueError("--offset auto estimates the offsets with the nadir search; with an "
                          "oblique top view give them as frame numbers (or 0)")
-    return calib, (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- {calib.tilt_std_deg:.0f} "
-                   f"degrees, about {calib.camera_height:.0f} m up (from its people); each "
-                   "handheld view registered on its ground map frame by frame and the views "
-                   "joined there (boxes only: --model, its images and --camera-id not used)"
-                   f"{guessed}")
+    return calib, (f"{oblique_note(calib)}; each handheld view registered on its ground map "
+                   "frame by frame and the views joined there (boxes only: --model, its images "
+                   f"and --camera-id not used){guessed}")
 
 
 def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int, int], str]],
