@@ -336,3 +336,21 @@ def test_another_lens_whose_run_as_made_keeps_clearly_more_replaces_the_choice()
     given = run_ground_association(clip.top, clip.hor["hor1"],
                                    replace(options, hor_hfov_deg=110.0), frames, calib)
     assert (given.pairs, given.scale, given.lens) == (auto.pairs, auto.scale, None)
+
+
+def test_a_run_with_the_sights_replaces_the_lens_only_where_the_runs_without_them_tell_one(
+) -> None:
+    """:func:`replacing`: a lens whose run with the top camera's sights keeps more than a near
+    tie of the chosen one's replaces it where its run without them joined two people, but not
+    where every lens's run without them kept as many pairs (no lens told: two-person clips)."""
+    from xvmatch.inference.matching.ground_association import replacing
+
+    kept = {70.0: 75, 60.0: 75, 90.0: 75, 110.0: 75}
+    people = dict.fromkeys(kept, 2)
+    made = {70.0: 75, 60.0: 75, 90.0: 75, 110.0: 119}
+    assert replacing(70.0, kept, people, made) == 70.0
+    told = {**kept, 110.0: 80}
+    assert replacing(70.0, told, people, made) == 110.0
+    assert replacing(70.0, told, {**people, 110.0: 1}, made) == 70.0
+    assert replacing(70.0, told, people, {**made, 110.0: 82}) == 70.0  # a near tie
+    assert replacing(70.0, told, people, {**made, 90.0: 90}) == 110.0  # 119 > 1.1 x 90

@@ -101,6 +101,7 @@ __all__ = [
     "miss_spread",
     "oblique_note",
     "register_and_pair",
+    "replacing",
     "run_along_tracks",
     "run_ground_association",
     "run_top_view",
@@ -478,7 +479,8 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     chosen one's where it keeps more than :data:`~xvmatch.cues.hor_lens.NEAR_TIE` times its
     pairs, where its run without them joined :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people
     (a 65 degree lens: without the sights 110 degrees kept 122 pair-frames, a third wrong, 70
-    kept 51, all right; with them, 130 and 190). Each compared as it would run: with the
+    kept 51, all right; with them, 130 and 190), and none where the runs without them all keep
+    as many pairs (:func:`replacing`). Each compared as it would run: with the
     sights alone a 65 degree clip's 60-degree run kept nothing, so every other lens's wrong run
     replaced the one that, without them, kept 200 pair-frames of nine people, right. Then the
     lens each run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_fit`: a measurement,
@@ -510,11 +512,8 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     # that keeps more), the chosen one's first
     made = {h: each[h].made for h in (hfov, *(h for h in both if h != hfov))}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
-    best, run, run_kept = hfov, made[hfov], made_kept[hfov]
-    for h, other in made.items():  # another lens's run needs more than a near tie, and
-        # pairs of two people or more without the sights (which steady any lens's poses)
-        if people[h] >= MIN_PEOPLE and made_kept[h] > NEAR_TIE * run_kept:
-            best, run, run_kept = h, other, made_kept[h]
+    best = replacing(hfov, kept, people, made_kept)
+    run, run_kept = made[best], made_kept[best]
 
     def run_at(lens: float) -> Registered:  # a measured lens's run, as register_and_pair's
         return run_along_tracks(order, tops, _hor_people(boxes, reading, lens), sizes, lens,
@@ -546,6 +545,27 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                          scores={**choice.scores, best: float(run_kept)},
                          people={**choice.people, best: _count(run[2])[1]})
     return choice, run
+
+
+def replacing(hfov: float, kept: Mapping[float, int], people: Mapping[float, int],
+              made_kept: Mapping[float, int]) -> float:
+    """The lens whose run as made (with the top camera's sights) replaces the chosen ``hfov``'s
+    in :func:`choose_along_tracks`: in the order of ``made_kept`` (pairs each lens's run as
+    made keeps), the first to keep more than :data:`~xvmatch.cues.hor_lens.NEAR_TIE` times the
+    best before it whose run without the sights joined
+    :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people (``kept``, ``people``: those runs' pairs
+    and people); none where the runs without the sights all keep as many pairs, so tell no
+    lens: on two-person renders with the handheld pitch drifting every lens kept 75-79
+    pair-frames without them and 110 degrees' run with them 91-119, all wrong (still drone s0
+    and s1, scene 10: 0.000, 1.000 when kept; docs/notes/oblique_top_camera.md)."""
+    best = hfov
+    if len(set(kept.values())) <= 1:
+        return best
+    for h, n in made_kept.items():  # more than a near tie, and pairs of two people or more
+        # without the sights (which steady any lens's poses)
+        if people[h] >= MIN_PEOPLE and n > NEAR_TIE * made_kept[best]:
+            best = h
+    return best
 
 
 MIN_TIE_TOLD = 3
