@@ -72,6 +72,7 @@ import numpy as np
 from xvmatch.datasets.box_scene import (
     PeopleState,
     SceneConfig,
+    _ou_step,
     _visible_parts,
     simulate_walks,
 )
@@ -1067,7 +1068,6 @@ def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
     if not (std_deg >= 0 and time_s > 0):
         raise ValueError(f"pitch_drifted needs std_deg >= 0 and time_s > 0, got {std_deg}, "
                          f"{time_s}")
-    decay = np.exp(-1.0 / (scene.config.fps * time_s))
     spread = np.radians(std_deg)
     cameras, boxes = {}, {}
     for k, (name, cams) in enumerate(scene.hor_cameras.items()):
@@ -1075,7 +1075,7 @@ def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
         drift = np.empty(len(cams))
         drift[0] = spread * noise[0]
         for t in range(1, len(cams)):
-            drift[t] = decay * drift[t - 1] + spread * np.sqrt(1.0 - decay**2) * noise[t]
+            drift[t] = _ou_step(drift[t - 1], spread, time_s, 1.0 / scene.config.fps, noise[t])
         c, s = np.cos(drift), np.sin(drift)  # about each camera's own x axis (its pitch)
         cameras[name] = [Camera(K=cam.K, R=np.array([[1.0, 0.0, 0.0], [0.0, ct, -st],
                                                      [0.0, st, ct]]) @ cam.R, c=cam.c,

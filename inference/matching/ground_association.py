@@ -501,7 +501,6 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     each = dict(zip(lenses, _each_lens(partial(
         _lens_runs, order, tops, boxes, sizes, fps=fps, reading=reading, views=views,
         sights=sights, spread=spread, slack=slack), lenses, workers), strict=True))
-    both = {h: runs.scale_runs for h, runs in each.items()}
     scales = {h: runs.scale for h, runs in each.items()}
     pairs = {h: runs.pairs for h, runs in each.items()}
     kept, people = _kept(pairs)
@@ -510,7 +509,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
                         along_tracks=True, people=people)
     # each lens's run as register_and_pair makes it (with the sights, or without them where
     # that keeps more), the chosen one's first
-    made = {h: each[h].made for h in (hfov, *(h for h in both if h != hfov))}
+    made = {h: each[h].made for h in (hfov, *(h for h in each if h != hfov))}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
     best = replacing(hfov, kept, people, made_kept)
     run, run_kept = made[best], made_kept[best]
@@ -521,7 +520,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
 
     measured_from, implied_by, measured = None, {}, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
-        fit = implied_by[source] = _implied(order, tops, both[source][0], sizes, source,
+        fit = implied_by[source] = _implied(order, tops, each[source].scale_runs[0], sizes, source,
                                             made[source][2])
         implied = None if fit is None else fit[0]
         if (implied is None or implied in measured or abs(implied - source) < MIN_REMEASURE_DEG
