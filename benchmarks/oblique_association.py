@@ -363,6 +363,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="move each box edge, in both views, by a normal draw of SIGMA times "
                    "the box's height, clipped to the image (default 0: the renders' exact "
                    "boxes)")
+    p.add_argument("--camera-id", action="store_true",
+                   help="the from-people rows are told the top-view id of the handheld camera's "
+                   "holder, as associate --camera-id ID (the camera placed where the top view "
+                   "sees them)")
     p.add_argument("--no-top-sizes", action="store_true",
                    help="read every handheld person at 1.72 m, not at their top-view partner's "
                    "height (before)")
@@ -425,6 +429,9 @@ def main(argv: list[str] | None = None) -> int:
                                   clip=args.box_extent == "visible") for v, c in
                         ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
+        holder = int(scene.groups["holders"][0])  # its scrambled id, where the top view has one
+        camera_id = next((a for a, b in top_back.items() if b == holder), None) if \
+            args.camera_id else None
         truth = {f: {(int(a), int(b)) for a in top[f].ids for b in hor[f].ids
                      if top_back[int(a)] == hor_back[int(b)]} for f in frames}
         hor_cam = scene.hor_cameras["hor1"][0]
@@ -462,7 +469,7 @@ def main(argv: list[str] | None = None) -> int:
             people_hor = ground_path_hor_size(hor, guess_image_size(hor, past) or hor_size,
                                               UNKNOWN) or hor_size
         options = GroundAssociationOptions(top_size, people_hor, fps=people_fps, consensus=False,
-                                           top_sizes=not args.no_top_sizes)
+                                           top_sizes=not args.no_top_sizes, camera_id=camera_id)
         try:  # frame by frame the calibration reads no ids; the consensus rows, the tracks
             calib = top_calibration(top, top_size)
             frame_calib = top_calibration(top, top_size, tracks=False)

@@ -213,6 +213,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hor-hfov", type=float, nargs=2, default=(60.0, 80.0), metavar=("LO", "HI"),
                    help="the handheld cameras' horizontal field of view in the renders, LO-HI "
                    "degrees (default 60 80)")
+    p.add_argument("--camera-id", action="store_true",
+                   help="the runs are told each handheld camera's holder's top-view id, as "
+                   "associate(-multi) --camera-id (the camera sought near where the top view "
+                   "sees them)")
     add_drone_arguments(p)
     args = p.parse_args(argv)
     config = drone_config(args, n_hor=2, hor_hfov=tuple(args.hor_hfov))
@@ -236,6 +240,10 @@ def main(argv: list[str] | None = None) -> int:
                               for j in views[b][f].ids if backs[a][int(i)] == backs[b][int(j)]}
                           for f in frames if f in views[a] and f in views[b]}
                  for a, b in combinations(range(3), 2)}
+        holders = [next((a for a, b in backs[0].items() if b == int(h)), None)
+                   if args.camera_id else None for h in scene.groups["holders"]]
+        wearers = tuple({f: int(np.flatnonzero(r.ids == h)[0]) for f, r in views[0].items()
+                         if h in r.ids} for h in holders) if args.camera_id else None
         top_size = scene.top_cameras[0].image_size
         hor_sizes = tuple(tuple(scene.hor_cameras[f"hor{k}"][0].image_size) for k in (1, 2))
         try:  # in frame mode the calibration follows people by their boxes, not the ids
@@ -248,10 +256,11 @@ def main(argv: list[str] | None = None) -> int:
         for name, video in (("per view", False), ("per view, video mode", True)):
             per_view = [untracked(run_ground_association(
                 tracked[0], tracked[k], GroundAssociationOptions(
-                    top_size, hor_sizes[k - 1], lens, fps=config.fps, consensus=video),
+                    top_size, hor_sizes[k - 1], lens, fps=config.fps, consensus=video,
+                    camera_id=holders[k - 1]),
                 calibration=calibs[video]).pairs, args.switch_every) for k in (1, 2)]
             preds[name] = joined_pairs(per_view, frames)
-        options = MultiGroundOptions(hor_sizes, lens, fps=config.fps)
+        options = MultiGroundOptions(hor_sizes, lens, fps=config.fps, wearers=wearers)
         for name, tracks, video in (("three views", False, False),
                                     ("three views, --tracks", True, False),
                                     ("three views, video mode", False, True),

@@ -4,7 +4,9 @@ Each view's people are put on its own ground map (metres, from its calibration: 
 :class:`~xvmatch.geometry.people_calibration.PeopleCalibration`, the horizontal view by the box
 heights of people about 1.72 m tall, as the CVMHAT method reads distances). The horizontal
 camera's pose on the top map, its position ``c`` and heading ``theta``, is unknown and changes as
-its holder walks and turns; it is *not* assumed to be a visible person. Per frame:
+its holder walks and turns; it is *not* assumed to be a visible person (where the user names
+the holder's top-view id, ``--camera-id``, it is sought near where the top view maps them,
+:data:`HOLDER_RADIUS`). Per frame:
 
 * **hypotheses**: every (top person i, horizontal person j, heading) triple puts j on i, which
   fixes ``c``; a hypothesis scores the horizontal people that land within :data:`RADIUS` of a
@@ -72,6 +74,7 @@ from xvmatch.geometry.people_calibration import (
 )
 
 __all__ = [
+    "HOLDER_RADIUS",
     "KEEP",
     "MAP_SCALES",
     "RADIUS",
@@ -81,6 +84,7 @@ __all__ = [
     "FramePose",
     "HandheldReading",
     "TopSight",
+    "anchored_poses",
     "associate_on_ground",
     "box_width_ratio",
     "carried",
@@ -156,6 +160,10 @@ _STEP_M = 1.0
 
 _STEP_DEG = 30.0
 """Degrees per second it may turn at no cost."""
+
+HOLDER_RADIUS = 2.0
+"""Metres on the top map within which a camera told where it stands (its holder seen,
+``--camera-id``) is sought: the holder's point errs, and so does the handheld map's scale."""
 
 _JUMP_COST = 2.0
 """Score lost per standard step beyond those (a frame's pose can jump where its evidence is
@@ -374,10 +382,12 @@ def pose_hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float,
 
 
 def _hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float, sizes: np.ndarray | None,
-                sight: TopSight | None, plain: bool, spread: float = RANGE_SPREAD
-                ) -> list[tuple[np.ndarray, np.ndarray]]:
+                sight: TopSight | None, plain: bool, spread: float = RANGE_SPREAD,
+                at: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """:func:`pose_hypotheses` with the ``sight``, then, with ``plain`` and a sight, without
-    it: the poses' terms are computed once for both (the sight only adds its count)."""
+    it: the poses' terms are computed once for both (the sight only adds its count). ``at``
+    ``(2,)``: the camera stands about there (its holder seen, ``--camera-id``): the poses
+    standing there (:func:`anchored_poses`) and those within :data:`HOLDER_RADIUS` of it."""
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(top) or not len(hor):
         return [(np.zeros((0, 3)), np.zeros(0))] * (2 if plain and sight is not None else 1)
@@ -395,9 +405,18 @@ def _hypotheses(top: np.ndarray, hor: np.ndarray, hfov_deg: float, sizes: np.nda
     cy = np.ascontiguousarray(centres[:, 1].reshape(_HEADINGS, n * m))
     grown = turned[:, :, None, :] * size[None, None, :, None]  # (H, M, N, 2)
     poses = np.column_stack([centres, np.repeat(headings, n * m)])
+    scores = _scores(cx, cy, grown, turned, top, hor, headings, hfov_deg, sight,
+                     plain and sight is not None, spread)
+    if at is not None:  # the poses near where the camera stands, and those standing there
+        at = np.asarray(at, float).reshape(2)
+        near = np.hypot(poses[:, 0] - at[0], poses[:, 1] - at[1]) <= HOLDER_RADIUS
+        fixed = anchored_poses(top, hor, at)
+        marks = _pose_scores(fixed, top, hor, hfov_deg, sizes, sight, plain and sight is not None,
+                             spread)
+        poses = np.concatenate([fixed, poses[near]])
+        scores = [np.concatenate([m, s[near]]) for m, s in zip(marks, scores, strict=True)]
     out = []
-    for score in _scores(cx, cy, grown, turned, top, hor, headings, hfov_deg, sight,
-                         plain and sight is not None, spread):
+    for score in scores:
         order = _best_first(score, _FIRST)
         keep = _distinct(poses, order)
         if len(keep) < KEEP and len(order) < len(score):  # the prefix ran out: the whole order
@@ -436,12 +455,33 @@ def score_poses(poses: np.ndarray, top: np.ndarray, hor: np.ndarray, hfov_deg: f
     top, hor = np.asarray(top, float).reshape(-1, 2), np.asarray(hor, float).reshape(-1, 2)
     if not len(poses) or not len(top) or not len(hor):
         return np.zeros(len(poses))
+    return _pose_scores(poses, top, hor, hfov_deg, sizes, sight, spread=spread)[0]
+
+
+def _pose_scores(poses: np.ndarray, top: np.ndarray, hor: np.ndarray, hfov_deg: float,
+                 sizes: np.ndarray | None, sight: TopSight | None, plain: bool = False,
+                 spread: float = RANGE_SPREAD) -> list[np.ndarray]:
+    """:func:`score_poses` on arrays of its shapes (none empty), with the ``sight``, then,
+    with ``plain``, without it (:func:`_scores`)."""
     size = np.ones(len(top)) if sizes is None else np.asarray(sizes, float).reshape(-1)
     headings = np.ascontiguousarray(poses[:, 2])
     turned = np.einsum("hab,mb->hma", _rotations(headings), hor)  # (K, M, 2)
     grown = turned[:, :, None, :] * size[None, None, :, None]  # (K, M, N, 2)
     return _scores(np.ascontiguousarray(poses[:, :1]), np.ascontiguousarray(poses[:, 1:2]),
-                   grown, turned, top, hor, headings, hfov_deg, sight, spread=spread)[0]
+                   grown, turned, top, hor, headings, hfov_deg, sight, plain, spread)
+
+
+def anchored_poses(top: np.ndarray, hor: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``(N M, 3)`` poses of a horizontal camera standing at ``at`` ``(2,)`` on the top map
+    (where the top view sees its holder, ``--camera-id``), one per pair of a top person ``i``
+    ``(N, 2)`` and a horizontal one ``j`` ``(M, 2)``: the heading that puts ``j`` on ``i``'s
+    bearing (a bearing read from a box holds where its distance errs), in ``[0, 2 pi)``,
+    rounded to :data:`_DIGITS` (the same poses on every CPU)."""
+    at = np.asarray(at, float).reshape(2)
+    to_top = np.arctan2(top[:, 1] - at[1], top[:, 0] - at[0])
+    of_hor = np.arctan2(hor[:, 1], hor[:, 0])
+    headings = np.round(np.mod(to_top[:, None] - of_hor[None, :], 2 * np.pi), _DIGITS)
+    return np.column_stack([np.tile(at, (headings.size, 1)), headings.reshape(-1)])
 
 
 def _best_first(score: np.ndarray, count: int) -> np.ndarray:
@@ -666,7 +706,8 @@ def _moved_on(poses: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
 
 def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarray],
             hors: list[np.ndarray], hfov_deg: float, sizes: list, sights: list,
-            motions: list[np.ndarray | None] | None = None, spread: float = RANGE_SPREAD
+            motions: list[np.ndarray | None] | None = None, spread: float = RANGE_SPREAD,
+            holders: Sequence[np.ndarray | None] | None = None
             ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each frame's hypotheses ``(poses, scores)``, then the :data:`CARRY` best of each
     neighbour's carried onto its map (by the top map's ``motions``, :func:`map_motion`) and
@@ -674,7 +715,9 @@ def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarr
     kept before left out: a pose that leads on either side of a frame where it fell out of
     the :data:`KEEP` best (near-duplicates of others kept in its place) stays on offer there,
     so the choice over time does not hinge on which of near-equal poses one frame kept. All
-    24 carried, not 8: more clips found, but more lost (docs/notes/oblique_top_camera.md)."""
+    24 carried, not 8: more clips found, but more lost (docs/notes/oblique_top_camera.md).
+    ``holders``: per frame, where the camera stands (:func:`anchored_poses`) or None; into a
+    frame where it stands, only the poses within :data:`HOLDER_RADIUS` of there are carried."""
     out = []
     for k, (poses, scores) in enumerate(candidates):
         near = []
@@ -688,6 +731,8 @@ def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarr
             out.append((poses, scores))
             continue
         extra = np.concatenate(near)
+        if holders is not None and holders[k] is not None:  # near where it stands
+            extra = extra[np.hypot(*(extra[:, :2] - holders[k]).T) <= HOLDER_RADIUS]
         extra = extra[_apart(extra, poses).all(axis=1)]  # this frame's own stand for them
         marks = score_poses(extra, tops[k], hors[k], hfov_deg, sizes[k], sights[k], spread)
         keep = _distinct(extra, np.argsort(-marks, kind="stable"), limit=len(extra))
@@ -752,32 +797,36 @@ def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nda
                     hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
                     top_sizes: list[np.ndarray] | None = None,
                     sights: list[TopSight] | None = None, spread: float = RANGE_SPREAD,
-                    slack: float = 1.0) -> dict[float, tuple[float, list[FramePose]]]:
+                    slack: float = 1.0, holders: Sequence[np.ndarray | None] | None = None
+                    ) -> dict[float, tuple[float, list[FramePose]]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES`: ``{scale: (total score, poses)}``, the poses on the
     top map multiplied by ``scale``. Arguments as :func:`register_with_scale`'s."""
     return _register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes, sights,
-                            plain=False, spread=spread, slack=slack)[0]
+                            plain=False, spread=spread, slack=slack, holders=holders)[0]
 
 
 def register_scales_twice(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                           hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None,
                           top_sizes: list[np.ndarray] | None, sights: list[TopSight],
-                          spread: float = RANGE_SPREAD, slack: float = 1.0
+                          spread: float = RANGE_SPREAD, slack: float = 1.0,
+                          holders: Sequence[np.ndarray | None] | None = None
                           ) -> tuple[dict[float, tuple[float, list[FramePose]]],
                                      dict[float, tuple[float, list[FramePose]]]]:
     """:func:`register_scales` with the top camera's ``sights`` and without them, as two calls
     give them (bit for bit), each frame's pose terms computed once for both: video mode
     compares the two runs of every lens."""
     made, plain = _register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes,
-                                   sights, plain=True, spread=spread, slack=slack)
+                                   sights, plain=True, spread=spread, slack=slack,
+                                   holders=holders)
     return made, plain
 
 
 def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                      hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None,
                      top_sizes: list[np.ndarray] | None, sights: list[TopSight] | None,
-                     plain: bool, spread: float = RANGE_SPREAD, slack: float = 1.0
+                     plain: bool, spread: float = RANGE_SPREAD, slack: float = 1.0,
+                     holders: Sequence[np.ndarray | None] | None = None
                      ) -> list[dict[float, tuple[float, list[FramePose]]]]:
     """:func:`register_scales` with the ``sights``, then, with ``plain`` and sights, without
     them."""
@@ -789,8 +838,11 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
     for scale in MAP_SCALES:
         scaled = [scale * np.asarray(p, float) for p in tops]
         seen = [None if v is None else v.scaled(scale) for v in sights or [None] * len(tops)]
-        each = [_hypotheses(p, q, hfov_deg, z, v, twice, spread)
-                for p, q, z, v in zip(scaled, hors, sizes, seen, strict=True)]
+        stands = None if holders is None else [None if h is None else scale * np.asarray(
+            h, float) for h in holders]
+        each = [_hypotheses(p, q, hfov_deg, z, v, twice, spread, a)
+                for p, q, z, v, a in zip(scaled, hors, sizes, seen, stands or [None] * len(tops),
+                                         strict=True)]
         # With the map's motion out, and (where any was read) with it left in: a static
         # camera's small crowd walking together reads as motion; the better-explained kept.
         variants = ([[None if m is None else np.array([scale * m[0], scale * m[1], m[2]])
@@ -800,8 +852,8 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
             looks = seen if k == 0 else [None] * len(tops)
             for motions in variants:
                 poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
-                                                          looks, motions, spread), fps, motions,
-                                          slack)
+                                                          looks, motions, spread, stands),
+                                          fps, motions, slack)
                 run = (round(sum(p.score for p in poses), 6), poses)
                 if scale not in kept or run[0] > kept[scale][0]:
                     kept[scale] = run
@@ -812,7 +864,8 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
                         hfov_deg: float, fps: float, top_ids: list[np.ndarray] | None = None,
                         top_sizes: list[np.ndarray] | None = None,
                         sights: list[TopSight] | None = None, spread: float = RANGE_SPREAD,
-                        slack: float = 1.0) -> tuple[float, list[FramePose]]:
+                        slack: float = 1.0, holders: Sequence[np.ndarray | None] | None = None
+                        ) -> tuple[float, list[FramePose]]:
     """The horizontal camera's pose per frame (:func:`register_sequence`) on the top map
     scaled by each of :data:`MAP_SCALES` (:func:`register_scales`), and the scale kept: the two
     maps' metres come from two estimates (the top camera's height from its people, each
@@ -841,11 +894,15 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
             :func:`pose_hypotheses`), or None.
         spread: see :func:`pose_hypotheses`.
         slack: see :func:`register_sequence`.
+        holders: per frame, where the top view sees the horizontal camera's holder on its map
+            (``--camera-id``; their box's ground point, ``(2,)``) or None (not seen): the
+            camera is sought within :data:`HOLDER_RADIUS` of there, and at it with each
+            heading a pair of people gives (:func:`anchored_poses`); None: no holder told.
     Returns:
         ``(scale, poses)``: the poses lie on the top map multiplied by ``scale``.
     """
     runs = register_scales(frames, tops, hors, hfov_deg, fps, top_ids, top_sizes, sights,
-                           spread, slack)
+                           spread, slack, holders)
     best = margin_scale(runs)
     return best, runs[best][1]
 

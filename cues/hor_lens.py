@@ -306,7 +306,8 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
                     prior_deg: float = PRIOR_HFOV_DEG, margin: float = LENS_MARGIN,
                     max_frames: int = MAX_FRAMES,
                     sizes: list[np.ndarray] | None = None,
-                    spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> LensChoice:
+                    spread: float = gr.RANGE_SPREAD, slack: float = 1.0,
+                    holders: list[np.ndarray | None] | None = None) -> LensChoice:
     """The horizontal camera's field of view that best registers its people on the top map
     (module docstring).
 
@@ -330,6 +331,8 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
             (:func:`~xvmatch.cues.ground_registration.pose_hypotheses`).
         slack: the registration's free walk and turn, as
             :func:`~xvmatch.cues.ground_registration.register_sequence`'s.
+        holders: per frame, where the camera stands on the top map, or None
+            (:func:`~xvmatch.cues.ground_registration.register_with_scale`'s).
     Returns:
         The choice; the prior when no frame has people in both views.
     """
@@ -348,6 +351,7 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
     sub_boxes = [np.asarray(hor_boxes[k], float).reshape(-1, 4) for k in keep]
     sub_sizes = None if sizes is None else [np.asarray(sizes[k], float).reshape(-1)
                                             for k in keep]
+    sub_holders = None if holders is None else [holders[k] for k in keep]
     scores: dict[float, float] = {}
     scales: dict[float, float] = {}
     chance: dict[float, float] = {}
@@ -355,11 +359,12 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
     for hfov in lenses:
         hors = [reading.points(b, hfov) for b in sub_boxes]
         scale, poses = gr.register_with_scale(sub, sub_tops, hors, hfov, fps,
-                                              top_sizes=sub_sizes, spread=spread, slack=slack)
+                                              top_sizes=sub_sizes, spread=spread, slack=slack,
+                                              holders=sub_holders)
         scores[hfov] = round(pairing_score([scale * t for t in sub_tops], hors, sub, poses,
                                            sub_sizes), _DIGITS)
         chance[hfov] = round(chance_score(sub, sub_tops, hors, hfov, fps, sub_sizes, spread,
-                                          slack), _DIGITS)
+                                          slack, sub_holders), _DIGITS)
         scales[hfov] = scale
     return LensChoice(hfov_deg=_pick(scores, chance, float(prior_deg), margin), scores=scores,
                       scales=scales, frames=sub, chance=chance)
@@ -367,17 +372,19 @@ def choose_hor_hfov(frames: list[int], tops: list[np.ndarray], hor_boxes: list[n
 
 def chance_score(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
                  hfov_deg: float, fps: float, sizes: list[np.ndarray] | None = None,
-                 spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> float:
+                 spread: float = gr.RANGE_SPREAD, slack: float = 1.0,
+                 holders: list[np.ndarray | None] | None = None) -> float:
     """The pairing score (:func:`pairing_score`) of the same registration with the horizontal
     view's ground maps mirrored (left and right swapped): what a lens pairs by chance. The
     mirrored crowd keeps its distances, its spread and the squeeze of the lens, but not its
     arrangement, so it matches the top map no better than chance, whether people walk or
     stand. A wide lens squeezes the handheld map and pairs more people by chance alone; the
     choice compares the lenses on what they pair above that (``sizes``: as
-    :func:`pairing_score`'s; ``spread`` and ``slack``: as the registration's)."""
+    :func:`pairing_score`'s; ``spread``, ``slack`` and ``holders``: as the registration's)."""
     mirrored = [np.asarray(h, float).reshape(-1, 2) * np.array([1.0, -1.0]) for h in hors]
     scale, poses = gr.register_with_scale(frames, tops, mirrored, hfov_deg, fps,
-                                          top_sizes=sizes, spread=spread, slack=slack)
+                                          top_sizes=sizes, spread=spread, slack=slack,
+                                          holders=holders)
     return pairing_score([scale * t for t in tops], mirrored, frames, poses, sizes)
 
 

@@ -25,14 +25,20 @@ def _in_view(local: np.ndarray, hfov: float = 70.0) -> np.ndarray:
                                    < np.radians(hfov) / 2)
 
 
-@settings(max_examples=20, deadline=None)
-@given(seed=st.integers(0, 10_000), heading=st.floats(-np.pi, np.pi))
-def test_pose_recovered_from_people_alone(seed: int, heading: float) -> None:
+def _crowd_seen(seed: int, heading: float) -> tuple:
+    """Nine top people, a camera about 12 m off looking along ``heading`` at them, and what
+    it sees: ``(rng, top, centre, local, seen)``, ``local`` the people in its frame."""
     rng = np.random.default_rng(seed)
     top = rng.uniform(-8, 8, (9, 2))
     centre = -12.0 * np.array([np.cos(heading), np.sin(heading)]) + rng.normal(0, 1, 2)
     local = _view(top, centre, heading)
-    seen = _in_view(local)
+    return rng, top, centre, local, _in_view(local)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), heading=st.floats(-np.pi, np.pi))
+def test_pose_recovered_from_people_alone(seed: int, heading: float) -> None:
+    rng, top, centre, local, seen = _crowd_seen(seed, heading)
     if seen.sum() < 4:
         return
     hor = local[seen] + rng.normal(0, 0.1, (int(seen.sum()), 2))
@@ -655,3 +661,34 @@ def test_registered_with_and_without_the_sights_at_once_as_one_by_one() -> None:
                 == [(p.frame, p.centre.tolist(), p.heading, p.score) for p in once[scale][1]]
     # the sight weighs here: some scale's total differs with it
     assert any(made[s][0] != plain[s][0] for s in made)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), heading=st.floats(-np.pi, np.pi))
+def test_a_camera_standing_where_its_holder_is_seen_is_found_by_its_heading(
+        seed: int, heading: float) -> None:
+    """Told where the camera stands (``--camera-id``): the poses standing there, one heading
+    per pair of people, the true one among them; every hypothesis within
+    :data:`HOLDER_RADIUS` of there, the best the true pose; and a registration over frames
+    keeps the camera near each frame's holder (scaled with the map), free where not told."""
+    _, top, centre, local, seen = _crowd_seen(seed, heading)
+    if seen.sum() < 3:
+        return
+    hor = local[seen]
+    poses = gr.anchored_poses(top, hor, centre)
+    assert poses.shape == (len(top) * len(hor), 3)
+    assert np.array_equal(poses[:, :2], np.tile(centre, (len(poses), 1)))
+    assert ((poses[:, 2] >= 0) & (poses[:, 2] <= 2 * np.pi)).all()
+    assert np.abs(gr._wrap(poses[:, 2] - heading)).min() < 1e-6
+    (best, scores), = gr._hypotheses(top, hor, 70.0, None, None, False, at=centre)
+    assert (np.hypot(*(best[:, :2] - centre).T) <= gr.HOLDER_RADIUS).all()
+    assert np.allclose(best[0, :2], centre) and abs(gr._wrap(best[0, 2] - heading)) < 1e-6
+    assert np.array_equal(scores, gr.score_poses(best, top, hor, 70.0))  # scored as any pose
+    far = centre + np.array([3 * gr.HOLDER_RADIUS, 0.0])  # told wrong: nothing near the truth
+    (wrong, _), = gr._hypotheses(top, hor, 70.0, None, None, False, at=far)
+    assert (np.hypot(*(wrong[:, :2] - far).T) <= gr.HOLDER_RADIUS).all()
+    holders = [centre, None, far]
+    scale, run = gr.register_with_scale([1, 2, 3], [top] * 3, [hor] * 3, 70.0, 10.0,
+                                        holders=holders)
+    assert np.hypot(*(run[0].centre - scale * centre)) <= gr.HOLDER_RADIUS + 1e-9
+    assert np.hypot(*(run[2].centre - scale * far)) <= gr.HOLDER_RADIUS + 1e-9

@@ -324,7 +324,7 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     ground = GroundAssociationOptions(top_size=top_size, hor_size=hor_size,
                                       hor_hfov_deg=options.hor_hfov, fps=options.fps,
                                       consensus=options.video, seed=0,
-                                      workers=options.workers)
+                                      workers=options.workers, camera_id=options.camera_id)
     try:
         run = run_top_view(top, hor, ground, options.top_view, name=options.top_boxes)
     except CalibrationError as error:
@@ -339,7 +339,6 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
              "wearer to be one of its people (if not: --top-view oblique)", False)
         return None
     unused = [name for name, given in (("--model", options.learned is not None),
-                                       ("--camera-id", options.camera_id is not None),
                                        ("--search", options.search is not None)) if given]
     ignored = f" ({', '.join(unused)}: not used on this path)" if unused else ""
     mode = ("pairs made consistent over the clip with each view's track ids" if

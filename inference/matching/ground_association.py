@@ -30,6 +30,14 @@ view's boxes say it is oblique).
    it where it keeps more than a near tie (:func:`_whole_boxes_run`: a close passer-by cut by
    the bottom edge can hold a wrong pose).
 
+With the holder's top-view id (``camera_id``, ``--camera-id``) their pairs are dropped (they
+are not in their own camera's view; they stay among the top people the registration weighs, as
+a wrong pose facing them sees them unexplained), and in video mode the whole run is made again
+with the camera sought within :data:`~xvmatch.cues.ground_registration.HOLDER_RADIUS` of where
+the top view sees them, kept where its pairs hold along the tracks more than a near tie more:
+the holder's point strays from where the handheld people put the camera by up to metres, so it
+is a candidate, not a given.
+
 ``--top-view auto`` takes the calibration's kind: nadir (today's search and learned matcher,
 which read the top image as the ground) or oblique (this run).
 
@@ -97,6 +105,7 @@ __all__ = [
     "Registered",
     "choose_along_tracks",
     "fewer_sights",
+    "holder_note",
     "lens_note",
     "miss_spread",
     "oblique_note",
@@ -145,6 +154,11 @@ class GroundAssociationOptions:
             of the crowd's height (before; a benchmark's comparison).
         workers: processes that run the candidate lenses' whole runs side by side (``auto``
             in video mode, :func:`choose_along_tracks`); the same result for any number.
+        camera_id: the top-view id of the horizontal camera's holder (``--camera-id``), or
+            None: their pairs are dropped (not in their own camera's view), and in video mode
+            the run with the camera sought near where the top view sees them
+            (:data:`~xvmatch.cues.ground_registration.HOLDER_RADIUS`) is kept where its pairs
+            hold along the tracks more than a near tie more (:func:`run_ground_association`).
     """
 
     top_size: tuple[int, int]
@@ -155,6 +169,7 @@ class GroundAssociationOptions:
     seed: int = 0
     top_sizes: bool = True
     workers: int = 1
+    camera_id: int | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.hor_hfov_deg, str) and self.hor_hfov_deg != AUTO_HFOV:
@@ -331,6 +346,27 @@ def _summary(calib: PeopleCalibration, tilt: TiltTrack | None = None) -> str:
             "by frame")
 
 
+def holder_note(camera_id: int, holders: Sequence[np.ndarray | None], video: bool,
+                held: tuple | None) -> str:
+    """What ``--camera-id`` did on the ground path: the holder is nobody's partner; in video
+    mode (``video``) the camera was also sought within
+    :data:`~xvmatch.cues.ground_registration.HOLDER_RADIUS` of where the top view sees them
+    (``holders``, per frame, or None), that run kept (``held`` not None) where its pairs held
+    along the tracks more than a near tie more than the run seeking it anywhere."""
+    seen = sum(h is not None for h in holders)
+    out = f"--camera-id {camera_id}: left out of the pairs (not in their own camera's view)"
+    if not video:
+        return out + ("; frame by frame the handheld camera is sought anywhere (in video mode "
+                      "also near them)")
+    if not seen:
+        return out + "; not on the top view's ground map on any frame paired"
+    near = (f"the handheld camera sought within {gr.HOLDER_RADIUS:g} m of where the top view "
+            f"sees them ({seen} of {len(holders)} frames)")
+    if held is not None:
+        return f"{out}; {near}: its pairs hold along the tracks more than anywhere's"
+    return f"{out}; {near} kept fewer pairs along the tracks than sought anywhere"
+
+
 def oblique_note(calib: PeopleCalibration) -> str:
     """What a top view calibrated from its people is: its tilt, the tilt's spread (to a tenth
     under a degree: "+- 0" reads as no measure) and its height."""
@@ -420,41 +456,39 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
         top_ground = top_ground_points(top_boxes, calib, read, top_frames, tilt)
     sights = None if top_points is not None else top_sights(order, top_ground, calib, tilt)
     tops, boxes, sizes = [], [], []
+    holders: list[np.ndarray | None] | None = None if options.camera_id is None else []
     for f, a, b in zip(order, starts, ends, strict=True):
         h = hor.get(f)
         hb = np.zeros((0, 4)) if h is None else np.asarray(h.boxes, float).reshape(-1, 4)
         h_ids = np.zeros(0, np.int64) if h is None else np.asarray(h.ids)
         ground, t_ids = top_ground[a:b], top_ids[a:b]
         ok = np.isfinite(ground).all(axis=1)
+        if holders is not None:  # the holder: about where the camera stands
+            wearer = (t_ids == options.camera_id) & ok
+            holders.append(ground[wearer][0] if wearer.any() else None)
         tops.append((ground[ok], t_ids[ok]))
         sizes.append(read[a:b][ok])
         boxes.append((hb, h_ids))
 
-    lens = None
-    hfov = options.hor_hfov_deg
-    reading = gr.HandheldReading.of([b for b, _ in boxes], options.hor_size)
-    if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
-        lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
-                                                          reading, (top, hor), sights,
-                                                          spread, slack, options.workers)
-    else:
-        if hfov == AUTO_HFOV:
-            lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
-                                   options.hor_size, fps, sizes=sizes, spread=spread,
-                                   slack=slack)
-            hfov = lens.hfov_deg
-        scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps,
-                                                reading,
-                                                (top, hor) if options.consensus else None, sights,
-                                                spread, slack)
-    if options.consensus:  # the run on the boxes no border cuts, where it keeps clearly more
-        whole = _whole_boxes_run(order, tops, boxes, sizes, hfov if lens is None else
-                                 lens.hfov_deg, fps, reading, (top, hor), sights, spread,
-                                 slack)
-        if whole is not None and _count(whole[2])[0] > NEAR_TIE * _count(pairs)[0]:
-            scale, poses, pairs = whole
+    run = partial(_lens_and_pairs, order, tops, boxes, sizes, options, fps,
+                  gr.HandheldReading.of([b for b, _ in boxes], options.hor_size), (top, hor),
+                  sights, spread, slack)
+    lens, (scale, poses, pairs) = run(None)
+    summary, held = _summary(calib, tilt), None
+    if options.camera_id is not None:  # the holder is not in their own camera's view
+        pairs = _without(pairs, options.camera_id)
+    if holders is not None and options.consensus and any(h is not None for h in holders):
+        # near the holder, kept where its pairs hold along the tracks more than a near tie
+        held = run(holders)
+        near = _without(held[1][2], options.camera_id)
+        if _count(near)[0] > NEAR_TIE * _count(pairs)[0]:
+            lens, (scale, poses, pairs) = held[0], (*held[1][:2], near)
+        else:
+            held = None
+    if holders is not None:
+        summary += f"; {holder_note(options.camera_id, holders, options.consensus, held)}"
     return GroundAssociation(pairs=pairs, calibration=calib, poses=poses,
-                             summary=_summary(calib, tilt), scale=scale, lens=lens,
+                             summary=summary, scale=scale, lens=lens,
                              frame_rate=rate, tilt=tilt)
 
 
@@ -462,10 +496,54 @@ Registered = tuple[float, list[gr.FramePose], dict[int, list[tuple[int, int]]]]
 """A registration's top map scale, its poses and the pairs under them."""
 
 
+def _without(pairs: Mapping[int, list[tuple[int, int]]], top_id: int
+             ) -> dict[int, list[tuple[int, int]]]:
+    """``pairs`` without those of top person ``top_id`` (the handheld camera's holder, not in
+    its view): dropped after the run, as the holder stays among the top people the
+    registration weighs (a wrong pose facing them sees them unexplained; left out, on a
+    rendered nadir clip a pose turned half round won, 0.553 -> 0.000 pair F1)."""
+    return {f: [(t, h) for t, h in p if t != top_id] for f, p in pairs.items()}
+
+
+def _lens_and_pairs(order: list[int], tops: list, boxes: list, sizes: list,
+                    options: GroundAssociationOptions, fps: float, reading: gr.HandheldReading,
+                    views: tuple[Mapping, Mapping], sights: list[gr.TopSight] | None,
+                    spread: float, slack: float, holders: list[np.ndarray | None] | None
+                    ) -> tuple[LensChoice | None, Registered]:
+    """:func:`run_ground_association`'s lens (chosen where ``auto``, else None) and run, with
+    the camera sought near its ``holders`` or anywhere (None): in video mode
+    (``options.consensus``) each lens's whole run (:func:`choose_along_tracks`), else the lens
+    chosen first (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`); then the run on the boxes
+    no border cuts where it keeps more than a near tie (:func:`_whole_boxes_run`). Arguments
+    as :func:`register_and_pair`'s."""
+    lens, hfov = None, options.hor_hfov_deg
+    if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
+        lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
+                                                          reading, views, sights, spread, slack,
+                                                          options.workers, holders)
+    else:
+        if hfov == AUTO_HFOV:
+            lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
+                                   options.hor_size, fps, sizes=sizes, spread=spread,
+                                   slack=slack, holders=holders)
+            hfov = lens.hfov_deg
+        scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps, reading,
+                                                views if options.consensus else None, sights,
+                                                spread, slack, holders)
+    if options.consensus:  # the run on the boxes no border cuts, where it keeps clearly more
+        whole = _whole_boxes_run(order, tops, boxes, sizes, hfov if lens is None else
+                                 lens.hfov_deg, fps, reading, views, sights, spread, slack,
+                                 holders)
+        if whole is not None and _count(whole[2])[0] > NEAR_TIE * _count(pairs)[0]:
+            scale, poses, pairs = whole
+    return lens, (scale, poses, pairs)
+
+
 def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, fps: float,
                         reading: gr.HandheldReading, views: tuple[Mapping, Mapping],
                         sights: list[gr.TopSight] | None = None,
-                        spread: float = gr.RANGE_SPREAD, slack: float = 1.0, workers: int = 1
+                        spread: float = gr.RANGE_SPREAD, slack: float = 1.0, workers: int = 1,
+                        holders: list[np.ndarray | None] | None = None
                         ) -> tuple[LensChoice, Registered]:
     """Video mode's ``--hor-hfov auto``: the whole run (the pairs made consistent along the
     tracks, each lens's map scale as :func:`~xvmatch.cues.ground_registration.register_with_scale`
@@ -500,7 +578,8 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     lenses = sorted(HFOV_CANDIDATES, key=lambda h: (abs(h - PRIOR_HFOV_DEG), h))
     each = dict(zip(lenses, _each_lens(partial(
         _lens_runs, order, tops, boxes, sizes, fps=fps, reading=reading, views=views,
-        sights=sights, spread=spread, slack=slack), lenses, workers), strict=True))
+        sights=sights, spread=spread, slack=slack, holders=holders), lenses, workers),
+        strict=True))
     scales = {h: runs.scale for h, runs in each.items()}
     pairs = {h: runs.pairs for h, runs in each.items()}
     kept, people = _kept(pairs)
@@ -516,7 +595,7 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
 
     def run_at(lens: float) -> Registered:  # a measured lens's run, as register_and_pair's
         return run_along_tracks(order, tops, _hor_people(boxes, reading, lens), sizes, lens,
-                                fps, views, sights, spread, slack)
+                                fps, views, sights, spread, slack, holders)
 
     measured_from, implied_by, measured = None, {}, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
@@ -620,13 +699,14 @@ class LensRuns:
 
 def _lens_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
                reading: gr.HandheldReading, views: tuple[Mapping, Mapping],
-               sights: list[gr.TopSight] | None, spread: float, slack: float) -> LensRuns:
+               sights: list[gr.TopSight] | None, spread: float, slack: float,
+               holders: list[np.ndarray | None] | None = None) -> LensRuns:
     """One candidate lens's part of :func:`choose_along_tracks`: its :func:`_scale_runs`, the
     map scale of its run without the sights (the last) by the clip's score totals
     (:func:`~xvmatch.cues.ground_registration.margin_scale`) and that run's pairs along the
     tracks, and its run as :func:`register_and_pair` makes it (:func:`_made`)."""
     runs = _scale_runs(order, tops, boxes, sizes, hfov, fps, reading, views, sights, spread,
-                       slack)
+                       slack, holders)
     hors, plain = runs[0], runs[1][-1]
     scale = gr.margin_scale(plain)
     pairs = _consistent(order, tops, hors, sizes, scale, plain[scale][1], views)
@@ -681,7 +761,8 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
                       fps: float, reading: gr.HandheldReading,
                       views: tuple[Mapping, Mapping] | None,
                       sights: list[gr.TopSight] | None = None,
-                      spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> Registered:
+                      spread: float = gr.RANGE_SPREAD, slack: float = 1.0,
+                      holders: list[np.ndarray | None] | None = None) -> Registered:
     """The handheld view registered on the top map with a lens of ``hfov`` degrees and each
     frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
     their ids the tracks: video mode) the top map's motion taken out, the pairs made
@@ -709,22 +790,26 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
         slack: how many times the registration's free walk and turn a second
             (:func:`~xvmatch.cues.ground_registration.register_sequence`; a rate read,
             :attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`).
+        holders: per frame, where the top view sees the handheld camera's holder on its map
+            (``--camera-id``), or None
+            (:func:`~xvmatch.cues.ground_registration.register_with_scale`).
     Returns:
         The top map's scale, the poses and ``{frame: [(top id, hor id), ...]}``.
     """
     hors = _hor_people(boxes, reading, hfov)
     if views is not None:
         return run_along_tracks(order, tops, hors, sizes, hfov, fps, views, sights, spread,
-                                slack)
-    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights, spread, slack)
+                                slack, holders)
+    runs = _registrations(order, tops, hors, sizes, hfov, fps, False, sights, spread, slack,
+                          holders)
     scale = gr.margin_scale(runs)
     return scale, runs[scale][1], _pairs_under(order, tops, hors, sizes, scale, runs[scale][1])
 
 
 def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfov: float,
                      fps: float, reading: gr.HandheldReading, views: tuple[Mapping, Mapping],
-                     sights: list[gr.TopSight] | None, spread: float, slack: float = 1.0
-                     ) -> Registered | None:
+                     sights: list[gr.TopSight] | None, spread: float, slack: float = 1.0,
+                     holders: list[np.ndarray | None] | None = None) -> Registered | None:
     """Video mode's run registered on the handheld boxes no border cuts and paired with every
     box under its poses (None where the bottom edge cuts none): a close passer-by's depth, read
     from a cut box's width, can hold a wrong pose. Arguments as :func:`register_and_pair`'s."""
@@ -733,19 +818,22 @@ def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfo
         return None
     hors = _hor_people(boxes, reading, hfov)
     whole = [(q[~c], i[~c]) for (q, i), c in zip(hors, cut, strict=True)]
-    by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread, slack)
+    by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread, slack,
+                         holders)
     return _made(order, tops, (hors, by_scale), sizes, views)
 
 
 def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                      fps: float, views: tuple[Mapping, Mapping],
                      sights: list[gr.TopSight] | None = None,
-                     spread: float = gr.RANGE_SPREAD, slack: float = 1.0) -> Registered:
+                     spread: float = gr.RANGE_SPREAD, slack: float = 1.0,
+                     holders: list[np.ndarray | None] | None = None) -> Registered:
     """Video mode's run of one lens on the handheld view's people (``hors``, on its map with
     their ids): the map scale along the tracks (:func:`scale_along_tracks`) of the run made
     with the ``sights``, or of the run without them where that keeps more
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
-    by_scale = _by_scale(order, tops, hors, sizes, hfov, fps, True, sights, spread, slack)
+    by_scale = _by_scale(order, tops, hors, sizes, hfov, fps, True, sights, spread, slack,
+                         holders)
     return _made(order, tops, (hors, by_scale), sizes, views)
 
 
@@ -764,7 +852,7 @@ def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, siz
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
                 reading: gr.HandheldReading, views: tuple[Mapping, Mapping] | None,
                 sights: list[gr.TopSight] | None = None, spread: float = gr.RANGE_SPREAD,
-                slack: float = 1.0
+                slack: float = 1.0, holders: list[np.ndarray | None] | None = None
                 ) -> tuple[list, list[dict[float, tuple[float, list[gr.FramePose]]]]]:
     """The handheld view's people on its own map (with their ids) and its registrations at
     each map scale (:func:`~xvmatch.cues.ground_registration.register_scales`; the top map's
@@ -772,20 +860,21 @@ def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: fl
     sights, the one."""
     hors = _hor_people(boxes, reading, hfov)
     return hors, _by_scale(order, tops, hors, sizes, hfov, fps, views is not None, sights,
-                           spread, slack)
+                           spread, slack, holders)
 
 
 def _by_scale(order: list[int], tops: list, hors: list, sizes: list, hfov: float, fps: float,
               video: bool, sights: list[gr.TopSight] | None, spread: float,
-              slack: float = 1.0) -> list[dict[float, tuple[float, list[gr.FramePose]]]]:
+              slack: float = 1.0, holders: list[np.ndarray | None] | None = None
+              ) -> list[dict[float, tuple[float, list[gr.FramePose]]]]:
     """The registrations at each map scale of the handheld people ``hors``: with the
     ``sights`` and without them (:func:`_registrations_twice`), or, without sights, the one
     (:func:`_registrations`)."""
     if sights is None:
         return [_registrations(order, tops, hors, sizes, hfov, fps, video, spread=spread,
-                               slack=slack)]
+                               slack=slack, holders=holders)]
     return list(_registrations_twice(order, tops, hors, sizes, hfov, fps, video, sights,
-                                     spread, slack))
+                                     spread, slack, holders))
 
 
 def _hor_people(boxes: list, reading: gr.HandheldReading, hfov: float) -> list:
@@ -797,26 +886,28 @@ def _hor_people(boxes: list, reading: gr.HandheldReading, hfov: float) -> list:
 
 def _registrations(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                    fps: float, video: bool, sights: list[gr.TopSight] | None = None,
-                   spread: float = gr.RANGE_SPREAD, slack: float = 1.0
+                   spread: float = gr.RANGE_SPREAD, slack: float = 1.0,
+                   holders: list[np.ndarray | None] | None = None
                    ) -> dict[float, tuple[float, list[gr.FramePose]]]:
     """The handheld view's registration at each map scale
     (:func:`~xvmatch.cues.ground_registration.register_scales`), the top map's motion taken
     out in ``video`` mode (its ids the tracks)."""
     return gr.register_scales(order, [p for p, _ in tops], [q for q, _ in hors], hfov, fps,
                               [i for _, i in tops] if video else None, sizes, sights, spread,
-                              slack)
+                              slack, holders)
 
 
 def _registrations_twice(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
                          fps: float, video: bool, sights: list[gr.TopSight],
-                         spread: float = gr.RANGE_SPREAD, slack: float = 1.0
+                         spread: float = gr.RANGE_SPREAD, slack: float = 1.0,
+                         holders: list[np.ndarray | None] | None = None
                          ) -> tuple[dict[float, tuple[float, list[gr.FramePose]]],
                                     dict[float, tuple[float, list[gr.FramePose]]]]:
     """:func:`_registrations` with the ``sights`` and without them, in one pass
     (:func:`~xvmatch.cues.ground_registration.register_scales_twice`)."""
     return gr.register_scales_twice(order, [p for p, _ in tops], [q for q, _ in hors], hfov,
                                     fps, [i for _, i in tops] if video else None, sizes, sights,
-                                    spread, slack)
+                                    spread, slack, holders)
 
 
 def scale_along_tracks(order: list[int], tops: list, hors: list,

@@ -39,11 +39,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
 from xvmatch.cues import ground_registration as gr
-from xvmatch.cues.hor_lens import LensChoice, choose_hor_hfov
+from xvmatch.cues.hor_lens import NEAR_TIE, LensChoice, choose_hor_hfov
 from xvmatch.formats.box_image_size import (
     check_boxes_in_image,
     ground_path_hor_size,
@@ -84,8 +85,8 @@ from xvmatch.inference.views.multi_view_costs import FrameProblem, LogisticCalib
 from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
 
 __all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "TopMap", "choose_lenses",
-           "ground_options", "ground_problems", "lenses_note", "oblique_top", "run_multi_ground",
-           "top_map"]
+           "ground_options", "ground_problems", "holders_note", "lenses_note", "oblique_top",
+           "run_multi_ground", "top_map"]
 
 TOP_HOR = LogisticCalibration(threshold=2.0 * gr.RADIUS, slope=1.0)
 """Top-handheld pairs: minus the evidence (nats) of a ground distance ``d`` (metres), none at
@@ -138,6 +139,11 @@ class MultiGroundOptions:
         workers: processes running a handheld view's candidate lenses side by side in video
             mode (:func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`);
             the same result for any number.
+        wearers: per handheld view, ``{frame: row within the top view's record}`` of its
+            holder (``--camera-id``, in the top file's frame numbers), or None: they pair
+            with nobody of their own view, and in video mode its camera is sought near where
+            the top view maps them where that keeps more pairs (:func:`_registered`); None:
+            no holder told.
     """
 
     hor_sizes: tuple[tuple[int, int], ...]
@@ -145,6 +151,7 @@ class MultiGroundOptions:
     fps: float | str = PRIOR_FPS
     slack: float = 1.0
     workers: int = 1
+    wearers: tuple[Mapping[int, int] | None, ...] | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.fps, str) and self.fps != AUTO_FPS:
@@ -159,6 +166,15 @@ class MultiGroundOptions:
         if isinstance(hfov, tuple) and len(hfov) != len(self.hor_sizes):
             raise ValueError(f"MultiGroundOptions.hor_hfov_deg: one per handheld view "
                              f"({len(self.hor_sizes)}), got {len(hfov)}")
+        if self.wearers is not None and len(self.wearers) != len(self.hor_sizes):
+            raise ValueError(f"MultiGroundOptions.wearers: one per handheld view "
+                             f"({len(self.hor_sizes)}), got {len(self.wearers)}")
+
+    def wearer(self, k: int, frame: int) -> int | None:
+        """Handheld view ``k``'s (1-based) holder's row in the top view's record of ``frame``,
+        or None (no holder told, or not in that frame)."""
+        rows = None if self.wearers is None else self.wearers[k - 1]
+        return None if rows is None else rows.get(frame)
 
     def hfov(self, k: int) -> float:
         """Handheld view ``k``'s field of view (1-based; not ``auto``)."""
@@ -235,19 +251,21 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
         raise ValueError("--offset auto estimates the offsets with the nadir search; with an "
                          "oblique top view give them as frame numbers (or 0)")
     return calib, (f"{oblique_note(calib)}; each handheld view registered on its ground map "
-                   "frame by frame and the views joined there (boxes only: --model, its images "
-                   f"and --camera-id not used){guessed}")
+                   "frame by frame and the views joined there (boxes only: --model and its "
+                   f"images not used){guessed}")
 
 
 def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int, int], str]],
                    paths: Sequence[str], hfov: float | str, fps: float | str,
-                   note: Callable[[str], object], workers: int = 1) -> MultiGroundOptions:
+                   note: Callable[[str], object], workers: int = 1,
+                   wearers: Sequence[Mapping[int, int]] | None = None) -> MultiGroundOptions:
     """``associate-multi``'s options of this path: each handheld view's image size as resolved
     (``views[k + 1]``'s ``(size, source)``), except a CVMHAT size assumed for boxes alone (or
     none known: boxes that do not fit it), where the size its boxes tell serves
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), told to
     ``note`` (``paths``: the box files, top first; the CVMHAT size kept, where the boxes fit
-    it, told too); ``--hor-hfov``, ``--fps`` and ``--workers``."""
+    it, told too); ``--hor-hfov``, ``--fps``, ``--workers`` and the holders' rows
+    (``--camera-id``, :attr:`MultiGroundOptions.wearers`)."""
     sizes = []
     past = runs_past_borders(*views)  # the run's files, made by one tracker or tool
     for k, (size, source) in enumerate(resolved, 1):
@@ -255,7 +273,8 @@ def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int,
         if (said := ground_path_size_note(paths[k], views[k], guess, source, past)) is not None:
             note(said)
         sizes.append(tuple(guess or size))
-    return MultiGroundOptions(tuple(sizes), hfov, fps, workers=workers)
+    return MultiGroundOptions(tuple(sizes), hfov, fps, workers=workers,
+                              wearers=None if wearers is None else tuple(wearers))
 
 
 def _tracked(top: Mapping, top_tracks: Mapping[int, int] | None) -> Mapping:
@@ -275,6 +294,21 @@ def _boxes(record) -> np.ndarray:
 def _paired_frames(hor: Mapping, tops: Mapping[int, np.ndarray]) -> list[int]:
     """The frames where both the top view (on its map) and handheld view ``hor`` have people."""
     return sorted(f for f in set(tops) & set(hor) if len(_boxes(hor[f])) and len(tops[f]))
+
+
+def _holders(tops: Mapping[int, np.ndarray], order: Sequence[int], options: MultiGroundOptions,
+             k: int) -> list[np.ndarray | None] | None:
+    """For handheld view ``k`` on ``order``'s frames, where its camera stands about: its
+    holder's point on the top map ``tops`` ``{frame: (N, 2)}`` (None where not mapped), or
+    None without a holder told (:attr:`MultiGroundOptions.wearers`). The holder stays among
+    the top people the registration weighs (see
+    :func:`~xvmatch.inference.matching.ground_association.run_ground_association`); only
+    their pairs with view ``k`` are left out (:func:`_cost`)."""
+    if options.wearers is None or options.wearers[k - 1] is None:
+        return None
+    rows = [options.wearer(k, f) for f in order]
+    return [None if r is None or not np.isfinite(tops[f][r]).all() else tops[f][r]
+            for f, r in zip(order, rows, strict=True)]
 
 
 @dataclass(frozen=True)
@@ -379,6 +413,26 @@ def _with_lenses(views: Sequence[Mapping], frames: Sequence[int],
     return replace(options, hor_hfov_deg=tuple(c.hfov_deg for c in lenses)), lenses
 
 
+def holders_note(views: Sequence[Mapping], tops: Mapping[int, np.ndarray],
+                 options: MultiGroundOptions, kept: Sequence[bool | None]) -> str:
+    """The line saying what ``--camera-id`` did: each holder is nobody of their own view's;
+    per handheld view, on how many of its frames paired with the top view the top view maps
+    its holder, and whether its camera was kept near them (``kept``, per view, as
+    :func:`ground_problems` fills it: True near, False anywhere, None frame by frame or no
+    holder told)."""
+    said = []
+    for k in range(1, len(views)):
+        order = _paired_frames(views[k], tops)
+        holders = _holders(tops, order, options, k)
+        seen = sum(h is not None for h in holders or ())
+        where = {True: "near them", False: "anywhere (near them kept fewer pairs)",
+                 None: "anywhere"}[kept[k - 1]]
+        said.append(f"hor{k} mapped on {seen} of {len(order)} frames, sought {where}")
+    return (f"--camera-id: each holder left out of their own view's pairs; {', '.join(said)} "
+            f"(near: within {gr.HOLDER_RADIUS:g} m, in video mode where its pairs hold along "
+            "the tracks more)")
+
+
 def lenses_note(choices: Sequence[LensChoice]) -> str:
     """The line saying which lens ``--hor-hfov auto`` chose for each handheld view."""
     said = [f"hor{k} {choice.hfov_deg:.0f}"
@@ -396,17 +450,22 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
                 tracks: Sequence[Mapping[int, int]] | None = None,
                 sizes: Mapping[int, np.ndarray] | None = None,
                 sights: Mapping[int, gr.TopSight] | None = None,
-                spread: float = gr.RANGE_SPREAD) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+                spread: float = gr.RANGE_SPREAD
+                ) -> tuple[dict[int, tuple[np.ndarray, np.ndarray]], bool | None]:
     """``{frame: ((M, 2), (M, 2))}`` handheld view ``k``'s people on the top map and the rays
     from its camera to them there, on the frames where its pose was registered (both views
-    have boxes there). Frame by frame the top map at the scale whose poses explain the most
+    have boxes there), and whether its run near its holder was kept (None: no holder told, or
+    frame by frame). Frame by frame the top map at the scale whose poses explain the most
     people (:func:`~xvmatch.cues.ground_registration.register_with_scale`); with ``tracks``
     (per view ``{row id: track id}``, video mode) the top map's own motion taken out of the
     registration's jumps and the scale the one whose run with the top view keeps the most
     pairs along both views' tracks, as ``associate`` chooses it
-    (:func:`~xvmatch.inference.matching.ground_association.run_along_tracks`). ``sizes``:
-    ``{frame: (N,)}`` each top person's height over the crowd's, :attr:`TopMap.sizes`;
-    ``sights``: :attr:`TopMap.sights`; ``spread``: :attr:`TopMap.spread`."""
+    (:func:`~xvmatch.inference.matching.ground_association.run_along_tracks`), and, with its
+    holder told (:attr:`MultiGroundOptions.wearers`), the run seeking the camera near them kept
+    where it keeps more than a near tie more pairs, as ``associate`` keeps it. The holder is
+    nobody's partner either way. ``sizes``: ``{frame: (N,)}`` each top person's height over
+    the crowd's, :attr:`TopMap.sizes`; ``sights``: :attr:`TopMap.sights`; ``spread``:
+    :attr:`TopMap.spread`."""
     hor = views[k]
     order = _paired_frames(hor, tops)
     size, hfov = tuple(options.hor_sizes[k - 1]), options.hfov(k)
@@ -414,9 +473,11 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     reading = gr.HandheldReading.of(every, size)
     local = {f: reading.points(_boxes(hor[f]), hfov) for f in order}
     ok = {f: np.isfinite(tops[f]).all(axis=1) for f in order}
+    holders = _holders(tops, order, options, k)
     points = [tops[f][ok[f]] for f in order]
     heights = None if sizes is None else [sizes[f][ok[f]] for f in order]
     seen = None if sights is None else [sights[f] for f in order]
+    held = None
     if tracks is None:
         scale, poses = gr.register_with_scale(order, points, [local[f] for f in order], hfov,
                                               options.fps, None, heights, seen, spread,
@@ -424,28 +485,39 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
     else:
         pair = (_tracked(views[0], tracks[0]), _tracked(hor, tracks[k]))
         ids = [np.asarray(pair[0][f].ids)[ok[f]] for f in order]
-        scale, poses, _ = run_along_tracks(  # as associate runs it
-            order, list(zip(points, ids, strict=True)),
-            [(local[f], np.asarray(pair[1][f].ids)) for f in order],
-            heights if heights is not None else [None] * len(order), hfov, options.fps, pair,
-            seen, spread, options.slack)
+        run = partial(run_along_tracks, order, list(zip(points, ids, strict=True)),  # as
+                      [(local[f], np.asarray(pair[1][f].ids)) for f in order],  # associate
+                      heights if heights is not None else [None] * len(order), hfov,
+                      options.fps, pair, seen, spread, options.slack)
+        scale, poses, pairs = run()
+        if holders is not None and any(h is not None for h in holders):
+            def count(kept: Mapping[int, list[tuple[int, int]]]) -> int:  # but the holder's
+                return sum(options.wearer(k, f) is None
+                           or t != int(pair[0][f].ids[options.wearer(k, f)])
+                           for f, p in kept.items() for t, _ in p)
+
+            near = run(holders=holders)
+            held = count(near[2]) > NEAR_TIE * count(pairs)
+            if held:
+                scale, poses, _ = near
     out = {}
     for pose in poses:  # back from the scaled top map to the top map
         placed = gr.on_top_map(local[pose.frame], pose)
         out[pose.frame] = (placed / scale, (placed - pose.centre) / scale)
-    return out
+    return out, held
 
 
 def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
-          calibration: LogisticCalibration | None, sizes: np.ndarray | None = None
-          ) -> np.ndarray:
+          calibration: LogisticCalibration | None, sizes: np.ndarray | None = None,
+          wearer: int | None = None) -> np.ndarray:
     """``(n_a, n_b)`` costs of two views' people on the top map, each ``(points, rays)`` (None:
     not on the map this frame; NaN rows: no ground), a positive cost where there is no
     distance; without a calibration :data:`HOR_HOR_COST` everywhere. A top view (its rays
     None) and a handheld view are as far apart as
     :func:`~xvmatch.cues.ground_registration.ray_distances` says (the handheld distance errs
     along its ray; each handheld person read at the top person's height, ``sizes`` ``(n_a,)``),
-    two handheld views by the plain distance."""
+    two handheld views by the plain distance. ``wearer``: the row of view ``a`` (the top
+    view) that holds view ``b``'s camera, whose pairs there get no evidence."""
     if calibration is None:
         return np.full(n, HOR_HOR_COST)
     none = calibration.cost(np.full(n, _FAR * gr.RADIUS))
@@ -456,13 +528,16 @@ def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
         d = gr.ray_distances(pa, pb, rb, sizes)
     else:
         d = np.hypot(*(pa[:, None, :] - pb[None, :, :]).transpose(2, 0, 1))
+    if wearer is not None:  # the holder is not in their own camera's view
+        d[wearer] = np.nan
     return np.where(np.isfinite(d), calibration.cost(np.minimum(d, _FAR * gr.RADIUS)), none)
 
 
 def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
                     calibration: PeopleCalibration, options: MultiGroundOptions,
                     tracks: Sequence[Mapping[int, int]] | None = None,
-                    tops: TopMap | None = None) -> dict[int, FrameProblem]:
+                    tops: TopMap | None = None, kept: list[bool | None] | None = None
+                    ) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame of ``frames`` (module docstring).
 
     Args:
@@ -477,6 +552,8 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
             (:func:`_registered`).
         tops: the top view's people on its map for ``frames`` (:func:`top_map`, with the top
             view's ``tracks``), when already built.
+        kept: a list to be given, per handheld view, whether its run near its holder was kept
+            (:func:`_registered`; :func:`holders_note`).
     """
     if len(options.hor_sizes) != len(views) - 1:
         raise ValueError(f"MultiGroundOptions.hor_sizes: one per handheld view "
@@ -485,14 +562,17 @@ def ground_problems(views: Sequence[Mapping], frames: Sequence[int],
     top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
     options = _with_lenses(views, frames, calibration, options, top)[0]
     tops, heights = top.points, top.sizes
-    placed = [{f: (p, None) for f, p in tops.items() if len(p)},
-              *(_registered(views, k, tops, options, tracks, heights, top.sights, top.spread)
-                for k in range(1, len(views)))]
+    runs = [_registered(views, k, tops, options, tracks, heights, top.sights, top.spread)
+            for k in range(1, len(views))]
+    if kept is not None:
+        kept.extend(held for _, held in runs)
+    placed = [{f: (p, None) for f, p in tops.items() if len(p)}, *(r for r, _ in runs)]
     problems = {}
     for f in frames:
         sizes = tuple(len(_boxes(v.get(f))) for v in views)
         costs = {(a, b): _cost(placed[a].get(f), placed[b].get(f), (sizes[a], sizes[b]),
-                               TOP_HOR if a == 0 else HOR_HOR, heights.get(f) if a == 0 else None)
+                               TOP_HOR if a == 0 else HOR_HOR, heights.get(f) if a == 0 else None,
+                               options.wearer(b, f) if a == 0 else None)
                  for a, b in view_pairs(len(views))}
         problems[f] = FrameProblem(sizes, costs, dict.fromkeys(costs, 0.0))
     return problems
@@ -511,7 +591,11 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     With ``options.hor_hfov_deg`` ``auto`` the lenses are chosen first (:func:`choose_lenses`)
     and told to ``note`` in one line (:func:`lenses_note`); with ``options.fps`` ``auto``, the
     frame rate likewise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`)."""
-    aligned = align_frames(views, offsets)[0] if any(offsets) else list(views)
+    aligned, shifts = align_frames(views, offsets) if any(offsets) else (list(views), [0])
+    if options.wearers is not None and shifts[0]:  # the holders' rows, in the views' timing
+        options = replace(options, wearers=tuple(
+            None if rows is None else {f + shifts[0]: r for f, r in rows.items()}
+            for rows in options.wearers))
     frames = sorted(set().union(*aligned))
     top_tracks = None if tracks is None else tracks[0]
     if options.fps == AUTO_FPS:  # the rate from the clip's one fit, then the map at that rate
@@ -526,7 +610,10 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     options, lenses = _with_lenses(aligned, frames, calibration, options, top, tracks)
     if lenses and note is not None:
         note(lenses_note(lenses))
-    problems = ground_problems(aligned, frames, calibration, options, tracks, top)
+    kept: list[bool | None] = []
+    problems = ground_problems(aligned, frames, calibration, options, tracks, top, kept)
+    if options.wearers is not None and note is not None:
+        note(holders_note(aligned, top.points, options, kept))
     if tracks is not None:
         from xvmatch.inference.views.multi_ego_video import video_people
 

@@ -213,7 +213,7 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
                                         hor_path=paths[k + 1])
         ground = calib and multi_ground.run_multi_ground(
             views, offsets, calib, multi_ground.ground_options(
-                views, resolved, paths, args.hor_hfov, args.fps, say, args.workers),
+                views, resolved, paths, args.hor_hfov, args.fps, say, args.workers, camera_rows),
             options.people, tracks, say)
         run = ground or mer.run_multi_ego(
             inputs, matcher, sizes, offsets, camera_rows, options,
