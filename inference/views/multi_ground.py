@@ -491,13 +491,10 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
                       options.fps, pair, seen, spread, options.slack)
         scale, poses, pairs = run()
         if holders is not None and any(h is not None for h in holders):
-            def count(kept: Mapping[int, list[tuple[int, int]]]) -> int:  # but the holder's
-                return sum(options.wearer(k, f) is None
-                           or t != int(pair[0][f].ids[options.wearer(k, f)])
-                           for f, p in kept.items() for t, _ in p)
-
+            mine = {f: int(pair[0][f].ids[r]) for f in order  # the holder's track, per frame
+                    if (r := options.wearer(k, f)) is not None}
             near = run(holders=holders)
-            held = count(near[2]) > NEAR_TIE * count(pairs)
+            held = _pairs_but(near[2], mine) > NEAR_TIE * _pairs_but(pairs, mine)
             if held:
                 scale, poses, _ = near
     out = {}
@@ -505,6 +502,11 @@ def _registered(views: Sequence[Mapping], k: int, tops: Mapping[int, np.ndarray]
         placed = gr.on_top_map(local[pose.frame], pose)
         out[pose.frame] = (placed / scale, (placed - pose.centre) / scale)
     return out, held
+
+
+def _pairs_but(pairs: Mapping[int, list[tuple[int, int]]], holder: Mapping[int, int]) -> int:
+    """Pairs kept over the frames, but those of the holder's top id (``holder``, per frame)."""
+    return sum(t != holder.get(f) for f, p in pairs.items() for t, _ in p)
 
 
 def _cost(a: tuple | None, b: tuple | None, n: tuple[int, int],
