@@ -88,6 +88,8 @@ __all__ = [
     "make_oblique_scene",
     "pitch_drifted",
     "project_view",
+    "sloped",
+    "top_distorted",
     "write_oblique_scene",
 ]
 
@@ -342,6 +344,7 @@ def project_view(
     present: np.ndarray | None = None,
     k1: float = 0.0,
     extent: str = "visible",
+    ground: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Boxes of upright people in one camera's image, with occlusion and truncation.
 
@@ -366,6 +369,8 @@ def project_view(
             ``None``: everyone.
         k1: the lens's radial distortion (:func:`distorted`), 0: a pinhole.
         extent: ``"visible"``, ``"past_border"`` or ``"amodal"``.
+        ground: ``(N,)`` the height of the ground under each person's feet, metres (a sloping
+            ground, :func:`sloped`); ``None``: 0 for everyone.
 
     Returns:
         (index, boxes): ``(M,)`` int64 indices into N, ascending, and ``(M, 4)`` ``x, y, w, h``
@@ -378,11 +383,13 @@ def project_view(
     n = positions.shape[0]
     heights = np.asarray(heights, dtype=float).reshape(n)
     widths = np.asarray(widths, dtype=float).reshape(n)
+    base = np.zeros(n) if ground is None else np.asarray(ground, dtype=float).reshape(n)
     angle = np.linspace(0.0, 2.0 * np.pi, _CIRCLE_POINTS, endpoint=False)
     ring = np.stack([np.cos(angle), np.sin(angle)], axis=1)  # (P, 2)
     xy = positions[:, None, :] + 0.5 * widths[:, None, None] * ring[None]  # (N, P, 2)
-    z = np.concatenate([np.zeros((n, _CIRCLE_POINTS)),
-                        np.broadcast_to(heights[:, None], (n, _CIRCLE_POINTS))], axis=1)
+    z = base[:, None] + np.concatenate([np.zeros((n, _CIRCLE_POINTS)),
+                                        np.broadcast_to(heights[:, None], (n, _CIRCLE_POINTS))],
+                                       axis=1)
     points = np.concatenate([np.concatenate([xy, xy], axis=1), z[..., None]], axis=2)
     uv, depth = camera.project(points)  # (N, 2P, 2), (N, 2P)
     if k1:
@@ -400,7 +407,7 @@ def project_view(
     idx = np.flatnonzero(seen)
     if idx.size == 0:
         return np.empty(0, dtype=np.int64), np.empty((0, 4))
-    mid = np.concatenate([positions[idx], 0.5 * heights[idx, None]], axis=1)
+    mid = np.concatenate([positions[idx], base[idx, None] + 0.5 * heights[idx, None]], axis=1)
     area, part = _visible_parts(clipped[idx], camera.depth(mid))
     keep = (area > 0) & (area >= min_visible_fraction * full_area[idx])
     part = part[keep]
@@ -432,9 +439,11 @@ def _project_frames(
     config: ObliqueSceneConfig,
     hidden: int | None = None,
     k1: float = 0.0,
+    ground: np.ndarray | None = None,
 ) -> dict[int, FrameBoxes]:
     """``{frame: FrameBoxes}`` of one view over all frames (``hidden``: its camera's holder;
-    ``k1``: its lens's distortion)."""
+    ``k1``: its lens's distortion; ``ground``: ``(F, N)`` the ground's height under each
+    person, a sloping ground)."""
     present = np.ones(people.n_people, dtype=bool)
     if hidden is not None:
         present[hidden] = False
@@ -444,6 +453,7 @@ def _project_frames(
             people.positions[f], people.heights, people.widths, cam,
             near_clip=config.near_clip, min_visible_fraction=config.min_visible_fraction,
             present=present, k1=k1, extent=config.box_extent,
+            ground=None if ground is None else ground[f],
         )
         records[f + 1] = FrameBoxes(f + 1, people.ids[idx], boxes)
     return records
@@ -1084,6 +1094,39 @@ def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
         boxes[name] = _project_frames(scene.people, cameras[name], scene.config, hidden=k,
                                       k1=scene.hor_distortion.get(name, 0.0))
     return replace(scene, hor_cameras=cameras, hor=boxes)
+
+
+def sloped(scene: ObliqueScene, grade_deg: float, rng: np.random.Generator) -> ObliqueScene:
+    """The same scene on a ground that slopes ``grade_deg`` degrees (a plane through the shared
+    group's mean place, rising towards a direction drawn from ``rng``): people stand upright on
+    it, each handheld camera rises and falls with its holder, the top camera flies where it
+    was; every view's boxes projected again. The methods take the ground to be level, so this
+    measures what a park's or a street's slope costs them (what the boxes cannot tell)."""
+    if not 0.0 <= grade_deg < 45.0:
+        raise ValueError(f"sloped needs 0 <= grade_deg < 45, got {grade_deg}")
+    up = rng.uniform(0.0, 2.0 * np.pi)
+    rise = np.tan(np.radians(grade_deg)) * np.array([np.cos(up), np.sin(up)])
+    shared = scene.groups.get("shared", np.empty(0, dtype=np.int64))
+    pool = scene.people.positions[:, shared] if shared.size else scene.people.positions
+    centre = pool.reshape(-1, 2).mean(axis=0)
+    ground = (scene.people.positions - centre) @ rise  # (F, N)
+    cameras = {name: [Camera(K=cam.K, R=cam.R, c=cam.c + np.array([0.0, 0.0,
+                                                                  (cam.c[:2] - centre) @ rise]),
+                             width=cam.width, height=cam.height) for cam in cams]
+               for name, cams in scene.hor_cameras.items()}
+    top = _project_frames(scene.people, scene.top_cameras, scene.config, ground=ground)
+    hor = {name: _project_frames(scene.people, cams, scene.config, hidden=k,
+                                 k1=scene.hor_distortion.get(name, 0.0), ground=ground)
+           for k, (name, cams) in enumerate(cameras.items())}
+    return replace(scene, hor_cameras=cameras, top=top, hor=hor)
+
+
+def top_distorted(scene: ObliqueScene, k1: float) -> ObliqueScene:
+    """The same scene with the top camera's lens distorting radially by ``k1``
+    (:func:`distorted`; a drone's wide lens whose video is not undistorted: about -0.1), its
+    boxes projected again; the handheld views unchanged."""
+    return replace(scene, top=_project_frames(scene.people, scene.top_cameras, scene.config,
+                                              k1=k1))
 
 
 def write_oblique_scene(

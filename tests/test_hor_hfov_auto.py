@@ -30,6 +30,7 @@ from xvmatch.inference.matching.ground_association import (
     _tie_measured,
     lens_note,
     run_ground_association,
+    tied_with,
     top_calibration,
 )
 
@@ -224,6 +225,16 @@ def test_lenses_tied_with_the_choice_measure_it_together() -> None:
 
 
 @pytest.mark.slow
+def test_lenses_near_tied_above_the_choice_measure_it_too() -> None:
+    """The lenses measured with the chosen one: those whose runs keep as many pairs, or more
+    by no more than a near tie (the prior beat them, no measure); not those keeping fewer
+    (the choice kept the most) nor clearly more."""
+    made = {70.0: 128, 60.0: 128, 90.0: 131, 110.0: 141}
+    assert tied_with(128, made) == [70.0, 60.0, 90.0]  # 141 > 1.1 * 128
+    assert tied_with(131, made) == [90.0, 110.0]  # fewer: the choice kept the most
+    assert tied_with(0, {70.0: 0, 90.0: 3}) == [70.0]
+
+
 def test_auto_from_the_command_line(scene, tmp_path, capsys) -> None:
     from xvmatch.cli import build_parser, main
     from xvmatch.datasets.oblique_scenes import write_oblique_scene

@@ -13,6 +13,8 @@ from xvmatch.datasets.oblique_scenes import (
     make_oblique_scene,
     pitch_drifted,
     project_view,
+    sloped,
+    top_distorted,
     write_oblique_scene,
 )
 from xvmatch.formats.camera_frames import open_cameras
@@ -128,6 +130,64 @@ def test_a_drifting_pitch_keeps_the_scene_and_moves_the_handheld_boxes():
                for v in scene.hor for f in scene.hor[v])
     with pytest.raises(ValueError, match="time_s"):
         pitch_drifted(scene, 5.0, 0.0, np.random.default_rng(0))
+
+
+def _plane_error(scene, plane: np.ndarray) -> np.ndarray:
+    """How far each top box's bottom centre, cast onto the plane z = a x + b y + c, lands from
+    the person's place (frames 1, 30, 60), metres."""
+    errors = []
+    for f in (1, 30, 60):
+        cam, rec = scene.top_cameras[f - 1], scene.top[f]
+        uv = np.c_[rec.boxes[:, 0] + 0.5 * rec.boxes[:, 2], rec.boxes[:, 1] + rec.boxes[:, 3]]
+        d = cam.ray_directions(uv)
+        t = (plane[:2] @ cam.c[:2] + plane[2] - cam.c[2]) / (d[:, 2] - d[:, :2] @ plane[:2])
+        place = cam.c[:2] + t[:, None] * d[:, :2]
+        errors.append(np.linalg.norm(place - scene.people.positions[f - 1][rec.ids], axis=1))
+    return np.concatenate(errors)
+
+
+def test_a_sloping_ground_raises_the_holders_and_the_feet_on_one_plane():
+    """:func:`sloped`: the handheld cameras rise with their holders on one plane of the grade
+    asked, and the top view's feet lie on that plane (cast onto it, each lands by its person
+    within a body's radius; cast onto the level ground, 1-2 m off); no slope, the very
+    boxes."""
+    scene = _scene(dataclasses.replace(OBLIQUE, n_hor=2), 4, 60)
+    steep = sloped(scene, 8.0, np.random.default_rng(0))
+    assert steep.people is scene.people
+    xy = np.concatenate([[c.c[:2] for c in cams] for cams in scene.hor_cameras.values()])
+    rise = np.concatenate([[b.c[2] - a.c[2] for a, b in zip(cams, steep.hor_cameras[v],
+                                                              strict=True)]
+                           for v, cams in scene.hor_cameras.items()])
+    design = np.c_[xy, np.ones(len(xy))]
+    plane = np.linalg.lstsq(design, rise, rcond=None)[0]
+    np.testing.assert_allclose(design @ plane, rise, atol=1e-9)
+    assert np.degrees(np.arctan(np.hypot(*plane[:2]))) == pytest.approx(8.0)
+    assert np.percentile(_plane_error(steep, plane), 90) < 0.5
+    assert np.percentile(_plane_error(steep, np.zeros(3)), 90) > 1.0
+    level = sloped(scene, 0.0, np.random.default_rng(0))
+    assert all(np.allclose(level.hor[v][f].boxes, scene.hor[v][f].boxes)
+               and np.allclose(level.top[f].boxes, scene.top[f].boxes)
+               for v in scene.hor for f in scene.hor[v])
+    with pytest.raises(ValueError, match="grade_deg"):
+        sloped(scene, 50.0, np.random.default_rng(0))
+
+
+def test_a_barrel_top_lens_draws_the_top_boxes_in():
+    """:func:`top_distorted`: the top boxes drawn towards the image centre, the farther out
+    the more (a few pixels near the middle, tens near the edge); the handheld views kept."""
+    scene = _scene(OBLIQUE, 4, 10)
+    barrel = top_distorted(scene, -0.1)
+    assert barrel.hor is scene.hor
+    cam = scene.top_cameras[0]
+    before, after = scene.top[1], barrel.top[1]
+    assert np.array_equal(before.ids, after.ids)
+    radius = [np.linalg.norm(r.boxes[:, :2] + 0.5 * r.boxes[:, 2:] - cam.K[:2, 2], axis=1)
+              for r in (before, after)]
+    moved = radius[1] - radius[0]
+    assert (moved <= 1e-6).all()
+    assert moved[np.argmax(radius[0])] == moved.min() < -3.0
+    same = top_distorted(scene, 0.0)
+    assert all(np.allclose(same.top[f].boxes, scene.top[f].boxes) for f in scene.top)
 
 
 def test_a_turning_drone_stays_low_and_keeps_the_people_in_view():

@@ -115,6 +115,7 @@ __all__ = [
     "run_ground_association",
     "run_top_view",
     "scale_along_tracks",
+    "tied_with",
     "tilt_note",
     "tilting_top",
     "top_calibration",
@@ -566,9 +567,10 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     the tracks more often (the chosen lens's; another lens's, more than a near tie; the
     choice's ``measured_from`` says so; a tie keeps the candidate: on tilting close drones,
     whose runs kept as many pairs at any lens, the lens measured was up to 54 degrees off).
-    But where candidates' runs keep exactly as many pairs as the chosen lens's, and nothing
-    replaced it, the lens their pairs imply that they fit best is kept where its run keeps as
-    many (:func:`_tie_measured`: several measurements, the best taken). The run kept is the one
+    But where candidates' runs keep as many pairs as the chosen lens's, or more by no more
+    than a near tie (:func:`tied_with`), and nothing replaced it, the lens their pairs imply
+    that they fit best is kept where its run keeps as many (:func:`_tie_measured`: several
+    measurements, the best taken). The run kept is the one
     :func:`register_and_pair` makes: the same lens, given or chosen, runs the same.
     Arguments as :func:`register_and_pair`'s (``workers``: processes running the candidates'
     runs side by side, :func:`_each_lens`); returns the choice and the chosen lens's run."""
@@ -612,8 +614,8 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
             best, measured_from, run, run_kept = implied, source, measured[implied], kept_here
     if best == hfov:  # candidates tied with the chosen lens measure it together
         best, measured_from, run = _tie_measured(
-            hfov, run, {h: implied_by[h] for h in made if made_kept[h] == run_kept}, measured,
-            run_at)
+            hfov, run, {h: implied_by[h] for h in tied_with(run_kept, made_kept)},
+            measured, run_at)
         run_kept = _count(run[2])[0]
     choice = replace(choice, made={h: float(n) for h, n in made_kept.items()})
     if best != hfov:
@@ -650,6 +652,15 @@ MIN_TIE_TOLD = 3
 """Tied candidates whose pairs must each imply a lens for the best fitting of those lenses to
 be tried (:func:`_tie_measured`; with the middle of two told, on renders of a 100-degree lens
 with 90 and 110 tied, the lower, 80 degrees, paired 0.69 against 110's 0.83)."""
+
+
+def tied_with(kept: int, made_kept: Mapping[float, int]) -> list[float]:
+    """The lenses whose runs as made keep as many pairs as the chosen lens's (``kept``), or
+    more by no more than a near tie (:data:`~xvmatch.cues.hor_lens.NEAR_TIE`), which the
+    choice's leaning to the prior beat: no measure of the lens either (:func:`_tie_measured`).
+    Renders: a 92-degree lens, 70 chosen with 128 pair-frames, 30 % of them a swap; 90 and
+    110 kept 131, all right."""
+    return [h for h, n in made_kept.items() if kept <= n <= NEAR_TIE * kept]
 
 
 def _tie_measured(hfov: float, run: Registered,
