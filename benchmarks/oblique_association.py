@@ -46,7 +46,10 @@ ground a plane sloping DEG degrees towards a drawn direction
 (:func:`~xvmatch.datasets.oblique_scenes.sloped`: a park, a street); ``--top-distortion K1``,
 the top camera's lens distorting radially by K1
 (:func:`~xvmatch.datasets.oblique_scenes.top_distorted`: a drone's video not undistorted,
-about -0.1). The methods take a level ground and a pinhole top camera.
+about -0.1); ``--top-roll DEG``, the top camera turned DEG degrees about its optical axis
+(:func:`~xvmatch.datasets.oblique_scenes.top_rolled`: a building camera mounted askew; the
+renders' top cameras are otherwise level). The methods take a level ground and a pinhole top
+camera, and fit the top camera's roll.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --ground-slope 3
 
@@ -133,6 +136,7 @@ from xvmatch.datasets.oblique_scenes import (
     pitch_drifted,
     sloped,
     top_distorted,
+    top_rolled,
 )
 from xvmatch.formats.box_image_size import (
     ASSUMED,
@@ -376,6 +380,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--top-distortion", type=float, default=None, metavar="K1",
                    help="the same scenes with the top camera's lens distorting radially by K1 "
                    "(a drone's video not undistorted: about -0.1; the methods take a pinhole)")
+    p.add_argument("--top-roll", type=float, default=None, metavar="DEG",
+                   help="the same scenes with the top camera rolled DEG degrees about its axis "
+                   "(a building camera mounted askew; the calibration leans to level)")
     p.add_argument("--box-noise", type=float, default=0.0, metavar="SIGMA",
                    help="move each box edge, in both views, by a normal draw of SIGMA times "
                    "the box's height, clipped to the image (default 0: the renders' exact "
@@ -441,6 +448,8 @@ def main(argv: list[str] | None = None) -> int:
             scene = sloped(scene, args.ground_slope, np.random.default_rng([args.seed, k, 4]))
         if args.top_distortion is not None:  # the same scene through a drone's barrel lens
             scene = top_distorted(scene, args.top_distortion)
+        if args.top_roll is not None:  # the same scene from a camera mounted askew
+            scene = top_rolled(scene, args.top_roll)
         rng = np.random.default_rng([args.seed, k, 1])
         top, top_back = _scrambled(scene.top, rng)
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)

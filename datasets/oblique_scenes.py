@@ -90,6 +90,7 @@ __all__ = [
     "project_view",
     "sloped",
     "top_distorted",
+    "top_rolled",
     "write_oblique_scene",
 ]
 
@@ -1127,6 +1128,18 @@ def top_distorted(scene: ObliqueScene, k1: float) -> ObliqueScene:
     boxes projected again; the handheld views unchanged."""
     return replace(scene, top=_project_frames(scene.people, scene.top_cameras, scene.config,
                                               k1=k1))
+
+
+def top_rolled(scene: ObliqueScene, roll_deg: float) -> ObliqueScene:
+    """The same scene with the top camera rolled ``roll_deg`` degrees about its optical axis on
+    every frame (a building camera mounted askew; a drone's gimbal holds it level), its boxes
+    projected again; the handheld views unchanged."""
+    c, s = np.cos(np.radians(roll_deg)), np.sin(np.radians(roll_deg))
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    cameras = [Camera(K=cam.K, R=turn @ cam.R, c=cam.c, width=cam.width, height=cam.height)
+               for cam in scene.top_cameras]
+    return replace(scene, top_cameras=cameras,
+                   top=_project_frames(scene.people, cameras, scene.config))
 
 
 def write_oblique_scene(

@@ -15,6 +15,7 @@ from xvmatch.datasets.oblique_scenes import (
     project_view,
     sloped,
     top_distorted,
+    top_rolled,
     write_oblique_scene,
 )
 from xvmatch.formats.camera_frames import open_cameras
@@ -188,6 +189,26 @@ def test_a_barrel_top_lens_draws_the_top_boxes_in():
     assert moved[np.argmax(radius[0])] == moved.min() < -3.0
     same = top_distorted(scene, 0.0)
     assert all(np.allclose(same.top[f].boxes, scene.top[f].boxes) for f in scene.top)
+
+
+def test_a_top_camera_mounted_askew_tips_its_horizon():
+    """:func:`top_rolled`: the top camera turned about its optical axis (same centre and axis,
+    its image's horizon tipped by the roll asked), its boxes projected through it; no roll,
+    the very boxes; the handheld views kept."""
+    scene = _scene(OBLIQUE, 4, 10)
+    askew = top_rolled(scene, 8.0)
+    assert askew.hor is scene.hor
+    for a, b in zip(scene.top_cameras, askew.top_cameras, strict=True):
+        np.testing.assert_allclose(b.c, a.c)
+        np.testing.assert_allclose(b.R[2], a.R[2])  # the optical axis kept
+        # the world's up seen in each image: turned by the roll
+        up_a, up_b = a.R @ np.array([0.0, 0.0, 1.0]), b.R @ np.array([0.0, 0.0, 1.0])
+        turn = np.degrees(np.arctan2(up_b[0], -up_b[1]) - np.arctan2(up_a[0], -up_a[1]))
+        assert abs(turn) == pytest.approx(8.0)
+    assert any(askew.top[f].boxes.shape != scene.top[f].boxes.shape
+               or not np.allclose(askew.top[f].boxes, scene.top[f].boxes) for f in scene.top)
+    level = top_rolled(scene, 0.0)
+    assert all(np.allclose(level.top[f].boxes, scene.top[f].boxes) for f in scene.top)
 
 
 def test_a_turning_drone_stays_low_and_keeps_the_people_in_view():
