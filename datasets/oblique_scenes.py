@@ -311,6 +311,10 @@ class ObliqueScene:
             rounded or left out): shared / (shared + top-only) for the top view, shared /
             (shared + horK-only) for view horK.
         hor_distortion: ``{view: k1}``, each handheld lens's distortion drawn (0: a pinhole).
+        top_distortion: the top lens's distortion (:func:`top_distorted`; 0: a pinhole).
+        ground: ``(F, N)`` the ground's height under each person, metres, where it slopes
+            (:func:`sloped`); None: level. Every view's boxes are projected with these, so the
+            transforms below compose in any order.
     """
 
     config: ObliqueSceneConfig
@@ -323,6 +327,8 @@ class ObliqueScene:
     overlap: dict[str, float]
     overlap_target: dict[str, float]
     hor_distortion: dict[str, float] = field(default_factory=dict)
+    top_distortion: float = 0.0
+    ground: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -1055,18 +1061,31 @@ def make_oblique_scene(
     # The boxes; each handheld lens's distortion drawn last (none drawn for a fixed value).
     lo, hi = config.hor_distortion
     k1 = np.full(n_hor, lo) if lo == hi else rng.uniform(lo, hi, size=n_hor)
-    top = _project_frames(people, top_cameras, config)
-    hor = {name: _project_frames(people, hor_cameras[name], config, hidden=k, k1=float(k1[k]))
-           for k, name in enumerate(hor_names)}
     overlap = {"top": p_top, **dict(zip(hor_names, p_hor, strict=True))}
     target_fraction = {"top": n_shared / (n_shared + n_top_only + holders_seen)}
     for k, name in enumerate(hor_names):
         target_fraction[name] = n_shared / (n_shared + n_hor_only[k])
-    return ObliqueScene(
+    scene = ObliqueScene(
         config=config, people=people, top_cameras=top_cameras, hor_cameras=hor_cameras,
-        top=top, hor=hor, groups=groups, overlap=overlap, overlap_target=target_fraction,
+        top={}, hor={}, groups=groups, overlap=overlap, overlap_target=target_fraction,
         hor_distortion={name: float(k1[k]) for k, name in enumerate(hor_names)},
     )
+    return replace(scene, top=_top_boxes(scene, top_cameras), hor=_hor_boxes(scene, hor_cameras))
+
+
+def _top_boxes(scene: ObliqueScene, cameras: Sequence[Camera]) -> dict[int, FrameBoxes]:
+    """The top view's boxes through ``cameras``, with the scene's top lens and ground."""
+    return _project_frames(scene.people, cameras, scene.config, k1=scene.top_distortion,
+                           ground=scene.ground)
+
+
+def _hor_boxes(scene: ObliqueScene, cameras: dict[str, list[Camera]]
+               ) -> dict[str, dict[int, FrameBoxes]]:
+    """Each handheld view's boxes through ``cameras`` (view k's holder, person k, hidden from
+    it), with its lens and the scene's ground."""
+    return {name: _project_frames(scene.people, cams, scene.config, hidden=k,
+                                  k1=scene.hor_distortion.get(name, 0.0), ground=scene.ground)
+            for k, (name, cams) in enumerate(cameras.items())}
 
 
 def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
@@ -1080,8 +1099,8 @@ def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
         raise ValueError(f"pitch_drifted needs std_deg >= 0 and time_s > 0, got {std_deg}, "
                          f"{time_s}")
     spread = np.radians(std_deg)
-    cameras, boxes = {}, {}
-    for k, (name, cams) in enumerate(scene.hor_cameras.items()):
+    cameras = {}
+    for name, cams in scene.hor_cameras.items():
         noise = rng.standard_normal(len(cams))
         drift = np.empty(len(cams))
         drift[0] = spread * noise[0]
@@ -1092,17 +1111,16 @@ def pitch_drifted(scene: ObliqueScene, std_deg: float, time_s: float,
                                                      [0.0, st, ct]]) @ cam.R, c=cam.c,
                                 width=cam.width, height=cam.height)
                          for cam, ct, st in zip(cams, c, s, strict=True)]
-        boxes[name] = _project_frames(scene.people, cameras[name], scene.config, hidden=k,
-                                      k1=scene.hor_distortion.get(name, 0.0))
-    return replace(scene, hor_cameras=cameras, hor=boxes)
+    return replace(scene, hor_cameras=cameras, hor=_hor_boxes(scene, cameras))
 
 
 def sloped(scene: ObliqueScene, grade_deg: float, rng: np.random.Generator) -> ObliqueScene:
     """The same scene on a ground that slopes ``grade_deg`` degrees (a plane through the shared
     group's mean place, rising towards a direction drawn from ``rng``): people stand upright on
     it, each handheld camera rises and falls with its holder, the top camera flies where it
-    was; every view's boxes projected again. The methods take the ground to be level, so this
-    measures what a park's or a street's slope costs them (what the boxes cannot tell)."""
+    was; every view's boxes projected again (on a ground already sloping, the slopes add). The
+    methods take the ground to be level, so this measures what a park's or a street's slope
+    costs them (what the boxes cannot tell)."""
     if not 0.0 <= grade_deg < 45.0:
         raise ValueError(f"sloped needs 0 <= grade_deg < 45, got {grade_deg}")
     up = rng.uniform(0.0, 2.0 * np.pi)
@@ -1110,24 +1128,22 @@ def sloped(scene: ObliqueScene, grade_deg: float, rng: np.random.Generator) -> O
     shared = scene.groups.get("shared", np.empty(0, dtype=np.int64))
     pool = scene.people.positions[:, shared] if shared.size else scene.people.positions
     centre = pool.reshape(-1, 2).mean(axis=0)
-    ground = (scene.people.positions - centre) @ rise  # (F, N)
+    plane = (scene.people.positions - centre) @ rise  # (F, N)
     cameras = {name: [Camera(K=cam.K, R=cam.R, c=cam.c + np.array([0.0, 0.0,
                                                                   (cam.c[:2] - centre) @ rise]),
                              width=cam.width, height=cam.height) for cam in cams]
                for name, cams in scene.hor_cameras.items()}
-    top = _project_frames(scene.people, scene.top_cameras, scene.config, ground=ground)
-    hor = {name: _project_frames(scene.people, cams, scene.config, hidden=k,
-                                 k1=scene.hor_distortion.get(name, 0.0), ground=ground)
-           for k, (name, cams) in enumerate(cameras.items())}
-    return replace(scene, hor_cameras=cameras, top=top, hor=hor)
+    out = replace(scene, hor_cameras=cameras,
+                  ground=plane if scene.ground is None else scene.ground + plane)
+    return replace(out, top=_top_boxes(out, out.top_cameras), hor=_hor_boxes(out, cameras))
 
 
 def top_distorted(scene: ObliqueScene, k1: float) -> ObliqueScene:
     """The same scene with the top camera's lens distorting radially by ``k1``
     (:func:`distorted`; a drone's wide lens whose video is not undistorted: about -0.1), its
     boxes projected again; the handheld views unchanged."""
-    return replace(scene, top=_project_frames(scene.people, scene.top_cameras, scene.config,
-                                              k1=k1))
+    out = replace(scene, top_distortion=k1)
+    return replace(out, top=_top_boxes(out, out.top_cameras))
 
 
 def top_rolled(scene: ObliqueScene, roll_deg: float) -> ObliqueScene:
@@ -1138,8 +1154,7 @@ def top_rolled(scene: ObliqueScene, roll_deg: float) -> ObliqueScene:
     turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     cameras = [Camera(K=cam.K, R=turn @ cam.R, c=cam.c, width=cam.width, height=cam.height)
                for cam in scene.top_cameras]
-    return replace(scene, top_cameras=cameras,
-                   top=_project_frames(scene.people, cameras, scene.config))
+    return replace(scene, top_cameras=cameras, top=_top_boxes(scene, cameras))
 
 
 def write_oblique_scene(

@@ -211,6 +211,27 @@ def test_a_top_camera_mounted_askew_tips_its_horizon():
     assert all(np.allclose(level.top[f].boxes, scene.top[f].boxes) for f in scene.top)
 
 
+def _same_boxes(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(
+        np.array_equal(a[f].ids, b[f].ids) and np.allclose(a[f].boxes, b[f].boxes) for f in a)
+
+
+def test_the_transforms_compose_in_any_order():
+    """A slope, the top lens's barrel, its roll and the handheld drift each keep what the
+    others did (the scene carries its ground and top lens): sloping then distorting gives the
+    boxes of distorting then sloping, and neither those of the barrel on a level ground; the
+    handheld drift keeps the slope under its people."""
+    scene = _scene(dataclasses.replace(OBLIQUE, n_hor=2), 4, 30)
+    a = top_distorted(sloped(scene, 5.0, np.random.default_rng(0)), -0.1)
+    b = sloped(top_distorted(scene, -0.1), 5.0, np.random.default_rng(0))
+    assert _same_boxes(a.top, b.top) and all(_same_boxes(a.hor[v], b.hor[v]) for v in a.hor)
+    assert not _same_boxes(a.top, top_distorted(scene, -0.1).top)
+    rolled = top_rolled(a, 3.0)
+    assert rolled.ground is a.ground and rolled.top_distortion == -0.1
+    drifted = pitch_drifted(a, 0.0, 6.0, np.random.default_rng(0))
+    assert all(_same_boxes(drifted.hor[v], a.hor[v]) for v in a.hor)
+
+
 def test_a_turning_drone_stays_low_and_keeps_the_people_in_view():
     """A low drone that drifts and turns fast (36 degrees over the clip, about its own axis):
     rising cannot keep the shared square in a turning image, so past the highest drone asked
