@@ -138,8 +138,10 @@ MIN_BOXES = 30
 """Fewest usable boxes (inside the image, not cut by its border) a calibration is fitted from."""
 
 MIN_BLOCKS = 3
-"""Fewest stretches of 10 frames the usable boxes must come from: the confidence is the
-spread over resamples of them."""
+"""Fewest stretches of 10 frames the usable boxes must come from in the strict calibration:
+the confidence is the spread over resamples of them. The loose one (what the association
+takes) fits any number, its spread not measured from a single stretch: a clip of 20 frames
+(every 10th of a 6 s video) spans 2 or 3 by where its people happen to be readable."""
 
 MIN_ROW_SPREAD = 0.15
 """The usable foot rows must spread over this fraction of the image height (between their 10th
@@ -384,11 +386,12 @@ def calibrate_from_people(
             caller that does not read them, with ``strict=False``).
 
     Raises:
-        CalibrationError: too few usable boxes, foot rows in too narrow a band, or a tilt or
-            horizon that the clip does not pin down (:data:`MAX_TILT_STD_DEG`,
-            :data:`MAX_HORIZON_STD`); with ``strict``, also people seen from too steeply above
-            (:data:`MIN_UPRIGHT_ASPECT`) and, without ``hfov_deg``, a tilt that rests on the
-            lens (:data:`LENS_RANGE_DEG`). The message says what to give instead.
+        CalibrationError: too few usable boxes (:data:`MIN_BOXES`); with ``strict``, also
+            boxes from too few stretches of the clip (:data:`MIN_BLOCKS`), foot rows in too
+            narrow a band, a tilt or horizon that the clip does not pin down
+            (:data:`MAX_TILT_STD_DEG`, :data:`MAX_HORIZON_STD`), people seen from too steeply
+            above (:data:`MIN_UPRIGHT_ASPECT`) and, without ``hfov_deg``, a tilt that rests on
+            the lens (:data:`LENS_RANGE_DEG`). The message says what to give instead.
     """
     frames = np.asarray(frames, dtype=np.int64).reshape(-1)
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
@@ -401,9 +404,10 @@ def calibrate_from_people(
         raise CalibrationError(
             f"{name}: {len(b.h)} boxes clear of the image border and of each other, the "
             f"calibration needs {MIN_BOXES}; {give}")
-    if int(b.block.max()) + 1 < MIN_BLOCKS:
+    n_blocks = int(b.block.max()) + 1
+    if strict and n_blocks < MIN_BLOCKS:
         raise CalibrationError(
-            f"{name}: its usable boxes span {int(b.block.max()) + 1} stretch(es) of "
+            f"{name}: its usable boxes span {n_blocks} stretch(es) of "
             f"{BLOCK_FRAMES} frames, the calibration needs {MIN_BLOCKS} to measure its "
             f"confidence; {give}")
     inside = (w > 0) & (h > 0)
@@ -418,6 +422,7 @@ def calibrate_from_people(
             f"{MIN_UPRIGHT_ASPECT:g}): their boxes' heights are then mostly their width and do "
             f"not tell the tilt within {MAX_TILT_STD_DEG:g} degrees, nor whether it looks straight "
             "down; give its camera with --cameras")
+    spread = spread and n_blocks > 1  # one stretch: no resample differs from the clip
     try:
         calib = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread,
                          lens=strict)

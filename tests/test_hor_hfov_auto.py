@@ -140,24 +140,24 @@ def test_the_lens_candidates_run_side_by_side_give_the_same_run(scene) -> None:
 
 @pytest.mark.slow
 def test_the_lens_the_pairs_imply_is_run_and_kept_where_it_keeps_more() -> None:
-    """A clip (seed 13, a 113-degree lens) whose 110-degree run keeps the most pairs: they
-    measure 121 degrees, whose run keeps more pairs along the tracks than 110's, so it is the
-    lens, said so, and runs as if given (a measurement kept on the tracks' evidence, not a
-    closer lens: the pairs read 8 degrees wide here)."""
-    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(13))
+    """A clip (seed 3, a 112-degree lens) whose 90 and 110-degree runs keep the most pairs (72
+    each): the 90-degree run's measure 115 degrees, whose run keeps more pairs along the tracks
+    (76), so it is the lens, said so, and runs as if given (a measurement kept on the tracks'
+    evidence, not a closer lens: the pairs read 3 degrees wide here)."""
+    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(3))
     frames = list(range(1, 31, 3))
     calib = top_calibration(clip.top, clip.top_cameras[0].image_size)
     options = replace(_options(clip, "auto"), consensus=True)
     auto = run_ground_association(clip.top, clip.hor["hor1"], options, frames, calib)
     lens = auto.lens.hfov_deg
-    assert auto.lens.measured_from == 110.0 and lens not in HFOV_CANDIDATES
+    assert auto.lens.measured_from == 90.0 and lens not in HFOV_CANDIDATES
     assert lens == round(lens) and MEASURED_RANGE[0] <= lens <= MEASURED_RANGE[1]
     kept = sum(map(len, auto.pairs.values()))
-    assert auto.lens.scores[lens] == kept > auto.lens.made[110.0]
+    assert auto.lens.scores[lens] == kept > auto.lens.made[90.0]
     assert auto.scale == auto.lens.scales[lens]
     assert lens_note(auto.lens) == (
         f"handheld lens: {lens:.0f} degrees, chosen from its people (measured from the pairs "
-        "of a 110-degree run; --hor-hfov DEG fixes it)")
+        "of a 90-degree run; --hor-hfov DEG fixes it)")
     given = run_ground_association(clip.top, clip.hor["hor1"],
                                    replace(options, hor_hfov_deg=lens), frames, calib)
     assert (given.pairs, given.scale, given.lens) == (auto.pairs, auto.scale, None)
@@ -326,11 +326,11 @@ def test_multi_auto_from_the_command_line(two_wide, tmp_path, capsys) -> None:
 
 @pytest.mark.slow
 def test_another_lens_whose_run_as_made_keeps_clearly_more_replaces_the_choice() -> None:
-    """A clip (seed 7, a 110-degree lens) whose 90 and 110 degree runs without the top
-    camera's sights keep as many pairs (90, the nearer the prior, chosen; 60's and 70's
-    fewer): made with them, 110's keeps more than a near tie of 90's, so 110 is the lens, with
-    that run, as if given."""
-    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(7))
+    """A clip (seed 49, a 114-degree lens) whose 90 and 110 degree runs without the top
+    camera's sights keep as many pairs (49 each; 90, the nearer the prior, chosen; 60's and
+    70's fewer): made with them, 110's keeps 57, more than a near tie of 90's 49, so 110 is
+    the lens, with that run, as if given."""
+    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(49))
     frames = list(range(1, 31, 3))
     calib = top_calibration(clip.top, clip.top_cameras[0].image_size)
     options = replace(_options(clip, "auto"), consensus=True)

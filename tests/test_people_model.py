@@ -12,11 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from xvmatch.geometry.people_model import (
+    HIDING_GAP,
+    HIDING_SHARE,
     PERSON_HEIGHT,
     UsableBoxes,
     fit_model,
     predicted_heights,
     prior_focal,
+    readable_boxes,
 )
 
 SIZE = (1920, 1080)
@@ -94,3 +97,37 @@ def test_a_start_may_carry_a_tilt_per_window() -> None:
     assert len(one) == len(truth) - 1
     np.testing.assert_allclose(fit_model(b, SIZE, prior_focal(SIZE), [one], hold=(1, 2, 3)),
                                truth, atol=1e-3)
+
+
+def _readable(*boxes: tuple[float, float, float, float]) -> list[bool]:
+    """Which of one frame's boxes (x, y, w, h) tell their person's height."""
+    array = np.array(boxes, dtype=float)
+    return readable_boxes(np.zeros(len(array), np.int64), array, SIZE).tolist()
+
+
+def test_a_box_is_hidden_where_a_nearer_box_spans_most_of_its_feet_or_head() -> None:
+    """A far person (feet at row 400) behind a near one (feet at row 600): a near box across
+    the far box's foot row hides it from :data:`HIDING_SHARE` of its width on, one at its side
+    does not; a taller near box across its top row hides it; the near one stays readable."""
+    far = (500.0, 250.0, 60.0, 150.0)
+    cover = HIDING_SHARE * 60.0
+    assert _readable(far, (560.0 - cover, 350.0, 80.0, 250.0)) == [False, True]
+    assert _readable(far, (560.0 - cover + 2.0, 350.0, 80.0, 250.0)) == [True, True]
+    assert _readable(far, (450.0, 350.0, 40.0, 250.0)) == [True, True]  # left of it, apart
+    assert _readable(far, (480.0, 200.0, 100.0, 400.0)) == [False, True]  # its head too
+    assert _readable(far, (480.0, 420.0, 100.0, 180.0)) == [True, True]  # below its feet
+    assert _readable(far, (500.0, 200.0, 60.0, 150.0)) == [True, False]  # feet higher: behind
+
+
+def test_a_box_ending_just_above_nearer_boxes_is_hidden_by_them_together() -> None:
+    """Loose edges leave a gap between a hidden box's bottom and its hider's top: within
+    :data:`HIDING_GAP` of the hider's height it is hidden, farther up it stands clear; two
+    nearer boxes each across a third of its width hide it together."""
+    far = (500.0, 250.0, 60.0, 150.0)
+    gap = HIDING_GAP * 200.0
+    assert _readable(far, (480.0, 400.0 + gap - 1.0, 100.0, 200.0)) == [False, True]
+    assert _readable(far, (480.0, 400.0 + gap + 1.0, 100.0, 200.0)) == [True, True]
+    third = 60.0 / 3.0
+    pair = ((500.0 - 40.0 + third, 350.0, 40.0, 250.0), (560.0 - third, 360.0, 40.0, 250.0))
+    assert _readable(far, *pair) == [False, True, True]
+    assert _readable(far, pair[0]) == [True, True]

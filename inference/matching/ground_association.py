@@ -370,11 +370,12 @@ def holder_note(camera_id: int, holders: Sequence[np.ndarray | None], video: boo
 
 def oblique_note(calib: PeopleCalibration) -> str:
     """What a top view calibrated from its people is: its tilt, the tilt's spread (to a tenth
-    under a degree: "+- 0" reads as no measure) and its height."""
+    under a degree: "+- 0" reads as no measure; none where not measured: a clip of one stretch)
+    and its height."""
     spread = calib.tilt_std_deg
-    return (f"top view: oblique, tilt {calib.tilt_deg:.0f} +- "
-            f"{spread:.{1 if spread < 0.95 else 0}f} degrees, about {calib.camera_height:.0f} m "
-            "up (from its people)")
+    measured = "" if np.isnan(spread) else f" +- {spread:.{1 if spread < 0.95 else 0}f}"
+    return (f"top view: oblique, tilt {calib.tilt_deg:.0f}{measured} degrees, about "
+            f"{calib.camera_height:.0f} m up (from its people)")
 
 
 FIXES_LENS = "--hor-hfov DEG fixes it"
