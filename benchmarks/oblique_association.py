@@ -48,8 +48,9 @@ the top camera's lens distorting radially by K1
 (:func:`~xvmatch.datasets.oblique_scenes.top_distorted`: a drone's video not undistorted,
 about -0.1); ``--top-roll DEG``, the top camera turned DEG degrees about its optical axis
 (:func:`~xvmatch.datasets.oblique_scenes.top_rolled`: a building camera mounted askew; the
-renders' top cameras are otherwise level). The methods take a level ground and a pinhole top
-camera, and fit the top camera's roll.
+renders' top cameras are otherwise level); ``--top-hfov LO HI``, the top camera's lens (default
+55-85 degrees; 90 120: an action camera on a pole). The methods take a level ground and a
+pinhole top camera, and fit the top camera's roll and lens.
 
     .venv/bin/python benchmarks/oblique_association.py --scenes 12 --ground-slope 3
 
@@ -297,6 +298,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--top-height", type=float, nargs=2, default=(4.0, 60.0),
                    metavar=("LO", "HI"), help="the top camera's height in the renders, LO-HI "
                    "metres (default 4 60; raised where the people do not fit its image)")
+    p.add_argument("--top-hfov", type=float, nargs=2, default=(55.0, 85.0),
+                   metavar=("LO", "HI"), help="the top camera's horizontal field of view in the "
+                   "renders, LO-HI degrees (default 55 85; 90 120: an action camera on a pole)")
     p.add_argument("--edge-people", type=int, nargs=2, default=(0, 0), metavar=("LO", "HI"),
                    help="LO-HI more people per camera walking across its image's bottom edge, "
                    "their boxes cut by it (default 0 0)")
@@ -350,6 +354,7 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               top_yaw_rate=tuple(args.top_yaw_rate),
                               top_pitch_rate=tuple(args.top_pitch_rate),
                               top_pitch=tuple(args.top_pitch), top_height=tuple(args.top_height),
+                              top_hfov=tuple(args.top_hfov),
                               edge_people=tuple(args.edge_people),
                               holder_speed=tuple(args.holder_speed),
                               holder_area=tuple(args.holder_area), pan_rate=args.pan_rate,

@@ -536,3 +536,5 @@ def test_the_benchmarks_render_options_default_to_the_configs_own() -> None:
     assert drone_config(parser.parse_args([])) == ObliqueSceneConfig()
     spread = drone_config(parser.parse_args(["--area", "20", "40", "--group-area", "6", "12"]))
     assert (spread.area, spread.group_area) == ((20.0, 40.0), (6.0, 12.0))
+    wide = drone_config(parser.parse_args(["--top-hfov", "90", "120"]))
+    assert wide.top_hfov == (90.0, 120.0)
