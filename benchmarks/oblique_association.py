@@ -387,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
                    "(a drone's video not undistorted: about -0.1; the methods take a pinhole)")
     p.add_argument("--top-roll", type=float, default=None, metavar="DEG",
                    help="the same scenes with the top camera rolled DEG degrees about its axis "
-                   "(a building camera mounted askew; the calibration leans to level)")
+                   "(a building camera mounted askew; the calibration fits the roll)")
     p.add_argument("--box-noise", type=float, default=0.0, metavar="SIGMA",
                    help="move each box edge, in both views, by a normal draw of SIGMA times "
                    "the box's height, clipped to the image (default 0: the renders' exact "

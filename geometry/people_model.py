@@ -80,7 +80,7 @@ side, leaves them in sight."""
 HIDING_GAP = 0.1
 """A box that ends within this share of a nearer box's height above that box's top is taken
 to end at it (its feet hidden): boxes' edges are loose by a few per cent of their height (on
-renders with 3 % loose edges, the boxes ended just above a hider read 1.6-2.6 times too
+renders with 3 % loose edges, the boxes ended just above a hider read 1.7-2.6 times too
 short for the true camera)."""
 
 _MIN_HEIGHT_PX = 8.0
