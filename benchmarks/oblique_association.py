@@ -133,6 +133,7 @@ from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import (
     BOX_EXTENTS,
     ObliqueSceneConfig,
+    jittered,
     make_oblique_scene,
     pitch_drifted,
     sloped,
@@ -171,28 +172,6 @@ def _scrambled(frames: dict, rng: np.random.Generator) -> tuple[dict, dict]:
     return ({f: FrameBoxes(f, np.array([forward[int(i)] for i in r.ids], dtype=np.int64),
                            np.asarray(r.boxes, float).reshape(-1, 4))
              for f, r in frames.items()}, back)
-
-
-def _jittered(frames: dict, sigma: float, rng: np.random.Generator,
-              size: tuple[int, int], clip: bool = True) -> dict:
-    """The view's boxes with each edge moved by a normal draw of ``sigma`` times the box's
-    height (an annotator's or a detector's looseness), then clipped to the ``size`` image as
-    annotation tools and detectors clip them (``clip``; else only a side already past the
-    border may stay past it), at least 2 px wide and tall."""
-    out = {}
-    for f in sorted(frames):
-        rec = frames[f]
-        b = np.asarray(rec.boxes, float).reshape(-1, 4)
-        x0, y0, x1, y1 = (b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3])
-        step = sigma * b[:, 3:4] * rng.standard_normal((len(b), 4))
-        lo = (np.minimum(x0, 0.0), np.minimum(y0, 0.0)) if not clip else (0.0, 0.0)
-        hi = (np.maximum(x1, size[0]), np.maximum(y1, size[1])) if not clip else size
-        x0, x1 = (np.clip(v + step[:, k], lo[0], hi[0]) for k, v in ((0, x0), (2, x1)))
-        y0, y1 = (np.clip(v + step[:, k], lo[1], hi[1]) for k, v in ((1, y0), (3, y1)))
-        x0, y0 = np.minimum(x0, size[0] - 2.0), np.minimum(y0, size[1] - 2.0)
-        w, h = np.maximum(x1 - x0, 2.0), np.maximum(y1 - y0, 2.0)
-        out[f] = FrameBoxes(f, rec.ids, np.column_stack([x0, y0, w, h]))
-    return out
 
 
 def _true_calibration(camera, size: tuple[int, int]) -> PeopleCalibration:
@@ -460,8 +439,8 @@ def main(argv: list[str] | None = None) -> int:
         hor, hor_back = _scrambled(scene.hor["hor1"], rng)
         if args.box_noise > 0:  # from a generator of its own: the scenes' draws stay
             noise = np.random.default_rng([args.seed, k, 2])
-            top, hor = (_jittered(v, args.box_noise, noise, c.image_size,
-                                  clip=args.box_extent == "visible") for v, c in
+            top, hor = (jittered(v, args.box_noise, noise, c.image_size,
+                                 clip=args.box_extent == "visible") for v, c in
                         ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         holder = int(scene.groups["holders"][0])  # its scrambled id, where the top view has one

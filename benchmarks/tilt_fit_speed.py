@@ -26,9 +26,8 @@ import argparse
 import time
 
 import numpy as np
-from oblique_association import _jittered
 
-from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, jittered, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.geometry import tilting_camera
 from xvmatch.geometry.people_model import usable_boxes
@@ -52,7 +51,7 @@ def clip(seconds: float, case: tuple[dict, float], k: int) -> tuple[tuple, tuple
     size = scene.top_cameras[0].image_size
     top = scene.top
     if noise > 0:
-        top = _jittered(top, noise, np.random.default_rng([0, k, 2]), size)
+        top = jittered(top, noise, np.random.default_rng([0, k, 2]), size)
     frames = [f for f in sorted(top) if (f - 1) % 3 == 0]
     top = {i: FrameBoxes(i, top[f].ids, top[f].boxes) for i, f in enumerate(frames, 1)}
     return stack_frames(top), size, top

@@ -85,6 +85,7 @@ __all__ = [
     "ObliqueScene",
     "ObliqueSceneConfig",
     "distorted",
+    "jittered",
     "make_oblique_scene",
     "pitch_drifted",
     "project_view",
@@ -438,6 +439,28 @@ def distorted(uv: np.ndarray, K: np.ndarray, k1: float) -> np.ndarray:
     if k1 < 0:
         r2 = np.minimum(r2, -1.0 / (3.0 * k1))
     return c + f * xy * (1.0 + k1 * r2)
+
+
+def jittered(frames: dict[int, FrameBoxes], sigma: float, rng: np.random.Generator,
+             size: tuple[int, int], clip: bool = True) -> dict[int, FrameBoxes]:
+    """One view's boxes ``{frame: FrameBoxes}`` with each edge moved by a normal draw of
+    ``sigma`` times the box's height (an annotator's or a detector's looseness), then clipped
+    to the ``size`` image as annotation tools and detectors clip them (``clip``; else only a
+    side already past the border may stay past it), at least 2 px wide and tall."""
+    out = {}
+    for f in sorted(frames):
+        rec = frames[f]
+        b = np.asarray(rec.boxes, float).reshape(-1, 4)
+        x0, y0, x1, y1 = (b[:, 0], b[:, 1], b[:, 0] + b[:, 2], b[:, 1] + b[:, 3])
+        step = sigma * b[:, 3:4] * rng.standard_normal((len(b), 4))
+        lo = (np.minimum(x0, 0.0), np.minimum(y0, 0.0)) if not clip else (0.0, 0.0)
+        hi = (np.maximum(x1, size[0]), np.maximum(y1, size[1])) if not clip else size
+        x0, x1 = (np.clip(v + step[:, k], lo[0], hi[0]) for k, v in ((0, x0), (2, x1)))
+        y0, y1 = (np.clip(v + step[:, k], lo[1], hi[1]) for k, v in ((1, y0), (3, y1)))
+        x0, y0 = np.minimum(x0, size[0] - 2.0), np.minimum(y0, size[1] - 2.0)
+        w, h = np.maximum(x1 - x0, 2.0), np.maximum(y1 - y0, 2.0)
+        out[f] = FrameBoxes(f, rec.ids, np.column_stack([x0, y0, w, h]))
+    return out
 
 
 def _project_frames(

@@ -9,8 +9,9 @@ the whole pinhole model (:mod:`~xvmatch.geometry.people_model`) to a clip's boxe
 
 * **model**: ``K`` with square pixels and the principal point at the image centre, ``R`` =
   ``look_rotation(0, tilt, roll)``, centre ``(0, 0, h_camera)``; each box's foot pixel (bottom
-  centre) is cast to the ground and a person of :data:`PERSON_HEIGHT` stood there; the residual
-  is ``log(predicted height / box height)``;
+  centre) is cast to the ground and a person of :data:`PERSON_HEIGHT` stood there, the foot row
+  moved until the person's box has the box's centre row (loose edges); the residual is
+  ``log(predicted height / box height)``;
 * **start**: a robust linear fit of box height on foot row and column (the level-camera line,
   which gives the horizon line and ``H_person / h_camera``), for several focal lengths;
 * **fit**: ``scipy.optimize.least_squares`` with a soft-L1 loss (people differ in height, boxes

@@ -140,11 +140,11 @@ def test_the_lens_candidates_run_side_by_side_give_the_same_run(scene) -> None:
 
 @pytest.mark.slow
 def test_the_lens_the_pairs_imply_is_run_and_kept_where_it_keeps_more() -> None:
-    """A clip (seed 3, a 112-degree lens) whose 90 and 110-degree runs keep the most pairs (72
-    each): the 90-degree run's measure 115 degrees, whose run keeps more pairs along the tracks
-    (76), so it is the lens, said so, and runs as if given (a measurement kept on the tracks'
-    evidence, not a closer lens: the pairs read 3 degrees wide here)."""
-    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(3))
+    """A clip (seed 5, a 114-degree lens) whose 90 and 110-degree runs keep the most pairs (71
+    each): the 90-degree run's measure 113 degrees, whose run keeps more pairs along the tracks
+    (75), so it is the lens, said so, and runs as if given (a measurement kept on the tracks'
+    evidence)."""
+    clip = make_oblique_scene(WIDE, 30, np.random.default_rng(5))
     frames = list(range(1, 31, 3))
     calib = top_calibration(clip.top, clip.top_cameras[0].image_size)
     options = replace(_options(clip, "auto"), consensus=True)
