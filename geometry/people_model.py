@@ -7,8 +7,8 @@ metres over one ground plane, looking along +x, tilted down by ``tilt`` and roll
 :data:`PERSON_HEIGHT` tall unless followed long enough to have a height of their own. The
 residual of a box is ``log(predicted height / box height)``, the person placed so that their
 box's centre row is the box's (:func:`centred_heights`: a loose bottom edge would move the foot
-row and the height together), fitted with a soft-L1 loss (people
-differ in height, boxes are cut by occlusion) and weak priors on the focal length
+row and the height together), fitted with a soft-L1 loss (people differ in height, boxes are
+cut by occlusion) and weak priors on the focal length
 (:data:`PRIOR_HFOV_DEG`) and the people's heights.
 
 The tilt is one for the clip (:mod:`~xvmatch.geometry.people_calibration`, a static camera) or
@@ -102,7 +102,8 @@ _BAD_RESIDUAL = 3.0
 """Residual of a box whose foot the model puts at or above the horizon (log units: e^3)."""
 
 CENTRE_ROUNDS = 2
-"""Steps of :func:`centred_heights`' foot row (each shrinks its error by a factor 2-5)."""
+"""Steps of :func:`centred_heights`' foot row (each multiplies its error by half the rate at
+which box heights change with the row: well under a half where people stand upright)."""
 
 SOFT_SCALE = 0.08
 """Soft-L1 scale of the height residuals: people's heights differ by about 8 %."""
@@ -334,12 +335,12 @@ def predicted_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int])
 
 def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
     """Box heights the model predicts for the boxes' centre rows rather than their bottoms (the
-    foot row solved from ``v = centre + height(v) / 2`` in :data:`CENTRE_ROUNDS` steps, each
-    moving it by a fifth to a half of the last): a box's loose bottom edge moves its foot row
-    and its height together, and where each person followed has a height of their own the tilt
-    rests on how heights change over the few rows they walk, which that shared error flattens
-    (renders with 3 % loose edges read 3-8 degrees too level); the centre row's error is
-    independent of the height's where both edges are as loose."""
+    foot row solved from ``v = centre + height(v) / 2`` in :data:`CENTRE_ROUNDS` fixed-point
+    steps): a box's loose bottom edge moves its foot row and its height together, and where
+    each person followed has a height of their own the tilt rests on how heights change over
+    the few rows they walk, which that shared error flattens (renders with 3 % loose edges
+    read 3-8 degrees too level); the centre row's error is independent of the height's where
+    both edges are as loose."""
     centre = b.v - 0.5 * b.h
     pred = predicted_heights(params, b, size)
     for _ in range(CENTRE_ROUNDS):
