@@ -262,8 +262,8 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     images' bottom edges (``--edge-people``), the handheld cameras' holders' pace, walk and
     pans (``--holder-speed``, ``--holder-area``, ``--pan-rate``), their lenses' distortion
     (``--hor-distortion``), pitch and height (``--hor-pitch``, ``--hor-wobble``,
-    ``--hor-height``), people's heights (``--person-height``) and how far apart they stand
-    (``--area``, ``--group-area``)."""
+    ``--hor-height``), people's heights (``--person-height``), how far apart they stand
+    (``--area``, ``--group-area``) and how often and how long they stand still (``--stops``)."""
     p.add_argument("--top-drift", type=float, nargs=2, default=(0.0, 0.0), metavar=("LO", "HI"),
                    help="the top camera drifts at LO-HI m/s (a drone; default static)")
     p.add_argument("--top-yaw-rate", type=float, nargs=2, default=(0.0, 0.0),
@@ -313,6 +313,9 @@ def add_drone_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--person-height", type=float, nargs=2, default=(1.5, 1.95),
                    metavar=("LO", "HI"), help="people's heights in the renders, LO-HI metres "
                    "(default 1.5 1.95; lower: children, people sitting)")
+    p.add_argument("--stops", type=float, nargs=2, default=(0.1, 5.0), metavar=("RATE", "S"),
+                   help="people stop RATE times a second for S seconds on average (default 0.1 "
+                   "5: a third stand at any time; 0.5 30, a lingering crowd: 94 %%)")
     p.add_argument("--box-extent", choices=BOX_EXTENTS, default="visible",
                    help="what a person's box covers: visible (default: the visible part, "
                    "clipped to the image), past_border (run on past a border that cuts it, as "
@@ -342,6 +345,7 @@ def drone_config(args: argparse.Namespace, **settings) -> ObliqueSceneConfig:
                               hor_height=tuple(args.hor_height),
                               height_range=tuple(args.person_height), area=tuple(args.area),
                               group_area=tuple(args.group_area),
+                              stop_probability=args.stops[0], stop_duration=args.stops[1],
                               box_extent=args.box_extent, **settings)
 
 

@@ -79,6 +79,7 @@ __all__ = [
     "MAP_SCALES",
     "RADIUS",
     "RANGE_SPREAD",
+    "SCALE_FLOOR",
     "SCALE_MARGIN",
     "WIDTH_RATIO",
     "FramePose",
@@ -154,6 +155,17 @@ MAP_SCALES = (0.7, 0.85, 1.0, 1.15, 1.3)
 
 SCALE_MARGIN = 1.05
 """How many times the people explained at scale 1 another scale must explain to replace it."""
+
+SCALE_FLOOR = 0.85
+"""The least share of scale 1's clip score total (the people its chosen poses explain) another
+scale's run needs for video mode to weigh its pairs along the tracks at all
+(:func:`~xvmatch.inference.matching.ground_association.scale_along_tracks`): pairs of people
+who stand still hold along the tracks under a wrong pose too, so on a crowd standing 94 % of
+the time a wrong scale kept more of them (0.7: 280 pair-frames, all wrong, where scale 1
+explained twice the people and kept 238, all right). Logged with no floor over every choice
+of two walking render sets, 2 of the 218 that took another scale had under 0.85 of scale 1's
+total (a lens's runs that were not kept); over the standing crowd's, 11 of 58 (0.51-0.85)
+(docs/notes/oblique_top_camera.md, fifty-seventh session)."""
 
 _STEP_M = 1.0
 """Metres per second a handheld camera's position may drift between frames at no cost."""

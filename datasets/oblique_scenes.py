@@ -142,6 +142,10 @@ class ObliqueSceneConfig:
         fps: frame rate.
         walk_speed: preferred walking speed (m/s), per person.
         stop_probability: probability per second that a walker stops.
+        stop_duration: mean duration of a stop (s, exponentially distributed): with
+            ``stop_probability`` it sets the share of people standing at any time,
+            ``p d / (1 + p d)`` (a third by default; 0.5 a second for 30 s, a lingering crowd,
+            94 %).
         top_size: top image (width, height), pixels.
         top_pitch: downward pitch of the top camera (90: nadir).
         top_height: height of the top camera (raised where the shared square cannot fit,
@@ -201,6 +205,7 @@ class ObliqueSceneConfig:
     fps: float = 10.0
     walk_speed: tuple[float, float] = (0.3, 1.4)
     stop_probability: float = 0.1
+    stop_duration: float = 5.0
     top_size: tuple[int, int] = (1920, 1080)
     top_pitch: tuple[float, float] = (20.0, 90.0)
     top_height: tuple[float, float] = (4.0, 60.0)
@@ -273,7 +278,7 @@ class ObliqueSceneConfig:
             if len(size) != 2 or min(size) < 8:
                 raise ValueError(f"ObliqueSceneConfig.{name} must be (width, height) >= 8, "
                                  f"got {size}")
-        for name in ("fps", "min_separation", "near_clip", "head_turn_time"):
+        for name in ("fps", "min_separation", "near_clip", "head_turn_time", "stop_duration"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"ObliqueSceneConfig.{name} must be > 0, "
                                  f"got {getattr(self, name)}")
@@ -920,6 +925,7 @@ def _walk(
         n_people=(n, n), area=region.side, height_range=config.height_range,
         width_range=config.width_range, min_separation=config.min_separation,
         fps=config.fps, walk_speed=speed, stop_probability=config.stop_probability,
+        stop_duration=config.stop_duration,
         edge_margin=min(2.0, 0.2 * region.side), hor_wobble_deg=0.0,
         top_altitude=max(40.0, config.height_range[1] + 1.0),
     )

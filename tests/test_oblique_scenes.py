@@ -509,6 +509,24 @@ def test_written_files_read_back(tmp_path, two_hor):
         write_oblique_scene(scene, tmp_path / "missing", "s1")
 
 
+def test_a_lingering_crowd_stands_still():
+    """``stop_probability`` and ``stop_duration``: people who stop half a second's chance a
+    second for 30 s on average stand nearly all the time (``p d / (1 + p d)``, 94 %), for 5 s
+    about two thirds of it, and the default crowd a third; the default duration is the walks'
+    own (5 s), so the default scene is the same draw for draw."""
+    def standing(stops):  # the share of person-frames slower than 5 cm/s, seed 2
+        config = dataclasses.replace(CONFIG, stop_probability=stops[0], stop_duration=stops[1])
+        steps = np.diff(_scene(config, 2, 100).people.positions, axis=0)
+        return float(np.mean(np.hypot(*steps.transpose(2, 0, 1)) * config.fps < 0.05))
+
+    assert standing((0.1, 5.0)) < 0.4 < standing((0.5, 5.0)) < 0.8 < standing((0.5, 30.0))
+    np.testing.assert_array_equal(
+        _scene(dataclasses.replace(CONFIG, stop_duration=5.0), 3, 40).people.positions,
+        _scene(CONFIG, 3, 40).people.positions)
+    with pytest.raises(ValueError, match="stop_duration"):
+        ObliqueSceneConfig(stop_duration=0.0)
+
+
 def test_bad_input():
     with pytest.raises(ValueError, match="top_pitch"):
         ObliqueSceneConfig(top_pitch=(20.0, 100.0))
@@ -538,3 +556,5 @@ def test_the_benchmarks_render_options_default_to_the_configs_own() -> None:
     assert (spread.area, spread.group_area) == ((20.0, 40.0), (6.0, 12.0))
     wide = drone_config(parser.parse_args(["--top-hfov", "90", "120"]))
     assert wide.top_hfov == (90.0, 120.0)
+    lingering = drone_config(parser.parse_args(["--stops", "0.5", "30"]))
+    assert (lingering.stop_probability, lingering.stop_duration) == (0.5, 30.0)
