@@ -885,7 +885,8 @@ def register_with_scale(frames: list[int], tops: list[np.ndarray], hors: list[np
     where its chosen poses explain :data:`SCALE_MARGIN` times as many people over the clip (a
     small lead is noise). The totals tell the scale weakly (a pose fitted frame by frame
     absorbs a scale error; on the renders the best other scale's total is within 0.97-1.13 of
-    scale 1's on most clips): video mode chooses along the tracks instead
+    scale 1's on most clips): video mode chooses along the tracks instead, among the scales
+    whose total reaches :data:`SCALE_FLOOR` of scale 1's
     (:func:`xvmatch.inference.matching.ground_association.register_and_pair`).
 
     Args:

@@ -25,7 +25,9 @@ view's boxes say it is oblique).
    over the clip (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`), and
    the map scale kept is the one whose run keeps the most pairs along the tracks
    (:func:`register_and_pair`; the registration's score totals tell it weakly: on a shallow
-   tilting render, 0 of 40 pairs right at the scale they kept, 105 of 105 at 1.3). The run
+   tilting render, 0 of 40 pairs right at the scale they kept, 105 of 105 at 1.3), of those
+   whose score total is not far below scale 1's (:func:`scale_along_tracks`: standing
+   people's pairs hold along the tracks under a wrong pose too). The run
    registered on the handheld boxes no border cuts, every box paired under its poses, replaces
    it where it keeps more than a near tie (:func:`_whole_boxes_run`: a close passer-by cut by
    the bottom edge can hold a wrong pose).
@@ -779,10 +781,10 @@ def register_and_pair(order: list[int], tops: list, boxes: list, sizes: list, hf
     frame's pairs under its pose; with ``views`` (the top and horizontal ``{frame: record}``,
     their ids the tracks: video mode) the top map's motion taken out, the pairs made
     consistent along the tracks, and the map scale the one whose run keeps the most pairs
-    there (:func:`~xvmatch.cues.hor_lens.pick_along_tracks`, scale 1 the prior: the clip's
-    score totals tell the scale weakly, :func:`~xvmatch.cues.ground_registration.margin_scale`)
-    and, with ``sights``, the run without them where it keeps more (:func:`fewer_sights`);
-    frame by frame the scale those totals keep.
+    there (:func:`scale_along_tracks`, scale 1 the prior: the clip's score totals tell the
+    scale weakly, :func:`~xvmatch.cues.ground_registration.margin_scale`, and only bar a
+    scale far below scale 1's) and, with ``sights``, the run without them where it keeps more
+    (:func:`fewer_sights`); frame by frame the scale those totals keep.
 
     Args:
         order: the frames.
