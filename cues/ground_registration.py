@@ -89,6 +89,7 @@ __all__ = [
     "associate_on_ground",
     "box_width_ratio",
     "carried",
+    "fitting_scales",
     "hor_ground_points",
     "hor_horizon",
     "map_motion",
@@ -925,6 +926,15 @@ def margin_scale(runs: dict[float, tuple[float, list[FramePose]]]) -> float:
     best total's, where it leads scale 1's by :data:`SCALE_MARGIN`, else 1."""
     best = max(MAP_SCALES, key=lambda s: (runs[s][0], -abs(s - 1.0)))
     return best if runs[best][0] > round(SCALE_MARGIN * runs[1.0][0], 6) else 1.0
+
+
+def fitting_scales(runs: dict[float, tuple[float, list[FramePose]]]) -> list[float]:
+    """The map scales of :func:`register_scales`' runs whose clip score total is at least
+    :data:`SCALE_FLOOR` of scale 1's (scale 1 always): those video mode weighs by their pairs
+    along the tracks."""
+    one = runs[1.0][0]
+    floor = one - (1.0 - SCALE_FLOOR) * abs(one)
+    return [s for s, (total, _) in runs.items() if s == 1.0 or total >= floor]
 
 
 def on_top_map(hor: np.ndarray, pose: FramePose) -> np.ndarray:

@@ -930,11 +930,10 @@ def scale_along_tracks(order: list[int], tops: list, hors: list,
     """The map scale whose run keeps the most pairs along the tracks (scale 1 the prior,
     :func:`~xvmatch.cues.hor_lens.pick_along_tracks`), its poses and pairs; of the scales
     whose clip score total is at least :data:`~xvmatch.cues.ground_registration.SCALE_FLOOR`
-    of scale 1's (people who stand still keep their pairs along the tracks under any pose)."""
-    one = runs[1.0][0]
-    floor = one - (1.0 - gr.SCALE_FLOOR) * abs(one)
-    pairs = {s: _consistent(order, tops, hors, sizes, s, poses, views)
-             for s, (total, poses) in runs.items() if s == 1.0 or total >= floor}
+    of scale 1's (:func:`~xvmatch.cues.ground_registration.fitting_scales`: people who stand
+    still keep their pairs along the tracks under any pose)."""
+    pairs = {s: _consistent(order, tops, hors, sizes, s, runs[s][1], views)
+             for s in gr.fitting_scales(runs)}
     scale = pick_along_tracks(*_kept(pairs), prior=1.0)
     return scale, runs[scale][1], pairs[scale]
 
