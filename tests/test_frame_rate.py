@@ -13,6 +13,7 @@ from xvmatch.inference.matching.frame_rate import (
     BRISK_WALK_MPS,
     MIN_WALKERS,
     READ_RATE_SLACK,
+    UNREAD_RATE_SLACK,
     frame_rate_from_walkers,
     frame_rate_note,
 )
@@ -42,7 +43,7 @@ def test_a_file_numbered_three_a_second_is_read_as_such() -> None:
     rate = frame_rate_from_walkers(*_walkers(3.0, standing=3))
     assert rate.estimated and rate.walkers == 9
     assert 2.0 <= rate.fps <= 4.0
-    assert rate.slack == READ_RATE_SLACK > 1.0  # a rate read: the registration walks looser
+    assert rate.slack == rate.lens_slack == READ_RATE_SLACK > 1.0  # a rate read: looser
     # Read at 30 a second they would walk ten times too fast; the note says both.
     assert rate.prior_pace > 8 * BRISK_WALK_MPS
     note = frame_rate_note(rate)
@@ -70,9 +71,14 @@ def test_a_video_numbered_at_its_own_rate_keeps_the_prior() -> None:
 def test_people_who_do_not_walk_tell_nothing() -> None:
     standing = frame_rate_from_walkers(*_walkers(3.0, walking=0, standing=8))
     assert not standing.estimated and standing.fps == 30.0 and standing.walkers == 0
+    # Nothing says the file is not numbered 1, 2, 3: the camera walks and turns as freely as
+    # at a tenth of the prior, where a rate read gets twice and one confirmed or given none.
+    assert standing.slack == UNREAD_RATE_SLACK == 10.0 > READ_RATE_SLACK
+    assert standing.lens_slack == 1.0  # the lens chosen as before: let move, lenses tie
     assert "too few people walk" in frame_rate_note(standing)
+    assert "as at a tenth of it" in frame_rate_note(standing)
     few = frame_rate_from_walkers(*_walkers(3.0, walking=MIN_WALKERS - 1))
-    assert not few.estimated and few.walkers == 0
+    assert not few.estimated and few.walkers == 0 and few.slack == UNREAD_RATE_SLACK
     # No boxes, one box, no foot on the ground: the prior.
     assert frame_rate_from_walkers(np.zeros(0), np.zeros(0), np.zeros((0, 2))).fps == 30.0
     assert frame_rate_from_walkers([1], [1], [[0.0, 0.0]], prior=25.0).fps == 25.0

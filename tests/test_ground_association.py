@@ -13,6 +13,7 @@ from xvmatch.cues import ground_registration as gr
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, stack_frames
 from xvmatch.inference.matching import ground_association
+from xvmatch.inference.matching.frame_rate import READ_RATE_SLACK, UNREAD_RATE_SLACK
 from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
     run_ground_association,
@@ -573,6 +574,70 @@ def test_the_note_leaves_out_a_spread_not_measured() -> None:
     assert note == "top view: oblique, tilt 31 degrees, about 10 m up (from its people)"
     measured = replace(calib, tilt_std_deg=0.42)
     assert "tilt 31 +- 0.4 degrees" in ground_association.oblique_note(measured)
+
+
+def _standing_crowd() -> tuple:
+    """A crowd standing 94 % of the time seen by a still drone and a still handheld camera
+    (its lens 80 degrees), every 3rd frame of the 10 fps render numbered 1, 2, 3: the scene,
+    the two views (ids scrambled), ``{scene frame: number}``, video mode's options and the ways
+    back to the scene's ids."""
+    config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), overlap=(0.35, 0.65),
+                                top_height=(4.0, 12.0), stop_probability=0.5,
+                                stop_duration=30.0, hor_hfov=(60.0, 110.0))
+    clip = make_oblique_scene(config, 120, np.random.default_rng([1, 7]))
+    top, hor, frames, options, backs = _prepared(clip)
+    number = {f: k for k, f in enumerate(frames, 1)}
+    top, hor = ({number[f]: FrameBoxes(number[f], v[f].ids, v[f].boxes) for f in frames if f in v}
+                for v in (top, hor))
+    return clip, top, hor, number, replace(options, consensus=True), backs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fps", ["auto", 30.0])
+def test_a_standing_crowd_whose_frame_rate_no_walker_tells_lets_the_camera_move_freely(
+        fps: str | float) -> None:
+    """A crowd that stands tells no frame rate, and the prior (30 a second) is taken; on a
+    file of every 3rd frame of a 10 fps clip numbered 1, 2, 3 (3.3 a second) the registration
+    would then allow a tenth of the camera's true walk and turn, the poses' own wobble would
+    cost more than any clip score, and a steady wrong run won (the right one, present in every
+    frame, explained 156 against 135). A rate no walker told gets ``UNREAD_RATE_SLACK``; the
+    same 30 given is trusted, and loses the clip."""
+    clip, top, hor, number, options, backs = _standing_crowd()
+    frames = list(number)
+    options = replace(options, hor_hfov_deg=70.0, fps=fps)
+    run = run_ground_association(top, hor, options, list(number.values()),
+                                 top_calibration(top, options.top_size))
+    scene_run = replace(run, pairs={f: run.pairs.get(k, []) for f, k in number.items()})
+    score = _cvidf1(clip, scene_run, frames, backs)
+    if fps == "auto":
+        assert run.frame_rate is not None and run.frame_rate.fps == 30.0
+        assert not run.frame_rate.estimated and run.frame_rate.walkers == 0
+        assert run.frame_rate.slack == UNREAD_RATE_SLACK > READ_RATE_SLACK
+        assert score > 95.0  # a percentage
+    else:
+        assert run.frame_rate is None and score < 5.0
+
+
+@pytest.mark.slow
+def test_where_no_walker_tells_the_rate_the_lens_is_chosen_at_the_priors_own_pace(
+        registration_paces) -> None:
+    """Let move as at a tenth of the prior, every lens's run keeps as many pairs along a
+    standing crowd's tracks and wider lenses won; so the lens is chosen at the prior's own
+    free walk and turn (``FrameRate.lens_slack``), and the chosen lens's run then made let
+    move: the same run as that lens given."""
+    _, top, hor, number, options, _ = _standing_crowd()
+    options = replace(options, hor_hfov_deg="auto", fps="auto")
+    calib = top_calibration(top, options.top_size)
+    run = run_ground_association(top, hor, options, list(number.values()), calib)
+    assert run.frame_rate is not None and run.frame_rate.walkers == 0
+    assert run.frame_rate.lens_slack == 1.0 and run.frame_rate.slack == UNREAD_RATE_SLACK
+    slacks = [slack for _, slack in registration_paces]
+    assert set(slacks) == {1.0, UNREAD_RATE_SLACK}
+    first = slacks.index(UNREAD_RATE_SLACK)  # the choice, then the chosen lens's run
+    assert first > 0 and set(slacks[first:]) == {UNREAD_RATE_SLACK}
+    given = run_ground_association(top, hor, replace(options, hor_hfov_deg=run.lens.hfov_deg),
+                                   list(number.values()), calib)
+    assert given.scale == run.scale and given.pairs == run.pairs
 
 
 @pytest.mark.slow

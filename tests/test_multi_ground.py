@@ -199,6 +199,8 @@ def test_fps_auto_reads_the_top_views_walkers_by_its_tracks(scene, registration_
         MultiGroundOptions((SIZE, SIZE), 70.0, "fast")
     with pytest.raises(ValueError, match="slack must be positive"):
         MultiGroundOptions((SIZE, SIZE), 70.0, 3.0, 0.0)
+    with pytest.raises(ValueError, match="lens_slack must be positive or None"):
+        MultiGroundOptions((SIZE, SIZE), 70.0, 3.0, 1.0, lens_slack=0.0)
 
 
 def test_ground_options_guess_only_a_size_assumed() -> None:

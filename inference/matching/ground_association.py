@@ -55,7 +55,7 @@ second unless the top view's walkers say otherwise
 (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_from_walkers`: a file of every 10th
 frame numbered 1, 2, 3); a rate read so is registered with twice the free walk and turn
 (:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`), as it reads too high more
-often than too low.
+often than too low; where no walker tells a rate, ten times (the file may be numbered 1, 2, 3).
 """
 
 from __future__ import annotations
@@ -452,6 +452,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
             if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
     slack = 1.0 if rate is None else rate.slack  # a rate read: a looser walk
+    lens_slack = 1.0 if rate is None else rate.lens_slack
     tilt = None if top_points is not None else tilting_top(top_frames, tracks, top_boxes,
                                                              calib, fps)
     if tilt is not None:  # a gimbal tilting over the clip: each frame through its own tilt
@@ -476,7 +477,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
 
     run = partial(_lens_and_pairs, order, tops, boxes, sizes, options, fps,
                   gr.HandheldReading.of([b for b, _ in boxes], options.hor_size), (top, hor),
-                  sights, spread, slack)
+                  sights, spread, (lens_slack, slack))
     lens, (scale, poses, pairs) = run(None)
     summary, held = _summary(calib, tilt), None
     if options.camera_id is not None:  # the holder is not in their own camera's view
@@ -512,24 +513,33 @@ def _without(pairs: Mapping[int, list[tuple[int, int]]], top_id: int
 def _lens_and_pairs(order: list[int], tops: list, boxes: list, sizes: list,
                     options: GroundAssociationOptions, fps: float, reading: gr.HandheldReading,
                     views: tuple[Mapping, Mapping], sights: list[gr.TopSight] | None,
-                    spread: float, slack: float, holders: list[np.ndarray | None] | None
+                    spread: float, slacks: tuple[float, float],
+                    holders: list[np.ndarray | None] | None
                     ) -> tuple[LensChoice | None, Registered]:
     """:func:`run_ground_association`'s lens (chosen where ``auto``, else None) and run, with
     the camera sought near its ``holders`` or anywhere (None): in video mode
     (``options.consensus``) each lens's whole run (:func:`choose_along_tracks`), else the lens
     chosen first (:func:`~xvmatch.cues.hor_lens.choose_hor_hfov`); then the run on the boxes
-    no border cuts where it keeps more than a near tie (:func:`_whole_boxes_run`). Arguments
-    as :func:`register_and_pair`'s."""
+    no border cuts where it keeps more than a near tie (:func:`_whole_boxes_run`). ``slacks``:
+    the registration's free walk and turn for the lens choice and for the runs
+    (:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.lens_slack`, ``slack``); where
+    they differ, the chosen lens's run is made again. Other arguments as
+    :func:`register_and_pair`'s."""
     lens, hfov = None, options.hor_hfov_deg
+    lens_slack, slack = slacks
     if hfov == AUTO_HFOV and options.consensus:  # each lens's whole run, along the tracks
         lens, (scale, poses, pairs) = choose_along_tracks(order, tops, boxes, sizes, fps,
-                                                          reading, views, sights, spread, slack,
-                                                          options.workers, holders)
+                                                          reading, views, sights, spread,
+                                                          lens_slack, options.workers, holders)
+        if lens_slack != slack:
+            scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, lens.hfov_deg,
+                                                    fps, reading, views, sights, spread, slack,
+                                                    holders)
     else:
         if hfov == AUTO_HFOV:
             lens = choose_hor_hfov(order, [p for p, _ in tops], [b for b, _ in boxes],
                                    options.hor_size, fps, sizes=sizes, spread=spread,
-                                   slack=slack, holders=holders)
+                                   slack=lens_slack, holders=holders)
             hfov = lens.hfov_deg
         scale, poses, pairs = register_and_pair(order, tops, boxes, sizes, hfov, fps, reading,
                                                 views if options.consensus else None, sights,

@@ -136,6 +136,8 @@ class MultiGroundOptions:
             (:func:`~xvmatch.cues.ground_registration.register_sequence`): set with the rate
             where it was read from the walkers
             (:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.slack`).
+        lens_slack: the same for choosing the handheld lenses, or None: ``slack``
+            (:attr:`~xvmatch.inference.matching.frame_rate.FrameRate.lens_slack`).
         workers: processes running a handheld view's candidate lenses side by side in video
             mode (:func:`~xvmatch.inference.matching.ground_association.choose_along_tracks`);
             the same result for any number.
@@ -150,6 +152,7 @@ class MultiGroundOptions:
     hor_hfov_deg: float | str | tuple[float, ...] = PRIOR_HFOV_DEG
     fps: float | str = PRIOR_FPS
     slack: float = 1.0
+    lens_slack: float | None = None
     workers: int = 1
     wearers: tuple[Mapping[int, int] | None, ...] | None = None
 
@@ -159,6 +162,9 @@ class MultiGroundOptions:
                              f"{AUTO_FPS!r}, got {self.fps!r}")
         if not self.slack > 0:
             raise ValueError(f"MultiGroundOptions.slack must be positive, got {self.slack!r}")
+        if self.lens_slack is not None and not self.lens_slack > 0:
+            raise ValueError(f"MultiGroundOptions.lens_slack must be positive or None, got "
+                             f"{self.lens_slack!r}")
         hfov = self.hor_hfov_deg
         if isinstance(hfov, str) and hfov != AUTO_HFOV:
             raise ValueError(f"MultiGroundOptions.hor_hfov_deg must be degrees or "
@@ -386,7 +392,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         if tracks is None:
             choices.append(choose_hor_hfov(order, points, [_boxes(views[k][f]) for f in order],
                                            size, options.fps, sizes=sizes, spread=top.spread,
-                                           slack=options.slack))
+                                           slack=options.lens_slack or options.slack))
             continue
         pair = (tracked_top, _tracked(views[k], tracks[k]))
         tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
@@ -394,7 +400,8 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
         reading = gr.HandheldReading.of([b for b, _ in boxes], size)
         choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, reading,
-                                           pair, spread=top.spread, slack=options.slack,
+                                           pair, spread=top.spread,
+                                           slack=options.lens_slack or options.slack,
                                            workers=options.workers)[0])
     return tuple(choices)
 
@@ -603,7 +610,7 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     if options.fps == AUTO_FPS:  # the rate from the clip's one fit, then the map at that rate
         first = top_map(aligned, frames, calibration, top_tracks)
         rate = top_frame_rate(aligned[0], calibration, table=first.walkers)
-        options = replace(options, fps=rate.fps, slack=rate.slack)
+        options = replace(options, fps=rate.fps, slack=rate.slack, lens_slack=rate.lens_slack)
         if note is not None:
             note(frame_rate_note(rate))
     top = top_map(aligned, frames, calibration, top_tracks, options.fps)  # lenses, problems
