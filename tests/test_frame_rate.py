@@ -44,6 +44,7 @@ def test_a_file_numbered_three_a_second_is_read_as_such() -> None:
     assert rate.estimated and rate.walkers == 9
     assert 2.0 <= rate.fps <= 4.0
     assert rate.slack == rate.lens_slack == READ_RATE_SLACK > 1.0  # a rate read: looser
+    assert not rate.unread
     # Read at 30 a second they would walk ten times too fast; the note says both.
     assert rate.prior_pace > 8 * BRISK_WALK_MPS
     note = frame_rate_note(rate)
@@ -76,7 +77,7 @@ def test_people_who_do_not_walk_tell_nothing() -> None:
     assert standing.slack == UNREAD_RATE_SLACK == 10.0 > READ_RATE_SLACK
     assert standing.lens_slack == 1.0  # the lens chosen as before: let move, lenses tie
     assert "too few people walk" in frame_rate_note(standing)
-    assert "as at a tenth of it" in frame_rate_note(standing)
+    assert standing.unread and "the camera let move as at 3 a second" in frame_rate_note(standing)
     few = frame_rate_from_walkers(*_walkers(3.0, walking=MIN_WALKERS - 1))
     assert not few.estimated and few.walkers == 0 and few.slack == UNREAD_RATE_SLACK
     # No boxes, one box, no foot on the ground: the prior.

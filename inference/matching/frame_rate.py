@@ -118,14 +118,19 @@ class FrameRate:
         walker could tell one, 1 for one given or the walkers confirm."""
         if self.estimated:
             return READ_RATE_SLACK
-        return UNREAD_RATE_SLACK if not self.walkers else 1.0
+        return UNREAD_RATE_SLACK if self.unread else 1.0
+
+    @property
+    def unread(self) -> bool:
+        """The prior taken because no walker could tell a rate (neither read nor confirmed)."""
+        return not self.estimated and not self.walkers
 
     @property
     def lens_slack(self) -> float:
         """The free walk and turn the handheld lens is chosen with: :attr:`slack`, but 1 where
         no walker told the rate: let move so, on a standing crowd each lens's run keeps as many
         pairs along the tracks and a wider lens than the true one was chosen more often."""
-        return 1.0 if not self.estimated and not self.walkers else self.slack
+        return 1.0 if self.unread else self.slack
 
 
 def _paces(frames: np.ndarray, ids: np.ndarray, points: np.ndarray, span: float) -> np.ndarray:
@@ -200,5 +205,5 @@ def frame_rate_note(rate: FrameRate) -> str:
         return (f"frame numbers read as {rate.fps:g} a second (the top view's {rate.walkers} "
                 f"walkers then walk {rate.prior_pace:.1f} m/s); give --fps if known")
     return (f"frame numbers read as {rate.fps:g} a second, the default (too few people walk "
-            "in the top view to tell; the camera let move as at a tenth of it; give --fps "
-            "if known)")
+            f"in the top view to tell; the camera let move as at "
+            f"{rate.fps / UNREAD_RATE_SLACK:g} a second; give --fps if known)")
