@@ -382,6 +382,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
     top_tracks = None if tracks is None else tracks[0]
     top = top_map(views, frames, calibration, top_tracks) if tops is None else tops
     tracked_top = None if tracks is None else _tracked(views[0], tracks[0])  # once, all views
+    slack = options.slack if options.lens_slack is None else options.lens_slack
     choices = []
     for k in range(1, len(views)):
         order = _paired_frames(views[k], top.points)
@@ -392,7 +393,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         if tracks is None:
             choices.append(choose_hor_hfov(order, points, [_boxes(views[k][f]) for f in order],
                                            size, options.fps, sizes=sizes, spread=top.spread,
-                                           slack=options.lens_slack or options.slack))
+                                           slack=slack))
             continue
         pair = (tracked_top, _tracked(views[k], tracks[k]))
         tops_ids = [(p, np.asarray(pair[0][f].ids)[o])
@@ -400,8 +401,7 @@ def choose_lenses(views: Sequence[Mapping], frames: Sequence[int],
         boxes = [(_boxes(pair[1][f]), np.asarray(pair[1][f].ids)) for f in order]
         reading = gr.HandheldReading.of([b for b, _ in boxes], size)
         choices.append(choose_along_tracks(order, tops_ids, boxes, sizes, options.fps, reading,
-                                           pair, spread=top.spread,
-                                           slack=options.lens_slack or options.slack,
+                                           pair, spread=top.spread, slack=slack,
                                            workers=options.workers)[0])
     return tuple(choices)
 
