@@ -365,3 +365,24 @@ def test_a_run_with_the_sights_replaces_the_lens_only_where_the_runs_without_the
     assert replacing(70.0, told, {**people, 110.0: 1}, made) == 70.0
     assert replacing(70.0, told, people, {**made, 110.0: 82}) == 70.0  # a near tie
     assert replacing(70.0, told, people, {**made, 90.0: 90}) == 110.0  # 119 > 1.1 x 90
+
+
+def test_a_run_whose_pairs_stray_from_any_lens_replaces_nothing() -> None:
+    """:func:`replacing` with each run's implied fit (lens, stray): a lens whose run keeps
+    clearly more pairs replaces the choice only where its pairs stray from the lens they imply
+    no more than ``STRAY_RATIO`` times as far as the chosen run's (a run that swaps people fits
+    no lens: a standing crowd's 90-degree run kept 280 pair-frames to 238, straying 0.199 to
+    0.088, and paired 0.155 to 1.000); a fit that tells nothing checks nothing."""
+    from xvmatch.inference.matching.ground_association import STRAY_RATIO, replacing
+
+    kept = {70.0: 238, 60.0: 238, 90.0: 238, 110.0: 160}
+    people = {70.0: 6, 60.0: 6, 90.0: 6, 110.0: 4}
+    made = {70.0: 238, 60.0: 238, 90.0: 280, 110.0: 160}
+    fits = {70.0: (75.0, 0.0883), 60.0: (75.0, 0.0883), 90.0: (70.0, 0.1987),
+            110.0: (95.0, 0.1081)}
+    assert replacing(70.0, kept, people, made) == 90.0  # unchecked: more than a near tie
+    assert replacing(70.0, kept, people, made, fits) == 70.0
+    close = {**fits, 90.0: (70.0, STRAY_RATIO * 0.0883)}
+    assert replacing(70.0, kept, people, made, close) == 90.0  # no further than allowed
+    for untold in (90.0, 70.0):
+        assert replacing(70.0, kept, people, made, {**fits, untold: None}) == 90.0

@@ -572,7 +572,9 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     pairs, where its run without them joined :data:`~xvmatch.cues.hor_lens.MIN_PEOPLE` people
     (a 65 degree lens: without the sights 110 degrees kept 122 pair-frames, a third wrong, 70
     kept 51, all right; with them, 130 and 190), and none where the runs without them all keep
-    as many pairs (:func:`replacing`). Each compared as it would run: with the
+    as many pairs, nor where its pairs stray from the lens they imply more than
+    :data:`STRAY_RATIO` times as far as the chosen one's (:func:`replacing`). Each compared as
+    it would run: with the
     sights alone a 65 degree clip's 60-degree run kept nothing, so every other lens's wrong run
     replaced the one that, without them, kept 200 pair-frames of nine people, right. Then the
     lens each run's pairs imply (:func:`~xvmatch.cues.hor_lens.implied_fit`: a measurement,
@@ -605,17 +607,18 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
     # that keeps more), the chosen one's first
     made = {h: each[h].made for h in (hfov, *(h for h in each if h != hfov))}
     made_kept = {h: _count(m[2])[0] for h, m in made.items()}
-    best = replacing(hfov, kept, people, made_kept)
+    implied_by = {source: _implied(order, tops, each[source].scale_runs[0], sizes, source,
+                                   made[source][2]) for source in made}
+    best = replacing(hfov, kept, people, made_kept, implied_by)
     run, run_kept = made[best], made_kept[best]
 
     def run_at(lens: float) -> Registered:  # a measured lens's run, as register_and_pair's
         return run_along_tracks(order, tops, _hor_people(boxes, reading, lens), sizes, lens,
                                 fps, views, sights, spread, slack, holders)
 
-    measured_from, implied_by, measured = None, {}, dict(made)
+    measured_from, measured = None, dict(made)
     for source in made:  # then the lens each run's pairs imply, the chosen one's first
-        fit = implied_by[source] = _implied(order, tops, each[source].scale_runs[0], sizes, source,
-                                            made[source][2])
+        fit = implied_by[source]
         implied = None if fit is None else fit[0]
         if (implied is None or implied in measured or abs(implied - source) < MIN_REMEASURE_DEG
                 or any(abs(implied - t) < MIN_REMEASURE_DEG for t in measured if t not in made)):
@@ -641,7 +644,8 @@ def choose_along_tracks(order: list[int], tops: list, boxes: list, sizes: list, 
 
 
 def replacing(hfov: float, kept: Mapping[float, int], people: Mapping[float, int],
-              made_kept: Mapping[float, int]) -> float:
+              made_kept: Mapping[float, int],
+              fits: Mapping[float, tuple[float, float] | None] | None = None) -> float:
     """The lens whose run as made (with the top camera's sights) replaces the chosen ``hfov``'s
     in :func:`choose_along_tracks`: in the order of ``made_kept`` (pairs each lens's run as
     made keeps), the first to keep more than :data:`~xvmatch.cues.hor_lens.NEAR_TIE` times the
@@ -650,7 +654,13 @@ def replacing(hfov: float, kept: Mapping[float, int], people: Mapping[float, int
     and people); none where the runs without the sights all keep as many pairs, so tell no
     lens: on two-person renders with the handheld pitch drifting every lens kept 75-79
     pair-frames without them and 110 degrees' run with them 91-119, all wrong (still drone s0
-    and s1, scene 10: 0.000, 1.000 when kept; docs/notes/oblique_top_camera.md)."""
+    and s1, scene 10: 0.000, 1.000 when kept; docs/notes/oblique_top_camera.md). Nor where
+    that run's pairs stray from the lens they imply more than :data:`STRAY_RATIO` times as far
+    as the chosen lens's run's (``fits``: each run's :func:`~xvmatch.cues.hor_lens.implied_fit`,
+    None where it tells nothing; None: not checked): a run that swaps people fits no lens well,
+    however many pairs it holds (a standing crowd, a 61-degree lens: 90 degrees' run kept 280
+    pair-frames to the others' 238, straying 0.199 to 0.088, and paired 0.155 to 1.000; with
+    the boxes moved in their last digits, or another CPU's arithmetic, it kept 238 too)."""
     best = hfov
     if len(set(kept.values())) <= 1:
         return best
@@ -658,7 +668,17 @@ def replacing(hfov: float, kept: Mapping[float, int], people: Mapping[float, int
         # without the sights (which steady any lens's poses)
         if people[h] >= MIN_PEOPLE and n > NEAR_TIE * made_kept[best]:
             best = h
+    if (fits is not None and best != hfov and fits[best] is not None
+            and fits[hfov] is not None and fits[best][1] > STRAY_RATIO * fits[hfov][1]):
+        return hfov
     return best
+
+
+STRAY_RATIO = 2.0
+"""How many times as far from the lens they imply the pairs of a run replacing the chosen
+lens's may stray as that run's (:func:`replacing`): on renders a swapping run strayed 2.3
+times as far as the right one (its docstring's clip), and a right run of seven people 1.6
+times as far as the chosen lens's right run of six (a 114-degree lens, 110 replacing 90)."""
 
 
 MIN_TIE_TOLD = 3
