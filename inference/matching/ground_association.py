@@ -451,8 +451,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     rate = (top_frame_rate(top, calib, table=(top_frames, tracks, top_ground))  # followed once
             if options.fps == AUTO_FPS else None)
     fps = float(options.fps) if rate is None else rate.fps
-    slack = 1.0 if rate is None else rate.slack  # a rate read: a looser walk
-    lens_slack = 1.0 if rate is None else rate.lens_slack
+    slack = 1.0 if rate is None else rate.slack  # a rate read, or none told: a looser walk
+    lens_slack = 1.0 if rate is None else rate.lens_slack  # none told: the lens as at 1
     tilt = None if top_points is not None else tilting_top(top_frames, tracks, top_boxes,
                                                              calib, fps)
     if tilt is not None:  # a gimbal tilting over the clip: each frame through its own tilt
