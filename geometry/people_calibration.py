@@ -474,7 +474,7 @@ def _oblique(b: UsableBoxes, size: tuple[int, int], n_frames: int, hfov_deg: flo
     fixed = prior_f if hfov_deg else None
     starts = (model_starts(b, size, prior_f, (hfov_deg,)) if hfov_deg
               else model_starts(b, size, prior_f))
-    params = fit_model(b, size, prior_f, starts, fixed)
+    params = fit_model(b, size, prior_f, starts, fixed, settle=True)
     spread = (_resample_spread(b, size, prior_f, params, fixed, seed) if measure
               else np.full(3, np.nan))
     cam = model_camera(params, size)
