@@ -497,6 +497,16 @@ def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
         free[n + 1] = False
     sparsity = _sparsity(b)[:, free]
     step = np.radians(tilt_step_deg)
+    lo, hi = lower[free], upper[free]
+
+    def around(full: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """The residuals as a function of the free parameters, the others held at ``full``'s."""
+        def fun(p: np.ndarray) -> np.ndarray:
+            x = full.copy()
+            x[free] = p
+            return _residuals(x, b, size, prior_f, step)
+        return fun
+
     best, best_cost = None, np.inf
     for x0 in starts:
         x0 = np.asarray(x0, float)
@@ -504,43 +514,30 @@ def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
         full = np.clip(np.concatenate([tilts, x0[-3 - k:]]), lower + 1e-6, upper - 1e-6)
         if fixed_f is not None:
             full[n + 1] = np.log(fixed_f)
-
-        def fun(p: np.ndarray, full: np.ndarray = full) -> np.ndarray:
-            x = full.copy()
-            x[free] = p
-            return _residuals(x, b, size, prior_f, step)
-
-        res = least_squares(fun, full[free], loss="soft_l1", f_scale=SOFT_SCALE,
-                            bounds=(lower[free], upper[free]), jac_sparsity=sparsity)
+        res = least_squares(around(full), full[free], loss="soft_l1", f_scale=SOFT_SCALE,
+                            bounds=(lo, hi), jac_sparsity=sparsity)
         if res.cost < best_cost:
             x = full.copy()
             x[free] = res.x
             best, best_cost = x, res.cost
     if settle and best is not None:
-        best = _settle(best, free, lower, upper, b, size, prior_f, step)
+        best = best.copy()
+        best[free] = _settle(around(best), best[free], lo, hi)
     return best
 
 
-def _settle(x: np.ndarray, free: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-            b: UsableBoxes, size: tuple[int, int], prior_f: float, step: float) -> np.ndarray:
-    """The fit ``x`` carried to its minimum's last digits. The sparse steps stop at their
-    tolerance on a flat cost, and where they stop moves with the BLAS kernels' last bits
-    (2e-4 of the focal length on a lingering crowd's clip, between OpenBLAS's kernels); exact
-    steps scaled by the Jacobian, to :data:`SETTLE_TOLERANCE`, end within 1e-4 px of one
-    focal length on each kernel tried, which ``people_calibration._settled`` rounds to one."""
-    def fun(p: np.ndarray) -> np.ndarray:
-        y = x.copy()
-        y[free] = p
-        return _residuals(y, b, size, prior_f, step)
-
-    lo, hi = lower[free], upper[free]
-    p0 = np.clip(x[free], lo + 1e-9, hi - 1e-9)
-    res = least_squares(fun, p0, loss="soft_l1", f_scale=SOFT_SCALE, bounds=(lo, hi),
-                        tr_solver="exact", x_scale="jac", ftol=SETTLE_TOLERANCE,
-                        xtol=SETTLE_TOLERANCE, gtol=SETTLE_TOLERANCE)
-    out = x.copy()
-    out[free] = res.x
-    return out
+def _settle(fun: Callable[[np.ndarray], np.ndarray], p: np.ndarray, lo: np.ndarray,
+            hi: np.ndarray) -> np.ndarray:
+    """The fit's free parameters ``p`` carried to its minimum's last digits (``fun``: the
+    residuals of them, within ``lo``-``hi``). The sparse steps stop at their tolerance on a
+    flat cost, and where they stop moves with the BLAS kernels' last bits (2e-4 of the focal
+    length on a lingering crowd's clip, between OpenBLAS's kernels); exact steps scaled by the
+    Jacobian, to :data:`SETTLE_TOLERANCE`, end within 1e-4 px of one focal length on each
+    kernel tried, which ``people_calibration._settled`` rounds to one."""
+    p0 = np.clip(p, lo + 1e-9, hi - 1e-9)
+    return least_squares(fun, p0, loss="soft_l1", f_scale=SOFT_SCALE, bounds=(lo, hi),
+                         tr_solver="exact", x_scale="jac", ftol=SETTLE_TOLERANCE,
+                         xtol=SETTLE_TOLERANCE, gtol=SETTLE_TOLERANCE).x
 
 
 def pinhole(focal: float, tilt: float, roll: float, height: float,
