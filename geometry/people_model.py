@@ -282,58 +282,72 @@ def predicted_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int])
     inside the box). Off the image centre a tilted camera sees people lean (their verticals meet
     below the image): the box's centre column is then halfway between the foot's and the
     head's, and the leaning body's width adds to the box's height."""
+    return _height_model(params, b, size)(b.v)
+
+
+def _height_model(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]
+                  ) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`predicted_heights` as a function of the boxes' foot rows, the camera's rotations
+    and each box's person made once (:func:`centred_heights` asks at several rows)."""
     n = b.n_windows
     log_f, log_hc = params[n + 1:n + 3]
     person = params[n + 3:][b.track]
     f, hc = np.exp(log_f), np.exp(log_hc)
     cx, cy = 0.5 * size[0], 0.5 * size[1]
     camera_z, to_world, to_camera = _rotations(params, b)
-    rows = (b.v - cy) / f  # the foot rows' rays (the same for both foot columns)
-    ones = np.ones_like(b.u)
-
-    def ground(u: np.ndarray) -> np.ndarray:
-        """The foot pixel's ground point relative to the camera centre (NaN above the
-        horizon)."""
-        d = to_world(np.column_stack([(u - cx) / f, rows, ones]))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
-        return s[:, None] * d
+    count = len(b.u)
+    radius = np.full_like(person, 0.5 * BODY_WIDTH)
+    lift = to_world(person[:, None] * camera_z)  # the head over the feet, in camera axes
+    up = np.zeros((count, 3))
+    up[:, 2] = person
 
     def depth(cam: np.ndarray) -> np.ndarray:
         """Camera coordinates' depth, NaN behind the camera."""
         return np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
 
-    radius = np.full_like(person, 0.5 * BODY_WIDTH)
+    def heights(v: np.ndarray) -> np.ndarray:
+        """The heights of the boxes with their feet on rows ``v``."""
+        rays = np.empty((count, 3))  # the foot pixels' rays: column, row, 1
+        rays[:, 1] = (v - cy) / f
+        rays[:, 2] = 1.0
 
-    def axis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The body's axis at the ground and the radius along the ray: the box's bottom row
-        sees the near edge of the feet, the axis is a radius farther."""
-        rim = ground(u)
+        def axis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """The body's axis at the ground and the radius along the ray: the box's bottom
+            row sees the near edge of the feet (where the foot pixel's ray meets the ground,
+            NaN above the horizon), the axis is a radius farther."""
+            rays[:, 0] = (u - cx) / f
+            d = to_world(rays)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
+                rim = s[:, None] * d
+                along = rim.copy()
+                along[:, 2] = 0.0
+                along *= (radius / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
+            return rim + along, along
+
+        foot, _ = axis(b.u)
+        head = to_camera(foot + lift)
         with np.errstate(divide="ignore", invalid="ignore"):
-            along = np.column_stack([rim[:, 0], rim[:, 1], np.zeros_like(u)]) * (
-                radius / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
-        return rim + along, along
+            u_head = cx + f * head[:, 0] / depth(head)
+        foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the lean's middle
+        side = np.empty_like(along)
+        np.negative(along[:, 1], out=side[:, 0])
+        side[:, 1] = along[:, 0]
+        side[:, 2] = along[:, 2]
+        # The body's outline (seen and in depth) at the feet and at the head, corner by corner:
+        # one product for all, each row's top and bottom a maximum and minimum over 8 rows.
+        corners = np.empty((8, count, 3))
+        for k, base in enumerate((foot, foot + up)):
+            np.add(base, side, out=corners[4 * k])
+            np.subtract(base, side, out=corners[4 * k + 1])
+            np.add(base, along, out=corners[4 * k + 2])
+            np.subtract(base, along, out=corners[4 * k + 3])
+        cam = to_camera(corners.reshape(-1, 3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rows = (cy + f * cam[:, 1] / depth(cam)).reshape(8, -1)
+        return rows.max(axis=0) - rows.min(axis=0)
 
-    foot, _ = axis(b.u)
-    head = to_camera(foot + to_world(person[:, None] * camera_z))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u_head = cx + f * head[:, 0] / depth(head)
-    foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the middle of the lean
-    side = np.column_stack([-along[:, 1], along[:, 0], along[:, 2]])
-    up = np.zeros_like(foot)
-    up[:, 2] = person
-    # The body's outline (seen and in depth) at the feet and at the head, corner by corner: one
-    # product for all, each row's top and bottom a maximum and minimum over 8 rows.
-    corners = np.empty((8, *foot.shape))
-    for k, base in enumerate((foot, foot + up)):
-        np.add(base, side, out=corners[4 * k])
-        np.subtract(base, side, out=corners[4 * k + 1])
-        np.add(base, along, out=corners[4 * k + 2])
-        np.subtract(base, along, out=corners[4 * k + 3])
-    cam = to_camera(corners.reshape(-1, 3))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = (cy + f * cam[:, 1] / depth(cam)).reshape(8, -1)
-    return v.max(axis=0) - v.min(axis=0)
+    return heights
 
 
 def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
@@ -344,11 +358,11 @@ def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -
     the few rows they walk, which that shared error flattens (renders with 3 % loose edges
     read 3-8 degrees too level); the centre row's error is independent of the height's where
     both edges are as loose."""
+    heights = _height_model(params, b, size)
     centre = b.v - 0.5 * b.h
-    pred = predicted_heights(params, b, size)
+    pred = heights(b.v)
     for _ in range(CENTRE_ROUNDS):
-        foot = centre + 0.5 * np.where(np.isfinite(pred), pred, b.h)
-        pred = predicted_heights(params, replace(b, v=foot), size)
+        pred = heights(centre + 0.5 * np.where(np.isfinite(pred), pred, b.h))
     return pred
 
 
