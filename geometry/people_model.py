@@ -46,6 +46,7 @@ __all__ = [
     "centred_heights",
     "data_cost",
     "fit_model",
+    "forward_differences",
     "handheld_horizon",
     "model_camera",
     "model_starts",
@@ -536,22 +537,71 @@ def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
             best, best_cost = x, res.cost
     if settle and best is not None:
         best = best.copy()
-        best[free] = _settle(around(best), best[free], lo, hi)
+        best[free] = _settle(around(best), best[free], lo, hi, sparsity)
     return best
 
 
 def _settle(fun: Callable[[np.ndarray], np.ndarray], p: np.ndarray, lo: np.ndarray,
-            hi: np.ndarray) -> np.ndarray:
+            hi: np.ndarray, structure: np.ndarray) -> np.ndarray:
     """The fit's free parameters ``p`` carried to its minimum's last digits (``fun``: the
-    residuals of them, within ``lo``-``hi``). The sparse steps stop at their tolerance on a
-    flat cost, and where they stop moves with the BLAS kernels' last bits (2e-4 of the focal
-    length on a lingering crowd's clip, between OpenBLAS's kernels); exact steps scaled by the
-    Jacobian, to :data:`SETTLE_TOLERANCE`, end within 1e-4 px of one focal length on each
-    kernel tried, which ``people_calibration._settled`` rounds to one."""
+    residuals of them, within ``lo``-``hi``; ``structure``: which parameters each residual
+    reads). The sparse steps stop at their tolerance on a flat cost, and where they stop moves
+    with the BLAS kernels' last bits (2e-4 of the focal length on a lingering crowd's clip,
+    between OpenBLAS's kernels); exact steps scaled by the Jacobian, to
+    :data:`SETTLE_TOLERANCE`, end within 1e-4 px of one focal length on each kernel tried,
+    which ``people_calibration._settled`` rounds to one (where the cost has a minimum: along a
+    valley flat to its 7th digit they stop where they run out of steps)."""
     p0 = np.clip(p, lo + 1e-9, hi - 1e-9)
-    return least_squares(fun, p0, loss="soft_l1", f_scale=SOFT_SCALE, bounds=(lo, hi),
-                         tr_solver="exact", x_scale="jac", ftol=SETTLE_TOLERANCE,
-                         xtol=SETTLE_TOLERANCE, gtol=SETTLE_TOLERANCE).x
+    last: dict[str, np.ndarray] = {}
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        last["x"], last["r"] = x.copy(), fun(x)
+        return last["r"]
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        f0 = last["r"] if "x" in last and np.array_equal(last["x"], x) else fun(x)
+        return forward_differences(fun, x, f0, lo, hi, structure)
+
+    return least_squares(residuals, p0, jac=jacobian, loss="soft_l1", f_scale=SOFT_SCALE,
+                         bounds=(lo, hi), tr_solver="exact", x_scale="jac",
+                         ftol=SETTLE_TOLERANCE, xtol=SETTLE_TOLERANCE,
+                         gtol=SETTLE_TOLERANCE).x
+
+
+def forward_differences(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
+                        f0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                        structure: np.ndarray) -> np.ndarray:
+    """The dense Jacobian of ``fun`` at ``x`` (``f0``: its value there) by forward differences,
+    one evaluation for each group of parameters that no residual reads together
+    (``structure`` ``(M, N)``): a followed person's height moves only their own boxes, so all
+    heights share one. Bit for bit scipy's dense ``"2-point"`` rule (a step of sqrt(eps)
+    times ``max(1, |x|)``, turned or shortened at the bounds ``lo``-``hi``), where the
+    evaluations it saves would each have moved only the residuals that ``structure`` marks."""
+    h = np.sqrt(np.finfo(float).eps) * np.where(x >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+    below, above = x - lo, hi - x
+    fits = np.abs(h) <= np.maximum(below, above)
+    h = np.where(((x + h < lo) | (x + h > hi)) & fits, -h, h)
+    h = np.where(fits, h, np.where(above >= below, above, -below))
+    step = (x + h) - x
+    groups: list[tuple[list[int], np.ndarray]] = []  # parameters, and the residuals they move
+    for j in range(len(x)):  # greedily: each parameter joins the first group it does not touch
+        for group, rows in groups:
+            if not (rows & structure[:, j]).any():
+                group.append(j)
+                rows |= structure[:, j]
+                break
+        else:
+            groups.append(([j], structure[:, j].copy()))
+    # Filled by parameter and returned transposed, column-major as scipy's: the trust-region
+    # steps' BLAS calls then take the same path and give the same bits.
+    transposed = np.empty((len(x), len(f0)))
+    for group, _ in groups:
+        moved = x.copy()
+        moved[group] = x[group] + h[group]
+        change = fun(moved) - f0
+        for j in group:  # an unmarked residual's change is 0: signed as the step's, as scipy's
+            transposed[j] = np.where(structure[:, j], change, 0.0) / step[j]
+    return transposed.T
 
 
 def pinhole(focal: float, tilt: float, roll: float, height: float,

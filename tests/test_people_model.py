@@ -14,12 +14,14 @@ from hypothesis import strategies as st
 from xvmatch.geometry.people_model import (
     BORDER,
     BORDER_SHARE,
+    CENTRE_ROUNDS,
     HIDING_GAP,
     HIDING_SHARE,
     PERSON_HEIGHT,
     UsableBoxes,
     centred_heights,
     fit_model,
+    forward_differences,
     predicted_heights,
     prior_focal,
     readable_boxes,
@@ -179,6 +181,26 @@ def test_a_box_of_the_models_own_height_has_its_centre_where_its_foot_says() -> 
     np.testing.assert_allclose(centred_heights(truth, b, SIZE), b.h, rtol=1e-3)
 
 
+@settings(max_examples=20, deadline=None)
+@given(windows=st.integers(1, 3), seed=st.integers(0, 1000), tilt=st.floats(5.0, 60.0),
+       roll=st.floats(-5.0, 5.0), hfov=st.floats(50.0, 110.0), height=st.floats(3.0, 40.0))
+def test_centred_heights_are_the_model_asked_row_by_row(windows: int, seed: int, tilt: float,
+                                                        roll: float, hfov: float,
+                                                        height: float) -> None:
+    """The centre rows' heights, the camera made once for all rows, are bit for bit the
+    predicted heights of each round's foot rows (feet above the horizon: NaN, then the box's
+    own height)."""
+    b = _boxes(80, windows, seed)
+    params = np.concatenate([np.radians(tilt + 5.0 * np.arange(windows)),
+                             [np.radians(roll), np.log(prior_focal(SIZE, hfov)),
+                              np.log(height), 1.6, 1.8]])
+    pred = predicted_heights(params, b, SIZE)
+    for _ in range(CENTRE_ROUNDS):
+        foot = b.v - 0.5 * b.h + 0.5 * np.where(np.isfinite(pred), pred, b.h)
+        pred = predicted_heights(params, replace(b, v=foot), SIZE)
+    assert np.array_equal(centred_heights(params, b, SIZE), pred, equal_nan=True)
+
+
 @pytest.mark.parametrize("tilt", [30.0, 40.0])
 def test_loose_top_and_bottom_edges_leave_the_tilt_where_it_is(tilt: float) -> None:
     """Each box's top and bottom moved by a normal draw of 3 % of its height (a tracker's
@@ -192,3 +214,34 @@ def test_loose_top_and_bottom_edges_leave_the_tilt_where_it_is(tilt: float) -> N
     loose = replace(b, v=bottom, h=bottom - top)
     fit = fit_model(loose, SIZE, prior_focal(SIZE), [truth], fixed_f=prior_focal(SIZE))
     assert abs(np.degrees(fit[0]) - tilt) < 1.0, np.degrees(fit[0])
+
+
+def test_forward_differences_share_an_evaluation_only_where_no_residual_reads_both() -> None:
+    """The people model's Jacobian with the followed people's heights sharing one evaluation is
+    bit for bit the one with an evaluation per parameter; near a bound the step turns back
+    inside, and the differences still follow the derivative."""
+    b, truth = _walkers(35.0, 4)
+    lo = np.concatenate([[-0.8, -0.5, -np.inf, np.log(0.5)], np.full(b.n_tracks, 1.0)])
+    hi = np.concatenate([[1.55, 0.5, np.inf, np.log(1e3)], np.full(b.n_tracks, 2.5)])
+    x = truth.copy()
+    x[5] = hi[5] - 1e-12  # a height at its upper bound: its step must go down
+
+    def fun(p: np.ndarray) -> np.ndarray:
+        return np.log(predicted_heights(p, b, SIZE) / b.h)
+
+    structure = np.zeros((len(b.h), len(x)), dtype=bool)
+    structure[:, :4] = True
+    structure[np.arange(len(b.h)), 4 + b.track] = True
+    f0 = fun(x)
+    grouped = forward_differences(fun, x, f0, lo, hi, structure)
+    alone = forward_differences(fun, x, f0, lo, hi, np.ones_like(structure))
+    assert np.array_equal(grouped, alone) and np.array_equal(np.signbit(grouped),
+                                                             np.signbit(alone))
+    assert not grouped[~structure].any()
+    # Central differences of a small step agree with the forward ones to their accuracy.
+    for j in (0, 2, 5):
+        step = np.zeros_like(x)
+        step[j] = 1e-6
+        central = (fun(x + step) - fun(x - step)) / 2e-6 if j != 5 else (
+            fun(x) - fun(x - step)) / 1e-6
+        np.testing.assert_allclose(grouped[:, j], central, atol=1e-5)
