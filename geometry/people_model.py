@@ -549,8 +549,8 @@ def _settle(fun: Callable[[np.ndarray], np.ndarray], p: np.ndarray, lo: np.ndarr
     with the BLAS kernels' last bits (2e-4 of the focal length on a lingering crowd's clip,
     between OpenBLAS's kernels); exact steps scaled by the Jacobian, to
     :data:`SETTLE_TOLERANCE`, end within 1e-4 px of one focal length on each kernel tried,
-    which ``people_calibration._settled`` rounds to one (where the cost has a minimum: along a
-    valley flat to its 7th digit they stop where they run out of steps)."""
+    which ``people_calibration._settled`` rounds to one (where the cost has one minimum there:
+    in a valley of shallow minima each start's fit stays in its own, docs/method.md)."""
     p0 = np.clip(p, lo + 1e-9, hi - 1e-9)
     last: dict[str, np.ndarray] = {}
 
