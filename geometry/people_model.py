@@ -535,8 +535,7 @@ def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
             x = full.copy()
             x[free] = res.x
             best, best_cost = x, res.cost
-    if settle and best is not None:
-        best = best.copy()
+    if settle and best is not None:  # best is this call's own copy
         best[free] = _settle(around(best), best[free], lo, hi, sparsity)
     return best
 
