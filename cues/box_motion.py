@@ -17,7 +17,6 @@ from collections.abc import Mapping
 from itertools import pairwise
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from xvmatch.core.array_checks import as_boxes, as_points
 from xvmatch.cues.spatial_vectors import box_centres
@@ -93,6 +92,8 @@ def frame_jump(frames: Mapping) -> float:
     Args:
         frames: ``{frame: record}`` with ``boxes`` (``(N, 4)`` x, y, w, h in pixels).
     """
+    from scipy.optimize import linear_sum_assignment  # half a second: not at start-up
+
     held = [f for f in sorted(frames) if 0 < len(frames[f].boxes) <= JUMP_BOXES]
     pairs = [(a, b) for a, b in pairwise(held)]
     if len(pairs) > JUMP_FRAME_PAIRS:

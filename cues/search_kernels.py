@@ -453,6 +453,24 @@ def lower_bounds(top_x: np.ndarray, count: np.ndarray, hor_x: np.ndarray, coef: 
 
 
 @njit(cache=True)
+def _mod_two_pi(a: float) -> float:
+    """numpy's ``mod(a, 2 pi)`` to the bit, a third of its cost where -2 pi < a < 4 pi (every
+    angle difference of two wrapped angles plus pi): fmod is exact there, so the remainder is
+    ``a``, ``a - 2 pi`` (exact) or, below zero, numpy's one rounded ``a + 2 pi``; zero is +0
+    (numpy's sign rule). Elsewhere, and NaN, numpy's mod itself."""
+    two_pi = 2.0 * np.pi
+    if 0.0 < a < two_pi:
+        return a
+    if -two_pi < a < 0.0:
+        return a + two_pi
+    if two_pi <= a < 2.0 * two_pi:
+        return a - two_pi
+    if a == 0.0:
+        return 0.0
+    return np.mod(a, two_pi)
+
+
+@njit(cache=True)
 def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, half: float,
                      delta: np.ndarray, x: np.ndarray, count: np.ndarray, seen: np.ndarray,
                      packed: np.ndarray) -> int:
@@ -468,7 +486,7 @@ def hypothesis_table(phi: np.ndarray, visible: np.ndarray, thetas: np.ndarray, h
             b = c * n_theta + t
             n = 0
             for m in range(n_people):
-                d = np.mod(phi[c, m] - thetas[t] + np.pi, 2.0 * np.pi) - np.pi
+                d = _mod_two_pi(phi[c, m] - thetas[t] + np.pi) - np.pi
                 delta[b, m] = d
                 if abs(d) < half and visible[c, m]:
                     seen[n_seen] = b * n_people + m
@@ -544,7 +562,7 @@ def pair_features(bearing_top: np.ndarray, log_depth: np.ndarray, visible: np.nd
             row_min = np.inf
             for j in range(n_hor):
                 angle = bearing_top[h, i] - bearing_hor[j]
-                diff = _clip((np.mod(angle + np.pi, 2.0 * np.pi) - np.pi) / half_fov,
+                diff = _clip((_mod_two_pi(angle + np.pi) - np.pi) / half_fov,
                              -clip, clip)
                 a = abs(diff)
                 absdiff[i, j] = a

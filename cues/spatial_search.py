@@ -494,6 +494,20 @@ def _group_seeds(loose: np.ndarray, n_theta: int) -> np.ndarray:
     return seed[np.isfinite(loose[seed])]
 
 
+def _lowest_finite(values: np.ndarray, n: int) -> np.ndarray:
+    """Ascending indices of the ``n`` lowest finite ``values``, the lower index on ties: the
+    finite ones among ``np.argsort(values, kind="stable")[:n]`` (the seeds of :func:`_ranked`),
+    by a partition instead of a sort of every hypothesis."""
+    finite = np.flatnonzero(np.isfinite(values))
+    if finite.size <= n:
+        return finite
+    kept = values[finite]
+    kth = np.partition(kept, n - 1)[n - 1]
+    below = kept < kth
+    below[np.flatnonzero(kept == kth)[:n - int(below.sum())]] = True
+    return finite[below]
+
+
 def hypothesis_vectors(
     top_boxes: np.ndarray,
     camera: int,
@@ -545,8 +559,10 @@ def _ranked(
     def score(idx: np.ndarray) -> None:
         vectors = hypotheses.take(idx)
         result = match_vector_sets(vectors.x, vectors.y, vectors.count, hor, params)
-        limit = threshold()
-        for r in np.flatnonzero(np.isfinite(result.cost) & (result.cost <= limit)):
+        rows = np.flatnonzero(np.isfinite(result.cost) & (result.cost <= threshold()))
+        if rows.size > k:  # only the batch's k best can enter the pool's k best
+            rows = rows[np.lexsort((idx[rows], result.cost[rows]))[:k]]
+        for r in rows:
             pool.append(
                 (
                     float(result.cost[r]),
@@ -561,8 +577,7 @@ def _ranked(
 
     # Seed the pool with the most promising hypotheses under the loose bound, then bound the
     # survivors tightly and score them best-first in chunks of doubling size.
-    seed = np.argsort(loose, kind="stable")[:first_chunk]
-    seed = np.sort(seed[np.isfinite(loose[seed])])
+    seed = _lowest_finite(loose, first_chunk)
     if seed.size == 0:
         return []
     score(seed)

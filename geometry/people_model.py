@@ -24,7 +24,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from xvmatch.geometry.camera import Camera, look_rotation
 
@@ -411,6 +410,14 @@ def _sparsity(b: UsableBoxes) -> np.ndarray:
     return out
 
 
+def _least_squares(*args, **kwargs):
+    """``scipy.optimize.least_squares``, imported at the first fit: half a second at start-up
+    that a run fitting nothing (the nadir search) need not pay."""
+    from scipy.optimize import least_squares
+
+    return least_squares(*args, **kwargs)
+
+
 def _level_line(b: UsableBoxes, size: tuple[int, int]) -> tuple[float, float, float]:
     """Robust fit of ``h = a (v - v0 - s (u - cx))``: slope ``a``, horizon row ``v0`` at the
     centre column and its slope ``s`` (the level-camera line, the fit's start)."""
@@ -421,7 +428,7 @@ def _level_line(b: UsableBoxes, size: tuple[int, int]) -> tuple[float, float, fl
         return (A @ p - b.h) / np.maximum(b.h, 1.0)
 
     p0 = np.linalg.lstsq(A, b.h, rcond=None)[0]
-    p = least_squares(resid, p0, loss="soft_l1", f_scale=SOFT_SCALE).x
+    p = _least_squares(resid, p0, loss="soft_l1", f_scale=SOFT_SCALE).x
     a = p[0]
     if not a > 0:
         return 0.0, np.nan, 0.0
@@ -446,7 +453,7 @@ def handheld_horizon(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int
     def resid(p: np.ndarray) -> np.ndarray:
         return (p[0] + p[1] * b.h - top) / np.maximum(b.h, 1.0)
 
-    fit = least_squares(resid, [float(np.median(top)), 0.0], bounds=([-np.inf, lo], [np.inf, hi]),
+    fit = _least_squares(resid, [float(np.median(top)), 0.0], bounds=([-np.inf, lo], [np.inf, hi]),
                         loss="soft_l1", f_scale=SOFT_SCALE)
     return float(fit.x[0])
 
@@ -529,7 +536,7 @@ def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
         full = np.clip(np.concatenate([tilts, x0[-3 - k:]]), lower + 1e-6, upper - 1e-6)
         if fixed_f is not None:
             full[n + 1] = np.log(fixed_f)
-        res = least_squares(around(full), full[free], loss="soft_l1", f_scale=SOFT_SCALE,
+        res = _least_squares(around(full), full[free], loss="soft_l1", f_scale=SOFT_SCALE,
                             bounds=(lo, hi), jac_sparsity=sparsity)
         if res.cost < best_cost:
             x = full.copy()
@@ -561,7 +568,7 @@ def _settle(fun: Callable[[np.ndarray], np.ndarray], p: np.ndarray, lo: np.ndarr
         f0 = last["r"] if "x" in last and np.array_equal(last["x"], x) else fun(x)
         return forward_differences(fun, x, f0, lo, hi, structure)
 
-    return least_squares(residuals, p0, jac=jacobian, loss="soft_l1", f_scale=SOFT_SCALE,
+    return _least_squares(residuals, p0, jac=jacobian, loss="soft_l1", f_scale=SOFT_SCALE,
                          bounds=(lo, hi), tr_solver="exact", x_scale="jac",
                          ftol=SETTLE_TOLERANCE, xtol=SETTLE_TOLERANCE,
                          gtol=SETTLE_TOLERANCE).x

@@ -24,6 +24,7 @@ from xvmatch.cues.offset_estimation import (
 from xvmatch.cues.spatial_matching import SpatialParams, match_vector_sets
 from xvmatch.cues.spatial_search import (
     FollowPolicy,
+    _lowest_finite,
     associate_frame,
     associate_sequence,
     best_per_candidate,
@@ -191,6 +192,17 @@ def test_rank_hypotheses_equals_brute_force_top_k(scene, noisy_views, source, fr
     assert ranked[0].camera == best.camera and ranked[0].cost == best.cost
     with pytest.raises(ValueError, match="k must be"):
         rank_hypotheses(top, hor, WIDTH, PARAMS, k=0)
+
+
+@given(values=st.lists(st.sampled_from([0.0, -0.0, 0.5, 1.0, 2.0, math.inf, math.nan]) |
+                       st.floats(-1.0, 3.0), max_size=40), n=st.integers(1, 12))
+def test_search_seeds_are_the_sorts_lowest_finite_rows(values, n):
+    # The exhaustive search seeds with the n lowest bounds (lower index on ties) by a partition;
+    # the definition is the stable sort's first n, finite ones, in index order.
+    loose = np.asarray(values, dtype=float)
+    by_sort = np.argsort(loose, kind="stable")[:n]
+    np.testing.assert_array_equal(_lowest_finite(loose, n),
+                                  np.sort(by_sort[np.isfinite(loose[by_sort])]))
 
 
 @pytest.mark.parametrize(
