@@ -6,8 +6,9 @@ Measures, on the same frames in the same run:
   * reduced theta + O followed (video mode),
 each in-process, and the whole ``xvmatch associate`` CLI (process start, file parsing, writing)
 in frame mode, in video mode (its default: the exhaustive search, then the tracklet consensus)
-and in video mode with ``--search follow`` (the video default before issue 67). Prints frames/s from CPU time (robust to other load on the
-machine) and from wall time, and the speed-up of each mode over the exhaustive search.
+and in video mode with ``--search follow`` (the video default before issue 67). Prints
+frames/s from CPU time (robust to other load on the machine) and from wall time, and the
+speed-up of each mode over the exhaustive search.
 
 Targets (issue 2): exhaustive >= 200 frames/s with the CLI included; video >= 1000 frames/s.
 The paper reports 3.1 / 26.3 / 44.8 frames/s in MATLAB on an i9 (Table 3).

@@ -453,8 +453,9 @@ def handheld_horizon(frames: np.ndarray, boxes: np.ndarray, size: tuple[int, int
     def resid(p: np.ndarray) -> np.ndarray:
         return (p[0] + p[1] * b.h - top) / np.maximum(b.h, 1.0)
 
-    fit = _least_squares(resid, [float(np.median(top)), 0.0], bounds=([-np.inf, lo], [np.inf, hi]),
-                        loss="soft_l1", f_scale=SOFT_SCALE)
+    fit = _least_squares(resid, [float(np.median(top)), 0.0],
+                         bounds=([-np.inf, lo], [np.inf, hi]), loss="soft_l1",
+                         f_scale=SOFT_SCALE)
     return float(fit.x[0])
 
 
@@ -537,7 +538,7 @@ def fit_model(b: UsableBoxes, size: tuple[int, int], prior_f: float,
         if fixed_f is not None:
             full[n + 1] = np.log(fixed_f)
         res = _least_squares(around(full), full[free], loss="soft_l1", f_scale=SOFT_SCALE,
-                            bounds=(lo, hi), jac_sparsity=sparsity)
+                             bounds=(lo, hi), jac_sparsity=sparsity)
         if res.cost < best_cost:
             x = full.copy()
             x[free] = res.x
@@ -569,9 +570,9 @@ def _settle(fun: Callable[[np.ndarray], np.ndarray], p: np.ndarray, lo: np.ndarr
         return forward_differences(fun, x, f0, lo, hi, structure)
 
     return _least_squares(residuals, p0, jac=jacobian, loss="soft_l1", f_scale=SOFT_SCALE,
-                         bounds=(lo, hi), tr_solver="exact", x_scale="jac",
-                         ftol=SETTLE_TOLERANCE, xtol=SETTLE_TOLERANCE,
-                         gtol=SETTLE_TOLERANCE).x
+                          bounds=(lo, hi), tr_solver="exact", x_scale="jac",
+                          ftol=SETTLE_TOLERANCE, xtol=SETTLE_TOLERANCE,
+                          gtol=SETTLE_TOLERANCE).x
 
 
 def forward_differences(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
