@@ -67,13 +67,13 @@ def cheapest_path(cost: np.ndarray, switch_cost: float) -> np.ndarray:
         raise ValueError("cheapest_path: a cost is NaN")
     rows = cost.tolist()
     n, switch = len(rows), float(switch_cost)
-    back: list[list[int]] = [[]] * n
+    back: list[list[int]] = [[]]  # back[k]: each state's state at step k - 1 (none at 0)
     total = rows[0]
     for k in range(1, n):
         low = min(total)
         best = total.index(low)  # the first lowest, as argmin
         limit = low + switch
-        back[k] = [j if t <= limit else best for j, t in enumerate(total)]
+        back.append([j if t <= limit else best for j, t in enumerate(total)])
         total = [(t if t <= limit else limit) + c for t, c in zip(total, rows[k], strict=True)]
     path = np.zeros(n, dtype=np.int64)
     path[-1] = total.index(min(total))
