@@ -21,8 +21,8 @@ import time
 
 import numpy as np
 
+from xvmatch.core import kernel_choice
 from xvmatch.cues import ground_registration as gr
-from xvmatch.cues import kernel_choice
 from xvmatch.geometry.people_model import pinhole
 
 

@@ -64,7 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 from xvmatch.geometry.camera import Camera
 from xvmatch.geometry.people_calibration import (
     BODY_WIDTH,
@@ -535,7 +535,7 @@ def pose_terms(cx: np.ndarray, cy: np.ndarray, grown: np.ndarray, turned: np.nda
     hidden), and horizontal people (``turned`` ``(H, M, 2)``) in the top camera's
     ``sight`` (zeros without one).
 
-    The compiled kernel where numba is loaded (:mod:`~xvmatch.cues.kernel_choice`: one pass,
+    The compiled kernel where numba is loaded (:mod:`~xvmatch.core.kernel_choice`: one pass,
     no ``(N, P)`` array), else numpy, horizontal person by horizontal person as an ``(N, P)``
     slab along the poses; the same arithmetic and comparisons, so the same bits either way."""
     cos_h, sin_h, tan_half, reach2 = view
@@ -586,7 +586,7 @@ def _distinct(poses: np.ndarray, order: np.ndarray, block: int = 512, limit: int
               ) -> list[int]:
     """The first ``limit`` of ``order`` (indices into ``poses`` ``(P, 3)``) each 1 m or 10
     degrees away from every one kept before it (greedy, in order). The compiled kernel where
-    numba is loaded (one pass, :mod:`~xvmatch.cues.kernel_choice`), else numpy: a block of
+    numba is loaded (one pass, :mod:`~xvmatch.core.kernel_choice`), else numpy: a block of
     candidates at a time, those near an earlier block's kept ones struck out at once, then the
     first left kept and those near it struck out, until ``limit``; the same comparisons either
     way."""

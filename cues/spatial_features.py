@@ -36,8 +36,8 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from xvmatch.core import kernel_choice
 from xvmatch.core.array_checks import as_boxes
-from xvmatch.cues import kernel_choice
 from xvmatch.cues.spatial_matching import SpatialParams
 from xvmatch.cues.spatial_search import (
     FrameAssociation,
@@ -312,7 +312,7 @@ def _hypothesis_features(
     ``geometry``: the :class:`TopGeometry` of each hypothesis' O, a row each):
     every hypothesis at once, (H, M) per top person and (H, M, N) per pair, each feature computed
     in float64 and written into its slice. The (H, M, N) part runs in one compiled pass where
-    the kernels are loaded (:mod:`~xvmatch.cues.kernel_choice`): the same arithmetic on numpy's
+    the kernels are loaded (:mod:`~xvmatch.core.kernel_choice`): the same arithmetic on numpy's
     log, cos and arctan, so the same bits (tested)."""
     n_hyp, m = pair_f.shape[:2]
     half_fov = 0.5 * math.radians(config.fov_deg)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 from xvmatch.cues.spatial_matching import (
     SpatialParams,
     cached_penalty_table,
@@ -342,7 +342,7 @@ def _best_per_group(
     exactly, by best-first branch and bound against each group's own best cost (and the
     ``keep``-th lowest group best, when only the ``keep`` best groups are wanted).
 
-    Where the kernels are loaded (:mod:`~xvmatch.cues.kernel_choice`), each batch is sorted,
+    Where the kernels are loaded (:mod:`~xvmatch.core.kernel_choice`), each batch is sorted,
     matched and merged in one compiled call (:class:`_CompiledBatches`) on the y of Eq. 5
     taken once per block (numpy's cos of every entry in view, elementwise as
     :meth:`~xvmatch.cues.spatial_vectors.TopHypotheses.take` takes it): the same batches, the

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 
 __all__ = [
     "REFERENCE_SIZE",

@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from xvmatch.core import kernel_choice
 from xvmatch.geometry.camera import Camera, look_rotation
 
 __all__ = [
@@ -236,39 +237,14 @@ def usable_boxes(frames: np.ndarray, ids: np.ndarray | None, boxes: np.ndarray,
     return out
 
 
-def _rotations(params: np.ndarray, b: UsableBoxes
-               ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray],
-                          Callable[[np.ndarray], np.ndarray]]:
-    """Each box's world z axis in camera coordinates ``(3,)`` or ``(N, 3)``, and the maps of
-    rows of vectors (``(..., N, 3)`` with a tilt per window) from camera to world coordinates
-    and back: one rotation for a clip of one tilt (one product), one per box's window else."""
+def _box_rotations(params: np.ndarray, b: UsableBoxes) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's world-to-camera rotations ``(W, 3, 3)``, one per window of the tilt, and
+    each box's window ``(N,)``."""
     n = b.n_windows
     roll = params[n]
-    if n == 1:
-        R = look_rotation(0.0, params[0], roll)
-        return R[:, 2], lambda x: x @ R, lambda x: x @ R.T
-    window = b.window
-    if np.any(window[1:] < window[:-1]):
-        raise ValueError("a tilt per window needs the boxes ordered by window "
-                         "(UsableBoxes.windowed)")
-    per_window = np.stack([look_rotation(0.0, t, roll) for t in params[:n]])
-    bounds = np.searchsorted(window, np.arange(n + 1))
-    count = len(window)
-
-    def product(x: np.ndarray, rotations: np.ndarray) -> np.ndarray:
-        """Each window's rows of ``x`` times its rotation: one product per window (a product
-        per box is 25 times slower)."""
-        rows = x.reshape(-1, count, 3)
-        out = np.empty_like(rows)
-        with np.errstate(invalid="ignore"):  # NaN rows (no ground point) stay NaN
-            for k in range(n):
-                s, e = bounds[k], bounds[k + 1]
-                np.matmul(rows[:, s:e], rotations[k], out=out[:, s:e])
-        return out.reshape(x.shape)
-
-    inverse = per_window.transpose(0, 2, 1)
-    return (per_window[window, :, 2], lambda x: product(x, per_window),
-            lambda x: product(x, inverse))
+    rotations = np.stack([look_rotation(0.0, t, roll) for t in params[:n]])
+    window = np.zeros(len(b.u), np.int64) if n == 1 else np.asarray(b.window, np.int64)
+    return rotations, window
 
 
 def predicted_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
@@ -282,72 +258,101 @@ def predicted_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int])
     inside the box). Off the image centre a tilted camera sees people lean (their verticals meet
     below the image): the box's centre column is then halfway between the foot's and the
     head's, and the leaning body's width adds to the box's height."""
-    return _height_model(params, b, size)(b.v)
+    return _model_heights(params, b, size, 0)
 
 
-def _height_model(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]
-                  ) -> Callable[[np.ndarray], np.ndarray]:
-    """:func:`predicted_heights` as a function of the boxes' foot rows, the camera's rotations
-    and each box's person made once (:func:`centred_heights` asks at several rows)."""
+def _model_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int],
+                   rounds: int) -> np.ndarray:
+    """The boxes' predicted heights, their foot rows moved ``rounds`` times so that each box's
+    centre row is its own (:func:`centred_heights`; 0: :func:`predicted_heights`): the
+    compiled kernel where numba is loaded (:mod:`~xvmatch.core.kernel_choice`), else numpy,
+    the same bits either way (:mod:`~xvmatch.geometry.people_kernels`)."""
     n = b.n_windows
-    log_f, log_hc = params[n + 1:n + 3]
-    person = params[n + 3:][b.track]
-    f, hc = np.exp(log_f), np.exp(log_hc)
+    f, hc = float(np.exp(params[n + 1])), float(np.exp(params[n + 2]))
+    person = np.ascontiguousarray(params[n + 3:][b.track], dtype=float)
+    rotations, window = _box_rotations(params, b)
     cx, cy = 0.5 * size[0], 0.5 * size[1]
-    camera_z, to_world, to_camera = _rotations(params, b)
-    count = len(b.u)
-    radius = np.full_like(person, 0.5 * BODY_WIDTH)
-    lift = to_world(person[:, None] * camera_z)  # the head over the feet, in camera axes
+    u, v, h = (np.ascontiguousarray(x, dtype=float) for x in (b.u, b.v, b.h))
+    kernels = kernel_choice.kernels("people")
+    if kernels is not None:
+        return kernels.centred_box_heights(u, v, h, person, rotations, window, f, hc, cx, cy,
+                                           0.5 * BODY_WIDTH, rounds)
+    turn = rotations[window]
+    pred = _heights_numpy(u, v, person, turn, f, hc, cx, cy)
+    centre = v - 0.5 * h
+    for _ in range(rounds):
+        pred = _heights_numpy(u, centre + 0.5 * np.where(np.isfinite(pred), pred, h), person,
+                              turn, f, hc, cx, cy)
+    return pred
+
+
+def _to_world(x: np.ndarray, turn: np.ndarray) -> np.ndarray:
+    """Rows of camera vectors ``(..., N, 3)`` in world axes (``x R``, ``turn`` each row's
+    world-to-camera rotation ``(N, 3, 3)``): three products summed left to right, the
+    kernel's order on every CPU (a BLAS product sums and fuses in its kernel's own)."""
+    return ((x[..., 0, None] * turn[:, 0, :] + x[..., 1, None] * turn[:, 1, :])
+            + x[..., 2, None] * turn[:, 2, :])
+
+
+def _to_camera(x: np.ndarray, turn: np.ndarray) -> np.ndarray:
+    """Rows of world vectors ``(..., N, 3)`` in camera axes (``R x``), summed as
+    :func:`_to_world`."""
+    return ((x[..., 0, None] * turn[:, :, 0] + x[..., 1, None] * turn[:, :, 1])
+            + x[..., 2, None] * turn[:, :, 2])
+
+
+def _heights_numpy(u: np.ndarray, v: np.ndarray, person: np.ndarray, turn: np.ndarray,
+                   f: float, hc: float, cx: float, cy: float) -> np.ndarray:
+    """The heights of the boxes with their foot pixels at ``u``, ``v`` (:func:`predicted_heights`),
+    ``person`` tall, ``turn`` each box's world-to-camera rotation: the numpy form of
+    :func:`~xvmatch.geometry.people_kernels.centred_box_heights`, operation for operation."""
+    count = len(u)
+    ray_row = (v - cy) / f
+
+    def depth(z: np.ndarray) -> np.ndarray:
+        """Camera coordinates' depth, NaN behind the camera."""
+        return np.where(z > 1e-9, z, np.nan)
+
+    def axis(column: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The body's axis at the ground and the radius along the ray: the box's bottom
+        row sees the near edge of the feet (where the foot pixel's ray meets the ground,
+        NaN above the horizon), the axis is a radius farther."""
+        rays = np.empty((count, 3))  # the foot pixels' rays: column, row, 1
+        rays[:, 0] = (column - cx) / f
+        rays[:, 1] = ray_row
+        rays[:, 2] = 1.0
+        d = _to_world(rays, turn)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
+            rim = s[:, None] * d
+            along = rim.copy()
+            along[:, 2] = 0.0
+            along *= (0.5 * BODY_WIDTH / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
+        return rim + along, along
+
     up = np.zeros((count, 3))
     up[:, 2] = person
-
-    def depth(cam: np.ndarray) -> np.ndarray:
-        """Camera coordinates' depth, NaN behind the camera."""
-        return np.where(cam[..., 2] > 1e-9, cam[..., 2], np.nan)
-
-    def heights(v: np.ndarray) -> np.ndarray:
-        """The heights of the boxes with their feet on rows ``v``."""
-        rays = np.empty((count, 3))  # the foot pixels' rays: column, row, 1
-        rays[:, 1] = (v - cy) / f
-        rays[:, 2] = 1.0
-
-        def axis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            """The body's axis at the ground and the radius along the ray: the box's bottom
-            row sees the near edge of the feet (where the foot pixel's ray meets the ground,
-            NaN above the horizon), the axis is a radius farther."""
-            rays[:, 0] = (u - cx) / f
-            d = to_world(rays)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                s = np.where(d[:, 2] < -1e-9, hc / -d[:, 2], np.nan)
-                rim = s[:, None] * d
-                along = rim.copy()
-                along[:, 2] = 0.0
-                along *= (radius / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
-            return rim + along, along
-
-        foot, _ = axis(b.u)
-        head = to_camera(foot + lift)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u_head = cx + f * head[:, 0] / depth(head)
-        foot, along = axis(b.u - 0.5 * (u_head - b.u))  # the box centre is the lean's middle
-        side = np.empty_like(along)
-        np.negative(along[:, 1], out=side[:, 0])
-        side[:, 1] = along[:, 0]
-        side[:, 2] = along[:, 2]
-        # The body's outline (seen and in depth) at the feet and at the head, corner by corner:
-        # one product for all, each row's top and bottom a maximum and minimum over 8 rows.
-        corners = np.empty((8, count, 3))
-        for k, base in enumerate((foot, foot + up)):
-            np.add(base, side, out=corners[4 * k])
-            np.subtract(base, side, out=corners[4 * k + 1])
-            np.add(base, along, out=corners[4 * k + 2])
-            np.subtract(base, along, out=corners[4 * k + 3])
-        cam = to_camera(corners.reshape(-1, 3))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rows = (cy + f * cam[:, 1] / depth(cam)).reshape(8, -1)
-        return rows.max(axis=0) - rows.min(axis=0)
-
-    return heights
+    foot, _ = axis(u)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        head = _to_camera(foot + up, turn)
+        u_head = cx + f * head[:, 0] / depth(head[:, 2])
+    foot, along = axis(u - 0.5 * (u_head - u))  # the box centre is the lean's middle
+    side = np.empty_like(along)
+    np.negative(along[:, 1], out=side[:, 0])
+    side[:, 1] = along[:, 0]
+    side[:, 2] = along[:, 2]
+    # The body's outline (seen and in depth) at the feet and at the head, corner by corner:
+    # each row's top and bottom a maximum and minimum over 8 rows.
+    corners = np.empty((8, count, 3))
+    for k, base in enumerate((foot, foot + up)):
+        np.add(base, side, out=corners[4 * k])
+        np.subtract(base, side, out=corners[4 * k + 1])
+        np.add(base, along, out=corners[4 * k + 2])
+        np.subtract(base, along, out=corners[4 * k + 3])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cam = _to_camera(corners, turn)
+        rows = cy + f * cam[..., 1] / depth(cam[..., 2])
+    return rows.max(axis=0) - rows.min(axis=0)
 
 
 def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
@@ -358,12 +363,7 @@ def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -
     the few rows they walk, which that shared error flattens (renders with 3 % loose edges
     read 3-8 degrees too level); the centre row's error is independent of the height's where
     both edges are as loose."""
-    heights = _height_model(params, b, size)
-    centre = b.v - 0.5 * b.h
-    pred = heights(b.v)
-    for _ in range(CENTRE_ROUNDS):
-        pred = heights(centre + 0.5 * np.where(np.isfinite(pred), pred, b.h))
-    return pred
+    return _model_heights(params, b, size, CENTRE_ROUNDS)
 
 
 def _residuals(params: np.ndarray, b: UsableBoxes, size: tuple[int, int], prior_f: float,

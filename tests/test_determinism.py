@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 import pytest
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 from xvmatch.cues.offset_estimation import estimate_offset
 from xvmatch.cues.spatial_search import associate_sequence, rank_hypotheses
 from xvmatch.formats.mot_boxes import read_mot_boxes

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from xvmatch.core import kernel_choice
 from xvmatch.cues import ground_registration as gr
-from xvmatch.cues import kernel_choice
 from xvmatch.geometry.people_calibration import BODY_WIDTH
 
 

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 from xvmatch.cues.spatial_search import associate_frame
 
 TOP = np.array([[100, 100, 20, 20], [300, 120, 20, 20], [200, 300, 20, 20], [150, 220, 20, 20],
@@ -39,21 +39,21 @@ def test_auto_takes_the_kernels_wherever_numba_is_installed():
 
 def test_auto_falls_back_to_numpy_without_numba_and_compiled_says_why():
     code = ("import sys; sys.modules['numba'] = None\n"
-            "from xvmatch.cues import kernel_choice\n"
+            "from xvmatch.core import kernel_choice\n"
             "from xvmatch.cues.spatial_search import associate_frame\n"
             "import numpy as np\n"
-            "print(kernel_choice.kernels() is None)\n"
+            "print(kernel_choice.kernels() is None, kernel_choice.kernels('people') is None)\n"
             "top = np.array([[100, 100, 20, 20], [300, 120, 20, 20], [200, 300, 20, 20]], float)\n"
             "hor = np.array([[100, 300, 60, 200], [900, 320, 50, 170]], float)\n"
             "print(associate_frame(top, hor, 2688.0).camera >= 0)\n"
             "kernel_choice.set_mode('compiled')\n"
             "try:\n"
-            "    kernel_choice.kernels()\n"
+            "    kernel_choice.kernels('people')\n"
             "except ImportError as e:\n"
             "    print('numba' in str(e))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={"XVMATCH_KERNELS": "auto", "PATH": ""}).stdout.split()
-    assert out == ["True", "True", "True"]
+    assert out == ["True", "True", "True", "True"]
 
 
 def test_bad_mode_is_a_clear_error():
@@ -62,7 +62,7 @@ def test_bad_mode_is_a_clear_error():
 
 
 def test_environment_variable_sets_the_mode():
-    code = ("from xvmatch.cues import kernel_choice; print(kernel_choice.mode()); "
+    code = ("from xvmatch.core import kernel_choice; print(kernel_choice.mode()); "
             "print(kernel_choice.kernels() is None)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={"XVMATCH_KERNELS": "compiled", "PATH": ""}).stdout.split()

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 from xvmatch.cues.spatial_features import FeatureConfig, _hypotheses, _wrap, frame_features
 from xvmatch.cues.spatial_search import _group_seeds
 from xvmatch.cues.spatial_vectors import REFERENCE_SIZE, box_centres, top_geometry

@@ -1,6 +1,6 @@
 """The people model with a tilt per window (issue 67): one call for all windows is the one-tilt
-model of each window's boxes, the boxes come in window order, and the fit holds what it is
-asked to hold and starts where it is told."""
+model of each window's boxes, its compiled kernel the numpy form to the bit, and the fit holds
+what it is asked to hold and starts where it is told."""
 
 from __future__ import annotations
 
@@ -11,7 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from xvmatch.core import kernel_choice
+from xvmatch.geometry import people_model as pm
+from xvmatch.geometry.people_kernels import centred_box_heights
 from xvmatch.geometry.people_model import (
+    BODY_WIDTH,
     BORDER,
     BORDER_SHARE,
     CENTRE_ROUNDS,
@@ -66,7 +70,7 @@ def test_a_tilt_per_window_is_each_windows_own_camera(tilts: list[float], roll: 
         rows = np.flatnonzero(b.window == k)
         one = b.take(rows).windowed(np.zeros(len(rows), np.int64))
         alone = predicted_heights(np.concatenate([[np.radians(tilt)], shared]), one, SIZE)
-        np.testing.assert_allclose(windowed[rows], alone, rtol=1e-10, equal_nan=True)
+        assert np.array_equal(windowed[rows], alone, equal_nan=True)  # the same arithmetic
 
 
 def test_held_parameters_stay_and_the_tilts_move() -> None:
@@ -81,16 +85,58 @@ def test_held_parameters_stay_and_the_tilts_move() -> None:
 
 def test_windowed_boxes_come_in_window_order() -> None:
     """``windowed`` orders the boxes by window (each window's rows one slice, each box with its
-    own frame, height and track); boxes whose windows are not in order are refused by the
-    model rather than mapped through another window's tilt."""
+    own frame, height and track); the model maps each box through its own window's tilt
+    whatever the boxes' order."""
     b = _boxes(30, 3, 2)
     assert np.all(np.diff(b.window) >= 0) and np.bincount(b.window).tolist() == [10, 10, 10]
     np.testing.assert_array_equal(b.frame % 3, b.window)  # the rows moved whole
     params = np.concatenate([np.radians([20.0, 25.0, 30.0]),
                              [0.0, np.log(prior_focal(SIZE)), np.log(8.0), 1.7, 1.7]])
-    shuffled = replace(b, window=b.window[::-1].copy())
-    with pytest.raises(ValueError, match="ordered by window"):
-        predicted_heights(params, shuffled, SIZE)
+    order = np.random.default_rng(3).permutation(30)
+    assert np.array_equal(predicted_heights(params, b.take(order), SIZE),
+                          predicted_heights(params, b, SIZE)[order], equal_nan=True)
+
+
+@settings(max_examples=40, deadline=None)
+@given(windows=st.integers(1, 3), seed=st.integers(0, 1000), tilt=st.floats(-40.0, 89.0),
+       roll=st.floats(-30.0, 30.0), hfov=st.floats(20.0, 150.0), height=st.floats(0.5, 900.0),
+       person=st.floats(1.0, 2.4), rounds=st.integers(0, 3))
+def test_the_compiled_heights_are_the_numpy_forms_to_the_bit(
+        windows: int, seed: int, tilt: float, roll: float, hfov: float, height: float,
+        person: float, rounds: int) -> None:
+    """The people model's compiled kernel and its numpy form give the same bits (NaN where a
+    foot is at or above the horizon, behind the camera), over the fit's whole bounds, for the
+    boxes' foot rows and for their centre rows."""
+    b = _boxes(80, windows, seed)
+    b = replace(b, u=np.append(b.u[:-1], SIZE[0] / 2), v=np.append(b.v[:-1], SIZE[1] / 2))
+    params = np.concatenate([np.radians(np.clip(tilt + 7.0 * np.arange(windows), -45, 89)),
+                             [np.radians(roll), np.log(prior_focal(SIZE, hfov)),
+                              np.log(height), person, 3.4 - person]])
+    made = {}
+    for mode in ("compiled", "numpy"):
+        with kernel_choice.forced(mode):
+            made[mode] = pm._model_heights(params, b, SIZE, rounds)
+    assert np.array_equal(made["compiled"], made["numpy"], equal_nan=True)
+    assert np.array_equal(np.signbit(made["compiled"]), np.signbit(made["numpy"]))
+
+
+def test_a_person_partly_behind_the_camera_has_no_height_in_either_form() -> None:
+    """A person close below a low camera with a very wide lens (165 degrees), at the image's
+    lower right: a corner of their outline lies behind the camera, so the box has no height
+    (NaN, not the span of the corners in front), in both forms alike; a nadir camera's
+    centre, where the radius along the ray divides by zero, likewise."""
+    b = replace(_boxes(2, 1, 0), u=np.array([1801.9, 960.0]), v=np.array([1068.8, 540.0]),
+                track=np.zeros(2, np.int64))
+    tilted = np.array([0.7574, -0.328, np.log(127.0), np.log(3.84), 1.5857, 1.5857])
+    for mode in ("compiled", "numpy"):
+        with kernel_choice.forced(mode):
+            assert np.isnan(predicted_heights(tilted, b, SIZE)[0])
+    down = np.array([[[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]])  # exactly
+    at = (b.u[1:], b.v[1:])
+    numpy_form = pm._heights_numpy(*at, np.array([1.7]), down, 1000.0, 8.0, 960.0, 540.0)
+    compiled = centred_box_heights(*at, b.h[1:], np.array([1.7]), down, np.zeros(1, np.int64),
+                                   1000.0, 8.0, 960.0, 540.0, 0.5 * BODY_WIDTH, 0)
+    assert np.isnan(numpy_form[0]) and np.isnan(compiled[0])
 
 
 def test_a_start_may_carry_a_tilt_per_window() -> None:

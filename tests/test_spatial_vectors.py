@@ -14,7 +14,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from xvmatch.cues import kernel_choice
+from xvmatch.core import kernel_choice
 from xvmatch.cues.spatial_vectors import (
     REFERENCE_SIZE,
     box_centres,

@@ -1,10 +1,11 @@
-"""Whether a step of the (O, theta) search, or the oblique registration's pose terms and its
-choice of distinct poses, runs its numpy form or its compiled numba kernel.
+"""Whether a step of the (O, theta) search, the oblique registration's pose terms and its
+choice of distinct poses, or the people model's box heights, runs its numpy form or its
+compiled numba kernel.
 
 The two give bit-identical results on every CPU (the kernels do only IEEE arithmetic and
 comparisons in the numpy forms' order; every transcendental function is numpy's, in both;
 ``tests/test_spatial_matching.py``, ``tests/test_spatial_vectors.py`` and
-``tests/test_ground_registration.py`` pin it), so the choice
+``tests/test_ground_registration.py``, ``tests/test_people_model.py`` pin it), so the choice
 only moves time. ``auto`` (the default) runs every call in the kernels wherever numba can be
 imported (a base requirement), and numpy where it cannot: the kernels are about 3x faster even
 on the video mode's few dozen orientations per frame, and every run of the search has calls of
@@ -20,15 +21,20 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib import import_module
 from types import ModuleType
 
 __all__ = ["MODES", "forced", "kernels", "mode", "set_mode"]
 
 MODES = ("auto", "compiled", "numpy")
 
+_MODULES = {"search": "xvmatch.cues.search_kernels", "people": "xvmatch.geometry.people_kernels"}
+"""The compiled kernels' modules: the search's and the registration's, the people model's."""
+
 _state: dict[str, str] = {"mode": ""}
 _loaded: dict[str, ModuleType | None] = {}
-"""The kernels module once imported (``"module"``), or None when numba could not be."""
+"""Each kernels module once imported, by its name in :data:`_MODULES`, or None when numba
+could not be."""
 
 
 def set_mode(value: str) -> None:
@@ -56,26 +62,27 @@ def forced(value: str) -> Iterator[None]:
         set_mode(previous)
 
 
-def _module(required: bool) -> ModuleType | None:
-    """The kernels module, imported once; None when numba is missing and not ``required``."""
-    if "module" not in _loaded:
+def _module(which: str, required: bool) -> ModuleType | None:
+    """The kernels module ``which``, imported once; None when numba is missing and not
+    ``required``."""
+    if which not in _loaded:
         try:
-            from xvmatch.cues import search_kernels
+            _loaded[which] = import_module(_MODULES[which])
         except ImportError:
             if required:
                 raise
-            _loaded["module"] = None
-        else:
-            _loaded["module"] = search_kernels
-    module = _loaded["module"]
+            _loaded[which] = None
+    module = _loaded[which]
     if module is None and required:
         raise ImportError("XVMATCH_KERNELS=compiled needs numba (pip install numba)")
     return module
 
 
-def kernels() -> ModuleType | None:
-    """The compiled kernels module for the next call, or None (use numpy)."""
+def kernels(which: str = "search") -> ModuleType | None:
+    """The compiled kernels module ``which`` (``search``: :mod:`~xvmatch.cues.search_kernels`,
+    ``people``: :mod:`~xvmatch.geometry.people_kernels`) for the next call, or None (use
+    numpy)."""
     current = mode()
     if current == "numpy":
         return None
-    return _module(required=current == "compiled")
+    return _module(which, required=current == "compiled")
