@@ -4,8 +4,8 @@ compiled numba kernel.
 
 The two give bit-identical results on every CPU (the kernels do only IEEE arithmetic and
 comparisons in the numpy forms' order; every transcendental function is numpy's, in both;
-``tests/test_spatial_matching.py``, ``tests/test_spatial_vectors.py`` and
-``tests/test_ground_registration.py``, ``tests/test_people_model.py`` pin it), so the choice
+``tests/test_spatial_matching.py``, ``tests/test_spatial_vectors.py``,
+``tests/test_ground_registration.py`` and ``tests/test_people_model.py`` pin it), so the choice
 only moves time. ``auto`` (the default) runs every call in the kernels wherever numba can be
 imported (a base requirement), and numpy where it cannot: the kernels are about 3x faster even
 on the video mode's few dozen orientations per frame, and every run of the search has calls of

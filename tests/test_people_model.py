@@ -247,6 +247,20 @@ def test_centred_heights_are_the_model_asked_row_by_row(windows: int, seed: int,
     assert np.array_equal(centred_heights(params, b, SIZE), pred, equal_nan=True)
 
 
+def test_a_fit_is_the_same_under_either_kernel_choice() -> None:
+    """The whole fit (its steps and finite differences, then the settling) from the same
+    starts gives the same parameters to the bit with the compiled heights and with numpy's."""
+    b, truth = _walkers(35.0, 4)
+    start = np.concatenate([[np.radians(25.0), 0.0, np.log(1.2 * prior_focal(SIZE)),
+                             np.log(6.0)], truth[4:]])
+    fits = {}
+    for mode in ("compiled", "numpy"):
+        with kernel_choice.forced(mode):
+            fits[mode] = fit_model(b, SIZE, prior_focal(SIZE), [start], settle=True)
+    assert np.array_equal(fits["compiled"], fits["numpy"])
+    assert abs(np.degrees(fits["numpy"][0]) - 35.0) < 1.0  # and it found the camera
+
+
 @pytest.mark.parametrize("tilt", [30.0, 40.0])
 def test_loose_top_and_bottom_edges_leave_the_tilt_where_it_is(tilt: float) -> None:
     """Each box's top and bottom moved by a normal draw of 3 % of its height (a tracker's
