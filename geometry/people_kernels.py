@@ -7,10 +7,12 @@ The calibration asks for these heights a few thousand times a fit (the finite di
 its Jacobian), and the numpy form spent most of that time in calls on arrays of a few hundred
 boxes. The kernel follows the numpy form (``people_model._heights_numpy``) operation by
 operation: the rotations as three products summed left to right (never a BLAS call, whose
-kernels sum in their own order and fuse multiply-adds on some CPUs), ``hypot`` from the C
-library in both, NaN where a ray misses the ground; numba does not contract multiply-adds
-without ``fastmath``. So the two are bit-identical on every CPU (tested), and the choice
-between them (:mod:`~xvmatch.core.kernel_choice`) only moves time.
+kernels sum in their own order and fuse multiply-adds on some CPUs), a length as the square
+root of its squares (IEEE-exact in both, where NumPy's SIMD ``hypot`` may differ from the C
+library's in the last bit), NaN where a ray misses the ground; numba does not contract
+multiply-adds without ``fastmath``. So the two are bit-identical on every CPU (tested), and
+the choice between them (:mod:`~xvmatch.core.kernel_choice`) only moves time; the camera's
+cosines and sines come from numpy, the same for both.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ def _axis(column: float, ray_row: float, R: np.ndarray, f: float, hc: float, cx:
     d2 = _to_world(r0, ray_row, 1.0, R, 2)
     s = hc / -d2 if d2 < -1e-9 else np.nan
     rim0, rim1, rim2 = s * d0, s * d1, s * d2
-    q = radius / math.hypot(rim0, rim1)
+    q = radius / math.sqrt(rim0 * rim0 + rim1 * rim1)
     a0, a1, a2 = rim0 * q, rim1 * q, 0.0 * q
     return rim0 + a0, rim1 + a1, rim2 + a2, a0, a1, a2
 

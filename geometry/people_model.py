@@ -327,7 +327,9 @@ def _heights_numpy(u: np.ndarray, v: np.ndarray, person: np.ndarray, turn: np.nd
             rim = s[:, None] * d
             along = rim.copy()
             along[:, 2] = 0.0
-            along *= (0.5 * BODY_WIDTH / np.hypot(rim[:, 0], rim[:, 1]))[:, None]
+            # the length as the kernel's: a square root is exact, a SIMD hypot may not be
+            along *= (0.5 * BODY_WIDTH / np.sqrt(rim[:, 0] * rim[:, 0] + rim[:, 1] * rim[:, 1])
+                      )[:, None]
         return rim + along, along
 
     up = np.zeros((count, 3))
