@@ -167,7 +167,8 @@ class UsableBoxes:
 
     def windowed(self, window: np.ndarray) -> UsableBoxes:
         """The same boxes with a tilt per window: ``window`` ``(N,)`` each box's, 0, 1, ...;
-        the boxes ordered by window (stably), so that each window's rows are one slice."""
+        the boxes ordered by window (stably): each window's rows one slice, the fit's residuals
+        in that order (the model itself reads each box's own window, in any order)."""
         window = np.asarray(window, np.int64).reshape(-1)
         out = self.take(np.argsort(window, kind="stable"))
         return replace(out, window=np.sort(window), n_windows=int(window.max()) + 1)
@@ -295,10 +296,9 @@ def _to_world(x: np.ndarray, turn: np.ndarray) -> np.ndarray:
 
 
 def _to_camera(x: np.ndarray, turn: np.ndarray) -> np.ndarray:
-    """Rows of world vectors ``(..., N, 3)`` in camera axes (``R x``), summed as
-    :func:`_to_world`."""
-    return ((x[..., 0, None] * turn[:, :, 0] + x[..., 1, None] * turn[:, :, 1])
-            + x[..., 2, None] * turn[:, :, 2])
+    """Rows of world vectors ``(..., N, 3)`` in camera axes (``R x``): :func:`_to_world`
+    through the inverse rotations, the same sums."""
+    return _to_world(x, turn.transpose(0, 2, 1))
 
 
 def _heights_numpy(u: np.ndarray, v: np.ndarray, person: np.ndarray, turn: np.ndarray,
