@@ -82,6 +82,7 @@ __all__ = [
     "calibrate_from_people",
     "cut_at_bottom",
     "horizon_line",
+    "measure_spread",
     "whole_boxes",
 ]
 
@@ -171,6 +172,17 @@ class CalibrationError(ValueError):
 
 
 @dataclass(frozen=True)
+class _Fit:
+    """An oblique fit as made, unrounded, and what its spread's resamples need."""
+
+    boxes: UsableBoxes
+    prior_f: float
+    params: np.ndarray
+    fixed_f: float | None
+    seed: int
+
+
+@dataclass(frozen=True)
 class PeopleCalibration:
     """A view's camera as its people tell it.
 
@@ -188,6 +200,8 @@ class PeopleCalibration:
             :data:`PRIOR_HFOV_DEG`) or ``"given"`` (the caller's).
         tilt_std_deg, horizon_std_px, focal_rel_std: spread over resamples of the clip.
         n_boxes, n_frames: the usable boxes and the frames they came from.
+        _fit: what the spread is measured from where it was left for later
+            (:func:`measure_spread`), else None; not part of the record.
     """
 
     kind: str
@@ -205,6 +219,7 @@ class PeopleCalibration:
     n_boxes: int
     n_frames: int
     person_height: float = PERSON_HEIGHT
+    _fit: _Fit | None = field(default=None, repr=False, compare=False)
     _camera: Camera = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -365,7 +380,7 @@ def calibrate_from_people(
     seed: int = 0,
     name: str = "the view",
     strict: bool = True,
-    spread: bool = True,
+    spread: bool | str = True,
 ) -> PeopleCalibration:
     """Estimate a static camera from its boxes over a clip (module docstring).
 
@@ -384,7 +399,10 @@ def calibrate_from_people(
             place the view somehow is better served by a loose fit than by none).
         spread: measure the fit's spread over resamples of the clip (16 more fits, most of
             the time); False leaves the ``*_std`` fields NaN, the fit itself unchanged (a
-            caller that does not read them, with ``strict=False``).
+            caller that does not read them, with ``strict=False``); ``"later"`` (with
+            ``strict=False``) leaves them NaN until :func:`measure_spread` measures them, the
+            same figures as at once (a caller that may not need them); measured at once all
+            the same where they decide the view (squat boxes, whose loose fit reads as nadir).
 
     Raises:
         CalibrationError: too few usable boxes (:data:`MIN_BOXES`); with ``strict``, also
@@ -393,7 +411,10 @@ def calibrate_from_people(
             (:data:`MAX_TILT_STD_DEG`, :data:`MAX_HORIZON_STD`), people seen from too steeply
             above (:data:`MIN_UPRIGHT_ASPECT`) and, without ``hfov_deg``, a tilt that rests on
             the lens (:data:`LENS_RANGE_DEG`). The message says what to give instead.
+        ValueError: ``spread`` other than True, False or ``"later"`` (not with ``strict``).
     """
+    if spread not in (True, False, "later") or (strict and spread == "later"):
+        raise ValueError(f"spread must be True, False or 'later' (not strict), got {spread!r}")
     frames = np.asarray(frames, dtype=np.int64).reshape(-1)
     boxes = np.asarray(boxes, dtype=float).reshape(-1, 4)
     size = (int(image_size[0]), int(image_size[1]))
@@ -423,17 +444,16 @@ def calibrate_from_people(
             f"{MIN_UPRIGHT_ASPECT:g}): their boxes' heights are then mostly their width and do "
             f"not tell the tilt within {MAX_TILT_STD_DEG:g} degrees, nor whether it looks straight "
             "down; give its camera with --cameras")
-    spread = spread and n_blocks > 1  # one stretch: no resample differs from the clip
-    try:
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread,
-                         lens=strict)
-    except CalibrationError:
+    spread = spread if n_blocks > 1 else False  # one stretch: no resample differs
+    if spread == "later" and aspect < STEEP_ASPECT:  # a loose fit then reads as nadir: now
+        spread = True
+    calib, refusal = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread,
+                              lens=strict, keep_loose=not strict and aspect >= STEEP_ASPECT)
+    if refusal is not None:
         if strict:
-            raise
+            raise refusal
         if aspect < STEEP_ASPECT:  # squat boxes the model cannot read: seen from above
             return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
-        calib = _oblique(b, size, n_frames, hfov_deg, seed, name, strict=False,
-                         measure=spread)
     if calib.tilt_deg > NADIR_TILT_DEG:
         return _settled(_nadir(b, w[inside], size, n_frames, hfov_deg))
     return _settled(calib)
@@ -453,21 +473,29 @@ def _settled(calib: PeopleCalibration) -> PeopleCalibration:
 
 
 def _oblique(b: UsableBoxes, size: tuple[int, int], n_frames: int, hfov_deg: float | None,
-             seed: int, name: str, strict: bool = True, measure: bool = True,
-             lens: bool = False) -> PeopleCalibration:
-    """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`);
-    ``measure``: its spread over resamples (else NaN, and the fit is not judged loose);
-    ``lens`` (the strict calibration): without ``hfov_deg``, refuse a tilt that rests on the
-    lens (:data:`LENS_RANGE_DEG`); followed people may stay within a narrower band of rows
-    (:data:`MIN_TRACKED_ROW_SPREAD`)."""
+             seed: int, name: str, measure: bool | str = True, lens: bool = False,
+             keep_loose: bool = False
+             ) -> tuple[PeopleCalibration | None, CalibrationError | None]:
+    """The pinhole fit of a camera that sees people upright (:func:`calibrate_from_people`)
+    and what a strict calibration refuses of it (None: nothing): feet in too narrow a band of
+    rows (followed people, with ``lens``, may stay within a narrower one,
+    :data:`MIN_TRACKED_ROW_SPREAD`), a fit the clip does not pin down, and with ``lens``
+    (strict) and no ``hfov_deg``, a tilt that rests on the lens (:data:`LENS_RANGE_DEG`; the
+    fit is then not returned). The fit is made once, whether the caller keeps it or refuses
+    it; where the rows refuse, only with ``keep_loose`` (a caller that keeps a loose fit).
+    ``measure``: the fit's spread over resamples (else NaN, and the fit is not judged loose;
+    ``"later"``: kept measurable, :func:`measure_spread`)."""
     give = "give its camera with --cameras (or a longer clip with more people)"
     lo, hi = np.percentile(b.v, [10, 90])
     min_rows = MIN_TRACKED_ROW_SPREAD if lens and b.n_tracks > 1 else MIN_ROW_SPREAD
-    if strict and hi - lo < min_rows * size[1]:
-        raise CalibrationError(
+    refusal = None
+    if hi - lo < min_rows * size[1]:
+        refusal = CalibrationError(
             f"{name}: the people's feet stay within {hi - lo:.0f} rows "
             f"({100 * (hi - lo) / size[1]:.0f} % of the image height), too few distances to find "
             f"the horizon; {give}")
+        if not keep_loose:
+            return None, refusal
     if len(b.h) > MAX_FIT_BOXES:  # evenly spread over the clip: same answer, bounded time
         b = b.take(np.linspace(0, len(b.h) - 1, MAX_FIT_BOXES).round().astype(np.int64))
     prior_f = prior_focal(size, hfov_deg)
@@ -475,23 +503,23 @@ def _oblique(b: UsableBoxes, size: tuple[int, int], n_frames: int, hfov_deg: flo
     starts = (model_starts(b, size, prior_f, (hfov_deg,)) if hfov_deg
               else model_starts(b, size, prior_f))
     params = fit_model(b, size, prior_f, starts, fixed, settle=True)
-    spread = (_resample_spread(b, size, prior_f, params, fixed, seed) if measure
-              else np.full(3, np.nan))
+    fit = _Fit(b, prior_f, params, fixed, seed)
+    spread = (_resample_spread(fit, size) if measure is True else np.full(3, np.nan))
     cam = model_camera(params, size)
     hor = horizon_line(cam)
-    focal_from = "given" if hfov_deg else ("prior" if spread[2] >= 0.5 * PRIOR_LOG_STD
-                                            else "people")
     calib = PeopleCalibration(
         kind="oblique", width=size[0], height=size[1], focal=float(np.exp(params[2])),
         tilt_deg=float(np.degrees(params[0])), roll_deg=float(np.degrees(params[1])),
-        camera_height=float(np.exp(params[3])), horizon=hor, focal_from=focal_from,
+        camera_height=float(np.exp(params[3])), horizon=hor, focal_from=_focal_from(fit, spread),
         tilt_std_deg=float(spread[0]), horizon_std_px=float(spread[1]),
-        focal_rel_std=float(spread[2]), n_boxes=len(b.h), n_frames=n_frames)
+        focal_rel_std=float(spread[2]), n_boxes=len(b.h), n_frames=n_frames,
+        _fit=fit if measure == "later" else None)
+    if refusal is not None:
+        return calib, refusal
     near = -size[1] <= np.mean(hor) <= 2 * size[1]  # a horizon far off the image is a tilt
-    loose = calib.tilt_std_deg > MAX_TILT_STD_DEG or (
-        near and calib.horizon_std_px > MAX_HORIZON_STD * size[1])
-    if strict and loose:
-        raise CalibrationError(
+    if calib.tilt_std_deg > MAX_TILT_STD_DEG or (
+            near and calib.horizon_std_px > MAX_HORIZON_STD * size[1]):
+        return calib, CalibrationError(
             f"{name}: the boxes do not pin the camera down (tilt {calib.tilt_deg:.1f} +- "
             f"{calib.tilt_std_deg:.1f} degrees, horizon +- {calib.horizon_std_px:.0f} px over the "
             f"clip); give --hfov if you know the field of view, or {give}")
@@ -499,12 +527,12 @@ def _oblique(b: UsableBoxes, size: tuple[int, int], n_frames: int, hfov_deg: flo
         tilts = _lens_tilts(b, size, prior_f, params)
         if tilts and max(abs(t - calib.tilt_deg) for t in tilts) > MAX_TILT_STD_DEG:
             ends = " to ".join(f"{t:.1f}" for t in sorted(tilts))
-            raise CalibrationError(
+            return None, CalibrationError(
                 f"{name}: the boxes do not tell the field of view and the tilt rests on it "
                 f"({calib.tilt_deg:.1f} degrees with a {calib.hfov_deg:.0f}-degree lens, {ends} "
                 f"with {LENS_RANGE_DEG[0]:g}-{LENS_RANGE_DEG[1]:g}); give --hfov (the lens's "
                 "horizontal field of view in degrees), or its camera with --cameras")
-    return calib
+    return calib, None
 
 
 def _lens_tilts(b: UsableBoxes, size: tuple[int, int], prior_f: float, params: np.ndarray
@@ -522,10 +550,32 @@ def _lens_tilts(b: UsableBoxes, size: tuple[int, int], prior_f: float, params: n
     return out
 
 
-def _resample_spread(b: UsableBoxes, size: tuple[int, int], prior_f: float, params: np.ndarray,
-                     fixed_f: float | None, seed: int) -> np.ndarray:
+def measure_spread(calib: PeopleCalibration) -> PeopleCalibration:
+    """``calib`` with its spread over resamples measured, where :func:`calibrate_from_people`
+    left it for later (``spread="later"``): the figures, and the focal length's source, as had
+    it measured them at once (the same resamples of the same fit); any other as it is."""
+    fit = calib._fit
+    if fit is None:
+        return calib
+    spread = _resample_spread(fit, (calib.width, calib.height))
+    return _settled(replace(calib, focal_from=_focal_from(fit, spread),
+                            tilt_std_deg=float(spread[0]), horizon_std_px=float(spread[1]),
+                            focal_rel_std=float(spread[2]), _fit=None))
+
+
+def _focal_from(fit: _Fit, spread: np.ndarray) -> str:
+    """Where a fit's focal length came from: ``"given"``, or, by its spread over resamples
+    (``(3,)``, NaN: not measured), ``"prior"`` where the boxes left it at the prior's breadth,
+    else ``"people"``."""
+    if fit.fixed_f is not None:
+        return "given"
+    return "prior" if spread[2] >= 0.5 * PRIOR_LOG_STD else "people"
+
+
+def _resample_spread(fit: _Fit, size: tuple[int, int]) -> np.ndarray:
     """Standard deviations of (tilt degrees, horizon row at the centre, log f) over fits to
     resamples of the clip's time blocks, each started from the whole clip's fit."""
+    b, prior_f, params, fixed_f, seed = fit.boxes, fit.prior_f, fit.params, fit.fixed_f, fit.seed
     rng = np.random.default_rng([seed, 67])
     n_blocks = int(b.block.max()) + 1
     out = []

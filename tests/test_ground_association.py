@@ -63,11 +63,14 @@ def test_oblique_scene_associated_from_boxes_alone(scene) -> None:
     assert calib.kind == "oblique"
     true_tilt = np.degrees(np.arcsin(-scene.top_cameras[0].R[2, 2]))
     assert abs(calib.tilt_deg - true_tilt) < 5.0
+    later = top_calibration(top, options.top_size, spread="later")  # as associate asks it
+    assert np.isnan(later.tilt_std_deg)
     scores = {}
     for consensus in (False, True):
         run = run_ground_association(top, hor, replace(options, consensus=consensus), frames,
-                                     calib)
+                                     later if consensus else calib)
         scores[consensus] = _cvidf1(scene, run, frames, backs)
+    assert run.calibration == calib  # a steady camera's spread measured for the note: the same
     assert run.summary.startswith("top view: oblique, tilt")
     spread = calib.tilt_std_deg  # said to a tenth under a degree, not "+- 0"
     said = f"{spread:.1f}" if spread < 0.95 else f"{spread:.0f}"

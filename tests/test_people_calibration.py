@@ -16,7 +16,12 @@ from hypothesis import strategies as st
 
 from xvmatch.cli import main
 from xvmatch.datasets.box_scene import SceneConfig, project_top_boxes, simulate_walks
-from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene, project_view
+from xvmatch.datasets.oblique_scenes import (
+    ObliqueSceneConfig,
+    jittered,
+    make_oblique_scene,
+    project_view,
+)
 from xvmatch.formats.camera_io import CameraFileError, load_cameras, load_estimated
 from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, stack_frames, write_mot_boxes
 from xvmatch.geometry.camera import Camera, intrinsics_from_fov, look_rotation
@@ -27,6 +32,7 @@ from xvmatch.geometry.people_calibration import (
     calibrate_from_people,
     cut_at_bottom,
     horizon_line,
+    measure_spread,
 )
 from xvmatch.geometry.people_model import fit_model, model_starts, prior_focal, usable_boxes
 
@@ -199,6 +205,25 @@ def test_without_the_spread_the_fit_is_the_same_and_its_record_says_unmeasured()
     record = fast.to_record()
     assert record["tilt_std_deg"] is None and record["focal_rel_std"] is None
     assert full.to_record()["tilt_std_deg"] is not None
+
+
+def test_a_spread_left_for_later_is_the_one_measured_at_once() -> None:
+    """``spread="later"`` (associate's: a tilting camera's one tilt is not told): the fit as
+    at once, its spread NaN until :func:`measure_spread`, which gives the very figures (and the
+    focal length's source) of the spread measured at once; the strict calibration, which judges
+    by the spread, does not take it."""
+    _camera, frames = _scene(30.0, 10.0, 70.0)
+    numbers, ids, boxes = stack_frames(frames)
+    now = calibrate_from_people(numbers, boxes, SIZE, ids=ids, strict=False)
+    later = calibrate_from_people(numbers, boxes, SIZE, ids=ids, strict=False, spread="later")
+    assert np.isnan(later.tilt_std_deg) and later.to_record()["tilt_std_deg"] is None
+    assert (later.focal, later.tilt_deg, later.roll_deg, later.camera_height) == (
+        now.focal, now.tilt_deg, now.roll_deg, now.camera_height)
+    measured = measure_spread(later)
+    assert measured == now and np.isfinite(measured.tilt_std_deg)
+    assert measure_spread(measured) is measured and measure_spread(now) is now
+    with pytest.raises(ValueError, match="spread must be"):
+        calibrate_from_people(numbers, boxes, SIZE, ids=ids, spread="later")
 
 
 def test_the_fit_settles_where_the_boxes_leave_its_cost_flat() -> None:
@@ -450,3 +475,31 @@ def test_calibrate_without_image_size_or_enough_people(tmp_path, capsys) -> None
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "give its camera with --cameras" in err[0]
     assert not out.exists()
+
+
+def test_a_loose_fit_is_made_once_and_is_what_the_association_keeps(monkeypatch) -> None:
+    """A low drone's 12 s of jittered boxes (everything at once in ``tilt_fit_speed.py``) that
+    the boxes do not pin down: the strict calibration refuses, naming the fit's tilt and
+    spread; the loose one (the association's) keeps that same fit, made once: it was made
+    twice before, the loose clips' calibration twice as slow."""
+    config = ObliqueSceneConfig(top_pitch=(20.0, 45.0), top_height=(4.0, 12.0),
+                                overlap=(0.35, 0.65), hor_hfov=(60.0, 110.0),
+                                holder_speed=(1.0, 1.5), pan_rate=0.3,
+                                top_drift_speed=(0.3, 1.0), top_yaw_rate=(0.0, 3.0),
+                                edge_people=(1, 3))
+    scene = make_oblique_scene(config, 120, np.random.default_rng([0, 0]))
+    top = jittered(scene.top, 0.03, np.random.default_rng([0, 0, 2]), SIZE)
+    numbers, ids, boxes = stack_frames({i: top[f] for i, f in enumerate(sorted(top)[::3], 1)})
+    with pytest.raises(CalibrationError, match="do not pin the camera down") as refused:
+        calibrate_from_people(numbers, boxes, SIZE, ids=ids)
+    settled = []
+
+    def counted(*args, **kwargs):
+        settled.append(kwargs.get("settle", False))
+        return fit_model(*args, **kwargs)
+
+    monkeypatch.setattr("xvmatch.geometry.people_calibration.fit_model", counted)
+    loose = calibrate_from_people(numbers, boxes, SIZE, ids=ids, strict=False)
+    assert settled.count(True) == 1  # the main fit; the rest are the spread's resamples
+    assert f"(tilt {loose.tilt_deg:.1f} +- {loose.tilt_std_deg:.1f} degrees" in str(
+        refused.value)

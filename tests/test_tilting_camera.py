@@ -122,10 +122,11 @@ def test_the_run_maps_each_frame_of_a_tilting_clip_through_its_own_tilt(tilting)
     scene, top, hor, _ = tilting
     size = scene.top_cameras[0].image_size
     options = GroundAssociationOptions(size, scene.hor_cameras["hor1"][0].image_size, fps=FPS)
-    calib = top_calibration(top, size)
+    calib = top_calibration(top, size, spread="later")  # as associate asks it
     shifted = {f: FrameBoxes(f, np.asarray(r.ids) + 1000, r.boxes) for f, r in hor.items()}
     run = run_ground_association(top, shifted, options, calibration=calib)
     assert run.tilt is not None and run.tilt.tilting
+    assert np.isnan(run.calibration.tilt_std_deg)  # the one tilt's spread: not told, not measured
     first, last = run.tilt.tilts_deg[0], run.tilt.tilts_deg[-1]
     assert f"tilting from {first:.0f} to {last:.0f} degrees" in run.summary
     assert 18 < first < 30 and 32 < last < 42  # the truth went 19.7 -> 37.6

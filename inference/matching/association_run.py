@@ -284,7 +284,8 @@ def oblique_top(top: Mapping, options: AssociationOptions, hor: Mapping) -> obje
     from xvmatch.inference.matching.ground_association import top_calibration
 
     try:
-        calib = top_calibration(top, top_size, 0, options.top_boxes, options.video)
+        calib = top_calibration(top, top_size, 0, options.top_boxes, options.video,
+                                spread="later")  # its kind only: no spread
     except CalibrationError:
         return None
     return calib if calib.kind == "oblique" or options.top_view == "oblique" else None

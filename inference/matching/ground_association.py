@@ -84,6 +84,7 @@ from xvmatch.geometry.people_calibration import (
     PeopleCalibration,
     calibrate_from_people,
     cut_at_bottom,
+    measure_spread,
 )
 from xvmatch.geometry.tilting_camera import WINDOW_S, TiltTrack, fit_tilt_track
 from xvmatch.inference.linking.pair_consensus import consistent_pairs
@@ -206,16 +207,19 @@ class GroundAssociation:
 
 
 def top_calibration(top: Mapping, top_size: tuple[int, int], seed: int = 0,
-                    name: str = "the top view", tracks: bool = True) -> PeopleCalibration:
+                    name: str = "the top view", tracks: bool = True,
+                    spread: bool | str = True) -> PeopleCalibration:
     """The top camera from its people, loose rather than refused (see the module docstring);
     raises :class:`~xvmatch.geometry.people_calibration.CalibrationError` only for too few
     boxes. Each person followed gives a height of their own: ``tracks``, by the view's own
     track ids (video mode); False (frame mode), by its boxes linked by IoU
-    (:func:`~xvmatch.inference.linking.tracklets.box_track_ids`), the ids unread."""
+    (:func:`~xvmatch.inference.linking.tracklets.box_track_ids`), the ids unread. ``spread``:
+    the fit's spread over resamples measured (True), not (False) or left for
+    :func:`~xvmatch.geometry.people_calibration.measure_spread` (``"later"``)."""
     frames, ids, boxes = stack_frames(top)
     return calibrate_from_people(frames, boxes, top_size,
                                  ids=ids if tracks else box_track_ids(top), seed=seed,
-                                 name=name, strict=False)
+                                 name=name, strict=False, spread=spread)
 
 
 def top_frame_rate(top: Mapping, calib: PeopleCalibration, tracks: bool = True,
@@ -479,6 +483,8 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
                   gr.HandheldReading.of([b for b, _ in boxes], options.hor_size), (top, hor),
                   sights, spread, (lens_slack, slack))
     lens, (scale, poses, pairs) = run(None)
+    if tilt is None:  # its tilt's spread told (a tilting camera's one tilt is not)
+        calib = measure_spread(calib)
     summary, held = _summary(calib, tilt), None
     if options.camera_id is not None:  # the holder is not in their own camera's view
         pairs = _without(pairs, options.camera_id)
@@ -1008,7 +1014,8 @@ def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
     it)."""
     if top_view not in ("auto", "oblique"):
         raise ValueError(f"top_view must be auto or oblique here, got {top_view!r}")
-    calib = top_calibration(top, options.top_size, options.seed, name, options.consensus)
+    calib = top_calibration(top, options.top_size, options.seed, name, options.consensus,
+                            spread="later")  # measured where told: not for a tilting camera
     if calib.kind == "nadir" and top_view == "auto":
         return None
     return run_ground_association(top, hor, options, calibration=calib)
