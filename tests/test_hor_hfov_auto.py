@@ -386,3 +386,25 @@ def test_a_run_whose_pairs_stray_from_any_lens_replaces_nothing() -> None:
     assert replacing(70.0, kept, people, made, close) == 90.0  # no further than allowed
     for untold in (90.0, 70.0):
         assert replacing(70.0, kept, people, made, {**fits, untold: None}) == 90.0
+
+
+def test_a_run_with_or_without_the_sights_is_kept_for_more_pairs_unless_it_strays_more() -> None:
+    """``fewer_sights``' test (``strays_more``): a lens's run with the top camera's sights, or
+    without them, that keeps more pairs gives way to the other where its pairs stray from the
+    lens they imply more than ``SIGHTS_STRAY_RATIO`` times as far (the two read the same
+    people through the same lens: the render of a 66-degree lens run at 70, 140 pair-frames
+    straying 0.272 against 127 straying 0.146, right), a lower bar than between lenses; a fit
+    that tells nothing, nothing."""
+    from xvmatch.inference.matching.ground_association import (
+        SIGHTS_STRAY_RATIO,
+        STRAY_RATIO,
+        strays_more,
+    )
+
+    sighted, plain = (58.0, 0.2724), (72.0, 0.146)
+    assert SIGHTS_STRAY_RATIO < 0.2724 / 0.146 < STRAY_RATIO
+    assert strays_more(sighted, plain, SIGHTS_STRAY_RATIO)
+    assert not strays_more(sighted, plain, STRAY_RATIO)
+    assert not strays_more(plain, sighted, SIGHTS_STRAY_RATIO)
+    assert not strays_more((58.0, SIGHTS_STRAY_RATIO * 0.146), plain, SIGHTS_STRAY_RATIO)
+    assert not strays_more(None, plain, 1.0) and not strays_more(sighted, None, 1.0)

@@ -118,6 +118,7 @@ __all__ = [
     "run_ground_association",
     "run_top_view",
     "scale_along_tracks",
+    "strays_more",
     "tied_with",
     "tilt_note",
     "tilting_top",
@@ -674,8 +675,7 @@ def replacing(hfov: float, kept: Mapping[float, int], people: Mapping[float, int
         # without the sights (which steady any lens's poses)
         if people[h] >= MIN_PEOPLE and n > NEAR_TIE * made_kept[best]:
             best = h
-    if (fits is not None and best != hfov and fits[best] is not None
-            and fits[hfov] is not None and fits[best][1] > STRAY_RATIO * fits[hfov][1]):
+    if fits is not None and best != hfov and strays_more(fits[best], fits[hfov], STRAY_RATIO):
         return hfov
     return best
 
@@ -760,7 +760,7 @@ def _lens_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: flo
     hors, plain = runs[0], runs[1][-1]
     scale = gr.margin_scale(plain)
     pairs = _consistent(order, tops, hors, sizes, scale, plain[scale][1], views)
-    return LensRuns(runs, scale, pairs, _made(order, tops, runs, sizes, views))
+    return LensRuns(runs, scale, pairs, _made(order, tops, runs, sizes, views, hfov))
 
 
 def _each_lens(run: Callable[[float], object], lenses: list[float], workers: int) -> list:
@@ -776,7 +776,7 @@ def _each_lens(run: Callable[[float], object], lenses: list[float], workers: int
 
 
 def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: list,
-          views: tuple[Mapping, Mapping]) -> Registered:
+          views: tuple[Mapping, Mapping], hfov: float) -> Registered:
     """One lens's run along the tracks from its :func:`_scale_runs` (its people and its
     registrations at each map scale, with the sights and without, or the one): as
     :func:`run_along_tracks` makes it, without registering again."""
@@ -784,7 +784,7 @@ def _made(order: list[int], tops: list, scale_runs: tuple[list, list], sizes: li
     run = scale_along_tracks(order, tops, hors, by_scale[0], sizes, views)
     if len(by_scale) == 1:
         return run
-    return fewer_sights(run, order, tops, hors, sizes, by_scale[-1], views)
+    return fewer_sights(run, order, tops, hors, sizes, by_scale[-1], views, hfov)
 
 
 def _implied(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
@@ -870,7 +870,7 @@ def _whole_boxes_run(order: list[int], tops: list, boxes: list, sizes: list, hfo
     whole = [(q[~c], i[~c]) for (q, i), c in zip(hors, cut, strict=True)]
     by_scale = _by_scale(order, tops, whole, sizes, hfov, fps, True, sights, spread, slack,
                          holders)
-    return _made(order, tops, (hors, by_scale), sizes, views)
+    return _made(order, tops, (hors, by_scale), sizes, views, hfov)
 
 
 def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov: float,
@@ -884,19 +884,45 @@ def run_along_tracks(order: list[int], tops: list, hors: list, sizes: list, hfov
     (:func:`fewer_sights`). Arguments as :func:`register_and_pair`'s."""
     by_scale = _by_scale(order, tops, hors, sizes, hfov, fps, True, sights, spread, slack,
                          holders)
-    return _made(order, tops, (hors, by_scale), sizes, views)
+    return _made(order, tops, (hors, by_scale), sizes, views, hfov)
 
 
 def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, sizes: list,
                  plain: dict[float, tuple[float, list[gr.FramePose]]],
-                 views: tuple[Mapping, Mapping]) -> Registered:
+                 views: tuple[Mapping, Mapping], hfov: float) -> Registered:
     """A run made with the top camera's sights (video mode), or the run without them
     (``plain``: its registration at each map scale without them) where that keeps more pairs
     along the tracks: the sights steady poses, but where the top camera's view of the holder
     misleads them they cost the right ones (a 110-degree run: 69 pair-frames with them, all
-    wrong; 152 without, all right). Arguments as :func:`scale_along_tracks`'."""
+    wrong; 152 without, all right). But not the one keeping more where its pairs stray from
+    the lens they imply more than :data:`SIGHTS_STRAY_RATIO` times as far as the other's
+    (:func:`~xvmatch.cues.hor_lens.implied_fit`; the lens ``hfov``): a run that swaps people
+    fits no lens well. A tie keeps the run as made (the stray alone decided ties on the
+    renders as often wrongly as rightly). Arguments as :func:`scale_along_tracks`'."""
     other = scale_along_tracks(order, tops, hors, plain, sizes, views)
-    return other if _count(other[2])[0] > _count(made[2])[0] else made
+    more, fewer = (other, made) if _count(other[2])[0] > _count(made[2])[0] else (made, other)
+    if _count(more[2])[0] > _count(fewer[2])[0]:  # a tie keeps the run as made
+        fits = [_implied(order, tops, hors, sizes, hfov, run[2]) for run in (more, fewer)]
+        if strays_more(*fits, SIGHTS_STRAY_RATIO):
+            return fewer
+    return more
+
+
+SIGHTS_STRAY_RATIO = 1.5
+"""How many times as far from the lens they imply the pairs of one lens's run with the top
+camera's sights (or without them) may stray as the other run's, and be kept for keeping more
+pairs (:func:`fewer_sights`). The two read the same people through the same lens, so a lower
+bar than :data:`STRAY_RATIO`'s between lenses: on renders of a 66-degree lens run at 70, the run
+with the sights kept 140 pair-frames straying 0.272, the one without 127 straying 0.146, right
+(pair F1 0.689 -> 1.000; docs/notes/oblique_top_camera.md)."""
+
+
+def strays_more(fit: tuple[float, float] | None, other: tuple[float, float] | None,
+                ratio: float) -> bool:
+    """Whether pairs whose implied lens fit is ``fit`` (lens, how far they stray:
+    :func:`~xvmatch.cues.hor_lens.implied_fit`) stray more than ``ratio`` times as far as
+    ``other``'s; False where either tells nothing (None)."""
+    return fit is not None and other is not None and fit[1] > ratio * other[1]
 
 
 def _scale_runs(order: list[int], tops: list, boxes: list, sizes: list, hfov: float, fps: float,
