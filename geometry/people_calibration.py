@@ -171,7 +171,7 @@ class CalibrationError(ValueError):
     varies too much over the clip. The message says which and what to give instead."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _Fit:
     """An oblique fit as made, unrounded, and what its spread's resamples need."""
 
@@ -444,7 +444,8 @@ def calibrate_from_people(
             f"{MIN_UPRIGHT_ASPECT:g}): their boxes' heights are then mostly their width and do "
             f"not tell the tilt within {MAX_TILT_STD_DEG:g} degrees, nor whether it looks straight "
             "down; give its camera with --cameras")
-    spread = spread if n_blocks > 1 else False  # one stretch: no resample differs
+    # one stretch: no resample differs from the clip
+    spread = (spread if spread == "later" else bool(spread)) if n_blocks > 1 else False
     if spread == "later" and aspect < STEEP_ASPECT:  # a loose fit then reads as nadir: now
         spread = True
     calib, refusal = _oblique(b, size, n_frames, hfov_deg, seed, name, measure=spread,
