@@ -900,12 +900,12 @@ def fewer_sights(made: Registered, order: list[int], tops: list, hors: list, siz
     fits no lens well. A tie keeps the run as made (the stray alone decided ties on the
     renders as often wrongly as rightly). Arguments as :func:`scale_along_tracks`'."""
     other = scale_along_tracks(order, tops, hors, plain, sizes, views)
-    more, fewer = (other, made) if _count(other[2])[0] > _count(made[2])[0] else (made, other)
-    if _count(more[2])[0] > _count(fewer[2])[0]:  # a tie keeps the run as made
-        fits = [_implied(order, tops, hors, sizes, hfov, run[2]) for run in (more, fewer)]
-        if strays_more(*fits, SIGHTS_STRAY_RATIO):
-            return fewer
-    return more
+    kept, kept_other = _count(made[2])[0], _count(other[2])[0]
+    if kept == kept_other:  # a tie keeps the run as made
+        return made
+    more, fewer = (other, made) if kept_other > kept else (made, other)
+    fits = [_implied(order, tops, hors, sizes, hfov, run[2]) for run in (more, fewer)]
+    return fewer if strays_more(*fits, SIGHTS_STRAY_RATIO) else more
 
 
 SIGHTS_STRAY_RATIO = 1.5
