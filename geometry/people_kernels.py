@@ -69,8 +69,10 @@ def _row(c0: float, c1: float, c2: float, R: np.ndarray, f: float, cy: float) ->
 
 @njit(cache=True, error_model="numpy")
 def _height(u: float, v: float, person: float, R: np.ndarray, f: float, hc: float, cx: float,
-            cy: float, radius: float) -> float:
-    """One box's height with its foot on row ``v`` (``people_model._heights_numpy``)."""
+            cy: float, radius: float, smooth2: float) -> float:
+    """One box's height with its foot on row ``v`` (``people_model._heights_numpy``): the
+    span of its outline's corner rows, each highest and lowest taken smoothly
+    (``smooth2``: the squared rounding, ``people_model.OUTLINE_SMOOTH_PX``)."""
     ray_row = (v - cy) / f
     p0, p1, p2, _, _, _ = _axis(u, ray_row, R, f, hc, cx, radius)
     h0 = _to_camera(p0 + 0.0, p1 + 0.0, p2 + person, R, 0)
@@ -83,18 +85,22 @@ def _height(u: float, v: float, person: float, R: np.ndarray, f: float, hc: floa
             _row(p0 + a0, p1 + a1, p2 + a2, R, f, cy), _row(p0 - a0, p1 - a1, p2 - a2, R, f, cy),
             _row(q0 + s0, q1 + s1, q2 + s2, R, f, cy), _row(q0 - s0, q1 - s1, q2 - s2, R, f, cy),
             _row(q0 + a0, q1 + a1, q2 + a2, R, f, cy), _row(q0 - a0, q1 - a1, q2 - a2, R, f, cy))
-    hi, lo, missing = rows[0], rows[0], False
-    for row in rows:
+    hi, lo, missing = rows[0], rows[0], rows[0] != rows[0]
+    for k in range(1, 8):  # in the numpy form's order (people_model._smooth_span)
+        row = rows[k]
         missing = missing or row != row
-        hi = max(hi, row)
-        lo = min(lo, row)
+        d = hi - row
+        hi = 0.5 * ((hi + row) + math.sqrt(d * d + smooth2))
+        d = lo - row
+        lo = 0.5 * ((lo + row) - math.sqrt(d * d + smooth2))
     return np.nan if missing else hi - lo
 
 
 @njit(cache=True, error_model="numpy")
 def centred_box_heights(u: np.ndarray, v: np.ndarray, h: np.ndarray, person: np.ndarray,
                         rotations: np.ndarray, window: np.ndarray, f: float, hc: float,
-                        cx: float, cy: float, radius: float, rounds: int) -> np.ndarray:
+                        cx: float, cy: float, radius: float, rounds: int,
+                        smooth2: float) -> np.ndarray:
     """Each box's predicted height (``u``, ``v``: its foot pixel, ``h`` its height, ``person``
     its person's height, ``rotations[window]`` its world-to-camera rotation), the foot row
     moved ``rounds`` times so that the box's centre row is the box's
@@ -102,10 +108,11 @@ def centred_box_heights(u: np.ndarray, v: np.ndarray, h: np.ndarray, person: np.
     out = np.empty(u.shape[0])
     for i in range(u.shape[0]):
         R = rotations[window[i]]
-        pred = _height(u[i], v[i], person[i], R, f, hc, cx, cy, radius)
+        pred = _height(u[i], v[i], person[i], R, f, hc, cx, cy, radius, smooth2)
         centre = v[i] - 0.5 * h[i]
         for _ in range(rounds):
             at = pred if np.isfinite(pred) else h[i]
-            pred = _height(u[i], centre + 0.5 * at, person[i], R, f, hc, cx, cy, radius)
+            pred = _height(u[i], centre + 0.5 * at, person[i], R, f, hc, cx, cy, radius,
+                           smooth2)
         out[i] = pred
     return out

@@ -38,6 +38,7 @@ __all__ = [
     "HIDING_GAP",
     "HIDING_SHARE",
     "MAX_FIT_BOXES",
+    "OUTLINE_SMOOTH_PX",
     "PERSON_HEIGHT",
     "PRIOR_HFOV_DEG",
     "PRIOR_LOG_STD",
@@ -64,6 +65,14 @@ PERSON_HEIGHT = 1.72
 BODY_WIDTH = 0.45
 """Diameter (m) of the upright cylinder a person is modelled as: shoulders across, feet and
 stride in depth."""
+
+OUTLINE_SMOOTH_PX = 0.2
+"""How smoothly (px) a box's top and bottom follow its outline's highest and lowest corner
+rows: with a sharp highest row the fit's cost bends where the corner on top changes, its
+settling stalls on a bend short of the minimum, and where it stalls rests on the last bit of
+the CPU's arithmetic (one clip's calibration read 34.5 or 34.8 degrees by its CPU, its pairs
+0 or 1 F1). Rounded, a box grows where corners nearly share its top or bottom row: 0.01-0.04
+px (median) on rendered clips (docs/notes/oblique_top_camera.md, sixty-fifth session)."""
 
 PRIOR_HFOV_DEG = 70.0
 """Horizontal field of view (degrees) the focal length is drawn towards where the boxes cannot
@@ -256,9 +265,10 @@ def predicted_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int])
     box's bottom meets the ground (the near edge of the feet: the axis is a radius farther); the
     predicted height is that of the image's bounding box of its outline at the feet and at the
     head (a camera from above sees the top of the head and the ground in front of the feet
-    inside the box). Off the image centre a tilted camera sees people lean (their verticals meet
-    below the image): the box's centre column is then halfway between the foot's and the
-    head's, and the leaning body's width adds to the box's height."""
+    inside the box), its top and bottom rounded over :data:`OUTLINE_SMOOTH_PX`. Off the image
+    centre a tilted camera sees people lean (their verticals meet below the image): the box's
+    centre column is then halfway between the foot's and the head's, and the leaning body's
+    width adds to the box's height."""
     return _model_heights(params, b, size, 0)
 
 
@@ -277,7 +287,7 @@ def _model_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int],
     kernels = kernel_choice.kernels("people")
     if kernels is not None:
         return kernels.centred_box_heights(u, v, h, person, rotations, window, f, hc, cx, cy,
-                                           0.5 * BODY_WIDTH, rounds)
+                                           0.5 * BODY_WIDTH, rounds, OUTLINE_SMOOTH_PX**2)
     turn = rotations[window]
     pred = _heights_numpy(u, v, person, turn, f, hc, cx, cy)
     centre = v - 0.5 * h
@@ -354,7 +364,21 @@ def _heights_numpy(u: np.ndarray, v: np.ndarray, person: np.ndarray, turn: np.nd
     with np.errstate(divide="ignore", invalid="ignore"):
         cam = _to_camera(corners, turn)
         rows = cy + f * cam[..., 1] / depth(cam[..., 2])
-    return rows.max(axis=0) - rows.min(axis=0)
+    return _smooth_span(rows)
+
+
+def _smooth_span(rows: np.ndarray) -> np.ndarray:
+    """The highest of ``rows`` ``(8, N)`` less the lowest, each taken smoothly: two rows'
+    highest as ``(a + b + sqrt((a - b)^2 + e^2)) / 2`` (``e``: :data:`OUTLINE_SMOOTH_PX`),
+    rows folded in in order, the kernel's (NaN in, NaN out)."""
+    e2 = OUTLINE_SMOOTH_PX**2
+    hi, lo = rows[0].copy(), rows[0].copy()
+    for row in rows[1:]:
+        d = hi - row
+        hi = 0.5 * ((hi + row) + np.sqrt(d * d + e2))
+        d = lo - row
+        lo = 0.5 * ((lo + row) - np.sqrt(d * d + e2))
+    return hi - lo
 
 
 def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
