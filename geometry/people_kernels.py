@@ -69,10 +69,10 @@ def _row(c0: float, c1: float, c2: float, R: np.ndarray, f: float, cy: float) ->
 
 @njit(cache=True, error_model="numpy")
 def _height(u: float, v: float, person: float, R: np.ndarray, f: float, hc: float, cx: float,
-            cy: float, radius: float, smooth2: float) -> float:
+            cy: float, radius: float, smooth: float) -> float:
     """One box's height with its foot on row ``v`` (``people_model._heights_numpy``): the
-    span of its outline's corner rows, each highest and lowest taken smoothly
-    (``smooth2``: the squared rounding, ``people_model.OUTLINE_SMOOTH_PX``)."""
+    span of its outline's corner rows, each highest and lowest rounded within ``smooth``
+    pixels of a tie (``people_model.OUTLINE_SMOOTH_PX``)."""
     ray_row = (v - cy) / f
     p0, p1, p2, _, _, _ = _axis(u, ray_row, R, f, hc, cx, radius)
     h0 = _to_camera(p0 + 0.0, p1 + 0.0, p2 + person, R, 0)
@@ -89,18 +89,25 @@ def _height(u: float, v: float, person: float, R: np.ndarray, f: float, hc: floa
     for k in range(1, 8):  # in the numpy form's order (people_model._smooth_span)
         row = rows[k]
         missing = missing or row != row
-        d = hi - row
-        hi = 0.5 * ((hi + row) + math.sqrt(d * d + smooth2))
-        d = lo - row
-        lo = 0.5 * ((lo + row) - math.sqrt(d * d + smooth2))
+        hi = max(hi, row) + _tie(abs(hi - row), smooth)
+        lo = min(lo, row) - _tie(abs(lo - row), smooth)
     return np.nan if missing else hi - lo
+
+
+@njit(cache=True, error_model="numpy")
+def _tie(t: float, e: float) -> float:
+    """What rounds the higher of two rows ``t`` apart (``people_model._tie``)."""
+    if t < e:
+        r = 1.0 - t / e
+        return -(0.5 * t) * (r * r)
+    return 0.0
 
 
 @njit(cache=True, error_model="numpy")
 def centred_box_heights(u: np.ndarray, v: np.ndarray, h: np.ndarray, person: np.ndarray,
                         rotations: np.ndarray, window: np.ndarray, f: float, hc: float,
                         cx: float, cy: float, radius: float, rounds: int,
-                        smooth2: float) -> np.ndarray:
+                        smooth: float) -> np.ndarray:
     """Each box's predicted height (``u``, ``v``: its foot pixel, ``h`` its height, ``person``
     its person's height, ``rotations[window]`` its world-to-camera rotation), the foot row
     moved ``rounds`` times so that the box's centre row is the box's
@@ -108,11 +115,11 @@ def centred_box_heights(u: np.ndarray, v: np.ndarray, h: np.ndarray, person: np.
     out = np.empty(u.shape[0])
     for i in range(u.shape[0]):
         R = rotations[window[i]]
-        pred = _height(u[i], v[i], person[i], R, f, hc, cx, cy, radius, smooth2)
+        pred = _height(u[i], v[i], person[i], R, f, hc, cx, cy, radius, smooth)
         centre = v[i] - 0.5 * h[i]
         for _ in range(rounds):
             at = pred if np.isfinite(pred) else h[i]
             pred = _height(u[i], centre + 0.5 * at, person[i], R, f, hc, cx, cy, radius,
-                           smooth2)
+                           smooth)
         out[i] = pred
     return out

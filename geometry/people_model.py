@@ -67,12 +67,14 @@ BODY_WIDTH = 0.45
 stride in depth."""
 
 OUTLINE_SMOOTH_PX = 0.2
-"""How smoothly (px) a box's top and bottom follow its outline's highest and lowest corner
-rows: with a sharp highest row the fit's cost bends where the corner on top changes, its
-settling stalls on a bend short of the minimum, and where it stalls rests on the last bit of
-the CPU's arithmetic (one clip's calibration read 34.5 or 34.8 degrees by its CPU, its pairs
-0 or 1 F1). Rounded, a box grows where corners nearly share its top or bottom row: 0.01-0.04
-px (median) on rendered clips (docs/notes/oblique_top_camera.md, sixty-fifth session)."""
+"""Within how many pixels of each other two corner rows of a person's outline have their
+highest (lowest) rounded (:func:`_tie`): with the sharp highest row the fit's cost bends where
+the corner on top changes, its settling stalls on a bend short of the minimum, and where it
+stalls rests on the last bit of the CPU's arithmetic (one clip's calibration read 34.5 or
+34.8 degrees by its CPU, its pairs 0 or 1 F1). Rounded, a box is shorter by at most 0.074
+of this for each row nearly tied with the top or bottom (under 0.8 of it with all eight
+nearly tied), and as sharp where they are tied or farther apart
+(docs/notes/oblique_top_camera.md, sixty-fifth session)."""
 
 PRIOR_HFOV_DEG = 70.0
 """Horizontal field of view (degrees) the focal length is drawn towards where the boxes cannot
@@ -287,7 +289,7 @@ def _model_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int],
     kernels = kernel_choice.kernels("people")
     if kernels is not None:
         return kernels.centred_box_heights(u, v, h, person, rotations, window, f, hc, cx, cy,
-                                           0.5 * BODY_WIDTH, rounds, OUTLINE_SMOOTH_PX**2)
+                                           0.5 * BODY_WIDTH, rounds, OUTLINE_SMOOTH_PX)
     turn = rotations[window]
     pred = _heights_numpy(u, v, person, turn, f, hc, cx, cy)
     centre = v - 0.5 * h
@@ -368,17 +370,24 @@ def _heights_numpy(u: np.ndarray, v: np.ndarray, person: np.ndarray, turn: np.nd
 
 
 def _smooth_span(rows: np.ndarray) -> np.ndarray:
-    """The highest of ``rows`` ``(8, N)`` less the lowest, each taken smoothly: two rows'
-    highest as ``(a + b + sqrt((a - b)^2 + e^2)) / 2`` (``e``: :data:`OUTLINE_SMOOTH_PX`),
-    rows folded in in order, the kernel's (NaN in, NaN out)."""
-    e2 = OUTLINE_SMOOTH_PX**2
+    """The highest of ``rows`` ``(8, N)`` less the lowest, each rounded near a tie
+    (:func:`_tie`), the rows folded in in order, the kernel's (NaN in, NaN out)."""
     hi, lo = rows[0].copy(), rows[0].copy()
     for row in rows[1:]:
-        d = hi - row
-        hi = 0.5 * ((hi + row) + np.sqrt(d * d + e2))
-        d = lo - row
-        lo = 0.5 * ((lo + row) - np.sqrt(d * d + e2))
+        hi = np.maximum(hi, row) + _tie(np.abs(hi - row))
+        lo = np.minimum(lo, row) - _tie(np.abs(lo - row))
     return hi - lo
+
+
+def _tie(t: np.ndarray) -> np.ndarray:
+    """What the higher of two rows ``t`` apart gains to round it: ``-(t / 2) (1 - t / e)^2``
+    within ``e`` (:data:`OUTLINE_SMOOTH_PX`), else 0. The higher of ``a`` and ``b`` so rounded
+    has one slope, a half each, at a tie, so its value there is exact and its slope continuous:
+    no bend, and nothing added at a tie (as a square root's rounding adds half of ``e``, to a
+    nadir view's four tied head corners most of all)."""
+    e = OUTLINE_SMOOTH_PX
+    r = 1.0 - t / e
+    return np.where(t < e, -(0.5 * t) * (r * r), 0.0)
 
 
 def centred_heights(params: np.ndarray, b: UsableBoxes, size: tuple[int, int]) -> np.ndarray:
