@@ -13,6 +13,7 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.formats.mot_boxes import FrameBoxes, read_mot_boxes, write_mot_boxes
+from xvmatch.geometry.people_calibration import measure_spread
 from xvmatch.inference.matching.frame_rate import READ_RATE_SLACK, frame_rate_note
 from xvmatch.inference.matching.ground_association import (
     GroundAssociationOptions,
@@ -20,6 +21,7 @@ from xvmatch.inference.matching.ground_association import (
     top_calibration,
 )
 from xvmatch.inference.views.multi_ground import (
+    REGISTERED,
     MultiGroundOptions,
     ground_problems,
     oblique_top,
@@ -61,7 +63,7 @@ def _f1(pred: set, truth: set) -> float:
 
 
 @pytest.mark.slow
-def test_three_views_pair_at_least_as_well_as_per_view(scene, tmp_path) -> None:
+def test_three_views_pair_at_least_as_well_as_per_view(scene, tmp_path, capsys) -> None:
     views, backs = scene
     paths = []
     for name, v in zip(("top", "hor1", "hor2"), views, strict=True):
@@ -99,26 +101,31 @@ def test_three_views_pair_at_least_as_well_as_per_view(scene, tmp_path) -> None:
     assert pooled["multi"] >= pooled["per view"]
     assert pooled["multi"] > 0.55
     assert min(f1["multi"].values()) > 0.45
-    # Each handheld view's candidate lenses run side by side: the same output.
+    # Each handheld view's candidate lenses run side by side: the same output. The steady top
+    # camera is said in one line, once its tilt is read: its tilt, with its spread.
     side = tmp_path / "side"
+    capsys.readouterr()
     assert main(["associate-multi", "--top", str(paths[0]), "--hor", str(paths[1]),
                  str(paths[2]), "--out", str(side), "--top-image-size", "1920x1080",
-                 "--image-size", "1920x1080", "--fps", "3.33", "--quiet", "--workers", "2"]) == 0
+                 "--image-size", "1920x1080", "--fps", "3.33", "--workers", "2"]) == 0
     for name in ("top", "hor1", "hor2"):
         assert (side / f"{name}.txt").read_bytes() == (out / f"{name}.txt").read_bytes()
+    said = [line for line in capsys.readouterr().err.splitlines() if "note: top view" in line]
+    assert len(said) == 1 and "note: top view: oblique, tilt " in said[0], said
+    assert " +- " in said[0] and said[0].endswith(REGISTERED)
 
 
 @pytest.mark.slow
 def test_oblique_top_decides_and_refuses(scene) -> None:
     views, _ = scene
     calib, note = oblique_top(views[0], "auto", SIZE, "top.txt", [0, 0])
-    assert calib is not None and calib.kind == "oblique" and note.startswith("top view: oblique")
+    assert calib is not None and calib.kind == "oblique" and note is None  # said by the run
     assert oblique_top(views[0], "nadir", SIZE, "top.txt") == (None, None)
     # Without its size, the upright people's top view takes the smallest common video size
     # holding its boxes, and says so; a forced kind without a size is the command's refusal.
     calib, note = oblique_top(views[0], "auto", None, "top.txt")
     assert calib is not None and calib.kind == "oblique"
-    assert "its size taken as" in note and "--top-image-size" in note
+    assert note.startswith("top view: its size taken as") and "--top-image-size" in note
     assert oblique_top(views[0], "oblique", None, "top.txt") == (None, None)
     far = {1: FrameBoxes(1, [1], [[9000.0, 10.0, 20.0, 50.0]])}
     calib, note = oblique_top(far, "auto", None, "top.txt")
@@ -147,6 +154,7 @@ def test_oblique_top_follows_the_top_views_tracks_in_video_mode(scene) -> None:
     tracks = {1000 * f + n: int(i) for f, r in views[0].items() for n, i in enumerate(r.ids)}
     video, _ = oblique_top(rows, "oblique", SIZE, "top.txt", top_tracks=tracks)
     frame, _ = oblique_top(rows, "oblique", SIZE, "top.txt")
+    video, frame = measure_spread(video), measure_spread(frame)  # its spread left for later
     assert video == top_calibration(views[0], SIZE)
     assert frame == top_calibration(views[0], SIZE, tracks=False) and frame != video
 

@@ -118,6 +118,29 @@ def test_a_long_clip_tries_its_starts_on_a_few_boxes(monkeypatch) -> None:
 
 
 @pytest.mark.slow
+def test_associate_multi_says_a_tilting_top_camera_in_one_line(tilting, monkeypatch) -> None:
+    """associate-multi reads the tilt before it says what the top view is: a tilting camera's
+    one line gives its first and last tilts, its one fit's spread neither said nor measured
+    (it is not its tilt's)."""
+    from xvmatch.inference.views import multi_ground
+    from xvmatch.inference.views.multi_view_people import PeopleOptions
+
+    scene, top, hor, _ = tilting
+    size, hor_size = scene.top_cameras[0].image_size, scene.hor_cameras["hor1"][0].image_size
+    calib, note = multi_ground.oblique_top(top, "oblique", size, "top.txt")
+    assert note is None and np.isnan(calib.tilt_std_deg)  # the spread left for later
+    measured: list = []
+    monkeypatch.setattr(multi_ground, "measure_spread", measured.append)
+    said: list[str] = []
+    shifted = {f: FrameBoxes(f, np.asarray(r.ids) + 1000, r.boxes) for f, r in hor.items()}
+    multi_ground.run_multi_ground([top, shifted], [0], calib, multi_ground.MultiGroundOptions(
+        (hor_size,), 70.0, FPS), PeopleOptions(), None, said.append)
+    tops = [line for line in said if line.startswith("top view")]
+    assert len(tops) == 1 and tops[0].startswith("top view: oblique, tilting from "), said
+    assert "+-" not in tops[0] and tops[0].endswith(multi_ground.REGISTERED) and not measured
+
+
+@pytest.mark.slow
 def test_the_run_maps_each_frame_of_a_tilting_clip_through_its_own_tilt(tilting) -> None:
     scene, top, hor, _ = tilting
     size = scene.top_cameras[0].image_size

@@ -120,12 +120,12 @@ __all__ = [
     "scale_along_tracks",
     "strays_more",
     "tied_with",
-    "tilt_note",
     "tilting_top",
     "top_calibration",
     "top_frame_rate",
     "top_ground_points",
     "top_sizes",
+    "top_summary",
 ]
 
 TOP_VIEWS = ("auto", "nadir", "oblique")
@@ -334,24 +334,21 @@ def tilting_top(frames: np.ndarray, tracks: np.ndarray, boxes: np.ndarray,
     return track if track is not None and track.tilting else None
 
 
-def tilt_note(tilt: TiltTrack) -> str:
-    """The line saying the top camera was read as tilting."""
-    return (f"top view: tilting from {tilt.tilts_deg[0]:.0f} to {tilt.tilts_deg[-1]:.0f} "
-            f"degrees over the clip (a tilt per {WINDOW_S:g} s, from its people); each frame "
-            "mapped through its own")
-
-
-def _summary(calib: PeopleCalibration, tilt: TiltTrack | None = None) -> str:
+def top_summary(calib: PeopleCalibration, tilt: TiltTrack | None = None,
+                registered: str = "the horizontal camera registered on its ground map frame by "
+                                  "frame") -> str:
+    """The one line saying what the top view was read as, once its tilt is known: nadir; a
+    steady oblique camera's tilt with its spread (:func:`oblique_note`); a tilting one's first
+    and last tilts (its one fit's spread is not its tilt's, and is not said); then how the
+    other views were ``registered``."""
     if calib.kind == "nadir":
         return "top view: looking straight down (its boxes are as wide as tall)"
     if tilt is not None:
         return (f"top view: oblique, tilting from {tilt.tilts_deg[0]:.0f} to "
                 f"{tilt.tilts_deg[-1]:.0f} degrees over the clip, about "
                 f"{tilt.camera_height:.0f} m up (from its people, a tilt per "
-                f"{WINDOW_S:g} s); the horizontal camera registered on its ground map frame by "
-                "frame")
-    return (f"{oblique_note(calib)}; the horizontal camera registered on its ground map frame "
-            "by frame")
+                f"{WINDOW_S:g} s); {registered}")
+    return f"{oblique_note(calib)}; {registered}"
 
 
 def holder_note(camera_id: int, holders: Sequence[np.ndarray | None], video: bool,
@@ -486,7 +483,7 @@ def run_ground_association(top: Mapping, hor: Mapping, options: GroundAssociatio
     lens, (scale, poses, pairs) = run(None)
     if tilt is None:  # its tilt's spread told (a tilting camera's one tilt is not)
         calib = measure_spread(calib)
-    summary, held = _summary(calib, tilt), None
+    summary, held = top_summary(calib, tilt), None
     if options.camera_id is not None:  # the holder is not in their own camera's view
         pairs = _without(pairs, options.camera_id)
     if holders is not None and options.consensus and any(h is not None for h in holders):

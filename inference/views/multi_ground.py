@@ -58,6 +58,7 @@ from xvmatch.geometry.people_calibration import (
     PRIOR_HFOV_DEG,
     CalibrationError,
     PeopleCalibration,
+    measure_spread,
 )
 from xvmatch.geometry.tilting_camera import TiltTrack
 from xvmatch.inference.linking.tracklets import box_track_ids
@@ -69,22 +70,21 @@ from xvmatch.inference.matching.ground_association import (
     TOP_VIEWS,
     choose_along_tracks,
     miss_spread,
-    oblique_note,
     run_along_tracks,
-    tilt_note,
     tilting_top,
     top_calibration,
     top_frame_rate,
     top_ground_points,
     top_sights,
     top_sizes,
+    top_summary,
 )
 from xvmatch.inference.views.multi_ego_run import MultiEgoRun
 from xvmatch.inference.views.multi_view_assignment import view_pairs
 from xvmatch.inference.views.multi_view_costs import FrameProblem, LogisticCalibration
 from xvmatch.inference.views.multi_view_people import PeopleOptions, assign_people
 
-__all__ = ["HOR_HOR", "TOP_HOR", "MultiGroundOptions", "TopMap", "choose_lenses",
+__all__ = ["HOR_HOR", "REGISTERED", "TOP_HOR", "MultiGroundOptions", "TopMap", "choose_lenses",
            "ground_options", "ground_problems", "holders_note", "lenses_note", "oblique_top",
            "run_multi_ground", "top_map"]
 
@@ -95,6 +95,11 @@ saves the per-view Hungarian of :func:`~xvmatch.cues.ground_registration.associa
 (which pays ``2 radius`` for a row left unmatched). On 3 rendered 6 s scenes (two handheld views,
 top pitch 25-60 degrees) the top-handheld pair F1 was 0.314 with it against 0.222 with no
 evidence at the radius (slope 2)."""
+
+REGISTERED = ("each handheld view registered on its ground map frame by frame and the views "
+              "joined there (boxes only: --model and its images not used)")
+"""How :func:`run_multi_ground`'s line on the top view ends (:func:`~xvmatch.inference.
+matching.ground_association.top_summary`)."""
 
 HOR_HOR: LogisticCalibration | None = None
 """Handheld-handheld pairs from their ground distance, or None: no evidence either way
@@ -197,7 +202,9 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
                 ) -> tuple[PeopleCalibration | None, str | None]:
     """``associate-multi --top-view``: the top camera calibrated from its people when it is
     oblique (forced, or found so by ``auto``), else None (the nadir path), and the line to say
-    about it (None: nothing to say).
+    now (None: nothing to say): why the nadir path, or the top view's size where guessed. An
+    oblique camera's tilt is said by :func:`run_multi_ground` once it knows whether the camera
+    tilts (its spread, measured only for a steady one, is left for later here).
 
     Args:
         top: the top view's ``{frame: record}``.
@@ -239,12 +246,13 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
                           "as wide): an oblique camera, read here as a nadir one; no common video "
                           "size holds its boxes: give --top-image-size WxH to calibrate it from "
                           "its people")
-        guessed = (f"; its size taken as {top_size[0]}x{top_size[1]}, "
+        guessed = (f"top view: its size taken as {top_size[0]}x{top_size[1]}, "
                    f"{size_guess_how(top, top_size, past)} (give --top-image-size WxH if not)")
     check_boxes_in_image(top, tuple(top_size), name, "--top-image-size", ids=False, past=past)
     top = _tracked(top, top_tracks)
     try:
-        calib = top_calibration(top, tuple(top_size), seed, name, top_tracks is not None)
+        calib = top_calibration(top, tuple(top_size), seed, name, top_tracks is not None,
+                                spread="later")
     except CalibrationError as error:
         if not guessed:
             raise
@@ -256,9 +264,7 @@ def oblique_top(top: Mapping, top_view: str, top_size: tuple[int, int] | None, n
     if "auto" in offsets:
         raise ValueError("--offset auto estimates the offsets with the nadir search; with an "
                          "oblique top view give them as frame numbers (or 0)")
-    return calib, (f"{oblique_note(calib)}; each handheld view registered on its ground map "
-                   "frame by frame and the views joined there (boxes only: --model and its "
-                   f"images not used){guessed}")
+    return calib, guessed or None
 
 
 def ground_options(views: Sequence[Mapping], resolved: Sequence[tuple[tuple[int, int], str]],
@@ -599,7 +605,9 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
     (:func:`~xvmatch.inference.views.multi_ego_video.video_people`, :data:`VIDEO_KEEP_FREE`).
     With ``options.hor_hfov_deg`` ``auto`` the lenses are chosen first (:func:`choose_lenses`)
     and told to ``note`` in one line (:func:`lenses_note`); with ``options.fps`` ``auto``, the
-    frame rate likewise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`)."""
+    frame rate likewise (:func:`~xvmatch.inference.matching.frame_rate.frame_rate_note`); what
+    the top view was read as, once its tilt is read, likewise (:func:`~xvmatch.inference.
+    matching.ground_association.top_summary`)."""
     aligned, shifts = align_frames(views, offsets) if any(offsets) else (list(views), [0])
     if options.wearers is not None and shifts[0]:  # the holders' rows, in the views' timing
         options = replace(options, wearers=tuple(
@@ -614,8 +622,9 @@ def run_multi_ground(views: Sequence[Mapping], offsets: Sequence[int],
         if note is not None:
             note(frame_rate_note(rate))
     top = top_map(aligned, frames, calibration, top_tracks, options.fps)  # lenses, problems
-    if top.tilt is not None and note is not None:
-        note(tilt_note(top.tilt))
+    if note is not None:  # its tilt's spread measured for a steady camera only
+        note(top_summary(calibration if top.tilt else measure_spread(calibration), top.tilt,
+                         REGISTERED))
     options, lenses = _with_lenses(aligned, frames, calibration, options, top, tracks)
     if lenses and note is not None:
         note(lenses_note(lenses))
