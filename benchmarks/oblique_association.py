@@ -23,6 +23,10 @@ methods, scored by the F1 of the cross-view pairs over all frames:
   above where the top view's calibration is oblique, the search made consistent over the clip
   (:func:`~xvmatch.inference.linking.pair_consensus.consistent_pairs`) where it looks straight
   down or cannot be calibrated (the rows above run the ground path on those scenes too).
+* ``associate, its warning followed``: that row, but where it took the search and warned that
+  the search's camera location wandered from person to person
+  (:mod:`~xvmatch.inference.matching.search_camera`), the ground path as ``--top-view
+  oblique`` runs it (the lens chosen with ``--choose-lens``, else the consensus row's).
 
 CVIDF1 pools the frames of all scenes (:mod:`xvmatch.metrics.cross_view_metrics`); a second
 table gives it per scenario: per top pitch band (:data:`PITCH_BANDS`) and per overlap band
@@ -160,6 +164,7 @@ from xvmatch.inference.matching.ground_association import (
     top_calibration,
     top_ground_points,
 )
+from xvmatch.inference.matching.search_camera import wandering_camera_note
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 
@@ -420,6 +425,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.choose_lens:
         names += ("registered, from people, true lens, tracklet consensus",
                   "registered, from people, lens chosen, tracklet consensus")
+    names += ("associate, its warning followed",)
     choice_s = voted_s = 0.0
     totals = {name: np.zeros(3) for name in names}
     counts: dict[str, list] = {name: [] for name in names}
@@ -465,7 +471,8 @@ def main(argv: list[str] | None = None) -> int:
             frames, fps = list(range(1, len(sampled) + 1)), config.fps / args.step
         people_fps = fps if args.fps == "true" else (
             AUTO_FPS if args.fps == AUTO_FPS else float(args.fps))
-        search = associate_sequence(top, hor, float(hor_size[0]), frames=frames)
+        cameras: dict[int, int] = {}  # the search's O per frame (search_camera's warning)
+        search = associate_sequence(top, hor, float(hor_size[0]), frames=frames, cameras=cameras)
         follow = associate_sequence(top, hor, float(hor_size[0]), frames=frames, search="follow")
         top_size = scene.top_cameras[0].image_size
         known = GroundAssociationOptions(top_size, hor_size, true_hfov, fps, consensus=False,
@@ -526,6 +533,11 @@ def main(argv: list[str] | None = None) -> int:
         preds = (search, follow, true, people, voted, routed)
         if args.choose_lens:
             preds += (true_lens, chosen)
+        # associate warns where the search's O wandered; --top-view oblique then runs the
+        # ground path (the lens chosen, as associate; else the 70-degree consensus run)
+        warned = (calib is not None and calib.kind != "oblique"
+                  and wandering_camera_note(cameras) is not None)
+        preds += ((chosen if args.choose_lens else voted) if warned else routed,)
         if args.renumber:
             preds = tuple({sampled[f - 1]: v for f, v in pred.items()} for pred in preds)
         frames = sampled
@@ -545,7 +557,7 @@ def main(argv: list[str] | None = None) -> int:
               f"pair F1 search {line[0]} (video {line[1]}), registered (true) {line[2]}, "
               f"(from people) {line[3]}, (+ consensus) {line[4]}, (as associate routes: "
               f"{'ground' if calib is not None and calib.kind == 'oblique' else 'search'}) "
-              f"{line[5]}"
+              f"{line[5]}{' (warned: --top-view oblique ' + line[-1] + ')' if warned else ''}"
               + (f"; lens {true_hfov:.0f}, chosen {lens:.0f} ({lens_scores}): (true lens) "
                  f"{line[6]}, (lens chosen) {line[7]}" if args.choose_lens else "")
               + (f"; frame rate {rate.fps:g}{' (walkers)' if rate.estimated else ''}, true "

@@ -645,6 +645,7 @@ def associate_sequence(
     frames: Iterable[int] | None = None,
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
     follow: FollowPolicy = FollowPolicy(),
+    cameras: dict[int, int] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame of a sequence pair; returns ``{frame: [(top_id, hor_id), ...]}``.
 
@@ -665,6 +666,8 @@ def associate_sequence(
         frames: frames to process (default: the union of both views' frames, ascending).
         progress: optional wrapper around the frame iterator (e.g. a progress bar).
         follow: how the ``follow`` mode finds O when ``camera_id`` is not given.
+        cameras: where given, filled with ``{frame: top-view id of O}`` for each frame whose
+            search found one (:mod:`~xvmatch.inference.matching.search_camera`).
     """
     if search not in SEARCH_MODES:
         raise ValueError(f"search must be one of {', '.join(SEARCH_MODES)}; got {search!r}")
@@ -714,5 +717,7 @@ def associate_sequence(
             last_theta = result.theta
             if not voting:
                 followed = int(t_rec.ids[result.camera])
+            if cameras is not None:
+                cameras[frame] = int(t_rec.ids[result.camera])
         out[frame] = [(int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs]
     return out

@@ -461,15 +461,27 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     if learned is None and options.offset != "auto":  # the learned run says it as it opens
         hooks.size_assumed()
     run = refined = None
+    # Video mode, the holder not named, no cameras: whether the search's camera location O
+    # stayed with one top-view person (search_camera).
+    searched: dict[int, int] | None = ({} if options.video and options.camera_id is None and (
+        learned is None or learned.cameras is None) else None)
     if learned is not None:
         pairs, run, refined = _learned_pairs(top, hor, frames, options, offset, hooks)
+        if searched is not None:
+            searched = run.searched
     else:
         from xvmatch.cues.spatial_search import associate_sequence
 
         pairs = associate_sequence(top, hor, hor_width=options.hor_size[0][0],
                                    params=options.params, search=options.search or "exhaustive",
                                    camera_id=options.camera_id, frames=frames,
-                                   progress=hooks.frames(len(frames)) if hooks.frames else None)
+                                   progress=hooks.frames(len(frames)) if hooks.frames else None,
+                                   cameras=searched)
+    if searched is not None:
+        from xvmatch.inference.matching.search_camera import wandering_camera_note
+
+        if (said := wandering_camera_note(searched)) is not None:
+            hooks.note(f"xvmatch: warning: {said}", True)
     if options.video:
         from xvmatch.inference.linking.pair_consensus import consistent_pairs
 

@@ -491,6 +491,8 @@ class _SequenceScorer:
         judge: whether the appearance cue is checked before any frame is assigned.
         costs_out: receives ``{frame: cost matrix}`` when given.
         rechecked: receives the frames scored again with FP32 when given.
+        searched: receives ``{frame: top-view id}`` of each frame's best camera location O of
+            the geometry features' search (their first hypothesis) when given.
         out: ``{frame: [(top_id, hor_id)]}`` of the frames assigned so far.
         pending: ``(frame, features, cues)`` of the frames waiting to be scored.
         held: ``{frame: (cost, box-only cost, appearance cue)}`` of the scored frames waiting
@@ -510,6 +512,7 @@ class _SequenceScorer:
     judge: bool
     costs_out: dict[int, np.ndarray] | None
     rechecked: list[int] | None
+    searched: dict[int, int] | None = None
     out: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
     pending: list[tuple[int, list[list[FrameFeatures]], dict]] = field(default_factory=list)
     held: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
@@ -637,6 +640,9 @@ class _SequenceScorer:
                 self.out[frame] = []
                 continue
             self.pending.append((frame, next(stream), self.raw_cues(frame)))
+            if self.searched is not None and (first := self.pending[-1][1][0][0]).hyp_camera.size:
+                row = first.top_order[first.hyp_camera[0]]
+                self.searched[frame] = int(self.top[frame].ids[row])
             pending_cells += sum(math.prod(f.shape) for g in self.pending[-1][1] for f in g)
             if len(self.pending) >= self.batch_size or pending_cells >= 4 * MATCHER_BATCH_CELLS:
                 self.flush()
@@ -703,6 +709,7 @@ def associate_sequence_learned(
     rechecked: list[int] | None = None,
     appearance_check: bool = False,
     checked: list[AppearanceCheck] | None = None,
+    searched: dict[int, int] | None = None,
 ) -> dict[int, list[tuple[int, int]]]:
     """Associate every frame on its own with the learned matcher; ``{frame: [(top_id, hor_id)]}``.
 
@@ -741,6 +748,9 @@ def associate_sequence_learned(
             on its own (:mod:`xvmatch.inference.matching.frame_check`).
         checked: if given, receives the :class:`~xvmatch.inference.matching.appearance_check.
             AppearanceCheck` of a run with ``appearance_check`` and images.
+        searched: if given, filled with ``{frame: top-view id of O}``: each frame's best camera
+            location of the (first) geometry features' search
+            (:mod:`~xvmatch.inference.matching.search_camera`).
 
     Raises:
         ValueError: bad options, or a frame over the crowd limits (:func:`check_crowd_size`),
@@ -750,6 +760,7 @@ def associate_sequence_learned(
     check_crowd_size(top, hor, frames)
     run = _SequenceScorer.for_models(top, hor, models, gamma, batch_size, top_images,
                                      hor_images, cameras, appearance_check, costs_out, rechecked)
+    run.searched = searched
     height = float(hor_height) if hor_height is not None else float(hor_width) * 9.0 / 16.0
     size = (float(hor_width), height)
     order = sorted(set(top) | set(hor)) if frames is None else sorted({int(f) for f in frames})

@@ -148,6 +148,8 @@ class LearnedRun:
             ``refine_top_camera``, else None.
         camera_checked: the camera check of a run with cameras and ``camera_check``, else
             None (when it failed, the run was matched without the cameras).
+        searched: ``{frame: top-view id}`` of each frame's best camera location O of the
+            geometry features' search (:mod:`~xvmatch.inference.matching.search_camera`).
     """
 
     pairs: dict[int, list[tuple[int, int]]]
@@ -160,6 +162,7 @@ class LearnedRun:
     checked: AppearanceCheck | None = None
     refinement: CameraRefinement | None = None
     camera_checked: CameraCheck | None = None
+    searched: dict[int, int] = field(default_factory=dict)
 
 
 class RetimedFrames:
@@ -326,6 +329,7 @@ class LearnedInputs:
         costs: dict | None = {} if options.keep_costs else None
         rechecked: list[int] = []
         checked: list[AppearanceCheck] = []
+        searched: dict[int, int] = {}
         pairs = associate_sequence_learned(
             self.top,
             self.hor,
@@ -345,10 +349,11 @@ class LearnedInputs:
             rechecked=rechecked,
             appearance_check=options.appearance_check,
             checked=checked,
+            searched=searched,
         )
         return LearnedRun(pairs, costs, self.gamma, (width, height), options.hor_size_source,
                           options.models, rechecked, checked[0] if checked else None,
-                          self.refinement, self.camera_checked)
+                          self.refinement, self.camera_checked, searched)
 
     def close(self) -> None:
         """Close the image sources."""

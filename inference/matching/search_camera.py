@@ -1,0 +1,49 @@
+"""Whether the nadir search kept its handheld camera at one top-view person over the clip.
+
+The spatial-distribution search (CVMHAT, Sec. 3.2) puts the handheld camera at a top-view
+person O in every frame: the camera's wearer, whom a CVMHAT drone sees. Followed by the top
+view's track ids (video mode), O stays with that person where they are in the top view; where
+the holder is not (a phone on a sideline, a nadir drone over someone else's camera), each frame
+takes whoever fits best and O wanders from person to person, and so do the pairs. On the 10
+CVMHAT development pairs the most frequent O holds 0.80-0.99 of a clip's frames (all frames;
+one pair, whose search pairs 63.5 CVIDF1 and the ground maps 88.4, 0.44); on 24 rendered
+drones 80-90 degrees down (holders in the top view or not) the 8 clips the search paired at
+0.75 pair F1 or better held 0.75 or more, and 13 of the 15 it paired under 0.6 held under 0.7
+(docs/notes/oblique_top_camera.md, sixty-sixth session). A clip under :data:`MIN_CAMERA_HELD`
+is said: ``--top-view oblique`` pairs on the ground maps wherever the camera stands.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping
+
+__all__ = ["MIN_CAMERA_HELD", "camera_held", "wandering_camera_note"]
+
+MIN_CAMERA_HELD = 0.7
+"""The least share of the searched frames whose O is the clip's most frequent one for the search
+to read as having followed one camera holder (between the renders' failures, mostly under 0.55,
+and CVMHAT's and the renders' good clips, 0.75 and over; CVMHAT's lowest but one, 0.80)."""
+
+
+def camera_held(cameras: Mapping[int, int]) -> float | None:
+    """The share of frames whose camera location O (``{frame: top-view track id}``, as
+    :func:`~xvmatch.cues.spatial_search.associate_sequence` reports it) is the clip's most
+    frequent O; None where no frame found one."""
+    if not cameras:
+        return None
+    return Counter(cameras.values()).most_common(1)[0][1] / len(cameras)
+
+
+def wandering_camera_note(cameras: Mapping[int, int]) -> str | None:
+    """The line saying that the search's camera did not stay with one top-view person (its
+    holder seems not to be in the top view), and what to give instead; None where it held
+    (:data:`MIN_CAMERA_HELD`)."""
+    held = camera_held(cameras)
+    if held is None or held >= MIN_CAMERA_HELD:
+        return None
+    return (f"the search put the handheld camera at one top-view person in only "
+            f"{100 * held:.0f} % of the frames: its holder seems not to be in the top view, which "
+            "the search assumes, and its pairs may be wrong; --top-view oblique "
+            "--top-image-size WxH pairs through the ground maps wherever the camera stands "
+            "(slower), --camera-id ID names the holder")
