@@ -37,13 +37,13 @@ def camera_held(cameras: Mapping[int, int]) -> float | None:
 
 def wandering_camera_note(cameras: Mapping[int, int]) -> str | None:
     """The line saying that the search's camera did not stay with one top-view person (its
-    holder seems not to be in the top view), and what to give instead; None where it held
-    (:data:`MIN_CAMERA_HELD`)."""
+    holder not in the top view, or not found there), and what to give instead; None where it
+    held (:data:`MIN_CAMERA_HELD`)."""
     held = camera_held(cameras)
     if held is None or held >= MIN_CAMERA_HELD:
         return None
     return (f"the search put the handheld camera at one top-view person in only "
-            f"{100 * held:.0f} % of the frames: its holder seems not to be in the top view, which "
-            "the search assumes, and its pairs may be wrong; --top-view oblique "
+            f"{100 * held:.0f} % of the frames: it did not find the holder among the top view's "
+            "people, as it assumes, and its pairs may be wrong; --top-view oblique "
             "--top-image-size WxH pairs through the ground maps wherever the camera stands "
             "(slower), --camera-id ID names the holder")
