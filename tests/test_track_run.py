@@ -5,12 +5,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from xvmatch.cli import main
+from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
 from xvmatch.datasets.synthetic_scenes import SynthConfig
 from xvmatch.datasets.tracking_video import render_tracking_video, write_tracking_video
 from xvmatch.formats.detection_rows import read_detection_rows, write_track_rows
+from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.matching.learned_association import load_matcher_bundle
 from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
 from xvmatch.inference.tracks.track_run import (
@@ -19,6 +22,7 @@ from xvmatch.inference.tracks.track_run import (
     open_track_images,
     run_tracking,
     track_weights,
+    upright_top_warning,
 )
 from xvmatch.inference.tracks.tracking import TrackConfig
 
@@ -99,3 +103,24 @@ def test_the_cameras_lines_are_told_as_they_come(clip) -> None:
     assert run.refinement is not None and run.cameras is not None
     assert told[0] == (run.refinement.message, run.refinement.turned)
     assert run.result.top_rows and run.result.hor_rows
+
+
+def test_an_upright_top_view_is_warned_of_without_cameras(clip) -> None:
+    """track's cross-view search takes the top camera to look straight down: a top view whose
+    people stand upright (an oblique drone) is warned of, always, with what to give instead;
+    the rendered nadir drone's is not (issue 67: nothing silently assumed)."""
+    scene = make_oblique_scene(ObliqueSceneConfig(top_pitch=(25.0, 45.0)), 12,
+                               np.random.default_rng(1))
+    top, hor = ({f: FrameBoxes(f, 100 * f + np.arange(len(r.ids)), r.boxes)
+                 for f, r in v.items()} for v in (scene.top, scene.hor["hor1"]))
+    said = upright_top_warning(top)
+    assert said is not None and said.startswith("xvmatch: warning: the top view's people stand "
+                                                 "upright (boxes ")
+    assert "--cameras" in said and "associate" in said and "\n" not in said
+    assert upright_top_warning(read_detection_rows(clip["top"]).frames) is None
+    assert upright_top_warning({}) is None
+    told: list[tuple[str, bool]] = []
+    run_tracking(top, hor, TrackRunOptions(), (scene.hor_cameras["hor1"][0].image_size,
+                                               "--image-size"),
+                 note=lambda line, always: told.append((line, always)))
+    assert (said, True) in told
