@@ -68,9 +68,9 @@ __all__ = [
     "cross_view_weights",
     "open_track_images",
     "run_tracking",
-    "upright_top_warning",
     "track_pictures",
     "track_weights",
+    "upright_top_warning",
 ]
 
 CROSS_VIEW_WEIGHTS = ("learned", "handcrafted")
