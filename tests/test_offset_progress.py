@@ -74,6 +74,7 @@ def test_offset_command_is_silent_but_for_its_line_off_a_terminal(pair, tmp_path
     quiet = capsys.readouterr()
     assert first.out == quiet.out and first.out.startswith("offset ")
     assert "offset search" not in first.err  # stderr is not a terminal here: no bar
+    assert "stand upright" not in first.err  # a nadir drone's view: nothing to warn of
 
 
 def test_a_top_frames_hypotheses_built_once_give_associate_frames_cost(pair) -> None:

@@ -1,15 +1,17 @@
-"""The nadir search's camera location followed over a clip (video mode): a clip whose handheld
-camera the search could not keep at one top-view person (its holder not in the top view) is
-said, with what to give instead; one whose holder it followed is not."""
+"""The nadir search's assumptions checked: its camera location followed over a clip (video
+mode), a clip whose handheld camera the search could not keep at one top-view person (its
+holder not in the top view) said, with what to give instead, one whose holder it followed not;
+and an upright top view said by the commands that take the search whatever the camera."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from xvmatch.cli import main
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
-from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.inference.matching.association_run import (
     AssociationHooks,
     AssociationOptions,
@@ -79,3 +81,19 @@ def test_a_search_whose_camera_wanders_is_said(k: int, holder_seen: bool, warned
         notes.clear()
         run_association(top, hor, quiet, hooks)
         assert not any("warning: the search put" in line for line, _ in notes)
+
+
+def test_the_offset_search_says_an_upright_top_view(tmp_path, capsys) -> None:
+    """``offset`` estimates with the nadir search whatever the top camera: a rendered drone 25-45
+    degrees down (people upright) is warned of, with --quiet too, naming --offset N."""
+    config = ObliqueSceneConfig(top_pitch=(25.0, 45.0), hor_hfov=(60.0, 80.0))
+    scene = make_oblique_scene(config, 40, np.random.default_rng(2))
+    write_mot_boxes(tmp_path / "top.txt", scene.top)
+    write_mot_boxes(tmp_path / "hor.txt", scene.hor["hor1"])
+    size = "x".join(map(str, scene.hor_cameras["hor1"][0].image_size))
+    assert main(["offset", "--top", str(tmp_path / "top.txt"), "--hor", str(tmp_path / "hor.txt"),
+                 "--max-offset", "5", "--clips", "2", "--image-size", size, "--quiet"]) == 0
+    said = capsys.readouterr().err.splitlines()[0]  # before the estimate's own lines
+    assert said.startswith("xvmatch: warning: the top view's people stand upright (boxes ")
+    assert "the offset search reads as a drone looking straight down" in said
+    assert said.endswith("give the offset by hand (--offset N)")

@@ -1,4 +1,5 @@
-"""Whether the nadir search kept its handheld camera at one top-view person over the clip.
+"""Whether the nadir search's assumptions hold: its handheld camera kept at one top-view person
+over the clip, and a top view whose people are seen from above.
 
 The spatial-distribution search (CVMHAT, Sec. 3.2) puts the handheld camera at a top-view
 person O in every frame: the camera's wearer, whom a CVMHAT drone sees. Followed by the top
@@ -11,6 +12,10 @@ drones 80-90 degrees down (holders in the top view or not) the 8 clips the searc
 0.75 pair F1 or better held 0.75 or more, and 13 of the 15 it paired under 0.6 held under 0.7
 (docs/notes/oblique_top_camera.md, sixty-sixth session). A clip under :data:`MIN_CAMERA_HELD`
 is said: ``--top-view oblique`` pairs on the ground maps wherever the camera stands.
+
+The commands that take the search whatever the top camera (``track``'s cross-view evidence,
+``offset``'s estimate) say where the top view's people stand upright (:func:`upright_top_warning`):
+an oblique camera, which the search reads as a drone looking straight down.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping
 
-__all__ = ["MIN_CAMERA_HELD", "camera_held", "wandering_camera_note"]
+__all__ = ["MIN_CAMERA_HELD", "camera_held", "upright_top_warning", "wandering_camera_note"]
 
 MIN_CAMERA_HELD = 0.7
 """The least share of the searched frames whose O is the clip's most frequent one for the search
@@ -47,3 +52,21 @@ def wandering_camera_note(cameras: Mapping[int, int]) -> str | None:
             "people, as it assumes, and its pairs may be wrong; --top-view oblique "
             "--top-image-size WxH pairs through the ground maps wherever the camera stands "
             "(slower), --camera-id ID names the holder")
+
+
+def upright_top_warning(top: Mapping, search: str, what: str, instead: str) -> str | None:
+    """The line warning that the top view's people (``{frame: FrameBoxes}``) stand upright
+    (median box height over width at least
+    :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`: an oblique camera), which the
+    ``search`` reads as a drone looking straight down, so ``what`` it gives may be wrong, and
+    what to give ``instead``; None where they do not (a nadir view, no boxes). On issue 67's
+    real low drones the search paired 9.7 CVIDF1."""
+    from xvmatch.formats.box_image_size import median_aspect
+    from xvmatch.geometry.people_calibration import STEEP_ASPECT  # scipy: not at start-up
+
+    aspect = median_aspect(top)
+    if aspect is None or aspect < STEEP_ASPECT:
+        return None
+    return (f"xvmatch: warning: the top view's people stand upright (boxes {aspect:.1f} times as "
+            f"tall as wide): an oblique camera, which {search} reads as a drone looking straight "
+            f"down, so {what} may be wrong; {instead}")

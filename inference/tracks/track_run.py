@@ -45,6 +45,7 @@ from xvmatch.inference.matching.learned_pipeline import (
     open_view_images,
     retimed,
 )
+from xvmatch.inference.matching.search_camera import upright_top_warning
 from xvmatch.inference.tracks.track_costs import (
     FITTED_CAMERAS_W1,
     LEARNED_DUMMY_WEIGHT,
@@ -70,7 +71,6 @@ __all__ = [
     "run_tracking",
     "track_pictures",
     "track_weights",
-    "upright_top_warning",
 ]
 
 CROSS_VIEW_WEIGHTS = ("learned", "handcrafted")
@@ -359,24 +359,6 @@ def _fitted_config(options: TrackRunOptions, refinement: CameraRefinement | None
     return replace(config, weights=replace(config.weights, w1=FITTED_CAMERAS_W1))
 
 
-def upright_top_warning(top: Mapping[int, FrameBoxes]) -> str | None:
-    """The line warning that the top view's people stand upright (median box height over
-    width at least :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`: an oblique
-    camera), which the tracker's cross-view search reads as a drone looking straight down (on
-    issue 67's real low drones that search paired 9.7 CVIDF1); None otherwise."""
-    from xvmatch.formats.box_image_size import median_aspect
-    from xvmatch.geometry.people_calibration import STEEP_ASPECT
-
-    aspect = median_aspect(top)
-    if aspect is None or aspect < STEEP_ASPECT:
-        return None
-    return (f"xvmatch: warning: the top view's people stand upright (boxes {aspect:.1f} times as "
-            "tall as wide): an oblique camera, which track's cross-view search reads as a drone "
-            "looking straight down, so its ids across the views may be wrong; give --cameras "
-            "(the views' calibrated cameras, with --model), or pair the views with associate, "
-            "which calibrates an oblique top view from its people")
-
-
 def _said_nowhere(line: str, always: bool) -> None:
     """A :data:`Note` that says nothing."""
 
@@ -424,7 +406,10 @@ def run_tracking(
     for view, frames in (("top", top), ("horizontal", hor)):
         if said := jump_warning(view, frames):
             note(said, True)
-    if options.cameras is None and (said := upright_top_warning(top)) is not None:
+    if options.cameras is None and (said := upright_top_warning(
+            top, "track's cross-view search", "its ids across the views",
+            "give --cameras (the views' calibrated cameras, with --model), or pair the views "
+            "with associate, which calibrates an oblique top view from its people")) is not None:
         note(said, True)
     cameras, refinement = _open_cameras(top, hor, options, hor_size, offset, images, note)
     refined = cameras, refinement  # to write: also when the check leaves them out

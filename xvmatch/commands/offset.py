@@ -173,6 +173,11 @@ def _cmd_offset(args: argparse.Namespace) -> int:
     resolved = resolve_size(hor, args.hor, given)
     hor_width = resolved[0][0]
     note_if_assumed(resolved, hor, args.hor)
+    from xvmatch.inference.matching.search_camera import upright_top_warning
+
+    if (said := upright_top_warning(top, "the offset search", "its estimate",
+                                    "give the offset by hand (--offset N)")) is not None:
+        print(said, file=sys.stderr)
     with progress_bar(0, "offset search", "clip", not args.quiet) as bar:
         est = estimate_offset(top, hor, hor_width=hor_width, params=params, step=args.step,
                               clip_start=args.clip_start, clip_length=args.clip_length,
