@@ -11,6 +11,7 @@ import pytest
 from xvmatch.cli import main
 from xvmatch.cues.spatial_search import associate_sequence
 from xvmatch.datasets.oblique_scenes import ObliqueSceneConfig, make_oblique_scene
+from xvmatch.datasets.synthetic_io import SyntheticDataset, write_scene_inputs
 from xvmatch.formats.mot_boxes import FrameBoxes, write_mot_boxes
 from xvmatch.inference.matching.association_run import (
     AssociationHooks,
@@ -97,3 +98,24 @@ def test_the_offset_search_says_an_upright_top_view(tmp_path, capsys) -> None:
     assert said.startswith("xvmatch: warning: the top view's people stand upright (boxes ")
     assert "the offset search reads as a drone looking straight down" in said
     assert said.endswith("give the offset by hand (--offset N)")
+
+
+def test_the_learned_matcher_with_images_says_an_upright_top_view(tmp_path, tiny_synth,
+                                                                   capsys) -> None:
+    """With the top images (and no --top-image-size) an oblique top view keeps the learned
+    matcher, whose geometry cue reads it as a nadir drone: a note says so and what calibrates
+    it instead (a rendered building camera); --quiet leaves it out, a nadir drone has none."""
+    def said(scenario: str, *extra: str) -> str:
+        scene = write_scene_inputs(SyntheticDataset(tiny_synth[scenario]).scene("s00001"),
+                                   tmp_path / scenario)
+        capsys.readouterr()
+        assert main(["associate", "--top", str(scene.top), "--hor", str(scene.hor), "--out",
+                     str(tmp_path / f"{scenario}.csv"), "--model", "default", "--top-images",
+                     scene.top_images, "--hor-images", scene.hor_images, *extra]) == 0
+        return capsys.readouterr().err
+
+    err = said("overview")
+    assert "xvmatch: note: the top view's people stand upright (boxes " in err
+    assert "--top-image-size WxH (the top images' size) calibrates the top camera" in err
+    assert "stand upright" not in said("overview", "--quiet")
+    assert "stand upright" not in said("drone")

@@ -269,7 +269,17 @@ def _top_size(top: Mapping, options: AssociationOptions, note: Note = _no_note,
     if options.top_view == "nadir" or options.cameras is not None:
         return None
     images = options.learned is not None and options.learned.top_images is not None
-    return options.top_image_size or (None if images else guessed_top_size(top, note, past))
+    if images and not options.top_image_size:  # the learned matcher's path, said if upright
+        from xvmatch.inference.matching.search_camera import upright_top_warning
+
+        if (said := upright_top_warning(
+                top, "the learned matcher's geometry cue", "that cue",
+                "its images' appearance weighs too; --top-image-size WxH (the top images' size) "
+                "calibrates the top camera from its people and pairs on its ground map instead "
+                "(boxes only)", level="note")) is not None:
+            note(said, False)
+        return None
+    return options.top_image_size or guessed_top_size(top, note, past)
 
 
 def oblique_top(top: Mapping, options: AssociationOptions, hor: Mapping) -> object | None:

@@ -54,9 +54,10 @@ def wandering_camera_note(cameras: Mapping[int, int]) -> str | None:
             "(slower), --camera-id ID names the holder")
 
 
-def upright_top_warning(top: Mapping, search: str, what: str, instead: str) -> str | None:
-    """The line warning that the top view's people (``{frame: FrameBoxes}``) stand upright
-    (median box height over width at least
+def upright_top_warning(top: Mapping, search: str, what: str, instead: str,
+                        level: str = "warning") -> str | None:
+    """The line (a ``level``: ``warning`` or ``note``) saying that the top view's people
+    (``{frame: FrameBoxes}``) stand upright (median box height over width at least
     :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`: an oblique camera), which the
     ``search`` reads as a drone looking straight down, so ``what`` it gives may be wrong, and
     what to give ``instead``; None where they do not (a nadir view, no boxes). On issue 67's
@@ -67,6 +68,6 @@ def upright_top_warning(top: Mapping, search: str, what: str, instead: str) -> s
     aspect = median_aspect(top)
     if aspect is None or aspect < STEEP_ASPECT:
         return None
-    return (f"xvmatch: warning: the top view's people stand upright (boxes {aspect:.1f} times as "
+    return (f"xvmatch: {level}: the top view's people stand upright (boxes {aspect:.1f} times as "
             f"tall as wide): an oblique camera, which {search} reads as a drone looking straight "
             f"down, so {what} may be wrong; {instead}")
