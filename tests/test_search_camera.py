@@ -119,3 +119,23 @@ def test_the_learned_matcher_with_images_says_an_upright_top_view(tmp_path, tiny
     assert "--top-image-size WxH (the top images' size) calibrates the top camera" in err
     assert "stand upright" not in said("overview", "--quiet")
     assert "stand upright" not in said("drone")
+
+
+@pytest.mark.parametrize(("k", "model"), [(4, None), (4, "default"), (9, None)])
+def test_associate_multi_says_a_view_whose_camera_wanders(tmp_path, capsys, k: int,
+                                                          model: str | None) -> None:
+    """associate-multi's nadir path, video mode: each handheld view's search followed by the
+    top view's tracks, the search's and the learned matcher's alike; the clip whose holder is
+    outside the top view is said, naming its file, the other not."""
+    top, hor, size, _ = _nadir_clip(k)
+    write_mot_boxes(tmp_path / "top.txt", top)
+    write_mot_boxes(tmp_path / "hor.txt", hor)
+    argv = ["associate-multi", "--top", str(tmp_path / "top.txt"), "--hor",
+            str(tmp_path / "hor.txt"), "--out", str(tmp_path / "out"), "--top-view", "nadir",
+            "--image-size", "x".join(map(str, size)), "--mode", "video", "--quiet"]
+    assert main(argv + (["--model", model] if model else [])) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "search put" in line]
+    assert len(said) == (k == 4), said
+    assert all(line.startswith(f"xvmatch: warning: --hor {tmp_path / 'hor.txt'}: the search put "
+                               "the handheld camera at one top-view person in only ")
+               for line in said)

@@ -272,6 +272,7 @@ def run_multi_ego(
     on_camera_check: Callable[[int, CameraCheck], None] | None = None,
     on_appearance_check: Callable[[int, AppearanceCheck], None] | None = None,
     tracks: Sequence[Mapping[int, int]] | None = None,
+    on_wandering: Callable[[int, str], None] | None = None,
 ) -> MultiEgoRun:
     """Person ids for every box of the opened views.
 
@@ -290,6 +291,9 @@ def run_multi_ego(
         on_appearance_check: told each view's appearance check, in the order of the views.
         tracks: per view (top first) ``{row id: track id}`` for video mode
             (:func:`~xvmatch.inference.views.multi_ego_video.video_people`), or None.
+        on_wandering: in video mode, told ``(view, line)`` for each horizontal view (its wearer
+            not given, no cameras) whose search put its camera at one top-view track in too few
+            frames (:func:`~xvmatch.inference.matching.search_camera.wandering_camera_note`).
     """
     views, images, cameras = inputs.views, inputs.images, inputs.cameras
     frames = sorted(set().union(*views))
@@ -307,13 +311,24 @@ def run_multi_ego(
         cameras = _checked_cameras(matcher, views, sizes, cameras, refinement, options,
                                    on_camera_check)
     checked: dict = {}
+    searched: dict[int, dict[int, int]] | None = (
+        {} if tracks is not None and on_wandering is not None else None)
     problems = multi_view_costs(
         views, sizes, frames, matcher=matcher,
         appearance=matcher if images is not None else None, images=images,
         cameras=cameras, camera_rows=camera_rows, params=options.params,
         workers=options.workers, progress=progress(len(frames)) if progress else None,
-        appearance_check=options.appearance_check, checked=checked,
+        appearance_check=options.appearance_check, checked=checked, searched=searched,
     )
+    if searched:  # each view's O followed by the top view's tracks (search_camera)
+        from xvmatch.inference.matching.search_camera import wandering_camera_note
+
+        for k, found in sorted(searched.items()):
+            if cameras is not None and cameras[k - 1] is not None:
+                continue
+            said = wandering_camera_note({f: tracks[0].get(r, r) for f, r in found.items()})
+            if said is not None:
+                on_wandering(k, said)
     for k, check in sorted(checked.items()):
         if on_appearance_check is not None:
             on_appearance_check(k, check)

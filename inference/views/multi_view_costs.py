@@ -132,6 +132,14 @@ def spatial_vote_cost(
     (or, with O given, the ``keep`` best orientations), weighted by
     ``exp(-(Phi - Phi_min) / temperature)`` (Phi of Eq. 12).
     """
+    return _spatial_votes(top_boxes, hor_boxes, hor_width, params, camera, keep, temperature)[0]
+
+
+def _spatial_votes(top_boxes: np.ndarray, hor_boxes: np.ndarray, hor_width: float,
+                   params: SpatialParams | None, camera: int | None, keep: int = 5,
+                   temperature: float = 0.01) -> tuple[np.ndarray, int | None]:
+    """:func:`spatial_vote_cost`, and the top box its best hypothesis puts the camera at (None:
+    no hypothesis)."""
     m, n = len(top_boxes), len(hor_boxes)
     out = np.ones((m, n))
     if camera is None:
@@ -139,14 +147,14 @@ def spatial_vote_cost(
     else:
         found = rank_hypotheses(top_boxes, hor_boxes, hor_width, params, [camera], k=keep)
     if not found:
-        return out
+        return out, None
     phi = np.array([h.cost for h in found])
     weight = np.exp(-(phi - phi.min()) / temperature)
     weight /= weight.sum()
     for h, w in zip(found, weight, strict=True):
         p = np.asarray(h.pairs, dtype=np.int64).reshape(-1, 2)
         out[p[:, 0], p[:, 1]] -= w
-    return np.clip(out, 0.0, 1.0)
+    return np.clip(out, 0.0, 1.0), int(found[int(np.argmin(phi))].camera)
 
 
 def _view_boxes(views: Sequence[Mapping[int, object]], v: int, f: int) -> np.ndarray:
@@ -170,24 +178,30 @@ def _check_views(views: Sequence[Mapping[int, object]], hor_sizes: Sequence[tupl
 
 
 def _spatial_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: Iterable[int],
-                     width: float, params: SpatialParams | None, rows: Mapping[int, int]
-                     ) -> dict[int, np.ndarray]:
+                     width: float, params: SpatialParams | None, rows: Mapping[int, int],
+                     searched: dict[int, int] | None = None) -> dict[int, np.ndarray]:
     """``{frame: top x view-k vote costs}`` of the spatial search (all 1 where a view has no
-    box)."""
+    box); ``searched`` filled with ``{frame: top-view id}`` of each frame's best O."""
     out = {}
     for f in frames:
         t, h = _view_boxes(views, 0, f), _view_boxes(views, k, f)
-        out[f] = (spatial_vote_cost(t, h, width, params, rows.get(f))
-                  if len(t) and len(h) else np.ones((len(t), len(h))))
+        if not (len(t) and len(h)):
+            out[f] = np.ones((len(t), len(h)))
+            continue
+        out[f], best = _spatial_votes(t, h, width, params, rows.get(f))
+        if searched is not None and best is not None:
+            searched[f] = int(views[0][f].ids[best])
     return out
 
 
 def _learned_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: list[int],
                      size: tuple[float, float], matcher: LearnedMatcher,
-                     rows: Mapping[int, int], options: dict
+                     rows: Mapping[int, int], options: dict,
+                     searched: dict[int, int] | None = None
                      ) -> tuple[dict[int, np.ndarray], list[AppearanceCheck]]:
     """The learned matcher's top x view-k cost matrices, ``{frame: costs}`` of the frames
-    with boxes in both views, and the appearance check of the pass (if judged).
+    with boxes in both views, and the appearance check of the pass (if judged); ``searched``
+    filled with ``{frame: top-view id}`` of each frame's best O of its features' search.
 
     ``options`` are the keyword arguments passed on to
     :func:`~xvmatch.inference.matching.learned_association.associate_sequence_learned`.
@@ -195,11 +209,14 @@ def _learned_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: list
     found: dict[int, np.ndarray] = {}
     judged: list[AppearanceCheck] = []
     top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
+    at: dict[int, int] = {}  # the best O's position in the top record
     associate_sequence_learned(
         top_rows, {f: views[k][f] for f in frames if f in views[k]}, size[0], matcher,
         camera_id=-1 if rows else None, hor_height=size[1], frames=frames, costs_out=found,
-        checked=judged, **options,
+        checked=judged, searched=at, **options,
     )
+    if searched is not None:
+        searched.update({f: int(views[0][f].ids[p]) for f, p in at.items() if p >= 0})
     return found, judged
 
 
@@ -246,6 +263,7 @@ def multi_view_costs(
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
     appearance_check: bool = False,
     checked: dict[int, AppearanceCheck] | None = None,
+    searched: dict[int, dict[int, int]] | None = None,
 ) -> dict[int, FrameProblem]:
     """The :class:`FrameProblem` of every frame.
 
@@ -269,6 +287,10 @@ def multi_view_costs(
             (:mod:`xvmatch.inference.matching.appearance_check`; the ego-ego costs are not judged).
         checked: if given, receives ``{egocentric view (1-based): AppearanceCheck}`` of the
             passes judged.
+        searched: if given, receives ``{egocentric view (1-based): {frame: top-view id}}``:
+            where each frame's best hypothesis of the search puts that view's camera
+            (:mod:`~xvmatch.inference.matching.search_camera`), for the views whose wearer is
+            not given.
     """
     frames = sorted({int(f) for f in frames})
     n_views = len(views)
@@ -277,9 +299,12 @@ def multi_view_costs(
     top_ego: dict[int, dict[int, np.ndarray]] = {f: {} for f in frames}
     for k in range(1, n_views):
         rows = (camera_rows[k - 1] if camera_rows is not None else None) or {}
+        if searched is not None and not rows:
+            searched[k] = {}
         if matcher is None:
             spatial = _spatial_top_ego(views, k, progress(frames) if progress else frames,
-                                       hor_sizes[k - 1][0], params, rows)
+                                       hor_sizes[k - 1][0], params, rows,
+                                       None if searched is None else searched.get(k))
             for f, cost in spatial.items():
                 top_ego[f][k] = cost
             continue
@@ -289,7 +314,7 @@ def multi_view_costs(
                 top_images=images[0] if images is not None else None,
                 hor_images=images[k] if images is not None else None,
                 cameras=cameras[k - 1] if cameras is not None else None,
-                appearance_check=appearance_check))
+                appearance_check=appearance_check), None if searched is None else searched.get(k))
         if checked is not None and judged:
             checked[k] = judged[0]
         for f in frames:

@@ -9,8 +9,7 @@ cost matrices of every view pair and the joint cycle-consistent program of every
 :mod:`xvmatch.inference.views.multi_ego_video`). Writes ``OUT/top.txt``, ``OUT/hor1.txt``, ...:
 the input rows, text unchanged but the id field, which holds a person id; the same id in two
 views of a frame is the same person. ``--draw DIR``: pictures of each (top, horizontal) pair.
-Bad input raises ``ValueError`` with one line, printed by the main entry point as
-``xvmatch: error: ...``.
+Bad input raises ``ValueError`` with one line, printed as ``xvmatch: error: ...``.
 """
 
 from __future__ import annotations
@@ -221,7 +220,8 @@ def _cmd_associate_multi(args: argparse.Namespace) -> int:
             on_refinement=lambda r: note_camera_refinement(r, quiet),
             on_camera_check=lambda v, c: note_camera_check(c, quiet, f"--hor {paths[v]}: "),
             on_appearance_check=lambda v, c: note_camera_check(c, quiet, f"--hor {paths[v]}: "),
-            tracks=tracks)
+            tracks=tracks, on_wandering=lambda v, line: print(
+                f"xvmatch: warning: --hor {paths[v]}: {line}", file=sys.stderr))
         if args.draw is not None:  # each (top, horizontal view) pair in DIR/horK/
             from xvmatch.viz.match_pictures import write_match_pictures
 
