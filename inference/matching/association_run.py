@@ -269,17 +269,7 @@ def _top_size(top: Mapping, options: AssociationOptions, note: Note = _no_note,
     if options.top_view == "nadir" or options.cameras is not None:
         return None
     images = options.learned is not None and options.learned.top_images is not None
-    if images and not options.top_image_size:  # the learned matcher's path, said if upright
-        from xvmatch.inference.matching.search_camera import upright_top_warning
-
-        if (said := upright_top_warning(
-                top, "the learned matcher's geometry cue", "that cue",
-                "its images' appearance weighs too; --top-image-size WxH (the top images' size) "
-                "calibrates the top camera from its people and pairs on its ground map instead "
-                "(boxes only)", level="note")) is not None:
-            note(said, False)
-        return None
-    return options.top_image_size or guessed_top_size(top, note, past)
+    return options.top_image_size or (None if images else guessed_top_size(top, note, past))
 
 
 def oblique_top(top: Mapping, options: AssociationOptions, hor: Mapping) -> object | None:
@@ -376,6 +366,19 @@ def _tell(note: Note, check) -> None:
         note(check.message(), check.to_tell(True))
 
 
+def _upright_note(top: Mapping, note: Note) -> None:
+    """Tell ``note`` where the top view's people stand upright and its images keep the learned
+    matcher (``--top-image-size`` not given): its geometry cue reads a nadir drone's view."""
+    from xvmatch.inference.matching.search_camera import upright_top_warning
+
+    if (said := upright_top_warning(
+            top, "the learned matcher's geometry cue", "that cue",
+            "its images' appearance weighs too; --top-image-size WxH (the top images' size) "
+            "calibrates the top camera from its people and pairs on its ground map instead "
+            "(boxes only)", level="note")) is not None:
+        note(said, False)
+
+
 def _learned_pairs(top: Mapping, hor: Mapping, frames: list[int], options: AssociationOptions,
                    offset: int, hooks: AssociationHooks) -> tuple[Pairs, LearnedRun, object]:
     """The learned matchers' pairs of ``frames`` (``top`` re-timed by ``offset``), after the
@@ -404,6 +407,9 @@ def _learned_pairs(top: Mapping, hor: Mapping, frames: list[int], options: Assoc
     note = hooks.note
     with open_learned_inputs(top, hor, frames, run_options) as inputs:
         hooks.size_assumed()
+        if images and options.top_view != "nadir" and not (options.top_image_size
+                                                           or choice.cameras):
+            _upright_note(top, note)  # kept on this path: its images' size not given
         if (refinement := inputs.refinement) is not None:
             note(refinement.message, refinement.turned)
         _tell(note, inputs.camera_checked)
