@@ -164,7 +164,7 @@ from xvmatch.inference.matching.ground_association import (
     top_calibration,
     top_ground_points,
 )
-from xvmatch.inference.matching.search_camera import wandering_camera_note
+from xvmatch.inference.matching.search_camera import followed_cameras, wandering_camera_note
 from xvmatch.metrics.cross_view_metrics import count_sequence, summarize
 
 
@@ -535,8 +535,8 @@ def main(argv: list[str] | None = None) -> int:
             preds += (true_lens, chosen)
         # associate warns where the search's O wandered; --top-view oblique then runs the
         # ground path (the lens chosen, as associate; else the 70-degree consensus run)
-        warned = (calib is not None and calib.kind != "oblique"
-                  and wandering_camera_note(cameras) is not None)
+        warned = (calib is not None and calib.kind != "oblique" and wandering_camera_note(
+            followed_cameras(top, cameras, video=True)) is not None)
         preds += ((chosen if args.choose_lens else voted) if warned else routed,)
         if args.renumber:
             preds = tuple({sampled[f - 1]: v for f, v in pred.items()} for pred in preds)

@@ -666,8 +666,8 @@ def associate_sequence(
         frames: frames to process (default: the union of both views' frames, ascending).
         progress: optional wrapper around the frame iterator (e.g. a progress bar).
         follow: how the ``follow`` mode finds O when ``camera_id`` is not given.
-        cameras: where given, filled with ``{frame: top-view id of O}`` for each frame whose
-            search found one (:mod:`~xvmatch.inference.matching.search_camera`).
+        cameras: where given, filled with ``{frame: O's row in the frame's top record}`` for
+            each frame whose search found one (:mod:`~xvmatch.inference.matching.search_camera`).
     """
     if search not in SEARCH_MODES:
         raise ValueError(f"search must be one of {', '.join(SEARCH_MODES)}; got {search!r}")
@@ -718,6 +718,6 @@ def associate_sequence(
             if not voting:
                 followed = int(t_rec.ids[result.camera])
             if cameras is not None:
-                cameras[frame] = int(t_rec.ids[result.camera])
+                cameras[frame] = int(result.camera)
         out[frame] = [(int(t_rec.ids[a]), int(h_rec.ids[b])) for a, b in result.pairs]
     return out

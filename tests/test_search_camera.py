@@ -22,6 +22,7 @@ from xvmatch.inference.matching.association_run import (
 from xvmatch.inference.matching.search_camera import (
     MIN_CAMERA_HELD,
     camera_held,
+    followed_cameras,
     wandering_camera_note,
 )
 
@@ -36,6 +37,21 @@ def test_the_share_held_is_the_most_frequent_camera_over_the_frames() -> None:
     assert "--top-view oblique --top-image-size WxH" in said and "--camera-id ID" in said
     assert wandering_camera_note(dict.fromkeys(range(10), 3)) is None
     assert 0.5 < MIN_CAMERA_HELD < 0.8  # CVMHAT's dev clips hold 0.80 or more
+
+
+def test_the_camera_is_followed_by_track_ids_or_by_its_boxes_linked() -> None:
+    """Video mode reads O's row as the top view's track id; frame mode as the track of its
+    boxes linked by IoU (a detector's ids, here all 7, unread); pictures whose boxes jump
+    like independent ones' have nobody to follow."""
+    boxes = np.array([[10.0 + 60 * k, 10.0, 20.0, 50.0] for k in range(8)])
+    still = {f: FrameBoxes(f, np.full(8, 7), np.add(boxes, [f, 0, 0, 0])) for f in range(1, 7)}
+    rows = {f: 1 if f < 5 else 2 for f in still}
+    assert followed_cameras(still, rows, video=True) == dict.fromkeys(still, 7)
+    linked = followed_cameras(still, rows, video=False)
+    assert linked is not None and len({linked[f] for f in (1, 2, 3, 4)}) == 1
+    assert linked[5] == linked[6] != linked[1] and camera_held(linked) == pytest.approx(4 / 6)
+    jumpy = {f: FrameBoxes(f, np.arange(8), np.add(boxes, [0, 400 * (f % 2), 0, 0])) for f in still}
+    assert followed_cameras(jumpy, rows, video=False) is None
 
 
 def _nadir_clip(k: int) -> tuple[dict, dict, tuple[int, int], int]:
@@ -64,8 +80,9 @@ def test_a_search_whose_camera_wanders_is_said(k: int, holder_seen: bool, warned
     cameras: dict[int, int] = {}
     found = associate_sequence(top, hor, float(size[0]), frames=frames, cameras=cameras)
     assert found == associate_sequence(top, hor, float(size[0]), frames=frames)
-    assert set(cameras) <= set(frames) and all(cameras[f] in top[f].ids for f in cameras)
-    assert (camera_held(cameras) < MIN_CAMERA_HELD) == warned and run.pairs
+    assert set(cameras) <= set(frames) and all(0 <= cameras[f] < len(top[f].ids) for f in cameras)
+    followed = followed_cameras(top, cameras, video=True)
+    assert (camera_held(followed) < MIN_CAMERA_HELD) == warned and run.pairs
     # The learned matcher (boxes only) reads its features from the same search: the same say.
     notes.clear()
     learned = run_association(top, hor, AssociationOptions(
@@ -73,15 +90,21 @@ def test_a_search_whose_camera_wanders_is_said(k: int, holder_seen: bool, warned
         learned=LearnedChoice(("default",))), hooks)
     assert [line for line, always in notes if "warning: the search put" in line and always] \
         == warnings
-    assert set(learned.learned.searched) <= set(frames)
-    assert all(learned.learned.searched[f] in top[f].ids for f in learned.learned.searched)
-    # Frame mode reads no track ids: nothing said; nor where the holder is named.
-    for quiet in (AssociationOptions(hor_size=(size, "--image-size"), top_view="nadir"),
-                  AssociationOptions(hor_size=(size, "--image-size"), top_view="nadir",
-                                     video=True, camera_id=holder)):
-        notes.clear()
-        run_association(top, hor, quiet, hooks)
-        assert not any("warning: the search put" in line for line, _ in notes)
+    searched = learned.learned.searched
+    assert set(searched) <= set(frames)
+    assert all(0 <= searched[f] < len(top[f].ids) for f in searched)
+    # Frame mode follows O by the top boxes linked by IoU (its ids unread): the same say.
+    notes.clear()
+    run_association(top, hor, AssociationOptions(hor_size=(size, "--image-size"),
+                                                 top_view="nadir"), hooks)
+    assert [line for line, always in notes if "warning: the search put" in line and always] \
+        == warnings
+    # Nothing where the holder is named.
+    notes.clear()
+    run_association(top, hor, AssociationOptions(hor_size=(size, "--image-size"),
+                                                 top_view="nadir", video=True,
+                                                 camera_id=holder), hooks)
+    assert not any("warning: the search put" in line for line, _ in notes)
 
 
 def test_the_offset_search_says_an_upright_top_view(tmp_path, capsys) -> None:

@@ -477,9 +477,9 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     if learned is None and options.offset != "auto":  # the learned run says it as it opens
         hooks.size_assumed()
     run = refined = None
-    # Video mode, the holder not named, no cameras: whether the search's camera location O
-    # stayed with one top-view person (search_camera).
-    searched: dict[int, int] | None = ({} if options.video and options.camera_id is None and (
+    # The holder not named, no cameras: whether the search's camera location O stayed with one
+    # top-view person, followed by the view's tracks (video) or its boxes linked (search_camera).
+    searched: dict[int, int] | None = ({} if options.camera_id is None and (
         learned is None or learned.cameras is None) else None)
     if learned is not None:
         pairs, run, refined = _learned_pairs(top, hor, frames, options, offset, hooks)
@@ -494,9 +494,13 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
                                    progress=hooks.frames(len(frames)) if hooks.frames else None,
                                    cameras=searched)
     if searched is not None:
-        from xvmatch.inference.matching.search_camera import wandering_camera_note
+        from xvmatch.inference.matching.search_camera import (
+            followed_cameras,
+            wandering_camera_note,
+        )
 
-        if (said := wandering_camera_note(searched)) is not None:
+        followed = followed_cameras(top, searched, options.video)
+        if followed is not None and (said := wandering_camera_note(followed)) is not None:
             hooks.note(f"xvmatch: warning: {said}", True)
     if options.video:
         from xvmatch.inference.linking.pair_consensus import consistent_pairs

@@ -491,8 +491,8 @@ class _SequenceScorer:
         judge: whether the appearance cue is checked before any frame is assigned.
         costs_out: receives ``{frame: cost matrix}`` when given.
         rechecked: receives the frames scored again with FP32 when given.
-        searched: receives ``{frame: top-view id}`` of each frame's best camera location O of
-            the geometry features' search (their first hypothesis) when given.
+        searched: receives ``{frame: row of the top record}`` of each frame's best camera
+            location O of the geometry features' search (their first hypothesis) when given.
         out: ``{frame: [(top_id, hor_id)]}`` of the frames assigned so far.
         pending: ``(frame, features, cues)`` of the frames waiting to be scored.
         held: ``{frame: (cost, box-only cost, appearance cue)}`` of the scored frames waiting
@@ -642,7 +642,7 @@ class _SequenceScorer:
             self.pending.append((frame, next(stream), self.raw_cues(frame)))
             if self.searched is not None and (first := self.pending[-1][1][0][0]).hyp_camera.size:
                 row = first.top_order[first.hyp_camera[0]]
-                self.searched[frame] = int(self.top[frame].ids[row])
+                self.searched[frame] = int(row)
             pending_cells += sum(math.prod(f.shape) for g in self.pending[-1][1] for f in g)
             if len(self.pending) >= self.batch_size or pending_cells >= 4 * MATCHER_BATCH_CELLS:
                 self.flush()
@@ -748,8 +748,8 @@ def associate_sequence_learned(
             on its own (:mod:`xvmatch.inference.matching.frame_check`).
         checked: if given, receives the :class:`~xvmatch.inference.matching.appearance_check.
             AppearanceCheck` of a run with ``appearance_check`` and images.
-        searched: if given, filled with ``{frame: top-view id of O}``: each frame's best camera
-            location of the (first) geometry features' search
+        searched: if given, filled with ``{frame: O's row in the frame's top record}``: each
+            frame's best camera location of the (first) geometry features' search
             (:mod:`~xvmatch.inference.matching.search_camera`).
 
     Raises:

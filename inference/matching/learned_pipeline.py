@@ -148,8 +148,8 @@ class LearnedRun:
             ``refine_top_camera``, else None.
         camera_checked: the camera check of a run with cameras and ``camera_check``, else
             None (when it failed, the run was matched without the cameras).
-        searched: ``{frame: top-view id}`` of each frame's best camera location O of the
-            geometry features' search (:mod:`~xvmatch.inference.matching.search_camera`).
+        searched: ``{frame: row of the top record}`` of each frame's best camera location O of
+            the geometry features' search (:mod:`~xvmatch.inference.matching.search_camera`).
     """
 
     pairs: dict[int, list[tuple[int, int]]]

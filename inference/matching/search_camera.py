@@ -23,7 +23,8 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping
 
-__all__ = ["MIN_CAMERA_HELD", "camera_held", "upright_top_warning", "wandering_camera_note"]
+__all__ = ["MIN_CAMERA_HELD", "camera_held", "followed_cameras", "upright_top_warning",
+           "wandering_camera_note"]
 
 MIN_CAMERA_HELD = 0.7
 """The least share of the searched frames whose O is the clip's most frequent one for the search
@@ -31,10 +32,30 @@ to read as having followed one camera holder (between the renders' failures, mos
 and CVMHAT's and the renders' good clips, 0.75 and over; CVMHAT's lowest but one, 0.80)."""
 
 
+def followed_cameras(top: Mapping, rows: Mapping[int, int], video: bool
+                     ) -> dict[int, int] | None:
+    """Each frame's camera location O (``rows``: ``{frame: O's row in the top record}``, as
+    :func:`~xvmatch.cues.spatial_search.associate_sequence` reports it) as the person it is
+    followed by over time: the top view's track id in ``video`` mode; else the track of its
+    boxes linked by IoU (:func:`~xvmatch.inference.linking.tracklets.box_track_ids`, the ids
+    unread: a detector's). None in frame mode where the top view's boxes jump like independent
+    pictures' (nobody to follow)."""
+    if video:
+        return {f: int(top[f].ids[r]) for f, r in rows.items()}
+    from xvmatch.cues.box_motion import jumps_like_frames
+    from xvmatch.inference.linking.tracklets import box_track_ids
+
+    if jumps_like_frames(top):
+        return None
+    linked, start, n = box_track_ids(top), {}, 0
+    for f in sorted(f for f in top if len(top[f].ids)):  # stack_frames' order
+        start[f], n = n, n + len(top[f].ids)
+    return {f: int(linked[start[f] + r]) for f, r in rows.items()}
+
+
 def camera_held(cameras: Mapping[int, int]) -> float | None:
-    """The share of frames whose camera location O (``{frame: top-view track id}``, as
-    :func:`~xvmatch.cues.spatial_search.associate_sequence` reports it) is the clip's most
-    frequent O; None where no frame found one."""
+    """The share of frames whose camera location O (``{frame: person}``,
+    :func:`followed_cameras`) is the clip's most frequent O; None where no frame found one."""
     if not cameras:
         return None
     return Counter(cameras.values()).most_common(1)[0][1] / len(cameras)

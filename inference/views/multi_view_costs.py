@@ -209,14 +209,14 @@ def _learned_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: list
     found: dict[int, np.ndarray] = {}
     judged: list[AppearanceCheck] = []
     top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
-    at: dict[int, int] = {}  # the best O's position in the top record
+    at: dict[int, int] = {}  # the best O's row in the top record
     associate_sequence_learned(
         top_rows, {f: views[k][f] for f in frames if f in views[k]}, size[0], matcher,
         camera_id=-1 if rows else None, hor_height=size[1], frames=frames, costs_out=found,
         checked=judged, searched=at, **options,
     )
     if searched is not None:
-        searched.update({f: int(views[0][f].ids[p]) for f, p in at.items() if p >= 0})
+        searched.update({f: int(views[0][f].ids[p]) for f, p in at.items()})
     return found, judged
 
 
