@@ -477,14 +477,10 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
     if learned is None and options.offset != "auto":  # the learned run says it as it opens
         hooks.size_assumed()
     run = refined = None
-    # The holder not named, no cameras: whether the search's camera location O stayed with one
-    # top-view person, followed by the view's tracks (video) or its boxes linked (search_camera).
-    searched: dict[int, int] | None = ({} if options.camera_id is None and (
-        learned is None or learned.cameras is None) else None)
+    searched: dict[int, int] = {}  # each frame's row of the search's camera location O
     if learned is not None:
         pairs, run, refined = _learned_pairs(top, hor, frames, options, offset, hooks)
-        if searched is not None:
-            searched = run.searched
+        searched = run.searched
     else:
         from xvmatch.cues.spatial_search import associate_sequence
 
@@ -493,7 +489,9 @@ def run_association(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes]
                                    camera_id=options.camera_id, frames=frames,
                                    progress=hooks.frames(len(frames)) if hooks.frames else None,
                                    cameras=searched)
-    if searched is not None:
+    # The holder not named, no cameras: whether O stayed with one top-view person, followed by
+    # the view's tracks (video) or its boxes linked (frame mode; search_camera).
+    if options.camera_id is None and (learned is None or learned.cameras is None):
         from xvmatch.inference.matching.search_camera import (
             followed_cameras,
             wandering_camera_note,

@@ -321,12 +321,16 @@ def run_multi_ego(
         appearance_check=options.appearance_check, checked=checked, searched=searched,
     )
     if searched:  # each view's O followed by the top view's tracks (search_camera)
-        from xvmatch.inference.matching.search_camera import wandering_camera_note
+        from xvmatch.inference.matching.search_camera import (
+            followed_cameras,
+            wandering_camera_note,
+        )
 
         for k, found in sorted(searched.items()):
             if cameras is not None and cameras[k - 1] is not None:
                 continue
-            said = wandering_camera_note({f: tracks[0].get(r, r) for f, r in found.items()})
+            ids = followed_cameras(views[0], found, video=True)  # rows' ids, then their tracks
+            said = wandering_camera_note({f: tracks[0].get(i, i) for f, i in ids.items()})
             if said is not None:
                 on_wandering(k, said)
     for k, check in sorted(checked.items()):

@@ -181,7 +181,8 @@ def _spatial_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: Iter
                      width: float, params: SpatialParams | None, rows: Mapping[int, int],
                      searched: dict[int, int] | None = None) -> dict[int, np.ndarray]:
     """``{frame: top x view-k vote costs}`` of the spatial search (all 1 where a view has no
-    box); ``searched`` filled with ``{frame: top-view id}`` of each frame's best O."""
+    box); ``searched`` filled with ``{frame: O's row in the top record}`` of each frame's best
+    hypothesis."""
     out = {}
     for f in frames:
         t, h = _view_boxes(views, 0, f), _view_boxes(views, k, f)
@@ -190,7 +191,7 @@ def _spatial_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: Iter
             continue
         out[f], best = _spatial_votes(t, h, width, params, rows.get(f))
         if searched is not None and best is not None:
-            searched[f] = int(views[0][f].ids[best])
+            searched[f] = best
     return out
 
 
@@ -201,7 +202,7 @@ def _learned_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: list
                      ) -> tuple[dict[int, np.ndarray], list[AppearanceCheck]]:
     """The learned matcher's top x view-k cost matrices, ``{frame: costs}`` of the frames
     with boxes in both views, and the appearance check of the pass (if judged); ``searched``
-    filled with ``{frame: top-view id}`` of each frame's best O of its features' search.
+    filled with ``{frame: O's row in the top record}`` of its features' search.
 
     ``options`` are the keyword arguments passed on to
     :func:`~xvmatch.inference.matching.learned_association.associate_sequence_learned`.
@@ -209,14 +210,11 @@ def _learned_top_ego(views: Sequence[Mapping[int, object]], k: int, frames: list
     found: dict[int, np.ndarray] = {}
     judged: list[AppearanceCheck] = []
     top_rows = {f: with_wearer_tag(views[0][f], rows.get(f)) for f in frames if f in views[0]}
-    at: dict[int, int] = {}  # the best O's row in the top record
     associate_sequence_learned(
         top_rows, {f: views[k][f] for f in frames if f in views[k]}, size[0], matcher,
         camera_id=-1 if rows else None, hor_height=size[1], frames=frames, costs_out=found,
-        checked=judged, searched=at, **options,
+        checked=judged, searched=searched, **options,
     )
-    if searched is not None:
-        searched.update({f: int(views[0][f].ids[p]) for f, p in at.items()})
     return found, judged
 
 
@@ -287,8 +285,8 @@ def multi_view_costs(
             (:mod:`xvmatch.inference.matching.appearance_check`; the ego-ego costs are not judged).
         checked: if given, receives ``{egocentric view (1-based): AppearanceCheck}`` of the
             passes judged.
-        searched: if given, receives ``{egocentric view (1-based): {frame: top-view id}}``:
-            where each frame's best hypothesis of the search puts that view's camera
+        searched: if given, receives ``{egocentric view (1-based): {frame: row of the top
+            record}}``: where each frame's best hypothesis of the search puts that view's camera
             (:mod:`~xvmatch.inference.matching.search_camera`), for the views whose wearer is
             not given.
     """
