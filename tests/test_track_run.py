@@ -17,6 +17,7 @@ from xvmatch.formats.mot_boxes import FrameBoxes
 from xvmatch.inference.matching.learned_association import load_matcher_bundle
 from xvmatch.inference.matching.search_camera import upright_top_warning
 from xvmatch.inference.tracks.track_costs import LEARNED_DUMMY_WEIGHT, TrackWeights
+from xvmatch.inference.tracks.track_ground import GroundChoice
 from xvmatch.inference.tracks.track_run import (
     TrackRunOptions,
     cross_view_weights,
@@ -105,10 +106,11 @@ def test_the_cameras_lines_are_told_as_they_come(clip) -> None:
     assert run.result.top_rows and run.result.hor_rows
 
 
-def test_an_upright_top_view_is_warned_of_without_cameras(clip) -> None:
+def test_an_upright_top_view_takes_the_ground_maps_or_is_warned_of(clip) -> None:
     """track's cross-view search takes the top camera to look straight down: a top view whose
-    people stand upright (an oblique drone) is warned of, always, with what to give instead;
-    the rendered nadir drone's is not (issue 67: nothing silently assumed)."""
+    people stand upright (an oblique drone) takes the ground-map path instead, saying what it
+    assumed; forced onto the search (``--top-view nadir``) it is warned of, always, with what
+    to give instead; the rendered nadir drone's is not (issue 67: nothing silently assumed)."""
     scene = make_oblique_scene(ObliqueSceneConfig(top_pitch=(25.0, 45.0)), 12,
                                np.random.default_rng(1))
     top, hor = ({f: FrameBoxes(f, 100 * f + np.arange(len(r.ids)), r.boxes)
@@ -116,11 +118,18 @@ def test_an_upright_top_view_is_warned_of_without_cameras(clip) -> None:
     nadir = read_detection_rows(clip["top"]).frames
     assert upright_top_warning(nadir, "s", "w", "i") is None
     assert upright_top_warning({}, "s", "w", "i") is None
-    told: list[tuple[str, bool]] = []
-    run_tracking(top, hor, TrackRunOptions(), (scene.hor_cameras["hor1"][0].image_size,
-                                               "--image-size"),
-                 note=lambda line, always: told.append((line, always)))
-    said = [(line, always) for line, always in told if "stand upright" in line]
-    assert len(said) == 1 and said[0][1], told
-    assert said[0][0].startswith("xvmatch: warning: the top view's people stand upright (boxes ")
-    assert "--cameras" in said[0][0] and "associate" in said[0][0] and "\n" not in said[0][0]
+    hor_size = (scene.hor_cameras["hor1"][0].image_size, "--image-size")
+    for choice in (GroundChoice(), GroundChoice(top_view="nadir")):
+        told: list[tuple[str, bool]] = []
+        run_tracking(top, hor, TrackRunOptions(ground=choice), hor_size,
+                     note=lambda line, always, told=told: told.append((line, always)))
+        said = [(line, always) for line, always in told if "stand upright" in line]
+        assert len(said) == 1, told
+        if choice.top_view == "auto":
+            assert said[0] == (said[0][0], False) and "an oblique camera; took" in said[0][0]
+            assert any("top view: oblique, tilt" in line for line, _ in told), told
+            continue
+        assert said[0][1] and not any("top view: oblique" in line for line, _ in told), told
+        assert said[0][0].startswith("xvmatch: warning: the top view's people stand upright (")
+        assert "--cameras" in said[0][0] and "--top-view oblique" in said[0][0]
+        assert "\n" not in said[0][0]

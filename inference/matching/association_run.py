@@ -292,7 +292,7 @@ def oblique_top(top: Mapping, options: AssociationOptions, hor: Mapping) -> obje
 
 
 def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
-                  note: Note = _no_note) -> Pairs | None:
+                  note: Note = _no_note, over_time: str | None = None) -> Pairs | None:
     """The pairs of the ground-map association when the top view is oblique (forced, or found
     so by ``auto``), else None (the nadir path); tells ``note`` the one line saying what was
     assumed (and, with ``hor_hfov`` ``auto``, one saying the lens chosen). In video mode the
@@ -301,7 +301,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     view too sparse to calibrate takes the nadir path; a horizontal size assumed to be CVMHAT's
     (or not known: boxes that do not fit it) is guessed from its boxes too
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note (the CVMHAT
-    size kept, where its boxes fit it, said too)."""
+    size kept, where its boxes fit it, said too). ``over_time``: how the caller keeps the
+    pairs over time, said in place of the mode (``track``'s tracker)."""
     from xvmatch.formats.box_image_size import (
         check_boxes_in_image,
         ground_path_hor_size,
@@ -342,9 +343,9 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     unused = [name for name, given in (("--model", options.learned is not None),
                                        ("--search", options.search is not None)) if given]
     ignored = f" ({', '.join(unused)}: not used on this path)" if unused else ""
-    mode = ("pairs made consistent over the clip with each view's track ids" if
-            ground.consensus else "each frame on its own (--mode video: consistent over "
-            "the clip)")
+    mode = over_time or ("pairs made consistent over the clip with each view's track ids" if
+                         ground.consensus else "each frame on its own (--mode video: "
+                         "consistent over the clip)")
     note(f"xvmatch: note: {run.summary}; {mode}{ignored}", False)
     said = ground_path_size_note(options.hor_boxes, hor, guessed, options.hor_size[1], past)
     if said is not None:

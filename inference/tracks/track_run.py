@@ -51,6 +51,7 @@ from xvmatch.inference.tracks.track_costs import (
     LEARNED_DUMMY_WEIGHT,
     TrackWeights,
 )
+from xvmatch.inference.tracks.track_ground import GroundChoice, ground_frame_pairs
 from xvmatch.inference.tracks.tracking import (
     Progress,
     TrackConfig,
@@ -141,7 +142,13 @@ class TrackRunOptions:
             both or neither.
         cameras: a camera file or folder with cameras ``top`` and ``ego``, per-frame files
             numbered by the horizontal frames; needs the learned weights.
-        top_boxes: the top-view box file, named when a top box lies outside the top images.
+        top_boxes, hor_boxes: the box files, named when a top box lies outside the top
+            images and in the notes of the ground-map path.
+        ground: the top view's geometry (no ``cameras``): where the top view is oblique (its
+            people stand upright and calibrate it so, or forced), the frame association is
+            ``associate``'s ground-map path frame by frame
+            (:func:`~xvmatch.inference.tracks.track_ground.ground_frame_pairs`) instead of the
+            nadir search, and the learned matcher's box-only costs are not used.
         appearance_check: with the model's network and the learned weights, judge the
             cross-view appearance cue on the video's own sure tracklet pairs.
         refine_top_camera: with cameras, turn a fixed top camera to fit the head rays when
@@ -163,6 +170,8 @@ class TrackRunOptions:
     hor_images: str | None = None
     cameras: str | None = None
     top_boxes: str = "the top-view boxes"
+    hor_boxes: str = "the horizontal-view boxes"
+    ground: GroundChoice = field(default_factory=GroundChoice)
     appearance_check: bool = True
     refine_top_camera: bool = True
     camera_check: bool = True
@@ -193,6 +202,11 @@ class OpenTrackImages:
 
     def __init__(self, images: TrackImages | None, sources: list) -> None:
         self.images, self.sources = images, sources
+
+    @property
+    def top_size(self) -> tuple[int, int] | None:
+        """``(W, H)`` of the top images, or None without images."""
+        return tuple(self.sources[0].size) if self.sources else None
 
     @property
     def hor_size(self) -> tuple[int, int] | None:
@@ -359,6 +373,30 @@ def _fitted_config(options: TrackRunOptions, refinement: CameraRefinement | None
     return replace(config, weights=replace(config.weights, w1=FITTED_CAMERAS_W1))
 
 
+def _ground_pairs(top: Mapping, hor: Mapping, options: TrackRunOptions,
+                  hor_size: tuple[tuple[int, int], str], camera_rows, images: OpenTrackImages,
+                  note: Note) -> dict[int, list[tuple[int, int]]] | None:
+    """The frame association of the ground-map path where the top view is oblique and no
+    cameras are given (``top`` and ``hor`` aligned; :func:`~xvmatch.inference.tracks.
+    track_ground.ground_frame_pairs`), its lines told to ``note``; else None, with a warning
+    where the top view's people stand upright all the same (the nadir search misreads them)."""
+    if options.cameras is not None:
+        return None
+    pairs = ground_frame_pairs(top, hor, hor_size, options.ground, images.top_size, camera_rows,
+                               (options.top_boxes, options.hor_boxes), options.workers, note)
+    if pairs is None:
+        if (said := upright_top_warning(
+                top, "track's cross-view search", "its ids across the views",
+                "give --cameras (the views' calibrated cameras, with --model), or --top-view "
+                "oblique --top-image-size WxH to calibrate it from its people")) is not None:
+            note(said, True)
+    elif options.weights == "learned":
+        with_images = " (its appearance network is, on the images)" if images.sources else ""
+        note(f"track: {options.model_name}'s box-only costs are not used on the ground "
+             f"maps{with_images}", False)
+    return pairs
+
+
 def _said_nowhere(line: str, always: bool) -> None:
     """A :data:`Note` that says nothing."""
 
@@ -406,24 +444,21 @@ def run_tracking(
     for view, frames in (("top", top), ("horizontal", hor)):
         if said := jump_warning(view, frames):
             note(said, True)
-    if options.cameras is None and (said := upright_top_warning(
-            top, "track's cross-view search", "its ids across the views",
-            "give --cameras (the views' calibrated cameras, with --model), or pair the views "
-            "with associate, which calibrates an oblique top view from its people")) is not None:
-        note(said, True)
     cameras, refinement = _open_cameras(top, hor, options, hor_size, offset, images, note)
     refined = cameras, refinement  # to write: also when the check leaves them out
     top, hor, track_images, cameras = _aligned(top, hor, images.images, cameras, offset)
+    frame_pairs = _ground_pairs(top, hor, options, hor_size, camera_rows, images, note)
     cameras, refinement, camera_checked = _checked_cameras(top, hor, options, hor_size[0],
                                                            cameras, refinement, note)
     config = _fitted_config(options, refinement, track_images, note)
     learned = None
-    if options.weights == "learned":
+    if options.weights == "learned" and frame_pairs is None:
         learned = learned_frame_evidence(top, hor, hor_size[0], options.model, camera_rows,
                                          options.workers, progress, cameras=cameras)
     checked: list[AppearanceCheck] = []
     result = track_pair(top, hor, float(hor_size[0][0]), options.params, config, camera_rows,
-                        options.workers, progress, images=track_images, learned=learned,
+                        options.workers, progress, frame_pairs=frame_pairs,
+                        images=track_images, learned=learned,
                         appearance_check=options.appearance_check, checked=checked)
     return TrackRun(result, config, *refined, camera_checked, checked[0] if checked else None)
 

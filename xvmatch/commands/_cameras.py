@@ -151,6 +151,12 @@ def note_camera_check(check, quiet: bool, prefix: str = "") -> None:
         print(f"{prefix}{check.message()}", file=sys.stderr)
 
 
+def line_printer(quiet: bool) -> Callable[[str, bool], None]:
+    """``note(line, always)``: prints the line on stderr unless ``quiet`` and not ``always``
+    (a run's notes and warnings as a library run tells them)."""
+    return lambda line, always: print(line, file=sys.stderr) if always or not quiet else None
+
+
 def note_printer(quiet: bool) -> Callable[[str], None]:
     """``say(line)``: prints ``xvmatch: note: line`` on stderr unless quiet (a run's notes,
     e.g. the lenses ``--hor-hfov auto`` chose)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from xvmatch.commands._cameras import add_top_view_arguments, check_top_view
+from xvmatch.commands._cameras import add_top_view_arguments, check_top_view, line_printer
 from xvmatch.commands._model import (
     DRAW_COMMAND,
     LEARNED_ONLY,
@@ -207,8 +207,7 @@ def _hooks(args: argparse.Namespace, hor: dict, hor_size) -> AssociationHooks:
                       truth=args.draw_truth, camera_id=args.camera_id, video=args.draw_video)
 
     return AssociationHooks(
-        note=lambda line, always: print(line, file=sys.stderr) if always or not args.quiet
-        else None,
+        note=line_printer(args.quiet),
         size_assumed=lambda: note_if_assumed(hor_size, hor, args.hor, args.quiet),
         frames=lambda n: frame_progress(n, "associate", not args.quiet),
         clips=lambda: offset_progress("", not args.quiet),

@@ -16,6 +16,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
+from xvmatch.commands._cameras import line_printer
 from xvmatch.commands._options import (
     HOR_IMAGE_SIZE,
     IMAGE_SIZE_HELP,
@@ -153,7 +154,7 @@ def resolve_offset(args: argparse.Namespace, top, hor, hor_width: float, params,
     return offset_to_apply(
         top, hor, value, auto, (args.top, hor_path or args.hor),
         lambda: offset_progress(label, not args.quiet),
-        lambda line, always: print(line, file=sys.stderr) if always or not args.quiet else None)
+        line_printer(args.quiet))
 
 
 def _cmd_offset(args: argparse.Namespace) -> int:

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from xvmatch.commands._box_reading import box_reading, read_detections, settled_hor_size
+from xvmatch.commands._cameras import add_top_view_arguments, check_top_view, line_printer
 from xvmatch.commands._model import (
     add_track_camera_arguments,
     check_write_cameras,
@@ -52,6 +53,7 @@ TRACK_COMMAND = "xvmatch track"
 EXAMPLE = (
     "xvmatch track --top seq_top.txt --hor seq_hor.txt --out tracks/\n"
     "  xvmatch track --top seq_top.txt --hor seq_hor.txt --model default --out tracks/\n"
+    "  xvmatch track --top drone.txt --hor phone.txt --top-image-size 1920x1080 --out tracks/\n"
     "  xvmatch evaluate --tracks tracks/ --top gt_top.txt --hor gt_hor.txt"
 )
 
@@ -74,8 +76,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     )
     p = add_command_parser(subparsers, "track", help_text, EXAMPLE)
     p.add_argument("--top", required=True, help="top-view detections (MOT format, ids ignored)")
-    p.add_argument("--hor", required=True,
-                   help="horizontal-view detections (MOT format, ids ignored)")
+    p.add_argument("--hor", required=True, help="horizontal-view detections (MOT, ids ignored)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (created): top.txt, hor.txt and offset.json (the offset "
                    "applied, read by evaluate --tracks), each written atomically")
@@ -89,21 +90,19 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
                    help="frames per clip, 1..1000 (default 10)")
     p.add_argument("--min-iou", type=MIN_IOU_TYPE, default=0.5,
                    help="IoU that links a box to the previous frame's, in (0, 1] (default 0.5)")
-    p.add_argument("--max-gap", type=MAX_GAP_TYPE, default=3,
-                   help="frames a tracklet may miss inside a clip and still continue, 0..1000 "
-                   "(default 3)")
+    p.add_argument("--max-gap", type=MAX_GAP_TYPE, default=3, help="frames a tracklet may miss "
+                   "inside a clip and still continue, 0..1000 (default 3)")
     p.add_argument("--c0", type=C0_TYPE, default=None,
                    help="dummy-node weight of Eq. 1, in [0, 1] (default 0.1, 0.02 with the "
                    "learned weights; the paper's 0.2)")
-    p.add_argument("--sigma", type=SIGMA_TYPE, default=None,
-                   help="motion deviation scale of Eq. 15 per box height (resolution-free), in "
-                   "(0, 1000] (default 1)")
+    p.add_argument("--sigma", type=SIGMA_TYPE, default=None, help="motion deviation scale of "
+                   "Eq. 15 per box height (resolution-free), in (0, 1000] (default 1)")
     p.add_argument("--time-limit", type=TIME_LIMIT_TYPE, default=30.0,
                    help="wall-time guard per window for the MIP, in [0.01, 600] (default 30); "
                    "past it or its budget (64 added loops and 1000 HiGHS nodes a program) the "
                    "best loop-free answer found is used, with a warning")
-    p.add_argument("--seed", type=seed_value, default=0,
-                   help="seed of the spectral baseline's k-means, 0..2**32-1 (default 0)")
+    p.add_argument("--seed", type=seed_value, default=0, help="seed of the spectral baseline's "
+                   "k-means, 0..2**32-1 (default 0)")
     p.add_argument("--image-size", type=HOR_IMAGE_SIZE, default=None, metavar="WxH",
                    help=IMAGE_SIZE_HELP + "; with --hor-images it must agree with them")
     add_offset_options(p, "", default="auto")
@@ -116,6 +115,7 @@ def add_track_parser(subparsers) -> argparse.ArgumentParser:
     _add_appearance_options(p)
     add_draw_arguments(p, video=True)
     add_spatial_options(p)
+    add_top_view_arguments(p.add_argument_group("an oblique top view (without --cameras)"))
     p.set_defaults(func=_cmd_track)
     return p
 
@@ -151,8 +151,7 @@ def _add_appearance_options(p: argparse.ArgumentParser) -> None:
 
 def _read_checked(args: argparse.Namespace):
     """``(top, hor, camera_rows, out)``: the boxes, wearer's rows and output folder, all checked."""
-    top = read_detections(args.top, box_reading(args))
-    hor = read_detections(args.hor, box_reading(args))
+    top, hor = (read_detections(path, box_reading(args)) for path in (args.top, args.hor))
     camera_rows = None
     if args.camera_id is not None:
         camera_rows = top.rows_with_id(args.camera_id)
@@ -165,9 +164,9 @@ def _read_checked(args: argparse.Namespace):
         [Output("--out", out, folder=True, files=("top.txt", "hor.txt", OFFSET_FILE)),
          Output("--draw", args.draw, folder=True), Output("--draw-video", args.draw_video),
          *check_write_cameras(model_args(args))],
-        [Input("--top", args.top), Input("--hor", args.hor),
-         *image_inputs(args), Input("--cameras", args.cameras),
-         Input("--model", None if args.model == "default" else args.model)],
+        [Input("--top", args.top), Input("--hor", args.hor), *image_inputs(args),
+         Input("--cameras", args.cameras), Input("--model", None if args.model == "default"
+                                                 else args.model)],
     )
     check_own_folder(out, TRACK_COMMAND)
     if args.draw is not None:
@@ -178,6 +177,7 @@ def _read_checked(args: argparse.Namespace):
 def _run_options(args: argparse.Namespace, params, weights: str, model):
     """The :class:`~xvmatch.inference.tracks.track_run.TrackRunOptions` of the options, for the
     search's ``params``, the cross-view ``weights`` settled and the ``model`` opened (or None)."""
+    from xvmatch.inference.tracks.track_ground import GroundChoice
     from xvmatch.inference.tracks.track_run import TrackRunOptions, track_weights
     from xvmatch.inference.tracks.tracking import TrackConfig
 
@@ -188,46 +188,45 @@ def _run_options(args: argparse.Namespace, params, weights: str, model):
     return TrackRunOptions(
         config=config, params=params, weights=weights, model=model,
         model_name=str(args.model), top_images=args.top_images, hor_images=args.hor_images,
-        cameras=args.cameras, top_boxes=args.top,
+        cameras=args.cameras, top_boxes=args.top, hor_boxes=args.hor, ground=GroundChoice(
+            args.top_view, args.top_image_size, args.hor_hfov, args.fps),
         appearance_check=args.appearance_check == "on",
         refine_top_camera=args.refine_top_camera != "off",
         camera_check=args.camera_check != "off", fit_w1=args.w1 is None, workers=args.workers)
 
 
-def _notes(quiet: bool):
-    """The run's ``note(line, always)``: the line on stderr, unless quiet and not always."""
-    return lambda line, always: print(line, file=sys.stderr) if always or not quiet else None
-
-
 def _cmd_track(args: argparse.Namespace) -> int:
     from xvmatch.formats.detection_rows import write_track_rows
     from xvmatch.formats.offset_record import write_offset_record
-    from xvmatch.inference.tracks.track_run import (
-        cross_view_weights,
-        open_track_images,
-        run_tracking,
-        track_pictures,
-    )
+    from xvmatch.inference.tracks import track_run
+    from xvmatch.inference.tracks.track_ground import OBLIQUE_OFFSET, oblique_track_top
 
     start = time.perf_counter()
+    check_top_view(args)
     params = spatial_params(args)
-    weights = cross_view_weights(args.weights, args.model, args.cameras,
+    weights = track_run.cross_view_weights(args.weights, args.model, args.cameras,
                                  args.top_images is not None)
     top, hor, camera_rows, out = _read_checked(args)
     max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
     model = open_models([args.model])[0] if args.model is not None else None
     options = _run_options(args, params, weights, model)
-    with open_track_images(top.frames, hor.frames, options) as images:
+    with track_run.open_track_images(top.frames, hor.frames, options) as images:
+        oblique = args.cameras is None and oblique_track_top(
+            top.frames, hor.frames, options.ground, images.top_size, args.top)
         resolved = settled_hor_size(hor.frames, args.hor, args.image_size, images.hor_size,
-                                    args.hor_images, args.cameras, args.quiet, False, top.frames)
+                                    args.hor_images, args.cameras, args.quiet or oblique, False,
+                                    top.frames)  # the ground path says its own size
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
+        if auto := oblique and args.offset == "auto":  # the nadir search's estimate misleads
+            print(f"xvmatch: warning: {OBLIQUE_OFFSET}", file=sys.stderr)
         offset = resolve_offset(args, marked, hor.frames, resolved[0][0], params, max_offset,
-                                wearer)
-        run = run_tracking(top.frames, hor.frames, options, resolved, offset, camera_rows, images,
-                           step_progress(not args.quiet), _notes(args.quiet))
+                                wearer, 0 if auto else None)
+        run = track_run.run_tracking(top.frames, hor.frames, options, resolved, offset,
+                                     camera_rows, images, step_progress(not args.quiet),
+                                     line_printer(args.quiet))
         if args.draw is not None or args.draw_video is not None:
-            shown = track_pictures(top.frames, hor.frames, run.result, offset, images)
+            shown = track_run.track_pictures(top.frames, hor.frames, run.result, offset, images)
             draw_pictures(args.draw, args.draw_every, shown.top, shown.hor, shown.pairs,
                           shown.frames, shown.sources, resolved[0], not args.no_labels,
                           owner=f"{TRACK_COMMAND} --draw", truth=args.draw_truth,
