@@ -11,7 +11,9 @@ and refines a fixed top camera on the boxes
 and cameras) so that top frame ``t + offset`` and horizontal frame ``t`` are tracked as
 one moment (the rows keep their own frame numbers), judges the cameras
 (:mod:`xvmatch.inference.matching.camera_check`: the cross-view weights come from the boxes
-alone when they fail), takes Eq. 17's ``w1`` at
+alone when they fail), without cameras takes the frame association of a top view whose people
+stand upright from the ground maps (:mod:`xvmatch.inference.tracks.track_ground`; the nadir
+search otherwise, warned of where they stand upright all the same), takes Eq. 17's ``w1`` at
 :data:`~xvmatch.inference.tracks.track_costs.FITTED_CAMERAS_W1` when the images would enter the
 cross-view weights and the refined cameras fit the video, computes the learned matcher's
 box-only evidence (``weights="learned"``) and tracks
