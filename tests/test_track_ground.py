@@ -114,3 +114,27 @@ def test_the_holders_rows_take_one_id_past_every_row(sizes, data) -> None:
         expected = np.where(np.isin(record.ids, rows), n, record.ids)
         assert np.array_equal(marked[f].ids, expected)
         assert np.array_equal(marked[f].boxes, record.boxes)
+
+
+def test_track_guesses_the_handheld_size_on_the_ground_maps_only(tmp_path, capsys) -> None:
+    """Boxes alone that fit no CVMHAT size: on the ground-map path ``track`` guesses the handheld
+    view's size from its boxes and says so, as ``associate`` does; the search refuses, one
+    line naming ``--image-size``."""
+    from xvmatch.cli import main
+    from xvmatch.formats.mot_boxes import write_mot_boxes
+
+    scene = make_oblique_scene(ObliqueSceneConfig(top_pitch=(25.0, 45.0), overlap=(0.7, 1.0),
+                                                  hor_sizes=((1920, 1080),)),
+                               30, np.random.default_rng(3))
+    write_mot_boxes(tmp_path / "top.txt", scene.top)
+    write_mot_boxes(tmp_path / "hor.txt", scene.hor["hor1"])
+    base = ["track", "--top", str(tmp_path / "top.txt"), "--hor", str(tmp_path / "hor.txt"),
+            "--offset", "0", "--hor-hfov", "70", "--fps", "10"]
+    capsys.readouterr()
+    assert main([*base, "--out", str(tmp_path / "ground")]) == 0
+    err = capsys.readouterr().err
+    assert "hor.txt: its images taken as" in err and "top view: oblique, tilt" in err, err
+    assert (tmp_path / "ground" / "hor.txt").read_text()
+    assert main([*base, "--top-view", "nadir", "--out", str(tmp_path / "nadir")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--image-size WxH" in lines[0], lines

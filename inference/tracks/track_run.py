@@ -35,7 +35,12 @@ import numpy as np
 
 from xvmatch.cues.box_motion import jump_warning
 from xvmatch.cues.spatial_matching import SpatialParams
-from xvmatch.formats.box_image_size import check_boxes_in_image, runs_past_borders
+from xvmatch.formats.box_image_size import (
+    UNKNOWN,
+    check_boxes_in_image,
+    runs_past_borders,
+    unknown_size_error,
+)
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, shift_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
@@ -387,6 +392,8 @@ def _ground_pairs(top: Mapping, hor: Mapping, options: TrackRunOptions,
     pairs = ground_frame_pairs(top, hor, hor_size, options.ground, images.top_size, camera_rows,
                                (options.top_boxes, options.hor_boxes), options.workers, note)
     if pairs is None:
+        if hor_size[1] == UNKNOWN:  # guessed for this path only (the command's defer)
+            raise unknown_size_error(hor, options.hor_boxes)
         if (said := upright_top_warning(
                 top, "track's cross-view search", "its ids across the views",
                 "give --cameras (the views' calibrated cameras, with --model), or --top-view "

@@ -154,13 +154,14 @@ def note_if_assumed(resolved: tuple[tuple[int, int], str], hor: Mapping,
 def settled_hor_size(hor: Mapping, hor_path: str, image_size: tuple[int, int] | None,
                      images_size: tuple[int, int] | None = None, images: str | None = None,
                      cameras: str | None = None, quiet: bool = False,
-                     ids: bool = True, top: Mapping | None = None
+                     ids: bool = True, top: Mapping | None = None, defer: bool = False
                      ) -> tuple[tuple[int, int], str]:
     """The horizontal image size of ``hor`` (read from ``hor_path``) and where it comes from:
     ``image_size`` (``--image-size``), the size of the horizontal ``images`` (None without) or
     else the ``cameras``' ego camera, which must agree
     (:func:`~xvmatch.formats.box_image_size.resolve_size`; with the run's ``top`` view, whether
-    boxes run on past the borders read from both files); said when assumed."""
+    boxes run on past the borders read from both files; ``defer``: boxes alone that do not fit
+    CVMHAT's size guessed, for the ground-map path); said when assumed."""
     from xvmatch.formats.box_image_size import resolve_size, runs_past_borders
 
     given = [] if image_size is None else [(image_size, "--image-size")]
@@ -171,7 +172,7 @@ def settled_hor_size(hor: Mapping, hor_path: str, image_size: tuple[int, int] | 
 
         given.append(ego_camera_size(cameras))
     past = None if top is None else runs_past_borders(top, hor)
-    resolved = resolve_size(hor, hor_path, given, ids=ids, past=past)
+    resolved = resolve_size(hor, hor_path, given, ids=ids, defer=defer, past=past)
     note_if_assumed(resolved, hor, hor_path, quiet)
     return resolved
 

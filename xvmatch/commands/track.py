@@ -215,7 +215,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
             top.frames, hor.frames, options.ground, images.top_size, args.top)
         resolved = settled_hor_size(hor.frames, args.hor, args.image_size, images.hor_size,
                                     args.hor_images, args.cameras, args.quiet or oblique, False,
-                                    top.frames)  # the ground path says its own size
+                                    top.frames, oblique)  # the ground path: its own size
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         if auto := oblique and args.offset == "auto":  # the nadir search's estimate misleads
