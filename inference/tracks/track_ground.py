@@ -135,8 +135,9 @@ def ground_frame_pairs(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBox
     pairs = oblique_pairs(marked, hor, options, note or (lambda line, always: None), OVER_TIME)
     if pairs is None:
         return None
-    rows = {}
+    rows: dict[int, list[tuple[int, int]]] = {}
     for f, frame_pairs in pairs.items():  # the holder's id back to its row
-        row = dict(zip(marked[f].ids.tolist(), top[f].ids.tolist(), strict=True))
+        row = (dict(zip(marked[f].ids.tolist(), top[f].ids.tolist(), strict=True))
+               if frame_pairs else {})
         rows[f] = [(row[a], b) for a, b in frame_pairs]
     return rows
