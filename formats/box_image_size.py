@@ -72,6 +72,7 @@ __all__ = [
     "runs_past_borders",
     "size_guess_how",
     "unknown_size_error",
+    "upright_aspect",
     "upright_size_guess",
 ]
 
@@ -346,16 +347,23 @@ def median_aspect(frames: Mapping) -> float | None:
     return float(np.median(b[:, 3] / np.maximum(b[:, 2], 1e-9)))
 
 
-def upright_size_guess(frames: Mapping, past: bool | None = None
-                       ) -> tuple[float, tuple[int, int] | None] | None:
-    """For a view whose size is not given: None where its people do not stand upright (median
-    height over width below :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`, or no
-    boxes: a view looking down, read as the ground); else that median and the size guessed for
-    it, :func:`guess_image_size` (``past`` as it takes it; None: no size holds the boxes)."""
+def upright_aspect(frames: Mapping) -> float | None:
+    """:func:`median_aspect` where the view's people stand upright (at least
+    :data:`~xvmatch.geometry.people_calibration.STEEP_ASPECT`: an oblique camera); None where
+    they do not or there are no boxes (a view looking down)."""
     from xvmatch.geometry.people_calibration import STEEP_ASPECT  # scipy: not at start-up
 
     aspect = median_aspect(frames)
-    if aspect is None or aspect < STEEP_ASPECT:
+    return None if aspect is None or aspect < STEEP_ASPECT else aspect
+
+
+def upright_size_guess(frames: Mapping, past: bool | None = None
+                       ) -> tuple[float, tuple[int, int] | None] | None:
+    """For a view whose size is not given: None where its people do not stand upright
+    (:func:`upright_aspect`: a view looking down, read as the ground); else their median
+    aspect and the size guessed for it, :func:`guess_image_size` (``past`` as it takes it;
+    None: no size holds the boxes)."""
+    if (aspect := upright_aspect(frames)) is None:
         return None
     return aspect, guess_image_size(frames, past)
 

@@ -292,7 +292,8 @@ def oblique_top(top: Mapping, options: AssociationOptions, hor: Mapping) -> obje
 
 
 def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
-                  note: Note = _no_note, over_time: str | None = None) -> Pairs | None:
+                  note: Note = _no_note, over_time: str | None = None,
+                  calibration: object | None = None) -> Pairs | None:
     """The pairs of the ground-map association when the top view is oblique (forced, or found
     so by ``auto``), else None (the nadir path); tells ``note`` the one line saying what was
     assumed (and, with ``hor_hfov`` ``auto``, one saying the lens chosen). In video mode the
@@ -302,7 +303,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
     (or not known: boxes that do not fit it) is guessed from its boxes too
     (:func:`~xvmatch.formats.box_image_size.ground_path_hor_size`), with a note (the CVMHAT
     size kept, where its boxes fit it, said too). ``over_time``: how the caller keeps the
-    pairs over time, said in place of the mode (``track``'s tracker)."""
+    pairs over time, said in place of the mode (``track``'s tracker); ``calibration``: the top
+    camera as :func:`oblique_top` calibrated it on these views, not calibrated again."""
     from xvmatch.formats.box_image_size import (
         check_boxes_in_image,
         ground_path_hor_size,
@@ -328,7 +330,8 @@ def oblique_pairs(top: Mapping, hor: Mapping, options: AssociationOptions,
                                       consensus=options.video, seed=0,
                                       workers=options.workers, camera_id=options.camera_id)
     try:
-        run = run_top_view(top, hor, ground, options.top_view, name=options.top_boxes)
+        run = run_top_view(top, hor, ground, options.top_view, name=options.top_boxes,
+                           calibration=calibration)
     except CalibrationError as error:
         if options.top_image_size:
             raise

@@ -1031,14 +1031,15 @@ def _pairs_under(order: list[int], tops: list, hors: list, sizes: list, scale: f
 
 
 def run_top_view(top: Mapping, hor: Mapping, options: GroundAssociationOptions,
-                 top_view: str = "auto", name: str = "the top view") -> GroundAssociation | None:
-    """``--top-view auto|oblique``: the top camera calibrated from its people, then this run;
-    None when ``auto`` finds the top view looking straight down (today's nadir path serves
-    it)."""
+                 top_view: str = "auto", name: str = "the top view",
+                 calibration: PeopleCalibration | None = None) -> GroundAssociation | None:
+    """``--top-view auto|oblique``: the top camera calibrated from its people (or
+    ``calibration``, made so by the caller on the same boxes), then this run; None when
+    ``auto`` finds the top view looking straight down (today's nadir path serves it)."""
     if top_view not in ("auto", "oblique"):
         raise ValueError(f"top_view must be auto or oblique here, got {top_view!r}")
-    calib = top_calibration(top, options.top_size, options.seed, name, options.consensus,
-                            spread="later")  # measured where told: not for a tilting camera
+    calib = calibration or top_calibration(top, options.top_size, options.seed, name,
+                                           options.consensus, spread="later")  # told: measured
     if calib.kind == "nadir" and top_view == "auto":
         return None
     return run_ground_association(top, hor, options, calibration=calib)

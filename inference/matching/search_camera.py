@@ -83,11 +83,9 @@ def upright_top_warning(top: Mapping, search: str, what: str, instead: str,
     ``search`` reads as a drone looking straight down, so ``what`` it gives may be wrong, and
     what to give ``instead``; None where they do not (a nadir view, no boxes). On issue 67's
     real low drones the search paired 9.7 CVIDF1."""
-    from xvmatch.formats.box_image_size import median_aspect
-    from xvmatch.geometry.people_calibration import STEEP_ASPECT  # scipy: not at start-up
+    from xvmatch.formats.box_image_size import upright_aspect
 
-    aspect = median_aspect(top)
-    if aspect is None or aspect < STEEP_ASPECT:
+    if (aspect := upright_aspect(top)) is None:
         return None
     return (f"xvmatch: {level}: the top view's people stand upright (boxes {aspect:.1f} times as "
             f"tall as wide): an oblique camera, which {search} reads as a drone looking straight "

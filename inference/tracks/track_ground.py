@@ -13,12 +13,13 @@ along such tracks kept 9-50 % of the right pairs, frame by frame 95 % (precision
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from xvmatch.formats.mot_boxes import FrameBoxes
+from xvmatch.inference.matching.association_run import Note
 
 __all__ = ["OBLIQUE_OFFSET", "GroundChoice", "ground_frame_pairs", "oblique_track_top",
            "with_wearer"]
@@ -29,9 +30,6 @@ OBLIQUE_OFFSET = ("--offset auto estimates the offset with the nadir search, whi
 
 OVER_TIME = "each frame on its own, the tracker joining them over time"
 """How ``track`` keeps this path's pairs over time, said in its note."""
-
-Note = Callable[[str, bool], None]
-"""``note(line, always)``, as :data:`~xvmatch.inference.tracks.track_run.Note`."""
 
 
 @dataclass(frozen=True)
@@ -72,11 +70,10 @@ def _association_options(top: Mapping[int, FrameBoxes], hor_size: tuple[tuple[in
     top images' size ``top_size`` serves only where the top view's people stand upright, as
     ``associate`` guesses a size only for them: a nadir drone's squat boxes, given a size, can
     fit a tilted camera (a 20-frame render of one, 46 degrees)."""
-    from xvmatch.formats.box_image_size import median_aspect
-    from xvmatch.geometry.people_calibration import STEEP_ASPECT
+    from xvmatch.formats.box_image_size import upright_aspect
     from xvmatch.inference.matching.association_run import AssociationOptions
 
-    if top_size is not None and (median_aspect(top) or 0.0) < STEEP_ASPECT:
+    if top_size is not None and upright_aspect(top) is None:
         top_size = None
     return AssociationOptions(hor_size=hor_size, camera_id=camera_id, workers=workers,
                               top_boxes=names[0], hor_boxes=names[1], top_view=choice.top_view,
@@ -86,18 +83,20 @@ def _association_options(top: Mapping[int, FrameBoxes], hor_size: tuple[tuple[in
 
 def oblique_track_top(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes],
                       choice: GroundChoice, top_size: tuple[int, int] | None = None,
-                      name: str = "the top-view boxes") -> bool:
-    """Whether the ground-map path takes the top view (forced, or its people calibrate it as
-    an oblique camera; ``top_size``: its images' size, or None); says nothing. For what must
-    be settled before the run, as the offset, which the nadir search estimates."""
+                      name: str = "the top-view boxes") -> object | None:
+    """The top camera calibrated from its people where the ground-map path takes the top view
+    (forced, or found oblique; ``top_size``: its images' size, or None), else None; says
+    nothing. For what must be settled before the run, as the offset, which the nadir search
+    estimates; :func:`ground_frame_pairs` of the same views takes it rather than calibrating
+    again."""
     from xvmatch.formats.box_image_size import CVMHAT_SIZE
     from xvmatch.inference.matching.association_run import oblique_top
 
     if choice.top_view == "nadir":
-        return False
+        return None
     options = _association_options(top, (CVMHAT_SIZE, "--image-size"), choice, top_size,
                                    (name, ""), 1)
-    return oblique_top(top, options, hor) is not None
+    return oblique_top(top, options, hor)
 
 
 def ground_frame_pairs(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBoxes],
@@ -106,7 +105,8 @@ def ground_frame_pairs(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBox
                        wearer_rows: Sequence[int] | np.ndarray | None = None,
                        names: tuple[str, str] = ("the top-view boxes",
                                                  "the horizontal-view boxes"),
-                       workers: int = 1, note: Note | None = None
+                       workers: int = 1, note: Note | None = None,
+                       calibration: object | None = None
                        ) -> dict[int, list[tuple[int, int]]] | None:
     """``{frame: [(top row, horizontal row)]}`` of the ground-map path where it takes the top
     view (``associate``'s pairs frame by frame), else None (the nadir search's view).
@@ -121,6 +121,8 @@ def ground_frame_pairs(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBox
         names: the box files (messages).
         workers: processes for the lens candidates (the same pairs for any number).
         note: told the path's lines (what it assumed, the lens, the rate).
+        calibration: the top camera of :func:`oblique_track_top` on these same views, or
+            None (calibrated here).
 
     Raises:
         ValueError: a top box outside the size given, a top view forced oblique that its
@@ -132,7 +134,8 @@ def ground_frame_pairs(top: Mapping[int, FrameBoxes], hor: Mapping[int, FrameBox
         return None
     marked, camera_id = with_wearer(top, wearer_rows)
     options = _association_options(top, hor_size, choice, top_size, names, workers, camera_id)
-    pairs = oblique_pairs(marked, hor, options, note or (lambda line, always: None), OVER_TIME)
+    pairs = oblique_pairs(marked, hor, options, note or (lambda line, always: None), OVER_TIME,
+                          calibration)
     if pairs is None:
         return None
     rows: dict[int, list[tuple[int, int]]] = {}

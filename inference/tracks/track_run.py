@@ -28,7 +28,7 @@ that supply each input (``--model``, ``--cameras``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -44,6 +44,7 @@ from xvmatch.formats.box_image_size import (
 from xvmatch.formats.camera_frames import CameraFrames
 from xvmatch.formats.mot_boxes import FrameBoxes, align_frames, shift_frames
 from xvmatch.inference.matching.appearance_check import AppearanceCheck
+from xvmatch.inference.matching.association_run import Note
 from xvmatch.inference.matching.camera_check import CameraCheck, check_run_cameras
 from xvmatch.inference.matching.camera_refinement import CameraRefinement, refine_run_cameras
 from xvmatch.inference.matching.learned_association import LearnedMatcher
@@ -84,10 +85,6 @@ __all__ = [
 CROSS_VIEW_WEIGHTS = ("learned", "handcrafted")
 """Where the cross-view weights (Eq. 13) come from: the learned matcher's box-only costs, or the
 spatial-distribution search's pairs."""
-
-Note = Callable[[str, bool], None]
-"""``note(line, always)``: told each line a run has to say as it goes; ``always``: also with
-``--quiet`` (a camera turned, cameras left out)."""
 
 
 def cross_view_weights(weights: str | None, model: str | None, cameras: str | None,
@@ -382,15 +379,18 @@ def _fitted_config(options: TrackRunOptions, refinement: CameraRefinement | None
 
 def _ground_pairs(top: Mapping, hor: Mapping, options: TrackRunOptions,
                   hor_size: tuple[tuple[int, int], str], camera_rows, images: OpenTrackImages,
-                  note: Note) -> dict[int, list[tuple[int, int]]] | None:
+                  note: Note, calibration: object | None = None
+                  ) -> dict[int, list[tuple[int, int]]] | None:
     """The frame association of the ground-map path where the top view is oblique and no
     cameras are given (``top`` and ``hor`` aligned; :func:`~xvmatch.inference.tracks.
-    track_ground.ground_frame_pairs`), its lines told to ``note``; else None, with a warning
-    where the top view's people stand upright all the same (the nadir search misreads them)."""
+    track_ground.ground_frame_pairs`; ``calibration``: the top camera already calibrated on
+    these views), its lines told to ``note``; else None, with a warning where the top view's
+    people stand upright all the same (the nadir search misreads them)."""
     if options.cameras is not None:
         return None
     pairs = ground_frame_pairs(top, hor, hor_size, options.ground, images.top_size, camera_rows,
-                               (options.top_boxes, options.hor_boxes), options.workers, note)
+                               (options.top_boxes, options.hor_boxes), options.workers, note,
+                               calibration)
     if pairs is None:
         if hor_size[1] == UNKNOWN:  # guessed for this path only (the command's defer)
             raise unknown_size_error(hor, options.hor_boxes)
@@ -420,6 +420,7 @@ def run_tracking(
     images: OpenTrackImages | None = None,
     progress: Progress | None = None,
     note: Note | None = None,
+    calibration: object | None = None,
 ) -> TrackRun:
     """Track the people of both views with one id per person across the views.
 
@@ -438,6 +439,9 @@ def run_tracking(
         note: told each line to say as the run goes (:data:`Note`), among them a warning for a
             view whose boxes jump like independent pictures'
             (:func:`~xvmatch.cues.box_motion.jump_warning`); None: said nowhere.
+        calibration: the top camera as :func:`~xvmatch.inference.tracks.track_ground.
+            oblique_track_top` calibrated it on ``top`` and ``hor`` as given, or None; taken
+            at offset 0 (the views then as tracked) rather than calibrated again.
 
     Returns:
         The :class:`TrackRun`.
@@ -448,7 +452,7 @@ def run_tracking(
     if images is None:
         with open_track_images(top, hor, options) as opened:
             return run_tracking(top, hor, options, hor_size, offset, camera_rows, opened,
-                                progress, note)
+                                progress, note, calibration)
     note = note or _said_nowhere
     for view, frames in (("top", top), ("horizontal", hor)):
         if said := jump_warning(view, frames):
@@ -456,7 +460,8 @@ def run_tracking(
     cameras, refinement = _open_cameras(top, hor, options, hor_size, offset, images, note)
     refined = cameras, refinement  # to write: also when the check leaves them out
     top, hor, track_images, cameras = _aligned(top, hor, images.images, cameras, offset)
-    frame_pairs = _ground_pairs(top, hor, options, hor_size, camera_rows, images, note)
+    frame_pairs = _ground_pairs(top, hor, options, hor_size, camera_rows, images, note,
+                                None if offset else calibration)
     cameras, refinement, camera_checked = _checked_cameras(top, hor, options, hor_size[0],
                                                            cameras, refinement, note)
     config = _fitted_config(options, refinement, track_images, note)

@@ -205,17 +205,18 @@ def _cmd_track(args: argparse.Namespace) -> int:
     check_top_view(args)
     params = spatial_params(args)
     weights = track_run.cross_view_weights(args.weights, args.model, args.cameras,
-                                 args.top_images is not None)
+                                           args.top_images is not None)
     top, hor, camera_rows, out = _read_checked(args)
     max_offset = max_offset_of(args, top.frames, hor.frames) if args.offset == "auto" else None
     model = open_models([args.model])[0] if args.model is not None else None
     options = _run_options(args, params, weights, model)
     with track_run.open_track_images(top.frames, hor.frames, options) as images:
-        oblique = args.cameras is None and oblique_track_top(
+        calib = None if args.cameras else oblique_track_top(  # the ground path's top camera
             top.frames, hor.frames, options.ground, images.top_size, args.top)
+        oblique = calib is not None  # the ground path says its own size, and may guess it
         resolved = settled_hor_size(hor.frames, args.hor, args.image_size, images.hor_size,
                                     args.hor_images, args.cameras, args.quiet or oblique, False,
-                                    top.frames, oblique)  # the ground path: its own size
+                                    top.frames, oblique)
         positions = None if camera_rows is None else top.positions_of_id(args.camera_id)
         marked, wearer = wearer_marked(top.frames, positions)
         if auto := oblique and args.offset == "auto":  # the nadir search's estimate misleads
@@ -224,7 +225,7 @@ def _cmd_track(args: argparse.Namespace) -> int:
                                 wearer, 0 if auto else None)
         run = track_run.run_tracking(top.frames, hor.frames, options, resolved, offset,
                                      camera_rows, images, step_progress(not args.quiet),
-                                     line_printer(args.quiet))
+                                     line_printer(args.quiet), calib)
         if args.draw is not None or args.draw_video is not None:
             shown = track_run.track_pictures(top.frames, hor.frames, run.result, offset, images)
             draw_pictures(args.draw, args.draw_every, shown.top, shown.hor, shown.pairs,
