@@ -43,7 +43,10 @@ person read at 1.72 m, not at the height the top view reads for the partner it i
 with (as before :func:`~xvmatch.inference.matching.ground_association.top_sizes`);
 ``--box-noise SIGMA``: each box edge of both views moved by a normal draw of SIGMA times the
 box's height, then clipped to the image (the renders' boxes are exact; annotations and
-detectors are not, and both clip to the image).
+detectors are not, and both clip to the image); ``--box-misses RATE S``: each person missed in
+both views RATE of the time, in runs of S seconds on average
+(:func:`~xvmatch.datasets.oblique_scenes.thinned`: a detector's misses; the truth counts only
+the boxes kept).
 
 What the methods take for granted, broken on the same scenes: ``--ground-slope DEG``, the
 ground a plane sloping DEG degrees towards a drawn direction
@@ -141,6 +144,7 @@ from xvmatch.datasets.oblique_scenes import (
     make_oblique_scene,
     pitch_drifted,
     sloped,
+    thinned,
     top_distorted,
     top_rolled,
 )
@@ -380,6 +384,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="move each box edge, in both views, by a normal draw of SIGMA times "
                    "the box's height, clipped to the image (default 0: the renders' exact "
                    "boxes)")
+    p.add_argument("--box-misses", type=float, nargs=2, default=None, metavar=("RATE", "S"),
+                   help="miss each person, in both views, RATE of the time in runs of S "
+                   "seconds on average, as a detector misses (default: none missed)")
     p.add_argument("--camera-id", action="store_true",
                    help="the from-people rows are told the top-view id of the handheld camera's "
                    "holder, as associate --camera-id ID (the camera placed where the top view "
@@ -452,6 +459,10 @@ def main(argv: list[str] | None = None) -> int:
             top, hor = (jittered(v, args.box_noise, noise, c.image_size,
                                  clip=args.box_extent == "visible") for v, c in
                         ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
+        if args.box_misses is not None:  # its own generator, as the noise's
+            misses = np.random.default_rng([args.seed, k, 5])
+            top, hor = (thinned(v, args.box_misses[0], max(1.0, args.box_misses[1] * config.fps),
+                                misses) for v in (top, hor))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         holder = int(scene.groups["holders"][0])  # its scrambled id, where the top view has one
         camera_id = next((a for a, b in top_back.items() if b == holder), None) if \
