@@ -463,6 +463,9 @@ def main(argv: list[str] | None = None) -> int:
             misses = np.random.default_rng([args.seed, k, 5])
             top, hor = (thinned(v, args.box_misses[0], max(1.0, args.box_misses[1] * config.fps),
                                 misses) for v in (top, hor))
+        seen = tuple(  # the boxes the methods see, the scene's ids: what CVIDF1 scores
+            {f: FrameBoxes(f, np.array([back[int(i)] for i in r.ids], np.int64), r.boxes)
+             for f, r in v.items()} for v, back in ((top, top_back), (hor, hor_back)))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         holder = int(scene.groups["holders"][0])  # its scrambled id, where the top view has one
         camera_id = next((a for a, b in top_back.items() if b == holder), None) if \
@@ -559,7 +562,7 @@ def main(argv: list[str] | None = None) -> int:
             s = _score(pred, truth)
             totals[name] += s
             back = {f: [(top_back[a], hor_back[b]) for a, b in pred.get(f, [])] for f in frames}
-            per_scene[-1][3][name] = count_sequence(back, scene.top, scene.hor["hor1"],
+            per_scene[-1][3][name] = count_sequence(back, *seen,
                                                     frames=frames)
             counts[name] += per_scene[-1][3][name]
             line.append(f"{2 * s[0] / max(1, 2 * s[0] + s[1] + s[2]):.3f}")
