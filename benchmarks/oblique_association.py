@@ -45,8 +45,8 @@ with (as before :func:`~xvmatch.inference.matching.ground_association.top_sizes`
 box's height, then clipped to the image (the renders' boxes are exact; annotations and
 detectors are not, and both clip to the image); ``--box-misses RATE S``: each person missed in
 both views RATE of the time, in runs of S seconds on average
-(:func:`~xvmatch.datasets.oblique_scenes.thinned`: a detector's misses; the truth counts only
-the boxes kept).
+(:class:`~xvmatch.datasets.detector_noise.DetectorNoise` ``miss_run``: a detector's misses; the
+truth counts only the boxes kept).
 
 What the methods take for granted, broken on the same scenes: ``--ground-slope DEG``, the
 ground a plane sloping DEG degrees towards a drawn direction
@@ -137,6 +137,7 @@ import numpy as np
 
 from xvmatch.cues import ground_registration as gr
 from xvmatch.cues.spatial_search import associate_sequence
+from xvmatch.datasets.detector_noise import DetectorNoise, apply_detector_noise
 from xvmatch.datasets.oblique_scenes import (
     BOX_EXTENTS,
     ObliqueSceneConfig,
@@ -144,7 +145,6 @@ from xvmatch.datasets.oblique_scenes import (
     make_oblique_scene,
     pitch_drifted,
     sloped,
-    thinned,
     top_distorted,
     top_rolled,
 )
@@ -459,10 +459,12 @@ def main(argv: list[str] | None = None) -> int:
             top, hor = (jittered(v, args.box_noise, noise, c.image_size,
                                  clip=args.box_extent == "visible") for v, c in
                         ((top, scene.top_cameras[0]), (hor, scene.hor_cameras["hor1"][0])))
-        if args.box_misses is not None:  # its own generator, as the noise's
-            misses = np.random.default_rng([args.seed, k, 5])
-            top, hor = (thinned(v, args.box_misses[0], max(1.0, args.box_misses[1] * config.fps),
-                                misses) for v in (top, hor))
+        if args.box_misses is not None:  # its own draws, as the noise's
+            misses = DetectorNoise(0.0, args.box_misses[0], 0.0,
+                                   max(1.0, args.box_misses[1] * config.fps))
+            top, hor = (apply_detector_noise(v, c.image_size, misses, 1000 * args.seed + k, n)
+                        for v, c, n in ((top, scene.top_cameras[0], "top"),
+                                        (hor, scene.hor_cameras["hor1"][0], "hor")))
         seen = tuple(  # the boxes the methods see, the scene's ids: what CVIDF1 scores
             {f: FrameBoxes(f, np.array([back[int(i)] for i in r.ids], np.int64), r.boxes)
              for f, r in v.items()} for v, back in ((top, top_back), (hor, hor_back)))

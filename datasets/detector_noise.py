@@ -38,11 +38,16 @@ class DetectorNoise:
             ``exp(N(0, jitter))`` (log-normal, so sizes stay positive; ~``1 +- jitter``).
         miss_rate: probability that a box is dropped, independently per box.
         false_per_frame: Poisson mean of the false boxes added per frame (and view).
+        miss_run: None (the default), each box missed on its own; else the mean length, in
+            frames, of a run in which one person is missed (behind a passer-by, blurred,
+            turned away), each id's frames a two-state chain missed ``miss_rate`` of the time
+            on average, its runs of geometric length.
     """
 
     jitter: float = 0.05
     miss_rate: float = 0.10
     false_per_frame: float = 0.3
+    miss_run: float | None = None
 
     def __post_init__(self) -> None:
         if not self.jitter >= 0:
@@ -53,6 +58,27 @@ class DetectorNoise:
             raise ValueError(
                 f"DetectorNoise.false_per_frame must be >= 0, got {self.false_per_frame}"
             )
+        if self.miss_run is not None and not self.miss_run >= 1:
+            raise ValueError(f"DetectorNoise.miss_run must be None or >= 1 frame, got "
+                             f"{self.miss_run}")
+
+
+def _missed(draws: np.ndarray, ids: np.ndarray, noise: DetectorNoise) -> np.ndarray:
+    """``(M,)`` the boxes a detector misses, from one uniform draw each (boxes frame after
+    frame): each with probability ``miss_rate``, or, with ``miss_run``, each id's a two-state
+    chain that leaves a miss with probability ``1 / miss_run`` a frame and enters one so that
+    ``miss_rate`` of its frames are missed (a new id starts in that steady state)."""
+    if noise.miss_run is None or noise.miss_rate >= 1.0:
+        return draws < noise.miss_rate
+    leave = 1.0 / noise.miss_run
+    enter = min(1.0, noise.miss_rate / (1.0 - noise.miss_rate) * leave)
+    state: dict[int, bool] = {}
+    out = np.empty(len(draws), bool)
+    for k, (i, d) in enumerate(zip(ids.tolist(), draws.tolist(), strict=True)):
+        was = state.get(i)
+        out[k] = state[i] = (d < noise.miss_rate if was is None else
+                             d >= leave if was else d < enter)
+    return out
 
 
 def _jitter_and_drop(
@@ -80,7 +106,8 @@ def _jitter_and_drop(
     # x' = (x + w/2 + shift w) - w'/2, written so that zero jitter returns x exactly.
     corner = boxes[:, :2] + 0.5 * boxes[:, 2:] * (1.0 - scale) + shift * boxes[:, 2:]
     noisy = np.concatenate([corner, size], axis=1)
-    kept = (rng.random(n_real) >= noise.miss_rate) | np.isin(ids, np.fromiter(keep_ids, np.int64))
+    kept = ~_missed(rng.random(n_real), ids, noise) | np.isin(ids, np.fromiter(keep_ids,
+                                                                              np.int64))
     return noisy, kept
 
 
@@ -134,7 +161,8 @@ def apply_detector_noise(
     """Jitter, drop and add boxes like a detector would, deterministically.
 
     Per box: the centre and both side lengths are perturbed (:class:`DetectorNoise`), then the box
-    is dropped with probability ``miss_rate`` unless its id is in ``keep_ids`` (e.g. the top-view
+    is dropped with probability ``miss_rate`` (or in runs, ``miss_run``) unless its id is in
+    ``keep_ids`` (e.g. the top-view
     wearer box, id 0, which is an input when the camera location is given). Per frame:
     ``Poisson(false_per_frame)`` false boxes are added after the real ones; their sizes are those
     of real boxes of the same frame drawn at random (of the whole input when the frame has none),

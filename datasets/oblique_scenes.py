@@ -90,7 +90,6 @@ __all__ = [
     "pitch_drifted",
     "project_view",
     "sloped",
-    "thinned",
     "top_distorted",
     "top_rolled",
     "write_oblique_scene",
@@ -466,34 +465,6 @@ def jittered(frames: dict[int, FrameBoxes], sigma: float, rng: np.random.Generat
         x0, y0 = np.minimum(x0, size[0] - 2.0), np.minimum(y0, size[1] - 2.0)
         w, h = np.maximum(x1 - x0, 2.0), np.maximum(y1 - y0, 2.0)
         out[f] = FrameBoxes(f, rec.ids, np.column_stack([x0, y0, w, h]))
-    return out
-
-
-def thinned(frames: dict[int, FrameBoxes], rate: float, gap_frames: float,
-            rng: np.random.Generator) -> dict[int, FrameBoxes]:
-    """One view's boxes ``{frame: FrameBoxes}`` with each person missed in runs, as a detector
-    misses (behind a passer-by, blurred, turned away): each id's frames a two-state chain,
-    missed ``rate`` of the time on average, a miss lasting ``gap_frames`` frames on average
-    (a geometric length). Frames stay, empty where all are missed."""
-    if not 0.0 <= rate < 1.0 or gap_frames < 1.0:
-        raise ValueError(f"thinned: rate must be in [0, 1) and gap_frames at least 1, got "
-                         f"{rate!r}, {gap_frames!r}")
-    leave = 1.0 / gap_frames  # a miss ends; one starts so that `rate` of the frames are missed
-    enter = min(1.0, rate / (1.0 - rate) * leave)
-    missed: dict[int, bool] = {}
-    out = {}
-    for f in sorted(frames):
-        rec = frames[f]
-        ids = np.asarray(rec.ids).reshape(-1)
-        keep = np.ones(len(ids), bool)
-        draws = rng.random(len(ids))
-        for k, i in enumerate(ids.tolist()):  # a new id starts in its chain's steady state
-            was = missed.get(i)
-            now = (draws[k] < rate) if was is None else (
-                draws[k] >= leave if was else draws[k] < enter)
-            missed[i] = bool(now)
-            keep[k] = not now
-        out[f] = FrameBoxes(f, ids[keep], np.asarray(rec.boxes, float).reshape(-1, 4)[keep])
     return out
 
 

@@ -126,3 +126,31 @@ def test_bad_input_is_rejected():
         )
     with pytest.raises(ValueError, match="miss_rate"):
         DetectorNoise(miss_rate=1.5)
+
+
+def test_misses_in_runs_at_the_rate_asked():
+    """With ``miss_run`` a person is missed ``miss_rate`` of the time in runs about that many
+    frames long (each box on its own: runs of 1 / (1 - rate)); the boxes kept are as given,
+    the same seed draws the same misses, and a run shorter than a frame is refused."""
+    frames = _frames(2000)
+    runs = DetectorNoise(0.0, 0.25, 0.0, miss_run=10.0)
+    out = apply_detector_noise(frames, SIZE, runs, seed=3, view="hor")
+    assert _same(out, apply_detector_noise(frames, SIZE, runs, seed=3, view="hor"))
+
+    def missed_runs(out) -> tuple[float, float]:
+        seen = np.array([[i in out[f].ids for i in range(5)] for f in sorted(frames)])
+        starts = (~seen[1:] & seen[:-1]).sum() + (~seen[0]).sum()
+        return float((~seen).mean()), float((~seen).sum() / starts)
+
+    rate, length = missed_runs(out)
+    assert rate == pytest.approx(0.25, abs=0.04)
+    assert length == pytest.approx(10.0, rel=0.25)
+    alone = apply_detector_noise(frames, SIZE, DetectorNoise(0.0, 0.25, 0.0), seed=3,
+                                 view="hor")
+    assert missed_runs(alone)[1] == pytest.approx(1 / 0.75, rel=0.1)
+    for f, rec in out.items():
+        given = dict(zip(frames[f].ids.tolist(), frames[f].boxes.tolist(), strict=True))
+        assert all(given[i] == b for i, b in zip(rec.ids.tolist(), rec.boxes.tolist(),
+                                                 strict=True))
+    with pytest.raises(ValueError, match="miss_run"):
+        DetectorNoise(miss_run=0.5)

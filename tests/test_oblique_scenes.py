@@ -14,7 +14,6 @@ from xvmatch.datasets.oblique_scenes import (
     pitch_drifted,
     project_view,
     sloped,
-    thinned,
     top_distorted,
     top_rolled,
     write_oblique_scene,
@@ -537,32 +536,6 @@ def test_bad_input():
         ObliqueSceneConfig(n_hor=0)
     with pytest.raises(ValueError, match="n_frames"):
         make_oblique_scene(CONFIG, 0, np.random.default_rng(0))
-
-
-def test_a_detectors_misses_come_in_runs_at_the_rate_asked(clips) -> None:
-    """``thinned`` drops about ``rate`` of each view's boxes, in runs about ``gap_frames``
-    long, keeps the boxes it does not drop as they were, and draws the same misses from the
-    same seed."""
-    top = clips[0].top
-    kept = thinned(top, 0.25, 10.0, np.random.default_rng(3))
-    assert sorted(kept) == sorted(top)
-    boxes = sum(len(r.ids) for r in top.values())
-    assert abs(1 - sum(len(r.ids) for r in kept.values()) / boxes - 0.25) < 0.08
-    runs, missing = 0, 0
-    for i in {int(j) for r in top.values() for j in r.ids}:
-        seen = [int(i in kept[f].ids) for f in sorted(top) if i in top[f].ids]
-        missing += seen.count(0)
-        runs += sum(1 for a, b in zip([1, *seen], seen, strict=False) if a and not b)
-    assert 5 < missing / max(runs, 1) < 20
-    for f, rec in kept.items():
-        original = dict(zip(top[f].ids.tolist(), top[f].boxes.tolist(), strict=True))
-        assert all(original[i] == b for i, b in zip(rec.ids.tolist(), rec.boxes.tolist(),
-                                                     strict=True))
-    again = thinned(top, 0.25, 10.0, np.random.default_rng(3))
-    assert all(np.array_equal(again[f].ids, kept[f].ids) for f in kept)
-    assert thinned(top, 0.0, 1.0, np.random.default_rng(0)).keys() == top.keys()
-    with pytest.raises(ValueError, match="rate"):
-        thinned(top, 1.0, 5.0, np.random.default_rng(0))
 
 
 def test_the_benchmarks_render_options_default_to_the_configs_own() -> None:
