@@ -33,7 +33,10 @@ the holder's top-view id, ``--camera-id``, it is sought near where the top view 
   the registration is consistent from frame to frame and a frame that alone is ambiguous is
   decided by its neighbours; each frame is also offered its neighbours' hypotheses, carried
   onto its map and scored in it (:func:`carried`), so a pose that one frame's :data:`KEEP`
-  left out for near-duplicates of another stays on offer there; the whole clip is registered
+  left out for near-duplicates of another stays on offer there, and, in video mode where the
+  top view's tracks show people missed (:data:`MISSED_SHARE`), the poses leading the choice at
+  the frame before (:data:`LEAD`), so that the pose the choice holds stays on offer through
+  frames whose own people rank it out; the whole clip is registered
   with the top map at a few scales (:func:`register_scales`) and the best kept
   (:func:`register_with_scale`; in video mode the one whose pairs hold along the tracks,
   :func:`xvmatch.inference.matching.ground_association.register_and_pair`);
@@ -58,8 +61,9 @@ a nadir image.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -76,7 +80,9 @@ from xvmatch.geometry.people_calibration import (
 __all__ = [
     "HOLDER_RADIUS",
     "KEEP",
+    "LEAD",
     "MAP_SCALES",
+    "MISSED_SHARE",
     "RADIUS",
     "RANGE_SPREAD",
     "SCALE_FLOOR",
@@ -94,6 +100,7 @@ __all__ = [
     "hor_horizon",
     "map_motion",
     "margin_scale",
+    "missed_share",
     "on_top_map",
     "pose_hypotheses",
     "ray_distances",
@@ -131,6 +138,16 @@ KEEP = 24
 
 CARRY = 8
 """A neighbour's best hypotheses each frame is also offered (:func:`carried`)."""
+
+LEAD = 8
+"""The poses leading the choice over time at one frame (the best totals) that the next frame
+is also offered (:func:`register_sequence`)."""
+
+MISSED_SHARE = 0.1
+"""The share of the top view's people missed within their own tracks' spans (video mode,
+:func:`missed_share`) from which :func:`register_scales` offers each frame the poses leading
+at the one before: a detector's misses (the renders' boxes, every 3rd frame at 10 a second:
+0-5 % missed as annotated, 14-26 % where each person is missed a fifth of the time)."""
 
 _HEADINGS = 72
 """Headings tried per (top, horizontal) pair: every 5 degrees."""
@@ -756,7 +773,9 @@ def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarr
 
 def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.ndarray]],
                       fps: float, motions: list[np.ndarray | None] | None = None,
-                      slack: float = 1.0) -> list[FramePose]:
+                      slack: float = 1.0,
+                      rescore: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
+                      | None = None) -> list[FramePose]:
     """One pose per frame from each frame's hypotheses (``(poses, scores)``), chosen by Viterbi
     over the frames with a cost on fast jumps (module docstring); frames without hypotheses
     split the sequence into runs, each chosen on its own. With ``motions``
@@ -764,12 +783,30 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
     drifting drone), so only the handheld camera's own walk and turn pay. ``slack``: how many
     times :data:`_STEP_M` and :data:`_STEP_DEG` a second go free (more where ``fps`` was read
     from the walkers and may be too high,
-    :data:`~xvmatch.inference.matching.frame_rate.READ_RATE_SLACK`)."""
+    :data:`~xvmatch.inference.matching.frame_rate.READ_RATE_SLACK`). ``rescore(k, poses)``:
+    poses ``(K, 3)`` scored in frame ``k`` (those it keeps and their scores); with it each
+    frame is also offered the :data:`LEAD` poses that lead the choice at the frame before (its
+    best totals), carried onto its map: a pose the choice holds stays on offer through frames
+    whose people alone rank it out of their own (a detector missed people, one person shared).
+    :func:`register_scales` offers them in video mode where the top view's tracks show people
+    missed (:data:`MISSED_SHARE`): there they mend clips (``benchmarks/oblique_association.py
+    --box-misses 0.2 1 --choose-lens``); elsewhere they also hold wrong poses (a lingering
+    crowd; frame by frame, ``benchmarks/oblique_tracking.py --seed 2`` 91.1 -> 56.4;
+    docs/notes/oblique_top_camera.md)."""
     if not slack > 0:
         raise ValueError(f"slack must be positive, got {slack}")
     totals: list[np.ndarray] = []
     back: list[np.ndarray] = []
+    candidates = list(candidates)  # a frame's own, then the poses leading at the one before
     for k, (poses, scores) in enumerate(candidates):
+        if rescore is not None and len(poses) and k > 0 and len(candidates[k - 1][0]):
+            lead = np.argsort(-totals[k - 1], kind="stable")[:LEAD]
+            extra = _moved_on(candidates[k - 1][0][lead],
+                              motions[k] if motions is not None else None)
+            kept, marks = rescore(k, extra[_apart(extra, poses).all(axis=1)])
+            if len(kept):
+                poses, scores = np.concatenate([poses, kept]), np.concatenate([scores, marks])
+                candidates[k] = (poses, scores)
         if not len(poses) or k == 0 or not len(candidates[k - 1][0]):
             totals.append(np.asarray(scores, float).copy())
             back.append(np.full(len(poses), -1))
@@ -804,6 +841,33 @@ def register_sequence(frames: list[int], candidates: list[tuple[np.ndarray, np.n
             out.append(FramePose(frames[k], p[:2].copy(), float(p[2]),
                                  float(scores[choice[k]])))
     return out
+
+
+def missed_share(ids: Sequence[np.ndarray]) -> float:
+    """The share of each id's frames, from its first to its last (``ids``: per frame, the
+    view's track ids), in which it is missing: 0 where every track runs unbroken."""
+    k = np.concatenate([np.full(len(i), n) for n, i in enumerate(ids)] or [np.zeros(0, int)])
+    flat = np.concatenate([np.asarray(i).reshape(-1) for i in ids] or [np.zeros(0, int)])
+    if not len(flat):
+        return 0.0
+    _, which = np.unique(flat, return_inverse=True)
+    first = np.full(which.max() + 1, len(ids))
+    last = np.full(which.max() + 1, -1)
+    np.minimum.at(first, which, k)
+    np.maximum.at(last, which, k)
+    return float(1.0 - len(flat) / (last - first + 1).sum())
+
+
+def _scored_in(frames: tuple[list, list, list, list, list | None], hfov_deg: float,
+               spread: float, k: int, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Poses ``(K, 3)`` offered to frame ``k`` of ``frames`` (its top people, horizontal
+    people, sizes, sights and where its camera stands, per frame) and their scores there
+    (:func:`score_poses`): where the camera's stand is known, those within
+    :data:`HOLDER_RADIUS` of it, as :func:`carried` offers them."""
+    tops, hors, sizes, sights, stands = frames
+    if stands is not None and stands[k] is not None:
+        poses = poses[np.hypot(*(poses[:, :2] - stands[k]).T) <= HOLDER_RADIUS]
+    return poses, score_poses(poses, tops[k], hors[k], hfov_deg, sizes[k], sights[k], spread)
 
 
 def register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.ndarray],
@@ -847,6 +911,7 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
     runs: list[dict[float, tuple[float, list[FramePose]]]] = [{} for _ in range(1 + twice)]
     motion = None if top_ids is None else map_motion(frames, tops, top_ids, fps)
     moved = motion is not None and any(m is not None for m in motion)
+    missed = top_ids is not None and missed_share(top_ids) >= MISSED_SHARE
     sizes = top_sizes or [None] * len(tops)
     for scale in MAP_SCALES:
         scaled = [scale * np.asarray(p, float) for p in tops]
@@ -864,9 +929,11 @@ def _register_scales(frames: list[int], tops: list[np.ndarray], hors: list[np.nd
             cands = [c[k] for c in each]
             looks = seen if k == 0 else [None] * len(tops)
             for motions in variants:
-                poses = register_sequence(frames, carried(cands, scaled, hors, hfov_deg, sizes,
-                                                          looks, motions, spread, stands),
-                                          fps, motions, slack)
+                poses = register_sequence(
+                    frames, carried(cands, scaled, hors, hfov_deg, sizes, looks, motions, spread,
+                                    stands), fps, motions, slack,
+                    partial(_scored_in, (scaled, hors, sizes, looks, stands), hfov_deg,
+                            spread) if missed else None)
                 run = (round(sum(p.score for p in poses), 6), poses)
                 if scale not in kept or run[0] > kept[scale][0]:
                     kept[scale] = run

@@ -147,9 +147,27 @@ def registration_paces(monkeypatch) -> list[tuple[float, float]]:
 
     real, paces = gr.register_sequence, []
 
-    def spy(frames, candidates, fps, motions=None, slack=1.0):
+    def spy(frames, candidates, fps, motions=None, slack=1.0, rescore=None):
         paces.append((fps, slack))
-        return real(frames, candidates, fps, motions, slack)
+        return real(frames, candidates, fps, motions, slack, rescore)
 
     monkeypatch.setattr(gr, "register_sequence", spy)
     return paces
+
+
+@pytest.fixture
+def registration_offers(monkeypatch) -> list[bool]:
+    """Whether each call of the ground registration's Viterbi
+    (:func:`~xvmatch.cues.ground_registration.register_sequence`) made during the test was
+    given a ``rescore`` (the poses leading at the frame before offered), the real registration
+    still run."""
+    from xvmatch.cues import ground_registration as gr
+
+    real, offers = gr.register_sequence, []
+
+    def spy(frames, candidates, fps, motions=None, slack=1.0, rescore=None):
+        offers.append(rescore is not None)
+        return real(frames, candidates, fps, motions, slack, rescore)
+
+    monkeypatch.setattr(gr, "register_sequence", spy)
+    return offers

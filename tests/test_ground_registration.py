@@ -82,6 +82,64 @@ def test_slack_lets_a_brisk_walk_pass_free() -> None:
         gr.register_sequence([1, 2], cands, fps=1.0, slack=0.0)
 
 
+def test_the_pose_the_choice_holds_is_offered_through_frames_that_rank_it_out() -> None:
+    """Frames 2 and 3 lost the true pose from their own hypotheses (people missed there: a
+    wrong pose 20 m off explains more). Offered the poses leading the choice at the frame
+    before and scored there (``rescore``), the choice keeps the true pose in every frame;
+    without, the clip is cheaper wrong throughout than jumping there and back. Poses the
+    callback drops are not offered."""
+    true, wrong = np.array([0.0, 0.0, 0.0]), np.array([20.0, 0.0, np.pi])
+    own = [(np.array([true, wrong]), np.array([3.0, 1.5]))] * 2 + \
+        [(np.array([wrong]), np.array([1.5]))] * 2 + [(np.array([true, wrong]),
+                                                       np.array([3.0, 1.5]))] * 2
+    frames = list(range(6))
+
+    def rescore(k: int, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return poses, np.where(np.hypot(*poses[:, :2].T) < 1.0, 0.5, 1.5)
+
+    held = gr.register_sequence(frames, own, 10.0, rescore=rescore)
+    assert all(np.allclose(p.centre, true[:2]) for p in held)
+    assert [p.score for p in held] == [3.0, 3.0, 0.5, 0.5, 3.0, 3.0]
+    lost = gr.register_sequence(frames, own, 10.0)
+    assert all(np.allclose(p.centre, wrong[:2]) for p in lost)
+    dropped = gr.register_sequence(frames, own, 10.0,
+                                   rescore=lambda k, p: (p[:0], np.zeros(0)))
+    assert all(np.allclose(p.centre, wrong[:2]) for p in dropped)
+
+
+def test_the_missed_share_counts_the_gaps_within_each_track() -> None:
+    """Per id, the frames between its first and its last in which it is missing, over all
+    those frames: people who come and stay, or leave for good, miss nothing."""
+    assert gr.missed_share([]) == 0.0
+    assert gr.missed_share([np.array([1, 2]), np.array([2]), np.array([2, 3])]) == 0.0
+    assert gr.missed_share([np.array([1, 2]), np.array([2]), np.array([1, 2])]) == \
+        pytest.approx(1 / 6)
+    assert gr.missed_share([np.array([7]), np.zeros(0, int), np.zeros(0, int),
+                            np.array([7])]) == 0.5
+
+
+def test_the_leading_poses_are_offered_in_video_mode_where_people_are_missed(
+        registration_offers) -> None:
+    """``register_scales`` offers each frame the poses leading at the one before only with the
+    top view's tracks (video mode) and where they show at least :data:`MISSED_SHARE` of their
+    people missed: the same boxes with every track whole, or frame by frame, are registered
+    as before."""
+    rng = np.random.default_rng(5)
+    world = rng.uniform(-6, 6, (6, 2))
+    local = _view(world, np.array([-12.0, 0.0]), 0.0)
+    hor = local[_in_view(local)]
+    tops = [world] * 10
+    whole = [np.arange(6)] * 10
+    gapped = [np.arange(6) if k % 2 else np.arange(3) for k in range(10)]  # 3-5 every other
+    tops_gapped = [world if k % 2 else world[:3] for k in range(10)]
+    assert gr.missed_share(gapped) >= gr.MISSED_SHARE > gr.missed_share(whole)
+    for points, ids, offered in ((tops, None, False), (tops, whole, False),
+                                 (tops_gapped, gapped, True)):
+        registration_offers.clear()
+        gr.register_scales(list(range(10)), points, [hor] * 10, 70.0, 10.0, ids)
+        assert registration_offers and set(registration_offers) == {offered}
+
+
 def test_frames_without_people_split_the_sequence() -> None:
     empty = (np.zeros((0, 3)), np.zeros(0))
     cands = [(np.array([[0.0, 0.0, 0.0]]), np.array([1.0])), empty,
