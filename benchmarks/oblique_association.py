@@ -20,7 +20,8 @@ methods, scored by the F1 of the cross-view pairs over all frames:
 * ``+ tracklet consensus``: those pairs made consistent over the clip with each view's own track
   ids (:func:`~xvmatch.inference.linking.pair_consensus.tracklet_consensus`, video mode).
 * ``associate, as it routes``: what ``associate --mode video`` (boxes only) answers: the row
-  above where the top view's calibration is oblique, the search made consistent over the clip
+  above where the top view's calibration is oblique (with ``--choose-lens`` the lens chosen, as
+  ``associate`` chooses it; else the row's 70 degrees), the search made consistent over the clip
   (:func:`~xvmatch.inference.linking.pair_consensus.consistent_pairs`) where it looks straight
   down or cannot be calibrated (the rows above run the ground path on those scenes too).
 * ``associate, its warning followed``: that row, but where it took the search and warned that
@@ -544,8 +545,9 @@ def main(argv: list[str] | None = None) -> int:
                 if choice.made:  # each lens's run as made, with the top camera's sights
                     lens_scores += "; made " + " ".join(f"{h:.0f}:{v:.0f}"
                                                         for h, v in choice.made.items())
-        routed = voted if calib is not None and calib.kind == "oblique" else consistent_pairs(
-            search, top, hor, frames)
+        routed = ((chosen if args.choose_lens else voted)  # associate chooses the lens
+                  if calib is not None and calib.kind == "oblique" else
+                  consistent_pairs(search, top, hor, frames))
         preds = (search, follow, true, people, voted, routed)
         if args.choose_lens:
             preds += (true_lens, chosen)
