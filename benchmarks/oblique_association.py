@@ -467,8 +467,8 @@ def main(argv: list[str] | None = None) -> int:
                         for v, c, n in ((top, scene.top_cameras[0], "top"),
                                         (hor, scene.hor_cameras["hor1"][0], "hor")))
         seen = tuple(  # the boxes the methods see, the scene's ids: what CVIDF1 scores
-            {f: FrameBoxes(f, np.array([back[int(i)] for i in r.ids], np.int64), r.boxes)
-             for f, r in v.items()} for v, back in ((top, top_back), (hor, hor_back)))
+            {f: FrameBoxes(f, np.array([way[int(i)] for i in r.ids], np.int64), r.boxes)
+             for f, r in v.items()} for v, way in ((top, top_back), (hor, hor_back)))
         frames = [f for f in sorted(set(top) & set(hor)) if (f - 1) % args.step == 0]
         holder = int(scene.groups["holders"][0])  # its scrambled id, where the top view has one
         camera_id = next((a for a, b in top_back.items() if b == holder), None) if \

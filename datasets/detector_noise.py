@@ -162,8 +162,8 @@ def apply_detector_noise(
 
     Per box: the centre and both side lengths are perturbed (:class:`DetectorNoise`), then the box
     is dropped with probability ``miss_rate`` (or in runs, ``miss_run``) unless its id is in
-    ``keep_ids`` (e.g. the top-view
-    wearer box, id 0, which is an input when the camera location is given). Per frame:
+    ``keep_ids`` (e.g. the top-view wearer box, id 0, which is an input when the camera location
+    is given). Per frame:
     ``Poisson(false_per_frame)`` false boxes are added after the real ones; their sizes are those
     of real boxes of the same frame drawn at random (of the whole input when the frame has none),
     and they lie entirely inside the image at a uniformly drawn position. Noise is applied to the
