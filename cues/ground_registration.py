@@ -734,6 +734,14 @@ def _moved_on(poses: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
     return np.column_stack([c * x + s * y, c * y - s * x, poses[:, 2] - motion[2]])
 
 
+def _near_stand(poses: np.ndarray, stand: np.ndarray | None) -> np.ndarray:
+    """The poses ``(K, 3)`` within :data:`HOLDER_RADIUS` of where the camera stands (its
+    holder seen by the top view, ``--camera-id``); all of them where that is not known."""
+    if stand is None:
+        return poses
+    return poses[np.hypot(*(poses[:, :2] - stand).T) <= HOLDER_RADIUS]
+
+
 def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarray],
             hors: list[np.ndarray], hfov_deg: float, sizes: list, sights: list,
             motions: list[np.ndarray | None] | None = None, spread: float = RANGE_SPREAD,
@@ -760,9 +768,7 @@ def carried(candidates: list[tuple[np.ndarray, np.ndarray]], tops: list[np.ndarr
         if not near:
             out.append((poses, scores))
             continue
-        extra = np.concatenate(near)
-        if holders is not None and holders[k] is not None:  # near where it stands
-            extra = extra[np.hypot(*(extra[:, :2] - holders[k]).T) <= HOLDER_RADIUS]
+        extra = _near_stand(np.concatenate(near), None if holders is None else holders[k])
         extra = extra[_apart(extra, poses).all(axis=1)]  # this frame's own stand for them
         marks = score_poses(extra, tops[k], hors[k], hfov_deg, sizes[k], sights[k], spread)
         keep = _distinct(extra, np.argsort(-marks, kind="stable"), limit=len(extra))
@@ -865,8 +871,7 @@ def _scored_in(frames: tuple[list, list, list, list, list | None], hfov_deg: flo
     (:func:`score_poses`): where the camera's stand is known, those within
     :data:`HOLDER_RADIUS` of it, as :func:`carried` offers them."""
     tops, hors, sizes, sights, stands = frames
-    if stands is not None and stands[k] is not None:
-        poses = poses[np.hypot(*(poses[:, :2] - stands[k]).T) <= HOLDER_RADIUS]
+    poses = _near_stand(poses, None if stands is None else stands[k])
     return poses, score_poses(poses, tops[k], hors[k], hfov_deg, sizes[k], sights[k], spread)
 
 

@@ -138,20 +138,28 @@ def close_drone():
                              focal_rel_std=0.0, n_boxes=100, n_frames=10)
 
 
+def _spy_registration(monkeypatch, record) -> None:
+    """Replace the ground registration's Viterbi
+    (:func:`~xvmatch.cues.ground_registration.register_sequence`) by itself, telling
+    ``record(fps, slack, rescore)`` of each call first."""
+    from xvmatch.cues import ground_registration as gr
+
+    real = gr.register_sequence
+
+    def spy(frames, candidates, fps, motions=None, slack=1.0, rescore=None):
+        record(fps, slack, rescore)
+        return real(frames, candidates, fps, motions, slack, rescore)
+
+    monkeypatch.setattr(gr, "register_sequence", spy)
+
+
 @pytest.fixture
 def registration_paces(monkeypatch) -> list[tuple[float, float]]:
     """The ``(fps, slack)`` of every call of the ground registration's Viterbi
     (:func:`~xvmatch.cues.ground_registration.register_sequence`) made during the test, the
     real registration still run: which rate and free walk a command registered at."""
-    from xvmatch.cues import ground_registration as gr
-
-    real, paces = gr.register_sequence, []
-
-    def spy(frames, candidates, fps, motions=None, slack=1.0, rescore=None):
-        paces.append((fps, slack))
-        return real(frames, candidates, fps, motions, slack, rescore)
-
-    monkeypatch.setattr(gr, "register_sequence", spy)
+    paces: list[tuple[float, float]] = []
+    _spy_registration(monkeypatch, lambda fps, slack, rescore: paces.append((fps, slack)))
     return paces
 
 
@@ -161,13 +169,6 @@ def registration_offers(monkeypatch) -> list[bool]:
     (:func:`~xvmatch.cues.ground_registration.register_sequence`) made during the test was
     given a ``rescore`` (the poses leading at the frame before offered), the real registration
     still run."""
-    from xvmatch.cues import ground_registration as gr
-
-    real, offers = gr.register_sequence, []
-
-    def spy(frames, candidates, fps, motions=None, slack=1.0, rescore=None):
-        offers.append(rescore is not None)
-        return real(frames, candidates, fps, motions, slack, rescore)
-
-    monkeypatch.setattr(gr, "register_sequence", spy)
+    offers: list[bool] = []
+    _spy_registration(monkeypatch, lambda fps, slack, rescore: offers.append(rescore is not None))
     return offers

@@ -382,10 +382,11 @@ def _ground_pairs(top: Mapping, hor: Mapping, options: TrackRunOptions,
                   note: Note, calibration: object | None = None
                   ) -> dict[int, list[tuple[int, int]]] | None:
     """The frame association of the ground-map path where the top view is oblique and no
-    cameras are given (``top`` and ``hor`` aligned; :func:`~xvmatch.inference.tracks.
-    track_ground.ground_frame_pairs`; ``calibration``: the top camera already calibrated on
-    these views), its lines told to ``note``; else None, with a warning where the top view's
-    people stand upright all the same (the nadir search misreads them)."""
+    cameras are given (``top`` and ``hor`` aligned;
+    :func:`~xvmatch.inference.tracks.track_ground.ground_frame_pairs`; ``calibration``: the
+    top camera already calibrated on these views), its lines told to ``note``; else None,
+    with a warning where the top view's people stand upright all the same (the nadir search
+    misreads them)."""
     if options.cameras is not None:
         return None
     pairs = ground_frame_pairs(top, hor, hor_size, options.ground, images.top_size, camera_rows,
@@ -439,9 +440,10 @@ def run_tracking(
         note: told each line to say as the run goes (:data:`Note`), among them a warning for a
             view whose boxes jump like independent pictures'
             (:func:`~xvmatch.cues.box_motion.jump_warning`); None: said nowhere.
-        calibration: the top camera as :func:`~xvmatch.inference.tracks.track_ground.
-            oblique_track_top` calibrated it on ``top`` and ``hor`` as given, or None; taken
-            at offset 0 (the views then as tracked) rather than calibrated again.
+        calibration: the top camera as
+            :func:`~xvmatch.inference.tracks.track_ground.oblique_track_top` calibrated it on
+            ``top`` and ``hor`` as given, or None; taken at offset 0 (the views then as
+            tracked) rather than calibrated again.
 
     Returns:
         The :class:`TrackRun`.
